@@ -1,0 +1,191 @@
+"""Config files: TOML read at the edge and validated into typed, frozen objects.
+
+Every config problem surfaces as one exception type, :class:`ConfigError`, whose message names the
+file and the dotted key at fault (``body.inertia_kgm2``). Keys carry their unit in their name
+(``duration_s``, ``arw_deg_per_sqrt_h``), so a key with the wrong unit is an unknown key, and the
+error suggests the known key it most resembles.
+
+Sections are pydantic models (``extra="forbid"``, frozen). Numbers are given as :data:`Real`, which
+refuses strings and booleans (TOML's ``"10 s"`` or ``true`` where a number belongs) instead of
+coercing them.
+"""
+
+from __future__ import annotations
+
+import difflib
+import tomllib
+from pathlib import Path
+from typing import Annotated, Any, TypeVar
+
+import pydantic
+from pydantic import BaseModel, ConfigDict, Field
+
+__all__ = [
+    "ConfigError",
+    "Section",
+    "Real",
+    "PositiveReal",
+    "NonNegativeReal",
+    "Vec3",
+    "Quat",
+    "read_toml",
+    "validate",
+    "config_dir",
+    "resolve_config",
+]
+
+
+class ConfigError(ValueError):
+    """A config file, key or value that gyroemu cannot use.
+
+    Attributes
+    ----------
+    file : str or None
+        The file at fault, when there is one.
+    key : str or None
+        Dotted key within the file (``body.inertia_kgm2``), when one key is at fault.
+    reason : str
+        What is wrong, in words.
+    """
+
+    def __init__(self, reason: str, *, file: str | Path | None = None, key: str | None = None):
+        self.reason = reason
+        self.file = None if file is None else str(file)
+        self.key = key
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        where = []
+        if self.file:
+            where.append(self.file)
+        if self.key:
+            where.append(f"key '{self.key}'")
+        return (": ".join(where) + ": " if where else "") + self.reason
+
+
+def _number(value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"expected a number, got {type(value).__name__} {value!r}")
+    return float(value)
+
+
+Real = Annotated[float, pydantic.BeforeValidator(_number)]
+PositiveReal = Annotated[Real, Field(gt=0)]
+NonNegativeReal = Annotated[Real, Field(ge=0)]
+Vec3 = tuple[Real, Real, Real]
+Quat = tuple[Real, Real, Real, Real]
+
+
+class Section(BaseModel):
+    """Base of every config table: unknown keys are refused, values are immutable."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, arbitrary_types_allowed=True)
+
+
+M = TypeVar("M", bound=BaseModel)
+
+
+def read_toml(path: str | Path) -> dict:
+    """Read a TOML file into a dict, or raise :class:`ConfigError` naming the file."""
+    path = Path(path)
+    try:
+        with path.open("rb") as f:
+            return tomllib.load(f)
+    except FileNotFoundError:
+        raise ConfigError("no such file", file=path) from None
+    except IsADirectoryError:
+        raise ConfigError("is a directory, not a TOML file", file=path) from None
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"not valid TOML: {e}", file=path) from None
+    except UnicodeDecodeError:
+        raise ConfigError("not valid TOML: not UTF-8 text", file=path) from None
+
+
+def validate(model: type[M], data: Any, *, file: str | Path | None = None, prefix: str = "") -> M:
+    """Validate ``data`` (a dict from TOML) into ``model``, or raise :class:`ConfigError`.
+
+    The error names ``file`` and the first offending key (dotted, below ``prefix``); the reason lists
+    every problem pydantic found, one per line.
+    """
+    try:
+        return model.model_validate(data)
+    except pydantic.ValidationError as e:
+        errors = e.errors(include_url=False)
+        # A misspelt or wrongly-unitted key usually also leaves a required key missing: name it first.
+        errors.sort(key=lambda err: err["type"] != "extra_forbidden")
+        problems = [_describe(model, err) for err in errors]
+        key = ".".join(p for p in (prefix, problems[0][0]) if p) or None
+        lines = [problems[0][1]] + [
+            f"also key '{'.'.join(p for p in (prefix, k) if p)}': {why}" for k, why in problems[1:]
+        ]
+        raise ConfigError("\n  ".join(lines), file=file, key=key) from None
+
+
+def _describe(model: type[BaseModel], err: dict) -> tuple[str, str]:
+    loc = [p for p in err["loc"] if not str(p).startswith("function-")]
+    key = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in loc).lstrip(".")
+    loc = [str(p) for p in loc]
+    kind = err["type"]
+    if kind == "extra_forbidden":
+        known = _fields_at(model, loc[:-1])
+        hint = difflib.get_close_matches(loc[-1], known, n=1, cutoff=0.5)
+        why = "unknown key"
+        if hint:
+            why += f" (did you mean '{hint[0]}'? key names carry their unit)"
+        elif known:
+            why += f" (known keys: {', '.join(sorted(known))})"
+        return key, why
+    if kind == "missing":
+        return key, "missing required key"
+    msg = err["msg"]
+    if msg.startswith("Value error, "):
+        msg = msg[len("Value error, "):]
+    return key, msg
+
+
+def _fields_at(model: type[BaseModel], loc: list[str]) -> list[str]:
+    """Field names of the (nested) section at ``loc``; empty where it cannot be followed."""
+    current: Any = model
+    for part in loc:
+        fields = getattr(current, "model_fields", None)
+        if not fields or part not in fields:
+            return []
+        current = fields[part].annotation
+        # Optional[Section] and similar unions: take the first model among the arguments.
+        for arg in getattr(current, "__args__", ()) or ():
+            if isinstance(arg, type) and issubclass(arg, BaseModel):
+                current = arg
+                break
+    fields = getattr(current, "model_fields", None)
+    return list(fields) if fields else []
+
+
+def config_dir() -> Path:
+    """The ``configs/`` folder of built-in scenarios and devices (``$GYROEMU_CONFIG_DIR`` overrides)."""
+    import os
+
+    override = os.environ.get("GYROEMU_CONFIG_DIR")
+    return Path(override) if override else Path(__file__).resolve().parent.parent / "configs"
+
+
+def resolve_config(name_or_path: str | Path, folder: str, what: str) -> Path:
+    """The file a built-in name (``configs/<folder>/<name>.toml``) or a path refers to.
+
+    Raises :class:`ConfigError` naming the argument and the built-in names when neither exists.
+    """
+    text = str(name_or_path)
+    path = Path(text)
+    if text.endswith(".toml") or path.exists() or "/" in text:
+        if not path.is_file():
+            raise ConfigError("no such file", file=path)
+        return path
+    builtin = config_dir() / folder / f"{text}.toml"
+    if builtin.is_file():
+        return builtin
+    names = sorted(p.stem for p in (config_dir() / folder).glob("*.toml"))
+    hint = difflib.get_close_matches(text, names, n=1)
+    raise ConfigError(
+        f"unknown {what} '{text}'"
+        + (f" (did you mean '{hint[0]}'?)" if hint else "")
+        + f"; built-in {what}s: {', '.join(names) or 'none'}; or give a path to a .toml file"
+    )

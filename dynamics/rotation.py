@@ -1,0 +1,280 @@
+"""Rotations, vectorised over leading axes.
+
+Conventions (``interface.md``): Hamilton quaternions, unit norm, stored scalar-first ``(w, x, y, z)``
+in arrays of shape ``(..., 4)``. ``q_wb`` rotates a body-frame vector into the world frame:
+``v_w = q_wb ⊗ v_b ⊗ q_wb*``, and ``R(q_wb)`` is the matrix that does the same.
+
+Conversions defer to :class:`scipy.spatial.transform.Rotation`; the products and vector rotations
+that sit on hot paths are written out here in numpy, which is several times faster than building
+``Rotation`` objects for them.
+
+Euler angles
+------------
+* Z-X-Z (precession φ, nutation θ, spin ψ), the lecture's top angles: ``R = Rz(φ) Rx(θ) Rz(ψ)``,
+  each about the axis as already moved (intrinsic).
+* Z-Y-X (yaw ψ, pitch θ, roll φ), the vehicle angles: ``R = Rz(ψ) Ry(θ) Rx(φ)``, intrinsic; arrays
+  hold ``(roll, pitch, yaw)`` in that order, as ROS and most datasheets list them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+__all__ = [
+    "quat_multiply",
+    "quat_conjugate",
+    "quat_normalize",
+    "quat_positive",
+    "quat_exp",
+    "quat_log",
+    "quat_from_rotvec",
+    "quat_to_rotvec",
+    "quat_slerp",
+    "quat_rotate",
+    "quat_to_matrix",
+    "quat_from_matrix",
+    "quat_from_euler_zxz",
+    "euler_zxz_from_quat",
+    "quat_from_euler_zyx",
+    "euler_zyx_from_quat",
+    "quat_angle",
+    "skew",
+    "body_rate_from_quat_derivative",
+    "body_rate_from_euler_zxz",
+    "body_rate_from_euler_zyx",
+]
+
+
+def _q(q) -> np.ndarray:
+    q = np.asarray(q, dtype=float)
+    if q.shape[-1] != 4:
+        raise ValueError(f"quaternions need a last axis of length 4 (w, x, y, z), got shape {q.shape}")
+    return q
+
+
+def _v(v) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    if v.shape[-1] != 3:
+        raise ValueError(f"vectors need a last axis of length 3, got shape {v.shape}")
+    return v
+
+
+def quat_multiply(p, q) -> np.ndarray:
+    """Hamilton product ``p ⊗ q``; shapes ``(..., 4)`` broadcast against each other."""
+    p, q = _q(p), _q(q)
+    pw, px, py, pz = np.moveaxis(p, -1, 0)
+    qw, qx, qy, qz = np.moveaxis(q, -1, 0)
+    return np.stack(
+        [
+            pw * qw - px * qx - py * qy - pz * qz,
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw,
+        ],
+        axis=-1,
+    )
+
+
+def quat_conjugate(q) -> np.ndarray:
+    """Conjugate ``(w, -x, -y, -z)``: the inverse of a unit quaternion."""
+    q = _q(q)
+    return q * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def quat_normalize(q) -> np.ndarray:
+    """Scale each quaternion to unit norm; a zero quaternion raises ``ValueError``."""
+    q = _q(q)
+    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    if np.any(n == 0):
+        raise ValueError("cannot normalise a zero quaternion")
+    return q / n
+
+
+def quat_positive(q) -> np.ndarray:
+    """The same rotations with ``w >= 0`` (``q`` and ``-q`` are one rotation)."""
+    q = _q(q)
+    return np.where(q[..., :1] < 0, -q, q)
+
+
+def quat_exp(v) -> np.ndarray:
+    """Exponential of the pure quaternion ``(0, v)``: ``(cos|v|, sin|v| v/|v|)``.
+
+    A rotation by angle ``θ`` about unit axis ``n`` is ``quat_exp(θ n / 2)``.
+    """
+    v = _v(v)
+    a = np.linalg.norm(v, axis=-1, keepdims=True)
+    # sin(a)/a with its Taylor series near 0, where the quotient loses digits.
+    k = np.where(a < 1e-4, 1.0 - a * a / 6.0, np.sin(a) / np.where(a == 0, 1.0, a))
+    return np.concatenate([np.cos(a), k * v], axis=-1)
+
+
+def quat_log(q) -> np.ndarray:
+    """Logarithm of a unit quaternion: the vector part ``v`` of ``log q = (0, v)``, ``|v| <= π/2``
+    after choosing the sign with ``w >= 0``. Inverse of :func:`quat_exp` on that range."""
+    q = quat_positive(q)
+    w = np.clip(q[..., :1], -1.0, 1.0)
+    s = np.linalg.norm(q[..., 1:], axis=-1, keepdims=True)
+    a = np.arctan2(s, w)
+    k = np.where(s < 1e-8, 1.0 + a * a / 6.0, a / np.where(s == 0, 1.0, s))
+    return k * q[..., 1:]
+
+
+def quat_from_rotvec(phi) -> np.ndarray:
+    """Quaternion of the rotation vector ``phi`` (axis times angle, rad)."""
+    return quat_exp(0.5 * _v(phi))
+
+
+def quat_to_rotvec(q) -> np.ndarray:
+    """Rotation vector (axis times angle in ``[0, π]``, rad) of unit quaternions."""
+    return 2.0 * quat_log(q)
+
+
+def quat_slerp(q0, q1, s) -> np.ndarray:
+    """Spherical linear interpolation ``q0 ⊗ (q0* ⊗ q1)^s`` along the shorter arc.
+
+    ``s`` is the fraction (0 gives ``q0``, 1 gives ``q1``) and broadcasts against the quaternions'
+    leading axes.
+    """
+    q0, q1 = _q(q0), _q(q1)
+    d = quat_log(quat_multiply(quat_conjugate(q0), q1))
+    return quat_multiply(q0, quat_exp(np.asarray(s, dtype=float)[..., None] * d))
+
+
+def quat_rotate(q, v) -> np.ndarray:
+    """Rotate vectors: ``q ⊗ (0, v) ⊗ q*``, shapes ``(..., 4)`` and ``(..., 3)`` broadcast.
+
+    Uses ``v + 2w (u × v) + 2 u × (u × v)`` with ``u`` the vector part.
+    """
+    q, v = _q(q), _v(v)
+    w = q[..., :1]
+    u = q[..., 1:]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def quat_to_matrix(q) -> np.ndarray:
+    """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)``."""
+    q = _q(q)
+    m = Rotation.from_quat(q.reshape(-1, 4), scalar_first=True).as_matrix()
+    return m.reshape(q.shape[:-1] + (3, 3))
+
+
+def quat_from_matrix(m) -> np.ndarray:
+    """Unit quaternions ``(..., 4)``, ``w >= 0``, of rotation matrices ``(..., 3, 3)``."""
+    m = np.asarray(m, dtype=float)
+    q = Rotation.from_matrix(m.reshape(-1, 3, 3)).as_quat(canonical=True, scalar_first=True)
+    return q.reshape(m.shape[:-2] + (4,))
+
+
+def quat_from_euler_zxz(angles) -> np.ndarray:
+    """Quaternions of Z-X-Z angles ``(..., 3)`` = (precession φ, nutation θ, spin ψ), rad."""
+    a = _v(angles)
+    q = Rotation.from_euler("ZXZ", a.reshape(-1, 3)).as_quat(scalar_first=True)
+    return q.reshape(a.shape[:-1] + (4,))
+
+
+def euler_zxz_from_quat(q) -> np.ndarray:
+    """Z-X-Z angles (φ, θ, ψ) with ``θ`` in ``[0, π]``; at ``θ = 0`` or ``π`` only φ±ψ is defined."""
+    q = _q(q)
+    a = Rotation.from_quat(q.reshape(-1, 4), scalar_first=True).as_euler("ZXZ", suppress_warnings=True)
+    return a.reshape(q.shape[:-1] + (3,))
+
+
+def quat_from_euler_zyx(rpy) -> np.ndarray:
+    """Quaternions of (roll φ, pitch θ, yaw ψ) ``(..., 3)``, rad, with ``R = Rz(ψ) Ry(θ) Rx(φ)``."""
+    a = _v(rpy)
+    q = Rotation.from_euler("ZYX", a.reshape(-1, 3)[:, ::-1]).as_quat(scalar_first=True)
+    return q.reshape(a.shape[:-1] + (4,))
+
+
+def euler_zyx_from_quat(q) -> np.ndarray:
+    """(roll, pitch, yaw), rad, pitch in ``[-π/2, π/2]``, of unit quaternions."""
+    q = _q(q)
+    a = Rotation.from_quat(q.reshape(-1, 4), scalar_first=True).as_euler("ZYX", suppress_warnings=True)
+    return a[:, ::-1].reshape(q.shape[:-1] + (3,))
+
+
+def quat_angle(p, q) -> np.ndarray:
+    """Angle (rad, in ``[0, π]``) of the rotation that takes ``q`` to ``p``."""
+    d = quat_multiply(p, quat_conjugate(q))
+    return 2.0 * np.arctan2(np.linalg.norm(d[..., 1:], axis=-1), np.abs(d[..., 0]))
+
+
+def skew(v) -> np.ndarray:
+    """Cross-product matrices ``[v]×`` ``(..., 3, 3)``, so that ``skew(a) @ b == cross(a, b)``."""
+    v = _v(v)
+    x, y, z = np.moveaxis(v, -1, 0)
+    o = np.zeros_like(x)
+    return np.stack([np.stack([o, -z, y], -1), np.stack([z, o, -x], -1), np.stack([-y, x, o], -1)], -2)
+
+
+def body_rate_from_quat_derivative(q, q_dot) -> np.ndarray:
+    """Body angular velocity ``ω_b`` from ``q̇ = ½ q ⊗ (0, ω_b)``: ``ω_b = 2 (q* ⊗ q̇)_vec``."""
+    return 2.0 * quat_multiply(quat_conjugate(q), q_dot)[..., 1:]
+
+
+def body_rate_from_euler_zxz(angles, rates, accels=None):
+    """Body angular velocity (and acceleration) of a Z-X-Z motion.
+
+    Parameters
+    ----------
+    angles, rates : array_like, shape (..., 3)
+        (φ, θ, ψ) and their time derivatives, rad and rad/s.
+    accels : array_like, shape (..., 3), optional
+        Second derivatives, rad/s²; when given, ``α_b = dω_b/dt`` is returned too.
+
+    Returns
+    -------
+    omega_b : ndarray (..., 3)
+        ``[φ̇ sθ sψ + θ̇ cψ, φ̇ sθ cψ − θ̇ sψ, φ̇ cθ + ψ̇]`` for ``R = Rz(φ) Rx(θ) Rz(ψ)``.
+    alpha_b : ndarray (..., 3), only when ``accels`` is given.
+    """
+    (f, th, p), (fd, thd, pd) = np.moveaxis(_v(angles), -1, 0), np.moveaxis(_v(rates), -1, 0)
+    st, ct, sp, cp = np.sin(th), np.cos(th), np.sin(p), np.cos(p)
+    omega = np.stack([fd * st * sp + thd * cp, fd * st * cp - thd * sp, fd * ct + pd], axis=-1)
+    if accels is None:
+        return omega
+    fdd, thdd, pdd = np.moveaxis(_v(accels), -1, 0)
+    alpha = np.stack(
+        [
+            fdd * st * sp + fd * thd * ct * sp + fd * pd * st * cp + thdd * cp - thd * pd * sp,
+            fdd * st * cp + fd * thd * ct * cp - fd * pd * st * sp - thdd * sp - thd * pd * cp,
+            fdd * ct - fd * thd * st + pdd,
+        ],
+        axis=-1,
+    )
+    return omega, alpha
+
+
+def body_rate_from_euler_zyx(rpy, rpy_rates, rpy_accels=None):
+    """Body angular velocity (and acceleration) of a roll-pitch-yaw motion.
+
+    Parameters
+    ----------
+    rpy, rpy_rates : array_like, shape (..., 3)
+        (roll φ, pitch θ, yaw ψ) and their time derivatives, rad and rad/s.
+    rpy_accels : array_like, shape (..., 3), optional
+        Second derivatives, rad/s²; when given, ``α_b`` is returned too.
+
+    Returns
+    -------
+    omega_b : ndarray (..., 3)
+        ``[φ̇ − ψ̇ sθ, θ̇ cφ + ψ̇ cθ sφ, −θ̇ sφ + ψ̇ cθ cφ]`` for ``R = Rz(ψ) Ry(θ) Rx(φ)``.
+    alpha_b : ndarray (..., 3), only when ``rpy_accels`` is given.
+    """
+    (r, th, y), (rd, thd, yd) = np.moveaxis(_v(rpy), -1, 0), np.moveaxis(_v(rpy_rates), -1, 0)
+    sr, cr, st, ct = np.sin(r), np.cos(r), np.sin(th), np.cos(th)
+    omega = np.stack([rd - yd * st, thd * cr + yd * ct * sr, -thd * sr + yd * ct * cr], axis=-1)
+    if rpy_accels is None:
+        return omega
+    rdd, thdd, ydd = np.moveaxis(_v(rpy_accels), -1, 0)
+    alpha = np.stack(
+        [
+            rdd - ydd * st - yd * thd * ct,
+            thdd * cr - thd * rd * sr + ydd * ct * sr - yd * thd * st * sr + yd * rd * ct * cr,
+            -thdd * sr - thd * rd * cr + ydd * ct * cr - yd * thd * st * cr - yd * rd * ct * sr,
+        ],
+        axis=-1,
+    )
+    return omega, alpha

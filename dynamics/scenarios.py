@@ -1,0 +1,130 @@
+"""Scenario files: TOML validated into a typed spec per ``kind``, and :func:`load_scenario`.
+
+Every scenario file has ``kind``, ``duration_s``, ``rate_hz`` and an optional ``description``; the
+rest is the kind's own tables, defined by the kind's spec class (a :class:`ScenarioSpec` subclass in
+the module of its physics). :data:`KINDS` maps each kind to that class by import path, so that a
+kind's module is imported only when a scenario of that kind is loaded.
+"""
+
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+
+import numpy as np
+import tomli_w
+
+from .config import ConfigError, PositiveReal, Section, config_dir, read_toml, resolve_config, validate
+from .trajectory import Trajectory
+
+__all__ = ["ScenarioSpec", "Scenario", "KINDS", "load_scenario", "scenario_from_dict", "list_scenarios"]
+
+KINDS: dict[str, str] = {
+    "free-rigid-body": "dynamics.tops:FreeRigidBodySpec",
+    "heavy-top": "dynamics.tops:HeavyTopSpec",
+    "static": "dynamics.motions:StaticSpec",
+    "rate-table": "dynamics.motions:RateTableSpec",
+    "oscillation": "dynamics.motions:OscillationSpec",
+    "coning": "dynamics.motions:ConingSpec",
+    "sculling": "dynamics.motions:ScullingSpec",
+    "random-manoeuvre": "dynamics.vehicles:RandomManoeuvreSpec",
+    "car": "dynamics.vehicles:CarSpec",
+    "ship": "dynamics.vessels:ShipSpec",
+    "spacecraft-cmg": "dynamics.vessels:SpacecraftSpec",
+    "drop": "dynamics.impact:DropSpec",
+}
+"""Scenario kind → ``"module:SpecClass"``."""
+
+
+class ScenarioSpec(Section):
+    """Keys common to every scenario file. A kind subclasses this and implements :meth:`trajectory`."""
+
+    kind: str
+    duration_s: PositiveReal
+    rate_hz: PositiveReal
+    description: str = ""
+
+    def trajectory(self, t: np.ndarray) -> Trajectory:
+        """Truth sampled at the times ``t`` (s, uniform from 0 at ``rate_hz``)."""
+        raise NotImplementedError
+
+
+class Scenario:
+    """A validated scenario, ready to simulate.
+
+    Attributes
+    ----------
+    spec : ScenarioSpec
+        The typed config of the scenario's kind.
+    name : str
+        The built-in name or the file's stem.
+    path : Path or None
+        The file it was read from.
+    """
+
+    def __init__(self, spec: ScenarioSpec, name: str, path: Path | None = None):
+        self.spec = spec
+        self.name = name
+        self.path = path
+
+    kind = property(lambda self: self.spec.kind)
+    duration_s = property(lambda self: self.spec.duration_s)
+    rate_hz = property(lambda self: self.spec.rate_hz)
+    description = property(lambda self: self.spec.description)
+
+    def times(self, duration: float | None = None, rate_hz: float | None = None) -> np.ndarray:
+        """Sample times ``k / rate_hz`` for ``k = 0 … round(duration · rate_hz)``, s."""
+        duration = self.spec.duration_s if duration is None else float(duration)
+        rate_hz = self.spec.rate_hz if rate_hz is None else float(rate_hz)
+        if not duration > 0:
+            raise ConfigError(f"duration must be positive, got {duration}", key="duration")
+        if not rate_hz > 0:
+            raise ConfigError(f"rate must be positive, got {rate_hz}", key="rate_hz")
+        return np.arange(int(round(duration * rate_hz)) + 1) / rate_hz
+
+    def simulate(self, duration: float | None = None, rate_hz: float | None = None) -> Trajectory:
+        """Simulate the truth; ``duration`` (s) and ``rate_hz`` override the file's values."""
+        return self.spec.trajectory(self.times(duration, rate_hz))
+
+    def to_toml(self) -> str:
+        """The fully resolved config (defaults filled in) as TOML text."""
+        return tomli_w.dumps(self.spec.model_dump(mode="json"))
+
+    def __repr__(self) -> str:
+        return f"Scenario({self.name!r}, kind={self.kind!r}, duration_s={self.duration_s}, rate_hz={self.rate_hz})"
+
+
+def _spec_class(kind) -> type[ScenarioSpec]:
+    module, cls = KINDS[kind].split(":")
+    return getattr(importlib.import_module(module), cls)
+
+
+def scenario_from_dict(data: dict, name: str = "<dict>", path: Path | None = None) -> Scenario:
+    """Validate a scenario given as a dict (as read from TOML); errors name ``path`` or ``name``."""
+    where = path if path is not None else name
+    if not isinstance(data, dict):
+        raise ConfigError("a scenario is a table of keys", file=where)
+    kind = data.get("kind")
+    if kind is None:
+        raise ConfigError("missing required key", file=where, key="kind")
+    if kind not in KINDS:
+        raise ConfigError(f"unknown kind {kind!r}; kinds: {', '.join(KINDS)}", file=where, key="kind")
+    return Scenario(validate(_spec_class(kind), data, file=where), name=name, path=path)
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """Load a built-in scenario by name (``configs/scenarios/<name>.toml``) or a TOML file by path.
+
+    Raises
+    ------
+    ConfigError
+        Unknown name, unreadable file, unknown or missing key, bad value; the message names the file
+        and key.
+    """
+    path = resolve_config(name_or_path, "scenarios", "scenario")
+    return scenario_from_dict(read_toml(path), name=path.stem, path=path)
+
+
+def list_scenarios() -> list[Scenario]:
+    """The built-in scenarios, loaded and validated, sorted by name."""
+    return [load_scenario(p) for p in sorted((config_dir() / "scenarios").glob("*.toml"))]
