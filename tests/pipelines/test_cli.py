@@ -1,0 +1,86 @@
+"""The command line: exit status 2 with the file and key named, inputs untouched, nothing half-written."""
+
+import hashlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+GOOD_TOP = """\
+kind = "heavy-top"
+duration_s = 0.5
+rate_hz = 200
+[body]
+mass_kg = 0.1
+inertia_kgm2 = [4e-5, 4e-5, 6e-5]
+cm_height_m = 0.03
+[initial]
+euler_zxz_rad = [0.0, 0.3, 0.0]
+euler_zxz_rates_rad_s = [0.0, 0.0, 150.0]
+[environment]
+gravity_m_s2 = 9.81
+"""
+
+
+def gyroemu(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "pipelines.cli", *args], capture_output=True, text=True, cwd=cwd)
+
+
+def digest(path):
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@pytest.mark.parametrize(
+    "edit, key",
+    [
+        (("mass_kg = 0.1", "mass_kg = -0.1"), "body.mass_kg"),
+        (("duration_s = 0.5", "duration_s = -1"), "duration_s"),
+        (("duration_s = 0.5", "duration_min = 0.5"), "duration_min"),
+        (("cm_height_m = 0.03", "cm_height_m = 0.03\ncolour = 'red'"), "body.colour"),
+        (("mass_kg = 0.1\n", ""), "body.mass_kg"),
+        (("[4e-5, 4e-5, 6e-5]", "[4e-5, 4e-5, 9e-5]"), "body.inertia_kgm2"),
+        (("rate_hz = 200", "rate_hz = '200 Hz'"), "rate_hz"),
+    ],
+)
+def test_bad_scenario_exits_2_naming_file_and_key(tmp_path, edit, key):
+    scenario = tmp_path / "top.toml"
+    scenario.write_text(GOOD_TOP.replace(*edit))
+    before = digest(scenario)
+    out = tmp_path / "truth.npz"
+    result = gyroemu("simulate", "--scenario", str(scenario), "--out", str(out))
+    assert result.returncode == 2, result.stderr
+    assert str(scenario) in result.stderr and f"key '{key}'" in result.stderr
+    assert digest(scenario) == before
+    assert list(tmp_path.iterdir()) == [scenario]  # no output, no temporary left behind
+
+
+def test_bad_arguments_exit_2_naming_them(tmp_path):
+    result = gyroemu("simulate", "--scenario", "no_such_scenario", "--out", str(tmp_path / "t.npz"))
+    assert result.returncode == 2 and "unknown scenario 'no_such_scenario'" in result.stderr
+    result = gyroemu("simulate", "--scenario", "heavy_top", "--out", str(tmp_path / "t.csv"))
+    assert result.returncode == 2 and "--out" in result.stderr
+    result = gyroemu("simulate", "--scenario", "heavy_top", "--duration", "-3", "--out", str(tmp_path / "t.npz"))
+    assert result.returncode == 2 and "--duration" in result.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_simulate_writes_the_truth(tmp_path):
+    scenario = tmp_path / "top.toml"
+    scenario.write_text(GOOD_TOP)
+    out = tmp_path / "truth.npz"
+    result = gyroemu("simulate", "--scenario", str(scenario), "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    with np.load(out) as data:
+        assert data["t"].shape == (101,) and data["q_wb"].shape == (101, 4)
+        assert 'kind = "heavy-top"' in str(data["scenario_toml"])
+
+
+def test_scenarios_lists_every_builtin_and_demo_runs():
+    result = gyroemu("scenarios")
+    assert result.returncode == 0, result.stderr
+    names = {line.split()[0] for line in result.stdout.splitlines()}
+    assert {"heavy_top", "free_symmetric_top", "bench_static", "smooth_manoeuvre", "drop_impact"} <= names
+    result = gyroemu("demo", "--duration", "1")
+    assert result.returncode == 0, result.stderr
+    assert "samples" in result.stdout
