@@ -1,0 +1,174 @@
+"""Allan deviation of a sensor's output, and a fit of the IEEE Std 952 noise terms to it.
+
+The overlapping Allan deviation (NIST SP 1065, eq. 11) is computed by ``allantools.oadev`` on the rate
+(or specific-force) samples at octave-spaced averaging times τ = Δt, 2Δt, 4Δt, …
+
+The fit uses the model of IEEE Std 952-1997 Annex C, where the independent terms add in variance:
+
+    σ²(τ) = 3Q²/τ²  +  N²/τ  +  (2 ln2/π) B²  +  K² τ/3  +  R² τ²/2
+            quant.     ARW      bias instab.     RRW        rate ramp
+    slope   −1         −½       0                +½         +1         (of σ on a log-log plot)
+
+so N is the −½ line read at τ = 1 s, K the +½ line read at τ = 3 s, and B the flat floor divided by
+√(2 ln2/π) ≈ 0.664. Q is the rms angle error, LSB/√12 for a quantiser of step LSB.
+
+The model is linear in the coefficients c = (Q², N², B², K², R²), so they are found by non-negative
+weighted least squares of σ²(τ) itself. Each point is weighted by the standard deviation of its own
+Allan variance estimate, σ²(τ)·√(2/ν), with ν the equivalent degrees of freedom of the chi-squared
+distribution of the estimate. We take ν = ⌊n/m⌋ − 1 for n samples and clusters of m samples: the
+number of independent clusters less one, IEEE 952 Annex C's count, which gives the familiar relative
+uncertainty 1/√(2(n/m − 1)) of σ(τ) (conservative for the overlapping estimator). Weighting by the
+model's σ² rather than the noisy estimate (iterated a few times) keeps the fit from favouring points
+that happen to be low; relative weights make it a fit of the log curve. Each coefficient's 68 %
+confidence interval is read as IEEE 952 reads the coefficient itself, off one point of the curve: the τ
+where that term is best determined (largest share of σ² for its ν), as a chi-squared interval
+(``allantools.confidence_interval``) with ν·share² degrees of freedom. Octave points share data (and
+for random-walk noise are strongly correlated), so combining them as independent would overstate the
+confidence; the one-point interval is on the cautious side.
+
+Units: for a gyro Q in rad, N in rad/√s, B in rad/s, K in rad/s/√s, R in rad/s²; for an accelerometer
+m/s, m/s/√s, m/s², m/s²/√s, m/s³. Convert with N[deg/√h] = N·(180/π)·60, B[deg/h] = B·(180/π)·3600,
+K[deg/h/√h] = K·(180/π)·3600·60.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import allantools
+import numpy as np
+from scipy.optimize import nnls
+
+__all__ = ["AllanDeviation", "Coefficient", "AllanFit", "allan_deviation", "fit_allan", "TERMS"]
+
+#: The IEEE 952 terms in the order of the fit's coefficients.
+TERMS = ("quantisation", "arw", "bias_instability", "rrw", "rate_ramp")
+
+_ONE_SIGMA = 0.682689492137086  # probability within ±1σ of a normal distribution
+
+
+@dataclass(frozen=True)
+class AllanDeviation:
+    """An overlapping Allan deviation with its confidence.
+
+    Attributes
+    ----------
+    tau : (M,) averaging times, s.
+    adev : (M,) Allan deviation σ(τ), in the data's unit.
+    clusters : (M,) number of independent (non-overlapping) clusters ⌊n/m⌋.
+    edf : (M,) chi-squared equivalent degrees of freedom, ν = clusters − 1.
+    low, high : (M,) 68 % confidence interval of σ(τ).
+    """
+
+    tau: np.ndarray
+    adev: np.ndarray
+    clusters: np.ndarray
+    edf: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+
+    def slope(self) -> np.ndarray:
+        """(M−1,) local log-log slope between neighbouring points (−1 quantisation … +1 ramp)."""
+        return np.diff(np.log(self.adev)) / np.diff(np.log(self.tau))
+
+
+def allan_deviation(data: np.ndarray, dt: float, taus="octave") -> AllanDeviation:
+    """Overlapping Allan deviation of rate samples ``data`` (n,) taken every ``dt`` seconds.
+
+    Parameters
+    ----------
+    data : (n,) rate, rad/s (or specific force, m/s²).
+    dt : sample interval, s.
+    taus : "octave" (τ = Δt·2^k, the default), another allantools keyword, or an array of τ in s.
+
+    Keeps the τ with at least two independent clusters (ν ≥ 1).
+    """
+    data = np.asarray(data, dtype=float)
+    if data.ndim != 1 or data.size < 4:
+        raise ValueError(f"expected a 1-D series of at least 4 samples, got shape {data.shape}")
+    tau, adev, _, _ = allantools.oadev(data, rate=1.0 / dt, data_type="freq", taus=taus)
+    clusters = np.floor(data.size / np.round(tau / dt))
+    keep = clusters >= 2
+    tau, adev, clusters = tau[keep], adev[keep], clusters[keep]
+    edf = clusters - 1
+    bounds = np.array([allantools.confidence_interval(s, nu, ci=_ONE_SIGMA) for s, nu in zip(adev, edf)])
+    return AllanDeviation(tau=tau, adev=adev, clusters=clusters, edf=edf, low=bounds[:, 0], high=bounds[:, 1])
+
+
+@dataclass(frozen=True)
+class Coefficient:
+    """A fitted noise coefficient and its 68 % confidence interval (value 0: the term was not found,
+    ``high`` is then a one-sigma upper limit)."""
+
+    value: float
+    low: float
+    high: float
+
+
+@dataclass(frozen=True)
+class AllanFit:
+    """IEEE 952 coefficients fitted to an Allan deviation (units in the module notes)."""
+
+    quantisation: Coefficient  # Q, slope −1
+    arw: Coefficient  # N, slope −½, σ(1 s)
+    bias_instability: Coefficient  # B, floor 0.664 B
+    rrw: Coefficient  # K, slope +½, σ(3 s)
+    rate_ramp: Coefficient  # R, slope +1
+    allan: AllanDeviation
+
+    def model(self, tau) -> np.ndarray:
+        """The fitted σ(τ) at ``tau``, s."""
+        c = np.array([getattr(self, name).value for name in TERMS]) ** 2
+        return np.sqrt(_basis(np.asarray(tau, dtype=float)) @ c)
+
+
+def _basis(tau: np.ndarray) -> np.ndarray:
+    """(…, 5) Allan variance of each term per unit coefficient²: 3/τ², 1/τ, 2 ln2/π, τ/3, τ²/2."""
+    floor = np.full_like(tau, 2 * np.log(2) / np.pi)
+    return np.stack([3 / tau**2, 1 / tau, floor, tau / 3, tau**2 / 2], axis=-1)
+
+
+def fit_allan(allan: AllanDeviation, terms=TERMS, iterations: int = 5) -> AllanFit:
+    """Fit the IEEE 952 terms named in ``terms`` (a subset of :data:`TERMS`) to ``allan``.
+
+    Leave out terms known to be absent (a static test has no rate ramp): a spare term soaks up some
+    of the scatter of its neighbours. Returns every term; those left out are 0.
+    """
+    unknown = set(terms) - set(TERMS)
+    if unknown:
+        raise ValueError(f"unknown terms {sorted(unknown)}; known: {', '.join(TERMS)}")
+    used = np.array([name in terms for name in TERMS])
+    basis = _basis(allan.tau) * used  # (M, 5): a term left out has a zero column
+    avar = allan.adev**2
+    relative_sd = np.sqrt(2 / allan.edf)  # sd of an Allan variance estimate, per unit variance
+
+    model = avar  # weights from the data first, then from the model
+    for _ in range(iterations):
+        sd = model * relative_sd
+        c, _ = nnls(basis[:, used] / sd[:, None], avar / sd)
+        coefficients = np.zeros(len(TERMS))
+        coefficients[used] = c
+        model = np.maximum(basis @ coefficients, np.finfo(float).tiny)
+
+    fitted = {name: _read(j, coefficients, basis, model, allan) if use else Coefficient(0.0, 0.0, 0.0)
+              for j, (name, use) in enumerate(zip(TERMS, used))}
+    return AllanFit(allan=allan, **fitted)
+
+
+def _read(j: int, c: np.ndarray, basis: np.ndarray, model: np.ndarray, allan: AllanDeviation) -> Coefficient:
+    """Coefficient j with its confidence, read where the data pin it best.
+
+    At τ_i, term j makes the share s_i = c_j A_ij / σ²(τ_i) of the Allan variance, so τ_i alone would
+    give c_j with a relative standard deviation √(2/ν_i) / s_i: the chi-squared of ν_i s_i² degrees of
+    freedom. We take the best τ_i (adjacent octaves share data, so they are not combined). A term not
+    found gets the upper limit at which it would have made one standard deviation where it shows most.
+    """
+    relative_sd = np.sqrt(2 / allan.edf)
+    if c[j] <= 0:
+        limit = np.min(model * relative_sd / basis[:, j])
+        return Coefficient(0.0, 0.0, float(np.sqrt(limit)))
+    share = c[j] * basis[:, j] / model
+    best = np.argmin(relative_sd / share)
+    value = np.sqrt(c[j])
+    low, high = allantools.confidence_interval(value, allan.edf[best] * share[best] ** 2, ci=_ONE_SIGMA)
+    return Coefficient(float(value), float(low), float(high))

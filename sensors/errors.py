@@ -1,0 +1,468 @@
+"""The standard error terms of inertial sensors, shared by every gyro and accelerometer kind.
+
+One vectorised function, :func:`apply_errors`, turns the true signal of a three-axis sensor (angular
+rate ω in rad/s, or specific force f in m/s²) into what the sensor outputs, following the models of
+IEEE Std 952-1997 (fibre-optic gyros; its Annex C gives the Allan-variance terms), IEEE Std 647-2006
+(ring-laser gyros) and IEEE Std 1431-2004 (Coriolis vibratory gyros); accelerometers take the same
+terms in their own units (IEEE Std 1293-2018). For each axis i, with ΔT = T − T_ref:
+
+    u_i = Σ_j (δ_ij + s_i + M_ij) x_j        scale factor s (ppm) and misalignment / cross-axis M
+        + k_i x_i²                           quadratic scale-factor nonlinearity
+        + s_T,i ΔT x_i + b_T,i ΔT            temperature sensitivity of scale factor and bias
+        + Σ_j G_ij f_j                        g-sensitivity (gyro only; f = specific force, m/s²)
+        + b_i + b_on,i + R_i t               fixed bias, turn-on bias (random per power-up), ramp
+        + n_i(t)                             ARW/VRW white noise + bias instability (flicker) + RRW
+
+    y = Q( clip( LPF(u), ±range ) )          bandwidth (Butterworth low-pass), saturation, quantisation
+
+The small terms act on the true input (first order in the errors). The noise n is made by
+:func:`sensors.noise.sensor_noise`; the module notes of :mod:`sensors.noise` define the noise density
+(single-sided: the Allan deviation at τ = 1 s, σ = N/√Δt per sample; MATLAB's ``imuSensor`` is √2
+lower for the same number) and the flicker model. Quantisation is either of the integrated output
+(``quantisation_rad`` / ``quantisation_m_per_s``: a pulse-counting sensor that never loses angle) or
+of the output itself (``quantisation_rad_per_s`` / ``quantisation_m_per_s2``: a rate ADC, which adds
+white noise of σ = LSB/√12 per sample when the signal spans many LSBs). The pulse counter gives IEEE
+952's quantisation term (Allan slope −1, σ(τ) = √3 Q/τ, Q = LSB/√12) when the angle moves by an LSB or
+more between samples (a dithered ring-laser gyro, a vehicle in motion); on a quiet static sensor its
+angle error is correlated from sample to sample, as a real counter's is, and the −1 line is fainter.
+
+Config keys carry their datasheet unit (``bias_deg_per_h``, ``vrw_m_per_s_per_sqrt_h``), so a key in
+the wrong unit is an unknown key. Per-axis keys take one number for all axes or a list of three (x, y,
+z). ``g`` in a key name is the unit g₀ = 9.80665 m/s², not local gravity. :class:`GyroErrors` and
+:class:`AccelErrors` convert to one SI :class:`ErrorModel`, which is all :func:`apply_errors` needs.
+
+Randomness: every draw comes from the Generator passed in, in a fixed order (turn-on bias, then the
+noise, then the quantiser's initial fraction); a term that is off draws nothing. One call is one
+power-up: call again with the same Generator for the next run's turn-on bias.
+
+Implementation: numpy prepares, and three small numba kernels make one pass each over the samples
+(the deterministic response, the noise recurrences, the filter; the quantiser is a fourth), so the
+layer costs about 2½ times numpy's own white-noise draw (``tests/benchmarks/bench_errors.py``). A
+plain ``x @ M.T`` would be shorter but goes through multithreaded BLAS, which on a shared machine
+ran 40 times slower than the loop.
+
+Left to the IMU layer: the sample clock (rate error, jitter, time offset), sensor lever arms, and the
+choice of which truth array feeds which sensor. The sample times given here must be uniform.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Annotated, Literal
+
+import numba
+import numpy as np
+import scipy.signal
+from pydantic import BeforeValidator, ValidationInfo, field_validator
+
+from dynamics.config import ConfigError, NonNegativeReal, PositiveReal, Real, Section
+
+from . import noise
+
+__all__ = ["GyroErrors", "AccelErrors", "ErrorModel", "apply_errors", "STANDARD_GRAVITY"]
+
+#: The unit g₀ in key names (``_per_g``, ``_ug``), m/s²; not the local gravity of a scenario.
+STANDARD_GRAVITY = 9.80665
+
+_DEG = np.pi / 180  # rad per degree
+_HOUR = 3600.0  # s per hour
+_SQRT_HOUR = 60.0  # √s per √h
+_PPM = 1e-6
+_MRAD = 1e-3
+_UG = 1e-6 * STANDARD_GRAVITY  # m/s² per µg
+
+
+# --------------------------------------------------------------------------------------------------
+# Config value types
+# --------------------------------------------------------------------------------------------------
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _axes(value):
+    """One number for all three axes, or a list of three."""
+    if _is_number(value):
+        return (value, value, value)
+    if isinstance(value, (list, tuple)) and len(value) != 3:
+        raise ValueError(f"expected one number or 3 (x, y, z), got {len(value)} values")
+    if not isinstance(value, (list, tuple)):
+        raise ValueError(f"expected one number or a list of 3, got {type(value).__name__} {value!r}")
+    return value
+
+
+def _axes_nonnegative(value):
+    if _is_number(value) and value < 0:
+        raise ValueError(f"must be >= 0 (a noise or uncertainty magnitude), got {value}")
+    return _axes(value)
+
+
+PerAxis = Annotated[tuple[Real, Real, Real], BeforeValidator(_axes)]
+PerAxisNonNegative = Annotated[
+    tuple[NonNegativeReal, NonNegativeReal, NonNegativeReal], BeforeValidator(_axes_nonnegative)
+]
+Matrix3 = tuple[tuple[Real, Real, Real], tuple[Real, Real, Real], tuple[Real, Real, Real]]
+#: Six small angles (xy, xz, yx, yz, zx, zy): sensing axis x tilted towards y by xy, and so on.
+Angles6 = tuple[Real, Real, Real, Real, Real, Real]
+_ZERO = (0.0, 0.0, 0.0)
+
+
+class _CommonErrors(Section):
+    """Keys without a unit that depends on the sensor, and the checks that relate keys."""
+
+    scale_factor_ppm: PerAxis = _ZERO
+    scale_factor_temperature_ppm_per_degC: PerAxis = _ZERO
+    reference_temperature_degC: Real = 25.0
+    misalignment_mrad: Angles6 | None = None
+    cross_axis_matrix: Matrix3 | None = None
+    bias_instability_tau_range_s: tuple[PositiveReal, PositiveReal] = (1.0, 1.0e4)
+    bandwidth_hz: PositiveReal | None = None
+    filter_order: Literal[1, 2] = 2
+
+    @field_validator("cross_axis_matrix")
+    @classmethod
+    def _one_misalignment(cls, value, info: ValidationInfo):
+        if value is not None and info.data.get("misalignment_mrad") is not None:
+            raise ValueError("give either misalignment_mrad or cross_axis_matrix, not both")
+        if value is not None and any(value[i][i] != 0 for i in range(3)):
+            raise ValueError("the diagonal must be 0 (scale factor errors go in scale_factor_ppm)")
+        return value
+
+    @field_validator("bias_instability_tau_range_s")
+    @classmethod
+    def _ascending(cls, value):
+        if not value[0] < value[1]:
+            raise ValueError(f"expected (min, max) with min < max, got {value}")
+        return value
+
+    def _cross_axis(self) -> np.ndarray:
+        if self.cross_axis_matrix is not None:
+            return np.array(self.cross_axis_matrix, dtype=float)
+        m = np.zeros((3, 3))
+        if self.misalignment_mrad is not None:
+            xy, xz, yx, yz, zx, zy = np.array(self.misalignment_mrad) * _MRAD
+            m = np.array([[0, xy, xz], [yx, 0, yz], [zx, zy, 0]])
+        return m
+
+
+def _exclusive(first: str):
+    """A validator for the second of two alternative keys: refuse it when ``first`` is given too."""
+
+    def check(cls, value, info: ValidationInfo):
+        if value is not None and info.data.get(first) is not None:
+            raise ValueError(f"give either {first} or {info.field_name}, not both")
+        return value
+
+    return classmethod(check)
+
+
+def _needs_range(range_key: str):
+    """A validator for the nonlinearity: it is in ppm of full scale, so the range must be given."""
+
+    def check(cls, value, info: ValidationInfo):
+        if any(value) and info.data.get(range_key) is None:
+            raise ValueError(f"is in ppm of full scale: give {range_key} too")
+        return value
+
+    return classmethod(check)
+
+
+class GyroErrors(_CommonErrors):
+    """A gyro's error terms, each key in the datasheet unit its name says. All default to off.
+
+    Noise: ``arw_deg_per_sqrt_h`` or ``noise_density_deg_per_s_per_sqrt_hz`` (one of them; single-sided,
+    = Allan deviation at 1 s), ``bias_instability_deg_per_h`` (flicker floor 0.664 B, flat over
+    ``bias_instability_tau_range_s``), ``rrw_deg_per_h_per_sqrt_h``. Quantisation: ``quantisation_rad``
+    (angle per count of an integrating output) or ``quantisation_rad_per_s`` (rate LSB).
+    ``g_sensitivity_deg_per_h_per_g``: 3x3, row i = output axis, column j = specific-force axis.
+    """
+
+    bias_deg_per_h: PerAxis = _ZERO
+    turn_on_bias_deg_per_h: PerAxisNonNegative = _ZERO
+    bias_temperature_deg_per_h_per_degC: PerAxis = _ZERO
+    range_deg_per_s: PositiveReal | None = None
+    scale_factor_nonlinearity_ppm: PerAxis = _ZERO
+    g_sensitivity_deg_per_h_per_g: Matrix3 | None = None
+    arw_deg_per_sqrt_h: PerAxisNonNegative | None = None
+    noise_density_deg_per_s_per_sqrt_hz: PerAxisNonNegative | None = None
+    bias_instability_deg_per_h: PerAxisNonNegative = _ZERO
+    rrw_deg_per_h_per_sqrt_h: PerAxisNonNegative = _ZERO
+    rate_ramp_deg_per_h_per_h: PerAxis = _ZERO
+    quantisation_rad: PositiveReal | None = None
+    quantisation_rad_per_s: PositiveReal | None = None
+
+    _nonlinearity = field_validator("scale_factor_nonlinearity_ppm")(_needs_range("range_deg_per_s"))
+    _density = field_validator("noise_density_deg_per_s_per_sqrt_hz")(_exclusive("arw_deg_per_sqrt_h"))
+    _quantum = field_validator("quantisation_rad_per_s")(_exclusive("quantisation_rad"))
+
+    def to_si(self) -> ErrorModel:
+        """The same terms in SI units (rad, rad/s, s, m/s²)."""
+        deg_per_h = _DEG / _HOUR  # rad/s per deg/h
+        if self.noise_density_deg_per_s_per_sqrt_hz is not None:
+            density = np.array(self.noise_density_deg_per_s_per_sqrt_hz) * _DEG
+        else:
+            density = np.array(self.arw_deg_per_sqrt_h or _ZERO) * _DEG / _SQRT_HOUR
+        full_scale = None if self.range_deg_per_s is None else self.range_deg_per_s * _DEG
+        g_sens = self.g_sensitivity_deg_per_h_per_g
+        return ErrorModel(
+            bias=np.array(self.bias_deg_per_h) * deg_per_h,
+            turn_on_bias=np.array(self.turn_on_bias_deg_per_h) * deg_per_h,
+            bias_temperature=np.array(self.bias_temperature_deg_per_h_per_degC) * deg_per_h,
+            scale_factor=np.array(self.scale_factor_ppm) * _PPM,
+            scale_factor_temperature=np.array(self.scale_factor_temperature_ppm_per_degC) * _PPM,
+            reference_temperature_degC=self.reference_temperature_degC,
+            nonlinearity=_quadratic(self.scale_factor_nonlinearity_ppm, full_scale),
+            cross_axis=self._cross_axis(),
+            g_sensitivity=None if g_sens is None else np.array(g_sens) * deg_per_h / STANDARD_GRAVITY,
+            noise_density=density,
+            bias_instability=np.array(self.bias_instability_deg_per_h) * deg_per_h,
+            bias_instability_tau_range=self.bias_instability_tau_range_s,
+            random_walk=np.array(self.rrw_deg_per_h_per_sqrt_h) * deg_per_h / _SQRT_HOUR,
+            ramp=np.array(self.rate_ramp_deg_per_h_per_h) * deg_per_h / _HOUR,
+            integral_lsb=self.quantisation_rad,
+            output_lsb=self.quantisation_rad_per_s,
+            full_scale=full_scale,
+            bandwidth_hz=self.bandwidth_hz,
+            filter_order=self.filter_order,
+        )
+
+
+class AccelErrors(_CommonErrors):
+    """An accelerometer's error terms, each key in the datasheet unit its name says. All default to off.
+
+    Noise: ``vrw_m_per_s_per_sqrt_h`` or ``noise_density_ug_per_sqrt_hz`` (one of them; single-sided,
+    = Allan deviation at 1 s), ``bias_instability_ug`` (flicker floor 0.664 B over
+    ``bias_instability_tau_range_s``), ``random_walk_ug_per_sqrt_h`` (the accelerometer's rate random
+    walk). Quantisation: ``quantisation_m_per_s`` (velocity per count of an integrating output) or
+    ``quantisation_m_per_s2`` (acceleration LSB). µg is written ``ug``.
+    """
+
+    bias_ug: PerAxis = _ZERO
+    turn_on_bias_ug: PerAxisNonNegative = _ZERO
+    bias_temperature_ug_per_degC: PerAxis = _ZERO
+    range_g: PositiveReal | None = None
+    scale_factor_nonlinearity_ppm: PerAxis = _ZERO
+    vrw_m_per_s_per_sqrt_h: PerAxisNonNegative | None = None
+    noise_density_ug_per_sqrt_hz: PerAxisNonNegative | None = None
+    bias_instability_ug: PerAxisNonNegative = _ZERO
+    random_walk_ug_per_sqrt_h: PerAxisNonNegative = _ZERO
+    ramp_ug_per_h: PerAxis = _ZERO
+    quantisation_m_per_s: PositiveReal | None = None
+    quantisation_m_per_s2: PositiveReal | None = None
+
+    _nonlinearity = field_validator("scale_factor_nonlinearity_ppm")(_needs_range("range_g"))
+    _density = field_validator("noise_density_ug_per_sqrt_hz")(_exclusive("vrw_m_per_s_per_sqrt_h"))
+    _quantum = field_validator("quantisation_m_per_s2")(_exclusive("quantisation_m_per_s"))
+
+    def to_si(self) -> ErrorModel:
+        """The same terms in SI units (m/s, m/s², s)."""
+        if self.noise_density_ug_per_sqrt_hz is not None:
+            density = np.array(self.noise_density_ug_per_sqrt_hz) * _UG
+        else:
+            density = np.array(self.vrw_m_per_s_per_sqrt_h or _ZERO) / _SQRT_HOUR
+        full_scale = None if self.range_g is None else self.range_g * STANDARD_GRAVITY
+        return ErrorModel(
+            bias=np.array(self.bias_ug) * _UG,
+            turn_on_bias=np.array(self.turn_on_bias_ug) * _UG,
+            bias_temperature=np.array(self.bias_temperature_ug_per_degC) * _UG,
+            scale_factor=np.array(self.scale_factor_ppm) * _PPM,
+            scale_factor_temperature=np.array(self.scale_factor_temperature_ppm_per_degC) * _PPM,
+            reference_temperature_degC=self.reference_temperature_degC,
+            nonlinearity=_quadratic(self.scale_factor_nonlinearity_ppm, full_scale),
+            cross_axis=self._cross_axis(),
+            g_sensitivity=None,
+            noise_density=density,
+            bias_instability=np.array(self.bias_instability_ug) * _UG,
+            bias_instability_tau_range=self.bias_instability_tau_range_s,
+            random_walk=np.array(self.random_walk_ug_per_sqrt_h) * _UG / _SQRT_HOUR,
+            ramp=np.array(self.ramp_ug_per_h) * _UG / _HOUR,
+            integral_lsb=self.quantisation_m_per_s,
+            output_lsb=self.quantisation_m_per_s2,
+            full_scale=full_scale,
+            bandwidth_hz=self.bandwidth_hz,
+            filter_order=self.filter_order,
+        )
+
+
+def _quadratic(ppm_of_full_scale, full_scale: float | None) -> np.ndarray:
+    """k of the quadratic term k·x², from a nonlinearity in ppm of full scale: k·FS² = ppm·1e-6·FS."""
+    ppm = np.array(ppm_of_full_scale, dtype=float)
+    return np.zeros(3) if full_scale is None else ppm * _PPM / full_scale
+
+
+# --------------------------------------------------------------------------------------------------
+# The SI model and the error function
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ErrorModel:
+    """Error terms in SI units. "unit" below is rad/s for a gyro, m/s² for an accelerometer.
+
+    Attributes
+    ----------
+    bias, turn_on_bias : (3,) unit
+        Fixed bias b, and the standard deviation of the bias drawn once per power-up.
+    bias_temperature : (3,) unit per K
+    scale_factor, scale_factor_temperature : (3,) dimensionless, and per K
+    reference_temperature_degC : float
+        Temperature at which the temperature terms vanish, °C.
+    nonlinearity : (3,) 1/unit
+        k in k·x².
+    cross_axis : (3, 3) dimensionless, zero diagonal
+        M: sensing axis i responds to M[i, j]·x_j.
+    g_sensitivity : (3, 3) unit per m/s², or None
+    noise_density : (3,) unit·√s
+        N: white noise, Allan deviation at 1 s.
+    bias_instability : (3,) unit; bias_instability_tau_range : (τ_min, τ_max), s
+    random_walk : (3,) unit/√s
+        K, rate random walk.
+    ramp : (3,) unit/s
+    integral_lsb : float or None
+        Quantum of the integrated output (rad or m/s).
+    output_lsb : float or None
+        Quantum of the output (unit).
+    full_scale : float or None
+        Saturation limit (unit).
+    bandwidth_hz : float or None; filter_order : 1 or 2
+    """
+
+    bias: np.ndarray
+    turn_on_bias: np.ndarray
+    bias_temperature: np.ndarray
+    scale_factor: np.ndarray
+    scale_factor_temperature: np.ndarray
+    reference_temperature_degC: float
+    nonlinearity: np.ndarray
+    cross_axis: np.ndarray
+    g_sensitivity: np.ndarray | None
+    noise_density: np.ndarray
+    bias_instability: np.ndarray
+    bias_instability_tau_range: tuple[float, float]
+    random_walk: np.ndarray
+    ramp: np.ndarray
+    integral_lsb: float | None
+    output_lsb: float | None
+    full_scale: float | None
+    bandwidth_hz: float | None
+    filter_order: int
+
+
+def apply_errors(truth: np.ndarray, t: np.ndarray, spec: GyroErrors | AccelErrors | ErrorModel,
+                 rng: np.random.Generator, *, temperature_degC=None,
+                 specific_force: np.ndarray | None = None) -> np.ndarray:
+    """What a three-axis sensor with the error terms ``spec`` outputs for the true input ``truth``.
+
+    Parameters
+    ----------
+    truth : (N, 3)
+        True angular rate ω_b (rad/s) for a gyro, true specific force f_b (m/s²) for an accelerometer,
+        in the sensor's axes.
+    t : (N,)
+        Sample times, s, uniformly spaced (N ≥ 2); the rate ramp is R·t, so t = 0 is power-up.
+    spec : GyroErrors, AccelErrors or ErrorModel
+    rng : numpy.random.Generator
+        Source of every random draw (see the module notes for the order).
+    temperature_degC : float or (N,), optional
+        Sensor temperature, °C (per-°C sensitivities are per kelvin). None: the reference temperature.
+    specific_force : (N, 3), optional
+        Specific force at the sensor, m/s², for the gyro's g-sensitivity (required when it is set).
+
+    Returns
+    -------
+    (N, 3) float64: the measured rate (rad/s) or specific force (m/s²).
+    """
+    m = spec if isinstance(spec, ErrorModel) else spec.to_si()
+    x = np.asarray(truth, dtype=float)
+    t = np.asarray(t, dtype=float)
+    n = x.shape[0]
+    if x.shape != (n, 3) or t.shape != (n,) or n < 2:
+        raise ValueError(f"expected truth (N, 3) and t (N,) with N >= 2, got {x.shape} and {t.shape}")
+    dt = (t[-1] - t[0]) / (n - 1)
+    if not dt > 0 or np.max(np.abs(np.diff(t) - dt)) > 1e-6 * dt:
+        raise ValueError("sample times must be uniform and increasing (clock jitter is the IMU layer's)")
+    if m.bandwidth_hz is not None and not m.bandwidth_hz < 0.5 / dt:
+        raise ConfigError(f"{m.bandwidth_hz:g} Hz is not below the Nyquist frequency {0.5 / dt:g} Hz "
+                          f"of the {1 / dt:g} Hz sample rate", key="bandwidth_hz")
+
+    # Deterministic response: (I + S + M) x + k x² + (b_T + s_T x) ΔT + G f + b + b_on + R t.
+    gain = np.eye(3) + np.diag(m.scale_factor) + m.cross_axis
+    if temperature_degC is None:
+        temperature_degC = m.reference_temperature_degC
+    dT = np.broadcast_to(np.asarray(temperature_degC, dtype=float) - m.reference_temperature_degC, (n,))
+    g_sensitivity, f = np.zeros((3, 3)), np.broadcast_to(np.zeros(3), (n, 3))
+    if m.g_sensitivity is not None:
+        if specific_force is None:
+            raise ValueError("this gyro has a g-sensitivity: pass the specific force (N, 3), m/s²")
+        g_sensitivity, f = m.g_sensitivity, np.asarray(specific_force, dtype=float)
+        if f.shape != (n, 3):
+            raise ValueError(f"expected specific_force of shape {(n, 3)}, got {f.shape}")
+    bias = m.bias + (m.turn_on_bias * rng.standard_normal(3) if np.any(m.turn_on_bias) else 0.0)
+    y = np.empty((n, 3))
+    _response(x, t, dT, f, gain, m.nonlinearity, m.bias_temperature, m.scale_factor_temperature,
+              g_sensitivity, bias, m.ramp, y)
+
+    # Noise: white, flicker and rate random walk, added in place.
+    flicker = None
+    if np.any(m.bias_instability):
+        flicker = noise.flicker_bank(m.bias_instability, m.bias_instability_tau_range, dt, n_axes=3)
+    noise.sensor_noise(rng, y.shape, dt, white=m.noise_density, random_walk=m.random_walk,
+                       flicker=flicker, out=y)
+
+    # Output stage: bandwidth, saturation, quantisation.
+    if m.bandwidth_hz is not None:
+        _low_pass(y, dt, m.bandwidth_hz, m.filter_order)
+    if m.full_scale is not None:
+        np.clip(y, -m.full_scale, m.full_scale, out=y)
+    if m.integral_lsb is not None:
+        noise.quantise_angle(y, dt, m.integral_lsb, rng, out=y)
+    if m.output_lsb is not None:
+        np.round(y / m.output_lsb, out=y)
+        y *= m.output_lsb
+    return y
+
+
+@numba.njit(cache=True)
+def _response(x, t, dT, f, gain, k, b_T, s_T, G, bias, ramp, out):
+    """The deterministic terms, written out per sample k and axis i (shapes as in apply_errors)."""
+    for n in range(x.shape[0]):
+        for i in range(3):
+            out[n, i] = (
+                gain[i, 0] * x[n, 0] + gain[i, 1] * x[n, 1] + gain[i, 2] * x[n, 2]  # (I + S + M) x
+                + k[i] * x[n, i] * x[n, i]  # quadratic nonlinearity
+                + (b_T[i] + s_T[i] * x[n, i]) * dT[n]  # temperature: bias and scale factor
+                + G[i, 0] * f[n, 0] + G[i, 1] * f[n, 1] + G[i, 2] * f[n, 2]  # g-sensitivity
+                + bias[i] + ramp[i] * t[n]  # fixed and turn-on bias, rate ramp
+            )
+
+
+def _low_pass(y: np.ndarray, dt: float, bandwidth_hz: float, order: int) -> None:
+    """Butterworth low-pass of ``order`` with −3 dB at ``bandwidth_hz``, in place on ``y`` (n, 3).
+
+    Designed by ``scipy.signal.butter`` (bilinear transform with pre-warping, so the digital filter's
+    −3 dB point is exactly ``bandwidth_hz``) and started in steady state at the first sample
+    (``scipy.signal.lfilter_zi``): a constant input passes unchanged, with no start-up transient.
+    """
+    b, a = scipy.signal.butter(order, bandwidth_hz, btype="low", fs=1.0 / dt)
+    zi = scipy.signal.lfilter_zi(b, a)[:, None] * y[0]
+    _lfilter_into(b, a, zi, y)
+
+
+@numba.njit(cache=True)
+def _lfilter_into(b, a, zi, y):
+    """``scipy.signal.lfilter(b, a, y, axis=0, zi=zi)[0]`` written into ``y`` (n, A); a[0] = 1.
+
+    The same direct form II transposed: out = b₀x + z₀; z_j = b_{j+1}x − a_{j+1}out + z_{j+1}.
+    """
+    n, n_axes = y.shape
+    order = a.shape[0] - 1
+    z = zi.copy()
+    for k in range(n):
+        for i in range(n_axes):
+            x = y[k, i]
+            out = b[0] * x + z[0, i]
+            for j in range(order - 1):
+                z[j, i] = b[j + 1] * x - a[j + 1] * out + z[j + 1, i]
+            z[order - 1, i] = b[order] * x - a[order] * out
+            y[k, i] = out

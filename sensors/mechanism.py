@@ -1,0 +1,160 @@
+"""The contract between a gyro's mechanism and the IMU around it.
+
+A mechanism (``rate_gyro.py``, ``rate_integrating.py``, ``free_gyro.py``, ``mems.py``, ``fog.py``,
+``rlg.py``) models how one kind of gyro turns motion into a physical observable (a gimbal angle, a
+pickoff voltage, a Sagnac phase, beat-fringe counts) and what rate or angle that observable implies.
+It sees a triad's truth on its own inner time grid, as a :class:`GyroTruth` (sensor axes, SI), and
+answers with a :class:`GyroResponse`. The IMU (``imu.py``) then forms the output samples and applies
+the standard error terms (``errors.py``) on top.
+
+Noise budget
+------------
+A mechanism whose physics makes white rate noise (Brownian motion of a MEMS proof mass, shot noise of
+a FOG's detector, dither randomisation of an RLG) reports its density through
+:meth:`GyroMechanism.intrinsic_noise_density`. The IMU adds only the remainder
+``sqrt(N_spec² − N_mech²)`` of the device's specified angle random walk ``N_spec``, so the total
+matches the datasheet whichever kind produces it; a mechanism noisier than its specification is a
+config error.
+
+Output samples
+--------------
+Output sample ``k`` at time ``t_k`` covers the interval ``[t_{k−1}, t_k]``: the IMU reports the
+indicated angle increment over it (or that increment divided by the interval, as a rate). This is
+the strapdown convention: a filter that propagates its attitude from ``t_{k−1}`` to ``t_k`` with it
+integrates exactly what the gyro saw.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from dynamics.config import Section
+
+__all__ = ["GyroTruth", "GyroResponse", "GyroMechanism", "IdealGyro", "GYRO_KINDS", "mechanism_class",
+           "hermite_integral"]
+
+GYRO_KINDS: dict[str, str] = {
+    "ideal": "sensors.mechanism:IdealGyro",
+    "rate-gyro": "sensors.rate_gyro:RateGyro",
+    "rate-integrating": "sensors.rate_integrating:RateIntegratingGyro",
+    "free-gyro": "sensors.free_gyro:FreeGyro",
+    "mems": "sensors.mems:MemsGyro",
+    "fog": "sensors.fog:FiberOpticGyro",
+    "rlg": "sensors.rlg:RingLaserGyro",
+}
+"""Gyro kind (the ``kind`` key of a device's ``[gyro.mechanism]`` table) → ``"module:Class"``."""
+
+
+def mechanism_class(kind: str) -> type["GyroMechanism"]:
+    """The mechanism class of a gyro kind (imported on first use)."""
+    module, cls = GYRO_KINDS[kind].split(":")
+    return getattr(importlib.import_module(module), cls)
+
+
+@dataclass(frozen=True, eq=False)
+class GyroTruth:
+    """What a triad of gyros is exposed to, on a uniform inner time grid, in the sensor's axes.
+
+    Attributes
+    ----------
+    t : ndarray (M,)
+        Inner sample times, s, uniform with step ``dt``.
+    dt : float
+        Inner step, s.
+    omega : ndarray (M, 3)
+        Angular velocity of the sensor relative to inertial space, rad/s.
+    alpha : ndarray (M, 3)
+        Its time derivative (of the sensor-axes components), rad/s².
+    specific_force : ndarray (M, 3)
+        At the sensor, m/s².
+    q_is : ndarray (M, 4)
+        Attitude of the sensor relative to an inertial frame that coincides with the world frame at
+        ``t = 0`` (what a free gyro's rotor holds on to).
+    temperature_degC : ndarray (M,)
+        Sensor temperature, °C.
+    """
+
+    t: np.ndarray
+    dt: float
+    omega: np.ndarray
+    alpha: np.ndarray
+    specific_force: np.ndarray
+    q_is: np.ndarray
+    temperature_degC: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+@dataclass(frozen=True, eq=False)
+class GyroResponse:
+    """A mechanism's answer on the inner grid of its :class:`GyroTruth`.
+
+    Exactly one of ``angle`` and ``rate`` is set.
+
+    Attributes
+    ----------
+    angle : ndarray (M, 3) or None
+        Indicated angle about each sensing axis, rad, cumulative from 0 at ``t[0]``: the natural output
+        of integrating kinds (rate-integrating gyros, ring lasers counting fringes).
+    rate : ndarray (M, 3) or None
+        Indicated angular rate, rad/s, at the inner sample times: the natural output of rate kinds.
+    raw : dict of str to ndarray
+        The physical observables, first axis M (e.g. ``gimbal_angle_rad``, ``sagnac_phase_rad``).
+    """
+
+    angle: np.ndarray | None = None
+    rate: np.ndarray | None = None
+    raw: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if (self.angle is None) == (self.rate is None):
+            raise ValueError("a GyroResponse has exactly one of angle and rate")
+
+
+class GyroMechanism(Section):
+    """Base of every mechanism spec (the ``[gyro.mechanism]`` table of a device file)."""
+
+    kind: str
+
+    def inner_rate_hz(self, output_rate_hz: float) -> float:
+        """The rate the mechanism's physics needs to be simulated at, Hz (at least the output rate)."""
+        return output_rate_hz
+
+    def intrinsic_noise_density(self) -> float:
+        """White rate noise the physics itself makes, rad/s/√Hz (Allan deviation at 1 s); 0 if none."""
+        return 0.0
+
+    def respond(self, truth: GyroTruth, rng: np.random.Generator) -> GyroResponse:
+        """The mechanism's indicated angle or rate, and its raw observables, for ``truth``."""
+        raise NotImplementedError
+
+
+class IdealGyro(GyroMechanism):
+    """A gyro with no mechanism of its own: it indicates the true inertial rate exactly.
+
+    Its angle is the exact integral of the cubic Hermite interpolant of ω (which matches ω and α at
+    every inner sample), so an ideal device's increments are exact to fourth order in the step.
+    """
+
+    kind: Literal["ideal"] = "ideal"
+
+    def respond(self, truth: GyroTruth, rng: np.random.Generator) -> GyroResponse:
+        return GyroResponse(angle=hermite_integral(truth.omega, truth.alpha, truth.dt))
+
+
+def hermite_integral(y: np.ndarray, dy: np.ndarray, h: float) -> np.ndarray:
+    """Cumulative integral of the piecewise cubic Hermite interpolant of samples ``y`` with slopes ``dy``.
+
+    On each step ``∫ = h (y_i + y_{i+1})/2 + h² (dy_i − dy_{i+1})/12`` (the corrected trapezoid rule,
+    exact for cubics). Returns an array shaped like ``y`` starting at 0.
+    """
+    steps = 0.5 * h * (y[1:] + y[:-1]) + (h * h / 12.0) * (dy[:-1] - dy[1:])
+    out = np.empty_like(y, dtype=float)
+    out[0] = 0.0
+    np.cumsum(steps, axis=0, out=out[1:])
+    return out
