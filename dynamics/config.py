@@ -13,6 +13,7 @@ coercing them.
 from __future__ import annotations
 
 import difflib
+import math
 import tomllib
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
@@ -24,6 +25,7 @@ __all__ = [
     "ConfigError",
     "Section",
     "Real",
+    "as_number",
     "PositiveReal",
     "NonNegativeReal",
     "Vec3",
@@ -63,13 +65,16 @@ class ConfigError(ValueError):
         return (": ".join(where) + ": " if where else "") + self.reason
 
 
-def _number(value: Any) -> float:
+def as_number(value: Any) -> float:
+    """``value`` as a finite float; strings, booleans and non-finite numbers raise ``ValueError``."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ValueError(f"expected a number, got {type(value).__name__} {value!r}")
+    if not math.isfinite(value):
+        raise ValueError(f"expected a finite number, got {value}")
     return float(value)
 
 
-Real = Annotated[float, pydantic.BeforeValidator(_number)]
+Real = Annotated[float, pydantic.BeforeValidator(as_number)]
 PositiveReal = Annotated[Real, Field(gt=0)]
 NonNegativeReal = Annotated[Real, Field(ge=0)]
 Vec3 = tuple[Real, Real, Real]

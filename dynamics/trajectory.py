@@ -85,6 +85,14 @@ class Trajectory:
         return float(self.t[-1] - self.t[0]) if len(self.t) else 0.0
 
 
+def _cross(a, b) -> np.ndarray:
+    """``a × b`` over the last axis, written out (``np.cross`` copies broadcast operands)."""
+    a, b = np.broadcast_arrays(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
+    ax, ay, az = np.moveaxis(a, -1, 0)
+    bx, by, bz = np.moveaxis(b, -1, 0)
+    return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], -1)
+
+
 def trajectory_from_world_motion(
     t,
     q_wb,
@@ -119,17 +127,28 @@ def trajectory_from_world_motion(
         mag_b   = R_bw m_w
     """
     q_bw = quat_conjugate(q_wb)
-    earth_b = quat_rotate(q_bw, environment.earth_rate_w)
-    coriolis = 2.0 * np.cross(environment.earth_rate_w, vel_w)
+    omega_wb_b = np.asarray(omega_wb_b, dtype=float)
+    alpha_wb_b = np.asarray(alpha_wb_b, dtype=float)
+    earth = environment.earth_rate_w
+    if np.any(earth):
+        earth_b = quat_rotate(q_bw, earth)
+        omega_b = omega_wb_b + earth_b
+        alpha_b = alpha_wb_b - _cross(omega_wb_b, earth_b)
+        inertial_acc_w = acc_w + _cross(2.0 * earth, vel_w) - environment.gravity_w
+    else:  # an inertial world: nothing to add (and long arrays are not copied for zeros)
+        omega_b, alpha_b = omega_wb_b, alpha_wb_b
+        inertial_acc_w = acc_w - environment.gravity_w
+    field = environment.magnetic_field_w
+    mag_b = quat_rotate(q_bw, field) if np.any(field) else np.zeros_like(omega_b)
     return Trajectory(
         t=np.asarray(t, dtype=float),
         q_wb=np.asarray(q_wb, dtype=float),
-        omega_b=omega_wb_b + earth_b,
-        alpha_b=alpha_wb_b - np.cross(omega_wb_b, earth_b),
-        specific_force_b=quat_rotate(q_bw, acc_w + coriolis - environment.gravity_w),
+        omega_b=omega_b,
+        alpha_b=alpha_b,
+        specific_force_b=quat_rotate(q_bw, inertial_acc_w),
         pos_w=np.asarray(pos_w, dtype=float),
         vel_w=np.asarray(vel_w, dtype=float),
-        mag_b=quat_rotate(q_bw, environment.magnetic_field_w),
+        mag_b=mag_b,
         extras=extras or {},
         environment=environment,
     )

@@ -16,6 +16,18 @@ a FOG's detector, dither randomisation of an RLG) reports its density through
 matches the datasheet whichever kind produces it; a mechanism noisier than its specification is a
 config error.
 
+Long runs, in chunks
+--------------------
+An hour at the tens of kilohertz a dithered ring laser needs inside does not fit in memory, so the
+IMU feeds long runs to :meth:`GyroMechanism.respond` in consecutive chunks of truth, passing the same
+``state`` dict each time: a mechanism reads its initial condition from it (an empty dict means
+power-up) and writes its final condition back (gimbal angle and rate, oscillator envelope, Sagnac
+loop integrator, beat phase and fringe count, ...). Splitting a run into chunks must not change
+its output beyond round-off (random draws come from the same Generator in the same order).
+Consecutive chunks share one sample: a chunk's first time is the previous chunk's last, and ``state``
+holds the condition at that instant, so the response there repeats the previous chunk's last value.
+Cumulative angles restart from 0 at each chunk's first sample.
+
 Output samples
 --------------
 Output sample ``k`` at time ``t_k`` covers the interval ``[t_{k−1}, t_k]``: the IMU reports the
@@ -129,8 +141,12 @@ class GyroMechanism(Section):
         """White rate noise the physics itself makes, rad/s/√Hz (Allan deviation at 1 s); 0 if none."""
         return 0.0
 
-    def respond(self, truth: GyroTruth, rng: np.random.Generator) -> GyroResponse:
-        """The mechanism's indicated angle or rate, and its raw observables, for ``truth``."""
+    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict | None = None) -> GyroResponse:
+        """The mechanism's indicated angle or rate, and its raw observables, for ``truth``.
+
+        ``state``: read the initial condition from it (empty or None: power-up) and write the final
+        condition back, so that consecutive chunks continue one run (see the module notes).
+        """
         raise NotImplementedError
 
 
@@ -143,7 +159,7 @@ class IdealGyro(GyroMechanism):
 
     kind: Literal["ideal"] = "ideal"
 
-    def respond(self, truth: GyroTruth, rng: np.random.Generator) -> GyroResponse:
+    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict | None = None) -> GyroResponse:
         return GyroResponse(angle=hermite_integral(truth.omega, truth.alpha, truth.dt))
 
 
