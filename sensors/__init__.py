@@ -1,5 +1,31 @@
-"""gyroemu's emulated sensors: gyro mechanisms, error terms, accelerometer, magnetometer, IMU devices."""
+"""gyroemu's emulated sensors: gyro mechanisms, error terms, accelerometer, magnetometer, IMU devices.
+
+Entry points (``interface.md``): :func:`load_device` and :meth:`Device.measure`, returning
+:class:`ImuSamples`. Mechanisms implement :class:`GyroMechanism` (``sensors.mechanism``); the error
+terms are :func:`apply_errors` (``sensors.errors``); Allan deviation and its fit are in ``sensors.allan``.
+"""
 
 from dynamics.config import ConfigError
 
-__all__ = ["ConfigError"]
+from .errors import AccelErrors, GyroErrors, apply_errors
+from .imu import Device, DeviceSpec
+from .mechanism import GYRO_KINDS, GyroMechanism, GyroResponse, GyroTruth
+from .presets import device_from_dict, list_devices, load_device
+from .samples import ImuSamples
+
+__all__ = [
+    "ConfigError",
+    "AccelErrors",
+    "GyroErrors",
+    "apply_errors",
+    "Device",
+    "DeviceSpec",
+    "GYRO_KINDS",
+    "GyroMechanism",
+    "GyroResponse",
+    "GyroTruth",
+    "device_from_dict",
+    "list_devices",
+    "load_device",
+    "ImuSamples",
+]

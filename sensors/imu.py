@@ -1,0 +1,273 @@
+"""The IMU: a gyro triad of any kind, an accelerometer triad and an optional magnetometer.
+
+``Device.measure(trajectory)`` runs, in this order:
+
+1. **Clock.** The device believes it samples every ``T = 1/rate_hz``; its oscillator is off by
+   ``rate_error_ppm``, so the true instants are ``τ_k = t₀ + k T (1 + ε)``. It stamps sample ``k``
+   with ``t_k = k T + offset_s + jitter`` (white, σ = ``jitter_s``).
+2. **Gyro mechanism.** The truth on the mechanism's inner grid (``m`` inner steps per output
+   interval, ``m = ceil(inner_rate / rate_hz)``) goes through :meth:`GyroMechanism.respond` in chunks
+   that carry its state (:mod:`sensors.mechanism`), giving the indicated angle; sample ``k`` is its
+   increment over ``[τ_{k−1}, τ_k]``, divided by ``T`` for a rate.
+3. **Error terms** (:func:`sensors.errors.apply_errors`) on that rate: bias, scale factor,
+   misalignment, g-sensitivity, temperature, bias instability, rate random walk, range, quantisation,
+   and the part of the white noise the mechanism did not already make, ``sqrt(N_spec² − N_mech²)``.
+4. **Accelerometer**: mean specific force over the same intervals at the sensor's lever arm, then its
+   error terms. **Magnetometer**: the field sampled at ``τ_k``, then hard and soft iron and noise.
+
+Random draws come from independent streams spawned from the device's seed (clock, gyro mechanism,
+gyro errors, accelerometer, magnetometer), so adding a magnetometer does not change the gyro's noise.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+from typing import Annotated, Literal
+
+import numpy as np
+import tomli_w
+from pydantic import Field, field_validator
+
+from dynamics import ConfigError, Trajectory
+from dynamics.config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3, validate
+
+from .accelerometer import AccelerometerSpec, mean_specific_force
+from .errors import GyroErrors, apply_errors
+from .magnetometer import MagnetometerSpec
+from .mechanism import GYRO_KINDS, GyroMechanism, GyroTruth, mechanism_class
+from .samples import ImuSamples
+from .sampling import SensorTruth
+
+__all__ = ["DeviceSpec", "Device", "MountingSpec", "ClockSpec", "TemperatureSpec", "GyroSpec"]
+
+CHUNK_INNER_SAMPLES = 1 << 20
+"""Inner samples per chunk handed to a gyro mechanism (bounds memory on long, fast runs)."""
+
+
+class MountingSpec(Section):
+    """``[mounting]``: where the sensor sits on the body."""
+
+    q_bs: Quat = (1.0, 0.0, 0.0, 0.0)
+    """Unit quaternion (w, x, y, z) turning sensor-frame vectors into body axes."""
+    lever_arm_m: Vec3 = (0.0, 0.0, 0.0)
+    """Sensor origin from the body's reference point, body axes, m."""
+
+    @field_validator("q_bs")
+    @classmethod
+    def _unit(cls, q):
+        if abs(math.sqrt(sum(x * x for x in q)) - 1.0) > 1e-6:
+            raise ValueError(f"must be a unit quaternion (w, x, y, z), its norm is {math.sqrt(sum(x * x for x in q)):.6g}")
+        return q
+
+
+class ClockSpec(Section):
+    """``[clock]``: the sample clock's errors."""
+
+    rate_error_ppm: Annotated[Real, Field(gt=-1e5, lt=1e5)] = 0.0
+    offset_s: Real = 0.0
+    jitter_s: NonNegativeReal = 0.0
+
+
+class TemperatureSpec(Section):
+    """``[temperature]``: the sensor's temperature, a first-order warm-up from ``initial`` to ``final``."""
+
+    initial_degC: Real = 25.0
+    final_degC: Real = 25.0
+    time_constant_s: PositiveReal = 600.0
+
+    def at(self, t: np.ndarray) -> np.ndarray:
+        """Temperature at times ``t`` (s since power-up), °C."""
+        return self.final_degC + (self.initial_degC - self.final_degC) * np.exp(-np.asarray(t) / self.time_constant_s)
+
+
+class GyroSpec(Section):
+    """``[gyro]``: the mechanism (``[gyro.mechanism]``, with its ``kind``) and the error terms."""
+
+    mechanism: dict = {"kind": "ideal"}
+    errors: GyroErrors = GyroErrors()
+
+
+class DeviceSpec(Section):
+    """A device file (``configs/devices/*.toml``)."""
+
+    description: str
+    resembles: str = ""
+    rate_hz: PositiveReal
+    output: Literal["rate", "increment"] = "rate"
+    mounting: MountingSpec = MountingSpec()
+    clock: ClockSpec = ClockSpec()
+    temperature: TemperatureSpec = TemperatureSpec()
+    gyro: GyroSpec = GyroSpec()
+    accelerometer: AccelerometerSpec = AccelerometerSpec()
+    magnetometer: MagnetometerSpec | None = None
+
+
+def validate_mechanism(data: dict, file=None) -> GyroMechanism:
+    """The typed mechanism of a ``[gyro.mechanism]`` table; errors name ``gyro.mechanism.<key>``."""
+    kind = data.get("kind")
+    if kind is None:
+        raise ConfigError("missing required key", file=file, key="gyro.mechanism.kind")
+    if kind not in GYRO_KINDS:
+        raise ConfigError(f"unknown gyro kind {kind!r}; kinds: {', '.join(GYRO_KINDS)}", file=file,
+                          key="gyro.mechanism.kind")
+    return validate(mechanism_class(kind), data, file=file, prefix="gyro.mechanism")
+
+
+class Device:
+    """An emulated IMU, ready to measure trajectories.
+
+    Parameters
+    ----------
+    spec : DeviceSpec
+    name : str
+    seed : int
+        Seed of every random draw the device makes.
+    path : Path, optional
+        The file the spec was read from (named in errors).
+    """
+
+    def __init__(self, spec: DeviceSpec, name: str = "imu0", seed: int = 0, path: Path | None = None):
+        self.spec = spec
+        self.name = name
+        self.seed = int(seed)
+        self.path = path
+        where = path if path is not None else name
+        self.mechanism = validate_mechanism(spec.gyro.mechanism, file=where)
+        self.inner_rate_hz = float(self.mechanism.inner_rate_hz(spec.rate_hz))
+        if self.inner_rate_hz < spec.rate_hz:
+            raise ConfigError(f"the output rate {spec.rate_hz:g} Hz is above the gyro mechanism's inner rate "
+                              f"{self.inner_rate_hz:g} Hz", file=where, key="rate_hz")
+        self._gyro_errors = spec.gyro.errors.to_si()
+        intrinsic = float(self.mechanism.intrinsic_noise_density())
+        specified = self._gyro_errors.noise_density
+        explicit = spec.gyro.errors.arw_deg_per_sqrt_h is not None or \
+            spec.gyro.errors.noise_density_deg_per_s_per_sqrt_hz is not None
+        if explicit and np.any(intrinsic > specified * (1 + 1e-9)):
+            raise ConfigError(
+                f"the {self.mechanism.kind} mechanism's own white noise, {np.degrees(intrinsic) * 60:.4g} deg/sqrt(h), "
+                f"exceeds the specified angle random walk {np.degrees(specified.max()) * 60:.4g} deg/sqrt(h): "
+                "lower the mechanism's noise or raise the specification", file=where, key="gyro.errors.arw_deg_per_sqrt_h")
+        remainder = np.sqrt(np.maximum(specified**2 - intrinsic**2, 0.0)) if explicit else np.zeros(3)
+        self._gyro_errors = dataclasses.replace(self._gyro_errors, noise_density=remainder)
+        self._accel_errors = spec.accelerometer.errors.to_si()
+        if self._gyro_errors.bandwidth_hz is not None and not self._gyro_errors.bandwidth_hz < spec.rate_hz / 2:
+            raise ConfigError(f"{self._gyro_errors.bandwidth_hz:g} Hz is not below the Nyquist frequency "
+                              f"{spec.rate_hz / 2:g} Hz of the output rate", file=where, key="gyro.errors.bandwidth_hz")
+        if self._accel_errors.bandwidth_hz is not None and not self._accel_errors.bandwidth_hz < spec.rate_hz / 2:
+            raise ConfigError(f"{self._accel_errors.bandwidth_hz:g} Hz is not below the Nyquist frequency "
+                              f"{spec.rate_hz / 2:g} Hz of the output rate", file=where,
+                              key="accelerometer.errors.bandwidth_hz")
+        if spec.clock.jitter_s >= 0.25 / spec.rate_hz:
+            raise ConfigError(f"jitter {spec.clock.jitter_s:g} s is not small against the sample interval "
+                              f"{1 / spec.rate_hz:g} s", file=where, key="clock.jitter_s")
+
+    @property
+    def kind(self) -> str:
+        """The gyro mechanism's kind."""
+        return self.mechanism.kind
+
+    def to_toml(self) -> str:
+        """The fully resolved device config (defaults filled in, mechanism included) as TOML text."""
+        data = self.spec.model_dump(mode="json", exclude_none=True)
+        data["gyro"]["mechanism"] = self.mechanism.model_dump(mode="json", exclude_none=True)
+        return tomli_w.dumps(data)
+
+    def __repr__(self) -> str:
+        return f"Device({self.name!r}, kind={self.kind!r}, rate_hz={self.spec.rate_hz:g}, seed={self.seed})"
+
+    # ------------------------------------------------------------------------------------------------
+
+    def measure(self, trajectory: Trajectory) -> ImuSamples:
+        """Emulate the device over ``trajectory``: one output sample per interval ``[τ_{k−1}, τ_k]``.
+
+        Returns an :class:`ImuSamples` with ``floor(duration · rate_hz / (1 + ε))`` samples.
+        """
+        spec = self.spec
+        streams = [np.random.default_rng(s) for s in np.random.SeedSequence(self.seed).spawn(5)]
+        rng_clock, rng_mech, rng_gyro, rng_accel, rng_mag = streams
+        truth = SensorTruth(trajectory, spec.mounting.q_bs, spec.mounting.lever_arm_m)
+
+        period = 1.0 / spec.rate_hz  # what the device believes
+        true_period = period * (1.0 + spec.clock.rate_error_ppm * 1e-6)
+        t0 = truth.t_start
+        count = int(math.floor((truth.t_end - t0) / true_period * (1 + 1e-12)))
+        if count < 2:
+            raise ConfigError(f"the trajectory ({truth.t_end - t0:g} s) is shorter than two samples of "
+                              f"the device ({period:g} s)", key="duration")
+        instants = t0 + np.arange(count + 1) * true_period  # τ_0 … τ_K
+        k = np.arange(1, count + 1)
+        stamps = k * period + spec.clock.offset_s
+        if spec.clock.jitter_s > 0:
+            stamps = stamps + spec.clock.jitter_s * rng_clock.standard_normal(count)
+        temperature = spec.temperature.at(instants[1:] - t0)
+
+        increments, raw = self._gyro_increments(truth, instants, rng_mech, self._substeps(trajectory, true_period))
+        rate_indicated = increments / period
+        substeps = self._substeps(trajectory, true_period)
+        force_mean = mean_specific_force(truth, instants, substeps=substeps + substeps % 2)
+        gyro = apply_errors(rate_indicated, instants[1:], self._gyro_errors, rng_gyro,
+                            temperature_degC=temperature,
+                            specific_force=force_mean if self._gyro_errors.g_sensitivity is not None else None)
+        accel = apply_errors(force_mean * (true_period / period), instants[1:], self._accel_errors, rng_accel,
+                             temperature_degC=temperature)
+        if spec.magnetometer is not None:
+            mag = spec.magnetometer.measure(truth.magnetic_field(instants[1:]), period, rng_mag)
+        else:
+            mag = np.full((count, 3), np.nan)
+        increment = spec.output == "increment"
+        return ImuSamples(
+            t=stamps,
+            gyro=gyro,
+            accel=accel,
+            mag=mag,
+            raw={self.kind: raw} if raw else {},
+            delta_angle=gyro * period if increment else None,
+            delta_velocity=accel * period if increment else None,
+            t_true=instants[1:],
+            temperature_degC=temperature,
+            device=self.name,
+        )
+
+    @staticmethod
+    def _substeps(trajectory: Trajectory, interval: float) -> int:
+        """Sub-steps per output interval that are at least as fine as the trajectory's samples."""
+        truth_step = trajectory.duration / max(len(trajectory) - 1, 1)
+        return max(1, math.ceil(interval / truth_step * (1 - 1e-9)))
+
+    def _gyro_increments(self, truth: SensorTruth, instants: np.ndarray, rng: np.random.Generator,
+                         truth_substeps: int):
+        """Indicated angle increments (K, 3) over the intervals between ``instants``, and raw observables.
+
+        The inner grid has ``m`` steps per interval: enough for the mechanism's inner rate, and never
+        coarser than the trajectory's own samples.
+        """
+        count = len(instants) - 1
+        m = max(truth_substeps, math.ceil(self.inner_rate_hz / self.spec.rate_hz - 1e-9))
+        h = (instants[1] - instants[0]) / m
+        per_chunk = max(1, CHUNK_INNER_SAMPLES // m)
+        state: dict = {}
+        increments = np.empty((count, 3))
+        raw_chunks: dict[str, list] = {}
+        t0 = instants[0]
+        for first in range(0, count, per_chunk):
+            last = min(first + per_chunk, count)
+            j = np.arange(first * m, last * m + 1)
+            t = t0 + j * h
+            omega, alpha = truth.omega_alpha(t)
+            chunk = GyroTruth(t=t, dt=h, omega=omega, alpha=alpha, specific_force=truth.specific_force(t),
+                              q_is=truth.attitude_inertial(t),
+                              temperature_degC=self.spec.temperature.at(t - t0))
+            response = self.mechanism.respond(chunk, rng, state)
+            if response.angle is not None:
+                angle = response.angle - response.angle[0]
+            else:  # a rate: trapezoid on the inner grid (the mechanisms' bandwidth is far below 1/h)
+                r = response.rate
+                angle = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * h * (r[1:] + r[:-1]), axis=0)])
+            at_outputs = angle[::m]  # inner index 0, m, 2m, … are τ_first … τ_last
+            increments[first:last] = np.diff(at_outputs, axis=0)
+            for name, values in response.raw.items():
+                raw_chunks.setdefault(name, []).append(np.asarray(values)[m::m])
+        raw = {name: np.concatenate(parts) for name, parts in raw_chunks.items()}
+        return increments, raw

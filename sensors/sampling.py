@@ -1,0 +1,108 @@
+"""The truth a mounted sensor sees, at any instant within a trajectory's span.
+
+A :class:`~dynamics.Trajectory` is sampled at the scenario's rate; sensors need their truth at their
+own instants (an inner rate for the physics, the output instants of a clock that runs fast or slow).
+:class:`SensorTruth` interpolates once-built splines (scipy):
+
+* ``ω_b`` by the cubic Hermite spline through the samples of ``ω_b`` with slopes ``α_b``, so
+  ``ω`` and ``α`` are continuous and exact at the samples;
+* ``f_b`` and ``m_b`` by cubic splines;
+* ``q_wb`` by spherical linear interpolation (scipy ``Slerp``).
+
+It then applies the mounting: the sensor frame ``s`` is turned by ``q_bs`` from the body axes and its
+origin sits at the lever arm ``r`` (body axes) from the body's reference point::
+
+    ω_s = R_sb ω_b,   α_s = R_sb α_b,   m_s = R_sb m_b
+    f_s = R_sb (f_b + α_b × r + ω_b × (ω_b × r))       (rigid-body acceleration of a point)
+    q_is = q_iw(t) ⊗ q_wb ⊗ q_bs,   q_iw(t) = exp(Ω_w t / 2)    (world frame turning at Ω_w)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.interpolate import CubicHermiteSpline, CubicSpline
+from scipy.spatial.transform import Rotation, Slerp
+
+from dynamics import Trajectory
+from dynamics.rotation import quat_conjugate, quat_from_rotvec, quat_multiply, quat_normalize, quat_rotate
+
+__all__ = ["SensorTruth"]
+
+
+def _cross(a, b):
+    ax, ay, az = np.moveaxis(a, -1, 0)
+    bx, by, bz = np.moveaxis(b, -1, 0)
+    return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], -1)
+
+
+class SensorTruth:
+    """Interpolated truth of a sensor mounted on the body of ``trajectory``.
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+        At least two samples.
+    q_bs : array_like (4,)
+        Unit quaternion that turns sensor-frame vectors into body axes.
+    lever_arm_b : array_like (3,)
+        Sensor origin from the body's reference point, body axes, m.
+    """
+
+    def __init__(self, trajectory: Trajectory, q_bs=(1.0, 0.0, 0.0, 0.0), lever_arm_b=(0.0, 0.0, 0.0)):
+        if len(trajectory) < 2:
+            raise ValueError("a sensor needs a trajectory of at least two samples")
+        t = trajectory.t
+        self.t_start, self.t_end = float(t[0]), float(t[-1])
+        self.q_bs = quat_normalize(np.asarray(q_bs, dtype=float))
+        self.q_sb = quat_conjugate(self.q_bs)
+        self.lever_arm_b = np.asarray(lever_arm_b, dtype=float)
+        self._omega = CubicHermiteSpline(t, trajectory.omega_b, trajectory.alpha_b, axis=0)
+        self._alpha = self._omega.derivative()
+        self._force = CubicSpline(t, trajectory.specific_force_b, axis=0)
+        self._mag = CubicSpline(t, trajectory.mag_b, axis=0)
+        self._attitude = Slerp(t, Rotation.from_quat(trajectory.q_wb, scalar_first=True))
+        env = trajectory.environment
+        self._earth_rate_w = np.zeros(3) if env is None else np.asarray(env.earth_rate_w, dtype=float)
+
+    def _check(self, t):
+        t = np.asarray(t, dtype=float)
+        span = self.t_end - self.t_start
+        if t.size and (t.min() < self.t_start - 1e-9 * span or t.max() > self.t_end + 1e-9 * span):
+            raise ValueError(f"times {t.min():g}..{t.max():g} s leave the trajectory's span "
+                             f"{self.t_start:g}..{self.t_end:g} s")
+        return np.clip(t, self.t_start, self.t_end)
+
+    def omega_alpha(self, t):
+        """Sensor-axes ``ω_s`` (rad/s) and ``α_s`` (rad/s²) at times ``t`` (M,): two (M, 3) arrays."""
+        t = self._check(t)
+        return quat_rotate(self.q_sb, self._omega(t)), quat_rotate(self.q_sb, self._alpha(t))
+
+    def specific_force(self, t):
+        """Sensor-axes specific force at the sensor's origin, m/s², (M, 3)."""
+        t = self._check(t)
+        f = self._force(t)
+        if np.any(self.lever_arm_b):
+            w, a, r = self._omega(t), self._alpha(t), self.lever_arm_b
+            f = f + _cross(a, r) + _cross(w, _cross(w, r))
+        return quat_rotate(self.q_sb, f)
+
+    def magnetic_field(self, t):
+        """Sensor-axes magnetic flux density, tesla, (M, 3)."""
+        return quat_rotate(self.q_sb, self._mag(self._check(t)))
+
+    def attitude_inertial(self, t):
+        """``q_is``: the sensor's attitude relative to the inertial frame that is the world frame at
+        ``t = 0``, (M, 4)."""
+        t = self._check(t)
+        q_wb = self._attitude(t).as_quat(scalar_first=True)
+        q_iw = quat_from_rotvec(t[:, None] * self._earth_rate_w)
+        return quat_multiply(quat_multiply(q_iw, q_wb), self.q_bs)
+
+    def attitude_world(self, t):
+        """``q_wb`` of the body (not the sensor) at ``t``, (M, 4): what ``/truth/imu`` reports."""
+        return self._attitude(self._check(t)).as_quat(scalar_first=True)
+
+    def body_truth(self, t):
+        """Body-frame truth at ``t`` as ``(q_wb, omega_b, specific_force_b)``, for truth channels."""
+        t = self._check(t)
+        return self._attitude(t).as_quat(scalar_first=True), self._omega(t), self._force(t)

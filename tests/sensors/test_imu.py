@@ -1,0 +1,152 @@
+"""The IMU around the mechanisms: sampling convention, mounting, lever arm, clock, seeds, noise budget."""
+
+import numpy as np
+import pytest
+from scipy.interpolate import CubicHermiteSpline
+
+from dynamics import ConfigError, Environment, trajectory_from_world_motion
+from dynamics.rotation import quat_from_rotvec, quat_rotate
+from sensors import device_from_dict
+from sensors.mechanism import GyroMechanism, GyroResponse
+
+EPS = np.finfo(float).eps
+
+
+def spinning(rate=(0.3, -0.2, 2.0), duration=4.0, hz=1000.0, env=None):
+    """A body turning at a constant body rate ω (so q = exp(ω t / 2)), at rest at the origin."""
+    t = np.arange(int(duration * hz) + 1) / hz
+    w = np.broadcast_to(np.asarray(rate, float), (len(t), 3))
+    q = quat_from_rotvec(t[:, None] * w)
+    zero = np.zeros((len(t), 3))
+    env = env or Environment.inertial(9.81, magnetic_field_w=(0.0, 2e-5, -4e-5))
+    return trajectory_from_world_motion(t, q, w, zero, zero, zero, zero, env)
+
+
+def wobbling(duration=3.0, hz=1000.0):
+    """A body whose body rate varies: ω_b = (sin 3t, cos 2t, 0.5 + 0.2 sin 5t); attitude not needed."""
+    t = np.arange(int(duration * hz) + 1) / hz
+    w = np.stack([np.sin(3 * t), np.cos(2 * t), 0.5 + 0.2 * np.sin(5 * t)], -1)
+    a = np.stack([3 * np.cos(3 * t), -2 * np.sin(2 * t), np.cos(5 * t)], -1)
+    q = np.tile([1.0, 0, 0, 0], (len(t), 1))
+    zero = np.zeros((len(t), 3))
+    return trajectory_from_world_motion(t, q, w, a, zero, zero, zero, Environment.inertial(9.81))
+
+
+def test_ideal_gyro_reports_the_exact_mean_rate_over_each_interval():
+    traj = wobbling()
+    antiderivative = CubicHermiteSpline(traj.t, traj.omega_b, traj.alpha_b).antiderivative()
+    for rate in (1000.0, 250.0):
+        s = device_from_dict({"description": "ideal", "rate_hz": rate}).measure(traj)
+        assert len(s) == int(traj.duration * rate)
+        np.testing.assert_allclose(s.t, np.arange(1, len(s) + 1) / rate, rtol=1e-12)
+        expected = (antiderivative(s.t_true) - antiderivative(s.t_true - 1 / rate)) * rate
+        # Exact for the Hermite interpolant: only round-off of the cumulative sums remains.
+        np.testing.assert_allclose(s.gyro, expected, atol=len(traj) * EPS * 10)
+        assert np.isnan(s.mag).all() and s.delta_angle is None
+
+
+def test_mounting_rotation_and_increment_output():
+    traj = spinning()
+    q_bs = quat_from_rotvec([0.0, 0.0, np.pi / 2])  # sensor x along body y
+    s = device_from_dict({"description": "x", "rate_hz": 100, "output": "increment",
+                          "mounting": {"q_bs": q_bs.tolist()}}).measure(traj)
+    expected = quat_rotate(q_bs * [1, -1, -1, -1], traj.omega_b[0])
+    np.testing.assert_allclose(s.gyro, np.broadcast_to(expected, s.gyro.shape), atol=1e-12)
+    np.testing.assert_allclose(s.delta_angle, s.gyro / 100, rtol=1e-15)
+
+
+def test_lever_arm_accelerometer_reads_centripetal_acceleration():
+    # A body spinning at ω about z in free fall: a sensor at r reads f = ω × (ω × r) = −ω² r⊥.
+    w = 5.0
+    traj = spinning(rate=(0, 0, w), env=Environment.inertial(0.0))
+    r = np.array([0.1, 0.0, 0.02])
+    s = device_from_dict({"description": "x", "rate_hz": 200, "mounting": {"lever_arm_m": r.tolist()}}).measure(traj)
+    np.testing.assert_allclose(s.accel, np.broadcast_to([-w * w * 0.1, 0, 0], s.accel.shape), atol=1e-9)
+
+
+def test_clock_rate_error_scales_and_stamps_shift():
+    traj = spinning()
+    eps_ppm, offset = 200.0, 0.0125
+    s = device_from_dict({"description": "x", "rate_hz": 100,
+                          "clock": {"rate_error_ppm": eps_ppm, "offset_s": offset}}).measure(traj)
+    np.testing.assert_allclose(s.gyro, np.broadcast_to(traj.omega_b[0] * (1 + eps_ppm * 1e-6), s.gyro.shape), rtol=1e-12)
+    np.testing.assert_allclose(s.t, np.arange(1, len(s) + 1) / 100 + offset, rtol=1e-13)
+    np.testing.assert_allclose(s.t_true, np.arange(1, len(s) + 1) / 100 * (1 + eps_ppm * 1e-6), rtol=1e-13)
+
+
+NOISY = {
+    "description": "noisy",
+    "rate_hz": 200,
+    "gyro": {"errors": {"arw_deg_per_sqrt_h": 0.5, "bias_instability_deg_per_h": 5.0}},
+    "accelerometer": {"errors": {"noise_density_ug_per_sqrt_hz": 100.0}},
+}
+
+
+def test_same_seed_same_bytes_and_streams_are_independent():
+    traj = spinning(duration=10)
+    a = device_from_dict(NOISY, seed=3).measure(traj)
+    b = device_from_dict(NOISY, seed=3).measure(traj)
+    c = device_from_dict(NOISY, seed=4).measure(traj)
+    assert a.gyro.tobytes() == b.gyro.tobytes() and a.accel.tobytes() == b.accel.tobytes()
+    noise_a, noise_c = a.gyro - traj.omega_b[0], c.gyro - traj.omega_b[0]
+    r = np.corrcoef(noise_a[:, 0], noise_c[:, 0])[0, 1]
+    assert abs(r) < 4 / np.sqrt(len(a))  # independent draws: |r| within 4σ of 0
+    with_mag = device_from_dict({**NOISY, "magnetometer": {"noise_density_uT_per_sqrt_hz": 0.1}}, seed=3).measure(traj)
+    assert with_mag.gyro.tobytes() == a.gyro.tobytes()  # a magnetometer draws from its own stream
+
+
+def test_white_noise_through_the_device_matches_the_arw():
+    traj = spinning(duration=60)
+    spec = {"description": "x", "rate_hz": 200, "gyro": {"errors": {"arw_deg_per_sqrt_h": 0.5}}}
+    s = device_from_dict(spec, seed=1).measure(traj)
+    sigma = np.std(s.gyro - traj.omega_b[0], axis=0, ddof=1)
+    expected = np.radians(0.5) / 60 * np.sqrt(200)  # N/√T
+    # Sample standard deviation of n normal draws: relative standard error 1/√(2(n−1)); allow 5σ.
+    assert np.all(np.abs(sigma / expected - 1) < 5 / np.sqrt(2 * (len(s) - 1)))
+
+
+def test_magnetometer_hard_iron_and_soft_iron():
+    traj = spinning(rate=(0, 0, 0))
+    soft = [[1.1, 0.0, 0.0], [0.0, 0.9, 0.0], [0.0, 0.0, 1.0]]
+    s = device_from_dict({"description": "x", "rate_hz": 50,
+                          "magnetometer": {"hard_iron_uT": [5, -3, 1], "soft_iron": soft}}).measure(traj)
+    expected = np.array(soft) @ np.array([0.0, 2e-5, -4e-5]) + np.array([5e-6, -3e-6, 1e-6])
+    np.testing.assert_allclose(s.mag, np.broadcast_to(expected, s.mag.shape), atol=1e-18)
+
+
+class NoisyMechanism(GyroMechanism):
+    kind: str = "ideal"
+
+    def intrinsic_noise_density(self):
+        return np.radians(1.0) / 60  # 1 deg/sqrt(h)
+
+    def respond(self, truth, rng, state=None):
+        return GyroResponse(rate=truth.omega)
+
+
+def test_mechanism_noisier_than_its_spec_is_refused(monkeypatch):
+    import sensors.imu
+
+    monkeypatch.setattr(sensors.imu, "mechanism_class", lambda kind: NoisyMechanism)
+    with pytest.raises(ConfigError, match="exceeds the specified angle random walk") as info:
+        device_from_dict({"description": "x", "rate_hz": 100, "gyro": {"errors": {"arw_deg_per_sqrt_h": 0.5}}},
+                         name="dev.toml")
+    assert info.value.key == "gyro.errors.arw_deg_per_sqrt_h" and info.value.file == "dev.toml"
+
+
+@pytest.mark.parametrize(
+    "edit, key",
+    [
+        ({"rate_hz": -5}, "rate_hz"),
+        ({"gyro": {"mechanism": {"kind": "laser-sword"}}}, "gyro.mechanism.kind"),
+        ({"gyro": {"errors": {"arw_deg_per_h": 0.1}}}, "gyro.errors.arw_deg_per_h"),
+        ({"gyro": {"errors": {"arw_deg_per_sqrt_h": -0.1}}}, "gyro.errors.arw_deg_per_sqrt_h"),
+        ({"gyro": {"errors": {"bandwidth_hz": 80}}}, "gyro.errors.bandwidth_hz"),
+        ({"clock": {"jitter_s": 0.01}}, "clock.jitter_s"),
+        ({"mounting": {"q_bs": [1, 1, 0, 0]}}, "mounting.q_bs"),
+    ],
+)
+def test_bad_device_config_names_the_key(edit, key):
+    with pytest.raises(ConfigError) as info:
+        device_from_dict({"description": "x", "rate_hz": 100, **edit}, name="dev.toml")
+    assert info.value.key == key and info.value.file == "dev.toml"
