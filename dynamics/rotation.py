@@ -237,7 +237,7 @@ def body_rate_from_euler_zxz(angles, rates, accels=None):
         ``[φ̇ sθ sψ + θ̇ cψ, φ̇ sθ cψ − θ̇ sψ, φ̇ cθ + ψ̇]`` for ``R = Rz(φ) Rx(θ) Rz(ψ)``.
     alpha_b : ndarray (..., 3), only when ``accels`` is given.
     """
-    (f, th, p), (fd, thd, pd) = np.moveaxis(_v(angles), -1, 0), np.moveaxis(_v(rates), -1, 0)
+    (_, th, p), (fd, thd, pd) = np.moveaxis(_v(angles), -1, 0), np.moveaxis(_v(rates), -1, 0)
     st, ct, sp, cp = np.sin(th), np.cos(th), np.sin(p), np.cos(p)
     omega = np.stack([fd * st * sp + thd * cp, fd * st * cp - thd * sp, fd * ct + pd], axis=-1)
     if accels is None:
@@ -270,7 +270,7 @@ def body_rate_from_euler_zyx(rpy, rpy_rates, rpy_accels=None):
         ``[φ̇ − ψ̇ sθ, θ̇ cφ + ψ̇ cθ sφ, −θ̇ sφ + ψ̇ cθ cφ]`` for ``R = Rz(ψ) Ry(θ) Rx(φ)``.
     alpha_b : ndarray (..., 3), only when ``rpy_accels`` is given.
     """
-    (r, th, y), (rd, thd, yd) = np.moveaxis(_v(rpy), -1, 0), np.moveaxis(_v(rpy_rates), -1, 0)
+    (r, th, _), (rd, thd, yd) = np.moveaxis(_v(rpy), -1, 0), np.moveaxis(_v(rpy_rates), -1, 0)
     sr, cr, st, ct = np.sin(r), np.cos(r), np.sin(th), np.cos(th)
     omega = np.stack([rd - yd * st, thd * cr + yd * ct * sr, -thd * sr + yd * ct * cr], axis=-1)
     if rpy_accels is None:

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from .earth import Environment
-from .rotation import quat_conjugate, quat_rotate
 
 __all__ = ["Trajectory", "trajectory_from_world_motion"]
 
@@ -85,12 +85,41 @@ class Trajectory:
         return float(self.t[-1] - self.t[0]) if len(self.t) else 0.0
 
 
-def _cross(a, b) -> np.ndarray:
-    """``a × b`` over the last axis, written out (``np.cross`` copies broadcast operands)."""
-    a, b = np.broadcast_arrays(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
-    ax, ay, az = np.moveaxis(a, -1, 0)
-    bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], -1)
+@numba.njit(cache=True)
+def _to_body(q, v, out):  # pragma: no cover - compiled
+    """out = R_bw v = q* ⊗ v ⊗ q (the inverse rotation of :func:`dynamics.rotation.quat_rotate`)."""
+    w, x, y, z = q[0], -q[1], -q[2], -q[3]
+    tx = 2.0 * (y * v[2] - z * v[1])
+    ty = 2.0 * (z * v[0] - x * v[2])
+    tz = 2.0 * (x * v[1] - y * v[0])
+    out[0] = v[0] + w * tx + (y * tz - z * ty)
+    out[1] = v[1] + w * ty + (z * tx - x * tz)
+    out[2] = v[2] + w * tz + (x * ty - y * tx)
+
+
+@numba.njit(cache=True)
+def _world_to_imu(q_wb, omega_wb, alpha_wb, vel_w, acc_w, earth_w, gravity_w, field_w,
+                  omega_b, alpha_b, force_b, mag_b):  # pragma: no cover - compiled
+    """The equations of :func:`trajectory_from_world_motion`, one pass per sample."""
+    earth_b = np.empty(3)
+    f_w = np.empty(3)
+    for i in range(q_wb.shape[0]):
+        q = q_wb[i]
+        _to_body(q, earth_w, earth_b)  # R_bw Ω
+        w, a = omega_wb[i], alpha_wb[i]
+        for j in range(3):
+            omega_b[i, j] = w[j] + earth_b[j]  # ω_b = ω_wb + R_bw Ω
+        # α_b = α_wb − ω_wb × (R_bw Ω)
+        alpha_b[i, 0] = a[0] - (w[1] * earth_b[2] - w[2] * earth_b[1])
+        alpha_b[i, 1] = a[1] - (w[2] * earth_b[0] - w[0] * earth_b[2])
+        alpha_b[i, 2] = a[2] - (w[0] * earth_b[1] - w[1] * earth_b[0])
+        # f_b = R_bw (a_w + 2 Ω × v_w − g)
+        v = vel_w[i]
+        f_w[0] = acc_w[i, 0] + 2.0 * (earth_w[1] * v[2] - earth_w[2] * v[1]) - gravity_w[0]
+        f_w[1] = acc_w[i, 1] + 2.0 * (earth_w[2] * v[0] - earth_w[0] * v[2]) - gravity_w[1]
+        f_w[2] = acc_w[i, 2] + 2.0 * (earth_w[0] * v[1] - earth_w[1] * v[0]) - gravity_w[2]
+        _to_body(q, f_w, force_b[i])
+        _to_body(q, field_w, mag_b[i])  # m_b = R_bw m_w
 
 
 def trajectory_from_world_motion(
@@ -126,26 +155,20 @@ def trajectory_from_world_motion(
         f_b     = R_bw (a_w + 2 Ω × v_w − g)         (Coriolis; centrifugal sits in g)
         mag_b   = R_bw m_w
     """
-    q_bw = quat_conjugate(q_wb)
-    omega_wb_b = np.asarray(omega_wb_b, dtype=float)
-    alpha_wb_b = np.asarray(alpha_wb_b, dtype=float)
-    earth = environment.earth_rate_w
-    if np.any(earth):
-        earth_b = quat_rotate(q_bw, earth)
-        omega_b = omega_wb_b + earth_b
-        alpha_b = alpha_wb_b - _cross(omega_wb_b, earth_b)
-        inertial_acc_w = acc_w + _cross(2.0 * earth, vel_w) - environment.gravity_w
-    else:  # an inertial world: nothing to add (and long arrays are not copied for zeros)
-        omega_b, alpha_b = omega_wb_b, alpha_wb_b
-        inertial_acc_w = acc_w - environment.gravity_w
-    field = environment.magnetic_field_w
-    mag_b = quat_rotate(q_bw, field) if np.any(field) else np.zeros_like(omega_b)
+    q_wb = np.ascontiguousarray(q_wb, dtype=float)
+    n = len(q_wb)
+    omega_b, alpha_b, force_b, mag_b = (np.empty((n, 3)) for _ in range(4))
+    # numba reads strided (transposed, broadcast) inputs in place: no copies of long arrays.
+    _world_to_imu(q_wb, np.asarray(omega_wb_b, dtype=float), np.asarray(alpha_wb_b, dtype=float),
+                  np.asarray(vel_w, dtype=float), np.asarray(acc_w, dtype=float),
+                  np.asarray(environment.earth_rate_w, dtype=float), np.asarray(environment.gravity_w, dtype=float),
+                  np.asarray(environment.magnetic_field_w, dtype=float), omega_b, alpha_b, force_b, mag_b)
     return Trajectory(
         t=np.asarray(t, dtype=float),
-        q_wb=np.asarray(q_wb, dtype=float),
+        q_wb=q_wb,
         omega_b=omega_b,
         alpha_b=alpha_b,
-        specific_force_b=quat_rotate(q_bw, inertial_acc_w),
+        specific_force_b=force_b,
         pos_w=np.asarray(pos_w, dtype=float),
         vel_w=np.asarray(vel_w, dtype=float),
         mag_b=mag_b,

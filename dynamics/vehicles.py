@@ -1,0 +1,533 @@
+"""Vehicles: a smooth random manoeuvre and a car drive, both in closed form.
+
+``random-manoeuvre``
+    Roll, pitch, yaw and the three position coordinates are each a band-limited sum of sinusoids with
+    random amplitudes, frequencies and phases drawn from ``numpy.random.default_rng(seed)``, so the
+    attitude, ω, α, velocity and acceleration are analytic; the same seed gives bit-identical output.
+``car``
+    A car on a flat road: a speed profile of legs (speed up or brake to a speed, then hold it), turns
+    laid out along the road as smooth curvature pulses (continuous curvature, like the clothoid
+    transitions of real roads), body roll proportional to the lateral acceleration, pitch proportional
+    to the longitudinal acceleration (dive and squat), and road bumps that excite heave and pitch
+    transients of the suspension (damped oscillations with a smooth onset).
+
+Both build the attitude from roll-pitch-yaw angles ``R_wb = Rz(ψ) Ry(θ) Rx(φ)`` (body x forward,
+y left, z up; ENU world) with their first two derivatives, through :func:`euler_zyx_motion`.
+
+The car's position is the integral of its velocity along a path whose heading ``ψ(s)`` is known in
+closed form but whose integral ``∫ (cos ψ, sin ψ) ds`` through a turn is not elementary. Straight
+stretches are integrated exactly; through each turn the integrand, an entire function of the path
+distance, is interpolated by a Chebyshev series resolved to round-off and integrated term by term: the
+position through a turn of length ``L`` is exact to a few ``1e-16 L`` (checked against adaptive
+quadrature; see :class:`Road`), independent of the output grid.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+import numba
+import numpy as np
+from numpy.polynomial import Chebyshev
+from pydantic import Field, StrictInt, field_validator
+
+from .config import NonNegativeReal, PositiveReal, Real, Section, Vec3
+from .motions import EarthBoundSpec, TimeGrid, WorldMotion, in_chunks, smooth_step
+
+__all__ = [
+    "euler_zyx_motion",
+    "RotationBand",
+    "TranslationBand",
+    "RandomManoeuvreSpec",
+    "Drive",
+    "Leg",
+    "Turn",
+    "Bump",
+    "Suspension",
+    "SpeedProfile",
+    "Road",
+    "SuspensionTransient",
+    "CarSpec",
+    "CarMotion",
+]
+
+
+def euler_zyx_motion(rpy, rpy_rates, rpy_accels):
+    """Attitude, body rate and body angular acceleration of a roll-pitch-yaw motion.
+
+    The same equations as :func:`dynamics.rotation.quat_from_euler_zyx` and
+    :func:`dynamics.rotation.body_rate_from_euler_zyx`, sharing six sines and cosines between them
+    (the full angles' from the half angles' by the double-angle formulas), evaluated in parts of
+    :data:`~dynamics.motions.CHUNK` samples.
+
+    Parameters
+    ----------
+    rpy, rpy_rates, rpy_accels : array_like (3, N)
+        Roll φ, pitch θ, yaw ψ (rad) with ``R = Rz(ψ) Ry(θ) Rx(φ)``, their rates (rad/s) and
+        accelerations (rad/s²).
+
+    Returns
+    -------
+    q_wb : ndarray (N, 4)
+    omega_b : ndarray (N, 3)
+        ``[φ̇ − ψ̇ sθ, θ̇ cφ + ψ̇ cθ sφ, −θ̇ sφ + ψ̇ cθ cφ]``, rad/s.
+    alpha_b : ndarray (N, 3)
+        Its time derivative, rad/s².
+    """
+    rpy, rates, accels = (np.asarray(x, dtype=float) for x in (rpy, rpy_rates, rpy_accels))
+    n = rpy.shape[1]
+    q, omega, alpha = np.empty((n, 4)), np.empty((n, 3)), np.empty((n, 3))
+    _euler_zyx_kernel(rpy, rates, accels, q, omega, alpha)
+    return q, omega, alpha
+
+
+@numba.njit(cache=True)
+def _euler_zyx_kernel(rpy, rpy_rates, rpy_accels, q, omega, alpha):  # pragma: no cover - compiled
+    """:func:`euler_zyx_motion`, one sample at a time, written into ``q``, ``omega``, ``alpha``."""
+    for i in range(rpy.shape[1]):
+        droll, dpitch, dyaw = rpy_rates[0, i], rpy_rates[1, i], rpy_rates[2, i]
+        ddroll, ddpitch, ddyaw = rpy_accels[0, i], rpy_accels[1, i], rpy_accels[2, i]
+        cr, sr = np.cos(0.5 * rpy[0, i]), np.sin(0.5 * rpy[0, i])
+        cp, sp = np.cos(0.5 * rpy[1, i]), np.sin(0.5 * rpy[1, i])
+        cy, sy = np.cos(0.5 * rpy[2, i]), np.sin(0.5 * rpy[2, i])
+        # q = q_z(ψ) ⊗ q_y(θ) ⊗ q_x(φ), written out in the half-angle cosines and sines.
+        cycp, sysp, cysp, sycp = cy * cp, sy * sp, cy * sp, sy * cp
+        q[i, 0] = cycp * cr + sysp * sr
+        q[i, 1] = cycp * sr - sysp * cr
+        q[i, 2] = cysp * cr + sycp * sr
+        q[i, 3] = sycp * cr - cysp * sr
+        # Full angles: sin x = 2 sin(x/2) cos(x/2), cos x = cos²(x/2) − sin²(x/2).
+        s_r, c_r = 2 * sr * cr, cr * cr - sr * sr
+        s_p, c_p = 2 * sp * cp, cp * cp - sp * sp
+        yaw_cp = dyaw * c_p  # ψ̇ cθ
+        omega[i, 0] = droll - dyaw * s_p
+        omega[i, 1] = dpitch * c_r + yaw_cp * s_r
+        omega[i, 2] = yaw_cp * c_r - dpitch * s_r
+        # α: differentiate ω; d(cθ)/dt = −θ̇ sθ, d(sφ)/dt = φ̇ cφ, ...
+        lateral = ddyaw * c_p - dyaw * dpitch * s_p  # d/dt (ψ̇ cθ)
+        alpha[i, 0] = ddroll - ddyaw * s_p - dyaw * dpitch * c_p
+        alpha[i, 1] = (ddpitch * c_r - dpitch * droll * s_r) + lateral * s_r + yaw_cp * droll * c_r
+        alpha[i, 2] = (-ddpitch * s_r - dpitch * droll * c_r) + lateral * c_r - yaw_cp * droll * s_r
+
+
+# --------------------------------------------------------------------------------------------------
+# random-manoeuvre
+# --------------------------------------------------------------------------------------------------
+
+
+def _band(value):
+    low, high = value
+    if not 0 < low <= high:
+        raise ValueError(f"a frequency band is [low, high] with 0 < low <= high, got [{low}, {high}]")
+    return value
+
+
+def _non_negative(value):
+    if any(v < 0 for v in value):
+        raise ValueError(f"amplitudes must be >= 0, got {list(value)}")
+    return value
+
+
+class RotationBand(Section):
+    """``[rotation]``: roll, pitch and yaw, each ``mean + Σ_k A_k sin(2π f_k t + φ_k)`` with ``terms``
+    terms.
+
+    ``amplitude_deg`` bounds each angle's excursion from its mean (the ``A_k`` of an angle add up to it);
+    frequencies are drawn uniformly in ``frequency_hz = [low, high]``.
+    """
+
+    mean_rpy_deg: Vec3 = (0.0, 0.0, 0.0)
+    amplitude_deg: Vec3 = (20.0, 10.0, 90.0)
+    frequency_hz: tuple[PositiveReal, PositiveReal] = (0.02, 0.5)
+    terms: Annotated[StrictInt, Field(ge=1)] = 6
+
+    _band = field_validator("frequency_hz")(_band)
+    _amplitudes = field_validator("amplitude_deg")(_non_negative)
+
+
+class TranslationBand(Section):
+    """``[translation]``: east, north and up position, each ``Σ_k A_k sin(2π f_k t + φ_k)`` (about the
+    origin).
+
+    ``amplitude_m`` bounds each coordinate's excursion (the ``A_k`` add up to it).
+    """
+
+    amplitude_m: Vec3 = (50.0, 50.0, 5.0)
+    frequency_hz: tuple[PositiveReal, PositiveReal] = (0.005, 0.1)
+    terms: Annotated[StrictInt, Field(ge=1)] = 6
+
+    _band = field_validator("frequency_hz")(_band)
+    _amplitudes = field_validator("amplitude_m")(_non_negative)
+
+
+def _draw_sines(rng: np.random.Generator, bounds, band, terms: int):
+    """Amplitudes (C, K) summing to ``bounds`` per channel, angular frequencies uniform in the band,
+    phases uniform in [0, 2π): drawn in this order, all amplitudes first."""
+    u = rng.random((len(bounds), terms))
+    amplitude = np.asarray(bounds, dtype=float)[:, None] * u / u.sum(axis=1, keepdims=True)
+    omega = 2 * np.pi * rng.uniform(band[0], band[1], size=u.shape)
+    phase = rng.uniform(0.0, 2 * np.pi, size=u.shape)
+    return amplitude, omega, phase
+
+
+class RandomManoeuvreSpec(EarthBoundSpec):
+    """``kind = "random-manoeuvre"``: a smooth random manoeuvre, reproducible from ``seed``.
+
+    ``rng = numpy.random.default_rng(seed)`` draws, in this order, the rotation terms then the
+    translation terms (:func:`_draw_sines`). The angles and coordinates and their derivatives are exact
+    sums of sinusoids; ``q_wb``, ``ω_wb``, ``α_wb`` follow from :func:`euler_zyx_motion`.
+    """
+
+    kind: Literal["random-manoeuvre"] = "random-manoeuvre"
+    seed: Annotated[StrictInt, Field(ge=0)] = 0
+    rotation: RotationBand = Field(default_factory=RotationBand)
+    translation: TranslationBand = Field(default_factory=TranslationBand)
+
+    def sines(self):
+        """The drawn terms: ``(rotation, translation)``, each ``(amplitude, omega, phase)`` arrays (3, K)
+        in rad or m, rad/s, rad."""
+        rng = np.random.default_rng(self.seed)
+        rot, tr = self.rotation, self.translation
+        return (
+            _draw_sines(rng, np.radians(rot.amplitude_deg), rot.frequency_hz, rot.terms),
+            _draw_sines(rng, tr.amplitude_m, tr.frequency_hz, tr.terms),
+        )
+
+    def world_motion(self, t):
+        grid = TimeGrid(t)
+        rotation, translation = self.sines()
+        angles, rates, accels = grid.sum_of_sines(*rotation)  # each (3, N): roll, pitch, yaw
+        angles += np.radians(self.rotation.mean_rpy_deg)[:, None]
+        q, omega, alpha = euler_zyx_motion(angles, rates, accels)
+        pos, vel, acc = grid.sum_of_sines(*translation)  # each (3, N): east, north, up
+        return WorldMotion(t, q, omega, alpha, pos.T.copy(), vel.T.copy(), acc.T)
+
+
+# --------------------------------------------------------------------------------------------------
+# car
+# --------------------------------------------------------------------------------------------------
+
+
+class Drive(Section):
+    """``[drive]``: start heading and the peak longitudinal accelerations.
+
+    ``initial_yaw_deg`` is the ENU yaw of the road's start (0 east, 90 north). Speed changes follow
+    :func:`~dynamics.motions.smooth_step`, whose acceleration peaks at ``accel_m_s2`` (speeding up) or
+    ``brake_m_s2`` (slowing down): a change ``Δv`` takes ``16 |Δv| / (5 a_peak)`` seconds.
+    """
+
+    initial_yaw_deg: Real = 0.0
+    accel_m_s2: PositiveReal = 2.0
+    brake_m_s2: PositiveReal = 3.0
+
+
+class Leg(Section):
+    """``[[legs]]``: change speed to ``speed_m_s``, then hold it for ``hold_s``. The car starts at rest;
+    after the last leg it keeps the last speed."""
+
+    speed_m_s: NonNegativeReal
+    hold_s: NonNegativeReal
+
+
+class Turn(Section):
+    """``[[turns]]``: a turn by ``angle_deg`` (positive left, counter-clockwise seen from above) that
+    begins ``start_m`` along the road and lasts ``length_m`` of road.
+
+    The curvature is the smooth pulse ``κ(s) = Δψ S′(σ/L) / L`` (σ = s − start), so the heading turns
+    by ``Δψ S(σ/L)``; the yaw rate is ``κ v``. The curvature peaks at ``(16/5) Δψ / L``, the lateral
+    acceleration at ``(16/5) Δψ v² / L``: a 90° turn at 14 m/s needs about 200 m for 5 m/s².
+    """
+
+    start_m: NonNegativeReal
+    length_m: PositiveReal
+    angle_deg: Real
+
+
+class Bump(Section):
+    """``[[bumps]]``: a road bump met at ``at_s``: heave and pitch transients of the suspension.
+
+    ``heave_m`` is the peak upward heave, ``nose_up_deg`` the peak nose-up pitch (the front wheels meet
+    the bump first); ``rise_s`` is the time over which the wheels cross it (:class:`SuspensionTransient`).
+    """
+
+    at_s: NonNegativeReal
+    heave_m: Real = 0.02
+    nose_up_deg: Real = 0.5
+    rise_s: PositiveReal = 0.05
+
+
+class Suspension(Section):
+    """``[suspension]``: how the body moves on its springs.
+
+    ``roll_deg_per_m_s2``: roll outward in turns per m/s² of lateral acceleration (roll gradient);
+    ``pitch_deg_per_m_s2``: nose-down pitch per m/s² of deceleration (dive; squat when accelerating);
+    ``heave_frequency_hz``, ``pitch_frequency_hz``, ``damping_ratio``: the body modes that bumps excite.
+    """
+
+    roll_deg_per_m_s2: Real = 0.5
+    pitch_deg_per_m_s2: Real = 0.3
+    heave_frequency_hz: PositiveReal = 1.2
+    pitch_frequency_hz: PositiveReal = 1.5
+    damping_ratio: Annotated[Real, Field(gt=0, lt=1)] = 0.3
+
+
+class SpeedProfile:
+    """Speed along the road, piecewise in closed form: each leg changes speed along a smooth step, then
+    holds it.
+
+    Leg ``k`` starts at ``t_k`` with speed ``v_k`` and distance ``s_k`` and changes speed by ``Δv_k`` over
+    ``T_k``; with ``u = (t − t_k)/T_k`` and :func:`~dynamics.motions.smooth_step`::
+
+        v = v_k + Δv S(u),   s = s_k + v_k τ + Δv T I(u),
+        a = Δv S′/T,         j = Δv S″/T²,               ȷ̇ = Δv S‴/T³
+
+    and ``s = s_k + (v_k + Δv/2) T + (v_k + Δv)(τ − T)`` once the change is over.
+    """
+
+    def __init__(self, legs: list[Leg], drive: Drive):
+        start, dist, speed, change, ramp, dist_end = [], [], [], [], [], []
+        t = s = v = 0.0
+        for leg in legs:
+            dv = leg.speed_m_s - v
+            duration = (
+                16 * abs(dv) / (5 * (drive.accel_m_s2 if dv > 0 else drive.brake_m_s2))
+            )  # peak Δv S′/T = a_peak
+            start.append(t), dist.append(s), speed.append(v), change.append(dv), ramp.append(duration or 1.0)
+            s += (v + 0.5 * dv) * duration  # I(1) = ½
+            dist_end.append(s)
+            s += leg.speed_m_s * leg.hold_s
+            t += duration + leg.hold_s
+            v = leg.speed_m_s
+        self.start, self.distance, self.speed = np.array(start), np.array(dist), np.array(speed)
+        self.change, self.ramp, self.distance_after = np.array(change), np.array(ramp), np.array(dist_end)
+
+    def __call__(self, t):
+        """Distance (m), speed (m/s), acceleration, jerk and its derivative (m/s², m/s³, m/s⁴), each
+        (N,)."""
+        k = np.clip(np.searchsorted(self.start, t, side="right") - 1, 0, None)
+        tau = t - self.start[k]
+        ramp, dv, v0 = self.ramp[k], self.change[k], self.speed[k]
+        step, slope, curve, jolt, area = smooth_step(tau / ramp, derivatives=3, integral=True)
+        holding = tau >= ramp  # after the change: s = s_end + v (τ − T), exactly
+        distance = np.where(
+            holding,
+            self.distance_after[k] + (v0 + dv) * (tau - ramp),
+            self.distance[k] + v0 * tau + dv * ramp * area,
+        )
+        return distance, v0 + dv * step, dv * slope / ramp, dv * curve / ramp**2, dv * jolt / ramp**3
+
+
+class Road:
+    """The road's heading, curvature and position as functions of the distance along it.
+
+    Heading ``ψ(s) = ψ_k + Δψ_k S((s − s_k)/L_k)`` through turn ``k`` and constant between turns.
+    Position: exact on straight stretches; through a turn the antiderivative of ``(cos ψ, sin ψ)`` is
+    a Chebyshev series (``numpy.polynomial.Chebyshev``) interpolating the integrand, which is entire, so
+    its coefficients decay faster than geometrically down to the round-off plateau (about 1e-15,
+    the rounding of ``cos ψ`` itself); the degree is doubled until the series is resolved to that
+    plateau, it is chopped there and integrated exactly. What remains is round-off: against adaptive
+    quadrature the positions agree to a few 1e-16 of the distance (6e-14 m at 300 m).
+    """
+
+    ROUND_OFF = 64 * np.finfo(float).eps
+    """Coefficients below this are round-off (the integrand is O(1)): chop there."""
+
+    def __init__(self, turns: list[Turn], initial_yaw_rad: float):
+        self.start = np.array([tr.start_m for tr in turns])
+        self.length = np.array([tr.length_m for tr in turns])
+        self.angle = np.radians([tr.angle_deg for tr in turns])
+        # Heading before each turn, and after the last one.
+        self.heading = initial_yaw_rad + np.concatenate([[0.0], np.cumsum(self.angle)])
+        self.integrals = []
+        self.begin = np.zeros((len(turns), 2))  # position where each turn begins, m
+        self.end = np.zeros((len(turns), 2))  # and where it ends
+        position, s = np.zeros(2), 0.0
+        for k in range(len(turns)):
+            straight = self.start[k] - s
+            position = position + straight * np.array([np.cos(self.heading[k]), np.sin(self.heading[k])])
+            fx, fy = self._antiderivative(self.heading[k], self.angle[k], self.length[k])
+            self.integrals.append((fx, fy))
+            self.begin[k] = position
+            position = position + [fx(self.length[k]), fy(self.length[k])]
+            self.end[k] = position
+            s = self.start[k] + self.length[k]
+
+    @classmethod
+    def _antiderivative(cls, heading, angle, length):
+        """Chebyshev series of ``∫₀^σ (cos ψ, sin ψ) dσ′`` on ``[0, L]`` through one turn.
+
+        The degree is doubled until the last quarter of the coefficients is round-off, then the series
+        is chopped after its last coefficient above round-off (a plateau-detecting chop, as Chebfun's).
+        """
+
+        def psi(sigma):
+            return heading + angle * smooth_step(sigma / length, derivatives=0)[0]
+
+        for degree in (32, 64, 128, 256, 512, 1024):
+            cx = Chebyshev.interpolate(lambda x: np.cos(psi(x)), degree, domain=[0.0, length])
+            cy = Chebyshev.interpolate(lambda x: np.sin(psi(x)), degree, domain=[0.0, length])
+            size = np.maximum(np.abs(cx.coef), np.abs(cy.coef))
+            if size[-(degree // 4) :].max() < cls.ROUND_OFF:
+                keep = np.flatnonzero(size >= cls.ROUND_OFF)[-1] + 1
+                return cx.cutdeg(keep).integ(lbnd=0.0), cy.cutdeg(keep).integ(lbnd=0.0)
+        raise ValueError(f"a turn of {np.degrees(angle):g} deg in {length:g} m is too sharp to integrate")
+
+    def __call__(self, s):
+        """At distances ``s`` (N,), m: heading ψ (rad) with its cosine and sine, curvature κ and its
+        first two derivatives along the road (1/m, 1/m², 1/m³), and the east and north position (m)."""
+        if len(self.start) == 0:
+            psi = np.full_like(s, self.heading[0])
+            zero = np.zeros_like(s)
+            cos, sin = np.cos(psi), np.sin(psi)
+            return psi, cos, sin, zero, zero, zero, s * cos, s * sin
+        k = np.clip(np.searchsorted(self.start, s, side="right") - 1, 0, None)
+        sigma = s - self.start[k]
+        u = sigma / self.length[k]
+        # Straight road: from the start of turn k (before the first turn) or from its end (after it).
+        after = u >= 1.0
+        heading = np.where(after, self.heading[k + 1], self.heading[k])
+        psi, cos, sin = heading, np.cos(self.heading)[k + after], np.sin(self.heading)[k + after]
+        run = np.where(after, sigma - self.length[k], sigma)
+        x = np.where(after, self.end[k, 0], self.begin[k, 0]) + run * cos
+        y = np.where(after, self.end[k, 1], self.begin[k, 1]) + run * sin
+        kappa, dkappa, ddkappa = np.zeros_like(s), np.zeros_like(s), np.zeros_like(s)
+        # In turn j: ψ = ψ_j + Δψ S(σ/L), κ = Δψ S′/L, …; the position from the Chebyshev antiderivative.
+        for j, (fx, fy) in enumerate(self.integrals):
+            inside = np.flatnonzero((k == j) & (u > 0.0) & ~after)
+            if not len(inside):
+                continue
+            length, angle = self.length[j], self.angle[j]
+            step, slope, curve, jolt = smooth_step(u[inside], derivatives=3)
+            psi[inside] = self.heading[j] + angle * step
+            cos[inside], sin[inside] = np.cos(psi[inside]), np.sin(psi[inside])
+            kappa[inside], dkappa[inside], ddkappa[inside] = (
+                angle * slope / length,
+                angle * curve / length**2,
+                angle * jolt / length**3,
+            )
+            x[inside] = self.begin[j, 0] + fx(sigma[inside])
+            y[inside] = self.begin[j, 1] + fy(sigma[inside])
+        return psi, cos, sin, kappa, dkappa, ddkappa, x, y
+
+
+class SuspensionTransient:
+    """A damped oscillation of the body with a smooth onset, scaled to a peak of 1.
+
+    ``g(τ) = Im[(1 − e^{−τ/τ_r})³ e^{λτ}] / peak`` for ``τ ≥ 0`` (0 before), with
+    ``λ = ω_n (−ζ + i √(1 − ζ²))``: the free oscillation of a body mode of natural frequency ``ω_n`` and
+    damping ratio ``ζ``, switched on over the rise time ``τ_r`` in which the wheels cross the bump. The
+    onset factor makes ``g`` and its first three derivatives vanish at ``τ = 0``, so position and
+    attitude are C³ there. Expanding the cube, ``g = Im Σ_m c_m e^{μ_m τ}`` with ``c = (1, −3, 3, −1)``
+    and ``μ_m = λ − m/τ_r``, and the derivatives are ``Im Σ c_m μ_m^d e^{μ_m τ}``. After ``duration`` the
+    envelope is below 1e-17 and ``g`` is taken as 0.
+    """
+
+    def __init__(self, frequency_hz: float, damping_ratio: float, rise_s: float):
+        wn = 2 * np.pi * frequency_hz
+        lam = wn * complex(-damping_ratio, np.sqrt(1 - damping_ratio**2))
+        self._mu = lam - np.arange(4) / rise_s
+        self._c = np.array([1.0, -3.0, 3.0, -1.0])
+        self.peak = 1.0
+        grid = np.linspace(0.0, 4 * rise_s + 2 * np.pi / wn, 20001)  # the first peak lies within
+        self.peak = float(np.abs(self(grid, derivatives=0)[0]).max())
+        self.duration = np.log(1e17 / self.peak) / (damping_ratio * wn) + 4 * rise_s
+
+    def __call__(self, tau, derivatives: int = 2):
+        """``g``, ``ġ``, ``g̈`` (per s, s²) at ``τ`` (N,), s, for ``0 ≤ τ``."""
+        exps = np.exp(np.multiply.outer(tau, self._mu))  # (N, 4)
+        return tuple(np.imag(exps @ (self._c * self._mu**d)) / self.peak for d in range(derivatives + 1))
+
+
+class CarSpec(EarthBoundSpec):
+    """``kind = "car"``: a car drive with speed legs, turns and road bumps.
+
+    Along the road distance ``s(t)`` with speed ``v``, acceleration ``a`` and jerk ``j``
+    (:class:`SpeedProfile`) and the road's heading ``ψ(s)`` and curvature ``κ(s)`` (:class:`Road`)::
+
+        yaw   ψ,                 ψ̇ = κ v,             ψ̈ = κ′ v² + κ a
+        roll  φ = k_r κ v²       (outward, proportional to the lateral acceleration κ v²)
+              φ̇ = k_r (κ′ v³ + 2 κ v a),  φ̈ = k_r (κ″ v⁴ + 5 κ′ v² a + 2 κ (a² + v j))
+        pitch θ = −k_p a + bump transients (nose-down positive: y points left)
+        heave z = bump transients
+        v_w = (v cos ψ, v sin ψ, ż),  a_w = (a cos ψ − v ψ̇ sin ψ, a sin ψ + v ψ̇ cos ψ, z̈)
+
+    ``′`` is d/ds. The body x axis points along the road (no side slip); the reference point is on the
+    road surface's path plus heave.
+    """
+
+    kind: Literal["car"] = "car"
+    drive: Drive = Field(default_factory=Drive)
+    legs: list[Leg] = Field(min_length=1)
+    turns: list[Turn] = Field(default_factory=list)
+    bumps: list[Bump] = Field(default_factory=list)
+    suspension: Suspension = Field(default_factory=Suspension)
+
+    @field_validator("turns")
+    @classmethod
+    def _turns_in_order(cls, turns):
+        for k in range(1, len(turns)):
+            end = turns[k - 1].start_m + turns[k - 1].length_m
+            if turns[k].start_m < end:
+                raise ValueError(
+                    f"turns[{k}] starts at {turns[k].start_m:g} m, before turns[{k - 1}] ends at {end:g} m; "
+                    "list turns in order along the road, without overlap"
+                )
+        return turns
+
+    def evaluator(self) -> "CarMotion":
+        """The car's closed forms with the road series and transients set up once."""
+        return CarMotion(self)
+
+    def world_motion(self, t):
+        return in_chunks(t, self.evaluator())
+
+
+class CarMotion:
+    """The equations of :class:`CarSpec`, evaluated at any times: ``CarMotion(spec)(t) -> WorldMotion``."""
+
+    def __init__(self, spec: CarSpec):
+        sus = spec.suspension
+        self.speed = SpeedProfile(spec.legs, spec.drive)
+        self.road = Road(spec.turns, np.radians(spec.drive.initial_yaw_deg))
+        self.k_roll, self.k_pitch = np.radians(sus.roll_deg_per_m_s2), np.radians(sus.pitch_deg_per_m_s2)
+        self.bumps = []  # (time, heave, nose-up, heave transient, pitch transient)
+        modes = {}  # rise time → transients
+        for bump in spec.bumps:
+            if bump.rise_s not in modes:
+                modes[bump.rise_s] = tuple(
+                    SuspensionTransient(f, sus.damping_ratio, bump.rise_s)
+                    for f in (sus.heave_frequency_hz, sus.pitch_frequency_hz)
+                )
+            self.bumps.append((bump.at_s, bump.heave_m, np.radians(bump.nose_up_deg), *modes[bump.rise_s]))
+
+    def __call__(self, t) -> WorldMotion:
+        s, v, a, jerk, djerk = self.speed(t)
+        psi, cos, sin, kappa, dkappa, ddkappa, x, y = self.road(s)
+        k_roll, k_pitch = self.k_roll, self.k_pitch
+        v2 = v * v
+        yaw_rate = kappa * v
+        rpy = np.stack([k_roll * kappa * v2, -k_pitch * a, psi])
+        rates = np.stack([k_roll * (dkappa * v2 * v + 2 * kappa * v * a), -k_pitch * jerk, yaw_rate])
+        accels = np.stack(
+            [
+                k_roll * (ddkappa * v2 * v2 + 5 * dkappa * v2 * a + 2 * kappa * (a * a + v * jerk)),
+                -k_pitch * djerk,
+                dkappa * v2 + kappa * a,
+            ]
+        )
+        heave = np.zeros((3, len(t)))  # z, ż, z̈
+        grid = TimeGrid(t)
+        for at, height, nose_up, heave_mode, pitch_mode in self.bumps:
+            window = grid.window(at, at + heave_mode.duration)
+            heave[:, window] += height * np.array(heave_mode(t[window] - at))
+            window = grid.window(at, at + pitch_mode.duration)
+            pitch = nose_up * np.array(pitch_mode(t[window] - at))
+            rpy[1, window] -= pitch[0]  # pitch is nose-down positive
+            rates[1, window] -= pitch[1]
+            accels[1, window] -= pitch[2]
+        q, omega, alpha = euler_zyx_motion(rpy, rates, accels)
+        along, across = a, v * yaw_rate  # tangential and centripetal acceleration
+        pos = np.stack([x, y, heave[0]], axis=-1)
+        vel = np.stack([v * cos, v * sin, heave[1]], axis=-1)
+        acc = np.stack([along * cos - across * sin, along * sin + across * cos, heave[2]], axis=-1)
+        return WorldMotion(t, q, omega, alpha, pos, vel, acc, extras={"speed_m_s": v, "distance_m": s})
