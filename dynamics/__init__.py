@@ -5,6 +5,7 @@ Entry points (``interface.md``): :func:`load_scenario` and :meth:`Scenario.simul
 :mod:`dynamics.inertia`.
 """
 
+from . import jit  # noqa: F401  (numba compiles under an inter-process lock: see dynamics/jit.py)
 from .config import ConfigError
 from .earth import EARTH_RATE, Environment, Site, earth_rate_enu, normal_gravity
 from .scenarios import KINDS, Scenario, ScenarioSpec, list_scenarios, load_scenario, scenario_from_dict

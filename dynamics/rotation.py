@@ -18,9 +18,10 @@ Euler angles
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 from scipy.spatial.transform import Rotation
+
+from .jit import guvectorize
 
 __all__ = [
     "quat_multiply",
@@ -61,7 +62,7 @@ def _v(v) -> np.ndarray:
     return v
 
 
-@numba.guvectorize(["void(f8[:], f8[:], f8[:])"], "(n),(n)->(n)", cache=True)
+@guvectorize(["void(f8[:], f8[:], f8[:])"], "(n),(n)->(n)")
 def _multiply(p, q, out):  # pragma: no cover - compiled
     pw, px, py, pz = p[0], p[1], p[2], p[3]
     qw, qx, qy, qz = q[0], q[1], q[2], q[3]
@@ -141,7 +142,7 @@ def quat_slerp(q0, q1, s) -> np.ndarray:
     return quat_multiply(q0, quat_exp(np.asarray(s, dtype=float)[..., None] * d))
 
 
-@numba.guvectorize(["void(f8[:], f8[:], f8[:])"], "(n),(m)->(m)", cache=True)
+@guvectorize(["void(f8[:], f8[:], f8[:])"], "(n),(m)->(m)")
 def _rotate(q, v, out):  # pragma: no cover - compiled
     w, x, y, z = q[0], q[1], q[2], q[3]
     tx = 2.0 * (y * v[2] - z * v[1])  # t = 2 u × v
