@@ -1,0 +1,308 @@
+"""The free two-gimbal gyro: a rotor that holds its direction in inertial space, read by its gimbals.
+
+The instrument (Lecture 11, "free gyroscope"; Savet; Lawrence)
+----------------------------------------------------------------
+A rotor spins about its axis s with angular momentum H = I_s ω_s inside an *inner gimbal*, which turns
+about an axis perpendicular to s inside an *outer gimbal*, which turns about an axis fixed in the case.
+With frictionless bearings no torque reaches the rotor, so s stays fixed in inertial space while the
+carrier turns around it, and the two gimbal angles read the carrier's attitude relative to the rotor.
+This module's gyro 1 is the lecture's: spin axis along the sensor's x, inner gimbal about y, outer
+gimbal about z (the case's z). Its gimbal angles are signed as the rotation of the case relative to
+each gimbal (positive when the case turns positively about the gimbal axis while the gimbal holds
+still), so that with the rotor direction s in case axes
+
+    s = Rz(−ψ₁) Ry(−θ₁) e_x = (cos ψ₁ cos θ₁, −sin ψ₁ cos θ₁, sin θ₁):
+    θ₁ = atan2(s_z, √(s_x² + s_y²)),   ψ₁ = atan2(−s_y, s_x).                                      (1)
+
+One rotor fixes only a direction, so it reads two angles. Writing the carrier's attitude relative to
+the rotor frame (the sensor's attitude when the rotor was uncaged at t[0]) as X-Y-Z Euler angles,
+R = Rx(φ) Ry(θ) Rz(ψ) (intrinsic: roll about x, then pitch about the new y, then yaw about the newest
+z), gives s = Rᵀ e_x = Rz(−ψ) Ry(−θ) e_x: **gyro 1's inner gimbal reads the pitch θ and its outer
+gimbal the yaw ψ, exactly**; roll about the spin axis is invisible to it.
+
+The mechanism is therefore **a pair**: gyro 2, spin axis along the sensor's y, inner gimbal about x,
+outer gimbal about z, s₂ = Rz(−ψ₂) Rx(−θ₂) e_y, reads roll (θ₂ = φ exactly when θ = 0). The device
+combines the two: undoing gyro 1's yaw and pitch from gyro 2's rotor direction leaves the roll,
+
+    v = Ry(θ) Rz(ψ) s₂ = Rx(−φ) e_y = (0, cos φ, −sin φ):   φ = atan2(−v_z, v_y).                  (2)
+
+**Indicated rate.** The device differentiates the attitude angles (φ, θ, ψ) in time (fourth-order
+central differences on the inner grid, one-sided at the ends; error ≈ h⁴/30 · d⁵(angle)/dt⁵) and maps
+the Euler rates to body rates:
+
+    ω = (φ' cos θ cos ψ + θ' sin ψ,  −φ' cos θ sin ψ + θ' cos ψ,  φ' sin θ + ψ').                  (3)
+
+**Gimbal lock.** When an inner gimbal nears ±90° its rotor's axis lines up with the outer gimbal axis:
+the gimbals lose a degree of freedom (a real instrument's inner gimbal hits its stops there and the
+case torques the rotor, which tumbles), and (3) is singular at θ = ±90°. The model keeps the rotor
+ideal, flags every sample with an inner gimbal within ``gimbal_lock_margin_deg`` of 90° (raw
+``gimbal_lock``), and then either **warns** (:class:`GimbalLockWarning`, the default:
+``on_gimbal_lock = "warn"``) or **raises** :class:`GimbalLockError` (``"raise"``). Flagged samples'
+angles and rates are not what the instrument would show.
+
+Bearing friction and drift
+--------------------------
+Friction in a gimbal bearing torques the rotor, which precesses: the spin axis moves towards the
+torque at the rate torque/H. A bearing turns at the gimbal's rate relative to its mount; as the
+carrier turns about a rotor that holds still, the inner bearing turns at w_i = −ω·a_i and the outer
+at w_o = −ω·m/cos²θ, where a_o is the outer axis (case z), a_i = a_o × s/|a_o × s| the inner one and
+m = a_o − (a_o·s) s. Each bearing resists with a viscous and a Coulomb torque on its gimbal,
+τ = −(b w + τ_c sign w). The inner gimbal carries the rotor and passes on the outer bearing's torque;
+with massless gimbals and the spin speed held by its motor, the torque the rotor receives is
+T = τ_i a_i + τ_o m/cos²θ (its component along a_o is τ_o, along a_i is τ_i, and it is ⊥ s), so
+
+    H ds/dt = τ_i a_i + τ_o (a_o − (a_o·s) s) / (1 − (a_o·s)²).                                   (4)
+
+Outer-bearing friction thus tilts the spin axis about the inner gimbal axis at τ_o/(H cos θ) (for
+gyro 1, sin θ₁ grows at τ_o/H), and inner-bearing friction turns it about the outer axis, ψ₁' =
+−τ_i/(H cos θ₁): the lecture's "drift due to friction". The bearing rates that set the friction are
+the carrier-driven ones above; the drift's own contribution (≲ τ/H ~ 10⁻⁵ rad/s) is left out: at
+such rates real instrument bearings are in their pre-sliding (stiction) regime, not at the sliding
+torque, and leaving it out keeps Coulomb friction from chattering on a carrier at rest. (4) is
+integrated in the inertial frame by Heun's method with renormalisation, in a numba kernel; inside the
+gimbal-lock band the 1/cos²θ factor is held at its value at the band's edge.
+
+Neglected: nutation of the rotor in its gimbals (at H/√(J_i J_o), hundreds of Hz, and damped), gimbal
+inertia, rotor mass unbalance (g-dependent drift; the IMU's error layer has g-sensitivity), erection
+systems. The intrinsic noise density is 0. :meth:`FreeGyro.inner_rate_hz` is the output rate: the
+model has no dynamics of its own to resolve.
+
+Defaults
+--------
+An electrically driven aircraft attitude/directional gyro: a 400-Hz induction-motor rotor of
+I_s = 6·10⁻⁵ kg·m² at 22 500 rpm (H ≈ 0.14 N·m·s); ball-bearing gimbal pivots with Coulomb friction
+3·10⁻⁶ N·m and viscous friction 2·10⁻⁶ N·m·s/rad each, a drift of ≈ 4.4 °/h from Coulomb friction
+while the carrier turns (a few °/h, as such instruments drift); gimbal freedom ±85° (margin 5°).
+
+Sources
+-------
+* Lecture 11, "Angular momentum, tops and gyroscopes" (``/work/shared/seeds``): the two-gimbal free
+  gyro, two gyros for three Euler angles, drift from friction at the joints.
+* P. H. Savet (ed.), *Gyroscopes: Theory and Design*, McGraw-Hill 1961 (free gyros, gimbal errors).
+* A. Lawrence, *Modern Inertial Technology*, 2nd ed., Springer 1998, ch. 5–7.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from typing import Annotated, Literal
+
+import numba
+import numpy as np
+from pydantic import Field
+
+from dynamics.config import NonNegativeReal, PositiveReal, Real
+from dynamics.rotation import quat_conjugate, quat_multiply, quat_rotate
+
+from .mechanism import GyroMechanism, GyroResponse, GyroTruth
+from .rate_gyro import RPM
+
+__all__ = ["FreeGyro", "GimbalLockWarning", "GimbalLockError", "gimbal_angles", "euler_xyz_from_spins",
+           "body_rate_from_euler_xyz", "time_derivative"]
+
+#: Rotor directions at uncaging, in the sensor's axes at t[0]: gyro 1 along x, gyro 2 along y.
+SPIN_AXES = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+
+
+class GimbalLockWarning(RuntimeWarning):
+    """An inner gimbal of a free gyro came within the lock margin of ±90°."""
+
+
+class GimbalLockError(RuntimeError):
+    """An inner gimbal of a free gyro came within the lock margin of ±90° (``on_gimbal_lock = "raise"``)."""
+
+
+class FreeGyro(GyroMechanism):
+    """A pair of free two-gimbal gyros reading the carrier's attitude (see the module notes).
+
+    Parameters (config keys)
+    ------------------------
+    rotor_inertia_kgm2 : each rotor about its spin axis, kg·m².
+    spin_speed_rpm : rotor speed, rpm.
+    outer_viscous_friction_n_m_s_per_rad, outer_coulomb_friction_n_m : outer gimbal bearing.
+    inner_viscous_friction_n_m_s_per_rad, inner_coulomb_friction_n_m : inner gimbal bearing.
+    gimbal_lock_margin_deg : an inner gimbal within this of ±90° is locked.
+    on_gimbal_lock : ``"warn"`` (default) or ``"raise"``.
+    """
+
+    kind: Literal["free-gyro"] = "free-gyro"
+    rotor_inertia_kgm2: PositiveReal = 6.0e-5
+    spin_speed_rpm: PositiveReal = 22500.0
+    outer_viscous_friction_n_m_s_per_rad: NonNegativeReal = 2.0e-6
+    outer_coulomb_friction_n_m: NonNegativeReal = 3.0e-6
+    inner_viscous_friction_n_m_s_per_rad: NonNegativeReal = 2.0e-6
+    inner_coulomb_friction_n_m: NonNegativeReal = 3.0e-6
+    gimbal_lock_margin_deg: Annotated[Real, Field(gt=0, lt=90)] = 5.0
+    on_gimbal_lock: Literal["warn", "raise"] = "warn"
+
+    @property
+    def spin_momentum(self) -> float:
+        """H = I_s ω_s, N·m·s."""
+        return self.rotor_inertia_kgm2 * self.spin_speed_rpm * RPM
+
+    @property
+    def frictionless(self) -> bool:
+        """No bearing friction at all: the rotors hold still and the gimbal angles are exact."""
+        return not any((self.outer_viscous_friction_n_m_s_per_rad, self.outer_coulomb_friction_n_m,
+                        self.inner_viscous_friction_n_m_s_per_rad, self.inner_coulomb_friction_n_m))
+
+    def inner_rate_hz(self, output_rate_hz: float) -> float:
+        """The output rate: the model has no dynamics of its own to resolve."""
+        return output_rate_hz
+
+    def respond(self, truth: GyroTruth, rng: np.random.Generator) -> GyroResponse:
+        """Indicated rate (M, 3), rad/s, from the gimbal angles. Draws nothing.
+
+        Raw: ``gimbal_angle_rad`` (M, 4) = (θ₁ inner, ψ₁ outer, θ₂ inner, ψ₂ outer); ``attitude_xyz_rad``
+        (M, 3) = (φ, θ, ψ), the attitude the pair indicates relative to t[0]; ``gimbal_lock`` (M,) bool.
+        """
+        # Attitude relative to the uncaging attitude at t[0], in which the rotors were set.
+        q_is = np.asarray(truth.q_is, dtype=float)
+        q_rel = quat_multiply(quat_conjugate(q_is[0]), q_is)
+        spins = self._spins(q_rel, np.asarray(truth.omega, dtype=float), truth.dt)  # (M, 2, 3) rotor frame
+        spins_case = quat_rotate(quat_conjugate(q_rel)[:, None, :], spins)         # (M, 2, 3) case axes
+
+        gimbals = gimbal_angles(spins_case)
+        attitude = euler_xyz_from_spins(spins_case)
+        locked = np.abs(gimbals[:, [0, 2]]).max(axis=1) > math.radians(90.0 - self.gimbal_lock_margin_deg)
+        if np.any(locked):
+            self._report_lock(truth.t, gimbals, locked)
+
+        unwrapped = np.unwrap(attitude, axis=0)
+        rate = body_rate_from_euler_xyz(unwrapped, time_derivative(unwrapped, truth.dt))
+        return GyroResponse(rate=rate, raw={"gimbal_angle_rad": gimbals, "attitude_xyz_rad": attitude,
+                                            "gimbal_lock": locked})
+
+    def _spins(self, q_rel: np.ndarray, omega: np.ndarray, dt: float) -> np.ndarray:
+        """Rotor directions (M, 2, 3) in the rotor (inertial) frame: fixed, or drifting by (4)."""
+        if self.frictionless:
+            return np.broadcast_to(SPIN_AXES, (len(q_rel), 2, 3))
+        out = np.empty((len(q_rel), 2, 3))
+        min_cos2 = math.sin(math.radians(self.gimbal_lock_margin_deg)) ** 2
+        _drift(np.ascontiguousarray(q_rel), np.ascontiguousarray(omega), dt, self.spin_momentum,
+               self.outer_viscous_friction_n_m_s_per_rad, self.outer_coulomb_friction_n_m,
+               self.inner_viscous_friction_n_m_s_per_rad, self.inner_coulomb_friction_n_m, min_cos2, SPIN_AXES, out)
+        return out
+
+    def _report_lock(self, t: np.ndarray, gimbals: np.ndarray, locked: np.ndarray) -> None:
+        first = int(np.argmax(locked))
+        which = 1 + int(abs(gimbals[first, 2]) > abs(gimbals[first, 0]))
+        worst = math.degrees(np.abs(gimbals[:, [0, 2]]).max())
+        message = (f"free gyro {which}'s inner gimbal is within {self.gimbal_lock_margin_deg:g}° of 90° "
+                   f"(gimbal lock) from t = {t[first]:.6g} s, {int(locked.sum())} samples flagged in raw "
+                   f"'gimbal_lock', largest inner gimbal angle {worst:.3f}°; angles and rates there are not "
+                   "what the instrument shows")
+        if self.on_gimbal_lock == "raise":
+            raise GimbalLockError(message)
+        warnings.warn(message, GimbalLockWarning, stacklevel=3)
+
+
+# --------------------------------------------------------------------------------------------------
+# Gimbal geometry
+# --------------------------------------------------------------------------------------------------
+
+
+def gimbal_angles(spins_case: np.ndarray) -> np.ndarray:
+    """Gimbal angles (..., 4) = (θ₁, ψ₁, θ₂, ψ₂), rad, from the rotor directions (..., 2, 3) in case axes.
+
+    Gyro 1 (spin x, inner y, outer z): s = Rz(−ψ₁) Ry(−θ₁) e_x, equation (1).
+    Gyro 2 (spin y, inner x, outer z): s = Rz(−ψ₂) Rx(−θ₂) e_y = (sin ψ₂ cos θ₂, cos ψ₂ cos θ₂, −sin θ₂).
+    """
+    (x1, y1, z1), (x2, y2, z2) = np.moveaxis(spins_case[..., 0, :], -1, 0), np.moveaxis(spins_case[..., 1, :], -1, 0)
+    return np.stack([np.arctan2(z1, np.hypot(x1, y1)), np.arctan2(-y1, x1),
+                     np.arctan2(-z2, np.hypot(x2, y2)), np.arctan2(x2, y2)], axis=-1)
+
+
+def euler_xyz_from_spins(spins_case: np.ndarray) -> np.ndarray:
+    """Attitude (..., 3) = (φ, θ, ψ), rad, with R = Rx(φ) Ry(θ) Rz(ψ), from the rotor directions (..., 2, 3).
+
+    θ and ψ are gyro 1's gimbal angles; φ comes from gyro 2 by (2).
+    """
+    s1, s2 = spins_case[..., 0, :], spins_case[..., 1, :]
+    theta = np.arctan2(s1[..., 2], np.hypot(s1[..., 0], s1[..., 1]))
+    psi = np.arctan2(-s1[..., 1], s1[..., 0])
+    cp, sp, ct, st = np.cos(psi), np.sin(psi), np.cos(theta), np.sin(theta)
+    a = cp * s2[..., 0] - sp * s2[..., 1]          # Rz(ψ) s₂, x
+    v_y = sp * s2[..., 0] + cp * s2[..., 1]        # Rz(ψ) s₂, y (Ry(θ) leaves it)
+    v_z = -st * a + ct * s2[..., 2]                # Ry(θ) Rz(ψ) s₂, z
+    return np.stack([np.arctan2(-v_z, v_y), theta, psi], axis=-1)
+
+
+def body_rate_from_euler_xyz(angles: np.ndarray, rates: np.ndarray) -> np.ndarray:
+    """Body angular velocity (..., 3) of R = Rx(φ) Ry(θ) Rz(ψ) from (φ, θ, ψ) and their rates, equation (3)."""
+    phi_dot, theta_dot, psi_dot = np.moveaxis(rates, -1, 0)
+    theta, psi = angles[..., 1], angles[..., 2]
+    ct, st, cp, sp = np.cos(theta), np.sin(theta), np.cos(psi), np.sin(psi)
+    return np.stack([phi_dot * ct * cp + theta_dot * sp, -phi_dot * ct * sp + theta_dot * cp,
+                     phi_dot * st + psi_dot], axis=-1)
+
+
+def time_derivative(y: np.ndarray, h: float) -> np.ndarray:
+    """dy/dt along axis 0 of uniform samples ``y`` (M, ...), by fourth-order finite differences.
+
+    Interior: (y_{k−2} − 8 y_{k−1} + 8 y_{k+1} − y_{k+2}) / 12h, error h⁴ y⁽⁵⁾/30; the two samples at
+    each end use the one-sided five-point formulas (errors h⁴ y⁽⁵⁾/5 and /20). Fewer than five
+    samples: ``numpy.gradient``.
+    """
+    y = np.asarray(y, dtype=float)
+    if len(y) < 2:
+        return np.zeros_like(y)
+    if len(y) < 5:
+        return np.gradient(y, h, axis=0)
+    d = np.empty_like(y)
+    d[2:-2] = y[:-4] - 8 * y[1:-3] + 8 * y[3:-1] - y[4:]
+    d[0] = -25 * y[0] + 48 * y[1] - 36 * y[2] + 16 * y[3] - 3 * y[4]
+    d[1] = -3 * y[0] - 10 * y[1] + 18 * y[2] - 6 * y[3] + y[4]
+    d[-1] = 25 * y[-1] - 48 * y[-2] + 36 * y[-3] - 16 * y[-4] + 3 * y[-5]
+    d[-2] = 3 * y[-1] + 10 * y[-2] - 18 * y[-3] + 6 * y[-4] - y[-5]
+    return d / (12 * h)
+
+
+# --------------------------------------------------------------------------------------------------
+# Friction drift, equation (4)
+# --------------------------------------------------------------------------------------------------
+
+
+@numba.njit(cache=True)
+def _rotate(q, v, conjugate):
+    """q ⊗ v ⊗ q* (or q* ⊗ v ⊗ q with ``conjugate``) for one quaternion (4,) and vector (3,)."""
+    w = q[0]
+    ux, uy, uz = (-q[1], -q[2], -q[3]) if conjugate else (q[1], q[2], q[3])
+    tx, ty, tz = 2 * (uy * v[2] - uz * v[1]), 2 * (uz * v[0] - ux * v[2]), 2 * (ux * v[1] - uy * v[0])
+    return np.array([v[0] + w * tx + uy * tz - uz * ty,
+                     v[1] + w * ty + uz * tx - ux * tz,
+                     v[2] + w * tz + ux * ty - uy * tx])
+
+
+@numba.njit(cache=True)
+def _spin_rate(q, omega, s, h, b_o, c_o, b_i, c_i, min_cos2):
+    """ds/dt (3,) in the rotor frame by (4), for rotor direction ``s`` and the carrier at ``q``, ``omega``."""
+    sc = _rotate(q, s, True)                      # s in case axes; the outer axis a_o is case z
+    cos2 = max(1.0 - sc[2] * sc[2], min_cos2)     # cos²θ of the inner gimbal
+    cos = math.sqrt(cos2)
+    a_i = np.array([-sc[1] / cos, sc[0] / cos, 0.0])                   # a_o × s / |a_o × s|
+    m = np.array([-sc[2] * sc[0], -sc[2] * sc[1], 1.0 - sc[2] * sc[2]])  # a_o − (a_o·s) s
+    w_i = -(omega[0] * a_i[0] + omega[1] * a_i[1])                     # bearing rates, carrier-driven
+    w_o = -(omega[0] * m[0] + omega[1] * m[1] + omega[2] * m[2]) / cos2
+    tau_i = -(b_i * w_i + c_i * np.sign(w_i))
+    tau_o = -(b_o * w_o + c_o * np.sign(w_o))
+    torque = tau_i * a_i + (tau_o / cos2) * m
+    return _rotate(q, torque, False) / h
+
+
+@numba.njit(cache=True)
+def _drift(q_rel, omega, dt, h, b_o, c_o, b_i, c_i, min_cos2, spins0, out):
+    """Integrate (4) for each rotor by Heun's method with renormalisation; fills ``out`` (M, 2, 3)."""
+    n = q_rel.shape[0]
+    for g in range(spins0.shape[0]):
+        s = spins0[g].copy()
+        out[0, g] = s
+        for k in range(1, n):
+            f0 = _spin_rate(q_rel[k - 1], omega[k - 1], s, h, b_o, c_o, b_i, c_i, min_cos2)
+            guess = s + dt * f0
+            guess /= math.sqrt(guess[0] ** 2 + guess[1] ** 2 + guess[2] ** 2)
+            f1 = _spin_rate(q_rel[k], omega[k], guess, h, b_o, c_o, b_i, c_i, min_cos2)
+            s = s + 0.5 * dt * (f0 + f1)
+            s /= math.sqrt(s[0] ** 2 + s[1] ** 2 + s[2] ** 2)
+            out[k, g] = s

@@ -1,0 +1,768 @@
+"""The MEMS Coriolis vibratory gyro: a driven proof mass whose sense mode the Coriolis force excites.
+
+The instrument (Lecture 11 of the course seeds, "MEMS gyroscope"; IEEE Std 1431-2004 names the terms)
+-------------------------------------------------------------------------------------------------------
+A proof mass m on springs has two in-plane modes. The **drive mode** (along x) is kept oscillating at
+its resonance ω_d with a constant amplitude x₀ by an amplitude loop (AGC) and a phase-locked loop:
+
+    x(t) = x₀ sin θ(t),   θ̇ = ω_d,   ẋ = x₀ ω_d cos θ                                             (1)
+
+The **sense mode** (along y, natural frequency ω_s = ω_d + 2π Δf, quality factor Q_s) feels, in the
+sensor's rotating frame, the Coriolis force −2 m Ω × v of the drive motion and whatever else acts
+along y. Per unit mass, for an element sensing Ω_z with drive axis x and sense axis y:
+
+    ÿ + (ω_s/Q_s) ẏ + ω_s² y = −2 Ω_z ẋ                  Coriolis: in phase with the drive velocity
+                              − (k_q/m) x                 quadrature: drive-to-sense stiffness k_q
+                              − (α_z + Ω_x Ω_y) x         Euler and centrifugal forces of the motion
+                              + κ y_g F_x/m               drive force leaking along y (g-sensitivity)
+                              − f_y                       specific force along y (DC: rejected)
+                              + n(t)                      Brownian force, one-sided PSD 4 k_B T ω_s/(m Q_s)
+                                                                                                   (2)
+
+* **Quadrature.** A stiffness coupling k_q from drive to sense (an anisoelastic suspension) pushes in
+  phase with the drive *displacement*, 90° from the Coriolis force. It reads as the rate
+  Ω_q = k_q/(2 m ω_d) (IEEE 1431's "quadrature"), typically far larger than the rates measured.
+* **g-sensitivity.** The specific force f_y deflects the sense mode quasi-statically by
+  y_g = −f_y/ω_s². That DC deflection is invisible to the demodulator, but it makes the drive
+  electrodes push sideways: a comb drive whose fingers are off centre by y has a lateral force
+  κ y F_x (Legtenberg et al., J. Micromech. Microeng. 6, 1996, on the lateral comb force). The
+  drive force holding x₀ against damping, F_x/m = (ω_d²x₀/Q_d) cos θ, is in phase with the drive
+  velocity, so this leak reads as the rate G f_y with G = κ ω_d/(2 Q_d ω_s²) (rad/s per m/s²).
+* **Neglected:** the ω_s-relative terms Ω²/ω_s² (< 10⁻⁸) in the sense stiffness, the drive loop's
+  own noise and errors (x₀ and the reference are exact), electronic noise of the pickoff (the IMU's
+  error layer adds the rest of the specified noise), the temperature dependence of Q and of the
+  springs' coupling.
+
+A capacitive **pickoff** turns y into a voltage v = G_p y, and **phase-sensitive demodulation**
+multiplies it by the drive-velocity reference 2 cos(θ + φ_ref) (rate channel, I) and by
+2 sin(θ + φ_ref) (quadrature channel, Q), then low-pass filters (the demodulator filter, a Butterworth
+of ``demodulator_bandwidth_hz`` and ``demodulator_filter_order``). The reference phase is set at the
+calibration temperature to the phase of the Coriolis response, plus the **demodulation phase error**
+φ_e, so the quadrature leaks into the rate channel as the bias −Ω_q tan φ_e. The instrument
+**indicates I/SF₀**, SF₀ being the scale factor at the reference temperature (calibrated).
+
+The sense response at the drive frequency
+-----------------------------------------
+With y = Re{A e^{iθ}} and each force written Re{F e^{iθ}} (F: complex amplitude per unit mass, the
+Coriolis force having F = −2 x₀ ω_d Ω), a steady force gives A = H F with
+
+    H = 1 / (ω_s² − ω_d² + i ω_d ω_s/Q_s)                                                          (3)
+
+and the demodulated channels are I = G_p Re{A e^{−iφ_ref}}, Q = −G_p Im{A e^{−iφ_ref}}. So the
+**scale factor** (rate-channel volts per rad/s) is
+
+    SF = G_p · 2 x₀ ω_d |H| cos φ_e ≈ G_p x₀ / (2π Δf) · cos φ_e     (mode-split, |Δf| ≫ f_s/2Q_s)   (4)
+
+**Temperature.** Both resonances drift, f(T) = f(T_ref)(1 + α (T − T_ref)) with α in ppm/°C (silicon's
+Young's modulus gives about −30 ppm/°C); their mismatch moves the mode split. Equation (3) at the
+drifted frequencies gives the scale factor and the phase at T; to first order in the mode-split
+regime the scale factor changes by α_d − (α_s f_s − α_d f_d)/Δf − (α_s f_s + α_d f_d)/(f_s + f_d)
+per °C. The moved phase of H changes the quadrature leak, −Ω_q tan(φ_e − arg(H_T/H₀)).
+
+Two models of the same physics
+------------------------------
+**Carrier level** (``model = "carrier"``, for tests and short runs). The sense oscillator (2) is
+integrated on a phase-locked grid of :data:`CARRIER_STEPS_PER_CYCLE` steps per drive cycle, exactly
+for forcing whose complex amplitude F is linear between steps (a matrix exponential with the carrier
+e^{iω_d τ} as an exosystem), with the Brownian force as the exact discrete covariance (Van Loan,
+IEEE Trans. Autom. Control 23(3), 1978). The pickoff voltage is multiplied by the references and
+averaged over each whole drive cycle (which removes the 2ω_d product exactly), then filtered; the
+output is updated once per drive cycle and held. The temperature is held at its value at power-up.
+
+**Baseband** (``model = "baseband"``, the default). Averaging (2) over a drive cycle (substitute
+y = Re{A e^{iθ}}, drop Ä and the terms at 2ω_d) gives a first-order complex equation for the envelope:
+
+    Ȧ = p A + b F,    p ≈ −ω_s/(2Q_s) + i (ω_s² − ω_d²)/(2ω_d),   b ≈ −i/(2ω_d)                 (5)
+
+We place p at the sense mode's exact pole seen from the frame turning at ω_d,
+p = −ω_s/(2Q_s) + i(ω_s √(1 − 1/4Q_s²) − ω_d) (≈ −ω_s/2Q_s + 2πi Δf), and fix b = −p H so that the
+steady state A = −b F/p = H F is exact: the baseband and carrier scale factors, phases and quadrature
+rejection agree exactly, and their rate responses differ only by the counter-rotating sideband,
+a relative O(f/2f_d) at modulation frequency f. The rate response of (5) is that of a pair of poles
+at p and p̄ (for φ_e = 0):
+
+    H_rate(s) = (|p|² − s Re p) / ((s − p)(s − p̄))  ≈  1 / (1 − (f/Δf)²)                          (6)
+
+flat at low frequency, peaking at the mode split (+3 dB at f ≈ 0.54 Δf): the classic open-loop
+mode-split bandwidth (Acar & Shkel, "MEMS Vibratory Gyroscopes", Springer 2009, §2). Equation (5)
+and the demodulator filter form one complex linear system, discretised exactly for F linear between
+inner samples (first-order hold), the Brownian force again by its exact discrete covariance (less the
+directions that carry under 10⁻⁵ of it, two of five with the 4th-order filter, which are not drawn),
+so the inner step is free of the carrier: it needs only to resolve the output band.
+
+Temperature in the baseband model: the pole stays at its reference value and each force is scaled by
+H_T/H₀ (exact in steady state). The pole moves by (α_s f_s − α_d f_d) ΔT, about 0.09 Hz/°C for the
+defaults, far inside its own half-width f_s/2Q_s = 14.5 Hz.
+
+Brownian noise floor
+--------------------
+The sense mode's damping c = m ω_s/Q_s brings the thermal force of one-sided PSD 4 k_B T c
+(Gabrielson, IEEE Trans. Electron Devices 40(5), 1993). Near ω_d it is n = n_c cos θ − n_s sin θ,
+whose in-phase part n_c (two-sided PSD 4 k_B T ω_s/(m Q_s) per unit mass², twice the force's own)
+competes with the Coriolis amplitude 2 x₀ ω_d Ω; the quadrature part n_s is rejected by the
+demodulator (Leland's factor of two, IEEE Sensors J. 5(3), 2005). The rate noise is white at
+
+    Ω_n = √(4 k_B T ω_s / (m Q_s)) / (2 x₀ ω_d)      rad/s/√Hz                                    (7)
+
+in this repository's convention (the Allan deviation at 1 s, σ = Ω_n/√Δt per sample; see
+:mod:`sensors.noise`), divided by cos φ_e in the calibrated output. It does not depend on the mode
+split (signal and noise pass the same H). The tests check (7) against the carrier-level simulation.
+Through the sense resonance the same noise also makes a peak at Δf in the demodulated output, which
+the demodulator filter removes.
+
+Defaults: a consumer part (ICM-42688-P-like)
+---------------------------------------------
+Drive at 27 kHz (consumer gyros drive at a few tens of kilohertz), a 2 kHz mode split (flat rate response to a few
+hundred hertz), 5 µm drive amplitude, a 4 µg proof mass and Q_s = 1000 (moderate vacuum) give
+Ω_n = 1.6·10⁻⁵ rad/s/√Hz = 0.92 mdps/√Hz (0.055 °/√h) at 25 °C: a third of the part's 2.8 mdps/√Hz,
+so the electronics (the IMU's error layer) make the rest, as in real consumer parts. k_q = 1.5 mN/m
+gives 63 °/s of quadrature, with a 1 mrad phase error a 0.06 °/s bias (well inside a ±0.5 °/s
+zero-rate offset); κ = 7·10⁴ /m with Q_d = 1000 gives 0.1 °/s/g, the linear-acceleration sensitivity
+InvenSense specifies for its MPU-6000 family. The demodulator filter is 4th order at 500 Hz.
+
+Triad
+-----
+Three identical elements; element k senses Ω_k, drives along e_{k+1} and senses along e_{k+2} (indices
+mod 3), so e_drive × e_sense = e_k and element k feels Ω_k, α_k, Ω_{k+1}Ω_{k+2} and f_{k+2}.
+
+Raw observables (``GyroResponse.raw``): ``sense_in_phase_v`` and ``sense_quadrature_v`` (M, 3), the
+demodulated rate and quadrature channels after the demodulator filter, volts.
+
+Randomness: the power-up draw (the stationary thermal state) and then, time-major, a fixed number of
+normal draws per inner step (baseband) or carrier step (carrier) and axis, so runs split into chunks
+draw the same numbers.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+import numba
+import numpy as np
+import scipy.linalg
+import scipy.signal
+from pydantic import ValidationInfo, field_validator
+
+from dynamics.config import PositiveReal, Real
+
+from .mechanism import GyroMechanism, GyroResponse, GyroTruth
+
+__all__ = ["MemsGyro", "CARRIER_STEPS_PER_CYCLE", "K_BOLTZMANN", "element_axes"]
+
+K_BOLTZMANN = 1.380649e-23
+"""Boltzmann constant, J/K (exact, SI 2019)."""
+ZERO_CELSIUS_K = 273.15
+CARRIER_STEPS_PER_CYCLE = 24
+"""Steps per drive cycle of the carrier-level model (exact discretisation; ≥ 20 asked)."""
+_PPM = 1e-6
+_NOISE_DROP = 1e-5  # baseband noise directions below this share of the variance are not drawn
+
+
+def element_axes() -> tuple[np.ndarray, np.ndarray]:
+    """(drive, sense) sensor-axis index of each element k = 0, 1, 2: (k+1) mod 3 and (k+2) mod 3."""
+    return np.array([1, 2, 0]), np.array([2, 0, 1])
+
+
+class MemsGyro(GyroMechanism):
+    """A triad of MEMS Coriolis vibratory gyros (see the module notes for the model and its sources).
+
+    Every key is a physical parameter of one sense element, in SI units (frequencies in Hz), except
+    the temperature coefficients (ppm/°C) and the reference temperature (°C).
+    """
+
+    kind: Literal["mems"] = "mems"
+    model: Literal["baseband", "carrier"] = "baseband"
+    """``baseband``: the averaged envelope model (fast); ``carrier``: the sense oscillator itself."""
+    proof_mass_kg: PositiveReal = 4.0e-9
+    drive_frequency_hz: PositiveReal = 27_000.0
+    drive_amplitude_m: PositiveReal = 5.0e-6
+    drive_quality_factor: PositiveReal = 1000.0
+    mode_split_hz: Real = 2000.0
+    """f_s − f_d: sense resonance above (> 0) or below (< 0) the drive."""
+    sense_quality_factor: PositiveReal = 1000.0
+    pickoff_gain_v_per_m: PositiveReal = 1.0e7
+    quadrature_stiffness_n_per_m: Real = 1.5e-3
+    """k_q, drive-to-sense coupling stiffness: quadrature rate Ω_q = k_q/(2 m ω_d)."""
+    demodulation_phase_error_rad: Real = 1.0e-3
+    drive_force_sense_coupling_per_m: Real = 7.0e4
+    """κ: sideways drive force per drive force and per metre of sense deflection (g-sensitivity)."""
+    drive_frequency_tc_ppm_per_degC: Real = -30.0
+    sense_frequency_tc_ppm_per_degC: Real = -31.0
+    reference_temperature_degC: Real = 25.0
+    """Where the frequencies above hold and the scale factor and reference phase were calibrated."""
+    demodulator_bandwidth_hz: PositiveReal | None = 500.0
+    """Cut-off of the Butterworth low-pass after the demodulator (None: no filter)."""
+    demodulator_filter_order: Literal[1, 2, 3, 4] = 4
+
+    @field_validator("mode_split_hz")
+    @classmethod
+    def _sense_mode(cls, split, info: ValidationInfo):
+        drive = info.data.get("drive_frequency_hz")
+        if drive is None:
+            return split
+        if drive + split <= 0:
+            raise ValueError(f"the sense mode's frequency f_d + Δf = {drive + split:g} Hz must be positive "
+                             "(a negative stiffness makes the sense mode unstable)")
+        if abs(split) > drive / 4:
+            raise ValueError(f"|{split:g}| Hz is more than a quarter of the drive frequency {drive:g} Hz: "
+                             "the sense mode must lie near the drive for the Coriolis response (and the "
+                             "averaged envelope model) to hold")
+        return split
+
+    @field_validator("sense_quality_factor", "drive_quality_factor")
+    @classmethod
+    def _resonator(cls, q):
+        if q < 5:
+            raise ValueError(f"must be at least 5 (a resonator, not an overdamped mass), got {q:g}")
+        return q
+
+    @field_validator("demodulation_phase_error_rad")
+    @classmethod
+    def _phase(cls, phase):
+        if not abs(phase) < math.pi / 2:
+            raise ValueError(f"|{phase:g}| rad must be below π/2: at 90° the rate channel sees no rate")
+        return phase
+
+    @field_validator("reference_temperature_degC")
+    @classmethod
+    def _above_absolute_zero(cls, t):
+        if not t > -ZERO_CELSIUS_K:
+            raise ValueError(f"{t:g} °C is below absolute zero")
+        return t
+
+    @field_validator("demodulator_bandwidth_hz")
+    @classmethod
+    def _below_carrier(cls, bandwidth, info: ValidationInfo):
+        drive = info.data.get("drive_frequency_hz")
+        if bandwidth is not None and drive is not None and not bandwidth <= drive / 4:
+            raise ValueError(f"{bandwidth:g} Hz must be at most a quarter of the drive frequency {drive:g} Hz "
+                             "(the demodulator filter must reject the product at twice the drive frequency)")
+        return bandwidth
+
+    # ----------------------------------------------------------------------------------------------
+    # The physics in closed form
+    # ----------------------------------------------------------------------------------------------
+
+    def frequencies(self, temperature_degC=None):
+        """(ω_d, ω_s), rad/s, at ``temperature_degC`` (scalar or array; None: the reference)."""
+        dt = 0.0 if temperature_degC is None else np.asarray(temperature_degC, float) - self.reference_temperature_degC
+        w_d = 2 * np.pi * self.drive_frequency_hz * (1 + self.drive_frequency_tc_ppm_per_degC * _PPM * dt)
+        w_s = 2 * np.pi * (self.drive_frequency_hz + self.mode_split_hz) * (
+            1 + self.sense_frequency_tc_ppm_per_degC * _PPM * dt)
+        return w_d, w_s
+
+    def sense_response(self, temperature_degC=None):
+        """H = 1/(ω_s² − ω_d² + i ω_d ω_s/Q_s), m per m/s² of force amplitude at the drive frequency (3)."""
+        w_d, w_s = self.frequencies(temperature_degC)
+        return 1.0 / (w_s**2 - w_d**2 + 1j * w_d * w_s / self.sense_quality_factor)
+
+    def _coriolis_amplitude(self, w_d):
+        """c = −2 x₀ ω_d: complex force amplitude per unit mass per rad/s (real: drive-velocity phase)."""
+        return -2.0 * self.drive_amplitude_m * w_d
+
+    def reference_phase(self) -> float:
+        """φ_ref, rad: the phase of the Coriolis response at the reference temperature plus φ_e."""
+        w_d, _ = self.frequencies()
+        coriolis_response = self.sense_response() * self._coriolis_amplitude(w_d)
+        return float(np.angle(coriolis_response)) + self.demodulation_phase_error_rad
+
+    def scale_factor_v_per_rad_per_s(self, temperature_degC=None):
+        """Rate-channel output per rad/s in steady state, V/(rad/s): G_p Re{H c e^{−iφ_ref}} (4)."""
+        w_d, _ = self.frequencies(temperature_degC)
+        h = self.sense_response(temperature_degC) * self._coriolis_amplitude(w_d)
+        return self.pickoff_gain_v_per_m * np.real(h * np.exp(-1j * self.reference_phase()))
+
+    def envelope_pole(self) -> complex:
+        """p, rad/s: the sense mode's pole seen from the frame turning at ω_d (reference temperature)."""
+        w_d, w_s = self.frequencies()
+        q = self.sense_quality_factor
+        return complex(-w_s / (2 * q) + 1j * (w_s * math.sqrt(1 - 1 / (4 * q * q)) - w_d))
+
+    def quadrature_rate(self) -> float:
+        """Ω_q = k_q/(2 m ω_d), rad/s: the quadrature as the rate whose Coriolis force it equals."""
+        return self.quadrature_stiffness_n_per_m / (2 * self.proof_mass_kg * self.frequencies()[0])
+
+    def quadrature_bias(self) -> float:
+        """Rate-channel bias from the quadrature, −Ω_q tan φ_e, rad/s (reference temperature)."""
+        return -self.quadrature_rate() * math.tan(self.demodulation_phase_error_rad)
+
+    def g_sensitivity(self) -> float:
+        """G = κ ω_d/(2 Q_d ω_s²): indicated rate per specific force along the sense axis, rad/s per m/s²."""
+        w_d, w_s = self.frequencies()
+        return self.drive_force_sense_coupling_per_m * w_d / (2 * self.drive_quality_factor * w_s**2)
+
+    def brownian_noise_density(self, temperature_degC=None):
+        """Ω_n = √(4 k_B T ω_s/(m Q_s))/(2 x₀ ω_d), rad/s/√Hz (7), at ``temperature_degC`` (None: the
+        reference)."""
+        temp = self.reference_temperature_degC if temperature_degC is None else np.asarray(temperature_degC, float)
+        w_d, w_s = self.frequencies(temperature_degC)
+        m, q = self.proof_mass_kg, self.sense_quality_factor
+        return np.sqrt(4 * K_BOLTZMANN * (temp + ZERO_CELSIUS_K) * w_s / (m * q)) / (2 * self.drive_amplitude_m * w_d)
+
+    def intrinsic_noise_density(self) -> float:
+        """White rate noise of the calibrated output at the reference temperature, rad/s/√Hz:
+        the Brownian floor (7) over cos φ_e (the rate channel's share of the in-phase noise)."""
+        return float(self.brownian_noise_density()) / math.cos(self.demodulation_phase_error_rad)
+
+    def steady_state_rate(self, omega, specific_force=None, temperature_degC=None, alpha=None):
+        """Indicated rate (…, 3), rad/s, once the envelope has settled on constant inputs (closed form).
+
+        ``omega``, ``specific_force``, ``alpha``: (…, 3) in sensor axes; ``temperature_degC``: scalar
+        or (…,). Exact for the physics of (2)–(3); both models must reproduce it.
+        """
+        omega = np.asarray(omega, float)
+        zeros = np.zeros_like(omega)
+        force = zeros if specific_force is None else np.asarray(specific_force, float)
+        alpha = zeros if alpha is None else np.asarray(alpha, float)
+        w_d, w_s = self.frequencies(temperature_degC)
+        w_d, w_s = np.asarray(w_d)[..., None], np.asarray(w_s)[..., None]
+        h = self.sense_response(temperature_degC)
+        envelope = np.asarray(h)[..., None] * self._forcing(omega, alpha, force, w_d, w_s)
+        return self._demodulate(envelope)[0] / self.scale_factor_v_per_rad_per_s()
+
+    def rate_response(self, frequency_hz, exact: bool = False):
+        """Complex gain from a rate Ω cos(2π f t) about the sensing axis to the indicated rate.
+
+        The rate's envelope force c Ω and the Euler force i x₀ Ω̇ of its angular acceleration put
+        c (1 ± f/2f_d) Ω/2 on the sidebands f_d ± f. ``exact=False``: the baseband model's response to
+        them, the poles p and p̄ (6); ``exact=True``: the sense oscillator's own, H at the sidebands
+        over H₀ (what the carrier model follows, but for its cycle averaging and hold). Both include the
+        demodulator filter. ``frequency_hz``: scalar or array, Hz.
+        """
+        w = 2 * np.pi * np.asarray(frequency_hz, float)
+        w_d, w_s = self.frequencies()
+        if exact:
+            q = self.sense_quality_factor
+            h0 = self.sense_response()
+            upper = 1 / (w_s**2 - (w_d + w)**2 + 1j * (w_d + w) * w_s / q) / h0
+            lower = 1 / (w_s**2 - (w_d - w)**2 + 1j * (w_d - w) * w_s / q) / h0
+        else:
+            p = self.envelope_pole()
+            upper = -p / (1j * w - p)
+            lower = -p / (-1j * w - p)
+        upper = upper * (1 + w / (2 * w_d))  # the Euler force's share of each sideband
+        lower = lower * (1 - w / (2 * w_d))
+        phase = np.exp(-1j * self.demodulation_phase_error_rad)
+        gain = (upper * phase + np.conj(lower * phase)) / (2 * math.cos(self.demodulation_phase_error_rad))
+        return gain * self._filter_response(w)
+
+    def _filter_response(self, w):
+        """The demodulator filter's gain at angular frequency ``w`` (1 when there is none)."""
+        if self.demodulator_bandwidth_hz is None:
+            return np.ones_like(w, dtype=complex)
+        b, a = scipy.signal.butter(self.demodulator_filter_order, 2 * np.pi * self.demodulator_bandwidth_hz,
+                                   analog=True)
+        return scipy.signal.freqs(b, a, w)[1]
+
+    def inner_rate_hz(self, output_rate_hz: float) -> float:
+        """An integer multiple of the output rate, at least 4× it and 4× the output's band.
+
+        The band is the demodulator filter's cut-off, or the envelope pole's frequency |p|/2π (≈ |Δf|)
+        without a filter. Both models are discretised exactly, so nothing else binds: the carrier
+        model integrates on its own phase-locked grid of 24 steps per drive cycle between the samples.
+        """
+        band = abs(self.envelope_pole()) / (2 * np.pi)
+        if self.demodulator_bandwidth_hz is not None:
+            band = min(band, self.demodulator_bandwidth_hz)
+        return output_rate_hz * max(4, math.ceil(4 * band / output_rate_hz))
+
+    # ----------------------------------------------------------------------------------------------
+    # Forces, demodulation
+    # ----------------------------------------------------------------------------------------------
+
+    def _forcing(self, omega, alpha, force, w_d, w_s):
+        """Complex force amplitude F per unit mass on each element's sense mode, (…, 3), m/s².
+
+        ``omega``, ``alpha``, ``force``: (…, 3) sensor axes; ``w_d``, ``w_s``: broadcastable to (…, 1).
+        The real part is in phase with the drive velocity, the imaginary part with the displacement.
+        """
+        drive, sense = element_axes()
+        x0 = self.drive_amplitude_m
+        out = np.empty(np.broadcast_shapes(omega.shape, np.shape(w_d)), complex)
+        # −2 Ω ẋ (Coriolis) + κ y_g F_x/m (drive force leaking sideways, y_g = −f_s/ω_s²,
+        # F_x/m = ω_d² x₀/Q_d): both in phase with the drive velocity
+        leak = -self.drive_force_sense_coupling_per_m * x0 * w_d**2 / (self.drive_quality_factor * w_s**2)
+        out.real = self._coriolis_amplitude(w_d) * omega + leak * force[..., sense]
+        # −(k_q/m + α + Ω_d Ω_s) x, with x = Re{−i x₀ e^{iθ}}: in phase with the drive displacement
+        out.imag = x0 * (self.quadrature_stiffness_n_per_m / self.proof_mass_kg + alpha
+                         + omega[..., drive] * omega[..., sense])
+        return out
+
+    def _demodulate(self, envelope):
+        """(I, Q) volts of a sense envelope A (m): G_p Re{A e^{−iφ_ref}} and −G_p Im{A e^{−iφ_ref}}.
+
+        Equal to averaging v = G_p Re{A e^{iθ}} times 2 cos(θ + φ_ref) and times 2 sin(θ + φ_ref).
+        """
+        phase = self.reference_phase()
+        cos, sin = self.pickoff_gain_v_per_m * math.cos(phase), self.pickoff_gain_v_per_m * math.sin(phase)
+        envelope = np.asarray(envelope)
+        return cos * envelope.real + sin * envelope.imag, cos * -envelope.imag + sin * envelope.real
+
+    def _filter_state_space(self):
+        """The demodulator filter as (A_f, B_f, C_f), complex, or None when there is none.
+
+        A cascade of first-order sections −p_k/(s − p_k) over the Butterworth poles p_k (unit DC gain,
+        well scaled): their product is the real Butterworth low-pass.
+        """
+        if self.demodulator_bandwidth_hz is None:
+            return None
+        poles = scipy.signal.buttap(self.demodulator_filter_order)[1] * 2 * np.pi * self.demodulator_bandwidth_hz
+        n = len(poles)
+        a = np.diag(poles).astype(complex)
+        a[np.arange(1, n), np.arange(n - 1)] = -poles[1:]
+        b = np.zeros(n, complex)
+        b[0] = -poles[0]
+        c = np.zeros(n, complex)
+        c[-1] = 1.0
+        return a, b, c
+
+    def _response(self, envelope) -> GyroResponse:
+        """Demodulate the (filtered) sense envelope (M, 3) and calibrate: indicated rate I/SF₀."""
+        in_phase, quadrature = self._demodulate(envelope)
+        return GyroResponse(rate=in_phase / self.scale_factor_v_per_rad_per_s(),
+                            raw={"sense_in_phase_v": in_phase, "sense_quadrature_v": quadrature})
+
+    # ----------------------------------------------------------------------------------------------
+    # Simulation
+    # ----------------------------------------------------------------------------------------------
+
+    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict | None = None) -> GyroResponse:
+        """Indicated rate (M, 3) on the inner grid and the demodulated channels, by ``self.model``."""
+        state = {} if state is None else state
+        if np.any(np.asarray(truth.temperature_degC) <= -ZERO_CELSIUS_K):
+            raise ValueError("sensor temperature at or below absolute zero")
+        if self.model == "carrier":
+            return self._respond_carrier(truth, rng, state)
+        return self._respond_baseband(truth, rng, state)
+
+    def baseband_system(self):
+        """The envelope (5) and the demodulator filter as one complex system ż = A z + b F, Ã = c·z.
+
+        Returns (A (S, S), b (S,), c (S,)), complex, S = 1 + filter order: z = (A, filter states).
+        """
+        p = self.envelope_pole()
+        gain = -p * self.sense_response()
+        filt = self._filter_state_space()
+        if filt is None:
+            return np.array([[p]]), np.array([gain]), np.array([1.0 + 0j])
+        a_f, b_f, c_f = filt
+        n = len(b_f)
+        a = np.zeros((n + 1, n + 1), complex)
+        a[0, 0] = p
+        a[1:, 0] = b_f
+        a[1:, 1:] = a_f
+        b = np.zeros(n + 1, complex)
+        b[0] = gain
+        c = np.concatenate([[0.0], c_f])
+        return a, b, c
+
+    def _thermal_psd(self, temperature_degC=None):
+        """Two-sided PSD of the Brownian force per unit mass, (m/s²)²/Hz: 2 k_B T ω_s/(m Q_s)."""
+        temp = self.reference_temperature_degC if temperature_degC is None else temperature_degC
+        _, w_s = self.frequencies(temperature_degC)
+        return 2 * K_BOLTZMANN * (temp + ZERO_CELSIUS_K) * w_s / (self.proof_mass_kg * self.sense_quality_factor)
+
+    def _respond_baseband(self, truth: GyroTruth, rng, state: dict) -> GyroResponse:
+        """The envelope system on the inner grid; ``state["envelope_state"]`` (3, S) carries it."""
+        temperature = np.asarray(truth.temperature_degC, float)
+        w_d, w_s = self.frequencies(temperature)
+        ratio = self.sense_response(temperature) / self.sense_response()  # H_T/H₀: temperature, exact in steady state
+        forcing = ratio[:, None] * self._forcing(truth.omega, truth.alpha, truth.specific_force,
+                                                 w_d[:, None], w_s[:, None])
+        # The complex force n_c + i n_s has two-sided PSD 4 × (the real force's), scaled to the temperature.
+        noise_scale = np.abs(ratio) * np.sqrt(self._thermal_psd(temperature) / self._thermal_psd())
+        a, b, c = self.baseband_system()
+        phi, gamma0, gamma1 = first_order_hold(a, b, truth.dt)
+        psd = 4 * self._thermal_psd()
+        # Every state is an envelope in metres, so the covariance's small directions can be dropped:
+        # with the 4th-order filter two of five carry 10⁻⁶ of the variance (and would cost 40 % of the time).
+        noise = covariance_factor(discrete_noise_covariance(a, b, psd, truth.dt), drop=_NOISE_DROP)
+        z = state.get("envelope_state")
+        if z is None:  # power-up: settled on the first input, thermal motion from its stationary law
+            z = np.outer(forcing[0], np.linalg.solve(a, -b))
+            stationary = covariance_factor(stationary_covariance(a, b, psd), drop=_NOISE_DROP)
+            z = z + noise_scale[0] * _circular_normal(rng, (3, stationary.shape[1])) @ stationary.T
+        z = np.array(z, dtype=complex)  # a copy: the kernel updates it in place
+        envelope = np.empty(forcing.shape, complex)
+        _baseband_run(phi, gamma0, gamma1, noise, c, np.ascontiguousarray(forcing), noise_scale, z, rng, envelope)
+        state["envelope_state"] = z
+        return self._response(envelope)
+
+    def _respond_carrier(self, truth: GyroTruth, rng, state: dict) -> GyroResponse:
+        """The sense oscillators on the phase-locked carrier grid, from power-up (``state["carrier"]``
+        carries grid origin and index, held temperature, oscillator, demodulator and filter)."""
+        run = state.get("carrier")
+        steps = CARRIER_STEPS_PER_CYCLE
+        power_up = run is None
+        if power_up:  # the carrier grid starts at power-up; its temperature is held from then on
+            run = {"t0": float(truth.t[0]), "temperature_degC": float(truth.temperature_degC[0]), "j": 0}
+        temperature = run["temperature_degC"]
+        w_d, w_s = self.frequencies(temperature)
+        h = 2 * np.pi / (steps * w_d)  # carrier step: N per drive cycle, θ_j = 2π j/N
+        j0 = run["j"]
+        j_end = int(math.floor((truth.t[-1] - run["t0"]) / h + 1e-9))  # last carrier step in this chunk
+        _, sense = element_axes()
+
+        # The forces at the truth samples; the carrier steps see them linear in between, like the
+        # baseband model. F: complex amplitude at the carrier; −f_s: the DC force (deflection y_g).
+        forcing = self._forcing(truth.omega, truth.alpha, truth.specific_force, w_d, w_s)
+        static = np.ascontiguousarray(-truth.specific_force[:, sense])
+
+        # The sense oscillator (y, ẏ): ẋ = A x + b u, discretised exactly over a carrier step.
+        a = np.array([[0.0, 1.0], [-w_s**2, -w_s / self.sense_quality_factor]])
+        b = np.array([0.0, 1.0])
+        phi, dc0, dc1 = first_order_hold(a, b, h)
+        g0, g1 = carrier_hold(a, b, w_d, h)
+        psd = self._thermal_psd(temperature)
+        noise = covariance_factor(discrete_noise_covariance(a, b, psd, h))
+        carrier = np.exp(2j * np.pi * np.arange(steps) / steps)  # e^{iθ_j}, one drive cycle
+
+        if power_up:  # settled on the first input (A = H F plus the static deflection), thermal motion
+            settled = self.sense_response(temperature) * forcing[0]
+            x = np.column_stack([settled.real + static[0] / w_s**2, (1j * w_d * settled).real])
+            stationary = covariance_factor(stationary_covariance(a, b, psd))
+            x = x + rng.standard_normal((3, stationary.shape[1])) @ stationary.T
+            run.update(x=x, acc=2.0 * x[:, 0] + 0j,  # y_0 · 2 e^{−iθ_0}
+                       force_at_j=forcing[0].copy(), static_at_j=static[0].copy(),
+                       filter_state=None, filter_input=settled, held=settled)
+        x = np.array(run["x"], dtype=float)  # copies: the kernel updates them in place
+        acc = np.array(run["acc"], dtype=complex)
+        force_at_j = np.array(run["force_at_j"], dtype=complex)
+        static_at_j = np.array(run["static_at_j"], dtype=float)
+        cycles = np.empty(((j_end - j0) // steps + 2, 3), complex)
+        done = np.empty(len(cycles), np.int64)
+        count = _carrier_run(phi, dc0, dc1, g0, g1, noise, carrier, j0, j_end, (run["t0"] - truth.t[0]) / truth.dt,
+                             h / truth.dt, forcing, static, force_at_j, static_at_j, x, acc, rng, cycles, done)
+        cycles, done = cycles[:count], done[:count]
+
+        # The demodulator filter over the cycle averages, one sample per drive cycle, then held.
+        filtered = self._filter_cycles(cycles, run, steps * h)
+        held = np.empty((len(truth.t), 3), complex)
+        index = np.searchsorted(run["t0"] + done * h, truth.t + 1e-9 * h, side="right") - 1
+        held[index < 0] = run["held"]
+        held[index >= 0] = filtered[index[index >= 0]]
+        run.update(j=j_end, x=x, acc=acc, force_at_j=force_at_j, static_at_j=static_at_j,
+                   held=filtered[-1] if count else run["held"])
+        state["carrier"] = run
+        return self._response(held)
+
+    def _filter_cycles(self, cycles, run: dict, period: float):
+        """The demodulator filter over per-cycle envelopes (K, 3), input linear between cycles; state kept."""
+        filt = self._filter_state_space()
+        if filt is None or len(cycles) == 0:
+            return cycles
+        a_f, b_f, c_f = filt
+        phi, gamma0, gamma1 = first_order_hold(a_f, b_f, period)
+        if run["filter_state"] is None:  # settled on the power-up envelope
+            run["filter_state"] = np.outer(run["filter_input"], np.linalg.solve(a_f, -b_f))
+        s = np.array(run["filter_state"], dtype=complex)  # copies: the kernel updates them in place
+        previous = np.array(run["filter_input"], dtype=complex)
+        out = np.empty_like(cycles)
+        _filter_run(phi, gamma0, gamma1, c_f, np.ascontiguousarray(cycles), s, previous, out)
+        run.update(filter_state=s, filter_input=previous)
+        return out
+
+
+# --------------------------------------------------------------------------------------------------
+# Exact discretisation
+# --------------------------------------------------------------------------------------------------
+
+
+def first_order_hold(a: np.ndarray, b: np.ndarray, h: float):
+    """(Φ, Γ₀, Γ₁) with x_{k+1} = Φ x_k + Γ₀ u_k + Γ₁ u_{k+1}: ẋ = A x + b u exactly for u linear over
+    the step.
+
+    From one matrix exponential: d/dt (x, u, u̇) = (A x + b u, u̇, 0) over h maps (x_k, u_k, Δu/h).
+    ``a`` (S, S), ``b`` (S,), real or complex; u scalar.
+    """
+    s = a.shape[0]
+    m = np.zeros((s + 2, s + 2), dtype=np.result_type(a, b))
+    m[:s, :s] = a * h
+    m[:s, s] = b * h
+    m[s, s + 1] = 1.0
+    e = scipy.linalg.expm(m)
+    return e[:s, :s], e[:s, s] - e[:s, s + 1], e[:s, s + 1]
+
+
+def carrier_hold(a: np.ndarray, b: np.ndarray, w: float, h: float):
+    """(G₀, G₁), complex (S,): the response over one step of ẋ = A x + b Re{e^{iθ_k} (F_k + ΔF τ/h) e^{iwτ}}
+    from x = 0 is Re{e^{iθ_k} (G₀ F_k + G₁ ΔF)}.
+
+    The carrier is an exosystem: u₀ = e^{iwτ} (u₀' = iw u₀) and u₁ = (τ/h) e^{iwτ}
+    (u₁' = iw u₁ + u₀/h); the response to each, from rest, is one column of a matrix exponential.
+    """
+    s = a.shape[0]
+    m = np.zeros((s + 2, s + 2), complex)  # state (x, u₁, u₀)
+    m[:s, :s] = a
+    m[s, s] = m[s + 1, s + 1] = 1j * w
+    m[s, s + 1] = 1.0 / h
+    m0 = m.copy()
+    m0[:s, s + 1] = b  # x driven by u₀
+    m1 = m.copy()
+    m1[:s, s] = b  # x driven by u₁
+    return scipy.linalg.expm(m0 * h)[:s, s + 1], scipy.linalg.expm(m1 * h)[:s, s + 1]
+
+
+def discrete_noise_covariance(a: np.ndarray, b: np.ndarray, psd: float, h: float) -> np.ndarray:
+    """Q = ∫₀ʰ e^{Aσ} b S b* e^{A*σ} dσ: the covariance one step of white input (two-sided PSD S) adds.
+
+    Van Loan's method: exp([[−A, b S b*], [0, A*]] h) = [[·, Φ⁻¹Q], [0, Φ*]].
+    """
+    s = a.shape[0]
+    m = np.zeros((2 * s, 2 * s), dtype=np.result_type(a, b))
+    m[:s, :s] = -a
+    m[:s, s:] = psd * np.outer(b, np.conj(b))
+    m[s:, s:] = np.conj(a).T
+    e = scipy.linalg.expm(m * h)
+    phi = np.conj(e[s:, s:]).T
+    q = phi @ e[:s, s:]
+    return 0.5 * (q + np.conj(q).T)
+
+
+def stationary_covariance(a: np.ndarray, b: np.ndarray, psd: float) -> np.ndarray:
+    """P with A P + P A* + b S b* = 0: the covariance white input (two-sided PSD S) settles to.
+
+    Solved as the linear system (I ⊗ A + Ā ⊗ I) vec P = −vec(b S b*) (S ≤ 5 states here).
+    """
+    s = a.shape[0]
+    eye = np.eye(s)
+    lhs = np.kron(eye, a) + np.kron(np.conj(a), eye)
+    rhs = -psd * np.outer(b, np.conj(b))
+    p = np.linalg.solve(lhs, rhs.reshape(-1, order="F")).reshape(s, s, order="F")
+    return 0.5 * (p + np.conj(p).T)
+
+
+def covariance_factor(q: np.ndarray, drop: float = 0.0) -> np.ndarray:
+    """L (S, R) with L L* = Q, for a positive semi-definite Q, by eigen-decomposition.
+
+    With ``drop`` > 0 the directions that carry less than ``drop`` of the total variance tr Q are left
+    out (R ≤ S), which only makes sense when every state has the same unit: each costs a normal draw
+    per step, and together they hold less than S·``drop`` of the variance.
+    """
+    values, vectors = np.linalg.eigh(q)
+    values = np.clip(values, 0.0, None)
+    keep = values > drop * np.sum(values) if drop > 0 else np.ones(len(values), bool)
+    return np.ascontiguousarray(vectors[:, keep] * np.sqrt(values[keep]))
+
+
+def _circular_normal(rng: np.random.Generator, shape) -> np.ndarray:
+    """Circular complex normals, E|w|² = 1, real then imaginary part drawn for each element."""
+    pair = rng.standard_normal((*shape, 2))
+    return (pair[..., 0] + 1j * pair[..., 1]) / math.sqrt(2)
+
+
+# --------------------------------------------------------------------------------------------------
+# Recurrences
+# --------------------------------------------------------------------------------------------------
+
+
+@numba.njit(cache=True)
+def _baseband_run(phi, gamma0, gamma1, noise, c, forcing, noise_scale, z, rng, out):
+    """z_{k+1} = Φ z_k + Γ₀ F_k + Γ₁ F_{k+1} + s_k L w_k on each axis; out[k] = c·z_k.
+
+    ``phi`` (S, S), ``noise`` L (S, R); ``gamma0``, ``gamma1``, ``c`` (S,); ``forcing`` (M, A);
+    ``noise_scale`` s (M,), real; ``z`` (A, S): the state at sample 0 on entry, at sample M−1 on exit;
+    ``out`` (M, A). w_k: R circular normals (E|w|² = 1) per axis, real then imaginary part, drawn
+    sample by sample, axis by axis.
+    """
+    n, n_axes = forcing.shape
+    size = phi.shape[0]
+    rank = noise.shape[1]
+    w = np.empty(rank, np.complex128)
+    now = np.empty(size, np.complex128)
+    half = 1.0 / np.sqrt(2.0)
+    for k in range(n):
+        sk = noise_scale[k] * half
+        for a in range(n_axes):
+            y = 0j
+            for i in range(size):
+                now[i] = z[a, i]
+                y += c[i] * now[i]
+            out[k, a] = y
+            if k == n - 1:
+                continue
+            for j in range(rank):
+                re = rng.standard_normal()
+                im = rng.standard_normal()
+                w[j] = complex(re * sk, im * sk)
+            f0 = forcing[k, a]
+            f1 = forcing[k + 1, a]
+            for i in range(size):
+                acc = gamma0[i] * f0 + gamma1[i] * f1
+                for j in range(size):
+                    acc += phi[i, j] * now[j]
+                for j in range(rank):
+                    acc += noise[i, j] * w[j]
+                z[a, i] = acc
+
+
+@numba.njit(cache=True)
+def _carrier_run(phi, dc0, dc1, g0, g1, noise, carrier, j0, j_end, offset, ratio, forcing, static,
+                 force_at_j, static_at_j, x, acc, rng, cycles, done):
+    """Step the sense oscillators over carrier steps j0 → j_end and demodulate them.
+
+    x_{j+1} = Φ x_j + Re{e^{iθ_j}(G₀ F_j + G₁ (F_{j+1} − F_j))} + Γ₀ u_j + Γ₁ u_{j+1} + L w_j: F the
+    complex force amplitude, u the static force, both linear between truth samples (``forcing``,
+    ``static`` (M, A); carrier step j lies at truth index ``offset + j·ratio``). ``force_at_j`` and
+    ``static_at_j`` (A,) hold F and u at step j0 on entry, at j_end on exit. Each new y_j, times
+    2 e^{−iθ_j}, is added to ``acc`` (A,); after the last step of a cycle (phase index N − 1) the
+    average acc/N goes to ``cycles`` and its step index to ``done``. ``x`` (A, 2) is updated in place.
+    w_j: two normals per step and axis, step by step. Returns the number of completed cycles.
+    """
+    n_truth, n_axes = forcing.shape
+    period = carrier.shape[0]
+    count = 0
+    for j in range(j0, j_end):
+        u = offset + (j + 1) * ratio
+        i = min(max(int(u), 0), n_truth - 2)
+        frac = u - i
+        e = carrier[j % period]
+        e_next = carrier[(j + 1) % period]
+        for a in range(n_axes):
+            f0 = force_at_j[a]
+            f1 = forcing[i, a] + frac * (forcing[i + 1, a] - forcing[i, a])
+            s0 = static_at_j[a]
+            s1 = static[i, a] + frac * (static[i + 1, a] - static[i, a])
+            w0 = rng.standard_normal()
+            w1 = rng.standard_normal()
+            drive0 = e * (g0[0] * f0 + g1[0] * (f1 - f0))
+            drive1 = e * (g0[1] * f0 + g1[1] * (f1 - f0))
+            y = (phi[0, 0] * x[a, 0] + phi[0, 1] * x[a, 1] + drive0.real + dc0[0] * s0 + dc1[0] * s1
+                 + noise[0, 0] * w0 + noise[0, 1] * w1)
+            v = (phi[1, 0] * x[a, 0] + phi[1, 1] * x[a, 1] + drive1.real + dc0[1] * s0 + dc1[1] * s1
+                 + noise[1, 0] * w0 + noise[1, 1] * w1)
+            x[a, 0] = y
+            x[a, 1] = v
+            force_at_j[a] = f1
+            static_at_j[a] = s1
+            acc[a] += 2.0 * y * e_next.conjugate()  # pickoff times the two references (module notes)
+        if (j + 1) % period == period - 1:
+            for a in range(n_axes):
+                cycles[count, a] = acc[a] / period
+                acc[a] = 0j
+            done[count] = j + 1
+            count += 1
+    return count
+
+
+@numba.njit(cache=True)
+def _filter_run(phi, gamma0, gamma1, c, u, s, previous, out):
+    """s_{k+1} = Φ s_k + Γ₀ u_{k−1} + Γ₁ u_k, out[k] = c·s_{k+1}, per axis; ``s`` (A, S) and
+    ``previous`` (A,) (the input before u[0]) are updated in place. ``u``, ``out``: (K, A)."""
+    n, n_axes = u.shape
+    size = phi.shape[0]
+    new = np.empty(size, np.complex128)
+    for k in range(n):
+        for a in range(n_axes):
+            for i in range(size):
+                acc = gamma0[i] * previous[a] + gamma1[i] * u[k, a]
+                for j in range(size):
+                    acc += phi[i, j] * s[a, j]
+                new[i] = acc
+            y = 0j
+            for i in range(size):
+                s[a, i] = new[i]
+                y += c[i] * new[i]
+            out[k, a] = y
+            previous[a] = u[k, a]

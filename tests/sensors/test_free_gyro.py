@@ -1,0 +1,273 @@
+"""The free two-gimbal gyro pair: gimbal angles are the carrier's Euler angles, the indicated rate is the
+body rate, friction drifts the rotors at τ/H, gimbal lock is flagged, warned or raised; config errors.
+
+Tolerances come from theory: round-off where the model is exact (a frictionless rotor holds still, so
+the gimbal angles are a change of coordinates); the finite differences' h⁴ remainder for the rate; the
+closed-form precession of (4) for friction.
+"""
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from dynamics.config import ConfigError, validate
+from dynamics.rotation import body_rate_from_euler_zyx, quat_from_euler_zyx
+from sensors.free_gyro import (FreeGyro, GimbalLockError, GimbalLockWarning, body_rate_from_euler_xyz,
+                               time_derivative)
+from sensors.mechanism import GyroTruth, mechanism_class
+
+FRICTIONLESS = FreeGyro(outer_viscous_friction_n_m_s_per_rad=0, outer_coulomb_friction_n_m=0,
+                        inner_viscous_friction_n_m_s_per_rad=0, inner_coulomb_friction_n_m=0)
+
+
+def friction(outer=(0.0, 0.0), inner=(0.0, 0.0)):
+    """A gyro with (viscous N·m·s/rad, Coulomb N·m) in each bearing."""
+    return FreeGyro(outer_viscous_friction_n_m_s_per_rad=outer[0], outer_coulomb_friction_n_m=outer[1],
+                    inner_viscous_friction_n_m_s_per_rad=inner[0], inner_coulomb_friction_n_m=inner[1])
+
+
+def make_truth(q_is, omega, dt):
+    m = len(q_is)
+    return GyroTruth(t=np.arange(m) * dt, dt=dt, omega=np.asarray(omega, dtype=float), alpha=np.zeros((m, 3)),
+                     specific_force=np.zeros((m, 3)), q_is=np.asarray(q_is, dtype=float),
+                     temperature_degC=np.full(m, 25.0))
+
+
+def respond(gyro, q_is, omega, dt):
+    return gyro.respond(make_truth(q_is, omega, dt), np.random.default_rng(0))
+
+
+def wrap(a):
+    return np.angle(np.exp(1j * a))
+
+
+def tumbling_zyx(t):
+    """A carrier rolling, pitching (to ±40°) and turning: q_is and ω_b from the Z-Y-X helpers of
+    dynamics.rotation, starting from a non-trivial attitude."""
+    rpy = np.stack([0.3 + 1.2 * np.sin(0.7 * t), 0.2 + 0.5 * np.sin(0.45 * t + 0.3),
+                    2.5 * np.sin(0.2 * t) + 0.3 * t], -1)
+    rates = np.stack([1.2 * 0.7 * np.cos(0.7 * t), 0.5 * 0.45 * np.cos(0.45 * t + 0.3),
+                      0.5 * np.cos(0.2 * t) + 0.3], -1)
+    return quat_from_euler_zyx(rpy), body_rate_from_euler_zyx(rpy, rates)
+
+
+def rotation_about(axis, rate, t):
+    """q_is and ω_b of a steady rotation at ``rate`` about the body axis ``axis`` from the identity."""
+    q = np.zeros((t.size, 4))
+    q[:, 0], q[:, 1 + axis] = np.cos(rate * t / 2), np.sin(rate * t / 2)
+    omega = np.zeros((t.size, 3))
+    omega[:, axis] = rate
+    return q, omega
+
+
+# --------------------------------------------------------------------------------------------------
+# Frictionless: the gimbals read the attitude
+# --------------------------------------------------------------------------------------------------
+
+
+def test_gimbal_angles_are_the_euler_angles_of_the_carrier():
+    """Relative to the attitude at t[0], R = Rx(φ) Ry(θ) Rz(ψ): gyro 1 reads (θ, ψ), the pair gives φ,
+    to round-off, for an arbitrary tumbling from an arbitrary initial attitude."""
+    dt = 1e-2
+    t = np.arange(3001) * dt
+    q, omega = tumbling_zyx(t)
+    r = respond(FRICTIONLESS, q, omega, dt)
+    relative = Rotation.from_quat(q[0], scalar_first=True).inv() * Rotation.from_quat(q, scalar_first=True)
+    phi, theta, psi = relative.as_euler("XYZ").T
+    gimbals = r.raw["gimbal_angle_rad"]
+    assert np.abs(wrap(gimbals[:, 0] - theta)).max() < 1e-14
+    assert np.abs(wrap(gimbals[:, 1] - psi)).max() < 1e-14
+    assert np.abs(wrap(r.raw["attitude_xyz_rad"] - np.stack([phi, theta, psi], -1))).max() < 1e-14
+    assert not r.raw["gimbal_lock"].any()
+    assert mechanism_class("free-gyro") is FreeGyro
+
+
+def test_gyro_two_reads_roll_and_yaw_when_pitch_is_zero():
+    """Gyro 2 (spin y, inner x, outer z): with θ = 0, its inner gimbal reads φ and its outer ψ."""
+    dt = 1e-2
+    t = np.arange(1000) * dt
+    phi, psi = 1.3 * np.sin(0.9 * t), 2.0 * np.sin(0.3 * t)
+    q = Rotation.from_euler("XYZ", np.stack([phi, 0 * t, psi], -1)).as_quat(scalar_first=True)
+    gimbals = respond(FRICTIONLESS, q, np.zeros((t.size, 3)), dt).raw["gimbal_angle_rad"]
+    assert np.abs(wrap(gimbals[:, 2] - phi)).max() < 1e-14
+    assert np.abs(wrap(gimbals[:, 3] - psi)).max() < 1e-14
+
+
+def test_euler_rate_map_is_the_body_rate():
+    """(3) against the body rate of R(t) = Rx(φ) Ry(θ) Rz(ψ) by central differences of the rotation,
+    log(R(t−δ)ᵀ R(t+δ))/2δ (error δ²/6 |ω''| + ε/δ ≈ 1e-9)."""
+    rng = np.random.default_rng(3)
+    angles, rates = rng.uniform(-1.4, 1.4, (50, 3)), rng.uniform(-2, 2, (50, 3))
+    delta = 1e-5
+    rotation = lambda s: Rotation.from_euler("XYZ", angles + s * rates)  # noqa: E731
+    numeric = (rotation(-delta).inv() * rotation(delta)).as_rotvec() / (2 * delta)
+    np.testing.assert_allclose(body_rate_from_euler_xyz(angles, rates), numeric, rtol=0, atol=1e-8)
+
+
+def test_indicated_rate_is_the_body_rate_within_the_finite_difference_error():
+    """Euler angles φ, θ, ψ = A_i sin(w_i t + p_i): the fourth-order differences err by at most
+    h⁴/5 max|y⁽⁵⁾| = h⁴ A w⁵/5 (one-sided ends; h⁴/30 inside), and each body-rate component sums at
+    most two Euler rates with coefficients ≤ 1 in size."""
+    dt = 2e-3
+    t = np.arange(5001) * dt
+    amp, w = np.array([1.0, 0.9, 2.0]), np.array([1.1, 0.8, 0.5])
+    angles = amp * np.sin(np.outer(t, w))  # zero at t[0], where the rotors are set: R(0) = I
+    rates = amp * w * np.cos(np.outer(t, w))
+    q = Rotation.from_euler("XYZ", angles).as_quat(scalar_first=True)
+    truth_rate = body_rate_from_euler_xyz(angles, rates)  # checked against the rotation above
+    r = respond(FRICTIONLESS, q, truth_rate, dt)
+    bound = 2 * dt**4 * np.max(amp * w**5) / 5
+    assert np.abs(r.rate - truth_rate).max() <= bound
+    interior = slice(2, -2)
+    assert np.abs(r.rate[interior] - truth_rate[interior]).max() <= 2 * dt**4 * np.max(amp * w**5) / 30
+
+
+def test_time_derivative_is_fourth_order():
+    t = np.arange(200) * 0.01
+    for h_factor in (1, 2):
+        h = 0.01 * h_factor
+        y = np.sin(3 * t[::h_factor])
+        err = np.abs(time_derivative(y, h) - 3 * np.cos(3 * t[::h_factor]))
+        assert err.max() <= h**4 * 3**5 / 5
+        assert err[2:-2].max() <= h**4 * 3**5 / 30
+
+
+# --------------------------------------------------------------------------------------------------
+# Friction drift
+# --------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("viscous, coulomb, rate", [(4e-6, 0.0, 0.5), (0.0, 3e-6, 0.5), (4e-6, 3e-6, -0.8)])
+def test_outer_bearing_friction_tilts_the_rotor_at_tau_over_h(viscous, coulomb, rate):
+    """The carrier turns about z (the outer gimbal axis) at r: the outer bearing turns at −r and its
+    friction torque τ_o = b r + τ_c sign r about z precesses the rotor: sin θ₁ = τ_o t / H exactly by (4).
+    Heun's step with renormalisation errs by ≤ (h τ_o/(H cos²θ))² per step."""
+    gyro = friction(outer=(viscous, coulomb))
+    dt = 1e-3
+    t = np.arange(100001) * dt
+    q, omega = rotation_about(2, rate, t)
+    r = respond(gyro, q, omega, dt)
+    tau = viscous * rate + coulomb * np.sign(rate)
+    drift = tau / gyro.spin_momentum
+    sin_theta1 = np.sin(r.raw["gimbal_angle_rad"][:, 0])
+    assert np.abs(sin_theta1 - drift * t).max() <= t.size * (dt * drift) ** 2 / 0.99 + 1e-13
+    # Gyro 2's rotor (y) tilts up too: the rotor frame turns rigidly at ω_d = (τ_o/H)(1, −1, 0) in
+    # inertial axes, and the pair indicates ω − Rᵀ ω_d, Rᵀ = Rz(−r t), to first order in the drift angle.
+    c, s = np.cos(rate * t), np.sin(rate * t)
+    expected = omega - drift * np.column_stack([c - s, -(s + c), 0 * t])
+    sigma = np.abs(drift * t)[:, None]
+    assert np.all(np.abs(r.rate - expected) <= 2 * sigma * abs(drift) + 1e-12)
+    # The outer gimbal still reads the yaw.
+    assert np.abs(wrap(r.raw["gimbal_angle_rad"][:, 1] - rate * t)).max() < 1e-9
+
+
+@pytest.mark.parametrize("viscous, coulomb, rate", [(4e-6, 0.0, 0.3), (0.0, 3e-6, -0.3)])
+def test_inner_bearing_friction_turns_the_rotor_at_tau_over_h(viscous, coulomb, rate):
+    """The carrier pitches about y (gyro 1's inner gimbal axis) at q for 3 s (to ±52°): the inner bearing
+    turns at −q, τ_i = b q + τ_c sign q about y, and the rotor turns towards y at τ_i/H inertially:
+    s_y = −sin ψ₁ cos θ₁ = sin(τ_i t/H), the outer gimbal reading ψ₁ = −τ_i t/(H cos qt) to first order.
+    The inner axis leaves y only at second order in the drift angle σ ≈ 4e-5 (relative σ²/cos² < 1e-8)."""
+    gyro = friction(inner=(viscous, coulomb))
+    dt = 1e-3
+    t = np.arange(3001) * dt
+    q, omega = rotation_about(1, rate, t)
+    r = respond(gyro, q, omega, dt)
+    tau = viscous * rate + coulomb * np.sign(rate)
+    sigma = tau * t / gyro.spin_momentum
+    theta1, psi1 = r.raw["gimbal_angle_rad"][:, 0], r.raw["gimbal_angle_rad"][:, 1]
+    np.testing.assert_allclose(theta1, rate * t, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(-np.sin(psi1) * np.cos(theta1), np.sin(sigma), rtol=1e-7, atol=1e-15)
+    np.testing.assert_allclose(psi1, -sigma / np.cos(rate * t), rtol=1e-7, atol=1e-15)
+
+
+def test_a_still_carrier_does_not_drift():
+    """Friction needs bearing motion: no drift at all while the carrier is at rest."""
+    dt = 1e-3
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (5000, 1))
+    r = respond(FreeGyro(), q, np.zeros((5000, 3)), dt)
+    assert np.abs(r.raw["gimbal_angle_rad"]).max() == 0.0
+    assert np.abs(r.rate).max() == 0.0
+
+
+def test_default_drift_is_a_few_degrees_per_hour():
+    gyro = FreeGyro()
+    deg_per_h = math.degrees(gyro.outer_coulomb_friction_n_m / gyro.spin_momentum) * 3600
+    assert 1.0 < deg_per_h < 10.0
+
+
+# --------------------------------------------------------------------------------------------------
+# Gimbal lock
+# --------------------------------------------------------------------------------------------------
+
+
+def pitch_to(max_deg, dt=1e-3, duration=2.0):
+    """Pitch about y from 0 to ``max_deg`` and back: θ(t) = θ_max sin(π t/T)."""
+    t = np.arange(int(duration / dt) + 1) * dt
+    amp = math.radians(max_deg)
+    theta = amp * np.sin(np.pi * t / duration)
+    q = np.zeros((t.size, 4))
+    q[:, 0], q[:, 2] = np.cos(theta / 2), np.sin(theta / 2)
+    omega = np.zeros((t.size, 3))
+    omega[:, 1] = amp * np.pi / duration * np.cos(np.pi * t / duration)
+    return t, theta, q, omega
+
+
+def test_gimbal_lock_is_flagged_and_warned():
+    t, theta, q, omega = pitch_to(88.0)
+    with pytest.warns(GimbalLockWarning, match="free gyro 1's inner gimbal"):
+        r = respond(FRICTIONLESS, q, omega, 1e-3)
+    np.testing.assert_array_equal(r.raw["gimbal_lock"], np.abs(theta) > math.radians(85.0))
+    assert r.raw["gimbal_lock"].sum() > 0
+
+
+def test_gimbal_lock_of_the_roll_gyro():
+    t = np.arange(2001) * 1e-3
+    phi = math.radians(87.0) * np.sin(np.pi * t / 2)
+    q = Rotation.from_euler("XYZ", np.stack([phi, 0 * t, 0 * t], -1)).as_quat(scalar_first=True)
+    with pytest.warns(GimbalLockWarning, match="free gyro 2's inner gimbal"):
+        r = respond(FRICTIONLESS, q, np.zeros((t.size, 3)), 1e-3)
+    np.testing.assert_array_equal(r.raw["gimbal_lock"], np.abs(phi) > math.radians(85.0))
+
+
+def test_gimbal_lock_can_raise():
+    t, theta, q, omega = pitch_to(89.5)
+    with pytest.raises(GimbalLockError, match="gimbal lock"):
+        respond(FreeGyro(on_gimbal_lock="raise", gimbal_lock_margin_deg=2.0), q, omega, 1e-3)
+
+
+def test_no_lock_no_warning():
+    t, theta, q, omega = pitch_to(84.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r = respond(FreeGyro(), q, omega, 1e-3)
+    assert not r.raw["gimbal_lock"].any()
+
+
+# --------------------------------------------------------------------------------------------------
+# Interface and config
+# --------------------------------------------------------------------------------------------------
+
+
+def test_inner_rate_is_the_output_rate_and_nothing_is_drawn():
+    assert FreeGyro().inner_rate_hz(250.0) == 250.0
+    rng = np.random.default_rng(1)
+    state = rng.bit_generator.state
+    t = np.arange(100) * 1e-2
+    q, omega = tumbling_zyx(t)
+    FreeGyro().respond(make_truth(q, omega, 1e-2), rng)
+    assert rng.bit_generator.state == state
+
+
+@pytest.mark.parametrize("key, value", [
+    ("rotor_inertia_kgm2", 0.0), ("spin_speed_rpm", -1.0), ("outer_viscous_friction_n_m_s_per_rad", -1e-6),
+    ("outer_coulomb_friction_n_m", -1e-6), ("inner_viscous_friction_n_m_s_per_rad", -1e-6),
+    ("inner_coulomb_friction_n_m", "3e-6"), ("gimbal_lock_margin_deg", 0), ("gimbal_lock_margin_deg", 90),
+    ("on_gimbal_lock", "ignore"), ("friction_n_m", 1e-6),
+])
+def test_bad_parameters_name_the_key(key, value):
+    with pytest.raises(ConfigError) as err:
+        validate(FreeGyro, {"kind": "free-gyro", key: value})
+    assert err.value.key == key
