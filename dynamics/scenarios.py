@@ -88,7 +88,7 @@ class Scenario:
 
     def to_toml(self) -> str:
         """The fully resolved config (defaults filled in) as TOML text."""
-        return tomli_w.dumps(self.spec.model_dump(mode="json"))
+        return tomli_w.dumps(self.spec.model_dump(mode="json", exclude_none=True))
 
     def __repr__(self) -> str:
         return f"Scenario({self.name!r}, kind={self.kind!r}, duration_s={self.duration_s}, rate_hz={self.rate_hz})"

@@ -72,8 +72,25 @@ def test_simulate_writes_the_truth(tmp_path):
     result = gyroemu("simulate", "--scenario", str(scenario), "--out", str(out))
     assert result.returncode == 0, result.stderr
     with np.load(out) as data:
-        assert data["t"].shape == (101,) and data["q_wb"].shape == (101, 4)
+        assert data["truth/t"].shape == (101,) and data["truth/q_wb"].shape == (101, 4)
         assert 'kind = "heavy-top"' in str(data["scenario_toml"])
+        assert "imu/gyro" not in data  # no device: truth only
+
+
+def test_simulate_with_a_device_writes_its_samples_reproducibly(tmp_path):
+    scenario = tmp_path / "top.toml"
+    scenario.write_text(GOOD_TOP)
+    device = tmp_path / "dev.toml"
+    device.write_text('description = "x"\nrate_hz = 100\n[gyro.errors]\narw_deg_per_sqrt_h = 0.5\n')
+    runs = []
+    for name in ("a.npz", "b.npz"):
+        result = gyroemu("simulate", "--scenario", str(scenario), "--device", str(device), "--seed", "7",
+                         "--out", str(tmp_path / name))
+        assert result.returncode == 0, result.stderr
+        with np.load(tmp_path / name) as data:
+            runs.append(data["imu/gyro"].copy())
+            assert data["imu/t"].shape == (50,) and int(data["seed"]) == 7
+    assert runs[0].tobytes() == runs[1].tobytes()
 
 
 def test_scenarios_lists_every_builtin_and_demo_runs():

@@ -1,0 +1,364 @@
+"""A free rigid body: state ``[x, q, P, L]``, its equations of motion, lever arms and impulses.
+
+Model (the scribe notes on rigid-body dynamics, ``shared/seeds/scribe-notes-rigid-body-dynamics.txt``;
+Baraff, *Physically Based Modeling: Rigid Body Simulation*, SIGGRAPH course notes 2001)
+--------------------------------------------------------------------------------------------------
+The state of one body is 13 numbers, all in world axes::
+
+    x  (3)  position of the centre of mass, m
+    q  (4)  attitude q_wb, unit quaternion (w, x, y, z), body -> world
+    P  (3)  linear momentum m v, kg m/s (v relative to the world frame)
+    L  (3)  angular momentum about the centre of mass, relative to inertial space, kg m²/s
+
+and it moves by::
+
+    ẋ = P / m
+    q̇ = ½ (0, ω_wb) ⊗ q                  ω_wb = ω − Ω, the rotation relative to the world frame
+    Ṗ = F − 2 Ω × P                      (Coriolis; gravity and centrifugal are in F)
+    L̇ = τ − Ω × L                        (L's components seen from world axes turning at Ω)
+
+with ``ω = R I_b⁻¹ Rᵀ L`` the inertial angular velocity (world axes), ``I_b`` the inertia tensor in
+body axes about the centre of mass, ``R = R(q)``, ``F`` the total force and ``τ`` the torque about
+the centre of mass, both in world axes. ``Ω`` is the world frame's rotation relative to inertial
+space: zero for an inertial world (then these are exactly the scribe notes' equations), the Earth rate
+for an Earth-bound scenario, whose world frame is the local ENU frame fixed to the Earth.
+
+Derived quantities, exact at any state (no differencing)::
+
+    a      = Ṗ / m                                  acceleration relative to the world frame
+    α_b    = I_b⁻¹ (τ_b − ω_b × I_b ω_b)            Euler's equation, τ_b = Rᵀ τ, ω_b = Rᵀ ω
+
+``α_b`` is ``dω_b/dt``: the derivative of the body-axes components of the inertial angular velocity,
+which is also the inertial angular acceleration in body axes.
+
+Arrays: every function here takes states of shape ``(13,)`` or ``(..., 13)`` and times that broadcast
+against the leading axes, so the integrator's single states and a whole sampled trajectory go
+through the same code.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from .earth import Environment
+from .inertia import check_inertia
+from .trajectory import Trajectory, trajectory_from_world_motion
+
+__all__ = [
+    "STATE_SIZE",
+    "X",
+    "Q",
+    "P",
+    "L",
+    "RigidBody",
+    "rotation_matrix",
+    "rotate",
+    "rotate_back",
+    "point_position",
+    "point_velocity",
+    "point_acceleration",
+    "contact_mass_matrix",
+    "cross",
+    "world_motion_trajectory",
+]
+
+STATE_SIZE = 13
+X = slice(0, 3)
+Q = slice(3, 7)
+P = slice(7, 10)
+L = slice(10, 13)
+
+ForceFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+"""``force(t, y) -> (..., 3)``: world axes, newtons (or N m for a torque about the centre of mass)."""
+
+
+# --------------------------------------------------------------------------------------------
+# Small vectorised helpers, written out because they sit on the integrator's hot path.
+# --------------------------------------------------------------------------------------------
+
+
+def rotation_matrix(q) -> np.ndarray:
+    """``R(q)`` of shape ``(..., 3, 3)``; ``q`` need not be of unit norm (it is normalised first)."""
+    q = np.asarray(q, dtype=float)
+    if q.ndim == 1:  # the integrator's case: plain floats are several times faster than array ops
+        w, x, y, z = q.tolist()
+        n = 1.0 / (w * w + x * x + y * y + z * z)
+        return np.array(
+            [
+                [1 - 2 * (y * y + z * z) * n, 2 * (x * y - w * z) * n, 2 * (x * z + w * y) * n],
+                [2 * (x * y + w * z) * n, 1 - 2 * (x * x + z * z) * n, 2 * (y * z - w * x) * n],
+                [2 * (x * z - w * y) * n, 2 * (y * z + w * x) * n, 1 - 2 * (x * x + y * y) * n],
+            ]
+        )
+    q = q / np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
+
+
+def rotate(r, v) -> np.ndarray:
+    """``R v`` for matrices ``(..., 3, 3)`` and vectors ``(..., 3)``: body to world."""
+    return np.matmul(r, np.asarray(v, dtype=float)[..., None])[..., 0]
+
+
+def rotate_back(r, v) -> np.ndarray:
+    """``Rᵀ v``: world to body."""
+    return np.matmul(np.asarray(v, dtype=float)[..., None, :], r)[..., 0, :]
+
+
+def cross(a, b) -> np.ndarray:
+    """``a × b`` over the last axis, broadcasting (``numpy.cross`` without its overhead)."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    if a.ndim == 1 and b.ndim == 1:
+        a1, a2, a3 = a.tolist()
+        b1, b2, b3 = b.tolist()
+        return np.array([a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1])
+    a1, a2, a3 = a[..., 0], a[..., 1], a[..., 2]
+    b1, b2, b3 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1], axis=-1)
+
+
+def _stack_state(lead, parts) -> np.ndarray:
+    """Concatenate state parts along the last axis, broadcasting each to the leading shape ``lead``."""
+    return np.concatenate([a if a.shape[:-1] == lead else np.broadcast_to(a, lead + a.shape[-1:]) for a in parts],
+                          axis=-1)
+
+
+def _omega_quat(omega) -> np.ndarray:
+    """The pure quaternion ``(0, ω)``."""
+    omega = np.asarray(omega, dtype=float)
+    return np.concatenate([np.zeros(omega.shape[:-1] + (1,)), omega], axis=-1)
+
+
+def _quat_product(p, q) -> np.ndarray:
+    """Hamilton product ``p ⊗ q`` (as :func:`dynamics.rotation.quat_multiply`, without its checks)."""
+    if p.ndim == 1 and q.ndim == 1:
+        pw, px, py, pz = p.tolist()
+        qw, qx, qy, qz = q.tolist()
+        return np.array(
+            [
+                pw * qw - px * qx - py * qy - pz * qz,
+                pw * qx + px * qw + py * qz - pz * qy,
+                pw * qy - px * qz + py * qw + pz * qx,
+                pw * qz + px * qy - py * qx + pz * qw,
+            ]
+        )
+    pw, px, py, pz = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
+    qw, qx, qy, qz = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.stack(
+        [
+            pw * qw - px * qx - py * qy - pz * qz,
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw,
+        ],
+        axis=-1,
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# Lever arms
+# --------------------------------------------------------------------------------------------
+
+
+def point_position(pos, r, lever) -> np.ndarray:
+    """World position of a body-fixed point: ``x + R r_b``.
+
+    Parameters
+    ----------
+    pos : (..., 3) centre of mass, world, m
+    r : (..., 3, 3) rotation matrices ``R(q_wb)``
+    lever : (..., 3) the point in body axes from the centre of mass, m
+    """
+    return np.asarray(pos, dtype=float) + rotate(r, lever)
+
+
+def point_velocity(vel, omega, lever) -> np.ndarray:
+    """Velocity of a body-fixed point: ``v + ω × r`` (scribe notes: ``v_p = v_cm + ω × r_i``).
+
+    All three arguments in one set of axes, and ``ω`` relative to the frame ``v`` is measured in:
+    world axes with ``ω_wb`` and world-relative ``v`` for the point's world velocity; body axes with
+    ``v_b = Rᵀ v`` and the lever arm in body axes give the same vector in body axes. Shapes ``(..., 3)``
+    broadcast.
+    """
+    return np.asarray(vel, dtype=float) + cross(omega, lever)
+
+
+def point_acceleration(acc, omega, alpha, lever) -> np.ndarray:
+    """Acceleration of a body-fixed point: ``a + α × r + ω × (ω × r)`` (tangential and centripetal).
+
+    ``ω`` and ``α = dω/dt`` relative to the frame in which ``a`` is taken; all vectors in one set of
+    axes. For an accelerometer at lever arm ``r_b`` (body axes): the specific force there is
+    ``f_b + α_b × r_b + ω_b × (ω_b × r_b)`` with the inertial ``ω_b``, ``α_b`` of a
+    :class:`~dynamics.trajectory.Trajectory` (``α_b``, the derivative of body components, equals the
+    inertial angular acceleration in body axes). Shapes ``(..., 3)`` broadcast.
+    """
+    return np.asarray(acc, dtype=float) + cross(alpha, lever) + cross(omega, cross(omega, lever))
+
+
+def contact_mass_matrix(mass, inertia_w_inv, lever_w) -> np.ndarray:
+    """``K`` with ``Δu = K J``: the change of a point's velocity under an impulse ``J`` at that point.
+
+    ``K = (1/m) 1 − [r]× I_w⁻¹ [r]×`` (Mirtich 1996, *Impulse-based dynamic simulation of rigid body
+    systems*, eq. 4.8), world axes, ``r`` the point from the centre of mass. Shapes: ``inertia_w_inv``
+    ``(..., 3, 3)``, ``lever_w`` ``(..., 3)``; returns ``(..., 3, 3)``.
+    """
+    r = np.asarray(lever_w, dtype=float)
+    rx = np.zeros(r.shape[:-1] + (3, 3))
+    rx[..., 0, 1], rx[..., 0, 2], rx[..., 1, 2] = -r[..., 2], r[..., 1], -r[..., 0]
+    rx[..., 1, 0], rx[..., 2, 0], rx[..., 2, 1] = r[..., 2], -r[..., 1], r[..., 0]
+    return np.eye(3) / mass - rx @ inertia_w_inv @ rx
+
+
+# --------------------------------------------------------------------------------------------
+# The body
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class RigidBody:
+    """Mass properties of one rigid body and its equations of motion in the state ``[x, q, P, L]``.
+
+    Attributes
+    ----------
+    mass : float
+        kg.
+    inertia_b : ndarray (3, 3)
+        Inertia tensor about the centre of mass in body axes, kg m² (validated).
+    frame_rate_w : ndarray (3,)
+        ``Ω``, the world frame's rotation relative to inertial space, world axes, rad/s (zero: an
+        inertial world; ``Environment.earth_rate_w`` for an Earth-bound one).
+    """
+
+    mass: float
+    inertia_b: np.ndarray
+    frame_rate_w: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def __post_init__(self):
+        if not self.mass > 0:
+            raise ValueError(f"mass must be positive, got {self.mass}")
+        object.__setattr__(self, "inertia_b", check_inertia(self.inertia_b))
+        object.__setattr__(self, "frame_rate_w", np.asarray(self.frame_rate_w, dtype=float).reshape(3))
+        object.__setattr__(self, "_inertia_inv", np.linalg.inv(self.inertia_b))
+        object.__setattr__(self, "_rotating", bool(np.any(self.frame_rate_w != 0)))
+
+    # -- building and reading states ---------------------------------------------------------------
+
+    def state(self, pos_w=(0, 0, 0), q_wb=(1, 0, 0, 0), vel_w=(0, 0, 0), omega_b=(0, 0, 0)) -> np.ndarray:
+        """The state ``[x, q, P, L]`` of a body at ``pos_w`` with attitude ``q_wb``, moving at ``vel_w``
+        (world-relative, m/s) and turning at ``omega_b`` (inertial, body axes, rad/s). Shapes broadcast;
+        returns ``(..., 13)``."""
+        pos, q, vel, omega = (np.asarray(a, dtype=float) for a in (pos_w, q_wb, vel_w, omega_b))
+        q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+        r = rotation_matrix(q)
+        momentum = self.mass * vel  # P = m v
+        angular_momentum = rotate(r, np.asarray(omega) @ self.inertia_b.T)  # L = R I_b ω_b
+        shape = np.broadcast_shapes(pos.shape[:-1], q.shape[:-1], vel.shape[:-1], omega.shape[:-1])
+        parts = [pos, q, momentum, angular_momentum]
+        return np.concatenate([np.broadcast_to(a, shape + a.shape[-1:]) for a in parts], axis=-1)
+
+    def omega_b(self, y, r=None) -> np.ndarray:
+        """Inertial angular velocity in body axes: ``ω_b = I_b⁻¹ Rᵀ L``; ``(..., 3)``."""
+        r = rotation_matrix(y[..., Q]) if r is None else r
+        return rotate_back(r, y[..., L]) @ self._inertia_inv.T
+
+    def velocity(self, y) -> np.ndarray:
+        """World-relative velocity of the centre of mass: ``v = P / m``."""
+        return y[..., P] / self.mass
+
+    def kinetic_energy(self, y) -> np.ndarray:
+        """``½ P·P/m + ½ ω_b · I_b ω_b``, J (with world-relative ``P``, inertial ``ω``)."""
+        w = self.omega_b(y)
+        return 0.5 * np.sum(y[..., P] ** 2, -1) / self.mass + 0.5 * np.einsum("...i,ij,...j->...", w, self.inertia_b, w)
+
+    def inertia_w_inv(self, r) -> np.ndarray:
+        """``I_w⁻¹ = R I_b⁻¹ Rᵀ``, ``(..., 3, 3)``."""
+        return r @ self._inertia_inv @ np.swapaxes(r, -1, -2)
+
+    # -- equations of motion -----------------------------------------------------------------------
+
+    def derivative(self, t, y, force: ForceFn | None = None, torque: ForceFn | None = None) -> np.ndarray:
+        """``ẏ = [ẋ, q̇, Ṗ, L̇]`` (module docstring) for states ``(..., 13)`` at times ``t``.
+
+        ``force(t, y)`` and ``torque(t, y)`` return world-axes vectors (N, and N m about the centre of
+        mass) for the same shapes; ``None`` is zero.
+        """
+        y = np.asarray(y, dtype=float)
+        q = y[..., Q]
+        r = rotation_matrix(q)
+        omega_w = rotate(r, self.omega_b(y, r))  # ω = R I_b⁻¹ Rᵀ L
+        omega_wb_w = omega_w - self.frame_rate_w  # rotation relative to the world frame
+        f = np.zeros(y.shape[:-1] + (3,)) if force is None else force(t, y)
+        tau = np.zeros(y.shape[:-1] + (3,)) if torque is None else torque(t, y)
+        x_dot = y[..., P] / self.mass  # ẋ = P/m
+        q_dot = 0.5 * _quat_product(_omega_quat(omega_wb_w), q)  # q̇ = ½ ω ⊗ q
+        p_dot, l_dot = np.asarray(f, dtype=float), np.asarray(tau, dtype=float)  # Ṗ = F, L̇ = τ
+        if self._rotating:
+            p_dot = p_dot - 2.0 * cross(self.frame_rate_w, y[..., P])  # Coriolis: − 2Ω×P
+            l_dot = l_dot - cross(self.frame_rate_w, y[..., L])  # turning axes: − Ω×L
+        return _stack_state(y.shape[:-1], [x_dot, q_dot, p_dot, l_dot])
+
+    def accelerations(self, t, y, force: ForceFn | None = None, torque: ForceFn | None = None):
+        """Exact accelerations at states ``(..., 13)``.
+
+        Returns
+        -------
+        acc_w : (..., 3)
+            World-relative acceleration of the centre of mass, ``Ṗ/m``, m/s².
+        omega_b, alpha_b : (..., 3)
+            Inertial angular velocity and ``dω_b/dt = I_b⁻¹ (τ_b − ω_b × I_b ω_b)``, body axes.
+        """
+        y = np.asarray(y, dtype=float)
+        r = rotation_matrix(y[..., Q])
+        omega = self.omega_b(y, r)
+        f = np.zeros(y.shape[:-1] + (3,)) if force is None else force(t, y)
+        tau = np.zeros(y.shape[:-1] + (3,)) if torque is None else torque(t, y)
+        acc = (f - 2.0 * cross(self.frame_rate_w, y[..., P])) / self.mass
+        tau_b = rotate_back(r, tau)
+        alpha = (tau_b - cross(omega, omega @ self.inertia_b.T)) @ self._inertia_inv.T  # Euler
+        return acc, omega, alpha
+
+    # -- impulses ------------------------------------------------------------------------------------
+
+    def apply_impulse(self, y, impulse_w, point_w) -> np.ndarray:
+        """State after an impulse ``J`` (N s, world) at the world point ``point_w``:
+        ``ΔP = J``, ``ΔL = r × J`` with ``r = point − x`` (scribe notes: ``τ = r × F``)."""
+        y = np.array(y, dtype=float)
+        j = np.asarray(impulse_w, dtype=float)
+        y[..., P] += j
+        y[..., L] += cross(np.asarray(point_w, dtype=float) - y[..., X], j)
+        return y
+
+    def point_velocity_w(self, y, lever_b) -> np.ndarray:
+        """World-relative velocity of the body point ``lever_b`` (body axes from the centre of mass)."""
+        r = rotation_matrix(y[..., Q])
+        omega_wb_w = rotate(r, self.omega_b(y, r)) - self.frame_rate_w
+        return point_velocity(self.velocity(y), omega_wb_w, rotate(r, lever_b))
+
+
+def world_motion_trajectory(t, pos_w, q_wb, vel_w, acc_w, omega_b, alpha_b, environment: Environment,
+                            extras=None) -> Trajectory:
+    """A :class:`Trajectory` from integrated states, given the *inertial* ``omega_b`` and ``alpha_b``.
+
+    :func:`~dynamics.trajectory.trajectory_from_world_motion` takes the rotation relative to the
+    world frame and adds the Earth's; this converts (``ω_wb = ω − Rᵀ Ω``,
+    ``α_wb = α + ω_wb × Rᵀ Ω``, the inverse of its formulas) so the sum reproduces the inertial
+    values to rounding.
+    """
+    r = rotation_matrix(q_wb)
+    frame_b = rotate_back(r, environment.earth_rate_w)
+    omega_wb = omega_b - frame_b
+    alpha_wb = alpha_b + cross(omega_wb, frame_b)
+    q = np.asarray(q_wb, dtype=float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return trajectory_from_world_motion(t, q, omega_wb, alpha_wb, pos_w, vel_w, acc_w, environment, extras)
