@@ -140,7 +140,7 @@ class Device:
             raise ConfigError(f"the output rate {spec.rate_hz:g} Hz is above the gyro mechanism's inner rate "
                               f"{self.inner_rate_hz:g} Hz", file=where, key="rate_hz")
         self._gyro_errors = spec.gyro.errors.to_si()
-        intrinsic = float(self.mechanism.intrinsic_noise_density())
+        intrinsic = self.intrinsic_noise_density = float(self.mechanism.intrinsic_noise_density())
         specified = self._gyro_errors.noise_density
         explicit = spec.gyro.errors.arw_deg_per_sqrt_h is not None or \
             spec.gyro.errors.noise_density_deg_per_s_per_sqrt_hz is not None
@@ -162,6 +162,18 @@ class Device:
         if spec.clock.jitter_s >= 0.25 / spec.rate_hz:
             raise ConfigError(f"jitter {spec.clock.jitter_s:g} s is not small against the sample interval "
                               f"{1 / spec.rate_hz:g} s", file=where, key="clock.jitter_s")
+
+    @property
+    def gyro_noise_density(self) -> np.ndarray:
+        """Total white rate noise of each gyro axis, rad/s/√Hz: the mechanism's own plus what the
+        error layer adds (the specified ARW when one is given)."""
+        return np.hypot(self._gyro_errors.noise_density, self.intrinsic_noise_density)
+
+    @property
+    def gyro_errors(self):
+        """The gyro error terms in SI (:class:`sensors.errors.ErrorModel`), white noise as added on
+        top of the mechanism's own."""
+        return self._gyro_errors
 
     @property
     def kind(self) -> str:
@@ -256,9 +268,13 @@ class Device:
             j = np.arange(first * m, last * m + 1)
             t = t0 + j * h
             omega, alpha = truth.omega_alpha(t)
-            chunk = GyroTruth(t=t, dt=h, omega=omega, alpha=alpha, specific_force=truth.specific_force(t),
-                              q_is=truth.attitude_inertial(t),
-                              temperature_degC=self.spec.temperature.at(t - t0))
+            reads = self.mechanism.reads
+            chunk = GyroTruth(
+                t=t, dt=h, omega=omega, alpha=alpha,
+                specific_force=truth.specific_force(t) if "specific_force" in reads else None,
+                q_is=truth.attitude_inertial(t) if "q_is" in reads else None,
+                temperature_degC=self.spec.temperature.at(t - t0) if "temperature_degC" in reads else None,
+            )
             response = self.mechanism.respond(chunk, rng, state)
             if response.angle is not None:
                 angle = response.angle - response.angle[0]

@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import ClassVar, Literal
 
 import numpy as np
 
@@ -81,22 +81,26 @@ class GyroTruth:
         Angular velocity of the sensor relative to inertial space, rad/s.
     alpha : ndarray (M, 3)
         Its time derivative (of the sensor-axes components), rad/s².
-    specific_force : ndarray (M, 3)
+    specific_force : ndarray (M, 3) or None
         At the sensor, m/s².
-    q_is : ndarray (M, 4)
+    q_is : ndarray (M, 4) or None
         Attitude of the sensor relative to an inertial frame that coincides with the world frame at
         ``t = 0`` (what a free gyro's rotor holds on to).
-    temperature_degC : ndarray (M,)
+    temperature_degC : ndarray (M,) or None
         Sensor temperature, °C.
+
+    The last three are None when the mechanism's :attr:`GyroMechanism.reads` leaves them out: the IMU
+    does not interpolate what a mechanism does not read (at tens of kilohertz it would cost more
+    than the physics).
     """
 
     t: np.ndarray
     dt: float
     omega: np.ndarray
     alpha: np.ndarray
-    specific_force: np.ndarray
-    q_is: np.ndarray
-    temperature_degC: np.ndarray
+    specific_force: np.ndarray | None = None
+    q_is: np.ndarray | None = None
+    temperature_degC: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t)
@@ -133,6 +137,10 @@ class GyroMechanism(Section):
 
     kind: str
 
+    reads: ClassVar[frozenset[str]] = frozenset({"specific_force", "q_is", "temperature_degC"})
+    """Which of the optional :class:`GyroTruth` fields the mechanism reads (``t``, ``dt``, ``omega``
+    and ``alpha`` are always there)."""
+
     def inner_rate_hz(self, output_rate_hz: float) -> float:
         """The rate the mechanism's physics needs to be simulated at, Hz (at least the output rate)."""
         return output_rate_hz
@@ -158,6 +166,7 @@ class IdealGyro(GyroMechanism):
     """
 
     kind: Literal["ideal"] = "ideal"
+    reads: ClassVar[frozenset[str]] = frozenset()
 
     def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict | None = None) -> GyroResponse:
         return GyroResponse(angle=hermite_integral(truth.omega, truth.alpha, truth.dt))

@@ -136,7 +136,7 @@ draw the same numbers.
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import ClassVar, Literal
 
 import numba
 import numpy as np
@@ -172,6 +172,7 @@ class MemsGyro(GyroMechanism):
     """
 
     kind: Literal["mems"] = "mems"
+    reads: ClassVar[frozenset[str]] = frozenset({"specific_force", "temperature_degC"})
     model: Literal["baseband", "carrier"] = "baseband"
     """``baseband``: the averaged envelope model (fast); ``carrier``: the sense oscillator itself."""
     proof_mass_kg: PositiveReal = 4.0e-9
