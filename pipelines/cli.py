@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from dynamics import ConfigError, list_scenarios, load_scenario
+from sensors import list_devices, load_device
 
 __all__ = ["main"]
 
@@ -49,19 +50,86 @@ def write_npz_atomic(path: Path, arrays: dict) -> None:
 def _cmd_simulate(args) -> int:
     out = Path(args.out)
     if out.suffix != ".npz":
-        raise UsageError(f"argument --out: {out}: only .npz truth files are written yet (got '{out.suffix}')")
+        raise UsageError(f"argument --out: {out}: only .npz files are written yet (got '{out.suffix}')")
     if not out.parent.is_dir():
         raise UsageError(f"argument --out: {out.parent} is not a folder")
     scenario = load_scenario(args.scenario)
+    device = load_device(args.device, seed=args.seed) if args.device else None
     started = time.perf_counter()
     traj = scenario.simulate(duration=args.duration, rate_hz=args.rate)
-    elapsed = time.perf_counter() - started
-    arrays = {name: getattr(traj, name) for name in
+    arrays = {f"truth/{name}": getattr(traj, name) for name in
               ("t", "q_wb", "omega_b", "alpha_b", "specific_force_b", "pos_w", "vel_w", "mag_b")}
-    arrays.update({f"extras/{k}": v for k, v in traj.extras.items()})
+    arrays.update({f"truth/extras/{k}": v for k, v in traj.extras.items()})
     arrays["scenario_toml"] = np.array(scenario.to_toml())
+    summary = f"{len(traj)} truth samples"
+    if device is not None:
+        samples = device.measure(traj)
+        for name in ("t", "t_true", "gyro", "accel", "mag", "temperature_degC", "delta_angle", "delta_velocity"):
+            if getattr(samples, name) is not None:
+                arrays[f"imu/{name}"] = getattr(samples, name)
+        for kind, observables in samples.raw.items():
+            arrays.update({f"raw/{kind}/{k}": v for k, v in observables.items()})
+        arrays["device_toml"] = np.array(device.to_toml())
+        arrays["seed"] = np.array(device.seed)
+        summary += f", {len(samples)} samples of {device.name} ({device.kind})"
+    elapsed = time.perf_counter() - started
     write_npz_atomic(out, arrays)
-    print(f"{scenario.name}: {len(traj)} samples over {traj.duration:g} s in {elapsed:.2f} s -> {out}")
+    print(f"{scenario.name}: {summary} over {traj.duration:g} s in {elapsed:.2f} s -> {out}")
+    return 0
+
+
+def _cmd_presets(args) -> int:
+    devices = list_devices()
+    rows = [("name", "gyro kind", "rate Hz", "ARW deg/sqrt(h)", "bias inst. deg/h", "resembles")]
+    for d in devices:
+        arw = np.degrees(d.gyro_noise_density.max()) * 60
+        instability = np.degrees(d.gyro_errors.bias_instability.max()) * 3600
+        rows.append((d.name, d.kind, f"{d.spec.rate_hz:g}", f"{arw:.3g}", f"{instability:.3g}", d.spec.resembles))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    for r in rows:
+        print("  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip())
+    return 0
+
+
+def _cmd_allan(args) -> int:
+    from .allan import allan_report, plot_allan
+
+    log = Path(args.log)
+    if not log.is_file():
+        raise UsageError(f"argument LOG: {log}: no such file")
+    try:
+        with np.load(log, allow_pickle=False) as data:
+            if "imu/gyro" not in data or "imu/t" not in data:
+                raise UsageError(f"argument LOG: {log}: holds no gyro samples (write one with "
+                                 "'gyroemu simulate --device ...')")
+            gyro, t = data["imu/gyro"], data["imu/t"]
+            device_toml = str(data["device_toml"]) if "device_toml" in data else None
+    except (OSError, ValueError) as e:
+        raise UsageError(f"argument LOG: {log}: not a gyroemu .npz log ({e})") from None
+    spec = None
+    if device_toml is not None:
+        import tomllib
+
+        from sensors import device_from_dict
+
+        import dataclasses
+
+        device = device_from_dict(tomllib.loads(device_toml), name=log.name)
+        spec = dataclasses.replace(device.gyro_errors, noise_density=device.gyro_noise_density)
+    dt = float(np.median(np.diff(t)))
+    try:
+        report = allan_report(gyro, dt, spec)
+    except ValueError as e:
+        raise UsageError(f"argument LOG: {log}: {e}") from None
+    print(report.table())
+    out = Path(args.out) if args.out else log.with_suffix(".allan.png")
+    tmp = out.with_name(f".{out.name}.tmp.png")
+    try:
+        plot_allan(report, tmp, title=f"Allan deviation: {log.name}")
+        tmp.replace(out)
+    finally:
+        tmp.unlink(missing_ok=True)
+    print(f"Allan plot -> {out}")
     return 0
 
 
@@ -97,8 +165,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenario", required=True, help="built-in name or TOML path")
     p.add_argument("--duration", type=_positive, default=None, help="seconds (default: the scenario's)")
     p.add_argument("--rate", type=_positive, default=None, help="output rate, Hz (default: the scenario's)")
+    p.add_argument("--device", default=None, help="built-in device name or TOML path (default: truth only)")
+    p.add_argument("--seed", type=int, default=0, help="seed of every random draw (default: 0)")
     p.add_argument("--out", required=True, help="output file (.npz)")
     p.set_defaults(func=_cmd_simulate)
+
+    p = sub.add_parser("presets", help="list the built-in devices as a table")
+    p.set_defaults(func=_cmd_presets)
+
+    p = sub.add_parser("allan", help="fit the noise terms of a static gyro log and draw its Allan plot")
+    p.add_argument("log", metavar="LOG", help="a log written by 'gyroemu simulate --device ...' (.npz)")
+    p.add_argument("--out", default=None, help="PNG to write (default: LOG with .allan.png)")
+    p.set_defaults(func=_cmd_allan)
     return parser
 
 

@@ -1,0 +1,109 @@
+"""``gyroemu allan``: fit the IEEE 952 noise terms to a static gyro log and draw the Allan plot.
+
+The fit is :func:`sensors.allan.fit_allan` over ``allantools``' overlapping Allan deviation, axis by
+axis. The plot shows each axis's measured curve with its confidence band, the fitted model, and,
+when the log carries its device's config, the specification's lines (quantisation, ARW, bias
+instability floor, RRW) beside them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from sensors.allan import AllanFit, allan_deviation, fit_allan
+from sensors.errors import ErrorModel
+
+__all__ = ["AllanReport", "allan_report", "plot_allan", "SPEC_UNITS"]
+
+_DEG = 180.0 / np.pi
+SPEC_UNITS = {  # term: (SI to datasheet factor, datasheet unit)
+    "quantisation": (1.0, "rad"),
+    "arw": (_DEG * 60.0, "deg/sqrt(h)"),
+    "bias_instability": (_DEG * 3600.0, "deg/h"),
+    "rrw": (_DEG * 3600.0 * 60.0, "deg/h/sqrt(h)"),
+    "rate_ramp": (_DEG * 3600.0 * 3600.0, "deg/h/h"),
+}
+
+
+@dataclass(frozen=True)
+class AllanReport:
+    """Fits of the three axes of a gyro log, and the specification they are compared with."""
+
+    fits: tuple[AllanFit, AllanFit, AllanFit]
+    spec: ErrorModel | None
+    intrinsic_noise_density: float = 0.0
+
+    def table(self) -> str:
+        """A plain-text table: each term's fitted value per axis (datasheet units) and the spec."""
+        lines = [f"{'term':<17}{'unit':<15}{'x':>12}{'y':>12}{'z':>12}{'spec':>12}"]
+        specified = _spec_terms(self.spec) if self.spec is not None else {}
+        for term, (factor, unit) in SPEC_UNITS.items():
+            values = [getattr(f, term).value * factor for f in self.fits]
+            spec = specified.get(term)
+            spec_text = f"{spec * factor:12.4g}" if spec is not None else f"{'-':>12}"
+            lines.append(f"{term:<17}{unit:<15}" + "".join(f"{v:12.4g}" for v in values) + spec_text)
+        return "\n".join(lines)
+
+
+def _spec_terms(spec: ErrorModel) -> dict:
+    """The specification's Allan coefficients in SI (axis x; presets give the same for all axes)."""
+    q = spec.integral_lsb / np.sqrt(12) if spec.integral_lsb else None
+    return {
+        "quantisation": q,
+        "arw": float(spec.noise_density[0]),
+        "bias_instability": float(spec.bias_instability[0]),
+        "rrw": float(spec.random_walk[0]),
+        "rate_ramp": float(spec.ramp[0]) or None,
+    }
+
+
+def allan_report(gyro: np.ndarray, dt: float, spec: ErrorModel | None = None) -> AllanReport:
+    """Fit each axis of a static gyro record ``gyro`` (N, 3), rad/s, sampled every ``dt`` s."""
+    gyro = np.asarray(gyro, dtype=float)
+    if gyro.ndim != 2 or gyro.shape[1] != 3 or len(gyro) < 64:
+        raise ValueError(f"an Allan analysis needs a (N, 3) gyro record with N >= 64, got shape {gyro.shape}")
+    if not np.all(np.isfinite(gyro)):
+        raise ValueError("the gyro record has NaN or infinite samples")
+    fits = tuple(fit_allan(allan_deviation(gyro[:, i] - gyro[:, i].mean(), dt)) for i in range(3))
+    return AllanReport(fits=fits, spec=spec)
+
+
+def plot_allan(report: AllanReport, out: str | Path, title: str = "") -> Path:
+    """Draw the Allan plot (PNG): measured curves with 68 % bands, fitted models, specification lines."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 5.5), dpi=110)
+    to_deg_h = _DEG * 3600.0
+    for axis, (fit, colour) in enumerate(zip(report.fits, ("tab:red", "tab:green", "tab:blue"))):
+        a = fit.allan
+        ax.fill_between(a.tau, a.low * to_deg_h, a.high * to_deg_h, color=colour, alpha=0.15, lw=0)
+        ax.loglog(a.tau, a.adev * to_deg_h, "o", ms=3, color=colour, label=f"measured {'xyz'[axis]}")
+        ax.loglog(a.tau, fit.model(a.tau) * to_deg_h, "-", lw=1, color=colour, alpha=0.8)
+    tau = report.fits[0].allan.tau
+    if report.spec is not None:
+        s = _spec_terms(report.spec)
+        lines = {
+            "spec quantisation": None if s["quantisation"] is None else np.sqrt(3) * s["quantisation"] / tau,
+            "spec ARW": s["arw"] / np.sqrt(tau) if s["arw"] else None,
+            "spec bias instability": np.full_like(tau, 0.664 * s["bias_instability"]) if s["bias_instability"] else None,
+            "spec RRW": s["rrw"] * np.sqrt(tau / 3) if s["rrw"] else None,
+        }
+        for (label, values), style in zip(lines.items(), (":", "--", "-.", (0, (5, 1, 1, 1)))):
+            if values is not None:
+                ax.loglog(tau, values * to_deg_h, color="0.3", ls=style, lw=1.2, label=label)
+    ax.set_xlabel("averaging time τ (s)")
+    ax.set_ylabel("Allan deviation (deg/h)")
+    ax.set_title(title or "Allan deviation")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    out = Path(out)
+    fig.savefig(out)
+    plt.close(fig)
+    return out
