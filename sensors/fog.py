@@ -217,6 +217,12 @@ class FiberOpticGyro(GyroMechanism):
 
     # --- the mechanism contract --------------------------------------------------------------------
 
+    def max_rate(self) -> float:
+        """Closed loop: the feedback range over the Sagnac scale factor. Open loop: the first extremum
+        of ``sin Δφ`` (Δφ = π/2), beyond which the reading folds back."""
+        limit = self.feedback_range_rad if self.loop == "closed" else np.pi / 2
+        return limit / self.scale_factor_s
+
     def intrinsic_noise_density(self) -> float:
         """N = σ(0)/S, rad/s/√Hz: the angle random walk from shot noise and excess RIN."""
         return float(self.phase_noise(0.0)) / self.scale_factor_s

@@ -34,7 +34,7 @@ from dynamics import ConfigError, Trajectory
 from dynamics.config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3, validate
 
 from .accelerometer import AccelerometerSpec, mean_specific_force
-from .errors import GyroErrors, apply_errors
+from .errors import ErrorModel, GyroErrors, apply_errors
 from .magnetometer import MagnetometerSpec
 from .mechanism import GYRO_KINDS, GyroMechanism, GyroTruth, mechanism_class
 from .samples import ImuSamples
@@ -115,6 +115,34 @@ def validate_mechanism(data: dict, file=None) -> GyroMechanism:
     return validate(mechanism_class(kind), data, file=file, prefix="gyro.mechanism")
 
 
+def _white_noise_budget(model: ErrorModel, period: float, intrinsic: float, *, explicit: bool, key: str,
+                        what: str, file):
+    """Split a specified white-noise density between its sources, so the total at the output is it.
+
+    A datasheet's noise density is measured at the output: it holds the mechanism's own noise
+    ``N_mech`` and, for a digital output of step ``LSB`` dithered by the noise, the quantiser's white
+    noise of variance ``LSB²/12`` per sample, i.e. density² ``LSB² T / 12``. The error layer adds the
+    rest, ``N_add² = N_spec² − N_mech² − LSB² T / 12``; a negative rest cannot work.
+
+    Returns the model with ``noise_density = N_add`` and the total density at the output (3,).
+    """
+    quantiser = (model.output_lsb**2 * period / 12.0) if model.output_lsb else 0.0
+    if not explicit:
+        total = np.full(3, np.sqrt(intrinsic**2 + quantiser))
+        return dataclasses.replace(model, noise_density=np.zeros(3)), total
+    specified = np.asarray(model.noise_density, dtype=float)
+    rest = specified**2 - intrinsic**2 - quantiser
+    if np.any(rest < -1e-12 * specified**2):
+        parts = []
+        if intrinsic:
+            parts.append(f"{what} ({intrinsic:.4g} per sqrt(s))")
+        if quantiser:
+            parts.append(f"the output quantiser at this rate ({np.sqrt(quantiser):.4g} per sqrt(s))")
+        raise ConfigError(f"{' and '.join(parts)} exceed the specified white noise {specified.max():.4g} "
+                          "per sqrt(s) (SI): lower them or raise the specification", file=file, key=key)
+    return dataclasses.replace(model, noise_density=np.sqrt(np.maximum(rest, 0.0))), specified
+
+
 class Device:
     """An emulated IMU, ready to measure trajectories.
 
@@ -140,18 +168,28 @@ class Device:
             raise ConfigError(f"the output rate {spec.rate_hz:g} Hz is above the gyro mechanism's inner rate "
                               f"{self.inner_rate_hz:g} Hz", file=where, key="rate_hz")
         self._gyro_errors = spec.gyro.errors.to_si()
-        intrinsic = self.intrinsic_noise_density = float(self.mechanism.intrinsic_noise_density())
-        specified = self._gyro_errors.noise_density
-        explicit = spec.gyro.errors.arw_deg_per_sqrt_h is not None or \
-            spec.gyro.errors.noise_density_deg_per_s_per_sqrt_hz is not None
-        if explicit and np.any(intrinsic > specified * (1 + 1e-9)):
+        limit = self.mechanism.max_rate()
+        if self._gyro_errors.full_scale is not None and self._gyro_errors.full_scale > limit * (1 + 1e-12):
             raise ConfigError(
-                f"the {self.mechanism.kind} mechanism's own white noise, {np.degrees(intrinsic) * 60:.4g} deg/sqrt(h), "
-                f"exceeds the specified angle random walk {np.degrees(specified.max()) * 60:.4g} deg/sqrt(h): "
-                "lower the mechanism's noise or raise the specification", file=where, key="gyro.errors.arw_deg_per_sqrt_h")
-        remainder = np.sqrt(np.maximum(specified**2 - intrinsic**2, 0.0)) if explicit else np.zeros(3)
-        self._gyro_errors = dataclasses.replace(self._gyro_errors, noise_density=remainder)
-        self._accel_errors = spec.accelerometer.errors.to_si()
+                f"a range of {np.degrees(self._gyro_errors.full_scale):g} deg/s is beyond what the "
+                f"{self.mechanism.kind} mechanism can indicate, {np.degrees(limit):.4g} deg/s",
+                file=where, key="gyro.errors.range_deg_per_s")
+        self.intrinsic_noise_density = float(self.mechanism.intrinsic_noise_density())
+        period = 1.0 / spec.rate_hz
+        gyro_keys = spec.gyro.errors
+        self._gyro_errors, self._gyro_noise_density = _white_noise_budget(
+            self._gyro_errors, period, self.intrinsic_noise_density,
+            explicit=gyro_keys.arw_deg_per_sqrt_h is not None or gyro_keys.noise_density_deg_per_s_per_sqrt_hz is not None,
+            key="gyro.errors.arw_deg_per_sqrt_h" if gyro_keys.noise_density_deg_per_s_per_sqrt_hz is None
+            else "gyro.errors.noise_density_deg_per_s_per_sqrt_hz",
+            what=f"the {self.mechanism.kind} mechanism's own white noise", file=where)
+        accel_keys = spec.accelerometer.errors
+        self._accel_errors, _ = _white_noise_budget(
+            spec.accelerometer.errors.to_si(), period, 0.0,
+            explicit=accel_keys.vrw_m_per_s_per_sqrt_h is not None or accel_keys.noise_density_ug_per_sqrt_hz is not None,
+            key="accelerometer.errors.noise_density_ug_per_sqrt_hz" if accel_keys.vrw_m_per_s_per_sqrt_h is None
+            else "accelerometer.errors.vrw_m_per_s_per_sqrt_h",
+            what="nothing", file=where)
         if self._gyro_errors.bandwidth_hz is not None and not self._gyro_errors.bandwidth_hz < spec.rate_hz / 2:
             raise ConfigError(f"{self._gyro_errors.bandwidth_hz:g} Hz is not below the Nyquist frequency "
                               f"{spec.rate_hz / 2:g} Hz of the output rate", file=where, key="gyro.errors.bandwidth_hz")
@@ -165,9 +203,9 @@ class Device:
 
     @property
     def gyro_noise_density(self) -> np.ndarray:
-        """Total white rate noise of each gyro axis, rad/s/√Hz: the mechanism's own plus what the
-        error layer adds (the specified ARW when one is given)."""
-        return np.hypot(self._gyro_errors.noise_density, self.intrinsic_noise_density)
+        """Total white rate noise of each gyro axis at the output, rad/s/√Hz: the specified ARW when
+        one is given; otherwise the mechanism's own and the output quantiser's."""
+        return self._gyro_noise_density
 
     @property
     def gyro_errors(self):

@@ -149,6 +149,13 @@ class GyroMechanism(Section):
         """White rate noise the physics itself makes, rad/s/√Hz (Allan deviation at 1 s); 0 if none."""
         return 0.0
 
+    def max_rate(self) -> float:
+        """Largest input rate the mechanism indicates unambiguously, rad/s (``inf`` when unbounded).
+
+        A device whose specified range exceeds it cannot work, and is refused.
+        """
+        return float("inf")
+
     def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict | None = None) -> GyroResponse:
         """The mechanism's indicated angle or rate, and its raw observables, for ``truth``.
 

@@ -128,7 +128,7 @@ def test_mechanism_noisier_than_its_spec_is_refused(monkeypatch):
     import sensors.imu
 
     monkeypatch.setattr(sensors.imu, "mechanism_class", lambda kind: NoisyMechanism)
-    with pytest.raises(ConfigError, match="exceeds the specified angle random walk") as info:
+    with pytest.raises(ConfigError, match="own white noise .* exceed the specified white noise") as info:
         device_from_dict({"description": "x", "rate_hz": 100, "gyro": {"errors": {"arw_deg_per_sqrt_h": 0.5}}},
                          name="dev.toml")
     assert info.value.key == "gyro.errors.arw_deg_per_sqrt_h" and info.value.file == "dev.toml"
@@ -144,6 +144,10 @@ def test_mechanism_noisier_than_its_spec_is_refused(monkeypatch):
         ({"gyro": {"errors": {"bandwidth_hz": 80}}}, "gyro.errors.bandwidth_hz"),
         ({"clock": {"jitter_s": 0.01}}, "clock.jitter_s"),
         ({"mounting": {"q_bs": [1, 1, 0, 0]}}, "mounting.q_bs"),
+        # An open-loop FOG reads sin Δφ: beyond Δφ = π/2 (512 deg/s for the default coil) it folds back.
+        ({"gyro": {"mechanism": {"kind": "fog", "loop": "open"}, "errors": {"range_deg_per_s": 600}}},
+         "gyro.errors.range_deg_per_s"),
+        ({"gyro": {"mechanism": {"kind": "mems", "proof_mass_kg": -1e-9}}}, "gyro.mechanism.proof_mass_kg"),
     ],
 )
 def test_bad_device_config_names_the_key(edit, key):
@@ -170,3 +174,19 @@ def test_each_mechanism_reads_only_what_it_declares(kind):
     response = mechanism.respond(truth, np.random.default_rng(0), {})
     out = response.angle if response.angle is not None else response.rate
     assert out.shape == (len(t), 3) and np.all(np.isfinite(out))
+
+
+def test_output_quantiser_counts_in_the_noise_budget():
+    # 1 deg/s LSB at 100 Hz: LSB²T/12 = (0.01745)²·0.01/12 → 5.04e-4 rad/√s of white noise, more than
+    # a specified 0.5 deg/sqrt(h) (1.45e-4 rad/√s): refused. At 0.01 deg/s LSB it fits, and the total
+    # white noise the device shows is the specified one.
+    spec = {"description": "x", "rate_hz": 100, "gyro": {"errors": {"arw_deg_per_sqrt_h": 0.5}}}
+    coarse = {**spec, "gyro": {"errors": {"arw_deg_per_sqrt_h": 0.5, "quantisation_rad_per_s": np.radians(1.0)}}}
+    with pytest.raises(ConfigError, match="output quantiser") as info:
+        device_from_dict(coarse, name="dev.toml")
+    assert info.value.key == "gyro.errors.arw_deg_per_sqrt_h"
+    fine = {**spec, "gyro": {"errors": {"arw_deg_per_sqrt_h": 0.5, "quantisation_rad_per_s": np.radians(0.01)}}}
+    device = device_from_dict(fine)
+    lsb_density2 = np.radians(0.01) ** 2 * 0.01 / 12
+    np.testing.assert_allclose(device.gyro_errors.noise_density ** 2 + lsb_density2, (np.radians(0.5) / 60) ** 2)
+    np.testing.assert_allclose(device.gyro_noise_density, np.radians(0.5) / 60)
