@@ -1,7 +1,12 @@
 """``gyroemu demo``: the main job on built-in defaults, with a short printed summary.
 
-For now it simulates a scenario's truth and summarises it; the sensor, stream and filter stages join
-it as they land.
+1. Truth: simulate a scenario (default: the toy heavy top) and summarise it.
+2. Sensors: every built-in device measures the same smooth manoeuvre; print each one's gyro error
+   against the true mean rate over each sample interval.
+3. Gyrocompassing: on a bench at rest, the navigation FOG finds north from Earth's rotation alone;
+   the consumer MEMS gyro cannot, and the demo says by how much.
+
+Stream, record and filter stages join as they land.
 """
 
 from __future__ import annotations
@@ -12,25 +17,77 @@ import numpy as np
 
 from dynamics import load_scenario
 from dynamics.rotation import quat_angle
+from sensors import list_devices, load_device
+from sensors.gyrocompass import gyrocompass, heading_uncertainty
+from sensors.sampling import SensorTruth
 
 __all__ = ["run_demo"]
 
 
 def run_demo(scenario: str = "heavy_top", duration: float | None = None) -> int:
-    """Simulate ``scenario`` and print what the truth looks like; returns the exit status (0)."""
-    s = load_scenario(scenario)
+    """Run the demo and print its summary; returns the exit status (0)."""
+    _truth(scenario, duration)
+    _sensors()
+    _gyrocompass()
+    print("\nmore: 'gyroemu scenarios' and 'gyroemu presets' list what is built in; "
+          "'gyroemu simulate --scenario S --device D --out run.npz' writes a run; 'gyroemu allan run.npz' fits its noise")
+    return 0
+
+
+def _truth(name: str, duration: float | None) -> None:
+    s = load_scenario(name)
     started = time.perf_counter()
     traj = s.simulate(duration=duration)
     elapsed = time.perf_counter() - started
     rate = np.linalg.norm(traj.omega_b, axis=1)
     force = np.linalg.norm(traj.specific_force_b, axis=1)
-    turned = quat_angle(traj.q_wb[-1], traj.q_wb[0])
-    print(f"gyroemu demo: scenario '{s.name}' ({s.kind}): {s.description}")
-    print(f"  truth: {len(traj)} samples over {traj.duration:g} s at {s.rate_hz:g} Hz, "
+    print(f"gyroemu demo\n\n1. truth: '{s.name}' ({s.kind}): {s.description}")
+    print(f"   {len(traj)} samples over {traj.duration:g} s at {s.rate_hz:g} Hz, "
           f"simulated in {elapsed:.3f} s ({len(traj) / elapsed / 1e6:.2f} M samples/s)")
-    print(f"  |omega_b|          {rate.min():10.4g} .. {rate.max():.4g} rad/s")
-    print(f"  |specific_force_b| {force.min():10.4g} .. {force.max():.4g} m/s^2")
-    print(f"  attitude change, first to last sample: {np.degrees(turned):.3f} deg")
-    print("  more: 'gyroemu scenarios' lists the built-in scenarios; "
-          "'gyroemu simulate --scenario NAME --out truth.npz' writes one's truth")
-    return 0
+    print(f"   |omega_b| {rate.min():.4g} .. {rate.max():.4g} rad/s; |specific force| {force.min():.4g} .. "
+          f"{force.max():.4g} m/s^2; attitude change {np.degrees(quat_angle(traj.q_wb[-1], traj.q_wb[0])):.3f} deg")
+
+
+def _sensors(seconds: float = 10.0) -> None:
+    traj = load_scenario("smooth_manoeuvre").simulate(duration=seconds)
+    print(f"\n2. sensors: every preset measures {seconds:g} s of the smooth manoeuvre (seed 0)")
+    print(f"   {'device':<18}{'gyro kind':<18}{'rate Hz':>8}{'gyro rms error deg/s':>22}{'x real time':>13}  note")
+    for device in list_devices():
+        started = time.perf_counter()
+        samples = device.measure(traj)
+        elapsed = time.perf_counter() - started
+        truth = SensorTruth(traj, device.spec.mounting.q_bs, device.spec.mounting.lever_arm_m)
+        instants = np.concatenate([[traj.t[0]], samples.t_true])
+        mean = truth.mean_omega(instants)
+        error = np.degrees(np.sqrt(np.mean((samples.gyro - mean) ** 2)))
+        full_scale = device.gyro_errors.full_scale or device.mechanism.max_rate()
+        note = (f"saturates: the manoeuvre reaches {np.degrees(np.abs(mean).max()):.0f} deg/s, its range "
+                f"{np.degrees(full_scale):.0f}") if np.abs(mean).max() > full_scale else ""
+        print(f"   {device.name:<18}{device.kind:<18}{device.spec.rate_hz:>8g}{error:>22.3g}"
+              f"{seconds / elapsed:>13.0f}  {note}")
+    print("   (error against the true mean rate over each sample interval: bias, scale factor, noise, bandwidth,"
+          "\n    quantisation; the ring laser's is its 2.3 arcsec fringe quantum, counted every millisecond)")
+
+
+def _gyrocompass(seconds: float = 600.0) -> None:
+    scenario = load_scenario("bench_static")
+    latitude = np.radians(scenario.spec.site.latitude_deg)
+    traj = scenario.simulate(duration=seconds)
+    north_true = gyrocompass(traj.omega_b, traj.specific_force_b).heading
+    print(f"\n3. gyrocompassing: {seconds:g} s at rest on a bench at {scenario.spec.site.latitude_deg:g} deg latitude")
+    for name in ("navigation_fog", "consumer_mems"):
+        device = load_device(name)
+        e, a = device.gyro_errors, device.spec.accelerometer.errors.to_si()
+        sigma = heading_uncertainty(latitude, seconds, bias=np.hypot(e.bias[0], e.turn_on_bias[0]),
+                                    noise_density=device.gyro_noise_density[0],
+                                    bias_instability=e.bias_instability[0], random_walk=e.random_walk[0],
+                                    accel_bias=np.hypot(a.bias[0], a.turn_on_bias[0]))
+        if sigma < np.radians(5.0):
+            samples = device.measure(traj)
+            found = gyrocompass(samples.gyro, samples.accel)
+            error = np.degrees(np.angle(np.exp(1j * (found.heading - north_true))))
+            print(f"   {name}: finds north to {error:+.2f} deg (its noise and bias allow +-{np.degrees(sigma):.2f} deg, 1 sigma)")
+        else:
+            horizontal = np.degrees(7.292115e-5 * np.cos(latitude)) * 3600
+            print(f"   {name}: cannot find north: its gyro errors ({np.degrees(sigma * 7.292115e-5 * np.cos(latitude)) * 3600:.0f} deg/h) "
+                  f"are {sigma:.0f} times the horizontal Earth rate ({horizontal:.1f} deg/h)")

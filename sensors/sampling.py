@@ -58,6 +58,7 @@ class SensorTruth:
         self.lever_arm_b = np.asarray(lever_arm_b, dtype=float)
         self._omega = CubicHermiteSpline(t, trajectory.omega_b, trajectory.alpha_b, axis=0)
         self._alpha = self._omega.derivative()
+        self._angle = self._omega.antiderivative()
         self._force = CubicSpline(t, trajectory.specific_force_b, axis=0)
         self._mag = CubicSpline(t, trajectory.mag_b, axis=0)
         self._attitude = Slerp(t, Rotation.from_quat(trajectory.q_wb, scalar_first=True))
@@ -76,6 +77,12 @@ class SensorTruth:
         """Sensor-axes ``ω_s`` (rad/s) and ``α_s`` (rad/s²) at times ``t`` (M,): two (M, 3) arrays."""
         t = self._check(t)
         return quat_rotate(self.q_sb, self._omega(t)), quat_rotate(self.q_sb, self._alpha(t))
+
+    def mean_omega(self, instants):
+        """Sensor-axes mean angular velocity over each interval between consecutive ``instants``
+        (K+1,), rad/s, (K, 3): what an ideal gyro reports on the strapdown sampling convention."""
+        t = self._check(instants)
+        return quat_rotate(self.q_sb, np.diff(self._angle(t), axis=0) / np.diff(t)[:, None])
 
     def specific_force(self, t):
         """Sensor-axes specific force at the sensor's origin, m/s², (M, 3)."""
