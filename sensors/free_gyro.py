@@ -62,6 +62,30 @@ torque, and leaving it out keeps Coulomb friction from chattering on a carrier a
 integrated in the inertial frame by Heun's method with renormalisation, in a numba kernel; inside the
 gimbal-lock band the 1/cos²θ factor is held at its value at the band's edge.
 
+Chunks
+------
+A long run comes in chunks that share their edge sample (:mod:`sensors.mechanism`). The state carries
+what ties the chunks into one run:
+
+* ``state["q_uncage"]`` (4,): q_is at the run's first sample, the attitude in which the rotors were set
+  (the rotor frame); every chunk's attitude is taken relative to it.
+* ``state["spins"]`` (2, 3): the rotor directions in the rotor frame at the chunk's last sample, where
+  (4) continues by the same Heun steps. The friction torques are memoryless (set by the carrier-driven
+  bearing rates of each sample), so the rotor directions are all the friction drift carries.
+* ``state["attitude_tail"]`` (≤ 5, 3): the unwrapped (φ, θ, ψ) of the last five samples so far (the
+  shared sample last). The next chunk's angles are unwrapped on from it, and its differences reach
+  back into it: from its second sample on, the central and end formulas see the samples a single
+  call would see.
+* ``state["rate"]`` (3,): the indicated rate at the last sample, which the next chunk's first sample
+  repeats; ``state["lock_reported"]``: gimbal lock was already reported in this run (once, as one call).
+
+The differences need two samples beyond a sample, which a chunk does not have at its end: there the
+rate is the one-sided estimate, as for a single call ending at that sample. So a chunked run equals one
+call to round-off except at the last two samples of each chunk but the final one, whose Euler rates
+differ from the central estimates by at most the two truncation errors, h⁴ max|y⁽⁵⁾| (1/5 + 1/30)
+(the same order as a single call's own error at its ends). The gimbal angles, the attitude and the
+lock flags are the same samples as in one call.
+
 Neglected: nutation of the rotor in its gimbals (at H/√(J_i J_o), hundreds of Hz, and damped), gimbal
 inertia, rotor mass unbalance (g-dependent drift; the IMU's error layer has g-sensitivity), erection
 systems. The intrinsic noise density is 0. :meth:`FreeGyro.inner_rate_hz` is the output rate: the
@@ -86,7 +110,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import Annotated, Literal
+from typing import Annotated, ClassVar, Literal
 
 import numba
 import numpy as np
@@ -127,6 +151,7 @@ class FreeGyro(GyroMechanism):
     """
 
     kind: Literal["free-gyro"] = "free-gyro"
+    reads: ClassVar[frozenset[str]] = frozenset({"q_is"})
     rotor_inertia_kgm2: PositiveReal = 6.0e-5
     spin_speed_rpm: PositiveReal = 22500.0
     outer_viscous_friction_n_m_s_per_rad: NonNegativeReal = 2.0e-6
@@ -151,38 +176,61 @@ class FreeGyro(GyroMechanism):
         """The output rate: the model has no dynamics of its own to resolve."""
         return output_rate_hz
 
-    def respond(self, truth: GyroTruth, rng: np.random.Generator) -> GyroResponse:
+    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict | None = None) -> GyroResponse:
         """Indicated rate (M, 3), rad/s, from the gimbal angles. Draws nothing.
 
         Raw: ``gimbal_angle_rad`` (M, 4) = (θ₁ inner, ψ₁ outer, θ₂ inner, ψ₂ outer); ``attitude_xyz_rad``
-        (M, 3) = (φ, θ, ψ), the attitude the pair indicates relative to t[0]; ``gimbal_lock`` (M,) bool.
+        (M, 3) = (φ, θ, ψ), the attitude the pair indicates relative to the run's first sample;
+        ``gimbal_lock`` (M,) bool.
+
+        ``state`` (empty or None at power-up, when the rotors are uncaged at t[0]): ``q_uncage``,
+        ``spins``, ``attitude_tail``, ``rate`` and ``lock_reported``, as in the module notes.
         """
-        # Attitude relative to the uncaging attitude at t[0], in which the rotors were set.
+        state = {} if state is None else state
+        # Attitude relative to the uncaging attitude at power-up, in which the rotors were set.
         q_is = np.asarray(truth.q_is, dtype=float)
-        q_rel = quat_multiply(quat_conjugate(q_is[0]), q_is)
-        spins = self._spins(q_rel, np.asarray(truth.omega, dtype=float), truth.dt)  # (M, 2, 3) rotor frame
-        spins_case = quat_rotate(quat_conjugate(q_rel)[:, None, :], spins)         # (M, 2, 3) case axes
+        q_uncage = state.get("q_uncage", q_is[0])
+        q_rel = quat_multiply(quat_conjugate(q_uncage), q_is)
+        spins = self._spins(q_rel, np.asarray(truth.omega, dtype=float), truth.dt,
+                            state.get("spins", SPIN_AXES))                    # (M, 2, 3) rotor frame
+        spins_case = quat_rotate(quat_conjugate(q_rel)[:, None, :], spins)  # (M, 2, 3) case axes
 
         gimbals = gimbal_angles(spins_case)
         attitude = euler_xyz_from_spins(spins_case)
         locked = np.abs(gimbals[:, [0, 2]]).max(axis=1) > math.radians(90.0 - self.gimbal_lock_margin_deg)
-        if np.any(locked):
+        if np.any(locked) and not state.get("lock_reported", False):
+            state["lock_reported"] = True
             self._report_lock(truth.t, gimbals, locked)
 
-        unwrapped = np.unwrap(attitude, axis=0)
-        rate = body_rate_from_euler_xyz(unwrapped, time_derivative(unwrapped, truth.dt))
+        # Unwrap and differentiate on from the previous samples: the tail's last sample is this chunk's
+        # first (the same angles, up to the turns the tail has unwrapped), so it is left out here.
+        tail = state.get("attitude_tail")
+        history = attitude if tail is None else np.concatenate([tail, attitude[1:]])
+        unwrapped_history = np.unwrap(history, axis=0)
+        skip = 0 if tail is None else len(tail) - 1
+        unwrapped = unwrapped_history[skip:]
+        rate = body_rate_from_euler_xyz(unwrapped, time_derivative(unwrapped_history, truth.dt)[skip:])
+        if "rate" in state:
+            rate[0] = state["rate"]  # the shared sample repeats the previous chunk's last (one-sided) value
+
+        state["q_uncage"] = np.array(q_uncage, dtype=float)
+        state["spins"] = np.array(spins[-1])
+        state["attitude_tail"] = unwrapped_history[-5:].copy()  # enough for the end formulas' five points
+        state["rate"] = rate[-1].copy()
         return GyroResponse(rate=rate, raw={"gimbal_angle_rad": gimbals, "attitude_xyz_rad": attitude,
                                             "gimbal_lock": locked})
 
-    def _spins(self, q_rel: np.ndarray, omega: np.ndarray, dt: float) -> np.ndarray:
-        """Rotor directions (M, 2, 3) in the rotor (inertial) frame: fixed, or drifting by (4)."""
+    def _spins(self, q_rel: np.ndarray, omega: np.ndarray, dt: float, spins0: np.ndarray = SPIN_AXES) -> np.ndarray:
+        """Rotor directions (M, 2, 3) in the rotor (inertial) frame from ``spins0`` at the first sample:
+        fixed, or drifting by (4)."""
+        spins0 = np.ascontiguousarray(spins0, dtype=float)
         if self.frictionless:
-            return np.broadcast_to(SPIN_AXES, (len(q_rel), 2, 3))
+            return np.broadcast_to(spins0, (len(q_rel), 2, 3))
         out = np.empty((len(q_rel), 2, 3))
         min_cos2 = math.sin(math.radians(self.gimbal_lock_margin_deg)) ** 2
         _drift(np.ascontiguousarray(q_rel), np.ascontiguousarray(omega), dt, self.spin_momentum,
                self.outer_viscous_friction_n_m_s_per_rad, self.outer_coulomb_friction_n_m,
-               self.inner_viscous_friction_n_m_s_per_rad, self.inner_coulomb_friction_n_m, min_cos2, SPIN_AXES, out)
+               self.inner_viscous_friction_n_m_s_per_rad, self.inner_coulomb_friction_n_m, min_cos2, spins0, out)
         return out
 
     def _report_lock(self, t: np.ndarray, gimbals: np.ndarray, locked: np.ndarray) -> None:

@@ -66,6 +66,12 @@ t[0]): on the particular solution of (1) for an input ramping at its initial slo
 constant or steadily ramping rate gives no start-up transient. For a step response from rest, give
 ω = 0 at the first sample.
 
+Chunks (:mod:`sensors.mechanism`): the state of (2) at a chunk's last sample, x = (θ, θ') of each gyro,
+is all the recurrence carries (the torque u_k is recomputed from θ_k and the shared sample's input,
+the same numbers), so ``state["gimbal_state"]`` (3, 2) continues the run exactly: a run split into
+chunks gives the same samples as one call, bit for bit. It is set at power-up (an empty state) to
+the equilibrium above.
+
 :meth:`RateGyro.inner_rate_hz` runs the simulation at an integer multiple of the output rate of at
 least 20 natural frequencies.
 
@@ -89,7 +95,7 @@ Sources
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal
+from typing import Annotated, ClassVar, Literal
 
 import numba
 import numpy as np
@@ -126,6 +132,7 @@ class RateGyro(GyroMechanism):
     """
 
     kind: Literal["rate-gyro"] = "rate-gyro"
+    reads: ClassVar[frozenset[str]] = frozenset()
     rotor_inertia_kgm2: PositiveReal = 4.0e-6
     spin_speed_rpm: PositiveReal = 24000.0
     gimbal_inertia_kgm2: PositiveReal = 8.5e-6
@@ -173,24 +180,36 @@ class RateGyro(GyroMechanism):
 
     # ---- the GyroMechanism interface --------------------------------------------------------------
 
+    def max_rate(self) -> float:
+        """The gimbal reaches its stop at K θ_stop/H: no larger rate can be indicated."""
+        return self.range_rad_per_s
+
     def inner_rate_hz(self, output_rate_hz: float) -> float:
         """An integer multiple of the output rate, at least 20 natural frequencies."""
         return inner_rate_for(self.natural_frequency_hz, output_rate_hz)
 
-    def respond(self, truth: GyroTruth, rng: np.random.Generator) -> GyroResponse:
-        """Indicated rate K θ/H (M, 3), rad/s; raw ``gimbal_angle_rad`` θ (M, 3). Draws nothing."""
+    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict | None = None) -> GyroResponse:
+        """Indicated rate K θ/H (M, 3), rad/s; raw ``gimbal_angle_rad`` θ (M, 3). Draws nothing.
+
+        ``state["gimbal_state"]`` (3, 2): (θ, θ') of each gyro at the last sample (rad, rad/s); absent
+        at power-up, when the gimbals start in equilibrium with the first sample's input.
+        """
+        state = {} if state is None else state
         w_ia, w_sra, a_oa = sdf_axes(truth)
         h, j, k = self.spin_momentum, self.gimbal_inertia_kgm2, self.spring_stiffness_n_m_per_rad
         c, stop = self.damping_n_m_s_per_rad, self.stop_angle_rad
 
-        # Initial equilibrium: the particular solution of (1) for a torque ramping at u' = H ω'_IA,
-        # θ' = u'/K and K θ = u(θ) − c θ', with u(θ) = H (ω_IA cos θ − ω_SRA sin θ) − J ω'_OA.
-        theta_dot0 = h * np.asarray(truth.alpha[0], dtype=float) / k  # ω'_IA of gyro k is α_k
-        theta0 = _static_balance(k, h, w_ia[0], w_sra[0], -j * a_oa[0] - c * theta_dot0, stop)
-        x0 = np.column_stack([theta0, np.where(np.abs(theta0) < stop, theta_dot0, 0.0)])
+        x0 = state.get("gimbal_state")
+        if x0 is None:
+            # Initial equilibrium: the particular solution of (1) for a torque ramping at u' = H ω'_IA,
+            # θ' = u'/K and K θ = u(θ) − c θ', with u(θ) = H (ω_IA cos θ − ω_SRA sin θ) − J ω'_OA.
+            theta_dot0 = h * np.asarray(truth.alpha[0], dtype=float) / k  # ω'_IA of gyro k is α_k
+            theta0 = _static_balance(k, h, w_ia[0], w_sra[0], -j * a_oa[0] - c * theta_dot0, stop)
+            x0 = np.column_stack([theta0, np.where(np.abs(theta0) < stop, theta_dot0, 0.0)])
 
         a, b = self.state_space()
         states = simulate_gimbal(a, b, truth.dt, x0, h, j, w_ia, w_sra, a_oa, stop)
+        state["gimbal_state"] = states[-1].copy()  # x at the last sample: the next chunk's first
         theta = states[:, :, 0]
         return GyroResponse(rate=k * theta / h, raw={"gimbal_angle_rad": theta})
 

@@ -65,6 +65,14 @@ to carry the torque, θ = u'/(k_t k_i) (or, for k_i = 0, θ = u/(k_t k_p) − c 
 :meth:`RateIntegratingGyro.inner_rate_hz` resolves the fastest pole (the float corner open-loop, the
 loop's poles closed-loop) with 20 samples per period, at an integer multiple of the output rate.
 
+Chunks (:mod:`sensors.mechanism`): ``state["gimbal_state"]`` (3, n) is x at a chunk's last sample, the
+whole state of the recurrence (the torque is recomputed from θ and the shared sample's input, the same
+numbers), so the next chunk continues the run bit for bit: the float's angle and rate, and closed-loop
+the loop integrator ∫θ dt and the charge ∫i dt. The indicated angle restarts from 0 at each chunk's
+first sample: open-loop (c/H)(θ − θ₀), closed-loop (k_t/H)(∫i dt − its value at the first sample),
+with θ₀ and the charge carried in x (both 0 at power-up, where the output is as before).
+``state["stop_warned"]`` keeps an open loop from warning about its stops again in later chunks of a run.
+
 Defaults
 --------
 A size-18 floated single-degree-of-freedom RIG of the strapdown kind: a 24 000-rpm, 400-Hz
@@ -89,7 +97,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import Literal
+from typing import ClassVar, Literal
 
 import numpy as np
 from pydantic import Field, StrictBool, ValidationInfo, field_validator
@@ -118,6 +126,7 @@ class RateIntegratingGyro(GyroMechanism):
     """
 
     kind: Literal["rate-integrating"] = "rate-integrating"
+    reads: ClassVar[frozenset[str]] = frozenset()
     rotor_inertia_kgm2: PositiveReal = 2.0e-6
     spin_speed_rpm: PositiveReal = 24000.0
     gimbal_inertia_kgm2: PositiveReal = 1.0e-5
@@ -203,28 +212,44 @@ class RateIntegratingGyro(GyroMechanism):
         fastest = np.abs(np.linalg.eigvals(self.state_space()[0])).max() / (2 * math.pi)
         return inner_rate_for(fastest, output_rate_hz)
 
-    def respond(self, truth: GyroTruth, rng: np.random.Generator) -> GyroResponse:
-        """Indicated angle (M, 3), rad; raw ``gimbal_angle_rad`` and ``torquer_current_a`` (M, 3). Draws nothing."""
+    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict | None = None) -> GyroResponse:
+        """Indicated angle (M, 3), rad, from 0 at t[0]; raw ``gimbal_angle_rad`` and ``torquer_current_a``
+        (M, 3). Draws nothing.
+
+        ``state["gimbal_state"]`` (3, n): x at the last sample, (θ, θ') open-loop (rad, rad/s) or
+        (θ, θ', ∫θ dt, ∫i dt) closed-loop (also rad·s, A·s), absent at power-up (equilibrium with the
+        first sample's input); ``state["stop_warned"]``: the open loop has warned of its stops.
+        """
+        state = {} if state is None else state
         w_ia, w_sra, a_oa = sdf_axes(truth)
         h, j, stop = self.spin_momentum, self.gimbal_inertia_kgm2, self.stop_angle_rad
         a, b = self.state_space()
-        x0 = self._initial_state(h * w_ia[0] - j * a_oa[0], h * np.asarray(truth.alpha[0], dtype=float))
+        x0 = state.get("gimbal_state")
+        if x0 is None:
+            x0 = self._initial_state(h * w_ia[0] - j * a_oa[0], h * np.asarray(truth.alpha[0], dtype=float))
+        elif np.shape(x0) != (3, a.shape[0]):
+            raise ValueError(f"state['gimbal_state'] has shape {np.shape(x0)}, this loop needs (3, {a.shape[0]})")
         states = simulate_gimbal(a, b, truth.dt, x0, h, j, w_ia, w_sra, a_oa, stop)
+        state["gimbal_state"] = states[-1].copy()  # x at the last sample: the next chunk's first
         theta = states[:, :, 0]
 
         if not self.torque_rebalance:
-            if np.any(np.abs(theta) >= stop):
+            if np.any(np.abs(theta) >= stop) and not state.get("stop_warned", False):
+                state["stop_warned"] = True  # once per run, as one call warns once
                 first = truth.t[np.argmax(np.any(np.abs(theta) >= stop, axis=1))]
                 warnings.warn(f"open-loop rate-integrating gyro reached its ±{self.stop_angle_deg:g}° stops at "
                               f"t = {first:.6g} s (past (c/H)·θ_stop = {math.degrees(stop / self.gimbal_gain):.3g}° "
                               "of input angle); it indicates nothing beyond them: set torque_rebalance = true",
                               RuntimeWarning, stacklevel=2)
-            return GyroResponse(angle=theta / self.gimbal_gain,
+            # (c/H)(θ − θ₀): from 0 at the first sample (θ₀ = 0 at power-up).
+            return GyroResponse(angle=(theta - theta[0]) / self.gimbal_gain,
                                 raw={"gimbal_angle_rad": theta, "torquer_current_a": np.zeros_like(theta)})
 
         kt, kp, ki = self.torquer_scale_n_m_per_a, self.loop_proportional_a_per_rad, self.loop_integral_a_per_rad_s
         current = kp * theta + ki * states[:, :, 2]
-        return GyroResponse(angle=(kt / h) * states[:, :, 3],
+        charge = states[:, :, 3]  # ∫i dt since power-up, A·s
+        # (k_t/H)(∫i dt − its value at the first sample): from 0 there (the charge is 0 at power-up).
+        return GyroResponse(angle=(kt / h) * (charge - charge[0]),
                             raw={"gimbal_angle_rad": theta, "torquer_current_a": current})
 
     def _initial_state(self, u0: np.ndarray, u_dot: np.ndarray) -> np.ndarray:

@@ -247,6 +247,103 @@ def test_no_lock_no_warning():
 
 
 # --------------------------------------------------------------------------------------------------
+# Long runs in chunks (the mechanism contract)
+# --------------------------------------------------------------------------------------------------
+
+
+def imu_angle(rate, dt):
+    """The indicated angle from 0 at the first sample, as the IMU forms it from a rate: trapezoids."""
+    return np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * dt * (rate[1:] + rate[:-1]), axis=0)])
+
+
+@pytest.mark.parametrize("gyro", [FRICTIONLESS, FreeGyro()], ids=["frictionless", "friction"])
+def test_chunks_continue_one_run(gyro):
+    """A run split into four uneven chunks sharing their edge samples (one two samples long), at a
+    typical output rate (100 Hz), from a non-trivial attitude, yawing through several turns.
+
+    * Gimbal angles, attitude and lock flags are one call's samples (1e-14 rad: a few ulp of π, for
+      vectorised arctan2 paths; in fact bit for bit): the state carries the uncaging attitude and the
+      rotor directions, which (4) continues by the same steps.
+    * The rate is one call's everywhere but at the last two samples of each chunk but the final one,
+      to the round-off of the differences: the unwrapped angles (≤ Ψ ≈ 15 rad) may differ by the
+      rounding of the turns added, an ulp of Ψ, and the differences' coefficients sum to ≤ 128/12
+      over h, two Euler rates per component: 2 (128/12) ulp(Ψ)/h ≈ 4e-12 rad/s (2e-12 of the largest rate).
+    * At those two samples the differences would need the next chunk's samples: the rate is what a
+      run ending there shows (one-sided formulas), equal to a call on the truth up to there to the same
+      round-off, and off the central estimate by at most the two truncation errors, 2 h⁴ max|y⁽⁵⁾|
+      (1/5 + 1/30) (Euler angles A sin ωt plus a steady turn; checked without friction, whose
+      Coulomb kinks y⁽⁵⁾ does not bound). A chunk's first sample repeats the previous chunk's last.
+    * A fresh ``{}`` (or no state) is power-up: the rotors are set at that chunk's first attitude.
+    """
+    dt = 1e-2
+    t = np.arange(2001) * dt
+    amp, w, turn = np.array([1.0, 0.9, 2.0]), np.array([1.1, 0.8, 0.5]), np.array([0.0, 0.0, 0.8])
+    angles = amp * np.sin(np.outer(t, w)) + np.outer(t, turn)
+    rates = amp * w * np.cos(np.outer(t, w)) + turn
+    q_start = Rotation.from_rotvec([0.4, -0.3, 2.0])  # the uncaging attitude: not the identity
+    q = (q_start * Rotation.from_euler("XYZ", angles)).as_quat(scalar_first=True)
+    omega = body_rate_from_euler_xyz(angles, rates)
+    whole = gyro.respond(make_truth(q, omega, dt), np.random.default_rng(0), {})
+    np.testing.assert_array_equal(whole.rate, respond(gyro, q, omega, dt).rate)  # {} and None: power-up
+    unwrapped = np.unwrap(whole.raw["attitude_xyz_rad"], axis=0)
+    assert np.abs(np.diff(np.floor(unwrapped[:, 2] / (2 * np.pi) + 0.5))).sum() >= 2  # ψ passes ±π twice
+    roundoff = 2 * (128 / 12) * np.spacing(np.abs(unwrapped).max()) / dt
+
+    n = len(t) - 1
+    edges = (0, 737, 738, 1500, n)
+    state, parts = {}, []
+    for first, last in zip(edges[:-1], edges[1:]):
+        cut = slice(first, last + 1)
+        part = gyro.respond(make_truth(q[cut], omega[cut], dt), np.random.default_rng(0), state)
+        if parts:  # the shared sample repeats the previous chunk's last value
+            np.testing.assert_array_equal(part.rate[0], parts[-1].rate[-1])
+            for name in part.raw:
+                np.testing.assert_array_equal(part.raw[name][0], parts[-1].raw[name][-1])
+        np.testing.assert_array_equal(state["q_uncage"], q[0])
+        assert state["spins"].shape == (2, 3) and state["attitude_tail"].shape == (5, 3)
+        parts.append(part)
+        if last < n:  # a chunk ends as a run ending there: the one-sided formulas, not the next samples
+            alone = gyro.respond(make_truth(q[:last + 1], omega[:last + 1], dt), np.random.default_rng(0), {})
+            own = slice(max(last - 1, first + 1) - first, None)
+            np.testing.assert_allclose(part.rate[own], alone.rate[first + own.start:], rtol=0, atol=roundoff)
+
+    for name, values in whole.raw.items():
+        joined = np.concatenate([parts[0].raw[name]] + [p.raw[name][1:] for p in parts[1:]])
+        np.testing.assert_allclose(joined.astype(float), values, rtol=0, atol=1e-14)
+    rate = np.concatenate([parts[0].rate] + [p.rate[1:] for p in parts[1:]])
+    ends = np.zeros(len(t), bool)
+    ends[[e + k for e in edges[1:-1] for k in (-1, 0)]] = True
+    np.testing.assert_allclose(rate[~ends], whole.rate[~ends], rtol=0, atol=roundoff)
+    truncation = 2 * dt**4 * np.max(amp * w**5) * (1 / 5 + 1 / 30)
+    if gyro.frictionless:
+        assert np.abs(rate[ends] - whole.rate[ends]).max() <= truncation + roundoff
+    # As the IMU integrates it, each chunk's angle from 0 is one call's re-based there, but for the end
+    # samples' differences (each in at most two trapezoids of h/2, both chunks around an edge).
+    angle = imu_angle(whole.rate, dt)
+    bound = len(t) * np.finfo(float).eps * np.abs(angle).max() + 2 * dt * np.abs(rate[ends] - whole.rate[ends]).max()
+    for first, last, part in zip(edges[:-1], edges[1:], parts):
+        np.testing.assert_allclose(imu_angle(part.rate, dt), angle[first:last + 1] - angle[first], rtol=0, atol=bound)
+
+    # A fresh state on a later chunk is a power-up there: the rotors are set at its first attitude.
+    fresh = gyro.respond(make_truth(q[edges[-2]:], omega[edges[-2]:], dt), np.random.default_rng(0), {})
+    np.testing.assert_array_equal(fresh.rate, respond(gyro, q[edges[-2]:], omega[edges[-2]:], dt).rate)
+    np.testing.assert_allclose(fresh.raw["attitude_xyz_rad"][0], 0.0, rtol=0, atol=1e-15)
+    assert np.abs(parts[-1].raw["attitude_xyz_rad"][0]).max() > 0.1
+
+
+def test_gimbal_lock_is_reported_once_per_run():
+    t, theta, q, omega = pitch_to(88.0)
+    state, locked = {}, []
+    with pytest.warns(GimbalLockWarning) as record:  # locked from ≈ 0.83 s to 1.17 s: in every chunk
+        for first, last in ((0, 900), (900, 1000), (1000, len(t) - 1)):
+            part = FRICTIONLESS.respond(make_truth(q[first:last + 1], omega[first:last + 1], 1e-3),
+                                        np.random.default_rng(0), state)
+            locked.append(part.raw["gimbal_lock"][1 if locked else 0:])
+    assert len(record) == 1 and state["lock_reported"]
+    np.testing.assert_array_equal(np.concatenate(locked), np.abs(theta) > math.radians(85.0))
+
+
+# --------------------------------------------------------------------------------------------------
 # Interface and config
 # --------------------------------------------------------------------------------------------------
 

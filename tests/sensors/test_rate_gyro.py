@@ -252,6 +252,67 @@ def test_draws_nothing_and_is_deterministic():
 
 
 # --------------------------------------------------------------------------------------------------
+# Long runs in chunks (the mechanism contract)
+# --------------------------------------------------------------------------------------------------
+
+
+def imu_angle(rate, dt):
+    """The indicated angle from 0 at the first sample, as the IMU forms it from a rate: trapezoids."""
+    return np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * dt * (rate[1:] + rate[:-1]), axis=0)])
+
+
+def test_chunks_continue_one_run():
+    """A run split into four uneven chunks that share their edge samples (one of them two samples
+    long; two edges with gyro y resting on its stop, one with it free) gives the samples of one call.
+
+    The state is the whole state (θ, θ') of the recurrence, and the torque at the shared sample is
+    recomputed from the same θ and input, so the chunks repeat one call's arithmetic: the rate and
+    gimbal angle agree to 1e-15 of their largest value (in fact bit for bit). The IMU's angle, the
+    trapezoid sum restarted at each chunk's first sample, matches one call's sum re-based there to the
+    round-off of the two sums: one rounding of a partial sum per step, n eps max|angle| for n steps.
+    A fresh ``{}`` (or no state) is power-up: the gimbals start in equilibrium with that input.
+    """
+    dt = 1e-3
+    t = np.arange(4001) * dt
+    # Cross rates, an output-axis acceleration, and gyro y past its range (≈ 1.82 rad/s) at the peaks.
+    omega = np.column_stack([0.3 * np.sin(3 * t) + 0.1, 2.2 * np.cos(5 * t), np.sin(0.7 * t) + 0.5])
+    alpha = np.column_stack([0.9 * np.cos(3 * t), -11 * np.sin(5 * t), 0.7 * np.cos(0.7 * t)])
+    whole = GYRO.respond(make_truth(omega, alpha, dt), np.random.default_rng(0), {})
+    np.testing.assert_array_equal(whole.rate, respond(omega, alpha, dt).rate)  # {} and None: power-up
+    theta = whole.raw["gimbal_angle_rad"]
+    on_stop = np.abs(theta[:, 1]) == GYRO.stop_angle_rad
+    edges = (0, 700, 701, 2700, len(t) - 1)
+    assert on_stop[[700, 701]].all() and not on_stop[2700]  # the stop contact is carried across edges
+
+    state, parts = {}, []
+    for first, last in zip(edges[:-1], edges[1:]):
+        cut = slice(first, last + 1)
+        part = GYRO.respond(make_truth(omega[cut], alpha[cut], dt), np.random.default_rng(0), state)
+        if parts:  # the shared sample repeats the previous chunk's last value
+            np.testing.assert_array_equal(part.rate[0], parts[-1].rate[-1])
+        # The state holds (θ, θ') of each gyro at the chunk's last sample.
+        assert state["gimbal_state"].shape == (3, 2)
+        np.testing.assert_array_equal(state["gimbal_state"][:, 0], part.raw["gimbal_angle_rad"][-1])
+        parts.append(part)
+
+    rate = np.concatenate([parts[0].rate] + [p.rate[1:] for p in parts[1:]])
+    gimbal = np.concatenate([parts[0].raw["gimbal_angle_rad"]] + [p.raw["gimbal_angle_rad"][1:] for p in parts[1:]])
+    np.testing.assert_allclose(rate, whole.rate, rtol=0, atol=1e-15 * np.abs(whole.rate).max())
+    np.testing.assert_allclose(gimbal, theta, rtol=0, atol=1e-15 * np.abs(theta).max())
+    angle = imu_angle(whole.rate, dt)
+    for first, last, part in zip(edges[:-1], edges[1:], parts):
+        rebased = angle[first:last + 1] - angle[first]
+        bound = len(t) * np.finfo(float).eps * np.abs(angle).max()
+        np.testing.assert_allclose(imu_angle(part.rate, dt), rebased, rtol=0, atol=bound)
+
+    # A fresh state on a later chunk is a power-up there, not the continued run.
+    cut = slice(2700, len(t))
+    fresh = GYRO.respond(make_truth(omega[cut], alpha[cut], dt), np.random.default_rng(0), {})
+    np.testing.assert_array_equal(fresh.rate, respond(omega[cut], alpha[cut], dt).rate)
+    assert not np.allclose(fresh.rate[:100], parts[-1].rate[:100], rtol=1e-6, atol=0)
+
+
+# --------------------------------------------------------------------------------------------------
 # Config
 # --------------------------------------------------------------------------------------------------
 

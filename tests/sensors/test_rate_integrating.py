@@ -224,6 +224,74 @@ def test_inner_rate_resolves_the_fastest_pole():
 
 
 # --------------------------------------------------------------------------------------------------
+# Long runs in chunks (the mechanism contract)
+# --------------------------------------------------------------------------------------------------
+
+
+def wandering(dt, scale, duration=4.0):
+    """ω, α: cross rates and an output-axis acceleration on every gyro, times ``scale`` (0.005: the open
+    loop stays off its stops)."""
+    t = np.arange(int(round(duration / dt)) + 1) * dt
+    omega = scale * np.column_stack([0.3 * np.sin(3 * t) + 0.1, 2.2 * np.cos(5 * t), np.sin(0.7 * t) + 0.5])
+    alpha = scale * np.column_stack([0.9 * np.cos(3 * t), -11 * np.sin(5 * t), 0.7 * np.cos(0.7 * t)])
+    return t, omega, alpha
+
+
+@pytest.mark.parametrize("gyro, dt, scale", [(LOOP, 1e-3, 1.0), (OPEN, 5e-4, 0.005)], ids=["loop", "open"])
+def test_chunks_continue_one_run(gyro, dt, scale):
+    """A run split into four uneven chunks sharing their edge samples (one two samples long) gives one
+    call's samples, the indicated angle re-based at each chunk's first sample as the IMU does.
+
+    The state is the recurrence's whole state x (θ, θ', and closed-loop ∫θ dt, ∫i dt), and the torque
+    at the shared sample is recomputed from the same numbers, so the gimbal angle and current agree to
+    1e-15 of their largest value (in fact bit for bit). The chunk's angle (k_t/H)(∫i − ∫i₀), or
+    (c/H)(θ − θ₀), and one call's re-based (k_t/H)∫i − (k_t/H)∫i₀ differ by the rounding of the
+    products and the difference, ≤ 4 eps max|angle|. A fresh ``{}`` (or no state) is power-up.
+    """
+    t, omega, alpha = wandering(dt, scale)
+    whole = gyro.respond(make_truth(omega, alpha, dt), np.random.default_rng(0), {})
+    np.testing.assert_array_equal(whole.angle, respond(gyro, omega, alpha, dt).angle)  # {} and None: power-up
+    n = len(t) - 1
+    edges = (0, n // 5, n // 5 + 1, (3 * n) // 4, n)
+    state, parts = {}, []
+    for first, last in zip(edges[:-1], edges[1:]):
+        cut = slice(first, last + 1)
+        part = gyro.respond(make_truth(omega[cut], alpha[cut], dt), np.random.default_rng(0), state)
+        assert part.angle[0].tolist() == [0.0, 0.0, 0.0]  # the angle restarts at the chunk's first sample
+        if parts:  # the shared sample repeats the previous chunk's last value
+            for name in part.raw:
+                np.testing.assert_array_equal(part.raw[name][0], parts[-1].raw[name][-1])
+        # The state holds x of each gyro at the chunk's last sample.
+        assert state["gimbal_state"].shape == (3, 4 if gyro.torque_rebalance else 2)
+        np.testing.assert_array_equal(state["gimbal_state"][:, 0], part.raw["gimbal_angle_rad"][-1])
+        parts.append(part)
+
+    for name, values in whole.raw.items():
+        joined = np.concatenate([parts[0].raw[name]] + [p.raw[name][1:] for p in parts[1:]])
+        np.testing.assert_allclose(joined, values, rtol=0, atol=1e-15 * np.abs(values).max())
+    bound = 4 * np.finfo(float).eps * np.abs(whole.angle).max()
+    for first, last, part in zip(edges[:-1], edges[1:], parts):
+        np.testing.assert_allclose(part.angle, whole.angle[first:last + 1] - whole.angle[first], rtol=0, atol=bound)
+
+    # A fresh state on a later chunk is a power-up there, not the continued run.
+    cut = slice(edges[-2], len(t))
+    fresh = gyro.respond(make_truth(omega[cut], alpha[cut], dt), np.random.default_rng(0), {})
+    np.testing.assert_array_equal(fresh.angle, respond(gyro, omega[cut], alpha[cut], dt).angle)
+    assert not np.allclose(fresh.raw["gimbal_angle_rad"], parts[-1].raw["gimbal_angle_rad"], rtol=1e-6, atol=0)
+
+
+def test_open_loop_warns_of_its_stops_once_per_run():
+    dt = 1e-4
+    t, omega = step_from_rest(1.0, dt, 0.1)  # on the stops from ≈ 0.035 s
+    state = {}
+    with pytest.warns(RuntimeWarning, match="stops") as record:
+        for first, last in ((0, 400), (400, 700), (700, len(t) - 1)):
+            cut = slice(first, last + 1)
+            OPEN.respond(make_truth(omega[cut], np.zeros_like(omega[cut]), dt), np.random.default_rng(0), state)
+    assert len([w for w in record if "stops" in str(w.message)]) == 1 and state["stop_warned"]
+
+
+# --------------------------------------------------------------------------------------------------
 # Config
 # --------------------------------------------------------------------------------------------------
 
