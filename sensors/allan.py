@@ -161,7 +161,9 @@ def _read(j: int, c: np.ndarray, basis: np.ndarray, model: np.ndarray, allan: Al
     At τ_i, term j makes the share s_i = c_j A_ij / σ²(τ_i) of the Allan variance, so τ_i alone would
     give c_j with a relative standard deviation √(2/ν_i) / s_i: the chi-squared of ν_i s_i² degrees of
     freedom. We take the best τ_i (adjacent octaves share data, so they are not combined). A term not
-    found gets the upper limit at which it would have made one standard deviation where it shows most.
+    found gets the upper limit at which it would have made one standard deviation where it shows most;
+    a term found but never holding enough of the variance for one degree of freedom is undetermined,
+    with the interval (0, ∞).
     """
     relative_sd = np.sqrt(2 / allan.edf)
     if c[j] <= 0:
@@ -170,5 +172,8 @@ def _read(j: int, c: np.ndarray, basis: np.ndarray, model: np.ndarray, allan: Al
     share = c[j] * basis[:, j] / model
     best = np.argmin(relative_sd / share)
     value = np.sqrt(c[j])
-    low, high = allantools.confidence_interval(value, allan.edf[best] * share[best] ** 2, ci=_ONE_SIGMA)
+    dof = allan.edf[best] * share[best] ** 2
+    if dof < 1.0:  # the term never holds enough of the variance to be pinned: undetermined
+        return Coefficient(float(value), 0.0, float("inf"))
+    low, high = allantools.confidence_interval(value, dof, ci=_ONE_SIGMA)
     return Coefficient(float(value), float(low), float(high))

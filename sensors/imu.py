@@ -138,7 +138,8 @@ def _white_noise_budget(model: ErrorModel, period: float, intrinsic: float, *, e
             parts.append(f"{what} ({intrinsic:.4g} per sqrt(s))")
         if quantiser:
             parts.append(f"the output quantiser at this rate ({np.sqrt(quantiser):.4g} per sqrt(s))")
-        raise ConfigError(f"{' and '.join(parts)} exceed the specified white noise {specified.max():.4g} "
+        verb = "exceeds" if len(parts) == 1 else "exceed"
+        raise ConfigError(f"{' and '.join(parts)} {verb} the specified white noise {specified.max():.4g} "
                           "per sqrt(s) (SI): lower them or raise the specification", file=file, key=key)
     return dataclasses.replace(model, noise_density=np.sqrt(np.maximum(rest, 0.0))), specified
 

@@ -105,3 +105,14 @@ def test_static_run_recovers_the_noise_terms():
         assert fit.allan.tau[0] == pytest.approx(dt)
         for term in (fit.arw, fit.bias_instability, fit.rrw, fit.quantisation):
             assert term.low < term.value < term.high
+
+
+def test_a_term_too_small_to_pin_is_reported_undetermined_not_nonsense():
+    # White noise with a rate random walk 10⁴ times below where a 2000 s record could see it.
+    rng = np.random.default_rng(11)
+    dt, n = 0.1, 20000
+    rate = 1e-3 / np.sqrt(dt) * rng.standard_normal(n) + np.cumsum(1e-12 * np.sqrt(dt) * rng.standard_normal(n))
+    fit = fit_allan(allan_deviation(rate, dt))
+    for name in ("quantisation", "arw", "bias_instability", "rrw", "rate_ramp"):
+        c = getattr(fit, name)
+        assert c.low <= c.value <= c.high, (name, c)

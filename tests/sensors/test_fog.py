@@ -266,7 +266,7 @@ def test_inside_an_imu_the_mechanism_makes_part_of_the_specified_arw():
     assert np.all(np.abs(error.std(axis=0) / (spec * math.sqrt(200.0)) - 1) < SIGMAS / math.sqrt(2 * len(error)))
     assert samples.raw["fog"]["sagnac_phase_rad"].shape == (len(samples), 3)
     # A mechanism noisier than its specification is refused.
-    with pytest.raises(ConfigError, match="exceeds the specified"):
+    with pytest.raises(ConfigError, match="exceeds? the specified"):
         device_from_dict({"description": "fog", "rate_hz": 200.0,
                           "gyro": {"mechanism": {"kind": "fog"}, "errors": {"arw_deg_per_sqrt_h": 0.005}}})
 

@@ -128,7 +128,7 @@ def test_mechanism_noisier_than_its_spec_is_refused(monkeypatch):
     import sensors.imu
 
     monkeypatch.setattr(sensors.imu, "mechanism_class", lambda kind: NoisyMechanism)
-    with pytest.raises(ConfigError, match="own white noise .* exceed the specified white noise") as info:
+    with pytest.raises(ConfigError, match="own white noise .* exceeds? the specified white noise") as info:
         device_from_dict({"description": "x", "rate_hz": 100, "gyro": {"errors": {"arw_deg_per_sqrt_h": 0.5}}},
                          name="dev.toml")
     assert info.value.key == "gyro.errors.arw_deg_per_sqrt_h" and info.value.file == "dev.toml"

@@ -28,7 +28,7 @@ RUNS = {  # preset: (output rate Hz, hours). The consumer part runs at its own r
     "consumer_mems": (1000.0, 1.0),
     "tactical_mems": (20.0, 4.0),
     "navigation_fog": (5.0, 24.0),
-    "classic_rate_gyro": (50.0, 2.0),
+    "classic_rate_gyro": (200.0, 1.0),
 }
 
 
