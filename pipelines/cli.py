@@ -16,7 +16,6 @@ from pathlib import Path
 import numpy as np
 
 from dynamics import ConfigError, list_scenarios, load_scenario
-from sensors import list_devices, load_device
 
 __all__ = ["main"]
 
@@ -54,7 +53,11 @@ def _cmd_simulate(args) -> int:
     if not out.parent.is_dir():
         raise UsageError(f"argument --out: {out.parent} is not a folder")
     scenario = load_scenario(args.scenario)
-    device = load_device(args.device, seed=args.seed) if args.device else None
+    device = None
+    if args.device:
+        from sensors import load_device  # imported where used: it pulls in scipy.signal (0.7 s)
+
+        device = load_device(args.device, seed=args.seed)
     started = time.perf_counter()
     traj = scenario.simulate(duration=args.duration, rate_hz=args.rate)
     arrays = {f"truth/{name}": getattr(traj, name) for name in
@@ -79,6 +82,8 @@ def _cmd_simulate(args) -> int:
 
 
 def _cmd_presets(args) -> int:
+    from sensors import list_devices
+
     devices = list_devices()
     rows = [("name", "gyro kind", "rate Hz", "ARW deg/sqrt(h)", "bias inst. deg/h", "resembles")]
     for d in devices:
