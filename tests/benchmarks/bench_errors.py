@@ -15,12 +15,12 @@ The target is 20 M per second per axis.
 from __future__ import annotations
 
 import argparse
-import time
 
 import numpy as np
 
 from sensors import noise
 from sensors.errors import GyroErrors, apply_errors
+from timing import best_time  # noqa: E402  (tests/benchmarks is the script folder)
 
 TARGET = 20e6
 
@@ -34,14 +34,6 @@ ALL_TERMS = dict(
 )
 
 
-def best_time(run, repeats: int) -> float:
-    run()  # warm-up: compiles, fills caches
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        run()
-        times.append(time.perf_counter() - start)
-    return min(times)
 
 
 def main() -> None:

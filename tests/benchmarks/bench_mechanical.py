@@ -41,6 +41,7 @@ from sensors.free_gyro import FreeGyro, _spin_rate  # noqa: E402
 from sensors.mechanism import GyroTruth  # noqa: E402
 from sensors.rate_gyro import RateGyro, sdf_axes, simulate_gimbal  # noqa: E402
 from sensors.rate_integrating import RateIntegratingGyro  # noqa: E402
+from timing import best_time  # noqa: E402  (tests/benchmarks is the script folder)
 
 TARGET = 100.0  # × real time
 
@@ -64,14 +65,6 @@ def carrier(t: np.ndarray) -> GyroTruth:
                      q_is=quat_from_euler_zyx(rpy), temperature_degC=np.full(m, 25.0))
 
 
-def best_time(run, repeats: int) -> float:
-    run()  # warm-up: loads or compiles the numba kernels
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        run()
-        times.append(time.perf_counter() - start)
-    return min(times)
 
 
 # --------------------------------------------------------------------------------------------------

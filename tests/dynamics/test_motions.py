@@ -18,7 +18,7 @@ import pytest
 from scipy.integrate import simpson
 from scipy.special import j1
 
-from dynamics import ConfigError, EARTH_RATE, load_scenario, normal_gravity, scenario_from_dict
+from dynamics import KINDS, ConfigError, EARTH_RATE, list_scenarios, load_scenario, normal_gravity, scenario_from_dict
 from dynamics.motions import (
     ConingSpec,
     OscillationSpec,
@@ -430,17 +430,7 @@ def test_sculling_rectified_specific_force(phase_deg):
 # Config files and errors
 # --------------------------------------------------------------------------------------------------
 
-BUILT_IN = [
-    "bench_static",
-    "rate_table_constant",
-    "rate_table_steps",
-    "rate_table_tumble",
-    "oscillation",
-    "coning",
-    "sculling",
-    "smooth_manoeuvre",
-    "car_drive",
-]
+BUILT_IN = [s.name for s in list_scenarios() if KINDS[s.kind].startswith(("dynamics.motions", "dynamics.vehicles"))]
 
 
 @pytest.mark.parametrize("name", BUILT_IN)

@@ -1,0 +1,15 @@
+"""Timing shared by the benchmark scripts (they run as ``python tests/benchmarks/bench_*.py``)."""
+
+import time
+
+
+def best_time(run, repeats: int) -> float:
+    """Best wall time (s) of ``repeats`` calls of ``run()``, after one warm-up call that loads or
+    compiles the numba kernels and fills the caches."""
+    run()
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        run()
+        times.append(time.perf_counter() - start)
+    return min(times)
