@@ -48,10 +48,13 @@ def write_npz_atomic(path: Path, arrays: dict) -> None:
 
 def _cmd_simulate(args) -> int:
     out = Path(args.out)
-    if out.suffix != ".npz":
-        raise UsageError(f"argument --out: {out}: only .npz files are written yet (got '{out.suffix}')")
+    if out.suffix not in (".npz", ".mcap"):
+        raise UsageError(f"argument --out: {out}: write a .mcap (ROS 2) or .npz file (got '{out.suffix}')")
     if not out.parent.is_dir():
         raise UsageError(f"argument --out: {out.parent} is not a folder")
+    if out.suffix == ".mcap" and not args.device:
+        raise UsageError("argument --device: an .mcap log holds a device's samples: name a device "
+                         "('gyroemu presets' lists them)")
     scenario = load_scenario(args.scenario)
     device = None
     if args.device:
@@ -60,13 +63,28 @@ def _cmd_simulate(args) -> int:
         device = load_device(args.device, seed=args.seed)
     started = time.perf_counter()
     traj = scenario.simulate(duration=args.duration, rate_hz=args.rate)
+    samples = device.measure(traj) if device is not None else None
+    if out.suffix == ".mcap":
+        from .mcap_io import Recording, truth_series, write_mcap
+
+        write_mcap(out, Recording(samples, truth=truth_series(traj, samples), device=device), scenario=scenario)
+    else:
+        write_npz_atomic(out, _npz_arrays(scenario, traj, device, samples))
+    elapsed = time.perf_counter() - started
+    summary = f"{len(traj)} truth samples"
+    if device is not None:
+        summary += f", {len(samples)} samples of {device.name} ({device.kind})"
+    print(f"{scenario.name}: {summary} over {traj.duration:g} s in {elapsed:.2f} s -> {out}")
+    return 0
+
+
+def _npz_arrays(scenario, traj, device, samples) -> dict:
+    """The arrays of an .npz run: ``truth/...``, ``imu/...``, ``raw/<kind>/...`` and the configs."""
     arrays = {f"truth/{name}": getattr(traj, name) for name in
               ("t", "q_wb", "omega_b", "alpha_b", "specific_force_b", "pos_w", "vel_w", "mag_b")}
     arrays.update({f"truth/extras/{k}": v for k, v in traj.extras.items()})
     arrays["scenario_toml"] = np.array(scenario.to_toml())
-    summary = f"{len(traj)} truth samples"
     if device is not None:
-        samples = device.measure(traj)
         for name in ("t", "t_true", "gyro", "accel", "mag", "temperature_degC", "delta_angle", "delta_velocity"):
             if getattr(samples, name) is not None:
                 arrays[f"imu/{name}"] = getattr(samples, name)
@@ -74,10 +92,33 @@ def _cmd_simulate(args) -> int:
             arrays.update({f"raw/{kind}/{k}": v for k, v in observables.items()})
         arrays["device_toml"] = np.array(device.to_toml())
         arrays["seed"] = np.array(device.seed)
-        summary += f", {len(samples)} samples of {device.name} ({device.kind})"
-    elapsed = time.perf_counter() - started
-    write_npz_atomic(out, arrays)
-    print(f"{scenario.name}: {summary} over {traj.duration:g} s in {elapsed:.2f} s -> {out}")
+    return arrays
+
+
+def _cmd_info(args) -> int:
+    from .mcap_io import read_mcap
+
+    path = Path(args.log)
+    log = read_mcap(path)
+    size = path.stat().st_size
+    state = "TRUNCATED: only complete chunks were recovered" if log.truncated else "complete (summary and indexes)"
+    print(f"{path}: MCAP, profile '{log.profile}', {size / 1e6:.3g} MB, {log.message_count} messages, {state}")
+    for name, dev in log.devices.items():
+        t = dev.samples.t
+        span = float(t[-1] - t[0]) if len(t) > 1 else 0.0
+        rate = (len(t) - 1) / span if span > 0 else float("nan")
+        print(f"  device '{name}': {len(t)} samples over {span:.6g} s ({rate:.6g} Hz)")
+        for role, topic in dev.topics.items():
+            print(f"    {topic:<28} {role}")
+        if dev.metadata:
+            print(f"    gyroemu {dev.metadata.get('version', '?')}, seed {dev.metadata.get('seed', '?')}")
+            if args.configs:
+                for key in ("scenario", "device"):
+                    if dev.metadata.get(key):
+                        print(f"    --- {key} ---")
+                        print("\n".join("    " + line for line in dev.metadata[key].splitlines()))
+    for topic, why in log.skipped.items():
+        print(f"  skipped {topic}: {why}")
     return 0
 
 
@@ -102,15 +143,22 @@ def _cmd_allan(args) -> int:
     log = Path(args.log)
     if not log.is_file():
         raise UsageError(f"argument LOG: {log}: no such file")
-    try:
-        with np.load(log, allow_pickle=False) as data:
-            if "imu/gyro" not in data or "imu/t" not in data:
-                raise UsageError(f"argument LOG: {log}: holds no gyro samples (write one with "
-                                 "'gyroemu simulate --device ...')")
-            gyro, t = data["imu/gyro"], data["imu/t"]
-            device_toml = str(data["device_toml"]) if "device_toml" in data else None
-    except (OSError, ValueError) as e:
-        raise UsageError(f"argument LOG: {log}: not a gyroemu .npz log ({e})") from None
+    if log.suffix == ".mcap":
+        from .mcap_io import read_mcap
+
+        device_log = read_mcap(log).device
+        gyro, t = device_log.samples.gyro, device_log.samples.t
+        device_toml = (device_log.metadata or {}).get("device") or None
+    else:
+        try:
+            with np.load(log, allow_pickle=False) as data:
+                if "imu/gyro" not in data or "imu/t" not in data:
+                    raise UsageError(f"argument LOG: {log}: holds no gyro samples (write one with "
+                                     "'gyroemu simulate --device ...')")
+                gyro, t = data["imu/gyro"], data["imu/t"]
+                device_toml = str(data["device_toml"]) if "device_toml" in data else None
+        except (OSError, ValueError) as e:
+            raise UsageError(f"argument LOG: {log}: not a gyroemu log (.mcap or .npz): {e}") from None
     spec = None
     if device_toml is not None:
         import tomllib
@@ -172,14 +220,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rate", type=_positive, default=None, help="output rate, Hz (default: the scenario's)")
     p.add_argument("--device", default=None, help="built-in device name or TOML path (default: truth only)")
     p.add_argument("--seed", type=int, default=0, help="seed of every random draw (default: 0)")
-    p.add_argument("--out", required=True, help="output file (.npz)")
+    p.add_argument("--out", required=True, help="output file: .mcap (ROS 2 log) or .npz (arrays)")
     p.set_defaults(func=_cmd_simulate)
+
+    p = sub.add_parser("info", help="summarise an MCAP log: devices, topics, counts, rates, configs")
+    p.add_argument("log", metavar="LOG", help="an MCAP file")
+    p.add_argument("--configs", action="store_true", help="also print the embedded scenario and device configs")
+    p.set_defaults(func=_cmd_info)
 
     p = sub.add_parser("presets", help="list the built-in devices as a table")
     p.set_defaults(func=_cmd_presets)
 
     p = sub.add_parser("allan", help="fit the noise terms of a static gyro log and draw its Allan plot")
-    p.add_argument("log", metavar="LOG", help="a log written by 'gyroemu simulate --device ...' (.npz)")
+    p.add_argument("log", metavar="LOG", help="a static gyro log (.mcap, or .npz from 'gyroemu simulate')")
     p.add_argument("--out", default=None, help="PNG to write (default: LOG with .allan.png)")
     p.set_defaults(func=_cmd_allan)
     return parser
@@ -197,6 +250,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.exit(2, f"gyroemu {args.command}: error: {e}\n")
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # the reader went away (`gyroemu info run.mcap | head`): stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":

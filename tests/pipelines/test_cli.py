@@ -101,3 +101,26 @@ def test_scenarios_lists_every_builtin_and_demo_runs():
     result = gyroemu("demo", "--duration", "1")
     assert result.returncode == 0, result.stderr
     assert "samples" in result.stdout
+
+
+def test_simulate_to_mcap_then_info_and_allan(tmp_path):
+    log = tmp_path / "run.mcap"
+    result = gyroemu("simulate", "--scenario", "bench_static", "--device", "navigation_fog", "--duration", "30",
+                     "--out", str(log))
+    assert result.returncode == 0, result.stderr
+    info = gyroemu("info", str(log), "--configs")
+    assert info.returncode == 0, info.stderr
+    assert "/imu" in info.stdout and "/truth/imu" in info.stdout and "/raw/fog" in info.stdout
+    assert "30000 samples" in info.stdout and 'kind = "static"' in info.stdout and "complete" in info.stdout
+    allan = gyroemu("allan", str(log), "--out", str(tmp_path / "a.png"))
+    assert allan.returncode == 0, allan.stderr
+    assert (tmp_path / "a.png").is_file()
+
+
+def test_info_on_a_non_mcap_file_exits_2_naming_it(tmp_path):
+    bad = tmp_path / "notes.mcap"
+    bad.write_text("not a log\n")
+    before = digest(bad)
+    result = gyroemu("info", str(bad))
+    assert result.returncode == 2 and str(bad) in result.stderr
+    assert digest(bad) == before

@@ -1,0 +1,607 @@
+"""MCAP logs (pipelines.mcap_io) against interface.md, the MCAP specification and independent readers.
+
+Tolerances: values go through CDR bit-exactly, so decoded arrays equal the written ones exactly. Time
+stamps are stored as integer nanoseconds: ``|t_read − t| ≤ 0.5 ns + rounding``, with the rounding of
+``t·1e9`` and of ``ns / 1e9`` each within one ulp (``spacing(t)`` is 4e-16 s for t < 4 s).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+import struct
+import tomllib
+import warnings
+import zlib
+from io import BytesIO
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zstandard
+from mcap.reader import make_reader
+from mcap.records import Chunk, MessageIndex
+from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.writer import CompressionType
+from mcap.writer import Writer as PlainMcapWriter
+from mcap_ros2.decoder import DecoderFactory
+from mcap_ros2.writer import Writer as Ros2McapWriter
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from dynamics import ConfigError, load_scenario
+from pipelines.mcap_io import (
+    BODY_FRAME,
+    ImuSeries,
+    LogError,
+    LogWarning,
+    McapLogWriter,
+    Recording,
+    read_mcap,
+    truth_series,
+    write_mcap,
+)
+from pipelines.messages import IMU, RAW_MESSAGE_TYPES, schema_text
+from sensors import load_device
+from sensors.samples import ImuSamples
+
+PRESETS = ["classic_rate_gyro", "consumer_mems", "floated_rig", "free_gyro", "ideal", "navigation_fog",
+           "navigation_rlg", "tactical_mems"]
+
+
+@pytest.fixture(scope="module")
+def scenario():
+    return load_scenario("smooth_manoeuvre")
+
+
+@pytest.fixture(scope="module")
+def trajectory(scenario):
+    return scenario.simulate(duration=0.5)
+
+
+@pytest.fixture(scope="module")
+def runs(trajectory):
+    """Every preset's samples and truth over the trajectory."""
+    out = {}
+    for name in PRESETS:
+        device = load_device(name, seed=3)
+        samples = device.measure(trajectory)
+        out[name] = (device, samples, truth_series(trajectory, samples))
+    return out
+
+
+def stamps_close(t_read, t):
+    return np.max(np.abs(t_read - t), initial=0.0) <= 0.5e-9 + 2 * np.spacing(np.max(np.abs(t), initial=1.0))
+
+
+def assert_samples_equal(got: ImuSamples, want: ImuSamples, n=None):
+    n = len(want) if n is None else n
+    assert len(got) == n
+    assert stamps_close(got.t, want.t[:n])
+    assert np.array_equal(got.gyro, want.gyro[:n])
+    assert np.array_equal(got.accel, want.accel[:n])
+    assert np.array_equal(got.mag, want.mag[:n], equal_nan=True)
+    assert set(got.raw) == set(want.raw)
+    for kind, observables in want.raw.items():
+        assert set(got.raw[kind]) == set(observables)
+        for name, values in observables.items():
+            assert got.raw[kind][name].dtype == values.dtype, (kind, name)
+            assert np.array_equal(got.raw[kind][name], values[:n], equal_nan=True), (kind, name)
+
+
+def file_digest(path):
+    stat = Path(path).stat()
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest(), stat.st_mtime_ns, stat.st_size
+
+
+def read_quietly(path):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # gyroemu's own files read without any warning
+        return read_mcap(path)
+
+
+# ---------------------------------------------------------------------------------------------------
+# Round trips.
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_round_trip_every_preset(tmp_path, runs, scenario, preset):
+    device, samples, truth = runs[preset]
+    path = write_mcap(tmp_path / "run.mcap", Recording(samples, truth=truth, device=device), scenario=scenario)
+    log = read_quietly(path)
+    assert list(log.devices) == [device.name] and not log.truncated
+    d = log.device
+    assert_samples_equal(d.samples, samples)
+    assert d.samples.device == device.name
+    assert stamps_close(d.truth.t, samples.t)
+    for name in ("q_wb", "omega_b", "specific_force_b"):
+        assert np.array_equal(getattr(d.truth, name), getattr(truth, name)), name
+    assert d.truth.q_wb_covariance is None and d.estimate is None
+    expected_topics = {"imu": "/imu", "truth/imu": "/truth/imu"}
+    expected_topics.update({f"raw/{k}": f"/raw/{k}" for k in samples.raw})
+    if samples.has_mag:
+        expected_topics["mag"] = "/mag"
+    assert d.topics == expected_topics
+    meta = d.metadata
+    assert meta["seed"] == "3" and meta["device_name"] == device.name and meta["topic_prefix"] == ""
+    assert tomllib.loads(meta["device"]) == tomllib.loads(device.to_toml())
+    assert tomllib.loads(meta["scenario"]) == tomllib.loads(scenario.to_toml())
+    assert meta["version"]
+
+
+def test_bare_samples_and_several_blocks(tmp_path, runs):
+    _, samples, truth = runs["navigation_rlg"]
+    whole = read_quietly(write_mcap(tmp_path / "whole.mcap", Recording(samples, truth=truth)))
+    cuts = [0, 7, 130, len(samples)]
+    with McapLogWriter(tmp_path / "blocks.mcap", chunk_size=4096) as log:
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            log.write(Recording(_slice(samples, a, b), truth=_slice_series(truth, a, b)))
+    blocks = read_quietly(tmp_path / "blocks.mcap")
+    assert_samples_equal(blocks.samples, whole.samples)
+    assert np.array_equal(blocks.truth.q_wb, whole.truth.q_wb)
+    with open(tmp_path / "blocks.mcap", "rb") as f:
+        reader = make_reader(f)
+        assert len(reader.get_summary().chunk_indexes) > 3
+        sequences = {}
+        for _, channel, message in reader.iter_messages(log_time_order=False):
+            sequences.setdefault(channel.topic, []).append(message.sequence)
+    assert all(seq == list(range(len(samples))) for seq in sequences.values())
+    bare = read_quietly(write_mcap(tmp_path / "bare.mcap", samples))
+    assert_samples_equal(bare.samples, samples)
+    assert bare.truth is None and bare.device.metadata["seed"] == "" and bare.device.metadata["device"] == ""
+
+
+def test_blocks_must_follow_in_time(tmp_path, runs):
+    _, samples, _ = runs["ideal"]
+    with pytest.raises(ValueError, match="time order"):
+        with McapLogWriter(tmp_path / "x.mcap") as log:
+            log.write(_slice(samples, 100, 200))
+            log.write(_slice(samples, 0, 100))
+    assert not (tmp_path / "x.mcap").exists() and not list(tmp_path.iterdir())
+
+
+def _slice(s: ImuSamples, a, b) -> ImuSamples:
+    return ImuSamples(t=s.t[a:b], gyro=s.gyro[a:b], accel=s.accel[a:b], mag=s.mag[a:b],
+                      raw={k: {n: v[a:b] for n, v in o.items()} for k, o in s.raw.items()}, device=s.device)
+
+
+def _slice_series(s: ImuSeries, a, b) -> ImuSeries:
+    return ImuSeries(t=s.t[a:b], q_wb=s.q_wb[a:b], omega_b=s.omega_b[a:b], specific_force_b=s.specific_force_b[a:b])
+
+
+def test_estimate_channel_round_trip(tmp_path, runs):
+    _, samples, truth = runs["tactical_mems"]
+    rng = np.random.default_rng(5)
+    n = len(samples)
+    a = rng.normal(size=(n, 3, 3)) * 1e-3
+    estimate = ImuSeries(t=samples.t, q_wb=truth.q_wb, omega_b=samples.gyro - 1e-4,
+                         q_wb_covariance=a @ a.transpose(0, 2, 1),
+                         omega_b_covariance=np.broadcast_to(np.eye(3) * 1e-6, (n, 3, 3)))
+    log = read_quietly(write_mcap(tmp_path / "e.mcap", Recording(samples, truth=truth, estimate=estimate)))
+    got = log.device.estimate
+    assert log.device.topics["estimate/imu"] == "/estimate/imu"
+    assert np.array_equal(got.q_wb, estimate.q_wb) and np.array_equal(got.omega_b, estimate.omega_b)
+    assert np.array_equal(got.q_wb_covariance, estimate.q_wb_covariance)
+    assert np.array_equal(got.omega_b_covariance, estimate.omega_b_covariance)
+    assert got.specific_force_b is None and got.specific_force_b_covariance is None  # written as covariance[0] = -1
+
+
+def test_several_devices_prefixed_and_interleaved(tmp_path, runs, scenario):
+    recordings = [Recording(runs[name][1], truth=runs[name][2], device=runs[name][0])
+                  for name in ("consumer_mems", "classic_rate_gyro", "navigation_fog")]  # 1000, 200, 1000 Hz
+    path = write_mcap(tmp_path / "three.mcap", recordings, scenario=scenario)
+    log = read_quietly(path)
+    assert list(log.devices) == ["consumer_mems", "classic_rate_gyro", "navigation_fog"]
+    for recording in recordings:
+        d = log.devices[recording.samples.device]
+        assert_samples_equal(d.samples, recording.samples)
+        assert all(topic.startswith(f"/{d.name}/") for topic in d.topics.values())
+        assert d.metadata["topic_prefix"] == f"/{d.name}" and d.metadata["device_name"] == d.name
+    assert len(log.metadata) == 3
+    _check_contract(path)
+    with pytest.raises(ValueError, match="devices"):
+        log.samples
+    with pytest.raises(ValueError, match="prefix"):
+        with McapLogWriter(tmp_path / "bad.mcap") as writer:
+            writer.write(recordings[0])
+            writer.write(recordings[1])
+
+
+def test_bad_inputs_to_the_writer(tmp_path, runs):
+    _, samples, _ = runs["ideal"]
+    early = ImuSamples(t=samples.t - 0.1, gyro=samples.gyro, accel=samples.accel, mag=samples.mag)
+    with pytest.raises(ValueError, match="before 0 s"):
+        write_mcap(tmp_path / "n.mcap", early)
+    renamed = ImuSamples(t=samples.t, gyro=samples.gyro, accel=samples.accel, mag=samples.mag, device="raw")
+    with pytest.raises(ValueError, match="cannot prefix"):
+        write_mcap(tmp_path / "n.mcap", [renamed, samples])
+    odd = ImuSamples(t=samples.t, gyro=samples.gyro, accel=samples.accel, mag=samples.mag,
+                     raw={"laser-vortex": {"x": np.zeros(len(samples))}})
+    with pytest.warns(LogWarning, match="laser-vortex"):
+        write_mcap(tmp_path / "n.mcap", odd)
+    assert read_quietly(tmp_path / "n.mcap").samples.raw == {}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["n.mcap"]  # no temporary files left
+
+
+def test_interrupted_write_leaves_nothing(tmp_path, runs):
+    _, samples, _ = runs["consumer_mems"]
+    target = tmp_path / "run.mcap"
+    target.write_bytes(b"an older file")
+    with pytest.raises(RuntimeError):
+        with McapLogWriter(target) as log:
+            log.write(samples)
+            raise RuntimeError("simulated crash")
+    assert target.read_bytes() == b"an older file"
+    assert [p.name for p in tmp_path.iterdir()] == ["run.mcap"]
+
+
+# ---------------------------------------------------------------------------------------------------
+# The file against interface.md and the MCAP specification, read by the mcap library.
+
+def _check_contract(path):
+    """Profile, encodings, summary, indexes, CRCs, time order, stamps, sequences."""
+    data = Path(path).read_bytes()
+    with open(path, "rb") as f:
+        reader = make_reader(f, validate_crcs=True)
+        header = reader.get_header()
+        summary = reader.get_summary()
+        messages = list(reader.iter_messages(log_time_order=False))  # validates chunk CRCs
+    assert header.profile == "ros2"
+    assert summary is not None and summary.statistics is not None
+    assert all(s.encoding == "ros2msg" for s in summary.schemas.values())
+    assert all(c.message_encoding == "cdr" for c in summary.channels.values())
+    assert all("offered_qos_profiles" in c.metadata for c in summary.channels.values())
+    assert summary.chunk_indexes and all(ci.compression == "zstd" for ci in summary.chunk_indexes)
+    assert summary.statistics.message_count == len(messages)
+    assert summary.statistics.chunk_count == len(summary.chunk_indexes)
+    with open(path, "rb") as f:
+        assert [m.name for m in make_reader(f).iter_metadata()].count("gyroemu") >= 1
+    # Footer: summary CRC over the summary section and the footer's fields before the CRC.
+    footer = data[-8 - 29:-8]
+    summary_start, summary_offset_start, crc = struct.unpack("<QQI", footer[9:])
+    assert data[-8:] == b"\x89MCAP0\r\n" and summary_offset_start > summary_start
+    assert zlib.crc32(data[summary_start:len(data) - 8 - 29] + footer[:25]) == crc
+    # Messages: time order in the file; log = publish = header stamp; sequences from 0 per channel.
+    times = [m.log_time for _, _, m in messages]
+    assert times == sorted(times)
+    counts = {}
+    for schema, channel, message in messages:
+        sec, nanosec = struct.unpack_from("<iI", message.data, 4)
+        assert message.log_time == message.publish_time == sec * 10**9 + nanosec
+        assert message.sequence == counts.get(channel.id, 0)
+        counts[channel.id] = message.sequence + 1
+    assert counts == summary.statistics.channel_message_counts
+    # Message indexes: every channel of every chunk, entries pointing at its Message records.
+    for ci in summary.chunk_indexes:
+        chunk = next(StreamReader(BytesIO(data[ci.chunk_start_offset:ci.chunk_start_offset + ci.chunk_length]),
+                                  skip_magic=True, emit_chunks=True).records)
+        assert isinstance(chunk, Chunk)
+        records = breakup_chunk(chunk, validate_crc=True)
+        raw = zstandard.decompress(chunk.data, chunk.uncompressed_size)
+        in_chunk = {r.channel_id for r in records if hasattr(r, "sequence")}
+        assert set(ci.message_index_offsets) == in_chunk
+        for channel_id, offset in ci.message_index_offsets.items():
+            index = next(StreamReader(BytesIO(data[offset:]), skip_magic=True).records)
+            assert isinstance(index, MessageIndex) and index.channel_id == channel_id
+            for log_time, at in index.records:
+                opcode, _, channel, _, logged = struct.unpack_from("<BQHIQ", raw, at)
+                assert (opcode, channel, logged) == (5, channel_id, log_time)
+
+
+def test_contract_structure(tmp_path, runs, scenario):
+    device, samples, truth = runs["consumer_mems"]
+    path = write_mcap(tmp_path / "c.mcap", Recording(samples, truth=truth, device=device), scenario=scenario,
+                      chunk_size=8192)
+    _check_contract(path)
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    topics = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+    assert topics == {"/imu": "sensor_msgs/msg/Imu", "/mag": "sensor_msgs/msg/MagneticField",
+                      "/truth/imu": "sensor_msgs/msg/Imu", "/raw/mems": "gyroemu_msgs/msg/MemsRaw"}
+    assert summary.schemas[1].data.decode() == schema_text(summary.schemas[1].name)
+    # Same stamp: /imu, /mag, /truth/imu, /raw/mems in that order, sample after sample.
+    with open(path, "rb") as f:
+        first = [c.topic for _, c, _ in list(make_reader(f).iter_messages(log_time_order=False))[:8]]
+    assert first == ["/imu", "/mag", "/truth/imu", "/raw/mems"] * 2
+
+
+def test_independent_readers_agree(tmp_path, runs):
+    device, samples, truth = runs["consumer_mems"]
+    path = write_mcap(tmp_path / "c.mcap", Recording(samples, truth=truth, device=device))
+    log = read_quietly(path)
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    store.register(get_types_from_msg(RAW_MESSAGE_TYPES["mems"].schema, RAW_MESSAGE_TYPES["mems"].name))
+    rows = {}
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for schema, channel, message, ros in reader.iter_decoded_messages():
+            other = store.deserialize_cdr(message.data, schema.name)
+            rows.setdefault(channel.topic, []).append((ros, other))
+    assert [len(v) for v in rows.values()] == [len(samples)] * 4
+    for k, (a, b) in enumerate(rows["/imu"]):
+        for msg in (a, b):
+            assert [msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z] == list(samples.gyro[k])
+            assert [msg.linear_acceleration.x, msg.linear_acceleration.y,
+                    msg.linear_acceleration.z] == list(samples.accel[k])
+            assert msg.orientation_covariance[0] == -1.0
+            assert msg.header.frame_id == device.name
+    for k, (a, b) in enumerate(rows["/mag"]):
+        for msg in (a, b):
+            assert [msg.magnetic_field.x, msg.magnetic_field.y, msg.magnetic_field.z] == list(samples.mag[k])
+    for k, (a, b) in enumerate(rows["/truth/imu"]):
+        for msg in (a, b):
+            q = [msg.orientation.w, msg.orientation.x, msg.orientation.y, msg.orientation.z]
+            assert q == list(truth.q_wb[k])  # scalar-first numpy, x y z w in the message
+            assert [msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z] == list(truth.omega_b[k])
+            assert list(msg.orientation_covariance) == [0.0] * 9 and msg.header.frame_id == BODY_FRAME
+    for k, (a, b) in enumerate(rows["/raw/mems"]):
+        for msg in (a, b):
+            assert list(msg.sense_in_phase_v) == list(samples.raw["mems"]["sense_in_phase_v"][k])
+            assert list(msg.sense_quadrature_v) == list(samples.raw["mems"]["sense_quadrature_v"][k])
+    assert np.array_equal(log.samples.gyro, samples.gyro)
+
+
+def test_messages_identical_to_mcap_ros2_writer(tmp_path, runs):
+    """The same content written message by message with mcap_ros2: byte-identical payloads, same
+    stamps, sequences and order."""
+    _, samples, truth = runs["navigation_rlg"]
+    ours = write_mcap(tmp_path / "ours.mcap", Recording(samples, truth=truth))
+    theirs = tmp_path / "theirs.mcap"
+    raw = samples.raw["rlg"]
+    with open(theirs, "wb") as f:
+        writer = Ros2McapWriter(f)
+        schemas = {name: writer.register_msgdef(name, schema_text(name))
+                   for name in ("sensor_msgs/msg/Imu", "gyroemu_msgs/msg/RlgRaw")}
+        for k in range(len(samples)):
+            sec, nanosec = divmod(int(round(samples.t[k] * 1e9)), 10**9)
+            header = {"stamp": {"sec": sec, "nanosec": nanosec}}
+            stamp = sec * 10**9 + nanosec
+            vec = lambda v: dict(zip("xyz", map(float, v)))  # noqa: E731
+            writer.write_message("/imu", schemas["sensor_msgs/msg/Imu"], {
+                "header": {**header, "frame_id": samples.device},
+                "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0},
+                "orientation_covariance": [-1.0] + [0.0] * 8, "angular_velocity": vec(samples.gyro[k]),
+                "angular_velocity_covariance": [0.0] * 9, "linear_acceleration": vec(samples.accel[k]),
+                "linear_acceleration_covariance": [0.0] * 9}, log_time=stamp, publish_time=stamp, sequence=k)
+            q = truth.q_wb[k]
+            writer.write_message("/truth/imu", schemas["sensor_msgs/msg/Imu"], {
+                "header": {**header, "frame_id": BODY_FRAME}, "orientation": dict(zip("wxyz", map(float, q))),
+                "orientation_covariance": [0.0] * 9, "angular_velocity": vec(truth.omega_b[k]),
+                "angular_velocity_covariance": [0.0] * 9, "linear_acceleration": vec(truth.specific_force_b[k]),
+                "linear_acceleration_covariance": [0.0] * 9}, log_time=stamp, publish_time=stamp, sequence=k)
+            writer.write_message("/raw/rlg", schemas["gyroemu_msgs/msg/RlgRaw"], {
+                "header": {**header, "frame_id": samples.device},
+                "fringe_count": [int(x) for x in raw["fringe_count"][k]],
+                "beat_phase_rad": list(map(float, raw["beat_phase_rad"][k])),
+                "dither_angle_rad": list(map(float, raw["dither_angle_rad"][k]))},
+                log_time=stamp, publish_time=stamp, sequence=k)
+        writer.finish()
+
+    def messages(path):
+        with open(path, "rb") as f:
+            return [(c.topic, m.log_time, m.publish_time, m.sequence, m.data)
+                    for _, c, m in make_reader(f).iter_messages(log_time_order=False)]
+
+    assert messages(ours) == messages(theirs)
+    # and our reader reads their file to the same numbers
+    assert_samples_equal(read_quietly(theirs).samples, samples)
+
+
+# ---------------------------------------------------------------------------------------------------
+# Damaged and foreign files.
+
+def _chunk_message_counts(path):
+    """(end offset, messages per channel topic) of each chunk, from the summary."""
+    data = Path(path).read_bytes()
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    out = []
+    for ci in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
+        chunk = next(StreamReader(BytesIO(data[ci.chunk_start_offset:ci.chunk_start_offset + ci.chunk_length]),
+                                  skip_magic=True, emit_chunks=True).records)
+        topics = [summary.channels[r.channel_id].topic for r in breakup_chunk(chunk) if hasattr(r, "sequence")]
+        out.append((ci.chunk_start_offset + ci.chunk_length, topics))
+    return out
+
+
+@pytest.mark.parametrize("fraction", [0.25, 0.5, 0.9, "summary"])
+def test_truncated_file_recovers_complete_chunks(tmp_path, runs, fraction):
+    _, samples, truth = runs["navigation_rlg"]
+    full = write_mcap(tmp_path / "full.mcap", Recording(samples, truth=truth), chunk_size=8192)
+    data = full.read_bytes()
+    summary_start = struct.unpack("<QQI", data[-8 - 29 + 9:-8])[0]  # from the Footer record
+    cut = summary_start + 40 if fraction == "summary" else int(len(data) * fraction)
+    cut_path = tmp_path / "cut.mcap"
+    cut_path.write_bytes(data[:cut])
+    before = file_digest(cut_path)
+    # Theory: the messages of the chunks that end before the cut.
+    kept = [topics for end, topics in _chunk_message_counts(full) if end <= cut]
+    expected = {}
+    for topics in kept:
+        for topic in topics:
+            expected[topic] = expected.get(topic, 0) + 1
+    with pytest.warns(LogWarning) as caught:
+        log = read_mcap(cut_path)
+    messages = [str(w.message) for w in caught]
+    assert any(re.search(rf"truncated at byte \d+ .*recovered {sum(expected.values())} messages", m) for m in messages)
+    assert log.truncated and log.message_count == sum(expected.values())
+    n = min(expected["/imu"], expected["/raw/rlg"])  # samples need their raw observables
+    assert any("no message on /raw/rlg" in m for m in messages) == (expected["/imu"] > n)
+    assert_samples_equal(log.samples, samples, n=n)
+    assert len(log.truth) == expected["/truth/imu"]
+    assert np.array_equal(log.truth.q_wb, truth.q_wb[:expected["/truth/imu"]])
+    assert file_digest(cut_path) == before
+    if fraction == "summary":
+        assert n == len(samples)
+
+
+def test_truncated_before_any_chunk(tmp_path, runs):
+    _, samples, _ = runs["ideal"]
+    data = write_mcap(tmp_path / "full.mcap", samples).read_bytes()
+    first_chunk = _chunk_message_counts(tmp_path / "full.mcap")[0][0]
+    for cut in (8, 40, first_chunk - 1):
+        path = tmp_path / f"cut{cut}.mcap"
+        path.write_bytes(data[:cut])
+        with pytest.warns(LogWarning, match="truncated"), pytest.raises(LogError, match="truncated") as e:
+            read_mcap(path)
+        assert e.value.file == str(path)
+
+
+@pytest.mark.parametrize("case", ["text", "empty", "garbage_after_magic", "flipped_chunk_byte", "crc", "folder",
+                                  "missing", "no_imu"])
+def test_unreadable_files_raise_log_error_naming_the_file(tmp_path, runs, case):
+    _, samples, _ = runs["ideal"]
+    path = tmp_path / "bad.mcap"
+    good = write_mcap(tmp_path / "good.mcap", samples).read_bytes()
+    first_chunk = good.index(bytes([6]), 8 + 9)  # the first Chunk record follows header, schema, channel, metadata
+    with open(tmp_path / "good.mcap", "rb") as f:
+        ci = make_reader(f).get_summary().chunk_indexes[0]
+    if case == "text":
+        path.write_text("timestamp,gx,gy,gz\n0.001,0.1,0.2,0.3\n")
+        match = "not an MCAP file"
+    elif case == "empty":
+        path.write_bytes(b"")
+        match = "not an MCAP file"
+    elif case == "garbage_after_magic":
+        path.write_bytes(good[:8] + bytes(range(256)) * 4)
+        match = "corrupt|truncated|no sensor_msgs"
+    elif case == "flipped_chunk_byte":
+        damaged = bytearray(good)
+        damaged[ci.chunk_start_offset + ci.chunk_length // 2] ^= 0xFF
+        path.write_bytes(bytes(damaged))
+        match = "corrupt chunk"
+    elif case == "crc":
+        damaged = bytearray(good)
+        crc_at = ci.chunk_start_offset + 9 + 24  # after opcode, length, start, end, uncompressed size
+        damaged[crc_at] ^= 0x01
+        path.write_bytes(bytes(damaged))
+        match = "CRC"
+    elif case == "folder":
+        path.mkdir()
+        match = "folder"
+    elif case == "missing":
+        match = "cannot open"
+    else:
+        with open(path, "wb") as f:
+            writer = Ros2McapWriter(f)
+            schema = writer.register_msgdef("std_msgs/msg/String", "string data\n")
+            writer.write_message("/chatter", schema, {"data": "hello"}, log_time=1)
+            writer.finish()
+        match = "no sensor_msgs/msg/Imu"
+    assert first_chunk > 0
+    before = file_digest(path) if path.is_file() else None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", LogWarning)
+        with pytest.raises(LogError, match=match) as e:
+            read_mcap(path)
+    assert e.value.file == str(path) and str(path) in str(e.value)
+    assert isinstance(e.value, ConfigError) and isinstance(e.value, ValueError)
+    if before is not None:
+        assert file_digest(path) == before
+
+
+@pytest.mark.parametrize("compression", [CompressionType.ZSTD, CompressionType.LZ4, CompressionType.NONE])
+def test_foreign_file(tmp_path, compression):
+    """Someone else's bag: an Imu topic of another name, frame ids of several lengths, log times after
+    the stamps, a String channel (skipped with a warning) and a lone MagneticField topic."""
+    rng = np.random.default_rng(11)
+    n = 500
+    stamps = 1_700_000_000 * 10**9 + np.cumsum(rng.integers(4_000_000, 6_000_000, n))
+    gyro, accel = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+    path = tmp_path / "foreign.mcap"
+    with open(path, "wb") as f:
+        writer = Ros2McapWriter(f, chunk_size=16384, compression=compression)
+        imu = writer.register_msgdef("sensor_msgs/msg/Imu", get_typestore(Stores.ROS2_HUMBLE).generate_msgdef(
+            "sensor_msgs/msg/Imu")[0].replace("time stamp", "builtin_interfaces/Time stamp") +
+            "=" * 80 + "\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n")
+        text = writer.register_msgdef("std_msgs/msg/String", "string data\n")
+        mag = writer.register_msgdef("sensor_msgs/msg/MagneticField", schema_text("sensor_msgs/msg/MagneticField"))
+        for k in range(n):
+            sec, nanosec = divmod(int(stamps[k]), 10**9)
+            header = {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": ["imu_link", "imu", ""][k % 3]}
+            writer.write_message("/sensors/imu_raw", imu, {
+                "header": header, "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0},
+                "orientation_covariance": [0.0] * 9, "angular_velocity": dict(zip("xyz", gyro[k])),
+                "angular_velocity_covariance": [0.0] * 9, "linear_acceleration": dict(zip("xyz", accel[k])),
+                "linear_acceleration_covariance": [0.0] * 9}, log_time=int(stamps[k]) + 2_000_000)
+            if k % 10 == 0:
+                writer.write_message("/rosout_text", text, {"data": f"sample {k}"}, log_time=int(stamps[k]) + 2_000_001)
+                writer.write_message("/sensors/mag", mag, {
+                    "header": header, "magnetic_field": {"x": 1e-5, "y": 0.0, "z": 0.0},
+                    "magnetic_field_covariance": [0.0] * 9}, log_time=int(stamps[k]) + 2_000_002)
+        writer.finish()
+    with pytest.warns(LogWarning) as caught:
+        log = read_mcap(path)
+    text = " ".join(str(w.message) for w in caught)
+    assert "/rosout_text" in text and "std_msgs/msg/String" in text and "/sensors/mag" in text
+    assert set(log.skipped) == {"/rosout_text", "/sensors/mag"}
+    assert list(log.devices) == ["sensors/imu_raw"] and not log.truncated
+    s = log.samples
+    assert np.array_equal(s.gyro, gyro) and np.array_equal(s.accel, accel)
+    assert np.array_equal(log.device.stamp_ns, stamps)  # the header stamps, not the log times
+    assert np.all(np.abs(s.t - stamps / 1e9) <= np.spacing(s.t) / 2)  # float64 seconds: nearest value
+    assert np.isnan(s.mag).all() and s.raw == {}
+    assert log.message_count == n + 2 * (n // 10)
+
+
+def test_unchunked_foreign_file(tmp_path):
+    path = tmp_path / "plain.mcap"
+    rows = IMU.encode(np.arange(1, 51) * 10**7, "imu", {"angular_velocity": np.arange(150.0).reshape(50, 3)})
+    with open(path, "wb") as f:
+        writer = PlainMcapWriter(f, use_chunking=False)
+        writer.start("ros2", "test")
+        schema = writer.register_schema("sensor_msgs/msg/Imu", "ros2msg", IMU.schema.encode())
+        channel = writer.register_channel("/imu", "cdr", schema)
+        for k, row in enumerate(rows):
+            writer.add_message(channel, log_time=(k + 1) * 10**7, data=row.tobytes(), publish_time=0, sequence=k)
+        writer.finish()
+    log = read_quietly(path)
+    assert list(log.devices) == ["imu0"]
+    assert np.array_equal(log.samples.gyro, np.arange(150.0).reshape(50, 3))
+
+
+def test_rosbags_anyreader_reads_our_log(tmp_path, runs):
+    """rosbags' high-level reader (rosbag2 semantics) takes the file as a bag, custom raw type included."""
+    from rosbags.highlevel import AnyReader
+
+    _, samples, truth = runs["navigation_rlg"]
+    path = write_mcap(tmp_path / "run.mcap", Recording(samples, truth=truth))
+    with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
+        assert {c.topic: c.msgtype for c in reader.connections} == {
+            "/imu": "sensor_msgs/msg/Imu", "/truth/imu": "sensor_msgs/msg/Imu", "/raw/rlg": "gyroemu_msgs/msg/RlgRaw"}
+        counts = {}
+        for connection, log_time, data in reader.messages():
+            msg = reader.deserialize(data, connection.msgtype)
+            k = counts.get(connection.topic, 0)
+            counts[connection.topic] = k + 1
+            assert log_time == msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+            if connection.topic == "/raw/rlg":
+                assert np.array_equal(msg.fringe_count, samples.raw["rlg"]["fringe_count"][k])
+            elif connection.topic == "/imu":
+                assert [msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z] == list(samples.gyro[k])
+    assert counts == {"/imu": len(samples), "/truth/imu": len(samples), "/raw/rlg": len(samples)}
+
+
+def test_rosbag2_mcap_written_by_rosbags_is_read(tmp_path):
+    from rosbags.rosbag2 import StoragePlugin
+    from rosbags.rosbag2 import Writer as BagWriter
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    t = store.types
+    rng = np.random.default_rng(4)
+    gyro, accel = rng.normal(size=(40, 3)), rng.normal(size=(40, 3))
+    stamps = 1_000 * 10**9 + np.arange(40) * 2_500_000
+    with BagWriter(tmp_path / "bag", version=8, storage_plugin=StoragePlugin.MCAP) as bag:
+        connection = bag.add_connection("/imu/data", "sensor_msgs/msg/Imu", typestore=store)
+        for k in range(40):
+            sec, nanosec = divmod(int(stamps[k]), 10**9)
+            msg = t["sensor_msgs/msg/Imu"](
+                header=t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec),
+                                                frame_id="imu_link"),
+                orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+                orientation_covariance=np.zeros(9), angular_velocity=t["geometry_msgs/msg/Vector3"](*gyro[k]),
+                angular_velocity_covariance=np.zeros(9), linear_acceleration=t["geometry_msgs/msg/Vector3"](*accel[k]),
+                linear_acceleration_covariance=np.zeros(9))
+            bag.write(connection, int(stamps[k]) + 1000, store.serialize_cdr(msg, "sensor_msgs/msg/Imu"))
+    log = read_quietly(next((tmp_path / "bag").glob("*.mcap")))
+    assert list(log.devices) == ["imu/data"]
+    assert np.array_equal(log.samples.gyro, gyro) and np.array_equal(log.samples.accel, accel)
+    assert np.array_equal(log.device.stamp_ns, stamps)
