@@ -94,9 +94,11 @@ def plot_allan(report: AllanReport, out: str | Path, title: str = "") -> Path:
             "spec bias instability": np.full_like(tau, 0.664 * s["bias_instability"]) if s["bias_instability"] else None,
             "spec RRW": s["rrw"] * np.sqrt(tau / 3) if s["rrw"] else None,
         }
-        for (label, values), style in zip(lines.items(), (":", "--", "-.", (0, (5, 1, 1, 1)))):
+        for (label, values), style in zip(lines.items(), ((0, (1, 3)), "--", "-.", ":")):
             if values is not None:
                 ax.loglog(tau, values * to_deg_h, color="0.3", ls=style, lw=1.2, label=label)
+    lowest = min(float(f.allan.adev.min()) for f in report.fits) * to_deg_h
+    ax.set_ylim(bottom=lowest / 5)  # spec lines below the data would only squash the curves
     ax.set_xlabel("averaging time τ (s)")
     ax.set_ylabel("Allan deviation (deg/h)")
     ax.set_title(title or "Allan deviation")
