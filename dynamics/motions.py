@@ -24,9 +24,10 @@ Kinds
     Angular oscillation about x in phase with linear oscillation along y (Savage 1998, part 2).
 
 Building blocks shared with :mod:`dynamics.vehicles`: :class:`TimeGrid` (sinusoids on uniform grids by
-angle addition), :func:`smooth_step` (a C⁵ step from 0 to 1), :func:`rotation_basis` and
-:func:`axis_rotation` (quaternions of a rotation about a fixed axis), :class:`WorldMotion` and
-:class:`EarthBoundSpec`.
+angle addition), :func:`smooth_step` (a C⁵ step from 0 to 1), :func:`rotation_basis`, :class:`WorldMotion` and
+:class:`EarthBoundSpec`. Each kind evaluates its closed forms in one compiled kernel (numba) that
+writes every output once; the kernels share compiled pieces of these blocks (``_sines_block``,
+``_phasor_block``, ``_sincos_block``, ``_smooth_step_at``; see "Speed" below).
 
 Attitudes in config files are ``rpy_deg = [roll, pitch, yaw]`` in degrees with
 ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (:func:`dynamics.rotation.quat_from_euler_zyx`); in the ENU world,
@@ -45,6 +46,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
+import numba
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
@@ -59,12 +61,7 @@ __all__ = [
     "smooth_step",
     "quat_from_rpy_deg",
     "rotation_basis",
-    "axis_rotation",
-    "outer",
-    "half_angle_combination",
     "WorldMotion",
-    "CHUNK",
-    "in_chunks",
     "EarthBoundSpec",
     "Attitude",
     "StaticSpec",
@@ -89,12 +86,18 @@ _E_Z = np.array([0.0, 0.0, 1.0])
 # --------------------------------------------------------------------------------------------------
 # Building blocks
 # --------------------------------------------------------------------------------------------------
+#
+# Speed. The kinds evaluate their closed forms in compiled kernels (numba) that write every output once,
+# in place, block by block (``TimeGrid.BLOCK`` samples, whose scratch arrays stay in the CPU cache).
+# Measured on 10⁶ samples: a fresh (N, 3) array costs 2–3 ns per sample in first touches of new memory,
+# and written in numpy a kind needs dozens of them; a sine and cosine from the C library cost about
+# 10 ns, by angle addition (TimeGrid) or from _sincos_block about 1 ns.
 
 
 class TimeGrid:
     """Sample times, and sinusoids ``sin(ω t + φ)`` evaluated on them.
 
-    Sinusoids are most of the cost of a closed-form motion: numpy's ``sin`` and ``cos`` take about
+    Sinusoids are most of the cost of a closed-form motion: ``sin`` and ``cos`` take about
     10 ns per sample, a multiplication 0.3 ns. On a uniform grid ``t_n = t_0 + n h`` the angle-addition
     theorem removes almost all of them. With ``n = j B + i`` (block ``j`` of ``B`` samples, offset ``i``)::
 
@@ -104,7 +107,10 @@ class TimeGrid:
     a few ulp to what direct evaluation loses already in rounding ``ω t + φ`` (the tests compare both
     against long-double references). A grid counts as uniform when it deviates from
     ``t_0 + n h`` by at most 8 ulp of its largest time, which ``Scenario.times`` (``k / rate_hz``) meets;
-    other grids are evaluated directly, in chunks.
+    other grids are evaluated directly.
+
+    The kinds' kernels take the tables of :meth:`phasor` and :meth:`sines` and evaluate block by block
+    (:func:`_phasor_block`, :func:`_sines_block`).
 
     Parameters
     ----------
@@ -113,10 +119,7 @@ class TimeGrid:
     """
 
     BLOCK = 1024
-    """Samples per block ``B`` on uniform grids."""
-
-    _CHUNK = 8192
-    """Samples per chunk of direct evaluation (bounds the (C, K, chunk) temporaries)."""
+    """Samples per block ``B``: the offset tables and the kernels' scratch arrays."""
 
     def __init__(self, t):
         self.t = np.asarray(t, dtype=float)
@@ -127,7 +130,7 @@ class TimeGrid:
         self.h = float(self.t[-1] - self.t[0]) / (n - 1) if n > 1 else 0.0
         self.uniform = False
         if n >= 4 * self.BLOCK and self.h > 0:
-            deviation = np.abs(self.t - (self.t0 + np.arange(n) * self.h)).max()
+            deviation = _grid_deviation(self.t, self.t0, self.h)  # max |t_n − (t_0 + n h)|
             self.uniform = bool(deviation <= 8 * _EPS * np.abs(self.t[[0, -1]]).max())
         self.sorted = self.uniform or bool(np.all(np.diff(self.t) >= 0))
 
@@ -140,26 +143,38 @@ class TimeGrid:
             return slice(*np.searchsorted(self.t, [start, stop]))
         return np.flatnonzero((self.t >= start) & (self.t < stop))
 
-    def _blocks(self):
-        """Block start times ``t_{jB}`` (J,), taken from the samples themselves, and in-block offsets
-        ``i h`` (B,)."""
-        return self.t[:: self.BLOCK], np.arange(self.BLOCK) * self.h
+    def _offset_tables(self, omega):
+        """``cos(ω i h)`` and ``sin(ω i h)`` for ``i < B``, shape ``omega.shape + (B,)``; empty (last axis
+        0) on other grids, whose kernels evaluate directly."""
+        omega = np.asarray(omega, dtype=float)
+        if not self.uniform:
+            empty = np.empty(omega.shape + (0,))
+            return empty, empty
+        angle = omega[..., None] * (np.arange(self.BLOCK) * self.h)
+        return np.cos(angle), np.sin(angle)
+
+    def phasor(self, omega: float, phase: float = 0.0):
+        """What :func:`_phasor_block` needs for ``cos(ω t + φ)``, ``sin(ω t + φ)``: ``(ω, φ, cos table,
+        sin table)``."""
+        return (float(omega), float(phase)) + self._offset_tables(float(omega))
+
+    def sines(self, amplitude, omega, phase):
+        """What :func:`_sines_block` needs for ``x_c = Σ_k A_ck sin(ω_ck t + φ_ck)``: the arrays (C, K)
+        broadcast from ``amplitude, omega, phase`` (any of (C, K), (C, 1), (K,), scalar) and the offset
+        tables (C, K, B)."""
+        a, w, p = (
+            np.ascontiguousarray(x)
+            for x in np.broadcast_arrays(
+                *(np.atleast_2d(np.asarray(x, dtype=float)) for x in (amplitude, omega, phase))
+            )
+        )
+        return (a, w, p) + self._offset_tables(w)
 
     def cos_sin(self, omega: float, phase: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """``cos(ω t + φ)`` and ``sin(ω t + φ)``, each (N,); ``ω`` in rad/s, ``φ`` in rad."""
-        if not self.uniform:
-            angle = omega * self.t + phase
-            return np.cos(angle), np.sin(angle)
-        starts, offsets = self._blocks()
-        cb, sb = np.cos(omega * starts + phase), np.sin(omega * starts + phase)
-        co, so = np.cos(omega * offsets), np.sin(omega * offsets)
-        # cos(a + b) = cos a cos b − sin a sin b,  sin(a + b) = sin a cos b + cos a sin b
-        c = np.multiply.outer(cb, co)
-        c -= np.multiply.outer(sb, so)
-        s = np.multiply.outer(sb, co)
-        s += np.multiply.outer(cb, so)
-        n = len(self.t)
-        return c.reshape(-1)[:n], s.reshape(-1)[:n]
+        c, s = np.empty(len(self.t)), np.empty(len(self.t))
+        _cos_sin_kernel(self.t, self.uniform, self.BLOCK, self.phasor(omega, phase), c, s)
+        return c, s
 
     def sum_of_sines(self, amplitude, omega, phase) -> np.ndarray:
         """Sums of sinusoids per channel and their first two time derivatives.
@@ -176,52 +191,186 @@ class TimeGrid:
         -------
         ndarray (3, C, N)
             Value, first and second derivative of each channel.
-
-        Notes
-        -----
-        On a uniform grid the sum is a matrix product: with block phasors ``P_jk = exp(i(ω_k t_j + φ_k))``
-        and offset phasors ``Q_ki = exp(i ω_k i h)``, ``x[j B + i] = Σ_k A_k Im(P_jk Q_ki)``
-        ``= Σ_k A_k (Im P_jk Re Q_ki + Re P_jk Im Q_ki)``, one ``(3J × 2K) · (2K × B)`` BLAS product per
-        channel for the value and both derivatives.
         """
-        a, w, p = np.broadcast_arrays(
-            *(np.atleast_2d(np.asarray(x, dtype=float)) for x in (amplitude, omega, phase))
-        )
-        if not self.uniform:
-            return self._sum_of_sines_direct(a, w, p)
-        channels, terms = a.shape
-        n = len(self.t)
-        starts, offsets = self._blocks()
-        block_phase = w[..., None] * starts + p[..., None]  # (C, K, J)
-        pc, ps = np.cos(block_phase), np.sin(block_phase)
-        offset_phase = w[..., None] * offsets  # (C, K, B)
-        right = np.concatenate([np.cos(offset_phase), np.sin(offset_phase)], axis=1)  # (C, 2K, B)
-        a0 = a[..., None]
-        a1 = a0 * w[..., None]
-        a2 = a1 * w[..., None]
-        left = np.stack(
-            [
-                np.concatenate([a0 * ps, a0 * pc], axis=1),  # Σ A Im(PQ)        value
-                np.concatenate([a1 * pc, -a1 * ps], axis=1),  # Σ A ω Re(PQ)      first derivative
-                np.concatenate([-a2 * ps, -a2 * pc], axis=1),  # −Σ A ω² Im(PQ)   second derivative
-            ],
-            axis=1,
-        )  # (C, 3, 2K, J)
-        left = left.transpose(0, 1, 3, 2).reshape(channels, 3 * len(starts), 2 * terms)
-        out = (left @ right).reshape(channels, 3, -1)[:, :, :n]
-        return out.transpose(1, 0, 2)
-
-    def _sum_of_sines_direct(self, a, w, p) -> np.ndarray:
-        out = np.empty((3, a.shape[0], len(self.t)))
-        a1, a2 = a * w, -a * w * w
-        for start in range(0, len(self.t), self._CHUNK):
-            chunk = slice(start, start + self._CHUNK)
-            phase = w[..., None] * self.t[chunk] + p[..., None]  # (C, K, n)
-            s, c = np.sin(phase), np.cos(phase)
-            out[0, :, chunk] = np.einsum("ck,ckn->cn", a, s)
-            out[1, :, chunk] = np.einsum("ck,ckn->cn", a1, c)
-            out[2, :, chunk] = np.einsum("ck,ckn->cn", a2, s)
+        sines = self.sines(amplitude, omega, phase)
+        out = np.empty((3, sines[0].shape[0], len(self.t)))
+        _sum_of_sines_kernel(self.t, self.uniform, self.BLOCK, sines, out)
         return out
+
+
+# Sine and cosine, vectorisable. Every kind needs cos(x/2) and sin(x/2) of angles that are not linear
+# in time (Euler angles, oscillation angles), up to three per sample. The C library's sin and cos are
+# calls the compiler cannot vectorise, about 10 ns a pair; the same argument reduction and polynomials
+# as the C library's (fdlibm, Sun Microsystems 1993: __ieee754_rem_pio2, __kernel_sin, __kernel_cos),
+# written out without branches, vectorise and take about 1 ns a pair in the loops of _sincos_block.
+# Error below 0.8 ulp (the library's: 0.5); results differ from the library's by one ulp in about 3 % of
+# arguments. Valid for |x| ≤ _SINCOS_LIMIT, where the reduction below is exact; callers fall back to
+# the library beyond it (and for NaN, inf).
+
+_SINCOS_LIMIT = 1e6
+"""|x| up to which :func:`_sincos` is accurate: ``n = round(2x/π) < 2²⁰``, so that ``n`` times the
+33-bit parts of π/2 is exact."""
+
+
+@numba.njit(inline="always")
+def _sincos(x):  # pragma: no cover - compiled
+    """``(sin x, cos x)`` for ``|x| ≤ _SINCOS_LIMIT``, branch-free (see the comment above)."""
+    # x = n π/2 + y0 + y1 with |y0 + y1| ≤ π/4: π/2 in 33-bit parts (each product with n exact) and a
+    # tail, fdlibm's reduction to 118 bits (its "second iteration", here always taken).
+    n = np.rint(x * 6.36619772367581382433e-01)  # 2/π
+    hi = x - n * 1.57079632673412561417e00  # π/2, first 33 bits: exact
+    w = n * 6.07710050630396597660e-11  # π/2, next 33 bits
+    r = hi - w
+    w = n * 2.02226624879595063154e-21 - ((hi - r) - w)  # π/2, the rest; and the rounding of r
+    y0 = r - w
+    y1 = (r - y0) - w
+    # fdlibm's __kernel_sin(y0, y1) and __kernel_cos(y0, y1): minimax polynomials on [−π/4, π/4].
+    z = y0 * y0
+    v = z * y0
+    s2, s3, s4 = 8.33333333332248946124e-03, -1.98412698298579493134e-04, 2.75573137070700676789e-06
+    s5, s6 = -2.50507602534068634195e-08, 1.58969099521155010221e-10
+    ps = s2 + z * (s3 + z * (s4 + z * (s5 + z * s6)))
+    sin = y0 - ((z * (0.5 * y1 - v * ps) - y1) + v * 1.66666666666666324348e-01)  # S1 = −1/6 + …
+    c1, c2, c3 = 4.16666666666666019037e-02, -1.38888888888741095749e-03, 2.48015872894767294178e-05
+    c4, c5, c6 = -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.13596475577881948265e-11
+    pc = z * (c1 + z * (c2 + z * (c3 + z * (c4 + z * (c5 + z * c6)))))
+    hz = 0.5 * z
+    one_hz = 1.0 - hz
+    cos = one_hz + (((1.0 - one_hz) - hz) + (z * pc - y0 * y1))
+    # Quadrant n mod 4 (as a float: no integer conversion of a NaN): sin(y + nπ/2) is sin y, cos y,
+    # −sin y, −cos y for n mod 4 = 0, 1, 2, 3; cos(y + nπ/2) is cos y, −sin y, −cos y, sin y.
+    quadrant = n - 4.0 * np.floor(0.25 * n)
+    odd = quadrant == 1.0 or quadrant == 3.0
+    s, c = (cos, sin) if odd else (sin, cos)
+    return (-s if quadrant >= 2.0 else s), (-c if quadrant == 1.0 or quadrant == 2.0 else c)
+
+
+@numba.njit(cache=True)
+def _sin_cos(x):  # pragma: no cover - compiled
+    """``(sin x, cos x)`` for one argument: :func:`_sincos`, or the library beyond its range."""
+    if abs(x) <= _SINCOS_LIMIT:
+        return _sincos(x)
+    return np.sin(x), np.cos(x)
+
+
+@numba.njit(cache=True)
+def _sincos_block(x, count, s, c):  # pragma: no cover - compiled
+    """``s[i], c[i] = sin x[i], cos x[i]`` for ``i < count``: one vectorised loop, then the library for
+    arguments beyond :data:`_SINCOS_LIMIT` (and NaN)."""
+    for i in range(count):
+        s[i], c[i] = _sincos(x[i])
+    for i in range(count):
+        if not abs(x[i]) <= _SINCOS_LIMIT:
+            s[i], c[i] = np.sin(x[i]), np.cos(x[i])
+
+
+@numba.njit(cache=True)
+def _grid_deviation(t, t0, h):  # pragma: no cover - compiled
+    """``max_n |t_n − (t_0 + n h)|`` in one pass (numpy would make three temporaries of N)."""
+    deviation = 0.0
+    for n in range(len(t)):
+        deviation = max(deviation, abs(t[n] - (t0 + n * h)))
+    return deviation
+
+
+@numba.njit(cache=True)
+def _phasor_block(t, start, count, uniform, phasor, c, s):  # pragma: no cover - compiled
+    """``cos(ω t + φ)``, ``sin(ω t + φ)`` at the samples ``start … start + count − 1`` into
+    ``c[:count]``, ``s[:count]``; ``phasor`` from :meth:`TimeGrid.phasor`. On a uniform grid ``start``
+    must begin a block (a multiple of ``B``)."""
+    omega, phase, offset_cos, offset_sin = phasor
+    if uniform:
+        angle = omega * t[start] + phase
+        cb, sb = np.cos(angle), np.sin(angle)
+        for i in range(count):
+            # cos(a + b) = cos a cos b − sin a sin b,  sin(a + b) = sin a cos b + cos a sin b
+            c[i] = cb * offset_cos[i] - sb * offset_sin[i]
+            s[i] = sb * offset_cos[i] + cb * offset_sin[i]
+    else:
+        for i in range(count):
+            angle = omega * t[start + i] + phase
+            c[i], s[i] = np.cos(angle), np.sin(angle)
+
+
+@numba.njit(cache=True)
+def _sines_block(t, start, count, uniform, sines, out):  # pragma: no cover - compiled
+    """Value, first and second derivative of the sums of sinusoids ``sines`` (:meth:`TimeGrid.sines`)
+    at the samples ``start … start + count − 1`` into ``out[d, c, :count]`` (d = 0, 1, 2).
+
+    On a uniform grid each term is ``Im(P Q_i)`` with the block phasor ``P = exp(i(ω t_start + φ))``
+    and the offset phasor ``Q_i`` from the table: ``sin(P + Q) = sin P cos Q + cos P sin Q``. The loops
+    over the block's samples are innermost, where the compiler vectorises them.
+    """
+    amplitude, omega, phase, offset_cos, offset_sin = sines
+    channels, terms = amplitude.shape
+    for ch in range(channels):
+        value, first, second = out[0, ch], out[1, ch], out[2, ch]
+        value[:count] = 0.0
+        first[:count] = 0.0
+        second[:count] = 0.0
+        for k in range(terms):
+            a, w = amplitude[ch, k], omega[ch, k]
+            a1 = a * w  # ẋ = Σ A ω cos(ω t + φ)
+            a2 = a1 * w  # ẍ = −Σ A ω² sin(ω t + φ)
+            if uniform:
+                angle = w * t[start] + phase[ch, k]
+                pc, ps = np.cos(angle), np.sin(angle)
+                qc, qs = offset_cos[ch, k], offset_sin[ch, k]
+                for i in range(count):
+                    sin = ps * qc[i] + pc * qs[i]
+                    cos = pc * qc[i] - ps * qs[i]
+                    value[i] += a * sin
+                    first[i] += a1 * cos
+                    second[i] -= a2 * sin
+            else:
+                for i in range(count):
+                    sin, cos = _sin_cos(w * t[start + i] + phase[ch, k])
+                    value[i] += a * sin
+                    first[i] += a1 * cos
+                    second[i] -= a2 * sin
+
+
+@numba.njit(cache=True)
+def _cos_sin_kernel(t, uniform, block, phasor, c, s):  # pragma: no cover - compiled
+    """:meth:`TimeGrid.cos_sin` block by block."""
+    for start in range(0, len(t), block):
+        count = min(block, len(t) - start)
+        _phasor_block(t, start, count, uniform, phasor, c[start:], s[start:])
+
+
+@numba.njit(cache=True)
+def _sum_of_sines_kernel(t, uniform, block, sines, out):  # pragma: no cover - compiled
+    """:meth:`TimeGrid.sum_of_sines` block by block, into ``out`` (3, C, N)."""
+    for start in range(0, len(t), block):
+        count = min(block, len(t) - start)
+        _sines_block(t, start, count, uniform, sines, out[:, :, start:])
+
+
+@numba.njit(cache=True)
+def _smooth_step_at(u):  # pragma: no cover - compiled
+    """``(S, S′, S″, S‴, I)`` of :func:`smooth_step` at one ``u``."""
+    if u <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 0.0
+    if u >= 1.0:
+        return 1.0, 0.0, 0.0, 0.0, u - 0.5
+    s, c = _sincos(2 * np.pi * u)
+    # The harmonics of 4πu and 6πu in c = cos 2πu, s = sin 2πu, factored on (1 − c) = 2 sin² πu so
+    # that the derivatives vanish exactly at the ends.
+    d = 1 - c
+    return (
+        u - s * (22 - 9 * c + 2 * c * c) / (30 * np.pi),  # S
+        0.4 * (d * d * d),  # S′ = (16/5) sin⁶ πu
+        (12 * np.pi / 5) * s * (d * d),  # S″
+        (24 * np.pi**2 / 5) * (d * d) * (2 + 3 * c),  # S‴
+        0.5 * u * u - d * (109 - 23 * c + 4 * c * c) / (360 * np.pi**2),  # I
+    )
+
+
+@numba.njit(cache=True)
+def _smooth_step_kernel(u, out):  # pragma: no cover - compiled
+    """:func:`smooth_step` of every ``u`` (N,) into ``out`` (5, N)."""
+    for n in range(len(u)):
+        out[0, n], out[1, n], out[2, n], out[3, n], out[4, n] = _smooth_step_at(u[n])
 
 
 def smooth_step(u, derivatives: int = 3, integral: bool = False):
@@ -252,28 +401,9 @@ def smooth_step(u, derivatives: int = 3, integral: bool = False):
         ``(S, S′, …, S^(derivatives))``, then ``I`` when asked for.
     """
     u = np.asarray(u, dtype=float)
-    # On the flat parts S is 0 or 1 and its derivatives 0: evaluate the trigonometry where 0 < u < 1 only.
-    rising = (u > 0.0) & (u < 1.0)
-    out = [(u >= 1.0).astype(float)] + [np.zeros_like(u) for _ in range(derivatives)]
-    if integral:
-        out.append(np.where(u >= 1.0, u - 0.5, 0.0))
-    if not rising.any():
-        return tuple(out)
-    where = slice(None) if rising.all() else np.flatnonzero(rising)
-    x = u[where]
-    c, s = np.cos(2 * np.pi * x), np.sin(2 * np.pi * x)
-    # The harmonics of 4πu and 6πu in c = cos 2πu, s = sin 2πu, factored on (1 − c) = 2 sin² πu so
-    # that the derivatives vanish exactly at the ends.
-    out[0][where] = x - s * (22 - 9 * c + 2 * c * c) / (30 * np.pi)  # S
-    if derivatives >= 1:
-        out[1][where] = 0.4 * (1 - c) ** 3  # S′ = (16/5) sin⁶ πu
-    if derivatives >= 2:
-        out[2][where] = (12 * np.pi / 5) * s * (1 - c) ** 2  # S″
-    if derivatives >= 3:
-        out[3][where] = (24 * np.pi**2 / 5) * (1 - c) ** 2 * (2 + 3 * c)  # S‴
-    if integral:
-        out[-1][where] = 0.5 * x * x - (1 - c) * (109 - 23 * c + 4 * c * c) / (360 * np.pi**2)  # I
-    return tuple(out)
+    out = np.empty((5,) + u.shape)  # S, S′, S″, S‴, I
+    _smooth_step_kernel(u.reshape(-1), out.reshape(5, -1))  # the kinds' kernels call _smooth_step_at
+    return tuple(out[k, ...] for k in range(derivatives + 1)) + ((out[4, ...],) if integral else ())
 
 
 def quat_from_rpy_deg(rpy_deg) -> np.ndarray:
@@ -300,34 +430,6 @@ def rotation_basis(axis, q_left=(1.0, 0.0, 0.0, 0.0), q_right=(1.0, 0.0, 0.0, 0.
     axis = np.asarray(axis, dtype=float)
     pure = np.concatenate([np.zeros(axis.shape[:-1] + (1,)), axis], axis=-1)
     return quat_multiply(q_left, q_right), quat_multiply(quat_multiply(q_left, pure), q_right)
-
-
-def axis_rotation(angle, axis, q_left=(1.0, 0.0, 0.0, 0.0), q_right=(1.0, 0.0, 0.0, 0.0)) -> np.ndarray:
-    """Quaternions ``q_left ⊗ exp(½ θ n) ⊗ q_right`` (N, 4) for angles ``θ`` (N,), rad, about a unit
-    axis ``n``."""
-    half = 0.5 * np.asarray(angle, dtype=float)
-    return half_angle_combination(np.cos(half), np.sin(half), *rotation_basis(axis, q_left, q_right))
-
-
-def outer(x, v) -> np.ndarray:
-    """``x[:, None] * v`` (N, k) for ``x`` (N,) and ``v`` (k,) or (N, k), filled column by column.
-
-    Numpy broadcasting with a trailing axis of 3 or 4 runs its inner loop 3 or 4 elements long and is
-    about six times slower than these k passes over N elements.
-    """
-    v = np.asarray(v, dtype=float)
-    out = np.empty((len(x), v.shape[-1]))
-    for i in range(v.shape[-1]):
-        np.multiply(x, v[..., i], out=out[:, i])
-    return out
-
-
-def half_angle_combination(c, s, a, b) -> np.ndarray:
-    """``c A + s B`` (N, 4): the quaternions of :func:`rotation_basis` from the half-angle cosines and
-    sines ``c, s`` (N,); ``A, B`` are (4,) or, gathered per sample, (N, 4)."""
-    q = outer(c, a)
-    q += outer(s, b)
-    return q
 
 
 def _unit(v, what: str) -> np.ndarray:
@@ -368,39 +470,55 @@ class WorldMotion:
     @classmethod
     def rotation_only(cls, t, q_wb, omega_wb_b, alpha_wb_b, extras=None) -> "WorldMotion":
         """A body that rotates about its fixed reference point at the world origin."""
-        zeros = np.zeros((len(t), 3))
-        return cls(t, q_wb, omega_wb_b, alpha_wb_b, zeros, zeros.copy(), zeros.copy(), extras or {})
+        # Three calls, not copies of one: np.zeros maps zero pages lazily, copies would write them.
+        n = len(t)
+        pos, vel, acc = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
+        return cls(t, q_wb, omega_wb_b, alpha_wb_b, pos, vel, acc, extras or {})
 
 
-CHUNK = 8192
-"""Samples per part in :func:`in_chunks`: the temporaries (64 KiB each) stay in the CPU cache, which
-makes closed forms with dozens of intermediate arrays (Euler angles, the car) 1.5–2 times faster on
-10⁶ samples than one pass over the whole arrays, whose every temporary is fresh memory."""
+def _motion_arrays(n: int, moves: bool):
+    """Outputs for a kind's kernel: ``q_wb`` (N, 4), ``ω_wb``, ``α_wb`` (N, 3), position, velocity,
+    acceleration (N, 3). The kernel writes all of them if the body ``moves``; else position, velocity and
+    acceleration are zeros (``np.zeros`` maps fresh zero pages lazily, cheaper than writing zeros; for
+    arrays the kernel writes anyway ``np.empty`` spares the zeroing of reused memory)."""
+    q, omega, alpha = np.empty((n, 4)), np.empty((n, 3)), np.empty((n, 3))
+    new = np.empty if moves else np.zeros
+    return q, omega, alpha, new((n, 3)), new((n, 3)), new((n, 3))
+
+
+@numba.njit(cache=True)
+def _rotate(q, x, y, z):  # pragma: no cover - compiled
+    """``q ⊗ (0, v) ⊗ q*`` for one vector ``v = (x, y, z)``: the formula of
+    :func:`dynamics.rotation.quat_rotate`, ``v + 2w (u × v) + 2 u × (u × v)``."""
+    w, qx, qy, qz = q[0], q[1], q[2], q[3]
+    tx = 2.0 * (qy * z - qz * y)  # t = 2 u × v
+    ty = 2.0 * (qz * x - qx * z)
+    tz = 2.0 * (qx * y - qy * x)
+    return (
+        x + w * tx + (qy * tz - qz * ty),  # v + w t + u × t
+        y + w * ty + (qz * tx - qx * tz),
+        z + w * tz + (qx * ty - qy * tx),
+    )
+
+
+@numba.njit(cache=True)
+def _cross(ax, ay, az, bx, by, bz):  # pragma: no cover - compiled
+    """``a × b`` as ``np.cross`` computes it."""
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+
+
+@numba.njit(cache=True)
+def _segment(edges, x, k):  # pragma: no cover - compiled
+    """``max(searchsorted(edges, x, side="right") − 1, 0)``: the last of the sorted ``edges`` at or
+    before ``x`` (0 before the first). Tries ``k``, the previous sample's segment, first: consecutive
+    samples mostly share it."""
+    last = len(edges) - 1
+    if (k == 0 or edges[k] <= x) and (k == last or x < edges[k + 1]):
+        return k
+    return max(np.searchsorted(edges, x, side="right") - 1, 0)
+
 
 _MOTION_ARRAYS = ("q_wb", "omega_wb_b", "alpha_wb_b", "pos_w", "vel_w", "acc_w")
-
-
-def in_chunks(t, evaluate, chunk: int = CHUNK) -> WorldMotion:
-    """``evaluate(t_part) -> WorldMotion`` on consecutive parts of ``t``, assembled into one WorldMotion.
-
-    For closed forms with many intermediate arrays (Euler angles, the car); ``evaluate`` must hold
-    everything that does not depend on time (schedules, series, transients) so that each call is cheap.
-    """
-    t = np.asarray(t, dtype=float)
-    if len(t) <= chunk:
-        return evaluate(t)
-    out = extras = None
-    for start in range(0, len(t), chunk):
-        part = slice(start, start + chunk)
-        m = evaluate(t[part])
-        if out is None:
-            out = {name: np.empty((len(t),) + getattr(m, name).shape[1:]) for name in _MOTION_ARRAYS}
-            extras = {k: np.empty((len(t),) + v.shape[1:], dtype=v.dtype) for k, v in m.extras.items()}
-        for name, array in out.items():
-            array[part] = getattr(m, name)
-        for k, array in extras.items():
-            array[part] = m.extras[k]
-    return WorldMotion(t, **out, extras=extras)
 
 
 class EarthBoundSpec(ScenarioSpec):
@@ -619,44 +737,34 @@ class RateTableSpec(EarthBoundSpec):
         return next(m for m in ("constant", "steps", "tumble") if getattr(self, m) is not None)
 
     def world_motion(self, t):
+        t = np.asarray(t, dtype=float)
         q_base = quat_from_rpy_deg(self.table.base_rpy_deg)
         q_mount = quat_from_rpy_deg(self.table.mount_rpy_deg)
         if self.tumble is not None:
             return self._tumble_motion(t, q_base, q_mount)
-        mode = getattr(self, self.mode)
-        angle, rate, accel = mode.angle(t)
-        if self.constant is not None:  # θ/2 = θ0/2 + (ω/2) t: cosine and sine by angle addition
-            c, s = TimeGrid(t).cos_sin(
-                0.5 * np.radians(mode.rate_deg_s), 0.5 * np.radians(mode.initial_angle_deg)
-            )
+        grid = TimeGrid(t)
+        if self.constant is not None:
+            # θ = θ0 + ω t: one segment of the schedule (the steps' formulas give exactly θ0 + ω t), and
+            # θ/2 = θ0/2 + (ω/2) t, cosine and sine by angle addition.
+            rate = np.radians(self.constant.rate_deg_s)
+            initial = np.radians(self.constant.initial_angle_deg)
+            schedule = tuple(np.array([x]) for x in (0.0, initial, rate, 0.0))
+            half = grid.phasor(0.5 * rate, 0.5 * initial)
         else:
-            c, s = np.cos(0.5 * angle), np.sin(0.5 * angle)
-        # q_wb = q_base ⊗ Rz(θ) ⊗ q_mount
-        q = half_angle_combination(c, s, *rotation_basis(_E_Z, q_base, q_mount))
+            schedule = self.steps.schedule()
+            half = grid.phasor(0.0)  # unused: cos(θ/2), sin(θ/2) directly
+        # q_wb = q_base ⊗ Rz(θ) ⊗ q_mount = cos(θ/2) A + sin(θ/2) B
+        a, b = rotation_basis(_E_Z, q_base, q_mount)
         axis_b = quat_rotate(quat_conjugate(q_mount), _E_Z)  # u_b = R_mount^T e_z
-        motion = WorldMotion.rotation_only(
-            t,
-            q,
-            outer(rate, axis_b),
-            outer(accel, axis_b),
-            extras={"table_angle_rad": angle, "table_rate_rad_s": rate},
-        )
+        n = len(t)
         lever = np.asarray(self.table.lever_arm_m, dtype=float)
-        if not lever.any():
-            return motion
-        # p = R_base Rz(θ) r, with cos θ = c² − s², sin θ = 2 s c from the half angle.
-        cos, sin = c * c - s * s, 2 * s * c
-        p_base = np.stack(
-            [lever[0] * cos - lever[1] * sin, lever[0] * sin + lever[1] * cos, np.full_like(cos, lever[2])],
-            -1,
+        arrays = _motion_arrays(n, moves=bool(lever.any()))
+        angle, rate = np.empty(n), np.empty(n)
+        _rate_table_kernel(
+            t, grid.uniform, grid.BLOCK, schedule, half, self.constant is not None, a, b, axis_b, q_base,
+            lever, *arrays, angle, rate,
         )
-        pos = quat_rotate(q_base, p_base)
-        n_w = quat_rotate(q_base, _E_Z)
-        n_x_p = np.cross(n_w, pos)
-        vel = outer(rate, n_x_p)  # v = θ̇ n × p
-        # a = θ̈ n × p + θ̇² n × (n × p)
-        acc = outer(accel, n_x_p) + outer(rate * rate, np.cross(n_w, n_x_p))
-        return WorldMotion(t, q, motion.omega_wb_b, motion.alpha_wb_b, pos, vel, acc, motion.extras)
+        return WorldMotion(t, *arrays, extras={"table_angle_rad": angle, "table_rate_rad_s": rate})
 
     def _tumble_motion(self, t, q_base, q_mount):
         tumble = self.tumble
@@ -666,37 +774,114 @@ class RateTableSpec(EarthBoundSpec):
         # q_wb = q_base ⊗ q_k ⊗ exp(½ S φ_k) ⊗ q_mount = cos(S|φ|/2) A_k + sin(S|φ|/2) B_k
         a, b = rotation_basis(axes, quat_multiply(q_base, positions), q_mount)
         axes_b = quat_rotate(quat_conjugate(q_mount), axes)  # R_mount^T φ̂_k
-        period = tumble.dwell_s + tumble.move_s
         lever = np.asarray(self.table.lever_arm_m, dtype=float)
+        arrays = _motion_arrays(len(t), moves=bool(lever.any()))
+        _tumble_kernel(
+            t, tumble.dwell_s + tumble.move_s, tumble.dwell_s, tumble.move_s, angles, a, b, axes, axes_b,
+            quat_conjugate(q_mount), lever, *arrays,
+        )
+        return WorldMotion(t, *arrays)
 
-        def evaluate(t):
-            k = np.clip(np.floor(t / period), 0, len(positions) - 1).astype(np.intp)
-            # u ≤ 0 while dwelling, 0 → 1 while moving
-            u = (t - k * period - tumble.dwell_s) / tumble.move_s
-            step, slope, curvature = smooth_step(u, derivatives=2)
-            angle = angles[k]
-            # While dwelling the half angle is 0: cos 1, sin 0; the trigonometry only for the moves.
-            c, s = np.ones_like(t), np.zeros_like(t)
-            moving = np.flatnonzero(step * angle)
-            half = 0.5 * angle[moving] * step[moving]
-            c[moving], s[moving] = np.cos(half), np.sin(half)
-            q = half_angle_combination(c, s, a[k], b[k])
-            rate = angle * slope / tumble.move_s  # d/dt (S |φ|) = |φ| S′ / T
-            accel = angle * curvature / tumble.move_s**2
-            motion = WorldMotion.rotation_only(t, q, outer(rate, axes_b[k]), outer(accel, axes_b[k]))
-            if not lever.any():
-                return motion
+
+@numba.njit(cache=True)
+def _rate_table_kernel(
+    t, uniform, block, schedule, half, by_phasor, a, b, axis_b, q_base, lever,
+    q, omega, alpha, pos, vel, acc, angle_out, rate_out,
+):  # pragma: no cover - compiled
+    """:meth:`RateTableSpec.world_motion` in the turning modes, block by block.
+
+    ``schedule``: segments of constant angular acceleration (:meth:`RateSteps.schedule`), which give the
+    table angle, rate and acceleration of each sample. ``cos(θ/2)``, ``sin(θ/2)`` of the block come from
+    the phasor ``half`` of ``θ/2`` (:meth:`TimeGrid.phasor`) when ``by_phasor`` (constant rate), else from
+    :func:`_sincos_block`.
+    """
+    start_s, angle0, rate0, accel0 = schedule
+    n_w = _rotate(q_base, 0.0, 0.0, 1.0)  # the table axis in the world
+    has_lever = lever[0] != 0.0 or lever[1] != 0.0 or lever[2] != 0.0
+    c, s, half_angle, accels = np.empty(block), np.empty(block), np.empty(block), np.empty(block)
+    k = 0
+    for start in range(0, len(t), block):
+        count = min(block, len(t) - start)
+        for i in range(count):
+            j = start + i
+            k = _segment(start_s, t[j], k)
+            tau = t[j] - start_s[k]
+            accels[i] = accel0[k]
+            rate_out[j] = rate0[k] + accel0[k] * tau
+            angle_out[j] = angle0[k] + (rate0[k] + 0.5 * accel0[k] * tau) * tau  # θ0 + ω0 τ + ½ a τ²
+            half_angle[i] = 0.5 * angle_out[j]
+        if by_phasor:
+            _phasor_block(t, start, count, uniform, half, c, s)
+        else:
+            _sincos_block(half_angle, count, s, c)
+        for i in range(count):
+            j = start + i
+            rate, accel = rate_out[j], accels[i]
+            for m in range(4):
+                q[j, m] = c[i] * a[m] + s[i] * b[m]
+            for m in range(3):
+                omega[j, m] = rate * axis_b[m]  # ω_wb = θ̇ u_b
+                alpha[j, m] = accel * axis_b[m]  # α_wb = θ̈ u_b
+            if has_lever:
+                # p = R_base Rz(θ) r, with cos θ = c² − s², sin θ = 2 s c from the half angle.
+                cos, sin = c[i] * c[i] - s[i] * s[i], 2 * s[i] * c[i]
+                px, py, pz = _rotate(
+                    q_base, lever[0] * cos - lever[1] * sin, lever[0] * sin + lever[1] * cos, lever[2]
+                )
+                # v = θ̇ n × p,  a = θ̈ n × p + θ̇² n × (n × p)
+                nx, ny, nz = _cross(n_w[0], n_w[1], n_w[2], px, py, pz)
+                nnx, nny, nnz = _cross(n_w[0], n_w[1], n_w[2], nx, ny, nz)
+                rate2 = rate * rate
+                pos[j, 0], pos[j, 1], pos[j, 2] = px, py, pz
+                vel[j, 0], vel[j, 1], vel[j, 2] = rate * nx, rate * ny, rate * nz
+                acc[j, 0] = accel * nx + rate2 * nnx
+                acc[j, 1] = accel * ny + rate2 * nny
+                acc[j, 2] = accel * nz + rate2 * nnz
+
+
+@numba.njit(cache=True)
+def _tumble_kernel(
+    t, period, dwell, move, angles, a, b, axes, axes_b, q_mount_conj, lever, q, omega, alpha, pos, vel, acc
+):  # pragma: no cover - compiled
+    """The tumble of :meth:`RateTableSpec._tumble_motion`, one pass over the samples."""
+    has_lever = lever[0] != 0.0 or lever[1] != 0.0 or lever[2] != 0.0
+    last = len(angles) - 1
+    for j in range(len(t)):
+        k = int(min(max(np.floor(t[j] / period), 0.0), last))
+        # u ≤ 0 while dwelling, 0 → 1 while moving
+        u = (t[j] - k * period - dwell) / move
+        step, slope, curvature, _, _ = _smooth_step_at(u)
+        angle = angles[k]
+        # While dwelling the half angle is 0: cos 1, sin 0; the trigonometry only for the moves.
+        c, s = 1.0, 0.0
+        if step * angle != 0.0:
+            s, c = _sin_cos(0.5 * angle * step)
+        for m in range(4):
+            q[j, m] = c * a[k, m] + s * b[k, m]
+        rate = angle * slope / move  # d/dt (S |φ|) = |φ| S′ / T
+        accel = angle * curvature / (move * move)
+        for m in range(3):
+            omega[j, m] = rate * axes_b[k, m]
+            alpha[j, m] = accel * axes_b[k, m]
+        if has_lever:
             # Rigid lever arm on the table top:
-            # p = R_wt r,  v = R_wt (ω_t × r),  a = R_wt (α_t × r + ω_t × (ω_t × r)).
-            q_wt = quat_multiply(q, quat_conjugate(q_mount))
-            omega_t, alpha_t = outer(rate, axes[k]), outer(accel, axes[k])
-            w_x_r = np.cross(omega_t, lever)
-            pos = quat_rotate(q_wt, lever)
-            vel = quat_rotate(q_wt, w_x_r)
-            acc = quat_rotate(q_wt, np.cross(alpha_t, lever) + np.cross(omega_t, w_x_r))
-            return WorldMotion(t, q, motion.omega_wb_b, motion.alpha_wb_b, pos, vel, acc)
-
-        return in_chunks(t, evaluate)
+            # p = R_wt r,  v = R_wt (ω_t × r),  a = R_wt (α_t × r + ω_t × (ω_t × r)),  q_wt = q_wb ⊗ q_mount*.
+            pw, px, py, pz = q[j, 0], q[j, 1], q[j, 2], q[j, 3]
+            mw, mx, my, mz = q_mount_conj[0], q_mount_conj[1], q_mount_conj[2], q_mount_conj[3]
+            q_wt = (
+                pw * mw - px * mx - py * my - pz * mz,
+                pw * mx + px * mw + py * mz - pz * my,
+                pw * my - px * mz + py * mw + pz * mx,
+                pw * mz + px * my - py * mx + pz * mw,
+            )
+            wx, wy, wz = rate * axes[k, 0], rate * axes[k, 1], rate * axes[k, 2]
+            ax, ay, az = accel * axes[k, 0], accel * axes[k, 1], accel * axes[k, 2]
+            wrx, wry, wrz = _cross(wx, wy, wz, lever[0], lever[1], lever[2])
+            arx, ary, arz = _cross(ax, ay, az, lever[0], lever[1], lever[2])
+            wwx, wwy, wwz = _cross(wx, wy, wz, wrx, wry, wrz)
+            pos[j, 0], pos[j, 1], pos[j, 2] = _rotate(q_wt, lever[0], lever[1], lever[2])
+            vel[j, 0], vel[j, 1], vel[j, 2] = _rotate(q_wt, wrx, wry, wrz)
+            acc[j, 0], acc[j, 1], acc[j, 2] = _rotate(q_wt, arx + wwx, ary + wwy, arz + wwz)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -740,23 +925,60 @@ class OscillationSpec(EarthBoundSpec):
     linear: LinearOscillation | None = None
 
     def world_motion(self, t):
+        t = np.asarray(t, dtype=float)
         grid = TimeGrid(t)
         osc = self.angular
         axis = _unit(osc.axis_b, "axis_b")
-        angle, rate, accel = grid.sum_of_sines(
-            np.radians(osc.amplitude_deg), 2 * np.pi * osc.frequency_hz, np.radians(osc.phase_deg)
-        )[:, 0]
-        q = axis_rotation(angle, axis, q_left=self.attitude.quat())
-        motion = WorldMotion.rotation_only(t, q, outer(rate, axis), outer(accel, axis))
-        if self.linear is None:
-            return motion
-        lin = self.linear
-        amplitude = np.asarray(lin.amplitude_m, dtype=float)[:, None]
-        # Each world axis: a_i sin(2π f t + φ); one channel per axis, (3 derivatives, 3 axes, N).
-        pos, vel, acc = grid.sum_of_sines(amplitude, 2 * np.pi * lin.frequency_hz, np.radians(lin.phase_deg))
-        return WorldMotion(
-            t, q, motion.omega_wb_b, motion.alpha_wb_b, pos.T.copy(), vel.T.copy(), acc.T
-        )
+        # Channels (amplitude, ω, φ): θ = A sin(2π f t + φ); with [linear] the position along the
+        # amplitude vector a, sin(2π f_l t + φ_l).
+        channels = [(np.radians(osc.amplitude_deg), 2 * np.pi * osc.frequency_hz, np.radians(osc.phase_deg))]
+        directions = np.zeros((0, 3))
+        if self.linear is not None:
+            lin = self.linear
+            channels.append((1.0, 2 * np.pi * lin.frequency_hz, np.radians(lin.phase_deg)))
+            directions = np.asarray(lin.amplitude_m, dtype=float)[None, :]
+        sines = grid.sines(*np.array(channels).T[:, :, None])  # each (C, 1)
+        a, b = rotation_basis(axis, self.attitude.quat())
+        arrays = _motion_arrays(len(t), moves=self.linear is not None)
+        _axis_oscillation_kernel(t, grid.uniform, grid.BLOCK, sines, a, b, axis, directions, *arrays)
+        return WorldMotion(t, *arrays)
+
+
+@numba.njit(cache=True)
+def _axis_oscillation_kernel(
+    t, uniform, block, sines, a, b, axis, directions, q, omega, alpha, pos, vel, acc
+):  # pragma: no cover - compiled
+    """Oscillation about a fixed body axis with linear oscillations, block by block (oscillation, sculling).
+
+    Channel 0 of the sums of sinusoids ``sines`` is the angle θ about ``axis`` (body axes):
+    ``q_wb = cos(θ/2) A + sin(θ/2) B`` (:func:`rotation_basis`), ``ω_wb = θ̇ n``, ``α_wb = θ̈ n``. Each
+    further channel ``c`` moves the body along the world vector ``directions[c − 1]`` (position,
+    velocity and acceleration: the channel's value and derivatives times it).
+    """
+    channels = sines[0].shape[0]
+    buf = np.empty((3, channels, block))
+    half, c, s = np.empty(block), np.empty(block), np.empty(block)
+    for start in range(0, len(t), block):
+        count = min(block, len(t) - start)
+        _sines_block(t, start, count, uniform, sines, buf)
+        for i in range(count):
+            half[i] = 0.5 * buf[0, 0, i]
+        _sincos_block(half, count, s, c)
+        for i in range(count):
+            j = start + i
+            for m in range(4):
+                q[j, m] = c[i] * a[m] + s[i] * b[m]
+            for m in range(3):
+                omega[j, m] = buf[1, 0, i] * axis[m]
+                alpha[j, m] = buf[2, 0, i] * axis[m]
+            if channels > 1:
+                for m in range(3):
+                    p = v = ac = 0.0
+                    for ch in range(1, channels):
+                        p += buf[0, ch, i] * directions[ch - 1, m]
+                        v += buf[1, ch, i] * directions[ch - 1, m]
+                        ac += buf[2, ch, i] * directions[ch - 1, m]
+                    pos[j, m], vel[j, m], acc[j, m] = p, v, ac
 
 
 # --------------------------------------------------------------------------------------------------
@@ -799,24 +1021,37 @@ class ConingSpec(EarthBoundSpec):
     coning: Coning
 
     def world_motion(self, t):
+        t = np.asarray(t, dtype=float)
         cone = self.coning
         theta, omega = np.radians(cone.half_angle_deg), 2 * np.pi * cone.frequency_hz
-        cos_t, sin_t = TimeGrid(t).cos_sin(omega)
+        grid = TimeGrid(t)
         q_ref = quat_from_rpy_deg(cone.reference_rpy_deg)
         # q_wb = q_ref ⊗ q_rb = cos(θ/2) q_ref + sin(θ/2) [cos Ωt (q_ref ⊗ j) + sin Ωt (q_ref ⊗ k)]
         j, k = quat_multiply(q_ref, [0.0, 0.0, 1.0, 0.0]), quat_multiply(q_ref, [0.0, 0.0, 0.0, 1.0])
-        q = half_angle_combination(cos_t, sin_t, np.sin(theta / 2) * j, np.sin(theta / 2) * k)
-        q += np.cos(theta / 2) * q_ref
         w = omega * np.sin(theta)
-        rate = np.empty((len(t), 3))
-        rate[:, 0] = -omega * (1 - np.cos(theta))
-        rate[:, 1] = -w * sin_t
-        rate[:, 2] = w * cos_t
-        accel = np.empty((len(t), 3))
-        accel[:, 0] = 0.0
-        accel[:, 1] = -omega * w * cos_t
-        accel[:, 2] = -omega * w * sin_t
+        n = len(t)
+        q, rate, accel = np.empty((n, 4)), np.empty((n, 3)), np.empty((n, 3))
+        _coning_kernel(
+            t, grid.uniform, grid.BLOCK, grid.phasor(omega), np.sin(theta / 2) * j, np.sin(theta / 2) * k,
+            np.cos(theta / 2) * q_ref, -omega * (1 - np.cos(theta)), w, -omega * w, q, rate, accel,
+        )
         return WorldMotion.rotation_only(t, q, rate, accel)
+
+
+@numba.njit(cache=True)
+def _coning_kernel(t, uniform, block, phasor, sj, sk, cq, rate_x, w, ow, q, rate, accel):  # pragma: no cover
+    """:meth:`ConingSpec.world_motion` block by block: ``q = cos Ωt sj + sin Ωt sk + cq``,
+    ``ω = (rate_x, −w sin Ωt, w cos Ωt)``, ``α = (0, ow cos Ωt, ow sin Ωt)`` with ``ow = −Ω w``."""
+    c, s = np.empty(block), np.empty(block)
+    for start in range(0, len(t), block):
+        count = min(block, len(t) - start)
+        _phasor_block(t, start, count, uniform, phasor, c, s)
+        for i in range(count):
+            j = start + i
+            for m in range(4):
+                q[j, m] = (c[i] * sj[m] + s[i] * sk[m]) + cq[m]
+            rate[j, 0], rate[j, 1], rate[j, 2] = rate_x, -w * s[i], w * c[i]
+            accel[j, 0], accel[j, 1], accel[j, 2] = 0.0, ow * c[i], ow * s[i]
 
 
 # --------------------------------------------------------------------------------------------------
@@ -861,19 +1096,20 @@ class ScullingSpec(EarthBoundSpec):
     sculling: Sculling
 
     def world_motion(self, t):
+        t = np.asarray(t, dtype=float)
         sc = self.sculling
         omega = 2 * np.pi * sc.frequency_hz
         theta0, accel_amp = np.radians(sc.angular_amplitude_deg), sc.acceleration_amplitude_m_s2
         grid = TimeGrid(t)
         # Channel 0: θ = θ0 sin Ωt.
-        # Channel 1: displacement y = −A/Ω² sin(Ωt + φ), so that ÿ = A sin(Ωt + φ).
-        (angle, y), (rate, vy), (accel, ay) = grid.sum_of_sines(
-            [[theta0], [-accel_amp / omega**2]], omega, [[0.0], [np.radians(sc.phase_deg)]]
-        )
+        # Channel 1: displacement y = −A/Ω² sin(Ωt + φ), so that ÿ = A sin(Ωt + φ), along the reference
+        # y axis.
+        sines = grid.sines([[theta0], [-accel_amp / omega**2]], omega, [[0.0], [np.radians(sc.phase_deg)]])
         q_ref = quat_from_rpy_deg(sc.reference_rpy_deg)
         e_x = np.array([1.0, 0.0, 0.0])
-        q = axis_rotation(angle, e_x, q_left=q_ref)
         y_w = quat_rotate(q_ref, [0.0, 1.0, 0.0])  # the reference y axis in the world
-        return WorldMotion(
-            t, q, outer(rate, e_x), outer(accel, e_x), outer(y, y_w), outer(vy, y_w), outer(ay, y_w)
+        arrays = _motion_arrays(len(t), moves=True)
+        _axis_oscillation_kernel(
+            t, grid.uniform, grid.BLOCK, sines, *rotation_basis(e_x, q_ref), e_x, y_w[None, :], *arrays
         )
+        return WorldMotion(t, *arrays)

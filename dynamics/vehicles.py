@@ -24,6 +24,7 @@ quadrature; see :class:`Road`), independent of the output grid.
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Annotated, Literal
 
 import numba
@@ -32,7 +33,18 @@ from numpy.polynomial import Chebyshev
 from pydantic import Field, StrictInt, field_validator
 
 from .config import NonNegativeReal, PositiveReal, Real, Section, Vec3
-from .motions import EarthBoundSpec, TimeGrid, WorldMotion, in_chunks, smooth_step
+from .motions import (
+    EarthBoundSpec,
+    TimeGrid,
+    WorldMotion,
+    _motion_arrays,
+    _segment,
+    _sin_cos,
+    _sincos_block,
+    _sines_block,
+    _smooth_step_at,
+    smooth_step,
+)
 
 __all__ = [
     "euler_zyx_motion",
@@ -57,8 +69,8 @@ def euler_zyx_motion(rpy, rpy_rates, rpy_accels):
 
     The same equations as :func:`dynamics.rotation.quat_from_euler_zyx` and
     :func:`dynamics.rotation.body_rate_from_euler_zyx`, sharing six sines and cosines between them
-    (the full angles' from the half angles' by the double-angle formulas), evaluated in parts of
-    :data:`~dynamics.motions.CHUNK` samples.
+    (the full angles' from the half angles' by the double-angle formulas), one compiled pass over the
+    samples (:func:`_euler_zyx_sample`, which the kinds' kernels call as well).
 
     Parameters
     ----------
@@ -85,29 +97,40 @@ def euler_zyx_motion(rpy, rpy_rates, rpy_accels):
 def _euler_zyx_kernel(rpy, rpy_rates, rpy_accels, q, omega, alpha):  # pragma: no cover - compiled
     """:func:`euler_zyx_motion`, one sample at a time, written into ``q``, ``omega``, ``alpha``."""
     for i in range(rpy.shape[1]):
-        droll, dpitch, dyaw = rpy_rates[0, i], rpy_rates[1, i], rpy_rates[2, i]
-        ddroll, ddpitch, ddyaw = rpy_accels[0, i], rpy_accels[1, i], rpy_accels[2, i]
-        cr, sr = np.cos(0.5 * rpy[0, i]), np.sin(0.5 * rpy[0, i])
-        cp, sp = np.cos(0.5 * rpy[1, i]), np.sin(0.5 * rpy[1, i])
-        cy, sy = np.cos(0.5 * rpy[2, i]), np.sin(0.5 * rpy[2, i])
-        # q = q_z(ψ) ⊗ q_y(θ) ⊗ q_x(φ), written out in the half-angle cosines and sines.
-        cycp, sysp, cysp, sycp = cy * cp, sy * sp, cy * sp, sy * cp
-        q[i, 0] = cycp * cr + sysp * sr
-        q[i, 1] = cycp * sr - sysp * cr
-        q[i, 2] = cysp * cr + sycp * sr
-        q[i, 3] = sycp * cr - cysp * sr
-        # Full angles: sin x = 2 sin(x/2) cos(x/2), cos x = cos²(x/2) − sin²(x/2).
-        s_r, c_r = 2 * sr * cr, cr * cr - sr * sr
-        s_p, c_p = 2 * sp * cp, cp * cp - sp * sp
-        yaw_cp = dyaw * c_p  # ψ̇ cθ
-        omega[i, 0] = droll - dyaw * s_p
-        omega[i, 1] = dpitch * c_r + yaw_cp * s_r
-        omega[i, 2] = yaw_cp * c_r - dpitch * s_r
-        # α: differentiate ω; d(cθ)/dt = −θ̇ sθ, d(sφ)/dt = φ̇ cφ, ...
-        lateral = ddyaw * c_p - dyaw * dpitch * s_p  # d/dt (ψ̇ cθ)
-        alpha[i, 0] = ddroll - ddyaw * s_p - dyaw * dpitch * c_p
-        alpha[i, 1] = (ddpitch * c_r - dpitch * droll * s_r) + lateral * s_r + yaw_cp * droll * c_r
-        alpha[i, 2] = (-ddpitch * s_r - dpitch * droll * c_r) + lateral * c_r - yaw_cp * droll * s_r
+        _euler_zyx_sample(
+            np.cos(0.5 * rpy[0, i]), np.sin(0.5 * rpy[0, i]),
+            np.cos(0.5 * rpy[1, i]), np.sin(0.5 * rpy[1, i]),
+            np.cos(0.5 * rpy[2, i]), np.sin(0.5 * rpy[2, i]),
+            rpy_rates[0, i], rpy_rates[1, i], rpy_rates[2, i],
+            rpy_accels[0, i], rpy_accels[1, i], rpy_accels[2, i],
+            q[i], omega[i], alpha[i],
+        )
+
+
+@numba.njit(cache=True)
+def _euler_zyx_sample(
+    cr, sr, cp, sp, cy, sy, droll, dpitch, dyaw, ddroll, ddpitch, ddyaw, q, omega, alpha
+):  # pragma: no cover - compiled
+    """One sample of :func:`euler_zyx_motion` from the cosines and sines of the half angles
+    ``φ/2, θ/2, ψ/2`` and the angles' rates and accelerations, into ``q`` (4,), ``omega``, ``alpha`` (3,)."""
+    # q = q_z(ψ) ⊗ q_y(θ) ⊗ q_x(φ), written out in the half-angle cosines and sines.
+    cycp, sysp, cysp, sycp = cy * cp, sy * sp, cy * sp, sy * cp
+    q[0] = cycp * cr + sysp * sr
+    q[1] = cycp * sr - sysp * cr
+    q[2] = cysp * cr + sycp * sr
+    q[3] = sycp * cr - cysp * sr
+    # Full angles: sin x = 2 sin(x/2) cos(x/2), cos x = cos²(x/2) − sin²(x/2).
+    s_r, c_r = 2 * sr * cr, cr * cr - sr * sr
+    s_p, c_p = 2 * sp * cp, cp * cp - sp * sp
+    yaw_cp = dyaw * c_p  # ψ̇ cθ
+    omega[0] = droll - dyaw * s_p
+    omega[1] = dpitch * c_r + yaw_cp * s_r
+    omega[2] = yaw_cp * c_r - dpitch * s_r
+    # α: differentiate ω; d(cθ)/dt = −θ̇ sθ, d(sφ)/dt = φ̇ cφ, ...
+    lateral = ddyaw * c_p - dyaw * dpitch * s_p  # d/dt (ψ̇ cθ)
+    alpha[0] = ddroll - ddyaw * s_p - dyaw * dpitch * c_p
+    alpha[1] = (ddpitch * c_r - dpitch * droll * s_r) + lateral * s_r + yaw_cp * droll * c_r
+    alpha[2] = (-ddpitch * s_r - dpitch * droll * c_r) + lateral * c_r - yaw_cp * droll * s_r
 
 
 # --------------------------------------------------------------------------------------------------
@@ -194,13 +217,45 @@ class RandomManoeuvreSpec(EarthBoundSpec):
         )
 
     def world_motion(self, t):
+        t = np.asarray(t, dtype=float)
         grid = TimeGrid(t)
         rotation, translation = self.sines()
-        angles, rates, accels = grid.sum_of_sines(*rotation)  # each (3, N): roll, pitch, yaw
-        angles += np.radians(self.rotation.mean_rpy_deg)[:, None]
-        q, omega, alpha = euler_zyx_motion(angles, rates, accels)
-        pos, vel, acc = grid.sum_of_sines(*translation)  # each (3, N): east, north, up
-        return WorldMotion(t, q, omega, alpha, pos.T.copy(), vel.T.copy(), acc.T)
+        arrays = _motion_arrays(len(t), moves=True)
+        _manoeuvre_kernel(
+            t, grid.uniform, grid.BLOCK, grid.sines(*rotation), np.radians(self.rotation.mean_rpy_deg),
+            grid.sines(*translation), *arrays,
+        )
+        return WorldMotion(t, *arrays)
+
+
+@numba.njit(cache=True)
+def _manoeuvre_kernel(
+    t, uniform, block, rotation, mean, translation, q, omega, alpha, pos, vel, acc
+):  # pragma: no cover - compiled
+    """:meth:`RandomManoeuvreSpec.world_motion` block by block: roll, pitch, yaw (``mean`` plus the sums
+    of sinusoids ``rotation``) into :func:`_euler_zyx_sample`; east, north, up from ``translation``."""
+    angles, coordinates = np.empty((3, 3, block)), np.empty((3, 3, block))
+    half, sin, cos = np.empty((3, block)), np.empty((3, block)), np.empty((3, block))
+    for start in range(0, len(t), block):
+        count = min(block, len(t) - start)
+        _sines_block(t, start, count, uniform, rotation, angles)
+        _sines_block(t, start, count, uniform, translation, coordinates)
+        for m in range(3):  # the half angles of roll, pitch, yaw, their sines and cosines
+            for i in range(count):
+                half[m, i] = 0.5 * (angles[0, m, i] + mean[m])
+            _sincos_block(half[m], count, sin[m], cos[m])
+        for i in range(count):
+            j = start + i
+            _euler_zyx_sample(
+                cos[0, i], sin[0, i], cos[1, i], sin[1, i], cos[2, i], sin[2, i],
+                angles[1, 0, i], angles[1, 1, i], angles[1, 2, i],
+                angles[2, 0, i], angles[2, 1, i], angles[2, 2, i],
+                q[j], omega[j], alpha[j],
+            )
+            for m in range(3):  # east, north, up
+                pos[j, m], vel[j, m], acc[j, m] = (
+                    coordinates[0, m, i], coordinates[1, m, i], coordinates[2, m, i]
+                )
 
 
 # --------------------------------------------------------------------------------------------------
@@ -479,55 +534,310 @@ class CarSpec(EarthBoundSpec):
         return CarMotion(self)
 
     def world_motion(self, t):
-        return in_chunks(t, self.evaluator())
+        return self.evaluator()(t)
+
+
+# The road's series and the transients' peaks take milliseconds to set up: as much as evaluating 10⁶
+# samples. Both are pure functions of a few numbers (turns are frozen, hashable sections), so each is
+# built once per process and shared by every CarMotion that needs it.
+
+
+@lru_cache(maxsize=64)
+def _road(turns: tuple[Turn, ...], initial_yaw_rad: float) -> Road:
+    return Road(list(turns), initial_yaw_rad)
+
+
+@lru_cache(maxsize=64)
+def _suspension_transient(frequency_hz: float, damping_ratio: float, rise_s: float) -> SuspensionTransient:
+    return SuspensionTransient(frequency_hz, damping_ratio, rise_s)
 
 
 class CarMotion:
-    """The equations of :class:`CarSpec`, evaluated at any times: ``CarMotion(spec)(t) -> WorldMotion``."""
+    """The equations of :class:`CarSpec`, evaluated at any times: ``CarMotion(spec)(t) -> WorldMotion``.
+
+    The setup gathers the speed profile, the road (with its Chebyshev series) and the bump transients
+    into arrays; :func:`_car_kernel` then evaluates the samples block by block, compiled, with the
+    formulas of :class:`SpeedProfile`, :meth:`Road.__call__`, :class:`SuspensionTransient` and
+    :class:`CarSpec`.
+    """
 
     def __init__(self, spec: CarSpec):
         sus = spec.suspension
         self.speed = SpeedProfile(spec.legs, spec.drive)
-        self.road = Road(spec.turns, np.radians(spec.drive.initial_yaw_deg))
+        self.road = _road(tuple(spec.turns), float(np.radians(spec.drive.initial_yaw_deg)))
         self.k_roll, self.k_pitch = np.radians(sus.roll_deg_per_m_s2), np.radians(sus.pitch_deg_per_m_s2)
         self.bumps = []  # (time, heave, nose-up, heave transient, pitch transient)
         modes = {}  # rise time → transients
         for bump in spec.bumps:
             if bump.rise_s not in modes:
                 modes[bump.rise_s] = tuple(
-                    SuspensionTransient(f, sus.damping_ratio, bump.rise_s)
+                    _suspension_transient(f, sus.damping_ratio, bump.rise_s)
                     for f in (sus.heave_frequency_hz, sus.pitch_frequency_hz)
                 )
             self.bumps.append((bump.at_s, bump.heave_m, np.radians(bump.nose_up_deg), *modes[bump.rise_s]))
+        self._rise = np.array([bump.rise_s for bump in spec.bumps])
+        tables = self._speed_table(), self._road_table(), self._bump_table()
+        self._tables = (*tables, self.k_roll, self.k_pitch)  # the arguments of _car_kernel after t, block
+
+    def _speed_table(self):
+        """The legs (:class:`SpeedProfile`): start time, distance and speed, speed change Δv, its
+        duration T with T² and T³, and the distance where the change ends."""
+        sp = self.speed
+        ramp = sp.ramp
+        return sp.start, sp.distance, sp.speed, sp.change, ramp, ramp**2, ramp**3, sp.distance_after
+
+    def _road_table(self):
+        """The turns (:class:`Road`): start, length L with L² and L³, angle; the headings with their
+        cosines and sines; where each turn begins and ends; the Chebyshev coefficients of the x and y
+        antiderivatives, (2, turns, size) zero-padded, with their sizes (2, turns), and the map of
+        [0, L] onto [−1, 1] (numpy's ``mapparms``: ``off + scl σ``) per turn."""
+        road = self.road
+        turns = len(road.integrals)
+        sizes = np.zeros((2, turns), dtype=np.intp)
+        coef = np.zeros((2, turns, max([len(f.coef) for pair in road.integrals for f in pair], default=1)))
+        maps = np.zeros((turns, 2))
+        for j, pair in enumerate(road.integrals):
+            for axis, series in enumerate(pair):
+                sizes[axis, j] = len(series.coef)
+                coef[axis, j, : sizes[axis, j]] = series.coef
+            maps[j] = pair[0].mapparms()  # both series share the domain [0, L]
+        headings = road.heading, np.cos(road.heading), np.sin(road.heading)
+        lengths = road.length, road.length**2, road.length**3
+        return (road.start, *lengths, road.angle, *headings, road.begin, road.end, coef, sizes, maps)
+
+    def _bump_table(self):
+        """The bumps: time, rise time τ_r; per mode (heave, pitch): scale (height, nose-up angle), end of
+        the transient (``at + duration``), peak, λ = μ_0 and the weights ``w_dm = c_m μ_m^d``
+        (d = 0, 1, 2) of :class:`SuspensionTransient`."""
+        m = len(self.bumps)
+        at, scale, end, peak = np.zeros(m), np.zeros((m, 2)), np.zeros((m, 2)), np.ones((m, 2))
+        lam, weights = np.zeros((m, 2), dtype=complex), np.zeros((m, 2, 3, 4), dtype=complex)
+        for b, (time, height, nose_up, *bump_modes) in enumerate(self.bumps):
+            at[b], scale[b] = time, (height, nose_up)
+            for k, mode in enumerate(bump_modes):
+                end[b, k], peak[b, k], lam[b, k] = time + mode.duration, mode.peak, mode._mu[0]
+                weights[b, k] = [mode._c * mode._mu**d for d in range(3)]
+        return at, self._rise, scale, end, peak, lam, weights
 
     def __call__(self, t) -> WorldMotion:
-        s, v, a, jerk, djerk = self.speed(t)
-        psi, cos, sin, kappa, dkappa, ddkappa, x, y = self.road(s)
-        k_roll, k_pitch = self.k_roll, self.k_pitch
-        v2 = v * v
-        yaw_rate = kappa * v
-        rpy = np.stack([k_roll * kappa * v2, -k_pitch * a, psi])
-        rates = np.stack([k_roll * (dkappa * v2 * v + 2 * kappa * v * a), -k_pitch * jerk, yaw_rate])
-        accels = np.stack(
-            [
-                k_roll * (ddkappa * v2 * v2 + 5 * dkappa * v2 * a + 2 * kappa * (a * a + v * jerk)),
-                -k_pitch * djerk,
-                dkappa * v2 + kappa * a,
-            ]
-        )
-        heave = np.zeros((3, len(t)))  # z, ż, z̈
-        grid = TimeGrid(t)
-        for at, height, nose_up, heave_mode, pitch_mode in self.bumps:
-            window = grid.window(at, at + heave_mode.duration)
-            heave[:, window] += height * np.array(heave_mode(t[window] - at))
-            window = grid.window(at, at + pitch_mode.duration)
-            pitch = nose_up * np.array(pitch_mode(t[window] - at))
-            rpy[1, window] -= pitch[0]  # pitch is nose-down positive
-            rates[1, window] -= pitch[1]
-            accels[1, window] -= pitch[2]
-        q, omega, alpha = euler_zyx_motion(rpy, rates, accels)
-        along, across = a, v * yaw_rate  # tangential and centripetal acceleration
-        pos = np.stack([x, y, heave[0]], axis=-1)
-        vel = np.stack([v * cos, v * sin, heave[1]], axis=-1)
-        acc = np.stack([along * cos - across * sin, along * sin + across * cos, heave[2]], axis=-1)
-        return WorldMotion(t, q, omega, alpha, pos, vel, acc, extras={"speed_m_s": v, "distance_m": s})
+        t = np.asarray(t, dtype=float)
+        n = len(t)
+        arrays = _motion_arrays(n, moves=True)
+        speed, distance = np.empty(n), np.empty(n)
+        _car_kernel(t, TimeGrid.BLOCK, *self._tables, *arrays, speed, distance)
+        return WorldMotion(t, *arrays, extras={"speed_m_s": speed, "distance_m": distance})
+
+
+@numba.njit(cache=True)
+def _chebval(coef, size, x):  # pragma: no cover - compiled
+    """``numpy.polynomial.chebyshev.chebval(x, coef[:size])`` for one ``x``, by the same Clenshaw
+    recurrence."""
+    if size == 1:
+        return coef[0] + 0.0 * x
+    if size == 2:
+        return coef[0] + coef[1] * x
+    x2 = 2 * x
+    c0, c1 = coef[size - 2], coef[size - 1]
+    for i in range(3, size + 1):
+        c0, c1 = coef[size - i] - c1, c0 + c1 * x2
+    return c0 + c1 * x
+
+
+@numba.njit(cache=True)
+def _chebval_block(coef, size, x, count, b0, b1, out):  # pragma: no cover - compiled
+    """:func:`_chebval` at ``x[:count]`` into ``out``: the same recurrence with the samples innermost,
+    where it vectorises (one sample's recurrence is a chain of ``size`` dependent steps)."""
+    if size <= 2:
+        for i in range(count):
+            out[i] = _chebval(coef, size, x[i])
+        return
+    for i in range(count):
+        b0[i], b1[i] = coef[size - 2], coef[size - 1]
+    for k in range(3, size + 1):
+        ck = coef[size - k]
+        for i in range(count):
+            b0[i], b1[i] = ck - b1[i], b0[i] + b1[i] * (2 * x[i])
+    for i in range(count):
+        out[i] = b0[i] + b1[i] * x[i]
+
+
+@numba.njit(cache=True)
+def _transients_block(
+    t, start, count, at, rise, end, lam, weights, peak, scale, sign, out0, out1, out2, work
+):  # pragma: no cover - compiled
+    """Adds ``sign · scale · g⁽ᵈ⁾(t − at)`` (:class:`SuspensionTransient`, d = 0, 1, 2) to ``out0``,
+    ``out1``, ``out2`` at the samples ``start … start + count − 1`` with ``at ≤ t < end``.
+
+    The ``μ_m = λ − m/τ_r`` differ by real shifts: ``e^{μ_m τ} = e^{λτ} ρ^m`` with ``ρ = e^{−τ/τ_r}``,
+    so ``Σ_m w_dm e^{μ_m τ}`` (``w_dm = c_m μ_m^d``) is ``e^{λτ}`` times a cubic in ρ: two exponentials,
+    a cosine and a sine per sample instead of four complex exponentials.
+    """
+    tau, rho, envelope, arg, sin, cos = work[0], work[1], work[2], work[3], work[4], work[5]
+    inside = np.zeros(count, np.bool_)
+    for i in range(count):  # the exponentials (library calls) where the transient runs
+        if at <= t[start + i] < end:
+            inside[i] = True
+            tau[i] = t[start + i] - at
+            rho[i], envelope[i] = np.exp(-tau[i] / rise), np.exp(lam.real * tau[i])
+        else:
+            tau[i] = rho[i] = envelope[i] = 0.0
+        arg[i] = lam.imag * tau[i]
+    if not inside.any():
+        return
+    _sincos_block(arg, count, sin, cos)
+    w = weights
+    for i in range(count):
+        er, ei, r = envelope[i] * cos[i], envelope[i] * sin[i], rho[i]  # e^{λτ}, ρ
+        # Σ_m w_dm ρ^m = w_d0 + ρ (w_d1 + ρ (w_d2 + ρ w_d3)), real and imaginary parts;
+        # g⁽ᵈ⁾ = Im(e^{λτ} Σ_m w_dm ρ^m) / peak
+        pr = w[0, 0].real + r * (w[0, 1].real + r * (w[0, 2].real + r * w[0, 3].real))
+        pi = w[0, 0].imag + r * (w[0, 1].imag + r * (w[0, 2].imag + r * w[0, 3].imag))
+        g0 = (er * pi + ei * pr) / peak
+        pr = w[1, 0].real + r * (w[1, 1].real + r * (w[1, 2].real + r * w[1, 3].real))
+        pi = w[1, 0].imag + r * (w[1, 1].imag + r * (w[1, 2].imag + r * w[1, 3].imag))
+        g1 = (er * pi + ei * pr) / peak
+        pr = w[2, 0].real + r * (w[2, 1].real + r * (w[2, 2].real + r * w[2, 3].real))
+        pi = w[2, 0].imag + r * (w[2, 1].imag + r * (w[2, 2].imag + r * w[2, 3].imag))
+        g2 = (er * pi + ei * pr) / peak
+        # (selects, not branches: the loop vectorises)
+        out0[i] = out0[i] + sign * (scale * g0) if inside[i] else out0[i]
+        out1[i] = out1[i] + sign * (scale * g1) if inside[i] else out1[i]
+        out2[i] = out2[i] + sign * (scale * g2) if inside[i] else out2[i]
+
+
+@numba.njit(cache=True)
+def _car_kernel(t, block, speed_table, road_table, bump_table, k_roll, k_pitch,
+                q, omega, alpha, pos, vel, acc, speed_out, distance_out):  # pragma: no cover - compiled
+    """The car (:class:`CarSpec`), block by block.
+
+    Sample by sample: the speed profile, the road and the Euler angles with their derivatives. Then for
+    the block at once, in loops that vectorise: the positions in turns (Chebyshev series), the bump
+    transients (heave and pitch), the half angles' sines and cosines and the attitude.
+    """
+    t_leg, s_leg, v_leg, dv_leg, ramp_leg, ramp2_leg, ramp3_leg, s_after_leg = speed_table
+    (s_turn, length, length2, length3, turn_angle, heading, cos_heading, sin_heading,
+     begin, end, coef, sizes, maps) = road_table
+    bump_at, bump_rise, bump_scale, bump_end, bump_peak, bump_lam, bump_weights = bump_table
+    turns = len(s_turn)
+    # Scratch for a block (separate arrays: rows unpacked from one array compile to slower,
+    # non-contiguous views). Per sample: roll, pitch, yaw, their rates and accelerations; heave z, ż,
+    # z̈; the half angles, their sines and cosines.
+    angles = np.empty((3, block))
+    rates = np.empty((3, block))
+    accels = np.empty((3, block))
+    heave = np.empty((3, block))
+    half = np.empty(block)
+    sin_half = np.empty((3, block))
+    cos_half = np.empty((3, block))
+    work = np.empty((6, block))  # for _transients_block
+    # The samples in turns: index, turn, argument of the series; scratch for their evaluation.
+    series_sample = np.empty(block, np.intp)
+    series_turn = np.empty(block, np.intp)
+    series_arg = np.empty(block)
+    samples = np.empty(block, np.intp)
+    args = np.empty(block)
+    values = np.empty(block)
+    b0 = np.empty(block)
+    b1 = np.empty(block)
+    leg = turn = 0
+    for start in range(0, len(t), block):
+        count = min(block, len(t) - start)
+        in_turns = 0
+        for i in range(count):
+            j = start + i
+            # Speed profile (SpeedProfile): leg k changes speed by Δv along S(τ/T), then holds it.
+            leg = _segment(t_leg, t[j], leg)
+            tau = t[j] - t_leg[leg]
+            ramp, dv, v0 = ramp_leg[leg], dv_leg[leg], v_leg[leg]
+            if tau >= ramp:  # after the change (S = 1, S′ = S″ = S‴ = 0): s = s_end + v (τ − T), exactly
+                s = s_after_leg[leg] + (v0 + dv) * (tau - ramp)
+                v, a, jerk, djerk = v0 + dv, 0.0, 0.0, 0.0
+            else:
+                step, slope, curve, jolt, area = _smooth_step_at(tau / ramp)
+                s = s_leg[leg] + v0 * tau + dv * ramp * area
+                v = v0 + dv * step
+                a = dv * slope / ramp
+                jerk = dv * curve / ramp2_leg[leg]
+                djerk = dv * jolt / ramp3_leg[leg]
+            # Road (Road.__call__): heading, curvature and position at the distance s.
+            kappa = dkappa = ddkappa = 0.0
+            if turns == 0:
+                psi, cos, sin = heading[0], cos_heading[0], sin_heading[0]
+                x, y = s * cos, s * sin
+            else:
+                turn = _segment(s_turn, s, turn)
+                sigma = s - s_turn[turn]
+                u = sigma / length[turn]
+                if u >= 1.0:  # straight road after turn k (from its end)
+                    psi, cos, sin = heading[turn + 1], cos_heading[turn + 1], sin_heading[turn + 1]
+                    x = end[turn, 0] + (sigma - length[turn]) * cos
+                    y = end[turn, 1] + (sigma - length[turn]) * sin
+                elif u > 0.0:  # in turn k: ψ = ψ_k + Δψ S(σ/L), κ = Δψ S′/L, …; position from the series
+                    step_t, slope_t, curve_t, jolt_t, _ = _smooth_step_at(u)
+                    angle = turn_angle[turn]
+                    psi = heading[turn] + angle * step_t
+                    sin, cos = _sin_cos(psi)
+                    kappa = angle * slope_t / length[turn]
+                    dkappa = angle * curve_t / length2[turn]
+                    ddkappa = angle * jolt_t / length3[turn]
+                    # x = x_k + X(σ) with the series X evaluated for the whole block (below).
+                    x, y = begin[turn, 0], begin[turn, 1]
+                    series_sample[in_turns], series_turn[in_turns] = j, turn
+                    series_arg[in_turns] = maps[turn, 0] + maps[turn, 1] * sigma  # σ mapped onto [−1, 1]
+                    in_turns += 1
+                else:  # straight road before turn k (before the first turn: from its start, backwards)
+                    psi, cos, sin = heading[turn], cos_heading[turn], sin_heading[turn]
+                    x = begin[turn, 0] + sigma * cos
+                    y = begin[turn, 1] + sigma * sin
+            # Attitude (CarSpec): roll ∝ lateral acceleration κ v², pitch ∝ −a, yaw ψ; their derivatives.
+            v2 = v * v
+            yaw_rate = kappa * v
+            angles[0, i] = k_roll * kappa * v2
+            rates[0, i] = k_roll * (dkappa * v2 * v + 2 * kappa * v * a)
+            accels[0, i] = k_roll * (ddkappa * v2 * v2 + 5 * dkappa * v2 * a + 2 * kappa * (a * a + v * jerk))
+            angles[1, i], rates[1, i], accels[1, i] = -k_pitch * a, -k_pitch * jerk, -k_pitch * djerk
+            angles[2, i], rates[2, i], accels[2, i] = psi, yaw_rate, dkappa * v2 + kappa * a
+            along, across = a, v * yaw_rate  # tangential and centripetal acceleration
+            pos[j, 0], pos[j, 1] = x, y
+            vel[j, 0], vel[j, 1] = v * cos, v * sin
+            acc[j, 0], acc[j, 1] = along * cos - across * sin, along * sin + across * cos
+            speed_out[j], distance_out[j] = v, s
+            heave[0, i] = heave[1, i] = heave[2, i] = 0.0
+        if in_turns:
+            # Turn by turn (a block of a sorted grid meets one or two), both series at the turn's samples.
+            for tj in range(series_turn[:in_turns].min(), series_turn[:in_turns].max() + 1):
+                m = 0
+                for k in range(in_turns):
+                    if series_turn[k] == tj:
+                        args[m], samples[m] = series_arg[k], series_sample[k]
+                        m += 1
+                for axis in range(2):
+                    _chebval_block(coef[axis, tj], sizes[axis, tj], args, m, b0, b1, values)
+                    for k in range(m):
+                        pos[samples[k], axis] += values[k]
+        # Bumps: heave z, ż, z̈ and nose-up pitch transients (pitch is nose-down positive), for the
+        # bumps whose transients overlap the block's time span.
+        t_min, t_max = t[start:start + count].min(), t[start:start + count].max()
+        for b in range(len(bump_at)):
+            if t_max < bump_at[b] or t_min >= max(bump_end[b, 0], bump_end[b, 1]):
+                continue
+            _transients_block(t, start, count, bump_at[b], bump_rise[b], bump_end[b, 0], bump_lam[b, 0],
+                              bump_weights[b, 0], bump_peak[b, 0], bump_scale[b, 0], 1.0,
+                              heave[0], heave[1], heave[2], work)
+            _transients_block(t, start, count, bump_at[b], bump_rise[b], bump_end[b, 1], bump_lam[b, 1],
+                              bump_weights[b, 1], bump_peak[b, 1], bump_scale[b, 1], -1.0,
+                              angles[1], rates[1], accels[1], work)
+        for i in range(count):
+            pos[start + i, 2], vel[start + i, 2], acc[start + i, 2] = heave[0, i], heave[1, i], heave[2, i]
+        for m in range(3):
+            for i in range(count):
+                half[i] = 0.5 * angles[m, i]
+            _sincos_block(half, count, sin_half[m], cos_half[m])
+        for i in range(count):
+            _euler_zyx_sample(
+                cos_half[0, i], sin_half[0, i], cos_half[1, i], sin_half[1, i],
+                cos_half[2, i], sin_half[2, i],
+                rates[0, i], rates[1, i], rates[2, i],
+                accels[0, i], accels[1, i], accels[2, i],
+                q[start + i], omega[start + i], alpha[start + i],
+            )
