@@ -192,6 +192,55 @@ def _cmd_demo(args) -> int:
     return run_demo(scenario=args.scenario, duration=args.duration)
 
 
+def _zenoh_options(args) -> dict:
+    return {"connect": args.connect, "listen": args.listen, "mode": args.mode, "config_file": args.config}
+
+
+def _cmd_stream(args) -> int:
+    from .stream import run_stream
+
+    try:
+        return run_stream(scenario=args.scenario, device=args.device, duration=args.duration, seed=args.seed,
+                          as_fast_as_possible=args.as_fast_as_possible, device_name=args.device_name,
+                          wait_s=args.wait, **_zenoh_options(args))
+    except ValueError as e:
+        raise UsageError(str(e) if str(e).startswith("argument") else f"argument --connect/--listen: {e}") from None
+
+
+def _cmd_record(args) -> int:
+    from .record import run_record
+
+    out = Path(args.out)
+    if not out.parent.is_dir():
+        raise UsageError(f"argument --out: {out.parent} is not a folder")
+    try:
+        return run_record(out_path=out, duration=args.duration, key_expr=args.key, report_path=args.report,
+                          **_zenoh_options(args))
+    except ValueError as e:
+        raise UsageError(str(e) if str(e).startswith("argument") else f"argument --connect/--listen: {e}") from None
+    except OSError as e:
+        raise UsageError(f"argument --out: {out}: {e.strerror or e}") from None
+
+
+def _cmd_router(args) -> int:
+    from .record import run_router
+
+    try:
+        return run_router(listen=args.listen, connect=args.connect, config_file=args.config)
+    except ValueError as e:
+        raise UsageError(str(e) if str(e).startswith("argument") else f"argument --listen: {e}") from None
+
+
+def _add_zenoh_arguments(p, modes=True) -> None:
+    p.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
+                   help="zenoh endpoint to connect to, e.g. tcp/host:7447 (repeatable)")
+    p.add_argument("--listen", action="append", default=None, metavar="ENDPOINT",
+                   help="zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable)")
+    if modes:
+        p.add_argument("--mode", choices=("peer", "client"), default=None, help="zenoh session mode")
+    p.add_argument("--config", default=None, metavar="FILE.json5", help="a zenoh JSON5 config file")
+
+
 def _positive(text: str) -> float:
     try:
         value = float(text)
@@ -235,6 +284,37 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("log", metavar="LOG", help="a static gyro log (.mcap, or .npz from 'gyroemu simulate')")
     p.add_argument("--out", default=None, help="PNG to write (default: LOG with .allan.png)")
     p.set_defaults(func=_cmd_allan)
+
+    zenoh_note = ("Without --connect/--listen/--mode/--config, gyroemu processes on one machine find each other "
+                  "(loopback, tcp/127.0.0.1:7447 plus gossip).")
+    p = sub.add_parser("stream", help="simulate a device and publish it live over zenoh, paced to its clock",
+                       epilog=zenoh_note)
+    p.add_argument("--scenario", required=True, help="built-in name or TOML path")
+    p.add_argument("--device", required=True, help="built-in device name or TOML path")
+    p.add_argument("--duration", type=_positive, default=None, help="seconds (default: the scenario's)")
+    p.add_argument("--seed", type=int, default=0, help="seed of every random draw (default: 0)")
+    p.add_argument("--as-fast-as-possible", action="store_true", help="do not pace to the sample clock")
+    p.add_argument("--device-name", default="imu0", help="key expressions gyroemu/<NAME>/... (default: imu0)")
+    p.add_argument("--wait", type=float, default=10.0,
+                   help="seconds to wait for a subscriber on every key before publishing (default: 10; 0: none)")
+    _add_zenoh_arguments(p)
+    p.set_defaults(func=_cmd_stream)
+
+    p = sub.add_parser("record", help="record gyroemu zenoh streams into an MCAP file", epilog=zenoh_note)
+    p.add_argument("--out", required=True, help="MCAP file to write (written in place)")
+    p.add_argument("--duration", type=_positive, default=None, help="seconds (default: until SIGINT/SIGTERM)")
+    p.add_argument("--key", default="gyroemu/**", help="key expression to subscribe to (default: gyroemu/**)")
+    p.add_argument("--report", default=None, metavar="FILE.json", help="also write the sequence report as JSON")
+    _add_zenoh_arguments(p)
+    p.set_defaults(func=_cmd_record)
+
+    p = sub.add_parser("router", help="run a zenoh router (until SIGINT/SIGTERM)")
+    p.add_argument("--listen", action="append", default=None, metavar="ENDPOINT",
+                   help="endpoint to listen on (repeatable; default: tcp/0.0.0.0:7447)")
+    p.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
+                   help="other routers to connect to (repeatable)")
+    p.add_argument("--config", default=None, metavar="FILE.json5", help="a zenoh JSON5 config file")
+    p.set_defaults(func=_cmd_router)
     return parser
 
 

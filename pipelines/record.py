@@ -1,0 +1,271 @@
+"""``gyroemu record`` (zenoh -> MCAP) and ``gyroemu router`` (a zenoh router process).
+
+Recording
+---------
+The recorder subscribes to ``gyroemu/**`` (FIFO channel handler), maps each key back to its device and
+topic (:func:`pipelines.zenoh_io.key_to_topic`) and copies the payload bytes into an MCAP file (profile
+``ros2``, zstd chunks) without re-encoding: only the header stamp is read, and it becomes the message's
+``log_time`` and ``publish_time``. Channels are registered per topic as they appear, with the schema the
+topic's role names (``/imu`` and ``/truth/imu``: ``sensor_msgs/msg/Imu``, ``/mag``: MagneticField,
+``/raw/<kind>``: the kind's raw type; other topics get no schema). The first device's topics are
+unprefixed (``/imu``), any further device's are prefixed (``/<device>/imu``); a ``gyroemu`` metadata
+record per device gives its name and prefix, so :func:`pipelines.mcap_io.read_mcap` names it.
+
+The file is written in place (not through a temporary name): :class:`~pipelines.mcap_io.McapFileWriter`
+writes sequentially, and the recorder flushes after every batch, so a recorder killed with SIGKILL leaves
+a file whose complete chunks read back (chunks of 256 KiB, so at most that much is lost).
+SIGINT/SIGTERM (or ``--duration``) end the recording properly: the remaining messages, the summary and
+indexes, the footer.
+
+From each message's attachment (sequence number, publisher id) the recorder counts, per publisher,
+messages received, sequence gaps (the exact missing numbers), duplicates and late (out-of-order)
+arrivals, and prints the report at the end (``--report FILE.json`` also writes it as JSON).
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .messages import IMU, MAGNETIC_FIELD, RAW_MESSAGE_TYPES
+from .zenoh_io import (drain, header_stamp_ns, key_to_topic, open_session, router_config, session_config,
+                       subscribe, unpack_attachment)
+
+__all__ = ["SequenceTracker", "Recorder", "run_record", "run_router"]
+
+
+def _ranges(numbers) -> list[list[int]]:
+    """Sorted integers as [first, last] ranges."""
+    out = []
+    for n in sorted(numbers):
+        if out and n == out[-1][1] + 1:
+            out[-1][1] = n
+        else:
+            out.append([n, n])
+    return out
+
+
+@dataclass
+class SequenceTracker:
+    """Sequence accounting of one publisher: sequence numbers step by 1 from the first one received.
+
+    ``missing`` holds the numbers skipped after the first received message (gaps); numbers before it
+    (sent before the recorder joined) are reported as ``first`` only."""
+
+    topic: str
+    received: int = 0
+    first: int | None = None
+    next: int = 0
+    missing: set = field(default_factory=set)
+    duplicates: int = 0
+    late: int = 0
+
+    def add(self, sequence: int) -> None:
+        self.received += 1
+        if self.first is None:
+            self.first = self.next = sequence  # what was sent before the recorder joined is not a gap
+        if sequence < self.first:
+            self.late += 1  # sent before the first one received, arrived after it
+        elif sequence >= self.next:
+            self.missing.update(range(self.next, sequence))
+            self.next = sequence + 1
+        elif sequence in self.missing:
+            self.missing.discard(sequence)
+            self.late += 1
+        else:
+            self.duplicates += 1
+
+    def report(self) -> dict:
+        return {"topic": self.topic, "received": self.received, "first": self.first, "last": self.next - 1,
+                "missing": len(self.missing), "missing_ranges": _ranges(self.missing),
+                "duplicates": self.duplicates, "late": self.late}
+
+
+def _message_schema(topic: str):
+    role = topic.rsplit("/", 2)
+    if topic.endswith("/imu"):
+        return IMU
+    if topic.endswith("/mag"):
+        return MAGNETIC_FIELD
+    if len(role) >= 2 and role[-2] == "raw":
+        return RAW_MESSAGE_TYPES.get(role[-1])
+    return None
+
+
+class Recorder:
+    """Copies received zenoh samples into an MCAP file (see the module's notes)."""
+
+    def __init__(self, path, chunk_size: int = 1 << 18):
+        from .mcap_io import OFFERED_QOS_PROFILES, McapFileWriter, _version
+
+        self.path = Path(path)
+        self._file = open(self.path, "wb")
+        self._mcap = McapFileWriter(self._file, chunk_size=chunk_size)
+        self._qos = OFFERED_QOS_PROFILES
+        self._version = _version()
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[tuple[str, str], int] = {}
+        self._devices: dict[str, str] = {}  # device -> topic prefix
+        self._pending: dict[tuple[int, int], tuple[list, list]] = {}  # (channel, size) -> stamps, payloads
+        self.trackers: dict[bytes, SequenceTracker] = {}
+        self.messages = 0
+        self.skipped = 0
+        self.without_attachment = 0
+
+    def _channel(self, device: str, topic: str) -> int:
+        key = (device, topic)
+        if key not in self._channels:
+            if device not in self._devices:
+                prefix = "" if not self._devices else f"/{device}"
+                self._devices[device] = prefix
+                self._mcap.add_metadata("gyroemu", {"version": self._version, "seed": "", "scenario": "",
+                                                    "device": "", "device_name": device, "topic_prefix": prefix})
+            mtype = _message_schema(topic)
+            schema_id = 0
+            if mtype is not None:
+                if mtype.name not in self._schemas:
+                    self._schemas[mtype.name] = self._mcap.register_schema(mtype.name, "ros2msg", mtype.schema.encode())
+                schema_id = self._schemas[mtype.name]
+            self._channels[key] = self._mcap.register_channel(self._devices[device] + topic, "cdr", schema_id,
+                                                              {"offered_qos_profiles": self._qos})
+        return self._channels[key]
+
+    def add(self, sample) -> None:
+        try:
+            device, topic = key_to_topic(str(sample.key_expr))
+            payload = sample.payload.to_bytes()
+            stamp = header_stamp_ns(payload)
+        except (ValueError, Exception):
+            self.skipped += 1
+            return
+        if stamp < 0:
+            self.skipped += 1
+            return
+        attachment = sample.attachment
+        if attachment is not None:
+            try:
+                sequence, _, gid = unpack_attachment(attachment.to_bytes())
+                tracker = self.trackers.get(gid)
+                if tracker is None:
+                    tracker = self.trackers[gid] = SequenceTracker(topic=f"{device}{topic}")
+                tracker.add(sequence)
+            except ValueError:
+                self.without_attachment += 1
+        else:
+            self.without_attachment += 1
+        channel = self._channel(device, topic)
+        stamps, payloads = self._pending.setdefault((channel, len(payload)), ([], []))
+        stamps.append(stamp)
+        payloads.append(payload)
+        self.messages += 1
+
+    def flush(self) -> None:
+        """Hand the pending messages to the MCAP writer (complete chunks reach the disk)."""
+        if not self._pending:
+            return
+        batches = []
+        for (channel, size), (stamps, payloads) in self._pending.items():
+            rows = np.frombuffer(b"".join(payloads), np.uint8).reshape(len(payloads), size)
+            batches.append((channel, np.array(stamps, dtype=np.int64), rows))
+        self._pending = {}
+        self._mcap.add_messages(batches)
+        self._file.flush()
+
+    def close(self) -> None:
+        self.flush()
+        self._mcap.finish()
+        self._file.flush()
+        self._file.close()
+
+    def report(self) -> dict:
+        return {"file": str(self.path), "messages": self.messages, "skipped": self.skipped,
+                "without_attachment": self.without_attachment,
+                "publishers": {gid.hex(): t.report() for gid, t in self.trackers.items()}}
+
+
+def format_report(report: dict) -> str:
+    lines = [f"record: {report['messages']} messages -> {report['file']}"
+             + (f" ({report['skipped']} skipped)" if report["skipped"] else "")
+             + (f" ({report['without_attachment']} without a valid attachment)" if report["without_attachment"] else "")]
+    total_missing = total_dup = 0
+    for gid, r in sorted(report["publishers"].items(), key=lambda kv: kv[1]["topic"]):
+        total_missing += r["missing"]
+        total_dup += r["duplicates"]
+        head = f"  {r['topic']:<24} publisher {gid}: {r['received']} received, seq {r['first']}..{r['last']}"
+        extra = []
+        if r["first"]:
+            extra.append(f"joined at seq {r['first']} (0..{r['first'] - 1} sent before)")
+        if r["missing"]:
+            ranges = ", ".join(f"{a}" if a == b else f"{a}-{b}" for a, b in r["missing_ranges"][:50])
+            more = " ..." if len(r["missing_ranges"]) > 50 else ""
+            extra.append(f"{r['missing']} missing: {ranges}{more}")
+        if r["duplicates"]:
+            extra.append(f"{r['duplicates']} duplicates")
+        if r["late"]:
+            extra.append(f"{r['late']} out of order")
+        lines.append(head + ("; " + "; ".join(extra) if extra else "; no gaps, no duplicates"))
+    lines.append(f"record: {len(report['publishers'])} publishers, {total_missing} missing, {total_dup} duplicates")
+    return "\n".join(lines)
+
+
+def run_record(*, out_path, duration: float | None = None, key_expr: str = "gyroemu/**", connect=None,
+               listen=None, mode=None, config_file=None, report_path=None, out=sys.stdout) -> int:
+    config = session_config(connect=connect, listen=listen, mode=mode, config_file=config_file)
+    session = open_session(config)
+    try:
+        recorder = Recorder(out_path)
+    except BaseException:
+        session.close()
+        raise
+    stopping = []
+    previous = {s: signal.signal(s, lambda *_: stopping.append(1)) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        subscriber = subscribe(session, key_expr)
+        print(f"record: subscribed to {key_expr} -> {recorder.path}", file=out, flush=True)
+        end = None if duration is None else time.monotonic() + duration
+        last_flush = time.monotonic()
+        while not stopping and (end is None or time.monotonic() < end):
+            samples = drain(subscriber)
+            for sample in samples:
+                recorder.add(sample)
+            now = time.monotonic()
+            if now - last_flush > 0.2:
+                recorder.flush()
+                last_flush = now
+            if not samples:
+                time.sleep(0.002)
+        for sample in drain(subscriber, 1 << 30):
+            recorder.add(sample)
+        subscriber.undeclare()
+    finally:
+        recorder.close()
+        session.close()
+        for s, h in previous.items():
+            signal.signal(s, h)
+    report = recorder.report()
+    print(format_report(report), file=out, flush=True)
+    if report_path:
+        Path(report_path).write_text(json.dumps(report, indent=1))
+    return 0
+
+
+def run_router(*, listen=None, connect=None, config_file=None, out=sys.stdout) -> int:
+    config = router_config(listen=listen, connect=connect, config_file=config_file)
+    session = open_session(config)
+    stopping = []
+    previous = {s: signal.signal(s, lambda *_: stopping.append(1)) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        print(f"router: {session.zid()} listening on {', '.join(listen or ['tcp/0.0.0.0:7447'])}", file=out, flush=True)
+        while not stopping:
+            time.sleep(0.1)
+    finally:
+        session.close()
+        for s, h in previous.items():
+            signal.signal(s, h)
+    return 0

@@ -1,0 +1,313 @@
+"""Live streams over Eclipse Zenoh: sessions, key expressions, attachments, a paced publisher, a subscriber.
+
+What goes on the wire (``interface.md``, "Live streams: Eclipse Zenoh")
+----------------------------------------------------------------------
+- Key expression: ``gyroemu/<device>`` followed by the MCAP topic: ``gyroemu/imu0/imu``,
+  ``gyroemu/imu0/truth/imu``, ``gyroemu/imu0/raw/fog``, ... (:func:`topic_to_key`, :func:`key_to_topic`).
+- Payload: the CDR bytes of the MCAP message (:mod:`pipelines.messages`), unchanged.
+- Attachment: 33 bytes as rmw_zenoh writes them: int64 LE sequence number (from 0, per publisher),
+  int64 LE source timestamp (ns since the Unix epoch, taken when the message is sent), one byte 16 (the
+  length of what follows), then the 16-byte publisher id (random per publisher, one publisher per
+  key expression) (:func:`pack_attachment`, :func:`unpack_attachment`).
+
+The default session (no --connect/--listen/--mode/--config)
+-----------------------------------------------------------
+Every gyroemu process opens a *peer* that
+
+1. tries to listen on ``tcp/127.0.0.1:7447`` (the one documented loopback endpoint) -- the first
+   gyroemu process on the machine gets it, the others fail to bind and carry on
+   (``listen.exit_on_failure = false``);
+2. also listens on an ephemeral loopback port ``tcp/127.0.0.1:0``, so that every peer is reachable;
+3. connects to ``tcp/127.0.0.1:7447`` (``connect.exit_on_failure = false``, retried), i.e. to whichever
+   gyroemu process holds it;
+4. has *gossip* scouting on and multicast scouting off: the holder of 7447 tells each newcomer the
+   ephemeral locators of the others, and the peers connect to each other directly (zenoh peers do not
+   route for one another, so a full mesh is needed).
+
+So gyroemu processes find each other in any start order with nothing else started first, nothing
+leaves the loopback interface, and a plain zenoh program reaches the streams by connecting to
+``tcp/127.0.0.1:7447`` (as a peer it is then linked to every gyroemu peer by gossip). Any of
+``--connect``, ``--listen``, ``--mode`` or ``--config FILE.json5`` replaces this default: the config
+file (if any) is loaded as is, then the flags override its ``connect/endpoints``, ``listen/endpoints``
+and ``mode``; without a config file multicast scouting stays off (gossip on), so a deployment is what
+the flags say, e.g. ``--connect tcp/router-host:7447`` to go through a router.
+
+Sources: zenoh-python 1.x API (``zenoh.Config.insert_json5``, ``Session.declare_publisher``,
+``CongestionControl.BLOCK``, ``handlers.FifoChannel``); the zenoh DEFAULT_CONFIG.json5 (listen, connect,
+scouting keys); rmw_zenoh design notes (attachment layout).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import secrets
+import struct
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import zenoh
+
+__all__ = [
+    "DEFAULT_ENDPOINT",
+    "KEY_ROOT",
+    "ATTACHMENT_SIZE",
+    "session_config",
+    "router_config",
+    "open_session",
+    "topic_to_key",
+    "key_to_topic",
+    "pack_attachment",
+    "unpack_attachment",
+    "PacedPublisher",
+    "PacingReport",
+    "subscribe",
+    "drain",
+    "header_stamp_ns",
+]
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+KEY_ROOT = "gyroemu"
+_ATTACHMENT = struct.Struct("<qqB16s")
+ATTACHMENT_SIZE = _ATTACHMENT.size  # 33
+assert ATTACHMENT_SIZE == 33
+
+
+# --------------------------------------------------------------------------------------------------
+# Sessions.
+
+def _zenoh_message(error: Exception) -> str:
+    """zenoh's error text without its Rust source locations."""
+    return re.sub(r" at /\S+\.rs:\d+\.?", "", str(error))
+
+
+def _insert(config: zenoh.Config, key: str, value) -> None:
+    config.insert_json5(key, json.dumps(value))
+
+
+def session_config(connect: Sequence[str] | None = None, listen: Sequence[str] | None = None,
+                   mode: str | None = None, config_file: str | os.PathLike | None = None) -> zenoh.Config:
+    """The zenoh configuration of a gyroemu process (see the module's notes for the default session).
+
+    Raises ``ValueError`` naming the argument at fault (mode, config file, endpoints).
+    """
+    if mode is not None and mode not in ("peer", "client", "router"):
+        raise ValueError(f"argument --mode: expected peer, client or router, got {mode!r}")
+    if config_file is None and not connect and not listen and mode is None:
+        config = zenoh.Config()
+        _insert(config, "mode", "peer")
+        _insert(config, "listen/endpoints", [DEFAULT_ENDPOINT, "tcp/127.0.0.1:0"])
+        _insert(config, "listen/exit_on_failure", False)
+        _insert(config, "connect/endpoints", [DEFAULT_ENDPOINT])
+        _insert(config, "connect/exit_on_failure", False)
+        _insert(config, "scouting/multicast/enabled", False)
+        _insert(config, "scouting/gossip/enabled", True)
+        return config
+    if config_file is not None:
+        path = Path(config_file)
+        if not path.is_file():
+            raise ValueError(f"argument --config: {path}: no such file")
+        try:
+            config = zenoh.Config.from_file(str(path))
+        except Exception as e:  # zenoh.ZError and friends
+            raise ValueError(f"argument --config: {path}: not a zenoh JSON5 config: {_zenoh_message(e)}") from None
+    else:
+        config = zenoh.Config()
+        _insert(config, "scouting/multicast/enabled", False)
+        _insert(config, "scouting/gossip/enabled", True)
+    try:
+        if mode is not None:
+            _insert(config, "mode", mode)
+        if connect:
+            _insert(config, "connect/endpoints", list(connect))
+        if listen:
+            _insert(config, "listen/endpoints", list(listen))
+    except Exception as e:
+        raise ValueError(f"argument --connect/--listen/--mode: {_zenoh_message(e)}") from None
+    return config
+
+
+def router_config(listen: Sequence[str] | None = None, connect: Sequence[str] | None = None,
+                  config_file: str | os.PathLike | None = None) -> zenoh.Config:
+    """A router's configuration: listens on ``listen`` (default ``tcp/0.0.0.0:7447``)."""
+    return session_config(connect=connect, listen=list(listen or ["tcp/0.0.0.0:7447"]), mode="router",
+                          config_file=config_file)
+
+
+def open_session(config: zenoh.Config) -> zenoh.Session:
+    """Open a session; zenoh's errors become ``ValueError`` (bad endpoints, port taken, ...)."""
+    try:
+        return zenoh.open(config)
+    except Exception as e:
+        raise ValueError(f"argument --connect/--listen/--config: cannot open the zenoh session: "
+                         f"{_zenoh_message(e)}") from None
+
+
+# --------------------------------------------------------------------------------------------------
+# Key expressions and attachments.
+
+def topic_to_key(device: str, topic: str) -> str:
+    """``gyroemu/<device>`` + topic: ``("imu0", "/imu") -> "gyroemu/imu0/imu"``."""
+    if not device or "/" in device or any(c in device for c in "*$?#"):
+        raise ValueError(f"device name {device!r}: one key chunk without '/', '*', '$', '?' or '#'")
+    if not topic.startswith("/") or topic.endswith("/") or "//" in topic:
+        raise ValueError(f"topic {topic!r} must look like /a/b")
+    return f"{KEY_ROOT}/{device}{topic}"
+
+
+def key_to_topic(key: str) -> tuple[str, str]:
+    """``"gyroemu/imu0/raw/fog" -> ("imu0", "/raw/fog")``; ``ValueError`` for other keys."""
+    parts = str(key).split("/")
+    if len(parts) < 3 or parts[0] != KEY_ROOT or not parts[1]:
+        raise ValueError(f"key expression {key!r} is not gyroemu/<device>/<topic>")
+    return parts[1], "/" + "/".join(parts[2:])
+
+
+def pack_attachment(sequence: int, source_timestamp_ns: int, publisher_id: bytes) -> bytes:
+    """The 33-byte rmw_zenoh attachment."""
+    if len(publisher_id) != 16:
+        raise ValueError("publisher id must be 16 bytes")
+    return _ATTACHMENT.pack(sequence, source_timestamp_ns, 16, publisher_id)
+
+
+def unpack_attachment(data) -> tuple[int, int, bytes]:
+    """``(sequence, source_timestamp_ns, publisher_id)`` of a 33-byte attachment (``ValueError`` otherwise)."""
+    data = bytes(data)
+    if len(data) != ATTACHMENT_SIZE:
+        raise ValueError(f"attachment of {len(data)} bytes, expected {ATTACHMENT_SIZE}")
+    sequence, stamp, length, gid = _ATTACHMENT.unpack(data)
+    if length != 16:
+        raise ValueError(f"attachment publisher-id length byte is {length}, expected 16")
+    return sequence, stamp, gid
+
+
+def header_stamp_ns(payload: bytes) -> int:
+    """``header.stamp`` (ns) of a CDR message: int32 sec and uint32 nanosec after the 4-byte encapsulation."""
+    sec, nanosec = struct.unpack_from("<iI", payload, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
+# --------------------------------------------------------------------------------------------------
+# Publishing.
+
+@dataclass
+class PacingReport:
+    """How late each sample went out relative to its deadline ``t0 + k / rate`` (seconds)."""
+
+    lateness_s: np.ndarray
+    messages: int
+    elapsed_s: float
+
+    def percentile(self, q: float) -> float:
+        return float(np.percentile(self.lateness_s, q)) if len(self.lateness_s) else 0.0
+
+    def summary(self) -> str:
+        if not len(self.lateness_s):
+            return "pacing: no samples"
+        return (f"pacing: {len(self.lateness_s)} samples, {self.messages} messages in {self.elapsed_s:.3f} s; "
+                f"lateness vs t0 + k/rate: p50 {self.percentile(50) * 1e3:.3f} ms, "
+                f"p99 {self.percentile(99) * 1e3:.3f} ms, max {self.lateness_s.max() * 1e3:.3f} ms")
+
+
+@dataclass
+class _Topic:
+    key: str
+    publisher: zenoh.Publisher
+    gid: bytes
+    sequence: int = 0
+
+
+class PacedPublisher:
+    """Publishes pre-encoded message batches, one group of messages per sample, on a drift-free clock.
+
+    Every key expression gets its own zenoh publisher (congestion control BLOCK, reliable: nothing is
+    dropped; a slow subscriber slows the publisher down instead), its own random 16-byte id and its
+    own sequence counter from 0.
+    """
+
+    def __init__(self, session: zenoh.Session, keys: Sequence[str]):
+        self._session = session
+        self._topics: dict[str, _Topic] = {}
+        for key in keys:
+            pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK,
+                                            reliability=zenoh.Reliability.RELIABLE)
+            self._topics[key] = _Topic(key, pub, secrets.token_bytes(16))
+
+    def publisher_ids(self) -> dict[str, bytes]:
+        return {key: t.gid for key, t in self._topics.items()}
+
+    def matched(self) -> bool:
+        """Whether every publisher has at least one matching subscriber."""
+        return all(t.publisher.matching_status.matching for t in self._topics.values())
+
+    def wait_for_subscribers(self, timeout_s: float) -> bool:
+        """Wait (up to ``timeout_s``) until every key has a subscriber; returns whether they all do."""
+        end = time.monotonic() + timeout_s
+        while not self.matched():
+            if time.monotonic() >= end:
+                return False
+            time.sleep(0.01)
+        return True
+
+    def put(self, key: str, payload: bytes) -> None:
+        topic = self._topics[key]
+        topic.publisher.put(payload, attachment=pack_attachment(topic.sequence, time.time_ns(), topic.gid))
+        topic.sequence += 1
+
+    def run(self, batches: dict[str, list[bytes]], rate_hz: float | None, stop=None) -> PacingReport:
+        """Send sample k's messages (``batches[key][k]`` for every key, in the dict's order) at
+        ``t0 + k / rate_hz``: sleep until each deadline, or send at once when behind (never a sleep per
+        sample that would accumulate). ``rate_hz=None``: as fast as possible. ``stop()`` returning True
+        ends the run early."""
+        keys = list(batches)
+        n = min((len(v) for v in batches.values()), default=0)
+        lateness = np.zeros(n)
+        period_ns = None if rate_hz is None else 1e9 / float(rate_hz)
+        t0 = time.monotonic_ns()
+        sent = 0
+        for k in range(n):
+            if period_ns is not None:
+                deadline = t0 + round(k * period_ns)
+                now = time.monotonic_ns()
+                if deadline > now:
+                    time.sleep((deadline - now) * 1e-9)
+                    now = time.monotonic_ns()
+                lateness[k] = (now - deadline) * 1e-9
+            for key in keys:
+                self.put(key, batches[key][k])
+            sent = k + 1
+            if stop is not None and k % 64 == 0 and stop():
+                break
+        elapsed = (time.monotonic_ns() - t0) * 1e-9
+        return PacingReport(lateness_s=lateness[:sent], messages=sent * len(keys), elapsed_s=elapsed)
+
+    def close(self) -> None:
+        for t in self._topics.values():
+            try:
+                t.publisher.undeclare()
+            except Exception:
+                pass
+
+
+# --------------------------------------------------------------------------------------------------
+# Subscribing.
+
+def subscribe(session: zenoh.Session, key_expr: str = f"{KEY_ROOT}/**", capacity: int = 1 << 16) -> zenoh.Subscriber:
+    """A subscriber whose samples queue in a FIFO channel (``capacity`` samples; when it is full zenoh
+    waits, which with BLOCK publishers slows them down rather than dropping)."""
+    return session.declare_subscriber(key_expr, zenoh.handlers.FifoChannel(capacity))
+
+
+def drain(subscriber: zenoh.Subscriber, limit: int = 1 << 14) -> list:
+    """Up to ``limit`` samples already queued (does not wait)."""
+    out = []
+    for _ in range(limit):
+        sample = subscriber.try_recv()
+        if sample is None:
+            break
+        out.append(sample)
+    return out
