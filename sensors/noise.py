@@ -119,14 +119,17 @@ def _ar1_sum_into(rng, phi, c, state, out):
 @numba.njit(cache=True)
 def _interpolate_into(coarse, ratio, out):
     """Add to ``out`` (n, A) the linear interpolation of ``coarse`` (m, A), whose knots lie every
-    ``ratio`` samples of ``out`` starting at sample 0 (so m ≥ (n − 1) // ratio + 2)."""
+    ``ratio`` samples of ``out`` starting at sample 0 (so m ≥ (n − 1) // ratio + 1, and one more knot
+    unless the last sample sits on a knot). Only knots the samples need are read."""
     n, n_axes = out.shape
     for i in range((n + ratio - 1) // ratio):  # coarse interval i covers samples i·ratio …
-        for r in range(min(ratio, n - i * ratio)):
+        k = i * ratio
+        for a in range(n_axes):  # on the knot itself: coarse[i] alone (coarse[i + 1] may not exist)
+            out[k, a] += coarse[i, a]
+        for r in range(1, min(ratio, n - k)):
             u = r / ratio
-            k = i * ratio + r
             for a in range(n_axes):
-                out[k, a] += coarse[i, a] + u * (coarse[i + 1, a] - coarse[i, a])
+                out[k + r, a] += coarse[i, a] + u * (coarse[i + 1, a] - coarse[i, a])
 
 
 def _shape2d(shape) -> tuple[tuple[int, ...], tuple[int, int]]:

@@ -185,3 +185,17 @@ def test_shapes_and_per_axis_coefficients():
         noise.white_noise(rng, 10, 0.1, -1.0)
     with pytest.raises(ValueError, match="tau_range"):
         noise.flicker_bank(1.0, (10.0, 1.0))
+
+
+def test_interpolation_reads_no_knot_beyond_the_last_sample():
+    # The last sample of ``out`` sits exactly on the last knot: the knot after it does not exist. Back
+    # ``coarse`` by a larger array whose next row is NaN, so reading past its end would show.
+    from sensors.noise import _interpolate_into
+
+    ratio, knots = 4, 3
+    backing = np.full((knots + 1, 2), np.nan)
+    backing[:knots] = [[0.0, 1.0], [4.0, 5.0], [8.0, 9.0]]
+    out = np.zeros(((knots - 1) * ratio + 1, 2))
+    _interpolate_into(backing[:knots], ratio, out)
+    expected = np.column_stack([np.arange(len(out)), np.arange(len(out)) + 1.0]).astype(float)
+    np.testing.assert_array_equal(out, expected)
