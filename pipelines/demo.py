@@ -6,7 +6,7 @@
 3. Gyrocompassing: on a bench at rest, the navigation FOG finds north from Earth's rotation alone;
    the consumer MEMS gyro cannot, and the demo says by how much.
 
-Stream, record and filter stages join as they land.
+The live stream, recorder and filter stages join the demo as the filter lands.
 """
 
 from __future__ import annotations
@@ -29,8 +29,9 @@ def run_demo(scenario: str = "heavy_top", duration: float | None = None) -> int:
     _truth(scenario, duration)
     _sensors()
     _gyrocompass()
-    print("\nmore: 'gyroemu scenarios' and 'gyroemu presets' list what is built in; "
-          "'gyroemu simulate --scenario S --device D --out run.npz' writes a run; 'gyroemu allan run.npz' fits its noise")
+    print("\nmore: 'gyroemu scenarios' and 'gyroemu presets' list what is built in;\n"
+          "      'gyroemu simulate --scenario S --device D --out run.mcap' writes a ROS 2 log, 'gyroemu info run.mcap'\n"
+          "      summarises it, 'gyroemu allan run.mcap' fits its noise; 'gyroemu record' and 'gyroemu stream' go live")
     return 0
 
 
