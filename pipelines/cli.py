@@ -222,6 +222,18 @@ def _cmd_record(args) -> int:
         raise UsageError(f"argument --out: {out}: {e.strerror or e}") from None
 
 
+def _cmd_replay(args) -> int:
+    from .replay import run_replay
+
+    try:
+        return run_replay(path=Path(args.log), rate=args.rate, loop=args.loop, topics=args.topics,
+                          device_name=args.device_name, wait_s=args.wait, **_zenoh_options(args))
+    except ConfigError:
+        raise  # LogError: names the file
+    except ValueError as e:
+        raise UsageError(str(e) if str(e).startswith("argument") else f"argument --connect/--listen: {e}") from None
+
+
 def _cmd_router(args) -> int:
     from .record import run_router
 
@@ -307,6 +319,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", default=None, metavar="FILE.json", help="also write the sequence report as JSON")
     _add_zenoh_arguments(p)
     p.set_defaults(func=_cmd_record)
+
+    p = sub.add_parser("replay", help="republish an MCAP log over zenoh with its recorded timing",
+                       epilog="Topics /imu, /<device>/imu, ... go to gyroemu/<device>/...; any other topic /a/b "
+                              "to gyroemu/<device-name>/a/b. " + zenoh_note)
+    p.add_argument("log", metavar="LOG", help="an MCAP file (ROS 2) holding sensor_msgs/msg/Imu messages")
+    p.add_argument("--rate", type=_positive, default=1.0, help="speed factor: 2 replays twice as fast (default: 1)")
+    p.add_argument("--loop", action="store_true", help="repeat until SIGINT/SIGTERM (deadlines keep increasing)")
+    p.add_argument("--topics", nargs="+", default=None, metavar="TOPIC", help="replay only these topics")
+    p.add_argument("--device-name", default="imu0",
+                   help="device of topics the file's gyroemu metadata does not name (default: imu0)")
+    p.add_argument("--wait", type=float, default=10.0,
+                   help="seconds to wait for a subscriber on every key before publishing (default: 10; 0: none)")
+    _add_zenoh_arguments(p)
+    p.set_defaults(func=_cmd_replay)
 
     p = sub.add_parser("router", help="run a zenoh router (until SIGINT/SIGTERM)")
     p.add_argument("--listen", action="append", default=None, metavar="ENDPOINT",

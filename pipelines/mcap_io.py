@@ -46,6 +46,8 @@ counts, whatever its topic; channels of unknown types are skipped with a :class:
 cut short (a recorder killed mid-write, no footer) yields the messages of its complete chunks, with a
 warning that says so and how many were recovered. Files that are not MCAP, are corrupt, or hold no IMU
 messages raise :class:`LogError`, which names the file. The input is opened read-only.
+:func:`iter_mcap_batches` walks the same records but hands out every message (topic, schema name,
+log time, payload bytes) in log-time order, a batch per chunk, for ``gyroemu replay``.
 
 Sources: MCAP format specification (https://mcap.dev/spec) and its appendix (well-known encodings,
 ``ros2`` profile); ``rosbag2_storage_mcap`` (channel metadata ``offered_qos_profiles``).
@@ -53,6 +55,8 @@ Sources: MCAP format specification (https://mcap.dev/spec) and its appendix (wel
 
 from __future__ import annotations
 
+import bisect
+import operator
 import os
 import re
 import secrets
@@ -62,7 +66,7 @@ import zlib
 from dataclasses import dataclass, field
 from io import BytesIO
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Iterable, Iterator, NamedTuple, Sequence
 
 import numpy as np
 import zstandard
@@ -99,6 +103,9 @@ from .messages import (
 
 __all__ = [
     "LogError",
+    "McapMessage",
+    "iter_mcap_batches",
+    "mcap_channels",
     "LogWarning",
     "ImuSeries",
     "Recording",
@@ -880,6 +887,12 @@ class _Scan:
         return LogError(reason, file=self.path)
 
     def run(self) -> "_Scan":
+        for _ in self.walk():
+            pass
+        return self
+
+    def walk(self):
+        """Read the file record by record (chunks decompressed and handled whole), yielding after each."""
         try:
             f = open(self.path, "rb")
         except IsADirectoryError:
@@ -917,7 +930,7 @@ class _Scan:
                     else:
                         self.footer = True
                     break
-        return self
+                yield opcode
 
     def _record(self, opcode: int, content: bytes, position: int) -> None:
         if opcode == Opcode.HEADER:
@@ -1113,6 +1126,125 @@ def _opcode_name(opcode: int) -> str:
         return Opcode(opcode).name.title().replace("_", " ")
     except ValueError:
         return f"opcode 0x{opcode:02x}"
+
+
+# -- message by message, in log-time order (replay) -------------------------------------------------
+
+class McapMessage(NamedTuple):
+    """One message as recorded: its channel's topic and schema name, ``log_time`` (ns), payload bytes."""
+
+    topic: str
+    schema: str
+    log_time: int
+    data: bytes
+
+
+class _MessageWalk(_Scan):
+    """A :class:`_Scan` that hands out each record's messages (of the wanted topics) instead of gathering
+    channel arrays; Schema and Channel records are registered as the scan does."""
+
+    def __init__(self, path: Path, topics=None):
+        super().__init__(path)
+        self.topics = None if topics is None else frozenset(topics)
+        self.out: list[McapMessage] = []
+        self.wanted: dict[int, tuple[str, str] | None] = {}  # channel id -> (topic, schema name) or None
+
+    def _channel(self, channel: Channel) -> None:
+        if channel.id in self.channels:
+            return
+        self.channels[channel.id] = channel
+        self.data[channel.id] = _ChannelData(channel)  # mtype None: nothing gathered
+        schema = self.schemas.get(channel.schema_id)
+        keep = self.topics is None or channel.topic in self.topics
+        self.wanted[channel.id] = (channel.topic, schema.name if schema is not None else "") if keep else None
+
+    def _loose_message(self, content: bytes) -> None:
+        if len(content) < 22:
+            raise ValueError("a Message record shorter than its fixed fields")
+        fields = np.frombuffer(content[:22], dtype=_MESSAGE_FIELDS)
+        channel_id = int(fields["channel_id"][0])
+        if channel_id not in self.data:
+            raise ValueError(f"a message on channel {channel_id}, which no Channel record defines")
+        self.message_count += 1
+        wanted = self.wanted[channel_id]
+        if wanted is not None:
+            self.out.append(McapMessage(wanted[0], wanted[1], int(fields["log_time"][0]), bytes(content[22:])))
+
+    def _chunk_records(self, data: bytes, position: int) -> None:
+        buffer = np.frombuffer(data, dtype=np.uint8)
+        try:
+            starts, opcodes, lengths = _record_positions(data, buffer)
+        except ValueError as e:
+            raise self.error(f"corrupt chunk at byte {position}: {e}") from None
+        for index in np.flatnonzero(opcodes != Opcode.MESSAGE):
+            p, q = int(starts[index]) + 9, int(starts[index] + 9 + lengths[index])
+            if opcodes[index] == Opcode.SCHEMA:
+                schema = Schema.read(ReadDataStream(BytesIO(data[p:q])))
+                self.schemas[schema.id] = schema
+            elif opcodes[index] == Opcode.CHANNEL:
+                self._channel(Channel.read(ReadDataStream(BytesIO(data[p:q]))))
+        is_message = opcodes == Opcode.MESSAGE
+        starts, lengths = starts[is_message], lengths[is_message]
+        if not len(starts):
+            return
+        if lengths.min() < 22:
+            raise self.error(f"corrupt chunk at byte {position}: a Message record shorter than its fixed fields")
+        header = _gather(buffer, starts + 9, 22).view(_MESSAGE_FIELDS)[:, 0]
+        self.message_count += len(starts)
+        unknown = [int(c) for c in np.unique(header["channel_id"]) if int(c) not in self.wanted]
+        if unknown:
+            raise self.error(f"corrupt chunk at byte {position}: a message on channel {unknown[0]}, "
+                             "which no Channel record defines")
+        wanted = self.wanted
+        out = self.out
+        for channel_id, log_time, start, length in zip(header["channel_id"].tolist(), header["log_time"].tolist(),
+                                                        (starts + 9 + 22).tolist(), (lengths - 22).tolist()):
+            w = wanted[channel_id]
+            if w is not None:
+                out.append(McapMessage(w[0], w[1], log_time, data[start:start + length]))
+
+
+def iter_mcap_batches(path, topics=None) -> Iterator[list[McapMessage]]:
+    """The messages of an MCAP file (of ``topics`` only, when given), in log-time order, a batch per chunk.
+
+    The file is read record by record (one decompressed chunk in memory at a time, plus what is held
+    back for ordering): each chunk's messages are sorted by log time (stable: file order for equal
+    times) and merged with those held back; the messages earlier than the start of the chunk just
+    read are handed out. So files whose chunks start in time order (what writers that log as they go
+    produce; gyroemu's chunks do not even overlap) come out in exact log-time order with one chunk of
+    look-ahead. A file cut short ends with the messages of its complete chunks. Raises
+    :class:`LogError` (naming the file) for what :func:`read_mcap` rejects as not MCAP or corrupt.
+    The input is opened read-only.
+    """
+    walk = _MessageWalk(Path(path), topics)
+    held: list[McapMessage] = []
+    by_time = operator.attrgetter("log_time")
+    for _ in walk.walk():
+        if not walk.out:
+            continue
+        batch, walk.out = walk.out, []
+        batch.sort(key=by_time)
+        threshold = batch[0].log_time
+        if held and held[-1].log_time > threshold:
+            held.extend(batch)
+            held.sort(key=by_time)  # two sorted runs: a linear merge for timsort
+        else:
+            held.extend(batch)
+        cut = bisect.bisect_left(held, threshold, key=by_time)
+        if cut:
+            yield held[:cut]
+            held = held[cut:]
+    if held:
+        yield held
+
+
+def mcap_channels(path) -> list[tuple[str, str, str]]:
+    """``(topic, schema name, message encoding)`` of every channel of an MCAP file, in file order
+    (a pass over the file that decodes no message). Raises :class:`LogError` as :func:`read_mcap` does."""
+    walk = _MessageWalk(Path(path), topics=())
+    walk.run()
+    return [(c.topic, walk.schemas[c.schema_id].name if c.schema_id in walk.schemas else "", c.message_encoding)
+            for c in walk.channels.values()]
 
 
 # -- from channels to devices -----------------------------------------------------------------------

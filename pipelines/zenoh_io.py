@@ -47,7 +47,7 @@ import struct
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
 import zenoh
@@ -196,7 +196,8 @@ def header_stamp_ns(payload: bytes) -> int:
 
 @dataclass
 class PacingReport:
-    """How late each sample went out relative to its deadline ``t0 + k / rate`` (seconds)."""
+    """How late each sample went out relative to its deadline (seconds): ``t0 + k / rate``
+    (:meth:`PacedPublisher.run`) or the message's own (:meth:`PacedPublisher.run_schedule`)."""
 
     lateness_s: np.ndarray
     messages: int
@@ -205,11 +206,11 @@ class PacingReport:
     def percentile(self, q: float) -> float:
         return float(np.percentile(self.lateness_s, q)) if len(self.lateness_s) else 0.0
 
-    def summary(self) -> str:
+    def summary(self, against: str = "t0 + k/rate") -> str:
         if not len(self.lateness_s):
             return "pacing: no samples"
         return (f"pacing: {len(self.lateness_s)} samples, {self.messages} messages in {self.elapsed_s:.3f} s; "
-                f"lateness vs t0 + k/rate: p50 {self.percentile(50) * 1e3:.3f} ms, "
+                f"lateness vs {against}: p50 {self.percentile(50) * 1e3:.3f} ms, "
                 f"p99 {self.percentile(99) * 1e3:.3f} ms, max {self.lateness_s.max() * 1e3:.3f} ms")
 
 
@@ -284,6 +285,43 @@ class PacedPublisher:
                 break
         elapsed = (time.monotonic_ns() - t0) * 1e-9
         return PacingReport(lateness_s=lateness[:sent], messages=sent * len(keys), elapsed_s=elapsed)
+
+    def run_schedule(self, messages: Iterable[tuple[int, str, bytes]], stop=None,
+                     max_samples: int = 1 << 20) -> PacingReport:
+        """Send each ``(offset_ns, key, payload)`` at its own deadline ``t0 + offset_ns`` (``t0``: when the
+        run starts, monotonic clock; offsets non-decreasing, keys among the publisher's): sleep until
+        each deadline, or send at once when behind -- the same drift-free rule as :meth:`run`, with
+        deadlines given per message instead of ``k / rate``. Messages sharing a deadline go out back to
+        back. ``stop()`` is polled between messages and at least every 0.1 s while waiting; True ends
+        the run. ``messages`` may be an endless generator: the report keeps the lateness of at most
+        ``max_samples`` deadlines (beyond that, every other one is dropped and the stride doubles)."""
+        lateness: list[float] = []
+        stride, skip = 1, 0
+        t0 = time.monotonic_ns()
+        sent = 0
+        last_deadline = None
+        for offset_ns, key, payload in messages:
+            deadline = t0 + int(offset_ns)
+            if deadline != last_deadline:
+                last_deadline = deadline
+                now = time.monotonic_ns()
+                while deadline > now:
+                    if stop is not None and stop():
+                        return PacingReport(np.array(lateness), sent, (time.monotonic_ns() - t0) * 1e-9)
+                    time.sleep(min(deadline - now, 100_000_000) * 1e-9)
+                    now = time.monotonic_ns()
+                if skip == 0:
+                    lateness.append((now - deadline) * 1e-9)
+                    if len(lateness) >= max_samples:
+                        lateness = lateness[::2]
+                        stride *= 2
+                skip = (skip + 1) % stride
+            self.put(key, payload)
+            sent += 1
+            if stop is not None and sent % 64 == 0 and stop():
+                break
+        return PacingReport(lateness_s=np.array(lateness), messages=sent,
+                            elapsed_s=(time.monotonic_ns() - t0) * 1e-9)
 
     def close(self) -> None:
         for t in self._topics.values():

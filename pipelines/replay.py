@@ -1,0 +1,225 @@
+"""``gyroemu replay``: republish an MCAP file's messages over zenoh with their recorded timing.
+
+What goes out
+-------------
+Every ``cdr`` channel of the file (or those named by ``--topics``), each message's recorded bytes
+unchanged, on the key expression of its topic (``interface.md``, "Live streams: Eclipse Zenoh"):
+
+- gyroemu's topics (``/imu``, ``/mag``, ``/truth/imu``, ``/estimate/imu``, ``/raw/<kind>``) go to
+  ``gyroemu/<device>/<topic>``. The device is the topic's prefix when the file's ``gyroemu`` metadata
+  names that prefix (``/<device>/imu`` of a several-device file), else the ``device_name`` of the
+  file's ``gyroemu`` metadata for unprefixed topics, else ``--device-name`` (default ``imu0``).
+- any other topic ``/a/b`` (someone else's file) goes to ``gyroemu/<device-name>/a/b``.
+
+The attachment is the publisher's (:class:`pipelines.zenoh_io.PacedPublisher`): a sequence per key
+from 0 (continuing across ``--loop`` passes), the send time, a random publisher id per key.
+
+Timing
+------
+Message i goes out at ``t_start + (log_time_i - log_time_0) / rate`` (``t_start``: when publishing
+starts, monotonic clock): the publisher sleeps until each absolute deadline, or sends at once when
+behind, so its error never accumulates (:meth:`PacedPublisher.run_schedule`). With ``--loop``, pass k
+is shifted by k times the file's span plus one mean message interval, so deadlines keep increasing
+(the payloads, header stamps included, are the recorded bytes every pass).
+
+A reader thread walks the file a chunk at a time (:func:`pipelines.mcap_io.iter_mcap_batches`),
+turns each chunk's messages into ``(deadline offset, key, payload)`` batches and queues them (a bounded
+queue of ``READ_AHEAD`` batches), so decompressing a chunk happens while the publisher waits for its
+deadlines, never on its schedule; memory stays bounded by the queue, whatever the file's size.
+
+Before the clock starts the file is validated with :func:`pipelines.mcap_io.read_mcap` (not MCAP,
+corrupt, truncated before its first chunk, no ``sensor_msgs/msg/Imu`` message: a ``LogError`` naming the
+file), and the replay waits (``--wait``, default 10 s) until every key has a subscriber, as
+``gyroemu stream`` does. The input is only ever opened for reading.
+"""
+
+from __future__ import annotations
+
+import queue
+import re
+import signal
+import sys
+import threading
+import time
+import warnings
+
+from .mcap_io import LogWarning, iter_mcap_batches, mcap_channels, read_mcap
+from .zenoh_io import PacedPublisher, open_session, session_config, topic_to_key
+
+__all__ = ["topic_keys", "ReadAhead", "run_replay", "READ_AHEAD"]
+
+READ_AHEAD = 8  # decoded chunk batches queued ahead of the publisher
+_ROLE = re.compile(r"^(?P<prefix>(/[^/]+)??)(?P<role>/imu|/mag|/truth/imu|/estimate/imu|/raw/[^/]+)$")
+
+
+class ReplayError(ValueError):
+    """Bad usage of ``gyroemu replay`` (the message names the argument)."""
+
+
+def topic_keys(topics, metadata: list[dict], device_name: str = "imu0") -> tuple[dict[str, str], dict[str, str]]:
+    """``({topic: key}, {topic: why it cannot be published})`` by the rule in the module's notes."""
+    by_prefix = {m.get("topic_prefix", ""): m.get("device_name") or "" for m in metadata}
+    if "" not in by_prefix and len(metadata) == 1:
+        by_prefix[""] = metadata[0].get("device_name") or ""
+    keys, bad = {}, {}
+    for topic in topics:
+        name = topic if topic.startswith("/") else "/" + topic
+        device, rest = device_name, name
+        m = _ROLE.match(name)
+        if m:
+            prefix = m.group("prefix")
+            if prefix in by_prefix:
+                device, rest = by_prefix[prefix] or prefix.strip("/") or device_name, m.group("role")
+        try:
+            if any(c in rest for c in "*$?#"):
+                raise ValueError(f"topic {topic!r}: '*', '$', '?' and '#' cannot go in a key expression")
+            keys[topic] = topic_to_key(device, rest)
+        except ValueError as e:
+            bad[topic] = str(e)
+    return keys, bad
+
+
+class ReadAhead(threading.Thread):
+    """Reads the file in a thread and queues ``[(deadline offset ns, key, payload), ...]`` batches (one
+    per chunk); ``None`` ends the stream, an exception object is raised by :meth:`messages`."""
+
+    def __init__(self, path, keys: dict[str, str], rate: float, loop: bool, depth: int = READ_AHEAD):
+        super().__init__(name="replay-read-ahead", daemon=True)
+        self.path, self.keys, self.rate, self.loop = path, keys, float(rate), loop
+        self.queue: queue.Queue = queue.Queue(depth)
+        self.stopping = threading.Event()
+        self.passes = 0
+
+    def _put(self, item) -> bool:
+        while not self.stopping.is_set():
+            try:
+                self.queue.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def run(self) -> None:
+        try:
+            keys, rate = self.keys, self.rate
+            offset = 0  # ns of log time added to this pass
+            first = None
+            while not self.stopping.is_set():
+                pass_first = last = previous = None
+                distinct = 0
+                for batch in iter_mcap_batches(self.path, topics=keys):
+                    if pass_first is None:
+                        pass_first = batch[0].log_time
+                        if first is None:
+                            first = pass_first
+                    shift = offset - first
+                    items = []
+                    for m in batch:
+                        if m.log_time != previous:
+                            distinct += 1
+                            previous = m.log_time
+                        items.append((round((m.log_time + shift) / rate), keys[m.topic], m.data))
+                    last = batch[-1].log_time
+                    if not self._put(items):
+                        return
+                self.passes += 1
+                if not self.loop or pass_first is None:
+                    break
+                span = last - pass_first
+                interval = span / (distinct - 1) if distinct > 1 else 1e9
+                offset += span + round(interval)
+        except BaseException as e:  # handed to the publishing thread
+            self._put(e)
+        finally:
+            self._put(None)
+
+    def messages(self, stop=lambda: False):
+        """The queued messages one by one (blocks while the reader is behind)."""
+        while True:
+            try:
+                batch = self.queue.get(timeout=0.1)
+            except queue.Empty:
+                if stop():
+                    return
+                continue
+            if batch is None:
+                return
+            if isinstance(batch, BaseException):
+                raise batch
+            yield from batch
+
+
+def run_replay(*, path, rate: float = 1.0, loop: bool = False, topics=None, device_name: str = "imu0",
+               wait_s: float = 10.0, connect=None, listen=None, mode=None, config_file=None,
+               out=sys.stdout) -> int:
+    """Replay ``path`` (see the module's notes). Returns the exit status: 0 when done (or, with
+    ``loop``, when stopped by SIGINT/SIGTERM), 130 when a single pass was interrupted. Raises
+    :class:`pipelines.mcap_io.LogError` for bad input and ``ValueError`` naming the argument at fault."""
+    config = session_config(connect=connect, listen=listen, mode=mode, config_file=config_file)
+    if not rate > 0:
+        raise ReplayError(f"argument --rate: must be positive, got {rate}")
+    try:
+        topic_to_key(device_name, "/imu")
+    except ValueError as e:
+        raise ReplayError(f"argument --device-name: {e}") from None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", LogWarning)
+        log = read_mcap(path)  # validation: LogError naming the file
+    for w in caught:
+        if issubclass(w.category, LogWarning) and "skipping topic" not in str(w.message):
+            print(f"replay: warning: {w.message}", file=out)
+    channels = mcap_channels(path)
+    cdr = [topic for topic, _, encoding in channels if encoding == "cdr"]
+    if topics:
+        known = {topic for topic, _, _ in channels}
+        for topic in topics:
+            if topic not in known:
+                raise ReplayError(f"argument --topics: {path}: no topic {topic!r} "
+                                  f"(it has {', '.join(sorted(known))})")
+            if topic not in cdr:
+                raise ReplayError(f"argument --topics: {path}: topic {topic!r} is not cdr-encoded")
+        cdr = [t for t in cdr if t in set(topics)]
+    for topic, _, encoding in channels:
+        if encoding != "cdr" and not topics:
+            print(f"replay: skipping {topic}: message encoding {encoding!r}, not cdr", file=out)
+    keys, bad = topic_keys(cdr, log.metadata, device_name)
+    for topic, why in bad.items():
+        if topics:
+            raise ReplayError(f"argument --topics: {path}: topic {topic!r} has no key expression: {why}")
+        print(f"replay: skipping {topic}: {why}", file=out)
+    if not keys:
+        raise ReplayError(f"argument LOG: {path}: no topic to publish")
+
+    print(f"replay: {path}: {len(keys)} topics at rate x{rate:g}{', looping' if loop else ''}", file=out)
+    for topic, key in keys.items():
+        print(f"  {topic} -> {key}", file=out)
+    session = open_session(config)
+    stopping = []
+    previous = {s: signal.signal(s, lambda *_: stopping.append(1)) for s in (signal.SIGINT, signal.SIGTERM)}
+    publisher = reader = None
+    try:
+        publisher = PacedPublisher(session, sorted(set(keys.values())))
+        reader = ReadAhead(path, keys, rate, loop)
+        reader.start()  # fills its queue while we wait for subscribers
+        if wait_s > 0:
+            end = time.monotonic() + wait_s
+            while not publisher.matched() and time.monotonic() < end and not stopping:
+                time.sleep(0.01)
+            if not publisher.matched():
+                print(f"replay: no subscriber on every key after {wait_s:g} s: publishing anyway", file=out)
+        print("replay: publishing", file=out, flush=True)
+        stop = lambda: bool(stopping)  # noqa: E731
+        report = publisher.run_schedule(reader.messages(stop), stop=stop)
+        print(f"replay: sent {report.messages} messages ({reader.passes} complete passes)", file=out)
+        print(f"replay: {report.summary('t_start + (log_time - log_time_0) / rate')}", file=out)
+        time.sleep(0.5)  # let queued messages drain before the session closes
+    finally:
+        if reader is not None:
+            reader.stopping.set()
+        if publisher is not None:
+            publisher.close()
+        session.close()
+        for s, h in previous.items():
+            signal.signal(s, h)
+    out.flush()
+    return 130 if stopping and not loop else 0

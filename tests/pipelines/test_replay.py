@@ -1,0 +1,343 @@
+"""``gyroemu replay``: recorded files republished over zenoh between real processes on loopback.
+
+Run alone with ``pytest tests/pipelines/test_replay.py -n 0 -s`` (``-s`` shows the measured figures).
+Every process is killed in a ``finally`` block; ports are picked free. About 30 s in all.
+"""
+
+import json
+import os
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+zenoh = pytest.importorskip("zenoh")
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENARIO, DEVICE, DURATION = "heavy_top", "consumer_mems", 5.0
+TOPICS = ("/imu", "/mag", "/truth/imu", "/raw/mems")
+N = 5000  # samples per topic at 1 kHz
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Procs:
+    """Started ``gyroemu`` subprocesses, output to files; all killed on exit (as in test_zenoh)."""
+
+    def __init__(self, folder: Path):
+        self.folder = folder
+        self.procs: dict[str, subprocess.Popen] = {}
+
+    def start(self, name, *args):
+        out = open(self.folder / f"{name}.log", "wb")
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        self.procs[name] = subprocess.Popen([sys.executable, "-m", "pipelines.cli", *args], cwd=ROOT, env=env,
+                                            stdout=out, stderr=subprocess.STDOUT)
+        out.close()
+        return self.procs[name]
+
+    def log(self, name) -> str:
+        return (self.folder / f"{name}.log").read_text(errors="replace")
+
+    def wait_for(self, name, text, timeout=30.0):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if text in self.log(name):
+                return
+            if self.procs[name].poll() is not None:
+                break
+            time.sleep(0.05)
+        raise AssertionError(f"{name} did not print {text!r} (exit {self.procs[name].poll()}):\n{self.log(name)}")
+
+    def wait(self, name, timeout=60.0) -> int:
+        try:
+            return self.procs[name].wait(timeout)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(f"{name} still running after {timeout} s:\n{self.log(name)}") from None
+
+    def stop(self, name, sig=signal.SIGINT, timeout=30.0) -> int:
+        self.procs[name].send_signal(sig)
+        return self.wait(name, timeout)
+
+    def kill_all(self):
+        for p in self.procs.values():
+            if p.poll() is None:
+                p.kill()
+        for p in self.procs.values():
+            try:
+                p.wait(10)
+            except subprocess.TimeoutExpired:
+                pass
+
+
+@pytest.fixture
+def procs(tmp_path):
+    p = Procs(tmp_path)
+    try:
+        yield p
+    finally:
+        p.kill_all()
+
+
+@pytest.fixture(scope="module")
+def gyroemu_mcap(tmp_path_factory):
+    path = tmp_path_factory.mktemp("replay") / "x.mcap"
+    subprocess.run([sys.executable, "-m", "pipelines.cli", "simulate", "--scenario", SCENARIO, "--device", DEVICE,
+                    "--duration", str(DURATION), "--out", str(path)], cwd=ROOT, check=True, capture_output=True)
+    return path
+
+
+def mcap_messages(path, topic=None) -> list:
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as f:
+        return [(c.topic, m.log_time, m.data) for _, c, m in
+                make_reader(f).iter_messages(topics=None if topic is None else [topic], log_time_order=True)]
+
+
+class Listener:
+    """An in-test zenoh peer listening on a free port (the replay connects to it), collecting
+    ``(key, payload, sequence, send stamp ns)`` of everything under ``gyroemu/**``."""
+
+    def __init__(self):
+        self.endpoint = f"tcp/127.0.0.1:{free_port()}"
+        config = zenoh.Config()
+        config.insert_json5("mode", '"peer"')
+        config.insert_json5("listen/endpoints", json.dumps([self.endpoint]))
+        config.insert_json5("scouting/multicast/enabled", "false")
+        self.session = zenoh.open(config)
+        self.sub = self.session.declare_subscriber("gyroemu/**", zenoh.handlers.FifoChannel(1 << 17))
+        self.samples = []
+
+    def drain(self):
+        while (sample := self.sub.try_recv()) is not None:
+            seq, stamp, _, _ = struct.unpack("<qqB16s", sample.attachment.to_bytes())
+            self.samples.append((str(sample.key_expr), sample.payload.to_bytes(), seq, stamp))
+        return self.samples
+
+    def close(self):
+        self.session.close()
+
+
+@pytest.fixture
+def listener():
+    lst = Listener()
+    try:
+        yield lst
+    finally:
+        lst.close()
+
+
+def test_gyroemu_file_recorded_back_complete_and_byte_exact(procs, tmp_path, gyroemu_mcap):
+    """(1) --rate 1 into `gyroemu record`: every message, sequences 0..N-1 per key, payloads identical."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    procs.start("rec", "record", "--out", str(tmp_path / "r.mcap"), "--listen", endpoint,
+                "--report", str(tmp_path / "r.json"))
+    procs.wait_for("rec", "subscribed")
+    procs.start("replay", "replay", str(gyroemu_mcap), "--connect", endpoint)
+    assert procs.wait("replay", 60) == 0, procs.log("replay")
+    assert "publishing anyway" not in procs.log("replay")
+    time.sleep(0.5)
+    assert procs.stop("rec") == 0, procs.log("rec")
+    print("\n" + procs.log("replay") + procs.log("rec"))
+    report = json.loads((tmp_path / "r.json").read_text())
+    by_topic = {r["topic"]: r for r in report["publishers"].values()}
+    assert sorted(by_topic) == sorted(f"{DEVICE}{t}" for t in TOPICS)  # the metadata's device_name
+    for r in by_topic.values():
+        assert (r["received"], r["first"], r["last"], r["missing"], r["duplicates"], r["late"]) == \
+            (N, 0, N - 1, 0, 0, 0), r
+    for topic in TOPICS:
+        got, want = mcap_messages(tmp_path / "r.mcap", topic), mcap_messages(gyroemu_mcap, topic)
+        assert len(got) == len(want) == N
+        assert [g[2] for g in got] == [w[2] for w in want], f"{topic}: payload bytes differ"
+        assert [g[1] for g in got] == [w[1] for w in want]
+    assert os.access(gyroemu_mcap, os.R_OK) and mcap_messages(gyroemu_mcap, "/imu")  # input untouched
+
+
+def test_rate_4_takes_a_quarter_of_the_time(procs, listener, gyroemu_mcap):
+    """(2) --rate 4: the send stamps span about D/4 of the log's duration D (= 4.999 s).
+
+    Bounds: the schedule never sends before a deadline, so the span is at least D/4 (0.25 D) minus the
+    first message's lateness; 0.15 D leaves room for that and fails a replay that ignores the pacing
+    (20 000 messages as fast as possible take well under 0.1 D here). The upper bound 0.6 D fails a
+    replay that ignores --rate (1.0 D) while allowing 1.7 s of stalls on a busy shared machine.
+    """
+    procs.start("replay", "replay", str(gyroemu_mcap), "--rate", "4", "--connect", listener.endpoint)
+    assert procs.wait("replay", 60) == 0, procs.log("replay")
+    time.sleep(0.3)
+    samples = listener.drain()
+    assert len(samples) == N * len(TOPICS)
+    log = mcap_messages(gyroemu_mcap)
+    duration_s = (log[-1][1] - log[0][1]) * 1e-9
+    stamps = np.array([s[3] for s in samples])
+    span_s = (stamps.max() - stamps.min()) * 1e-9
+    print(f"\n--rate 4: {duration_s:.3f} s of log sent in {span_s:.3f} s ({span_s / duration_s:.3f} of it)")
+    assert 0.15 * duration_s < span_s < 0.6 * duration_s
+
+
+def write_foreign(path, n, seed=11) -> np.ndarray:
+    """Someone else's bag (mcap_ros2's writer): /sensors/imu_raw at irregular 4-6 ms intervals, log
+    times 2 ms after the stamps, and a String topic every 10th sample. Returns the Imu log times."""
+    from mcap_ros2.writer import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    rng = np.random.default_rng(seed)
+    stamps = 1_700_000_000 * 10**9 + np.cumsum(rng.integers(4_000_000, 6_000_000, n))
+    with open(path, "wb") as f:
+        writer = Writer(f, chunk_size=16384)
+        imu = writer.register_msgdef("sensor_msgs/msg/Imu", get_typestore(Stores.ROS2_HUMBLE).generate_msgdef(
+            "sensor_msgs/msg/Imu")[0].replace("time stamp", "builtin_interfaces/Time stamp") +
+            "=" * 80 + "\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n")
+        text = writer.register_msgdef("std_msgs/msg/String", "string data\n")
+        for k in range(n):
+            sec, nanosec = divmod(int(stamps[k]), 10**9)
+            writer.write_message("/sensors/imu_raw", imu, {
+                "header": {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": "imu_link"},
+                "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}, "orientation_covariance": [-1.0] + [0.0] * 8,
+                "angular_velocity": dict(zip("xyz", rng.normal(size=3))), "angular_velocity_covariance": [0.0] * 9,
+                "linear_acceleration": dict(zip("xyz", rng.normal(size=3))),
+                "linear_acceleration_covariance": [0.0] * 9}, log_time=int(stamps[k]) + 2_000_000)
+            if k % 10 == 0:
+                writer.write_message("/rosout_text", text, {"data": f"sample {k}"}, log_time=int(stamps[k]) + 2_000_001)
+        writer.finish()
+    return stamps + 2_000_000
+
+
+def test_foreign_file_and_pacing(procs, listener, tmp_path):
+    """(3) someone else's /sensors/imu_raw goes to gyroemu/imu0/sensors/imu_raw, bytes unchanged (and
+    its String topic to gyroemu/imu0/rosout_text). (4) Pacing: send stamps against
+    t_start + (log_time - log_time_0) at irregular intervals; p50/p99 printed, drift asserted."""
+    n = 1200  # about 6 s
+    path = tmp_path / "foreign.mcap"
+    log_time = write_foreign(path, n)
+    before = path.read_bytes()
+    procs.start("replay", "replay", str(path), "--connect", listener.endpoint)
+    assert procs.wait("replay", 60) == 0, procs.log("replay")
+    time.sleep(0.3)
+    samples = listener.drain()
+    print("\n" + procs.log("replay"))
+    assert path.read_bytes() == before
+    imu = [s for s in samples if s[0] == "gyroemu/imu0/sensors/imu_raw"]
+    text = [s for s in samples if s[0] == "gyroemu/imu0/rosout_text"]
+    assert len(imu) + len(text) == len(samples)
+    assert [s[1] for s in imu] == [m[2] for m in mcap_messages(path, "/sensors/imu_raw")]
+    assert [s[1] for s in text] == [m[2] for m in mcap_messages(path, "/rosout_text")]
+    assert [s[2] for s in imu] == list(range(n)) and [s[2] for s in text] == list(range(n // 10))
+
+    sent = np.array([s[3] for s in imu], dtype=np.int64)
+    offset = (sent - (log_time - log_time[0])) * 1e-9  # send time minus the log-time offset: t_start + lateness
+    error = offset - offset.min()
+    p50, p99, worst = np.percentile(error, 50) * 1e3, np.percentile(error, 99) * 1e3, error.max() * 1e3
+    drift = (np.median(error[-200:]) - np.median(error[:200])) * 1e3
+    own = [line for line in procs.log("replay").splitlines() if "pacing" in line]
+    print(f"replay pacing from attachment stamps ({n} irregular deadlines): p50 {p50:.3f} ms, p99 {p99:.3f} ms, "
+          f"max {worst:.3f} ms; drift over the run {drift:.3f} ms\n{own}")
+    assert abs(drift) < 2.0  # ms: no accumulating drift (sleep-per-message would add ~0.1 ms x 1200)
+
+
+def test_loop_repeats_with_increasing_deadlines_until_sigterm(procs, listener, tmp_path):
+    """--loop: passes follow each other (sequences continue), SIGTERM ends it with status 0."""
+    path = tmp_path / "short.mcap"
+    log_time = write_foreign(path, 100)  # about 0.5 s
+    procs.start("replay", "replay", str(path), "--loop", "--rate", "2", "--topics", "/sensors/imu_raw",
+                "--connect", listener.endpoint)
+    procs.wait_for("replay", "publishing")
+    time.sleep(1.2)  # about 4 passes at --rate 2
+    assert procs.stop("replay", signal.SIGTERM) == 0, procs.log("replay")
+    samples = listener.drain()
+    assert {s[0] for s in samples} == {"gyroemu/imu0/sensors/imu_raw"}
+    seq = [s[2] for s in samples]
+    assert seq == list(range(len(seq))) and len(seq) > 2 * 100
+    payloads = [m[2] for m in mcap_messages(path, "/sensors/imu_raw")]
+    assert [s[1] for s in samples] == [payloads[k % 100] for k in range(len(seq))]
+    stamps = np.array([s[3] for s in samples[:200]])
+    gap = (stamps[100] - stamps[99]) * 1e-9  # from the end of pass 0 to the start of pass 1
+    interval = (log_time[-1] - log_time[0]) / 99 / 2 * 1e-9
+    print(f"\n--loop: {len(seq)} messages in {len(seq) / 100:.1f} passes; gap between passes {gap * 1e3:.2f} ms "
+          f"(mean interval / rate {interval * 1e3:.2f} ms)")
+    assert 0 < gap < 10 * interval + 0.01
+
+
+def test_bad_inputs_exit_2_naming_the_file(tmp_path, gyroemu_mcap, capsys):
+    """(5) missing, not MCAP, truncated before its first chunk, corrupt, no Imu channel, unknown topic."""
+    from mcap_ros2.writer import Writer
+
+    from pipelines.cli import main
+
+    data = gyroemu_mcap.read_bytes()
+    bad = {"missing.mcap": None, "text.mcap": b"hello, not an MCAP file\n", "head.mcap": data[:200]}
+    corrupt = bytearray(data)
+    middle = len(corrupt) // 2
+    corrupt[middle:middle + 64] = bytes(64)
+    bad["corrupt.mcap"] = bytes(corrupt)
+    for name, content in bad.items():
+        if content is not None:
+            (tmp_path / name).write_bytes(content)
+    with open(tmp_path / "text_only.mcap", "wb") as f:
+        writer = Writer(f)
+        schema = writer.register_msgdef("std_msgs/msg/String", "string data\n")
+        writer.write_message("/chatter", schema, {"data": "hi"}, log_time=1)
+        writer.finish()
+    for name in (*bad, "text_only.mcap"):
+        path = tmp_path / name
+        try:
+            status = main(["replay", str(path), "--wait", "0"])
+        except SystemExit as e:
+            status = e.code
+        err = capsys.readouterr().err
+        print(f"{name}: exit {status}: {err.strip()}")
+        assert status == 2 and str(path) in err, (name, status, err)
+    with pytest.raises(SystemExit) as e:
+        main(["replay", str(gyroemu_mcap), "--topics", "/imu", "/nope", "--wait", "0"])
+    err = capsys.readouterr().err
+    print(err.strip())
+    assert e.value.code == 2 and "/nope" in err and str(gyroemu_mcap) in err
+    assert gyroemu_mcap.read_bytes() == data
+
+
+def test_topic_keys_rule():
+    """Without processes: gyroemu topics by prefix / metadata / --device-name; foreign topics under the device."""
+    from pipelines.replay import topic_keys
+
+    meta = [{"device_name": "d0", "topic_prefix": ""}, {"device_name": "a", "topic_prefix": "/a"}]
+    keys, bad = topic_keys(["/imu", "/truth/imu", "/a/raw/fog", "/sensors/imu_raw", "/robot/imu", "/x*"], meta, "zz")
+    assert keys == {"/imu": "gyroemu/d0/imu", "/truth/imu": "gyroemu/d0/truth/imu", "/a/raw/fog": "gyroemu/a/raw/fog",
+                    "/sensors/imu_raw": "gyroemu/zz/sensors/imu_raw", "/robot/imu": "gyroemu/zz/robot/imu"}
+    assert list(bad) == ["/x*"]
+    assert topic_keys(["/imu", "/truth/imu"], [])[0] == {"/imu": "gyroemu/imu0/imu", "/truth/imu": "gyroemu/imu0/truth/imu"}
+
+
+def test_iter_mcap_batches_in_log_time_order(tmp_path, gyroemu_mcap):
+    """The read-ahead iterator: the mcap library's log-time order, also for chunks whose log times are
+    shuffled (within a chunk and across neighbouring chunks), and --topics filtering."""
+    from mcap_ros2.writer import Writer
+
+    from pipelines.mcap_io import iter_mcap_batches
+
+    def flat(path, topics=None):
+        return [(m.topic, m.log_time, m.data) for batch in iter_mcap_batches(path, topics) for m in batch]
+
+    assert flat(gyroemu_mcap) == mcap_messages(gyroemu_mcap)
+    assert flat(gyroemu_mcap, ["/mag"]) == mcap_messages(gyroemu_mcap, "/mag")
+    rng = np.random.default_rng(3)
+    times = np.arange(2000) * 1000 + rng.integers(0, 5000, 2000)  # jitter of 5 messages: out of order
+    path = tmp_path / "shuffled.mcap"
+    with open(path, "wb") as f:
+        writer = Writer(f, chunk_size=4096)
+        schema = writer.register_msgdef("std_msgs/msg/String", "string data\n")
+        for k, t in enumerate(times):
+            writer.write_message("/s", schema, {"data": str(k)}, log_time=int(t))
+        writer.finish()
+    got = flat(path)
+    assert [g[1] for g in got] == sorted(times.tolist())
+    assert sorted(g[2] for g in got) == sorted(m[2] for m in mcap_messages(path))
