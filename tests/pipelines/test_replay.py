@@ -7,7 +7,6 @@ Every process is killed in a ``finally`` block; ports are picked free. About 30 
 import json
 import os
 import signal
-import socket
 import struct
 import subprocess
 import sys
@@ -19,74 +18,12 @@ import pytest
 
 zenoh = pytest.importorskip("zenoh")
 
+from live_processes import free_port, procs  # noqa: E402,F401  (procs is a fixture)
+
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO, DEVICE, DURATION = "heavy_top", "consumer_mems", 5.0
 TOPICS = ("/imu", "/mag", "/truth/imu", "/raw/mems")
 N = 5000  # samples per topic at 1 kHz
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class Procs:
-    """Started ``gyroemu`` subprocesses, output to files; all killed on exit (as in test_zenoh)."""
-
-    def __init__(self, folder: Path):
-        self.folder = folder
-        self.procs: dict[str, subprocess.Popen] = {}
-
-    def start(self, name, *args):
-        out = open(self.folder / f"{name}.log", "wb")
-        env = dict(os.environ, PYTHONUNBUFFERED="1")
-        self.procs[name] = subprocess.Popen([sys.executable, "-m", "pipelines.cli", *args], cwd=ROOT, env=env,
-                                            stdout=out, stderr=subprocess.STDOUT)
-        out.close()
-        return self.procs[name]
-
-    def log(self, name) -> str:
-        return (self.folder / f"{name}.log").read_text(errors="replace")
-
-    def wait_for(self, name, text, timeout=30.0):
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if text in self.log(name):
-                return
-            if self.procs[name].poll() is not None:
-                break
-            time.sleep(0.05)
-        raise AssertionError(f"{name} did not print {text!r} (exit {self.procs[name].poll()}):\n{self.log(name)}")
-
-    def wait(self, name, timeout=60.0) -> int:
-        try:
-            return self.procs[name].wait(timeout)
-        except subprocess.TimeoutExpired:
-            raise AssertionError(f"{name} still running after {timeout} s:\n{self.log(name)}") from None
-
-    def stop(self, name, sig=signal.SIGINT, timeout=30.0) -> int:
-        self.procs[name].send_signal(sig)
-        return self.wait(name, timeout)
-
-    def kill_all(self):
-        for p in self.procs.values():
-            if p.poll() is None:
-                p.kill()
-        for p in self.procs.values():
-            try:
-                p.wait(10)
-            except subprocess.TimeoutExpired:
-                pass
-
-
-@pytest.fixture
-def procs(tmp_path):
-    p = Procs(tmp_path)
-    try:
-        yield p
-    finally:
-        p.kill_all()
 
 
 @pytest.fixture(scope="module")
