@@ -1009,7 +1009,8 @@ class _Scan:
         self.chunks += 1
 
     def _chunk_records(self, data: bytes, position: int) -> None:
-        """Find the Message records of a decompressed chunk; gather each wanted channel's payloads."""
+        """Read the Schema and Channel records of a decompressed chunk, then hand its Message records'
+        fixed fields (``header``), starts and lengths to :meth:`_chunk_messages`."""
         buffer = np.frombuffer(data, dtype=np.uint8)
         try:
             starts, opcodes, lengths = _record_positions(data, buffer)
@@ -1029,6 +1030,10 @@ class _Scan:
         if lengths.min() < 22:
             raise self.error(f"corrupt chunk at byte {position}: a Message record shorter than its fixed fields")
         header = _gather(buffer, starts + 9, 22).view(_MESSAGE_FIELDS)[:, 0]
+        self._chunk_messages(data, buffer, header, starts, lengths, position)
+
+    def _chunk_messages(self, data, buffer, header, starts, lengths, position) -> None:
+        """Gather each wanted channel's payloads, in bulk."""
         ordinal = self.message_count + np.arange(len(starts))
         self.message_count += len(starts)
         channel_ids = header["channel_id"]
@@ -1170,26 +1175,8 @@ class _MessageWalk(_Scan):
         if wanted is not None:
             self.out.append(McapMessage(wanted[0], wanted[1], int(fields["log_time"][0]), bytes(content[22:])))
 
-    def _chunk_records(self, data: bytes, position: int) -> None:
-        buffer = np.frombuffer(data, dtype=np.uint8)
-        try:
-            starts, opcodes, lengths = _record_positions(data, buffer)
-        except ValueError as e:
-            raise self.error(f"corrupt chunk at byte {position}: {e}") from None
-        for index in np.flatnonzero(opcodes != Opcode.MESSAGE):
-            p, q = int(starts[index]) + 9, int(starts[index] + 9 + lengths[index])
-            if opcodes[index] == Opcode.SCHEMA:
-                schema = Schema.read(ReadDataStream(BytesIO(data[p:q])))
-                self.schemas[schema.id] = schema
-            elif opcodes[index] == Opcode.CHANNEL:
-                self._channel(Channel.read(ReadDataStream(BytesIO(data[p:q]))))
-        is_message = opcodes == Opcode.MESSAGE
-        starts, lengths = starts[is_message], lengths[is_message]
-        if not len(starts):
-            return
-        if lengths.min() < 22:
-            raise self.error(f"corrupt chunk at byte {position}: a Message record shorter than its fixed fields")
-        header = _gather(buffer, starts + 9, 22).view(_MESSAGE_FIELDS)[:, 0]
+    def _chunk_messages(self, data, buffer, header, starts, lengths, position) -> None:
+        """Hand out each wanted message as its own :class:`McapMessage`, in file order."""
         self.message_count += len(starts)
         unknown = [int(c) for c in np.unique(header["channel_id"]) if int(c) not in self.wanted]
         if unknown:

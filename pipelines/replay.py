@@ -201,12 +201,8 @@ def run_replay(*, path, rate: float = 1.0, loop: bool = False, topics=None, devi
         publisher = PacedPublisher(session, sorted(set(keys.values())))
         reader = ReadAhead(path, keys, rate, loop)
         reader.start()  # fills its queue while we wait for subscribers
-        if wait_s > 0:
-            end = time.monotonic() + wait_s
-            while not publisher.matched() and time.monotonic() < end and not stopping:
-                time.sleep(0.01)
-            if not publisher.matched():
-                print(f"replay: no subscriber on every key after {wait_s:g} s: publishing anyway", file=out)
+        if wait_s > 0 and not publisher.wait_for_subscribers(wait_s, stop=lambda: bool(stopping)):
+            print(f"replay: no subscriber on every key after {wait_s:g} s: publishing anyway", file=out)
         print("replay: publishing", file=out, flush=True)
         stop = lambda: bool(stopping)  # noqa: E731
         report = publisher.run_schedule(reader.messages(stop), stop=stop)

@@ -80,12 +80,8 @@ def run_stream(*, scenario: str, device: str, duration: float | None = None, see
         publisher = PacedPublisher(session, list(batches))
         for key in batches:
             print(f"  {key}", file=out)
-        if wait_s > 0:
-            end = time.monotonic() + wait_s
-            while not publisher.matched() and time.monotonic() < end and not stopping:
-                time.sleep(0.01)
-            if not publisher.matched():
-                print(f"stream: no subscriber on every key after {wait_s:g} s: publishing anyway", file=out)
+        if wait_s > 0 and not publisher.wait_for_subscribers(wait_s, stop=lambda: bool(stopping)):
+            print(f"stream: no subscriber on every key after {wait_s:g} s: publishing anyway", file=out)
         print("stream: publishing", file=out, flush=True)
         report = publisher.run(batches, None if as_fast_as_possible else rate, stop=lambda: bool(stopping))
         print(f"stream: sent {report.messages} messages", file=out)

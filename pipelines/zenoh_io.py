@@ -245,11 +245,12 @@ class PacedPublisher:
         """Whether every publisher has at least one matching subscriber."""
         return all(t.publisher.matching_status.matching for t in self._topics.values())
 
-    def wait_for_subscribers(self, timeout_s: float) -> bool:
-        """Wait (up to ``timeout_s``) until every key has a subscriber; returns whether they all do."""
+    def wait_for_subscribers(self, timeout_s: float, stop=None) -> bool:
+        """Wait (up to ``timeout_s``, or until ``stop()`` is true) until every key has a subscriber;
+        returns whether they all do."""
         end = time.monotonic() + timeout_s
         while not self.matched():
-            if time.monotonic() >= end:
+            if time.monotonic() >= end or (stop is not None and stop()):
                 return False
             time.sleep(0.01)
         return True
