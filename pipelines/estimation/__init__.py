@@ -1,0 +1,19 @@
+"""Attitude estimation: gyroemu's Kalman filter, the peers' adapters, the filter protocol, metrics.
+
+- :mod:`.protocol`: what a filter is (:class:`AttitudeFilter`), what it knows (:class:`FilterSetup`)
+  and returns (:class:`Estimate`);
+- :mod:`.mekf` (+ :mod:`.mekf_kernels`): the multiplicative Kalman filter on filterpy;
+- :mod:`.batched`: the same filter over many Monte Carlo runs at once;
+- :mod:`.peers`, :mod:`.registry`: Madgwick, Mahony, EKF (``ahrs``), VQF, and filters by name;
+- :mod:`.metrics`: BROAD's error definitions; :mod:`.setup`: a setup from a device or a log.
+"""
+
+from .metrics import AttitudeErrors, attitude_errors, convergence_time, rmse_deg
+from .mekf import Mekf, MekfParams
+from .protocol import AttitudeFilter, DeviceNoise, Estimate, FilterSetup
+from .setup import noise_from_device, setup_for, setup_from_metadata
+
+__all__ = [
+    "AttitudeErrors", "AttitudeFilter", "DeviceNoise", "Estimate", "FilterSetup", "Mekf", "MekfParams",
+    "attitude_errors", "convergence_time", "noise_from_device", "rmse_deg", "setup_for", "setup_from_metadata",
+]

@@ -1,0 +1,388 @@
+"""gyroemu's attitude filter: a multiplicative (error-state) extended Kalman filter on filterpy.
+
+The nominal state is the attitude ``q_wb`` and the gyro bias ``b``; the Kalman filter (filterpy's
+``KalmanFilter``, dim_x = 6) carries their errors ``(δθ, δb)``, ``δθ`` in world axes. The gyro drives a
+strapdown integration at every sample; every window (20 ms by default) the error covariance is
+propagated over the window, the window's measurements update the error state, and the error is folded
+back into the nominal state (Markley & Crassidis, *Fundamentals of Spacecraft Attitude Determination
+and Control*, §6.2; the models are in :mod:`pipelines.estimation.mekf_kernels`):
+
+* **gravity direction** from the specific force averaged over the window in the world frame: it
+  corrects inclination only (its ``H`` has no heading column). Non-gravitational acceleration
+  (translation, tapping, vibration) enters as noise that grows with how far ``|a|`` strays from
+  gravity, and a χ² gate rejects what is still implausible, for at most ``accel_timeout_s``;
+* **heading** from the magnetic field averaged in the world frame, a scalar measurement whose gain is
+  constrained to never touch inclination; fields whose norm or dip differ from the reference
+  (learned at the start) are a disturbance and skipped, and a χ² gate catches the rest;
+* **rest**: a still gyro reads its bias (plus Earth's rate, taken out when the latitude is known, which
+  then also finds north for a gyro good enough to see it).
+
+Initialisation uses the first ``init_s`` of the first block: tilt from the mean specific force,
+heading from the mean field (9D), from Earth's rate (6D, known latitude, a gyro whose gyrocompass
+heading is better than 20°, at rest), or zero. The noise figures come from the device where they are
+known (:class:`~pipelines.estimation.protocol.DeviceNoise`) and from :class:`MekfParams`' defaults
+otherwise: one parameter set for every log.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+from filterpy.kalman import KalmanFilter
+
+from dynamics.earth import EARTH_RATE
+from . import mekf_kernels as kern
+from .protocol import Estimate, FilterSetup
+
+__all__ = ["Mekf", "MekfParams", "initial_state"]
+
+_DEG = np.pi / 180
+
+
+@dataclass(frozen=True)
+class MekfParams:
+    """The filter's parameters, SI. The defaults serve any log; the noise figures of a known device
+    replace the first five (:meth:`for_setup`).
+
+    Attributes
+    ----------
+    gyro_noise_density : float
+        White rate noise N, rad/s/√Hz (angle random walk).
+    gyro_bias_sigma : float
+        Turn-on bias uncertainty, rad/s.
+    gyro_bias_random_walk : float
+        Bias random walk, rad/s/√s (rate random walk, plus bias instability spread over 100 s).
+    accel_noise_density : float
+        White specific-force noise, m/s²/√Hz.
+    mag_noise_density : float
+        White magnetometer noise, T/√Hz.
+    scale_factor_sigma : float
+        Scale-factor and misalignment uncertainty, relative: every radian turned adds
+        ``scale_factor_sigma²`` rad² of attitude variance.
+    window_s : float
+        Window over which the covariance is propagated, s.
+    accel_window_s, mag_window_s : float
+        Windows over which the specific force and the field are averaged in the world frame, s.
+    motion_accel_density : float
+        Non-gravitational acceleration always allowed for, as a white-noise density, m/s²/√Hz (its
+        correlation over the window is what makes this a density and not a level).
+    motion_gain : float
+        Weight of the window's squared deviation of ``|a|`` from gravity in the gravity noise.
+    accel_gate, mag_gate : float
+        χ² gates of the gravity (2 dof) and heading (1 dof) innovations.
+    accel_timeout_s, mag_timeout_s : float
+        How long rejections may last before a measurement is taken again, inflated onto the gate, s.
+    heading_sigma : float
+        Heading noise of the field's direction (residual soft iron, local anomalies), rad.
+    mag_norm_tolerance : float
+        Relative change of the field's norm that marks a disturbance.
+    mag_dip_tolerance : float
+        Change of the dip angle that marks a disturbance, rad.
+    hold_rate : float
+        Rate uncertainty over a missing gyro sample (the last one is held), rad/s.
+    rest_tau_s, rest_gyro, rest_accel, rest_time_s : float
+        Rest detector: low-pass time constant (s), gyro (rad/s) and specific-force (m/s²) thresholds,
+        time still before the rest measurement starts (s).
+    rest_sigma : float
+        Residual-rate floor of the rest measurement, rad/s (Earth's rate is added when the latitude is
+        unknown).
+    init_s : float
+        Samples averaged for the initial attitude, s.
+    tilt_sigma0, heading_sigma0 : float
+        Initial attitude uncertainties (1σ), rad.
+    gyrocompass_s : float
+        Samples at rest averaged to find north from Earth's rate at the start (6D, latitude known), s.
+    """
+
+    gyro_noise_density: float = 3e-4
+    gyro_bias_sigma: float = 0.5 * _DEG
+    gyro_bias_random_walk: float = 2e-5
+    accel_noise_density: float = 2e-3
+    mag_noise_density: float = 2e-7
+    scale_factor_sigma: float = 0.01
+    window_s: float = 0.02
+    accel_window_s: float = 2.0
+    mag_window_s: float = 1.0
+    motion_accel_density: float = 1.0
+    motion_gain: float = 1.0
+    accel_gate: float = 13.8
+    accel_timeout_s: float = 2.0
+    mag_gate: float = 10.8
+    mag_timeout_s: float = 60.0
+    heading_sigma: float = 0.1
+    mag_norm_tolerance: float = 0.1
+    mag_dip_tolerance: float = 10 * _DEG
+    hold_rate: float = 1.0
+    rest_tau_s: float = 0.5
+    rest_gyro: float = 2 * _DEG
+    rest_accel: float = 0.5
+    rest_time_s: float = 1.5
+    rest_sigma: float = 0.0
+    init_s: float = 0.5
+    tilt_sigma0: float = 2 * _DEG
+    heading_sigma0: float = 10 * _DEG
+    gyrocompass_s: float = 10.0
+
+    @classmethod
+    def for_setup(cls, setup: FilterSetup, **overrides) -> "MekfParams":
+        """The defaults with the device's known noise figures in place, then ``overrides``."""
+        noise = setup.noise
+        known = {}
+        if noise.gyro_noise_density is not None:
+            known["gyro_noise_density"] = noise.gyro_noise_density
+        if noise.gyro_bias_sigma is not None:
+            known["gyro_bias_sigma"] = noise.gyro_bias_sigma
+        if noise.gyro_rate_random_walk is not None or noise.gyro_bias_instability is not None:
+            k = noise.gyro_rate_random_walk or 0.0
+            bi = noise.gyro_bias_instability or 0.0
+            known["gyro_bias_random_walk"] = float(np.sqrt(k**2 + bi**2 / 100.0))
+        if noise.gyro_scale_sigma is not None:
+            known["scale_factor_sigma"] = noise.gyro_scale_sigma
+        if noise.accel_noise_density is not None:
+            known["accel_noise_density"] = noise.accel_noise_density
+        if noise.mag_noise_density is not None:
+            known["mag_noise_density"] = noise.mag_noise_density
+        return replace(cls(), **known, **overrides)
+
+    def vector(self, setup: FilterSetup) -> np.ndarray:
+        """The parameter vector the compiled kernels read (layout ``mekf_kernels.P_*``)."""
+        p = np.zeros(kern.P_SIZE)
+        p[kern.P_WINDOW] = self.window_s
+        p[kern.P_WINDOW_N] = max(1, int(round(self.window_s * setup.rate_hz))) + 0.5  # + slack for jitter
+        p[kern.P_ACC_WINDOW] = self.accel_window_s
+        p[kern.P_MAG_WINDOW] = self.mag_window_s
+        p[kern.P_GYRO_NOISE] = self.gyro_noise_density
+        p[kern.P_BIAS_RW] = self.gyro_bias_random_walk
+        p[kern.P_SCALE_SIGMA] = self.scale_factor_sigma
+        p[kern.P_HOLD_RATE] = self.hold_rate
+        p[kern.P_ACC_NOISE] = self.accel_noise_density
+        p[kern.P_MOTION] = self.motion_accel_density
+        p[kern.P_MOTION_GAIN] = self.motion_gain
+        p[kern.P_ACC_GATE] = self.accel_gate
+        p[kern.P_ACC_TIMEOUT] = self.accel_timeout_s
+        p[kern.P_HEADING_SIGMA] = self.heading_sigma
+        p[kern.P_MAG_NOISE] = self.mag_noise_density
+        p[kern.P_MAG_NORM_TOL] = self.mag_norm_tolerance
+        p[kern.P_MAG_DIP_TOL] = self.mag_dip_tolerance
+        p[kern.P_MAG_GATE] = self.mag_gate
+        p[kern.P_MAG_TIMEOUT] = self.mag_timeout_s
+        p[kern.P_REST_TAU] = self.rest_tau_s
+        p[kern.P_REST_GYRO] = self.rest_gyro
+        p[kern.P_REST_ACCEL] = self.rest_accel
+        p[kern.P_REST_TIME] = self.rest_time_s
+        earth = EARTH_RATE if setup.latitude_rad is None else 0.0  # unmodelled Earth rate at rest
+        p[kern.P_REST_SIGMA] = np.hypot(self.rest_sigma, earth)
+        p[kern.P_USE_MAG] = 1.0 if setup.use_mag else 0.0
+        p[kern.P_DECLINATION] = setup.declination_rad
+        return p
+
+
+def earth_rate_enu(setup: FilterSetup) -> np.ndarray:
+    """Earth's rate in the ENU frame at the setup's latitude, rad/s (zeros when it is unknown)."""
+    if setup.latitude_rad is None:
+        return np.zeros(3)
+    return EARTH_RATE * np.array([0.0, np.cos(setup.latitude_rad), np.sin(setup.latitude_rad)])
+
+
+def _quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The shortest rotation (w, x, y, z) turning unit vector ``a`` onto unit vector ``b``."""
+    c = float(a @ b)
+    axis = np.cross(a, b)
+    if c < -1.0 + 1e-12:  # opposite: any perpendicular axis
+        perp = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+        return np.concatenate([[0.0], perp / np.linalg.norm(perp)])
+    q = np.concatenate([[1.0 + c], axis])
+    return q / np.linalg.norm(q)
+
+
+def _about_z(angle: float) -> np.ndarray:
+    return np.array([np.cos(angle / 2), 0.0, 0.0, np.sin(angle / 2)])
+
+
+def _mul(p, q):
+    w1, x1, y1, z1 = p
+    w2, x2, y2, z2 = q
+    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+
+
+def _matrix(q):
+    r = np.empty((3, 3))
+    kern.quat_to_matrix(np.asarray(q, dtype=float), r)
+    return r
+
+
+@dataclass
+class InitialState:
+    """Where a run starts: attitude, bias, covariance, and the references it learned."""
+
+    q: np.ndarray
+    b: np.ndarray
+    P: np.ndarray
+    slow: np.ndarray
+
+
+def initial_state(t, gyro, accel, mag, setup: FilterSetup, params: MekfParams) -> InitialState:
+    """The initial state from the first samples of a run (see the module's docstring)."""
+    t = np.asarray(t, dtype=float)
+    n = max(1, int(np.searchsorted(t, t[0] + params.init_s)))
+    # Average in the first sample's axes: each sample turned back by the gyro's rotation since then.
+    to_first = _rotations_since_first(t[:n], gyro[:n])
+    a_first = np.einsum("kij,kj->ki", to_first, accel[:n])
+    a = np.nanmean(a_first, axis=0) if np.isfinite(a_first).any() else np.array([0.0, 0.0, 9.81])
+    gravity = float(np.linalg.norm(a)) or 9.81
+    q = _quat_between(a / gravity, np.array([0.0, 0.0, 1.0]))
+    heading_var = np.pi**2  # 6D without Earth rate: heading unknown
+    slow = np.zeros(kern.S_SIZE)
+    slow[kern.S_GRAVITY] = float(np.nanmean(np.linalg.norm(accel[:n], axis=1))) if np.isfinite(accel[:n]).any() else 9.81
+    m_first = np.einsum("kij,kj->ki", to_first, mag[:n]) if mag is not None else None
+    if setup.use_mag and m_first is not None and np.isfinite(m_first).all(axis=1).any():
+        m_w = _matrix(q) @ np.nanmean(m_first, axis=0)
+        # rotate about up so that the field's azimuth atan2(m_x, m_y) becomes the declination
+        azimuth = np.arctan2(m_w[0], m_w[1])
+        q = _mul(_about_z(azimuth - setup.declination_rad), q)
+        horizontal = np.hypot(m_w[0], m_w[1])
+        slow[kern.S_MAG_NORM] = np.linalg.norm(m_w)
+        slow[kern.S_MAG_DIP] = np.arctan2(-m_w[2], horizontal)
+        heading_var = params.heading_sigma0**2
+    elif setup.latitude_rad is not None:
+        found = _gyrocompass_heading(t, gyro, accel, q, setup, params)
+        if found is not None:
+            q, heading_var = found
+    P = np.diag([params.tilt_sigma0**2, params.tilt_sigma0**2, heading_var] + [params.gyro_bias_sigma**2] * 3)
+    slow[kern.S_T] = t[0] - 1.0 / setup.rate_hz
+    g0 = np.nan_to_num(np.asarray(gyro[0], dtype=float))
+    slow[kern.S_OMEGA:kern.S_OMEGA + 3] = g0
+    slow[kern.S_LP_G:kern.S_LP_G + 3] = g0
+    slow[kern.S_LP_A:kern.S_LP_A + 3] = a
+    return InitialState(q=q, b=np.zeros(3), P=P, slow=slow)
+
+
+def _rotations_since_first(t, gyro) -> np.ndarray:
+    """``R_0k`` (n, 3, 3): the rotation from sample k's body axes to sample 0's, integrated from the
+    gyro (NaN samples hold the rate at zero), for averaging the first samples in one frame."""
+    q = np.array([1.0, 0.0, 0.0, 0.0])
+    tmp = np.empty(4)
+    out = np.empty((len(t), 3, 3))
+    out[0] = np.eye(3)
+    for k in range(1, len(t)):
+        w = np.nan_to_num(gyro[k]) * (t[k] - t[k - 1])
+        kern.rotate_body(q, tmp, w[0], w[1], w[2])
+        out[k] = _matrix(q)
+    return out
+
+
+def _gyrocompass_heading(t, gyro, accel, q_tilt, setup, params):
+    """North from Earth's rate over the first ``gyrocompass_s`` at rest, when the gyro's expected
+    heading error (:func:`sensors.gyrocompass.heading_uncertainty`) is below 20°; else None."""
+    from sensors.gyrocompass import gyrocompass, heading_uncertainty
+
+    n = int(np.searchsorted(t, t[0] + params.gyrocompass_s))
+    g, a = np.asarray(gyro[:n]), np.asarray(accel[:n])
+    ok = np.isfinite(g).all(axis=1) & np.isfinite(a).all(axis=1)
+    g, a = g[ok], a[ok]
+    if len(g) < 2:
+        return None
+    duration = float(t[min(n, len(t)) - 1] - t[0]) or 1.0 / setup.rate_hz
+    sigma = heading_uncertainty(setup.latitude_rad, duration, bias=params.gyro_bias_sigma,
+                                noise_density=params.gyro_noise_density)
+    # at rest: the rate's spread is the white noise alone (3σ), the force's norm is gravity's
+    still = (np.all(np.std(g, axis=0) < 3 * params.gyro_noise_density * np.sqrt(setup.rate_hz) + 1e-9)
+             and np.std(np.linalg.norm(a, axis=1)) < params.rest_accel)
+    if not (sigma < 20 * _DEG and still):
+        return None
+    return gyrocompass(g, a).q_ws, sigma**2
+
+
+class Mekf:
+    """The filter (see the module's docstring), obeying :class:`~pipelines.estimation.protocol.AttitudeFilter`.
+
+    Parameters
+    ----------
+    setup : FilterSetup
+        Sample rate, 6D/9D, the device's noise figures, latitude and declination.
+    params : MekfParams, optional
+        Default: :meth:`MekfParams.for_setup` of ``setup``.
+
+    ``process`` takes rate input; ``process_increments`` takes delta angles (rate-integrating gyros,
+    ring lasers). Stamps must increase; a gap is integrated over with the next sample; NaN samples
+    are skipped by the measurement they belong to, and a NaN gyro sample holds the last rate.
+    """
+
+    name = "mekf"
+
+    def __init__(self, setup: FilterSetup, params: MekfParams | None = None):
+        self.setup = setup
+        self.params = params if params is not None else MekfParams.for_setup(setup)
+        self._p = self.params.vector(setup)
+        self._earth = earth_rate_enu(setup)
+        self.kf = KalmanFilter(dim_x=6, dim_z=2)
+        self.q = None
+        self.b = np.zeros(3)
+        self._slow = np.zeros(kern.S_SIZE)
+        self._win = np.zeros(kern.W_SIZE)
+        self._phi12 = np.zeros((3, 3))
+        self._F = np.eye(6)
+        self._Q = np.zeros((6, 6))
+
+    def process(self, t, gyro, accel, mag=None) -> Estimate:
+        """Filter the next block: ``t`` (N,) s, ``gyro`` (N, 3) rad/s, ``accel`` (N, 3) m/s², ``mag``
+        (N, 3) T or None. Returns the attitude, bias and attitude covariance after each sample."""
+        return self._run(t, np.asarray(gyro, dtype=float), np.empty((0, 3)), accel, mag)
+
+    def process_increments(self, t, delta_angle, accel, mag=None) -> Estimate:
+        """As :meth:`process`, with the gyro's angle increments over ``[t_{k−1}, t_k]`` (N, 3), rad."""
+        delta = np.asarray(delta_angle, dtype=float)
+        return self._run(t, delta / np.diff(t, prepend=t[0] - 1 / self.setup.rate_hz)[:, None], delta, accel, mag)
+
+    def _run(self, t, gyro, delta, accel, mag) -> Estimate:
+        t = np.ascontiguousarray(t, dtype=float)
+        accel = np.ascontiguousarray(accel, dtype=float)
+        n = len(t)
+        mag = np.full((n, 3), np.nan) if mag is None or not self.setup.use_mag else np.ascontiguousarray(mag, dtype=float)
+        if self.q is None:
+            if n == 0:
+                return Estimate(np.empty((0, 4)), np.empty((0, 3)), np.empty((0, 3, 3)))
+            init = initial_state(t, gyro, accel, mag, self.setup, self.params)
+            self.q, self.b, self._slow = init.q, init.b, init.slow
+            self.kf.P = init.P
+        if n and not t[0] > self._slow[kern.S_T]:
+            raise ValueError(f"stamp {t[0]!r} s does not follow the previous block's {self._slow[kern.S_T]!r} s")
+        q_out = np.empty((n, 4))
+        b_out = np.empty((n, 3))
+        cov_out = np.empty((n, 3, 3))
+        k = 0
+        kf, p, x = self.kf, self._p, self.kf.x
+        while k < n:
+            try:
+                end = kern.strapdown(self.q, self.b, self._slow, self._win, self._phi12, t, gyro, delta, accel, mag,
+                                     self._earth, p, k, q_out)
+            except ValueError:
+                bad = k + int(np.argmax(np.diff(np.concatenate([[self._slow[kern.S_T]], t[k:]])) <= 0))
+                raise ValueError(f"sample {bad}: stamp {t[bad]!r} s does not increase") from None
+            b_out[k:end] = self.b
+            if kern.window_due(self._win, p):
+                self._window()
+                q_out[end - 1] = self.q
+                b_out[end - 1] = self.b
+            cov_out[k:end] = kf.P[:3, :3]
+            k = end
+        return Estimate(q_wb=q_out, gyro_bias=b_out, q_wb_covariance=cov_out)
+
+    def _window(self) -> None:
+        """The window's prediction and updates, then the injection into the nominal state."""
+        kf, p, win, slow = self.kf, self._p, self._win, self._slow
+        kern.transition(win, self._phi12, self._earth, p, self._F, self._Q)
+        kf.predict(F=self._F, Q=self._Q)
+        z, H, R = np.empty(2), np.empty((2, 6)), np.empty((2, 2))
+        if kern.gravity_measurement(win, slow, p, z, H, R) and kern.gravity_gate(kf.P, z, H, R, slow, p):
+            kf.update(z.reshape(2, 1), R=R, H=H)
+        if kern.rest_due(win, slow, p):
+            z3, H3, R3 = np.empty(3), np.empty((3, 6)), np.empty((3, 3))
+            kern.rest_measurement(win, self.q, self.b, self._earth, p, z3, H3, R3)
+            kf.update(z3.reshape(3, 1), R=R3, H=H3)
+        x = kf.x.reshape(6)  # a view: the heading update and the injection write through it
+        if self.setup.use_mag:
+            kern.heading_update(x, kf.P, self.q, win, slow, p)
+        kern.inject(x, self.q, self.b, win, self._phi12)

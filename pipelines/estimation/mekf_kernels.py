@@ -1,0 +1,460 @@
+"""The compiled parts of the MEKF that both its forms share: the per-sample strapdown and the
+measurement models. :mod:`pipelines.estimation.mekf` wraps them with filterpy's Kalman algebra;
+:mod:`pipelines.estimation.batched` with its own, run across many runs at once.
+
+The error state (``δθ``, ``δb``)
+-------------------------------
+``δθ`` is the attitude error in world axes, ``R_true = (I + [δθ×]) R_est`` (``q_true = δq ⊗ q_est``);
+``δb = b_true − b_est`` is the gyro bias error in body axes, ``ω_true = ω_m − b_true − n``. Between
+samples (Titterton & Weston §12.3.1, in the world frame; Earth rate ``Ω_ie`` when the latitude is known):
+
+    δθ̇ = −[Ω_ie×] δθ − R_est δb − R_est n_g,        δḃ = n_b
+
+The strapdown runs at every sample; the covariance is propagated once per *window* (a few tens of
+milliseconds) with the transition ``Φ = [[I − [Ω_ie×] T, −Σ R_k Δt_k], [0, I]]`` accumulated over the
+window's samples, which is what a strapdown INS does (the attitude at full rate, the error model at a
+lower one).
+
+Measurements, made at the end of each window from sums over it
+--------------------------------------------------------------
+* Gravity direction: the specific force turned into the world frame with the current estimate and
+  averaged over the window, ``ā_w``, (averaging in the world frame removes vibration without lagging
+  rotation, the idea of VQF's inertial-frame low-pass filter). With ``u = ā_w/|ā_w|``, at rest
+  ``u = e_z + e_z × δθ``: ``(u_x, u_y) = (−δθ_y, δθ_x)``, whatever the heading.
+* Heading: the magnetic field turned into the world frame and averaged, ``m̄_w``; its azimuth from
+  north is ``ψ = atan2(m_x, m_y) = D + δθ_z`` (``D`` the declination): only ``δθ_z``.
+* Rest: the mean gyro over a window at rest is the bias plus Earth's rate,
+  ``ω̄_m − R_estᵀ Ω_ie − b_est = δb + R_estᵀ [Ω_ie×] δθ``; with a precise gyro and a known latitude the
+  second term finds north (gyrocompassing), otherwise it sharpens the bias.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+# Window accumulator layout (one float64 vector per filter).
+W_ACC = 0        # 0:3  Σ R a_b over valid accelerometer samples, m/s²
+W_ACC_N = 3      # number of them
+W_ACC_T = 4      # time the gravity window has run, s
+W_MAG = 5        # 5:8  Σ R m_b over valid magnetometer samples, T
+W_MAG_N = 8
+W_T = 9          # window duration so far, s
+W_N = 10         # samples in the window
+W_EXTRA = 11     # extra attitude variance accrued (held samples, scale-factor uncertainty), rad²
+W_REST_G = 12    # 12:15 Σ ω_m over the window's samples at rest, rad/s
+W_REST_N = 15
+W_MAG_T = 16     # time the heading window has run, s
+W_SIZE = 17
+
+# Slow state layout (one float64 vector per filter).
+S_T = 0          # last stamp, s
+S_OMEGA = 1      # 1:4 last valid gyro sample, rad/s
+S_LP_G = 4       # 4:7 low-passed gyro, rad/s
+S_LP_A = 7       # 7:10 low-passed specific force, m/s²
+S_REST_T = 10    # time at rest so far, s
+S_ACC_REJ_T = 11 # time since the last accepted gravity update, s
+S_MAG_NORM = 12  # reference field: norm, T
+S_MAG_DIP = 13   # and dip (angle below the horizontal), rad
+S_MAG_REJ_T = 14 # time since the last accepted heading update, s
+S_GRAVITY = 15   # gravity magnitude seen at initialisation, m/s²
+S_SIZE = 16
+
+
+@numba.njit(cache=True)
+def quat_to_matrix(q, r):
+    """R (3, 3) of the unit quaternion q = (w, x, y, z), written into ``r``."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    r[0, 0] = 1 - 2 * (y * y + z * z)
+    r[0, 1] = 2 * (x * y - w * z)
+    r[0, 2] = 2 * (x * z + w * y)
+    r[1, 0] = 2 * (x * y + w * z)
+    r[1, 1] = 1 - 2 * (x * x + z * z)
+    r[1, 2] = 2 * (y * z - w * x)
+    r[2, 0] = 2 * (x * z - w * y)
+    r[2, 1] = 2 * (y * z + w * x)
+    r[2, 2] = 1 - 2 * (x * x + y * y)
+
+
+@numba.njit(cache=True)
+def rotate_body(q, v, phi_x, phi_y, phi_z):
+    """q ← q ⊗ exp(φ/2) for a body-frame rotation vector φ (rad), renormalised."""
+    angle = math.sqrt(phi_x * phi_x + phi_y * phi_y + phi_z * phi_z)
+    if angle > 1e-12:
+        s = math.sin(0.5 * angle) / angle
+    else:
+        s = 0.5 - angle * angle / 48.0
+    c = math.cos(0.5 * angle)
+    dx, dy, dz = phi_x * s, phi_y * s, phi_z * s
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    v[0] = w * c - x * dx - y * dy - z * dz
+    v[1] = w * dx + x * c + y * dz - z * dy
+    v[2] = w * dy - x * dz + y * c + z * dx
+    v[3] = w * dz + x * dy - y * dx + z * c
+    n = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2 + v[3] ** 2)
+    for i in range(4):
+        q[i] = v[i] / n
+
+
+@numba.njit(cache=True)
+def rotate_world(q, phi):
+    """q ← exp(φ/2) ⊗ q for a world-frame rotation vector φ (rad): the error-state injection."""
+    angle = math.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
+    s = math.sin(0.5 * angle) / angle if angle > 1e-12 else 0.5
+    c = math.cos(0.5 * angle)
+    dw, dx, dy, dz = c, phi[0] * s, phi[1] * s, phi[2] * s
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    a = dw * w - dx * x - dy * y - dz * z
+    b = dw * x + dx * w + dy * z - dz * y
+    cc = dw * y - dx * z + dy * w + dz * x
+    d = dw * z + dx * y - dy * x + dz * w
+    n = math.sqrt(a * a + b * b + cc * cc + d * d)
+    q[0], q[1], q[2], q[3] = a / n, b / n, cc / n, d / n
+
+
+@numba.njit(cache=True)
+def strapdown(q, b, slow, win, phi12, t, gyro, delta_angle, accel, mag, earth_rate_w, params, start, q_out):
+    """Advance the filter from sample ``start`` until a window closes or the samples end.
+
+    ``t`` (n,) s; ``gyro`` (n, 3) rad/s, or ``delta_angle`` (n, 3) rad when it has rows (then
+    ``gyro`` is ignored); ``accel`` (n, 3) m/s²; ``mag`` (n, 3) T (NaN rows: none). ``q``, ``b``,
+    ``slow``, ``win``, ``phi12`` are updated in place and ``q_out[k]`` receives the attitude after
+    sample k. Returns the index after the last sample consumed; the window is due for its updates
+    when it has run ``params[P_WINDOW]`` seconds or ``params[P_WINDOW_N]`` samples (see
+    :func:`window_due`). Raises ``ValueError`` on a stamp that does not increase.
+    """
+    n = len(t)
+    r = np.empty((3, 3))
+    tmp = np.empty(4)
+    use_delta = delta_angle.shape[0] > 0
+    sigma_sf2 = params[P_SCALE_SIGMA] ** 2
+    hold_rate = params[P_HOLD_RATE]
+    alpha_tau = params[P_REST_TAU]
+    rest_g, rest_a = params[P_REST_GYRO], params[P_REST_ACCEL]
+    use_mag = params[P_USE_MAG] > 0.5
+    k = start
+    while k < n:
+        dt = t[k] - slow[S_T]
+        if not dt > 0.0:
+            raise ValueError("sample stamps must increase")
+        slow[S_T] = t[k]
+        quat_to_matrix(q, r)
+        # The rate over [t_{k-1}, t_k], bias and Earth rate removed (ω_bw = ω_m − b − Rᵀ Ω_ie).
+        valid = True
+        for i in range(3):
+            if use_delta:
+                valid = valid and math.isfinite(delta_angle[k, i])
+            else:
+                valid = valid and math.isfinite(gyro[k, i])
+        wx = wy = wz = 0.0
+        for i in range(3):
+            m = (delta_angle[k, i] / dt if use_delta else gyro[k, i]) if valid else slow[S_OMEGA + i]
+            if valid:
+                slow[S_OMEGA + i] = m
+            e = r[0, i] * earth_rate_w[0] + r[1, i] * earth_rate_w[1] + r[2, i] * earth_rate_w[2]
+            w = m - b[i] - e
+            if i == 0:
+                wx = w
+            elif i == 1:
+                wy = w
+            else:
+                wz = w
+        turned = math.sqrt(wx * wx + wy * wy + wz * wz) * dt
+        if not valid:  # a held sample: its increment is uncertain by up to a hold_rate·dt rotation
+            win[W_EXTRA] += (max(turned / dt, hold_rate) * dt) ** 2
+        # Scale-factor and misalignment errors turn every rotation by a fraction σ of itself; as a
+        # random walk in the turned angle (variance σ² per radian) it cannot vanish with the step size.
+        win[W_EXTRA] += sigma_sf2 * turned
+        for i in range(3):
+            for j in range(3):
+                phi12[i, j] -= r[i, j] * dt  # Φ_θb = −Σ R Δt
+        rotate_body(q, tmp, wx * dt, wy * dt, wz * dt)
+        quat_to_matrix(q, r)
+
+        # Rest detector (VQF's idea): samples stay close to their low-pass, and the bias-corrected
+        # rate is small.
+        alpha = dt / (alpha_tau + dt)
+        still = valid
+        dev_g = 0.0
+        dev_a = 0.0
+        lp_rate = 0.0
+        for i in range(3):
+            g_i = slow[S_OMEGA + i]
+            slow[S_LP_G + i] += alpha * (g_i - slow[S_LP_G + i])
+            dev_g += (g_i - slow[S_LP_G + i]) ** 2
+            lp_rate += (slow[S_LP_G + i] - b[i]) ** 2
+            if math.isfinite(accel[k, i]):
+                slow[S_LP_A + i] += alpha * (accel[k, i] - slow[S_LP_A + i])
+                dev_a += (accel[k, i] - slow[S_LP_A + i]) ** 2
+            else:
+                still = False
+        still = still and dev_g < rest_g * rest_g and lp_rate < rest_g * rest_g and dev_a < rest_a * rest_a
+        if still:
+            slow[S_REST_T] += dt
+            for i in range(3):
+                win[W_REST_G + i] += slow[S_OMEGA + i]
+            win[W_REST_N] += 1.0
+        else:
+            slow[S_REST_T] = 0.0
+            win[W_REST_G:W_REST_N + 1] = 0.0
+
+        # Gravity and field in the world frame, summed over the window.
+        ax, ay, az = accel[k, 0], accel[k, 1], accel[k, 2]
+        if math.isfinite(ax) and math.isfinite(ay) and math.isfinite(az):
+            for i in range(3):
+                win[W_ACC + i] += r[i, 0] * ax + r[i, 1] * ay + r[i, 2] * az
+            win[W_ACC_N] += 1.0
+        if use_mag:
+            mx, my, mz = mag[k, 0], mag[k, 1], mag[k, 2]
+            if math.isfinite(mx) and math.isfinite(my) and math.isfinite(mz):
+                for i in range(3):
+                    win[W_MAG + i] += r[i, 0] * mx + r[i, 1] * my + r[i, 2] * mz
+                win[W_MAG_N] += 1.0
+        win[W_T] += dt
+        win[W_N] += 1.0
+        win[W_ACC_T] += dt
+        win[W_MAG_T] += dt
+        q_out[k, :] = q
+        k += 1
+        if window_due(win, params):
+            break
+    return k
+
+
+@numba.njit(cache=True)
+def window_due(win, params):
+    """Whether the window has run its time or its sample count."""
+    return win[W_T] >= params[P_WINDOW] or win[W_N] >= params[P_WINDOW_N]
+
+
+# Parameter vector layout (see MekfParams for meanings and units).
+P_WINDOW = 0
+P_WINDOW_N = 1
+P_GYRO_NOISE = 2
+P_BIAS_RW = 3
+P_SCALE_SIGMA = 4
+P_HOLD_RATE = 5
+P_ACC_NOISE = 6
+P_MOTION = 7
+P_MOTION_GAIN = 8
+P_ACC_GATE = 9
+P_ACC_TIMEOUT = 10
+P_HEADING_SIGMA = 11
+P_MAG_NOISE = 12
+P_MAG_NORM_TOL = 13
+P_MAG_DIP_TOL = 14
+P_MAG_GATE = 15
+P_MAG_TIMEOUT = 16
+P_REST_TAU = 17
+P_REST_GYRO = 18
+P_REST_ACCEL = 19
+P_REST_TIME = 20
+P_REST_SIGMA = 21
+P_USE_MAG = 22
+P_DECLINATION = 23
+P_ACC_WINDOW = 24
+P_MAG_WINDOW = 25
+P_SIZE = 26
+
+
+@numba.njit(cache=True)
+def transition(win, phi12, earth_rate_w, params, F, Q):
+    """The window's transition ``F`` (6, 6) and process noise ``Q`` (6, 6), written in place."""
+    T = win[W_T]
+    F[:, :] = 0.0
+    Q[:, :] = 0.0
+    for i in range(6):
+        F[i, i] = 1.0
+    # I − [Ω_ie×] T
+    F[0, 1] += earth_rate_w[2] * T
+    F[0, 2] -= earth_rate_w[1] * T
+    F[1, 0] -= earth_rate_w[2] * T
+    F[1, 2] += earth_rate_w[0] * T
+    F[2, 0] += earth_rate_w[1] * T
+    F[2, 1] -= earth_rate_w[0] * T
+    F[0:3, 3:6] = phi12
+    q_att = params[P_GYRO_NOISE] ** 2 * T + win[W_EXTRA]
+    q_bias = params[P_BIAS_RW] ** 2 * T
+    for i in range(3):
+        Q[i, i] = q_att
+        Q[3 + i, 3 + i] = q_bias
+
+
+@numba.njit(cache=True)
+def gravity_measurement(win, slow, params, z, H, R):
+    """The gravity-direction measurement, when its window (``accel_window_s``) is complete: ``z``
+    (2,), ``H`` (2, 6), ``R`` (2, 2); the window's sums are then cleared.
+
+    The world-frame mean of the specific force over T is gravity plus ``Δv/T``: translation back and
+    forth averages out, which is why this window is longer than the covariance's. Returns False when
+    the window is still open or had no valid accelerometer sample. The noise is the sensor's and the
+    non-gravitational acceleration's (both densities) over T, plus the squared excess of ``|ā|`` over
+    gravity, all over g²."""
+    T = win[W_ACC_T]
+    if T < params[P_ACC_WINDOW]:
+        return False
+    n = win[W_ACC_N]
+    ax, ay, az = win[W_ACC] / max(n, 1.0), win[W_ACC + 1] / max(n, 1.0), win[W_ACC + 2] / max(n, 1.0)
+    win[W_ACC:W_ACC_T + 1] = 0.0
+    if n < 1.0:
+        return False
+    norm = math.sqrt(ax * ax + ay * ay + az * az)
+    if not norm > 0.0:
+        return False
+    g = slow[S_GRAVITY]
+    z[0] = ax / norm
+    z[1] = ay / norm
+    H[:, :] = 0.0
+    H[0, 1] = -1.0  # u_x = −δθ_y
+    H[1, 0] = 1.0   # u_y = +δθ_x
+    var = ((params[P_ACC_NOISE] ** 2 + params[P_MOTION] ** 2) / T + params[P_MOTION_GAIN] * (norm - g) ** 2) / (g * g)
+    R[:, :] = 0.0
+    R[0, 0] = var
+    R[1, 1] = var
+    return True
+
+
+@numba.njit(cache=True)
+def heading_measurement(win, slow, params):
+    """The heading measurement, when its window (``mag_window_s``) is complete: ``(ok, y, r)`` with
+    the innovation ``y = ψ − D`` (rad, wrapped) and its variance ``r``; the window's sums are then
+    cleared. Not ok while the window is open, when it had no field, or when the field is disturbed:
+    its norm or dip differ from the reference by more than the tolerances."""
+    T = win[W_MAG_T]
+    n = win[W_MAG_N]
+    if T < params[P_MAG_WINDOW]:
+        return False, 0.0, 0.0
+    mx, my, mz = win[W_MAG] / max(n, 1.0), win[W_MAG + 1] / max(n, 1.0), win[W_MAG + 2] / max(n, 1.0)
+    win[W_MAG:W_MAG_N + 1] = 0.0
+    win[W_MAG_T] = 0.0
+    if n < 1.0:
+        return False, 0.0, 0.0
+    horizontal = math.sqrt(mx * mx + my * my)
+    norm = math.sqrt(horizontal * horizontal + mz * mz)
+    if not horizontal > 0.0:
+        return False, 0.0, 0.0
+    dip = math.atan2(-mz, horizontal)
+    ref_norm, ref_dip = slow[S_MAG_NORM], slow[S_MAG_DIP]
+    if abs(norm - ref_norm) > params[P_MAG_NORM_TOL] * ref_norm or abs(dip - ref_dip) > params[P_MAG_DIP_TOL]:
+        return False, 0.0, 0.0
+    y = math.atan2(mx, my) - params[P_DECLINATION]
+    y = (y + math.pi) % (2.0 * math.pi) - math.pi
+    r = params[P_HEADING_SIGMA] ** 2 + params[P_MAG_NOISE] ** 2 / T / (horizontal * horizontal)
+    return True, y, r
+
+
+@numba.njit(cache=True)
+def heading_gain(P, r, q, K):
+    """Kalman gain ``K`` (6,) of the heading measurement ``H = e_3ᵀ``, constrained so that it never
+    corrects inclination: the ``δθ_x``, ``δθ_y`` rows are zero, and the bias correction is kept to
+    the body's vertical axis ``Rᵀ e_z`` (the only bias the heading sees). Returns ``S``."""
+    S = P[2, 2] + r
+    for i in range(6):
+        K[i] = P[i, 2] / S
+    K[0] = 0.0
+    K[1] = 0.0
+    # vertical in body axes: third row of R
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    ux, uy, uz = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+    along = K[3] * ux + K[4] * uy + K[5] * uz
+    K[3], K[4], K[5] = along * ux, along * uy, along * uz
+    return S
+
+
+@numba.njit(cache=True)
+def joseph_update(P, K, h_index, r):
+    """P ← (I − K H) P (I − K H)ᵀ + K r Kᵀ for a scalar measurement ``H = e_{h_index}ᵀ``: valid for
+    any gain, optimal or not."""
+    A = np.eye(6)
+    for i in range(6):
+        A[i, h_index] -= K[i]
+    P[:, :] = A @ P @ A.T + r * np.outer(K, K)
+
+
+@numba.njit(cache=True)
+def rest_measurement(win, q, b, earth_rate_w, params, z, H, R):
+    """The rest measurement: ``z = ω̄_m − Rᵀ Ω_ie − b`` (3,), ``H = [Rᵀ [Ω_ie×], I]`` (3, 6),
+    ``R`` (3, 3): white noise over the window's rest samples plus the residual-rate floor."""
+    n = win[W_REST_N]
+    r = np.empty((3, 3))
+    quat_to_matrix(q, r)
+    H[:, :] = 0.0
+    ex, ey, ez = earth_rate_w[0], earth_rate_w[1], earth_rate_w[2]
+    # [Ω×] = [[0, −ez, ey], [ez, 0, −ex], [−ey, ex, 0]];  H_θ = Rᵀ [Ω×]
+    cross = np.array([[0.0, -ez, ey], [ez, 0.0, -ex], [-ey, ex, 0.0]])
+    H[:, 0:3] = r.T @ cross
+    for i in range(3):
+        e = r[0, i] * ex + r[1, i] * ey + r[2, i] * ez
+        z[i] = win[W_REST_G + i] / n - e - b[i]
+        H[i, 3 + i] = 1.0
+    dt_mean = win[W_T] / max(win[W_N], 1.0)
+    var = params[P_GYRO_NOISE] ** 2 / (n * dt_mean) + params[P_REST_SIGMA] ** 2
+    R[:, :] = 0.0
+    for i in range(3):
+        R[i, i] = var
+
+
+@numba.njit(cache=True)
+def gravity_gate(P, z, H, R, slow, params):
+    """Decide on the gravity measurement (``x = 0``, as it is the first after the prediction).
+
+    Accepted when its Mahalanobis distance ``zᵀ S⁻¹ z`` is within the gate (a χ² quantile). A
+    rejected measurement is a disturbance (a tap, a push); after ``accel_timeout_s`` of rejections the
+    filter must be wrong rather than the world, so it accepts again with ``R`` inflated to put the
+    measurement on the gate. Modifies ``R`` in place in that case."""
+    S = H @ P @ H.T + R
+    d2 = z @ np.linalg.solve(S, z)
+    if d2 <= params[P_ACC_GATE]:
+        slow[S_ACC_REJ_T] = 0.0
+        return True
+    if slow[S_ACC_REJ_T] > params[P_ACC_TIMEOUT]:
+        R *= d2 / params[P_ACC_GATE]
+        return True
+    return False
+
+
+@numba.njit(cache=True)
+def heading_update(x, P, q, win, slow, params):
+    """The heading measurement, gated, applied with the constrained gain of :func:`heading_gain`
+    (Joseph form): ``x`` (6,) and ``P`` are updated in place. Returns whether it was applied."""
+    T = win[W_MAG_T]
+    ok, y, r = heading_measurement(win, slow, params)
+    if not ok:
+        slow[S_MAG_REJ_T] += T if T >= params[P_MAG_WINDOW] else 0.0
+        return False
+    y -= x[2]
+    K = np.empty(6)
+    S = heading_gain(P, r, q, K)
+    if y * y / S > params[P_MAG_GATE]:
+        slow[S_MAG_REJ_T] += T
+        if slow[S_MAG_REJ_T] <= params[P_MAG_TIMEOUT]:
+            return False
+        r *= y * y / S / params[P_MAG_GATE]
+        S = heading_gain(P, r, q, K)
+    else:
+        slow[S_MAG_REJ_T] = 0.0
+    for i in range(6):
+        x[i] += K[i] * y
+    joseph_update(P, K, 2, r)
+    return True
+
+
+@numba.njit(cache=True)
+def rest_due(win, slow, params):
+    """Whether the window ends a stretch at rest long enough for the rest measurement."""
+    return slow[S_REST_T] >= params[P_REST_TIME] and win[W_REST_N] >= 1.0
+
+
+@numba.njit(cache=True)
+def inject(x, q, b, win, phi12):
+    """Fold the error estimate into the nominal state (``q ← exp(δθ) ⊗ q``, ``b ← b + δb``), zero it,
+    and open a new window."""
+    rotate_world(q, x[0:3])
+    for i in range(3):
+        b[i] += x[3 + i]
+    x[:] = 0.0
+    for i in (W_T, W_N, W_EXTRA, W_REST_G, W_REST_G + 1, W_REST_G + 2, W_REST_N):
+        win[i] = 0.0
+    phi12[:, :] = 0.0

@@ -1,0 +1,127 @@
+"""What an attitude filter is to gyroemu: the small protocol that ours, the peers and a user's obey.
+
+A filter is made from a :class:`FilterSetup` (what is known about the data before it starts) and then
+fed blocks of samples in time order; its state carries over from block to block, so the same object
+serves a whole log at once (``gyroemu estimate``, ``gyroemu bench``) and a live stream block by block
+(``gyroemu stream --estimate``). A user's filter is any class with this shape::
+
+    class MyFilter:
+        name = "my-filter"                      # how the report names it
+
+        def __init__(self, setup: FilterSetup): # rate, 6D/9D, what is known of the device
+            ...
+
+        def process(self, t, gyro, accel, mag=None) -> Estimate:
+            # t (N,) s; gyro (N, 3) rad/s; accel (N, 3) m/s²; mag (N, 3) tesla or None (6D)
+            # return q_wb (N, 4), world ENU, scalar first, one per sample
+            ...
+
+and is named on the command line as ``module:Class`` (``gyroemu bench --filter mypkg.filters:MyFilter``).
+Frames and units follow ``interface.md``: ``q_wb`` turns body vectors into the ENU world frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+__all__ = ["AttitudeFilter", "DeviceNoise", "Estimate", "FilterSetup"]
+
+
+@dataclass(frozen=True)
+class DeviceNoise:
+    """A device's noise figures, SI, as far as they are known (None: unknown, use the defaults).
+
+    Attributes
+    ----------
+    gyro_noise_density : float
+        White rate noise (angle random walk coefficient N), rad/s/√Hz.
+    gyro_bias_sigma : float
+        Standard deviation of the gyro's turn-on bias, rad/s.
+    gyro_bias_instability : float
+        Bias instability B, rad/s.
+    gyro_rate_random_walk : float
+        Rate random walk K, rad/s/√s.
+    gyro_scale_sigma : float
+        Scale-factor and misalignment error, relative (root sum square over both), dimensionless.
+    accel_noise_density : float
+        White specific-force noise, m/s²/√Hz.
+    mag_noise_density : float
+        White magnetometer noise, T/√Hz.
+    """
+
+    gyro_noise_density: float | None = None
+    gyro_bias_sigma: float | None = None
+    gyro_bias_instability: float | None = None
+    gyro_rate_random_walk: float | None = None
+    gyro_scale_sigma: float | None = None
+    accel_noise_density: float | None = None
+    mag_noise_density: float | None = None
+
+
+@dataclass(frozen=True)
+class FilterSetup:
+    """What a filter may know before its first sample.
+
+    Attributes
+    ----------
+    rate_hz : float
+        The nominal sample rate, Hz (stamps may still be uneven).
+    use_mag : bool
+        9D (True: correct heading with the magnetometer) or 6D (False: ignore it).
+    noise : DeviceNoise
+        The device's noise figures, where known (from a gyroemu device config, or a datasheet).
+    latitude_rad : float or None
+        Latitude of the site, rad, when known: lets a filter take Earth's rotation out of the gyro
+        (and find north from it, with a gyro good enough). None: Earth's rotation is not modelled.
+    declination_rad : float
+        Magnetic declination, rad, east positive: the azimuth of magnetic north in the ENU frame.
+    """
+
+    rate_hz: float
+    use_mag: bool = True
+    noise: DeviceNoise = field(default_factory=DeviceNoise)
+    latitude_rad: float | None = None
+    declination_rad: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class Estimate:
+    """A filter's output for N samples.
+
+    Attributes
+    ----------
+    q_wb : ndarray (N, 4)
+        Attitude, unit quaternion (w, x, y, z), body to ENU world.
+    gyro_bias : ndarray (N, 3) or None
+        Estimated gyro bias, rad/s, body axes (None: the filter has none).
+    q_wb_covariance : ndarray (N, 3, 3) or None
+        Attitude error covariance, rad², about the world axes (ROS ``orientation_covariance``).
+    """
+
+    q_wb: np.ndarray
+    gyro_bias: np.ndarray | None = None
+    q_wb_covariance: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.q_wb)
+
+    @staticmethod
+    def concatenate(parts: list["Estimate"]) -> "Estimate":
+        """Blocks joined in order (a field is kept only when every block has it)."""
+        def join(name):
+            values = [getattr(p, name) for p in parts]
+            return None if any(v is None for v in values) else np.concatenate(values)
+        return Estimate(q_wb=join("q_wb"), gyro_bias=join("gyro_bias"), q_wb_covariance=join("q_wb_covariance"))
+
+
+@runtime_checkable
+class AttitudeFilter(Protocol):
+    """The protocol (see the module's docstring): a ``name`` and ``process`` over blocks."""
+
+    name: str
+
+    def process(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
+                mag: np.ndarray | None = None) -> Estimate: ...

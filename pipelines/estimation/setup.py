@@ -1,0 +1,81 @@
+"""A :class:`FilterSetup` from what gyroemu knows: a device, a scenario, or a recorded log's metadata.
+
+A gyroemu log embeds its device and scenario configs, so a filter run on it starts from the device's
+own noise figures and the site's latitude and declination. A foreign log (BROAD, a robot's bag) has
+none of these: the filter's defaults apply.
+"""
+
+from __future__ import annotations
+
+import tomllib
+import warnings
+
+import numpy as np
+
+from .protocol import DeviceNoise, FilterSetup
+
+__all__ = ["noise_from_device", "setup_for", "setup_from_metadata"]
+
+
+def noise_from_device(device) -> DeviceNoise:
+    """The noise figures of a :class:`sensors.Device` (the mean over its three axes), SI."""
+    gyro = device.gyro_errors
+    accel = device.spec.accelerometer.errors.to_si()
+    mag = device.spec.magnetometer
+    return DeviceNoise(
+        gyro_noise_density=float(np.mean(device.gyro_noise_density)),
+        gyro_bias_sigma=float(np.sqrt(np.mean(gyro.turn_on_bias**2 + gyro.bias**2))),
+        gyro_bias_instability=float(np.mean(gyro.bias_instability)),
+        gyro_rate_random_walk=float(np.mean(gyro.random_walk)),
+        # a scale-factor error s turns a rotation θ by sθ, a misalignment m by mθ across it
+        gyro_scale_sigma=float(np.sqrt(np.mean(gyro.scale_factor**2) + np.sum(gyro.cross_axis**2) / 3)),
+        accel_noise_density=float(np.mean(accel.noise_density)),
+        mag_noise_density=None if mag is None else mag.noise_density_uT_per_sqrt_hz * 1e-6,
+    )
+
+
+def _site(scenario):
+    """The scenario's ``[site]`` (None for kinds in an inertial frame, such as the tops)."""
+    return getattr(scenario.spec, "site", None) if scenario is not None else None
+
+
+def setup_for(device, scenario=None, *, use_mag: bool | None = None) -> FilterSetup:
+    """The setup for a filter run on ``device``'s samples of ``scenario``.
+
+    ``use_mag`` defaults to whether the device has a magnetometer. The latitude is the site's when the
+    scenario stands on a rotating Earth; the declination is that of the site's field.
+    """
+    site = _site(scenario)
+    latitude = declination = None
+    if site is not None:
+        if site.earth_rotation:
+            latitude = float(np.radians(site.latitude_deg))
+        east, north, _ = site.magnetic_field_enu_uT
+        declination = float(np.arctan2(east, north))
+    if use_mag is None:
+        use_mag = device.spec.magnetometer is not None
+    return FilterSetup(rate_hz=float(device.spec.rate_hz), use_mag=use_mag, noise=noise_from_device(device),
+                       latitude_rad=latitude, declination_rad=declination or 0.0)
+
+
+def setup_from_metadata(metadata: dict | None, rate_hz: float, *, use_mag: bool) -> FilterSetup:
+    """The setup for a recorded log: from its ``gyroemu`` metadata record when it has one (device and
+    scenario configs as TOML), otherwise the defaults at ``rate_hz``. A config that no longer validates
+    is ignored with a warning (the log stays usable)."""
+    if metadata and metadata.get("device"):
+        from dynamics import scenario_from_dict
+        from sensors import device_from_dict
+
+        try:
+            device = device_from_dict(tomllib.loads(metadata["device"]), name=metadata.get("device_name", "imu0"))
+            scenario = None
+            if metadata.get("scenario"):
+                scenario = scenario_from_dict(tomllib.loads(metadata["scenario"]))
+        except Exception as exc:  # noqa: BLE001 - any bad embedded config: fall back to the defaults
+            warnings.warn(f"the log's embedded configs do not validate ({exc}); using the filter's defaults",
+                          stacklevel=2)
+        else:
+            setup = setup_for(device, scenario, use_mag=use_mag)
+            return FilterSetup(rate_hz=rate_hz, use_mag=use_mag, noise=setup.noise,
+                               latitude_rad=setup.latitude_rad, declination_rad=setup.declination_rad)
+    return FilterSetup(rate_hz=rate_hz, use_mag=use_mag)
