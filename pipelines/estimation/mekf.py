@@ -228,7 +228,7 @@ def initial_state(t, gyro, accel, mag, setup: FilterSetup, params: MekfParams) -
     t = np.asarray(t, dtype=float)
     n = max(1, int(np.searchsorted(t, t[0] + params.init_s)))
     # Average in the first sample's axes: each sample turned back by the gyro's rotation since then.
-    to_first = _rotations_since_first(t[:n], gyro[:n])
+    to_first = kern.rotations_since_first(t[:n], np.ascontiguousarray(gyro[:n], dtype=float))
     a_first = np.einsum("kij,kj->ki", to_first, accel[:n])
     a = np.nanmean(a_first, axis=0) if np.isfinite(a_first).any() else np.array([0.0, 0.0, 9.81])
     gravity = float(np.linalg.norm(a)) or 9.81
@@ -257,20 +257,6 @@ def initial_state(t, gyro, accel, mag, setup: FilterSetup, params: MekfParams) -
     slow[kern.S_LP_G:kern.S_LP_G + 3] = g0
     slow[kern.S_LP_A:kern.S_LP_A + 3] = a
     return InitialState(q=q, b=np.zeros(3), P=P, slow=slow)
-
-
-def _rotations_since_first(t, gyro) -> np.ndarray:
-    """``R_0k`` (n, 3, 3): the rotation from sample k's body axes to sample 0's, integrated from the
-    gyro (NaN samples hold the rate at zero), for averaging the first samples in one frame."""
-    q = np.array([1.0, 0.0, 0.0, 0.0])
-    tmp = np.empty(4)
-    out = np.empty((len(t), 3, 3))
-    out[0] = np.eye(3)
-    for k in range(1, len(t)):
-        w = np.nan_to_num(gyro[k]) * (t[k] - t[k - 1])
-        kern.rotate_body(q, tmp, w[0], w[1], w[2])
-        out[k] = _matrix(q)
-    return out
 
 
 def _gyrocompass_heading(t, gyro, accel, q_tilt, setup, params):

@@ -458,3 +458,22 @@ def inject(x, q, b, win, phi12):
     for i in (W_T, W_N, W_EXTRA, W_REST_G, W_REST_G + 1, W_REST_G + 2, W_REST_N):
         win[i] = 0.0
     phi12[:, :] = 0.0
+
+
+@numba.njit(cache=True)
+def rotations_since_first(t, gyro):
+    """``R_0k`` (n, 3, 3): the rotation from sample k's body axes to sample 0's, integrated from the
+    gyro (NaN samples count as zero rate), for averaging the first samples in one frame."""
+    n = len(t)
+    out = np.empty((n, 3, 3))
+    q = np.array([1.0, 0.0, 0.0, 0.0])
+    tmp = np.empty(4)
+    quat_to_matrix(q, out[0])
+    for k in range(1, n):
+        dt = t[k] - t[k - 1]
+        w = np.empty(3)
+        for i in range(3):
+            w[i] = gyro[k, i] * dt if math.isfinite(gyro[k, i]) else 0.0
+        rotate_body(q, tmp, w[0], w[1], w[2])
+        quat_to_matrix(q, out[k])
+    return out
