@@ -61,15 +61,25 @@ def _cmd_simulate(args) -> int:
         from sensors import load_device  # imported where used: it pulls in scipy.signal (0.7 s)
 
         device = load_device(args.device, seed=args.seed)
-    started = time.perf_counter()
-    traj = scenario.simulate(duration=args.duration, rate_hz=args.rate)
-    samples = device.measure(traj) if device is not None else None
-    if out.suffix == ".mcap":
-        from .mcap_io import Recording, truth_series, write_mcap
+    from .progress import PhaseProgress  # a bar on stderr when it is a terminal, nothing otherwise
 
-        write_mcap(out, Recording(samples, truth=truth_series(traj, samples), device=device), scenario=scenario)
-    else:
-        write_npz_atomic(out, _npz_arrays(scenario, traj, device, samples))
+    started = time.perf_counter()
+    with PhaseProgress(["truth", "measure", "write"] if device is not None else ["truth", "write"],
+                       label="simulate") as progress:
+        with progress.phase("truth"):
+            traj = scenario.simulate(duration=args.duration, rate_hz=args.rate)
+        samples = None
+        if device is not None:
+            with progress.phase("measure"):
+                samples = device.measure(traj)
+        with progress.phase("write"):
+            if out.suffix == ".mcap":
+                from .mcap_io import Recording, truth_series, write_mcap
+
+                write_mcap(out, Recording(samples, truth=truth_series(traj, samples), device=device),
+                           scenario=scenario)
+            else:
+                write_npz_atomic(out, _npz_arrays(scenario, traj, device, samples))
     elapsed = time.perf_counter() - started
     summary = f"{len(traj)} truth samples"
     if device is not None:
@@ -111,7 +121,13 @@ def _cmd_info(args) -> int:
         for role, topic in dev.topics.items():
             print(f"    {topic:<28} {role}")
         if dev.metadata:
-            print(f"    gyroemu {dev.metadata.get('version', '?')}, seed {dev.metadata.get('seed', '?')}")
+            seed = dev.metadata.get("seed", "?")
+            print(f"    gyroemu {dev.metadata.get('version', '?')}" + (f", seed {seed}" if seed else ""))
+            if dev.metadata.get("source"):
+                print(f"    imported from {dev.metadata['source']} ({dev.metadata.get('source_format', '?')})")
+                if dev.metadata.get("citation"):
+                    licence = f" ({dev.metadata['license']})" if dev.metadata.get("license") else ""
+                    print(f"    cite: {dev.metadata['citation']}{licence}")
             if args.configs:
                 for key in ("scenario", "device"):
                     if dev.metadata.get(key):
@@ -119,6 +135,50 @@ def _cmd_info(args) -> int:
                         print("\n".join("    " + line for line in dev.metadata[key].splitlines()))
     for topic, why in log.skipped.items():
         print(f"  skipped {topic}: {why}")
+    return 0
+
+
+def _cmd_import(args) -> int:
+    from .importers import IMPORTERS
+
+    source, out = Path(args.file), Path(args.out)
+    if out.suffix != ".mcap":
+        raise UsageError(f"argument --out: {out}: write a .mcap file (got '{out.suffix}')")
+    if not out.parent.is_dir():
+        raise UsageError(f"argument --out: {out.parent} is not a folder")
+    started = time.perf_counter()
+    try:
+        summary = IMPORTERS[args.format](source, out)
+    except OSError as e:  # reading errors are ImportInputError (a ConfigError); this is the output
+        raise UsageError(f"argument --out: {out}: {e.strerror or e}") from None
+    print(f"{summary} in {time.perf_counter() - started:.2f} s")
+    return 0
+
+
+def _cmd_estimate(args) -> int:
+    from .estimate import estimate_log
+    from .estimation.registry import FilterError, filter_class
+
+    try:
+        filter_class(args.filter)
+    except FilterError as e:
+        raise UsageError(f"argument --filter: {e}") from None
+    source, out = Path(args.file), Path(args.out)
+    if out.suffix != ".mcap":
+        raise UsageError(f"argument --out: {out}: write a .mcap file (got '{out.suffix}')")
+    if not out.parent.is_dir():
+        raise UsageError(f"argument --out: {out.parent} is not a folder")
+    if out.resolve() == source.resolve():
+        raise UsageError(f"argument --out: {out} is the input: the input is never modified")
+    started = time.perf_counter()
+    try:
+        summary = estimate_log(source, out, filter_name=args.filter, use_mag=False if args.six_d else None)
+    except ValueError as e:  # a filter refusing the data (e.g. stamps): name the file
+        raise UsageError(f"{source}: {e}") from None
+    elapsed = time.perf_counter() - started
+    for name, n, flt, nine in summary.devices:
+        print(f"{name}: {n} samples, {flt} ({'9D' if nine else '6D'})")
+    print(f"/estimate/imu written in {elapsed:.2f} s -> {out}")
     return 0
 
 
@@ -186,14 +246,85 @@ def _cmd_allan(args) -> int:
     return 0
 
 
+def _cmd_bench(args) -> int:
+    import warnings
+
+    from .bench import BenchWarning, LogCase, SimCase, run_bench
+    from .estimation.registry import FilterError, filter_class
+
+    # Names first, so that a typo fails at once and names its argument.
+    for spec in args.filter or ():
+        try:
+            filter_class(spec)
+        except FilterError as e:
+            raise UsageError(f"argument --filter: {e}") from None
+    if args.runs < 1:
+        raise UsageError(f"argument --runs: must be at least 1, got {args.runs}")
+    simulated = not args.log or args.scenario or args.device
+    scenarios = args.scenario or ["smooth_manoeuvre"]
+    devices = args.device or ["consumer_mems"]
+    if simulated:
+        from sensors import load_device
+
+        for flag, names, load in (("--scenario", scenarios, load_scenario), ("--device", devices, load_device)):
+            for name in dict.fromkeys(names):
+                try:
+                    load(name)
+                except ConfigError as e:
+                    if e.file is not None:
+                        raise  # a bad file: names the file and key
+                    raise UsageError(f"argument {flag}: {e}") from None
+    cases = [SimCase(scenario=sc, device=dev, duration=args.duration, six_d=args.six_d)
+             for sc in dict.fromkeys(scenarios) for dev in dict.fromkeys(devices)] if simulated else []
+    for log in args.log or ():
+        if not Path(log).is_file():
+            raise UsageError(f"argument --log: {log}: no such file")
+        cases.append(LogCase(path=log, six_d=args.six_d))
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"argument --out: {out} is not a folder")
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", BenchWarning)
+        warnings.showwarning = lambda message, category, *a, **k: print(
+            f"gyroemu bench: warning: {message}", file=sys.stderr)
+        try:
+            report = run_bench(cases, filters=args.filter, runs=args.runs, seed=args.seed,
+                               threshold_deg=args.threshold_deg, batched=args.batched)
+        except FilterError as e:
+            raise UsageError(f"argument --filter: {e}") from None
+    paths = report.save(out)
+    print(report.to_markdown())
+    print(f"report -> {paths['markdown']}, {paths['json']}")
+    for png in paths["plots"]:
+        print(f"plot -> {png}")
+    return 0
+
+
 def _cmd_demo(args) -> int:
     from .demo import run_demo
 
-    return run_demo(scenario=args.scenario, duration=args.duration)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"argument --out: {out} is not a folder")
+    return run_demo(scenario=args.scenario, duration=args.duration, out=out, live_seconds=args.live_seconds)
 
 
 def _zenoh_options(args) -> dict:
     return {"connect": args.connect, "listen": args.listen, "mode": args.mode, "config_file": args.config}
+
+
+def _ros2_options(args) -> dict:
+    """``--ros2`` and ``--domain`` (default: ``ROS_DOMAIN_ID``, else 0), checked before any work."""
+    if not args.ros2:
+        if args.domain is not None:
+            raise UsageError("argument --domain: only with --ros2")
+        return {}
+    from .ros2_keys import Ros2Error, domain_id
+
+    try:
+        return {"ros2": True, "domain": domain_id(args.domain)}
+    except Ros2Error as e:  # names --domain or ROS_DOMAIN_ID
+        raise UsageError(str(e)) from None
 
 
 def _cmd_stream(args) -> int:
@@ -202,7 +333,7 @@ def _cmd_stream(args) -> int:
     try:
         return run_stream(scenario=args.scenario, device=args.device, duration=args.duration, seed=args.seed,
                           as_fast_as_possible=args.as_fast_as_possible, device_name=args.device_name,
-                          wait_s=args.wait, **_zenoh_options(args))
+                          wait_s=args.wait, estimate=args.estimate, **_zenoh_options(args), **_ros2_options(args))
     except ValueError as e:
         raise UsageError(str(e) if str(e).startswith("argument") else f"argument --connect/--listen: {e}") from None
 
@@ -215,7 +346,7 @@ def _cmd_record(args) -> int:
         raise UsageError(f"argument --out: {out.parent} is not a folder")
     try:
         return run_record(out_path=out, duration=args.duration, key_expr=args.key, report_path=args.report,
-                          **_zenoh_options(args))
+                          **_zenoh_options(args), **_ros2_options(args))
     except ValueError as e:
         raise UsageError(str(e) if str(e).startswith("argument") else f"argument --connect/--listen: {e}") from None
     except OSError as e:
@@ -227,7 +358,8 @@ def _cmd_replay(args) -> int:
 
     try:
         return run_replay(path=Path(args.log), rate=args.rate, loop=args.loop, topics=args.topics,
-                          device_name=args.device_name, wait_s=args.wait, **_zenoh_options(args))
+                          device_name=args.device_name, wait_s=args.wait, **_zenoh_options(args),
+                          **_ros2_options(args))
     except ConfigError:
         raise  # LogError: names the file
     except ValueError as e:
@@ -253,6 +385,14 @@ def _add_zenoh_arguments(p, modes=True) -> None:
     p.add_argument("--config", default=None, metavar="FILE.json5", help="a zenoh JSON5 config file")
 
 
+def _add_ros2_arguments(p, what: str) -> None:
+    p.add_argument("--ros2", action="store_true",
+                   help=f"{what} rmw_zenoh's keys <domain>/<topic>/<type>/<RIHS01 hash>, with the liveliness "
+                        "tokens of a ROS 2 node, for ROS 2 nodes on rmw_zenoh (Jazzy)")
+    p.add_argument("--domain", type=int, default=None, metavar="N",
+                   help="ROS 2 domain of --ros2 (default: $ROS_DOMAIN_ID, else 0)")
+
+
 def _positive(text: str) -> float:
     try:
         value = float(text)
@@ -270,6 +410,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("demo", help="run the main job on built-in defaults and print a summary")
     p.add_argument("--scenario", default="heavy_top", help="built-in name or TOML path (default: heavy_top)")
     p.add_argument("--duration", type=_positive, default=None, help="seconds (default: the scenario's)")
+    p.add_argument("--live-seconds", type=_positive, default=20.0,
+                   help="seconds of the live stream to the recorder and the filter (default: 20)")
+    p.add_argument("--out", default="gyroemu-demo", help="folder for the log, report and plot (default: ./gyroemu-demo)")
     p.set_defaults(func=_cmd_demo)
 
     p = sub.add_parser("scenarios", help="list the built-in scenarios, one line each")
@@ -289,6 +432,60 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--configs", action="store_true", help="also print the embedded scenario and device configs")
     p.set_defaults(func=_cmd_info)
 
+    p = sub.add_parser("import", help="turn another format's recording into an MCAP log (BROAD trials)",
+                       description="Turn another format's recording into a gyroemu MCAP log. broad: a BROAD trial "
+                                   "(HDF5) to /imu, /mag (tesla), /truth/imu (optical reference, NaN rows kept) "
+                                   "and /movement, stamped t_k = k / sampling_rate from 0.")
+    p.add_argument("format", choices=("broad",), help="the input's format")
+    p.add_argument("file", metavar="FILE", help="the recording to import (read only), e.g. TRIAL.hdf5")
+    p.add_argument("--out", required=True, help="MCAP file to write")
+    p.set_defaults(func=_cmd_import)
+
+    p = sub.add_parser(
+        "bench", help="benchmark attitude filters on simulated truth and on logs with a truth channel",
+        description="Run attitude filters over simulated cases (each --scenario x each --device, Monte Carlo over "
+                    "--runs device seeds) and over MCAP logs with a /truth/imu channel (--log), and write bench.md, "
+                    "bench.json and one error plot per case into --out. Reports total, heading and inclination "
+                    "RMSE (BROAD's definitions), convergence time, gyro-bias error and throughput per filter; "
+                    "a diverged filter is reported as such. With no arguments: smooth_manoeuvre x consumer_mems, "
+                    "60 s, 3 runs, every available filter.",
+        epilog="Filters: mekf, madgwick, mahony, ahrs-ekf, vqf (needs the vqf package), or your own class as "
+               "module:Class or path/to/file.py:Class, made with the FilterSetup and obeying "
+               "pipelines/estimation/protocol.py.")
+    p.add_argument("--scenario", action="append", default=None, metavar="NAME",
+                   help="built-in scenario or TOML path (repeatable; default: smooth_manoeuvre unless only --log)")
+    p.add_argument("--device", action="append", default=None, metavar="NAME",
+                   help="built-in device or TOML path (repeatable; default: consumer_mems unless only --log)")
+    p.add_argument("--duration", type=_positive, default=60.0, help="seconds per simulated run (default: 60)")
+    p.add_argument("--runs", type=int, default=3, help="Monte Carlo runs per simulated case (default: 3)")
+    p.add_argument("--seed", type=int, default=0, help="device seed of the first run (default: 0)")
+    p.add_argument("--log", action="append", default=None, metavar="FILE.mcap",
+                   help="an MCAP log with /imu and /truth/imu (repeatable); its /movement mask, if any, "
+                        "selects the samples that count")
+    p.add_argument("--filter", action="append", default=None, metavar="NAME",
+                   help="a filter to run (repeatable; default: every available built-in)")
+    p.add_argument("--6d", dest="six_d", action="store_true", help="ignore magnetometers (6D: inclination only)")
+    p.add_argument("--batched", action="store_true",
+                   help="run the mekf over all runs of a simulated case at once (vectorised across runs)")
+    p.add_argument("--threshold-deg", type=_positive, default=2.0,
+                   help="convergence threshold, degrees (default: 2)")
+    p.add_argument("--out", default="bench", help="folder for the report (default: ./bench)")
+    p.set_defaults(func=_cmd_bench)
+
+    p = sub.add_parser(
+        "estimate", help="run an attitude filter over an MCAP log and write its /estimate/imu",
+        description="Filter every device of FILE.mcap and write OUT.mcap: the input's channels plus /estimate/imu, "
+                    "one message per /imu message at the same stamp (estimated q_wb with its covariance, "
+                    "bias-corrected rate). 9D where the device has a magnetometer, unless --6d. A gyroemu log "
+                    "gives the filter its device's noise figures and the site's latitude; other logs use the "
+                    "filter's defaults.")
+    p.add_argument("file", metavar="FILE.mcap", help="the log to filter (read only)")
+    p.add_argument("--out", required=True, help="MCAP file to write")
+    p.add_argument("--filter", default="mekf", metavar="NAME",
+                   help="mekf (default), madgwick, mahony, ahrs-ekf, vqf, or module:Class")
+    p.add_argument("--6d", dest="six_d", action="store_true", help="ignore the magnetometer")
+    p.set_defaults(func=_cmd_estimate)
+
     p = sub.add_parser("presets", help="list the built-in devices as a table")
     p.set_defaults(func=_cmd_presets)
 
@@ -307,17 +504,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seed of every random draw (default: 0)")
     p.add_argument("--as-fast-as-possible", action="store_true", help="do not pace to the sample clock")
     p.add_argument("--device-name", default="imu0", help="key expressions gyroemu/<NAME>/... (default: imu0)")
+    p.add_argument("--estimate", nargs="?", const="mekf", default=None, metavar="FILTER",
+                   help="also run an attitude filter live on the stream (default filter: mekf) and publish "
+                        "gyroemu/<NAME>/estimate/imu")
     p.add_argument("--wait", type=float, default=10.0,
                    help="seconds to wait for a subscriber on every key before publishing (default: 10; 0: none)")
     _add_zenoh_arguments(p)
+    _add_ros2_arguments(p, "publish on")
     p.set_defaults(func=_cmd_stream)
 
     p = sub.add_parser("record", help="record gyroemu zenoh streams into an MCAP file", epilog=zenoh_note)
     p.add_argument("--out", required=True, help="MCAP file to write (written in place)")
     p.add_argument("--duration", type=_positive, default=None, help="seconds (default: until SIGINT/SIGTERM)")
-    p.add_argument("--key", default="gyroemu/**", help="key expression to subscribe to (default: gyroemu/**)")
+    p.add_argument("--key", default=None,
+                   help="key expression to subscribe to (default: gyroemu/**; with --ros2: <domain>/**)")
     p.add_argument("--report", default=None, metavar="FILE.json", help="also write the sequence report as JSON")
     _add_zenoh_arguments(p)
+    _add_ros2_arguments(p, "record from")
     p.set_defaults(func=_cmd_record)
 
     p = sub.add_parser("replay", help="republish an MCAP log over zenoh with its recorded timing",
@@ -332,6 +535,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--wait", type=float, default=10.0,
                    help="seconds to wait for a subscriber on every key before publishing (default: 10; 0: none)")
     _add_zenoh_arguments(p)
+    _add_ros2_arguments(p, "publish on")
     p.set_defaults(func=_cmd_replay)
 
     p = sub.add_parser("router", help="run a zenoh router (until SIGINT/SIGTERM)")

@@ -14,6 +14,7 @@ topic              type                                 holds
 ``/truth/imu``     ``sensor_msgs/msg/Imu``              true ``q_wb``, ``omega_b``, ``specific_force_b``
 ``/estimate/imu``  ``sensor_msgs/msg/Imu``              estimated ``q_wb`` (+ covariance), rate, ...
 ``/raw/<kind>``    ``gyroemu_msgs/msg/<Kind>Raw``       the gyro kind's physical observables
+``/movement``      ``gyroemu_msgs/msg/Flag``            an imported dataset's mask of the samples that count
 =================  ===================================  =========================================
 
 With several devices the topics are prefixed: ``/<device>/imu``. Every message's ``log_time`` and
@@ -21,7 +22,8 @@ With several devices the topics are prefixed: ``/<device>/imu``. Every message's
 in time order across channels (same stamp: the order of the table). Frame ids: the device name for
 what the sensor measures (``/imu``, ``/mag``, ``/raw/...``), ``base_link`` for body-frame truth and
 estimates. Each device has a metadata record ``gyroemu`` with ``version``, ``seed``, ``scenario``
-(TOML), ``device`` (TOML), ``device_name`` and ``topic_prefix``.
+(TOML), ``device`` (TOML), ``device_name`` and ``topic_prefix``, plus any keys the recording adds
+(an imported file: ``source``, ``source_format``, ``citation``, ...; :mod:`pipelines.importers`).
 
 Writing
 -------
@@ -91,6 +93,7 @@ from sensors.samples import ImuSamples
 from .messages import (
     IMU,
     DecodedBatch,
+    FLAG,
     MAGNETIC_FIELD,
     RAW_MESSAGE_TYPES,
     MessageType,
@@ -106,6 +109,8 @@ __all__ = [
     "McapMessage",
     "iter_mcap_batches",
     "mcap_channels",
+    "ChannelInfo",
+    "mcap_channel_info",
     "LogWarning",
     "ImuSeries",
     "Recording",
@@ -229,6 +234,17 @@ class Recording:
         The device (or its resolved config as TOML text), for the metadata record.
     seed : int, optional
         The run's seed (default: ``device.seed`` when ``device`` is a Device).
+    movement : ndarray (N,) bool, optional
+        A mask aligned to ``samples`` (an imported dataset's samples over which errors are computed),
+        written to ``/movement`` as ``gyroemu_msgs/msg/Flag`` at the samples' stamps.
+    stamp_ns : ndarray (N,) int64, optional
+        The samples' stamps exactly, ns, used instead of ``samples.t`` (which, as float seconds, does
+        not resolve nanoseconds at Unix-epoch times); a truth or estimate series of the same length
+        and times is stamped with them too. For rewriting a log read by :func:`read_mcap`.
+    metadata : dict of str to str, optional
+        Further keys of the device's ``gyroemu`` metadata record (e.g. an import's ``source``); they
+        may not replace the writer's own keys (``version``, ``seed``, ``scenario``, ``device``,
+        ``device_name``, ``topic_prefix``).
     """
 
     samples: ImuSamples
@@ -236,6 +252,9 @@ class Recording:
     estimate: ImuSeries | None = None
     device: object = None
     seed: int | None = None
+    movement: np.ndarray | None = None
+    metadata: dict | None = None
+    stamp_ns: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -256,6 +275,9 @@ class DeviceLog:
     truth, estimate : ImuSeries or None
     metadata : dict of str to str or None
         The device's ``gyroemu`` metadata record, when there is one.
+    movement : ndarray (N,) bool or None
+        The ``/movement`` flags at the samples' stamps (False, with a warning, for samples without a
+        flag at their stamp); None when the device has no ``/movement`` topic.
     """
 
     name: str
@@ -265,6 +287,7 @@ class DeviceLog:
     truth: ImuSeries | None = None
     estimate: ImuSeries | None = None
     metadata: dict | None = None
+    movement: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -707,9 +730,13 @@ class McapLogWriter:
         self._devices[name] = entry
         device = recording.device
         seed = recording.seed if recording.seed is not None else getattr(device, "seed", None)
-        self._mcap.add_metadata("gyroemu", {
-            "version": _version(), "seed": "" if seed is None else str(int(seed)), "scenario": self._scenario,
-            "device": _toml(device), "device_name": name, "topic_prefix": entry.prefix})
+        record = {"version": _version(), "seed": "" if seed is None else str(int(seed)), "scenario": self._scenario,
+                  "device": _toml(device), "device_name": name, "topic_prefix": entry.prefix}
+        extra = dict(recording.metadata or {})
+        clash = sorted(set(extra) & set(record))
+        if clash:
+            raise ValueError(f"Recording.metadata may not set the writer's own key(s) {', '.join(clash)}")
+        self._mcap.add_metadata("gyroemu", {**record, **extra})
         return entry
 
     def write(self, *recordings: Recording | ImuSamples) -> None:
@@ -741,6 +768,11 @@ class McapLogWriter:
         """``(channel_id, stamp_ns, payloads)`` of every channel of a recording."""
         samples = recording.samples
         stamp_ns = _log_stamps(samples.t, "samples.t")
+        if recording.stamp_ns is not None:
+            exact = np.asarray(recording.stamp_ns, dtype=np.int64)
+            if exact.shape != stamp_ns.shape or np.abs(exact - stamp_ns).max(initial=0) > 1000:
+                raise ValueError("stamp_ns must be the samples' stamps (samples.t) in ns")
+            stamp_ns = exact
         n = len(stamp_ns)
         batches = []
         no_orientation = np.zeros(9)
@@ -755,6 +787,8 @@ class McapLogWriter:
         for role, series in (("truth/imu", recording.truth), ("estimate/imu", recording.estimate)):
             if series is not None:
                 series_ns = _log_stamps(series.t, f"{role.split('/')[0]}.t")
+                if recording.stamp_ns is not None and len(series_ns) == n and np.abs(series_ns - stamp_ns).max(initial=0) <= 1000:
+                    series_ns = stamp_ns
                 rows = IMU.encode(series_ns, BODY_FRAME, _series_fields(series))
                 batches.append((self._channel(device, role, IMU), series_ns, rows))
         for kind, observables in samples.raw.items():
@@ -774,6 +808,13 @@ class McapLogWriter:
                     raise ValueError(f"raw[{kind!r}][{name!r}] has {len(value)} rows for {n} samples")
             rows = mtype.encode(stamp_ns, device.frame_id, fields)
             batches.append((self._channel(device, f"raw/{kind}", mtype), stamp_ns, rows))
+        if recording.movement is not None:
+            movement = np.asarray(recording.movement)
+            if movement.shape != (n,) or not (movement.dtype == bool or np.isin(movement, (0, 1)).all()):
+                raise ValueError(f"movement must be {n} booleans (one per sample), got {movement.dtype} "
+                                 f"{movement.shape}")
+            rows = FLAG.encode(stamp_ns, device.frame_id, {"data": movement.astype(bool)})
+            batches.append((self._channel(device, "movement", FLAG), stamp_ns, rows))
         return batches
 
     def close(self) -> None:
@@ -1234,9 +1275,34 @@ def mcap_channels(path) -> list[tuple[str, str, str]]:
             for c in walk.channels.values()]
 
 
+
+class ChannelInfo(NamedTuple):
+    """A channel of an MCAP file with its schema (what ``gyroemu replay --ros2`` needs to name its type)."""
+
+    topic: str
+    message_encoding: str
+    schema_name: str       # '' when the channel has no schema
+    schema_encoding: str
+    schema_data: bytes
+    metadata: dict
+
+
+def mcap_channel_info(path) -> list[ChannelInfo]:
+    """Every channel of an MCAP file with its schema record and metadata, in file order (a pass that
+    decodes no message). Raises :class:`LogError` as :func:`read_mcap` does."""
+    walk = _MessageWalk(Path(path), topics=())
+    walk.run()
+    out = []
+    for c in walk.channels.values():
+        schema = walk.schemas.get(c.schema_id)
+        out.append(ChannelInfo(c.topic, c.message_encoding, schema.name if schema else "",
+                               schema.encoding if schema else "", bytes(schema.data) if schema else b"",
+                               dict(c.metadata)))
+    return out
+
 # -- from channels to devices -----------------------------------------------------------------------
 
-_ROLE = re.compile(r"^(?P<prefix>.*?)/(?P<role>truth/imu|estimate/imu|raw/(?P<kind>[^/]+)|imu|mag)$")
+_ROLE = re.compile(r"^(?P<prefix>.*?)/(?P<role>truth/imu|estimate/imu|raw/(?P<kind>[^/]+)|imu|mag|movement)$")
 
 
 def _role(topic: str) -> tuple[str, str]:
@@ -1333,9 +1399,11 @@ def read_mcap(path) -> McapLog:
     """Read a ``ros2`` MCAP log: every ``sensor_msgs/msg/Imu`` channel becomes a device's samples.
 
     Topics named as gyroemu names them (``[/<device>]/imu``, ``/mag``, ``/truth/imu``,
-    ``/estimate/imu``, ``/raw/<kind>``) are grouped by device; any other Imu topic is a device of its
-    own, named after the topic. Measured samples get the ``/mag`` field (NaN where absent) and the raw
-    observables at their stamps (samples without raw counterparts are dropped, with a warning).
+    ``/estimate/imu``, ``/raw/<kind>``, ``/movement``) are grouped by device; any other Imu topic is a
+    device of its own, named after the topic. Measured samples get the ``/mag`` field (NaN where absent)
+    and the raw observables at their stamps (samples without raw counterparts are dropped, with a
+    warning); ``/movement`` becomes :attr:`DeviceLog.movement` at the same stamps (False, with a warning,
+    where a sample has none).
 
     Raises
     ------
@@ -1385,6 +1453,8 @@ def _devices(path: Path, decoded: dict, metadata: list, skipped: dict) -> dict:
         if role in ("imu", "truth/imu", "estimate/imu") and d.mtype is not IMU:
             role = ""
         if role == "mag" and d.mtype is not MAGNETIC_FIELD:
+            role = ""
+        if role == "movement" and d.mtype is not FLAG:
             role = ""
         if not role:
             if d.mtype is IMU:
@@ -1436,6 +1506,15 @@ def _device_log(path: Path, name: str, group: dict, meta: dict | None) -> Device
         d = group["mag"]
         i, j = _match(stamp_ns[keep], d.batch.stamp_ns)
         mag[i] = d.batch["magnetic_field"][j]
+    movement = None
+    if "movement" in group:
+        d = group["movement"]
+        i, j = _match(stamp_ns[keep], d.batch.stamp_ns)
+        movement = np.zeros(len(keep), dtype=bool)
+        movement[i] = d.batch["data"][j]
+        if len(i) < len(keep):
+            warnings.warn(f"{path}: {len(keep) - len(i)} samples of {imu.topic} have no message on {d.topic} "
+                          "at their stamp; their movement flag is False", LogWarning, stacklevel=4)
     batch = imu.batch
     samples = ImuSamples(
         t=ns_to_stamps(stamp_ns[keep]),
@@ -1453,4 +1532,5 @@ def _device_log(path: Path, name: str, group: dict, meta: dict | None) -> Device
         truth=_imu_series(group["truth/imu"]) if "truth/imu" in group else None,
         estimate=_imu_series(group["estimate/imu"]) if "estimate/imu" in group else None,
         metadata=meta,
+        movement=movement,
     )

@@ -26,6 +26,8 @@ the last field. Payload offsets, with ``L = len(frame_id) + 1``::
 ``linear_acceleration_covariance`` [9] -- 296 bytes, so with ``frame_id = "imu0"`` (L = 5, a = 24) a message
 is 4 + 24 + 296 = 324 bytes. ``sensor_msgs/msg/MagneticField``: ``magnetic_field`` x, y, z and
 ``magnetic_field_covariance`` [9]. The raw types are listed in :data:`RAW_MESSAGE_TYPES`.
+``gyroemu_msgs/msg/Flag`` (:data:`FLAG`) is a header and one ``bool data`` (one byte, no padding): with
+``frame_id = "imu0"`` a message is 4 + 17 + 1 = 22 bytes.
 
 With one ``frame_id`` per batch every message of a type has the same length and the same field offsets,
 so a batch is a numpy structured array (explicit offsets, zeroed padding) viewed as an ``(N, size)``
@@ -64,6 +66,7 @@ __all__ = [
     "DecodedBatch",
     "IMU",
     "MAGNETIC_FIELD",
+    "FLAG",
     "RAW_MESSAGE_TYPES",
     "MESSAGE_TYPES",
     "message_type",
@@ -231,6 +234,14 @@ std_msgs/Header header
 float64[4] gimbal_angle_rad  # inner and outer gimbal angles of gyro 1, then of gyro 2, rad
 float64[3] attitude_xyz_rad  # indicated attitude (x-y-z Euler angles) since uncaging, rad
 bool gimbal_lock             # an inner gimbal is within the lock margin of 90 degrees
+""",
+    "gyroemu_msgs/Flag": """\
+# A stamped yes/no per sample, e.g. an imported dataset's mask of the samples over which errors are
+# computed (gyroemu's /movement topic: BROAD's `movement` array).
+
+std_msgs/Header header
+
+bool data  # the flag at this stamp
 """,
 }
 
@@ -613,7 +624,10 @@ RAW_MESSAGE_TYPES: dict[str, MessageType] = {
 (the ``ideal`` kind has no raw observables); FOG's ``closed_loop`` says whether ``feedback_phase_rad``
 (NaN otherwise) was present."""
 
-MESSAGE_TYPES: dict[str, MessageType] = {t.name: t for t in (IMU, MAGNETIC_FIELD, *RAW_MESSAGE_TYPES.values())}
+FLAG = MessageType("gyroemu_msgs/msg/Flag", (FieldSpec("data", "?"),))
+"""``gyroemu_msgs/msg/Flag``: one ``bool data`` per stamp (the ``/movement`` mask of imported datasets)."""
+
+MESSAGE_TYPES: dict[str, MessageType] = {t.name: t for t in (IMU, MAGNETIC_FIELD, FLAG, *RAW_MESSAGE_TYPES.values())}
 """Every type this module encodes and decodes, by ROS name (``package/msg/Type``)."""
 
 

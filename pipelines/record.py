@@ -20,6 +20,17 @@ indexes, the footer.
 From each message's attachment (sequence number, publisher id) the recorder counts, per publisher,
 messages received, sequence gaps (the exact missing numbers), duplicates and late (out-of-order)
 arrivals, and prints the report at the end (``--report FILE.json`` also writes it as JSON).
+
+ROS 2 mode (``--ros2``)
+-----------------------
+The recorder subscribes to ``<domain>/**`` instead (the data keys of rmw_zenoh,
+:mod:`pipelines.ros2_keys`): a key ``<domain>/<device>/<rest>/<pkg::msg::dds_::T_>/<RIHS01 hash>``
+is recorded on topic ``/<rest>`` of device ``<device>`` (so what ``gyroemu stream --ros2`` publishes
+comes back on the topics of a plain recording; a raw topic gets its kind back from its type), with the
+schema the key's type names when gyroemu knows the type, and the type hash in the channel's
+``topic_type_hash`` metadata, as rosbag2 records it. Keys of topics with a single name token
+(``/rosout``) have no device and are skipped (counted). The process appears in the ROS graph as node
+``gyroemu_record_<pid>``, with a subscription token per topic it records.
 """
 
 from __future__ import annotations
@@ -33,11 +44,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .messages import IMU, MAGNETIC_FIELD, RAW_MESSAGE_TYPES
+from .messages import IMU, MAGNETIC_FIELD, MESSAGE_TYPES, RAW_MESSAGE_TYPES
 from .zenoh_io import (drain, header_stamp_ns, key_to_topic, open_session, router_config, session_config,
                        subscribe, unpack_attachment)
 
-__all__ = ["SequenceTracker", "Recorder", "run_record", "run_router"]
+__all__ = ["SequenceTracker", "Recorder", "KeyInfo", "gyroemu_key", "ros2_key", "topic_message_type",
+           "run_record", "run_router"]
 
 
 def _ranges(numbers) -> list[list[int]]:
@@ -87,7 +99,9 @@ class SequenceTracker:
                 "duplicates": self.duplicates, "late": self.late}
 
 
-def _message_schema(topic: str):
+def topic_message_type(topic: str):
+    """The message type of a gyroemu topic by its role (``/imu``, ``/truth/imu``: Imu; ``/mag``:
+    MagneticField; ``/raw/<kind>``: the kind's raw type), or None."""
     role = topic.rsplit("/", 2)
     if topic.endswith("/imu"):
         return IMU
@@ -98,10 +112,38 @@ def _message_schema(topic: str):
     return None
 
 
-class Recorder:
-    """Copies received zenoh samples into an MCAP file (see the module's notes)."""
+@dataclass(frozen=True)
+class KeyInfo:
+    """What a key expression says: the device and topic to record under, and (ROS 2 keys) the type."""
 
-    def __init__(self, path, chunk_size: int = 1 << 18):
+    device: str
+    topic: str
+    type_name: str | None = None
+    type_hash: str | None = None
+    ros_topic: str | None = None  # the ROS 2 topic the key carries (ROS 2 keys)
+
+
+def gyroemu_key(key: str) -> KeyInfo:
+    """``gyroemu/<device>/<topic>`` (``ValueError`` for other keys)."""
+    return KeyInfo(*key_to_topic(key))
+
+
+def ros2_key(key: str) -> KeyInfo:
+    """``<domain>/<device>/<rest>/<type>/<hash>`` (rmw_zenoh) -> device, ``/<rest>``, type and hash."""
+    from .ros2_keys import gyroemu_topic, parse_data_key
+
+    parsed = parse_data_key(key)
+    device, topic = gyroemu_topic(parsed.topic, parsed.type_name)
+    return KeyInfo(device, topic, parsed.type_name, parsed.type_hash, parsed.topic)
+
+
+class Recorder:
+    """Copies received zenoh samples into an MCAP file (see the module's notes).
+
+    ``parse_key`` turns a sample's key expression into a :class:`KeyInfo` (:func:`gyroemu_key`, or
+    :func:`ros2_key` in ROS 2 mode); ``on_new_topic(info)`` is called once per new channel."""
+
+    def __init__(self, path, chunk_size: int = 1 << 18, parse_key=gyroemu_key, on_new_topic=None):
         from .mcap_io import OFFERED_QOS_PROFILES, McapFileWriter, _version
 
         self.path = Path(path)
@@ -114,34 +156,64 @@ class Recorder:
         self._devices: dict[str, str] = {}  # device -> topic prefix
         self._pending: dict[tuple[int, int], tuple[list, list]] = {}  # (channel, size) -> stamps, payloads
         self.trackers: dict[bytes, SequenceTracker] = {}
+        self._parse_key = parse_key
+        self._on_new_topic = on_new_topic
+        self._keys: dict[str, tuple[KeyInfo, int] | None] = {}  # key expression -> (info, channel) or None
         self.messages = 0
         self.skipped = 0
         self.without_attachment = 0
 
-    def _channel(self, device: str, topic: str) -> int:
-        key = (device, topic)
+    def _channel(self, info: KeyInfo) -> int:
+        key = (info.device, info.topic)
         if key not in self._channels:
+            device, topic = info.device, info.topic
             if device not in self._devices:
                 prefix = "" if not self._devices else f"/{device}"
                 self._devices[device] = prefix
                 self._mcap.add_metadata("gyroemu", {"version": self._version, "seed": "", "scenario": "",
                                                     "device": "", "device_name": device, "topic_prefix": prefix})
-            mtype = _message_schema(topic)
+            mtype = MESSAGE_TYPES.get(info.type_name) if info.type_name else topic_message_type(topic)
             schema_id = 0
             if mtype is not None:
                 if mtype.name not in self._schemas:
                     self._schemas[mtype.name] = self._mcap.register_schema(mtype.name, "ros2msg", mtype.schema.encode())
                 schema_id = self._schemas[mtype.name]
+            metadata = {"offered_qos_profiles": self._qos}
+            if info.type_hash:
+                metadata["topic_type_hash"] = info.type_hash  # as rosbag2 (Iron and later) records it
             self._channels[key] = self._mcap.register_channel(self._devices[device] + topic, "cdr", schema_id,
-                                                              {"offered_qos_profiles": self._qos})
+                                                              metadata)
+            if self._on_new_topic is not None:
+                try:
+                    self._on_new_topic(info)
+                except Exception:  # a graph token is advisory: never lose data over it
+                    pass
         return self._channels[key]
 
-    def add(self, sample) -> None:
+    def _key(self, key: str) -> tuple[KeyInfo, int] | None:
+        """The parsed key and its channel (cached per key expression); None for keys not recorded."""
         try:
-            device, topic = key_to_topic(str(sample.key_expr))
+            return self._keys[key]
+        except KeyError:
+            pass
+        try:
+            info = self._parse_key(key)
+            found = (info, self._channel(info))
+        except ValueError:
+            found = None
+        self._keys[key] = found
+        return found
+
+    def add(self, sample) -> None:
+        found = self._key(str(sample.key_expr))
+        if found is None:
+            self.skipped += 1
+            return
+        info, channel = found
+        try:
             payload = sample.payload.to_bytes()
             stamp = header_stamp_ns(payload)
-        except (ValueError, Exception):
+        except Exception:
             self.skipped += 1
             return
         if stamp < 0:
@@ -153,13 +225,12 @@ class Recorder:
                 sequence, _, gid = unpack_attachment(attachment.to_bytes())
                 tracker = self.trackers.get(gid)
                 if tracker is None:
-                    tracker = self.trackers[gid] = SequenceTracker(topic=f"{device}{topic}")
+                    tracker = self.trackers[gid] = SequenceTracker(topic=f"{info.device}{info.topic}")
                 tracker.add(sequence)
             except ValueError:
                 self.without_attachment += 1
         else:
             self.without_attachment += 1
-        channel = self._channel(device, topic)
         stamps, payloads = self._pending.setdefault((channel, len(payload)), ([], []))
         stamps.append(stamp)
         payloads.append(payload)
@@ -214,20 +285,43 @@ def format_report(report: dict) -> str:
     return "\n".join(lines)
 
 
-def run_record(*, out_path, duration: float | None = None, key_expr: str = "gyroemu/**", connect=None,
-               listen=None, mode=None, config_file=None, report_path=None, out=sys.stdout) -> int:
+def run_record(*, out_path, duration: float | None = None, key_expr: str | None = None, connect=None,
+               listen=None, mode=None, config_file=None, report_path=None, ros2: bool = False,
+               domain: int | None = None, out=sys.stdout) -> int:
+    """Record until SIGINT/SIGTERM or ``duration`` s (see the module's notes). ``key_expr`` defaults to
+    ``gyroemu/**`` (``<domain>/**`` with ``ros2``). Raises ``ValueError`` naming the argument at fault."""
+    node = None
+    if ros2:
+        from .ros2_keys import domain_id
+
+        domain = domain_id(domain)
+        parse_key = ros2_key
+        key_expr = key_expr or f"{domain}/**"
+    else:
+        parse_key = gyroemu_key
+        key_expr = key_expr or "gyroemu/**"
     config = session_config(connect=connect, listen=listen, mode=mode, config_file=config_file)
     session = open_session(config)
     try:
-        recorder = Recorder(out_path)
+        if ros2:
+            from .ros2_keys import Ros2Node, node_name
+
+            node = Ros2Node(session, domain, node_name("record"))
+            on_new_topic = (lambda info: node.subscription(info.ros_topic, info.type_name, info.type_hash))
+        else:
+            on_new_topic = None
+        recorder = Recorder(out_path, parse_key=parse_key, on_new_topic=on_new_topic)
     except BaseException:
+        if node is not None:
+            node.close()
         session.close()
         raise
     stopping = []
     previous = {s: signal.signal(s, lambda *_: stopping.append(1)) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         subscriber = subscribe(session, key_expr)
-        print(f"record: subscribed to {key_expr} -> {recorder.path}", file=out, flush=True)
+        what = f"ROS 2 domain {domain}: " if ros2 else ""
+        print(f"record: subscribed to {what}{key_expr} -> {recorder.path}", file=out, flush=True)
         end = None if duration is None else time.monotonic() + duration
         last_flush = time.monotonic()
         while not stopping and (end is None or time.monotonic() < end):
@@ -245,6 +339,8 @@ def run_record(*, out_path, duration: float | None = None, key_expr: str = "gyro
         subscriber.undeclare()
     finally:
         recorder.close()
+        if node is not None:
+            node.close()
         session.close()
         for s, h in previous.items():
             signal.signal(s, h)

@@ -14,6 +14,14 @@ unchanged, on the key expression of its topic (``interface.md``, "Live streams: 
 The attachment is the publisher's (:class:`pipelines.zenoh_io.PacedPublisher`): a sequence per key
 from 0 (continuing across ``--loop`` passes), the send time, a random publisher id per key.
 
+ROS 2 mode (``--ros2``, ``--domain``): the topic that would go to ``gyroemu/<device>/<topic>`` goes to
+ROS 2 topic ``/<device>/<topic>`` on rmw_zenoh's key ``<domain>/<device>/<topic>/<type>/<hash>``
+(:mod:`pipelines.ros2_keys`), with the liveliness tokens of a node ``gyroemu_replay_<pid>`` and its
+publishers. The type is the channel's schema name; the hash is the channel's ``topic_type_hash``
+metadata (rosbag2 records it since Iron) or else computed by REP-2011 from the channel's ``ros2msg``
+schema. A channel with neither (no schema, an IDL schema and no recorded hash) is skipped with a
+message, as is a topic that is not a valid ROS 2 name.
+
 Timing
 ------
 Message i goes out at ``t_start + (log_time_i - log_time_0) / rate`` (``t_start``: when publishing
@@ -43,10 +51,10 @@ import threading
 import time
 import warnings
 
-from .mcap_io import LogWarning, iter_mcap_batches, mcap_channels, read_mcap
-from .zenoh_io import PacedPublisher, open_session, session_config, topic_to_key
+from .mcap_io import LogWarning, iter_mcap_batches, mcap_channel_info, mcap_channels, read_mcap
+from .zenoh_io import PacedPublisher, key_to_topic, open_session, session_config, topic_to_key
 
-__all__ = ["topic_keys", "ReadAhead", "run_replay", "READ_AHEAD"]
+__all__ = ["topic_keys", "ros2_topic_keys", "ReadAhead", "run_replay", "READ_AHEAD"]
 
 READ_AHEAD = 8  # decoded chunk batches queued ahead of the publisher
 _ROLE = re.compile(r"^(?P<prefix>(/[^/]+)??)(?P<role>/imu|/mag|/truth/imu|/estimate/imu|/raw/[^/]+)$")
@@ -77,6 +85,36 @@ def topic_keys(topics, metadata: list[dict], device_name: str = "imu0") -> tuple
         except ValueError as e:
             bad[topic] = str(e)
     return keys, bad
+
+
+def ros2_topic_keys(keys: dict[str, str], channels, ros) -> tuple[dict[str, str], dict[str, str]]:
+    """ROS 2 mode: ``({topic: rmw_zenoh key}, {topic: why not})`` from the gyroemu keys of
+    :func:`topic_keys`, the file's :class:`pipelines.mcap_io.ChannelInfo` and a
+    :class:`pipelines.stream.Ros2Keys` (which keeps each key's topic, type and hash for its tokens)."""
+    from .ros2_keys import Ros2Error, is_type_hash, parse_definitions, ros_topic, type_hash
+
+    info = {c.topic: c for c in channels}
+    out, bad = {}, {}
+    for topic, key in keys.items():
+        c = info[topic]
+        try:
+            name = ros_topic(*key_to_topic(key))
+            if not c.schema_name:
+                raise Ros2Error("the channel has no schema, so its ROS 2 type is unknown")
+            type_name = c.schema_name if c.schema_name.count("/") == 2 else \
+                "{0}/msg/{1}".format(*c.schema_name.split("/", 1))
+            recorded = c.metadata.get("topic_type_hash", "")
+            if is_type_hash(recorded):
+                hash_ = recorded
+            elif c.schema_encoding == "ros2msg":
+                hash_ = type_hash(type_name, parse_definitions(c.schema_data.decode("utf-8"), type_name))
+            else:
+                raise Ros2Error(f"no topic_type_hash recorded and a {c.schema_encoding or 'missing'} schema, "
+                                "from which gyroemu cannot compute the type hash")
+            out[topic] = ros.key(name, type_name, hash_)
+        except (ValueError, UnicodeDecodeError) as e:
+            bad[topic] = f"no ROS 2 key: {e}"
+    return out, bad
 
 
 class ReadAhead(threading.Thread):
@@ -133,8 +171,9 @@ class ReadAhead(threading.Thread):
         finally:
             self._put(None)
 
-    def messages(self, stop=lambda: False):
-        """The queued messages one by one (blocks while the reader is behind)."""
+    def batches(self, stop=lambda: False):
+        """The queued batches, one list of ``(deadline offset ns, key, payload)`` per chunk (blocks
+        while the reader is behind; ``stop()`` is polled every 0.1 s meanwhile)."""
         while True:
             try:
                 batch = self.queue.get(timeout=0.1)
@@ -146,18 +185,23 @@ class ReadAhead(threading.Thread):
                 return
             if isinstance(batch, BaseException):
                 raise batch
-            yield from batch
+            yield batch
 
 
 def run_replay(*, path, rate: float = 1.0, loop: bool = False, topics=None, device_name: str = "imu0",
                wait_s: float = 10.0, connect=None, listen=None, mode=None, config_file=None,
-               out=sys.stdout) -> int:
+               ros2: bool = False, domain: int | None = None, out=sys.stdout) -> int:
     """Replay ``path`` (see the module's notes). Returns the exit status: 0 when done (or, with
     ``loop``, when stopped by SIGINT/SIGTERM), 130 when a single pass was interrupted. Raises
     :class:`pipelines.mcap_io.LogError` for bad input and ``ValueError`` naming the argument at fault."""
     config = session_config(connect=connect, listen=listen, mode=mode, config_file=config_file)
     if not rate > 0:
         raise ReplayError(f"argument --rate: must be positive, got {rate}")
+    ros = None
+    if ros2:
+        from .stream import Ros2Keys
+
+        ros = Ros2Keys(domain, "replay")  # Ros2Error names --domain or ROS_DOMAIN_ID
     try:
         topic_to_key(device_name, "/imu")
     except ValueError as e:
@@ -183,6 +227,9 @@ def run_replay(*, path, rate: float = 1.0, loop: bool = False, topics=None, devi
         if encoding != "cdr" and not topics:
             print(f"replay: skipping {topic}: message encoding {encoding!r}, not cdr", file=out)
     keys, bad = topic_keys(cdr, log.metadata, device_name)
+    if ros is not None:
+        keys, more = ros2_topic_keys(keys, mcap_channel_info(path), ros)
+        bad.update(more)
     for topic, why in bad.items():
         if topics:
             raise ReplayError(f"argument --topics: {path}: topic {topic!r} has no key expression: {why}")
@@ -199,13 +246,15 @@ def run_replay(*, path, rate: float = 1.0, loop: bool = False, topics=None, devi
     publisher = reader = None
     try:
         publisher = PacedPublisher(session, sorted(set(keys.values())))
+        if ros is not None:
+            ros.declare(session, out)
         reader = ReadAhead(path, keys, rate, loop)
         reader.start()  # fills its queue while we wait for subscribers
         if wait_s > 0 and not publisher.wait_for_subscribers(wait_s, stop=lambda: bool(stopping)):
             print(f"replay: no subscriber on every key after {wait_s:g} s: publishing anyway", file=out)
         print("replay: publishing", file=out, flush=True)
         stop = lambda: bool(stopping)  # noqa: E731
-        report = publisher.run_schedule(reader.messages(stop), stop=stop)
+        report = publisher.run_schedule(reader.batches(stop), stop=stop)
         print(f"replay: sent {report.messages} messages ({reader.passes} complete passes)", file=out)
         print(f"replay: {report.summary('t_start + (log_time - log_time_0) / rate')}", file=out)
         time.sleep(0.5)  # let queued messages drain before the session closes
@@ -214,6 +263,8 @@ def run_replay(*, path, rate: float = 1.0, loop: bool = False, topics=None, devi
             reader.stopping.set()
         if publisher is not None:
             publisher.close()
+        if ros is not None:
+            ros.close()
         session.close()
         for s, h in previous.items():
             signal.signal(s, h)

@@ -8,6 +8,12 @@ ids and fields as :class:`pipelines.mcap_io.McapLogWriter` writes them), then sa
 Before its clock starts the stream waits (``--wait``, default 10 s) until every key has a subscriber,
 so a recorder started just after the stream loses nothing; when the wait runs out it starts anyway.
 After the last sample it lingers briefly so that queued messages reach their subscribers.
+
+ROS 2 mode (``--ros2``, ``--domain``): the same bytes go on rmw_zenoh's keys instead,
+``<domain>/<device>/<topic>/<type>/<RIHS01 hash>`` (``0/imu0/imu/sensor_msgs::msg::dds_::Imu_/RIHS01_7d9a...``),
+and the process declares the liveliness tokens of a ROS 2 node ``gyroemu_stream_<pid>`` and of one
+publisher per topic, so that ROS 2 nodes on rmw_zenoh see and subscribe to the topics
+(:mod:`pipelines.ros2_keys`).
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ import numpy as np
 from .messages import IMU, MAGNETIC_FIELD, RAW_MESSAGE_TYPES, raw_fields, split_payloads, stamps_to_ns
 from .zenoh_io import PacedPublisher, open_session, session_config, topic_to_key
 
-__all__ = ["encode_run", "run_stream"]
+__all__ = ["encode_run", "topic_types", "run_stream", "Ros2Keys"]
 
 
 def encode_run(samples, truth=None) -> dict[str, np.ndarray]:
@@ -46,26 +52,97 @@ def encode_run(samples, truth=None) -> dict[str, np.ndarray]:
     return out
 
 
+def topic_types(topics) -> dict[str, str]:
+    """``{topic: ROS type name}`` of gyroemu topics (``/imu`` -> ``sensor_msgs/msg/Imu``, ...)."""
+    from .record import topic_message_type
+
+    return {topic: topic_message_type(topic).name for topic in topics}
+
+
+class Ros2Keys:
+    """Keys and graph tokens of a ROS 2 mode publisher (``--ros2``): one ROS 2 node per process, a
+    publisher token per key. :meth:`key` gives a topic's rmw_zenoh key; :meth:`declare` the tokens."""
+
+    def __init__(self, domain: int | None, command: str):
+        from .ros2_keys import domain_id, node_name
+
+        self.domain = domain_id(domain)  # Ros2Error (a ValueError) names --domain or ROS_DOMAIN_ID
+        self.node_name = node_name(command)
+        self.node = None
+        self.publishers: dict[str, tuple[str, str, str]] = {}  # key -> (ROS topic, type, hash)
+
+    def key(self, ros_topic: str, type_name: str, type_hash: str | None = None) -> str:
+        from .ros2_keys import data_key, type_hash as compute
+
+        type_hash = type_hash or compute(type_name)
+        key = data_key(self.domain, ros_topic, type_name, type_hash)
+        self.publishers[key] = (ros_topic, type_name, type_hash)
+        return key
+
+    def declare(self, session, out) -> None:
+        """Declare the node's and the publishers' liveliness tokens on ``session`` and print them."""
+        from .ros2_keys import Ros2Node
+
+        self.node = Ros2Node(session, self.domain, self.node_name)
+        print(f"  ROS 2 domain {self.domain}, node /{self.node_name}; liveliness tokens:", file=out)
+        print(f"    {self.node.keys[0]}", file=out)
+        for ros_topic, type_name, type_hash in self.publishers.values():
+            print(f"    {self.node.publisher(ros_topic, type_name, type_hash)}", file=out)
+
+    def close(self) -> None:
+        if self.node is not None:
+            self.node.close()
+
+
 def run_stream(*, scenario: str, device: str, duration: float | None = None, seed: int = 0,
                as_fast_as_possible: bool = False, device_name: str = "imu0", wait_s: float = 10.0,
-               connect=None, listen=None, mode=None, config_file=None, out=sys.stdout) -> int:
+               connect=None, listen=None, mode=None, config_file=None, ros2: bool = False,
+               domain: int | None = None, estimate: str | None = None, out=sys.stdout) -> int:
+    """Simulate, encode and publish (see the module's notes); returns the exit status (0, or 130 when
+    stopped by SIGINT/SIGTERM). Raises ``ValueError`` naming the argument at fault, before simulating.
+
+    ``estimate``: a filter name (``mekf``, ...; see :mod:`pipelines.estimation.registry`) to run live on
+    the stream, in this process but on a session of its own (:class:`pipelines.live_estimate.LiveEstimator`),
+    publishing ``gyroemu/<device>/estimate/imu``."""
     from dynamics import load_scenario
     from sensors import load_device
 
     from .mcap_io import truth_series
 
     config = session_config(connect=connect, listen=listen, mode=mode, config_file=config_file)
+    ros = Ros2Keys(domain, "stream") if ros2 else None
     try:
         topic_to_key(device_name, "/imu")  # checks the device name before the (slow) simulation
+        if ros is not None:
+            from .ros2_keys import ros_topic
+
+            ros_topic(device_name, "/imu")
     except ValueError as e:
         raise ValueError(f"argument --device-name: {e}") from None
+    if estimate is not None and ros is not None:
+        raise ValueError("argument --estimate: not available with --ros2")
+    if estimate is not None:
+        from .estimation.registry import FilterError, filter_class
+
+        try:
+            filter_class(estimate)
+        except FilterError as e:
+            raise ValueError(f"argument --estimate: {e}") from None
     scen = load_scenario(scenario)
     dev = load_device(device, seed=seed)
     started = time.perf_counter()
     traj = scen.simulate(duration=duration)
     samples = dev.measure(traj)
     encoded = encode_run(samples, truth_series(traj, samples))
-    batches = {topic_to_key(device_name, topic): split_payloads(rows) for topic, rows in encoded.items()}
+    if ros is not None:
+        from .ros2_keys import ros_topic
+
+        types = topic_types(encoded)
+        batches = {ros.key(ros_topic(device_name, topic), types[topic]): split_payloads(rows)
+                   for topic, rows in encoded.items()}
+    else:
+        batches = {topic_to_key(device_name, topic): split_payloads(rows) for topic, rows in encoded.items()}
+    del encoded  # the batches hold the bytes now (half the memory of a long run)
     n = len(samples.t)
     rate = (n - 1) / float(samples.t[-1] - samples.t[0]) if n > 1 else dev.spec.rate_hz
     rate = float(dev.spec.rate_hz) if dev.spec.rate_hz else rate
@@ -73,6 +150,18 @@ def run_stream(*, scenario: str, device: str, duration: float | None = None, see
           f"(encoded in {time.perf_counter() - started:.2f} s)", file=out, flush=True)
 
     session = open_session(config)
+    estimator = None
+    if estimate is not None:
+        from .estimation.registry import make_filter
+        from .estimation.setup import setup_for
+        from .live_estimate import LiveEstimator
+
+        setup = setup_for(dev, scen)
+        # a throwaway run first, so that loading the compiled kernels does not stall the paced clock
+        make_filter(estimate, setup).process(samples.t[:64] - samples.t[0], samples.gyro[:64], samples.accel[:64],
+                                             samples.mag[:64] if setup.use_mag else None)
+        estimator = LiveEstimator(open_session(config), device_name, make_filter(estimate, setup), setup.use_mag).start()
+        print(f"  {estimator.key} ({estimate}, {'9D' if setup.use_mag else '6D'}, live)", file=out)
     stopping = []
     previous = {s: signal.signal(s, lambda *_: stopping.append(1)) for s in (signal.SIGINT, signal.SIGTERM)}
     publisher = None
@@ -80,6 +169,8 @@ def run_stream(*, scenario: str, device: str, duration: float | None = None, see
         publisher = PacedPublisher(session, list(batches))
         for key in batches:
             print(f"  {key}", file=out)
+        if ros is not None:
+            ros.declare(session, out)
         if wait_s > 0 and not publisher.wait_for_subscribers(wait_s, stop=lambda: bool(stopping)):
             print(f"stream: no subscriber on every key after {wait_s:g} s: publishing anyway", file=out)
         print("stream: publishing", file=out, flush=True)
@@ -88,9 +179,17 @@ def run_stream(*, scenario: str, device: str, duration: float | None = None, see
         if not as_fast_as_possible:
             print(f"stream: {report.summary()}", file=out)
         time.sleep(0.5)  # let queued messages drain before the session closes
+        if estimator is not None:
+            estimator.close(drain_s=2.0)
+            print(f"stream: {estimator.published} estimates published", file=out)
+            estimator = None
     finally:
+        if estimator is not None:
+            estimator.close(drain_s=0.0)
         if publisher is not None:
             publisher.close()
+        if ros is not None:
+            ros.close()
         session.close()
         for s, h in previous.items():
             signal.signal(s, h)

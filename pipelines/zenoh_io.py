@@ -39,11 +39,15 @@ scouting keys); rmw_zenoh design notes (attachment layout).
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import gc
 import json
 import os
 import re
 import secrets
 import struct
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -65,6 +69,9 @@ __all__ = [
     "unpack_attachment",
     "PacedPublisher",
     "PacingReport",
+    "Timing",
+    "PRECISE",
+    "SLEEP_ONLY",
     "subscribe",
     "drain",
     "header_stamp_ns",
@@ -214,6 +221,113 @@ class PacingReport:
                 f"p99 {self.percentile(99) * 1e3:.3f} ms, max {self.lateness_s.max() * 1e3:.3f} ms")
 
 
+@dataclass(frozen=True)
+class Timing:
+    """How a :class:`PacedPublisher` waits for its deadlines (see :data:`PRECISE` for why).
+
+    Attributes
+    ----------
+    spin_s : float
+        Stop sleeping this long (s) before a deadline and spin on the monotonic clock for the rest;
+        0: sleep to the deadline itself.
+    switch_interval_s : float or None
+        Python's GIL switch interval (s) while the run lasts (``sys.setswitchinterval``); None: leave
+        it (Python's default is 5 ms).
+    quiet_gc : bool
+        Freeze the objects alive when the run starts out of the garbage collector's reach and turn
+        automatic collection off until the run ends (then collect once).
+    timer_slack_ns : int or None
+        Linux timer slack (ns) of the publishing thread while the run lasts (``prctl``); None: leave
+        it (the kernel's default is 50 us).
+    """
+
+    spin_s: float = 300e-6
+    switch_interval_s: float | None = 50e-6
+    quiet_gc: bool = True
+    timer_slack_ns: int | None = 1
+
+
+PRECISE = Timing()
+"""The default. Measured on the 2-core development machine (``tests/benchmarks/bench_replay.py``),
+a publisher that simply sleeps to each deadline is late by
+
+- ~75 us typically: ``time.sleep`` wakes up after the deadline plus the thread's timer slack (50 us by
+  default) plus the scheduler's wake-up latency. A slack of 1 ns and a spin over the last 300 us on the
+  clock remove that: the thread is awake and running when the deadline comes (a spin of 30 % of a
+  core at 1 kHz, 0 between deadlines further apart than that).
+- ~1 ms at the 99th percentile, up to 5 ms: the GIL. Another Python thread of the process (replay's
+  read-ahead, decoding a chunk) holds it when the publisher wakes, and gives it up only when the
+  switch interval (5 ms by default) expires. An interval of 50 us bounds that wait.
+- milliseconds, now and then: a full garbage collection walking every object of the process
+  (numpy, zenoh, the queued messages). The hot path makes no reference cycles, so the collector is
+  stopped for the run (the objects of the set-up frozen out of its reach) and run once at the end.
+"""
+
+SLEEP_ONLY = Timing(spin_s=0.0, switch_interval_s=None, quiet_gc=False, timer_slack_ns=None)
+"""Sleep to each deadline and change nothing in the process: gyroemu's pacing before :data:`PRECISE`
+(the baseline of the pacing benchmark)."""
+
+_PR_SET_TIMERSLACK, _PR_GET_TIMERSLACK = 29, 30
+
+
+def _timer_slack(ns: int | None) -> int | None:
+    """Set the calling thread's timer slack (Linux); returns the previous value, None where unsupported."""
+    if ns is None or not sys.platform.startswith("linux"):
+        return None
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        previous = libc.prctl(_PR_GET_TIMERSLACK, 0, 0, 0, 0)
+        if previous < 0 or libc.prctl(_PR_SET_TIMERSLACK, int(ns), 0, 0, 0) != 0:
+            return None
+        return previous
+    except (OSError, AttributeError):
+        return None
+
+
+@contextlib.contextmanager
+def hot_loop(timing: Timing):
+    """Apply ``timing``'s process settings (switch interval, collector, timer slack) for a block, and
+    restore them after it, whatever happens."""
+    interval = sys.getswitchinterval()
+    gc_was_enabled = gc.isenabled()
+    slack = None
+    try:
+        if timing.switch_interval_s is not None:
+            sys.setswitchinterval(timing.switch_interval_s)
+        if timing.quiet_gc:
+            gc.collect()
+            gc.freeze()
+            gc.disable()
+        slack = _timer_slack(timing.timer_slack_ns)
+        yield
+    finally:
+        if slack is not None:
+            _timer_slack(slack)
+        if timing.quiet_gc:
+            gc.unfreeze()
+            if gc_was_enabled:
+                gc.enable()
+            gc.collect()
+        sys.setswitchinterval(interval)
+
+
+def _wait_until(deadline_ns: int, spin_ns: int, stop=None, poll_ns: int = 100_000_000) -> int | None:
+    """Return the monotonic time (ns) at or after ``deadline_ns``: sleep until ``spin_ns`` before it,
+    then spin on the clock. ``stop()`` is polled at least every ``poll_ns`` while sleeping; True
+    returns None at once."""
+    clock = time.monotonic_ns
+    now = clock()
+    wake = deadline_ns - spin_ns
+    while now < wake:
+        if stop is not None and stop():
+            return None
+        time.sleep(min(wake - now, poll_ns) * 1e-9)
+        now = clock()
+    while now < deadline_ns:  # spin: at most spin_ns, on a thread that is awake and running
+        now = clock()
+    return now
+
+
 @dataclass
 class _Topic:
     key: str
@@ -227,11 +341,13 @@ class PacedPublisher:
 
     Every key expression gets its own zenoh publisher (congestion control BLOCK, reliable: nothing is
     dropped; a slow subscriber slows the publisher down instead), its own random 16-byte id and its
-    own sequence counter from 0.
+    own sequence counter from 0. Deadlines are waited for as ``timing`` says (:class:`Timing`,
+    default :data:`PRECISE`).
     """
 
-    def __init__(self, session: zenoh.Session, keys: Sequence[str]):
+    def __init__(self, session: zenoh.Session, keys: Sequence[str], timing: Timing | None = None):
         self._session = session
+        self.timing = timing if timing is not None else PRECISE
         self._topics: dict[str, _Topic] = {}
         for key in keys:
             pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK,
@@ -262,67 +378,78 @@ class PacedPublisher:
 
     def run(self, batches: dict[str, list[bytes]], rate_hz: float | None, stop=None) -> PacingReport:
         """Send sample k's messages (``batches[key][k]`` for every key, in the dict's order) at
-        ``t0 + k / rate_hz``: sleep until each deadline, or send at once when behind (never a sleep per
+        ``t0 + k / rate_hz``: wait for each deadline, or send at once when behind (never a sleep per
         sample that would accumulate). ``rate_hz=None``: as fast as possible. ``stop()`` returning True
         ends the run early."""
         keys = list(batches)
+        topics = [self._topics[key] for key in keys]
+        columns = [batches[key] for key in keys]
         n = min((len(v) for v in batches.values()), default=0)
         lateness = np.zeros(n)
         period_ns = None if rate_hz is None else 1e9 / float(rate_hz)
-        t0 = time.monotonic_ns()
+        spin_ns = round(self.timing.spin_s * 1e9)
+        pack, time_ns = _ATTACHMENT.pack, time.time_ns
         sent = 0
-        for k in range(n):
-            if period_ns is not None:
-                deadline = t0 + round(k * period_ns)
-                now = time.monotonic_ns()
-                if deadline > now:
-                    time.sleep((deadline - now) * 1e-9)
-                    now = time.monotonic_ns()
-                lateness[k] = (now - deadline) * 1e-9
-            for key in keys:
-                self.put(key, batches[key][k])
-            sent = k + 1
-            if stop is not None and k % 64 == 0 and stop():
-                break
-        elapsed = (time.monotonic_ns() - t0) * 1e-9
+        with hot_loop(self.timing if period_ns is not None else SLEEP_ONLY):
+            t0 = time.monotonic_ns()
+            for k in range(n):
+                if period_ns is not None:
+                    deadline = t0 + round(k * period_ns)
+                    now = _wait_until(deadline, spin_ns)
+                    lateness[k] = (now - deadline) * 1e-9
+                for topic, column in zip(topics, columns):  # put() inlined: the hot path
+                    topic.publisher.put(column[k], attachment=pack(topic.sequence, time_ns(), 16, topic.gid))
+                    topic.sequence += 1
+                sent = k + 1
+                if stop is not None and k % 64 == 0 and stop():
+                    break
+            elapsed = (time.monotonic_ns() - t0) * 1e-9
         return PacingReport(lateness_s=lateness[:sent], messages=sent * len(keys), elapsed_s=elapsed)
 
-    def run_schedule(self, messages: Iterable[tuple[int, str, bytes]], stop=None,
-                     max_samples: int = 1 << 20) -> PacingReport:
-        """Send each ``(offset_ns, key, payload)`` at its own deadline ``t0 + offset_ns`` (``t0``: when the
-        run starts, monotonic clock; offsets non-decreasing, keys among the publisher's): sleep until
-        each deadline, or send at once when behind -- the same drift-free rule as :meth:`run`, with
-        deadlines given per message instead of ``k / rate``. Messages sharing a deadline go out back to
-        back. ``stop()`` is polled between messages and at least every 0.1 s while waiting; True ends
-        the run. ``messages`` may be an endless generator: the report keeps the lateness of at most
+    def run_schedule(self, batches: Iterable, stop=None, max_samples: int = 1 << 20) -> PacingReport:
+        """Send messages at their own deadlines ``t0 + offset_ns`` (``t0``: when the run starts,
+        monotonic clock): wait for each deadline, or send at once when behind -- the same drift-free
+        rule as :meth:`run`, with deadlines given per message instead of ``k / rate``.
+
+        ``batches`` yields lists (or tuples) of messages ``(offset_ns, key, payload)``, offsets
+        non-decreasing across the whole run, keys among the publisher's (replay's read-ahead hands
+        over one list per MCAP chunk; an endless generator is fine). Messages sharing a deadline go
+        out back to back. ``stop()`` is polled between batches, every 64 messages and at least every
+        0.1 s while waiting; True ends the run. The report keeps the lateness of at most
         ``max_samples`` deadlines (beyond that, every other one is dropped and the stride doubles)."""
         lateness: list[float] = []
         stride, skip = 1, 0
-        t0 = time.monotonic_ns()
         sent = 0
         last_deadline = None
-        for offset_ns, key, payload in messages:
-            deadline = t0 + int(offset_ns)
-            if deadline != last_deadline:
-                last_deadline = deadline
-                now = time.monotonic_ns()
-                while deadline > now:
-                    if stop is not None and stop():
+        spin_ns = round(self.timing.spin_s * 1e9)
+        topics = self._topics
+        pack, time_ns = _ATTACHMENT.pack, time.time_ns
+        with hot_loop(self.timing):
+            t0 = time.monotonic_ns()
+            for batch in batches:
+                if stop is not None and stop():
+                    break
+                for offset_ns, key, payload in batch:
+                    deadline = t0 + offset_ns
+                    if deadline != last_deadline:
+                        last_deadline = deadline
+                        now = _wait_until(deadline, spin_ns, stop)
+                        if now is None:
+                            return PacingReport(np.array(lateness), sent, (time.monotonic_ns() - t0) * 1e-9)
+                        if skip == 0:
+                            lateness.append((now - deadline) * 1e-9)
+                            if len(lateness) >= max_samples:
+                                lateness = lateness[::2]
+                                stride *= 2
+                        skip = (skip + 1) % stride
+                    topic = topics[key]  # put() inlined: the hot path
+                    topic.publisher.put(payload, attachment=pack(topic.sequence, time_ns(), 16, topic.gid))
+                    topic.sequence += 1
+                    sent += 1
+                    if stop is not None and sent % 64 == 0 and stop():
                         return PacingReport(np.array(lateness), sent, (time.monotonic_ns() - t0) * 1e-9)
-                    time.sleep(min(deadline - now, 100_000_000) * 1e-9)
-                    now = time.monotonic_ns()
-                if skip == 0:
-                    lateness.append((now - deadline) * 1e-9)
-                    if len(lateness) >= max_samples:
-                        lateness = lateness[::2]
-                        stride *= 2
-                skip = (skip + 1) % stride
-            self.put(key, payload)
-            sent += 1
-            if stop is not None and sent % 64 == 0 and stop():
-                break
-        return PacingReport(lateness_s=np.array(lateness), messages=sent,
-                            elapsed_s=(time.monotonic_ns() - t0) * 1e-9)
+            elapsed = (time.monotonic_ns() - t0) * 1e-9
+        return PacingReport(lateness_s=np.array(lateness), messages=sent, elapsed_s=elapsed)
 
     def close(self) -> None:
         for t in self._topics.values():

@@ -34,8 +34,9 @@ FRAME_IDS = ["imu0", "", "a", "base_link", "capteur_é"]  # lengths 4, 0, 1, 9, 
 
 def _typestore():
     store = get_typestore(Stores.ROS2_HUMBLE)
-    for mtype in RAW_MESSAGE_TYPES.values():
-        store.register(get_types_from_msg(mtype.schema, mtype.name))
+    for mtype in MESSAGE_TYPES.values():
+        if mtype.name.startswith("gyroemu_msgs/"):  # the project's own types (raw observables, Flag)
+            store.register(get_types_from_msg(mtype.schema, mtype.name))
     return store
 
 

@@ -1,0 +1,849 @@
+"""``gyroemu bench``: attitude filters side by side, on simulated truth and on logs with a truth channel.
+
+Cases
+-----
+- :class:`SimCase` (a scenario × a device): the scenario's trajectory is simulated once; each Monte Carlo
+  run measures it with the device seeded ``seed + run`` (``sensors.load_device(name, seed)``), and the
+  truth is the body's attitude and rate at the instants the device sampled
+  (:func:`pipelines.mcap_io.truth_series`). Every sample counts.
+- :class:`LogCase` (an MCAP log): every device of the log with a truth channel (``/truth/imu``) is a
+  case with one run. The samples counted are the log's ``/movement`` mask when it has one (an imported
+  BROAD trial), otherwise all; truth rows that are NaN (a reference that lost tracking) are ignored.
+  The filter setup comes from the log's ``gyroemu`` metadata (:func:`setup_from_metadata`), or the
+  filters' defaults for a foreign log.
+
+A case is 9D when the device has a magnetometer (a log: any finite ``/mag`` sample), 6D otherwise or
+with ``six_d``. Each filter is made from the case's :class:`FilterSetup` for each run and given the
+whole run in one ``process()`` call.
+
+What is reported, per (case, filter), as mean ± standard deviation over the runs that did not diverge
+----------------------------------------------------------------------------------------------------
+- **total, heading, inclination RMSE**, degrees, with BROAD's definitions (:mod:`.metrics`); a 6D row
+  reports inclination only (its heading is arbitrary).
+- **convergence time**, s: the time from the first sample after which the error (total for 9D,
+  inclination for 6D) stays below ``threshold_deg`` (2° by default) until the end; "never" when it is
+  still above at the end (:func:`.metrics.convergence_time`).
+- **gyro-bias error**, deg/s, for filters that estimate a bias (``Estimate.gyro_bias``): the RMS of
+  ``|b_est − b_true|`` over the last half of the run, with ``b_true`` the measured gyro minus the true
+  rate, averaged over a centred 1 s window (it holds every slowly varying gyro error: bias, and what
+  scale factor and misalignment make of the motion). Sample ``k`` is the mean rate over
+  ``[t_{k−1}, t_k]``, so the true rate it is compared with is the mean of the truth at ``t_{k−1}`` and
+  ``t_k``. The true rate includes Earth's rotation and
+  so does the gyro, so a filter that does not model Earth's rate carries it (≤ 0.0042 °/s) in its
+  bias. "—" where the truth has no rate (a log without one) or the filter no bias.
+- **throughput**: samples per second of wall time spent in ``process()``; for the batched mekf, filter
+  updates per second across all runs at once.
+- **diverged**: a run whose output has a non-finite quaternion, or whose inclination error over the
+  last 10 % of the counted samples has an RMS above 30° (a filter that raises counts as diverged, with
+  the exception in the report). Diverged runs are counted in the status column and left out of the
+  means; a row whose runs all diverged says so in every cell. No row is dropped.
+
+Outputs: :meth:`BenchReport.to_markdown` (``bench.md``), :meth:`BenchReport.to_json` (``bench.json``: every
+number, every run) and :meth:`BenchReport.save_plots` (one PNG per case: the error of every filter
+against time, first run). :meth:`BenchReport.save` writes all three, each through a temporary file.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import math
+import re
+import sys
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from dynamics import ConfigError
+
+from .estimation.metrics import attitude_errors, convergence_time, rmse_deg
+from .estimation.protocol import Estimate, FilterSetup
+from .estimation.registry import FilterError, available_filters, filter_class, make_filter, unavailable_filters
+
+__all__ = ["BenchError", "BenchReport", "BenchWarning", "CaseResult", "FilterError", "FilterResult", "LogCase",
+           "RunResult", "SimCase", "evaluate_run", "run_bench"]
+
+DIVERGED_FINAL_FRACTION = 0.10
+DIVERGED_INCLINATION_DEG = 30.0
+BIAS_WINDOW_S = 1.0
+_PLOT_POINTS = 4000
+
+
+class BenchError(ConfigError):
+    """A case or option the bench cannot run (a log without IMU or truth, bad stamps, ...); names the file
+    or argument (a :class:`dynamics.ConfigError`, so the command line exits with status 2)."""
+
+
+class BenchWarning(UserWarning):
+    """Data the bench can still use, with a caveat (NaN samples, a log without a movement mask's hits)."""
+
+
+# ==================================================================================================
+# Cases
+
+@dataclass(frozen=True)
+class SimCase:
+    """A simulated case: ``scenario`` (built-in name or TOML path) measured by ``device``."""
+
+    scenario: str = "smooth_manoeuvre"
+    device: str = "consumer_mems"
+    duration: float | None = 60.0
+    six_d: bool = False
+
+
+@dataclass(frozen=True)
+class LogCase:
+    """An MCAP log with a truth channel; ``device`` picks one device (default: each with truth)."""
+
+    path: str | Path
+    device: str | None = None
+    six_d: bool = False
+
+
+@dataclass
+class _Run:
+    """One run's data: what the filters see and what they are judged against."""
+
+    t: np.ndarray
+    gyro: np.ndarray
+    accel: np.ndarray
+    mag: np.ndarray | None
+    q_true: np.ndarray
+    omega_true: np.ndarray | None
+    mask: np.ndarray
+    seed: int | None = None
+
+
+# ==================================================================================================
+# Results
+
+@dataclass
+class RunResult:
+    """One filter on one run. Angles in degrees; None where not defined (a 6D heading, no bias)."""
+
+    seed: int | None
+    samples: int
+    total_deg: float | None
+    heading_deg: float | None
+    inclination_deg: float | None
+    convergence_s: float | None          # inf: never converged
+    bias_error_deg_s: float | None
+    throughput: float                    # samples/s (batched: updates/s across runs)
+    wall_s: float
+    diverged: bool
+    reason: str = ""
+
+    def to_json(self) -> dict:
+        d = {k: _json_number(v) for k, v in self.__dict__.items()}
+        d["converged"] = self.convergence_s is not None and math.isfinite(self.convergence_s)
+        return d
+
+
+@dataclass
+class FilterResult:
+    """One filter over all runs of a case."""
+
+    filter: str                 # as asked for (built-in name or module:Class)
+    name: str                   # the filter object's ``name``
+    batched: bool
+    runs: list[RunResult]
+    curve_t: np.ndarray | None = None            # first run's error against time, for the plot
+    curve_total_deg: np.ndarray | None = None
+    curve_inclination_deg: np.ndarray | None = None
+    note: str = ""
+
+    @property
+    def label(self) -> str:
+        return f"{self.name} [batched]" if self.batched else self.name
+
+    @property
+    def diverged_runs(self) -> int:
+        return sum(r.diverged for r in self.runs)
+
+    def summary(self, metric: str) -> dict:
+        """Mean, standard deviation (ddof 1) and count over the runs that did not diverge (finite values);
+        for convergence also how many never converged."""
+        values = [getattr(r, metric) for r in self.runs if not r.diverged or metric in ("throughput", "wall_s")]
+        values = [v for v in values if v is not None]
+        out = {"mean": None, "std": None, "n": 0}
+        if metric == "convergence_s":
+            out["never"] = sum(1 for v in values if math.isinf(v))
+        finite = [v for v in values if math.isfinite(v)]
+        if finite:
+            out.update(mean=float(np.mean(finite)), std=float(np.std(finite, ddof=1)) if len(finite) > 1 else 0.0,
+                       n=len(finite))
+        return out
+
+
+@dataclass
+class CaseResult:
+    name: str
+    kind: str                   # "simulated" or "log"
+    mode: str                   # "9D" or "6D"
+    rate_hz: float
+    samples: int
+    duration_s: float
+    runs: int
+    source: dict
+    filters: list[FilterResult] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+
+_METRICS = ("total_deg", "heading_deg", "inclination_deg", "convergence_s", "bias_error_deg_s", "throughput")
+
+
+@dataclass
+class BenchReport:
+    """What :func:`run_bench` found."""
+
+    cases: list[CaseResult]
+    settings: dict
+    notes: list[str] = field(default_factory=list)
+    unavailable: dict = field(default_factory=dict)
+
+    # --- Markdown ---------------------------------------------------------------------------------
+    def to_markdown(self) -> str:
+        s = self.settings
+        lines = ["# gyroemu bench", ""]
+        sims = sum(c.kind == "simulated" for c in self.cases)
+        parts = []
+        if sims:
+            seeds = f"seed {s['seed']}" if s["runs"] == 1 else f"seeds {s['seed']}…{s['seed'] + s['runs'] - 1}"
+            parts.append(f"{sims} simulated case(s), {s['runs']} Monte Carlo run(s) each (device {seeds})")
+        if len(self.cases) - sims:
+            parts.append(f"{len(self.cases) - sims} log(s)")
+        lines.append("; ".join(parts + [f"convergence threshold {s['threshold_deg']:g}°."]))
+        lines.append("")
+        lines.append("| case | filter | mode | total RMSE ° | heading RMSE ° | inclination RMSE ° | "
+                     "converged after s | gyro-bias error °/s | throughput samples/s | status |")
+        lines.append("|---|---|---|---|---|---|---|---|---|---|")
+        for case in self.cases:
+            for fr in case.filters:
+                lines.append("| " + " | ".join(self._row(case, fr)) + " |")
+        lines.append("")
+        lines.append("Mean ± standard deviation over the runs that did not diverge. Errors with BROAD's "
+                     "definitions: q_err = q_est ⊗ conj(q_true); total 2·acos|w|, heading 2·atan|z/w|, "
+                     "inclination 2·acos√(w²+z²), RMSE over the counted samples (a log's movement mask), "
+                     "NaN reference rows ignored. A 6D row has no heading (—).")
+        lines.append(f"Converged after: the time from the first sample after which the error (total for 9D, "
+                     f"inclination for 6D) stays below {s['threshold_deg']:g}°; \"never\" if it is above it "
+                     "at the end.")
+        lines.append("Gyro-bias error: RMS of |b_est − b_true| over the last half of each run, b_true the measured "
+                     "gyro minus the true rate averaged over 1 s (— : the filter estimates no bias, or the "
+                     "truth has no rate).")
+        lines.append("Throughput: samples per second of process() wall time; [batched] rows: filter updates "
+                     "per second across all runs at once.")
+        lines.append(f"Diverged: non-finite output, or inclination error RMS above "
+                     f"{DIVERGED_INCLINATION_DEG:g}° over the last {DIVERGED_FINAL_FRACTION:.0%} of the samples.")
+        notes = list(self.notes)
+        for name, why in self.unavailable.items():
+            notes.append(f"{name} left out: {why}")
+        for case in self.cases:
+            notes += [f"{case.name}: {n}" for n in case.notes]
+            notes += [f"{case.name}, {fr.label}: {fr.note}" for fr in case.filters if fr.note]
+            for fr in case.filters:
+                for i, r in enumerate(fr.runs):
+                    if r.diverged and r.reason:
+                        notes.append(f"{case.name}, {fr.label}, run {i} (seed {r.seed}): {r.reason}")
+        if notes:
+            lines.append("")
+            lines.append("Notes:")
+            lines += [f"- {n}" for n in notes]
+        return "\n".join(lines) + "\n"
+
+    @staticmethod
+    def _row(case: CaseResult, fr: FilterResult) -> list[str]:
+        n_runs = len(fr.runs)
+        all_diverged = fr.diverged_runs == n_runs
+        cells = [case.name, fr.label, case.mode]
+        for metric, digits in (("total_deg", 2), ("heading_deg", 2), ("inclination_deg", 2),
+                               ("convergence_s", 2), ("bias_error_deg_s", 4)):
+            if case.mode == "6D" and metric in ("total_deg", "heading_deg"):
+                cells.append("—")
+            elif all_diverged:
+                cells.append("diverged")
+            else:
+                cells.append(_cell(fr.summary(metric), digits, metric))
+        tp = fr.summary("throughput")
+        cells.append("—" if tp["mean"] is None else
+                     (f"{_si(tp['mean'])} updates/s ({n_runs} runs at once)" if fr.batched else _si(tp["mean"])))
+        if fr.diverged_runs:
+            cells.append(f"diverged ({fr.diverged_runs} of {n_runs} runs)" if n_runs > 1 else "diverged")
+        else:
+            cells.append("ok")
+        return cells
+
+    # --- JSON -------------------------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        return {
+            "gyroemu_bench": 1,
+            "settings": self.settings,
+            "definitions": {
+                "errors": "BROAD: q_err = q_est ⊗ conj(q_true); total 2 acos|w|, heading 2 atan|z/w|, "
+                          "inclination 2 acos sqrt(w²+z²); RMSE in degrees over the counted samples, NaN rows ignored",
+                "convergence_s": f"time from the first sample after which the error (total 9D, inclination 6D) stays "
+                                 f"below {self.settings['threshold_deg']} deg; null with converged=false: never",
+                "bias_error_deg_s": "RMS of |b_est - b_true| over the last half of the run; b_true = measured gyro "
+                                    "minus true rate, averaged over 1 s",
+                "throughput": "samples/s of process() wall time; batched: filter updates/s across all runs",
+                "diverged": f"non-finite output or inclination error RMS > {DIVERGED_INCLINATION_DEG} deg over the "
+                            f"last {DIVERGED_FINAL_FRACTION:.0%} of the counted samples",
+                "summary": "mean, std (ddof 1) and n over the runs that did not diverge",
+            },
+            "unavailable": self.unavailable,
+            "notes": self.notes,
+            "cases": [{
+                "name": c.name, "kind": c.kind, "mode": c.mode, "rate_hz": c.rate_hz, "samples": c.samples,
+                "duration_s": c.duration_s, "runs": c.runs, "source": c.source, "notes": c.notes,
+                "filters": [{
+                    "filter": fr.filter, "name": fr.name, "batched": fr.batched, "note": fr.note,
+                    "diverged_runs": fr.diverged_runs,
+                    "status": "ok" if not fr.diverged_runs else f"diverged in {fr.diverged_runs} of {len(fr.runs)} runs",
+                    "summary": {m: {k: _json_number(v) for k, v in fr.summary(m).items()} for m in _METRICS},
+                    "runs": [r.to_json() for r in fr.runs],
+                } for fr in c.filters],
+            } for c in self.cases],
+        }
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=1, ensure_ascii=False, allow_nan=False)
+
+    # --- Plots ------------------------------------------------------------------------------------
+    def save_plots(self, directory) -> list[Path]:
+        """One PNG per case, ``<case>.png`` in ``directory``: each filter's error against time (first run;
+        9D: total and inclination, 6D: inclination), log scale, the convergence threshold dashed."""
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        directory = Path(directory)
+        written = []
+        for case, stem in zip(self.cases, _unique_stems([c.name for c in self.cases])):
+            panels = [("total", "curve_total_deg"), ("inclination", "curve_inclination_deg")] if case.mode == "9D" \
+                else [("inclination", "curve_inclination_deg")]
+            fig, axes = plt.subplots(len(panels), 1, figsize=(9, 3.2 * len(panels)), sharex=True, squeeze=False)
+            for ax, (what, attr) in zip(axes[:, 0], panels):
+                for fr in case.filters:
+                    y = getattr(fr, attr)
+                    if y is None or fr.curve_t is None:
+                        continue
+                    label = fr.label + (" (diverged)" if fr.runs and fr.runs[0].diverged else "")
+                    ax.plot(fr.curve_t, np.maximum(y, 1e-3), lw=0.8, label=label)
+                ax.axhline(self.settings["threshold_deg"], color="0.4", ls="--", lw=0.8)
+                ax.set_yscale("log")
+                ax.set_ylabel(f"{what} error, deg")
+                ax.grid(True, which="both", alpha=0.3)
+            axes[0, 0].set_title(f"{case.name} ({case.mode}), first run")
+            axes[0, 0].legend(fontsize=8, loc="upper right")
+            axes[-1, 0].set_xlabel("time, s")
+            fig.tight_layout()
+            path = directory / f"{stem}.png"
+            tmp = directory / f".{stem}.tmp.png"
+            try:
+                fig.savefig(tmp, dpi=110)
+                tmp.replace(path)
+            finally:
+                plt.close(fig)
+                tmp.unlink(missing_ok=True)
+            written.append(path)
+        return written
+
+    def save(self, directory) -> dict:
+        """``bench.md``, ``bench.json`` and the plots in ``directory`` (made if missing); their paths."""
+        directory = Path(directory)
+        directory.mkdir(parents=True, exist_ok=True)
+        paths = {"markdown": directory / "bench.md", "json": directory / "bench.json"}
+        _write_atomic(paths["json"], self.to_json())
+        _write_atomic(paths["markdown"], self.to_markdown())
+        paths["plots"] = self.save_plots(directory)
+        return paths
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _unique_stems(names: list[str]) -> list[str]:
+    stems, seen = [], {}
+    for name in names:
+        stem = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("_.") or "case"
+        seen[stem] = seen.get(stem, 0) + 1
+        stems.append(stem if seen[stem] == 1 else f"{stem}_{seen[stem]}")
+    return stems
+
+
+def _json_number(v):
+    if isinstance(v, (float, np.floating)):
+        return float(v) if math.isfinite(v) else None
+    if isinstance(v, np.integer):
+        return int(v)
+    if isinstance(v, np.bool_):
+        return bool(v)
+    return v
+
+
+def _si(x: float) -> str:
+    for scale, suffix in ((1e9, " G"), (1e6, " M"), (1e3, " k")):
+        if abs(x) >= scale:
+            return f"{x / scale:.3g}{suffix}"
+    return f"{x:.3g}"
+
+
+def _cell(summary: dict, digits: int, metric: str) -> str:
+    never = summary.get("never", 0)
+    if summary["mean"] is None:
+        return "never" if never else "—"
+    text = f"{summary['mean']:.{digits}f}"
+    if summary["n"] > 1:
+        text += f" ± {summary['std']:.{digits}f}"
+    if never:
+        text += f" ({never} never)"
+    return text
+
+
+# ==================================================================================================
+# Evaluation of one run
+
+def _moving_mean(x: np.ndarray, window: int) -> np.ndarray:
+    """Centred moving mean over ``window`` samples along axis 0; NaN where the window does not fit."""
+    n = len(x)
+    out = np.full(x.shape, np.nan)
+    if window < 1 or n < window:
+        return out
+    c = np.cumsum(np.concatenate([np.zeros((1,) + x.shape[1:]), x]), axis=0)
+    means = (c[window:] - c[:-window]) / window
+    start = window // 2
+    out[start:start + len(means)] = means
+    return out
+
+
+def evaluate_run(t, q_est, q_true, *, mask=None, six_d=False, threshold_deg=2.0, bias_est=None,
+                 omega_true=None, gyro=None, rate_hz=None, wall_s=float("nan"), throughput=None,
+                 seed=None, reason="") -> tuple[RunResult, dict]:
+    """The metrics of one filter run (see the module's docstring) and the per-sample errors (degrees,
+    NaN outside the counted samples) as ``{"total": ..., "inclination": ...}``."""
+    t = np.asarray(t, dtype=float)
+    n = len(t)
+    q_est = np.asarray(q_est, dtype=float)
+    q_true = np.asarray(q_true, dtype=float)
+    mask = np.ones(n, bool) if mask is None else np.asarray(mask, dtype=bool)
+    finite_est = np.isfinite(q_est).all(axis=1) & (np.linalg.norm(q_est, axis=1) > 0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        err = attitude_errors(np.where(finite_est[:, None], q_est, np.nan), q_true)
+    counted = mask & np.isfinite(q_true).all(axis=1)
+    total = np.where(counted, err.total, np.nan)
+    heading = np.where(counted, err.heading, np.nan)
+    inclination = np.where(counted, err.inclination, np.nan)
+
+    diverged = not finite_est.all()
+    why = reason or ("non-finite quaternions in the output" if diverged else "")
+    idx = np.flatnonzero(counted)
+    if len(idx):
+        tail = idx[len(idx) - max(1, int(math.ceil(DIVERGED_FINAL_FRACTION * len(idx)))):]
+        tail_rms = rmse_deg(err.inclination[tail])
+        if tail_rms > DIVERGED_INCLINATION_DEG or (math.isnan(tail_rms) and not diverged):
+            diverged = True
+            why = why or (f"inclination error RMS {tail_rms:.1f}° over the last {DIVERGED_FINAL_FRACTION:.0%}"
+                          if not math.isnan(tail_rms) else "no finite output over the last samples")
+    if reason:
+        diverged = True
+
+    conv_err = inclination if six_d else total
+    conv = convergence_time(t, conv_err, math.radians(threshold_deg)) if np.isfinite(conv_err).any() \
+        else float("nan")
+
+    bias_error = None
+    if bias_est is not None and omega_true is not None and gyro is not None and rate_hz:
+        window = max(1, int(round(BIAS_WINDOW_S * rate_hz)))
+        omega = np.asarray(omega_true, dtype=float)
+        # Sample k is the mean rate over [t_{k-1}, t_k] (the strapdown convention): compare it with the
+        # true rate's mean over the same interval (trapezoid), not with the rate at t_k, which would
+        # leave (T/2)·dω/dt in b_true (0.25 °/s at 200 Hz on a brisk manoeuvre).
+        omega_mean = omega.copy()
+        omega_mean[1:] = 0.5 * (omega[1:] + omega[:-1])
+        b_true = _moving_mean(np.asarray(gyro, dtype=float) - omega_mean, window)
+        b_est = np.asarray(bias_est, dtype=float)
+        half = t >= t[0] + 0.5 * (t[-1] - t[0])
+        diff = np.linalg.norm(b_est - b_true, axis=1)
+        ok = half & np.isfinite(diff)
+        if ok.any():
+            bias_error = float(np.degrees(np.sqrt(np.mean(diff[ok] ** 2))))
+
+    result = RunResult(
+        seed=seed, samples=n,
+        total_deg=None if six_d else rmse_deg(total),
+        heading_deg=None if six_d else rmse_deg(heading),
+        inclination_deg=rmse_deg(inclination),
+        convergence_s=conv, bias_error_deg_s=bias_error,
+        throughput=float(throughput) if throughput is not None else (n / wall_s if wall_s > 0 else float("nan")),
+        wall_s=float(wall_s), diverged=bool(diverged), reason=why if diverged else "")
+    return result, {"total": np.degrees(total), "inclination": np.degrees(inclination)}
+
+
+# ==================================================================================================
+# Running
+
+def _check_estimate(est, n: int, label: str) -> tuple[np.ndarray, np.ndarray | None]:
+    if not isinstance(est, Estimate) and not hasattr(est, "q_wb"):
+        raise TypeError(f"{label}.process() returned {type(est).__name__}, not an Estimate")
+    q = np.asarray(est.q_wb, dtype=float)
+    if q.shape != (n, 4):
+        raise ValueError(f"{label}.process() returned q_wb of shape {q.shape}, expected {(n, 4)}")
+    b = getattr(est, "gyro_bias", None)
+    if b is not None:
+        b = np.asarray(b, dtype=float)
+        if b.shape != (n, 3):
+            b = None
+    return q, b
+
+
+_WARM_UP_SAMPLES = 200
+
+
+def _warm_up(spec: str, setup: FilterSetup, run: _Run, six_d: bool) -> None:
+    """A short untimed call first, so that the timed ones measure the filter, not its first-call costs
+    (numba compiling or loading its cache, lazy imports)."""
+    k = min(len(run.t), _WARM_UP_SAMPLES)
+    try:
+        make_filter(spec, setup).process(run.t[:k], run.gyro[:k], run.accel[:k],
+                                         None if six_d or run.mag is None else run.mag[:k])
+    except Exception:  # noqa: BLE001 - the timed run reports it
+        pass
+
+
+def _run_filter(spec: str, setup: FilterSetup, run: _Run, *, six_d: bool, threshold_deg: float):
+    """One filter on one run: (RunResult, errors, name)."""
+    filt = make_filter(spec, setup)
+    name = str(filt.name)
+    n = len(run.t)
+    started = time.perf_counter()
+    try:
+        est = filt.process(run.t, run.gyro, run.accel, None if six_d else run.mag)
+        wall = time.perf_counter() - started
+        q, b = _check_estimate(est, n, name)
+        reason = ""
+    except Exception as exc:  # noqa: BLE001 - a filter that fails is reported, not fatal
+        wall = time.perf_counter() - started
+        q, b, reason = np.full((n, 4), np.nan), None, f"process() raised {type(exc).__name__}: {exc}"
+    result, errors = evaluate_run(run.t, q, run.q_true, mask=run.mask, six_d=six_d, threshold_deg=threshold_deg,
+                                  bias_est=b, omega_true=run.omega_true, gyro=run.gyro, rate_hz=setup.rate_hz,
+                                  wall_s=wall, seed=run.seed, reason=reason)
+    return result, errors, name
+
+
+def _curve(fr: FilterResult, t: np.ndarray, errors: dict) -> None:
+    step = max(1, len(t) // _PLOT_POINTS)
+    fr.curve_t = (t - t[0])[::step]
+    fr.curve_total_deg = errors["total"][::step]
+    fr.curve_inclination_deg = errors["inclination"][::step]
+
+
+class _Progress:
+    def __init__(self, total: int, enabled: bool | None):
+        if enabled is None:
+            enabled = sys.stderr.isatty()
+        self.bar = None
+        if enabled:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, file=sys.stderr, unit="run", dynamic_ncols=True, leave=False)
+
+    def step(self, text: str, n: int = 1) -> None:
+        if self.bar is not None:
+            self.bar.set_description(text[:60])
+            self.bar.update(n)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _sim_case(case: SimCase, runs: int, seed: int):
+    """Load a simulated case: (scenario, devices per run, setup, traj, name, mode)."""
+    from dynamics import load_scenario
+    from sensors import load_device
+
+    from .estimation.setup import setup_for
+
+    scenario = load_scenario(case.scenario)  # ConfigError: unknown name, or the file and key at fault
+    devices = [load_device(case.device, seed=seed + r) for r in range(runs)]
+    has_mag = devices[0].spec.magnetometer is not None
+    mode = "9D" if has_mag and not case.six_d else "6D"
+    setup = setup_for(devices[0], scenario, use_mag=mode == "9D")
+    name = f"{scenario.name} × {devices[0].name}" + (" (6D)" if case.six_d and has_mag else "")
+    return scenario, devices, setup, name, mode
+
+
+def _sim_run(traj, device, seed) -> _Run:
+    from .mcap_io import truth_series
+
+    samples = device.measure(traj)
+    truth = truth_series(traj, samples)
+    mag = samples.mag if np.isfinite(samples.mag).any() else None
+    return _Run(t=np.asarray(samples.t, float), gyro=samples.gyro, accel=samples.accel, mag=mag,
+                q_true=truth.q_wb, omega_true=truth.omega_b, mask=np.ones(len(samples.t), bool), seed=seed)
+
+
+def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, list[str]]]:
+    """The devices of a log to bench: (name, mode, setup, run, source, notes) each."""
+    from .estimation.setup import setup_from_metadata
+    from .mcap_io import read_mcap
+
+    path = Path(case.path)
+    if not path.is_file():
+        raise BenchError("no such file", file=path, key=None)
+    log = read_mcap(path)  # LogError (a ConfigError naming the file) when unreadable or without IMU messages
+    imu_devices = {n: d for n, d in log.devices.items()
+                   if not str(d.topics.get("imu", "")).rstrip("/").endswith(("truth/imu", "estimate/imu"))}
+    if not imu_devices:
+        raise BenchError("holds no IMU channel (/imu with sensor_msgs/msg/Imu measurements): only "
+                         + ", ".join(d.topics.get("imu", "?") for d in log.devices.values()), file=path)
+    if case.device is not None:
+        if case.device not in imu_devices:
+            raise BenchError(f"no device '{case.device}' (devices: {', '.join(imu_devices)})", file=path)
+        imu_devices = {case.device: imu_devices[case.device]}
+    with_truth = {n: d for n, d in imu_devices.items() if d.truth is not None and d.truth.q_wb is not None}
+    if not with_truth:
+        raise BenchError("has no truth channel (/truth/imu with the true attitude): the bench compares "
+                         "estimates with the truth", file=path)
+    out = []
+    for name, dev in with_truth.items():
+        notes = []
+        s = dev.samples
+        t = np.asarray(s.t, dtype=float)
+        label = path.name if len(log.devices) == 1 else f"{path.name}:{name}"
+        if len(t) < 2:
+            raise BenchError(f"device '{name}' has {len(t)} IMU sample(s): too few to run a filter", file=path)
+        steps = np.diff(t)
+        bad = np.flatnonzero(~(steps > 0))
+        if len(bad):
+            k = int(bad[0]) + 1
+            raise BenchError(f"IMU stamps of device '{name}' are not increasing: sample {k} at {t[k]:.9f} s follows "
+                             f"{t[k - 1]:.9f} s ({len(bad)} such steps)", file=path)
+        finite_imu = np.isfinite(s.gyro).all(axis=1) & np.isfinite(s.accel).all(axis=1)
+        if not finite_imu.any():
+            raise BenchError(f"every IMU sample of device '{name}' holds NaN", file=path)
+        if not finite_imu.all():
+            k = int((~finite_imu).sum())
+            msg = (f"{path}: {k} of {len(t)} IMU samples of device '{name}' hold NaN; they are passed to the filters "
+                   "as they are (the built-in filters hold their estimate over them)")
+            warnings.warn(msg, BenchWarning, stacklevel=3)
+            notes.append(msg.split(": ", 1)[1])
+        has_mag = bool(np.isfinite(s.mag).all(axis=1).any())
+        mode = "9D" if has_mag and not case.six_d else "6D"
+        # Truth at the samples' stamps (nearest within a quarter of a sample interval).
+        tt = np.asarray(dev.truth.t, dtype=float)
+        dt_nominal = float(np.median(steps))
+        q_true = np.full((len(t), 4), np.nan)
+        omega = None
+        if len(tt):
+            j = np.clip(np.searchsorted(tt, t), 1, max(1, len(tt) - 1)) if len(tt) > 1 else np.zeros(len(t), int)
+            if len(tt) > 1:
+                j = np.where(np.abs(tt[j - 1] - t) <= np.abs(tt[j] - t), j - 1, j)
+            hit = np.abs(tt[j] - t) <= 0.25 * dt_nominal
+            q_true[hit] = dev.truth.q_wb[j[hit]]
+            if dev.truth.omega_b is not None and np.isfinite(dev.truth.omega_b).any():
+                omega = np.full((len(t), 3), np.nan)
+                omega[hit] = dev.truth.omega_b[j[hit]]
+        if not np.isfinite(q_true).all(axis=1).any():
+            raise BenchError(f"the truth channel of device '{name}' has no finite attitude at the IMU's stamps",
+                             file=path)
+        movement = getattr(dev, "movement", None)
+        if movement is not None and np.asarray(movement, bool).any():
+            mask = np.asarray(movement, dtype=bool)
+            counted = f"the {int(mask.sum())} samples of its movement mask"
+        else:
+            if movement is not None:
+                msg = f"{path}: the movement mask of device '{name}' marks no sample; every sample counts"
+                warnings.warn(msg, BenchWarning, stacklevel=3)
+                notes.append(msg.split(": ", 1)[1])
+            mask = np.ones(len(t), bool)
+            counted = "every sample"
+        no_ref = int((~np.isfinite(q_true).all(axis=1) & mask).sum())
+        notes.insert(0, f"{counted} counted" + (f", {no_ref} of them without a finite reference (ignored)"
+                                                 if no_ref else ""))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # an embedded config that no longer validates: defaults
+            setup = setup_from_metadata(dev.metadata, 1.0 / dt_nominal, use_mag=mode == "9D")
+        run = _Run(t=t, gyro=np.asarray(s.gyro, float), accel=np.asarray(s.accel, float),
+                   mag=np.asarray(s.mag, float) if has_mag else None, q_true=q_true, omega_true=omega, mask=mask)
+        source = {"log": str(path), "device": name}
+        out.append((label + (" (6D)" if case.six_d and has_mag else ""), mode, setup, run, source, notes))
+    return out
+
+
+def _resolve_filters(filters) -> tuple[list[str], dict]:
+    unavailable = {}
+    if filters is None:
+        unavailable = unavailable_filters()
+        filters = available_filters()
+    filters = list(dict.fromkeys(filters))  # repeated names once
+    for spec in filters:
+        filter_class(spec)  # FilterError, naming it, before anything runs
+    return filters, unavailable
+
+
+def run_bench(cases=None, filters=None, runs: int = 3, seed: int = 0, *, threshold_deg: float = 2.0,
+              batched: bool = False, progress: bool | None = None) -> BenchReport:
+    """Run ``filters`` over ``cases`` and return the report.
+
+    Parameters
+    ----------
+    cases : list of SimCase or LogCase
+        Default: ``[SimCase()]`` (smooth_manoeuvre × consumer_mems, 60 s).
+    filters : list of str
+        Built-in names (``pipelines.estimation.registry.FILTERS``) or ``module:Class``; default every
+        available built-in (one whose package is missing is left out with a note).
+    runs, seed : int
+        Monte Carlo runs per simulated case, device seeds ``seed … seed + runs − 1``.
+    threshold_deg : float
+        Convergence threshold.
+    batched : bool
+        Run the ``mekf`` of each simulated case over all runs at once with ``mekf_batch`` (vectorised
+        across runs; stamps shared by every run, else run by run with a note) instead of run by run.
+    progress : bool or None
+        A tqdm bar on stderr (None: when stderr is a terminal).
+
+    Raises
+    ------
+    FilterError, BenchError, dynamics.ConfigError
+        An unknown or unusable filter, scenario, device or log (the message names it).
+    """
+    if runs < 1:
+        raise BenchError("argument --runs: must be at least 1")
+    cases = [SimCase()] if cases is None else list(cases)
+    filters, unavailable = _resolve_filters(filters)
+    batch_fn = None
+    if batched and "mekf" in filters and any(isinstance(c, SimCase) for c in cases):
+        try:
+            from .estimation.batched import mekf_batch as batch_fn
+        except ImportError as exc:
+            raise BenchError(f"argument --batched: the batched mekf is not available ({exc})") from exc
+
+    # Load everything first: bad names and bad logs fail before any work.
+    prepared = []
+    for case in cases:
+        if isinstance(case, SimCase):
+            prepared.append(("sim", case, _sim_case(case, runs, seed)))
+        elif isinstance(case, LogCase):
+            for item in _log_runs(case):
+                prepared.append(("log", case, item))
+        else:
+            raise TypeError(f"a case is a SimCase or a LogCase, got {type(case).__name__}")
+
+    steps = sum((runs if kind == "sim" else 1) * len(filters) for kind, _, _ in prepared)
+    bar = _Progress(steps, progress)
+    results = []
+    try:
+        for kind, case, item in prepared:
+            if kind == "sim":
+                results.append(_bench_sim(case, item, filters, runs, seed, threshold_deg, batch_fn, bar))
+            else:
+                results.append(_bench_log(item, filters, threshold_deg, bar))
+    finally:
+        bar.close()
+    settings = {"runs": runs, "seed": seed, "threshold_deg": threshold_deg, "batched": bool(batched),
+                "filters": filters, "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+                "cases": [{"type": type(c).__name__, **{k: v if v is None or isinstance(v, (bool, int, float)) else str(v)
+                                                          for k, v in c.__dict__.items()}} for c in cases]}
+    return BenchReport(cases=results, settings=settings, unavailable=unavailable)
+
+
+def _bench_sim(case: SimCase, item, filters, runs, seed, threshold_deg, batch_fn, bar) -> CaseResult:
+    scenario, devices, setup, name, mode = item
+    six_d = mode == "6D"
+    traj = scenario.simulate(duration=case.duration)
+    per_run = [f for f in filters if not (batch_fn is not None and f == "mekf")]
+    results = {f: None for f in filters}
+    kept = []  # the runs, for the batched mekf
+    first = None
+    for r, device in enumerate(devices):
+        run = _sim_run(traj, device, seed + r)
+        if first is None:
+            first = run
+        for spec in per_run:
+            if r == 0:
+                _warm_up(spec, setup, run, six_d)
+            res, errors, fname = _run_filter(spec, setup, run, six_d=six_d, threshold_deg=threshold_deg)
+            if results[spec] is None:
+                results[spec] = FilterResult(filter=spec, name=fname, batched=False, runs=[])
+                _curve(results[spec], run.t, errors)
+            results[spec].runs.append(res)
+            bar.step(f"{name}: {fname} run {r}")
+        if batch_fn is not None:
+            kept.append(run)
+    if batch_fn is not None:
+        results["mekf"] = _bench_batched(batch_fn, setup, kept, six_d, threshold_deg)
+        bar.step(f"{name}: mekf batched", len(kept))
+    return CaseResult(name=name, kind="simulated", mode=mode, rate_hz=setup.rate_hz, samples=len(first.t),
+                      duration_s=float(first.t[-1] - first.t[0]), runs=runs,
+                      source={"scenario": case.scenario, "device": case.device, "duration_s": case.duration,
+                              "seeds": [seed + r for r in range(runs)]},
+                      filters=[results[f] for f in filters])
+
+
+def _bench_batched(batch_fn, setup, runs: list[_Run], six_d, threshold_deg) -> FilterResult:
+    """All runs through ``mekf_batch`` at once when they share their stamps, else one by one."""
+    fr = FilterResult(filter="mekf", name="mekf", batched=True, runs=[])
+    shared = all(len(r.t) == len(runs[0].t) and np.array_equal(r.t, runs[0].t) for r in runs)
+    groups = [runs] if shared else [[r] for r in runs]
+    if not shared:
+        fr.note = ("the runs' stamps differ (clock jitter), so each run went through mekf_batch on its own; "
+                   "throughput is per run")
+    k = min(len(runs[0].t), _WARM_UP_SAMPLES)
+    try:  # untimed first call (compiling or loading the kernels)
+        batch_fn(setup, runs[0].t[:k], np.stack([r.gyro[:k] for r in runs[:2]]),
+                 np.stack([r.accel[:k] for r in runs[:2]]),
+                 None if six_d or runs[0].mag is None else np.stack([r.mag[:k] for r in runs[:2]]))
+    except Exception:  # noqa: BLE001 - the timed call reports it
+        pass
+    for group in groups:
+        n = len(group[0].t)
+        gyro = np.stack([r.gyro for r in group])
+        accel = np.stack([r.accel for r in group])
+        mag = None if six_d or group[0].mag is None else np.stack([r.mag for r in group])
+        started = time.perf_counter()
+        reason = ""
+        try:
+            est = batch_fn(setup, group[0].t, gyro, accel, mag)
+            wall = time.perf_counter() - started
+            q = np.asarray(est.q_wb, dtype=float)
+            b = None if est.gyro_bias is None else np.asarray(est.gyro_bias, dtype=float)
+            if q.shape != (len(group), n, 4):
+                raise ValueError(f"mekf_batch returned q_wb of shape {q.shape}, expected {(len(group), n, 4)}")
+        except Exception as exc:  # noqa: BLE001
+            wall = time.perf_counter() - started
+            q, b, reason = np.full((len(group), n, 4), np.nan), None, f"mekf_batch raised {type(exc).__name__}: {exc}"
+        for i, run in enumerate(group):
+            res, errors = evaluate_run(run.t, q[i], run.q_true, mask=run.mask, six_d=six_d, threshold_deg=threshold_deg,
+                                       bias_est=None if b is None else b[i], omega_true=run.omega_true, gyro=run.gyro,
+                                       rate_hz=setup.rate_hz, wall_s=wall, throughput=len(group) * n / wall if wall > 0
+                                       else float("nan"), seed=run.seed, reason=reason)
+            if fr.curve_t is None:
+                _curve(fr, run.t, errors)
+            fr.runs.append(res)
+    return fr
+
+
+def _bench_log(item, filters, threshold_deg, bar) -> CaseResult:
+    name, mode, setup, run, source, notes = item
+    results = []
+    for spec in filters:
+        _warm_up(spec, setup, run, mode == "6D")
+        res, errors, fname = _run_filter(spec, setup, run, six_d=mode == "6D", threshold_deg=threshold_deg)
+        fr = FilterResult(filter=spec, name=fname, batched=False, runs=[res])
+        _curve(fr, run.t, errors)
+        results.append(fr)
+        bar.step(f"{name}: {fname}")
+    return CaseResult(name=name, kind="log", mode=mode, rate_hz=setup.rate_hz, samples=len(run.t),
+                      duration_s=float(run.t[-1] - run.t[0]), runs=1, source=source, filters=results, notes=notes)
+

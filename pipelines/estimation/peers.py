@@ -1,0 +1,326 @@
+"""Well-known attitude filters behind gyroemu's filter protocol: Madgwick, Mahony and the EKF of the
+``ahrs`` package, and VQF from the ``vqf`` package (an optional extra: ``pip install 'gyroemu[vqf]'``).
+
+Each adapter is made from a :class:`~pipelines.estimation.protocol.FilterSetup`, keeps the library's
+state from one ``process()`` block to the next, and returns ``q_wb`` in gyroemu's convention (ENU world,
+body to world, scalar first). Each library's defaults are kept; what the adapter has to decide (frames,
+initialisation, time steps, missing samples) is listed here.
+
+Frames, found on BROAD trial 02 (``tests/pipelines/test_bench.py`` checks them on simulated truth)
+-------------------------------------------------------------------------------------------------
+All four libraries integrate ``q̇ = ½ q ⊗ (0, ω)``: their quaternion turns body vectors into their
+world frame, scalar first, like gyroemu's. Their world frames differ:
+
+=============  ======================================================  ===========================
+library        world frame (with the accelerometer as it is: +g up)    to ENU
+=============  ======================================================  ===========================
+Madgwick       x magnetic north, z up (so y west: NWU)                  ``q_z(+90°) ⊗ q``
+Mahony         x east, y magnetic north, z up (ENU)                     ``q``
+ahrs EKF       NED, but it takes the accelerometer as the gravity       ``C ⊗ q``, ``C`` the NED↔ENU
+               vector (down): the adapter feeds it ``−accel``           swap, ``(0, 1, 1, 0)/√2``
+VQF            ENU, y magnetic north (9D); heading arbitrary (6D)       ``q``
+=============  ======================================================  ===========================
+
+(The EKF fed the accelerometer as it is mixes an up-gravity with a down-dipping field reference:
+21.9° inclination RMSE on trial 02 against 0.97° with ``−accel``; its ``frame='ENU'`` option is
+inconsistent the other way round.) A 9D estimate is then turned from magnetic north to true north by
+the site's declination, ``q_wb = q_z(−declination) ⊗ q`` (``FilterSetup.declination_rad``: 0 for a
+foreign log such as BROAD, whose reference frame is magnetic). A 6D estimate's heading is arbitrary
+and left as it is.
+
+Defaults kept, by library
+-------------------------
+- Madgwick (ahrs 0.4): gain β = 0.033 (6D, ``gain_imu``) and 0.041 (9D, ``gain_marg``), rad/s, from
+  Madgwick's report. No bias state.
+- Mahony (ahrs 0.4): ``k_P`` = 1.0, ``k_I`` = 0.3, bias starting at 0; its integral term is the gyro
+  bias estimate (``Estimate.gyro_bias``).
+- ahrs EKF: state ``q`` only (no bias), ``P0 = I₄``, spectral variances gyro 0.3², accelerometer 0.5²,
+  magnetometer 0.8² (of the normalised vectors). Its magnetic reference defaults to Munich's WMM
+  field; the adapter gives it the dip angle measured in the first sample instead,
+  ``asin(−â·m̂)`` (69.2° at the start of BROAD trial 02, 2.3° total RMSE there against 5.7° with Munich's).
+- VQF (vqf 2.x): :class:`vqf.VQF` (the online filter, not ``offlineVQF``), default parameters (τ_acc
+  3 s, τ_mag 9 s, rest and motion bias estimation, magnetic disturbance rejection), fed block by block
+  through ``updateBatch`` so its state carries over. ``Estimate.gyro_bias`` is its bias estimate.
+
+Initialisation, time steps, units, missing samples
+-------------------------------------------------
+- The ``ahrs`` filters start, as their own batch mode does (``Q[0]`` from ``acc2q``/``ecompass``), from
+  the first sample: the adapter computes that attitude itself (TRIAD on gravity and the field in 9D,
+  the smallest tilt in 6D), in the library's frame (the library's ``ecompass(frame='NED')`` start
+  contradicts Madgwick's NWU update). The output for that sample is the initial attitude; each later
+  sample is one library update. VQF initialises itself (its accelerometer low-pass starts on the first
+  sample, its heading converges fast at first, ``magNewFirstTime``).
+- The ``ahrs`` updates take their own ``dt``: the adapter passes the stamp difference
+  ``t_k − t_{k−1}`` (uneven spacing and gaps as recorded), or the nominal ``1/rate_hz`` of the setup
+  where that difference is not positive and finite. VQF runs at the fixed ``1/rate_hz`` (it has no
+  per-sample step).
+- Magnetometer units: the ahrs docs ask for nT (Madgwick, EKF) or µT (Mahony), VQF for any unit;
+  every one of them only uses the field's direction (VQF's disturbance tests are relative), so the
+  adapters pass µT.
+- A sample with a non-finite gyro holds the last estimate (the next sample's ``dt`` spans the gap);
+  a non-finite accelerometer sample propagates the gyro only; a non-finite magnetometer sample in 9D
+  is a 6D update. Before the first usable sample the output is NaN.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dynamics.rotation import quat_conjugate, quat_from_matrix, quat_multiply
+
+from .protocol import Estimate, FilterSetup
+
+__all__ = ["AhrsEkf", "Madgwick", "Mahony", "Vqf", "VqfUnavailable", "initial_attitude"]
+
+_SQRT_HALF = math.sqrt(0.5)
+_Q_NWU_TO_ENU = np.array([_SQRT_HALF, 0.0, 0.0, _SQRT_HALF])  # q_z(+90°): NWU coordinates to ENU
+_Q_NED_TO_ENU = np.array([0.0, _SQRT_HALF, _SQRT_HALF, 0.0])   # (x, y, z)_NED -> (y, x, -z)
+_Q_IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
+
+
+class VqfUnavailable(ImportError):
+    """The optional ``vqf`` package is not installed."""
+
+
+def _q_z(angle: float) -> np.ndarray:
+    return np.array([math.cos(angle / 2), 0.0, 0.0, math.sin(angle / 2)])
+
+
+def _unit(v: np.ndarray) -> np.ndarray | None:
+    n = float(np.linalg.norm(v))
+    return v / n if n > 0 and math.isfinite(n) else None
+
+
+def initial_attitude(accel: np.ndarray, mag: np.ndarray | None = None) -> np.ndarray | None:
+    """``q_wb`` (w, x, y, z) of one sample at rest: ENU with y along magnetic north (TRIAD on the
+    specific force, which points up, and the field) when ``mag`` is given, else the smallest tilt that
+    brings the specific force to +z. None when the vectors are unusable (zero, non-finite, parallel)."""
+    up = _unit(np.asarray(accel, dtype=float))
+    if up is None:
+        return None
+    if mag is None:
+        # Smallest rotation taking `up` (body) to z (world): axis up × z, angle acos(up·z).
+        w = 1.0 + up[2]
+        if w < 1e-9:  # upside down: half a turn about x
+            return np.array([0.0, 1.0, 0.0, 0.0])
+        q = np.array([w, up[1], -up[0], 0.0])  # (1 + c, up × z) normalised
+        return q / np.linalg.norm(q)
+    m = np.asarray(mag, dtype=float)
+    east = _unit(np.cross(m, up))
+    if east is None:
+        return None
+    north = np.cross(up, east)
+    return quat_from_matrix(np.array([east, north, up]))  # rows: world axes in body coordinates
+
+
+def _as_inputs(t, gyro, accel, mag, use_mag: bool):
+    t = np.asarray(t, dtype=float).reshape(-1)
+    gyro = np.asarray(gyro, dtype=float).reshape(-1, 3)
+    accel = np.asarray(accel, dtype=float).reshape(-1, 3)
+    if not len(t) == len(gyro) == len(accel):
+        raise ValueError(f"t, gyro and accel must have the same length, got {len(t)}, {len(gyro)}, {len(accel)}")
+    if use_mag and mag is not None:
+        mag = np.asarray(mag, dtype=float).reshape(-1, 3)
+        if len(mag) != len(t):
+            raise ValueError(f"mag must have the length of t ({len(t)}), got {len(mag)}")
+        mag = mag * 1e6  # tesla -> µT (only the direction matters to these filters)
+    else:
+        mag = None
+    return t, gyro, accel, mag
+
+
+class _AhrsPeer:
+    """The per-sample loop shared by the ``ahrs`` filters (their updates are per-sample Python)."""
+
+    name = ""
+    has_bias = False
+    _to_enu = _Q_IDENTITY  # library world frame -> ENU (magnetic)
+
+    def __init__(self, setup: FilterSetup):
+        self.setup = setup
+        self.period = 1.0 / float(setup.rate_hz)
+        self._q = None          # the library's quaternion (its own frame)
+        self._t_last = None     # stamp of the last sample the filter took
+        self._out_rot = _q_z(-setup.declination_rad) if setup.use_mag else _Q_IDENTITY
+
+    # The library-specific parts.
+    def _start(self, q_lib: np.ndarray, accel: np.ndarray, mag: np.ndarray | None) -> None:
+        """Make the library's filter object, starting at ``q_lib``."""
+
+    def _step(self, q, gyro, accel, mag, dt):
+        """One library update (``accel`` or ``mag`` None: not usable in this sample)."""
+        raise NotImplementedError
+
+    def _bias(self) -> np.ndarray:
+        return np.full(3, np.nan)
+
+    def process(self, t, gyro, accel, mag=None) -> Estimate:
+        t, gyro, accel, mag = _as_inputs(t, gyro, accel, mag, self.setup.use_mag)
+        n = len(t)
+        q_out = np.full((n, 4), np.nan)
+        b_out = np.full((n, 3), np.nan) if self.has_bias else None
+        finite_g = np.isfinite(gyro).all(axis=1)
+        finite_a = np.isfinite(accel).all(axis=1) & (np.abs(accel).sum(axis=1) > 0)
+        finite_m = None if mag is None else np.isfinite(mag).all(axis=1) & (np.abs(mag).sum(axis=1) > 0)
+        dt_nominal = self.period
+        for k in range(n):
+            if self._q is None:
+                if not (finite_g[k] and finite_a[k]) or (mag is not None and not finite_m[k]):
+                    continue  # not started: NaN
+                q0 = initial_attitude(accel[k], None if mag is None else mag[k])
+                if q0 is None:
+                    continue
+                self._q = quat_multiply(quat_conjugate(self._to_enu), q0)
+                self._start(self._q, accel[k], None if mag is None else mag[k])
+                self._t_last = t[k]
+            elif finite_g[k]:
+                dt = t[k] - self._t_last
+                if not (dt > 0 and math.isfinite(dt)):
+                    dt = dt_nominal
+                self._q = np.asarray(self._step(self._q, gyro[k], accel[k] if finite_a[k] else None,
+                                                mag[k] if mag is not None and finite_m[k] else None, dt), dtype=float)
+                self._t_last = t[k]
+            # (a missing gyro sample holds the last estimate)
+            q_out[k] = self._q
+            if b_out is not None:
+                b_out[k] = self._bias()
+        q_wb = quat_multiply(self._out_rot, quat_multiply(self._to_enu, q_out))
+        return Estimate(q_wb=q_wb, gyro_bias=b_out)
+
+
+class Madgwick(_AhrsPeer):
+    """Madgwick's gradient-descent filter (``ahrs.filters.Madgwick``), default gains (β 0.033 / 0.041)."""
+
+    name = "madgwick"
+    _to_enu = _Q_NWU_TO_ENU
+
+    def _start(self, q_lib, accel, mag):
+        from ahrs.filters import Madgwick as _Madgwick
+
+        self._f = _Madgwick(frequency=self.setup.rate_hz)
+        # The gain was chosen for the architecture: gain_marg with a magnetometer, gain_imu without.
+        self._f.gain = self._f.gain_marg if mag is not None else self._f.gain_imu
+
+    def _step(self, q, gyro, accel, mag, dt):
+        if accel is None:
+            accel = np.zeros(3)  # the library skips the correction for a zero vector
+        if mag is not None:
+            return self._f.updateMARG(q, gyr=gyro, acc=accel, mag=mag, dt=dt)
+        return self._f.updateIMU(q, gyr=gyro, acc=accel, dt=dt)
+
+
+class Mahony(_AhrsPeer):
+    """Mahony's explicit complementary filter (``ahrs.filters.Mahony``), defaults k_P 1, k_I 0.3."""
+
+    name = "mahony"
+    has_bias = True
+
+    def _start(self, q_lib, accel, mag):
+        from ahrs.filters import Mahony as _Mahony
+
+        self._f = _Mahony(frequency=self.setup.rate_hz)
+
+    def _step(self, q, gyro, accel, mag, dt):
+        if accel is None:
+            accel = np.zeros(3)
+        if mag is not None:
+            return self._f.updateMARG(q, gyr=gyro, acc=accel, mag=mag, dt=dt)
+        return self._f.updateIMU(q, gyr=gyro, acc=accel, dt=dt)
+
+    def _bias(self):
+        return np.array(self._f.b, dtype=float)
+
+
+class AhrsEkf(_AhrsPeer):
+    """The quaternion EKF of ``ahrs.filters.EKF`` (state q only), default noises, NED with −accel."""
+
+    name = "ahrs-ekf"
+    _to_enu = _Q_NED_TO_ENU
+
+    def _start(self, q_lib, accel, mag):
+        from ahrs.filters import EKF
+
+        kwargs = {}
+        if mag is not None:
+            up, m = accel / np.linalg.norm(accel), mag / np.linalg.norm(mag)
+            kwargs["magnetic_ref"] = float(np.degrees(np.arcsin(np.clip(-up @ m, -1.0, 1.0))))  # dip, down +
+        self._f = EKF(frequency=self.setup.rate_hz, frame="NED", q0=q_lib, **kwargs)
+        self._f.mag = np.zeros((1, 3)) if mag is not None else None  # h() and H() switch on this attribute
+        self._mag_mode = self._f.mag
+
+    def _step(self, q, gyro, accel, mag, dt):
+        f = self._f
+        if accel is None:  # the library returns q unchanged for a zero accelerometer: predict only
+            q_t = f.f(q, gyro, dt)
+            F = f.dfdq(gyro, dt)
+            W = 0.5 * dt * np.r_[[-q[1:]], q[0] * np.identity(3) + _skew(q[1:])]
+            f.P = F @ f.P @ F.T + f.g_noise * W @ W.T
+            return q_t / np.linalg.norm(q_t)
+        if mag is None and self._mag_mode is not None:
+            f.mag = None
+            try:
+                return f.update(q, gyro, -accel, None, dt=dt)
+            finally:
+                f.mag = self._mag_mode
+        return f.update(q, gyro, -accel, mag, dt=dt)
+
+
+def _skew(v):
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _import_vqf():
+    try:
+        import vqf  # noqa: F401
+        from vqf import VQF
+    except ImportError as exc:
+        raise VqfUnavailable("the optional 'vqf' package is not installed (pip install 'gyroemu[vqf]' "
+                             f"or pip install vqf): {exc}") from exc
+    return VQF
+
+
+class Vqf:
+    """VQF (Laidig & Seel 2023), the online :class:`vqf.VQF` with its default parameters."""
+
+    name = "vqf"
+
+    def __init__(self, setup: FilterSetup):
+        VQF = _import_vqf()
+        self.setup = setup
+        self._f = VQF(1.0 / float(setup.rate_hz))
+        self._out_rot = _q_z(-setup.declination_rad) if setup.use_mag else _Q_IDENTITY
+        self._last = None  # (q, bias) of the last sample taken, for held samples
+
+    def _batch(self, gyro, accel, mag):
+        out = self._f.updateBatch(np.ascontiguousarray(gyro), np.ascontiguousarray(accel),
+                                  None if mag is None else np.ascontiguousarray(mag))
+        return (out["quat9D"] if mag is not None else out["quat6D"]), out["bias"]
+
+    def process(self, t, gyro, accel, mag=None) -> Estimate:
+        t, gyro, accel, mag = _as_inputs(t, gyro, accel, mag, self.setup.use_mag)
+        n = len(t)
+        # VQF skips an all-zero accelerometer or magnetometer sample: missing values become zeros.
+        accel = np.where(np.isfinite(accel).all(axis=1, keepdims=True), accel, 0.0)
+        if mag is not None:
+            mag = np.where(np.isfinite(mag).all(axis=1, keepdims=True), mag, 0.0)
+        finite_g = np.isfinite(gyro).all(axis=1)
+        q = np.full((n, 4), np.nan)
+        b = np.full((n, 3), np.nan)
+        if finite_g.all():
+            if n:
+                q[:], b[:] = self._batch(gyro, accel, mag)
+        else:  # runs of usable samples through the library, missing gyro samples hold the estimate
+            edges = np.flatnonzero(np.diff(np.r_[0, finite_g.astype(np.int8), 0]))
+            for start, stop in zip(edges[::2], edges[1::2]):
+                q[start:stop], b[start:stop] = self._batch(gyro[start:stop], accel[start:stop],
+                                                           None if mag is None else mag[start:stop])
+            for k in np.flatnonzero(~finite_g):
+                if k > 0 and np.isfinite(q[k - 1, 0]):
+                    q[k], b[k] = q[k - 1], b[k - 1]
+                elif k == 0 and self._last is not None:
+                    q[k], b[k] = self._last
+        if n and np.isfinite(q[-1, 0]):
+            self._last = (q[-1].copy(), b[-1].copy())
+        return Estimate(q_wb=quat_multiply(self._out_rot, q), gyro_bias=b)

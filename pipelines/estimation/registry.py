@@ -1,0 +1,168 @@
+"""The attitude filters gyroemu knows by name, and a user's own named as ``module:Class``.
+
+================  ===========================================================  ===================
+name              filter                                                       needs
+================  ===========================================================  ===================
+``mekf``          gyroemu's multiplicative (error-state) Kalman filter          —
+``madgwick``      Madgwick's gradient-descent filter (``ahrs``)                 —
+``mahony``        Mahony's explicit complementary filter (``ahrs``)             —
+``ahrs-ekf``      the quaternion EKF of ``ahrs``                                —
+``vqf``           VQF, Laidig & Seel (2023)                                     the ``vqf`` extra
+================  ===========================================================  ===================
+
+Anything else is a user's filter: ``package.module:Class`` (imported; the current folder is tried
+too) or ``path/to/file.py:Class``. The class is called with the :class:`FilterSetup` and the object
+must have a ``name`` and a ``process(t, gyro, accel, mag=None)`` method (the protocol of
+:mod:`pipelines.estimation.protocol`). Each problem raises :class:`FilterError`, whose message names the
+argument as given.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from .protocol import FilterSetup
+
+__all__ = ["FILTERS", "FilterError", "FilterSpec", "available_filters", "filter_class", "make_filter",
+           "unavailable_filters"]
+
+
+class FilterError(ValueError):
+    """A filter name or ``module:Class`` that cannot be used; the message names it."""
+
+
+@dataclass(frozen=True)
+class FilterSpec:
+    """A built-in filter: its class's ``module:attribute``, imported only when used."""
+
+    name: str
+    target: str
+    description: str
+    extra: str | None = None  # the optional extra that installs what it needs
+
+    def load(self) -> type:
+        """The filter's class; :class:`FilterError` (with the reason) when it cannot be imported."""
+        module, _, attr = self.target.partition(":")
+        try:
+            cls = getattr(importlib.import_module(module), attr)
+        except ImportError as exc:
+            hint = f" (pip install 'gyroemu[{self.extra}]')" if self.extra else ""
+            raise FilterError(f"filter '{self.name}' is not available: {exc}{hint}") from exc
+        if self.name == "vqf":  # the adapter imports vqf when made: check now, so the registry can tell
+            from .peers import _import_vqf
+
+            try:
+                _import_vqf()
+            except ImportError as exc:
+                raise FilterError(f"filter 'vqf' is not available: {exc}") from exc
+        return cls
+
+
+FILTERS: dict[str, FilterSpec] = {s.name: s for s in (
+    FilterSpec("mekf", "pipelines.estimation.mekf:Mekf", "gyroemu's multiplicative Kalman filter (filterpy)"),
+    FilterSpec("madgwick", "pipelines.estimation.peers:Madgwick", "Madgwick (ahrs), gain 0.033 / 0.041"),
+    FilterSpec("mahony", "pipelines.estimation.peers:Mahony", "Mahony (ahrs), k_P 1, k_I 0.3"),
+    FilterSpec("ahrs-ekf", "pipelines.estimation.peers:AhrsEkf", "quaternion EKF (ahrs), default noises"),
+    FilterSpec("vqf", "pipelines.estimation.peers:Vqf", "VQF (vqf package), default parameters", extra="vqf"),
+)}
+
+
+def unavailable_filters() -> dict[str, str]:
+    """Built-in filters that cannot run here, with the reason (e.g. VQF without its package)."""
+    missing = {}
+    for name, spec in FILTERS.items():
+        try:
+            spec.load()
+        except FilterError as exc:
+            missing[name] = str(exc)
+    return missing
+
+
+def available_filters() -> list[str]:
+    """Names of the built-in filters that can run here, in the table's order."""
+    missing = unavailable_filters()
+    return [name for name in FILTERS if name not in missing]
+
+
+def _user_class(spec: str) -> type:
+    module_name, sep, attr = spec.rpartition(":")
+    if not sep or not module_name or not attr:
+        known = ", ".join(FILTERS)
+        raise FilterError(f"unknown filter '{spec}' (known: {known}; or a class of your own as module:Class)")
+    if module_name.endswith(".py") or "/" in module_name or "\\" in module_name:
+        path = Path(module_name)
+        if not path.is_file():
+            raise FilterError(f"filter '{spec}': no such file {path}")
+        mod_id = f"gyroemu_user_filter_{abs(hash(str(path.resolve())))}"
+        loader_spec = importlib.util.spec_from_file_location(mod_id, path)
+        module = importlib.util.module_from_spec(loader_spec)
+        try:
+            loader_spec.loader.exec_module(module)
+        except Exception as exc:  # noqa: BLE001 - any error in the user's file is reported as theirs
+            raise FilterError(f"filter '{spec}': importing {path} failed: {type(exc).__name__}: {exc}") from exc
+    else:
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as exc:
+            if exc.name is None or not module_name.startswith(exc.name):
+                raise FilterError(f"filter '{spec}': importing '{module_name}' failed: {exc}") from exc
+            cwd = str(Path.cwd())
+            if cwd in sys.path:
+                raise FilterError(f"filter '{spec}': no module named '{module_name}'") from exc
+            sys.path.insert(0, cwd)  # `gyroemu` as a console script does not look in the current folder
+            try:
+                module = importlib.import_module(module_name)
+            except ModuleNotFoundError:
+                raise FilterError(f"filter '{spec}': no module named '{module_name}' (looked in the current "
+                                  "folder too)") from exc
+            finally:
+                sys.path.remove(cwd)
+        except Exception as exc:  # noqa: BLE001
+            raise FilterError(f"filter '{spec}': importing '{module_name}' failed: "
+                              f"{type(exc).__name__}: {exc}") from exc
+    try:
+        cls = getattr(module, attr)
+    except AttributeError:
+        raise FilterError(f"filter '{spec}': module '{module_name}' has no attribute '{attr}'") from None
+    if not callable(cls):
+        raise FilterError(f"filter '{spec}': '{attr}' is not a class")
+    return cls
+
+
+def filter_class(name_or_spec: str) -> type:
+    """The class a filter argument names: a built-in name or ``module:Class``."""
+    if name_or_spec in FILTERS:
+        return FILTERS[name_or_spec].load()
+    return _user_class(name_or_spec)
+
+
+def make_filter(name_or_spec: str, setup: FilterSetup):
+    """A filter object for ``setup``: a built-in name (``FILTERS``) or a user's ``module:Class``.
+
+    Raises
+    ------
+    FilterError
+        Unknown name, a built-in that cannot run here (VQF without its package), a ``module:Class``
+        that does not import, or an object without ``name`` and a callable ``process``. The message
+        names ``name_or_spec``.
+    """
+    cls = filter_class(name_or_spec)
+    try:
+        filt = cls(setup)
+    except FilterError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - a user's constructor failing is the user's argument at fault
+        raise FilterError(f"filter '{name_or_spec}': {getattr(cls, '__name__', cls)}(setup) failed: "
+                          f"{type(exc).__name__}: {exc}") from exc
+    missing = [a for a in ("name", "process") if not hasattr(filt, a)]
+    if missing or not callable(getattr(filt, "process")):
+        what = " and ".join(f"'{a}'" for a in missing) if missing else "a callable 'process'"
+        raise FilterError(f"filter '{name_or_spec}': {type(filt).__name__} has no {what}; a filter needs a "
+                          "'name' and 'process(t, gyro, accel, mag=None)' (see pipelines/estimation/protocol.py)")
+    if not isinstance(filt.name, str) or not filt.name:
+        raise FilterError(f"filter '{name_or_spec}': its 'name' must be a non-empty string, got {filt.name!r}")
+    return filt

@@ -1,0 +1,252 @@
+"""Importers: recordings in other formats turned into gyroemu's MCAP contract (``gyroemu import``).
+
+BROAD (``gyroemu import broad TRIAL.hdf5 --out trial.mcap``)
+-----------------------------------------------------------
+A trial of the Berlin Robust Orientation Estimation Assessment Dataset (D. Laidig, M. Caruso,
+A. Cereatti, T. Seel, "BROAD - A Benchmark for Robust Inertial Orientation Estimation", Data 6(7),
+2021; CC BY 4.0) is one HDF5 file holding, for N samples of a myon aktos-t IMU:
+
+=============  =======  ==================================================================
+dataset        shape    holds
+=============  =======  ==================================================================
+``imu_gyr``    (N, 3)   angular rate, rad/s
+``imu_acc``    (N, 3)   specific force, m/s²
+``imu_mag``    (N, 3)   magnetic field, µT
+``opt_quat``   (N, 4)   optical reference: unit quaternion (w, x, y, z) of the IMU relative to
+                        ENU, NaN rows where tracking was lost
+``movement``   (N,)     bool: the samples over which the dataset's errors are computed
+=============  =======  ==================================================================
+
+and the attribute ``sampling_rate`` (Hz; 285.714 for every trial). ``opt_pos`` (the IMU's position,
+m) has no topic in the contract and is not imported. The file is opened read-only and read whole
+before anything is written. What is written (one device, ``imu0``, topics unprefixed):
+
+- ``/imu``: ``imu_gyr`` and ``imu_acc`` unchanged (``orientation_covariance[0] = -1``).
+- ``/mag``: ``imu_mag · 1e-6`` (tesla, the ROS unit).
+- ``/truth/imu``: ``opt_quat`` as ``q_wb`` (NaN rows kept as NaN, covariance zeros = "unknown"); the
+  true rate and specific force are not known, so they are written as "no estimate"
+  (``covariance[0] = -1``) and read back as None (:class:`pipelines.mcap_io.ImuSeries`).
+- ``/movement``: ``movement`` as ``gyroemu_msgs/msg/Flag`` (read back as ``DeviceLog.movement``).
+
+**Time stamps.** BROAD's samples are equally spaced and carry no clock of their own, so sample k is
+stamped ``t_k = k / sampling_rate`` from 0, rounded to the nearest nanosecond: ``rint(k·10⁹ / fs)``,
+where ``k·10⁹`` is exact in float64 (for k < 4·10⁹) and the division correctly rounded, so each stamp
+is within 0.5 ns (+ 10⁻⁴ ns) of the exact ``k / fs``. At 285.714… Hz (2000/7) the stamps are exactly
+``k · 3.5 ms``. Every channel carries the same stamps.
+
+The ``gyroemu`` metadata record holds, besides the writer's keys (``version``, ``seed`` and the
+configs empty: no simulation), ``device_name`` ``imu0``, ``source`` (the file's name),
+``source_format``, ``citation``, ``license``, ``sampling_rate_hz`` (the attribute, ``repr`` of the
+float), ``time_stamps`` (the rule above) and ``source_info`` (the file's ``info`` attribute, when it
+has one).
+
+Bad input raises :class:`ImportInputError` (a :class:`dynamics.ConfigError`) naming the file and the
+dataset or attribute at fault; the output is written through a temporary file renamed at the end
+(:class:`pipelines.mcap_io.McapLogWriter`), so a failure leaves nothing at ``out``.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from dynamics import ConfigError
+from sensors.samples import ImuSamples
+
+from .mcap_io import ImuSeries, Recording, write_mcap
+from .messages import ns_to_stamps
+
+__all__ = [
+    "ImportInputError",
+    "ImportSummary",
+    "BroadTrial",
+    "BROAD_CITATION",
+    "BROAD_DATASETS",
+    "read_broad",
+    "broad_stamps_ns",
+    "broad_recording",
+    "import_broad",
+    "IMPORTERS",
+]
+
+BROAD_CITATION = ('D. Laidig, M. Caruso, A. Cereatti, T. Seel, "BROAD - A Benchmark for Robust Inertial '
+                  'Orientation Estimation", Data 6(7), 2021')
+BROAD_LICENSE = "CC BY 4.0"
+BROAD_DATASETS = {"imu_gyr": (3,), "imu_acc": (3,), "imu_mag": (3,), "opt_quat": (4,), "movement": ()}
+"""The datasets an import reads, with the shape of one sample (every dataset has N rows)."""
+
+
+class ImportInputError(ConfigError):
+    """A file an importer cannot use. ``file`` names it; ``item`` names the dataset or attribute at fault
+    (``dataset 'imu_gyr'``, ``attribute 'sampling_rate'``) or is None for the file as a whole."""
+
+    def __init__(self, reason: str, *, file, item: str | None = None):
+        self.item = item
+        super().__init__(reason, file=file)
+
+    def __str__(self) -> str:
+        where = [w for w in (self.file, self.item) if w]
+        return (": ".join(where) + ": " if where else "") + self.reason
+
+
+@dataclass(frozen=True)
+class ImportSummary:
+    """What an import wrote."""
+
+    source: Path
+    out: Path
+    format: str
+    samples: int
+    rate_hz: float
+    duration_s: float
+    truth_nan_rows: int
+    movement_samples: int
+
+    def __str__(self) -> str:
+        return (f"{self.source.name} ({self.format}): {self.samples} samples at {self.rate_hz:.6g} Hz over "
+                f"{self.duration_s:.6g} s, reference NaN in {self.truth_nan_rows} rows, movement in "
+                f"{self.movement_samples} samples -> {self.out}")
+
+
+@dataclass(frozen=True, eq=False)
+class BroadTrial:
+    """A BROAD trial as stored (units of the file: µT for the magnetometer)."""
+
+    path: Path
+    gyro: np.ndarray       # (N, 3) rad/s
+    accel: np.ndarray      # (N, 3) m/s²
+    mag_ut: np.ndarray     # (N, 3) µT
+    opt_quat: np.ndarray   # (N, 4) w, x, y, z; NaN rows
+    movement: np.ndarray   # (N,) bool
+    rate_hz: float
+    info: str = ""
+
+    def __len__(self) -> int:
+        return len(self.gyro)
+
+
+def read_broad(path) -> BroadTrial:
+    """Read and check a BROAD trial (opened read-only). Raises :class:`ImportInputError`."""
+    import h5py  # imported where used: only importers need it
+
+    path = Path(path)
+    if not path.exists():
+        raise ImportInputError("no such file", file=path)
+    if path.is_dir():
+        raise ImportInputError("is a folder, not an HDF5 file", file=path)
+    try:
+        with open(path, "rb"):
+            pass
+    except OSError as e:
+        raise ImportInputError(f"cannot open: {e.strerror or e}", file=path) from None
+    if not h5py.is_hdf5(path):  # looks for the HDF5 signature at byte 0, 512, 1024, ...
+        raise ImportInputError("not an HDF5 file (no HDF5 signature); a BROAD trial is an .hdf5 file", file=path)
+    try:
+        f = h5py.File(path, "r")
+    except OSError as e:
+        raise ImportInputError(f"cannot open as HDF5: {e}", file=path) from None
+    with f:
+        arrays = {}
+        n = None
+        for name, width in BROAD_DATASETS.items():
+            item = f"dataset '{name}'"
+            if name not in f:
+                raise ImportInputError(f"missing (a BROAD trial holds {', '.join(BROAD_DATASETS)})",
+                                       file=path, item=item)
+            node = f[name]
+            if not isinstance(node, h5py.Dataset):
+                raise ImportInputError("is a group, not a dataset", file=path, item=item)
+            if n is None:
+                n = node.shape[0] if node.ndim >= 1 else None
+            expected = ("N", *width) if n is None else (n, *width)
+            if node.ndim != 1 + len(width) or node.shape[1:] != width or (n is not None and node.shape[0] != n):
+                raise ImportInputError(f"shape {node.shape}, expected ({', '.join(map(str, expected))})"
+                                       + ("" if name == "imu_gyr" else " (N from imu_gyr)"), file=path, item=item)
+            kind = node.dtype.kind
+            if name == "movement":
+                if kind not in "biu":
+                    raise ImportInputError(f"type {node.dtype}, expected bool", file=path, item=item)
+            elif kind not in "fiu":
+                raise ImportInputError(f"type {node.dtype}, expected numbers (float64)", file=path, item=item)
+            try:
+                arrays[name] = node[()]
+            except (OSError, ValueError, TypeError) as e:
+                raise ImportInputError(f"cannot be read: {e}", file=path, item=item) from None
+        if not n:
+            raise ImportInputError("holds no samples", file=path, item="dataset 'imu_gyr'")
+        item = "attribute 'sampling_rate'"
+        if "sampling_rate" not in f.attrs:
+            raise ImportInputError("missing (the sampling rate in Hz)", file=path, item=item)
+        rate = np.asarray(f.attrs["sampling_rate"])
+        if rate.size != 1 or rate.dtype.kind not in "fiu" or not np.isfinite(rate).all() or not float(rate.flat[0]) > 0:
+            raise ImportInputError(f"{rate.tolist()!r}: expected a positive number of Hz", file=path, item=item)
+        info = f.attrs.get("info", "")
+        info = info.decode("utf-8", "replace") if isinstance(info, bytes) else str(info)
+    movement = arrays["movement"]
+    if movement.dtype != bool:
+        if not np.isin(movement, (0, 1)).all():
+            raise ImportInputError("values other than 0 and 1; expected bool", file=path, item="dataset 'movement'")
+        movement = movement.astype(bool)
+    as_float = {name: np.asarray(arrays[name], dtype=np.float64)
+                for name in ("imu_gyr", "imu_acc", "imu_mag", "opt_quat")}
+    return BroadTrial(path=path, gyro=as_float["imu_gyr"], accel=as_float["imu_acc"], mag_ut=as_float["imu_mag"],
+                      opt_quat=as_float["opt_quat"], movement=movement, rate_hz=float(rate.flat[0]), info=info)
+
+
+def broad_stamps_ns(n: int, rate_hz: float) -> np.ndarray:
+    """``t_k = k / rate_hz`` for k = 0 … n−1 as integer nanoseconds, rounded to nearest: (n,) int64."""
+    k = np.arange(n, dtype=np.float64)
+    return np.rint(k * 1e9 / float(rate_hz)).astype(np.int64)
+
+
+def broad_recording(trial: BroadTrial, device_name: str = "imu0") -> Recording:
+    """The :class:`Recording` of a trial: samples (mag in tesla), reference attitude, movement mask and the
+    import's metadata keys."""
+    stamp_ns = broad_stamps_ns(len(trial), trial.rate_hz)
+    t = ns_to_stamps(stamp_ns)
+    samples = ImuSamples(t=t, gyro=trial.gyro, accel=trial.accel, mag=trial.mag_ut * 1e-6, device=device_name)
+    truth = ImuSeries(t=t, q_wb=trial.opt_quat)  # omega_b, specific_force_b unknown: "no estimate"
+    metadata = {
+        "source": trial.path.name,
+        "source_format": "BROAD",
+        "citation": BROAD_CITATION,
+        "license": BROAD_LICENSE,
+        "sampling_rate_hz": repr(trial.rate_hz),
+        "time_stamps": "t_k = k / sampling_rate_hz s from k = 0, rounded to the nearest ns",
+    }
+    if trial.info:
+        metadata["source_info"] = trial.info
+    return Recording(samples, truth=truth, movement=trial.movement, metadata=metadata)
+
+
+def import_broad(path, out, *, device_name: str = "imu0") -> ImportSummary:
+    """Turn the BROAD trial ``path`` into the MCAP log ``out`` (see the module's notes).
+
+    Raises
+    ------
+    ImportInputError
+        The input is missing, not HDF5, lacks a dataset or attribute, or has the wrong shapes; or ``out``
+        is the input file itself.
+    FileNotFoundError
+        ``out``'s folder does not exist.
+    """
+    path, out = Path(path), Path(out)
+    if out.exists() and path.exists() and os.path.samefile(out, path):
+        raise ImportInputError("is the input file: the import never overwrites its input", file=out)
+    if not out.parent.is_dir():
+        raise FileNotFoundError(f"{out.parent} is not a folder")
+    trial = read_broad(path)
+    recording = broad_recording(trial, device_name)
+    write_mcap(out, recording)
+    n = len(trial)
+    return ImportSummary(source=path, out=out, format="BROAD", samples=n, rate_hz=trial.rate_hz,
+                         duration_s=(n - 1) / trial.rate_hz,
+                         truth_nan_rows=int(np.isnan(trial.opt_quat).any(axis=1).sum()),
+                         movement_samples=int(trial.movement.sum()))
+
+
+IMPORTERS = {"broad": import_broad}
+"""Format name (``gyroemu import FORMAT``) -> importer ``(path, out) -> ImportSummary``."""

@@ -1,0 +1,127 @@
+"""A live attitude filter on a zenoh stream: subscribe to a device's ``/imu`` (and ``/mag``), filter
+the samples as they arrive, publish ``/estimate/imu`` at the same stamps.
+
+:class:`LiveEstimator` runs on its own zenoh session and thread, so it sees the stream exactly as any
+other subscriber does (``gyroemu stream --estimate`` runs one next to its publisher; the demo too).
+Messages queue in FIFO channels; the worker drains them, pairs each ``/imu`` sample with the ``/mag``
+sample of the same stamp (when the filter is 9D; a field that has not arrived when a later sample's
+has is taken as missing), feeds the block to the filter (whose state carries over between blocks) and
+publishes one ``/estimate/imu`` message per sample, BLOCK congestion control, rmw_zenoh attachment.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+
+from .estimate import estimate_series
+from .messages import IMU, MAGNETIC_FIELD
+from .zenoh_io import PacedPublisher, drain, subscribe, topic_to_key
+
+__all__ = ["LiveEstimator"]
+
+
+class LiveEstimator:
+    """Filter ``device``'s live stream on ``session`` with ``flt`` (an AttitudeFilter).
+
+    Parameters
+    ----------
+    session : zenoh.Session
+    device : str
+        The stream's device name (keys ``gyroemu/<device>/imu``, ...).
+    flt : AttitudeFilter
+        Made for the stream's rate; ``flt.setup.use_mag`` (when present) says 9D.
+    use_mag : bool
+        Pair ``/mag`` samples with ``/imu`` samples (9D).
+
+    Attributes
+    ----------
+    published : int
+        Estimates sent so far.
+    """
+
+    def __init__(self, session, device: str, flt, use_mag: bool):
+        self.flt = flt
+        self.use_mag = use_mag
+        self.published = 0
+        self._imu = subscribe(session, topic_to_key(device, "/imu"))
+        self._mag = subscribe(session, topic_to_key(device, "/mag")) if use_mag else None
+        self.key = topic_to_key(device, "/estimate/imu")
+        self._out = PacedPublisher(session, [self.key])
+        self._pending: list[tuple[int, np.ndarray, np.ndarray]] = []  # (stamp ns, gyro, accel)
+        self._fields: dict[int, np.ndarray] = {}
+        self._t0_ns: int | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="gyroemu-live-estimate", daemon=True)
+
+    def start(self) -> "LiveEstimator":
+        self._thread.start()
+        return self
+
+    def ready(self) -> bool:
+        """Whether the stream's publishers have reached this estimator's subscribers (and a subscriber
+        waits for the estimates)."""
+        return self._out.matched()
+
+    def close(self, drain_s: float = 1.0) -> None:
+        """Process what is still queued (for up to ``drain_s``), then stop."""
+        end = time.monotonic() + drain_s
+        while time.monotonic() < end and self._step(final=True):
+            pass
+        self._stop.set()
+        self._thread.join(timeout=5)
+        self._out.close()
+        for sub in (self._imu, self._mag):
+            if sub is not None:
+                sub.undeclare()
+
+    def _loop(self) -> None:
+        while not self._stop.is_set():
+            if not self._step():
+                time.sleep(0.001)
+
+    def _step(self, final: bool = False) -> bool:
+        """Take in what has arrived and filter the samples that are complete; False when idle."""
+        imu = drain(self._imu)
+        mag = drain(self._mag) if self._mag is not None else []
+        if mag:
+            batch = MAGNETIC_FIELD.decode([bytes(s.payload.to_bytes()) for s in mag])
+            for stamp, field in zip(batch.stamp_ns, batch["magnetic_field"]):
+                self._fields[int(stamp)] = field
+        if imu:
+            batch = IMU.decode([bytes(s.payload.to_bytes()) for s in imu])
+            self._pending.extend(zip(batch.stamp_ns.tolist(), batch["angular_velocity"], batch["linear_acceleration"]))
+        if not self._pending:
+            return bool(mag)
+        # 9D: a sample is complete when its field is here, or a later sample's is (then it has none).
+        ready = len(self._pending)
+        if self.use_mag and not final:
+            newest_field = max(self._fields, default=-1)
+            ready = 0
+            while ready < len(self._pending) and self._pending[ready][0] <= newest_field:
+                ready += 1
+        if ready == 0:
+            return bool(imu or mag)
+        block, self._pending = self._pending[:ready], self._pending[ready:]
+        stamp_ns = np.array([s for s, _, _ in block], dtype=np.int64)
+        gyro = np.array([g for _, g, _ in block])
+        accel = np.array([a for _, _, a in block])
+        field = None
+        if self.use_mag:
+            field = np.array([self._fields.pop(int(s), (np.nan, np.nan, np.nan)) for s in stamp_ns])
+            for old in [s for s in self._fields if s < stamp_ns[-1]]:
+                del self._fields[old]
+        if self._t0_ns is None:
+            self._t0_ns = int(stamp_ns[0])
+        t_rel = (stamp_ns - self._t0_ns) * 1e-9
+        estimate = self.flt.process(t_rel, gyro, accel, field)
+        series = estimate_series(self.flt, stamp_ns * 1e-9, estimate, gyro)
+        from .mcap_io import BODY_FRAME, _series_fields
+
+        rows = IMU.encode(stamp_ns, BODY_FRAME, _series_fields(series))
+        for row in rows:
+            self._out.put(self.key, row.tobytes())
+        self.published += len(rows)
+        return True

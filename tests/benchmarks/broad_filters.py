@@ -1,0 +1,74 @@
+"""Every available filter on the BROAD trials in ``../shared/datasets/broad`` (``GYROEMU_BROAD_DIR``
+overrides): total, heading and inclination RMSE in 9D and inclination RMSE in 6D, per trial and averaged.
+
+    python tests/benchmarks/broad_filters.py [--filter NAME ...] [--trials 02 07 ...]
+
+A script, not a test (the ``ahrs`` filters are per-sample Python: about 3 minutes for all eight trials).
+Each filter runs through gyroemu's protocol (the adapters of :mod:`pipelines.estimation.peers` for the
+peers) with one global parameter set: its defaults, the sample rate from the file. The errors are the
+dataset's own (README of the folder): RMSE in degrees over the ``movement`` samples, NaN reference rows
+ignored. The same figures come from ``gyroemu import broad TRIAL.hdf5 --out trial.mcap`` then
+``gyroemu bench --log trial.mcap [--6d]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+from pipelines.estimation.metrics import attitude_errors, rmse_deg  # noqa: E402
+from pipelines.estimation.protocol import FilterSetup  # noqa: E402
+from pipelines.estimation.registry import available_filters, make_filter, unavailable_filters  # noqa: E402
+
+BROAD_DIR = Path(os.environ.get("GYROEMU_BROAD_DIR",
+                                Path(__file__).resolve().parents[3] / "shared" / "datasets" / "broad"))
+
+
+def main() -> int:
+    import h5py
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--filter", action="append", default=None, help="filters (default: every available one)")
+    parser.add_argument("--trials", nargs="+", default=None, help="trial numbers, e.g. 02 07 (default: all)")
+    args = parser.parse_args()
+    files = sorted(BROAD_DIR.glob("*.hdf5"))
+    if args.trials:
+        files = [f for f in files if f.name.split("_")[0] in args.trials]
+    if not files:
+        print(f"no BROAD trials in {BROAD_DIR}", file=sys.stderr)
+        return 2
+    filters = args.filter or available_filters()
+    for name, why in unavailable_filters().items():
+        print(f"({name} left out: {why})")
+    results = {name: [] for name in filters}  # name -> rows (total, heading, inclination, inclination 6D)
+    print("| trial | filter | total 9D ° | heading 9D ° | inclination 9D ° | inclination 6D ° |")
+    print("|---|---|---|---|---|---|")
+    for path in files:
+        with h5py.File(path, "r") as f:
+            gyro, accel, mag = (np.ascontiguousarray(f[k][:]) for k in ("imu_gyr", "imu_acc", "imu_mag"))
+            ref, movement = f["opt_quat"][:], f["movement"][:].astype(bool)
+            fs = float(f.attrs["sampling_rate"])
+        t = np.arange(len(gyro)) / fs
+        for name in filters:
+            e9 = attitude_errors(make_filter(name, FilterSetup(rate_hz=fs, use_mag=True)).process(
+                t, gyro, accel, mag * 1e-6).q_wb, ref)
+            e6 = attitude_errors(make_filter(name, FilterSetup(rate_hz=fs, use_mag=False)).process(
+                t, gyro, accel).q_wb, ref)
+            row = (rmse_deg(e9.total, movement), rmse_deg(e9.heading, movement), rmse_deg(e9.inclination, movement),
+                   rmse_deg(e6.inclination, movement))
+            results[name].append(row)
+            print(f"| {path.stem[:2]} | {name} | " + " | ".join(f"{x:.2f}" for x in row) + " |", flush=True)
+    for name in filters:
+        mean = np.mean(results[name], axis=0)
+        print(f"| **avg** | {name} | " + " | ".join(f"**{x:.2f}**" for x in mean) + " |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,144 @@
+"""gyroemu's MEKF: the filterpy form against its compiled batched twin, what it must recover on
+simulated data, its handling of bad samples, and the constraint of its heading update."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from dynamics import load_scenario
+from dynamics.earth import EARTH_RATE
+from dynamics.rotation import quat_rotate, quat_conjugate
+from pipelines.estimation import FilterSetup, Mekf, attitude_errors, rmse_deg, setup_for
+from pipelines.estimation import mekf_kernels as kern
+from pipelines.estimation.batched import mekf_batch
+from pipelines.mcap_io import truth_series
+from sensors import load_device
+from sensors.gyrocompass import heading_uncertainty
+
+
+@pytest.fixture(scope="module")
+def manoeuvre():
+    scenario = load_scenario("smooth_manoeuvre")
+    return scenario, scenario.simulate(duration=120.0)
+
+
+def test_batched_mode_is_the_filterpy_filter(manoeuvre):
+    """Same kernels, Kalman algebra from filterpy or compiled: the same attitudes to round-off."""
+    scenario, traj = manoeuvre
+    short = dataclasses.replace(traj, **{f: getattr(traj, f)[:2001] for f in
+                                         ("t", "q_wb", "omega_b", "alpha_b", "specific_force_b", "pos_w", "vel_w", "mag_b")})
+    runs = [load_device("consumer_mems", seed=s).measure(short) for s in (0, 1)]
+    setup = setup_for(load_device("consumer_mems"), scenario)
+    batch = mekf_batch(setup, runs[0].t, np.stack([r.gyro for r in runs]), np.stack([r.accel for r in runs]),
+                       np.stack([r.mag for r in runs]))
+    for i, r in enumerate(runs):
+        single = Mekf(setup).process(r.t, r.gyro, r.accel, r.mag)
+        assert np.abs(single.q_wb - batch.q_wb[i]).max() < 1e-9
+        assert np.abs(single.gyro_bias - batch.gyro_bias[i]).max() < 1e-12
+
+
+def test_consumer_mems_beats_its_accelerometer_and_learns_its_bias(manoeuvre):
+    """6D on the smooth manoeuvre: the inclination error over the second minute is below the tilt that
+    the non-gravitational acceleration puts on an accelerometer-only solution (its RMS, from the truth),
+    and the bias error across the vertical at the end is below half the bias itself."""
+    scenario, traj = manoeuvre
+    device = load_device("consumer_mems", seed=0)
+    samples = device.measure(traj)
+    truth = truth_series(traj, samples)
+    est = Mekf(setup_for(device, scenario, use_mag=False)).process(samples.t, samples.gyro, samples.accel)
+    err = attitude_errors(est.q_wb, truth.q_wb)
+    second_minute = samples.t >= 60.0
+    # apparent tilt of the accelerometer: angle between the specific force and the true up, body axes
+    up_b = quat_rotate(quat_conjugate(truth.q_wb), np.array([0.0, 0.0, 1.0]))
+    f = truth.specific_force_b
+    tilt = np.arccos(np.clip(np.sum(up_b * f, axis=1) / np.linalg.norm(f, axis=1), -1, 1))
+    assert rmse_deg(err.inclination[second_minute]) < rmse_deg(tilt[second_minute])
+    z = np.zeros_like(traj.omega_b)
+    bias = load_device("consumer_mems", seed=0).measure(dataclasses.replace(traj, omega_b=z, alpha_b=z)).gyro
+    b_end = bias[-1000:].mean(axis=0)
+    # 6D: only the bias across the vertical is observable (gravity says nothing about heading drift);
+    # the manoeuvre tilts the body's z axis by at most ~35°, so its x and y are the observable ones
+    assert np.linalg.norm(est.gyro_bias[-1, :2] - b_end[:2]) < 0.5 * np.linalg.norm(b_end[:2])
+
+
+def test_navigation_fog_finds_north_from_earth_rate():
+    """6D, at rest, latitude known: the heading error is within 3σ of what the FOG's bias and noise
+    allow (sensors.gyrocompass.heading_uncertainty), and a consumer MEMS filter does not claim it."""
+    scenario = load_scenario("bench_static")
+    traj = scenario.simulate(duration=60.0)
+    device = load_device("navigation_fog", seed=3)
+    samples = device.measure(traj)
+    setup = setup_for(device, scenario)
+    assert not setup.use_mag and setup.latitude_rad is not None
+    est = Mekf(setup).process(samples.t, samples.gyro, samples.accel)
+    err = attitude_errors(est.q_wb, truth_series(traj, samples).q_wb)
+    n = setup.noise
+    sigma = heading_uncertainty(setup.latitude_rad, 60.0, bias=n.gyro_bias_sigma, noise_density=n.gyro_noise_density)
+    assert err.heading[-1] < 3 * sigma
+    assert np.sqrt(est.q_wb_covariance[-1, 2, 2]) < 3 * sigma
+    consumer = load_device("consumer_mems", seed=3)
+    c_est = Mekf(setup_for(consumer, scenario, use_mag=False)).process(*(lambda s: (s.t, s.gyro, s.accel))(consumer.measure(traj)))
+    assert np.sqrt(c_est.q_wb_covariance[-1, 2, 2]) > np.radians(20)  # knows it does not know
+
+
+def test_nan_dropped_and_uneven_samples():
+    """An ideal IMU with 5 % of samples dropped (uneven stamps) and 1 % NaN rows: the filter keeps to
+    the attitude (no NaN out, inclination within the tilt its initial averaging leaves, 1°)."""
+    scenario = load_scenario("rate_table_tumble")
+    traj = scenario.simulate(duration=30.0)
+    samples = load_device("ideal", seed=0).measure(traj)
+    truth = truth_series(traj, samples)
+    rng = np.random.default_rng(0)
+    keep = np.sort(rng.choice(len(samples.t), size=int(0.95 * len(samples.t)), replace=False))
+    keep[0] = 0
+    gyro, accel = samples.gyro[keep].copy(), samples.accel[keep].copy()
+    # a kept sample after a gap covers the whole gap: its rate is the mean over it (strapdown convention)
+    t = samples.t[keep]
+    nan = rng.choice(len(keep), size=len(keep) // 100, replace=False)
+    gyro[nan] = np.nan
+    accel[nan] = np.nan
+    setup = FilterSetup(rate_hz=float(1 / np.median(np.diff(t))), use_mag=False)
+    est = Mekf(setup).process(t, gyro, accel)
+    assert np.isfinite(est.q_wb).all()
+    err = attitude_errors(est.q_wb, truth.q_wb[keep])
+    assert rmse_deg(err.inclination) < 1.0
+
+
+def test_stamps_must_increase():
+    setup = FilterSetup(rate_hz=100.0, use_mag=False)
+    t = np.arange(10) / 100.0
+    t[5] = t[4]
+    g = np.zeros((10, 3))
+    a = np.tile([0.0, 0.0, 9.81], (10, 1))
+    with pytest.raises(ValueError, match="sample 5"):
+        Mekf(setup).process(t, g, a)
+
+
+def test_heading_update_never_touches_inclination():
+    """With a covariance that couples heading to tilt and to every bias axis, the heading gain has no
+    tilt rows and corrects the bias only along the body's vertical."""
+    rng = np.random.default_rng(1)
+    A = rng.standard_normal((6, 6))
+    P = A @ A.T + 6 * np.eye(6)
+    q = rng.standard_normal(4)
+    q /= np.linalg.norm(q)
+    K = np.empty(6)
+    kern.heading_gain(P, 0.01, q, K)
+    assert K[0] == 0.0 and K[1] == 0.0 and K[2] != 0.0
+    r = np.empty((3, 3))
+    kern.quat_to_matrix(q, r)
+    vertical_b = r[2]  # world up in body axes
+    assert np.allclose(np.cross(K[3:], vertical_b), 0.0, atol=1e-15)
+    before = P.copy()
+    kern.joseph_update(P, K, 2, 0.01)
+    assert np.all(np.linalg.eigvalsh(P) > 0) and np.allclose(P, P.T)
+    assert P[2, 2] < before[2, 2]
+
+
+def test_earth_rate_model_is_enu():
+    from pipelines.estimation.mekf import earth_rate_enu
+
+    w = earth_rate_enu(FilterSetup(rate_hz=1.0, latitude_rad=np.radians(52.5)))
+    assert w[0] == 0.0 and np.isclose(np.linalg.norm(w), EARTH_RATE)
+    assert np.isclose(np.arctan2(w[2], w[1]), np.radians(52.5))

@@ -1,0 +1,296 @@
+"""ROS 2 mode (``--ros2``): REP-2011 type hashes, rmw_zenoh key expressions and liveliness tokens, and
+``gyroemu stream --ros2`` -> ``gyroemu router`` -> ``gyroemu record --ros2`` between real processes.
+
+The reference hashes below are not computed here: they are the values ``rosidl_generator_c`` writes
+into the generated ``<type>__description.c`` files of the ROS 2 packages (for instance
+``sensor_msgs/msg/detail/imu__description.c``, ``sensor_msgs__msg__Imu__get_type_hash``, as shipped in
+the micro-ROS build of hpmicro/hpm_sdk, ``middleware/microros/kilted/include/...``; the same
+``RIHS01_7d9a00ff...`` is what rmw_zenoh publishers of ``sensor_msgs/msg/Imu`` put in their keys on
+Jazzy). gyroemu computes its hashes from the ``.msg`` texts; the test holds them to these values.
+
+Run alone with ``pytest tests/pipelines/test_ros2.py -n 0 -s``; the live test takes about 15 s.
+"""
+
+import json
+import os
+import struct
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+zenoh = pytest.importorskip("zenoh")
+
+from live_processes import free_port, procs  # noqa: E402,F401  (procs is a fixture)
+
+from pipelines import ros2_keys  # noqa: E402
+from pipelines.ros2_keys import (Ros2Error, data_key, domain_id, entity_token, gyroemu_topic,  # noqa: E402
+                                 node_token, parse_data_key, parse_definitions, qos_keyexpr, ros_topic,
+                                 type_description, type_hash)
+
+ROOT = Path(__file__).resolve().parents[2]
+
+# rosidl_generator_c's values (see the module's notes): type -> RIHS01 hash.
+PUBLISHED = {
+    "sensor_msgs/msg/Imu": "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b",
+    "sensor_msgs/msg/MagneticField": "RIHS01_e80f32f56a20486c9923008fc1a1db07bbb273cbbf6a5b3bfa00835ee00e4dff",
+    "std_msgs/msg/Header": "RIHS01_f49fb3ae2cf070f793645ff749683ac6b06203e41c891e17701b1cb597ce6a01",
+    "builtin_interfaces/msg/Time": "RIHS01_b106235e25a4c5ed35098aa0a61a3ee9c9b18d197f398b0e4206cea9acf9c197",
+    "geometry_msgs/msg/Quaternion": "RIHS01_8a765f66778c8ff7c8ab94afcc590a2ed5325a1d9a076ffff38fbce36f458684",
+    "geometry_msgs/msg/Vector3": "RIHS01_cc12fe83e4c02719f1ce8070bfd14aecd40f75a96696a67a2a1f37f7dbb0765d",
+}
+STRING_HASH = "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18"  # std_msgs/msg/String
+CHAR_HASH = "RIHS01_3ad2d04dd29ba19d04b16659afa3ccaedd691914b02a64e82e252f2fa6a586a9"    # std_msgs/msg/Char
+
+
+def test_type_hashes_equal_the_published_values():
+    """Imu, MagneticField and the types they reference, from gyroemu's own .msg texts; String and Char
+    from one-line definitions (``char`` is ``uint8`` in ROS 2: FieldType 3, not 13)."""
+    for name, expected in PUBLISHED.items():
+        assert type_hash(name) == expected, name
+    assert type_hash("std_msgs/msg/String", {"std_msgs/String": "string data\n"}) == STRING_HASH
+    assert type_hash("std_msgs/msg/Char", {"std_msgs/Char": "char data\n"}) == CHAR_HASH
+    imu = type_description("sensor_msgs/msg/Imu")
+    assert [t["type_name"] for t in imu["referenced_type_descriptions"]] == [
+        "builtin_interfaces/msg/Time", "geometry_msgs/msg/Quaternion", "geometry_msgs/msg/Vector3",
+        "std_msgs/msg/Header"]
+    assert imu["type_description"]["fields"][2] == {"name": "orientation_covariance", "type": {
+        "type_id": 59, "capacity": 9, "string_capacity": 0, "nested_type_name": ""}}  # DOUBLE (11) + ARRAY (48)
+
+
+def test_hash_depends_on_fields_only():
+    """Comments, blank lines, constants and default values do not change the hash; a field's name, its
+    type or an array's size does (each edit below would pass unnoticed by a hash of the wrong input)."""
+    base = "float64 x 0\nfloat64[9] c\nstring<=8 s\nint32[<=4] q\nuint8 K=3\n"
+    h = type_hash("p/msg/T", {"p/T": base})
+    assert type_hash("p/msg/T", {"p/T": "# hi\n\nfloat64 x 1.5  # default\nfloat64[9] c\nstring<=8 s\n"
+                                         "int32[<=4] q\nuint8 K=4\n"}) == h
+    for changed in ("float64 y\nfloat64[9] c\nstring<=8 s\nint32[<=4] q\n",
+                    "float32 x\nfloat64[9] c\nstring<=8 s\nint32[<=4] q\n",
+                    "float64 x\nfloat64[8] c\nstring<=8 s\nint32[<=4] q\n",
+                    "float64 x\nfloat64[9] c\nstring<=9 s\nint32[<=4] q\n",
+                    "float64 x\nfloat64[9] c\nstring<=8 s\nint32[] q\n"):
+        assert type_hash("p/msg/T", {"p/T": changed}) != h, changed
+    with pytest.raises(Ros2Error, match="no definition"):
+        type_hash("p/msg/U", {"p/U": "p/Missing m\n"})
+
+
+def test_hash_agrees_with_rosbags_for_every_ros2_type():
+    """An independent implementation (rosbags' ``hash_rihs01``), over every message type of its Jazzy
+    store, parsed from the ``.msg`` text rosbags generates: equal, except where rosbags maps ``char``
+    to FieldType CHAR (13) -- there gyroemu follows rosidl (``uint8``), whose Char hash is above."""
+    rosbags_typesys = pytest.importorskip("rosbags.typesys")
+    store = rosbags_typesys.get_typestore(rosbags_typesys.Stores.ROS2_JAZZY)
+    compared = uses_char = 0
+    for name in sorted(store.fielddefs):
+        if "/msg/" not in name:
+            continue
+        text = store.generate_msgdef(name, ros_version=2)[0]
+        ours = type_hash(name, parse_definitions(text, name))
+        if any(line.split(" ")[0].startswith("char") for line in text.splitlines()):
+            uses_char += 1
+            assert ours != store.hash_rihs01(name), name
+            continue
+        assert ours == store.hash_rihs01(name), name
+        compared += 1
+    print(f"\n{compared} types equal to rosbags' hash; {uses_char} with char fields differ as expected")
+    assert compared > 100 and uses_char >= 1
+
+
+def test_gyroemu_mcap_schema_gives_the_same_hash(tmp_path):
+    """The ``ros2msg`` schema gyroemu writes into MCAP (definition + MSG: sections) parses back to the
+    same hash, for Imu and for every raw type."""
+    from pipelines.messages import MESSAGE_TYPES
+
+    for name, mtype in MESSAGE_TYPES.items():
+        assert type_hash(name, parse_definitions(mtype.schema, name)) == type_hash(name), name
+
+
+def test_keys_and_tokens_follow_rmw_zenoh():
+    """Data keys ``<domain>/<topic>/<type>/<hash>`` and liveliness tokens with the 9 (node) and 13
+    (publisher) chunks rmw_zenoh's ``Entity::make`` parses, none empty; QoS chunk parts as its
+    ``keyexpr_to_qos`` splits them."""
+    imu = PUBLISHED["sensor_msgs/msg/Imu"]
+    assert ros_topic("imu0", "/raw/rate-gyro") == "/imu0/raw/rate_gyro"
+    assert gyroemu_topic("/imu0/raw/rate_gyro", "gyroemu_msgs/msg/RateGyroRaw") == ("imu0", "/raw/rate-gyro")
+    assert gyroemu_topic("/imu0/truth/imu", "sensor_msgs/msg/Imu") == ("imu0", "/truth/imu")
+    for bad in ("/raw/x.y", "/2d/imu"):
+        with pytest.raises(Ros2Error):
+            ros_topic("imu0", bad)
+    with pytest.raises(Ros2Error):
+        gyroemu_topic("/rosout", "rcl_interfaces/msg/Log")
+    key = data_key(7, "/imu0/imu", "sensor_msgs/msg/Imu", imu)
+    assert key == f"7/imu0/imu/sensor_msgs::msg::dds_::Imu_/{imu}"
+    parsed = parse_data_key(key)
+    assert (parsed.domain, parsed.topic, parsed.type_name, parsed.type_hash) == (7, "/imu0/imu", "sensor_msgs/msg/Imu", imu)
+    with pytest.raises(Ros2Error):
+        parse_data_key("gyroemu/imu0/imu")
+
+    zid = "8e7efefe973896f23b94768cad80842b"
+    node = node_token(0, zid, 0, "gyroemu_stream_1")
+    assert node == f"@ros2_lv/0/{zid}/0/0/NN/%/%/gyroemu_stream_1"
+    pub = entity_token("MP", 0, zid, 0, 3, "gyroemu_stream_1", "/imu0/imu", "sensor_msgs/msg/Imu", imu)
+    assert pub == (f"@ros2_lv/0/{zid}/0/3/MP/%/%/gyroemu_stream_1/%imu0%imu/sensor_msgs::msg::dds_::Imu_/"
+                   f"{imu}/::2,:,:,:,,")
+    assert len(node.split("/")) == 9 and len(pub.split("/")) == 13
+    assert all(node.split("/")) and all(pub.split("/"))
+    qos = pub.split("/")[-1].split(":")  # reliability, durability, history+depth, deadline, lifespan, liveliness
+    assert len(qos) == 6 and qos[2].split(",") == ["2", ""] and len(qos[5].split(",")) == 3
+    assert qos_keyexpr(reliability=ros2_keys.BEST_EFFORT, history=ros2_keys.KEEP_LAST, depth=5) == "2::,5:,:,:,,"
+    assert qos_keyexpr(history=ros2_keys.KEEP_LAST, depth=42) == "::,:,:,:,,"  # all rmw_zenoh's defaults
+
+    assert domain_id(None, {}) == 0 and domain_id(None, {"ROS_DOMAIN_ID": " 42 "}) == 42
+    assert domain_id(5, {"ROS_DOMAIN_ID": "42"}) == 5
+    for value, env, what in ((233, {}, "--domain"), (None, {"ROS_DOMAIN_ID": "x"}, "ROS_DOMAIN_ID")):
+        with pytest.raises(Ros2Error, match=what):
+            domain_id(value, env)
+
+
+def test_bad_ros2_usage_exits_2_naming_the_argument(tmp_path):
+    env = dict(os.environ, ROS_DOMAIN_ID="abc")
+    cases = [(["stream", "--scenario", "heavy_top", "--device", "consumer_mems", "--ros2", "--domain", "300"],
+              os.environ, "argument --domain"),
+             (["record", "--out", str(tmp_path / "x.mcap"), "--ros2"], env, "ROS_DOMAIN_ID"),
+             (["replay", str(tmp_path / "x.mcap"), "--domain", "3"], os.environ, "argument --domain: only with --ros2"),
+             (["stream", "--scenario", "heavy_top", "--device", "consumer_mems", "--ros2", "--device-name", "9x"],
+              os.environ, "argument --device-name")]
+    for args, environ, text in cases:
+        run = subprocess.run([sys.executable, "-m", "pipelines.cli", *args], cwd=ROOT, env=environ,
+                             capture_output=True, text=True, timeout=60)
+        assert run.returncode == 2 and text in run.stderr, (args, run.returncode, run.stderr)
+    assert not (tmp_path / "x.mcap").exists()
+
+
+def _client(endpoint: str):
+    config = zenoh.Config()
+    config.insert_json5("mode", '"client"')
+    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    return zenoh.open(config)
+
+
+def test_stream_router_record_in_ros2_mode(procs, tmp_path):
+    """``stream --ros2`` and ``record --ros2`` as clients of ``gyroemu router`` (three processes), with a
+    plain zenoh client beside them that watches the liveliness tokens and the data keys: the tokens
+    of one node and its four publishers appear (and go when the stream ends), the keys are rmw_zenoh's
+    with the published Imu hash, and the recording holds every message, byte for byte what the same
+    scenario, device and seed encode, on the plain topics, with the type hash in its channel metadata."""
+    duration, seed, name, domain = 4.0, 5, "ros", 17
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    procs.start("router", "router", "--listen", endpoint)
+    procs.wait_for("router", "listening")
+    plain = _client(endpoint)
+    try:
+        tokens = plain.liveliness().declare_subscriber(f"@ros2_lv/{domain}/**", zenoh.handlers.FifoChannel(256),
+                                                        history=True)
+        data = plain.declare_subscriber(f"{domain}/**", zenoh.handlers.FifoChannel(1 << 16))
+        procs.start("rec", "record", "--out", str(tmp_path / "r.mcap"), "--ros2", "--domain", str(domain),
+                    "--connect", endpoint, "--mode", "client", "--report", str(tmp_path / "r.json"))
+        procs.wait_for("rec", "subscribed")
+        procs.start("stream", "stream", "--scenario", "heavy_top", "--device", "consumer_mems", "--duration",
+                    str(duration), "--seed", str(seed), "--device-name", name, "--ros2", "--domain", str(domain),
+                    "--connect", endpoint, "--mode", "client")
+        assert procs.wait("stream", 120) == 0, procs.log("stream")
+        time.sleep(1.0)
+        assert procs.stop("rec") == 0, procs.log("rec")
+        events = []
+        while (sample := tokens.try_recv()) is not None:
+            events.append((str(sample.kind).split(".")[-1], str(sample.key_expr)))
+        keys: dict[str, list[int]] = {}
+        while (sample := data.try_recv()) is not None:
+            keys.setdefault(str(sample.key_expr), []).append(
+                struct.unpack_from("<q", sample.attachment.to_bytes())[0])
+    finally:
+        plain.close()
+    print("\n" + procs.log("stream") + procs.log("rec"))
+    n = int(round(duration * 1000))
+    imu = PUBLISHED["sensor_msgs/msg/Imu"]
+    expected_keys = {f"{domain}/{name}/imu/sensor_msgs::msg::dds_::Imu_/{imu}",
+                     f"{domain}/{name}/truth/imu/sensor_msgs::msg::dds_::Imu_/{imu}",
+                     f"{domain}/{name}/mag/sensor_msgs::msg::dds_::MagneticField_/"
+                     f"{PUBLISHED['sensor_msgs/msg/MagneticField']}",
+                     f"{domain}/{name}/raw/mems/gyroemu_msgs::msg::dds_::MemsRaw_/{type_hash('gyroemu_msgs/msg/MemsRaw')}"}
+    assert set(keys) == expected_keys
+    assert all(seqs == list(range(n)) for seqs in keys.values())  # the plain client saw every message in order
+
+    stream_tokens = [k for kind, k in events if kind == "PUT" and "/gyroemu_stream_" in k]
+    gone = {k for kind, k in events if kind == "DELETE"}
+    nodes = [k for k in stream_tokens if k.split("/")[5] == "NN"]
+    pubs = [k for k in stream_tokens if k.split("/")[5] == "MP"]
+    assert len(nodes) == 1 and len(pubs) == 4, events
+    zid = nodes[0].split("/")[2]
+    assert all(k.split("/")[2] == zid for k in pubs)
+    for k in pubs:  # the token's topic, type and hash are those of a data key
+        parts = k.split("/")
+        assert f"{domain}/{parts[9].replace('%', '/').strip('/')}/{parts[10]}/{parts[11]}" in expected_keys
+    assert set(stream_tokens) <= gone  # withdrawn when the stream ended
+    record_tokens = [k for kind, k in events if kind == "PUT" and "/gyroemu_record_" in k]
+    assert sum(k.split("/")[5] == "MS" for k in record_tokens) == 4  # one subscription per recorded topic
+
+    report = json.loads((tmp_path / "r.json").read_text())
+    rows = {r["topic"]: r for r in report["publishers"].values()}
+    assert sorted(rows) == sorted(f"{name}{t}" for t in ("/imu", "/mag", "/truth/imu", "/raw/mems"))
+    assert all((r["received"], r["first"], r["last"], r["missing"], r["duplicates"]) == (n, 0, n - 1, 0, 0)
+               for r in rows.values()), rows
+
+    from dynamics import load_scenario
+    from pipelines.mcap_io import mcap_channel_info, read_mcap, truth_series
+    from pipelines.stream import encode_run
+    from sensors import load_device
+
+    traj = load_scenario("heavy_top").simulate(duration=duration)
+    samples = load_device("consumer_mems", seed=seed).measure(traj)
+    encoded = encode_run(samples, truth_series(traj, samples))
+    from mcap.reader import make_reader
+
+    with open(tmp_path / "r.mcap", "rb") as f:
+        got: dict[str, list[bytes]] = {}
+        for _, channel, message in make_reader(f).iter_messages(log_time_order=True):
+            got.setdefault(channel.topic, []).append(message.data)
+    assert sorted(got) == sorted(encoded)
+    for topic, rows_ in encoded.items():
+        assert got[topic] == [bytes(r) for r in rows_], f"{topic}: payload bytes differ"
+    hashes = {c.topic: c.metadata.get("topic_type_hash") for c in mcap_channel_info(tmp_path / "r.mcap")}
+    assert hashes["/imu"] == hashes["/truth/imu"] == imu
+    log = read_mcap(tmp_path / "r.mcap")
+    np.testing.assert_array_equal(log.device.samples.gyro, samples.gyro)
+    assert procs.stop("router") == 0
+
+
+def test_replay_ros2_of_a_foreign_file(procs, tmp_path):
+    """``replay --ros2`` of someone else's bag (mcap_ros2 writer, no recorded hash): its Imu topic and its
+    String topic go out on rmw_zenoh keys with hashes computed from the file's schemas (equal to the
+    published values), bytes unchanged."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("_test_replay", Path(__file__).with_name("test_replay.py"))
+    helpers = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(helpers)
+    mcap_messages, write_foreign = helpers.mcap_messages, helpers.write_foreign
+
+    path = tmp_path / "foreign.mcap"
+    write_foreign(path, 200)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    config = zenoh.Config()
+    config.insert_json5("mode", '"peer"')
+    config.insert_json5("listen/endpoints", json.dumps([endpoint]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    session = zenoh.open(config)
+    try:
+        sub = session.declare_subscriber("0/**", zenoh.handlers.FifoChannel(1 << 16))
+        procs.start("replay", "replay", str(path), "--ros2", "--domain", "0", "--rate", "4", "--connect", endpoint)
+        assert procs.wait("replay", 60) == 0, procs.log("replay")
+        time.sleep(0.3)
+        got: dict[str, list[bytes]] = {}
+        while (sample := sub.try_recv()) is not None:
+            got.setdefault(str(sample.key_expr), []).append(sample.payload.to_bytes())
+    finally:
+        session.close()
+    print("\n" + procs.log("replay"))
+    imu_key = f"0/imu0/sensors/imu_raw/sensor_msgs::msg::dds_::Imu_/{PUBLISHED['sensor_msgs/msg/Imu']}"
+    text_key = f"0/imu0/rosout_text/std_msgs::msg::dds_::String_/{STRING_HASH}"
+    assert set(got) == {imu_key, text_key}
+    assert got[imu_key] == [m[2] for m in mcap_messages(path, "/sensors/imu_raw")]
+    assert got[text_key] == [m[2] for m in mcap_messages(path, "/rosout_text")]
