@@ -130,6 +130,8 @@ def test_sigint_completes_and_sigkill_leaves_readable_chunks(procs, tmp_path):
     for name in ("int", "kill"):
         procs.start(name, "record", "--out", str(tmp_path / f"{name}.mcap"), "--connect", endpoint)
     procs.wait_for("stream", "publishing")
+    for name in ("int", "kill"):  # a SIGINT before the recorder is up would only interrupt its start-up
+        procs.wait_for(name, "subscribed")
     time.sleep(3.0)
     assert procs.stop("int", signal.SIGINT) == 0, procs.log("int")
     procs.stop("kill", signal.SIGKILL)
