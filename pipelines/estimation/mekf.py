@@ -172,7 +172,8 @@ class MekfParams:
         p[kern.P_REST_ACCEL] = self.rest_accel
         p[kern.P_REST_TIME] = self.rest_time_s
         earth = EARTH_RATE if setup.latitude_rad is None else 0.0  # unmodelled Earth rate at rest
-        p[kern.P_REST_SIGMA] = np.hypot(self.rest_sigma, earth)
+        # floor: with a noiseless gyro and no bias uncertainty (the ideal device) S would be singular
+        p[kern.P_REST_SIGMA] = max(np.hypot(self.rest_sigma, earth), 1e-12)
         p[kern.P_USE_MAG] = 1.0 if setup.use_mag else 0.0
         p[kern.P_DECLINATION] = setup.declination_rad
         return p
@@ -277,6 +278,10 @@ def _gyrocompass_heading(t, gyro, accel, q_tilt, setup, params):
     still = (np.all(np.std(g, axis=0) < 3 * params.gyro_noise_density * np.sqrt(setup.rate_hz) + 1e-9)
              and np.std(np.linalg.norm(a, axis=1)) < params.rest_accel)
     if not (sigma < 20 * _DEG and still):
+        return None
+    # the data must show Earth's horizontal rate (not, say, a log of zeros): at least half of Ω cos φ
+    mean_g, up = g.mean(axis=0), a.mean(axis=0) / np.linalg.norm(a.mean(axis=0))
+    if np.linalg.norm(mean_g - (mean_g @ up) * up) < 0.5 * EARTH_RATE * np.cos(setup.latitude_rad):
         return None
     return gyrocompass(g, a).q_ws, sigma**2
 
