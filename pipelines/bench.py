@@ -557,9 +557,14 @@ class _Progress:
 
             self.bar = tqdm(total=total, file=sys.stderr, unit="run", dynamic_ncols=True, leave=False)
 
-    def step(self, text: str, n: int = 1) -> None:
+    def describe(self, text: str) -> None:
+        """Name the step about to run."""
         if self.bar is not None:
-            self.bar.set_description(text[:60])
+            self.bar.set_description(text[:70])
+
+    def step(self, n: int = 1) -> None:
+        """Count steps done."""
+        if self.bar is not None:
             self.bar.update(n)
 
     def close(self) -> None:
@@ -771,6 +776,7 @@ def _bench_sim(case: SimCase, item, filters, runs, seed, threshold_deg, batch_fn
         if first is None:
             first = run
         for spec in per_run:
+            bar.describe(f"{name}: {spec} run {r + 1}/{runs}")
             if r == 0:
                 _warm_up(spec, setup, run, six_d)
             res, errors, fname = _run_filter(spec, setup, run, six_d=six_d, threshold_deg=threshold_deg)
@@ -778,12 +784,13 @@ def _bench_sim(case: SimCase, item, filters, runs, seed, threshold_deg, batch_fn
                 results[spec] = FilterResult(filter=spec, name=fname, batched=False, runs=[])
                 _curve(results[spec], run.t, errors)
             results[spec].runs.append(res)
-            bar.step(f"{name}: {fname} run {r}")
+            bar.step()
         if batch_fn is not None:
             kept.append(run)
     if batch_fn is not None:
+        bar.describe(f"{name}: mekf, {len(kept)} runs batched")
         results["mekf"] = _bench_batched(batch_fn, setup, kept, six_d, threshold_deg)
-        bar.step(f"{name}: mekf batched", len(kept))
+        bar.step(len(kept))
     return CaseResult(name=name, kind="simulated", mode=mode, rate_hz=setup.rate_hz, samples=len(first.t),
                       duration_s=float(first.t[-1] - first.t[0]), runs=runs,
                       source={"scenario": case.scenario, "device": case.device, "duration_s": case.duration,
@@ -838,12 +845,13 @@ def _bench_log(item, filters, threshold_deg, bar) -> CaseResult:
     name, mode, setup, run, source, notes = item
     results = []
     for spec in filters:
+        bar.describe(f"{name}: {spec}")
         _warm_up(spec, setup, run, mode == "6D")
         res, errors, fname = _run_filter(spec, setup, run, six_d=mode == "6D", threshold_deg=threshold_deg)
         fr = FilterResult(filter=spec, name=fname, batched=False, runs=[res])
         _curve(fr, run.t, errors)
         results.append(fr)
-        bar.step(f"{name}: {fname}")
+        bar.step()
     return CaseResult(name=name, kind="log", mode=mode, rate_hz=setup.rate_hz, samples=len(run.t),
                       duration_s=float(run.t[-1] - run.t[0]), runs=1, source=source, filters=results, notes=notes)
 

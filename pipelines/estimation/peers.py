@@ -59,7 +59,8 @@ Initialisation, time steps, units, missing samples
   adapters pass µT.
 - A sample with a non-finite gyro holds the last estimate (the next sample's ``dt`` spans the gap);
   a non-finite accelerometer sample propagates the gyro only; a non-finite magnetometer sample in 9D
-  is a 6D update. Before the first usable sample the output is NaN.
+  is a 6D update (so a slower magnetometer, NaN between its samples, works; the start takes the
+  block's first field sample). Before the first usable sample the output is NaN.
 """
 
 from __future__ import annotations
@@ -167,13 +168,16 @@ class _AhrsPeer:
         dt_nominal = self.period
         for k in range(n):
             if self._q is None:
-                if not (finite_g[k] and finite_a[k]) or (mag is not None and not finite_m[k]):
+                if not (finite_g[k] and finite_a[k]):
                     continue  # not started: NaN
-                q0 = initial_attitude(accel[k], None if mag is None else mag[k])
+                # The field of this sample, or of the block's next one that has it (a slower magnetometer).
+                later = None if mag is None else np.flatnonzero(finite_m[k:])
+                m0 = mag[k + later[0]] if later is not None and len(later) else None
+                q0 = initial_attitude(accel[k], m0)
                 if q0 is None:
                     continue
                 self._q = quat_multiply(quat_conjugate(self._to_enu), q0)
-                self._start(self._q, accel[k], None if mag is None else mag[k])
+                self._start(self._q, accel[k], m0)
                 self._t_last = t[k]
             elif finite_g[k]:
                 dt = t[k] - self._t_last
@@ -201,7 +205,7 @@ class Madgwick(_AhrsPeer):
 
         self._f = _Madgwick(frequency=self.setup.rate_hz)
         # The gain was chosen for the architecture: gain_marg with a magnetometer, gain_imu without.
-        self._f.gain = self._f.gain_marg if mag is not None else self._f.gain_imu
+        self._f.gain = self._f.gain_marg if self.setup.use_mag else self._f.gain_imu
 
     def _step(self, q, gyro, accel, mag, dt):
         if accel is None:
@@ -258,6 +262,8 @@ class AhrsEkf(_AhrsPeer):
             W = 0.5 * dt * np.r_[[-q[1:]], q[0] * np.identity(3) + _skew(q[1:])]
             f.P = F @ f.P @ F.T + f.g_noise * W @ W.T
             return q_t / np.linalg.norm(q_t)
+        if self._mag_mode is None:  # started without a field: 6D throughout
+            mag = None
         if mag is None and self._mag_mode is not None:
             f.mag = None
             try:
@@ -273,7 +279,6 @@ def _skew(v):
 
 def _import_vqf():
     try:
-        import vqf  # noqa: F401
         from vqf import VQF
     except ImportError as exc:
         raise VqfUnavailable("the optional 'vqf' package is not installed (pip install 'gyroemu[vqf]' "

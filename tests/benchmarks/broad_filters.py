@@ -9,6 +9,10 @@ peers) with one global parameter set: its defaults, the sample rate from the fil
 dataset's own (README of the folder): RMSE in degrees over the ``movement`` samples, NaN reference rows
 ignored. The same figures come from ``gyroemu import broad TRIAL.hdf5 --out trial.mcap`` then
 ``gyroemu bench --log trial.mcap [--6d]``.
+
+``vqf`` is the online filter (:class:`vqf.VQF`, causal, as a live filter must be). ``--offline-vqf`` adds
+the rows of ``vqf.offlineVQF`` (acausal: it also filters backwards over the whole trial), called
+directly with its defaults, the figures usually quoted for VQF on BROAD; it is not a gyroemu filter.
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--filter", action="append", default=None, help="filters (default: every available one)")
     parser.add_argument("--trials", nargs="+", default=None, help="trial numbers, e.g. 02 07 (default: all)")
+    parser.add_argument("--offline-vqf", action="store_true", help="also vqf.offlineVQF, called directly")
     args = parser.parse_args()
     files = sorted(BROAD_DIR.glob("*.hdf5"))
     if args.trials:
@@ -44,6 +49,10 @@ def main() -> int:
         print(f"no BROAD trials in {BROAD_DIR}", file=sys.stderr)
         return 2
     filters = args.filter or available_filters()
+    if args.offline_vqf:
+        from vqf import offlineVQF
+
+        filters = filters + ["offlineVQF (direct)"]
     for name, why in unavailable_filters().items():
         print(f"({name} left out: {why})")
     results = {name: [] for name in filters}  # name -> rows (total, heading, inclination, inclination 6D)
@@ -56,10 +65,14 @@ def main() -> int:
             fs = float(f.attrs["sampling_rate"])
         t = np.arange(len(gyro)) / fs
         for name in filters:
-            e9 = attitude_errors(make_filter(name, FilterSetup(rate_hz=fs, use_mag=True)).process(
-                t, gyro, accel, mag * 1e-6).q_wb, ref)
-            e6 = attitude_errors(make_filter(name, FilterSetup(rate_hz=fs, use_mag=False)).process(
-                t, gyro, accel).q_wb, ref)
+            if name == "offlineVQF (direct)":
+                out = offlineVQF(gyro, accel, mag, 1.0 / fs)
+                e9, e6 = attitude_errors(out["quat9D"], ref), attitude_errors(out["quat6D"], ref)
+            else:
+                e9 = attitude_errors(make_filter(name, FilterSetup(rate_hz=fs, use_mag=True)).process(
+                    t, gyro, accel, mag * 1e-6).q_wb, ref)
+                e6 = attitude_errors(make_filter(name, FilterSetup(rate_hz=fs, use_mag=False)).process(
+                    t, gyro, accel).q_wb, ref)
             row = (rmse_deg(e9.total, movement), rmse_deg(e9.heading, movement), rmse_deg(e9.inclination, movement),
                    rmse_deg(e6.inclination, movement))
             results[name].append(row)
