@@ -31,14 +31,21 @@ is shifted by k times the file's span plus one mean message interval, so deadlin
 (the payloads, header stamps included, are the recorded bytes every pass).
 
 A reader thread walks the file a chunk at a time (:func:`pipelines.mcap_io.iter_mcap_batches`),
-turns each chunk's messages into ``(deadline offset, key, payload)`` batches and queues them (a bounded
-queue of ``READ_AHEAD`` batches), so decompressing a chunk happens while the publisher waits for its
-deadlines, never on its schedule; memory stays bounded by the queue, whatever the file's size.
+turns each chunk's messages into batches of ``BATCH`` ``(deadline offset, key, payload)`` and queues
+them (a bounded queue of ``READ_AHEAD`` batches), so decompressing a chunk happens while the
+publisher waits for its deadlines, never on its schedule; memory stays bounded by the queue, whatever
+the file's size. Batches are small because the publisher frees each spent one (a list of tuples of
+bytes: one deallocation per object, holding the GIL) just after a send: 256 messages take ~50 us,
+a whole 1 MiB chunk's 4000 took ~0.7 ms, long enough to make the next deadline late. The reader
+frees its own per-chunk objects a slice at a time for the same reason. How the publisher waits and
+keeps the reader from delaying it: :class:`pipelines.zenoh_io.Timing`.
 
 Before the clock starts the file is validated with :func:`pipelines.mcap_io.read_mcap` (not MCAP,
 corrupt, truncated before its first chunk, no ``sensor_msgs/msg/Imu`` message: a ``LogError`` naming the
-file), and the replay waits (``--wait``, default 10 s) until every key has a subscriber, as
-``gyroemu stream`` does. The input is only ever opened for reading.
+file), the replay waits (``--wait``, default 10 s) until every key has a subscriber, as
+``gyroemu stream`` does, and then until the reader has filled its queue (at most 10 s more): its
+start-up, competing for the GIL with the first deadlines, made them up to 15 ms late. The input is
+only ever opened for reading.
 """
 
 from __future__ import annotations
@@ -54,9 +61,10 @@ import warnings
 from .mcap_io import LogWarning, iter_mcap_batches, mcap_channel_info, mcap_channels, read_mcap
 from .zenoh_io import PacedPublisher, key_to_topic, open_session, session_config, topic_to_key
 
-__all__ = ["topic_keys", "ros2_topic_keys", "ReadAhead", "run_replay", "READ_AHEAD"]
+__all__ = ["topic_keys", "ros2_topic_keys", "ReadAhead", "run_replay", "READ_AHEAD", "BATCH"]
 
-READ_AHEAD = 8  # decoded chunk batches queued ahead of the publisher
+READ_AHEAD = 64  # batches queued ahead of the publisher
+BATCH = 256  # messages per batch: the publisher frees a spent batch (~50 us for 256) right after a send
 _ROLE = re.compile(r"^(?P<prefix>(/[^/]+)??)(?P<role>/imu|/mag|/truth/imu|/estimate/imu|/raw/[^/]+)$")
 
 
@@ -118,14 +126,15 @@ def ros2_topic_keys(keys: dict[str, str], channels, ros) -> tuple[dict[str, str]
 
 
 class ReadAhead(threading.Thread):
-    """Reads the file in a thread and queues ``[(deadline offset ns, key, payload), ...]`` batches (one
-    per chunk); ``None`` ends the stream, an exception object is raised by :meth:`messages`."""
+    """Reads the file in a thread and queues ``[(deadline offset ns, key, payload), ...]`` batches (of
+    at most ``BATCH``); ``None`` ends the stream, an exception object is raised by :meth:`batches`."""
 
     def __init__(self, path, keys: dict[str, str], rate: float, loop: bool, depth: int = READ_AHEAD):
         super().__init__(name="replay-read-ahead", daemon=True)
         self.path, self.keys, self.rate, self.loop = path, keys, float(rate), loop
         self.queue: queue.Queue = queue.Queue(depth)
         self.stopping = threading.Event()
+        self.ready = threading.Event()  # set once the queue is full (or the file read): start the clock then
         self.passes = 0
 
     def _put(self, item) -> bool:
@@ -134,6 +143,7 @@ class ReadAhead(threading.Thread):
                 self.queue.put(item, timeout=0.1)
                 return True
             except queue.Full:
+                self.ready.set()
                 continue
         return False
 
@@ -158,8 +168,11 @@ class ReadAhead(threading.Thread):
                             previous = m.log_time
                         items.append((round((m.log_time + shift) / rate), keys[m.topic], m.data))
                     last = batch[-1].log_time
-                    if not self._put(items):
-                        return
+                    while batch:  # free the McapMessage tuples a slice at a time: a deallocation holds
+                        del batch[-BATCH:]  # the GIL throughout, and 4000 at once take ~0.5 ms
+                    for start in range(0, len(items), BATCH):
+                        if not self._put(items[start:start + BATCH]):
+                            return
                 self.passes += 1
                 if not self.loop or pass_first is None:
                     break
@@ -169,10 +182,11 @@ class ReadAhead(threading.Thread):
         except BaseException as e:  # handed to the publishing thread
             self._put(e)
         finally:
+            self.ready.set()
             self._put(None)
 
     def batches(self, stop=lambda: False):
-        """The queued batches, one list of ``(deadline offset ns, key, payload)`` per chunk (blocks
+        """The queued batches, lists of ``(deadline offset ns, key, payload)`` in order (blocks
         while the reader is behind; ``stop()`` is polled every 0.1 s meanwhile)."""
         while True:
             try:
@@ -252,6 +266,11 @@ def run_replay(*, path, rate: float = 1.0, loop: bool = False, topics=None, devi
         reader.start()  # fills its queue while we wait for subscribers
         if wait_s > 0 and not publisher.wait_for_subscribers(wait_s, stop=lambda: bool(stopping)):
             print(f"replay: no subscriber on every key after {wait_s:g} s: publishing anyway", file=out)
+        # The reader's start-up (imports, the first chunks) would compete with the first deadlines for
+        # the GIL: start the clock once its queue is full (at most 10 s from here).
+        end = time.monotonic() + 10.0
+        while not reader.ready.wait(0.1) and not stopping and time.monotonic() < end:
+            pass
         print("replay: publishing", file=out, flush=True)
         stop = lambda: bool(stopping)  # noqa: E731
         report = publisher.run_schedule(reader.batches(stop), stop=stop)

@@ -84,6 +84,7 @@ __all__ = [
     "parse_definitions",
     "type_description",
     "type_hash",
+    "is_type_hash",
     "dds_type_name",
     "ros_type_name",
     "ros_topic",
@@ -95,6 +96,8 @@ __all__ = [
     "node_token",
     "entity_token",
     "Ros2Node",
+    "node_name",
+    "DataKey",
 ]
 
 ADMIN_SPACE = "@ros2_lv"

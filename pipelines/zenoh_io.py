@@ -32,6 +32,15 @@ file (if any) is loaded as is, then the flags override its ``connect/endpoints``
 and ``mode``; without a config file multicast scouting stays off (gossip on), so a deployment is what
 the flags say, e.g. ``--connect tcp/router-host:7447`` to go through a router.
 
+Pacing
+------
+:class:`PacedPublisher` sends on absolute deadlines (``t0 + k / rate``, or each message's own), never a
+sleep per sample, so its error does not accumulate. How it waits for a deadline is a :class:`Timing`:
+:data:`PRECISE` (the default: timer slack 1 ns, sleep to 300 us before the deadline then spin on the
+clock, a 50 us GIL switch interval and the garbage collector paused while the run lasts; its notes
+give the measured reasons) or :data:`SLEEP_ONLY` (the former behaviour, the benchmarks' baseline).
+ROS 2 key expressions and liveliness tokens (``--ros2``) are :mod:`pipelines.ros2_keys`'.
+
 Sources: zenoh-python 1.x API (``zenoh.Config.insert_json5``, ``Session.declare_publisher``,
 ``CongestionControl.BLOCK``, ``handlers.FifoChannel``); the zenoh DEFAULT_CONFIG.json5 (listen, connect,
 scouting keys); rmw_zenoh design notes (attachment layout).
@@ -231,8 +240,9 @@ class Timing:
         Stop sleeping this long (s) before a deadline and spin on the monotonic clock for the rest;
         0: sleep to the deadline itself.
     switch_interval_s : float or None
-        Python's GIL switch interval (s) while the run lasts (``sys.setswitchinterval``); None: leave
-        it (Python's default is 5 ms).
+        Python's GIL switch interval (s) while the run lasts (``sys.setswitchinterval``): how long the
+        publisher, woken up, waits for another thread to hand the GIL over. None: leave it (Python's
+        default is 5 ms).
     quiet_gc : bool
         Freeze the objects alive when the run starts out of the garbage collector's reach and turn
         automatic collection off until the run ends (then collect once).
@@ -257,10 +267,20 @@ a publisher that simply sleeps to each deadline is late by
   core at 1 kHz, 0 between deadlines further apart than that).
 - ~1 ms at the 99th percentile, up to 5 ms: the GIL. Another Python thread of the process (replay's
   read-ahead, decoding a chunk) holds it when the publisher wakes, and gives it up only when the
-  switch interval (5 ms by default) expires. An interval of 50 us bounds that wait.
-- milliseconds, now and then: a full garbage collection walking every object of the process
-  (numpy, zenoh, the queued messages). The hot path makes no reference cycles, so the collector is
-  stopped for the run (the objects of the set-up frozen out of its reach) and run once at the end.
+  switch interval (5 ms by default) expires. At 50 us the publisher, woken 300 us before its
+  deadline, has the GIL back well before it. (The other thread can still take it back for 50 us during
+  the spin. A longer interval for the spin alone would not stop that: the other thread, forced out
+  as the publisher wakes, asks again at once, before the publisher could lengthen the interval, takes
+  the GIL back in the spin, and the publisher would then wait out the long interval.)
+- up to 0.3 s, now and then: a full garbage collection, run by whichever thread allocates (replay's
+  reader allocates a tuple per message), walking every object of the process while holding the GIL.
+  The hot path makes no reference cycles, so the collector is stopped for the run (the objects of the
+  set-up frozen out of its reach) and run once at the end.
+
+What remains is the machine's: a bare loop of these waits, with no other thread and no zenoh, still
+sees stalls of 1-4 ms a few times a second on this VM (every 512 ms at times), and under load from
+other processes (a load average above the core count) the scheduler's time slices of several ms
+dominate every figure; nothing inside the process removes either.
 """
 
 SLEEP_ONLY = Timing(spin_s=0.0, switch_interval_s=None, quiet_gc=False, timer_slack_ns=None)

@@ -294,3 +294,51 @@ def test_replay_ros2_of_a_foreign_file(procs, tmp_path):
     assert set(got) == {imu_key, text_key}
     assert got[imu_key] == [m[2] for m in mcap_messages(path, "/sensors/imu_raw")]
     assert got[text_key] == [m[2] for m in mcap_messages(path, "/rosout_text")]
+
+
+class _Bytes:
+    def __init__(self, data):
+        self.data = data
+
+    def to_bytes(self):
+        return self.data
+
+
+class _Sample:
+    """What the recorder reads of a zenoh sample: key expression, payload, attachment."""
+
+    def __init__(self, key, payload, attachment):
+        self.key_expr, self.payload, self.attachment = key, _Bytes(payload), _Bytes(attachment)
+
+
+def test_recorder_maps_ros2_keys_back_to_topics(tmp_path):
+    """Without processes: a raw topic's kind comes back from its type (``rate_gyro`` -> ``rate-gyro``),
+    the type hash goes into the channel metadata, the schema is the key's type, and a key of a
+    one-token topic (``/rosout``) or of another form is skipped, counted."""
+    import numpy as np
+
+    from pipelines.mcap_io import mcap_channel_info
+    from pipelines.messages import IMU, RAW_MESSAGE_TYPES
+    from pipelines.record import Recorder, ros2_key
+    from pipelines.zenoh_io import pack_attachment
+
+    raw = RAW_MESSAGE_TYPES["rate-gyro"]
+    raw_hash = type_hash(raw.name)
+    imu_payload = bytes(IMU.encode(np.array([1_000_000_000]), "dev")[0])
+    raw_payload = bytes(raw.encode(np.array([1_000_000_000]), "dev", {"gimbal_angle_rad": [[0.1, 0.2, 0.3]]})[0])
+    gid = bytes(range(16))
+    recorder = Recorder(tmp_path / "r.mcap", parse_key=ros2_key)
+    recorder.add(_Sample(data_key(0, "/dev/imu", IMU.name, PUBLISHED[IMU.name]), imu_payload,
+                         pack_attachment(0, 1, gid)))
+    recorder.add(_Sample(data_key(0, ros_topic("dev", "/raw/rate-gyro"), raw.name, raw_hash), raw_payload,
+                         pack_attachment(0, 1, bytes(16))))
+    recorder.add(_Sample(f"0/rosout/rcl_interfaces::msg::dds_::Log_/{PUBLISHED[IMU.name]}", imu_payload,
+                         pack_attachment(0, 1, gid)))
+    recorder.add(_Sample("gyroemu/dev/imu", imu_payload, pack_attachment(1, 1, gid)))
+    recorder.close()
+    assert (recorder.messages, recorder.skipped) == (2, 2)
+    channels = {c.topic: c for c in mcap_channel_info(tmp_path / "r.mcap")}
+    assert sorted(channels) == ["/imu", "/raw/rate-gyro"]
+    assert channels["/raw/rate-gyro"].schema_name == raw.name
+    assert channels["/raw/rate-gyro"].metadata["topic_type_hash"] == raw_hash
+    assert channels["/imu"].metadata["topic_type_hash"] == PUBLISHED[IMU.name]
