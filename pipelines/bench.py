@@ -600,6 +600,7 @@ def _sim_run(traj, device, seed) -> _Run:
 
 def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, list[str]]]:
     """The devices of a log to bench: (name, mode, setup, run, source, notes) each."""
+    from .estimate import check_samples
     from .estimation.setup import setup_from_metadata
     from .mcap_io import read_mcap
 
@@ -626,23 +627,11 @@ def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, li
         s = dev.samples
         t = np.asarray(s.t, dtype=float)
         label = path.name if len(log.devices) == 1 else f"{path.name}:{name}"
-        if len(t) < 2:
-            raise BenchError(f"device '{name}' has {len(t)} IMU sample(s): too few to run a filter", file=path)
+        note = check_samples(path, name, t, s.gyro, s.accel)  # LogError: too few, stamps, all NaN
+        if note:
+            warnings.warn(f"{path}: {note}", BenchWarning, stacklevel=3)
+            notes.append(note)
         steps = np.diff(t)
-        bad = np.flatnonzero(~(steps > 0))
-        if len(bad):
-            k = int(bad[0]) + 1
-            raise BenchError(f"IMU stamps of device '{name}' are not increasing: sample {k} at {t[k]:.9f} s follows "
-                             f"{t[k - 1]:.9f} s ({len(bad)} such steps)", file=path)
-        finite_imu = np.isfinite(s.gyro).all(axis=1) & np.isfinite(s.accel).all(axis=1)
-        if not finite_imu.any():
-            raise BenchError(f"every IMU sample of device '{name}' holds NaN", file=path)
-        if not finite_imu.all():
-            k = int((~finite_imu).sum())
-            msg = (f"{path}: {k} of {len(t)} IMU samples of device '{name}' hold NaN; they are passed to the filters "
-                   "as they are (the built-in filters hold their estimate over them)")
-            warnings.warn(msg, BenchWarning, stacklevel=3)
-            notes.append(msg.split(": ", 1)[1])
         has_mag = bool(np.isfinite(s.mag).all(axis=1).any())
         mode = "9D" if has_mag and not case.six_d else "6D"
         # Truth at the samples' stamps (nearest within a quarter of a sample interval).

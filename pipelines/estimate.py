@@ -30,18 +30,25 @@ class EstimateSummary:
     devices: list
 
 
-def check_samples(path, name: str, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray) -> None:
-    """Refuse data a filter cannot run on, naming the file: stamps that do not increase. NaN samples
-    are usable (a filter skips them) and only warned about."""
-    dt = np.diff(t)
-    if len(dt) and not np.all(dt > 0):
-        k = int(np.argmax(~(dt > 0))) + 1
-        raise LogError(f"device {name}: stamps do not increase at sample {k} ({t[k - 1]!r} s, then {t[k]!r} s)",
-                       file=path)
-    bad = ~np.isfinite(gyro).all(axis=1) | ~np.isfinite(accel).all(axis=1)
-    if bad.any():
-        warnings.warn(f"{path}: device {name}: {int(bad.sum())} of {len(t)} samples hold NaN; the filter "
-                      "skips them (a NaN gyro sample holds the last rate)", UserWarning, stacklevel=3)
+def check_samples(path, name: str, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray) -> str | None:
+    """Refuse samples a filter cannot run on, naming the file (:class:`LogError`): fewer than two,
+    stamps that do not increase, or NaN everywhere. Some NaN samples are usable (the filters skip
+    them): returns a note saying how many, None when there are none."""
+    t = np.asarray(t, dtype=float)
+    if len(t) < 2:
+        raise LogError(f"device '{name}' has {len(t)} IMU sample(s): too few to run a filter", file=path)
+    bad = np.flatnonzero(~(np.diff(t) > 0))
+    if len(bad):
+        k = int(bad[0]) + 1
+        raise LogError(f"IMU stamps of device '{name}' are not increasing: sample {k} at {t[k]:.9f} s follows "
+                       f"{t[k - 1]:.9f} s ({len(bad)} such steps)", file=path)
+    finite = np.isfinite(gyro).all(axis=1) & np.isfinite(accel).all(axis=1)
+    if not finite.any():
+        raise LogError(f"every IMU sample of device '{name}' holds NaN", file=path)
+    if finite.all():
+        return None
+    return (f"{int((~finite).sum())} of {len(t)} IMU samples of device '{name}' hold NaN; they are passed to the "
+            "filters as they are (the built-in filters hold their estimate over them)")
 
 
 def rate_of(t: np.ndarray) -> float:
@@ -49,7 +56,7 @@ def rate_of(t: np.ndarray) -> float:
     return 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 1.0
 
 
-def estimate_series(flt, t, estimate: Estimate, gyro) -> ImuSeries:
+def estimate_series(t, estimate: Estimate, gyro) -> ImuSeries:
     """The ``/estimate/imu`` content of an estimate: attitude, covariance, bias-corrected rate."""
     rate = gyro - estimate.gyro_bias if estimate.gyro_bias is not None else None
     return ImuSeries(t=t, q_wb=estimate.q_wb, omega_b=rate, q_wb_covariance=estimate.q_wb_covariance)
@@ -65,7 +72,9 @@ def estimate_log(path, out, *, filter_name: str = "mekf", use_mag: bool | None =
     recordings, done = [], []
     for name, dev in log.devices.items():
         samples = dev.samples
-        check_samples(path, name, samples.t, samples.gyro, samples.accel)
+        note = check_samples(path, name, samples.t, samples.gyro, samples.accel)
+        if note:
+            warnings.warn(f"{path}: {note}", UserWarning, stacklevel=2)
         nine = samples.has_mag if use_mag is None else (use_mag and samples.has_mag)
         setup = setup_from_metadata(dev.metadata, rate_of(samples.t), use_mag=nine)
         flt = make_filter(filter_name, setup)
@@ -76,7 +85,7 @@ def estimate_log(path, out, *, filter_name: str = "mekf", use_mag: bool | None =
                  if k not in ("version", "seed", "scenario", "device", "device_name", "topic_prefix")}
         extra["estimate_filter"] = getattr(flt, "name", filter_name)
         recordings.append(Recording(
-            samples=samples, truth=dev.truth, estimate=estimate_series(flt, samples.t, est, samples.gyro),
+            samples=samples, truth=dev.truth, estimate=estimate_series(samples.t, est, samples.gyro),
             device=meta.get("device") or None, seed=int(meta["seed"]) if meta.get("seed") else None,
             movement=dev.movement, metadata=extra, stamp_ns=dev.stamp_ns))
         done.append((name, len(samples), getattr(flt, "name", filter_name), nine))

@@ -117,7 +117,7 @@ class LiveEstimator:
             self._t0_ns = int(stamp_ns[0])
         t_rel = (stamp_ns - self._t0_ns) * 1e-9
         estimate = self.flt.process(t_rel, gyro, accel, field)
-        series = estimate_series(self.flt, stamp_ns * 1e-9, estimate, gyro)
+        series = estimate_series(stamp_ns * 1e-9, estimate, gyro)
         from .mcap_io import BODY_FRAME, _series_fields
 
         rows = IMU.encode(stamp_ns, BODY_FRAME, _series_fields(series))

@@ -31,7 +31,10 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
+from scipy.spatial.transform import Rotation
+
 from dynamics.earth import EARTH_RATE
+from dynamics.rotation import quat_from_rotvec, quat_multiply, quat_rotate
 from . import mekf_kernels as kern
 from .protocol import Estimate, FilterSetup
 
@@ -186,34 +189,6 @@ def earth_rate_enu(setup: FilterSetup) -> np.ndarray:
     return EARTH_RATE * np.array([0.0, np.cos(setup.latitude_rad), np.sin(setup.latitude_rad)])
 
 
-def _quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The shortest rotation (w, x, y, z) turning unit vector ``a`` onto unit vector ``b``."""
-    c = float(a @ b)
-    axis = np.cross(a, b)
-    if c < -1.0 + 1e-12:  # opposite: any perpendicular axis
-        perp = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
-        return np.concatenate([[0.0], perp / np.linalg.norm(perp)])
-    q = np.concatenate([[1.0 + c], axis])
-    return q / np.linalg.norm(q)
-
-
-def _about_z(angle: float) -> np.ndarray:
-    return np.array([np.cos(angle / 2), 0.0, 0.0, np.sin(angle / 2)])
-
-
-def _mul(p, q):
-    w1, x1, y1, z1 = p
-    w2, x2, y2, z2 = q
-    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
-
-
-def _matrix(q):
-    r = np.empty((3, 3))
-    kern.quat_to_matrix(np.asarray(q, dtype=float), r)
-    return r
-
-
 @dataclass
 class InitialState:
     """Where a run starts: attitude, bias, covariance, and the references it learned."""
@@ -233,16 +208,17 @@ def initial_state(t, gyro, accel, mag, setup: FilterSetup, params: MekfParams) -
     a_first = np.einsum("kij,kj->ki", to_first, accel[:n])
     a = np.nanmean(a_first, axis=0) if np.isfinite(a_first).any() else np.array([0.0, 0.0, 9.81])
     gravity = float(np.linalg.norm(a)) or 9.81
-    q = _quat_between(a / gravity, np.array([0.0, 0.0, 1.0]))
+    # the shortest rotation taking the measured up (body axes) onto the world's up
+    q = Rotation.align_vectors([[0.0, 0.0, 1.0]], [a])[0].as_quat(canonical=True, scalar_first=True)
     heading_var = np.pi**2  # 6D without Earth rate: heading unknown
     slow = np.zeros(kern.S_SIZE)
     slow[kern.S_GRAVITY] = float(np.nanmean(np.linalg.norm(accel[:n], axis=1))) if np.isfinite(accel[:n]).any() else 9.81
     m_first = np.einsum("kij,kj->ki", to_first, mag[:n]) if mag is not None else None
     if setup.use_mag and m_first is not None and np.isfinite(m_first).all(axis=1).any():
-        m_w = _matrix(q) @ np.nanmean(m_first, axis=0)
+        m_w = quat_rotate(q, np.nanmean(m_first, axis=0))
         # rotate about up so that the field's azimuth atan2(m_x, m_y) becomes the declination
         azimuth = np.arctan2(m_w[0], m_w[1])
-        q = _mul(_about_z(azimuth - setup.declination_rad), q)
+        q = quat_multiply(quat_from_rotvec([0.0, 0.0, azimuth - setup.declination_rad]), q)
         horizontal = np.hypot(m_w[0], m_w[1])
         slow[kern.S_MAG_NORM] = np.linalg.norm(m_w)
         slow[kern.S_MAG_DIP] = np.arctan2(-m_w[2], horizontal)

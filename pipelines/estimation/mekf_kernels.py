@@ -79,39 +79,36 @@ def quat_to_matrix(q, r):
 
 
 @numba.njit(cache=True)
-def rotate_body(q, v, phi_x, phi_y, phi_z):
-    """q ← q ⊗ exp(φ/2) for a body-frame rotation vector φ (rad), renormalised."""
+def _half_turn(phi_x, phi_y, phi_z):
+    """exp(φ/2) = (cos |φ|/2, sin(|φ|/2) φ/|φ|) of a rotation vector φ (rad), as (w, x, y, z)."""
     angle = math.sqrt(phi_x * phi_x + phi_y * phi_y + phi_z * phi_z)
-    if angle > 1e-12:
-        s = math.sin(0.5 * angle) / angle
-    else:
-        s = 0.5 - angle * angle / 48.0
-    c = math.cos(0.5 * angle)
-    dx, dy, dz = phi_x * s, phi_y * s, phi_z * s
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    v[0] = w * c - x * dx - y * dy - z * dz
-    v[1] = w * dx + x * c + y * dz - z * dy
-    v[2] = w * dy - x * dz + y * c + z * dx
-    v[3] = w * dz + x * dy - y * dx + z * c
-    n = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2 + v[3] ** 2)
-    for i in range(4):
-        q[i] = v[i] / n
+    s = math.sin(0.5 * angle) / angle if angle > 1e-12 else 0.5 - angle * angle / 48.0
+    return math.cos(0.5 * angle), phi_x * s, phi_y * s, phi_z * s
+
+
+@numba.njit(cache=True)
+def _set_product(q, aw, ax, ay, az, bw, bx, by, bz):
+    """q ← a ⊗ b (Hamilton), renormalised."""
+    w = aw * bw - ax * bx - ay * by - az * bz
+    x = aw * bx + ax * bw + ay * bz - az * by
+    y = aw * by - ax * bz + ay * bw + az * bx
+    z = aw * bz + ax * by - ay * bx + az * bw
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    q[0], q[1], q[2], q[3] = w / n, x / n, y / n, z / n
+
+
+@numba.njit(cache=True)
+def rotate_body(q, phi_x, phi_y, phi_z):
+    """q ← q ⊗ exp(φ/2) for a body-frame rotation vector φ (rad): the strapdown step."""
+    c, dx, dy, dz = _half_turn(phi_x, phi_y, phi_z)
+    _set_product(q, q[0], q[1], q[2], q[3], c, dx, dy, dz)
 
 
 @numba.njit(cache=True)
 def rotate_world(q, phi):
     """q ← exp(φ/2) ⊗ q for a world-frame rotation vector φ (rad): the error-state injection."""
-    angle = math.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
-    s = math.sin(0.5 * angle) / angle if angle > 1e-12 else 0.5
-    c = math.cos(0.5 * angle)
-    dw, dx, dy, dz = c, phi[0] * s, phi[1] * s, phi[2] * s
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    a = dw * w - dx * x - dy * y - dz * z
-    b = dw * x + dx * w + dy * z - dz * y
-    cc = dw * y - dx * z + dy * w + dz * x
-    d = dw * z + dx * y - dy * x + dz * w
-    n = math.sqrt(a * a + b * b + cc * cc + d * d)
-    q[0], q[1], q[2], q[3] = a / n, b / n, cc / n, d / n
+    c, dx, dy, dz = _half_turn(phi[0], phi[1], phi[2])
+    _set_product(q, c, dx, dy, dz, q[0], q[1], q[2], q[3])
 
 
 @numba.njit(cache=True)
@@ -127,7 +124,8 @@ def strapdown(q, b, slow, win, phi12, t, gyro, delta_angle, accel, mag, earth_ra
     """
     n = len(t)
     r = np.empty((3, 3))
-    tmp = np.empty(4)
+    quat_to_matrix(q, r)  # the attitude before each sample; recomputed once per sample, after its rotation
+    w = np.empty(3)
     use_delta = delta_angle.shape[0] > 0
     sigma_sf2 = params[P_SCALE_SIGMA] ** 2
     hold_rate = params[P_HOLD_RATE]
@@ -140,27 +138,15 @@ def strapdown(q, b, slow, win, phi12, t, gyro, delta_angle, accel, mag, earth_ra
         if not dt > 0.0:
             raise ValueError("sample stamps must increase")
         slow[S_T] = t[k]
-        quat_to_matrix(q, r)
         # The rate over [t_{k-1}, t_k], bias and Earth rate removed (ω_bw = ω_m − b − Rᵀ Ω_ie).
-        valid = True
+        rate = delta_angle[k] if use_delta else gyro[k]
+        valid = math.isfinite(rate[0]) and math.isfinite(rate[1]) and math.isfinite(rate[2])
         for i in range(3):
-            if use_delta:
-                valid = valid and math.isfinite(delta_angle[k, i])
-            else:
-                valid = valid and math.isfinite(gyro[k, i])
-        wx = wy = wz = 0.0
-        for i in range(3):
-            m = (delta_angle[k, i] / dt if use_delta else gyro[k, i]) if valid else slow[S_OMEGA + i]
             if valid:
-                slow[S_OMEGA + i] = m
+                slow[S_OMEGA + i] = rate[i] / dt if use_delta else rate[i]
             e = r[0, i] * earth_rate_w[0] + r[1, i] * earth_rate_w[1] + r[2, i] * earth_rate_w[2]
-            w = m - b[i] - e
-            if i == 0:
-                wx = w
-            elif i == 1:
-                wy = w
-            else:
-                wz = w
+            w[i] = slow[S_OMEGA + i] - b[i] - e  # a missing sample holds the last valid rate
+        wx, wy, wz = w[0], w[1], w[2]
         turned = math.sqrt(wx * wx + wy * wy + wz * wz) * dt
         if not valid:  # a held sample: its increment is uncertain by up to a hold_rate·dt rotation
             win[W_EXTRA] += (max(turned / dt, hold_rate) * dt) ** 2
@@ -170,7 +156,7 @@ def strapdown(q, b, slow, win, phi12, t, gyro, delta_angle, accel, mag, earth_ra
         for i in range(3):
             for j in range(3):
                 phi12[i, j] -= r[i, j] * dt  # Φ_θb = −Σ R Δt
-        rotate_body(q, tmp, wx * dt, wy * dt, wz * dt)
+        rotate_body(q, wx * dt, wy * dt, wz * dt)
         quat_to_matrix(q, r)
 
         # Rest detector (VQF's idea): samples stay close to their low-pass, and the bias-corrected
@@ -467,13 +453,12 @@ def rotations_since_first(t, gyro):
     n = len(t)
     out = np.empty((n, 3, 3))
     q = np.array([1.0, 0.0, 0.0, 0.0])
-    tmp = np.empty(4)
     quat_to_matrix(q, out[0])
     for k in range(1, n):
         dt = t[k] - t[k - 1]
         w = np.empty(3)
         for i in range(3):
             w[i] = gyro[k, i] * dt if math.isfinite(gyro[k, i]) else 0.0
-        rotate_body(q, tmp, w[0], w[1], w[2])
+        rotate_body(q, w[0], w[1], w[2])
         quat_to_matrix(q, out[k])
     return out

@@ -69,7 +69,7 @@ import math
 
 import numpy as np
 
-from dynamics.rotation import quat_conjugate, quat_from_matrix, quat_multiply
+from dynamics.rotation import quat_conjugate, quat_from_matrix, quat_from_rotvec, quat_multiply, skew
 
 from .protocol import Estimate, FilterSetup
 
@@ -83,10 +83,6 @@ _Q_IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 
 class VqfUnavailable(ImportError):
     """The optional ``vqf`` package is not installed."""
-
-
-def _q_z(angle: float) -> np.ndarray:
-    return np.array([math.cos(angle / 2), 0.0, 0.0, math.sin(angle / 2)])
 
 
 def _unit(v: np.ndarray) -> np.ndarray | None:
@@ -144,15 +140,20 @@ class _AhrsPeer:
         self.period = 1.0 / float(setup.rate_hz)
         self._q = None          # the library's quaternion (its own frame)
         self._t_last = None     # stamp of the last sample the filter took
-        self._out_rot = _q_z(-setup.declination_rad) if setup.use_mag else _Q_IDENTITY
+        self._out_rot = quat_from_rotvec([0.0, 0.0, -setup.declination_rad]) if setup.use_mag else _Q_IDENTITY
 
     # The library-specific parts.
     def _start(self, q_lib: np.ndarray, accel: np.ndarray, mag: np.ndarray | None) -> None:
         """Make the library's filter object, starting at ``q_lib``."""
 
     def _step(self, q, gyro, accel, mag, dt):
-        """One library update (``accel`` or ``mag`` None: not usable in this sample)."""
-        raise NotImplementedError
+        """One library update (``accel`` or ``mag`` None: not usable in this sample). Madgwick's and
+        Mahony's share their API: ``updateMARG`` with a field, ``updateIMU`` without."""
+        if accel is None:
+            accel = np.zeros(3)  # the library skips the correction for a zero vector
+        if mag is not None:
+            return self._f.updateMARG(q, gyr=gyro, acc=accel, mag=mag, dt=dt)
+        return self._f.updateIMU(q, gyr=gyro, acc=accel, dt=dt)
 
     def _bias(self) -> np.ndarray:
         return np.full(3, np.nan)
@@ -207,13 +208,6 @@ class Madgwick(_AhrsPeer):
         # The gain was chosen for the architecture: gain_marg with a magnetometer, gain_imu without.
         self._f.gain = self._f.gain_marg if self.setup.use_mag else self._f.gain_imu
 
-    def _step(self, q, gyro, accel, mag, dt):
-        if accel is None:
-            accel = np.zeros(3)  # the library skips the correction for a zero vector
-        if mag is not None:
-            return self._f.updateMARG(q, gyr=gyro, acc=accel, mag=mag, dt=dt)
-        return self._f.updateIMU(q, gyr=gyro, acc=accel, dt=dt)
-
 
 class Mahony(_AhrsPeer):
     """Mahony's explicit complementary filter (``ahrs.filters.Mahony``), defaults k_P 1, k_I 0.3."""
@@ -225,13 +219,6 @@ class Mahony(_AhrsPeer):
         from ahrs.filters import Mahony as _Mahony
 
         self._f = _Mahony(frequency=self.setup.rate_hz)
-
-    def _step(self, q, gyro, accel, mag, dt):
-        if accel is None:
-            accel = np.zeros(3)
-        if mag is not None:
-            return self._f.updateMARG(q, gyr=gyro, acc=accel, mag=mag, dt=dt)
-        return self._f.updateIMU(q, gyr=gyro, acc=accel, dt=dt)
 
     def _bias(self):
         return np.array(self._f.b, dtype=float)
@@ -259,7 +246,7 @@ class AhrsEkf(_AhrsPeer):
         if accel is None:  # the library returns q unchanged for a zero accelerometer: predict only
             q_t = f.f(q, gyro, dt)
             F = f.dfdq(gyro, dt)
-            W = 0.5 * dt * np.r_[[-q[1:]], q[0] * np.identity(3) + _skew(q[1:])]
+            W = 0.5 * dt * np.r_[[-q[1:]], q[0] * np.identity(3) + skew(q[1:])]
             f.P = F @ f.P @ F.T + f.g_noise * W @ W.T
             return q_t / np.linalg.norm(q_t)
         if self._mag_mode is None:  # started without a field: 6D throughout
@@ -271,10 +258,6 @@ class AhrsEkf(_AhrsPeer):
             finally:
                 f.mag = self._mag_mode
         return f.update(q, gyro, -accel, mag, dt=dt)
-
-
-def _skew(v):
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 def _import_vqf():
@@ -295,7 +278,7 @@ class Vqf:
         VQF = _import_vqf()
         self.setup = setup
         self._f = VQF(1.0 / float(setup.rate_hz))
-        self._out_rot = _q_z(-setup.declination_rad) if setup.use_mag else _Q_IDENTITY
+        self._out_rot = quat_from_rotvec([0.0, 0.0, -setup.declination_rad]) if setup.use_mag else _Q_IDENTITY
         self._last = None  # (q, bias) of the last sample taken, for held samples
 
     def _batch(self, gyro, accel, mag):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import tomllib
 import warnings
+from dataclasses import replace
 
 import numpy as np
 
@@ -75,7 +76,5 @@ def setup_from_metadata(metadata: dict | None, rate_hz: float, *, use_mag: bool)
             warnings.warn(f"the log's embedded configs do not validate ({exc}); using the filter's defaults",
                           stacklevel=2)
         else:
-            setup = setup_for(device, scenario, use_mag=use_mag)
-            return FilterSetup(rate_hz=rate_hz, use_mag=use_mag, noise=setup.noise,
-                               latitude_rad=setup.latitude_rad, declination_rad=setup.declination_rad)
+            return replace(setup_for(device, scenario, use_mag=use_mag), rate_hz=rate_hz)
     return FilterSetup(rate_hz=rate_hz, use_mag=use_mag)
