@@ -31,11 +31,10 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
-from scipy.spatial.transform import Rotation
-
 from dynamics.earth import EARTH_RATE
 from dynamics.rotation import quat_from_rotvec, quat_multiply, quat_rotate
 from . import mekf_kernels as kern
+from .peers import initial_attitude
 from .protocol import Estimate, FilterSetup
 
 __all__ = ["Mekf", "MekfParams", "initial_state"]
@@ -208,8 +207,7 @@ def initial_state(t, gyro, accel, mag, setup: FilterSetup, params: MekfParams) -
     a_first = np.einsum("kij,kj->ki", to_first, accel[:n])
     a = np.nanmean(a_first, axis=0) if np.isfinite(a_first).any() else np.array([0.0, 0.0, 9.81])
     gravity = float(np.linalg.norm(a)) or 9.81
-    # the shortest rotation taking the measured up (body axes) onto the world's up
-    q = Rotation.align_vectors([[0.0, 0.0, 1.0]], [a])[0].as_quat(canonical=True, scalar_first=True)
+    q = initial_attitude(a)  # the shortest rotation taking the measured up onto the world's
     heading_var = np.pi**2  # 6D without Earth rate: heading unknown
     slow = np.zeros(kern.S_SIZE)
     slow[kern.S_GRAVITY] = float(np.nanmean(np.linalg.norm(accel[:n], axis=1))) if np.isfinite(accel[:n]).any() else 9.81

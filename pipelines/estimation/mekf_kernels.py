@@ -139,11 +139,14 @@ def strapdown(q, b, slow, win, phi12, t, gyro, delta_angle, accel, mag, earth_ra
             raise ValueError("sample stamps must increase")
         slow[S_T] = t[k]
         # The rate over [t_{k-1}, t_k], bias and Earth rate removed (ω_bw = ω_m − b − Rᵀ Ω_ie).
-        rate = delta_angle[k] if use_delta else gyro[k]
-        valid = math.isfinite(rate[0]) and math.isfinite(rate[1]) and math.isfinite(rate[2])
+        if use_delta:
+            w[0], w[1], w[2] = delta_angle[k, 0] / dt, delta_angle[k, 1] / dt, delta_angle[k, 2] / dt
+        else:
+            w[0], w[1], w[2] = gyro[k, 0], gyro[k, 1], gyro[k, 2]
+        valid = math.isfinite(w[0]) and math.isfinite(w[1]) and math.isfinite(w[2])
         for i in range(3):
             if valid:
-                slow[S_OMEGA + i] = rate[i] / dt if use_delta else rate[i]
+                slow[S_OMEGA + i] = w[i]
             e = r[0, i] * earth_rate_w[0] + r[1, i] * earth_rate_w[1] + r[2, i] * earth_rate_w[2]
             w[i] = slow[S_OMEGA + i] - b[i] - e  # a missing sample holds the last valid rate
         wx, wy, wz = w[0], w[1], w[2]
