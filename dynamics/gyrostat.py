@@ -61,6 +61,15 @@ W = slice(10, 13)
 GIMBALS = slice(13, None)
 
 
+def _gimbal_axes(delta, spin0, transverse):
+    """Spin and output axes of gimballed rotors turned by ``δ``: ``ŝ(δ) = cos δ ŝ₀ + sin δ (ĝ × ŝ₀)`` and
+    ``ĝ × ŝ(δ) = dŝ/dδ = cos δ (ĝ × ŝ₀) − sin δ ŝ₀``, shapes ``δ.shape + (3,)``. ``spin0`` and
+    ``transverse`` (``ŝ₀``, ``ĝ × ŝ₀``) are (3,) for one rotor or (n_gimbals, 3) stacked."""
+    d = np.asarray(delta, dtype=float)[..., None]
+    c, s = np.cos(d), np.sin(d)
+    return c * spin0 + s * transverse, c * transverse - s * spin0
+
+
 def _unit(v, name) -> np.ndarray:
     v = np.asarray(v, dtype=float).reshape(3)
     n = np.linalg.norm(v)
@@ -173,13 +182,11 @@ class GimballedRotor:
 
     def spin_axis(self, delta) -> np.ndarray:
         """``ŝ(δ) = cos δ ŝ₀ + sin δ (ĝ × ŝ₀)``, shape ``δ.shape + (3,)``."""
-        d = np.asarray(delta, dtype=float)[..., None]
-        return np.cos(d) * self.spin_axis_b + np.sin(d) * self.transverse_b
+        return _gimbal_axes(delta, self.spin_axis_b, self.transverse_b)[0]
 
     def torque_axis(self, delta) -> np.ndarray:
         """``ĝ × ŝ(δ) = dŝ/dδ``: the direction of ``ḣ`` for a gimbal rate (the output axis)."""
-        d = np.asarray(delta, dtype=float)[..., None]
-        return np.cos(d) * self.transverse_b - np.sin(d) * self.spin_axis_b
+        return _gimbal_axes(delta, self.spin_axis_b, self.transverse_b)[1]
 
 
 @dataclass(frozen=True, eq=False)
@@ -251,13 +258,11 @@ class Gyrostat:
 
     def spin_axes(self, delta) -> np.ndarray:
         """``ŝ_i(δ_i)`` of every gimballed rotor, shape ``δ.shape + (3,)``."""
-        d = np.asarray(delta, dtype=float)[..., None]
-        return np.cos(d) * self._s0 + np.sin(d) * self._t0
+        return _gimbal_axes(delta, self._s0, self._t0)[0]
 
     def torque_axes(self, delta) -> np.ndarray:
         """``ĝ_i × ŝ_i(δ_i)``, shape ``δ.shape + (3,)``."""
-        d = np.asarray(delta, dtype=float)[..., None]
-        return np.cos(d) * self._t0 - np.sin(d) * self._s0
+        return _gimbal_axes(delta, self._s0, self._t0)[1]
 
     def rotor_momentum_b(self, t, y, gimbal_rates=None):
         """Rotors' momentum relative to the body ``h`` and, when ``gimbal_rates`` is given, ``ḣ``.
@@ -274,11 +279,11 @@ class Gyrostat:
         if self.gimbals:
             delta = y[..., GIMBALS]
             jw, jw_dot = self._gimbal_spin_rates(t, lead)
-            s = self.spin_axes(delta)
+            s, output = _gimbal_axes(delta, self._s0, self._t0)  # ŝ, ĝ×ŝ
             h = h + np.matmul(jw[..., None, :], s)[..., 0, :]  # Σ J Ω ŝ
             if gimbal_rates is not None:
                 spin_up = np.matmul(jw_dot[..., None, :], s)[..., 0, :]  # Σ J Ω̇ ŝ
-                turning = np.matmul((jw * gimbal_rates)[..., None, :], self.torque_axes(delta))[..., 0, :]  # Σ J Ω δ̇ ĝ×ŝ
+                turning = np.matmul((jw * gimbal_rates)[..., None, :], output)[..., 0, :]  # Σ J Ω δ̇ ĝ×ŝ
                 h_dot = h_dot + spin_up + turning
         return (h, h_dot) if gimbal_rates is not None else h
 
@@ -325,14 +330,13 @@ class Gyrostat:
         y = np.asarray(y, dtype=float)
         lead = y.shape[:-1]
         q, omega = y[..., Q], y[..., W]
-        r = rotation_matrix(q)
         delta_dot = np.zeros(lead + (len(self.gimbals),)) if gimbal_rate is None else gimbal_rate(t, y)
         h, h_dot = self.rotor_momentum_b(t, y, delta_dot)
         tau = np.zeros(lead + (3,)) if torque_b is None else torque_b(t, y)
         f = np.zeros(lead + (3,)) if force_w is None else force_w(t, y)
         big_h = omega @ self.inertia_b.T + h  # H = I ω + h
         omega_dot = (tau - cross(omega, big_h) - h_dot) @ self._inertia_inv.T  # I ω̇ = τ − ω×H − ḣ
-        omega_wb = omega - rotate_back(r, self.frame_rate_w) if self._rotating else omega  # relative to world
+        omega_wb = omega - rotate_back(rotation_matrix(q), self.frame_rate_w) if self._rotating else omega  # to world
         q_dot = 0.5 * _quat_product(q, _omega_quat(omega_wb))  # q̇ = ½ q ⊗ ω_b
         x_dot = y[..., P] / self.mass  # ẋ = P/m
         p_dot = np.asarray(f, dtype=float)  # Ṗ = F − 2Ω×P

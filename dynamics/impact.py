@@ -59,7 +59,7 @@ from pydantic import Field
 
 from .config import NonNegativeReal, PositiveReal, Real, Section, Vec3
 from .earth import Environment, Site
-from .inertia import box, inertia_tensor
+from .inertia import box, inertia_config
 from .integrate import Event, Jump, Jumped, integrate
 from .rigid_body import (L, P, Q, X, RigidBody, _quat_product, contact_mass_matrix, cross, rotate, rotation_matrix,
                          world_motion_trajectory)
@@ -78,20 +78,13 @@ TIE_M = 1e-9
 # ================================================================================================
 
 
-def _inertia_value(value):
-    if value is not None:
-        inertia_tensor(value)  # InertiaError (a ValueError) says what is wrong
-    return value
-
-
-
 class DropBody(Section):
     """``[body]``: the dropped device, a box."""
 
     mass_kg: PositiveReal = 0.2
     size_m: tuple[PositiveReal, PositiveReal, PositiveReal] = (0.12, 0.07, 0.02)
     """Edge lengths along body x, y, z; the centre of mass is at the box's centre."""
-    inertia_kgm2: Annotated[Optional[Vec3], pydantic.AfterValidator(_inertia_value)] = None
+    inertia_kgm2: Annotated[Optional[Vec3], pydantic.AfterValidator(inertia_config)] = None
     """Principal moments about the box's axes; default: a uniform box."""
 
 
@@ -117,17 +110,7 @@ class Contact(Section):
     """Bouncing ends when its energy is below that of a landing at this speed."""
 
 
-class _DropsNone(ScenarioSpec):
-    @pydantic.model_serializer(mode="wrap")
-    def _drop_none(self, handler):
-        return _without_none(handler(self))
-
-
-def _without_none(d):
-    return {k: _without_none(v) if isinstance(v, dict) else v for k, v in d.items() if v is not None}
-
-
-class DropSpec(_DropsNone):
+class DropSpec(ScenarioSpec):
     """``kind = "drop"``: a box dropped with a tumble onto the ground."""
 
     kind: Literal["drop"]
@@ -233,6 +216,11 @@ class Drop:
     impulses: list = field(default_factory=list)  # ideal mode: (t_c, J_w)
     settling: Settling | None = None
     recent_contacts: list = field(default_factory=list)  # times of the contacts within the last microsecond
+    # The pulses stacked into arrays for _pulse (start times, impulses, levers), rebuilt when one is added.
+    _pulse_table: tuple | None = field(default=None, init=False, repr=False)
+
+    def __post_init__(self):
+        self.corners_b = _corners(self.size)  # (8, 3), body axes
 
     @classmethod
     def from_spec(cls, spec: DropSpec) -> "Drop":
@@ -245,10 +233,6 @@ class Drop:
         y0 = body.state((0.0, 0.0, ini.height_m), q, ini.vel_w, omega)
         return cls(body, np.asarray(b.size_m, float), env, y0, c.restitution, c.friction, c.pulse_duration_s,
                    c.rest_speed_m_s)
-
-    @property
-    def corners_b(self) -> np.ndarray:
-        return _corners(self.size)
 
     @property
     def gravity(self) -> float:
@@ -267,28 +251,27 @@ class Drop:
         overlap, so the one that may act at ``t`` is the last to start at or before it.
         """
         t = np.asarray(t, dtype=float)
-        force = np.zeros(t.shape + (3,))
-        lever = np.zeros(t.shape + (3,))
         if not self.pulses:
-            return force, lever
-        starts = np.array([p[0] for p in self.pulses])
+            return np.zeros(t.shape + (3,)), np.zeros(t.shape + (3,))
+        if self._pulse_table is None or len(self._pulse_table[0]) != len(self.pulses):
+            self._pulse_table = tuple(np.array([p[i] for p in self.pulses]) for i in range(3))
+        starts, impulses, levers = self._pulse_table
         k = np.searchsorted(starts, t, side="right") - 1
         valid = k >= 0
         kk = np.where(valid, k, 0)
         s = np.where(valid, (t - starts[kk]) / self.pulse_duration, -1.0)
         on = (s >= 0.0) & (s <= 1.0)
         shape = np.where(on, np.pi / (2.0 * self.pulse_duration) * np.sin(np.pi * np.clip(s, 0.0, 1.0)), 0.0)
-        impulses = np.array([p[1] for p in self.pulses])
-        levers = np.array([p[2] for p in self.pulses])
         return shape[..., None] * impulses[kk], levers[kk]
 
-    def force(self, t, y) -> np.ndarray:
+    def force(self, t, y, pulse=None) -> np.ndarray:
         """Total force, world axes, N: gravity and contact pulses; once settled, gravity and the
-        ground's support (holding the box on the ground against weight and Coriolis) and friction."""
+        ground's support (holding the box on the ground against weight and Coriolis) and friction.
+        ``pulse``: :meth:`_pulse` at ``t`` when the caller has it already."""
         y = np.asarray(y, dtype=float)
         t = np.asarray(t, dtype=float)
         weight = self.body.mass * self.environment.gravity_w
-        flying = weight + self._pulse(t)[0]
+        flying = weight + (self._pulse(t) if pulse is None else pulse)[0]
         if self.settling is None:
             return flying
         st = self.settling
@@ -297,14 +280,15 @@ class Drop:
         settled = 2.0 * cross(self.body.frame_rate_w, y[..., P]) + friction  # so that Ṗ = friction
         return np.where((t >= st.t)[..., None], settled, flying)
 
-    def torque(self, t, y) -> np.ndarray:
+    def torque(self, t, y, pulse=None) -> np.ndarray:
         """Moment about the centre of mass, world axes, N m: the pulse's ``r × F``; once settled, the
         ground's moment that keeps the box flat, ``ω × L + I_w (Ω × ω) + ṡ I_w ẑ``, which makes the
-        rotation relative to the world ``s ẑ`` with the spin ``s`` braked at the rate ``ṡ``."""
+        rotation relative to the world ``s ẑ`` with the spin ``s`` braked at the rate ``ṡ``.
+        ``pulse``: :meth:`_pulse` at ``t`` when the caller has it already."""
         y = np.asarray(y, dtype=float)
         t = np.asarray(t, dtype=float)
         r = rotation_matrix(y[..., Q])
-        pulse, lever_b = self._pulse(t)
+        pulse, lever_b = self._pulse(t) if pulse is None else pulse
         flying = cross(rotate(r, lever_b), pulse)  # τ = r × F
         if self.settling is None:
             return flying
@@ -317,7 +301,9 @@ class Drop:
         return np.where((t >= st.t)[..., None], held, flying)
 
     def derivative(self, t, y) -> np.ndarray:
-        return self.body.derivative(t, y, self.force, self.torque)
+        pulse = self._pulse(t)  # for the force and its moment alike
+        return self.body.derivative(t, y, lambda tt, yy: self.force(tt, yy, pulse),
+                                    lambda tt, yy: self.torque(tt, yy, pulse))
 
     # -- contacts --------------------------------------------------------------------------------------
 
@@ -338,9 +324,7 @@ class Drop:
         return condition
 
     def _corner_velocities(self, y) -> np.ndarray:
-        r = rotation_matrix(y[Q])
-        omega_wb = rotate(r, self.body.omega_b(y, r)) - self.body.frame_rate_w
-        return self.body.velocity(y) + cross(omega_wb, rotate(r, self.corners_b))
+        return self.body.point_velocity_w(y, self.corners_b)
 
     def _pending(self, t, y) -> bool:
         if not self._contacts_enabled(t):
@@ -373,8 +357,7 @@ class Drop:
             return self._settle(t, y)
         lever_b = self.corners_b[touching].mean(axis=0)
         lever_w = rotate(r, lever_b)
-        omega_wb = rotate(r, self.body.omega_b(y, r)) - self.body.frame_rate_w
-        u = self.body.velocity(y) + cross(omega_wb, lever_w)  # contact point velocity (scribe notes)
+        u = self.body.point_velocity_w(y, lever_b)  # contact point velocity (scribe notes)
         j = contact_impulse(self.body.mass, self.body.inertia_w_inv(r), lever_w, u, self.restitution, self.friction)
         if self.pulse_duration > 0.0:
             self.pulses.append((t, j, lever_b))
@@ -388,8 +371,7 @@ class Drop:
         the centre of mass lying on the face that points down, J."""
         r = rotation_matrix(y[Q])
         k, _, _ = self._face_down(r)
-        omega_wb = rotate(r, self.body.omega_b(y, r)) - self.body.frame_rate_w
-        omega_h = omega_wb * np.array([1.0, 1.0, 0.0])
+        omega_h = self.body.omega_wb_w(y, r) * np.array([1.0, 1.0, 0.0])
         inertia_w = r @ self.body.inertia_b @ r.T
         v_z = y[P][2] / self.body.mass
         return float(0.5 * self.body.mass * v_z**2 + 0.5 * omega_h @ inertia_w @ omega_h
@@ -406,8 +388,7 @@ class Drop:
         fix = quat_from_rotvec(axis / np.linalg.norm(axis) * tilt) if tilt > 0 else np.array([1.0, 0.0, 0.0, 0.0])
         q = _quat_product(fix, y[Q])
         r = rotation_matrix(q)
-        omega_wb = rotate(r, self.body.omega_b(y, r)) - self.body.frame_rate_w
-        spin = float(omega_wb[2])  # s: rotation about the vertical, kept
+        spin = float(self.body.omega_wb_w(y, r)[2])  # s: rotation about the vertical, kept
         v = self.body.velocity(y) * np.array([1.0, 1.0, 0.0])  # horizontal slide, kept
         speed = float(np.linalg.norm(v))
         mu_g = self.friction * self.gravity
@@ -451,6 +432,7 @@ class Drop:
 
     def solve(self, t, rtol=1e-10):
         self.pulses, self.impulses, self.settling, self.recent_contacts = [], [], None, []
+        self._pulse_table = None
         atol = np.concatenate([np.full(3, 1e-12), np.full(4, 1e-12), np.full(6, 1e-14)])
         return integrate(self.derivative, t, self.y0, events=self.events(), rtol=rtol, atol=atol)
 
@@ -458,10 +440,12 @@ class Drop:
         t = np.asarray(t, dtype=float)
         sol = self.solve(t, rtol)
         y, y_dot = sol.y, sol.y_dot
-        acc, omega, alpha = self.body.accelerations(t, y, self.force, self.torque)
+        pulse = self._pulse(t)
+        force = self.force(t, y, pulse)
+        _, omega, alpha = self.body.accelerations(t, y, lambda *_: force, lambda tt, yy: self.torque(tt, yy, pulse))
         weight = self.body.mass * self.environment.gravity_w
         extras = {
-            "contact_force_w": self.force(t, y) - weight,
+            "contact_force_w": force - weight,
             "settled": t >= self.settle_time,
         }
         if self.pulse_duration == 0.0:

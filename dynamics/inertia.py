@@ -13,6 +13,7 @@ from .rotation import quat_to_matrix
 __all__ = [
     "InertiaError",
     "inertia_tensor",
+    "inertia_config",
     "check_inertia",
     "point_masses",
     "box",
@@ -65,6 +66,15 @@ def inertia_tensor(value) -> np.ndarray:
     elif v.shape != (3, 3):
         raise InertiaError(f"give 3 principal moments or a 3x3 matrix, got shape {v.shape}")
     return check_inertia(v)
+
+
+def inertia_config(value):
+    """A config file's inertia (three principal moments, a 3x3 matrix, or ``None`` for a default),
+    returned unchanged once :func:`inertia_tensor` accepts it: the validator of the scenario kinds'
+    ``inertia_kgm2`` keys. Raises :class:`InertiaError` (a ``ValueError``) saying what is wrong."""
+    if value is not None:
+        inertia_tensor(value)
+    return value
 
 
 def point_masses(masses, positions) -> np.ndarray:

@@ -132,16 +132,9 @@ class TimeGrid:
         if n >= 4 * self.BLOCK and self.h > 0:
             deviation = _grid_deviation(self.t, self.t0, self.h)  # max |t_n − (t_0 + n h)|
             self.uniform = bool(deviation <= 8 * _EPS * np.abs(self.t[[0, -1]]).max())
-        self.sorted = self.uniform or bool(np.all(np.diff(self.t) >= 0))
 
     def __len__(self) -> int:
         return len(self.t)
-
-    def window(self, start: float, stop: float):
-        """The samples with ``start <= t < stop``: a slice on sorted grids, else an index array."""
-        if self.sorted:
-            return slice(*np.searchsorted(self.t, [start, stop]))
-        return np.flatnonzero((self.t >= start) & (self.t < stop))
 
     def _offset_tables(self, omega):
         """``cos(ω i h)`` and ``sin(ω i h)`` for ``i < B``, shape ``omega.shape + (B,)``; empty (last axis
@@ -518,9 +511,6 @@ def _segment(edges, x, k):  # pragma: no cover - compiled
     return max(np.searchsorted(edges, x, side="right") - 1, 0)
 
 
-_MOTION_ARRAYS = ("q_wb", "omega_wb_b", "alpha_wb_b", "pos_w", "vel_w", "acc_w")
-
-
 class EarthBoundSpec(ScenarioSpec):
     """Base of the kinds that move on the Earth at a ``[site]``: they prescribe :meth:`world_motion`."""
 
@@ -613,11 +603,6 @@ class ConstantRate(Section):
 
     rate_deg_s: Real
     initial_angle_deg: Real = 0.0
-
-    def angle(self, t):
-        """Table angle, rate and acceleration (N,) each: rad, rad/s, rad/s²."""
-        rate = np.radians(self.rate_deg_s)
-        return np.radians(self.initial_angle_deg) + rate * t, np.full(len(t), rate), np.zeros(len(t))
 
 
 class RateSteps(Section):

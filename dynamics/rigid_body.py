@@ -45,6 +45,7 @@ import numpy as np
 
 from .earth import Environment
 from .inertia import check_inertia
+from .rotation import quat_multiply
 from .trajectory import Trajectory, trajectory_from_world_motion
 
 __all__ = [
@@ -141,7 +142,8 @@ def _omega_quat(omega) -> np.ndarray:
 
 
 def _quat_product(p, q) -> np.ndarray:
-    """Hamilton product ``p ⊗ q`` (as :func:`dynamics.rotation.quat_multiply`, without its checks)."""
+    """Hamilton product ``p ⊗ q``: :func:`dynamics.rotation.quat_multiply`, with plain floats for two
+    single quaternions (the integrator's case, where they beat the compiled ufunc's call overhead)."""
     if p.ndim == 1 and q.ndim == 1:
         pw, px, py, pz = p.tolist()
         qw, qx, qy, qz = q.tolist()
@@ -153,17 +155,7 @@ def _quat_product(p, q) -> np.ndarray:
                 pw * qz + px * qy - py * qx + pz * qw,
             ]
         )
-    pw, px, py, pz = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
-    qw, qx, qy, qz = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.stack(
-        [
-            pw * qw - px * qx - py * qy - pz * qz,
-            pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw,
-        ],
-        axis=-1,
-    )
+    return quat_multiply(p, q)
 
 
 # --------------------------------------------------------------------------------------------
@@ -264,13 +256,17 @@ class RigidBody:
         momentum = self.mass * vel  # P = m v
         angular_momentum = rotate(r, np.asarray(omega) @ self.inertia_b.T)  # L = R I_b ω_b
         shape = np.broadcast_shapes(pos.shape[:-1], q.shape[:-1], vel.shape[:-1], omega.shape[:-1])
-        parts = [pos, q, momentum, angular_momentum]
-        return np.concatenate([np.broadcast_to(a, shape + a.shape[-1:]) for a in parts], axis=-1)
+        return _stack_state(shape, [pos, q, momentum, angular_momentum])
 
     def omega_b(self, y, r=None) -> np.ndarray:
         """Inertial angular velocity in body axes: ``ω_b = I_b⁻¹ Rᵀ L``; ``(..., 3)``."""
         r = rotation_matrix(y[..., Q]) if r is None else r
         return rotate_back(r, y[..., L]) @ self._inertia_inv.T
+
+    def omega_wb_w(self, y, r=None) -> np.ndarray:
+        """Angular velocity relative to the world frame, world axes: ``R ω_b − Ω``; ``(..., 3)``."""
+        r = rotation_matrix(y[..., Q]) if r is None else r
+        return rotate(r, self.omega_b(y, r)) - self.frame_rate_w
 
     def velocity(self, y) -> np.ndarray:
         """World-relative velocity of the centre of mass: ``v = P / m``."""
@@ -295,9 +291,7 @@ class RigidBody:
         """
         y = np.asarray(y, dtype=float)
         q = y[..., Q]
-        r = rotation_matrix(q)
-        omega_w = rotate(r, self.omega_b(y, r))  # ω = R I_b⁻¹ Rᵀ L
-        omega_wb_w = omega_w - self.frame_rate_w  # rotation relative to the world frame
+        omega_wb_w = self.omega_wb_w(y)  # ω − Ω (ω = R I_b⁻¹ Rᵀ L): the rotation relative to the world frame
         f = np.zeros(y.shape[:-1] + (3,)) if force is None else force(t, y)
         tau = np.zeros(y.shape[:-1] + (3,)) if torque is None else torque(t, y)
         x_dot = y[..., P] / self.mass  # ẋ = P/m
@@ -342,8 +336,7 @@ class RigidBody:
     def point_velocity_w(self, y, lever_b) -> np.ndarray:
         """World-relative velocity of the body point ``lever_b`` (body axes from the centre of mass)."""
         r = rotation_matrix(y[..., Q])
-        omega_wb_w = rotate(r, self.omega_b(y, r)) - self.frame_rate_w
-        return point_velocity(self.velocity(y), omega_wb_w, rotate(r, lever_b))
+        return point_velocity(self.velocity(y), self.omega_wb_w(y, r), rotate(r, lever_b))
 
 
 def world_motion_trajectory(t, pos_w, q_wb, vel_w, acc_w, omega_b, alpha_b, environment: Environment,

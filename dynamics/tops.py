@@ -25,7 +25,7 @@ from pydantic import field_validator
 
 from .config import as_number, NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3
 from .earth import Environment
-from .inertia import inertia_tensor
+from .inertia import inertia_config, inertia_tensor
 from .rotation import body_rate_from_euler_zxz, quat_from_euler_zxz, quat_rotate
 from .scenarios import ScenarioSpec
 from .splitting import integrate_free_body, integrate_heavy_top
@@ -77,8 +77,7 @@ class FreeBody(Section):
     @field_validator("inertia_kgm2")
     @classmethod
     def _physical(cls, value):
-        inertia_tensor(value)  # raises InertiaError (a ValueError) saying what is wrong
-        return value
+        return inertia_config(value)  # raises InertiaError (a ValueError) saying what is wrong
 
     def tensor(self) -> np.ndarray:
         """The inertia tensor in body axes, (3, 3), kg m²."""

@@ -336,7 +336,8 @@ class SpeedProfile:
         v = v_k + Δv S(u),   s = s_k + v_k τ + Δv T I(u),
         a = Δv S′/T,         j = Δv S″/T²,               ȷ̇ = Δv S‴/T³
 
-    and ``s = s_k + (v_k + Δv/2) T + (v_k + Δv)(τ − T)`` once the change is over.
+    and ``s = s_k + (v_k + Δv/2) T + (v_k + Δv)(τ − T)`` once the change is over. The legs are laid
+    out here; :func:`_car_kernel` evaluates these formulas (:meth:`CarMotion._speed_table`).
     """
 
     def __init__(self, legs: list[Leg], drive: Drive):
@@ -355,21 +356,6 @@ class SpeedProfile:
             v = leg.speed_m_s
         self.start, self.distance, self.speed = np.array(start), np.array(dist), np.array(speed)
         self.change, self.ramp, self.distance_after = np.array(change), np.array(ramp), np.array(dist_end)
-
-    def __call__(self, t):
-        """Distance (m), speed (m/s), acceleration, jerk and its derivative (m/s², m/s³, m/s⁴), each
-        (N,)."""
-        k = np.clip(np.searchsorted(self.start, t, side="right") - 1, 0, None)
-        tau = t - self.start[k]
-        ramp, dv, v0 = self.ramp[k], self.change[k], self.speed[k]
-        step, slope, curve, jolt, area = smooth_step(tau / ramp, derivatives=3, integral=True)
-        holding = tau >= ramp  # after the change: s = s_end + v (τ − T), exactly
-        distance = np.where(
-            holding,
-            self.distance_after[k] + (v0 + dv) * (tau - ramp),
-            self.distance[k] + v0 * tau + dv * ramp * area,
-        )
-        return distance, v0 + dv * step, dv * slope / ramp, dv * curve / ramp**2, dv * jolt / ramp**3
 
 
 class Road:

@@ -59,10 +59,11 @@ from pydantic import Field, StrictInt
 from .config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3
 from .earth import Environment, Site
 from .gyrostat import GIMBALS, P, Q, W, X, GimballedRotor, Gyrostat, SpinProfile
-from .inertia import inertia_tensor
+from .inertia import inertia_config, inertia_tensor
 from .integrate import Jump, integrate
 from .rigid_body import _quat_product, cross, rotate_back, rotation_matrix, world_motion_trajectory
-from .rotation import body_rate_from_euler_zyx, euler_zyx_from_quat, quat_conjugate, quat_from_euler_zyx
+from .rotation import (body_rate_from_euler_zyx, euler_zyx_from_quat, quat_conjugate, quat_from_euler_zyx,
+                       quat_positive)
 from .scenarios import ScenarioSpec
 from .trajectory import Trajectory
 
@@ -192,15 +193,7 @@ class Stabiliser(Section):
     gimbal_limit_deg: Annotated[Real, Field(gt=10.0, le=90.0)] = 70.0
 
 
-class _DropsNone(ScenarioSpec):
-    """Absent optional tables stay absent in the resolved TOML (TOML has no null)."""
-
-    @pydantic.model_serializer(mode="wrap")
-    def _drop_none(self, handler):
-        return {k: v for k, v in handler(self).items() if v is not None}
-
-
-class ShipSpec(_DropsNone):
+class ShipSpec(ScenarioSpec):
     """``kind = "ship"``: a ship at anchor rolling in beam seas, optionally gyro-stabilised."""
 
     kind: Literal["ship"]
@@ -333,11 +326,12 @@ class Ship:
         hydro = np.stack(np.broadcast_arrays(mooring[..., 0], mooring[..., 1], heave), axis=-1)  # −C (z − η) − c ż
         return weight + buoyancy + hydro
 
-    def torque_b(self, t, y) -> np.ndarray:
-        """Hydrostatic, damping, wave and course-keeping moments about the centre of mass, body axes."""
-        r = rotation_matrix(y[..., Q])
+    def torque_b(self, t, y, r=None, rates=None) -> np.ndarray:
+        """Hydrostatic, damping, wave and course-keeping moments about the centre of mass, body axes.
+        ``r``, ``rates``: ``R(q)`` and :meth:`_rates_wb` when the caller has them already."""
+        r = rotation_matrix(y[..., Q]) if r is None else r
         up = r[..., 2, :]  # u = Rᵀ ẑ, the world's up axis in body axes
-        rates = self._rates_wb(y, r)
+        rates = self._rates_wb(y, r) if rates is None else rates
         weight = self.mass * self.gravity
         yaw_error = _wrap(np.arctan2(r[..., 1, 0], r[..., 0, 0]) - self.yaw0)
         roll = -weight * self.gm * up[..., 1] - self.roll_damping * rates[..., 0] + self.roll_moment(t)
@@ -345,10 +339,10 @@ class Ship:
         yaw = -self.yaw_stiffness * yaw_error - self.yaw_damping * rates[..., 2]
         return np.stack(np.broadcast_arrays(roll, pitch, yaw), axis=-1)
 
-    def gimbal_rate(self, t, y) -> np.ndarray:
-        """Commanded precession rate ``δ̇ = K p − k_c δ``, faded out over the last 10° before a stop."""
-        r = rotation_matrix(y[..., Q])
-        p = self._rates_wb(y, r)[..., 0]
+    def gimbal_rate(self, t, y, rates=None) -> np.ndarray:
+        """Commanded precession rate ``δ̇ = K p − k_c δ``, faded out over the last 10° before a stop.
+        ``rates``: :meth:`_rates_wb` when the caller has it already."""
+        p = (self._rates_wb(y, rotation_matrix(y[..., Q])) if rates is None else rates)[..., 0]
         delta = y[..., GIMBALS][..., 0]
         u = self.gain * p - self.centring * delta
         margin = np.radians(10.0)
@@ -356,8 +350,13 @@ class Ship:
         return (u * room)[..., None]
 
     def derivative(self, t, y) -> np.ndarray:
-        gimbal = self.gimbal_rate if self.body.gimbals else None
-        return self.body.derivative(t, y, self.force_w, self.torque_b, gimbal)
+        # R(q) and the rates relative to the water once, for the torque and the gimbal command alike.
+        r = rotation_matrix(y[..., Q])
+        rates = self._rates_wb(y, r)
+        torque = self.torque_b(t, y, r, rates)
+        gimbal = self.gimbal_rate(t, y, rates) if self.body.gimbals else None
+        return self.body.derivative(t, y, self.force_w, lambda *_: torque,
+                                    None if gimbal is None else lambda *_: gimbal)
 
     # -- linear theory -------------------------------------------------------------------------------
 
@@ -463,16 +462,11 @@ class Ship:
 # ================================================================================================
 
 
-def _inertia_value(value):
-    inertia_tensor(value)  # raises InertiaError (a ValueError) naming the problem
-    return value
-
-
 class SpacecraftBody(Section):
     """``[spacecraft]``: mass properties and initial attitude."""
 
     mass_kg: PositiveReal = 500.0
-    inertia_kgm2: Annotated[Vec3 | tuple[Vec3, Vec3, Vec3], pydantic.AfterValidator(_inertia_value)] = (
+    inertia_kgm2: Annotated[Vec3 | tuple[Vec3, Vec3, Vec3], pydantic.AfterValidator(inertia_config)] = (
         1200.0, 1000.0, 800.0)
     """Principal moments or a 3x3 matrix in body axes about the centre of mass, rotors locked."""
     q_wb: Quat = (1.0, 0.0, 0.0, 0.0)
@@ -585,7 +579,7 @@ class Spacecraft:
     def attitude_error(self, t, q) -> np.ndarray:
         """``q_e = q_c* ⊗ q`` (body-axes error), sign chosen with ``w ≥ 0`` (the short way round)."""
         qe = _quat_product(quat_conjugate(self.commanded_attitude(t)), np.asarray(q, dtype=float))
-        return np.where(qe[..., :1] < 0, -qe, qe)
+        return quat_positive(qe)
 
     def control_torque(self, t, y) -> np.ndarray:
         """Eigen-axis slew law ``u = −k I q_e − c I ω + ω × I ω``, body axes, N m."""

@@ -368,28 +368,19 @@ def test_road_position_through_turns_matches_quadrature():
     # Reference: adaptive quadrature of (cos ψ, sin ψ) with the turn ends as break points. Tolerance: its
     # own error estimate plus the round-off of positions of that size.
     for d, xe, ye in zip(s, x, y):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", IntegrationWarning)  # it reaches round-off and says so
-            ex, ex_err = quad(
-                lambda u: np.cos(heading(u)),
-                0,
-                d,
-                points=[15, 65, 80, 105],
-                limit=400,
-                epsabs=1e-14,
-                epsrel=1e-14,
-            )
-            ey, ey_err = quad(
-                lambda u: np.sin(heading(u)),
-                0,
-                d,
-                points=[15, 65, 80, 105],
-                limit=400,
-                epsabs=1e-14,
-                epsrel=1e-14,
-            )
-        assert abs(xe - ex) <= ex_err + 16 * EPS * max(d, 1)
-        assert abs(ye - ey) <= ey_err + 16 * EPS * max(d, 1)
+        for position, trig in ((xe, np.cos), (ye, np.sin)):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", IntegrationWarning)  # it reaches round-off and says so
+                expected, error = quad(
+                    lambda u: trig(heading(u)),
+                    0,
+                    d,
+                    points=[15, 65, 80, 105],
+                    limit=400,
+                    epsabs=1e-14,
+                    epsrel=1e-14,
+                )
+            assert abs(position - expected) <= error + 16 * EPS * max(d, 1)
     np.testing.assert_allclose(np.degrees(psi[-1]), -20 + 120 - 200, atol=1e-12)
     # Curvature is the smooth pulse Δψ S′/L: peak (16/5) Δψ / L mid-turn.
     kappa = road(np.array([40.0]))[3][0]
