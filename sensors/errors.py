@@ -48,7 +48,7 @@ choice of which truth array feeds which sensor. The sample times given here must
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Annotated, Literal
+from typing import Annotated, ClassVar, Literal
 
 import numba
 import numpy as np
@@ -136,6 +136,13 @@ class _CommonErrors(Section):
             raise ValueError(f"expected (min, max) with min < max, got {value}")
         return value
 
+    white_noise_keys: ClassVar[tuple[str, str]]
+    """The two alternative keys of the white noise (in its two datasheet forms)."""
+
+    def white_noise_key(self) -> str | None:
+        """Which of :attr:`white_noise_keys` the config gives (None: neither, no white noise)."""
+        return next((key for key in self.white_noise_keys if getattr(self, key) is not None), None)
+
     def _cross_axis(self) -> np.ndarray:
         if self.cross_axis_matrix is not None:
             return np.array(self.cross_axis_matrix, dtype=float)
@@ -192,6 +199,7 @@ class GyroErrors(_CommonErrors):
     quantisation_rad: PositiveReal | None = None
     quantisation_rad_per_s: PositiveReal | None = None
 
+    white_noise_keys = ("arw_deg_per_sqrt_h", "noise_density_deg_per_s_per_sqrt_hz")
     _nonlinearity = field_validator("scale_factor_nonlinearity_ppm")(_needs_range("range_deg_per_s"))
     _density = field_validator("noise_density_deg_per_s_per_sqrt_hz")(_exclusive("arw_deg_per_sqrt_h"))
     _quantum = field_validator("quantisation_rad_per_s")(_exclusive("quantisation_rad"))
@@ -251,6 +259,7 @@ class AccelErrors(_CommonErrors):
     quantisation_m_per_s: PositiveReal | None = None
     quantisation_m_per_s2: PositiveReal | None = None
 
+    white_noise_keys = ("vrw_m_per_s_per_sqrt_h", "noise_density_ug_per_sqrt_hz")
     _nonlinearity = field_validator("scale_factor_nonlinearity_ppm")(_needs_range("range_g"))
     _density = field_validator("noise_density_ug_per_sqrt_hz")(_exclusive("vrw_m_per_s_per_sqrt_h"))
     _quantum = field_validator("quantisation_m_per_s2")(_exclusive("quantisation_m_per_s"))

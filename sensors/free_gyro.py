@@ -196,7 +196,7 @@ class FreeGyro(GyroMechanism):
         spins_case = quat_rotate(quat_conjugate(q_rel)[:, None, :], spins)  # (M, 2, 3) case axes
 
         gimbals = gimbal_angles(spins_case)
-        attitude = euler_xyz_from_spins(spins_case)
+        attitude = euler_xyz_from_spins(spins_case, gimbals)
         locked = np.abs(gimbals[:, [0, 2]]).max(axis=1) > math.radians(90.0 - self.gimbal_lock_margin_deg)
         if np.any(locked) and not state.get("lock_reported", False):
             state["lock_reported"] = True
@@ -262,14 +262,15 @@ def gimbal_angles(spins_case: np.ndarray) -> np.ndarray:
                      np.arctan2(-z2, np.hypot(x2, y2)), np.arctan2(x2, y2)], axis=-1)
 
 
-def euler_xyz_from_spins(spins_case: np.ndarray) -> np.ndarray:
+def euler_xyz_from_spins(spins_case: np.ndarray, gimbals: np.ndarray | None = None) -> np.ndarray:
     """Attitude (..., 3) = (φ, θ, ψ), rad, with R = Rx(φ) Ry(θ) Rz(ψ), from the rotor directions (..., 2, 3).
 
-    θ and ψ are gyro 1's gimbal angles; φ comes from gyro 2 by (2).
+    θ and ψ are gyro 1's gimbal angles (``gimbals``, their :func:`gimbal_angles` when already at
+    hand); φ comes from gyro 2 by (2).
     """
-    s1, s2 = spins_case[..., 0, :], spins_case[..., 1, :]
-    theta = np.arctan2(s1[..., 2], np.hypot(s1[..., 0], s1[..., 1]))
-    psi = np.arctan2(-s1[..., 1], s1[..., 0])
+    if gimbals is None:
+        gimbals = gimbal_angles(spins_case)
+    theta, psi, s2 = gimbals[..., 0], gimbals[..., 1], spins_case[..., 1, :]
     cp, sp, ct, st = np.cos(psi), np.sin(psi), np.cos(theta), np.sin(theta)
     a = cp * s2[..., 0] - sp * s2[..., 1]          # Rz(ψ) s₂, x
     v_y = sp * s2[..., 0] + cp * s2[..., 1]        # Rz(ψ) s₂, y (Ry(θ) leaves it)

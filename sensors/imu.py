@@ -29,12 +29,13 @@ from typing import Annotated, Literal
 import numpy as np
 import tomli_w
 from pydantic import Field, field_validator
+from scipy.integrate import cumulative_trapezoid
 
 from dynamics import ConfigError, Trajectory
 from dynamics.config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3, validate
 
 from .accelerometer import AccelerometerSpec, mean_specific_force
-from .errors import ErrorModel, GyroErrors, apply_errors
+from .errors import AccelErrors, ErrorModel, GyroErrors, apply_errors
 from .magnetometer import MagnetometerSpec
 from .mechanism import GYRO_KINDS, GyroMechanism, GyroTruth, mechanism_class
 from .samples import ImuSamples
@@ -115,8 +116,8 @@ def validate_mechanism(data: dict, file=None) -> GyroMechanism:
     return validate(mechanism_class(kind), data, file=file, prefix="gyro.mechanism")
 
 
-def _white_noise_budget(model: ErrorModel, period: float, intrinsic: float, *, explicit: bool, key: str,
-                        what: str, file):
+def _white_noise_budget(model: ErrorModel, period: float, intrinsic: float, *, keys: GyroErrors | AccelErrors,
+                        prefix: str, what: str, file):
     """Split a specified white-noise density between its sources, so the total at the output is it.
 
     A datasheet's noise density is measured at the output: it holds the mechanism's own noise
@@ -124,10 +125,14 @@ def _white_noise_budget(model: ErrorModel, period: float, intrinsic: float, *, e
     noise of variance ``LSB²/12`` per sample, i.e. density² ``LSB² T / 12``. The error layer adds the
     rest, ``N_add² = N_spec² − N_mech² − LSB² T / 12``; a negative rest cannot work.
 
+    ``keys``: the config the model came from, where the white noise is specified (or not) by one of
+    two keys; errors name it under ``prefix``.
+
     Returns the model with ``noise_density = N_add`` and the total density at the output (3,).
     """
     quantiser = (model.output_lsb**2 * period / 12.0) if model.output_lsb else 0.0
-    if not explicit:
+    given = keys.white_noise_key()
+    if given is None:
         total = np.full(3, np.sqrt(intrinsic**2 + quantiser))
         return dataclasses.replace(model, noise_density=np.zeros(3)), total
     specified = np.asarray(model.noise_density, dtype=float)
@@ -140,7 +145,8 @@ def _white_noise_budget(model: ErrorModel, period: float, intrinsic: float, *, e
             parts.append(f"the output quantiser at this rate ({np.sqrt(quantiser):.4g} per sqrt(s))")
         verb = "exceeds" if len(parts) == 1 else "exceed"
         raise ConfigError(f"{' and '.join(parts)} {verb} the specified white noise {specified.max():.4g} "
-                          "per sqrt(s) (SI): lower them or raise the specification", file=file, key=key)
+                          "per sqrt(s) (SI): lower them or raise the specification", file=file,
+                          key=f"{prefix}.{given}")
     return dataclasses.replace(model, noise_density=np.sqrt(np.maximum(rest, 0.0))), specified
 
 
@@ -177,27 +183,16 @@ class Device:
                 file=where, key="gyro.errors.range_deg_per_s")
         self.intrinsic_noise_density = float(self.mechanism.intrinsic_noise_density())
         period = 1.0 / spec.rate_hz
-        gyro_keys = spec.gyro.errors
         self._gyro_errors, self._gyro_noise_density = _white_noise_budget(
-            self._gyro_errors, period, self.intrinsic_noise_density,
-            explicit=gyro_keys.arw_deg_per_sqrt_h is not None or gyro_keys.noise_density_deg_per_s_per_sqrt_hz is not None,
-            key="gyro.errors.arw_deg_per_sqrt_h" if gyro_keys.noise_density_deg_per_s_per_sqrt_hz is None
-            else "gyro.errors.noise_density_deg_per_s_per_sqrt_hz",
+            self._gyro_errors, period, self.intrinsic_noise_density, keys=spec.gyro.errors, prefix="gyro.errors",
             what=f"the {self.mechanism.kind} mechanism's own white noise", file=where)
-        accel_keys = spec.accelerometer.errors
         self._accel_errors, _ = _white_noise_budget(
-            spec.accelerometer.errors.to_si(), period, 0.0,
-            explicit=accel_keys.vrw_m_per_s_per_sqrt_h is not None or accel_keys.noise_density_ug_per_sqrt_hz is not None,
-            key="accelerometer.errors.noise_density_ug_per_sqrt_hz" if accel_keys.vrw_m_per_s_per_sqrt_h is None
-            else "accelerometer.errors.vrw_m_per_s_per_sqrt_h",
-            what="nothing", file=where)
-        if self._gyro_errors.bandwidth_hz is not None and not self._gyro_errors.bandwidth_hz < spec.rate_hz / 2:
-            raise ConfigError(f"{self._gyro_errors.bandwidth_hz:g} Hz is not below the Nyquist frequency "
-                              f"{spec.rate_hz / 2:g} Hz of the output rate", file=where, key="gyro.errors.bandwidth_hz")
-        if self._accel_errors.bandwidth_hz is not None and not self._accel_errors.bandwidth_hz < spec.rate_hz / 2:
-            raise ConfigError(f"{self._accel_errors.bandwidth_hz:g} Hz is not below the Nyquist frequency "
-                              f"{spec.rate_hz / 2:g} Hz of the output rate", file=where,
-                              key="accelerometer.errors.bandwidth_hz")
+            spec.accelerometer.errors.to_si(), period, 0.0, keys=spec.accelerometer.errors,
+            prefix="accelerometer.errors", what="nothing", file=where)
+        for model, prefix in ((self._gyro_errors, "gyro.errors"), (self._accel_errors, "accelerometer.errors")):
+            if model.bandwidth_hz is not None and not model.bandwidth_hz < spec.rate_hz / 2:
+                raise ConfigError(f"{model.bandwidth_hz:g} Hz is not below the Nyquist frequency "
+                                  f"{spec.rate_hz / 2:g} Hz of the output rate", file=where, key=f"{prefix}.bandwidth_hz")
         if spec.clock.jitter_s >= 0.25 / spec.rate_hz:
             raise ConfigError(f"jitter {spec.clock.jitter_s:g} s is not small against the sample interval "
                               f"{1 / spec.rate_hz:g} s", file=where, key="clock.jitter_s")
@@ -254,9 +249,9 @@ class Device:
             stamps = stamps + spec.clock.jitter_s * rng_clock.standard_normal(count)
         temperature = spec.temperature.at(instants[1:] - t0)
 
-        increments, raw = self._gyro_increments(truth, instants, rng_mech, self._substeps(trajectory, true_period))
-        rate_indicated = increments / period
         substeps = self._substeps(trajectory, true_period)
+        increments, raw = self._gyro_increments(truth, instants, rng_mech, substeps)
+        rate_indicated = increments / period
         force_mean = mean_specific_force(truth, instants, substeps=substeps + substeps % 2)
         gyro = apply_errors(rate_indicated, instants[1:], self._gyro_errors, rng_gyro,
                             temperature_degC=temperature,
@@ -302,12 +297,12 @@ class Device:
         increments = np.empty((count, 3))
         raw_chunks: dict[str, list] = {}
         t0 = instants[0]
+        reads = self.mechanism.reads
         for first in range(0, count, per_chunk):
             last = min(first + per_chunk, count)
             j = np.arange(first * m, last * m + 1)
             t = t0 + j * h
             omega, alpha = truth.omega_alpha(t)
-            reads = self.mechanism.reads
             chunk = GyroTruth(
                 t=t, dt=h, omega=omega, alpha=alpha,
                 specific_force=truth.specific_force(t) if "specific_force" in reads else None,
@@ -318,8 +313,7 @@ class Device:
             if response.angle is not None:
                 angle = response.angle - response.angle[0]
             else:  # a rate: trapezoid on the inner grid (the mechanisms' bandwidth is far below 1/h)
-                r = response.rate
-                angle = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * h * (r[1:] + r[:-1]), axis=0)])
+                angle = cumulative_trapezoid(response.rate, dx=h, axis=0, initial=0)
             at_outputs = angle[::m]  # inner index 0, m, 2m, … are τ_first … τ_last
             increments[first:last] = np.diff(at_outputs, axis=0)
             for name, values in response.raw.items():

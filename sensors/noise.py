@@ -219,10 +219,9 @@ def gauss_markov(rng: np.random.Generator, shape, dt: float, sigma, tau_c) -> np
     tau_c = _per_axis(tau_c, n_axes, "tau_c")
     if np.any(tau_c <= 0):
         raise ValueError(f"tau_c must be > 0, got {tau_c}")
-    phi = np.exp(-dt / tau_c)
-    state = sigma * rng.standard_normal(n_axes)  # x_{-1} from the stationary distribution
+    phi, c, x0 = _gauss_markov_rows(rng, sigma[None, :], tau_c[None, :], dt)  # x_{-1} from the stationary law
     out = np.zeros((n, n_axes))
-    _ar1_sum_into(rng, phi[None, :], (sigma * np.sqrt(1 - phi**2))[None, :], state[None, :], out)
+    _ar1_sum_into(rng, phi, c, x0, out)
     return out.reshape(shape)
 
 
@@ -454,7 +453,7 @@ def sensor_noise(rng: np.random.Generator, shape, dt: float, *, white=0.0, rando
 
     if flicker is not None:
         fast = _add_slow_flicker(rng, flicker, dt, out)
-        phi_f, c_f, x0_f = _gauss_markov_rows(rng, flicker.sigma[fast], flicker.tau_c[fast], dt)
+        phi_f, c_f, x0_f = _gauss_markov_rows(rng, flicker.sigma[fast], flicker.tau_c[fast, None], dt)
         phi, c, state = phi + list(phi_f), c + list(c_f), state + list(x0_f)
 
     phi, c, state = np.array(phi), np.array(c), np.array(state)
@@ -484,7 +483,7 @@ def _add_slow_flicker(rng, flicker: FlickerBank, dt: float, out: np.ndarray) -> 
         if coarse is not None:
             _interpolate_into(coarse, coarse_step // step, level)
         j = steps == step
-        phi, c, x0 = _gauss_markov_rows(rng, flicker.sigma[j], flicker.tau_c[j], step * dt)
+        phi, c, x0 = _gauss_markov_rows(rng, flicker.sigma[j], flicker.tau_c[j, None], step * dt)
         _ar1_sum_into(rng, phi, c, x0, level)
         coarse, coarse_step = level, step
     if coarse is not None:
@@ -493,8 +492,9 @@ def _add_slow_flicker(rng, flicker: FlickerBank, dt: float, out: np.ndarray) -> 
 
 
 def _gauss_markov_rows(rng, sigma, tau_c, step):
-    """AR(1) rows (φ, c, stationary x_{-1}) of Gauss–Markov components sampled every ``step`` s."""
-    phi = np.exp(-step / tau_c)[:, None] * np.ones_like(sigma)
+    """AR(1) rows (φ, c, stationary x_{-1}) of Gauss–Markov components sampled every ``step`` s:
+    ``sigma`` (J, A), ``tau_c`` broadcastable to it (one per component, or per component and axis)."""
+    phi = np.exp(-step / tau_c) * np.ones_like(sigma)
     c = sigma * np.sqrt(1 - phi**2)
     x0 = sigma * rng.standard_normal(sigma.shape)
     return phi, c, x0

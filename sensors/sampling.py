@@ -2,7 +2,7 @@
 
 A :class:`~dynamics.Trajectory` is sampled at the scenario's rate; sensors need their truth at their
 own instants (an inner rate for the physics, the output instants of a clock that runs fast or slow).
-:class:`SensorTruth` interpolates once-built splines (scipy):
+:class:`SensorTruth` interpolates splines (scipy), each built once, when first needed:
 
 * ``ω_b`` by the cubic Hermite spline through the samples of ``ω_b`` with slopes ``α_b``, so
   ``ω`` and ``α`` are continuous and exact at the samples;
@@ -19,20 +19,17 @@ origin sits at the lever arm ``r`` (body axes) from the body's reference point::
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline, CubicSpline
 from scipy.spatial.transform import Rotation, Slerp
 
 from dynamics import Trajectory
+from dynamics.rigid_body import point_acceleration
 from dynamics.rotation import quat_conjugate, quat_from_rotvec, quat_multiply, quat_normalize, quat_rotate
 
 __all__ = ["SensorTruth"]
-
-
-def _cross(a, b):
-    ax, ay, az = np.moveaxis(a, -1, 0)
-    bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], -1)
 
 
 class SensorTruth:
@@ -52,18 +49,32 @@ class SensorTruth:
         if len(trajectory) < 2:
             raise ValueError("a sensor needs a trajectory of at least two samples")
         t = trajectory.t
+        self._trajectory = trajectory
         self.t_start, self.t_end = float(t[0]), float(t[-1])
         self.q_bs = quat_normalize(np.asarray(q_bs, dtype=float))
         self.q_sb = quat_conjugate(self.q_bs)
         self.lever_arm_b = np.asarray(lever_arm_b, dtype=float)
         self._omega = CubicHermiteSpline(t, trajectory.omega_b, trajectory.alpha_b, axis=0)
         self._alpha = self._omega.derivative()
-        self._angle = self._omega.antiderivative()
         self._force = CubicSpline(t, trajectory.specific_force_b, axis=0)
-        self._mag = CubicSpline(t, trajectory.mag_b, axis=0)
-        self._attitude = Slerp(t, Rotation.from_quat(trajectory.q_wb, scalar_first=True))
         env = trajectory.environment
         self._earth_rate_w = np.zeros(3) if env is None else np.asarray(env.earth_rate_w, dtype=float)
+
+    # Built on first use: most devices read neither the attitude (only a free gyro and the truth
+    # channels do) nor the field (only a magnetometer), and the attitude's Slerp costs as much as all
+    # the other splines together.
+
+    @cached_property
+    def _angle(self):
+        return self._omega.antiderivative()
+
+    @cached_property
+    def _mag(self):
+        return CubicSpline(self._trajectory.t, self._trajectory.mag_b, axis=0)
+
+    @cached_property
+    def _attitude(self):
+        return Slerp(self._trajectory.t, Rotation.from_quat(self._trajectory.q_wb, scalar_first=True))
 
     def _check(self, t):
         t = np.asarray(t, dtype=float)
@@ -89,8 +100,7 @@ class SensorTruth:
         t = self._check(t)
         f = self._force(t)
         if np.any(self.lever_arm_b):
-            w, a, r = self._omega(t), self._alpha(t), self.lever_arm_b
-            f = f + _cross(a, r) + _cross(w, _cross(w, r))
+            f = point_acceleration(f, self._omega(t), self._alpha(t), self.lever_arm_b)
         return quat_rotate(self.q_sb, f)
 
     def magnetic_field(self, t):

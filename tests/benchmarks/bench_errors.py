@@ -34,8 +34,6 @@ ALL_TERMS = dict(
 )
 
 
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=2_000_000, help="three-axis samples per run")

@@ -65,8 +65,6 @@ def carrier(t: np.ndarray) -> GyroTruth:
                      q_is=quat_from_euler_zyx(rpy), temperature_degC=np.full(m, 25.0))
 
 
-
-
 # --------------------------------------------------------------------------------------------------
 # Baselines: the same equations of motion through solve_ivp
 # --------------------------------------------------------------------------------------------------
