@@ -138,14 +138,20 @@ def _cmd_info(args) -> int:
     return 0
 
 
-def _cmd_import(args) -> int:
-    from .importers import IMPORTERS
-
-    source, out = Path(args.file), Path(args.out)
+def _mcap_out(text: str) -> Path:
+    """``--out`` of a command that writes an MCAP file: a .mcap name in an existing folder."""
+    out = Path(text)
     if out.suffix != ".mcap":
         raise UsageError(f"argument --out: {out}: write a .mcap file (got '{out.suffix}')")
     if not out.parent.is_dir():
         raise UsageError(f"argument --out: {out.parent} is not a folder")
+    return out
+
+
+def _cmd_import(args) -> int:
+    from .importers import IMPORTERS
+
+    source, out = Path(args.file), _mcap_out(args.out)
     started = time.perf_counter()
     try:
         summary = IMPORTERS[args.format](source, out)
@@ -163,11 +169,7 @@ def _cmd_estimate(args) -> int:
         filter_class(args.filter)
     except FilterError as e:
         raise UsageError(f"argument --filter: {e}") from None
-    source, out = Path(args.file), Path(args.out)
-    if out.suffix != ".mcap":
-        raise UsageError(f"argument --out: {out}: write a .mcap file (got '{out.suffix}')")
-    if not out.parent.is_dir():
-        raise UsageError(f"argument --out: {out.parent} is not a folder")
+    source, out = Path(args.file), _mcap_out(args.out)
     if out.resolve() == source.resolve():
         raise UsageError(f"argument --out: {out} is the input: the input is never modified")
     started = time.perf_counter()
@@ -221,11 +223,10 @@ def _cmd_allan(args) -> int:
             raise UsageError(f"argument LOG: {log}: not a gyroemu log (.mcap or .npz): {e}") from None
     spec = None
     if device_toml is not None:
+        import dataclasses
         import tomllib
 
         from sensors import device_from_dict
-
-        import dataclasses
 
         device = device_from_dict(tomllib.loads(device_toml), name=log.name)
         spec = dataclasses.replace(device.gyro_errors, noise_density=device.gyro_noise_density)
@@ -309,6 +310,13 @@ def _cmd_demo(args) -> int:
     return run_demo(scenario=args.scenario, duration=args.duration, out=out, live_seconds=args.live_seconds)
 
 
+def _argument_error(error: ValueError, fallback: str) -> UsageError:
+    """A live command's ``ValueError`` as a usage error: its message names the argument, or else it is
+    zenoh's complaint about ``fallback`` (the endpoints)."""
+    text = str(error)
+    return UsageError(text if text.startswith("argument") else f"argument {fallback}: {text}")
+
+
 def _zenoh_options(args) -> dict:
     return {"connect": args.connect, "listen": args.listen, "mode": args.mode, "config_file": args.config}
 
@@ -335,7 +343,7 @@ def _cmd_stream(args) -> int:
                           as_fast_as_possible=args.as_fast_as_possible, device_name=args.device_name,
                           wait_s=args.wait, estimate=args.estimate, **_zenoh_options(args), **_ros2_options(args))
     except ValueError as e:
-        raise UsageError(str(e) if str(e).startswith("argument") else f"argument --connect/--listen: {e}") from None
+        raise _argument_error(e, "--connect/--listen") from None
 
 
 def _cmd_record(args) -> int:
@@ -348,7 +356,7 @@ def _cmd_record(args) -> int:
         return run_record(out_path=out, duration=args.duration, key_expr=args.key, report_path=args.report,
                           **_zenoh_options(args), **_ros2_options(args))
     except ValueError as e:
-        raise UsageError(str(e) if str(e).startswith("argument") else f"argument --connect/--listen: {e}") from None
+        raise _argument_error(e, "--connect/--listen") from None
     except OSError as e:
         raise UsageError(f"argument --out: {out}: {e.strerror or e}") from None
 
@@ -363,7 +371,7 @@ def _cmd_replay(args) -> int:
     except ConfigError:
         raise  # LogError: names the file
     except ValueError as e:
-        raise UsageError(str(e) if str(e).startswith("argument") else f"argument --connect/--listen: {e}") from None
+        raise _argument_error(e, "--connect/--listen") from None
 
 
 def _cmd_router(args) -> int:
@@ -372,7 +380,7 @@ def _cmd_router(args) -> int:
     try:
         return run_router(listen=args.listen, connect=args.connect, config_file=args.config)
     except ValueError as e:
-        raise UsageError(str(e) if str(e).startswith("argument") else f"argument --listen: {e}") from None
+        raise _argument_error(e, "--listen") from None
 
 
 def _add_zenoh_arguments(p, modes=True) -> None:

@@ -58,6 +58,7 @@ Sources: MCAP format specification (https://mcap.dev/spec) and its appendix (wel
 from __future__ import annotations
 
 import bisect
+import functools
 import operator
 import os
 import re
@@ -108,7 +109,6 @@ __all__ = [
     "LogError",
     "McapMessage",
     "iter_mcap_batches",
-    "mcap_channels",
     "ChannelInfo",
     "mcap_channel_info",
     "LogWarning",
@@ -156,6 +156,7 @@ class LogWarning(UserWarning):
     """Something in a log that was skipped or recovered: an unknown channel, a truncated file."""
 
 
+@functools.cache
 def _version() -> str:
     try:
         from importlib.metadata import version
@@ -309,6 +310,8 @@ class McapLog:
         The file ends before its footer: only complete chunks were read.
     skipped : dict of str to str
         Topics not decoded, with the reason.
+    channels : tuple of ChannelInfo
+        Every channel of the file (decoded or not) with its schema, in file order.
     """
 
     path: Path
@@ -318,6 +321,7 @@ class McapLog:
     message_count: int
     truncated: bool = False
     skipped: dict = field(default_factory=dict)
+    channels: tuple = ()
 
     @property
     def device(self) -> DeviceLog:
@@ -376,6 +380,11 @@ class _Stream:
     records: np.ndarray   # (N, record size) uint8
 
 
+def _no_messages():
+    """``(data, channel_id, log_time, offset)`` of no message (see :func:`_interleave`)."""
+    return np.empty(0, np.uint8), np.empty(0, np.uint16), np.empty(0, np.uint64), np.empty(0, np.int64)
+
+
 def _interleave(streams: Sequence[_Stream]):
     """Records of several channels in time order (ties: the order of ``streams``).
 
@@ -384,7 +393,7 @@ def _interleave(streams: Sequence[_Stream]):
     """
     streams = [s for s in streams if len(s.log_time)]
     if not streams:
-        return np.empty(0, np.uint8), np.empty(0, np.uint16), np.empty(0, np.uint64), np.empty(0, np.int64)
+        return _no_messages()
     sizes = np.array([s.records.shape[1] for s in streams], dtype=np.int64)
     first = streams[0].log_time
     if all(len(s.log_time) == len(first) and np.array_equal(s.log_time, first) for s in streams[1:]):
@@ -448,7 +457,7 @@ class McapFileWriter:
         self._channel_counts: dict[int, int] = {}
         self._time_range: list[int] | None = None
         self._metadata_count = 0
-        self._pending = (np.empty(0, np.uint8), np.empty(0, np.uint16), np.empty(0, np.uint64), np.empty(0, np.int64))
+        self._pending = _no_messages()
         self._finished = False
         self._write(MAGIC)
         self._write_record(Header(profile=profile, library=library or f"gyroemu/{_version()}"))
@@ -487,14 +496,17 @@ class McapFileWriter:
         self._write_record(channel)
         return channel.id
 
+    def register_ros2_channel(self, topic: str, mtype: MessageType | None, metadata: dict | None = None) -> int:
+        """A new ``cdr`` channel of type ``mtype`` (its ``ros2msg`` schema, registered once; None: no
+        schema) with the ``offered_qos_profiles`` of the ``ros2`` profile, then ``metadata``."""
+        schema_id = 0 if mtype is None else self.register_schema(mtype.name, "ros2msg", mtype.schema.encode())
+        return self.register_channel(topic, "cdr", schema_id,
+                                     {"offered_qos_profiles": OFFERED_QOS_PROFILES, **(metadata or {})})
+
     def add_metadata(self, name: str, data: dict) -> None:
         """A Metadata record (and its index in the summary)."""
-        record = Metadata(name=name, metadata={str(k): str(v) for k, v in data.items()})
-        builder = RecordBuilder()
-        record.write(builder)
-        raw = builder.end()
-        self._metadata_indexes.append(MetadataIndex(offset=self._position, length=len(raw), name=name))
-        self._write(raw)
+        offset = self._write_record(Metadata(name=name, metadata={str(k): str(v) for k, v in data.items()}))
+        self._metadata_indexes.append(MetadataIndex(offset=offset, length=self._position - offset, name=name))
         self._metadata_count += 1
 
     def add_messages(self, batches: Iterable[tuple[int, np.ndarray, np.ndarray]]) -> None:
@@ -593,7 +605,7 @@ class McapFileWriter:
             return
         data, channel, log_time, offset = self._pending
         self._write_chunk(data, channel, log_time, offset)
-        self._pending = (np.empty(0, np.uint8), np.empty(0, np.uint16), np.empty(0, np.uint64), np.empty(0, np.int64))
+        self._pending = _no_messages()
         self._write_record(DataEnd(data_section_crc=0))
         summary_start = self._position
         builder = RecordBuilder()
@@ -638,6 +650,13 @@ class _DeviceChannels:
     channels: dict  # role -> channel id
     frame_id: str
     warned: set = field(default_factory=set)
+
+
+def _device_metadata(device_name: str, topic_prefix: str, *, seed: str = "", scenario: str = "",
+                    device: str = "") -> dict:
+    """A device's ``gyroemu`` metadata record: the writer's own keys (empty: not known)."""
+    return {"version": _version(), "seed": seed, "scenario": scenario, "device": device,
+            "device_name": device_name, "topic_prefix": topic_prefix}
 
 
 def _toml(value) -> str:
@@ -687,7 +706,6 @@ class McapLogWriter:
         self._scenario = _toml(scenario)
         self._prefix = prefix_topics
         self._devices: dict[str, _DeviceChannels] = {}
-        self._schemas: dict[str, int] = {}
         self._last_time = -1
         self._closed = False
 
@@ -702,16 +720,9 @@ class McapLogWriter:
 
     # ---------------------------------------------------------------------------------------------
 
-    def _schema(self, mtype: MessageType) -> int:
-        if mtype.name not in self._schemas:
-            self._schemas[mtype.name] = self._mcap.register_schema(mtype.name, "ros2msg", mtype.schema.encode())
-        return self._schemas[mtype.name]
-
     def _channel(self, device: _DeviceChannels, role: str, mtype: MessageType) -> int:
         if role not in device.channels:
-            topic = f"{device.prefix}/{role}"
-            device.channels[role] = self._mcap.register_channel(
-                topic, "cdr", self._schema(mtype), {"offered_qos_profiles": OFFERED_QOS_PROFILES})
+            device.channels[role] = self._mcap.register_ros2_channel(f"{device.prefix}/{role}", mtype)
         return device.channels[role]
 
     def _device(self, recording: Recording, several: bool) -> _DeviceChannels:
@@ -730,8 +741,8 @@ class McapLogWriter:
         self._devices[name] = entry
         device = recording.device
         seed = recording.seed if recording.seed is not None else getattr(device, "seed", None)
-        record = {"version": _version(), "seed": "" if seed is None else str(int(seed)), "scenario": self._scenario,
-                  "device": _toml(device), "device_name": name, "topic_prefix": entry.prefix}
+        record = _device_metadata(name, entry.prefix, seed="" if seed is None else str(int(seed)),
+                                 scenario=self._scenario, device=_toml(device))
         extra = dict(recording.metadata or {})
         clash = sorted(set(extra) & set(record))
         if clash:
@@ -775,11 +786,7 @@ class McapLogWriter:
             stamp_ns = exact
         n = len(stamp_ns)
         batches = []
-        no_orientation = np.zeros(9)
-        no_orientation[0] = -1.0
-        rows = IMU.encode(stamp_ns, device.frame_id, {
-            "orientation": (0.0, 0.0, 0.0, 1.0), "orientation_covariance": no_orientation,
-            "angular_velocity": samples.gyro, "linear_acceleration": samples.accel})
+        rows = IMU.encode(stamp_ns, device.frame_id, _measured_fields(samples))
         batches.append((self._channel(device, "imu", IMU), stamp_ns, rows))
         if samples.has_mag or "mag" in device.channels:
             rows = MAGNETIC_FIELD.encode(stamp_ns, device.frame_id, {"magnetic_field": samples.mag})
@@ -856,6 +863,16 @@ _IMU_QUANTITIES = (
 )
 """(ImuSeries attribute, its covariance, Imu field, its covariance) for each quantity of an Imu message."""
 
+_NO_ESTIMATE = np.array([-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+_NO_ESTIMATE.flags.writeable = False
+"""An Imu covariance with element 0 at -1: "no estimate" of its quantity (sensor_msgs/msg/Imu)."""
+
+
+def _measured_fields(samples: ImuSamples) -> dict:
+    """Imu message fields of a device's samples (``/imu``): rate and specific force, no orientation."""
+    return {"orientation": (0.0, 0.0, 0.0, 1.0), "orientation_covariance": _NO_ESTIMATE,
+            "angular_velocity": samples.gyro, "linear_acceleration": samples.accel}
+
 
 def _series_fields(series: ImuSeries) -> dict:
     """Imu message fields of an :class:`ImuSeries` (scalar-first quaternions to x, y, z, w)."""
@@ -864,9 +881,7 @@ def _series_fields(series: ImuSeries) -> dict:
     for value_name, cov_name, field_name, cov_field in _IMU_QUANTITIES:
         value, cov = getattr(series, value_name), getattr(series, cov_name)
         if value is None:
-            unknown = np.zeros(9)
-            unknown[0] = -1.0
-            fields[cov_field] = unknown
+            fields[cov_field] = _NO_ESTIMATE
             if field_name == "orientation":
                 fields[field_name] = (0.0, 0.0, 0.0, 1.0)
             continue
@@ -1007,13 +1022,18 @@ class _Scan:
             self.skipped[channel.topic] = reason
         self.data[channel.id] = _ChannelData(channel, mtype=None if reason else mtype)
 
-    def _loose_message(self, content: bytes) -> None:
+    def _loose_fields(self, content: bytes) -> tuple[np.ndarray, int]:
+        """The fixed fields (``(1,)`` :data:`_MESSAGE_FIELDS`) and channel id of a Message record outside chunks."""
         if len(content) < 22:
             raise ValueError("a Message record shorter than its fixed fields")
         fields = np.frombuffer(content[:22], dtype=_MESSAGE_FIELDS)
         channel_id = int(fields["channel_id"][0])
         if channel_id not in self.data:
             raise ValueError(f"a message on channel {channel_id}, which no Channel record defines")
+        return fields, channel_id
+
+    def _loose_message(self, content: bytes) -> None:
+        fields, channel_id = self._loose_fields(content)
         if self.data[channel_id].mtype is not None:
             self.data[channel_id].loose.append((self.message_count, fields, content[22:]))
         self.message_count += 1
@@ -1205,12 +1225,7 @@ class _MessageWalk(_Scan):
         self.wanted[channel.id] = (channel.topic, schema.name if schema is not None else "") if keep else None
 
     def _loose_message(self, content: bytes) -> None:
-        if len(content) < 22:
-            raise ValueError("a Message record shorter than its fixed fields")
-        fields = np.frombuffer(content[:22], dtype=_MESSAGE_FIELDS)
-        channel_id = int(fields["channel_id"][0])
-        if channel_id not in self.data:
-            raise ValueError(f"a message on channel {channel_id}, which no Channel record defines")
+        fields, channel_id = self._loose_fields(content)
         self.message_count += 1
         wanted = self.wanted[channel_id]
         if wanted is not None:
@@ -1253,27 +1268,16 @@ def iter_mcap_batches(path, topics=None) -> Iterator[list[McapMessage]]:
         batch, walk.out = walk.out, []
         batch.sort(key=by_time)
         threshold = batch[0].log_time
-        if held and held[-1].log_time > threshold:
-            held.extend(batch)
+        overlap = held and held[-1].log_time > threshold
+        held.extend(batch)
+        if overlap:
             held.sort(key=by_time)  # two sorted runs: a linear merge for timsort
-        else:
-            held.extend(batch)
         cut = bisect.bisect_left(held, threshold, key=by_time)
         if cut:
             yield held[:cut]
             held = held[cut:]
     if held:
         yield held
-
-
-def mcap_channels(path) -> list[tuple[str, str, str]]:
-    """``(topic, schema name, message encoding)`` of every channel of an MCAP file, in file order
-    (a pass over the file that decodes no message). Raises :class:`LogError` as :func:`read_mcap` does."""
-    walk = _MessageWalk(Path(path), topics=())
-    walk.run()
-    return [(c.topic, walk.schemas[c.schema_id].name if c.schema_id in walk.schemas else "", c.message_encoding)
-            for c in walk.channels.values()]
-
 
 
 class ChannelInfo(NamedTuple):
@@ -1287,18 +1291,22 @@ class ChannelInfo(NamedTuple):
     metadata: dict
 
 
-def mcap_channel_info(path) -> list[ChannelInfo]:
-    """Every channel of an MCAP file with its schema record and metadata, in file order (a pass that
-    decodes no message). Raises :class:`LogError` as :func:`read_mcap` does."""
-    walk = _MessageWalk(Path(path), topics=())
-    walk.run()
+def _channel_info(scan: _Scan) -> list[ChannelInfo]:
+    """The channels a scan found, with their schemas, in file order."""
     out = []
-    for c in walk.channels.values():
-        schema = walk.schemas.get(c.schema_id)
+    for c in scan.channels.values():
+        schema = scan.schemas.get(c.schema_id)
         out.append(ChannelInfo(c.topic, c.message_encoding, schema.name if schema else "",
                                schema.encoding if schema else "", bytes(schema.data) if schema else b"",
                                dict(c.metadata)))
     return out
+
+
+def mcap_channel_info(path) -> list[ChannelInfo]:
+    """Every channel of an MCAP file with its schema record and metadata, in file order (a pass that
+    decodes no message; :attr:`McapLog.channels` holds the same). Raises :class:`LogError` as
+    :func:`read_mcap` does."""
+    return _channel_info(_MessageWalk(Path(path), topics=()).run())
 
 # -- from channels to devices -----------------------------------------------------------------------
 
@@ -1440,7 +1448,8 @@ def read_mcap(path) -> McapLog:
         raise LogError(f"holds no sensor_msgs/msg/Imu messages ({len(scan.channels)} channels, "
                        f"{scan.message_count} messages{state})", file=path)
     return McapLog(path=path, devices=devices, metadata=metadata, profile=scan.profile,
-                   message_count=scan.message_count, truncated=scan.truncated_at is not None, skipped=skipped)
+                   message_count=scan.message_count, truncated=scan.truncated_at is not None, skipped=skipped,
+                   channels=tuple(_channel_info(scan)))
 
 
 def _devices(path: Path, decoded: dict, metadata: list, skipped: dict) -> dict:

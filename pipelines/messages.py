@@ -345,6 +345,10 @@ class FieldSpec:
     def itemsize(self) -> int:
         return np.dtype(self.dtype).itemsize
 
+    def shape(self, n: int) -> tuple:
+        """The array shape of ``n`` messages' values: (n,) for a scalar, else (n, count)."""
+        return (n,) if self.count == 1 else (n, self.count)
+
 
 @dataclass(frozen=True)
 class DecodedBatch:
@@ -473,7 +477,7 @@ class MessageType:
                 out[spec.present_flag] = spec.name in fields
             if spec.name in fields:
                 values = np.asarray(fields[spec.name])
-                target = (n,) if spec.count == 1 else (n, spec.count)
+                target = spec.shape(n)
                 try:
                     out[spec.name] = np.broadcast_to(values, target)
                 except ValueError:
@@ -519,8 +523,7 @@ class MessageType:
             return parts[0][1]
         stamp_ns = np.empty(n, dtype=np.int64)
         frame_id = np.empty(n, dtype=object)
-        fields = {spec.name: np.empty((n,) if spec.count == 1 else (n, spec.count), dtype=spec.dtype)
-                  for spec in self.body}
+        fields = {spec.name: np.empty(spec.shape(n), dtype=spec.dtype) for spec in self.body}
         for index, batch in parts:
             stamp_ns[index] = batch.stamp_ns
             frame_id[index] = batch.frame_id
@@ -534,8 +537,7 @@ class MessageType:
         m, size = rows.shape
         if m == 0:
             return DecodedBatch(np.empty(0, np.int64), np.empty(0, str),
-                                {spec.name: np.empty((0,) if spec.count == 1 else (0, spec.count), spec.dtype)
-                                 for spec in self.body})
+                                {spec.name: np.empty(spec.shape(0), spec.dtype) for spec in self.body})
         if size < 4 + _HEADER_FIXED + 1:
             raise ValueError(f"a {size}-byte message is too short for a {self.name}")
         bad = (rows[:, 0] != 0) | (rows[:, 1] != 1)

@@ -36,7 +36,6 @@ schema the key's type names when gyroemu knows the type, and the type hash in th
 from __future__ import annotations
 
 import json
-import signal
 import sys
 import time
 from dataclasses import dataclass, field
@@ -46,7 +45,7 @@ import numpy as np
 
 from .messages import IMU, MAGNETIC_FIELD, MESSAGE_TYPES, RAW_MESSAGE_TYPES
 from .zenoh_io import (drain, header_stamp_ns, key_to_topic, open_session, router_config, session_config,
-                       subscribe, unpack_attachment)
+                       stop_on_signals, subscribe, unpack_attachment)
 
 __all__ = ["SequenceTracker", "Recorder", "KeyInfo", "gyroemu_key", "ros2_key", "topic_message_type",
            "run_record", "run_router"]
@@ -144,14 +143,11 @@ class Recorder:
     :func:`ros2_key` in ROS 2 mode); ``on_new_topic(info)`` is called once per new channel."""
 
     def __init__(self, path, chunk_size: int = 1 << 18, parse_key=gyroemu_key, on_new_topic=None):
-        from .mcap_io import OFFERED_QOS_PROFILES, McapFileWriter, _version
+        from .mcap_io import McapFileWriter
 
         self.path = Path(path)
         self._file = open(self.path, "wb")
         self._mcap = McapFileWriter(self._file, chunk_size=chunk_size)
-        self._qos = OFFERED_QOS_PROFILES
-        self._version = _version()
-        self._schemas: dict[str, int] = {}
         self._channels: dict[tuple[str, str], int] = {}
         self._devices: dict[str, str] = {}  # device -> topic prefix
         self._pending: dict[tuple[int, int], tuple[list, list]] = {}  # (channel, size) -> stamps, payloads
@@ -164,25 +160,19 @@ class Recorder:
         self.without_attachment = 0
 
     def _channel(self, info: KeyInfo) -> int:
+        from .mcap_io import _device_metadata
+
         key = (info.device, info.topic)
         if key not in self._channels:
             device, topic = info.device, info.topic
             if device not in self._devices:
                 prefix = "" if not self._devices else f"/{device}"
                 self._devices[device] = prefix
-                self._mcap.add_metadata("gyroemu", {"version": self._version, "seed": "", "scenario": "",
-                                                    "device": "", "device_name": device, "topic_prefix": prefix})
+                self._mcap.add_metadata("gyroemu", _device_metadata(device, prefix))
             mtype = MESSAGE_TYPES.get(info.type_name) if info.type_name else topic_message_type(topic)
-            schema_id = 0
-            if mtype is not None:
-                if mtype.name not in self._schemas:
-                    self._schemas[mtype.name] = self._mcap.register_schema(mtype.name, "ros2msg", mtype.schema.encode())
-                schema_id = self._schemas[mtype.name]
-            metadata = {"offered_qos_profiles": self._qos}
-            if info.type_hash:
-                metadata["topic_type_hash"] = info.type_hash  # as rosbag2 (Iron and later) records it
-            self._channels[key] = self._mcap.register_channel(self._devices[device] + topic, "cdr", schema_id,
-                                                              metadata)
+            # the type hash as rosbag2 (Iron and later) records it
+            metadata = {"topic_type_hash": info.type_hash} if info.type_hash else None
+            self._channels[key] = self._mcap.register_ros2_channel(self._devices[device] + topic, mtype, metadata)
             if self._on_new_topic is not None:
                 try:
                     self._on_new_topic(info)
@@ -316,34 +306,31 @@ def run_record(*, out_path, duration: float | None = None, key_expr: str | None 
             node.close()
         session.close()
         raise
-    stopping = []
-    previous = {s: signal.signal(s, lambda *_: stopping.append(1)) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        subscriber = subscribe(session, key_expr)
-        what = f"ROS 2 domain {domain}: " if ros2 else ""
-        print(f"record: subscribed to {what}{key_expr} -> {recorder.path}", file=out, flush=True)
-        end = None if duration is None else time.monotonic() + duration
-        last_flush = time.monotonic()
-        while not stopping and (end is None or time.monotonic() < end):
-            samples = drain(subscriber)
-            for sample in samples:
+    with stop_on_signals() as stopping:
+        try:
+            subscriber = subscribe(session, key_expr)
+            what = f"ROS 2 domain {domain}: " if ros2 else ""
+            print(f"record: subscribed to {what}{key_expr} -> {recorder.path}", file=out, flush=True)
+            end = None if duration is None else time.monotonic() + duration
+            last_flush = time.monotonic()
+            while not stopping and (end is None or time.monotonic() < end):
+                samples = drain(subscriber)
+                for sample in samples:
+                    recorder.add(sample)
+                now = time.monotonic()
+                if now - last_flush > 0.2:
+                    recorder.flush()
+                    last_flush = now
+                if not samples:
+                    time.sleep(0.002)
+            for sample in drain(subscriber, 1 << 30):
                 recorder.add(sample)
-            now = time.monotonic()
-            if now - last_flush > 0.2:
-                recorder.flush()
-                last_flush = now
-            if not samples:
-                time.sleep(0.002)
-        for sample in drain(subscriber, 1 << 30):
-            recorder.add(sample)
-        subscriber.undeclare()
-    finally:
-        recorder.close()
-        if node is not None:
-            node.close()
-        session.close()
-        for s, h in previous.items():
-            signal.signal(s, h)
+            subscriber.undeclare()
+        finally:
+            recorder.close()
+            if node is not None:
+                node.close()
+            session.close()
     report = recorder.report()
     print(format_report(report), file=out, flush=True)
     if report_path:
@@ -354,14 +341,12 @@ def run_record(*, out_path, duration: float | None = None, key_expr: str | None 
 def run_router(*, listen=None, connect=None, config_file=None, out=sys.stdout) -> int:
     config = router_config(listen=listen, connect=connect, config_file=config_file)
     session = open_session(config)
-    stopping = []
-    previous = {s: signal.signal(s, lambda *_: stopping.append(1)) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        print(f"router: {session.zid()} listening on {', '.join(listen or ['tcp/0.0.0.0:7447'])}", file=out, flush=True)
-        while not stopping:
-            time.sleep(0.1)
-    finally:
-        session.close()
-        for s, h in previous.items():
-            signal.signal(s, h)
+    with stop_on_signals() as stopping:
+        try:
+            print(f"router: {session.zid()} listening on {', '.join(listen or ['tcp/0.0.0.0:7447'])}", file=out,
+                  flush=True)
+            while not stopping:
+                time.sleep(0.1)
+        finally:
+            session.close()
     return 0

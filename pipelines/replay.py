@@ -52,14 +52,13 @@ from __future__ import annotations
 
 import queue
 import re
-import signal
 import sys
 import threading
 import time
 import warnings
 
-from .mcap_io import LogWarning, iter_mcap_batches, mcap_channel_info, mcap_channels, read_mcap
-from .zenoh_io import PacedPublisher, key_to_topic, open_session, session_config, topic_to_key
+from .mcap_io import LogWarning, iter_mcap_batches, read_mcap
+from .zenoh_io import PacedPublisher, key_to_topic, open_session, session_config, stop_on_signals, topic_to_key
 
 __all__ = ["topic_keys", "ros2_topic_keys", "ReadAhead", "run_replay", "READ_AHEAD", "BATCH"]
 
@@ -99,7 +98,7 @@ def ros2_topic_keys(keys: dict[str, str], channels, ros) -> tuple[dict[str, str]
     """ROS 2 mode: ``({topic: rmw_zenoh key}, {topic: why not})`` from the gyroemu keys of
     :func:`topic_keys`, the file's :class:`pipelines.mcap_io.ChannelInfo` and a
     :class:`pipelines.stream.Ros2Keys` (which keeps each key's topic, type and hash for its tokens)."""
-    from .ros2_keys import Ros2Error, is_type_hash, parse_definitions, ros_topic, type_hash
+    from .ros2_keys import Ros2Error, full_type_name, is_type_hash, parse_definitions, ros_topic, type_hash
 
     info = {c.topic: c for c in channels}
     out, bad = {}, {}
@@ -109,8 +108,7 @@ def ros2_topic_keys(keys: dict[str, str], channels, ros) -> tuple[dict[str, str]
             name = ros_topic(*key_to_topic(key))
             if not c.schema_name:
                 raise Ros2Error("the channel has no schema, so its ROS 2 type is unknown")
-            type_name = c.schema_name if c.schema_name.count("/") == 2 else \
-                "{0}/msg/{1}".format(*c.schema_name.split("/", 1))
+            type_name = full_type_name(c.schema_name)
             recorded = c.metadata.get("topic_type_hash", "")
             if is_type_hash(recorded):
                 hash_ = recorded
@@ -226,10 +224,10 @@ def run_replay(*, path, rate: float = 1.0, loop: bool = False, topics=None, devi
     for w in caught:
         if issubclass(w.category, LogWarning) and "skipping topic" not in str(w.message):
             print(f"replay: warning: {w.message}", file=out)
-    channels = mcap_channels(path)
-    cdr = [topic for topic, _, encoding in channels if encoding == "cdr"]
+    channels = log.channels  # the pass that validated the file found them
+    cdr = [c.topic for c in channels if c.message_encoding == "cdr"]
     if topics:
-        known = {topic for topic, _, _ in channels}
+        known = {c.topic for c in channels}
         for topic in topics:
             if topic not in known:
                 raise ReplayError(f"argument --topics: {path}: no topic {topic!r} "
@@ -237,12 +235,12 @@ def run_replay(*, path, rate: float = 1.0, loop: bool = False, topics=None, devi
             if topic not in cdr:
                 raise ReplayError(f"argument --topics: {path}: topic {topic!r} is not cdr-encoded")
         cdr = [t for t in cdr if t in set(topics)]
-    for topic, _, encoding in channels:
-        if encoding != "cdr" and not topics:
-            print(f"replay: skipping {topic}: message encoding {encoding!r}, not cdr", file=out)
+    for c in channels:
+        if c.message_encoding != "cdr" and not topics:
+            print(f"replay: skipping {c.topic}: message encoding {c.message_encoding!r}, not cdr", file=out)
     keys, bad = topic_keys(cdr, log.metadata, device_name)
     if ros is not None:
-        keys, more = ros2_topic_keys(keys, mcap_channel_info(path), ros)
+        keys, more = ros2_topic_keys(keys, channels, ros)
         bad.update(more)
     for topic, why in bad.items():
         if topics:
@@ -255,37 +253,34 @@ def run_replay(*, path, rate: float = 1.0, loop: bool = False, topics=None, devi
     for topic, key in keys.items():
         print(f"  {topic} -> {key}", file=out)
     session = open_session(config)
-    stopping = []
-    previous = {s: signal.signal(s, lambda *_: stopping.append(1)) for s in (signal.SIGINT, signal.SIGTERM)}
     publisher = reader = None
-    try:
-        publisher = PacedPublisher(session, sorted(set(keys.values())))
-        if ros is not None:
-            ros.declare(session, out)
-        reader = ReadAhead(path, keys, rate, loop)
-        reader.start()  # fills its queue while we wait for subscribers
-        if wait_s > 0 and not publisher.wait_for_subscribers(wait_s, stop=lambda: bool(stopping)):
-            print(f"replay: no subscriber on every key after {wait_s:g} s: publishing anyway", file=out)
-        # The reader's start-up (imports, the first chunks) would compete with the first deadlines for
-        # the GIL: start the clock once its queue is full (at most 10 s from here).
-        end = time.monotonic() + 10.0
-        while not reader.ready.wait(0.1) and not stopping and time.monotonic() < end:
-            pass
-        print("replay: publishing", file=out, flush=True)
-        stop = lambda: bool(stopping)  # noqa: E731
-        report = publisher.run_schedule(reader.batches(stop), stop=stop)
-        print(f"replay: sent {report.messages} messages ({reader.passes} complete passes)", file=out)
-        print(f"replay: {report.summary('t_start + (log_time - log_time_0) / rate')}", file=out)
-        time.sleep(0.5)  # let queued messages drain before the session closes
-    finally:
-        if reader is not None:
-            reader.stopping.set()
-        if publisher is not None:
-            publisher.close()
-        if ros is not None:
-            ros.close()
-        session.close()
-        for s, h in previous.items():
-            signal.signal(s, h)
+    with stop_on_signals() as stopping:
+        try:
+            publisher = PacedPublisher(session, sorted(set(keys.values())))
+            if ros is not None:
+                ros.declare(session, out)
+            reader = ReadAhead(path, keys, rate, loop)
+            reader.start()  # fills its queue while we wait for subscribers
+            stop = lambda: bool(stopping)  # noqa: E731
+            if wait_s > 0 and not publisher.wait_for_subscribers(wait_s, stop=stop):
+                print(f"replay: no subscriber on every key after {wait_s:g} s: publishing anyway", file=out)
+            # The reader's start-up (imports, the first chunks) would compete with the first deadlines for
+            # the GIL: start the clock once its queue is full (at most 10 s from here).
+            end = time.monotonic() + 10.0
+            while not reader.ready.wait(0.1) and not stopping and time.monotonic() < end:
+                pass
+            print("replay: publishing", file=out, flush=True)
+            report = publisher.run_schedule(reader.batches(stop), stop=stop)
+            print(f"replay: sent {report.messages} messages ({reader.passes} complete passes)", file=out)
+            print(f"replay: {report.summary('t_start + (log_time - log_time_0) / rate')}", file=out)
+            time.sleep(0.5)  # let queued messages drain before the session closes
+        finally:
+            if reader is not None:
+                reader.stopping.set()
+            if publisher is not None:
+                publisher.close()
+            if ros is not None:
+                ros.close()
+            session.close()
     out.flush()
     return 130 if stopping and not loop else 0

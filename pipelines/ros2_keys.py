@@ -81,6 +81,7 @@ from .messages import RAW_MESSAGE_TYPES, ROS_DEFINITIONS
 __all__ = [
     "ADMIN_SPACE",
     "Ros2Error",
+    "full_type_name",
     "parse_definitions",
     "type_description",
     "type_hash",
@@ -128,7 +129,7 @@ _TYPE = re.compile(r"^(?P<base>[A-Za-z][A-Za-z0-9_/]*)(?:<=(?P<strcap>\d+))?"
 _MSG_SECTION = re.compile(r"^MSG: (\S+)\s*$", re.MULTILINE)
 
 
-def _full_name(name: str, package: str | None = None) -> str:
+def full_type_name(name: str, package: str | None = None) -> str:
     """``pkg/Type``, ``pkg/msg/Type`` or (inside ``package``) ``Type`` -> ``pkg/msg/Type``."""
     parts = name.split("/")
     if len(parts) == 3 and parts[1] == "msg":
@@ -163,7 +164,7 @@ def _field_type(token: str, package: str) -> dict:
         element = _TYPE_IDS[base]
     else:
         element = _TYPE_IDS["nested"]
-        nested = _ALIASES.get(base) or _full_name(base, package)
+        nested = _ALIASES.get(base) or full_type_name(base, package)
     capacity = 0
     if m.group(0).endswith("]"):
         size = m.group("size")
@@ -211,14 +212,14 @@ def parse_definitions(schema: str, name: str) -> dict[str, str]:
     ``{pkg/msg/Type: .msg text}``."""
     out: dict[str, str] = {}
     sections = re.split(r"^=+\s*$", schema, flags=re.MULTILINE)
-    out[_full_name(name)] = sections[0]
+    out[full_type_name(name)] = sections[0]
     for section in sections[1:]:
         m = _MSG_SECTION.search(section)
         if not m:
             if section.strip():
                 raise Ros2Error(f"schema of {name}: a section without its 'MSG: pkg/Type' line")
             continue
-        out[_full_name(m.group(1))] = section[m.end():]
+        out[full_type_name(m.group(1))] = section[m.end():]
     return out
 
 
@@ -228,8 +229,8 @@ def type_description(name: str, definitions: Mapping[str, str] = ROS_DEFINITIONS
 
     ``definitions`` maps type names (``pkg/msg/Type`` or ``pkg/Type``) to ``.msg`` texts; raises
     :class:`Ros2Error` when a referenced type is missing or a definition does not parse."""
-    texts = {_full_name(k): v for k, v in definitions.items()}
-    root = _full_name(name)
+    texts = {full_type_name(k): v for k, v in definitions.items()}
+    root = full_type_name(name)
     described: dict[str, dict] = {}
     pending = [root]
     while pending:
@@ -268,7 +269,7 @@ _TOKEN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 def dds_type_name(name: str) -> str:
     """``sensor_msgs/msg/Imu`` -> ``sensor_msgs::msg::dds_::Imu_`` (the type name rmw_zenoh puts in keys)."""
-    package, _, typ = _full_name(name).split("/")
+    package, _, typ = full_type_name(name).split("/")
     return f"{package}::msg::dds_::{typ}_"
 
 

@@ -18,29 +18,24 @@ publisher per topic, so that ROS 2 nodes on rmw_zenoh see and subscribe to the t
 
 from __future__ import annotations
 
-import signal
 import sys
 import time
 
 import numpy as np
 
 from .messages import IMU, MAGNETIC_FIELD, RAW_MESSAGE_TYPES, raw_fields, split_payloads, stamps_to_ns
-from .zenoh_io import PacedPublisher, open_session, session_config, topic_to_key
+from .zenoh_io import PacedPublisher, open_session, session_config, stop_on_signals, topic_to_key
 
 __all__ = ["encode_run", "topic_types", "run_stream", "Ros2Keys"]
 
 
 def encode_run(samples, truth=None) -> dict[str, np.ndarray]:
     """Topic -> ``(N, size)`` encoded rows of a device's samples (and truth), as an MCAP log holds them."""
-    from .mcap_io import BODY_FRAME, _series_fields
+    from .mcap_io import BODY_FRAME, _measured_fields, _series_fields
 
     stamp_ns = stamps_to_ns(samples.t)
     frame = samples.device
-    no_orientation = np.zeros(9)
-    no_orientation[0] = -1.0
-    out = {"/imu": IMU.encode(stamp_ns, frame, {
-        "orientation": (0.0, 0.0, 0.0, 1.0), "orientation_covariance": no_orientation,
-        "angular_velocity": samples.gyro, "linear_acceleration": samples.accel})}
+    out = {"/imu": IMU.encode(stamp_ns, frame, _measured_fields(samples))}
     if samples.has_mag:
         out["/mag"] = MAGNETIC_FIELD.encode(stamp_ns, frame, {"magnetic_field": samples.mag})
     if truth is not None:
@@ -109,13 +104,13 @@ def run_stream(*, scenario: str, device: str, duration: float | None = None, see
 
     from .mcap_io import truth_series
 
+    from .ros2_keys import ros_topic
+
     config = session_config(connect=connect, listen=listen, mode=mode, config_file=config_file)
     ros = Ros2Keys(domain, "stream") if ros2 else None
     try:
         topic_to_key(device_name, "/imu")  # checks the device name before the (slow) simulation
         if ros is not None:
-            from .ros2_keys import ros_topic
-
             ros_topic(device_name, "/imu")
     except ValueError as e:
         raise ValueError(f"argument --device-name: {e}") from None
@@ -135,8 +130,6 @@ def run_stream(*, scenario: str, device: str, duration: float | None = None, see
     samples = dev.measure(traj)
     encoded = encode_run(samples, truth_series(traj, samples))
     if ros is not None:
-        from .ros2_keys import ros_topic
-
         types = topic_types(encoded)
         batches = {ros.key(ros_topic(device_name, topic), types[topic]): split_payloads(rows)
                    for topic, rows in encoded.items()}
@@ -162,36 +155,33 @@ def run_stream(*, scenario: str, device: str, duration: float | None = None, see
                                              samples.mag[:64] if setup.use_mag else None)
         estimator = LiveEstimator(open_session(config), device_name, make_filter(estimate, setup), setup.use_mag).start()
         print(f"  {estimator.key} ({estimate}, {'9D' if setup.use_mag else '6D'}, live)", file=out)
-    stopping = []
-    previous = {s: signal.signal(s, lambda *_: stopping.append(1)) for s in (signal.SIGINT, signal.SIGTERM)}
     publisher = None
-    try:
-        publisher = PacedPublisher(session, list(batches))
-        for key in batches:
-            print(f"  {key}", file=out)
-        if ros is not None:
-            ros.declare(session, out)
-        if wait_s > 0 and not publisher.wait_for_subscribers(wait_s, stop=lambda: bool(stopping)):
-            print(f"stream: no subscriber on every key after {wait_s:g} s: publishing anyway", file=out)
-        print("stream: publishing", file=out, flush=True)
-        report = publisher.run(batches, None if as_fast_as_possible else rate, stop=lambda: bool(stopping))
-        print(f"stream: sent {report.messages} messages", file=out)
-        if not as_fast_as_possible:
-            print(f"stream: {report.summary()}", file=out)
-        time.sleep(0.5)  # let queued messages drain before the session closes
-        if estimator is not None:
-            estimator.close(drain_s=2.0)
-            print(f"stream: {estimator.published} estimates published", file=out)
-            estimator = None
-    finally:
-        if estimator is not None:
-            estimator.close(drain_s=0.0)
-        if publisher is not None:
-            publisher.close()
-        if ros is not None:
-            ros.close()
-        session.close()
-        for s, h in previous.items():
-            signal.signal(s, h)
+    with stop_on_signals() as stopping:
+        try:
+            publisher = PacedPublisher(session, list(batches))
+            for key in batches:
+                print(f"  {key}", file=out)
+            if ros is not None:
+                ros.declare(session, out)
+            if wait_s > 0 and not publisher.wait_for_subscribers(wait_s, stop=lambda: bool(stopping)):
+                print(f"stream: no subscriber on every key after {wait_s:g} s: publishing anyway", file=out)
+            print("stream: publishing", file=out, flush=True)
+            report = publisher.run(batches, None if as_fast_as_possible else rate, stop=lambda: bool(stopping))
+            print(f"stream: sent {report.messages} messages", file=out)
+            if not as_fast_as_possible:
+                print(f"stream: {report.summary()}", file=out)
+            time.sleep(0.5)  # let queued messages drain before the session closes
+            if estimator is not None:
+                estimator.close(drain_s=2.0)
+                print(f"stream: {estimator.published} estimates published", file=out)
+                estimator = None
+        finally:
+            if estimator is not None:
+                estimator.close(drain_s=0.0)
+            if publisher is not None:
+                publisher.close()
+            if ros is not None:
+                ros.close()
+            session.close()
     out.flush()
     return 130 if stopping else 0

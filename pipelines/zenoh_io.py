@@ -55,6 +55,7 @@ import json
 import os
 import re
 import secrets
+import signal
 import struct
 import sys
 import time
@@ -84,6 +85,7 @@ __all__ = [
     "subscribe",
     "drain",
     "header_stamp_ns",
+    "stop_on_signals",
 ]
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
@@ -161,6 +163,19 @@ def open_session(config: zenoh.Config) -> zenoh.Session:
     except Exception as e:
         raise ValueError(f"argument --connect/--listen/--config: cannot open the zenoh session: "
                          f"{_zenoh_message(e)}") from None
+
+
+@contextlib.contextmanager
+def stop_on_signals():
+    """For the block, SIGINT and SIGTERM append to the list it yields instead of ending the process
+    (the command's loops poll it to stop cleanly); the previous handlers are back after the block."""
+    stopping: list = []
+    previous = {s: signal.signal(s, lambda *_: stopping.append(1)) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield stopping
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
 
 # --------------------------------------------------------------------------------------------------

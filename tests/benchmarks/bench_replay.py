@@ -26,7 +26,6 @@ slack: the replay before :data:`pipelines.zenoh_io.PRECISE`).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import re
 import signal
@@ -43,7 +42,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-import zenoh  # noqa: E402
+from pipelines.zenoh_io import open_session, session_config, subscribe  # noqa: E402
 
 SCENARIO, DEVICE = "heavy_top", "consumer_mems"
 TIMINGS = {"baseline (SLEEP_ONLY)": "SLEEP_ONLY", "gyroemu (PRECISE)": "PRECISE"}
@@ -59,14 +58,10 @@ def free_port() -> int:
 def replay_once(log: Path, folder: Path, timing: str, recorder: bool) -> dict:
     """One replay of ``log`` with ``pipelines.zenoh_io.<timing>`` as the publisher's default."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    config = zenoh.Config()
-    config.insert_json5("mode", '"peer"')
-    config.insert_json5("listen/endpoints", json.dumps([endpoint]))
-    config.insert_json5("scouting/multicast/enabled", "false")
-    session = zenoh.open(config)
+    session = open_session(session_config(listen=[endpoint], mode="peer"))
     rec = None
     try:
-        sub = session.declare_subscriber("gyroemu/**", zenoh.handlers.FifoChannel(1 << 17))
+        sub = subscribe(session, "gyroemu/**", capacity=1 << 17)
         if recorder:
             rec_log = folder / "rec.log"
             with open(rec_log, "wb") as out:

@@ -7,7 +7,6 @@ Every process is killed in a ``finally`` block; ports are picked free. About 30 
 import json
 import os
 import signal
-import struct
 import subprocess
 import sys
 import time
@@ -18,7 +17,7 @@ import pytest
 
 zenoh = pytest.importorskip("zenoh")
 
-from live_processes import free_port, procs  # noqa: E402,F401  (procs is a fixture)
+from live_processes import Listener, free_port, mcap_messages, procs, write_foreign  # noqa: E402,F401
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO, DEVICE, DURATION = "heavy_top", "consumer_mems", 5.0
@@ -32,38 +31,6 @@ def gyroemu_mcap(tmp_path_factory):
     subprocess.run([sys.executable, "-m", "pipelines.cli", "simulate", "--scenario", SCENARIO, "--device", DEVICE,
                     "--duration", str(DURATION), "--out", str(path)], cwd=ROOT, check=True, capture_output=True)
     return path
-
-
-def mcap_messages(path, topic=None) -> list:
-    from mcap.reader import make_reader
-
-    with open(path, "rb") as f:
-        return [(c.topic, m.log_time, m.data) for _, c, m in
-                make_reader(f).iter_messages(topics=None if topic is None else [topic], log_time_order=True)]
-
-
-class Listener:
-    """An in-test zenoh peer listening on a free port (the replay connects to it), collecting
-    ``(key, payload, sequence, send stamp ns)`` of everything under ``gyroemu/**``."""
-
-    def __init__(self):
-        self.endpoint = f"tcp/127.0.0.1:{free_port()}"
-        config = zenoh.Config()
-        config.insert_json5("mode", '"peer"')
-        config.insert_json5("listen/endpoints", json.dumps([self.endpoint]))
-        config.insert_json5("scouting/multicast/enabled", "false")
-        self.session = zenoh.open(config)
-        self.sub = self.session.declare_subscriber("gyroemu/**", zenoh.handlers.FifoChannel(1 << 17))
-        self.samples = []
-
-    def drain(self):
-        while (sample := self.sub.try_recv()) is not None:
-            seq, stamp, _, _ = struct.unpack("<qqB16s", sample.attachment.to_bytes())
-            self.samples.append((str(sample.key_expr), sample.payload.to_bytes(), seq, stamp))
-        return self.samples
-
-    def close(self):
-        self.session.close()
 
 
 @pytest.fixture
@@ -120,34 +87,6 @@ def test_rate_4_takes_a_quarter_of_the_time(procs, listener, gyroemu_mcap):
     span_s = (stamps.max() - stamps.min()) * 1e-9
     print(f"\n--rate 4: {duration_s:.3f} s of log sent in {span_s:.3f} s ({span_s / duration_s:.3f} of it)")
     assert 0.15 * duration_s < span_s < 0.6 * duration_s
-
-
-def write_foreign(path, n, seed=11) -> np.ndarray:
-    """Someone else's bag (mcap_ros2's writer): /sensors/imu_raw at irregular 4-6 ms intervals, log
-    times 2 ms after the stamps, and a String topic every 10th sample. Returns the Imu log times."""
-    from mcap_ros2.writer import Writer
-    from rosbags.typesys import Stores, get_typestore
-
-    rng = np.random.default_rng(seed)
-    stamps = 1_700_000_000 * 10**9 + np.cumsum(rng.integers(4_000_000, 6_000_000, n))
-    with open(path, "wb") as f:
-        writer = Writer(f, chunk_size=16384)
-        imu = writer.register_msgdef("sensor_msgs/msg/Imu", get_typestore(Stores.ROS2_HUMBLE).generate_msgdef(
-            "sensor_msgs/msg/Imu")[0].replace("time stamp", "builtin_interfaces/Time stamp") +
-            "=" * 80 + "\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n")
-        text = writer.register_msgdef("std_msgs/msg/String", "string data\n")
-        for k in range(n):
-            sec, nanosec = divmod(int(stamps[k]), 10**9)
-            writer.write_message("/sensors/imu_raw", imu, {
-                "header": {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": "imu_link"},
-                "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}, "orientation_covariance": [-1.0] + [0.0] * 8,
-                "angular_velocity": dict(zip("xyz", rng.normal(size=3))), "angular_velocity_covariance": [0.0] * 9,
-                "linear_acceleration": dict(zip("xyz", rng.normal(size=3))),
-                "linear_acceleration_covariance": [0.0] * 9}, log_time=int(stamps[k]) + 2_000_000)
-            if k % 10 == 0:
-                writer.write_message("/rosout_text", text, {"data": f"sample {k}"}, log_time=int(stamps[k]) + 2_000_001)
-        writer.finish()
-    return stamps + 2_000_000
 
 
 def test_foreign_file_and_pacing(procs, listener, tmp_path):

@@ -24,7 +24,7 @@ import pytest
 
 zenoh = pytest.importorskip("zenoh")
 
-from live_processes import free_port, procs  # noqa: E402,F401  (procs is a fixture)
+from live_processes import Listener, free_port, mcap_messages, procs, write_foreign  # noqa: E402,F401
 
 from pipelines import ros2_keys  # noqa: E402
 from pipelines.ros2_keys import (Ros2Error, data_key, domain_id, entity_token, gyroemu_topic,  # noqa: E402
@@ -263,31 +263,19 @@ def test_replay_ros2_of_a_foreign_file(procs, tmp_path):
     """``replay --ros2`` of someone else's bag (mcap_ros2 writer, no recorded hash): its Imu topic and its
     String topic go out on rmw_zenoh keys with hashes computed from the file's schemas (equal to the
     published values), bytes unchanged."""
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("_test_replay", Path(__file__).with_name("test_replay.py"))
-    helpers = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(helpers)
-    mcap_messages, write_foreign = helpers.mcap_messages, helpers.write_foreign
-
     path = tmp_path / "foreign.mcap"
     write_foreign(path, 200)
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    config = zenoh.Config()
-    config.insert_json5("mode", '"peer"')
-    config.insert_json5("listen/endpoints", json.dumps([endpoint]))
-    config.insert_json5("scouting/multicast/enabled", "false")
-    session = zenoh.open(config)
+    listener = Listener("0/**")
     try:
-        sub = session.declare_subscriber("0/**", zenoh.handlers.FifoChannel(1 << 16))
-        procs.start("replay", "replay", str(path), "--ros2", "--domain", "0", "--rate", "4", "--connect", endpoint)
+        procs.start("replay", "replay", str(path), "--ros2", "--domain", "0", "--rate", "4", "--connect",
+                    listener.endpoint)
         assert procs.wait("replay", 60) == 0, procs.log("replay")
         time.sleep(0.3)
         got: dict[str, list[bytes]] = {}
-        while (sample := sub.try_recv()) is not None:
-            got.setdefault(str(sample.key_expr), []).append(sample.payload.to_bytes())
+        for key, payload, _, _ in listener.drain():
+            got.setdefault(key, []).append(payload)
     finally:
-        session.close()
+        listener.close()
     print("\n" + procs.log("replay"))
     imu_key = f"0/imu0/sensors/imu_raw/sensor_msgs::msg::dds_::Imu_/{PUBLISHED['sensor_msgs/msg/Imu']}"
     text_key = f"0/imu0/rosout_text/std_msgs::msg::dds_::String_/{STRING_HASH}"
