@@ -51,7 +51,7 @@ def _window(q, b, slow, win, phi12, P, x, earth, params, use_mag):
         kalman_update(x, P, z3, H3, R3)
     if use_mag:
         kern.heading_update(x, P, q, win, slow, params)
-    kern.inject(x, q, b, win, phi12)
+    kern.inject(x, q, b, slow, win, phi12)
 
 
 @numba.njit(cache=True, parallel=True)

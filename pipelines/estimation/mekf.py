@@ -64,8 +64,10 @@ class MekfParams:
         ``scale_factor_sigma²`` rad² of attitude variance.
     window_s : float
         Window over which the covariance is propagated, s.
-    accel_window_s, mag_window_s : float
-        Windows over which the specific force and the field are averaged in the world frame, s.
+    accel_tau_s : float
+        Time constant of each of the two low-passes the world-frame specific force goes through, s.
+    mag_window_s : float
+        Window over which the field is averaged in the world frame, s.
     motion_accel_density : float
         Non-gravitational acceleration always allowed for, as a white-noise density, m/s²/√Hz (its
         correlation over the window is what makes this a density and not a level).
@@ -75,8 +77,9 @@ class MekfParams:
         χ² gates of the gravity (2 dof) and heading (1 dof) innovations.
     accel_timeout_s, mag_timeout_s : float
         How long rejections may last before a measurement is taken again, inflated onto the gate, s.
-    heading_sigma : float
-        Heading noise of the field's direction (residual soft iron, local anomalies), rad.
+    heading_sigma, heading_correlation_s : float
+        Heading error of the field's direction (residual soft iron, local anomalies, a moving
+        sensor's changing surroundings), rad, and the time over which it is correlated, s.
     mag_norm_tolerance : float
         Relative change of the field's norm that marks a disturbance.
     mag_dip_tolerance : float
@@ -104,15 +107,16 @@ class MekfParams:
     mag_noise_density: float = 2e-7
     scale_factor_sigma: float = 0.01
     window_s: float = 0.02
-    accel_window_s: float = 2.0
+    accel_tau_s: float = 1.0
     mag_window_s: float = 1.0
-    motion_accel_density: float = 1.0
+    motion_accel_density: float = 0.3
     motion_gain: float = 1.0
     accel_gate: float = 13.8
     accel_timeout_s: float = 2.0
     mag_gate: float = 10.8
     mag_timeout_s: float = 60.0
-    heading_sigma: float = 0.1
+    heading_sigma: float = 5 * _DEG
+    heading_correlation_s: float = 30.0
     mag_norm_tolerance: float = 0.1
     mag_dip_tolerance: float = 10 * _DEG
     hold_rate: float = 1.0
@@ -152,7 +156,7 @@ class MekfParams:
         p = np.zeros(kern.P_SIZE)
         p[kern.P_WINDOW] = self.window_s
         p[kern.P_WINDOW_N] = max(1, int(round(self.window_s * setup.rate_hz))) + 0.5  # + slack for jitter
-        p[kern.P_ACC_WINDOW] = self.accel_window_s
+        p[kern.P_ACC_TAU] = self.accel_tau_s
         p[kern.P_MAG_WINDOW] = self.mag_window_s
         p[kern.P_GYRO_NOISE] = self.gyro_noise_density
         p[kern.P_BIAS_RW] = self.gyro_bias_random_walk
@@ -164,6 +168,7 @@ class MekfParams:
         p[kern.P_ACC_GATE] = self.accel_gate
         p[kern.P_ACC_TIMEOUT] = self.accel_timeout_s
         p[kern.P_HEADING_SIGMA] = self.heading_sigma
+        p[kern.P_HEADING_CORR] = self.heading_correlation_s
         p[kern.P_MAG_NOISE] = self.mag_noise_density
         p[kern.P_MAG_NORM_TOL] = self.mag_norm_tolerance
         p[kern.P_MAG_DIP_TOL] = self.mag_dip_tolerance
@@ -225,12 +230,16 @@ def initial_state(t, gyro, accel, mag, setup: FilterSetup, params: MekfParams) -
         found = _gyrocompass_heading(t, gyro, accel, q, setup, params)
         if found is not None:
             q, heading_var = found
-    P = np.diag([params.tilt_sigma0**2, params.tilt_sigma0**2, heading_var] + [params.gyro_bias_sigma**2] * 3)
+    # Motion during the averaging tilts the mean force by up to the samples' spread about it
+    spread = float(np.nanmean(np.sum((a_first - a) ** 2, axis=1))) / gravity**2 if np.isfinite(a_first).any() else 0.0
+    tilt_var = params.tilt_sigma0**2 + spread
+    P = np.diag([tilt_var, tilt_var, heading_var] + [params.gyro_bias_sigma**2] * 3)
     slow[kern.S_T] = t[0] - 1.0 / setup.rate_hz
     g0 = np.nan_to_num(np.asarray(gyro[0], dtype=float))
     slow[kern.S_OMEGA:kern.S_OMEGA + 3] = g0
     slow[kern.S_LP_G:kern.S_LP_G + 3] = g0
     slow[kern.S_LP_A:kern.S_LP_A + 3] = a
+    slow[kern.S_GRAV_LP:kern.S_GRAV_LP2 + 3] = np.tile(quat_rotate(q, a), 2)  # the low-passes at rest
     return InitialState(q=q, b=np.zeros(3), P=P, slow=slow)
 
 
@@ -350,4 +359,4 @@ class Mekf:
         x = kf.x.reshape(6)  # a view: the heading update and the injection write through it
         if self.setup.use_mag:
             kern.heading_update(x, kf.P, self.q, win, slow, p)
-        kern.inject(x, self.q, self.b, win, self._phi12)
+        kern.inject(x, self.q, self.b, slow, win, self._phi12)

@@ -36,18 +36,16 @@ import numba
 import numpy as np
 
 # Window accumulator layout (one float64 vector per filter).
-W_ACC = 0        # 0:3  Σ R a_b over valid accelerometer samples, m/s²
-W_ACC_N = 3      # number of them
-W_ACC_T = 4      # time the gravity window has run, s
-W_MAG = 5        # 5:8  Σ R m_b over valid magnetometer samples, T
-W_MAG_N = 8
-W_T = 9          # window duration so far, s
-W_N = 10         # samples in the window
-W_EXTRA = 11     # extra attitude variance accrued (held samples, scale-factor uncertainty), rad²
-W_REST_G = 12    # 12:15 Σ ω_m over the window's samples at rest, rad/s
-W_REST_N = 15
-W_MAG_T = 16     # time the heading window has run, s
-W_SIZE = 17
+W_ACC_N = 0      # valid accelerometer samples in the window
+W_MAG = 1        # 1:4  Σ R m_b over valid magnetometer samples, T
+W_MAG_N = 4
+W_T = 5          # window duration so far, s
+W_N = 6          # samples in the window
+W_EXTRA = 7      # extra attitude variance accrued (held samples, scale-factor uncertainty), rad²
+W_REST_G = 8     # 8:11 Σ ω_m over the window's samples at rest, rad/s
+W_REST_N = 11
+W_MAG_T = 12     # time the heading window has run, s
+W_SIZE = 13
 
 # Slow state layout (one float64 vector per filter).
 S_T = 0          # last stamp, s
@@ -60,7 +58,9 @@ S_MAG_NORM = 12  # reference field: norm, T
 S_MAG_DIP = 13   # and dip (angle below the horizontal), rad
 S_MAG_REJ_T = 14 # time since the last accepted heading update, s
 S_GRAVITY = 15   # gravity magnitude seen at initialisation, m/s²
-S_SIZE = 16
+S_GRAV_LP = 16   # 16:19 specific force in the world frame, low-passed once, m/s²
+S_GRAV_LP2 = 19  # 19:22 and twice: the gravity measurement, m/s²
+S_SIZE = 22
 
 
 @numba.njit(cache=True)
@@ -138,6 +138,7 @@ def strapdown(q, b, slow, win, phi12, t, gyro, delta_angle, accel, mag, earth_ra
         if not dt > 0.0:
             raise ValueError("sample stamps must increase")
         slow[S_T] = t[k]
+        slow[S_ACC_REJ_T] += dt
         # The rate over [t_{k-1}, t_k], bias and Earth rate removed (ω_bw = ω_m − b − Rᵀ Ω_ie).
         if use_delta:
             w[0], w[1], w[2] = delta_angle[k, 0] / dt, delta_angle[k, 1] / dt, delta_angle[k, 2] / dt
@@ -190,10 +191,16 @@ def strapdown(q, b, slow, win, phi12, t, gyro, delta_angle, accel, mag, earth_ra
             win[W_REST_G:W_REST_N + 1] = 0.0
 
         # Gravity and field in the world frame, summed over the window.
+        # The specific force in the world frame through two first-order low-passes in cascade,
+        # H(s) = 1/(1 + τs)², exact for any step (α = 1 − e^(−Δt/τ)): its 1/f² roll-off removes
+        # back-and-forth translation far better than a mean over a window, whose 1/f does not.
         ax, ay, az = accel[k, 0], accel[k, 1], accel[k, 2]
         if math.isfinite(ax) and math.isfinite(ay) and math.isfinite(az):
+            alpha_g = 1.0 - math.exp(-dt / params[P_ACC_TAU])
             for i in range(3):
-                win[W_ACC + i] += r[i, 0] * ax + r[i, 1] * ay + r[i, 2] * az
+                a_w = r[i, 0] * ax + r[i, 1] * ay + r[i, 2] * az
+                slow[S_GRAV_LP + i] += alpha_g * (a_w - slow[S_GRAV_LP + i])
+                slow[S_GRAV_LP2 + i] += alpha_g * (slow[S_GRAV_LP + i] - slow[S_GRAV_LP2 + i])
             win[W_ACC_N] += 1.0
         if use_mag:
             mx, my, mz = mag[k, 0], mag[k, 1], mag[k, 2]
@@ -203,7 +210,6 @@ def strapdown(q, b, slow, win, phi12, t, gyro, delta_angle, accel, mag, earth_ra
                 win[W_MAG_N] += 1.0
         win[W_T] += dt
         win[W_N] += 1.0
-        win[W_ACC_T] += dt
         win[W_MAG_T] += dt
         q_out[k, :] = q
         k += 1
@@ -243,9 +249,10 @@ P_REST_TIME = 20
 P_REST_SIGMA = 21
 P_USE_MAG = 22
 P_DECLINATION = 23
-P_ACC_WINDOW = 24
+P_ACC_TAU = 24
 P_MAG_WINDOW = 25
-P_SIZE = 26
+P_HEADING_CORR = 26
+P_SIZE = 27
 
 
 @numba.njit(cache=True)
@@ -273,22 +280,23 @@ def transition(win, phi12, earth_rate_w, params, F, Q):
 
 @numba.njit(cache=True)
 def gravity_measurement(win, slow, params, z, H, R):
-    """The gravity-direction measurement, when its window (``accel_window_s``) is complete: ``z``
-    (2,), ``H`` (2, 6), ``R`` (2, 2); the window's sums are then cleared.
+    """The gravity-direction measurement at the end of a window: ``z`` (2,), ``H`` (2, 6), ``R`` (2, 2).
 
-    The world-frame mean of the specific force over T is gravity plus ``Δv/T``: translation back and
-    forth averages out, which is why this window is longer than the covariance's. Returns False when
-    the window is still open or had no valid accelerometer sample. The noise is the sensor's and the
-    non-gravitational acceleration's (both densities) over T, plus the squared excess of ``|ā|`` over
-    gravity, all over g²."""
-    T = win[W_ACC_T]
-    if T < params[P_ACC_WINDOW]:
-        return False
+    ``z`` is the horizontal part of the direction of the low-passed world-frame specific force
+    ``ā_w`` (:func:`strapdown`). Returns False when the window had no valid accelerometer sample.
+
+    Noise. White noise of density N through ``1/(1 + τs)²`` has the variance ``N² / (8τ)``
+    (its noise bandwidth is 1/(8τ) Hz); that of the sensor and the non-gravitational acceleration
+    always allowed for (both densities) is the base. What the low-pass left of the motion shows in
+    ``|ā_w| − g`` (the vertical share of the residual, as large as each horizontal one for motion
+    in every direction), weighted by ``motion_gain``. All over g², in rad². The output is
+    correlated over about ``4τ`` (``1 / (2 · bandwidth)``), so a measurement every window of T
+    carries the information of ``T / 4τ`` independent ones: ``R`` is scaled by ``4τ / T``."""
     n = win[W_ACC_N]
-    ax, ay, az = win[W_ACC] / max(n, 1.0), win[W_ACC + 1] / max(n, 1.0), win[W_ACC + 2] / max(n, 1.0)
-    win[W_ACC:W_ACC_T + 1] = 0.0
+    win[W_ACC_N] = 0.0
     if n < 1.0:
         return False
+    ax, ay, az = slow[S_GRAV_LP2], slow[S_GRAV_LP2 + 1], slow[S_GRAV_LP2 + 2]
     norm = math.sqrt(ax * ax + ay * ay + az * az)
     if not norm > 0.0:
         return False
@@ -298,7 +306,10 @@ def gravity_measurement(win, slow, params, z, H, R):
     H[:, :] = 0.0
     H[0, 1] = -1.0  # u_x = −δθ_y
     H[1, 0] = 1.0   # u_y = +δθ_x
-    var = ((params[P_ACC_NOISE] ** 2 + params[P_MOTION] ** 2) / T + params[P_MOTION_GAIN] * (norm - g) ** 2) / (g * g)
+    tau = params[P_ACC_TAU]
+    var = ((params[P_ACC_NOISE] ** 2 + params[P_MOTION] ** 2) / (8.0 * tau)
+           + params[P_MOTION_GAIN] * (norm - g) ** 2) / (g * g)
+    var *= 4.0 * tau / max(win[W_T], 1e-9)
     R[:, :] = 0.0
     R[0, 0] = var
     R[1, 1] = var
@@ -330,7 +341,10 @@ def heading_measurement(win, slow, params):
         return False, 0.0, 0.0
     y = math.atan2(mx, my) - params[P_DECLINATION]
     y = (y + math.pi) % (2.0 * math.pi) - math.pi
-    r = params[P_HEADING_SIGMA] ** 2 + params[P_MAG_NOISE] ** 2 / T / (horizontal * horizontal)
+    # The field's heading error (residual soft iron, local anomalies) is correlated over
+    # heading_correlation_s: a window of T carries T / τ_c of an independent measurement of it.
+    r = (params[P_HEADING_SIGMA] ** 2 * max(params[P_HEADING_CORR] / T, 1.0)
+         + params[P_MAG_NOISE] ** 2 / T / (horizontal * horizontal))
     return True, y, r
 
 
@@ -391,15 +405,19 @@ def gravity_gate(P, z, H, R, slow, params):
 
     Accepted when its Mahalanobis distance ``zᵀ S⁻¹ z`` is within the gate (a χ² quantile). A
     rejected measurement is a disturbance (a tap, a push); after ``accel_timeout_s`` of rejections the
-    filter must be wrong rather than the world, so it accepts again with ``R`` inflated to put the
-    measurement on the gate. Modifies ``R`` in place in that case."""
+    filter must be wrong rather than the world: its tilt variance is widened by ``|z|²/gate`` (which
+    puts the measurement inside the gate) and the measurement is accepted, so that the tilt, not the
+    bias, takes the correction. Modifies ``P`` in place in that case."""
     S = H @ P @ H.T + R
     d2 = z @ np.linalg.solve(S, z)
     if d2 <= params[P_ACC_GATE]:
         slow[S_ACC_REJ_T] = 0.0
         return True
     if slow[S_ACC_REJ_T] > params[P_ACC_TIMEOUT]:
-        R *= d2 / params[P_ACC_GATE]
+        extra = (z[0] * z[0] + z[1] * z[1]) / params[P_ACC_GATE]
+        P[0, 0] += extra
+        P[1, 1] += extra
+        slow[S_ACC_REJ_T] = 0.0
         return True
     return False
 
@@ -437,10 +455,19 @@ def rest_due(win, slow, params):
 
 
 @numba.njit(cache=True)
-def inject(x, q, b, win, phi12):
+def inject(x, q, b, slow, win, phi12):
     """Fold the error estimate into the nominal state (``q ← exp(δθ) ⊗ q``, ``b ← b + δb``), zero it,
     and open a new window."""
     rotate_world(q, x[0:3])
+    # The low-passed specific force was turned into the world frame with the old estimate: turn it
+    # with the same correction, so that the measurement does not see the error it already gave.
+    c = np.empty((3, 3))
+    c_w, c_x, c_y, c_z = _half_turn(x[0], x[1], x[2])
+    quat_to_matrix(np.array([c_w, c_x, c_y, c_z]), c)
+    for s0 in (S_GRAV_LP, S_GRAV_LP2):
+        v0, v1, v2 = slow[s0], slow[s0 + 1], slow[s0 + 2]
+        for i in range(3):
+            slow[s0 + i] = c[i, 0] * v0 + c[i, 1] * v1 + c[i, 2] * v2
     for i in range(3):
         b[i] += x[3 + i]
     x[:] = 0.0
