@@ -45,7 +45,7 @@ _DEG = np.pi / 180
 @dataclass(frozen=True)
 class MekfParams:
     """The filter's parameters, SI. The defaults serve any log; the noise figures of a known device
-    replace the first five (:meth:`for_setup`).
+    replace the first six, and a simulated site's field its ``heading_sigma`` (:meth:`for_setup`).
 
     Attributes
     ----------
@@ -149,6 +149,8 @@ class MekfParams:
             known["accel_noise_density"] = noise.accel_noise_density
         if noise.mag_noise_density is not None:
             known["mag_noise_density"] = noise.mag_noise_density
+        if setup.field_heading_sigma is not None:
+            known["heading_sigma"] = setup.field_heading_sigma
         return replace(cls(), **known, **overrides)
 
     def vector(self, setup: FilterSetup) -> np.ndarray:

@@ -318,44 +318,53 @@ def gravity_measurement(win, slow, params, z, H, R):
 
 @numba.njit(cache=True)
 def heading_measurement(win, slow, params):
-    """The heading measurement, when its window (``mag_window_s``) is complete: ``(ok, y, r)`` with
-    the innovation ``y = ψ − D`` (rad, wrapped) and its variance ``r``; the window's sums are then
-    cleared. Not ok while the window is open, when it had no field, or when the field is disturbed:
-    its norm or dip differ from the reference by more than the tolerances."""
+    """The heading measurement, when its window (``mag_window_s``) is complete: ``(ok, y, r, h_x, h_y)``
+    with the innovation ``y = ψ − D`` (rad, wrapped), its variance ``r`` and the tilt columns of its
+    ``H = (h_x, h_y, 1, 0, 0, 0)``; the window's sums are then cleared. Not ok while the window is
+    open, when it had no field, or when the field is disturbed: its norm or dip differ from the
+    reference by more than the tolerances.
+
+    The field is turned into the world frame with the whole estimated attitude, so a tilt error
+    leaks into the heading: with ``m̂_w = (I − [δθ×]) m_w``, ``ψ̂ = ψ + δθ_z + tan(dip) (n · δθ)``,
+    ``n`` the field's horizontal direction. The update never corrects tilt (:func:`heading_gain`), but
+    ``S`` counts the tilt's uncertainty and the innovation the tilt already corrected."""
     T = win[W_MAG_T]
     n = win[W_MAG_N]
     if T < params[P_MAG_WINDOW]:
-        return False, 0.0, 0.0
+        return False, 0.0, 0.0, 0.0, 0.0
     mx, my, mz = win[W_MAG] / max(n, 1.0), win[W_MAG + 1] / max(n, 1.0), win[W_MAG + 2] / max(n, 1.0)
     win[W_MAG:W_MAG_N + 1] = 0.0
     win[W_MAG_T] = 0.0
     if n < 1.0:
-        return False, 0.0, 0.0
+        return False, 0.0, 0.0, 0.0, 0.0
     horizontal = math.sqrt(mx * mx + my * my)
     norm = math.sqrt(horizontal * horizontal + mz * mz)
     if not horizontal > 0.0:
-        return False, 0.0, 0.0
+        return False, 0.0, 0.0, 0.0, 0.0
     dip = math.atan2(-mz, horizontal)
     ref_norm, ref_dip = slow[S_MAG_NORM], slow[S_MAG_DIP]
     if abs(norm - ref_norm) > params[P_MAG_NORM_TOL] * ref_norm or abs(dip - ref_dip) > params[P_MAG_DIP_TOL]:
-        return False, 0.0, 0.0
+        return False, 0.0, 0.0, 0.0, 0.0
     y = math.atan2(mx, my) - params[P_DECLINATION]
     y = (y + math.pi) % (2.0 * math.pi) - math.pi
     # The field's heading error (residual soft iron, local anomalies) is correlated over
     # heading_correlation_s: a window of T carries T / τ_c of an independent measurement of it.
     r = (params[P_HEADING_SIGMA] ** 2 * max(params[P_HEADING_CORR] / T, 1.0)
          + params[P_MAG_NOISE] ** 2 / T / (horizontal * horizontal))
-    return True, y, r
+    tan_dip = -mz / horizontal
+    return True, y, r, tan_dip * mx / horizontal, tan_dip * my / horizontal
 
 
 @numba.njit(cache=True)
-def heading_gain(P, r, q, K):
-    """Kalman gain ``K`` (6,) of the heading measurement ``H = e_3ᵀ``, constrained so that it never
-    corrects inclination: the ``δθ_x``, ``δθ_y`` rows are zero, and the bias correction is kept to
-    the body's vertical axis ``Rᵀ e_z`` (the only bias the heading sees). Returns ``S``."""
-    S = P[2, 2] + r
+def heading_gain(P, h, r, q, K):
+    """Kalman gain ``K`` (6,) of the heading measurement ``H = hᵀ`` (``h`` (6,), :func:`heading_measurement`),
+    constrained so that it never corrects inclination: the ``δθ_x``, ``δθ_y`` rows are zero, and the
+    bias correction is kept to the body's vertical axis ``Rᵀ e_z`` (the only bias the heading sees).
+    Returns ``S = H P Hᵀ + r``."""
+    Ph = P @ h
+    S = h @ Ph + r
     for i in range(6):
-        K[i] = P[i, 2] / S
+        K[i] = Ph[i] / S
     K[0] = 0.0
     K[1] = 0.0
     # vertical in body axes: third row of R
@@ -367,12 +376,10 @@ def heading_gain(P, r, q, K):
 
 
 @numba.njit(cache=True)
-def joseph_update(P, K, h_index, r):
-    """P ← (I − K H) P (I − K H)ᵀ + K r Kᵀ for a scalar measurement ``H = e_{h_index}ᵀ``: valid for
-    any gain, optimal or not."""
-    A = np.eye(6)
-    for i in range(6):
-        A[i, h_index] -= K[i]
+def joseph_update(P, K, h, r):
+    """P ← (I − K hᵀ) P (I − K hᵀ)ᵀ + K r Kᵀ for a scalar measurement ``H = hᵀ``: valid for any gain,
+    optimal or not."""
+    A = np.eye(6) - np.outer(K, h)
     P[:, :] = A @ P @ A.T + r * np.outer(K, K)
 
 
@@ -427,24 +434,26 @@ def heading_update(x, P, q, win, slow, params):
     """The heading measurement, gated, applied with the constrained gain of :func:`heading_gain`
     (Joseph form): ``x`` (6,) and ``P`` are updated in place. Returns whether it was applied."""
     T = win[W_MAG_T]
-    ok, y, r = heading_measurement(win, slow, params)
+    ok, y, r, h_x, h_y = heading_measurement(win, slow, params)
     if not ok:
         slow[S_MAG_REJ_T] += T if T >= params[P_MAG_WINDOW] else 0.0
         return False
-    y -= x[2]
+    h = np.zeros(6)
+    h[0], h[1], h[2] = h_x, h_y, 1.0
+    y -= h @ x
     K = np.empty(6)
-    S = heading_gain(P, r, q, K)
+    S = heading_gain(P, h, r, q, K)
     if y * y / S > params[P_MAG_GATE]:
         slow[S_MAG_REJ_T] += T
         if slow[S_MAG_REJ_T] <= params[P_MAG_TIMEOUT]:
             return False
         r *= y * y / S / params[P_MAG_GATE]
-        S = heading_gain(P, r, q, K)
+        S = heading_gain(P, h, r, q, K)
     else:
         slow[S_MAG_REJ_T] = 0.0
     for i in range(6):
         x[i] += K[i] * y
-    joseph_update(P, K, 2, r)
+    joseph_update(P, K, h, r)
     return True
 
 

@@ -78,6 +78,10 @@ class FilterSetup:
         (and find north from it, with a gyro good enough). None: Earth's rotation is not modelled.
     declination_rad : float
         Magnetic declination, rad, east positive: the azimuth of magnetic north in the ENU frame.
+    field_heading_sigma : float or None
+        Heading error of the measured field's direction, rad, when known: on a simulated site, where the
+        field is the model's, what the magnetometer's uncompensated hard and soft iron make of it. None:
+        unknown (a real site's anomalies, a moving sensor's surroundings).
     """
 
     rate_hz: float
@@ -85,6 +89,7 @@ class FilterSetup:
     noise: DeviceNoise = field(default_factory=DeviceNoise)
     latitude_rad: float | None = None
     declination_rad: float = 0.0
+    field_heading_sigma: float | None = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -47,16 +47,24 @@ def setup_for(device, scenario=None, *, use_mag: bool | None = None) -> FilterSe
     scenario stands on a rotating Earth; the declination is that of the site's field.
     """
     site = _site(scenario)
-    latitude = declination = None
+    latitude = declination = heading_sigma = None
+    mag = device.spec.magnetometer
     if site is not None:
         if site.earth_rotation:
             latitude = float(np.radians(site.latitude_deg))
-        east, north, _ = site.magnetic_field_enu_uT
+        east, north, up = site.magnetic_field_enu_uT
         declination = float(np.arctan2(east, north))
+        horizontal = float(np.hypot(east, north))
+        if mag is not None and horizontal > 0.0:
+            # the simulated field has no anomalies: only the sensor's uncompensated iron turns it, by at
+            # most |hard iron| / B_h plus ‖soft iron − I‖ |B| / B_h
+            soft = np.linalg.norm(np.asarray(mag.soft_iron) - np.eye(3), 2)
+            heading_sigma = float((np.linalg.norm(mag.hard_iron_uT) + soft * np.linalg.norm([east, north, up]))
+                                  / horizontal)
     if use_mag is None:
-        use_mag = device.spec.magnetometer is not None
+        use_mag = mag is not None
     return FilterSetup(rate_hz=float(device.spec.rate_hz), use_mag=use_mag, noise=noise_from_device(device),
-                       latitude_rad=latitude, declination_rad=declination or 0.0)
+                       latitude_rad=latitude, declination_rad=declination or 0.0, field_heading_sigma=heading_sigma)
 
 
 def setup_from_metadata(metadata: dict | None, rate_hz: float, *, use_mag: bool) -> FilterSetup:

@@ -118,22 +118,25 @@ def test_stamps_must_increase():
 
 
 def test_heading_update_never_touches_inclination():
-    """With a covariance that couples heading to tilt and to every bias axis, the heading gain has no
-    tilt rows and corrects the bias only along the body's vertical."""
+    """With a covariance that couples heading to tilt and to every bias axis, and a measurement that
+    sees the tilt (a dipping field), the heading gain has no tilt rows and corrects the bias only along
+    the body's vertical."""
     rng = np.random.default_rng(1)
     A = rng.standard_normal((6, 6))
     P = A @ A.T + 6 * np.eye(6)
     q = rng.standard_normal(4)
     q /= np.linalg.norm(q)
     K = np.empty(6)
-    kern.heading_gain(P, 0.01, q, K)
+    h = np.array([0.8, -1.5, 1.0, 0.0, 0.0, 0.0])  # tan(dip) n: a 60° dip
+    S = kern.heading_gain(P, h, 0.01, q, K)
+    assert np.isclose(S, h @ P @ h + 0.01)
     assert K[0] == 0.0 and K[1] == 0.0 and K[2] != 0.0
     r = np.empty((3, 3))
     kern.quat_to_matrix(q, r)
     vertical_b = r[2]  # world up in body axes
     assert np.allclose(np.cross(K[3:], vertical_b), 0.0, atol=1e-15)
     before = P.copy()
-    kern.joseph_update(P, K, 2, 0.01)
+    kern.joseph_update(P, K, h, 0.01)
     assert np.all(np.linalg.eigvalsh(P) > 0) and np.allclose(P, P.T)
     assert P[2, 2] < before[2, 2]
 
@@ -211,3 +214,22 @@ def test_broad_targets_with_one_parameter_set():
         vqf_total.append(rmse_deg(attitude_errors(v["quat9D"], ref).total, movement))
     assert np.mean(total) <= 2.4 and np.mean(total) < np.mean(vqf_total)
     assert np.mean(inclination) <= 0.7
+
+
+def test_simulated_field_heading_error_is_the_sensors_iron():
+    """On a simulated site the field has no anomalies: the heading error the filter is told is what
+    the magnetometer's hard iron makes of the horizontal field (|h| / B_h), none for a calibrated one;
+    a log with no device (BROAD) leaves it unknown, to the filter's default."""
+    import tomllib
+
+    from sensors import device_from_dict
+
+    scenario = load_scenario("smooth_manoeuvre")
+    assert setup_for(load_device("consumer_mems"), scenario).field_heading_sigma == 0.0
+    config = tomllib.loads((Path(__file__).resolve().parents[2] / "configs" / "devices" / "consumer_mems.toml").read_text())
+    config["magnetometer"]["hard_iron_uT"] = [2.0, 0.0, 0.0]
+    setup = setup_for(device_from_dict(config, name="iron"), scenario)
+    east, north, _ = scenario.spec.site.magnetic_field_enu_uT
+    assert np.isclose(setup.field_heading_sigma, 2.0 / np.hypot(east, north))
+    assert Mekf(setup).params.heading_sigma == setup.field_heading_sigma
+    assert FilterSetup(rate_hz=100.0).field_heading_sigma is None
