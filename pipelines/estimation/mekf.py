@@ -7,10 +7,11 @@ propagated over the window, the window's measurements update the error state, an
 back into the nominal state (Markley & Crassidis, *Fundamentals of Spacecraft Attitude Determination
 and Control*, §6.2; the models are in :mod:`pipelines.estimation.mekf_kernels`):
 
-* **gravity direction** from the specific force averaged over the window in the world frame: it
-  corrects inclination only (its ``H`` has no heading column). Non-gravitational acceleration
-  (translation, tapping, vibration) enters as noise that grows with how far ``|a|`` strays from
-  gravity, and a χ² gate rejects what is still implausible, for at most ``accel_timeout_s``;
+* **gravity direction** from the specific force in the world frame through two low-passes of
+  ``accel_tau_s``: it corrects inclination only (its ``H`` has no heading column). Non-gravitational
+  acceleration (translation, tapping, vibration) is what the low-passes leave of it, noise of density
+  ``motion_accel_density`` plus how far ``|ā|`` strays from gravity, and a χ² gate rejects what is still
+  implausible, for at most ``accel_timeout_s``;
 * **heading** from the magnetic field averaged in the world frame, a scalar measurement whose gain is
   constrained to never touch inclination; fields whose norm or dip differ from the reference
   (learned at the start) are a disturbance and skipped, and a χ² gate catches the rest;

@@ -15,14 +15,15 @@ milliseconds) with the transition ``Φ = [[I − [Ω_ie×] T, −Σ R_k Δt_k], 
 window's samples, which is what a strapdown INS does (the attitude at full rate, the error model at a
 lower one).
 
-Measurements, made at the end of each window from sums over it
---------------------------------------------------------------
+Measurements, made at the end of each window
+--------------------------------------------
 * Gravity direction: the specific force turned into the world frame with the current estimate and
-  averaged over the window, ``ā_w``, (averaging in the world frame removes vibration without lagging
-  rotation, the idea of VQF's inertial-frame low-pass filter). With ``u = ā_w/|ā_w|``, at rest
+  low-passed twice, ``ā_w`` (filtering in the world frame removes vibration and translation without
+  lagging rotation, the idea of VQF's inertial-frame low-pass filter). With ``u = ā_w/|ā_w|``, at rest
   ``u = e_z + e_z × δθ``: ``(u_x, u_y) = (−δθ_y, δθ_x)``, whatever the heading.
 * Heading: the magnetic field turned into the world frame and averaged, ``m̄_w``; its azimuth from
-  north is ``ψ = atan2(m_x, m_y) = D + δθ_z`` (``D`` the declination): only ``δθ_z``.
+  north is ``ψ = atan2(m_x, m_y) = D + δθ_z + tan(dip) (n · δθ)`` (``D`` the declination, ``n`` the
+  field's horizontal direction).
 * Rest: the mean gyro over a window at rest is the bias plus Earth's rate,
   ``ω̄_m − R_estᵀ Ω_ie − b_est = δb + R_estᵀ [Ω_ie×] δθ``; with a precise gyro and a known latitude the
   second term finds north (gyrocompassing), otherwise it sharpens the bias.

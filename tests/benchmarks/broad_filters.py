@@ -1,7 +1,7 @@
 """Every available filter on the BROAD trials in ``../shared/datasets/broad`` (``GYROEMU_BROAD_DIR``
 overrides): total, heading and inclination RMSE in 9D and inclination RMSE in 6D, per trial and averaged.
 
-    python tests/benchmarks/broad_filters.py [--filter NAME ...] [--trials 02 07 ...]
+    python tests/benchmarks/broad_filters.py [--filter NAME ...] [--trials 02 07 ...] [--mekf-param NAME=VALUE ...]
 
 A script, not a test (the ``ahrs`` filters are per-sample Python: about 3 minutes for all eight trials).
 Each filter runs through gyroemu's protocol (the adapters of :mod:`pipelines.estimation.peers` for the
@@ -13,6 +13,8 @@ ignored. The same figures come from ``gyroemu import broad TRIAL.hdf5 --out tria
 ``vqf`` is the online filter (:class:`vqf.VQF`, causal, as a live filter must be). ``--offline-vqf`` adds
 the rows of ``vqf.offlineVQF`` (acausal: it also filters backwards over the whole trial), called
 directly with its defaults, the figures usually quoted for VQF on BROAD; it is not a gyroemu filter.
+``--mekf-param accel_tau_s=1.5`` overrides one of :class:`~pipelines.estimation.MekfParams`' defaults for
+the ``mekf`` rows (how the defaults' plateau in README was measured).
 """
 
 from __future__ import annotations
@@ -20,12 +22,14 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
+from pipelines.estimation.mekf import Mekf, MekfParams  # noqa: E402
 from pipelines.estimation.metrics import attitude_errors, rmse_deg  # noqa: E402
 from pipelines.estimation.protocol import FilterSetup  # noqa: E402
 from pipelines.estimation.registry import available_filters, make_filter, unavailable_filters  # noqa: E402
@@ -41,7 +45,15 @@ def main() -> int:
     parser.add_argument("--filter", action="append", default=None, help="filters (default: every available one)")
     parser.add_argument("--trials", nargs="+", default=None, help="trial numbers, e.g. 02 07 (default: all)")
     parser.add_argument("--offline-vqf", action="store_true", help="also vqf.offlineVQF, called directly")
+    parser.add_argument("--mekf-param", action="append", default=[], metavar="NAME=VALUE",
+                        help="override a MekfParams default for the mekf rows (repeatable)")
     args = parser.parse_args()
+    overrides = {}
+    for item in args.mekf_param:
+        key, _, value = item.partition("=")
+        if key not in {f.name for f in fields(MekfParams)} or not value:
+            parser.error(f"--mekf-param {item!r}: expected NAME=VALUE with NAME a MekfParams field")
+        overrides[key] = float(value)
     files = sorted(BROAD_DIR.glob("*.hdf5"))
     if args.trials:
         files = [f for f in files if f.name.split("_")[0] in args.trials]
@@ -69,10 +81,11 @@ def main() -> int:
                 out = offlineVQF(gyro, accel, mag, 1.0 / fs)
                 e9, e6 = attitude_errors(out["quat9D"], ref), attitude_errors(out["quat6D"], ref)
             else:
-                e9 = attitude_errors(make_filter(name, FilterSetup(rate_hz=fs, use_mag=True)).process(
+                make = (lambda s: Mekf(s, MekfParams.for_setup(s, **overrides))) if name == "mekf" and overrides \
+                    else (lambda s, name=name: make_filter(name, s))
+                e9 = attitude_errors(make(FilterSetup(rate_hz=fs, use_mag=True)).process(
                     t, gyro, accel, mag * 1e-6).q_wb, ref)
-                e6 = attitude_errors(make_filter(name, FilterSetup(rate_hz=fs, use_mag=False)).process(
-                    t, gyro, accel).q_wb, ref)
+                e6 = attitude_errors(make(FilterSetup(rate_hz=fs, use_mag=False)).process(t, gyro, accel).q_wb, ref)
             row = (rmse_deg(e9.total, movement), rmse_deg(e9.heading, movement), rmse_deg(e9.inclination, movement),
                    rmse_deg(e6.inclination, movement))
             results[name].append(row)
