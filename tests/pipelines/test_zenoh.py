@@ -152,7 +152,8 @@ def test_pacing_follows_the_sample_clock(procs):
     """Send times (source stamps of the attachments) against t0 + k/rate: no accumulating drift.
 
     A sleep-per-sample scheduler adds its overhead at every sample (tens of µs × 5000 samples = a drift
-    of 0.1 s or more); the drift-free schedule sleeps to absolute deadlines, so its error stays put.
+    of 0.1 s or more); the drift-free schedule sleeps to absolute deadlines, so its error stays put, and
+    a stretch the machine starved it of is caught up afterwards.
     The p99 error is printed, not asserted: it is a speed figure of a shared machine (README records it).
     """
     endpoint = f"tcp/127.0.0.1:{free_port()}"
@@ -185,7 +186,9 @@ def test_pacing_follows_the_sample_clock(procs):
     own = [line for line in procs.log("stream").splitlines() if "pacing" in line]
     print(f"\npacing from attachment stamps: p50 {p50:.3f} ms, p99 {p99:.3f} ms, max {worst:.3f} ms; "
           f"drift over the run {(np.median(error[-500:]) - np.median(error[:500])) * 1e3:.3f} ms\n{own}")
-    assert abs(np.median(error[-500:]) - np.median(error[:500])) < 2e-3  # seconds: no accumulating drift
+    # Drift is in every sample, a busy machine's starvation only in some: compare the least lateness of
+    # the first and the last 1000 samples (a drift-free schedule returns to time once it gets the CPU).
+    assert abs(error[-1000:].min() - error[:1000].min()) < 2e-3  # seconds: no accumulating drift
 
 
 def test_keys_attachments_and_sequence_report():
