@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import sys
 from pathlib import Path
 
@@ -37,17 +36,15 @@ from dynamics.rotation import quat_from_euler_zyx, quat_multiply
 from pipelines import cli
 from pipelines.bench import LogCase, SimCase, evaluate_run, run_bench
 from pipelines.estimation import registry
+from broad_trials import BROAD_DIR, needs_trial
 from pipelines.estimation.metrics import attitude_errors, rmse_deg
 from pipelines.estimation.protocol import Estimate, FilterSetup
 from pipelines.mcap_io import Recording, truth_series, write_mcap
 from pipelines.messages import IMU
 
 PEERS = ["madgwick", "mahony", "ahrs-ekf", "vqf"]
-BROAD_DIR = Path(os.environ.get("GYROEMU_BROAD_DIR",
-                                Path(__file__).resolve().parents[3] / "shared" / "datasets" / "broad"))
 TRIAL_02 = BROAD_DIR / "02_undisturbed_slow_rotation_B.hdf5"
-needs_broad = pytest.mark.skipif(not TRIAL_02.is_file(),
-                                 reason=f"BROAD trials not found at {BROAD_DIR} (set GYROEMU_BROAD_DIR)")
+needs_broad = needs_trial(TRIAL_02.name)
 
 ROTATION_TOML = """\
 kind = "random-manoeuvre"

@@ -11,7 +11,6 @@ tests that need them skip when the folder is absent. Error cases use small synth
 from __future__ import annotations
 
 import hashlib
-import os
 import subprocess
 import sys
 import warnings
@@ -27,14 +26,12 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from pipelines import cli
 from pipelines.importers import BROAD_CITATION, ImportInputError, import_broad, read_broad
 from pipelines.mcap_io import LogWarning, McapFileWriter, Recording, read_mcap, write_mcap
+from broad_trials import BROAD_DIR, needs_trial
 from pipelines.messages import FLAG, IMU, schema_text
 from sensors.samples import ImuSamples
 
-BROAD_DIR = Path(os.environ.get("GYROEMU_BROAD_DIR",
-                                Path(__file__).resolve().parents[3] / "shared" / "datasets" / "broad"))
 TRIAL = "33_disturbed_attached_magnet_2cm.hdf5"  # the smallest of the eight (48,279 samples)
-needs_broad = pytest.mark.skipif(not (BROAD_DIR / TRIAL).is_file(),
-                                 reason=f"BROAD trials not found at {BROAD_DIR} (set GYROEMU_BROAD_DIR)")
+needs_broad = needs_trial(TRIAL)
 
 
 def fingerprint(path):

@@ -2,13 +2,13 @@
 simulated data, its handling of bad samples, and the constraint of its heading update."""
 
 import dataclasses
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from broad_trials import BROAD_DIR, needs_trial
 from dynamics import load_scenario
 from dynamics.earth import EARTH_RATE
 from dynamics.rotation import quat_rotate, quat_conjugate
@@ -186,12 +186,7 @@ def test_injection_turns_the_low_passed_force_with_the_estimate():
     assert np.allclose(q, np.roll(Rotation.from_rotvec(x[:3]).as_quat(), 1), atol=1e-12)
 
 
-BROAD_DIR = Path(os.environ.get("GYROEMU_BROAD_DIR",
-                                Path(__file__).resolve().parents[3] / "shared" / "datasets" / "broad"))
-
-
-@pytest.mark.skipif(not list(BROAD_DIR.glob("*.hdf5")),
-                    reason=f"BROAD trials not found at {BROAD_DIR} (set GYROEMU_BROAD_DIR)")
+@needs_trial()
 def test_broad_targets_with_one_parameter_set():
     """The issue's bars on the BROAD trials in shared, defaults only: mean 9D total RMSE at or below
     VQF's quoted 2.4° (and below online VQF's in the same run), mean 6D inclination RMSE at or below
