@@ -106,13 +106,6 @@ def rotate_body(q, phi_x, phi_y, phi_z):
 
 
 @numba.njit(cache=True)
-def rotate_world(q, phi):
-    """q ← exp(φ/2) ⊗ q for a world-frame rotation vector φ (rad): the error-state injection."""
-    c, dx, dy, dz = _half_turn(phi[0], phi[1], phi[2])
-    _set_product(q, c, dx, dy, dz, q[0], q[1], q[2], q[3])
-
-
-@numba.njit(cache=True)
 def strapdown(q, b, slow, win, phi12, t, gyro, delta_angle, accel, mag, earth_rate_w, params, start, q_out):
     """Advance the filter from sample ``start`` until a window closes or the samples end.
 
@@ -468,12 +461,13 @@ def rest_due(win, slow, params):
 def inject(x, q, b, slow, win, phi12):
     """Fold the error estimate into the nominal state (``q ← exp(δθ) ⊗ q``, ``b ← b + δb``), zero it,
     and open a new window."""
-    rotate_world(q, x[0:3])
+    turn = np.empty(4)
+    turn[0], turn[1], turn[2], turn[3] = _half_turn(x[0], x[1], x[2])  # exp(δθ/2), world axes
+    _set_product(q, turn[0], turn[1], turn[2], turn[3], q[0], q[1], q[2], q[3])
     # The low-passed specific force was turned into the world frame with the old estimate: turn it
     # with the same correction, so that the measurement does not see the error it already gave.
     c = np.empty((3, 3))
-    c_w, c_x, c_y, c_z = _half_turn(x[0], x[1], x[2])
-    quat_to_matrix(np.array([c_w, c_x, c_y, c_z]), c)
+    quat_to_matrix(turn, c)
     for s0 in (S_GRAV_LP, S_GRAV_LP2):
         v0, v1, v2 = slow[s0], slow[s0 + 1], slow[s0 + 2]
         for i in range(3):

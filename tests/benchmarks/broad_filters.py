@@ -30,6 +30,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from pipelines.estimation.mekf import Mekf, MekfParams  # noqa: E402
+from pipelines.importers import read_broad  # noqa: E402
 from pipelines.estimation.metrics import attitude_errors, rmse_deg  # noqa: E402
 from pipelines.estimation.protocol import FilterSetup  # noqa: E402
 from pipelines.estimation.registry import available_filters, make_filter, unavailable_filters  # noqa: E402
@@ -39,8 +40,6 @@ BROAD_DIR = Path(os.environ.get("GYROEMU_BROAD_DIR",
 
 
 def main() -> int:
-    import h5py
-
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--filter", action="append", default=None, help="filters (default: every available one)")
     parser.add_argument("--trials", nargs="+", default=None, help="trial numbers, e.g. 02 07 (default: all)")
@@ -71,10 +70,9 @@ def main() -> int:
     print("| trial | filter | total 9D ° | heading 9D ° | inclination 9D ° | inclination 6D ° |")
     print("|---|---|---|---|---|---|")
     for path in files:
-        with h5py.File(path, "r") as f:
-            gyro, accel, mag = (np.ascontiguousarray(f[k][:]) for k in ("imu_gyr", "imu_acc", "imu_mag"))
-            ref, movement = f["opt_quat"][:], f["movement"][:].astype(bool)
-            fs = float(f.attrs["sampling_rate"])
+        trial = read_broad(path)
+        gyro, accel, mag, ref, movement = trial.gyro, trial.accel, trial.mag_ut, trial.opt_quat, trial.movement
+        fs = trial.rate_hz
         t = np.arange(len(gyro)) / fs
         for name in filters:
             if name == "offlineVQF (direct)":

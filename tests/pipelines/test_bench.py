@@ -485,21 +485,19 @@ DIRECT_02 = {
 
 @pytest.fixture(scope="module")
 def trial_02():
-    import h5py
+    from pipelines.importers import read_broad
 
-    with h5py.File(TRIAL_02, "r") as f:
-        data = {k: f[k][:] for k in ("imu_gyr", "imu_acc", "imu_mag", "opt_quat", "movement")}
-        fs = float(f.attrs["sampling_rate"])
-    return data, fs
+    return read_broad(TRIAL_02)
 
 
 @needs_broad
 @pytest.mark.parametrize("name", PEERS)
 def test_peer_reproduces_its_library_on_broad(trial_02, name):
-    data, fs = trial_02
-    n = DIRECT_02[name][0] if name in DIRECT_02 else len(data["imu_gyr"])
-    g, a, m = (np.ascontiguousarray(data[k][:n]) for k in ("imu_gyr", "imu_acc", "imu_mag"))
-    ref, movement = data["opt_quat"][:n], data["movement"][:n]
+    trial = trial_02
+    fs = trial.rate_hz
+    n = DIRECT_02[name][0] if name in DIRECT_02 else len(trial)
+    g, a, m = (np.ascontiguousarray(x[:n]) for x in (trial.gyro, trial.accel, trial.mag_ut))
+    ref, movement = trial.opt_quat[:n], trial.movement[:n]
     t = np.arange(n) / fs
     est = registry.make_filter(name, FilterSetup(rate_hz=fs)).process(t, g, a, m * 1e-6)
     e = attitude_errors(est.q_wb, ref)
