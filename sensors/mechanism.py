@@ -149,6 +149,12 @@ class GyroMechanism(Section):
         """White rate noise the physics itself makes, rad/s/√Hz (Allan deviation at 1 s); 0 if none."""
         return 0.0
 
+    def rest_bias(self) -> float:
+        """Size of the rate the mechanism indicates at rest on the ground (its offsets at the reference
+        temperature and its g-sensitivity under 1 g), rad/s; 0 if none. Not part of the device's error
+        terms, so a filter that knows only those must still allow for it."""
+        return 0.0
+
     def max_rate(self) -> float:
         """Largest input rate the mechanism indicates unambiguously, rad/s (``inf`` when unbounded).
 

@@ -146,6 +146,7 @@ from pydantic import ValidationInfo, field_validator
 
 from dynamics.config import PositiveReal, Real
 
+from .errors import STANDARD_GRAVITY
 from .mechanism import GyroMechanism, GyroResponse, GyroTruth
 
 __all__ = ["MemsGyro", "CARRIER_STEPS_PER_CYCLE", "K_BOLTZMANN", "element_axes"]
@@ -287,6 +288,10 @@ class MemsGyro(GyroMechanism):
     def quadrature_bias(self) -> float:
         """Rate-channel bias from the quadrature, −Ω_q tan φ_e, rad/s (reference temperature)."""
         return -self.quadrature_rate() * math.tan(self.demodulation_phase_error_rad)
+
+    def rest_bias(self) -> float:
+        """|(−Ω_q tan φ_e, G g)|: the quadrature leak and the g-sensitivity under 1 g, rad/s."""
+        return math.hypot(self.quadrature_bias(), self.g_sensitivity() * STANDARD_GRAVITY)
 
     def g_sensitivity(self) -> float:
         """G = κ ω_d/(2 Q_d ω_s²): indicated rate per specific force along the sense axis, rad/s per m/s²."""
