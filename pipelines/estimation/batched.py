@@ -31,27 +31,27 @@ def kalman_update(x, P, z, H, R):
     S = H @ PHT + R
     K = PHT @ np.linalg.inv(S)
     x += K @ (z - H @ x)
-    A = np.eye(6) - K @ H
+    A = np.eye(len(x)) - K @ H
     P[:, :] = A @ P @ A.T + K @ R @ K.T
 
 
 @numba.njit(cache=True)
-def _window(q, b, slow, win, phi12, P, x, earth, params, use_mag):
+def _window(q, b, slow, win, phi, P, x, earth, params, use_mag):
     """One window's prediction and updates, then the injection: :meth:`Mekf._window`, compiled."""
-    F = np.empty((6, 6))
-    Q = np.empty((6, 6))
-    kern.transition(win, phi12, earth, params, F, Q)
+    F = np.empty((kern.X_SIZE, kern.X_SIZE))
+    Q = np.empty((kern.X_SIZE, kern.X_SIZE))
+    kern.transition(win, phi, earth, params, F, Q)
     kalman_predict(P, F, Q)
-    z, H, R = np.empty(2), np.empty((2, 6)), np.empty((2, 2))
+    z, H, R = np.empty(2), np.empty((2, kern.X_SIZE)), np.empty((2, 2))
     if kern.gravity_measurement(win, slow, params, z, H, R) and kern.gravity_gate(P, z, H, R, slow, params):
         kalman_update(x, P, z, H, R)
     if kern.rest_due(win, slow, params):
-        z3, H3, R3 = np.empty(3), np.empty((3, 6)), np.empty((3, 3))
+        z3, H3, R3 = np.empty(3), np.empty((3, kern.X_SIZE)), np.empty((3, 3))
         kern.rest_measurement(win, q, b, earth, params, z3, H3, R3)
         kalman_update(x, P, z3, H3, R3)
     if use_mag:
         kern.heading_update(x, P, q, win, slow, params)
-    kern.inject(x, q, b, slow, win, phi12)
+    kern.inject(x, q, b, slow, win, phi)
 
 
 @numba.njit(cache=True, parallel=True)
@@ -59,17 +59,17 @@ def _run(q, b, slow, P, t, gyro, delta, accel, mag, earth, params, use_mag, q_ou
     runs, n = gyro.shape[0], len(t)
     for r in numba.prange(runs):
         win = np.zeros(kern.W_SIZE)
-        phi12 = np.zeros((3, 3))
-        x = np.zeros(6)
+        phi = np.zeros((3, kern.N_DRIFT))
+        x = np.zeros(kern.X_SIZE)
         k = 0
         d = delta[r] if delta.shape[0] > 0 else delta[0:0, 0]
         while k < n:
-            end = kern.strapdown(q[r], b[r], slow[r], win, phi12, t, gyro[r], d, accel[r], mag[r], earth,
+            end = kern.strapdown(q[r], b[r], slow[r], win, phi, t, gyro[r], d, accel[r], mag[r], earth,
                                  params, k, q_out[r])
             for j in range(k, end):
                 b_out[r, j, :] = b[r]
             if kern.window_due(win, params):
-                _window(q[r], b[r], slow[r], win, phi12, P[r], x, earth, params, use_mag)
+                _window(q[r], b[r], slow[r], win, phi, P[r], x, earth, params, use_mag)
                 q_out[r, end - 1, :] = q[r]
                 b_out[r, end - 1, :] = b[r]
             k = end
@@ -116,7 +116,7 @@ def mekf_batch(setup: FilterSetup, t, gyro, accel, mag=None, *, delta_angle=None
     q = np.empty((runs, 4))
     b = np.empty((runs, 3))
     slow = np.empty((runs, kern.S_SIZE))
-    P = np.empty((runs, 6, 6))
+    P = np.empty((runs, kern.X_SIZE, kern.X_SIZE))
     for r in range(runs):
         init = initial_state(t, gyro[r], accel[r], mag[r] if use_mag else None, setup, params)
         q[r], b[r], slow[r], P[r] = init.q, init.b, init.slow, init.P

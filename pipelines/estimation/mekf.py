@@ -1,7 +1,8 @@
 """gyroemu's attitude filter: a multiplicative (error-state) extended Kalman filter on filterpy.
 
-The nominal state is the attitude ``q_wb`` and the gyro bias ``b``; the Kalman filter (filterpy's
-``KalmanFilter``, dim_x = 6) carries their errors ``(δθ, δb)``, ``δθ`` in world axes. The gyro drives a
+The nominal state is the attitude ``q_wb``, the gyro bias ``b`` and the gyro's scale-factor and
+misalignment errors ``M``; the Kalman filter (filterpy's ``KalmanFilter``, dim_x = 15) carries their
+errors ``(δθ, δb, δM)``, ``δθ`` in world axes. The gyro drives a
 strapdown integration at every sample; every window (20 ms by default) the error covariance is
 propagated over the window, the window's measurements update the error state, and the error is folded
 back into the nominal state (Markley & Crassidis, *Fundamentals of Spacecraft Attitude Determination
@@ -46,7 +47,7 @@ _DEG = np.pi / 180
 @dataclass(frozen=True)
 class MekfParams:
     """The filter's parameters, SI. The defaults serve any log; the noise figures of a known device
-    replace the first six, and a simulated site's field its ``heading_sigma`` (:meth:`for_setup`).
+    replace the first seven, and a simulated site's field its ``heading_sigma`` (:meth:`for_setup`).
 
     Attributes
     ----------
@@ -60,9 +61,14 @@ class MekfParams:
         White specific-force noise, m/s²/√Hz.
     mag_noise_density : float
         White magnetometer noise, T/√Hz.
-    scale_factor_sigma : float
-        Scale-factor and misalignment uncertainty, relative: every radian turned adds
-        ``scale_factor_sigma²`` rad² of attitude variance.
+    scale_factor_sigma, misalignment_sigma : float
+        Initial uncertainty (1σ) of each gyro axis's scale-factor error, relative, and of each of the six
+        misalignments, rad: the prior of ``M``'s diagonal and off-diagonal elements.
+    scale_factor_random_walk : float
+        How fast ``M`` may wander (temperature, ageing), 1/√s.
+    turn_noise : float
+        Rotation error the scale-factor states do not model (nonlinearity, stamps a little off), relative:
+        every radian turned adds ``turn_noise²`` rad² of attitude variance.
     window_s : float
         Window over which the covariance is propagated, s.
     accel_tau_s : float
@@ -107,6 +113,9 @@ class MekfParams:
     accel_noise_density: float = 2e-3
     mag_noise_density: float = 2e-7
     scale_factor_sigma: float = 0.01
+    misalignment_sigma: float = 0.01
+    scale_factor_random_walk: float = 1e-5
+    turn_noise: float = 0.01
     window_s: float = 0.02
     accel_tau_s: float = 1.0
     mag_window_s: float = 1.0
@@ -146,13 +155,16 @@ class MekfParams:
             known["gyro_bias_random_walk"] = float(np.sqrt(k**2 + bi**2 / 100.0))
         if noise.gyro_scale_sigma is not None:
             known["scale_factor_sigma"] = noise.gyro_scale_sigma
+            known["turn_noise"] = 0.0  # the device's scale and misalignment are all the states need
+        if noise.gyro_misalignment_sigma is not None:
+            known["misalignment_sigma"] = noise.gyro_misalignment_sigma
         if noise.accel_noise_density is not None:
             known["accel_noise_density"] = noise.accel_noise_density
         if noise.mag_noise_density is not None:
             known["mag_noise_density"] = noise.mag_noise_density
         if setup.field_heading_sigma is not None:
             known["heading_sigma"] = setup.field_heading_sigma
-        return replace(cls(), **known, **overrides)
+        return replace(cls(), **(known | overrides))
 
     def vector(self, setup: FilterSetup) -> np.ndarray:
         """The parameter vector the compiled kernels read (layout ``mekf_kernels.P_*``)."""
@@ -163,7 +175,8 @@ class MekfParams:
         p[kern.P_MAG_WINDOW] = self.mag_window_s
         p[kern.P_GYRO_NOISE] = self.gyro_noise_density
         p[kern.P_BIAS_RW] = self.gyro_bias_random_walk
-        p[kern.P_SCALE_SIGMA] = self.scale_factor_sigma
+        p[kern.P_SCALE_RW] = self.scale_factor_random_walk
+        p[kern.P_TURN_NOISE] = self.turn_noise
         p[kern.P_HOLD_RATE] = self.hold_rate
         p[kern.P_ACC_NOISE] = self.accel_noise_density
         p[kern.P_MOTION] = self.motion_accel_density
@@ -236,7 +249,8 @@ def initial_state(t, gyro, accel, mag, setup: FilterSetup, params: MekfParams) -
     # Motion during the averaging tilts the mean force by up to the samples' spread about it
     spread = float(np.nanmean(np.sum((a_first - a) ** 2, axis=1))) / gravity**2 if np.isfinite(a_first).any() else 0.0
     tilt_var = params.tilt_sigma0**2 + spread
-    P = np.diag([tilt_var, tilt_var, heading_var] + [params.gyro_bias_sigma**2] * 3)
+    scale_var = np.where(np.eye(3, dtype=bool), params.scale_factor_sigma**2, params.misalignment_sigma**2)
+    P = np.diag([tilt_var, tilt_var, heading_var] + [params.gyro_bias_sigma**2] * 3 + list(scale_var.ravel()))
     slow[kern.S_T] = t[0] - 1.0 / setup.rate_hz
     g0 = np.nan_to_num(np.asarray(gyro[0], dtype=float))
     slow[kern.S_OMEGA:kern.S_OMEGA + 3] = g0
@@ -294,14 +308,14 @@ class Mekf:
         self.params = params if params is not None else MekfParams.for_setup(setup)
         self._p = self.params.vector(setup)
         self._earth = earth_rate_enu(setup)
-        self.kf = KalmanFilter(dim_x=6, dim_z=2)
+        self.kf = KalmanFilter(dim_x=kern.X_SIZE, dim_z=2)
         self.q = None
         self.b = np.zeros(3)
         self._slow = np.zeros(kern.S_SIZE)
         self._win = np.zeros(kern.W_SIZE)
-        self._phi12 = np.zeros((3, 3))
-        self._F = np.eye(6)
-        self._Q = np.zeros((6, 6))
+        self._phi = np.zeros((3, kern.N_DRIFT))
+        self._F = np.eye(kern.X_SIZE)
+        self._Q = np.zeros((kern.X_SIZE, kern.X_SIZE))
 
     def process(self, t, gyro, accel, mag=None) -> Estimate:
         """Filter the next block: ``t`` (N,) s, ``gyro`` (N, 3) rad/s, ``accel`` (N, 3) m/s², ``mag``
@@ -333,7 +347,7 @@ class Mekf:
         kf, p, x = self.kf, self._p, self.kf.x
         while k < n:
             try:
-                end = kern.strapdown(self.q, self.b, self._slow, self._win, self._phi12, t, gyro, delta, accel, mag,
+                end = kern.strapdown(self.q, self.b, self._slow, self._win, self._phi, t, gyro, delta, accel, mag,
                                      self._earth, p, k, q_out)
             except ValueError:
                 bad = k + int(np.argmax(np.diff(np.concatenate([[self._slow[kern.S_T]], t[k:]])) <= 0))
@@ -350,16 +364,16 @@ class Mekf:
     def _window(self) -> None:
         """The window's prediction and updates, then the injection into the nominal state."""
         kf, p, win, slow = self.kf, self._p, self._win, self._slow
-        kern.transition(win, self._phi12, self._earth, p, self._F, self._Q)
+        kern.transition(win, self._phi, self._earth, p, self._F, self._Q)
         kf.predict(F=self._F, Q=self._Q)
-        z, H, R = np.empty(2), np.empty((2, 6)), np.empty((2, 2))
+        z, H, R = np.empty(2), np.empty((2, kern.X_SIZE)), np.empty((2, 2))
         if kern.gravity_measurement(win, slow, p, z, H, R) and kern.gravity_gate(kf.P, z, H, R, slow, p):
             kf.update(z.reshape(2, 1), R=R, H=H)
         if kern.rest_due(win, slow, p):
-            z3, H3, R3 = np.empty(3), np.empty((3, 6)), np.empty((3, 3))
+            z3, H3, R3 = np.empty(3), np.empty((3, kern.X_SIZE)), np.empty((3, 3))
             kern.rest_measurement(win, self.q, self.b, self._earth, p, z3, H3, R3)
             kf.update(z3.reshape(3, 1), R=R3, H=H3)
-        x = kf.x.reshape(6)  # a view: the heading update and the injection write through it
+        x = kf.x.reshape(kern.X_SIZE)  # a view: the heading update and the injection write through it
         if self.setup.use_mag:
             kern.heading_update(x, kf.P, self.q, win, slow, p)
-        kern.inject(x, self.q, self.b, slow, win, self._phi12)
+        kern.inject(x, self.q, self.b, slow, win, self._phi)

@@ -2,25 +2,31 @@
 measurement models. :mod:`pipelines.estimation.mekf` wraps them with filterpy's Kalman algebra;
 :mod:`pipelines.estimation.batched` with its own, run across many runs at once.
 
-The error state (``δθ``, ``δb``)
--------------------------------
-``δθ`` is the attitude error in world axes, ``R_true = (I + [δθ×]) R_est`` (``q_true = δq ⊗ q_est``);
-``δb = b_true − b_est`` is the gyro bias error in body axes, ``ω_true = ω_m − b_true − n``. Between
-samples (Titterton & Weston §12.3.1, in the world frame; Earth rate ``Ω_ie`` when the latitude is known):
+The error state (``δθ``, ``δb``, ``δM``)
+---------------------------------------
+``δθ`` is the attitude error in world axes, ``R_true = (I + [δθ×]) R_est`` (``q_true = δq ⊗ q_est``).
+The gyro reads ``ω_m = (I + M) ω + b + n``: ``M`` holds the scale-factor errors (diagonal) and the
+misalignments (off the diagonal), the strapdown integrates ``(I − M̂)(ω_m − b̂)``, and ``δb = b − b̂``,
+``δM = M − M̂`` (body axes; nine states, row-major) are their errors, so that to first order the
+integrated rate is wrong by ``δb + δM u`` (``u = ω_m − b̂``). Between samples (Titterton & Weston
+§12.3.1, in the world frame; Earth rate ``Ω_ie`` when the latitude is known):
 
-    δθ̇ = −[Ω_ie×] δθ − R_est δb − R_est n_g,        δḃ = n_b
+    δθ̇ = −[Ω_ie×] δθ − R_est (δb + δM u) − R_est n_g,        δḃ = n_b,        δṀ = n_M
 
 The strapdown runs at every sample; the covariance is propagated once per *window* (a few tens of
-milliseconds) with the transition ``Φ = [[I − [Ω_ie×] T, −Σ R_k Δt_k], [0, I]]`` accumulated over the
-window's samples, which is what a strapdown INS does (the attitude at full rate, the error model at a
-lower one).
+milliseconds) with the transition ``Φ = [[I − [Ω_ie×] T, Φ_θb, Φ_θM], [0, I, 0], [0, 0, I]]``,
+``Φ_θb = −Σ R_k Δt_k`` and ``Φ_θM`` likewise, accumulated over the window's samples, which is what a
+strapdown INS does (the attitude at full rate, the error model at a lower one). The rotation makes
+``δM`` observable: each turn shows its own scale factor and what leaks into the other axes.
 
 Measurements, made at the end of each window
 --------------------------------------------
 * Gravity direction: the specific force turned into the world frame with the current estimate and
   low-passed twice, ``ā_w`` (filtering in the world frame removes vibration and translation without
   lagging rotation, the idea of VQF's inertial-frame low-pass filter). With ``u = ā_w/|ā_w|``, at rest
-  ``u = e_z + e_z × δθ``: ``(u_x, u_y) = (−δθ_y, δθ_x)``, whatever the heading.
+  ``u = e_z + e_z × δθ``: ``(u_x, u_y) = (−δθ_y, δθ_x)``, whatever the heading. The low-passes hold
+  forces turned with past attitudes, so they see the error as it was: ``δθ + D (δb, δM)``, ``D`` the
+  drift since, weighted by the low-pass (2τ R for a steady drift), tracked per sample.
 * Heading: the magnetic field turned into the world frame and averaged, ``m̄_w``; its azimuth from
   north is ``ψ = atan2(m_x, m_y) = D + δθ_z + tan(dip) (n · δθ)`` (``D`` the declination, ``n`` the
   field's horizontal direction).
@@ -61,7 +67,17 @@ S_MAG_REJ_T = 14 # time since the last accepted heading update, s
 S_GRAVITY = 15   # gravity magnitude seen at initialisation, m/s²
 S_GRAV_LP = 16   # 16:19 specific force in the world frame, low-passed once, m/s²
 S_GRAV_LP2 = 19  # 19:22 and twice: the gravity measurement, m/s²
-S_SIZE = 22
+S_LAG1 = 22      # 22:58 D₁ (3×12, row-major): the first low-pass's sensitivity to δb and δM
+S_LAG2 = 58      # 58:94 D₂: the second's (the measurement's); see strapdown and gravity_measurement
+S_SCALE = 94     # 94:103 M̂ (3×3, row-major): the gyro's scale-factor and misalignment errors
+S_SIZE = 103
+
+# Error state layout.
+X_THETA = 0      # 0:3 δθ, rad, world axes
+X_BIAS = 3       # 3:6 δb, rad/s, body axes
+X_SCALE = 6      # 6:15 δM (3×3, row-major), dimensionless
+X_SIZE = 15
+N_DRIFT = X_SIZE - X_BIAS  # the error states that drive the attitude error: δb and δM
 
 
 @numba.njit(cache=True)
@@ -106,12 +122,12 @@ def rotate_body(q, phi_x, phi_y, phi_z):
 
 
 @numba.njit(cache=True)
-def strapdown(q, b, slow, win, phi12, t, gyro, delta_angle, accel, mag, earth_rate_w, params, start, q_out):
+def strapdown(q, b, slow, win, phi, t, gyro, delta_angle, accel, mag, earth_rate_w, params, start, q_out):
     """Advance the filter from sample ``start`` until a window closes or the samples end.
 
     ``t`` (n,) s; ``gyro`` (n, 3) rad/s, or ``delta_angle`` (n, 3) rad when it has rows (then
     ``gyro`` is ignored); ``accel`` (n, 3) m/s²; ``mag`` (n, 3) T (NaN rows: none). ``q``, ``b``,
-    ``slow``, ``win``, ``phi12`` are updated in place and ``q_out[k]`` receives the attitude after
+    ``slow``, ``win``, ``phi`` (3, 12: the window's Φ_θb, Φ_θM) are updated in place and ``q_out[k]`` receives the attitude after
     sample k. Returns the index after the last sample consumed; the window is due for its updates
     when it has run ``params[P_WINDOW]`` seconds or ``params[P_WINDOW_N]`` samples (see
     :func:`window_due`). Raises ``ValueError`` on a stamp that does not increase.
@@ -119,9 +135,11 @@ def strapdown(q, b, slow, win, phi12, t, gyro, delta_angle, accel, mag, earth_ra
     n = len(t)
     r = np.empty((3, 3))
     quat_to_matrix(q, r)  # the attitude before each sample; recomputed once per sample, after its rotation
+    inc = np.empty((3, N_DRIFT))  # this sample's −ΔΦ: how δb and δM turn the attitude over it
+    u = np.empty(3)
     w = np.empty(3)
     use_delta = delta_angle.shape[0] > 0
-    sigma_sf2 = params[P_SCALE_SIGMA] ** 2
+    turn_noise2 = params[P_TURN_NOISE] ** 2
     hold_rate = params[P_HOLD_RATE]
     alpha_tau = params[P_REST_TAU]
     rest_g, rest_a = params[P_REST_GYRO], params[P_REST_ACCEL]
@@ -133,7 +151,8 @@ def strapdown(q, b, slow, win, phi12, t, gyro, delta_angle, accel, mag, earth_ra
             raise ValueError("sample stamps must increase")
         slow[S_T] = t[k]
         slow[S_ACC_REJ_T] += dt
-        # The rate over [t_{k-1}, t_k], bias and Earth rate removed (ω_bw = ω_m − b − Rᵀ Ω_ie).
+        # The rate over [t_{k-1}, t_k], bias, scale and misalignment and Earth rate removed:
+        # ω_bw = (I − M̂)(ω_m − b̂) − Rᵀ Ω_ie.
         if use_delta:
             w[0], w[1], w[2] = delta_angle[k, 0] / dt, delta_angle[k, 1] / dt, delta_angle[k, 2] / dt
         else:
@@ -142,18 +161,28 @@ def strapdown(q, b, slow, win, phi12, t, gyro, delta_angle, accel, mag, earth_ra
         for i in range(3):
             if valid:
                 slow[S_OMEGA + i] = w[i]
+            u[i] = slow[S_OMEGA + i] - b[i]  # a missing sample holds the last valid rate
+        for i in range(3):
             e = r[0, i] * earth_rate_w[0] + r[1, i] * earth_rate_w[1] + r[2, i] * earth_rate_w[2]
-            w[i] = slow[S_OMEGA + i] - b[i] - e  # a missing sample holds the last valid rate
+            m0 = S_SCALE + 3 * i
+            w[i] = u[i] - (slow[m0] * u[0] + slow[m0 + 1] * u[1] + slow[m0 + 2] * u[2]) - e
         wx, wy, wz = w[0], w[1], w[2]
         turned = math.sqrt(wx * wx + wy * wy + wz * wz) * dt
         if not valid:  # a held sample: its increment is uncertain by up to a hold_rate·dt rotation
             win[W_EXTRA] += (max(turned / dt, hold_rate) * dt) ** 2
-        # Scale-factor and misalignment errors turn every rotation by a fraction σ of itself; as a
-        # random walk in the turned angle (variance σ² per radian) it cannot vanish with the step size.
-        win[W_EXTRA] += sigma_sf2 * turned
+        # What the scale-factor states cannot hold (nonlinearity, a scale that changes with the rate,
+        # stamps off by a little) turns every rotation by a fraction σ of itself; as a random walk in
+        # the turned angle (variance σ² per radian) it does not vanish with the step size.
+        win[W_EXTRA] += turn_noise2 * turned
+        # The rate error δb + δM u turns the attitude by −R (δb + δM u) Δt: Φ_θb = −Σ R Δt, and for
+        # δM_ac (axis a's error per rad/s about c) the column −Σ R[:, a] u_c Δt.
         for i in range(3):
-            for j in range(3):
-                phi12[i, j] -= r[i, j] * dt  # Φ_θb = −Σ R Δt
+            for a in range(3):
+                inc[i, a] = r[i, a] * dt
+                for c in range(3):
+                    inc[i, 3 + 3 * a + c] = r[i, a] * u[c] * dt
+            for j in range(N_DRIFT):
+                phi[i, j] -= inc[i, j]
         rotate_body(q, wx * dt, wy * dt, wz * dt)
         quat_to_matrix(q, r)
 
@@ -189,13 +218,23 @@ def strapdown(q, b, slow, win, phi12, t, gyro, delta_angle, accel, mag, earth_ra
         # H(s) = 1/(1 + τs)², exact for any step (α = 1 − e^(−Δt/τ)): its 1/f² roll-off removes
         # back-and-forth translation far better than a mean over a window, whose 1/f does not.
         ax, ay, az = accel[k, 0], accel[k, 1], accel[k, 2]
-        if math.isfinite(ax) and math.isfinite(ay) and math.isfinite(az):
-            alpha_g = 1.0 - math.exp(-dt / params[P_ACC_TAU])
+        accel_valid = math.isfinite(ax) and math.isfinite(ay) and math.isfinite(az)
+        alpha_g = 1.0 - math.exp(-dt / params[P_ACC_TAU]) if accel_valid else 0.0
+        if accel_valid:
             for i in range(3):
                 a_w = r[i, 0] * ax + r[i, 1] * ay + r[i, 2] * az
                 slow[S_GRAV_LP + i] += alpha_g * (a_w - slow[S_GRAV_LP + i])
                 slow[S_GRAV_LP2 + i] += alpha_g * (slow[S_GRAV_LP + i] - slow[S_GRAV_LP2 + i])
             win[W_ACC_N] += 1.0
+        # What the low-passes hold was turned with past attitudes, whose errors differ from today's by
+        # the drift since: δθ(t') = δθ(t) + ∫_{t'}^{t} R (δb + δM u) du. Each stage's output is thus
+        # δθ + D (δb, δM), with D₁ ← (1 − α)(D₁ + inc), D₂ ← (1 − α)(D₂ + inc) + α D₁ (for a steady
+        # drift, D₂ → 2τ R: the cascade's group delay).
+        for e in range(3 * N_DRIFT):
+            i, j = e // N_DRIFT, e % N_DRIFT
+            d1 = (1.0 - alpha_g) * (slow[S_LAG1 + e] + inc[i, j])
+            slow[S_LAG2 + e] = (1.0 - alpha_g) * (slow[S_LAG2 + e] + inc[i, j]) + alpha_g * d1
+            slow[S_LAG1 + e] = d1
         if use_mag:
             mx, my, mz = mag[k, 0], mag[k, 1], mag[k, 2]
             if math.isfinite(mx) and math.isfinite(my) and math.isfinite(mz):
@@ -223,7 +262,7 @@ P_WINDOW = 0
 P_WINDOW_N = 1
 P_GYRO_NOISE = 2
 P_BIAS_RW = 3
-P_SCALE_SIGMA = 4
+P_SCALE_RW = 4
 P_HOLD_RATE = 5
 P_ACC_NOISE = 6
 P_MOTION = 7
@@ -246,16 +285,17 @@ P_DECLINATION = 23
 P_ACC_TAU = 24
 P_MAG_WINDOW = 25
 P_HEADING_CORR = 26
-P_SIZE = 27
+P_TURN_NOISE = 27
+P_SIZE = 28
 
 
 @numba.njit(cache=True)
-def transition(win, phi12, earth_rate_w, params, F, Q):
-    """The window's transition ``F`` (6, 6) and process noise ``Q`` (6, 6), written in place."""
+def transition(win, phi, earth_rate_w, params, F, Q):
+    """The window's transition ``F`` and process noise ``Q`` (X_SIZE, X_SIZE), written in place."""
     T = win[W_T]
     F[:, :] = 0.0
     Q[:, :] = 0.0
-    for i in range(6):
+    for i in range(X_SIZE):
         F[i, i] = 1.0
     # I − [Ω_ie×] T
     F[0, 1] += earth_rate_w[2] * T
@@ -264,17 +304,20 @@ def transition(win, phi12, earth_rate_w, params, F, Q):
     F[1, 2] += earth_rate_w[0] * T
     F[2, 0] += earth_rate_w[1] * T
     F[2, 1] -= earth_rate_w[0] * T
-    F[0:3, 3:6] = phi12
+    F[0:3, X_BIAS:X_SIZE] = phi
     q_att = params[P_GYRO_NOISE] ** 2 * T + win[W_EXTRA]
     q_bias = params[P_BIAS_RW] ** 2 * T
+    q_scale = params[P_SCALE_RW] ** 2 * T
     for i in range(3):
-        Q[i, i] = q_att
-        Q[3 + i, 3 + i] = q_bias
+        Q[X_THETA + i, X_THETA + i] = q_att
+        Q[X_BIAS + i, X_BIAS + i] = q_bias
+    for i in range(X_SCALE, X_SIZE):
+        Q[i, i] = q_scale
 
 
 @numba.njit(cache=True)
 def gravity_measurement(win, slow, params, z, H, R):
-    """The gravity-direction measurement at the end of a window: ``z`` (2,), ``H`` (2, 6), ``R`` (2, 2).
+    """The gravity-direction measurement at the end of a window: ``z`` (2,), ``H`` (2, X_SIZE), ``R`` (2, 2).
 
     ``z`` is the horizontal part of the direction of the low-passed world-frame specific force
     ``ā_w`` (:func:`strapdown`). Returns False when the window had no valid accelerometer sample.
@@ -298,8 +341,11 @@ def gravity_measurement(win, slow, params, z, H, R):
     z[0] = ax / norm
     z[1] = ay / norm
     H[:, :] = 0.0
-    H[0, 1] = -1.0  # u_x = −δθ_y
-    H[1, 0] = 1.0   # u_y = +δθ_x
+    H[0, 1] = -1.0  # u_x = −y_y, y = δθ + D₂ (δb, δM) (strapdown): the tilt it saw, lagged by the low-pass
+    H[1, 0] = 1.0   # u_y = +y_x
+    for j in range(N_DRIFT):
+        H[0, X_BIAS + j] = -slow[S_LAG2 + N_DRIFT + j]
+        H[1, X_BIAS + j] = slow[S_LAG2 + j]
     tau = params[P_ACC_TAU]
     var = ((params[P_ACC_NOISE] ** 2 + params[P_MOTION] ** 2) / (8.0 * tau)
            + params[P_MOTION_GAIN] * (norm - g) ** 2) / (g * g)
@@ -314,7 +360,7 @@ def gravity_measurement(win, slow, params, z, H, R):
 def heading_measurement(win, slow, params):
     """The heading measurement, when its window (``mag_window_s``) is complete: ``(ok, y, r, h_x, h_y)``
     with the innovation ``y = ψ − D`` (rad, wrapped), its variance ``r`` and the tilt columns of its
-    ``H = (h_x, h_y, 1, 0, 0, 0)``; the window's sums are then cleared. Not ok while the window is
+    ``H = (h_x, h_y, 1, 0, …, 0)``; the window's sums are then cleared. Not ok while the window is
     open, when it had no field, or when the field is disturbed: its norm or dip differ from the
     reference by more than the tolerances.
 
@@ -351,21 +397,25 @@ def heading_measurement(win, slow, params):
 
 @numba.njit(cache=True)
 def heading_gain(P, h, r, q, K):
-    """Kalman gain ``K`` (6,) of the heading measurement ``H = hᵀ`` (``h`` (6,), :func:`heading_measurement`),
+    """Kalman gain ``K`` (X_SIZE,) of the heading measurement ``H = hᵀ`` (:func:`heading_measurement`),
     constrained so that it never corrects inclination: the ``δθ_x``, ``δθ_y`` rows are zero, and the
-    bias correction is kept to the body's vertical axis ``Rᵀ e_z`` (the only bias the heading sees).
-    Returns ``S = H P Hᵀ + r``."""
+    bias correction is kept to the body's vertical axis ``v = Rᵀ e_z`` (the only bias the heading
+    sees). Nor does it touch ``δM``: the heading sees only ``vᵀ δM ω``, and a field disturbance that
+    passed the gates would be learnt into the scale factors and carried into every later turn (on
+    BROAD's magnet trial 31 it cost 1.3° of heading); the gravity direction, seen through turns about
+    every axis, teaches ``δM``. Returns ``S = H P Hᵀ + r``."""
     Ph = P @ h
     S = h @ Ph + r
-    for i in range(6):
+    for i in range(X_SIZE):
         K[i] = Ph[i] / S
     K[0] = 0.0
     K[1] = 0.0
     # vertical in body axes: third row of R
     w, x, y, z = q[0], q[1], q[2], q[3]
-    ux, uy, uz = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
-    along = K[3] * ux + K[4] * uy + K[5] * uz
-    K[3], K[4], K[5] = along * ux, along * uy, along * uz
+    v0, v1, v2 = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+    along = K[X_BIAS] * v0 + K[X_BIAS + 1] * v1 + K[X_BIAS + 2] * v2
+    K[X_BIAS], K[X_BIAS + 1], K[X_BIAS + 2] = along * v0, along * v1, along * v2
+    K[X_SCALE:] = 0.0
     return S
 
 
@@ -373,14 +423,15 @@ def heading_gain(P, h, r, q, K):
 def joseph_update(P, K, h, r):
     """P ← (I − K hᵀ) P (I − K hᵀ)ᵀ + K r Kᵀ for a scalar measurement ``H = hᵀ``: valid for any gain,
     optimal or not."""
-    A = np.eye(6) - np.outer(K, h)
+    A = np.eye(len(K)) - np.outer(K, h)
     P[:, :] = A @ P @ A.T + r * np.outer(K, K)
 
 
 @numba.njit(cache=True)
 def rest_measurement(win, q, b, earth_rate_w, params, z, H, R):
-    """The rest measurement: ``z = ω̄_m − Rᵀ Ω_ie − b`` (3,), ``H = [Rᵀ [Ω_ie×], I]`` (3, 6),
-    ``R`` (3, 3): white noise over the window's rest samples plus the residual-rate floor."""
+    """The rest measurement: ``z = ω̄_m − Rᵀ Ω_ie − b`` (3,), ``H = [Rᵀ [Ω_ie×], I, 0]`` (3, X_SIZE),
+    ``R`` (3, 3): white noise over the window's rest samples plus the residual-rate floor (at rest
+    the scale and misalignment errors turn nothing, δM ω ≈ 0)."""
     n = win[W_REST_N]
     r = np.empty((3, 3))
     quat_to_matrix(q, r)
@@ -392,7 +443,7 @@ def rest_measurement(win, q, b, earth_rate_w, params, z, H, R):
     for i in range(3):
         e = r[0, i] * ex + r[1, i] * ey + r[2, i] * ez
         z[i] = win[W_REST_G + i] / n - e - b[i]
-        H[i, 3 + i] = 1.0
+        H[i, X_BIAS + i] = 1.0
     dt_mean = win[W_T] / max(win[W_N], 1.0)
     var = params[P_GYRO_NOISE] ** 2 / (n * dt_mean) + params[P_REST_SIGMA] ** 2
     R[:, :] = 0.0
@@ -426,16 +477,16 @@ def gravity_gate(P, z, H, R, slow, params):
 @numba.njit(cache=True)
 def heading_update(x, P, q, win, slow, params):
     """The heading measurement, gated, applied with the constrained gain of :func:`heading_gain`
-    (Joseph form): ``x`` (6,) and ``P`` are updated in place. Returns whether it was applied."""
+    (Joseph form): ``x`` (X_SIZE,) and ``P`` are updated in place. Returns whether it was applied."""
     T = win[W_MAG_T]
     ok, y, r, h_x, h_y = heading_measurement(win, slow, params)
     if not ok:
         slow[S_MAG_REJ_T] += T if T >= params[P_MAG_WINDOW] else 0.0
         return False
-    h = np.zeros(6)
+    h = np.zeros(X_SIZE)
     h[0], h[1], h[2] = h_x, h_y, 1.0
     y -= h @ x
-    K = np.empty(6)
+    K = np.empty(X_SIZE)
     S = heading_gain(P, h, r, q, K)
     if y * y / S > params[P_MAG_GATE]:
         slow[S_MAG_REJ_T] += T
@@ -445,7 +496,7 @@ def heading_update(x, P, q, win, slow, params):
         S = heading_gain(P, h, r, q, K)
     else:
         slow[S_MAG_REJ_T] = 0.0
-    for i in range(6):
+    for i in range(X_SIZE):
         x[i] += K[i] * y
     joseph_update(P, K, h, r)
     return True
@@ -458,26 +509,35 @@ def rest_due(win, slow, params):
 
 
 @numba.njit(cache=True)
-def inject(x, q, b, slow, win, phi12):
-    """Fold the error estimate into the nominal state (``q ← exp(δθ) ⊗ q``, ``b ← b + δb``), zero it,
-    and open a new window."""
+def inject(x, q, b, slow, win, phi):
+    """Fold the error estimate into the nominal state (``q ← exp(δθ) ⊗ q``, ``b ← b + δb``,
+    ``M̂ ← M̂ + δM``), zero it, and open a new window."""
     turn = np.empty(4)
     turn[0], turn[1], turn[2], turn[3] = _half_turn(x[0], x[1], x[2])  # exp(δθ/2), world axes
     _set_product(q, turn[0], turn[1], turn[2], turn[3], q[0], q[1], q[2], q[3])
-    # The low-passed specific force was turned into the world frame with the old estimate: turn it
-    # with the same correction, so that the measurement does not see the error it already gave.
+    # The low-passed specific force was turned into the world frame with past estimates: turn it by
+    # the correction those would have had, δθ + D (δb, δM) (strapdown), so that the measurement does
+    # not see the error it already gave.
     c = np.empty((3, 3))
-    quat_to_matrix(turn, c)
-    for s0 in (S_GRAV_LP, S_GRAV_LP2):
+    past = np.empty(3)
+    for s0, d0 in ((S_GRAV_LP, S_LAG1), (S_GRAV_LP2, S_LAG2)):
+        for i in range(3):
+            past[i] = x[X_THETA + i]
+            for j in range(N_DRIFT):
+                past[i] += slow[d0 + N_DRIFT * i + j] * x[X_BIAS + j]
+        turn[0], turn[1], turn[2], turn[3] = _half_turn(past[0], past[1], past[2])
+        quat_to_matrix(turn, c)
         v0, v1, v2 = slow[s0], slow[s0 + 1], slow[s0 + 2]
         for i in range(3):
             slow[s0 + i] = c[i, 0] * v0 + c[i, 1] * v1 + c[i, 2] * v2
     for i in range(3):
-        b[i] += x[3 + i]
+        b[i] += x[X_BIAS + i]
+    for e in range(9):
+        slow[S_SCALE + e] += x[X_SCALE + e]
     x[:] = 0.0
     for i in (W_T, W_N, W_EXTRA, W_REST_G, W_REST_G + 1, W_REST_G + 2, W_REST_N):
         win[i] = 0.0
-    phi12[:, :] = 0.0
+    phi[:, :] = 0.0
 
 
 @numba.njit(cache=True)

@@ -45,7 +45,9 @@ class DeviceNoise:
     gyro_rate_random_walk : float
         Rate random walk K, rad/s/√s.
     gyro_scale_sigma : float
-        Scale-factor and misalignment error, relative (root sum square over both), dimensionless.
+        Scale-factor error of each axis (RMS over the axes), relative.
+    gyro_misalignment_sigma : float
+        Misalignment of each axis towards each other one (RMS over the six), rad.
     accel_noise_density : float
         White specific-force noise, m/s²/√Hz.
     mag_noise_density : float
@@ -57,6 +59,7 @@ class DeviceNoise:
     gyro_bias_instability: float | None = None
     gyro_rate_random_walk: float | None = None
     gyro_scale_sigma: float | None = None
+    gyro_misalignment_sigma: float | None = None
     accel_noise_density: float | None = None
     mag_noise_density: float | None = None
 

@@ -25,11 +25,12 @@ def noise_from_device(device) -> DeviceNoise:
     mag = device.spec.magnetometer
     return DeviceNoise(
         gyro_noise_density=float(np.mean(device.gyro_noise_density)),
-        gyro_bias_sigma=float(np.sqrt(np.mean(gyro.turn_on_bias**2 + gyro.bias**2))),
+        # the mechanism's own rest bias (a MEMS quadrature leak, its g-sensitivity) is a bias to learn too
+        gyro_bias_sigma=float(np.sqrt(np.mean(gyro.turn_on_bias**2 + gyro.bias**2) + device.mechanism.rest_bias()**2)),
         gyro_bias_instability=float(np.mean(gyro.bias_instability)),
         gyro_rate_random_walk=float(np.mean(gyro.random_walk)),
-        # a scale-factor error s turns a rotation θ by sθ, a misalignment m by mθ across it
-        gyro_scale_sigma=float(np.sqrt(np.mean(gyro.scale_factor**2) + np.sum(gyro.cross_axis**2) / 3)),
+        gyro_scale_sigma=float(np.sqrt(np.mean(gyro.scale_factor**2))),
+        gyro_misalignment_sigma=float(np.sqrt(np.sum(gyro.cross_axis**2) / 6)),  # its six off-diagonal terms
         accel_noise_density=float(np.mean(accel.noise_density)),
         mag_noise_density=None if mag is None else mag.noise_density_uT_per_sqrt_hz * 1e-6,
     )

@@ -12,7 +12,7 @@ from broad_trials import BROAD_DIR, needs_trial
 from dynamics import load_scenario
 from dynamics.earth import EARTH_RATE
 from dynamics.rotation import quat_rotate, quat_conjugate
-from pipelines.estimation import FilterSetup, Mekf, attitude_errors, rmse_deg, setup_for
+from pipelines.estimation import FilterSetup, Mekf, MekfParams, attitude_errors, rmse_deg, setup_for
 from pipelines.estimation import mekf_kernels as kern
 from pipelines.estimation.batched import mekf_batch
 from pipelines.mcap_io import truth_series
@@ -62,6 +62,43 @@ def test_consumer_mems_beats_its_accelerometer_and_learns_its_bias(manoeuvre):
     # 6D: only the bias across the vertical is observable (gravity says nothing about heading drift);
     # the manoeuvre tilts the body's z axis by at most ~35°, so its x and y are the observable ones
     assert np.linalg.norm(est.gyro_bias[-1, :2] - b_end[:2]) < 0.5 * np.linalg.norm(b_end[:2])
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_consumer_mems_meets_the_issue_bars_on_the_smooth_manoeuvre(seed):
+    """The issue's simulated bars, 6D, over the scenario's whole run (300 s): inclination RMSE below 1°,
+    and the gyro bias converged within 60 s. Converged means learnt and known: at 60 s the filter's σ
+    of the bias across the vertical (body x, y: what gravity observes) is below a quarter of the
+    turn-on σ, and from then on the error over that σ has an RMS within the 99.9 % χ² bound for 8
+    independent samples (a floor on how many 240 s of a bias error correlated over ~30 s hold). The
+    bias truth is the device run on the same trajectory held still (bias, drift, its mechanism's
+    quadrature and g-sensitivity), averaged over 1 s."""
+    from scipy.stats import chi2
+
+    scenario = load_scenario("smooth_manoeuvre")
+    traj = scenario.simulate()
+    device = load_device("consumer_mems", seed=seed)
+    samples = device.measure(traj)
+    setup = setup_for(device, scenario, use_mag=False)
+    mekf, block = Mekf(setup), int(device.spec.rate_hz)
+    q, bias_est, sigma = [], [], []
+    for k in range(0, len(samples.t), block):
+        est = mekf.process(samples.t[k:k + block], samples.gyro[k:k + block], samples.accel[k:k + block])
+        q.append(est.q_wb)
+        bias_est.append(est.gyro_bias[-1, :2])
+        sigma.append(np.sqrt(np.diag(mekf.kf.P)[kern.X_BIAS:kern.X_BIAS + 2]))
+    err = attitude_errors(np.concatenate(q), truth_series(traj, samples).q_wb)
+    assert rmse_deg(err.inclination) < 1.0
+
+    z = np.zeros_like(traj.omega_b)
+    still = load_device("consumer_mems", seed=seed).measure(dataclasses.replace(traj, omega_b=z, alpha_b=z)).gyro
+    ends = np.minimum(np.arange(block, len(samples.t) + block, block), len(samples.t)) - 1
+    bias_true = np.array([still[max(e - block // 2, 0):e + block // 2, :2].mean(axis=0) for e in ends])
+    t_end, sigma = samples.t[ends] - samples.t[0], np.array(sigma)
+    at_60 = int(np.searchsorted(t_end, 60.0))
+    assert np.all(sigma[at_60] < setup.noise.gyro_bias_sigma / 4)
+    normalised = (np.array(bias_est) - bias_true)[at_60:] / sigma[at_60:]
+    assert np.sqrt(np.mean(normalised**2)) < np.sqrt(chi2.ppf(0.999, 8) / 8)
 
 
 def test_navigation_fog_finds_north_from_earth_rate():
@@ -118,23 +155,27 @@ def test_stamps_must_increase():
 
 
 def test_heading_update_never_touches_inclination():
-    """With a covariance that couples heading to tilt and to every bias axis, and a measurement that
-    sees the tilt (a dipping field), the heading gain has no tilt rows and corrects the bias only along
-    the body's vertical."""
+    """With a covariance that couples heading to tilt, to every bias axis and to the scale factors, and
+    a measurement that sees the tilt (a dipping field), the heading gain has no tilt rows, corrects the
+    bias only along the body's vertical, and leaves the scale factors alone."""
     rng = np.random.default_rng(1)
-    A = rng.standard_normal((6, 6))
-    P = A @ A.T + 6 * np.eye(6)
+    n = kern.X_SIZE
+    A = rng.standard_normal((n, n))
+    P = A @ A.T + n * np.eye(n)
     q = rng.standard_normal(4)
     q /= np.linalg.norm(q)
-    K = np.empty(6)
-    h = np.array([0.8, -1.5, 1.0, 0.0, 0.0, 0.0])  # tan(dip) n: a 60° dip
+    K = np.empty(n)
+    h = np.zeros(n)
+    h[:3] = [0.8, -1.5, 1.0]  # tan(dip) n: a 60° dip
     S = kern.heading_gain(P, h, 0.01, q, K)
     assert np.isclose(S, h @ P @ h + 0.01)
     assert K[0] == 0.0 and K[1] == 0.0 and K[2] != 0.0
     r = np.empty((3, 3))
     kern.quat_to_matrix(q, r)
     vertical_b = r[2]  # world up in body axes
-    assert np.allclose(np.cross(K[3:], vertical_b), 0.0, atol=1e-15)
+    bias = K[kern.X_BIAS:kern.X_BIAS + 3]
+    assert np.linalg.norm(bias) > 0 and np.allclose(np.cross(bias, vertical_b), 0.0, atol=1e-15)
+    assert np.all(K[kern.X_SCALE:] == 0.0)
     before = P.copy()
     kern.joseph_update(P, K, h, 0.01)
     assert np.all(np.linalg.eigvalsh(P) > 0) and np.allclose(P, P.T)
@@ -174,16 +215,59 @@ def test_injection_turns_the_low_passed_force_with_the_estimate():
     correction turns the estimate by exp(δθ), the stored force turns with it (else the next gravity
     measurement would report the corrected error again)."""
     rng = np.random.default_rng(2)
-    x = np.concatenate([rng.normal(0.0, 0.05, 3), np.zeros(3)])
+    x = np.zeros(kern.X_SIZE)
+    x[:3] = rng.normal(0.0, 0.05, 3)
+    x[kern.X_BIAS:] = rng.normal(0.0, 0.01, kern.N_DRIFT)
     q, b = np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3)
     slow = np.zeros(kern.S_SIZE)
     force = rng.normal(0.0, 1.0, (2, 3)) + [0.0, 0.0, 9.81]
+    lag = rng.normal(0.0, 0.5, (2, 3, kern.N_DRIFT))  # D₁, D₂: the low-passes' sensitivity to δb, δM
     slow[kern.S_GRAV_LP:kern.S_GRAV_LP + 3], slow[kern.S_GRAV_LP2:kern.S_GRAV_LP2 + 3] = force
-    kern.inject(x.copy(), q, b, slow, np.zeros(kern.W_SIZE), np.zeros((3, 3)))
-    turned = Rotation.from_rotvec(x[:3]).apply(force)
+    slow[kern.S_LAG1:kern.S_LAG1 + lag[0].size], slow[kern.S_LAG2:kern.S_LAG2 + lag[1].size] = lag.reshape(2, -1)
+    kern.inject(x.copy(), q, b, slow, np.zeros(kern.W_SIZE), np.zeros((3, kern.N_DRIFT)))
+    # each low-pass holds the tilt as it was, δθ + D (δb, δM): it turns by that stage's correction
+    turned = [Rotation.from_rotvec(x[:3] + lag[i] @ x[kern.X_BIAS:]).apply(force[i]) for i in range(2)]
     assert np.allclose(slow[kern.S_GRAV_LP:kern.S_GRAV_LP + 3], turned[0], atol=1e-12)
     assert np.allclose(slow[kern.S_GRAV_LP2:kern.S_GRAV_LP2 + 3], turned[1], atol=1e-12)
     assert np.allclose(q, np.roll(Rotation.from_rotvec(x[:3]).as_quat(), 1), atol=1e-12)
+    assert np.array_equal(b, x[kern.X_BIAS:kern.X_BIAS + 3])
+    assert np.array_equal(slow[kern.S_SCALE:kern.S_SCALE + 9], x[kern.X_SCALE:])
+
+
+def test_low_pass_lag_of_a_steady_drift_is_the_group_delay():
+    """Turning at a steady rate ω about z, a bias error δb drifts the attitude error by −R(t) δb; the
+    two cascaded low-passes of τ hold that error as it was. With the impulse responses h₁(s) =
+    e^{−s/τ}/τ and h₂(s) = s e^{−s/τ}/τ², and C(s) = ∫₀ˢ R(t−v) dv the drift since t−s, the stages hold
+    D = ∫ h(s) C(s) ds = ∫ R(t−v) H(v) dv with H(v) = ∫_v^∞ h: e^{−v/τ} and e^{−v/τ}(1 + v/τ). About z
+    nothing turns: D₁ = τ, D₂ = 2τ (the group delays). About x, y, R(t−v) = R(t) Rz(−ωv), so
+    R(t)ᵀ D is the rotation-like matrix of the Laplace transforms at iω: τ/(1+iωτ) and
+    τ/(1+iωτ) + τ/(1+iωτ)². The recursion is exact to one sample: tolerance Δt/τ relative."""
+    rate, tau, omega = 200.0, 1.0, 0.3
+    t = np.arange(1, int(30 * rate) + 1) / rate  # 30 τ: the start is forgotten to e^{-30}
+    n = len(t)
+    gyro = np.tile([0.0, 0.0, omega], (n, 1))
+    accel = np.tile([0.0, 0.0, 9.81], (n, 1))
+    params = MekfParams(accel_tau_s=tau).vector(FilterSetup(rate_hz=rate, use_mag=False))
+    q, b, slow = np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3), np.zeros(kern.S_SIZE)
+    slow[kern.S_GRAV_LP:kern.S_GRAV_LP2 + 3] = np.tile([0.0, 0.0, 9.81], 2)
+    win, phi, q_out = np.zeros(kern.W_SIZE), np.zeros((3, kern.N_DRIFT)), np.empty((n, 4))
+    params[kern.P_WINDOW] = params[kern.P_WINDOW_N] = 1e9  # one window: only the strapdown runs
+    assert kern.strapdown(q, b, slow, win, phi, t, gyro, np.empty((0, 3)), accel, np.full((n, 3), np.nan),
+                          np.zeros(3), params, 0, q_out) == n
+    d1 = slow[kern.S_LAG1:kern.S_LAG1 + 3 * kern.N_DRIFT].reshape(3, kern.N_DRIFT)[:, :3]
+    d2 = slow[kern.S_LAG2:kern.S_LAG2 + 3 * kern.N_DRIFT].reshape(3, kern.N_DRIFT)[:, :3]
+    r_now = Rotation.from_quat(np.roll(q, -1)).as_matrix()
+    tol = 1.0 / (rate * tau)
+    assert np.isclose(d1[2, 2], tau, rtol=tol) and np.isclose(d2[2, 2], 2 * tau, rtol=tol)
+    first = tau / (1 + 1j * omega * tau)
+    for d, h in ((d1, first), (d2, first + tau / (1 + 1j * omega * tau) ** 2)):
+        expected = np.array([[h.real, -h.imag], [h.imag, h.real]])
+        assert np.allclose(r_now.T[:2, :2] @ d[:2, :2], expected, rtol=0, atol=tol * abs(h))
+    # the scale-factor columns: at a steady rate about z, δM_az drifts like δb_a times ω
+    dm = slow[kern.S_LAG2:kern.S_LAG2 + 3 * kern.N_DRIFT].reshape(3, kern.N_DRIFT)[:, 3:]
+    for a in range(3):
+        assert np.allclose(dm[:, 3 * a + 2], omega * d2[:, a], rtol=1e-9, atol=1e-12)
+        assert np.all(dm[:, 3 * a:3 * a + 2] == 0.0)
 
 
 @needs_trial()
