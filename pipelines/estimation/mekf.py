@@ -47,7 +47,8 @@ _DEG = np.pi / 180
 @dataclass(frozen=True)
 class MekfParams:
     """The filter's parameters, SI. The defaults serve any log; the noise figures of a known device
-    replace the first seven, and a simulated site's field its ``heading_sigma`` (:meth:`for_setup`).
+    replace the first seven (and set ``turn_noise`` to 0: its scale states then model all it turns), and a
+    simulated site's field its ``heading_sigma`` (:meth:`for_setup`).
 
     Attributes
     ----------

@@ -127,8 +127,8 @@ def strapdown(q, b, slow, win, phi, t, gyro, delta_angle, accel, mag, earth_rate
 
     ``t`` (n,) s; ``gyro`` (n, 3) rad/s, or ``delta_angle`` (n, 3) rad when it has rows (then
     ``gyro`` is ignored); ``accel`` (n, 3) m/s²; ``mag`` (n, 3) T (NaN rows: none). ``q``, ``b``,
-    ``slow``, ``win``, ``phi`` (3, 12: the window's Φ_θb, Φ_θM) are updated in place and ``q_out[k]`` receives the attitude after
-    sample k. Returns the index after the last sample consumed; the window is due for its updates
+    ``slow``, ``win``, ``phi`` (3, N_DRIFT: the window's Φ_θb, Φ_θM) are updated in place and
+    ``q_out[k]`` receives the attitude after sample k. Returns the index after the last sample consumed; the window is due for its updates
     when it has run ``params[P_WINDOW]`` seconds or ``params[P_WINDOW_N]`` samples (see
     :func:`window_due`). Raises ``ValueError`` on a stamp that does not increase.
     """
@@ -341,8 +341,9 @@ def gravity_measurement(win, slow, params, z, H, R):
     z[0] = ax / norm
     z[1] = ay / norm
     H[:, :] = 0.0
-    H[0, 1] = -1.0  # u_x = −y_y, y = δθ + D₂ (δb, δM) (strapdown): the tilt it saw, lagged by the low-pass
-    H[1, 0] = 1.0   # u_y = +y_x
+    # u_x = −y_y, u_y = y_x with y = δθ + D₂ (δb, δM) (strapdown): the tilt as the low-pass saw it
+    H[0, 1] = -1.0
+    H[1, 0] = 1.0
     for j in range(N_DRIFT):
         H[0, X_BIAS + j] = -slow[S_LAG2 + N_DRIFT + j]
         H[1, X_BIAS + j] = slow[S_LAG2 + j]
