@@ -116,7 +116,9 @@ def _live_and_bench(out: Path, seconds: float) -> None:
     log = out / "demo.mcap"
     print(f"\n4. live: smooth_manoeuvre through consumer_mems for {seconds:g} s over zenoh (peer mode), "
           "to a recorder process and a live MEKF")
-    recorder = subprocess.Popen([sys.executable, "-m", "pipelines.cli", "record", "--out", str(log)],
+    # only the demo's own device: other gyroemu streams on this machine's zenoh network are not its data
+    recorder = subprocess.Popen([sys.executable, "-m", "pipelines.cli", "record", "--out", str(log),
+                                 "--key", "gyroemu/imu0/**"],
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         talk = io.StringIO()
