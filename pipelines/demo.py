@@ -111,19 +111,21 @@ def _live_and_bench(out: Path, seconds: float) -> None:
     from .estimation.metrics import attitude_errors, rmse_deg
     from .mcap_io import read_mcap
     from .stream import run_stream
+    from .zenoh_io import topic_to_key
 
     out.mkdir(parents=True, exist_ok=True)
     log = out / "demo.mcap"
     print(f"\n4. live: smooth_manoeuvre through consumer_mems for {seconds:g} s over zenoh (peer mode), "
           "to a recorder process and a live MEKF")
     # only the demo's own device: other gyroemu streams on this machine's zenoh network are not its data
+    name = "imu0"
     recorder = subprocess.Popen([sys.executable, "-m", "pipelines.cli", "record", "--out", str(log),
-                                 "--key", "gyroemu/imu0/**"],
+                                 "--key", topic_to_key(name, "/**")],
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         talk = io.StringIO()
-        status = run_stream(scenario="smooth_manoeuvre", device="consumer_mems", duration=seconds, seed=0,
-                            wait_s=20.0, estimate="mekf", out=talk)
+        status = run_stream(scenario="smooth_manoeuvre", device="consumer_mems", device_name=name,
+                            duration=seconds, seed=0, wait_s=20.0, estimate="mekf", out=talk)
         lines = talk.getvalue().splitlines()
         print("\n".join("   " + line for line in lines if line.startswith("stream: ") and "publishing" not in line))
     finally:

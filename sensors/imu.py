@@ -225,6 +225,14 @@ class Device:
 
     # ------------------------------------------------------------------------------------------------
 
+    def measure_held_still(self, trajectory: Trajectory) -> ImuSamples:
+        """:meth:`measure` of ``trajectory`` with its rotation taken away (the same draws, attitude and
+        specific force): the gyro then reads its bias alone (turn-on bias, drift, temperature and
+        g-sensitivity, its mechanism's rest bias) and noise; scale factor and misalignment, which act on
+        the rate, drop out. The truth a filter's bias estimate is judged against."""
+        z = np.zeros_like(trajectory.omega_b)
+        return self.measure(dataclasses.replace(trajectory, omega_b=z, alpha_b=z))
+
     def measure(self, trajectory: Trajectory) -> ImuSamples:
         """Emulate the device over ``trajectory``: one output sample per interval ``[τ_{k−1}, τ_k]``.
 

@@ -1,7 +1,6 @@
 """gyroemu's MEKF: the filterpy form against its compiled batched twin, what it must recover on
 simulated data, its handling of bad samples, and the constraint of its heading update."""
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -56,8 +55,7 @@ def test_consumer_mems_beats_its_accelerometer_and_learns_its_bias(manoeuvre):
     f = truth.specific_force_b
     tilt = np.arccos(np.clip(np.sum(up_b * f, axis=1) / np.linalg.norm(f, axis=1), -1, 1))
     assert rmse_deg(err.inclination[second_minute]) < rmse_deg(tilt[second_minute])
-    z = np.zeros_like(traj.omega_b)
-    bias = load_device("consumer_mems", seed=0).measure(dataclasses.replace(traj, omega_b=z, alpha_b=z)).gyro
+    bias = device.measure_held_still(traj).gyro
     b_end = bias[-1000:].mean(axis=0)
     # 6D: only the bias across the vertical is observable (gravity says nothing about heading drift);
     # the manoeuvre tilts the body's z axis by at most ~35°, so its x and y are the observable ones
@@ -90,8 +88,7 @@ def test_consumer_mems_meets_the_issue_bars_on_the_smooth_manoeuvre(seed):
     err = attitude_errors(np.concatenate(q), truth_series(traj, samples).q_wb)
     assert rmse_deg(err.inclination) < 1.0
 
-    z = np.zeros_like(traj.omega_b)
-    still = load_device("consumer_mems", seed=seed).measure(dataclasses.replace(traj, omega_b=z, alpha_b=z)).gyro
+    still = device.measure_held_still(traj).gyro
     ends = np.minimum(np.arange(block, len(samples.t) + block, block), len(samples.t)) - 1
     bias_true = np.array([still[max(e - block // 2, 0):e + block // 2, :2].mean(axis=0) for e in ends])
     t_end, sigma = samples.t[ends] - samples.t[0], np.array(sigma)
