@@ -1,11 +1,10 @@
 """gyroemu's truth simulator: rigid bodies, prescribed motions and the Earth, sampled as a Trajectory.
 
 Entry points (``interface.md``): :func:`load_scenario` and :meth:`Scenario.simulate`, returning a
-:class:`Trajectory`. Rotation helpers live in :mod:`dynamics.rotation`, inertia tensors in
-:mod:`dynamics.inertia`.
+:class:`Trajectory`. Rotation helpers live in :mod:`gyroemu.dynamics.rotation`, inertia tensors in
+:mod:`gyroemu.dynamics.inertia`.
 """
 
-from . import jit  # noqa: F401  (numba compiles under an inter-process lock: see dynamics/jit.py)
 from .config import ConfigError
 from .earth import EARTH_RATE, Environment, Site, earth_rate_enu, normal_gravity
 from .scenarios import KINDS, Scenario, ScenarioSpec, list_scenarios, load_scenario, scenario_from_dict

@@ -13,7 +13,9 @@ coercing them.
 from __future__ import annotations
 
 import difflib
+import importlib.resources
 import math
+import os
 import tomllib
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
@@ -166,11 +168,19 @@ def _fields_at(model: type[BaseModel], loc: list[str]) -> list[str]:
 
 
 def config_dir() -> Path:
-    """The ``configs/`` folder of built-in scenarios and devices (``$GYROEMU_CONFIG_DIR`` overrides)."""
-    import os
+    """The folder of built-in scenarios and devices (``$GYROEMU_CONFIG_DIR`` overrides).
 
+    The package :mod:`gyroemu.configs`, found with :mod:`importlib.resources`, so the same code serves a
+    wheel, an editable install and a source checkout. gyroemu installs as plain files (numba caches its
+    machine code beside them), so the resource is a directory on disk.
+    """
     override = os.environ.get("GYROEMU_CONFIG_DIR")
-    return Path(override) if override else Path(__file__).resolve().parent.parent / "configs"
+    if override:
+        return Path(override)
+    root = importlib.resources.files("gyroemu.configs")
+    if not isinstance(root, Path):  # pragma: no cover - a zipped install, which gyroemu does not support
+        raise RuntimeError(f"gyroemu's built-in configs are not a folder on disk: {root}")
+    return root
 
 
 def resolve_config(name_or_path: str | Path, folder: str, what: str) -> Path:

@@ -38,7 +38,7 @@ State layout, ``(..., 13 + n_gimbals)``::
     P (3) linear momentum m v, world, kg m/s            ω (3) inertial angular velocity, body axes, rad/s
     δ (n_gimbals) gimbal angles, rad
 
-Translation is that of :mod:`dynamics.rigid_body` (``ẋ = P/m``, ``Ṗ = F − 2 Ω × P``); attitude
+Translation is that of :mod:`gyroemu.dynamics.rigid_body` (``ẋ = P/m``, ``Ṗ = F − 2 Ω × P``); attitude
 follows ``q̇ = ½ q ⊗ (0, ω − Rᵀ Ω)``, ``Ω`` the world frame's rotation relative to inertial space.
 """
 

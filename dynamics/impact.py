@@ -3,7 +3,7 @@ bounces until it comes to rest or the scenario ends (``kind = "drop"``).
 
 Model
 -----
-The device is a rigid box (:class:`~dynamics.rigid_body.RigidBody`, state ``[x, q, P, L]``) over the
+The device is a rigid box (:class:`~gyroemu.dynamics.rigid_body.RigidBody`, state ``[x, q, P, L]``) over the
 ground plane ``z = 0`` of an Earth-bound world (``[site]``: gravity, Earth rate, Coriolis). Between
 contacts it falls freely. A contact happens when a corner reaches the ground moving down (located by
 the solver's root finder, one event per corner); all closing corners at the ground (within ``1e-9``

@@ -1,10 +1,10 @@
 """Prescribed motions in closed form: a bench, a rate table, oscillation, coning and sculling.
 
-Every kind here stands on the Earth at a site (the optional ``[site]`` table, :class:`~dynamics.earth.Site`)
+Every kind here stands on the Earth at a site (the optional ``[site]`` table, :class:`~gyroemu.dynamics.earth.Site`)
 and prescribes its motion *relative to the local ENU world frame* analytically: attitude ``q_wb``, body
 rate ``ω_wb`` and its derivative ``α_wb`` (body axes), position, velocity and acceleration (world axes),
 each a closed-form function of time evaluated on arrays of samples (vectorised, no loop over samples).
-No kind integrates anything. :func:`~dynamics.trajectory.trajectory_from_world_motion` then adds what
+No kind integrates anything. :func:`~gyroemu.dynamics.trajectory.trajectory_from_world_motion` then adds what
 the Earth contributes: Earth rate, Coriolis, gravity and the magnetic field.
 
 Kinds
@@ -23,14 +23,14 @@ Kinds
 ``sculling``
     Angular oscillation about x in phase with linear oscillation along y (Savage 1998, part 2).
 
-Building blocks shared with :mod:`dynamics.vehicles`: :class:`TimeGrid` (sinusoids on uniform grids by
+Building blocks shared with :mod:`gyroemu.dynamics.vehicles`: :class:`TimeGrid` (sinusoids on uniform grids by
 angle addition), :func:`smooth_step` (a C⁵ step from 0 to 1), :func:`rotation_basis`, :class:`WorldMotion` and
 :class:`EarthBoundSpec`. Each kind evaluates its closed forms in one compiled kernel (numba) that
 writes every output once; the kernels share compiled pieces of these blocks (``_sines_block``,
 ``_phasor_block``, ``_sincos_block``, ``_smooth_step_at``; see "Speed" below).
 
 Attitudes in config files are ``rpy_deg = [roll, pitch, yaw]`` in degrees with
-``R = Rz(yaw) Ry(pitch) Rx(roll)`` (:func:`dynamics.rotation.quat_from_euler_zyx`); in the ENU world,
+``R = Rz(yaw) Ry(pitch) Rx(roll)`` (:func:`gyroemu.dynamics.rotation.quat_from_euler_zyx`); in the ENU world,
 yaw 0 points body x east, yaw 90 north.
 
 References
@@ -46,7 +46,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
-import numba
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
@@ -55,6 +54,7 @@ from .earth import Site
 from .rotation import quat_conjugate, quat_from_euler_zyx, quat_multiply, quat_rotate, quat_to_rotvec
 from .scenarios import ScenarioSpec
 from .trajectory import Trajectory, trajectory_from_world_motion
+from .jit import njit
 
 __all__ = [
     "TimeGrid",
@@ -205,7 +205,7 @@ _SINCOS_LIMIT = 1e6
 33-bit parts of π/2 is exact."""
 
 
-@numba.njit(inline="always")
+@njit(inline="always")
 def _sincos(x):  # pragma: no cover - compiled
     """``(sin x, cos x)`` for ``|x| ≤ _SINCOS_LIMIT``, branch-free (see the comment above)."""
     # x = n π/2 + y0 + y1 with |y0 + y1| ≤ π/4: π/2 in 33-bit parts (each product with n exact) and a
@@ -238,7 +238,7 @@ def _sincos(x):  # pragma: no cover - compiled
     return (-s if quadrant >= 2.0 else s), (-c if quadrant == 1.0 or quadrant == 2.0 else c)
 
 
-@numba.njit(cache=True)
+@njit
 def _sin_cos(x):  # pragma: no cover - compiled
     """``(sin x, cos x)`` for one argument: :func:`_sincos`, or the library beyond its range."""
     if abs(x) <= _SINCOS_LIMIT:
@@ -246,7 +246,7 @@ def _sin_cos(x):  # pragma: no cover - compiled
     return np.sin(x), np.cos(x)
 
 
-@numba.njit(cache=True)
+@njit
 def _sincos_block(x, count, s, c):  # pragma: no cover - compiled
     """``s[i], c[i] = sin x[i], cos x[i]`` for ``i < count``: one vectorised loop, then the library for
     arguments beyond :data:`_SINCOS_LIMIT` (and NaN)."""
@@ -257,7 +257,7 @@ def _sincos_block(x, count, s, c):  # pragma: no cover - compiled
             s[i], c[i] = np.sin(x[i]), np.cos(x[i])
 
 
-@numba.njit(cache=True)
+@njit
 def _grid_deviation(t, t0, h):  # pragma: no cover - compiled
     """``max_n |t_n − (t_0 + n h)|`` in one pass (numpy would make three temporaries of N)."""
     deviation = 0.0
@@ -266,7 +266,7 @@ def _grid_deviation(t, t0, h):  # pragma: no cover - compiled
     return deviation
 
 
-@numba.njit(cache=True)
+@njit
 def _phasor_block(t, start, count, uniform, phasor, c, s):  # pragma: no cover - compiled
     """``cos(ω t + φ)``, ``sin(ω t + φ)`` at the samples ``start … start + count − 1`` into
     ``c[:count]``, ``s[:count]``; ``phasor`` from :meth:`TimeGrid.phasor`. On a uniform grid ``start``
@@ -285,7 +285,7 @@ def _phasor_block(t, start, count, uniform, phasor, c, s):  # pragma: no cover -
             c[i], s[i] = np.cos(angle), np.sin(angle)
 
 
-@numba.njit(cache=True)
+@njit
 def _sines_block(t, start, count, uniform, sines, out):  # pragma: no cover - compiled
     """Value, first and second derivative of the sums of sinusoids ``sines`` (:meth:`TimeGrid.sines`)
     at the samples ``start … start + count − 1`` into ``out[d, c, :count]`` (d = 0, 1, 2).
@@ -323,7 +323,7 @@ def _sines_block(t, start, count, uniform, sines, out):  # pragma: no cover - co
                     second[i] -= a2 * sin
 
 
-@numba.njit(cache=True)
+@njit
 def _cos_sin_kernel(t, uniform, block, phasor, c, s):  # pragma: no cover - compiled
     """:meth:`TimeGrid.cos_sin` block by block."""
     for start in range(0, len(t), block):
@@ -331,7 +331,7 @@ def _cos_sin_kernel(t, uniform, block, phasor, c, s):  # pragma: no cover - comp
         _phasor_block(t, start, count, uniform, phasor, c[start:], s[start:])
 
 
-@numba.njit(cache=True)
+@njit
 def _sum_of_sines_kernel(t, uniform, block, sines, out):  # pragma: no cover - compiled
     """:meth:`TimeGrid.sum_of_sines` block by block, into ``out`` (3, C, N)."""
     for start in range(0, len(t), block):
@@ -339,7 +339,7 @@ def _sum_of_sines_kernel(t, uniform, block, sines, out):  # pragma: no cover - c
         _sines_block(t, start, count, uniform, sines, out[:, :, start:])
 
 
-@numba.njit(cache=True)
+@njit
 def _smooth_step_at(u):  # pragma: no cover - compiled
     """``(S, S′, S″, S‴, I)`` of :func:`smooth_step` at one ``u``."""
     if u <= 0.0:
@@ -359,7 +359,7 @@ def _smooth_step_at(u):  # pragma: no cover - compiled
     )
 
 
-@numba.njit(cache=True)
+@njit
 def _smooth_step_kernel(u, out):  # pragma: no cover - compiled
     """:func:`smooth_step` of every ``u`` (N,) into ``out`` (5, N)."""
     for n in range(len(u)):
@@ -479,10 +479,10 @@ def _motion_arrays(n: int, moves: bool):
     return q, omega, alpha, new((n, 3)), new((n, 3)), new((n, 3))
 
 
-@numba.njit(cache=True)
+@njit
 def _rotate(q, x, y, z):  # pragma: no cover - compiled
     """``q ⊗ (0, v) ⊗ q*`` for one vector ``v = (x, y, z)``: the formula of
-    :func:`dynamics.rotation.quat_rotate`, ``v + 2w (u × v) + 2 u × (u × v)``."""
+    :func:`gyroemu.dynamics.rotation.quat_rotate`, ``v + 2w (u × v) + 2 u × (u × v)``."""
     w, qx, qy, qz = q[0], q[1], q[2], q[3]
     tx = 2.0 * (qy * z - qz * y)  # t = 2 u × v
     ty = 2.0 * (qz * x - qx * z)
@@ -494,13 +494,13 @@ def _rotate(q, x, y, z):  # pragma: no cover - compiled
     )
 
 
-@numba.njit(cache=True)
+@njit
 def _cross(ax, ay, az, bx, by, bz):  # pragma: no cover - compiled
     """``a × b`` as ``np.cross`` computes it."""
     return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
 
 
-@numba.njit(cache=True)
+@njit
 def _segment(edges, x, k):  # pragma: no cover - compiled
     """``max(searchsorted(edges, x, side="right") − 1, 0)``: the last of the sorted ``edges`` at or
     before ``x`` (0 before the first). Tries ``k``, the previous sample's segment, first: consecutive
@@ -768,7 +768,7 @@ class RateTableSpec(EarthBoundSpec):
         return WorldMotion(t, *arrays)
 
 
-@numba.njit(cache=True)
+@njit
 def _rate_table_kernel(
     t, uniform, block, schedule, half, by_phasor, a, b, axis_b, q_base, lever,
     q, omega, alpha, pos, vel, acc, angle_out, rate_out,
@@ -824,7 +824,7 @@ def _rate_table_kernel(
                 acc[j, 2] = accel * nz + rate2 * nnz
 
 
-@numba.njit(cache=True)
+@njit
 def _tumble_kernel(
     t, period, dwell, move, angles, a, b, axes, axes_b, q_mount_conj, lever, q, omega, alpha, pos, vel, acc
 ):  # pragma: no cover - compiled
@@ -929,7 +929,7 @@ class OscillationSpec(EarthBoundSpec):
         return WorldMotion(t, *arrays)
 
 
-@numba.njit(cache=True)
+@njit
 def _axis_oscillation_kernel(
     t, uniform, block, sines, a, b, axis, directions, q, omega, alpha, pos, vel, acc
 ):  # pragma: no cover - compiled
@@ -1023,7 +1023,7 @@ class ConingSpec(EarthBoundSpec):
         return WorldMotion.rotation_only(t, q, rate, accel)
 
 
-@numba.njit(cache=True)
+@njit
 def _coning_kernel(t, uniform, block, phasor, sj, sk, cq, rate_x, w, ow, q, rate, accel):  # pragma: no cover
     """:meth:`ConingSpec.world_motion` block by block: ``q = cos Ωt sj + sin Ωt sk + cq``,
     ``ω = (rate_x, −w sin Ωt, w cos Ωt)``, ``α = (0, ow cos Ωt, ow sin Ωt)`` with ``ow = −Ω w``."""

@@ -142,7 +142,7 @@ def _omega_quat(omega) -> np.ndarray:
 
 
 def _quat_product(p, q) -> np.ndarray:
-    """Hamilton product ``p ⊗ q``: :func:`dynamics.rotation.quat_multiply`, with plain floats for two
+    """Hamilton product ``p ⊗ q``: :func:`gyroemu.dynamics.rotation.quat_multiply`, with plain floats for two
     single quaternions (the integrator's case, where they beat the compiled ufunc's call overhead)."""
     if p.ndim == 1 and q.ndim == 1:
         pw, px, py, pz = p.tolist()
@@ -192,7 +192,7 @@ def point_acceleration(acc, omega, alpha, lever) -> np.ndarray:
     ``ω`` and ``α = dω/dt`` relative to the frame in which ``a`` is taken; all vectors in one set of
     axes. For an accelerometer at lever arm ``r_b`` (body axes): the specific force there is
     ``f_b + α_b × r_b + ω_b × (ω_b × r_b)`` with the inertial ``ω_b``, ``α_b`` of a
-    :class:`~dynamics.trajectory.Trajectory` (``α_b``, the derivative of body components, equals the
+    :class:`~gyroemu.dynamics.trajectory.Trajectory` (``α_b``, the derivative of body components, equals the
     inertial angular acceleration in body axes). Shapes ``(..., 3)`` broadcast.
     """
     return np.asarray(acc, dtype=float) + cross(alpha, lever) + cross(omega, cross(omega, lever))
@@ -343,7 +343,7 @@ def world_motion_trajectory(t, pos_w, q_wb, vel_w, acc_w, omega_b, alpha_b, envi
                             extras=None) -> Trajectory:
     """A :class:`Trajectory` from integrated states, given the *inertial* ``omega_b`` and ``alpha_b``.
 
-    :func:`~dynamics.trajectory.trajectory_from_world_motion` takes the rotation relative to the
+    :func:`~gyroemu.dynamics.trajectory.trajectory_from_world_motion` takes the rotation relative to the
     world frame and adds the Earth's; this converts (``ω_wb = ω − Rᵀ Ω``,
     ``α_wb = α + ω_wb × Rᵀ Ω``, the inverse of its formulas) so the sum reproduces the inertial
     values to rounding.

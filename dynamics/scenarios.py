@@ -20,18 +20,18 @@ from .trajectory import Trajectory
 __all__ = ["ScenarioSpec", "Scenario", "KINDS", "load_scenario", "scenario_from_dict", "list_scenarios"]
 
 KINDS: dict[str, str] = {
-    "free-rigid-body": "dynamics.tops:FreeRigidBodySpec",
-    "heavy-top": "dynamics.tops:HeavyTopSpec",
-    "static": "dynamics.motions:StaticSpec",
-    "rate-table": "dynamics.motions:RateTableSpec",
-    "oscillation": "dynamics.motions:OscillationSpec",
-    "coning": "dynamics.motions:ConingSpec",
-    "sculling": "dynamics.motions:ScullingSpec",
-    "random-manoeuvre": "dynamics.vehicles:RandomManoeuvreSpec",
-    "car": "dynamics.vehicles:CarSpec",
-    "ship": "dynamics.vessels:ShipSpec",
-    "spacecraft-cmg": "dynamics.vessels:SpacecraftSpec",
-    "drop": "dynamics.impact:DropSpec",
+    "free-rigid-body": "gyroemu.dynamics.tops:FreeRigidBodySpec",
+    "heavy-top": "gyroemu.dynamics.tops:HeavyTopSpec",
+    "static": "gyroemu.dynamics.motions:StaticSpec",
+    "rate-table": "gyroemu.dynamics.motions:RateTableSpec",
+    "oscillation": "gyroemu.dynamics.motions:OscillationSpec",
+    "coning": "gyroemu.dynamics.motions:ConingSpec",
+    "sculling": "gyroemu.dynamics.motions:ScullingSpec",
+    "random-manoeuvre": "gyroemu.dynamics.vehicles:RandomManoeuvreSpec",
+    "car": "gyroemu.dynamics.vehicles:CarSpec",
+    "ship": "gyroemu.dynamics.vessels:ShipSpec",
+    "spacecraft-cmg": "gyroemu.dynamics.vessels:SpacecraftSpec",
+    "drop": "gyroemu.dynamics.impact:DropSpec",
 }
 """Scenario kind → ``"module:SpecClass"``."""
 

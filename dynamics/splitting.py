@@ -75,11 +75,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
 from .inertia import principal_axes
 from .rotation import quat_conjugate, quat_from_matrix, quat_multiply, quat_rotate
+from .jit import njit
 
 __all__ = [
     "Composition",
@@ -224,7 +224,7 @@ def plan_steps(t, omega, tol: float, compositions=COMPOSITIONS):
 # Kernels. The state lives in small arrays updated in place; each flow is an exact rotation.
 
 
-@numba.njit(cache=True, inline="always")
+@njit(inline="always")
 def _turn_body_z(q, L, a):
     """Body turns by ``a`` about its own z axis: ``q ← q ⊗ (cos a/2, 0, 0, sin a/2)``,
     ``L_b ← R_z(a)ᵀ L_b``.
@@ -248,7 +248,7 @@ def _turn_body_z(q, L, a):
     L[1] = ly - (s * lx + k * ly)
 
 
-@numba.njit(cache=True, inline="always")
+@njit(inline="always")
 def _turn_body_y(q, L, a):
     """Body turns by ``a`` about its own y axis: ``q ← q ⊗ (cos a/2, 0, sin a/2, 0)``,
     ``L_b ← R_y(a)ᵀ L_b`` (increments as in :func:`_turn_body_z`)."""
@@ -267,7 +267,7 @@ def _turn_body_y(q, L, a):
     L[0] = lx - (s * lz + k * lx)
 
 
-@numba.njit(cache=True, inline="always")
+@njit(inline="always")
 def _turn_world(q, L, h_over_a):
     """Body turns about the world vector ``L`` by ``|L| h / A``: ``q ← exp(L h / 2A) ⊗ q``."""
     norm_l = np.sqrt(L[0] * L[0] + L[1] * L[1] + L[2] * L[2])
@@ -287,7 +287,7 @@ def _turn_world(q, L, h_over_a):
     q[3] = z - (k2 * z - ez * w - ex * y + ey * x)
 
 
-@numba.njit(cache=True, inline="always")
+@njit(inline="always")
 def _kick(q, L, h_mgl):
     """Gravity acts for ``h`` with the attitude fixed: ``L_w ← L_w + h m g l ẑ × n``, where
     ``n = R(q) e_z`` is the symmetry axis and ``ẑ × n = (−n_y, n_x, 0)``."""
@@ -298,7 +298,7 @@ def _kick(q, L, h_mgl):
     L[1] += h_mgl * nx
 
 
-@numba.njit(cache=True, inline="always")
+@njit(inline="always")
 def _normalise(q):
     """``q ← q / |q|``."""
     norm = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
@@ -306,7 +306,7 @@ def _normalise(q):
         q[j] /= norm
 
 
-@numba.njit(cache=True, inline="always")
+@njit(inline="always")
 def _quat_mul(p, q):
     """Hamilton product ``p ⊗ q`` of two length-4 arrays, as a tuple."""
     return (
@@ -317,7 +317,7 @@ def _quat_mul(p, q):
     )
 
 
-@numba.njit(cache=True)
+@njit
 def _free_body_kernel(t, q0, L0, lw, cz, cy, inv_a, q_ib, m_bi, a_coef, b_coef, n_steps, q_out, L_out):
     """Torque-free body sampled at ``t``: the split flow of ``Hz + Hy``, then ``H0`` and the axes.
 
@@ -361,7 +361,7 @@ def _free_body_kernel(t, q0, L0, lw, cz, cy, inv_a, q_ib, m_bi, a_coef, b_coef, 
             L_out[k, j] = m_bi[j, 0] * L[0] + m_bi[j, 1] * L[1] + m_bi[j, 2] * L[2]
 
 
-@numba.njit(cache=True)
+@njit
 def _heavy_top_kernel(t, q0, Lw0, inv_a, mgl, spin_rate, a_coef, b_coef, n_steps, q_out, Lw_out):
     """Heavy top sampled at ``t``: the split flow of ``H0 + V``, then ``Hz`` in closed form.
 

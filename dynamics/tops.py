@@ -10,7 +10,7 @@
     *Classical Mechanics*, 3rd ed., §5.7): it precesses about the vertical and nutates between two
     tilts, the roots of a cubic in ``cos θ``. ``L_z`` (vertical) and ``L₃`` (spin) are constant.
 
-Both are integrated by :mod:`dynamics.splitting` (exact-rotation Lie–Poisson splitting, order up to
+Both are integrated by :mod:`gyroemu.dynamics.splitting` (exact-rotation Lie–Poisson splitting, order up to
 8), which keeps those invariants to round-off. ``omega_b`` is ``I⁻¹ L_b`` and ``alpha_b`` comes
 from Euler's equations ``I α = τ − ω × I ω`` at each sample, not from differences.
 """
@@ -19,7 +19,6 @@ from __future__ import annotations
 
 from typing import Literal
 
-import numba
 import numpy as np
 from pydantic import field_validator
 
@@ -30,6 +29,7 @@ from .rotation import body_rate_from_euler_zxz, quat_from_euler_zxz, quat_rotate
 from .scenarios import ScenarioSpec
 from .splitting import integrate_free_body, integrate_heavy_top
 from .trajectory import Trajectory
+from .jit import njit
 
 __all__ = [
     "FreeBody",
@@ -155,7 +155,7 @@ def free_body_motion(t, inertia_b, q0_wb, omega0_b):
     Notes
     -----
     A non-diagonal tensor is integrated in its principal axes and rotated back
-    (:func:`dynamics.splitting.integrate_free_body`).
+    (:func:`gyroemu.dynamics.splitting.integrate_free_body`).
     """
     inertia_b = np.asarray(inertia_b, dtype=float)
     q_wb, L_b = integrate_free_body(t, q0_wb, inertia_b @ np.asarray(omega0_b, dtype=float), inertia_b)
@@ -281,7 +281,7 @@ def heavy_top_attitude(t, moment_a, moment_c, mgl, euler0, euler_rates0):
     return integrate_heavy_top(t, q0, quat_rotate(q0, moments * omega0_b), moment_a, moment_c, mgl)
 
 
-@numba.njit(cache=True)
+@njit
 def _heavy_top_samples(q_wb, L_w, a, c, mgl, l, g, omega_b, alpha_b, pos_w, vel_w, f_b):
     """Rates, accelerations and centre-of-mass motion at each sample, written into the (N, 3) outputs.
 

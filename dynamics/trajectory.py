@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 
 from .earth import Environment
+from .jit import njit
 
 __all__ = ["Trajectory", "trajectory_from_world_motion"]
 
@@ -85,9 +85,9 @@ class Trajectory:
         return float(self.t[-1] - self.t[0]) if len(self.t) else 0.0
 
 
-@numba.njit(cache=True)
+@njit
 def _to_body(q, v, out):  # pragma: no cover - compiled
-    """out = R_bw v = q* ⊗ v ⊗ q (the inverse rotation of :func:`dynamics.rotation.quat_rotate`)."""
+    """out = R_bw v = q* ⊗ v ⊗ q (the inverse rotation of :func:`gyroemu.dynamics.rotation.quat_rotate`)."""
     w, x, y, z = q[0], -q[1], -q[2], -q[3]
     tx = 2.0 * (y * v[2] - z * v[1])
     ty = 2.0 * (z * v[0] - x * v[2])
@@ -97,7 +97,7 @@ def _to_body(q, v, out):  # pragma: no cover - compiled
     out[2] = v[2] + w * tz + (x * ty - y * tx)
 
 
-@numba.njit(cache=True)
+@njit
 def _world_to_imu(q_wb, omega_wb, alpha_wb, vel_w, acc_w, earth_w, gravity_w, field_w,
                   omega_b, alpha_b, force_b, mag_b):  # pragma: no cover - compiled
     """The equations of :func:`trajectory_from_world_motion`, one pass per sample."""

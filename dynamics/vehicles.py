@@ -27,7 +27,6 @@ from __future__ import annotations
 from functools import lru_cache
 from typing import Annotated, Literal
 
-import numba
 import numpy as np
 from numpy.polynomial import Chebyshev
 from pydantic import Field, StrictInt, field_validator
@@ -45,6 +44,7 @@ from .motions import (
     _smooth_step_at,
     smooth_step,
 )
+from .jit import njit
 
 __all__ = [
     "euler_zyx_motion",
@@ -67,8 +67,8 @@ __all__ = [
 def euler_zyx_motion(rpy, rpy_rates, rpy_accels):
     """Attitude, body rate and body angular acceleration of a roll-pitch-yaw motion.
 
-    The same equations as :func:`dynamics.rotation.quat_from_euler_zyx` and
-    :func:`dynamics.rotation.body_rate_from_euler_zyx`, sharing six sines and cosines between them
+    The same equations as :func:`gyroemu.dynamics.rotation.quat_from_euler_zyx` and
+    :func:`gyroemu.dynamics.rotation.body_rate_from_euler_zyx`, sharing six sines and cosines between them
     (the full angles' from the half angles' by the double-angle formulas), one compiled pass over the
     samples (:func:`_euler_zyx_sample`, which the kinds' kernels call as well).
 
@@ -93,7 +93,7 @@ def euler_zyx_motion(rpy, rpy_rates, rpy_accels):
     return q, omega, alpha
 
 
-@numba.njit(cache=True)
+@njit
 def _euler_zyx_kernel(rpy, rpy_rates, rpy_accels, q, omega, alpha):  # pragma: no cover - compiled
     """:func:`euler_zyx_motion`, one sample at a time, written into ``q``, ``omega``, ``alpha``."""
     for i in range(rpy.shape[1]):
@@ -107,7 +107,7 @@ def _euler_zyx_kernel(rpy, rpy_rates, rpy_accels, q, omega, alpha):  # pragma: n
         )
 
 
-@numba.njit(cache=True)
+@njit
 def _euler_zyx_sample(
     cr, sr, cp, sp, cy, sy, droll, dpitch, dyaw, ddroll, ddpitch, ddyaw, q, omega, alpha
 ):  # pragma: no cover - compiled
@@ -228,7 +228,7 @@ class RandomManoeuvreSpec(EarthBoundSpec):
         return WorldMotion(t, *arrays)
 
 
-@numba.njit(cache=True)
+@njit
 def _manoeuvre_kernel(
     t, uniform, block, rotation, mean, translation, q, omega, alpha, pos, vel, acc
 ):  # pragma: no cover - compiled
@@ -267,7 +267,7 @@ class Drive(Section):
     """``[drive]``: start heading and the peak longitudinal accelerations.
 
     ``initial_yaw_deg`` is the ENU yaw of the road's start (0 east, 90 north). Speed changes follow
-    :func:`~dynamics.motions.smooth_step`, whose acceleration peaks at ``accel_m_s2`` (speeding up) or
+    :func:`~gyroemu.dynamics.motions.smooth_step`, whose acceleration peaks at ``accel_m_s2`` (speeding up) or
     ``brake_m_s2`` (slowing down): a change ``Δv`` takes ``16 |Δv| / (5 a_peak)`` seconds.
     """
 
@@ -331,7 +331,7 @@ class SpeedProfile:
     holds it.
 
     Leg ``k`` starts at ``t_k`` with speed ``v_k`` and distance ``s_k`` and changes speed by ``Δv_k`` over
-    ``T_k``; with ``u = (t − t_k)/T_k`` and :func:`~dynamics.motions.smooth_step`::
+    ``T_k``; with ``u = (t − t_k)/T_k`` and :func:`~gyroemu.dynamics.motions.smooth_step`::
 
         v = v_k + Δv S(u),   s = s_k + v_k τ + Δv T I(u),
         a = Δv S′/T,         j = Δv S″/T²,               ȷ̇ = Δv S‴/T³
@@ -614,7 +614,7 @@ class CarMotion:
         return WorldMotion(t, *arrays, extras={"speed_m_s": speed, "distance_m": distance})
 
 
-@numba.njit(cache=True)
+@njit
 def _chebval(coef, size, x):  # pragma: no cover - compiled
     """``numpy.polynomial.chebyshev.chebval(x, coef[:size])`` for one ``x``, by the same Clenshaw
     recurrence."""
@@ -629,7 +629,7 @@ def _chebval(coef, size, x):  # pragma: no cover - compiled
     return c0 + c1 * x
 
 
-@numba.njit(cache=True)
+@njit
 def _chebval_block(coef, size, x, count, b0, b1, out):  # pragma: no cover - compiled
     """:func:`_chebval` at ``x[:count]`` into ``out``: the same recurrence with the samples innermost,
     where it vectorises (one sample's recurrence is a chain of ``size`` dependent steps)."""
@@ -647,7 +647,7 @@ def _chebval_block(coef, size, x, count, b0, b1, out):  # pragma: no cover - com
         out[i] = b0[i] + b1[i] * x[i]
 
 
-@numba.njit(cache=True)
+@njit
 def _transients_block(
     t, start, count, at, rise, end, lam, weights, peak, scale, sign, out0, out1, out2, work
 ):  # pragma: no cover - compiled
@@ -691,7 +691,7 @@ def _transients_block(
         out2[i] = out2[i] + sign * (scale * g2) if inside[i] else out2[i]
 
 
-@numba.njit(cache=True)
+@njit
 def _car_kernel(t, block, speed_table, road_table, bump_table, k_roll, k_pitch,
                 q, omega, alpha, pos, vel, acc, speed_out, distance_out):  # pragma: no cover - compiled
     """The car (:class:`CarSpec`), block by block.

@@ -1,5 +1,5 @@
 """Vessels that carry gyroscopes: a ship rolling in beam seas (with an optional gyrostabiliser), and a
-spacecraft slewed by control-moment gyros. Both are :class:`~dynamics.gyrostat.Gyrostat` models.
+spacecraft slewed by control-moment gyros. Both are :class:`~gyroemu.dynamics.gyrostat.Gyrostat` models.
 
 Ship (``kind = "ship"``)
 ------------------------

@@ -1,6 +1,6 @@
 """``gyroemu allan``: fit the IEEE 952 noise terms to a static gyro log and draw the Allan plot.
 
-The fit is :func:`sensors.allan.fit_allan` over ``allantools``' overlapping Allan deviation, axis by
+The fit is :func:`gyroemu.sensors.allan.fit_allan` over ``allantools``' overlapping Allan deviation, axis by
 axis. The plot shows each axis's measured curve with its confidence band, the fitted model, and,
 when the log carries its device's config, the specification's lines (quantisation, ARW, bias
 instability floor, RRW) beside them.
@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sensors.allan import AllanFit, allan_deviation, fit_allan
-from sensors.errors import ErrorModel
+from gyroemu.sensors.allan import AllanFit, allan_deviation, fit_allan
+from gyroemu.sensors.errors import ErrorModel
 
 __all__ = ["AllanReport", "allan_report", "plot_allan", "SPEC_UNITS"]
 

@@ -3,9 +3,9 @@
 Cases
 -----
 - :class:`SimCase` (a scenario × a device): the scenario's trajectory is simulated once; each Monte Carlo
-  run measures it with the device seeded ``seed + run`` (``sensors.load_device(name, seed)``), and the
+  run measures it with the device seeded ``seed + run`` (``gyroemu.sensors.load_device(name, seed)``), and the
   truth is the body's attitude and rate at the instants the device sampled
-  (:func:`pipelines.mcap_io.truth_series`). Every sample counts.
+  (:func:`gyroemu.pipelines.mcap_io.truth_series`). Every sample counts.
 - :class:`LogCase` (an MCAP log): every device of the log with a truth channel (``/truth/imu``) is a
   case with one run. The samples counted are the log's ``/movement`` mask when it has one (an imported
   BROAD trial), otherwise all; truth rows that are NaN (a reference that lost tracking) are ignored.
@@ -57,7 +57,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dynamics import ConfigError
+from gyroemu.dynamics import ConfigError
 
 from .estimation.metrics import attitude_errors, convergence_time, rmse_deg
 from .estimation.protocol import Estimate, FilterSetup
@@ -74,7 +74,7 @@ _PLOT_POINTS = 4000
 
 class BenchError(ConfigError):
     """A case or option the bench cannot run (a log without IMU or truth, bad stamps, ...); names the file
-    or argument (a :class:`dynamics.ConfigError`, so the command line exits with status 2)."""
+    or argument (a :class:`gyroemu.dynamics.ConfigError`, so the command line exits with status 2)."""
 
 
 class BenchWarning(UserWarning):
@@ -574,8 +574,8 @@ class _Progress:
 
 def _sim_case(case: SimCase, runs: int, seed: int):
     """Load a simulated case: (scenario, devices per run, setup, traj, name, mode)."""
-    from dynamics import load_scenario
-    from sensors import load_device
+    from gyroemu.dynamics import load_scenario
+    from gyroemu.sensors import load_device
 
     from .estimation.setup import setup_for
 
@@ -695,7 +695,7 @@ def run_bench(cases=None, filters=None, runs: int = 3, seed: int = 0, *, thresho
     cases : list of SimCase or LogCase
         Default: ``[SimCase()]`` (smooth_manoeuvre × consumer_mems, 60 s).
     filters : list of str
-        Built-in names (``pipelines.estimation.registry.FILTERS``) or ``module:Class``; default every
+        Built-in names (``gyroemu.pipelines.estimation.registry.FILTERS``) or ``module:Class``; default every
         available built-in (one whose package is missing is left out with a note).
     runs, seed : int
         Monte Carlo runs per simulated case, device seeds ``seed … seed + runs − 1``.
@@ -709,7 +709,7 @@ def run_bench(cases=None, filters=None, runs: int = 3, seed: int = 0, *, thresho
 
     Raises
     ------
-    FilterError, BenchError, dynamics.ConfigError
+    FilterError, BenchError, gyroemu.dynamics.ConfigError
         An unknown or unusable filter, scenario, device or log (the message names it).
     """
     if runs < 1:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dynamics import ConfigError, list_scenarios, load_scenario
+from gyroemu.dynamics import ConfigError, list_scenarios, load_scenario
 
 __all__ = ["main"]
 
@@ -58,7 +58,7 @@ def _cmd_simulate(args) -> int:
     scenario = load_scenario(args.scenario)
     device = None
     if args.device:
-        from sensors import load_device  # imported where used: it pulls in scipy.signal (0.7 s)
+        from gyroemu.sensors import load_device  # imported where used: it pulls in scipy.signal (0.7 s)
 
         device = load_device(args.device, seed=args.seed)
     from .progress import PhaseProgress  # a bar on stderr when it is a terminal, nothing otherwise
@@ -185,7 +185,7 @@ def _cmd_estimate(args) -> int:
 
 
 def _cmd_presets(args) -> int:
-    from sensors import list_devices
+    from gyroemu.sensors import list_devices
 
     devices = list_devices()
     rows = [("name", "gyro kind", "rate Hz", "ARW deg/sqrt(h)", "bias inst. deg/h", "resembles")]
@@ -226,7 +226,7 @@ def _cmd_allan(args) -> int:
         import dataclasses
         import tomllib
 
-        from sensors import device_from_dict
+        from gyroemu.sensors import device_from_dict
 
         device = device_from_dict(tomllib.loads(device_toml), name=log.name)
         spec = dataclasses.replace(device.gyro_errors, noise_density=device.gyro_noise_density)
@@ -265,7 +265,7 @@ def _cmd_bench(args) -> int:
     scenarios = args.scenario or ["smooth_manoeuvre"]
     devices = args.device or ["consumer_mems"]
     if simulated:
-        from sensors import load_device
+        from gyroemu.sensors import load_device
 
         for flag, names, load in (("--scenario", scenarios, load_scenario), ("--device", devices, load_device)):
             for name in dict.fromkeys(names):

@@ -24,11 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
-from dynamics import load_scenario
-from dynamics.rotation import quat_angle
-from sensors import list_devices, load_device
-from sensors.gyrocompass import gyrocompass, heading_uncertainty
-from sensors.sampling import SensorTruth
+from gyroemu.dynamics import load_scenario
+from gyroemu.dynamics.rotation import quat_angle
+from gyroemu.sensors import list_devices, load_device
+from gyroemu.sensors.gyrocompass import gyrocompass, heading_uncertainty
+from gyroemu.sensors.sampling import SensorTruth
 
 __all__ = ["run_demo"]
 
@@ -119,7 +119,7 @@ def _live_and_bench(out: Path, seconds: float) -> None:
           "to a recorder process and a live MEKF")
     # only the demo's own device: other gyroemu streams on this machine's zenoh network are not its data
     name = "imu0"
-    recorder = subprocess.Popen([sys.executable, "-m", "pipelines.cli", "record", "--out", str(log),
+    recorder = subprocess.Popen([sys.executable, "-m", "gyroemu", "record", "--out", str(log),
                                  "--key", topic_to_key(name, "/**")],
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:

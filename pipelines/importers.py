@@ -25,7 +25,7 @@ before anything is written. What is written (one device, ``imu0``, topics unpref
 - ``/mag``: ``imu_mag · 1e-6`` (tesla, the ROS unit).
 - ``/truth/imu``: ``opt_quat`` as ``q_wb`` (NaN rows kept as NaN, covariance zeros = "unknown"); the
   true rate and specific force are not known, so they are written as "no estimate"
-  (``covariance[0] = -1``) and read back as None (:class:`pipelines.mcap_io.ImuSeries`).
+  (``covariance[0] = -1``) and read back as None (:class:`gyroemu.pipelines.mcap_io.ImuSeries`).
 - ``/movement``: ``movement`` as ``gyroemu_msgs/msg/Flag`` (read back as ``DeviceLog.movement``).
 
 **Time stamps.** BROAD's samples are equally spaced and carry no clock of their own, so sample k is
@@ -40,9 +40,9 @@ configs empty: no simulation), ``device_name`` ``imu0``, ``source`` (the file's 
 float), ``time_stamps`` (the rule above) and ``source_info`` (the file's ``info`` attribute, when it
 has one).
 
-Bad input raises :class:`ImportInputError` (a :class:`dynamics.ConfigError`) naming the file and the
+Bad input raises :class:`ImportInputError` (a :class:`gyroemu.dynamics.ConfigError`) naming the file and the
 dataset or attribute at fault; the output is written through a temporary file renamed at the end
-(:class:`pipelines.mcap_io.McapLogWriter`), so a failure leaves nothing at ``out``.
+(:class:`gyroemu.pipelines.mcap_io.McapLogWriter`), so a failure leaves nothing at ``out``.
 """
 
 from __future__ import annotations
@@ -53,8 +53,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dynamics import ConfigError
-from sensors.samples import ImuSamples
+from gyroemu.dynamics import ConfigError
+from gyroemu.sensors.samples import ImuSamples
 
 from .mcap_io import ImuSeries, Recording, write_mcap
 from .messages import ns_to_stamps

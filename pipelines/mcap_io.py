@@ -2,7 +2,7 @@
 
 What a gyroemu file holds (``interface.md``)
 --------------------------------------------
-Schema encoding ``ros2msg``, message encoding ``cdr`` (the bytes of :mod:`pipelines.messages`),
+Schema encoding ``ros2msg``, message encoding ``cdr`` (the bytes of :mod:`gyroemu.pipelines.messages`),
 zstd-compressed chunks, message indexes after each chunk, and a summary (schemas, channels,
 statistics, chunk and metadata indexes, summary offsets). Channels, per device:
 
@@ -23,7 +23,7 @@ in time order across channels (same stamp: the order of the table). Frame ids: t
 what the sensor measures (``/imu``, ``/mag``, ``/raw/...``), ``base_link`` for body-frame truth and
 estimates. Each device has a metadata record ``gyroemu`` with ``version``, ``seed``, ``scenario``
 (TOML), ``device`` (TOML), ``device_name`` and ``topic_prefix``, plus any keys the recording adds
-(an imported file: ``source``, ``source_format``, ``citation``, ...; :mod:`pipelines.importers`).
+(an imported file: ``source``, ``source_format``, ``citation``, ...; :mod:`gyroemu.pipelines.importers`).
 
 Writing
 -------
@@ -88,8 +88,8 @@ from mcap.records import (
     SummaryOffset,
 )
 
-from dynamics import ConfigError
-from sensors.samples import ImuSamples
+from gyroemu.dynamics import ConfigError
+from gyroemu.sensors.samples import ImuSamples
 
 from .messages import (
     IMU,
@@ -147,7 +147,7 @@ _DEVICE_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 class LogError(ConfigError):
     """A log file gyroemu cannot read: not MCAP, corrupt, or without IMU messages.
 
-    A :class:`dynamics.ConfigError` (so a ``ValueError``): ``file`` names the file, ``reason`` says what
+    A :class:`gyroemu.dynamics.ConfigError` (so a ``ValueError``): ``file`` names the file, ``reason`` says what
     is wrong, and the command line reports it with exit status 2.
     """
 
@@ -214,7 +214,7 @@ class ImuSeries:
 def truth_series(trajectory, samples: ImuSamples) -> ImuSeries:
     """Body truth at the instants the device sampled (``samples.t_true``), stamped with the device's
     stamps ``samples.t``: what ``/truth/imu`` holds."""
-    from sensors.sampling import SensorTruth
+    from gyroemu.sensors.sampling import SensorTruth
 
     instants = samples.t_true if samples.t_true is not None else samples.t
     q_wb, omega_b, force_b = SensorTruth(trajectory).body_truth(instants)

@@ -3,15 +3,15 @@
 Recording
 ---------
 The recorder subscribes to ``gyroemu/**`` (FIFO channel handler), maps each key back to its device and
-topic (:func:`pipelines.zenoh_io.key_to_topic`) and copies the payload bytes into an MCAP file (profile
+topic (:func:`gyroemu.pipelines.zenoh_io.key_to_topic`) and copies the payload bytes into an MCAP file (profile
 ``ros2``, zstd chunks) without re-encoding: only the header stamp is read, and it becomes the message's
 ``log_time`` and ``publish_time``. Channels are registered per topic as they appear, with the schema the
 topic's role names (``/imu`` and ``/truth/imu``: ``sensor_msgs/msg/Imu``, ``/mag``: MagneticField,
 ``/raw/<kind>``: the kind's raw type; other topics get no schema). The first device's topics are
 unprefixed (``/imu``), any further device's are prefixed (``/<device>/imu``); a ``gyroemu`` metadata
-record per device gives its name and prefix, so :func:`pipelines.mcap_io.read_mcap` names it.
+record per device gives its name and prefix, so :func:`gyroemu.pipelines.mcap_io.read_mcap` names it.
 
-The file is written in place (not through a temporary name): :class:`~pipelines.mcap_io.McapFileWriter`
+The file is written in place (not through a temporary name): :class:`~gyroemu.pipelines.mcap_io.McapFileWriter`
 writes sequentially, and the recorder flushes after every batch, so a recorder killed with SIGKILL leaves
 a file whose complete chunks read back (chunks of 256 KiB, so at most that much is lost).
 SIGINT/SIGTERM (or ``--duration``) end the recording properly: the remaining messages, the summary and
@@ -24,7 +24,7 @@ arrivals, and prints the report at the end (``--report FILE.json`` also writes i
 ROS 2 mode (``--ros2``)
 -----------------------
 The recorder subscribes to ``<domain>/**`` instead (the data keys of rmw_zenoh,
-:mod:`pipelines.ros2_keys`): a key ``<domain>/<device>/<rest>/<pkg::msg::dds_::T_>/<RIHS01 hash>``
+:mod:`gyroemu.pipelines.ros2_keys`): a key ``<domain>/<device>/<rest>/<pkg::msg::dds_::T_>/<RIHS01 hash>``
 is recorded on topic ``/<rest>`` of device ``<device>`` (so what ``gyroemu stream --ros2`` publishes
 comes back on the topics of a plain recording; a raw topic gets its kind back from its type), with the
 schema the key's type names when gyroemu knows the type, and the type hash in the channel's

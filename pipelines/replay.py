@@ -11,12 +11,12 @@ unchanged, on the key expression of its topic (``interface.md``, "Live streams: 
   file's ``gyroemu`` metadata for unprefixed topics, else ``--device-name`` (default ``imu0``).
 - any other topic ``/a/b`` (someone else's file) goes to ``gyroemu/<device-name>/a/b``.
 
-The attachment is the publisher's (:class:`pipelines.zenoh_io.PacedPublisher`): a sequence per key
+The attachment is the publisher's (:class:`gyroemu.pipelines.zenoh_io.PacedPublisher`): a sequence per key
 from 0 (continuing across ``--loop`` passes), the send time, a random publisher id per key.
 
 ROS 2 mode (``--ros2``, ``--domain``): the topic that would go to ``gyroemu/<device>/<topic>`` goes to
 ROS 2 topic ``/<device>/<topic>`` on rmw_zenoh's key ``<domain>/<device>/<topic>/<type>/<hash>``
-(:mod:`pipelines.ros2_keys`), with the liveliness tokens of a node ``gyroemu_replay_<pid>`` and its
+(:mod:`gyroemu.pipelines.ros2_keys`), with the liveliness tokens of a node ``gyroemu_replay_<pid>`` and its
 publishers. The type is the channel's schema name; the hash is the channel's ``topic_type_hash``
 metadata (rosbag2 records it since Iron) or else computed by REP-2011 from the channel's ``ros2msg``
 schema. A channel with neither (no schema, an IDL schema and no recorded hash) is skipped with a
@@ -30,7 +30,7 @@ behind, so its error never accumulates (:meth:`PacedPublisher.run_schedule`). Wi
 is shifted by k times the file's span plus one mean message interval, so deadlines keep increasing
 (the payloads, header stamps included, are the recorded bytes every pass).
 
-A reader thread walks the file a chunk at a time (:func:`pipelines.mcap_io.iter_mcap_batches`),
+A reader thread walks the file a chunk at a time (:func:`gyroemu.pipelines.mcap_io.iter_mcap_batches`),
 turns each chunk's messages into batches of ``BATCH`` ``(deadline offset, key, payload)`` and queues
 them (a bounded queue of ``READ_AHEAD`` batches), so decompressing a chunk happens while the
 publisher waits for its deadlines, never on its schedule; memory stays bounded by the queue, whatever
@@ -38,9 +38,9 @@ the file's size. Batches are small because the publisher frees each spent one (a
 bytes: one deallocation per object, holding the GIL) just after a send: 256 messages take ~50 us,
 a whole 1 MiB chunk's 4000 took ~0.7 ms, long enough to make the next deadline late. The reader
 frees its own per-chunk objects a slice at a time for the same reason. How the publisher waits and
-keeps the reader from delaying it: :class:`pipelines.zenoh_io.Timing`.
+keeps the reader from delaying it: :class:`gyroemu.pipelines.zenoh_io.Timing`.
 
-Before the clock starts the file is validated with :func:`pipelines.mcap_io.read_mcap` (not MCAP,
+Before the clock starts the file is validated with :func:`gyroemu.pipelines.mcap_io.read_mcap` (not MCAP,
 corrupt, truncated before its first chunk, no ``sensor_msgs/msg/Imu`` message: a ``LogError`` naming the
 file), the replay waits (``--wait``, default 10 s) until every key has a subscriber, as
 ``gyroemu stream`` does, and then until the reader has filled its queue (at most 10 s more): its
@@ -96,8 +96,8 @@ def topic_keys(topics, metadata: list[dict], device_name: str = "imu0") -> tuple
 
 def ros2_topic_keys(keys: dict[str, str], channels, ros) -> tuple[dict[str, str], dict[str, str]]:
     """ROS 2 mode: ``({topic: rmw_zenoh key}, {topic: why not})`` from the gyroemu keys of
-    :func:`topic_keys`, the file's :class:`pipelines.mcap_io.ChannelInfo` and a
-    :class:`pipelines.stream.Ros2Keys` (which keeps each key's topic, type and hash for its tokens)."""
+    :func:`topic_keys`, the file's :class:`gyroemu.pipelines.mcap_io.ChannelInfo` and a
+    :class:`gyroemu.pipelines.stream.Ros2Keys` (which keeps each key's topic, type and hash for its tokens)."""
     from .ros2_keys import Ros2Error, full_type_name, is_type_hash, parse_definitions, ros_topic, type_hash
 
     info = {c.topic: c for c in channels}
@@ -205,7 +205,7 @@ def run_replay(*, path, rate: float = 1.0, loop: bool = False, topics=None, devi
                ros2: bool = False, domain: int | None = None, out=sys.stdout) -> int:
     """Replay ``path`` (see the module's notes). Returns the exit status: 0 when done (or, with
     ``loop``, when stopped by SIGINT/SIGTERM), 130 when a single pass was interrupted. Raises
-    :class:`pipelines.mcap_io.LogError` for bad input and ``ValueError`` naming the argument at fault."""
+    :class:`gyroemu.pipelines.mcap_io.LogError` for bad input and ``ValueError`` naming the argument at fault."""
     config = session_config(connect=connect, listen=listen, mode=mode, config_file=config_file)
     if not rate > 0:
         raise ReplayError(f"argument --rate: must be positive, got {rate}")

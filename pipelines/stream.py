@@ -1,9 +1,9 @@
 """``gyroemu stream``: simulate a scenario through a device, then publish it live over zenoh.
 
 The whole run is simulated and encoded first (the same CDR bytes an MCAP log of the run holds: frame
-ids and fields as :class:`pipelines.mcap_io.McapLogWriter` writes them), then sample k's messages
+ids and fields as :class:`gyroemu.pipelines.mcap_io.McapLogWriter` writes them), then sample k's messages
 (``/imu``, ``/mag`` when the device has a magnetometer, ``/truth/imu``, ``/raw/<kind>``) go out at
-``t0 + k / rate`` on ``gyroemu/<device-name>/<topic>`` (:mod:`pipelines.zenoh_io`).
+``t0 + k / rate`` on ``gyroemu/<device-name>/<topic>`` (:mod:`gyroemu.pipelines.zenoh_io`).
 
 Before its clock starts the stream waits (``--wait``, default 10 s) until every key has a subscriber,
 so a recorder started just after the stream loses nothing; when the wait runs out it starts anyway.
@@ -13,7 +13,7 @@ ROS 2 mode (``--ros2``, ``--domain``): the same bytes go on rmw_zenoh's keys ins
 ``<domain>/<device>/<topic>/<type>/<RIHS01 hash>`` (``0/imu0/imu/sensor_msgs::msg::dds_::Imu_/RIHS01_7d9a...``),
 and the process declares the liveliness tokens of a ROS 2 node ``gyroemu_stream_<pid>`` and of one
 publisher per topic, so that ROS 2 nodes on rmw_zenoh see and subscribe to the topics
-(:mod:`pipelines.ros2_keys`).
+(:mod:`gyroemu.pipelines.ros2_keys`).
 """
 
 from __future__ import annotations
@@ -96,11 +96,11 @@ def run_stream(*, scenario: str, device: str, duration: float | None = None, see
     """Simulate, encode and publish (see the module's notes); returns the exit status (0, or 130 when
     stopped by SIGINT/SIGTERM). Raises ``ValueError`` naming the argument at fault, before simulating.
 
-    ``estimate``: a filter name (``mekf``, ...; see :mod:`pipelines.estimation.registry`) to run live on
-    the stream, in this process but on a session of its own (:class:`pipelines.live_estimate.LiveEstimator`),
+    ``estimate``: a filter name (``mekf``, ...; see :mod:`gyroemu.pipelines.estimation.registry`) to run live on
+    the stream, in this process but on a session of its own (:class:`gyroemu.pipelines.live_estimate.LiveEstimator`),
     publishing ``gyroemu/<device>/estimate/imu``."""
-    from dynamics import load_scenario
-    from sensors import load_device
+    from gyroemu.dynamics import load_scenario
+    from gyroemu.sensors import load_device
 
     from .mcap_io import truth_series
 

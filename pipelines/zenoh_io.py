@@ -4,7 +4,7 @@ What goes on the wire (``interface.md``, "Live streams: Eclipse Zenoh")
 ----------------------------------------------------------------------
 - Key expression: ``gyroemu/<device>`` followed by the MCAP topic: ``gyroemu/imu0/imu``,
   ``gyroemu/imu0/truth/imu``, ``gyroemu/imu0/raw/fog``, ... (:func:`topic_to_key`, :func:`key_to_topic`).
-- Payload: the CDR bytes of the MCAP message (:mod:`pipelines.messages`), unchanged.
+- Payload: the CDR bytes of the MCAP message (:mod:`gyroemu.pipelines.messages`), unchanged.
 - Attachment: 33 bytes as rmw_zenoh writes them: int64 LE sequence number (from 0, per publisher),
   int64 LE source timestamp (ns since the Unix epoch, taken when the message is sent), one byte 16 (the
   length of what follows), then the 16-byte publisher id (random per publisher, one publisher per
@@ -39,7 +39,7 @@ sleep per sample, so its error does not accumulate. How it waits for a deadline 
 :data:`PRECISE` (the default: timer slack 1 ns, sleep to 300 us before the deadline then spin on the
 clock, a 50 us GIL switch interval and the garbage collector paused while the run lasts; its notes
 give the measured reasons) or :data:`SLEEP_ONLY` (the former behaviour, the benchmarks' baseline).
-ROS 2 key expressions and liveliness tokens (``--ros2``) are :mod:`pipelines.ros2_keys`'.
+ROS 2 key expressions and liveliness tokens (``--ros2``) are :mod:`gyroemu.pipelines.ros2_keys`'.
 
 Sources: zenoh-python 1.x API (``zenoh.Config.insert_json5``, ``Session.declare_publisher``,
 ``CongestionControl.BLOCK``, ``handlers.FifoChannel``); the zenoh DEFAULT_CONFIG.json5 (listen, connect,

@@ -3,7 +3,7 @@
 An accelerometer (or its integrating ADC) reports the specific force averaged over the sample
 interval, ``Δv_k / T = (1/T) ∫ f_s dt`` over ``[τ_{k−1}, τ_k]`` in sensor axes. The integral is taken
 by composite Simpson's rule on a grid two or more points per trajectory sample (error ``O(h⁴)``),
-then :func:`sensors.errors.apply_errors` adds bias, scale factor, misalignment, noise and the rest.
+then :func:`gyroemu.sensors.errors.apply_errors` adds bias, scale factor, misalignment, noise and the rest.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate import simpson
 
-from dynamics.config import Section
+from gyroemu.dynamics.config import Section
 
 from .errors import AccelErrors
 from .sampling import SensorTruth

@@ -16,7 +16,7 @@ terms in their own units (IEEE Std 1293-2018). For each axis i, with ΔT = T −
     y = Q( clip( LPF(u), ±range ) )          bandwidth (Butterworth low-pass), saturation, quantisation
 
 The small terms act on the true input (first order in the errors). The noise n is made by
-:func:`sensors.noise.sensor_noise`; the module notes of :mod:`sensors.noise` define the noise density
+:func:`gyroemu.sensors.noise.sensor_noise`; the module notes of :mod:`gyroemu.sensors.noise` define the noise density
 (single-sided: the Allan deviation at τ = 1 s, σ = N/√Δt per sample; MATLAB's ``imuSensor`` is √2
 lower for the same number) and the flicker model. Quantisation is either of the integrated output
 (``quantisation_rad`` / ``quantisation_m_per_s``: a pulse-counting sensor that never loses angle) or
@@ -50,14 +50,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated, ClassVar, Literal
 
-import numba
 import numpy as np
 import scipy.signal
 from pydantic import BeforeValidator, ValidationInfo, field_validator
 
-from dynamics.config import ConfigError, NonNegativeReal, PositiveReal, Real, Section
+from gyroemu.dynamics.config import ConfigError, NonNegativeReal, PositiveReal, Real, Section
 
 from . import noise
+from gyroemu.dynamics.jit import njit
 
 __all__ = ["GyroErrors", "AccelErrors", "ErrorModel", "apply_errors", "STANDARD_GRAVITY"]
 
@@ -432,7 +432,7 @@ def apply_errors(truth: np.ndarray, t: np.ndarray, spec: GyroErrors | AccelError
     return y
 
 
-@numba.njit(cache=True)
+@njit
 def _response(x, t, dT, f, gain, k, b_T, s_T, G, bias, ramp, out):
     """The deterministic terms, written out per sample k and axis i (shapes as in apply_errors)."""
     for n in range(x.shape[0]):
@@ -458,7 +458,7 @@ def _low_pass(y: np.ndarray, dt: float, bandwidth_hz: float, order: int) -> None
     _lfilter_into(b, a, zi, y)
 
 
-@numba.njit(cache=True)
+@njit
 def _lfilter_into(b, a, zi, y):
     """``scipy.signal.lfilter(b, a, y, axis=0, zi=zi)[0]`` written into ``y`` (n, A); a[0] = 1.
 

@@ -98,7 +98,7 @@ import numpy as np
 from pydantic import Field, ValidationInfo, field_validator
 from scipy.special import jv
 
-from dynamics.config import PositiveReal
+from gyroemu.dynamics.config import PositiveReal
 
 from .mechanism import GyroMechanism, GyroResponse, GyroTruth
 

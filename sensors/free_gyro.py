@@ -64,7 +64,7 @@ gimbal-lock band the 1/cos²θ factor is held at its value at the band's edge.
 
 Chunks
 ------
-A long run comes in chunks that share their edge sample (:mod:`sensors.mechanism`). The state carries
+A long run comes in chunks that share their edge sample (:mod:`gyroemu.sensors.mechanism`). The state carries
 what ties the chunks into one run:
 
 * ``state["q_uncage"]`` (4,): q_is at the run's first sample, the attitude in which the rotors were set
@@ -112,15 +112,15 @@ import math
 import warnings
 from typing import Annotated, ClassVar, Literal
 
-import numba
 import numpy as np
 from pydantic import Field
 
-from dynamics.config import NonNegativeReal, PositiveReal, Real
-from dynamics.rotation import quat_conjugate, quat_multiply, quat_rotate
+from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Real
+from gyroemu.dynamics.rotation import quat_conjugate, quat_multiply, quat_rotate
 
 from .mechanism import GyroMechanism, GyroResponse, GyroTruth
 from .rate_gyro import RPM
+from gyroemu.dynamics.jit import njit
 
 __all__ = ["FreeGyro", "GimbalLockWarning", "GimbalLockError", "gimbal_angles", "euler_xyz_from_spins",
            "body_rate_from_euler_xyz", "time_derivative"]
@@ -313,7 +313,7 @@ def time_derivative(y: np.ndarray, h: float) -> np.ndarray:
 # --------------------------------------------------------------------------------------------------
 
 
-@numba.njit(cache=True)
+@njit
 def _rotate(q, v, conjugate):
     """q ⊗ v ⊗ q* (or q* ⊗ v ⊗ q with ``conjugate``) for one quaternion (4,) and vector (3,)."""
     w = q[0]
@@ -324,7 +324,7 @@ def _rotate(q, v, conjugate):
                      v[2] + w * tz + ux * ty - uy * tx])
 
 
-@numba.njit(cache=True)
+@njit
 def _spin_rate(q, omega, s, h, b_o, c_o, b_i, c_i, min_cos2):
     """ds/dt (3,) in the rotor frame by (4), for rotor direction ``s`` and the carrier at ``q``, ``omega``."""
     sc = _rotate(q, s, True)                      # s in case axes; the outer axis a_o is case z
@@ -340,7 +340,7 @@ def _spin_rate(q, omega, s, h, b_o, c_o, b_i, c_i, min_cos2):
     return _rotate(q, torque, False) / h
 
 
-@numba.njit(cache=True)
+@njit
 def _drift(q_rel, omega, dt, h, b_o, c_o, b_i, c_i, min_cos2, spins0, out):
     """Integrate (4) for each rotor by Heun's method with renormalisation; fills ``out`` (M, 2, 3)."""
     n = q_rel.shape[0]

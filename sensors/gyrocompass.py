@@ -20,8 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dynamics.earth import EARTH_RATE
-from dynamics.rotation import quat_from_matrix
+from gyroemu.dynamics.earth import EARTH_RATE
+from gyroemu.dynamics.rotation import quat_from_matrix
 
 __all__ = ["Alignment", "gyrocompass", "heading_uncertainty"]
 

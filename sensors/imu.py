@@ -7,9 +7,9 @@
    with ``t_k = k T + offset_s + jitter`` (white, σ = ``jitter_s``).
 2. **Gyro mechanism.** The truth on the mechanism's inner grid (``m`` inner steps per output
    interval, ``m = ceil(inner_rate / rate_hz)``) goes through :meth:`GyroMechanism.respond` in chunks
-   that carry its state (:mod:`sensors.mechanism`), giving the indicated angle; sample ``k`` is its
+   that carry its state (:mod:`gyroemu.sensors.mechanism`), giving the indicated angle; sample ``k`` is its
    increment over ``[τ_{k−1}, τ_k]``, divided by ``T`` for a rate.
-3. **Error terms** (:func:`sensors.errors.apply_errors`) on that rate: bias, scale factor,
+3. **Error terms** (:func:`gyroemu.sensors.errors.apply_errors`) on that rate: bias, scale factor,
    misalignment, g-sensitivity, temperature, bias instability, rate random walk, range, quantisation,
    and the part of the white noise the mechanism did not already make, ``sqrt(N_spec² − N_mech²)``.
 4. **Accelerometer**: mean specific force over the same intervals at the sensor's lever arm, then its
@@ -31,8 +31,8 @@ import tomli_w
 from pydantic import Field, field_validator
 from scipy.integrate import cumulative_trapezoid
 
-from dynamics import ConfigError, Trajectory
-from dynamics.config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3, validate
+from gyroemu.dynamics import ConfigError, Trajectory
+from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3, validate
 
 from .accelerometer import AccelerometerSpec, mean_specific_force
 from .errors import AccelErrors, ErrorModel, GyroErrors, apply_errors
@@ -205,7 +205,7 @@ class Device:
 
     @property
     def gyro_errors(self):
-        """The gyro error terms in SI (:class:`sensors.errors.ErrorModel`), white noise as added on
+        """The gyro error terms in SI (:class:`gyroemu.sensors.errors.ErrorModel`), white noise as added on
         top of the mechanism's own."""
         return self._gyro_errors
 

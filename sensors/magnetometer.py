@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dynamics.config import NonNegativeReal, PositiveReal, Section, Vec3
+from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Section, Vec3
 
 __all__ = ["MagnetometerSpec"]
 

@@ -44,19 +44,19 @@ from typing import ClassVar, Literal
 
 import numpy as np
 
-from dynamics.config import Section
+from gyroemu.dynamics.config import Section
 
 __all__ = ["GyroTruth", "GyroResponse", "GyroMechanism", "IdealGyro", "GYRO_KINDS", "mechanism_class",
            "hermite_integral"]
 
 GYRO_KINDS: dict[str, str] = {
-    "ideal": "sensors.mechanism:IdealGyro",
-    "rate-gyro": "sensors.rate_gyro:RateGyro",
-    "rate-integrating": "sensors.rate_integrating:RateIntegratingGyro",
-    "free-gyro": "sensors.free_gyro:FreeGyro",
-    "mems": "sensors.mems:MemsGyro",
-    "fog": "sensors.fog:FiberOpticGyro",
-    "rlg": "sensors.rlg:RingLaserGyro",
+    "ideal": "gyroemu.sensors.mechanism:IdealGyro",
+    "rate-gyro": "gyroemu.sensors.rate_gyro:RateGyro",
+    "rate-integrating": "gyroemu.sensors.rate_integrating:RateIntegratingGyro",
+    "free-gyro": "gyroemu.sensors.free_gyro:FreeGyro",
+    "mems": "gyroemu.sensors.mems:MemsGyro",
+    "fog": "gyroemu.sensors.fog:FiberOpticGyro",
+    "rlg": "gyroemu.sensors.rlg:RingLaserGyro",
 }
 """Gyro kind (the ``kind`` key of a device's ``[gyro.mechanism]`` table) → ``"module:Class"``."""
 

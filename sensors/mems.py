@@ -105,7 +105,7 @@ demodulator (Leland's factor of two, IEEE Sensors J. 5(3), 2005). The rate noise
     Ω_n = √(4 k_B T ω_s / (m Q_s)) / (2 x₀ ω_d)      rad/s/√Hz                                    (7)
 
 in this repository's convention (the Allan deviation at 1 s, σ = Ω_n/√Δt per sample; see
-:mod:`sensors.noise`), divided by cos φ_e in the calibrated output. It does not depend on the mode
+:mod:`gyroemu.sensors.noise`), divided by cos φ_e in the calibrated output. It does not depend on the mode
 split (signal and noise pass the same H). The tests check (7) against the carrier-level simulation.
 Through the sense resonance the same noise also makes a peak at Δf in the demodulated output, which
 the demodulator filter removes.
@@ -138,16 +138,16 @@ from __future__ import annotations
 import math
 from typing import ClassVar, Literal
 
-import numba
 import numpy as np
 import scipy.linalg
 import scipy.signal
 from pydantic import ValidationInfo, field_validator
 
-from dynamics.config import PositiveReal, Real
+from gyroemu.dynamics.config import PositiveReal, Real
 
 from .errors import STANDARD_GRAVITY
 from .mechanism import GyroMechanism, GyroResponse, GyroTruth
+from gyroemu.dynamics.jit import njit
 
 __all__ = ["MemsGyro", "CARRIER_STEPS_PER_CYCLE", "K_BOLTZMANN", "element_axes"]
 
@@ -663,7 +663,7 @@ def _circular_normal(rng: np.random.Generator, shape) -> np.ndarray:
 # --------------------------------------------------------------------------------------------------
 
 
-@numba.njit(cache=True)
+@njit
 def _baseband_run(phi, gamma0, gamma1, noise, c, forcing, noise_scale, z, rng, out):
     """z_{k+1} = Φ z_k + Γ₀ F_k + Γ₁ F_{k+1} + s_k L w_k on each axis; out[k] = c·z_k.
 
@@ -703,7 +703,7 @@ def _baseband_run(phi, gamma0, gamma1, noise, c, forcing, noise_scale, z, rng, o
                 z[a, i] = acc
 
 
-@numba.njit(cache=True)
+@njit
 def _carrier_run(phi, dc0, dc1, g0, g1, noise, carrier, j0, j_end, offset, ratio, forcing, static,
                  force_at_j, static_at_j, x, acc, rng, cycles, done):
     """Step the sense oscillators over carrier steps j0 → j_end and demodulate them.
@@ -752,7 +752,7 @@ def _carrier_run(phi, dc0, dc1, g0, g1, noise, carrier, j0, j_end, offset, ratio
     return count
 
 
-@numba.njit(cache=True)
+@njit
 def _filter_run(phi, gamma0, gamma1, c, u, s, previous, out):
     """s_{k+1} = Φ s_k + Γ₀ u_{k−1} + Γ₁ u_k, out[k] = c·s_{k+1}, per axis; ``s`` (A, S) and
     ``previous`` (A,) (the input before u[0]) are updated in place. ``u``, ``out``: (K, A)."""

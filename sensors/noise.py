@@ -60,9 +60,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 from scipy.optimize import nnls
+from gyroemu.dynamics.jit import njit
 
 __all__ = [
     "FLICKER_FLOOR",
@@ -94,7 +94,7 @@ _STEPS_PER_TAU = 16
 # --------------------------------------------------------------------------------------------------
 
 
-@numba.njit(cache=True)
+@njit
 def _ar1_sum_into(rng, phi, c, state, out):
     """Add Σ_j x_j to ``out``, where x_j[k] = φ_j x_j[k−1] + c_j w, w ~ N(0, 1) from ``rng``.
 
@@ -116,7 +116,7 @@ def _ar1_sum_into(rng, phi, c, state, out):
             out[k, a] += total
 
 
-@numba.njit(cache=True)
+@njit
 def _interpolate_into(coarse, ratio, out):
     """Add to ``out`` (n, A) the linear interpolation of ``coarse`` (m, A), whose knots lie every
     ``ratio`` samples of ``out`` starting at sample 0 (so m ≥ (n − 1) // ratio + 1, and one more knot
@@ -394,7 +394,7 @@ def quantise_angle(rate: np.ndarray, dt: float, lsb, rng: np.random.Generator,
     return out
 
 
-@numba.njit(cache=True)
+@njit
 def _count_quanta(rate, dt, lsb, theta0, out):
     """Write to ``out`` the rate of whole quanta counted from the running angle θ₀ + Δt Σ rate
     (see quantise_angle); ``out`` may be ``rate``."""

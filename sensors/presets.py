@@ -1,10 +1,10 @@
-"""Device files: ``configs/devices/*.toml`` validated into a :class:`~sensors.imu.Device`."""
+"""Device files: ``configs/devices/*.toml`` validated into a :class:`~gyroemu.sensors.imu.Device`."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from dynamics.config import ConfigError, config_dir, read_toml, resolve_config, validate
+from gyroemu.dynamics.config import ConfigError, config_dir, read_toml, resolve_config, validate
 
 from .imu import Device, DeviceSpec
 

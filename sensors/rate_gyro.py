@@ -24,7 +24,7 @@ by θ, reads
   *output-axis angular-acceleration* error, −J ω'_OA/H in the indicated rate).
 * Neglected: anisoinertia (I_SRA − I_IA) ω_IA ω_SRA of the gimbal (nil for a gimbal balanced in
   inertia), mass unbalance (g-sensitivity) and the damping fluid's temperature dependence, which the
-  IMU's error layer (:mod:`sensors.errors`) applies on top; the Brownian torque on the gimbal,
+  IMU's error layer (:mod:`gyroemu.sensors.errors`) applies on top; the Brownian torque on the gimbal,
   √(2 k_B T c)/H ≈ 4·10⁻¹⁰ rad/s/√Hz for the defaults (10⁻⁵ of any real rate gyro's noise), so
   :meth:`RateGyro.intrinsic_noise_density` is 0 and the IMU supplies the specified noise.
 
@@ -66,7 +66,7 @@ t[0]): on the particular solution of (1) for an input ramping at its initial slo
 constant or steadily ramping rate gives no start-up transient. For a step response from rest, give
 ω = 0 at the first sample.
 
-Chunks (:mod:`sensors.mechanism`): the state of (2) at a chunk's last sample, x = (θ, θ') of each gyro,
+Chunks (:mod:`gyroemu.sensors.mechanism`): the state of (2) at a chunk's last sample, x = (θ, θ') of each gyro,
 is all the recurrence carries (the torque u_k is recomputed from θ_k and the shared sample's input,
 the same numbers), so ``state["gimbal_state"]`` (3, 2) continues the run exactly: a run split into
 chunks gives the same samples as one call, bit for bit. It is set at power-up (an empty state) to
@@ -97,14 +97,14 @@ from __future__ import annotations
 import math
 from typing import Annotated, ClassVar, Literal
 
-import numba
 import numpy as np
 import scipy.signal
 from pydantic import Field
 
-from dynamics.config import PositiveReal, Real
+from gyroemu.dynamics.config import PositiveReal, Real
 
 from .mechanism import GyroMechanism, GyroResponse, GyroTruth
+from gyroemu.dynamics.jit import njit
 
 __all__ = ["RateGyro", "RPM", "StopAngle", "sdf_axes", "foh_matrices", "simulate_gimbal", "inner_rate_for"]
 
@@ -275,13 +275,13 @@ def simulate_gimbal(a: np.ndarray, b: np.ndarray, dt: float, x0: np.ndarray, spi
     return out
 
 
-@numba.njit(cache=True)
+@njit
 def _torque(h, j, w_ia, w_sra, a_oa, theta):
     """u(θ) = H (ω_IA cos θ − ω_SRA sin θ) − J ω'_OA, N·m: the right-hand side of (1)."""
     return h * (w_ia * math.cos(theta) - w_sra * math.sin(theta)) - j * a_oa
 
 
-@numba.njit(cache=True)
+@njit
 def _gimbal_recurrence(phi, gamma0, gamma1, x0, h, j, w_ia, w_sra, a_oa, stop, out):
     """Recurrence (2) with the θ-dependent torque solved per step and inelastic stops; fills ``out``."""
     n_samples, n_axes = w_ia.shape

@@ -2,7 +2,7 @@
 
 The instrument (IEEE Std 517-1974 names its axes; Lecture 11, "rate integrating gyros")
 -------------------------------------------------------------------------------------------
-The same single-degree-of-freedom gimbal as the rate gyro (:mod:`sensors.rate_gyro`: rotor angular
+The same single-degree-of-freedom gimbal as the rate gyro (:mod:`gyroemu.sensors.rate_gyro`: rotor angular
 momentum H = I_s ω_s along the spin reference axis SRA, gimbal free to turn by θ about the output axis
 OA, input axis IA with IA × OA = SRA), but with no spring: the gimbal is a sealed float in a viscous
 fluid, restrained only by the damping c of the thin fluid gap, and a torquer may apply a torque T:
@@ -57,7 +57,7 @@ Simulation
 ----------
 As for the rate gyro: the state x = (θ, θ') open-loop, or (θ, θ', ∫θ dt, ∫i dt) closed-loop, follows
 the exact first-order-hold discretisation of its linear part, with the θ-dependent torque solved
-per step and inelastic stops (:func:`sensors.rate_gyro.simulate_gimbal`); ∫i dt is a state, so the
+per step and inelastic stops (:func:`gyroemu.sensors.rate_gyro.simulate_gimbal`); ∫i dt is a state, so the
 angle output is the exact integral of the simulated current. Each gyro starts in equilibrium with
 the first sample's input (the particular solution for an input torque ramping at u' = H ω'_IA): open
 loop at θ = 0 with the float drifting at θ' = u/c − J u'/c²; closed loop with the integrator charged
@@ -65,7 +65,7 @@ to carry the torque, θ = u'/(k_t k_i) (or, for k_i = 0, θ = u/(k_t k_p) − c 
 :meth:`RateIntegratingGyro.inner_rate_hz` resolves the fastest pole (the float corner open-loop, the
 loop's poles closed-loop) with 20 samples per period, at an integer multiple of the output rate.
 
-Chunks (:mod:`sensors.mechanism`): ``state["gimbal_state"]`` (3, n) is x at a chunk's last sample, the
+Chunks (:mod:`gyroemu.sensors.mechanism`): ``state["gimbal_state"]`` (3, n) is x at a chunk's last sample, the
 whole state of the recurrence (the torque is recomputed from θ and the shared sample's input, the same
 numbers), so the next chunk continues the run bit for bit: the float's angle and rate, and closed-loop
 the loop integrator ∫θ dt and the charge ∫i dt. The indicated angle restarts from 0 at each chunk's
@@ -102,7 +102,7 @@ from typing import ClassVar, Literal
 import numpy as np
 from pydantic import Field, StrictBool, ValidationInfo, field_validator
 
-from dynamics.config import NonNegativeReal, PositiveReal
+from gyroemu.dynamics.config import NonNegativeReal, PositiveReal
 
 from .mechanism import GyroMechanism, GyroResponse, GyroTruth
 from .rate_gyro import RPM, StopAngle, inner_rate_for, sdf_axes, simulate_gimbal

@@ -115,13 +115,13 @@ from __future__ import annotations
 import math
 from typing import ClassVar, Literal
 
-import numba
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator
 
-from dynamics.config import NonNegativeReal, PositiveReal
+from gyroemu.dynamics.config import NonNegativeReal, PositiveReal
 
 from .mechanism import GyroMechanism, GyroResponse, GyroTruth
+from gyroemu.dynamics.jit import njit
 
 __all__ = ["RingLaserGyro"]
 
@@ -297,7 +297,7 @@ class RingLaserGyro(GyroMechanism):
 # --------------------------------------------------------------------------------------------------
 
 
-@numba.njit(cache=True, error_model="numpy", fastmath=_FAST)
+@njit(error_model="numpy", fastmath=_FAST)
 def _adler_kernel(omega, alpha, dither, dither_rate, h, K, k_lock, psi0, out):
     """Integrate dψ/dt = K (ω + dθ_d/dt) − k sin ψ over the nodes of a uniform grid (all axes at once).
 
@@ -334,7 +334,7 @@ def _adler_kernel(omega, alpha, dither, dither_rate, h, K, k_lock, psi0, out):
             e[a] = ea * (1.5 - 0.5 * (ea.real * ea.real + ea.imag * ea.imag))  # keep |e| = 1 against round-off
 
 
-@numba.njit(cache=True, error_model="numpy", fastmath=_FAST)
+@njit(error_model="numpy", fastmath=_FAST)
 def _step_integrals(gain, rate0, rate1, h):
     """I = ∫₀ʰ e^{iφ(s)} ds, M = ∫₀ʰ e^{iφ(s)} conj(I(s)) ds and e^{iφ(h)} for the cubic Hermite phase
     φ with φ(0) = 0, φ(h) = ``gain``, φ'(0) = ``rate0``, φ'(h) = ``rate1``.
@@ -382,7 +382,7 @@ def _step_integrals(gain, rate0, rate1, h):
     return big_i, big_m, e0
 
 
-@numba.njit(cache=True, error_model="numpy", fastmath=_FAST)
+@njit(error_model="numpy", fastmath=_FAST)
 def _filon_weights(ex, x):
     """Weights of a sub-interval whose phase advances linearly by ``x`` (``ex`` = e^{ix}), per unit
     length (u = s/h_s ∈ [0, 1]):
@@ -407,7 +407,7 @@ def _filon_weights(ex, x):
     return f, g, m
 
 
-@numba.njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _dither_nodes(elapsed, frequency_hz, table, first_cycle, angle, rate):
     """Dither angle θ_d = A(u) sin 2πu and rate dθ_d/dt at u = f_d × ``elapsed`` (M,), written to
     ``angle``, ``rate`` (M, 3). A(u) = A_n + (A_{n+1} − A_n)(u − n), n = ⌊u⌋, with A_n = ``table[n −
@@ -430,7 +430,7 @@ _PIO2_2 = 6.07710050630396597660e-11
 _PIO2_3 = 2.02226624879595063154e-21
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@njit(error_model="numpy", inline="always")
 def _sincos(x):
     """(sin x, cos x), three times faster than two libm calls here (the kernel's main cost).
 

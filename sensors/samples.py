@@ -19,7 +19,7 @@ class ImuSamples:
         Sample stamps, s, as the device's clock reports them.
     gyro : ndarray (N, 3)
         Angular rate, rad/s: the indicated angle increment over ``[t_{k−1}, t_k]`` divided by the
-        nominal sample interval (the strapdown convention, see :mod:`sensors.mechanism`).
+        nominal sample interval (the strapdown convention, see :mod:`gyroemu.sensors.mechanism`).
     accel : ndarray (N, 3)
         Specific force, m/s², the mean over the same interval.
     mag : ndarray (N, 3)

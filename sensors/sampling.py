@@ -1,6 +1,6 @@
 """The truth a mounted sensor sees, at any instant within a trajectory's span.
 
-A :class:`~dynamics.Trajectory` is sampled at the scenario's rate; sensors need their truth at their
+A :class:`~gyroemu.dynamics.Trajectory` is sampled at the scenario's rate; sensors need their truth at their
 own instants (an inner rate for the physics, the output instants of a clock that runs fast or slow).
 :class:`SensorTruth` interpolates splines (scipy), each built once, when first needed:
 
@@ -25,9 +25,9 @@ import numpy as np
 from scipy.interpolate import CubicHermiteSpline, CubicSpline
 from scipy.spatial.transform import Rotation, Slerp
 
-from dynamics import Trajectory
-from dynamics.rigid_body import point_acceleration
-from dynamics.rotation import quat_conjugate, quat_from_rotvec, quat_multiply, quat_normalize, quat_rotate
+from gyroemu.dynamics import Trajectory
+from gyroemu.dynamics.rigid_body import point_acceleration
+from gyroemu.dynamics.rotation import quat_conjugate, quat_from_rotvec, quat_multiply, quat_normalize, quat_rotate
 
 __all__ = ["SensorTruth"]
 

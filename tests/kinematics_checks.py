@@ -16,8 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dynamics import EARTH_RATE
-from dynamics.rotation import body_rate_from_quat_derivative, quat_conjugate, quat_rotate
+from gyroemu.dynamics import EARTH_RATE
+from gyroemu.dynamics.rotation import body_rate_from_quat_derivative, quat_conjugate, quat_rotate
 
 EPS = np.finfo(float).eps
 

@@ -37,7 +37,7 @@ class Procs:
     def start(self, name, *args):
         out = open(self.folder / f"{name}.log", "wb")
         env = dict(os.environ, PYTHONUNBUFFERED="1")
-        self.procs[name] = subprocess.Popen([sys.executable, "-m", "pipelines.cli", *args], cwd=ROOT, env=env,
+        self.procs[name] = subprocess.Popen([sys.executable, "-m", "gyroemu", *args], cwd=ROOT, env=env,
                                             stdout=out, stderr=subprocess.STDOUT)
         out.close()
         return self.procs[name]
@@ -90,7 +90,7 @@ class Listener:
     collecting ``(key, payload, sequence, send stamp ns)`` of everything under ``key_expr``."""
 
     def __init__(self, key_expr="gyroemu/**"):
-        from pipelines.zenoh_io import open_session, session_config, subscribe
+        from gyroemu.pipelines.zenoh_io import open_session, session_config, subscribe
 
         self.endpoint = f"tcp/127.0.0.1:{free_port()}"
         self.session = open_session(session_config(listen=[self.endpoint], mode="peer"))

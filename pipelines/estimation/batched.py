@@ -14,17 +14,18 @@ import numpy as np
 from . import mekf_kernels as kern
 from .mekf import MekfParams, earth_rate_enu, initial_state
 from .protocol import Estimate, FilterSetup
+from gyroemu.dynamics.jit import njit
 
 __all__ = ["mekf_batch"]
 
 
-@numba.njit(cache=True)
+@njit
 def kalman_predict(P, F, Q):
     """P ← F P Fᵀ + Q (the error state is zero between windows, so x stays zero)."""
     P[:, :] = F @ P @ F.T + Q
 
 
-@numba.njit(cache=True)
+@njit
 def kalman_update(x, P, z, H, R):
     """y = z − H x, S = H P Hᵀ + R, K = P Hᵀ S⁻¹, x ← x + K y, P ← (I − K H) P (I − K H)ᵀ + K R Kᵀ."""
     PHT = P @ H.T
@@ -35,7 +36,7 @@ def kalman_update(x, P, z, H, R):
     P[:, :] = A @ P @ A.T + K @ R @ K.T
 
 
-@numba.njit(cache=True)
+@njit
 def _window(q, b, slow, win, phi, P, x, earth, params, use_mag):
     """One window's prediction and updates, then the injection: :meth:`Mekf._window`, compiled."""
     F = np.empty((kern.X_SIZE, kern.X_SIZE))
@@ -54,7 +55,7 @@ def _window(q, b, slow, win, phi, P, x, earth, params, use_mag):
     kern.inject(x, q, b, slow, win, phi)
 
 
-@numba.njit(cache=True, parallel=True)
+@njit(parallel=True)
 def _run(q, b, slow, P, t, gyro, delta, accel, mag, earth, params, use_mag, q_out, b_out):
     runs, n = gyro.shape[0], len(t)
     for r in numba.prange(runs):

@@ -6,7 +6,7 @@ errors ``(δθ, δb, δM)``, ``δθ`` in world axes. The gyro drives a
 strapdown integration at every sample; every window (20 ms by default) the error covariance is
 propagated over the window, the window's measurements update the error state, and the error is folded
 back into the nominal state (Markley & Crassidis, *Fundamentals of Spacecraft Attitude Determination
-and Control*, §6.2; the models are in :mod:`pipelines.estimation.mekf_kernels`):
+and Control*, §6.2; the models are in :mod:`gyroemu.pipelines.estimation.mekf_kernels`):
 
 * **gravity direction** from the specific force in the world frame through two low-passes of
   ``accel_tau_s``: it corrects inclination only (its ``H`` has no heading column). Non-gravitational
@@ -22,7 +22,7 @@ and Control*, §6.2; the models are in :mod:`pipelines.estimation.mekf_kernels`)
 Initialisation uses the first ``init_s`` of the first block: tilt from the mean specific force,
 heading from the mean field (9D), from Earth's rate (6D, known latitude, a gyro whose gyrocompass
 heading is better than 20°, at rest), or zero. The noise figures come from the device where they are
-known (:class:`~pipelines.estimation.protocol.DeviceNoise`) and from :class:`MekfParams`' defaults
+known (:class:`~gyroemu.pipelines.estimation.protocol.DeviceNoise`) and from :class:`MekfParams`' defaults
 otherwise: one parameter set for every log.
 """
 
@@ -33,8 +33,8 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
-from dynamics.earth import EARTH_RATE
-from dynamics.rotation import quat_from_rotvec, quat_multiply, quat_rotate
+from gyroemu.dynamics.earth import EARTH_RATE
+from gyroemu.dynamics.rotation import quat_from_rotvec, quat_multiply, quat_rotate
 from . import mekf_kernels as kern
 from .peers import initial_attitude
 from .protocol import Estimate, FilterSetup
@@ -263,8 +263,8 @@ def initial_state(t, gyro, accel, mag, setup: FilterSetup, params: MekfParams) -
 
 def _gyrocompass_heading(t, gyro, accel, q_tilt, setup, params):
     """North from Earth's rate over the first ``gyrocompass_s`` at rest, when the gyro's expected
-    heading error (:func:`sensors.gyrocompass.heading_uncertainty`) is below 20°; else None."""
-    from sensors.gyrocompass import gyrocompass, heading_uncertainty
+    heading error (:func:`gyroemu.sensors.gyrocompass.heading_uncertainty`) is below 20°; else None."""
+    from gyroemu.sensors.gyrocompass import gyrocompass, heading_uncertainty
 
     n = int(np.searchsorted(t, t[0] + params.gyrocompass_s))
     g, a = np.asarray(gyro[:n]), np.asarray(accel[:n])
@@ -288,7 +288,7 @@ def _gyrocompass_heading(t, gyro, accel, q_tilt, setup, params):
 
 
 class Mekf:
-    """The filter (see the module's docstring), obeying :class:`~pipelines.estimation.protocol.AttitudeFilter`.
+    """The filter (see the module's docstring), obeying :class:`~gyroemu.pipelines.estimation.protocol.AttitudeFilter`.
 
     Parameters
     ----------

@@ -1,6 +1,6 @@
 """The compiled parts of the MEKF that both its forms share: the per-sample strapdown and the
-measurement models. :mod:`pipelines.estimation.mekf` wraps them with filterpy's Kalman algebra;
-:mod:`pipelines.estimation.batched` with its own, run across many runs at once.
+measurement models. :mod:`gyroemu.pipelines.estimation.mekf` wraps them with filterpy's Kalman algebra;
+:mod:`gyroemu.pipelines.estimation.batched` with its own, run across many runs at once.
 
 The error state (``δθ``, ``δb``, ``δM``)
 ---------------------------------------
@@ -39,8 +39,8 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
+from gyroemu.dynamics.jit import njit
 
 # Window accumulator layout (one float64 vector per filter).
 W_ACC_N = 0      # valid accelerometer samples in the window
@@ -80,7 +80,7 @@ X_SIZE = 15
 N_DRIFT = X_SIZE - X_BIAS  # the error states that drive the attitude error: δb and δM
 
 
-@numba.njit(cache=True)
+@njit
 def quat_to_matrix(q, r):
     """R (3, 3) of the unit quaternion q = (w, x, y, z), written into ``r``."""
     w, x, y, z = q[0], q[1], q[2], q[3]
@@ -95,7 +95,7 @@ def quat_to_matrix(q, r):
     r[2, 2] = 1 - 2 * (x * x + y * y)
 
 
-@numba.njit(cache=True)
+@njit
 def _half_turn(phi_x, phi_y, phi_z):
     """exp(φ/2) = (cos |φ|/2, sin(|φ|/2) φ/|φ|) of a rotation vector φ (rad), as (w, x, y, z)."""
     angle = math.sqrt(phi_x * phi_x + phi_y * phi_y + phi_z * phi_z)
@@ -103,7 +103,7 @@ def _half_turn(phi_x, phi_y, phi_z):
     return math.cos(0.5 * angle), phi_x * s, phi_y * s, phi_z * s
 
 
-@numba.njit(cache=True)
+@njit
 def _set_product(q, aw, ax, ay, az, bw, bx, by, bz):
     """q ← a ⊗ b (Hamilton), renormalised."""
     w = aw * bw - ax * bx - ay * by - az * bz
@@ -114,14 +114,14 @@ def _set_product(q, aw, ax, ay, az, bw, bx, by, bz):
     q[0], q[1], q[2], q[3] = w / n, x / n, y / n, z / n
 
 
-@numba.njit(cache=True)
+@njit
 def rotate_body(q, phi_x, phi_y, phi_z):
     """q ← q ⊗ exp(φ/2) for a body-frame rotation vector φ (rad): the strapdown step."""
     c, dx, dy, dz = _half_turn(phi_x, phi_y, phi_z)
     _set_product(q, q[0], q[1], q[2], q[3], c, dx, dy, dz)
 
 
-@numba.njit(cache=True)
+@njit
 def strapdown(q, b, slow, win, phi, t, gyro, delta_angle, accel, mag, earth_rate_w, params, start, q_out):
     """Advance the filter from sample ``start`` until a window closes or the samples end.
 
@@ -251,7 +251,7 @@ def strapdown(q, b, slow, win, phi, t, gyro, delta_angle, accel, mag, earth_rate
     return k
 
 
-@numba.njit(cache=True)
+@njit
 def window_due(win, params):
     """Whether the window has run its time or its sample count."""
     return win[W_T] >= params[P_WINDOW] or win[W_N] >= params[P_WINDOW_N]
@@ -289,7 +289,7 @@ P_TURN_NOISE = 27
 P_SIZE = 28
 
 
-@numba.njit(cache=True)
+@njit
 def transition(win, phi, earth_rate_w, params, F, Q):
     """The window's transition ``F`` and process noise ``Q`` (X_SIZE, X_SIZE), written in place."""
     T = win[W_T]
@@ -315,7 +315,7 @@ def transition(win, phi, earth_rate_w, params, F, Q):
         Q[i, i] = q_scale
 
 
-@numba.njit(cache=True)
+@njit
 def gravity_measurement(win, slow, params, z, H, R):
     """The gravity-direction measurement at the end of a window: ``z`` (2,), ``H`` (2, X_SIZE), ``R`` (2, 2).
 
@@ -357,7 +357,7 @@ def gravity_measurement(win, slow, params, z, H, R):
     return True
 
 
-@numba.njit(cache=True)
+@njit
 def heading_measurement(win, slow, params):
     """The heading measurement, when its window (``mag_window_s``) is complete: ``(ok, y, r, h_x, h_y)``
     with the innovation ``y = ψ − D`` (rad, wrapped), its variance ``r`` and the tilt columns of its
@@ -396,7 +396,7 @@ def heading_measurement(win, slow, params):
     return True, y, r, tan_dip * mx / horizontal, tan_dip * my / horizontal
 
 
-@numba.njit(cache=True)
+@njit
 def heading_gain(P, h, r, q, K):
     """Kalman gain ``K`` (X_SIZE,) of the heading measurement ``H = hᵀ`` (:func:`heading_measurement`),
     constrained so that it never corrects inclination: the ``δθ_x``, ``δθ_y`` rows are zero, and the
@@ -420,7 +420,7 @@ def heading_gain(P, h, r, q, K):
     return S
 
 
-@numba.njit(cache=True)
+@njit
 def joseph_update(P, K, h, r):
     """P ← (I − K hᵀ) P (I − K hᵀ)ᵀ + K r Kᵀ for a scalar measurement ``H = hᵀ``: valid for any gain,
     optimal or not."""
@@ -428,7 +428,7 @@ def joseph_update(P, K, h, r):
     P[:, :] = A @ P @ A.T + r * np.outer(K, K)
 
 
-@numba.njit(cache=True)
+@njit
 def rest_measurement(win, q, b, earth_rate_w, params, z, H, R):
     """The rest measurement: ``z = ω̄_m − Rᵀ Ω_ie − b`` (3,), ``H = [Rᵀ [Ω_ie×], I, 0]`` (3, X_SIZE),
     ``R`` (3, 3): white noise over the window's rest samples plus the residual-rate floor (at rest
@@ -452,7 +452,7 @@ def rest_measurement(win, q, b, earth_rate_w, params, z, H, R):
         R[i, i] = var
 
 
-@numba.njit(cache=True)
+@njit
 def gravity_gate(P, z, H, R, slow, params):
     """Decide on the gravity measurement (``x = 0``, as it is the first after the prediction).
 
@@ -475,7 +475,7 @@ def gravity_gate(P, z, H, R, slow, params):
     return False
 
 
-@numba.njit(cache=True)
+@njit
 def heading_update(x, P, q, win, slow, params):
     """The heading measurement, gated, applied with the constrained gain of :func:`heading_gain`
     (Joseph form): ``x`` (X_SIZE,) and ``P`` are updated in place. Returns whether it was applied."""
@@ -503,13 +503,13 @@ def heading_update(x, P, q, win, slow, params):
     return True
 
 
-@numba.njit(cache=True)
+@njit
 def rest_due(win, slow, params):
     """Whether the window ends a stretch at rest long enough for the rest measurement."""
     return slow[S_REST_T] >= params[P_REST_TIME] and win[W_REST_N] >= 1.0
 
 
-@numba.njit(cache=True)
+@njit
 def inject(x, q, b, slow, win, phi):
     """Fold the error estimate into the nominal state (``q ← exp(δθ) ⊗ q``, ``b ← b + δb``,
     ``M̂ ← M̂ + δM``), zero it, and open a new window."""
@@ -541,7 +541,7 @@ def inject(x, q, b, slow, win, phi):
     phi[:, :] = 0.0
 
 
-@numba.njit(cache=True)
+@njit
 def rotations_since_first(t, gyro):
     """``R_0k`` (n, 3, 3): the rotation from sample k's body axes to sample 0's, integrated from the
     gyro (NaN samples count as zero rate), for averaging the first samples in one frame."""

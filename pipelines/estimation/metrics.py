@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dynamics.rotation import quat_conjugate, quat_multiply
+from gyroemu.dynamics.rotation import quat_conjugate, quat_multiply
 
 __all__ = ["AttitudeErrors", "attitude_errors", "convergence_time", "rmse_deg"]
 

@@ -1,7 +1,7 @@
 """Well-known attitude filters behind gyroemu's filter protocol: Madgwick, Mahony and the EKF of the
 ``ahrs`` package, and VQF from the ``vqf`` package (an optional extra: ``pip install 'gyroemu[vqf]'``).
 
-Each adapter is made from a :class:`~pipelines.estimation.protocol.FilterSetup`, keeps the library's
+Each adapter is made from a :class:`~gyroemu.pipelines.estimation.protocol.FilterSetup`, keeps the library's
 state from one ``process()`` block to the next, and returns ``q_wb`` in gyroemu's convention (ENU world,
 body to world, scalar first). Each library's defaults are kept; what the adapter has to decide (frames,
 initialisation, time steps, missing samples) is listed here.
@@ -69,7 +69,7 @@ import math
 
 import numpy as np
 
-from dynamics.rotation import quat_conjugate, quat_from_matrix, quat_from_rotvec, quat_multiply, skew
+from gyroemu.dynamics.rotation import quat_conjugate, quat_from_matrix, quat_from_rotvec, quat_multiply, skew
 
 from .protocol import Estimate, FilterSetup
 

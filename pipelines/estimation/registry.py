@@ -13,7 +13,7 @@ name              filter                                                       n
 Anything else is a user's filter: ``package.module:Class`` (imported; the current folder is tried
 too) or ``path/to/file.py:Class``. The class is called with the :class:`FilterSetup` and the object
 must have a ``name`` and a ``process(t, gyro, accel, mag=None)`` method (the protocol of
-:mod:`pipelines.estimation.protocol`). Each problem raises :class:`FilterError`, whose message names the
+:mod:`gyroemu.pipelines.estimation.protocol`). Each problem raises :class:`FilterError`, whose message names the
 argument as given.
 """
 
@@ -63,11 +63,11 @@ class FilterSpec:
 
 
 FILTERS: dict[str, FilterSpec] = {s.name: s for s in (
-    FilterSpec("mekf", "pipelines.estimation.mekf:Mekf", "gyroemu's multiplicative Kalman filter (filterpy)"),
-    FilterSpec("madgwick", "pipelines.estimation.peers:Madgwick", "Madgwick (ahrs), gain 0.033 / 0.041"),
-    FilterSpec("mahony", "pipelines.estimation.peers:Mahony", "Mahony (ahrs), k_P 1, k_I 0.3"),
-    FilterSpec("ahrs-ekf", "pipelines.estimation.peers:AhrsEkf", "quaternion EKF (ahrs), default noises"),
-    FilterSpec("vqf", "pipelines.estimation.peers:Vqf", "VQF (vqf package), default parameters", extra="vqf"),
+    FilterSpec("mekf", "gyroemu.pipelines.estimation.mekf:Mekf", "gyroemu's multiplicative Kalman filter (filterpy)"),
+    FilterSpec("madgwick", "gyroemu.pipelines.estimation.peers:Madgwick", "Madgwick (ahrs), gain 0.033 / 0.041"),
+    FilterSpec("mahony", "gyroemu.pipelines.estimation.peers:Mahony", "Mahony (ahrs), k_P 1, k_I 0.3"),
+    FilterSpec("ahrs-ekf", "gyroemu.pipelines.estimation.peers:AhrsEkf", "quaternion EKF (ahrs), default noises"),
+    FilterSpec("vqf", "gyroemu.pipelines.estimation.peers:Vqf", "VQF (vqf package), default parameters", extra="vqf"),
 )}
 
 

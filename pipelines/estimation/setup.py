@@ -19,7 +19,7 @@ __all__ = ["noise_from_device", "setup_for", "setup_from_metadata"]
 
 
 def noise_from_device(device) -> DeviceNoise:
-    """The noise figures of a :class:`sensors.Device` (the mean over its three axes), SI."""
+    """The noise figures of a :class:`gyroemu.sensors.Device` (the mean over its three axes), SI."""
     gyro = device.gyro_errors
     accel = device.spec.accelerometer.errors.to_si()
     mag = device.spec.magnetometer
@@ -73,8 +73,8 @@ def setup_from_metadata(metadata: dict | None, rate_hz: float, *, use_mag: bool)
     scenario configs as TOML), otherwise the defaults at ``rate_hz``. A config that no longer validates
     is ignored with a warning (the log stays usable)."""
     if metadata and metadata.get("device"):
-        from dynamics import scenario_from_dict
-        from sensors import device_from_dict
+        from gyroemu.dynamics import scenario_from_dict
+        from gyroemu.sensors import device_from_dict
 
         try:
             device = device_from_dict(tomllib.loads(metadata["device"]), name=metadata.get("device_name", "imu0"))

@@ -18,8 +18,8 @@ import argparse
 
 import numpy as np
 
-from sensors import noise
-from sensors.errors import GyroErrors, apply_errors
+from gyroemu.sensors import noise
+from gyroemu.sensors.errors import GyroErrors, apply_errors
 from timing import best_time  # noqa: E402  (tests/benchmarks is the script folder)
 
 TARGET = 20e6

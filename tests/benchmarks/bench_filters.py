@@ -13,7 +13,7 @@ call; the figure is the best of ``--repeats`` after one warm-up (numba compiles,
 - the increments ``exp(½ ω Δt)`` of every sample computed at once with numpy (the chain of products
   itself is sequential): the ceiling of vectorised numpy work per sample.
 
-With ``pipelines.estimation.batched`` present, also ``mekf_batch`` over ``--batch-runs`` runs of
+With ``gyroemu.pipelines.estimation.batched`` present, also ``mekf_batch`` over ``--batch-runs`` runs of
 ``--batch-seconds`` at once (one measured run plus independent white noise per run, 0.05 °/s on the gyro),
 reported as filter updates per second across runs. Targets (issue 5): the mekf ≥ 20 k samples/s
 (the ahrs EKF runs about 10 k), the batched mode ≥ 1 M updates/s across 1000 runs.
@@ -31,11 +31,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from dynamics import load_scenario  # noqa: E402
-from dynamics.rotation import quat_exp, quat_multiply  # noqa: E402
-from pipelines.estimation.registry import available_filters, make_filter, unavailable_filters  # noqa: E402
-from pipelines.estimation.setup import setup_for  # noqa: E402
-from sensors import load_device  # noqa: E402
+from gyroemu.dynamics import load_scenario  # noqa: E402
+from gyroemu.dynamics.rotation import quat_exp, quat_multiply  # noqa: E402
+from gyroemu.pipelines.estimation.registry import available_filters, make_filter, unavailable_filters  # noqa: E402
+from gyroemu.pipelines.estimation.setup import setup_for  # noqa: E402
+from gyroemu.sensors import load_device  # noqa: E402
 from timing import best_time  # noqa: E402
 
 TARGETS = {"mekf": 20e3}
@@ -106,7 +106,7 @@ def main() -> int:
         print(f"{name:48s} {rate:12,.0f} {rate / loop_rate:16.2f}{mark}")
 
     try:
-        from pipelines.estimation.batched import mekf_batch
+        from gyroemu.pipelines.estimation.batched import mekf_batch
     except ImportError as exc:
         print(f"\nbatched mode: not available ({exc})")
         return 0

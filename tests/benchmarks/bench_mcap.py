@@ -4,10 +4,10 @@
 
 A script, not a test (pytest does not collect it). End to end, from arrays to a file and back:
 
-- write: :func:`pipelines.mcap_io.write_mcap` from an ``ImuSamples`` (CDR encoding, Message records,
+- write: :func:`gyroemu.pipelines.mcap_io.write_mcap` from an ``ImuSamples`` (CDR encoding, Message records,
   zstd chunks, indexes, summary, fsync and rename), and mcap_ros2's ``Writer.write_message`` called
   once per message with the message as a dict built from the same arrays;
-- read: :func:`pipelines.mcap_io.read_mcap` to ``ImuSamples``, and the ``mcap`` reader with
+- read: :func:`gyroemu.pipelines.mcap_io.read_mcap` to ``ImuSamples``, and the ``mcap`` reader with
   mcap_ros2's ``DecoderFactory`` decoding each message to an object whose fields are copied into
   arrays.
 
@@ -34,9 +34,9 @@ from mcap.reader import make_reader  # noqa: E402
 from mcap_ros2.decoder import DecoderFactory  # noqa: E402
 from mcap_ros2.writer import Writer as Ros2Writer  # noqa: E402
 
-from pipelines.mcap_io import ImuSeries, Recording, read_mcap, write_mcap  # noqa: E402
-from pipelines.messages import schema_text  # noqa: E402
-from sensors.samples import ImuSamples  # noqa: E402
+from gyroemu.pipelines.mcap_io import ImuSeries, Recording, read_mcap, write_mcap  # noqa: E402
+from gyroemu.pipelines.messages import schema_text  # noqa: E402
+from gyroemu.sensors.samples import ImuSamples  # noqa: E402
 from timing import best_time  # noqa: E402
 
 TARGET = 200e3

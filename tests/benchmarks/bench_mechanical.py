@@ -36,11 +36,11 @@ from scipy.integrate import solve_ivp  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from dynamics.rotation import body_rate_from_euler_zyx, quat_conjugate, quat_from_euler_zyx, quat_multiply  # noqa: E402
-from sensors.free_gyro import FreeGyro, _spin_rate  # noqa: E402
-from sensors.mechanism import GyroTruth  # noqa: E402
-from sensors.rate_gyro import RateGyro, sdf_axes, simulate_gimbal  # noqa: E402
-from sensors.rate_integrating import RateIntegratingGyro  # noqa: E402
+from gyroemu.dynamics.rotation import body_rate_from_euler_zyx, quat_conjugate, quat_from_euler_zyx, quat_multiply  # noqa: E402
+from gyroemu.sensors.free_gyro import FreeGyro, _spin_rate  # noqa: E402
+from gyroemu.sensors.mechanism import GyroTruth  # noqa: E402
+from gyroemu.sensors.rate_gyro import RateGyro, sdf_axes, simulate_gimbal  # noqa: E402
+from gyroemu.sensors.rate_integrating import RateIntegratingGyro  # noqa: E402
 from timing import best_time  # noqa: E402  (tests/benchmarks is the script folder)
 
 TARGET = 100.0  # × real time

@@ -5,7 +5,7 @@
 A script, not a test (pytest does not collect it). Both models run a three-axis triad through
 :meth:`MemsGyro.respond` on the inner grid the mechanism asks for at the output rate
 (:meth:`MemsGyro.inner_rate_hz`, 4 kHz at 1 kHz output for the defaults), in chunks of
-``sensors.imu.CHUNK_INNER_SAMPLES`` carrying their state, as the IMU feeds them. The truth is a
+``gyroemu.sensors.imu.CHUNK_INNER_SAMPLES`` carrying their state, as the IMU feeds them. The truth is a
 tumbling, vibrating, warming sensor; making it is not timed, only ``respond``. Each figure is the best
 of ``--repeats`` runs after a warm-up that loads the numba kernels. Printed: simulated seconds per
 wall-clock second ("× real time") for each model, and their ratio.
@@ -31,9 +31,9 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from sensors.imu import CHUNK_INNER_SAMPLES  # noqa: E402
-from sensors.mechanism import GyroTruth  # noqa: E402
-from sensors.mems import CARRIER_STEPS_PER_CYCLE, MemsGyro  # noqa: E402
+from gyroemu.sensors.imu import CHUNK_INNER_SAMPLES  # noqa: E402
+from gyroemu.sensors.mechanism import GyroTruth  # noqa: E402
+from gyroemu.sensors.mems import CARRIER_STEPS_PER_CYCLE, MemsGyro  # noqa: E402
 
 TARGET = 100.0
 

@@ -1,14 +1,14 @@
 """Throughput of the prescribed-motion kinds, in samples per second, against a per-sample baseline.
 
 Run ``python tests/benchmarks/bench_motions.py [--samples N] [--repeats R]`` (a script, not collected by
-pytest). For each built-in scenario of :mod:`dynamics.motions` and :mod:`dynamics.vehicles` it times, on
+pytest). For each built-in scenario of :mod:`gyroemu.dynamics.motions` and :mod:`gyroemu.dynamics.vehicles` it times, on
 N samples at the scenario's rate, the best of R runs after a warm-up, with one BLAS thread:
 
 ``world``
     ``spec.world_motion(t)``: the kind's closed forms (attitude, ω, α, position, velocity, acceleration
     relative to the world frame).
 ``earth``
-    :func:`dynamics.trajectory.trajectory_from_world_motion` on that motion (Earth rate, Coriolis,
+    :func:`gyroemu.dynamics.trajectory.trajectory_from_world_motion` on that motion (Earth rate, Coriolis,
     gravity, magnetic field), as ns per sample, and its share of world + earth.
 ``simulate``
     ``spec.trajectory(t)``: world + earth, what ``Scenario.simulate`` returns. Target: at least
@@ -36,8 +36,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # single-core figures; set b
 import argparse  # noqa: E402
 import time  # noqa: E402
 
-from dynamics import load_scenario  # noqa: E402
-from dynamics.trajectory import trajectory_from_world_motion  # noqa: E402
+from gyroemu.dynamics import load_scenario  # noqa: E402
+from gyroemu.dynamics.trajectory import trajectory_from_world_motion  # noqa: E402
 
 SCENARIOS = [
     "bench_static",

@@ -7,7 +7,7 @@ measured in the same run.
 A script, not a test (pytest does not collect it). Each mechanism runs a three-axis triad through
 ``respond`` on the inner grid it asks for at its output rate (:meth:`inner_rate_hz`: the output rate
 itself for the FOG, the 32 kHz ``simulation_rate_hz`` for the dithered RLG, which must resolve its
-dither and lock-in crossings), in chunks of ``sensors.imu.CHUNK_INNER_SAMPLES`` carrying their state,
+dither and lock-in crossings), in chunks of ``gyroemu.sensors.imu.CHUNK_INNER_SAMPLES`` carrying their state,
 as the IMU feeds them. The truth is a manoeuvring vehicle (rates up to ~0.5 rad/s); making it is not
 timed. Each figure is the best of ``--repeats`` runs after a warm-up that loads the numba kernels;
 "× real time" is simulated seconds per wall-clock second. Target: 100× for every mechanism case.
@@ -46,10 +46,10 @@ from scipy.integrate import solve_ivp  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from sensors.fog import ELEMENTARY_CHARGE, FiberOpticGyro  # noqa: E402
-from sensors.imu import CHUNK_INNER_SAMPLES  # noqa: E402
-from sensors.mechanism import GyroTruth  # noqa: E402
-from sensors.rlg import RingLaserGyro  # noqa: E402
+from gyroemu.sensors.fog import ELEMENTARY_CHARGE, FiberOpticGyro  # noqa: E402
+from gyroemu.sensors.imu import CHUNK_INNER_SAMPLES  # noqa: E402
+from gyroemu.sensors.mechanism import GyroTruth  # noqa: E402
+from gyroemu.sensors.rlg import RingLaserGyro  # noqa: E402
 
 TARGET = 100.0
 
@@ -182,8 +182,8 @@ def fog_detector_samples(gyro: FiberOpticGyro, span: float, rng: np.random.Gener
 
 def device_run(kind: str, rate_hz: float, seconds: float, repeats: int) -> float:
     """Best wall time of ``Device.measure`` over a ``seconds``-long trajectory (made outside the clock)."""
-    from dynamics import Environment, trajectory_from_world_motion
-    from sensors import device_from_dict
+    from gyroemu.dynamics import Environment, trajectory_from_world_motion
+    from gyroemu.sensors import device_from_dict
 
     t = np.arange(int(round(seconds * 200)) + 1) / 200.0  # the trajectory at 200 Hz, the IMU interpolates
     omega, alpha = vehicle(t)

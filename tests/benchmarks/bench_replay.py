@@ -18,9 +18,9 @@ less the smallest such offset of the run (so it counts from the earliest message
 unknown ``t_start``). Each configuration runs ``--repeats`` times, interleaved so that machine load
 hits them alike; the table gives each run, then the median of the runs.
 
-Baseline, in the same run: the same replay with :data:`pipelines.zenoh_io.SLEEP_ONLY` (sleep to each
+Baseline, in the same run: the same replay with :data:`gyroemu.pipelines.zenoh_io.SLEEP_ONLY` (sleep to each
 deadline, Python's 5 ms GIL switch interval, the garbage collector on, the kernel's 50 us timer
-slack: the replay before :data:`pipelines.zenoh_io.PRECISE`).
+slack: the replay before :data:`gyroemu.pipelines.zenoh_io.PRECISE`).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from pipelines.zenoh_io import open_session, session_config, subscribe  # noqa: E402
+from gyroemu.pipelines.zenoh_io import open_session, session_config, subscribe  # noqa: E402
 
 SCENARIO, DEVICE = "heavy_top", "consumer_mems"
 TIMINGS = {"baseline (SLEEP_ONLY)": "SLEEP_ONLY", "gyroemu (PRECISE)": "PRECISE"}
@@ -56,7 +56,7 @@ def free_port() -> int:
 
 
 def replay_once(log: Path, folder: Path, timing: str, recorder: bool) -> dict:
-    """One replay of ``log`` with ``pipelines.zenoh_io.<timing>`` as the publisher's default."""
+    """One replay of ``log`` with ``gyroemu.pipelines.zenoh_io.<timing>`` as the publisher's default."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     session = open_session(session_config(listen=[endpoint], mode="peer"))
     rec = None
@@ -65,7 +65,7 @@ def replay_once(log: Path, folder: Path, timing: str, recorder: bool) -> dict:
         if recorder:
             rec_log = folder / "rec.log"
             with open(rec_log, "wb") as out:
-                rec = subprocess.Popen([sys.executable, "-m", "pipelines.cli", "record", "--out",
+                rec = subprocess.Popen([sys.executable, "-m", "gyroemu", "record", "--out",
                                         str(folder / "rec.mcap"), "--connect", endpoint, "--mode", "client"],
                                        cwd=ROOT, stdout=out, stderr=subprocess.STDOUT,
                                        env=dict(os.environ, PYTHONUNBUFFERED="1"))
@@ -75,9 +75,9 @@ def replay_once(log: Path, folder: Path, timing: str, recorder: bool) -> dict:
                     raise RuntimeError(f"recorder did not start:\n{rec_log.read_text(errors='replace')}")
                 time.sleep(0.05)
             time.sleep(1.0)  # its subscription reaches the replay's router-less peer mesh
-        code = ("import sys, pipelines.zenoh_io as z\n"
+        code = ("import sys, gyroemu.pipelines.zenoh_io as z\n"
                 f"z.PRECISE = z.{timing}\n"
-                "from pipelines.cli import main\n"
+                "from gyroemu.pipelines.cli import main\n"
                 f"sys.exit(main(['replay', {str(log)!r}, '--connect', {endpoint!r}]))\n")
         run = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=600)
         if run.returncode != 0:
@@ -116,7 +116,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="bench_replay_") as tmp:
         folder = Path(tmp)
         log = folder / "x.mcap"
-        subprocess.run([sys.executable, "-m", "pipelines.cli", "simulate", "--scenario", SCENARIO, "--device",
+        subprocess.run([sys.executable, "-m", "gyroemu", "simulate", "--scenario", SCENARIO, "--device",
                         DEVICE, "--duration", str(args.duration), "--out", str(log)], cwd=ROOT, check=True,
                        capture_output=True)
         results: dict[tuple[str, bool], list[dict]] = {}

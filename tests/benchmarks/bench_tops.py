@@ -37,9 +37,9 @@ from scipy.special import ellipj, ellipk, ellipkinc  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from dynamics import load_scenario  # noqa: E402
-from dynamics.rotation import body_rate_from_euler_zxz, quat_from_euler_zxz, quat_rotate  # noqa: E402
-from dynamics.tops import pivot_moments  # noqa: E402
+from gyroemu.dynamics import load_scenario  # noqa: E402
+from gyroemu.dynamics.rotation import body_rate_from_euler_zxz, quat_from_euler_zxz, quat_rotate  # noqa: E402
+from gyroemu.dynamics.tops import pivot_moments  # noqa: E402
 
 HOUR_S = 3600.0
 BUDGET_S = 10.0

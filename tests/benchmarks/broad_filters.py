@@ -4,7 +4,7 @@ overrides): total, heading and inclination RMSE in 9D and inclination RMSE in 6D
     python tests/benchmarks/broad_filters.py [--filter NAME ...] [--trials 02 07 ...] [--mekf-param NAME=VALUE ...]
 
 A script, not a test (the ``ahrs`` filters are per-sample Python: about 3 minutes for all eight trials).
-Each filter runs through gyroemu's protocol (the adapters of :mod:`pipelines.estimation.peers` for the
+Each filter runs through gyroemu's protocol (the adapters of :mod:`gyroemu.pipelines.estimation.peers` for the
 peers) with one global parameter set: its defaults, the sample rate from the file. The errors are the
 dataset's own (README of the folder): RMSE in degrees over the ``movement`` samples, NaN reference rows
 ignored. The same figures come from ``gyroemu import broad TRIAL.hdf5 --out trial.mcap`` then
@@ -13,7 +13,7 @@ ignored. The same figures come from ``gyroemu import broad TRIAL.hdf5 --out tria
 ``vqf`` is the online filter (:class:`vqf.VQF`, causal, as a live filter must be). ``--offline-vqf`` adds
 the rows of ``vqf.offlineVQF`` (acausal: it also filters backwards over the whole trial), called
 directly with its defaults, the figures usually quoted for VQF on BROAD; it is not a gyroemu filter.
-``--mekf-param accel_tau_s=1.5`` overrides one of :class:`~pipelines.estimation.MekfParams`' defaults for
+``--mekf-param accel_tau_s=1.5`` overrides one of :class:`~gyroemu.pipelines.estimation.MekfParams`' defaults for
 the ``mekf`` rows (how the defaults' plateau in README was measured).
 """
 
@@ -29,11 +29,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from pipelines.estimation.mekf import Mekf, MekfParams  # noqa: E402
-from pipelines.importers import read_broad  # noqa: E402
-from pipelines.estimation.metrics import attitude_errors, rmse_deg  # noqa: E402
-from pipelines.estimation.protocol import FilterSetup  # noqa: E402
-from pipelines.estimation.registry import available_filters, make_filter, unavailable_filters  # noqa: E402
+from gyroemu.pipelines.estimation.mekf import Mekf, MekfParams  # noqa: E402
+from gyroemu.pipelines.importers import read_broad  # noqa: E402
+from gyroemu.pipelines.estimation.metrics import attitude_errors, rmse_deg  # noqa: E402
+from gyroemu.pipelines.estimation.protocol import FilterSetup  # noqa: E402
+from gyroemu.pipelines.estimation.registry import available_filters, make_filter, unavailable_filters  # noqa: E402
 
 BROAD_DIR = Path(os.environ.get("GYROEMU_BROAD_DIR",
                                 Path(__file__).resolve().parents[3] / "shared" / "datasets" / "broad"))

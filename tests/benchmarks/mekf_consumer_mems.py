@@ -20,10 +20,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from dynamics import load_scenario  # noqa: E402
-from pipelines.estimation import Mekf, attitude_errors, rmse_deg, setup_for  # noqa: E402
-from pipelines.mcap_io import truth_series  # noqa: E402
-from sensors import load_device  # noqa: E402
+from gyroemu.dynamics import load_scenario  # noqa: E402
+from gyroemu.pipelines.estimation import Mekf, attitude_errors, rmse_deg, setup_for  # noqa: E402
+from gyroemu.pipelines.mcap_io import truth_series  # noqa: E402
+from gyroemu.sensors import load_device  # noqa: E402
 
 
 def main() -> int:

@@ -4,7 +4,7 @@ from typing import Literal
 
 import pytest
 
-from dynamics.config import ConfigError, PositiveReal, Section, Vec3, read_toml, resolve_config, validate
+from gyroemu.dynamics.config import ConfigError, PositiveReal, Section, Vec3, read_toml, resolve_config, validate
 
 
 class Body(Section):

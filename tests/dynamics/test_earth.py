@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from dynamics import EARTH_RATE, Environment, Site, earth_rate_enu, normal_gravity, trajectory_from_world_motion
-from dynamics.rotation import quat_from_euler_zyx, quat_rotate
+from gyroemu.dynamics import EARTH_RATE, Environment, Site, earth_rate_enu, normal_gravity, trajectory_from_world_motion
+from gyroemu.dynamics.rotation import quat_from_euler_zyx, quat_rotate
 
 
 def test_normal_gravity_matches_wgs84_published_values():

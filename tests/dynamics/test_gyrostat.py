@@ -9,9 +9,9 @@ Tolerances: DOP853's local error per step is below ``rtol·|y| + atol``; the wor
 import numpy as np
 import pytest
 
-from dynamics.gyrostat import W, GimballedRotor, Gyrostat, Rotor, SpinProfile
-from dynamics.integrate import Jump, integrate
-from dynamics.rotation import quat_from_euler_zyx
+from gyroemu.dynamics.gyrostat import W, GimballedRotor, Gyrostat, Rotor, SpinProfile
+from gyroemu.dynamics.integrate import Jump, integrate
+from gyroemu.dynamics.rotation import quat_from_euler_zyx
 
 RTOL = 1e-10
 EPS = np.finfo(float).eps

@@ -10,10 +10,10 @@ while gravity keeps pulling: the box leaves at ``e v − g τ``.
 import numpy as np
 import pytest
 
-from dynamics import ConfigError, load_scenario, scenario_from_dict
-from dynamics.impact import contact_impulse
-from dynamics.inertia import box
-from dynamics.rigid_body import P, contact_mass_matrix, rotation_matrix
+from gyroemu.dynamics import ConfigError, load_scenario, scenario_from_dict
+from gyroemu.dynamics.impact import contact_impulse
+from gyroemu.dynamics.inertia import box
+from gyroemu.dynamics.rigid_body import P, contact_mass_matrix, rotation_matrix
 
 EPS = np.finfo(float).eps
 

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from dynamics import inertia
-from dynamics.inertia import InertiaError
-from dynamics.rotation import quat_from_rotvec, quat_rotate
+from gyroemu.dynamics import inertia
+from gyroemu.dynamics.inertia import InertiaError
+from gyroemu.dynamics.rotation import quat_from_rotvec, quat_rotate
 
 EPS = np.finfo(float).eps
 

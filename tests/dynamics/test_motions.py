@@ -1,4 +1,4 @@
-"""Prescribed motions (dynamics.motions): closed forms against finite differences and against theory.
+"""Prescribed motions (gyroemu.dynamics.motions): closed forms against finite differences and against theory.
 
 The kinematic checks (:func:`assert_kinematics`) difference the produced samples and compare with the
 produced derivatives. Their tolerances are the central-difference truncation bounds
@@ -18,8 +18,8 @@ import pytest
 from scipy.integrate import simpson
 from scipy.special import j1
 
-from dynamics import KINDS, ConfigError, EARTH_RATE, list_scenarios, load_scenario, normal_gravity, scenario_from_dict
-from dynamics.motions import (
+from gyroemu.dynamics import KINDS, ConfigError, EARTH_RATE, list_scenarios, load_scenario, normal_gravity, scenario_from_dict
+from gyroemu.dynamics.motions import (
     ConingSpec,
     OscillationSpec,
     RateTableSpec,
@@ -29,7 +29,7 @@ from dynamics.motions import (
     quat_from_rpy_deg,
     smooth_step,
 )
-from dynamics.rotation import (
+from gyroemu.dynamics.rotation import (
     quat_angle,
     quat_conjugate,
     quat_rotate,
@@ -430,7 +430,7 @@ def test_sculling_rectified_specific_force(phase_deg):
 # Config files and errors
 # --------------------------------------------------------------------------------------------------
 
-BUILT_IN = [s.name for s in list_scenarios() if KINDS[s.kind].startswith(("dynamics.motions", "dynamics.vehicles"))]
+BUILT_IN = [s.name for s in list_scenarios() if KINDS[s.kind].startswith(("gyroemu.dynamics.motions", "gyroemu.dynamics.vehicles"))]
 
 
 @pytest.mark.parametrize("name", BUILT_IN)

@@ -10,11 +10,11 @@ quadratic one, like energy); finite differences err by their truncation terms ``
 import numpy as np
 import pytest
 
-from dynamics.gyrostat import Gyrostat
-from dynamics.integrate import Jump, integrate
-from dynamics.rigid_body import (L, P, Q, X, RigidBody, point_acceleration, point_position, point_velocity, rotate,
+from gyroemu.dynamics.gyrostat import Gyrostat
+from gyroemu.dynamics.integrate import Jump, integrate
+from gyroemu.dynamics.rigid_body import (L, P, Q, X, RigidBody, point_acceleration, point_position, point_velocity, rotate,
                                  rotate_back, rotation_matrix)
-from dynamics.rotation import quat_from_euler_zyx, quat_to_matrix
+from gyroemu.dynamics.rotation import quat_from_euler_zyx, quat_to_matrix
 
 EPS = np.finfo(float).eps
 RTOL = 1e-10

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from dynamics.rotation import (
+from gyroemu.dynamics.rotation import (
     body_rate_from_euler_zxz,
     body_rate_from_euler_zyx,
     body_rate_from_quat_derivative,

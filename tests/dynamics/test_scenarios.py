@@ -5,8 +5,8 @@ import tomllib
 import numpy as np
 import pytest
 
-from dynamics import KINDS, ConfigError, Trajectory, list_scenarios, load_scenario, scenario_from_dict
-from dynamics.config import config_dir
+from gyroemu.dynamics import KINDS, ConfigError, Trajectory, list_scenarios, load_scenario, scenario_from_dict
+from gyroemu.dynamics.config import config_dir
 
 BUILTIN = sorted(p.stem for p in (config_dir() / "scenarios").glob("*.toml"))
 

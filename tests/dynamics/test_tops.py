@@ -16,9 +16,9 @@ import pytest
 import tomli_w
 from scipy.special import ellipj, ellipk
 
-from dynamics import ConfigError, load_scenario, scenario_from_dict
-from dynamics.config import config_dir, read_toml
-from dynamics.rotation import (
+from gyroemu.dynamics import ConfigError, load_scenario, scenario_from_dict
+from gyroemu.dynamics.config import config_dir, read_toml
+from gyroemu.dynamics.rotation import (
     body_rate_from_euler_zxz,
     body_rate_from_quat_derivative,
     quat_angle,
@@ -30,8 +30,8 @@ from dynamics.rotation import (
     quat_multiply,
     quat_rotate,
 )
-from dynamics.splitting import COMPOSITIONS, DEFAULT_TOL, integrate_heavy_top, plan_steps
-from dynamics.tops import pivot_moments
+from gyroemu.dynamics.splitting import COMPOSITIONS, DEFAULT_TOL, integrate_heavy_top, plan_steps
+from gyroemu.dynamics.tops import pivot_moments
 
 EPS = np.finfo(float).eps
 SCENARIOS = ("free_symmetric_top", "intermediate_axis_flip", "heavy_top")

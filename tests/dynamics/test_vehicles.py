@@ -1,4 +1,4 @@
-"""Vehicles (dynamics.vehicles): the random manoeuvre and the car against finite differences and theory.
+"""Vehicles (gyroemu.dynamics.vehicles): the random manoeuvre and the car against finite differences and theory.
 
 The finite-difference tolerances need bounds on third and fourth derivatives of compositions (the
 attitude from Euler angles, roll ∝ κ(s(t)) v(t)², the position through a turn). They come from Cauchy's
@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 from scipy.integrate import IntegrationWarning, quad
 
-from dynamics import ConfigError, EARTH_RATE, scenario_from_dict
-from dynamics.motions import smooth_step
-from dynamics.rotation import body_rate_from_euler_zyx, euler_zyx_from_quat, quat_from_euler_zyx
-from dynamics.vehicles import Road, SuspensionTransient, Turn, euler_zyx_motion
+from gyroemu.dynamics import ConfigError, EARTH_RATE, scenario_from_dict
+from gyroemu.dynamics.motions import smooth_step
+from gyroemu.dynamics.rotation import body_rate_from_euler_zyx, euler_zyx_from_quat, quat_from_euler_zyx
+from gyroemu.dynamics.vehicles import Road, SuspensionTransient, Turn, euler_zyx_motion
 
 
 from kinematics_checks import EPS, DerivativeBounds, assert_kinematics, step_bound, uniform_times

@@ -9,8 +9,8 @@ is switched off there so that only these terms separate simulation and theory.
 import numpy as np
 import pytest
 
-from dynamics import ConfigError, load_scenario, scenario_from_dict
-from dynamics.vessels import jonswap
+from gyroemu.dynamics import ConfigError, load_scenario, scenario_from_dict
+from gyroemu.dynamics.vessels import jonswap
 
 SMALL_SEA = {"significant_height_m": 0.1}
 RECORD_S, RATE_HZ = 600.0, 5.0

@@ -1,4 +1,4 @@
-"""The filter bench (pipelines.bench), the peer adapters (pipelines.estimation.peers) and the registry.
+"""The filter bench (gyroemu.pipelines.bench), the peer adapters (gyroemu.pipelines.estimation.peers) and the registry.
 
 Bounds, and where they come from
 --------------------------------
@@ -32,15 +32,15 @@ import numpy as np
 import pytest
 from mcap.writer import Writer as PlainMcapWriter
 
-from dynamics.rotation import quat_from_euler_zyx, quat_multiply
-from pipelines import cli
-from pipelines.bench import LogCase, SimCase, evaluate_run, run_bench
-from pipelines.estimation import registry
+from gyroemu.dynamics.rotation import quat_from_euler_zyx, quat_multiply
+from gyroemu.pipelines import cli
+from gyroemu.pipelines.bench import LogCase, SimCase, evaluate_run, run_bench
+from gyroemu.pipelines.estimation import registry
 from broad_trials import BROAD_DIR, needs_trial
-from pipelines.estimation.metrics import attitude_errors, rmse_deg
-from pipelines.estimation.protocol import Estimate, FilterSetup
-from pipelines.mcap_io import Recording, truth_series, write_mcap
-from pipelines.messages import IMU
+from gyroemu.pipelines.estimation.metrics import attitude_errors, rmse_deg
+from gyroemu.pipelines.estimation.protocol import Estimate, FilterSetup
+from gyroemu.pipelines.mcap_io import Recording, truth_series, write_mcap
+from gyroemu.pipelines.messages import IMU
 
 PEERS = ["madgwick", "mahony", "ahrs-ekf", "vqf"]
 TRIAL_02 = BROAD_DIR / "02_undisturbed_slow_rotation_B.hdf5"
@@ -153,10 +153,10 @@ def test_evaluate_run_rules():
 # Peer adapters on simulated truth
 
 def _sim(configs, scenario="rotation.toml", device="ideal200.toml"):
-    from dynamics import load_scenario
-    from sensors import load_device
+    from gyroemu.dynamics import load_scenario
+    from gyroemu.sensors import load_device
 
-    from pipelines.estimation.setup import setup_for
+    from gyroemu.pipelines.estimation.setup import setup_for
 
     sc = load_scenario(configs / scenario)
     dev = load_device(configs / device, seed=0)
@@ -231,9 +231,9 @@ def test_peer_blocks_and_missing_samples(configs, name):
 TRUTH_FILTER = '''\
 """Test filters: one returning the truth of the scenario it was written for, one diverging."""
 import numpy as np
-from dynamics import load_scenario
-from pipelines.estimation.protocol import Estimate
-from sensors.sampling import SensorTruth
+from gyroemu.dynamics import load_scenario
+from gyroemu.pipelines.estimation.protocol import Estimate
+from gyroemu.sensors.sampling import SensorTruth
 
 
 class TruthFilter:
@@ -423,7 +423,7 @@ def test_log_case_counts_the_movement_mask(tmp_path, configs, user_filters):
                      scenario=sc)
     module = tmp_path / "masked.py"
     module.write_text(
-        "import numpy as np\nfrom pipelines.estimation.protocol import Estimate\n"
+        "import numpy as np\nfrom gyroemu.pipelines.estimation.protocol import Estimate\n"
         f"Q = np.load({str(tmp_path / 'q.npy')!r})\n"
         "class Masked:\n    name = 'masked'\n    def __init__(self, setup):\n        self.setup = setup\n"
         "    def process(self, t, gyro, accel, mag=None):\n        return Estimate(q_wb=Q[:len(t)])\n")
@@ -438,7 +438,7 @@ def test_log_case_counts_the_movement_mask(tmp_path, configs, user_filters):
 
 
 # ==================================================================================================
-# Batched mode (the plumbing, with a stand-in for pipelines.estimation.batched)
+# Batched mode (the plumbing, with a stand-in for gyroemu.pipelines.estimation.batched)
 
 def test_batched_mode(monkeypatch, configs):
     calls = []
@@ -450,9 +450,9 @@ def test_batched_mode(monkeypatch, configs):
         q[..., 0] = 1.0
         return Estimate(q_wb=q, gyro_bias=np.zeros((r, n, 3)))
 
-    fake = type(sys)("pipelines.estimation.batched")
+    fake = type(sys)("gyroemu.pipelines.estimation.batched")
     fake.mekf_batch = mekf_batch
-    monkeypatch.setitem(sys.modules, "pipelines.estimation.batched", fake)
+    monkeypatch.setitem(sys.modules, "gyroemu.pipelines.estimation.batched", fake)
     steady = SimCase(str(configs / "static.toml"), str(configs / "ideal200.toml"), duration=1.0)
     report = run_bench([steady], filters=["mekf"], runs=3, batched=True)
     assert calls == [(2, 200, 3), (3, 200, 3)]  # an untimed warm-up, then all runs at once (no clock jitter)
@@ -485,7 +485,7 @@ DIRECT_02 = {
 
 @pytest.fixture(scope="module")
 def trial_02():
-    from pipelines.importers import read_broad
+    from gyroemu.pipelines.importers import read_broad
 
     return read_broad(TRIAL_02)
 

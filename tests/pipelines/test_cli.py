@@ -24,7 +24,7 @@ gravity_m_s2 = 9.81
 
 
 def gyroemu(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "pipelines.cli", *args], capture_output=True, text=True, cwd=cwd)
+    return subprocess.run([sys.executable, "-m", "gyroemu", *args], capture_output=True, text=True, cwd=cwd)
 
 
 def digest(path):

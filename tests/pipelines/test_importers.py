@@ -23,12 +23,12 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from pipelines import cli
-from pipelines.importers import BROAD_CITATION, ImportInputError, import_broad, read_broad
-from pipelines.mcap_io import LogWarning, McapFileWriter, Recording, read_mcap, write_mcap
+from gyroemu.pipelines import cli
+from gyroemu.pipelines.importers import BROAD_CITATION, ImportInputError, import_broad, read_broad
+from gyroemu.pipelines.mcap_io import LogWarning, McapFileWriter, Recording, read_mcap, write_mcap
 from broad_trials import BROAD_DIR, needs_trial
-from pipelines.messages import FLAG, IMU, schema_text
-from sensors.samples import ImuSamples
+from gyroemu.pipelines.messages import FLAG, IMU, schema_text
+from gyroemu.sensors.samples import ImuSamples
 
 TRIAL = "33_disturbed_attached_magnet_2cm.hdf5"  # the smallest of the eight (48,279 samples)
 needs_broad = needs_trial(TRIAL)
@@ -167,7 +167,7 @@ def test_cli_import_and_info(tmp_path):
     source = BROAD_DIR / TRIAL
     before = fingerprint(source)
     out = tmp_path / "trial.mcap"
-    result = subprocess.run([sys.executable, "-m", "pipelines.cli", "import", "broad", str(source), "--out", str(out)],
+    result = subprocess.run([sys.executable, "-m", "gyroemu", "import", "broad", str(source), "--out", str(out)],
                             capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     assert fingerprint(source) == before

@@ -1,4 +1,4 @@
-"""MCAP logs (pipelines.mcap_io) against interface.md, the MCAP specification and independent readers.
+"""MCAP logs (gyroemu.pipelines.mcap_io) against interface.md, the MCAP specification and independent readers.
 
 Tolerances: values go through CDR bit-exactly, so decoded arrays equal the written ones exactly. Time
 stamps are stored as integer nanoseconds: ``|t_read − t| ≤ 0.5 ns + rounding``, with the rounding of
@@ -28,8 +28,8 @@ from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2McapWriter
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from dynamics import ConfigError, load_scenario
-from pipelines.mcap_io import (
+from gyroemu.dynamics import ConfigError, load_scenario
+from gyroemu.pipelines.mcap_io import (
     BODY_FRAME,
     ImuSeries,
     LogError,
@@ -40,9 +40,9 @@ from pipelines.mcap_io import (
     truth_series,
     write_mcap,
 )
-from pipelines.messages import IMU, RAW_MESSAGE_TYPES, schema_text
-from sensors import load_device
-from sensors.samples import ImuSamples
+from gyroemu.pipelines.messages import IMU, RAW_MESSAGE_TYPES, schema_text
+from gyroemu.sensors import load_device
+from gyroemu.sensors.samples import ImuSamples
 
 PRESETS = ["classic_rate_gyro", "consumer_mems", "floated_rig", "free_gyro", "ideal", "navigation_fog",
            "navigation_rlg", "tactical_mems"]

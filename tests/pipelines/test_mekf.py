@@ -8,15 +8,15 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from broad_trials import BROAD_DIR, needs_trial
-from dynamics import load_scenario
-from dynamics.earth import EARTH_RATE
-from dynamics.rotation import quat_rotate, quat_conjugate
-from pipelines.estimation import FilterSetup, Mekf, MekfParams, attitude_errors, rmse_deg, setup_for
-from pipelines.estimation import mekf_kernels as kern
-from pipelines.estimation.batched import mekf_batch
-from pipelines.mcap_io import truth_series
-from sensors import load_device
-from sensors.gyrocompass import heading_uncertainty
+from gyroemu.dynamics import load_scenario
+from gyroemu.dynamics.earth import EARTH_RATE
+from gyroemu.dynamics.rotation import quat_rotate, quat_conjugate
+from gyroemu.pipelines.estimation import FilterSetup, Mekf, MekfParams, attitude_errors, rmse_deg, setup_for
+from gyroemu.pipelines.estimation import mekf_kernels as kern
+from gyroemu.pipelines.estimation.batched import mekf_batch
+from gyroemu.pipelines.mcap_io import truth_series
+from gyroemu.sensors import load_device
+from gyroemu.sensors.gyrocompass import heading_uncertainty
 
 
 @pytest.fixture(scope="module")
@@ -100,7 +100,7 @@ def test_consumer_mems_meets_the_issue_bars_on_the_smooth_manoeuvre(seed):
 
 def test_navigation_fog_finds_north_from_earth_rate():
     """6D, at rest, latitude known: the heading error is within 3σ of what the FOG's bias and noise
-    allow (sensors.gyrocompass.heading_uncertainty), and a consumer MEMS filter does not claim it."""
+    allow (gyroemu.sensors.gyrocompass.heading_uncertainty), and a consumer MEMS filter does not claim it."""
     scenario = load_scenario("bench_static")
     traj = scenario.simulate(duration=60.0)
     device = load_device("navigation_fog", seed=3)
@@ -180,7 +180,7 @@ def test_heading_update_never_touches_inclination():
 
 
 def test_earth_rate_model_is_enu():
-    from pipelines.estimation.mekf import earth_rate_enu
+    from gyroemu.pipelines.estimation.mekf import earth_rate_enu
 
     w = earth_rate_enu(FilterSetup(rate_hz=1.0, latitude_rad=np.radians(52.5)))
     assert w[0] == 0.0 and np.isclose(np.linalg.norm(w), EARTH_RATE)
@@ -274,7 +274,7 @@ def test_broad_targets_with_one_parameter_set():
     its quoted 0.7°, both well below Madgwick's 4.96° (the dataset authors' best global set)."""
     from vqf import VQF
 
-    from pipelines.importers import read_broad
+    from gyroemu.pipelines.importers import read_broad
 
     total, inclination, vqf_total = [], [], []
     for path in sorted(BROAD_DIR.glob("*.hdf5")):
@@ -297,7 +297,7 @@ def test_simulated_field_heading_error_is_the_sensors_iron():
     a log with no device (BROAD) leaves it unknown, to the filter's default."""
     import tomllib
 
-    from sensors import device_from_dict
+    from gyroemu.sensors import device_from_dict
 
     scenario = load_scenario("smooth_manoeuvre")
     assert setup_for(load_device("consumer_mems"), scenario).field_heading_sigma == 0.0

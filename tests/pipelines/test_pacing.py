@@ -1,4 +1,4 @@
-"""The paced publisher's waiting machinery (:class:`pipelines.zenoh_io.Timing`), without timing figures:
+"""The paced publisher's waiting machinery (:class:`gyroemu.pipelines.zenoh_io.Timing`), without timing figures:
 what it changes in the process and puts back, that it never sends before a deadline, and that a
 schedule of batches goes out complete and in order. The figures are ``tests/benchmarks/bench_replay.py``'s.
 """
@@ -11,8 +11,8 @@ import pytest
 
 zenoh = pytest.importorskip("zenoh")
 
-from pipelines import zenoh_io  # noqa: E402
-from pipelines.zenoh_io import PRECISE, SLEEP_ONLY, PacedPublisher, Timing, hot_loop  # noqa: E402
+from gyroemu.pipelines import zenoh_io  # noqa: E402
+from gyroemu.pipelines.zenoh_io import PRECISE, SLEEP_ONLY, PacedPublisher, Timing, hot_loop  # noqa: E402
 
 
 def _read_slack():

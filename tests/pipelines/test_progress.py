@@ -22,7 +22,7 @@ def _run_on_pty(args) -> tuple[int, str, str]:
     """Run ``gyroemu ARGS`` with stderr on a pseudo-terminal (120 columns); returns (status, stdout, terminal)."""
     master, slave = os.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 120, 0, 0))
-    proc = subprocess.Popen([sys.executable, "-m", "pipelines.cli", *args], cwd=ROOT, stderr=slave,
+    proc = subprocess.Popen([sys.executable, "-m", "gyroemu", *args], cwd=ROOT, stderr=slave,
                             stdout=subprocess.PIPE)
     os.close(slave)
     seen = b""
@@ -62,7 +62,7 @@ def test_bar_on_a_terminal_names_each_phase(tmp_path):
 
 
 def test_no_bar_when_stderr_is_not_a_terminal(tmp_path):
-    run = subprocess.run([sys.executable, "-m", "pipelines.cli", *ARGS, "--out", str(tmp_path / "a.mcap")],
+    run = subprocess.run([sys.executable, "-m", "gyroemu", *ARGS, "--out", str(tmp_path / "a.mcap")],
                          cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert run.returncode == 0 and run.stderr == "", run.stderr
     assert (tmp_path / "a.mcap").exists()

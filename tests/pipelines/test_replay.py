@@ -28,7 +28,7 @@ N = 5000  # samples per topic at 1 kHz
 @pytest.fixture(scope="module")
 def gyroemu_mcap(tmp_path_factory):
     path = tmp_path_factory.mktemp("replay") / "x.mcap"
-    subprocess.run([sys.executable, "-m", "pipelines.cli", "simulate", "--scenario", SCENARIO, "--device", DEVICE,
+    subprocess.run([sys.executable, "-m", "gyroemu", "simulate", "--scenario", SCENARIO, "--device", DEVICE,
                     "--duration", str(DURATION), "--out", str(path)], cwd=ROOT, check=True, capture_output=True)
     return path
 
@@ -148,7 +148,7 @@ def test_bad_inputs_exit_2_naming_the_file(tmp_path, gyroemu_mcap, capsys):
     """(5) missing, not MCAP, truncated before its first chunk, corrupt, no Imu channel, unknown topic."""
     from mcap_ros2.writer import Writer
 
-    from pipelines.cli import main
+    from gyroemu.pipelines.cli import main
 
     data = gyroemu_mcap.read_bytes()
     bad = {"missing.mcap": None, "text.mcap": b"hello, not an MCAP file\n", "head.mcap": data[:200]}
@@ -183,7 +183,7 @@ def test_bad_inputs_exit_2_naming_the_file(tmp_path, gyroemu_mcap, capsys):
 
 def test_topic_keys_rule():
     """Without processes: gyroemu topics by prefix / metadata / --device-name; foreign topics under the device."""
-    from pipelines.replay import topic_keys
+    from gyroemu.pipelines.replay import topic_keys
 
     meta = [{"device_name": "d0", "topic_prefix": ""}, {"device_name": "a", "topic_prefix": "/a"}]
     keys, bad = topic_keys(["/imu", "/truth/imu", "/a/raw/fog", "/sensors/imu_raw", "/robot/imu", "/x*"], meta, "zz")
@@ -198,7 +198,7 @@ def test_iter_mcap_batches_in_log_time_order(tmp_path, gyroemu_mcap):
     shuffled (within a chunk and across neighbouring chunks), and --topics filtering."""
     from mcap_ros2.writer import Writer
 
-    from pipelines.mcap_io import iter_mcap_batches
+    from gyroemu.pipelines.mcap_io import iter_mcap_batches
 
     def flat(path, topics=None):
         return [(m.topic, m.log_time, m.data) for batch in iter_mcap_batches(path, topics) for m in batch]

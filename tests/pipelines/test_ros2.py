@@ -26,8 +26,8 @@ zenoh = pytest.importorskip("zenoh")
 
 from live_processes import Listener, free_port, mcap_messages, procs, write_foreign  # noqa: E402,F401
 
-from pipelines import ros2_keys  # noqa: E402
-from pipelines.ros2_keys import (Ros2Error, data_key, domain_id, entity_token, gyroemu_topic,  # noqa: E402
+from gyroemu.pipelines import ros2_keys  # noqa: E402
+from gyroemu.pipelines.ros2_keys import (Ros2Error, data_key, domain_id, entity_token, gyroemu_topic,  # noqa: E402
                                  node_token, parse_data_key, parse_definitions, qos_keyexpr, ros_topic,
                                  type_description, type_hash)
 
@@ -103,7 +103,7 @@ def test_hash_agrees_with_rosbags_for_every_ros2_type():
 def test_gyroemu_mcap_schema_gives_the_same_hash(tmp_path):
     """The ``ros2msg`` schema gyroemu writes into MCAP (definition + MSG: sections) parses back to the
     same hash, for Imu and for every raw type."""
-    from pipelines.messages import MESSAGE_TYPES
+    from gyroemu.pipelines.messages import MESSAGE_TYPES
 
     for name, mtype in MESSAGE_TYPES.items():
         assert type_hash(name, parse_definitions(mtype.schema, name)) == type_hash(name), name
@@ -158,7 +158,7 @@ def test_bad_ros2_usage_exits_2_naming_the_argument(tmp_path):
              (["stream", "--scenario", "heavy_top", "--device", "consumer_mems", "--ros2", "--device-name", "9x"],
               os.environ, "argument --device-name")]
     for args, environ, text in cases:
-        run = subprocess.run([sys.executable, "-m", "pipelines.cli", *args], cwd=ROOT, env=environ,
+        run = subprocess.run([sys.executable, "-m", "gyroemu", *args], cwd=ROOT, env=environ,
                              capture_output=True, text=True, timeout=60)
         assert run.returncode == 2 and text in run.stderr, (args, run.returncode, run.stderr)
     assert not (tmp_path / "x.mcap").exists()
@@ -235,10 +235,10 @@ def test_stream_router_record_in_ros2_mode(procs, tmp_path):
     assert all((r["received"], r["first"], r["last"], r["missing"], r["duplicates"]) == (n, 0, n - 1, 0, 0)
                for r in rows.values()), rows
 
-    from dynamics import load_scenario
-    from pipelines.mcap_io import mcap_channel_info, read_mcap, truth_series
-    from pipelines.stream import encode_run
-    from sensors import load_device
+    from gyroemu.dynamics import load_scenario
+    from gyroemu.pipelines.mcap_io import mcap_channel_info, read_mcap, truth_series
+    from gyroemu.pipelines.stream import encode_run
+    from gyroemu.sensors import load_device
 
     traj = load_scenario("heavy_top").simulate(duration=duration)
     samples = load_device("consumer_mems", seed=seed).measure(traj)
@@ -305,10 +305,10 @@ def test_recorder_maps_ros2_keys_back_to_topics(tmp_path):
     one-token topic (``/rosout``) or of another form is skipped, counted."""
     import numpy as np
 
-    from pipelines.mcap_io import mcap_channel_info
-    from pipelines.messages import IMU, RAW_MESSAGE_TYPES
-    from pipelines.record import Recorder, ros2_key
-    from pipelines.zenoh_io import pack_attachment
+    from gyroemu.pipelines.mcap_io import mcap_channel_info
+    from gyroemu.pipelines.messages import IMU, RAW_MESSAGE_TYPES
+    from gyroemu.pipelines.record import Recorder, ros2_key
+    from gyroemu.pipelines.zenoh_io import pack_attachment
 
     raw = RAW_MESSAGE_TYPES["rate-gyro"]
     raw_hash = type_hash(raw.name)

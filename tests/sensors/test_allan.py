@@ -4,9 +4,9 @@ import allantools
 import numpy as np
 import pytest
 
-from sensors import noise
-from sensors.allan import TERMS, AllanDeviation, allan_deviation, fit_allan
-from sensors.errors import GyroErrors, apply_errors
+from gyroemu.sensors import noise
+from gyroemu.sensors.allan import TERMS, AllanDeviation, allan_deviation, fit_allan
+from gyroemu.sensors.errors import GyroErrors, apply_errors
 
 DEG = np.pi / 180
 

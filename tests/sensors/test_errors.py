@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from dynamics.config import ConfigError, validate
-from sensors.errors import STANDARD_GRAVITY, AccelErrors, ErrorModel, GyroErrors, apply_errors
+from gyroemu.dynamics.config import ConfigError, validate
+from gyroemu.sensors.errors import STANDARD_GRAVITY, AccelErrors, ErrorModel, GyroErrors, apply_errors
 
 DEG_PER_H = np.pi / 180 / 3600  # rad/s
 UG = 1e-6 * STANDARD_GRAVITY  # m/s²

@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 from scipy.special import jv
 
-from dynamics import Environment, trajectory_from_world_motion
-from dynamics.config import ConfigError, validate
-from sensors import device_from_dict
-from sensors.allan import allan_deviation
-from sensors.fog import ELEMENTARY_CHARGE, SPEED_OF_LIGHT, FiberOpticGyro
-from sensors.mechanism import GyroTruth
+from gyroemu.dynamics import Environment, trajectory_from_world_motion
+from gyroemu.dynamics.config import ConfigError, validate
+from gyroemu.sensors import device_from_dict
+from gyroemu.sensors.allan import allan_deviation
+from gyroemu.sensors.fog import ELEMENTARY_CHARGE, SPEED_OF_LIGHT, FiberOpticGyro
+from gyroemu.sensors.mechanism import GyroTruth
 
 SIGMAS = 4
 DEG = math.pi / 180

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from dynamics.config import ConfigError, validate
-from dynamics.rotation import body_rate_from_euler_zyx, quat_from_euler_zyx
-from sensors.free_gyro import (FreeGyro, GimbalLockError, GimbalLockWarning, body_rate_from_euler_xyz,
+from gyroemu.dynamics.config import ConfigError, validate
+from gyroemu.dynamics.rotation import body_rate_from_euler_zyx, quat_from_euler_zyx
+from gyroemu.sensors.free_gyro import (FreeGyro, GimbalLockError, GimbalLockWarning, body_rate_from_euler_xyz,
                                time_derivative)
-from sensors.mechanism import GyroTruth, mechanism_class
+from gyroemu.sensors.mechanism import GyroTruth, mechanism_class
 
 FRICTIONLESS = FreeGyro(outer_viscous_friction_n_m_s_per_rad=0, outer_coulomb_friction_n_m=0,
                         inner_viscous_friction_n_m_s_per_rad=0, inner_coulomb_friction_n_m=0)
@@ -46,7 +46,7 @@ def wrap(a):
 
 def tumbling_zyx(t):
     """A carrier rolling, pitching (to ±40°) and turning: q_is and ω_b from the Z-Y-X helpers of
-    dynamics.rotation, starting from a non-trivial attitude."""
+    gyroemu.dynamics.rotation, starting from a non-trivial attitude."""
     rpy = np.stack([0.3 + 1.2 * np.sin(0.7 * t), 0.2 + 0.5 * np.sin(0.45 * t + 0.3),
                     2.5 * np.sin(0.2 * t) + 0.3 * t], -1)
     rates = np.stack([1.2 * 0.7 * np.cos(0.7 * t), 0.5 * 0.45 * np.cos(0.45 * t + 0.3),

@@ -2,10 +2,10 @@
 
 import numpy as np
 
-from dynamics import load_scenario
-from dynamics.rotation import quat_angle
-from sensors import load_device
-from sensors.gyrocompass import gyrocompass, heading_uncertainty
+from gyroemu.dynamics import load_scenario
+from gyroemu.dynamics.rotation import quat_angle
+from gyroemu.sensors import load_device
+from gyroemu.sensors.gyrocompass import gyrocompass, heading_uncertainty
 
 
 def expected_sigma(device, latitude_rad, duration_s):

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicHermiteSpline
 
-from dynamics import ConfigError, Environment, trajectory_from_world_motion
-from dynamics.rotation import quat_from_rotvec, quat_rotate
-from sensors import device_from_dict
-from sensors.mechanism import GYRO_KINDS, GyroMechanism, GyroResponse, GyroTruth, mechanism_class
+from gyroemu.dynamics import ConfigError, Environment, trajectory_from_world_motion
+from gyroemu.dynamics.rotation import quat_from_rotvec, quat_rotate
+from gyroemu.sensors import device_from_dict
+from gyroemu.sensors.mechanism import GYRO_KINDS, GyroMechanism, GyroResponse, GyroTruth, mechanism_class
 
 EPS = np.finfo(float).eps
 
@@ -125,9 +125,9 @@ class NoisyMechanism(GyroMechanism):
 
 
 def test_mechanism_noisier_than_its_spec_is_refused(monkeypatch):
-    import sensors.imu
+    import gyroemu.sensors.imu
 
-    monkeypatch.setattr(sensors.imu, "mechanism_class", lambda kind: NoisyMechanism)
+    monkeypatch.setattr(gyroemu.sensors.imu, "mechanism_class", lambda kind: NoisyMechanism)
     with pytest.raises(ConfigError, match="own white noise .* exceeds? the specified white noise") as info:
         device_from_dict({"description": "x", "rate_hz": 100, "gyro": {"errors": {"arw_deg_per_sqrt_h": 0.5}}},
                          name="dev.toml")

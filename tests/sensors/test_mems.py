@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from dynamics import Environment, trajectory_from_world_motion
-from dynamics.config import ConfigError, validate
-from sensors import device_from_dict
-from sensors.allan import allan_deviation
-from sensors.mechanism import GyroTruth
-from sensors.mems import CARRIER_STEPS_PER_CYCLE, K_BOLTZMANN, MemsGyro
+from gyroemu.dynamics import Environment, trajectory_from_world_motion
+from gyroemu.dynamics.config import ConfigError, validate
+from gyroemu.sensors import device_from_dict
+from gyroemu.sensors.allan import allan_deviation
+from gyroemu.sensors.mechanism import GyroTruth
+from gyroemu.sensors.mems import CARRIER_STEPS_PER_CYCLE, K_BOLTZMANN, MemsGyro
 
 DEG = np.pi / 180
 G0 = 9.80665  # m/s² per g

@@ -8,8 +8,8 @@ about 1/√(2(n/m − 1)) (IEEE 952 Annex C); a sample standard deviation of n i
 import numpy as np
 import pytest
 
-from sensors import noise
-from sensors.allan import allan_deviation
+from gyroemu.sensors import noise
+from gyroemu.sensors.allan import allan_deviation
 
 SIGMAS = 4
 
@@ -190,7 +190,7 @@ def test_shapes_and_per_axis_coefficients():
 def test_interpolation_reads_no_knot_beyond_the_last_sample():
     # The last sample of ``out`` sits exactly on the last knot: the knot after it does not exist. Back
     # ``coarse`` by a larger array whose next row is NaN, so reading past its end would show.
-    from sensors.noise import _interpolate_into
+    from gyroemu.sensors.noise import _interpolate_into
 
     ratio, knots = 4, 3
     backing = np.full((knots + 1, 2), np.nan)

@@ -18,10 +18,10 @@ import tomllib
 import numpy as np
 import pytest
 
-from dynamics import load_scenario
-from dynamics.config import config_dir
-from pipelines.allan import allan_report
-from sensors import device_from_dict
+from gyroemu.dynamics import load_scenario
+from gyroemu.dynamics.config import config_dir
+from gyroemu.pipelines.allan import allan_report
+from gyroemu.sensors import device_from_dict
 
 RUNS = {  # preset: (output rate Hz, hours). The consumer part runs at its own rate: its 16-bit output
     # quantiser is only dithered by the noise (and so white, as its datasheet measures) at 1 kHz.

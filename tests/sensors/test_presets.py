@@ -6,9 +6,9 @@ import sys
 import numpy as np
 import pytest
 
-from dynamics import load_scenario
-from dynamics.config import config_dir
-from sensors import ConfigError, load_device
+from gyroemu.dynamics import load_scenario
+from gyroemu.dynamics.config import config_dir
+from gyroemu.sensors import ConfigError, load_device
 
 PRESETS = sorted(p.stem for p in (config_dir() / "devices").glob("*.toml"))
 
@@ -36,7 +36,7 @@ def test_unknown_preset_is_named():
 
 
 def gyroemu(*args):
-    return subprocess.run([sys.executable, "-m", "pipelines.cli", *args], capture_output=True, text=True)
+    return subprocess.run([sys.executable, "-m", "gyroemu", *args], capture_output=True, text=True)
 
 
 def test_presets_command_lists_every_preset():

@@ -15,9 +15,9 @@ import pytest
 import scipy.optimize
 import scipy.signal
 
-from dynamics.config import ConfigError, validate
-from sensors.mechanism import GyroTruth, mechanism_class
-from sensors.rate_gyro import RateGyro, foh_matrices
+from gyroemu.dynamics.config import ConfigError, validate
+from gyroemu.sensors.mechanism import GyroTruth, mechanism_class
+from gyroemu.sensors.rate_gyro import RateGyro, foh_matrices
 
 GYRO = RateGyro()
 H, J = GYRO.spin_momentum, GYRO.gimbal_inertia_kgm2

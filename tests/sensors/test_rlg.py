@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 from scipy.special import jv
 
-from dynamics import Environment, trajectory_from_world_motion
-from dynamics.config import ConfigError, validate
-from sensors import device_from_dict
-from sensors.allan import allan_deviation
-from sensors.mechanism import GyroTruth
-from sensors.rlg import RingLaserGyro
+from gyroemu.dynamics import Environment, trajectory_from_world_motion
+from gyroemu.dynamics.config import ConfigError, validate
+from gyroemu.sensors import device_from_dict
+from gyroemu.sensors.allan import allan_deviation
+from gyroemu.sensors.mechanism import GyroTruth
+from gyroemu.sensors.rlg import RingLaserGyro
 
 SIGMAS = 4
 ARCSEC = math.pi / (180 * 3600)
