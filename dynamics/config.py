@@ -146,7 +146,7 @@ def _describe(model: type[BaseModel], err: dict) -> tuple[str, str]:
         return key, "missing required key"
     msg = err["msg"]
     if msg.startswith("Value error, "):
-        msg = msg[len("Value error, "):]
+        msg = msg[len("Value error, ") :]
     return key, msg
 
 

@@ -77,7 +77,7 @@ class Site(Section):
     magnetic_field_enu_uT: Vec3 = (1.63, 18.6, -46.4)
     earth_rotation: bool = True
 
-    def environment(self) -> "Environment":
+    def environment(self) -> Environment:
         lat = np.radians(self.latitude_deg)
         return Environment(
             gravity_w=np.array([0.0, 0.0, -float(normal_gravity(lat, self.height_m))]),
@@ -105,6 +105,6 @@ class Environment:
     magnetic_field_w: np.ndarray
 
     @classmethod
-    def inertial(cls, gravity_m_s2: float = 0.0, magnetic_field_w=(0.0, 0.0, 0.0)) -> "Environment":
+    def inertial(cls, gravity_m_s2: float = 0.0, magnetic_field_w=(0.0, 0.0, 0.0)) -> Environment:
         """A non-rotating world with uniform gravity ``-gravity_m_s2`` along z."""
         return cls(np.array([0.0, 0.0, -gravity_m_s2]), np.zeros(3), np.asarray(magnetic_field_w, float))

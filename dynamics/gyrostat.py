@@ -44,8 +44,8 @@ follows ``q̇ = ½ q ⊗ (0, ω − Rᵀ Ω)``, ``Ω`` the world frame's rotatio
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
 
 import numpy as np
 
@@ -242,8 +242,15 @@ class Gyrostat:
         delta = np.asarray(gimbal_angles, dtype=float).reshape(-1)
         if delta.size != len(self.gimbals):
             raise ValueError(f"need {len(self.gimbals)} gimbal angles, got {delta.size}")
-        return np.concatenate([np.asarray(pos_w, float), q / np.linalg.norm(q), self.mass * np.asarray(vel_w, float),
-                               np.asarray(omega_b, float), delta])
+        return np.concatenate(
+            [
+                np.asarray(pos_w, float),
+                q / np.linalg.norm(q),
+                self.mass * np.asarray(vel_w, float),
+                np.asarray(omega_b, float),
+                delta,
+            ]
+        )
 
     # -- rotor momentum ------------------------------------------------------------------------------
 

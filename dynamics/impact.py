@@ -51,7 +51,7 @@ them; this overestimates the braking of a box that slides and spins at once), ea
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Annotated, Literal, Optional
+from typing import Annotated, Literal
 
 import numpy as np
 import pydantic
@@ -61,8 +61,19 @@ from .config import NonNegativeReal, PositiveReal, Real, Section, Vec3
 from .earth import Environment, Site
 from .inertia import box, inertia_config
 from .integrate import Event, Jump, Jumped, integrate
-from .rigid_body import (L, P, Q, X, RigidBody, _quat_product, contact_mass_matrix, cross, rotate, rotation_matrix,
-                         world_motion_trajectory)
+from .rigid_body import (
+    L,
+    P,
+    Q,
+    RigidBody,
+    X,
+    _quat_product,
+    contact_mass_matrix,
+    cross,
+    rotate,
+    rotation_matrix,
+    world_motion_trajectory,
+)
 from .rotation import quat_from_euler_zyx, quat_from_rotvec
 from .scenarios import ScenarioSpec
 from .trajectory import Trajectory
@@ -84,7 +95,7 @@ class DropBody(Section):
     mass_kg: PositiveReal = 0.2
     size_m: tuple[PositiveReal, PositiveReal, PositiveReal] = (0.12, 0.07, 0.02)
     """Edge lengths along body x, y, z; the centre of mass is at the box's centre."""
-    inertia_kgm2: Annotated[Optional[Vec3], pydantic.AfterValidator(inertia_config)] = None
+    inertia_kgm2: Annotated[Vec3 | None, pydantic.AfterValidator(inertia_config)] = None
     """Principal moments about the box's axes; default: a uniform box."""
 
 
@@ -128,7 +139,7 @@ class DropSpec(ScenarioSpec):
             raise ValueError(f"initial.height_m: the box's lowest corner starts {-lowest:.3g} m below the ground")
         return self
 
-    def model(self) -> "Drop":
+    def model(self) -> Drop:
         return Drop.from_spec(self)
 
     def trajectory(self, t: np.ndarray) -> Trajectory:
@@ -147,8 +158,9 @@ def _corners(size) -> np.ndarray:
 # ================================================================================================
 
 
-def contact_impulse(mass, inertia_w_inv, lever_w, velocity_w, restitution, friction,
-                    normal=(0.0, 0.0, 1.0)) -> np.ndarray:
+def contact_impulse(
+    mass, inertia_w_inv, lever_w, velocity_w, restitution, friction, normal=(0.0, 0.0, 1.0)
+) -> np.ndarray:
     """Impulse ``J`` (N s, world) on the body at a contact point (module docstring).
 
     Parameters
@@ -223,7 +235,7 @@ class Drop:
         self.corners_b = _corners(self.size)  # (8, 3), body axes
 
     @classmethod
-    def from_spec(cls, spec: DropSpec) -> "Drop":
+    def from_spec(cls, spec: DropSpec) -> Drop:
         b, ini, c = spec.body, spec.initial, spec.contact
         env = spec.site.environment()
         inertia = box(b.mass_kg, *b.size_m) if b.inertia_kgm2 is None else np.diag(b.inertia_kgm2)
@@ -231,8 +243,9 @@ class Drop:
         q = quat_from_euler_zyx(np.radians(ini.rpy_deg))
         omega = np.asarray(ini.omega_b) + rotate(rotation_matrix(q).T, env.earth_rate_w)  # inertial rate
         y0 = body.state((0.0, 0.0, ini.height_m), q, ini.vel_w, omega)
-        return cls(body, np.asarray(b.size_m, float), env, y0, c.restitution, c.friction, c.pulse_duration_s,
-                   c.rest_speed_m_s)
+        return cls(
+            body, np.asarray(b.size_m, float), env, y0, c.restitution, c.friction, c.pulse_duration_s, c.rest_speed_m_s
+        )
 
     @property
     def gravity(self) -> float:
@@ -296,14 +309,18 @@ class Drop:
         inertia_w = r @ self.body.inertia_b @ np.swapaxes(r, -1, -2)
         omega_w = rotate(r, self.body.omega_b(y, r))
         spin_rate = np.where((t >= st.t) & (t < st.spin_end), st.spin_decel, 0.0)
-        held = (cross(omega_w, y[..., L]) + rotate(inertia_w, cross(self.body.frame_rate_w, omega_w))
-                + spin_rate[..., None] * inertia_w[..., :, 2])  # d/dt (I_w ω) with ω = Ω + s ẑ
+        held = (
+            cross(omega_w, y[..., L])
+            + rotate(inertia_w, cross(self.body.frame_rate_w, omega_w))
+            + spin_rate[..., None] * inertia_w[..., :, 2]
+        )  # d/dt (I_w ω) with ω = Ω + s ẑ
         return np.where((t >= st.t)[..., None], held, flying)
 
     def derivative(self, t, y) -> np.ndarray:
         pulse = self._pulse(t)  # for the force and its moment alike
-        return self.body.derivative(t, y, lambda tt, yy: self.force(tt, yy, pulse),
-                                    lambda tt, yy: self.torque(tt, yy, pulse))
+        return self.body.derivative(
+            t, y, lambda tt, yy: self.force(tt, yy, pulse), lambda tt, yy: self.torque(tt, yy, pulse)
+        )
 
     # -- contacts --------------------------------------------------------------------------------------
 
@@ -321,6 +338,7 @@ class Drop:
             if not self._contacts_enabled(t):
                 return 1.0
             return self._corner_heights(y)[i]
+
         return condition
 
     def _corner_velocities(self, y) -> np.ndarray:
@@ -352,8 +370,9 @@ class Drop:
         r = rotation_matrix(y[Q])
         _, _, tilt = self._face_down(r)
         self.recent_contacts = [tc for tc in self.recent_contacts if tc > t - 1e-6] + [t]
-        if tilt < self.settle_tilt and (self.bounce_energy(y) < self.body.mass * self.rest_speed**2 / 2.0
-                                        or len(self.recent_contacts) > 100):
+        if tilt < self.settle_tilt and (
+            self.bounce_energy(y) < self.body.mass * self.rest_speed**2 / 2.0 or len(self.recent_contacts) > 100
+        ):
             return self._settle(t, y)
         lever_b = self.corners_b[touching].mean(axis=0)
         lever_w = rotate(r, lever_b)
@@ -374,8 +393,11 @@ class Drop:
         omega_h = self.body.omega_wb_w(y, r) * np.array([1.0, 1.0, 0.0])
         inertia_w = r @ self.body.inertia_b @ r.T
         v_z = y[P][2] / self.body.mass
-        return float(0.5 * self.body.mass * v_z**2 + 0.5 * omega_h @ inertia_w @ omega_h
-                     + self.body.mass * self.gravity * (y[2] - 0.5 * self.size[k]))
+        return float(
+            0.5 * self.body.mass * v_z**2
+            + 0.5 * omega_h @ inertia_w @ omega_h
+            + self.body.mass * self.gravity * (y[2] - 0.5 * self.size[k])
+        )
 
     def _settle(self, t, y):
         """Lay the box flat on its downward face (a rotation by the small remaining tilt), on the ground,
@@ -425,8 +447,10 @@ class Drop:
 
     def events(self) -> list[Event]:
         """One falling-height event per corner."""
-        return [Event(self._corner_condition(i), self._on_contact, -1.0, self._pending if i == 0 else None)
-                for i in range(8)]
+        return [
+            Event(self._corner_condition(i), self._on_contact, -1.0, self._pending if i == 0 else None)
+            for i in range(8)
+        ]
 
     # -- simulation ----------------------------------------------------------------------------------
 
@@ -454,5 +478,14 @@ class Drop:
                 k = min(int(np.searchsorted(t, t_c, side="left")), t.size - 1)  # interval (t_{k-1}, t_k]
                 impulse[k] += j
             extras["contact_impulse_w"] = impulse
-        return world_motion_trajectory(t, y[:, X], y[:, Q], y[:, P] / self.body.mass, y_dot[:, P] / self.body.mass,
-                                       omega, alpha, self.environment, extras)
+        return world_motion_trajectory(
+            t,
+            y[:, X],
+            y[:, Q],
+            y[:, P] / self.body.mass,
+            y_dot[:, P] / self.body.mass,
+            omega,
+            alpha,
+            self.environment,
+            extras,
+        )

@@ -28,8 +28,8 @@ are read from it, never differenced).
 from __future__ import annotations
 
 import bisect
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -46,7 +46,7 @@ class Jumped:
 
     y: np.ndarray
     breakpoints: Sequence[float] = ()
-    jumps: Sequence["Jump"] = ()
+    jumps: Sequence[Jump] = ()
 
 
 @dataclass(frozen=True)
@@ -192,11 +192,13 @@ def integrate(
         so that the root finder looks for the next crossing instead of returning ``t_start`` again."""
         out = []
         for ev in events:
+
             def g(tt, yy, ev=ev):
                 value = ev.condition(tt, yy)
                 if tt == t_start and value == 0.0:
                     return -np.copysign(np.finfo(float).tiny, ev.direction or -1.0)
                 return value
+
             g.terminal = True
             g.direction = ev.direction
             out.append(g)
@@ -230,8 +232,17 @@ def integrate(
         t_stop = stops[0][0] if stops else t_end
         last = t_stop >= t_end
         if t_stop > t:
-            sol = solve_ivp(fun, (t, t_stop), y, method="DOP853", dense_output=True, events=solver_events(t),
-                            rtol=rtol, atol=atol, max_step=max_step)
+            sol = solve_ivp(
+                fun,
+                (t, t_stop),
+                y,
+                method="DOP853",
+                dense_output=True,
+                events=solver_events(t),
+                rtol=rtol,
+                atol=atol,
+                max_step=max_step,
+            )
             if sol.status < 0:
                 raise RuntimeError(f"integration failed at t = {sol.t[-1]:.9g} s: {sol.message}")
             n_steps += sol.t.size - 1

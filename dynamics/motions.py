@@ -51,10 +51,10 @@ from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from .config import NonNegativeReal, PositiveReal, Real, Section, Vec3
 from .earth import Site
+from .jit import njit
 from .rotation import quat_conjugate, quat_from_euler_zyx, quat_multiply, quat_rotate, quat_to_rotvec
 from .scenarios import ScenarioSpec
 from .trajectory import Trajectory, trajectory_from_world_motion
-from .jit import njit
 
 __all__ = [
     "TimeGrid",
@@ -461,7 +461,7 @@ class WorldMotion:
     extras: dict = field(default_factory=dict)
 
     @classmethod
-    def rotation_only(cls, t, q_wb, omega_wb_b, alpha_wb_b, extras=None) -> "WorldMotion":
+    def rotation_only(cls, t, q_wb, omega_wb_b, alpha_wb_b, extras=None) -> WorldMotion:
         """A body that rotates about its fixed reference point at the world origin."""
         # Three calls, not copies of one: np.zeros maps zero pages lazily, copies would write them.
         n = len(t)
@@ -746,8 +746,20 @@ class RateTableSpec(EarthBoundSpec):
         arrays = _motion_arrays(n, moves=bool(lever.any()))
         angle, rate = np.empty(n), np.empty(n)
         _rate_table_kernel(
-            t, grid.uniform, grid.BLOCK, schedule, half, self.constant is not None, a, b, axis_b, q_base,
-            lever, *arrays, angle, rate,
+            t,
+            grid.uniform,
+            grid.BLOCK,
+            schedule,
+            half,
+            self.constant is not None,
+            a,
+            b,
+            axis_b,
+            q_base,
+            lever,
+            *arrays,
+            angle,
+            rate,
         )
         return WorldMotion(t, *arrays, extras={"table_angle_rad": angle, "table_rate_rad_s": rate})
 
@@ -762,16 +774,43 @@ class RateTableSpec(EarthBoundSpec):
         lever = np.asarray(self.table.lever_arm_m, dtype=float)
         arrays = _motion_arrays(len(t), moves=bool(lever.any()))
         _tumble_kernel(
-            t, tumble.dwell_s + tumble.move_s, tumble.dwell_s, tumble.move_s, angles, a, b, axes, axes_b,
-            quat_conjugate(q_mount), lever, *arrays,
+            t,
+            tumble.dwell_s + tumble.move_s,
+            tumble.dwell_s,
+            tumble.move_s,
+            angles,
+            a,
+            b,
+            axes,
+            axes_b,
+            quat_conjugate(q_mount),
+            lever,
+            *arrays,
         )
         return WorldMotion(t, *arrays)
 
 
 @njit
 def _rate_table_kernel(
-    t, uniform, block, schedule, half, by_phasor, a, b, axis_b, q_base, lever,
-    q, omega, alpha, pos, vel, acc, angle_out, rate_out,
+    t,
+    uniform,
+    block,
+    schedule,
+    half,
+    by_phasor,
+    a,
+    b,
+    axis_b,
+    q_base,
+    lever,
+    q,
+    omega,
+    alpha,
+    pos,
+    vel,
+    acc,
+    angle_out,
+    rate_out,
 ):  # pragma: no cover - compiled
     """:meth:`RateTableSpec.world_motion` in the turning modes, block by block.
 
@@ -810,9 +849,7 @@ def _rate_table_kernel(
             if has_lever:
                 # p = R_base Rz(θ) r, with cos θ = c² − s², sin θ = 2 s c from the half angle.
                 cos, sin = c[i] * c[i] - s[i] * s[i], 2 * s[i] * c[i]
-                px, py, pz = _rotate(
-                    q_base, lever[0] * cos - lever[1] * sin, lever[0] * sin + lever[1] * cos, lever[2]
-                )
+                px, py, pz = _rotate(q_base, lever[0] * cos - lever[1] * sin, lever[0] * sin + lever[1] * cos, lever[2])
                 # v = θ̇ n × p,  a = θ̈ n × p + θ̇² n × (n × p)
                 nx, ny, nz = _cross(n_w[0], n_w[1], n_w[2], px, py, pz)
                 nnx, nny, nnz = _cross(n_w[0], n_w[1], n_w[2], nx, ny, nz)
@@ -1017,8 +1054,19 @@ class ConingSpec(EarthBoundSpec):
         n = len(t)
         q, rate, accel = np.empty((n, 4)), np.empty((n, 3)), np.empty((n, 3))
         _coning_kernel(
-            t, grid.uniform, grid.BLOCK, grid.phasor(omega), np.sin(theta / 2) * j, np.sin(theta / 2) * k,
-            np.cos(theta / 2) * q_ref, -omega * (1 - np.cos(theta)), w, -omega * w, q, rate, accel,
+            t,
+            grid.uniform,
+            grid.BLOCK,
+            grid.phasor(omega),
+            np.sin(theta / 2) * j,
+            np.sin(theta / 2) * k,
+            np.cos(theta / 2) * q_ref,
+            -omega * (1 - np.cos(theta)),
+            w,
+            -omega * w,
+            q,
+            rate,
+            accel,
         )
         return WorldMotion.rotation_only(t, q, rate, accel)
 

@@ -38,8 +38,8 @@ through the same code.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -131,8 +131,9 @@ def cross(a, b) -> np.ndarray:
 
 def _stack_state(lead, parts) -> np.ndarray:
     """Concatenate state parts along the last axis, broadcasting each to the leading shape ``lead``."""
-    return np.concatenate([a if a.shape[:-1] == lead else np.broadcast_to(a, lead + a.shape[-1:]) for a in parts],
-                          axis=-1)
+    return np.concatenate(
+        [a if a.shape[:-1] == lead else np.broadcast_to(a, lead + a.shape[-1:]) for a in parts], axis=-1
+    )
 
 
 def _omega_quat(omega) -> np.ndarray:
@@ -339,8 +340,9 @@ class RigidBody:
         return point_velocity(self.velocity(y), self.omega_wb_w(y, r), rotate(r, lever_b))
 
 
-def world_motion_trajectory(t, pos_w, q_wb, vel_w, acc_w, omega_b, alpha_b, environment: Environment,
-                            extras=None) -> Trajectory:
+def world_motion_trajectory(
+    t, pos_w, q_wb, vel_w, acc_w, omega_b, alpha_b, environment: Environment, extras=None
+) -> Trajectory:
     """A :class:`Trajectory` from integrated states, given the *inertial* ``omega_b`` and ``alpha_b``.
 
     :func:`~gyroemu.dynamics.trajectory.trajectory_from_world_motion` takes the rotation relative to the

@@ -78,8 +78,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .inertia import principal_axes
-from .rotation import quat_conjugate, quat_from_matrix, quat_multiply, quat_rotate
 from .jit import njit
+from .rotation import quat_conjugate, quat_from_matrix, quat_multiply, quat_rotate
 
 __all__ = [
     "Composition",
@@ -149,30 +149,34 @@ COMPOSITIONS: tuple[Composition, ...] = (
         "Kahan-Li s9odr6a",
         6,
         # Kahan & Li (1997), method s9odr6a; also in HLW §V.3.2.
-        _symmetric([
-            0.39216144400731413927925056,
-            0.33259913678935943859974864,
-            -0.70624617255763935980996482,
-            0.08221359629355080023149045,
-            0.79854399093482996339895035,
-        ]),
+        _symmetric(
+            [
+                0.39216144400731413927925056,
+                0.33259913678935943859974864,
+                -0.70624617255763935980996482,
+                0.08221359629355080023149045,
+                0.79854399093482996339895035,
+            ]
+        ),
         error_constant=2e-5,
     ),
     Composition(
         "Kahan-Li s17odr8a",
         8,
         # Kahan & Li (1997), method s17odr8a; also in HLW §V.3.2.
-        _symmetric([
-            0.13020248308889008087881763,
-            0.56116298177510838456196441,
-            -0.38947496264484728640807860,
-            0.15884190655515560089621075,
-            -0.39590389413323757733623154,
-            0.18453964097831570709183254,
-            0.25837438768632204729397911,
-            0.29501172360931029887096624,
-            -0.60550853383003451169892108,
-        ]),
+        _symmetric(
+            [
+                0.13020248308889008087881763,
+                0.56116298177510838456196441,
+                -0.38947496264484728640807860,
+                0.15884190655515560089621075,
+                -0.39590389413323757733623154,
+                0.18453964097831570709183254,
+                0.25837438768632204729397911,
+                0.29501172360931029887096624,
+                -0.60550853383003451169892108,
+            ]
+        ),
         error_constant=2e-7,
     ),
 )
@@ -322,9 +326,10 @@ def _free_body_kernel(t, q0, L0, lw, cz, cy, inv_a, q_ib, m_bi, a_coef, b_coef, 
     """Torque-free body sampled at ``t``: the split flow of ``Hz + Hy``, then ``H0`` and the axes.
 
     ``q0`` (4,), ``L0`` (3,): attitude and body momentum at time 0 in the internal frame; ``lw`` (3,)
-    the (constant) world momentum ``R(q0) L0``; ``cz = 1/C − 1/A``, ``cy = 1/B − 1/A``, ``inv_a = 1/A`` (1/(kg m²)); ``q_ib`` (4,) and
-    ``m_bi`` (3, 3) turn internal axes into body axes; ``a_coef``, ``b_coef``: the composition's
-    step fractions (:attr:`Composition.a`, :attr:`Composition.b`). Writes, at each ``t[k]``::
+    the (constant) world momentum ``R(q0) L0``; ``cz = 1/C − 1/A``, ``cy = 1/B − 1/A``,
+    ``inv_a = 1/A`` (1/(kg m²)); ``q_ib`` (4,) and ``m_bi`` (3, 3) turn internal axes into body axes;
+    ``a_coef``, ``b_coef``: the composition's step fractions (:attr:`Composition.a`,
+    :attr:`Composition.b`). Writes, at each ``t[k]``::
 
         q_wb = exp(L_w t / 2A) ⊗ q̃ ⊗ q_ib      (H0 in closed form, then body axes)
         L_b  = M_bi L̃
@@ -463,9 +468,7 @@ def integrate_free_body(t, q0_wb, L0_b, inertia_b, tol: float = DEFAULT_TOL, com
     return q_wb, L_b
 
 
-def integrate_heavy_top(
-    t, q0_wb, L0_w, moment_a, moment_c, mgl, tol: float = DEFAULT_TOL, compositions=COMPOSITIONS
-):
+def integrate_heavy_top(t, q0_wb, L0_w, moment_a, moment_c, mgl, tol: float = DEFAULT_TOL, compositions=COMPOSITIONS):
     """Symmetric top on a fixed pivot under uniform gravity along −z, sampled at ``t``.
 
     Parameters

@@ -22,14 +22,14 @@ from typing import Literal
 import numpy as np
 from pydantic import field_validator
 
-from .config import as_number, NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3
+from .config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3, as_number
 from .earth import Environment
 from .inertia import inertia_config, inertia_tensor
+from .jit import njit
 from .rotation import body_rate_from_euler_zxz, quat_from_euler_zxz, quat_rotate
 from .scenarios import ScenarioSpec
 from .splitting import integrate_free_body, integrate_heavy_top
 from .trajectory import Trajectory
-from .jit import njit
 
 __all__ = [
     "FreeBody",

@@ -67,7 +67,7 @@ class Trajectory:
     def __len__(self) -> int:
         return len(self.t)
 
-    def __getitem__(self, index) -> "Trajectory":
+    def __getitem__(self, index) -> Trajectory:
         """Samples selected by a slice, boolean mask or index array, as a new Trajectory."""
         if isinstance(index, (int, np.integer)):
             index = slice(index, index + 1 if index != -1 else None)
@@ -98,8 +98,9 @@ def _to_body(q, v, out):  # pragma: no cover - compiled
 
 
 @njit
-def _world_to_imu(q_wb, omega_wb, alpha_wb, vel_w, acc_w, earth_w, gravity_w, field_w,
-                  omega_b, alpha_b, force_b, mag_b):  # pragma: no cover - compiled
+def _world_to_imu(
+    q_wb, omega_wb, alpha_wb, vel_w, acc_w, earth_w, gravity_w, field_w, omega_b, alpha_b, force_b, mag_b
+):  # pragma: no cover - compiled
     """The equations of :func:`trajectory_from_world_motion`, one pass per sample."""
     earth_b = np.empty(3)
     f_w = np.empty(3)
@@ -159,10 +160,20 @@ def trajectory_from_world_motion(
     n = len(q_wb)
     omega_b, alpha_b, force_b, mag_b = (np.empty((n, 3)) for _ in range(4))
     # numba reads strided (transposed, broadcast) inputs in place: no copies of long arrays.
-    _world_to_imu(q_wb, np.asarray(omega_wb_b, dtype=float), np.asarray(alpha_wb_b, dtype=float),
-                  np.asarray(vel_w, dtype=float), np.asarray(acc_w, dtype=float),
-                  np.asarray(environment.earth_rate_w, dtype=float), np.asarray(environment.gravity_w, dtype=float),
-                  np.asarray(environment.magnetic_field_w, dtype=float), omega_b, alpha_b, force_b, mag_b)
+    _world_to_imu(
+        q_wb,
+        np.asarray(omega_wb_b, dtype=float),
+        np.asarray(alpha_wb_b, dtype=float),
+        np.asarray(vel_w, dtype=float),
+        np.asarray(acc_w, dtype=float),
+        np.asarray(environment.earth_rate_w, dtype=float),
+        np.asarray(environment.gravity_w, dtype=float),
+        np.asarray(environment.magnetic_field_w, dtype=float),
+        omega_b,
+        alpha_b,
+        force_b,
+        mag_b,
+    )
     return Trajectory(
         t=np.asarray(t, dtype=float),
         q_wb=q_wb,

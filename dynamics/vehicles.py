@@ -32,6 +32,7 @@ from numpy.polynomial import Chebyshev
 from pydantic import Field, StrictInt, field_validator
 
 from .config import NonNegativeReal, PositiveReal, Real, Section, Vec3
+from .jit import njit
 from .motions import (
     EarthBoundSpec,
     TimeGrid,
@@ -44,7 +45,6 @@ from .motions import (
     _smooth_step_at,
     smooth_step,
 )
-from .jit import njit
 
 __all__ = [
     "euler_zyx_motion",
@@ -98,12 +98,21 @@ def _euler_zyx_kernel(rpy, rpy_rates, rpy_accels, q, omega, alpha):  # pragma: n
     """:func:`euler_zyx_motion`, one sample at a time, written into ``q``, ``omega``, ``alpha``."""
     for i in range(rpy.shape[1]):
         _euler_zyx_sample(
-            np.cos(0.5 * rpy[0, i]), np.sin(0.5 * rpy[0, i]),
-            np.cos(0.5 * rpy[1, i]), np.sin(0.5 * rpy[1, i]),
-            np.cos(0.5 * rpy[2, i]), np.sin(0.5 * rpy[2, i]),
-            rpy_rates[0, i], rpy_rates[1, i], rpy_rates[2, i],
-            rpy_accels[0, i], rpy_accels[1, i], rpy_accels[2, i],
-            q[i], omega[i], alpha[i],
+            np.cos(0.5 * rpy[0, i]),
+            np.sin(0.5 * rpy[0, i]),
+            np.cos(0.5 * rpy[1, i]),
+            np.sin(0.5 * rpy[1, i]),
+            np.cos(0.5 * rpy[2, i]),
+            np.sin(0.5 * rpy[2, i]),
+            rpy_rates[0, i],
+            rpy_rates[1, i],
+            rpy_rates[2, i],
+            rpy_accels[0, i],
+            rpy_accels[1, i],
+            rpy_accels[2, i],
+            q[i],
+            omega[i],
+            alpha[i],
         )
 
 
@@ -222,8 +231,13 @@ class RandomManoeuvreSpec(EarthBoundSpec):
         rotation, translation = self.sines()
         arrays = _motion_arrays(len(t), moves=True)
         _manoeuvre_kernel(
-            t, grid.uniform, grid.BLOCK, grid.sines(*rotation), np.radians(self.rotation.mean_rpy_deg),
-            grid.sines(*translation), *arrays,
+            t,
+            grid.uniform,
+            grid.BLOCK,
+            grid.sines(*rotation),
+            np.radians(self.rotation.mean_rpy_deg),
+            grid.sines(*translation),
+            *arrays,
         )
         return WorldMotion(t, *arrays)
 
@@ -247,15 +261,24 @@ def _manoeuvre_kernel(
         for i in range(count):
             j = start + i
             _euler_zyx_sample(
-                cos[0, i], sin[0, i], cos[1, i], sin[1, i], cos[2, i], sin[2, i],
-                angles[1, 0, i], angles[1, 1, i], angles[1, 2, i],
-                angles[2, 0, i], angles[2, 1, i], angles[2, 2, i],
-                q[j], omega[j], alpha[j],
+                cos[0, i],
+                sin[0, i],
+                cos[1, i],
+                sin[1, i],
+                cos[2, i],
+                sin[2, i],
+                angles[1, 0, i],
+                angles[1, 1, i],
+                angles[1, 2, i],
+                angles[2, 0, i],
+                angles[2, 1, i],
+                angles[2, 2, i],
+                q[j],
+                omega[j],
+                alpha[j],
             )
             for m in range(3):  # east, north, up
-                pos[j, m], vel[j, m], acc[j, m] = (
-                    coordinates[0, m, i], coordinates[1, m, i], coordinates[2, m, i]
-                )
+                pos[j, m], vel[j, m], acc[j, m] = (coordinates[0, m, i], coordinates[1, m, i], coordinates[2, m, i])
 
 
 # --------------------------------------------------------------------------------------------------
@@ -345,9 +368,7 @@ class SpeedProfile:
         t = s = v = 0.0
         for leg in legs:
             dv = leg.speed_m_s - v
-            duration = (
-                16 * abs(dv) / (5 * (drive.accel_m_s2 if dv > 0 else drive.brake_m_s2))
-            )  # peak Δv S′/T = a_peak
+            duration = 16 * abs(dv) / (5 * (drive.accel_m_s2 if dv > 0 else drive.brake_m_s2))  # peak Δv S′/T = a_peak
             start.append(t), dist.append(s), speed.append(v), change.append(dv), ramp.append(duration or 1.0)
             s += (v + 0.5 * dv) * duration  # I(1) = ½
             dist_end.append(s)
@@ -515,7 +536,7 @@ class CarSpec(EarthBoundSpec):
                 )
         return turns
 
-    def evaluator(self) -> "CarMotion":
+    def evaluator(self) -> CarMotion:
         """The car's closed forms with the road series and transients set up once."""
         return CarMotion(self)
 
@@ -692,8 +713,23 @@ def _transients_block(
 
 
 @njit
-def _car_kernel(t, block, speed_table, road_table, bump_table, k_roll, k_pitch,
-                q, omega, alpha, pos, vel, acc, speed_out, distance_out):  # pragma: no cover - compiled
+def _car_kernel(
+    t,
+    block,
+    speed_table,
+    road_table,
+    bump_table,
+    k_roll,
+    k_pitch,
+    q,
+    omega,
+    alpha,
+    pos,
+    vel,
+    acc,
+    speed_out,
+    distance_out,
+):  # pragma: no cover - compiled
     """The car (:class:`CarSpec`), block by block.
 
     Sample by sample: the speed profile, the road and the Euler angles with their derivatives. Then for
@@ -701,8 +737,9 @@ def _car_kernel(t, block, speed_table, road_table, bump_table, k_roll, k_pitch,
     transients (heave and pitch), the half angles' sines and cosines and the attitude.
     """
     t_leg, s_leg, v_leg, dv_leg, ramp_leg, ramp2_leg, ramp3_leg, s_after_leg = speed_table
-    (s_turn, length, length2, length3, turn_angle, heading, cos_heading, sin_heading,
-     begin, end, coef, sizes, maps) = road_table
+    (s_turn, length, length2, length3, turn_angle, heading, cos_heading, sin_heading, begin, end, coef, sizes, maps) = (
+        road_table
+    )
     bump_at, bump_rise, bump_scale, bump_end, bump_peak, bump_lam, bump_weights = bump_table
     turns = len(s_turn)
     # Scratch for a block (separate arrays: rows unpacked from one array compile to slower,
@@ -803,16 +840,44 @@ def _car_kernel(t, block, speed_table, road_table, bump_table, k_roll, k_pitch,
                         pos[samples[k], axis] += values[k]
         # Bumps: heave z, ż, z̈ and nose-up pitch transients (pitch is nose-down positive), for the
         # bumps whose transients overlap the block's time span.
-        t_min, t_max = t[start:start + count].min(), t[start:start + count].max()
+        t_min, t_max = t[start : start + count].min(), t[start : start + count].max()
         for b in range(len(bump_at)):
             if t_max < bump_at[b] or t_min >= max(bump_end[b, 0], bump_end[b, 1]):
                 continue
-            _transients_block(t, start, count, bump_at[b], bump_rise[b], bump_end[b, 0], bump_lam[b, 0],
-                              bump_weights[b, 0], bump_peak[b, 0], bump_scale[b, 0], 1.0,
-                              heave[0], heave[1], heave[2], work)
-            _transients_block(t, start, count, bump_at[b], bump_rise[b], bump_end[b, 1], bump_lam[b, 1],
-                              bump_weights[b, 1], bump_peak[b, 1], bump_scale[b, 1], -1.0,
-                              angles[1], rates[1], accels[1], work)
+            _transients_block(
+                t,
+                start,
+                count,
+                bump_at[b],
+                bump_rise[b],
+                bump_end[b, 0],
+                bump_lam[b, 0],
+                bump_weights[b, 0],
+                bump_peak[b, 0],
+                bump_scale[b, 0],
+                1.0,
+                heave[0],
+                heave[1],
+                heave[2],
+                work,
+            )
+            _transients_block(
+                t,
+                start,
+                count,
+                bump_at[b],
+                bump_rise[b],
+                bump_end[b, 1],
+                bump_lam[b, 1],
+                bump_weights[b, 1],
+                bump_peak[b, 1],
+                bump_scale[b, 1],
+                -1.0,
+                angles[1],
+                rates[1],
+                accels[1],
+                work,
+            )
         for i in range(count):
             pos[start + i, 2], vel[start + i, 2], acc[start + i, 2] = heave[0, i], heave[1, i], heave[2, i]
         for m in range(3):
@@ -821,9 +886,19 @@ def _car_kernel(t, block, speed_table, road_table, bump_table, k_roll, k_pitch,
             _sincos_block(half, count, sin_half[m], cos_half[m])
         for i in range(count):
             _euler_zyx_sample(
-                cos_half[0, i], sin_half[0, i], cos_half[1, i], sin_half[1, i],
-                cos_half[2, i], sin_half[2, i],
-                rates[0, i], rates[1, i], rates[2, i],
-                accels[0, i], accels[1, i], accels[2, i],
-                q[start + i], omega[start + i], alpha[start + i],
+                cos_half[0, i],
+                sin_half[0, i],
+                cos_half[1, i],
+                sin_half[1, i],
+                cos_half[2, i],
+                sin_half[2, i],
+                rates[0, i],
+                rates[1, i],
+                rates[2, i],
+                accels[0, i],
+                accels[1, i],
+                accels[2, i],
+                q[start + i],
+                omega[start + i],
+                alpha[start + i],
             )

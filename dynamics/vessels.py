@@ -50,7 +50,7 @@ scaled down uniformly when a rate exceeds the gimbal rate limit.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Annotated, Literal, Optional
+from typing import Annotated, Literal
 
 import numpy as np
 import pydantic
@@ -58,12 +58,11 @@ from pydantic import Field, StrictInt
 
 from .config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3
 from .earth import Environment, Site
-from .gyrostat import GIMBALS, P, Q, W, X, GimballedRotor, Gyrostat, SpinProfile
+from .gyrostat import GIMBALS, GimballedRotor, Gyrostat, P, Q, SpinProfile, W, X
 from .inertia import inertia_config, inertia_tensor
 from .integrate import Jump, integrate
 from .rigid_body import _quat_product, cross, rotate_back, rotation_matrix, world_motion_trajectory
-from .rotation import (body_rate_from_euler_zyx, euler_zyx_from_quat, quat_conjugate, quat_from_euler_zyx,
-                       quat_positive)
+from .rotation import body_rate_from_euler_zyx, euler_zyx_from_quat, quat_conjugate, quat_from_euler_zyx, quat_positive
 from .scenarios import ScenarioSpec
 from .trajectory import Trajectory
 
@@ -144,7 +143,9 @@ class WaveComponents:
 
     def slope(self, t) -> np.ndarray:
         """Wave slope ``Σ k ζ sin(ω t + θ)`` across the ship, rad."""
-        return np.sin(np.asarray(t, dtype=float)[..., None] * self.omega + self.phase) @ (self.wavenumber * self.amplitude)
+        return np.sin(np.asarray(t, dtype=float)[..., None] * self.omega + self.phase) @ (
+            self.wavenumber * self.amplitude
+        )
 
 
 # ================================================================================================
@@ -201,9 +202,9 @@ class ShipSpec(ScenarioSpec):
     site: Site = Site()
     ship: Hull = Hull()
     waves: Waves = Waves()
-    stabiliser: Optional[Stabiliser] = None
+    stabiliser: Stabiliser | None = None
 
-    def model(self) -> "Ship":
+    def model(self) -> Ship:
         return Ship.from_spec(self)
 
     def trajectory(self, t: np.ndarray) -> Trajectory:
@@ -243,7 +244,7 @@ class Ship:
     gimbal_limit: float = np.pi / 2
 
     @classmethod
-    def from_spec(cls, spec: ShipSpec) -> "Ship":
+    def from_spec(cls, spec: ShipSpec) -> Ship:
         env = spec.site.environment()
         g = float(np.linalg.norm(env.gravity_w))
         hull, sea = spec.ship, spec.waves
@@ -254,16 +255,18 @@ class Ship:
         k_yaw = inertia[2] * (2.0 * np.pi / hull.heading_hold_period_s) ** 2
         k_moor = mass * (2.0 * np.pi / hull.mooring_period_s) ** 2
         rng = np.random.default_rng(spec.seed)
-        waves = WaveComponents.from_spectrum(rng, sea.significant_height_m, sea.peak_period_s, sea.peak_enhancement,
-                                             sea.components, g)
+        waves = WaveComponents.from_spectrum(
+            rng, sea.significant_height_m, sea.peak_period_s, sea.peak_enhancement, sea.components, g
+        )
         gimbals, extra = (), {}
         if spec.stabiliser is not None:
             st = spec.stabiliser
             spin = SpinProfile(st.spin_rpm * RPM)
             # Spin axis vertical at zero gimbal angle, gimbal (precession) axis athwartships.
             gimbals = (GimballedRotor((0.0, 1.0, 0.0), (0.0, 0.0, 1.0), st.rotor_inertia_kgm2, spin),)
-            extra = dict(gain=st.precession_gain, centring=st.centring_rate_per_s,
-                         gimbal_limit=np.radians(st.gimbal_limit_deg))
+            extra = dict(
+                gain=st.precession_gain, centring=st.centring_rate_per_s, gimbal_limit=np.radians(st.gimbal_limit_deg)
+            )
         body = Gyrostat(mass, np.diag(inertia), gimbals=gimbals, frame_rate_w=env.earth_rate_w)
         return cls(
             body=body,
@@ -355,8 +358,9 @@ class Ship:
         rates = self._rates_wb(y, r)
         torque = self.torque_b(t, y, r, rates)
         gimbal = self.gimbal_rate(t, y, rates) if self.body.gimbals else None
-        return self.body.derivative(t, y, self.force_w, lambda *_: torque,
-                                    None if gimbal is None else lambda *_: gimbal)
+        return self.body.derivative(
+            t, y, self.force_w, lambda *_: torque, None if gimbal is None else lambda *_: gimbal
+        )
 
     # -- linear theory -------------------------------------------------------------------------------
 
@@ -407,8 +411,11 @@ class Ship:
     def heave_response(self, t):
         """Steady-state heave ``z`` and ``ż``: ``m z̈ = −C (z − η) − c ż``, component by component."""
         w = self.waves
-        z_k = self.heave_stiffness * w.amplitude / (
-            self.heave_stiffness - self.mass * w.omega**2 + 1j * self.heave_damping * w.omega)
+        z_k = (
+            self.heave_stiffness
+            * w.amplitude
+            / (self.heave_stiffness - self.mass * w.omega**2 + 1j * self.heave_damping * w.omega)
+        )
         e = w.phasors(t)
         return np.real(e @ z_k), np.real(e @ (1j * w.omega * z_k))
 
@@ -433,8 +440,15 @@ class Ship:
 
     def solve(self, t, rtol=1e-10):
         """Integrate over the sample times ``t`` (from ``t[0]``); returns the :class:`Solution`."""
-        atol = np.concatenate([np.full(3, 1e-9), np.full(4, 1e-12), np.full(3, 1e-9 * self.mass), np.full(3, 1e-12),
-                               np.full(len(self.body.gimbals), 1e-12)])
+        atol = np.concatenate(
+            [
+                np.full(3, 1e-9),
+                np.full(4, 1e-12),
+                np.full(3, 1e-9 * self.mass),
+                np.full(3, 1e-12),
+                np.full(len(self.body.gimbals), 1e-12),
+            ]
+        )
         return integrate(self.derivative, t, self.initial_state(float(t[0])), rtol=rtol, atol=atol)
 
     def trajectory(self, t, rtol=1e-10) -> Trajectory:
@@ -453,8 +467,9 @@ class Ship:
         if self.body.gimbals:
             extras["gimbal_angle_rad"] = y[:, 13].copy()
             extras["gimbal_rate_rad_s"] = y_dot[:, 13].copy()
-        return world_motion_trajectory(t, y[:, X], q, y[:, P] / self.mass, y_dot[:, P] / self.mass, y[:, W],
-                                       y_dot[:, W], self.environment, extras)
+        return world_motion_trajectory(
+            t, y[:, X], q, y[:, P] / self.mass, y_dot[:, P] / self.mass, y[:, W], y_dot[:, W], self.environment, extras
+        )
 
 
 # ================================================================================================
@@ -467,7 +482,10 @@ class SpacecraftBody(Section):
 
     mass_kg: PositiveReal = 500.0
     inertia_kgm2: Annotated[Vec3 | tuple[Vec3, Vec3, Vec3], pydantic.AfterValidator(inertia_config)] = (
-        1200.0, 1000.0, 800.0)
+        1200.0,
+        1000.0,
+        800.0,
+    )
     """Principal moments or a 3x3 matrix in body axes about the centre of mass, rotors locked."""
     q_wb: Quat = (1.0, 0.0, 0.0, 0.0)
 
@@ -518,7 +536,7 @@ class SpacecraftSpec(ScenarioSpec):
     cmg: CmgArray = CmgArray()
     slew: Slew = Slew()
 
-    def model(self) -> "Spacecraft":
+    def model(self) -> Spacecraft:
         return Spacecraft.from_spec(self)
 
     def trajectory(self, t: np.ndarray) -> Trajectory:
@@ -555,7 +573,7 @@ class Spacecraft:
     initial_gimbal: np.ndarray
 
     @classmethod
-    def from_spec(cls, spec: SpacecraftSpec) -> "Spacecraft":
+    def from_spec(cls, spec: SpacecraftSpec) -> Spacecraft:
         sc, cmg, slew = spec.spacecraft, spec.cmg, spec.slew
         spin = cmg.rotor_speed_rpm * RPM
         gimbals = pyramid_gimbals(np.radians(cmg.skew_angle_deg), cmg.rotor_momentum_Nms / spin, spin)
@@ -565,11 +583,19 @@ class Spacecraft:
         half = 0.5 * np.radians(slew.angle_deg)
         turn = np.concatenate([[np.cos(half)], np.sin(half) * axis])  # about a body axis: q0 ⊗ Δq
         wn, zeta = slew.natural_frequency_rad_s, slew.damping_ratio
-        return cls(body=body, q0=q0, q_target=_quat_product(q0, turn), start=slew.start_s, k=2.0 * wn**2,
-                   c=2.0 * zeta * wn, rotor_momentum=cmg.rotor_momentum_Nms,
-                   gimbal_rate_limit=np.radians(cmg.gimbal_rate_limit_deg_s), singularity_gain=cmg.singularity_gain,
-                   singularity_sharpness=cmg.singularity_sharpness,
-                   initial_gimbal=np.radians(np.asarray(cmg.initial_gimbal_deg, dtype=float)))
+        return cls(
+            body=body,
+            q0=q0,
+            q_target=_quat_product(q0, turn),
+            start=slew.start_s,
+            k=2.0 * wn**2,
+            c=2.0 * zeta * wn,
+            rotor_momentum=cmg.rotor_momentum_Nms,
+            gimbal_rate_limit=np.radians(cmg.gimbal_rate_limit_deg_s),
+            singularity_gain=cmg.singularity_gain,
+            singularity_sharpness=cmg.singularity_sharpness,
+            initial_gimbal=np.radians(np.asarray(cmg.initial_gimbal_deg, dtype=float)),
+        )
 
     def commanded_attitude(self, t) -> np.ndarray:
         """``q0`` before the slew starts, the target after; shape ``t.shape + (4,)``."""
@@ -625,5 +651,6 @@ class Spacecraft:
             "angular_momentum_w": self.body.angular_momentum_w(t, y),
         }
         zeros = np.zeros((t.size, 3))
-        return world_motion_trajectory(t, zeros, y[:, Q], zeros, zeros, y[:, W], y_dot[:, W],
-                                       Environment.inertial(), extras)
+        return world_motion_trajectory(
+            t, zeros, y[:, Q], zeros, zeros, y[:, W], y_dot[:, W], Environment.inertial(), extras
+        )

@@ -91,7 +91,9 @@ def plot_allan(report: AllanReport, out: str | Path, title: str = "") -> Path:
         lines = {
             "spec quantisation": None if s["quantisation"] is None else np.sqrt(3) * s["quantisation"] / tau,
             "spec ARW": s["arw"] / np.sqrt(tau) if s["arw"] else None,
-            "spec bias instability": np.full_like(tau, 0.664 * s["bias_instability"]) if s["bias_instability"] else None,
+            "spec bias instability": np.full_like(tau, 0.664 * s["bias_instability"])
+            if s["bias_instability"]
+            else None,
             "spec RRW": s["rrw"] * np.sqrt(tau / 3) if s["rrw"] else None,
         }
         for (label, values), style in zip(lines.items(), ((0, (1, 3)), "--", "-.", ":")):

@@ -63,8 +63,19 @@ from .estimation.metrics import attitude_errors, convergence_time, rmse_deg
 from .estimation.protocol import Estimate, FilterSetup
 from .estimation.registry import FilterError, available_filters, filter_class, make_filter, unavailable_filters
 
-__all__ = ["BenchError", "BenchReport", "BenchWarning", "CaseResult", "FilterError", "FilterResult", "LogCase",
-           "RunResult", "SimCase", "evaluate_run", "run_bench"]
+__all__ = [
+    "BenchError",
+    "BenchReport",
+    "BenchWarning",
+    "CaseResult",
+    "FilterError",
+    "FilterResult",
+    "LogCase",
+    "RunResult",
+    "SimCase",
+    "evaluate_run",
+    "run_bench",
+]
 
 DIVERGED_FINAL_FRACTION = 0.10
 DIVERGED_INCLINATION_DEG = 30.0
@@ -83,6 +94,7 @@ class BenchWarning(UserWarning):
 
 # ==================================================================================================
 # Cases
+
 
 @dataclass(frozen=True)
 class SimCase:
@@ -120,6 +132,7 @@ class _Run:
 # ==================================================================================================
 # Results
 
+
 @dataclass
 class RunResult:
     """One filter on one run. Angles in degrees; None where not defined (a 6D heading, no bias)."""
@@ -129,9 +142,9 @@ class RunResult:
     total_deg: float | None
     heading_deg: float | None
     inclination_deg: float | None
-    convergence_s: float | None          # inf: never converged
+    convergence_s: float | None  # inf: never converged
     bias_error_deg_s: float | None
-    throughput: float                    # samples/s (batched: updates/s across runs)
+    throughput: float  # samples/s (batched: updates/s across runs)
     wall_s: float
     diverged: bool
     reason: str = ""
@@ -146,11 +159,11 @@ class RunResult:
 class FilterResult:
     """One filter over all runs of a case."""
 
-    filter: str                 # as asked for (built-in name or module:Class)
-    name: str                   # the filter object's ``name``
+    filter: str  # as asked for (built-in name or module:Class)
+    name: str  # the filter object's ``name``
     batched: bool
     runs: list[RunResult]
-    curve_t: np.ndarray | None = None            # first run's error against time, for the plot
+    curve_t: np.ndarray | None = None  # first run's error against time, for the plot
     curve_total_deg: np.ndarray | None = None
     curve_inclination_deg: np.ndarray | None = None
     note: str = ""
@@ -173,16 +186,19 @@ class FilterResult:
             out["never"] = sum(1 for v in values if math.isinf(v))
         finite = [v for v in values if math.isfinite(v)]
         if finite:
-            out.update(mean=float(np.mean(finite)), std=float(np.std(finite, ddof=1)) if len(finite) > 1 else 0.0,
-                       n=len(finite))
+            out.update(
+                mean=float(np.mean(finite)),
+                std=float(np.std(finite, ddof=1)) if len(finite) > 1 else 0.0,
+                n=len(finite),
+            )
         return out
 
 
 @dataclass
 class CaseResult:
     name: str
-    kind: str                   # "simulated" or "log"
-    mode: str                   # "9D" or "6D"
+    kind: str  # "simulated" or "log"
+    mode: str  # "9D" or "6D"
     rate_hz: float
     samples: int
     duration_s: float
@@ -217,27 +233,39 @@ class BenchReport:
             parts.append(f"{len(self.cases) - sims} log(s)")
         lines.append("; ".join(parts + [f"convergence threshold {s['threshold_deg']:g}°."]))
         lines.append("")
-        lines.append("| case | filter | mode | total RMSE ° | heading RMSE ° | inclination RMSE ° | "
-                     "converged after s | gyro-bias error °/s | throughput samples/s | status |")
+        lines.append(
+            "| case | filter | mode | total RMSE ° | heading RMSE ° | inclination RMSE ° | "
+            "converged after s | gyro-bias error °/s | throughput samples/s | status |"
+        )
         lines.append("|---|---|---|---|---|---|---|---|---|---|")
         for case in self.cases:
             for fr in case.filters:
                 lines.append("| " + " | ".join(self._row(case, fr)) + " |")
         lines.append("")
-        lines.append("Mean ± standard deviation over the runs that did not diverge. Errors with BROAD's "
-                     "definitions: q_err = q_est ⊗ conj(q_true); total 2·acos|w|, heading 2·atan|z/w|, "
-                     "inclination 2·acos√(w²+z²), RMSE over the counted samples (a log's movement mask), "
-                     "NaN reference rows ignored. A 6D row has no heading (—).")
-        lines.append(f"Converged after: the time from the first sample after which the error (total for 9D, "
-                     f"inclination for 6D) stays below {s['threshold_deg']:g}°; \"never\" if it is above it "
-                     "at the end.")
-        lines.append("Gyro-bias error: RMS of |b_est − b_true| over the last half of each run, b_true the measured "
-                     "gyro minus the true rate averaged over 1 s (— : the filter estimates no bias, or the "
-                     "truth has no rate).")
-        lines.append("Throughput: samples per second of process() wall time; [batched] rows: filter updates "
-                     "per second across all runs at once.")
-        lines.append(f"Diverged: non-finite output, or inclination error RMS above "
-                     f"{DIVERGED_INCLINATION_DEG:g}° over the last {DIVERGED_FINAL_FRACTION:.0%} of the samples.")
+        lines.append(
+            "Mean ± standard deviation over the runs that did not diverge. Errors with BROAD's "
+            "definitions: q_err = q_est ⊗ conj(q_true); total 2·acos|w|, heading 2·atan|z/w|, "
+            "inclination 2·acos√(w²+z²), RMSE over the counted samples (a log's movement mask), "
+            "NaN reference rows ignored. A 6D row has no heading (—)."
+        )
+        lines.append(
+            f"Converged after: the time from the first sample after which the error (total for 9D, "
+            f'inclination for 6D) stays below {s["threshold_deg"]:g}°; "never" if it is above it '
+            "at the end."
+        )
+        lines.append(
+            "Gyro-bias error: RMS of |b_est − b_true| over the last half of each run, b_true the measured "
+            "gyro minus the true rate averaged over 1 s (— : the filter estimates no bias, or the "
+            "truth has no rate)."
+        )
+        lines.append(
+            "Throughput: samples per second of process() wall time; [batched] rows: filter updates "
+            "per second across all runs at once."
+        )
+        lines.append(
+            f"Diverged: non-finite output, or inclination error RMS above "
+            f"{DIVERGED_INCLINATION_DEG:g}° over the last {DIVERGED_FINAL_FRACTION:.0%} of the samples."
+        )
         notes = list(self.notes)
         for name, why in self.unavailable.items():
             notes.append(f"{name} left out: {why}")
@@ -259,8 +287,13 @@ class BenchReport:
         n_runs = len(fr.runs)
         all_diverged = fr.diverged_runs == n_runs
         cells = [case.name, fr.label, case.mode]
-        for metric, digits in (("total_deg", 2), ("heading_deg", 2), ("inclination_deg", 2),
-                               ("convergence_s", 2), ("bias_error_deg_s", 4)):
+        for metric, digits in (
+            ("total_deg", 2),
+            ("heading_deg", 2),
+            ("inclination_deg", 2),
+            ("convergence_s", 2),
+            ("bias_error_deg_s", 4),
+        ):
             if case.mode == "6D" and metric in ("total_deg", "heading_deg"):
                 cells.append("—")
             elif all_diverged:
@@ -268,8 +301,11 @@ class BenchReport:
             else:
                 cells.append(_cell(fr.summary(metric), digits, metric))
         tp = fr.summary("throughput")
-        cells.append("—" if tp["mean"] is None else
-                     (f"{_si(tp['mean'])} updates/s ({n_runs} runs at once)" if fr.batched else _si(tp["mean"])))
+        cells.append(
+            "—"
+            if tp["mean"] is None
+            else (f"{_si(tp['mean'])} updates/s ({n_runs} runs at once)" if fr.batched else _si(tp["mean"]))
+        )
         if fr.diverged_runs:
             cells.append(f"diverged ({fr.diverged_runs} of {n_runs} runs)" if n_runs > 1 else "diverged")
         else:
@@ -283,29 +319,47 @@ class BenchReport:
             "settings": self.settings,
             "definitions": {
                 "errors": "BROAD: q_err = q_est ⊗ conj(q_true); total 2 acos|w|, heading 2 atan|z/w|, "
-                          "inclination 2 acos sqrt(w²+z²); RMSE in degrees over the counted samples, NaN rows ignored",
+                "inclination 2 acos sqrt(w²+z²); RMSE in degrees over the counted samples, NaN rows ignored",
                 "convergence_s": f"time from the first sample after which the error (total 9D, inclination 6D) stays "
-                                 f"below {self.settings['threshold_deg']} deg; null with converged=false: never",
+                f"below {self.settings['threshold_deg']} deg; null with converged=false: never",
                 "bias_error_deg_s": "RMS of |b_est - b_true| over the last half of the run; b_true = measured gyro "
-                                    "minus true rate, averaged over 1 s",
+                "minus true rate, averaged over 1 s",
                 "throughput": "samples/s of process() wall time; batched: filter updates/s across all runs",
                 "diverged": f"non-finite output or inclination error RMS > {DIVERGED_INCLINATION_DEG} deg over the "
-                            f"last {DIVERGED_FINAL_FRACTION:.0%} of the counted samples",
+                f"last {DIVERGED_FINAL_FRACTION:.0%} of the counted samples",
                 "summary": "mean, std (ddof 1) and n over the runs that did not diverge",
             },
             "unavailable": self.unavailable,
             "notes": self.notes,
-            "cases": [{
-                "name": c.name, "kind": c.kind, "mode": c.mode, "rate_hz": c.rate_hz, "samples": c.samples,
-                "duration_s": c.duration_s, "runs": c.runs, "source": c.source, "notes": c.notes,
-                "filters": [{
-                    "filter": fr.filter, "name": fr.name, "batched": fr.batched, "note": fr.note,
-                    "diverged_runs": fr.diverged_runs,
-                    "status": "ok" if not fr.diverged_runs else f"diverged in {fr.diverged_runs} of {len(fr.runs)} runs",
-                    "summary": {m: {k: _json_number(v) for k, v in fr.summary(m).items()} for m in _METRICS},
-                    "runs": [r.to_json() for r in fr.runs],
-                } for fr in c.filters],
-            } for c in self.cases],
+            "cases": [
+                {
+                    "name": c.name,
+                    "kind": c.kind,
+                    "mode": c.mode,
+                    "rate_hz": c.rate_hz,
+                    "samples": c.samples,
+                    "duration_s": c.duration_s,
+                    "runs": c.runs,
+                    "source": c.source,
+                    "notes": c.notes,
+                    "filters": [
+                        {
+                            "filter": fr.filter,
+                            "name": fr.name,
+                            "batched": fr.batched,
+                            "note": fr.note,
+                            "diverged_runs": fr.diverged_runs,
+                            "status": "ok"
+                            if not fr.diverged_runs
+                            else f"diverged in {fr.diverged_runs} of {len(fr.runs)} runs",
+                            "summary": {m: {k: _json_number(v) for k, v in fr.summary(m).items()} for m in _METRICS},
+                            "runs": [r.to_json() for r in fr.runs],
+                        }
+                        for fr in c.filters
+                    ],
+                }
+                for c in self.cases
+            ],
         }
 
     def to_json(self) -> str:
@@ -323,8 +377,11 @@ class BenchReport:
         directory = Path(directory)
         written = []
         for case, stem in zip(self.cases, _unique_stems([c.name for c in self.cases])):
-            panels = [("total", "curve_total_deg"), ("inclination", "curve_inclination_deg")] if case.mode == "9D" \
+            panels = (
+                [("total", "curve_total_deg"), ("inclination", "curve_inclination_deg")]
+                if case.mode == "9D"
                 else [("inclination", "curve_inclination_deg")]
+            )
             fig, axes = plt.subplots(len(panels), 1, figsize=(9, 3.2 * len(panels)), sharex=True, squeeze=False)
             for ax, (what, attr) in zip(axes[:, 0], panels):
                 for fr in case.filters:
@@ -413,6 +470,7 @@ def _cell(summary: dict, digits: int, metric: str) -> str:
 # ==================================================================================================
 # Evaluation of one run
 
+
 def _moving_mean(x: np.ndarray, window: int) -> np.ndarray:
     """Centred moving mean over ``window`` samples along axis 0; NaN where the window does not fit."""
     n = len(x)
@@ -422,13 +480,27 @@ def _moving_mean(x: np.ndarray, window: int) -> np.ndarray:
     c = np.cumsum(np.concatenate([np.zeros((1,) + x.shape[1:]), x]), axis=0)
     means = (c[window:] - c[:-window]) / window
     start = window // 2
-    out[start:start + len(means)] = means
+    out[start : start + len(means)] = means
     return out
 
 
-def evaluate_run(t, q_est, q_true, *, mask=None, six_d=False, threshold_deg=2.0, bias_est=None,
-                 omega_true=None, gyro=None, rate_hz=None, wall_s=float("nan"), throughput=None,
-                 seed=None, reason="") -> tuple[RunResult, dict]:
+def evaluate_run(
+    t,
+    q_est,
+    q_true,
+    *,
+    mask=None,
+    six_d=False,
+    threshold_deg=2.0,
+    bias_est=None,
+    omega_true=None,
+    gyro=None,
+    rate_hz=None,
+    wall_s=float("nan"),
+    throughput=None,
+    seed=None,
+    reason="",
+) -> tuple[RunResult, dict]:
     """The metrics of one filter run (see the module's docstring) and the per-sample errors (degrees,
     NaN outside the counted samples) as ``{"total": ..., "inclination": ...}``."""
     t = np.asarray(t, dtype=float)
@@ -448,18 +520,20 @@ def evaluate_run(t, q_est, q_true, *, mask=None, six_d=False, threshold_deg=2.0,
     why = reason or ("non-finite quaternions in the output" if diverged else "")
     idx = np.flatnonzero(counted)
     if len(idx):
-        tail = idx[len(idx) - max(1, int(math.ceil(DIVERGED_FINAL_FRACTION * len(idx)))):]
+        tail = idx[len(idx) - max(1, int(math.ceil(DIVERGED_FINAL_FRACTION * len(idx)))) :]
         tail_rms = rmse_deg(err.inclination[tail])
         if tail_rms > DIVERGED_INCLINATION_DEG or (math.isnan(tail_rms) and not diverged):
             diverged = True
-            why = why or (f"inclination error RMS {tail_rms:.1f}° over the last {DIVERGED_FINAL_FRACTION:.0%}"
-                          if not math.isnan(tail_rms) else "no finite output over the last samples")
+            why = why or (
+                f"inclination error RMS {tail_rms:.1f}° over the last {DIVERGED_FINAL_FRACTION:.0%}"
+                if not math.isnan(tail_rms)
+                else "no finite output over the last samples"
+            )
     if reason:
         diverged = True
 
     conv_err = inclination if six_d else total
-    conv = convergence_time(t, conv_err, math.radians(threshold_deg)) if np.isfinite(conv_err).any() \
-        else float("nan")
+    conv = convergence_time(t, conv_err, math.radians(threshold_deg)) if np.isfinite(conv_err).any() else float("nan")
 
     bias_error = None
     if bias_est is not None and omega_true is not None and gyro is not None and rate_hz:
@@ -479,18 +553,24 @@ def evaluate_run(t, q_est, q_true, *, mask=None, six_d=False, threshold_deg=2.0,
             bias_error = float(np.degrees(np.sqrt(np.mean(diff[ok] ** 2))))
 
     result = RunResult(
-        seed=seed, samples=n,
+        seed=seed,
+        samples=n,
         total_deg=None if six_d else rmse_deg(total),
         heading_deg=None if six_d else rmse_deg(heading),
         inclination_deg=rmse_deg(inclination),
-        convergence_s=conv, bias_error_deg_s=bias_error,
+        convergence_s=conv,
+        bias_error_deg_s=bias_error,
         throughput=float(throughput) if throughput is not None else (n / wall_s if wall_s > 0 else float("nan")),
-        wall_s=float(wall_s), diverged=bool(diverged), reason=why if diverged else "")
+        wall_s=float(wall_s),
+        diverged=bool(diverged),
+        reason=why if diverged else "",
+    )
     return result, {"total": np.degrees(total), "inclination": np.degrees(inclination)}
 
 
 # ==================================================================================================
 # Running
+
 
 def _check_estimate(est, n: int, label: str) -> tuple[np.ndarray, np.ndarray | None]:
     if not isinstance(est, Estimate) and not hasattr(est, "q_wb"):
@@ -514,8 +594,9 @@ def _warm_up(spec: str, setup: FilterSetup, run: _Run, six_d: bool) -> None:
     (numba compiling or loading its cache, lazy imports)."""
     k = min(len(run.t), _WARM_UP_SAMPLES)
     try:
-        make_filter(spec, setup).process(run.t[:k], run.gyro[:k], run.accel[:k],
-                                         None if six_d or run.mag is None else run.mag[:k])
+        make_filter(spec, setup).process(
+            run.t[:k], run.gyro[:k], run.accel[:k], None if six_d or run.mag is None else run.mag[:k]
+        )
     except Exception:  # noqa: BLE001 - the timed run reports it
         pass
 
@@ -534,9 +615,21 @@ def _run_filter(spec: str, setup: FilterSetup, run: _Run, *, six_d: bool, thresh
     except Exception as exc:  # noqa: BLE001 - a filter that fails is reported, not fatal
         wall = time.perf_counter() - started
         q, b, reason = np.full((n, 4), np.nan), None, f"process() raised {type(exc).__name__}: {exc}"
-    result, errors = evaluate_run(run.t, q, run.q_true, mask=run.mask, six_d=six_d, threshold_deg=threshold_deg,
-                                  bias_est=b, omega_true=run.omega_true, gyro=run.gyro, rate_hz=setup.rate_hz,
-                                  wall_s=wall, seed=run.seed, reason=reason)
+    result, errors = evaluate_run(
+        run.t,
+        q,
+        run.q_true,
+        mask=run.mask,
+        six_d=six_d,
+        threshold_deg=threshold_deg,
+        bias_est=b,
+        omega_true=run.omega_true,
+        gyro=run.gyro,
+        rate_hz=setup.rate_hz,
+        wall_s=wall,
+        seed=run.seed,
+        reason=reason,
+    )
     return result, errors, name
 
 
@@ -594,8 +687,16 @@ def _sim_run(traj, device, seed) -> _Run:
     samples = device.measure(traj)
     truth = truth_series(traj, samples)
     mag = samples.mag if np.isfinite(samples.mag).any() else None
-    return _Run(t=np.asarray(samples.t, float), gyro=samples.gyro, accel=samples.accel, mag=mag,
-                q_true=truth.q_wb, omega_true=truth.omega_b, mask=np.ones(len(samples.t), bool), seed=seed)
+    return _Run(
+        t=np.asarray(samples.t, float),
+        gyro=samples.gyro,
+        accel=samples.accel,
+        mag=mag,
+        q_true=truth.q_wb,
+        omega_true=truth.omega_b,
+        mask=np.ones(len(samples.t), bool),
+        seed=seed,
+    )
 
 
 def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, list[str]]]:
@@ -608,19 +709,27 @@ def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, li
     if not path.is_file():
         raise BenchError("no such file", file=path, key=None)
     log = read_mcap(path)  # LogError (a ConfigError naming the file) when unreadable or without IMU messages
-    imu_devices = {n: d for n, d in log.devices.items()
-                   if not str(d.topics.get("imu", "")).rstrip("/").endswith(("truth/imu", "estimate/imu"))}
+    imu_devices = {
+        n: d
+        for n, d in log.devices.items()
+        if not str(d.topics.get("imu", "")).rstrip("/").endswith(("truth/imu", "estimate/imu"))
+    }
     if not imu_devices:
-        raise BenchError("holds no IMU channel (/imu with sensor_msgs/msg/Imu measurements): only "
-                         + ", ".join(d.topics.get("imu", "?") for d in log.devices.values()), file=path)
+        raise BenchError(
+            "holds no IMU channel (/imu with sensor_msgs/msg/Imu measurements): only "
+            + ", ".join(d.topics.get("imu", "?") for d in log.devices.values()),
+            file=path,
+        )
     if case.device is not None:
         if case.device not in imu_devices:
             raise BenchError(f"no device '{case.device}' (devices: {', '.join(imu_devices)})", file=path)
         imu_devices = {case.device: imu_devices[case.device]}
     with_truth = {n: d for n, d in imu_devices.items() if d.truth is not None and d.truth.q_wb is not None}
     if not with_truth:
-        raise BenchError("has no truth channel (/truth/imu with the true attitude): the bench compares "
-                         "estimates with the truth", file=path)
+        raise BenchError(
+            "has no truth channel (/truth/imu with the true attitude): the bench compares estimates with the truth",
+            file=path,
+        )
     out = []
     for name, dev in with_truth.items():
         notes = []
@@ -649,8 +758,9 @@ def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, li
                 omega = np.full((len(t), 3), np.nan)
                 omega[hit] = dev.truth.omega_b[j[hit]]
         if not np.isfinite(q_true).all(axis=1).any():
-            raise BenchError(f"the truth channel of device '{name}' has no finite attitude at the IMU's stamps",
-                             file=path)
+            raise BenchError(
+                f"the truth channel of device '{name}' has no finite attitude at the IMU's stamps", file=path
+            )
         movement = getattr(dev, "movement", None)
         if movement is not None and np.asarray(movement, bool).any():
             mask = np.asarray(movement, dtype=bool)
@@ -663,13 +773,21 @@ def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, li
             mask = np.ones(len(t), bool)
             counted = "every sample"
         no_ref = int((~np.isfinite(q_true).all(axis=1) & mask).sum())
-        notes.insert(0, f"{counted} counted" + (f", {no_ref} of them without a finite reference (ignored)"
-                                                 if no_ref else ""))
+        notes.insert(
+            0, f"{counted} counted" + (f", {no_ref} of them without a finite reference (ignored)" if no_ref else "")
+        )
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # an embedded config that no longer validates: defaults
             setup = setup_from_metadata(dev.metadata, 1.0 / dt_nominal, use_mag=mode == "9D")
-        run = _Run(t=t, gyro=np.asarray(s.gyro, float), accel=np.asarray(s.accel, float),
-                   mag=np.asarray(s.mag, float) if has_mag else None, q_true=q_true, omega_true=omega, mask=mask)
+        run = _Run(
+            t=t,
+            gyro=np.asarray(s.gyro, float),
+            accel=np.asarray(s.accel, float),
+            mag=np.asarray(s.mag, float) if has_mag else None,
+            q_true=q_true,
+            omega_true=omega,
+            mask=mask,
+        )
         source = {"log": str(path), "device": name}
         out.append((label + (" (6D)" if case.six_d and has_mag else ""), mode, setup, run, source, notes))
     return out
@@ -686,8 +804,16 @@ def _resolve_filters(filters) -> tuple[list[str], dict]:
     return filters, unavailable
 
 
-def run_bench(cases=None, filters=None, runs: int = 3, seed: int = 0, *, threshold_deg: float = 2.0,
-              batched: bool = False, progress: bool | None = None) -> BenchReport:
+def run_bench(
+    cases=None,
+    filters=None,
+    runs: int = 3,
+    seed: int = 0,
+    *,
+    threshold_deg: float = 2.0,
+    batched: bool = False,
+    progress: bool | None = None,
+) -> BenchReport:
     """Run ``filters`` over ``cases`` and return the report.
 
     Parameters
@@ -745,10 +871,21 @@ def run_bench(cases=None, filters=None, runs: int = 3, seed: int = 0, *, thresho
                 results.append(_bench_log(item, filters, threshold_deg, bar))
     finally:
         bar.close()
-    settings = {"runs": runs, "seed": seed, "threshold_deg": threshold_deg, "batched": bool(batched),
-                "filters": filters, "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-                "cases": [{"type": type(c).__name__, **{k: v if v is None or isinstance(v, (bool, int, float)) else str(v)
-                                                          for k, v in c.__dict__.items()}} for c in cases]}
+    settings = {
+        "runs": runs,
+        "seed": seed,
+        "threshold_deg": threshold_deg,
+        "batched": bool(batched),
+        "filters": filters,
+        "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+        "cases": [
+            {
+                "type": type(c).__name__,
+                **{k: v if v is None or isinstance(v, (bool, int, float)) else str(v) for k, v in c.__dict__.items()},
+            }
+            for c in cases
+        ],
+    }
     return BenchReport(cases=results, settings=settings, unavailable=unavailable)
 
 
@@ -780,11 +917,22 @@ def _bench_sim(case: SimCase, item, filters, runs, seed, threshold_deg, batch_fn
         bar.describe(f"{name}: mekf, {len(kept)} runs batched")
         results["mekf"] = _bench_batched(batch_fn, setup, kept, six_d, threshold_deg)
         bar.step(len(kept))
-    return CaseResult(name=name, kind="simulated", mode=mode, rate_hz=setup.rate_hz, samples=len(first.t),
-                      duration_s=float(first.t[-1] - first.t[0]), runs=runs,
-                      source={"scenario": case.scenario, "device": case.device, "duration_s": case.duration,
-                              "seeds": [seed + r for r in range(runs)]},
-                      filters=[results[f] for f in filters])
+    return CaseResult(
+        name=name,
+        kind="simulated",
+        mode=mode,
+        rate_hz=setup.rate_hz,
+        samples=len(first.t),
+        duration_s=float(first.t[-1] - first.t[0]),
+        runs=runs,
+        source={
+            "scenario": case.scenario,
+            "device": case.device,
+            "duration_s": case.duration,
+            "seeds": [seed + r for r in range(runs)],
+        },
+        filters=[results[f] for f in filters],
+    )
 
 
 def _bench_batched(batch_fn, setup, runs: list[_Run], six_d, threshold_deg) -> FilterResult:
@@ -793,13 +941,19 @@ def _bench_batched(batch_fn, setup, runs: list[_Run], six_d, threshold_deg) -> F
     shared = all(len(r.t) == len(runs[0].t) and np.array_equal(r.t, runs[0].t) for r in runs)
     groups = [runs] if shared else [[r] for r in runs]
     if not shared:
-        fr.note = ("the runs' stamps differ (clock jitter), so each run went through mekf_batch on its own; "
-                   "throughput is per run")
+        fr.note = (
+            "the runs' stamps differ (clock jitter), so each run went through mekf_batch on its own; "
+            "throughput is per run"
+        )
     k = min(len(runs[0].t), _WARM_UP_SAMPLES)
     try:  # untimed first call (compiling or loading the kernels)
-        batch_fn(setup, runs[0].t[:k], np.stack([r.gyro[:k] for r in runs[:2]]),
-                 np.stack([r.accel[:k] for r in runs[:2]]),
-                 None if six_d or runs[0].mag is None else np.stack([r.mag[:k] for r in runs[:2]]))
+        batch_fn(
+            setup,
+            runs[0].t[:k],
+            np.stack([r.gyro[:k] for r in runs[:2]]),
+            np.stack([r.accel[:k] for r in runs[:2]]),
+            None if six_d or runs[0].mag is None else np.stack([r.mag[:k] for r in runs[:2]]),
+        )
     except Exception:  # noqa: BLE001 - the timed call reports it
         pass
     for group in groups:
@@ -820,10 +974,22 @@ def _bench_batched(batch_fn, setup, runs: list[_Run], six_d, threshold_deg) -> F
             wall = time.perf_counter() - started
             q, b, reason = np.full((len(group), n, 4), np.nan), None, f"mekf_batch raised {type(exc).__name__}: {exc}"
         for i, run in enumerate(group):
-            res, errors = evaluate_run(run.t, q[i], run.q_true, mask=run.mask, six_d=six_d, threshold_deg=threshold_deg,
-                                       bias_est=None if b is None else b[i], omega_true=run.omega_true, gyro=run.gyro,
-                                       rate_hz=setup.rate_hz, wall_s=wall, throughput=len(group) * n / wall if wall > 0
-                                       else float("nan"), seed=run.seed, reason=reason)
+            res, errors = evaluate_run(
+                run.t,
+                q[i],
+                run.q_true,
+                mask=run.mask,
+                six_d=six_d,
+                threshold_deg=threshold_deg,
+                bias_est=None if b is None else b[i],
+                omega_true=run.omega_true,
+                gyro=run.gyro,
+                rate_hz=setup.rate_hz,
+                wall_s=wall,
+                throughput=len(group) * n / wall if wall > 0 else float("nan"),
+                seed=run.seed,
+                reason=reason,
+            )
             if fr.curve_t is None:
                 _curve(fr, run.t, errors)
             fr.runs.append(res)
@@ -841,6 +1007,15 @@ def _bench_log(item, filters, threshold_deg, bar) -> CaseResult:
         _curve(fr, run.t, errors)
         results.append(fr)
         bar.step()
-    return CaseResult(name=name, kind="log", mode=mode, rate_hz=setup.rate_hz, samples=len(run.t),
-                      duration_s=float(run.t[-1] - run.t[0]), runs=1, source=source, filters=results, notes=notes)
-
+    return CaseResult(
+        name=name,
+        kind="log",
+        mode=mode,
+        rate_hz=setup.rate_hz,
+        samples=len(run.t),
+        duration_s=float(run.t[-1] - run.t[0]),
+        runs=1,
+        source=source,
+        filters=results,
+        notes=notes,
+    )

@@ -53,8 +53,9 @@ def _cmd_simulate(args) -> int:
     if not out.parent.is_dir():
         raise UsageError(f"argument --out: {out.parent} is not a folder")
     if out.suffix == ".mcap" and not args.device:
-        raise UsageError("argument --device: an .mcap log holds a device's samples: name a device "
-                         "('gyroemu presets' lists them)")
+        raise UsageError(
+            "argument --device: an .mcap log holds a device's samples: name a device ('gyroemu presets' lists them)"
+        )
     scenario = load_scenario(args.scenario)
     device = None
     if args.device:
@@ -64,8 +65,9 @@ def _cmd_simulate(args) -> int:
     from .progress import PhaseProgress  # a bar on stderr when it is a terminal, nothing otherwise
 
     started = time.perf_counter()
-    with PhaseProgress(["truth", "measure", "write"] if device is not None else ["truth", "write"],
-                       label="simulate") as progress:
+    with PhaseProgress(
+        ["truth", "measure", "write"] if device is not None else ["truth", "write"], label="simulate"
+    ) as progress:
         with progress.phase("truth"):
             traj = scenario.simulate(duration=args.duration, rate_hz=args.rate)
         samples = None
@@ -76,8 +78,7 @@ def _cmd_simulate(args) -> int:
             if out.suffix == ".mcap":
                 from .mcap_io import Recording, truth_series, write_mcap
 
-                write_mcap(out, Recording(samples, truth=truth_series(traj, samples), device=device),
-                           scenario=scenario)
+                write_mcap(out, Recording(samples, truth=truth_series(traj, samples), device=device), scenario=scenario)
             else:
                 write_npz_atomic(out, _npz_arrays(scenario, traj, device, samples))
     elapsed = time.perf_counter() - started
@@ -90,8 +91,10 @@ def _cmd_simulate(args) -> int:
 
 def _npz_arrays(scenario, traj, device, samples) -> dict:
     """The arrays of an .npz run: ``truth/...``, ``imu/...``, ``raw/<kind>/...`` and the configs."""
-    arrays = {f"truth/{name}": getattr(traj, name) for name in
-              ("t", "q_wb", "omega_b", "alpha_b", "specific_force_b", "pos_w", "vel_w", "mag_b")}
+    arrays = {
+        f"truth/{name}": getattr(traj, name)
+        for name in ("t", "q_wb", "omega_b", "alpha_b", "specific_force_b", "pos_w", "vel_w", "mag_b")
+    }
     arrays.update({f"truth/extras/{k}": v for k, v in traj.extras.items()})
     arrays["scenario_toml"] = np.array(scenario.to_toml())
     if device is not None:
@@ -215,8 +218,9 @@ def _cmd_allan(args) -> int:
         try:
             with np.load(log, allow_pickle=False) as data:
                 if "imu/gyro" not in data or "imu/t" not in data:
-                    raise UsageError(f"argument LOG: {log}: holds no gyro samples (write one with "
-                                     "'gyroemu simulate --device ...')")
+                    raise UsageError(
+                        f"argument LOG: {log}: holds no gyro samples (write one with 'gyroemu simulate --device ...')"
+                    )
                 gyro, t = data["imu/gyro"], data["imu/t"]
                 device_toml = str(data["device_toml"]) if "device_toml" in data else None
         except (OSError, ValueError) as e:
@@ -275,8 +279,15 @@ def _cmd_bench(args) -> int:
                     if e.file is not None:
                         raise  # a bad file: names the file and key
                     raise UsageError(f"argument {flag}: {e}") from None
-    cases = [SimCase(scenario=sc, device=dev, duration=args.duration, six_d=args.six_d)
-             for sc in dict.fromkeys(scenarios) for dev in dict.fromkeys(devices)] if simulated else []
+    cases = (
+        [
+            SimCase(scenario=sc, device=dev, duration=args.duration, six_d=args.six_d)
+            for sc in dict.fromkeys(scenarios)
+            for dev in dict.fromkeys(devices)
+        ]
+        if simulated
+        else []
+    )
     for log in args.log or ():
         if not Path(log).is_file():
             raise UsageError(f"argument --log: {log}: no such file")
@@ -287,10 +298,17 @@ def _cmd_bench(args) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("always", BenchWarning)
         warnings.showwarning = lambda message, category, *a, **k: print(
-            f"gyroemu bench: warning: {message}", file=sys.stderr)
+            f"gyroemu bench: warning: {message}", file=sys.stderr
+        )
         try:
-            report = run_bench(cases, filters=args.filter, runs=args.runs, seed=args.seed,
-                               threshold_deg=args.threshold_deg, batched=args.batched)
+            report = run_bench(
+                cases,
+                filters=args.filter,
+                runs=args.runs,
+                seed=args.seed,
+                threshold_deg=args.threshold_deg,
+                batched=args.batched,
+            )
         except FilterError as e:
             raise UsageError(f"argument --filter: {e}") from None
     paths = report.save(out)
@@ -339,9 +357,18 @@ def _cmd_stream(args) -> int:
     from .stream import run_stream
 
     try:
-        return run_stream(scenario=args.scenario, device=args.device, duration=args.duration, seed=args.seed,
-                          as_fast_as_possible=args.as_fast_as_possible, device_name=args.device_name,
-                          wait_s=args.wait, estimate=args.estimate, **_zenoh_options(args), **_ros2_options(args))
+        return run_stream(
+            scenario=args.scenario,
+            device=args.device,
+            duration=args.duration,
+            seed=args.seed,
+            as_fast_as_possible=args.as_fast_as_possible,
+            device_name=args.device_name,
+            wait_s=args.wait,
+            estimate=args.estimate,
+            **_zenoh_options(args),
+            **_ros2_options(args),
+        )
     except ValueError as e:
         raise _argument_error(e, "--connect/--listen") from None
 
@@ -353,8 +380,14 @@ def _cmd_record(args) -> int:
     if not out.parent.is_dir():
         raise UsageError(f"argument --out: {out.parent} is not a folder")
     try:
-        return run_record(out_path=out, duration=args.duration, key_expr=args.key, report_path=args.report,
-                          **_zenoh_options(args), **_ros2_options(args))
+        return run_record(
+            out_path=out,
+            duration=args.duration,
+            key_expr=args.key,
+            report_path=args.report,
+            **_zenoh_options(args),
+            **_ros2_options(args),
+        )
     except ValueError as e:
         raise _argument_error(e, "--connect/--listen") from None
     except OSError as e:
@@ -365,9 +398,16 @@ def _cmd_replay(args) -> int:
     from .replay import run_replay
 
     try:
-        return run_replay(path=Path(args.log), rate=args.rate, loop=args.loop, topics=args.topics,
-                          device_name=args.device_name, wait_s=args.wait, **_zenoh_options(args),
-                          **_ros2_options(args))
+        return run_replay(
+            path=Path(args.log),
+            rate=args.rate,
+            loop=args.loop,
+            topics=args.topics,
+            device_name=args.device_name,
+            wait_s=args.wait,
+            **_zenoh_options(args),
+            **_ros2_options(args),
+        )
     except ConfigError:
         raise  # LogError: names the file
     except ValueError as e:
@@ -384,21 +424,35 @@ def _cmd_router(args) -> int:
 
 
 def _add_zenoh_arguments(p, modes=True) -> None:
-    p.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
-                   help="zenoh endpoint to connect to, e.g. tcp/host:7447 (repeatable)")
-    p.add_argument("--listen", action="append", default=None, metavar="ENDPOINT",
-                   help="zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable)")
+    p.add_argument(
+        "--connect",
+        action="append",
+        default=None,
+        metavar="ENDPOINT",
+        help="zenoh endpoint to connect to, e.g. tcp/host:7447 (repeatable)",
+    )
+    p.add_argument(
+        "--listen",
+        action="append",
+        default=None,
+        metavar="ENDPOINT",
+        help="zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable)",
+    )
     if modes:
         p.add_argument("--mode", choices=("peer", "client"), default=None, help="zenoh session mode")
     p.add_argument("--config", default=None, metavar="FILE.json5", help="a zenoh JSON5 config file")
 
 
 def _add_ros2_arguments(p, what: str) -> None:
-    p.add_argument("--ros2", action="store_true",
-                   help=f"{what} rmw_zenoh's keys <domain>/<topic>/<type>/<RIHS01 hash>, with the liveliness "
-                        "tokens of a ROS 2 node, for ROS 2 nodes on rmw_zenoh (Jazzy)")
-    p.add_argument("--domain", type=int, default=None, metavar="N",
-                   help="ROS 2 domain of --ros2 (default: $ROS_DOMAIN_ID, else 0)")
+    p.add_argument(
+        "--ros2",
+        action="store_true",
+        help=f"{what} rmw_zenoh's keys <domain>/<topic>/<type>/<RIHS01 hash>, with the liveliness "
+        "tokens of a ROS 2 node, for ROS 2 nodes on rmw_zenoh (Jazzy)",
+    )
+    p.add_argument(
+        "--domain", type=int, default=None, metavar="N", help="ROS 2 domain of --ros2 (default: $ROS_DOMAIN_ID, else 0)"
+    )
 
 
 def _positive(text: str) -> float:
@@ -418,9 +472,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("demo", help="run the main job on built-in defaults and print a summary")
     p.add_argument("--scenario", default="heavy_top", help="built-in name or TOML path (default: heavy_top)")
     p.add_argument("--duration", type=_positive, default=None, help="seconds (default: the scenario's)")
-    p.add_argument("--live-seconds", type=_positive, default=20.0,
-                   help="seconds of the live stream to the recorder and the filter (default: 20)")
-    p.add_argument("--out", default="gyroemu-demo", help="folder for the log, report and plot (default: ./gyroemu-demo)")
+    p.add_argument(
+        "--live-seconds",
+        type=_positive,
+        default=20.0,
+        help="seconds of the live stream to the recorder and the filter (default: 20)",
+    )
+    p.add_argument(
+        "--out", default="gyroemu-demo", help="folder for the log, report and plot (default: ./gyroemu-demo)"
+    )
     p.set_defaults(func=_cmd_demo)
 
     p = sub.add_parser("scenarios", help="list the built-in scenarios, one line each")
@@ -440,57 +500,90 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--configs", action="store_true", help="also print the embedded scenario and device configs")
     p.set_defaults(func=_cmd_info)
 
-    p = sub.add_parser("import", help="turn another format's recording into an MCAP log (BROAD trials)",
-                       description="Turn another format's recording into a gyroemu MCAP log. broad: a BROAD trial "
-                                   "(HDF5) to /imu, /mag (tesla), /truth/imu (optical reference, NaN rows kept) "
-                                   "and /movement, stamped t_k = k / sampling_rate from 0.")
+    p = sub.add_parser(
+        "import",
+        help="turn another format's recording into an MCAP log (BROAD trials)",
+        description="Turn another format's recording into a gyroemu MCAP log. broad: a BROAD trial "
+        "(HDF5) to /imu, /mag (tesla), /truth/imu (optical reference, NaN rows kept) "
+        "and /movement, stamped t_k = k / sampling_rate from 0.",
+    )
     p.add_argument("format", choices=("broad",), help="the input's format")
     p.add_argument("file", metavar="FILE", help="the recording to import (read only), e.g. TRIAL.hdf5")
     p.add_argument("--out", required=True, help="MCAP file to write")
     p.set_defaults(func=_cmd_import)
 
     p = sub.add_parser(
-        "bench", help="benchmark attitude filters on simulated truth and on logs with a truth channel",
+        "bench",
+        help="benchmark attitude filters on simulated truth and on logs with a truth channel",
         description="Run attitude filters over simulated cases (each --scenario x each --device, Monte Carlo over "
-                    "--runs device seeds) and over MCAP logs with a /truth/imu channel (--log), and write bench.md, "
-                    "bench.json and one error plot per case into --out. Reports total, heading and inclination "
-                    "RMSE (BROAD's definitions), convergence time, gyro-bias error and throughput per filter; "
-                    "a diverged filter is reported as such. With no arguments: smooth_manoeuvre x consumer_mems, "
-                    "60 s, 3 runs, every available filter.",
+        "--runs device seeds) and over MCAP logs with a /truth/imu channel (--log), and write bench.md, "
+        "bench.json and one error plot per case into --out. Reports total, heading and inclination "
+        "RMSE (BROAD's definitions), convergence time, gyro-bias error and throughput per filter; "
+        "a diverged filter is reported as such. With no arguments: smooth_manoeuvre x consumer_mems, "
+        "60 s, 3 runs, every available filter.",
         epilog="Filters: mekf, madgwick, mahony, ahrs-ekf, vqf (needs the vqf package), or your own class as "
-               "module:Class or path/to/file.py:Class, made with the FilterSetup and obeying "
-               "pipelines/estimation/protocol.py.")
-    p.add_argument("--scenario", action="append", default=None, metavar="NAME",
-                   help="built-in scenario or TOML path (repeatable; default: smooth_manoeuvre unless only --log)")
-    p.add_argument("--device", action="append", default=None, metavar="NAME",
-                   help="built-in device or TOML path (repeatable; default: consumer_mems unless only --log)")
+        "module:Class or path/to/file.py:Class, made with the FilterSetup and obeying "
+        "pipelines/estimation/protocol.py.",
+    )
+    p.add_argument(
+        "--scenario",
+        action="append",
+        default=None,
+        metavar="NAME",
+        help="built-in scenario or TOML path (repeatable; default: smooth_manoeuvre unless only --log)",
+    )
+    p.add_argument(
+        "--device",
+        action="append",
+        default=None,
+        metavar="NAME",
+        help="built-in device or TOML path (repeatable; default: consumer_mems unless only --log)",
+    )
     p.add_argument("--duration", type=_positive, default=60.0, help="seconds per simulated run (default: 60)")
     p.add_argument("--runs", type=int, default=3, help="Monte Carlo runs per simulated case (default: 3)")
     p.add_argument("--seed", type=int, default=0, help="device seed of the first run (default: 0)")
-    p.add_argument("--log", action="append", default=None, metavar="FILE.mcap",
-                   help="an MCAP log with /imu and /truth/imu (repeatable); its /movement mask, if any, "
-                        "selects the samples that count")
-    p.add_argument("--filter", action="append", default=None, metavar="NAME",
-                   help="a filter to run (repeatable; default: every available built-in)")
+    p.add_argument(
+        "--log",
+        action="append",
+        default=None,
+        metavar="FILE.mcap",
+        help="an MCAP log with /imu and /truth/imu (repeatable); its /movement mask, if any, "
+        "selects the samples that count",
+    )
+    p.add_argument(
+        "--filter",
+        action="append",
+        default=None,
+        metavar="NAME",
+        help="a filter to run (repeatable; default: every available built-in)",
+    )
     p.add_argument("--6d", dest="six_d", action="store_true", help="ignore magnetometers (6D: inclination only)")
-    p.add_argument("--batched", action="store_true",
-                   help="run the mekf over all runs of a simulated case at once (vectorised across runs)")
-    p.add_argument("--threshold-deg", type=_positive, default=2.0,
-                   help="convergence threshold, degrees (default: 2)")
+    p.add_argument(
+        "--batched",
+        action="store_true",
+        help="run the mekf over all runs of a simulated case at once (vectorised across runs)",
+    )
+    p.add_argument("--threshold-deg", type=_positive, default=2.0, help="convergence threshold, degrees (default: 2)")
     p.add_argument("--out", default="bench", help="folder for the report (default: ./bench)")
     p.set_defaults(func=_cmd_bench)
 
     p = sub.add_parser(
-        "estimate", help="run an attitude filter over an MCAP log and write its /estimate/imu",
+        "estimate",
+        help="run an attitude filter over an MCAP log and write its /estimate/imu",
         description="Filter every device of FILE.mcap and write OUT.mcap: the input's channels plus /estimate/imu, "
-                    "one message per /imu message at the same stamp (estimated q_wb with its covariance, "
-                    "bias-corrected rate). 9D where the device has a magnetometer, unless --6d. A gyroemu log "
-                    "gives the filter its device's noise figures and the site's latitude; other logs use the "
-                    "filter's defaults.")
+        "one message per /imu message at the same stamp (estimated q_wb with its covariance, "
+        "bias-corrected rate). 9D where the device has a magnetometer, unless --6d. A gyroemu log "
+        "gives the filter its device's noise figures and the site's latitude; other logs use the "
+        "filter's defaults.",
+    )
     p.add_argument("file", metavar="FILE.mcap", help="the log to filter (read only)")
     p.add_argument("--out", required=True, help="MCAP file to write")
-    p.add_argument("--filter", default="mekf", metavar="NAME",
-                   help="mekf (default), madgwick, mahony, ahrs-ekf, vqf, or module:Class")
+    p.add_argument(
+        "--filter",
+        default="mekf",
+        metavar="NAME",
+        help="mekf (default), madgwick, mahony, ahrs-ekf, vqf, or module:Class",
+    )
     p.add_argument("--6d", dest="six_d", action="store_true", help="ignore the magnetometer")
     p.set_defaults(func=_cmd_estimate)
 
@@ -502,21 +595,34 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="PNG to write (default: LOG with .allan.png)")
     p.set_defaults(func=_cmd_allan)
 
-    zenoh_note = ("Without --connect/--listen/--mode/--config, gyroemu processes on one machine find each other "
-                  "(loopback, tcp/127.0.0.1:7447 plus gossip).")
-    p = sub.add_parser("stream", help="simulate a device and publish it live over zenoh, paced to its clock",
-                       epilog=zenoh_note)
+    zenoh_note = (
+        "Without --connect/--listen/--mode/--config, gyroemu processes on one machine find each other "
+        "(loopback, tcp/127.0.0.1:7447 plus gossip)."
+    )
+    p = sub.add_parser(
+        "stream", help="simulate a device and publish it live over zenoh, paced to its clock", epilog=zenoh_note
+    )
     p.add_argument("--scenario", required=True, help="built-in name or TOML path")
     p.add_argument("--device", required=True, help="built-in device name or TOML path")
     p.add_argument("--duration", type=_positive, default=None, help="seconds (default: the scenario's)")
     p.add_argument("--seed", type=int, default=0, help="seed of every random draw (default: 0)")
     p.add_argument("--as-fast-as-possible", action="store_true", help="do not pace to the sample clock")
     p.add_argument("--device-name", default="imu0", help="key expressions gyroemu/<NAME>/... (default: imu0)")
-    p.add_argument("--estimate", nargs="?", const="mekf", default=None, metavar="FILTER",
-                   help="also run an attitude filter live on the stream (default filter: mekf) and publish "
-                        "gyroemu/<NAME>/estimate/imu")
-    p.add_argument("--wait", type=float, default=10.0,
-                   help="seconds to wait for a subscriber on every key before publishing (default: 10; 0: none)")
+    p.add_argument(
+        "--estimate",
+        nargs="?",
+        const="mekf",
+        default=None,
+        metavar="FILTER",
+        help="also run an attitude filter live on the stream (default filter: mekf) and publish "
+        "gyroemu/<NAME>/estimate/imu",
+    )
+    p.add_argument(
+        "--wait",
+        type=float,
+        default=10.0,
+        help="seconds to wait for a subscriber on every key before publishing (default: 10; 0: none)",
+    )
     _add_zenoh_arguments(p)
     _add_ros2_arguments(p, "publish on")
     p.set_defaults(func=_cmd_stream)
@@ -524,33 +630,50 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("record", help="record gyroemu zenoh streams into an MCAP file", epilog=zenoh_note)
     p.add_argument("--out", required=True, help="MCAP file to write (written in place)")
     p.add_argument("--duration", type=_positive, default=None, help="seconds (default: until SIGINT/SIGTERM)")
-    p.add_argument("--key", default=None,
-                   help="key expression to subscribe to (default: gyroemu/**; with --ros2: <domain>/**)")
+    p.add_argument(
+        "--key", default=None, help="key expression to subscribe to (default: gyroemu/**; with --ros2: <domain>/**)"
+    )
     p.add_argument("--report", default=None, metavar="FILE.json", help="also write the sequence report as JSON")
     _add_zenoh_arguments(p)
     _add_ros2_arguments(p, "record from")
     p.set_defaults(func=_cmd_record)
 
-    p = sub.add_parser("replay", help="republish an MCAP log over zenoh with its recorded timing",
-                       epilog="Topics /imu, /<device>/imu, ... go to gyroemu/<device>/...; any other topic /a/b "
-                              "to gyroemu/<device-name>/a/b. " + zenoh_note)
+    p = sub.add_parser(
+        "replay",
+        help="republish an MCAP log over zenoh with its recorded timing",
+        epilog="Topics /imu, /<device>/imu, ... go to gyroemu/<device>/...; any other topic /a/b "
+        "to gyroemu/<device-name>/a/b. " + zenoh_note,
+    )
     p.add_argument("log", metavar="LOG", help="an MCAP file (ROS 2) holding sensor_msgs/msg/Imu messages")
     p.add_argument("--rate", type=_positive, default=1.0, help="speed factor: 2 replays twice as fast (default: 1)")
     p.add_argument("--loop", action="store_true", help="repeat until SIGINT/SIGTERM (deadlines keep increasing)")
     p.add_argument("--topics", nargs="+", default=None, metavar="TOPIC", help="replay only these topics")
-    p.add_argument("--device-name", default="imu0",
-                   help="device of topics the file's gyroemu metadata does not name (default: imu0)")
-    p.add_argument("--wait", type=float, default=10.0,
-                   help="seconds to wait for a subscriber on every key before publishing (default: 10; 0: none)")
+    p.add_argument(
+        "--device-name",
+        default="imu0",
+        help="device of topics the file's gyroemu metadata does not name (default: imu0)",
+    )
+    p.add_argument(
+        "--wait",
+        type=float,
+        default=10.0,
+        help="seconds to wait for a subscriber on every key before publishing (default: 10; 0: none)",
+    )
     _add_zenoh_arguments(p)
     _add_ros2_arguments(p, "publish on")
     p.set_defaults(func=_cmd_replay)
 
     p = sub.add_parser("router", help="run a zenoh router (until SIGINT/SIGTERM)")
-    p.add_argument("--listen", action="append", default=None, metavar="ENDPOINT",
-                   help="endpoint to listen on (repeatable; default: tcp/0.0.0.0:7447)")
-    p.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
-                   help="other routers to connect to (repeatable)")
+    p.add_argument(
+        "--listen",
+        action="append",
+        default=None,
+        metavar="ENDPOINT",
+        help="endpoint to listen on (repeatable; default: tcp/0.0.0.0:7447)",
+    )
+    p.add_argument(
+        "--connect", action="append", default=None, metavar="ENDPOINT", help="other routers to connect to (repeatable)"
+    )
     p.add_argument("--config", default=None, metavar="FILE.json5", help="a zenoh JSON5 config file")
     p.set_defaults(func=_cmd_router)
     return parser

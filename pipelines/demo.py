@@ -15,7 +15,6 @@
 from __future__ import annotations
 
 import io
-import os
 import signal
 import subprocess
 import sys
@@ -33,16 +32,22 @@ from gyroemu.sensors.sampling import SensorTruth
 __all__ = ["run_demo"]
 
 
-def run_demo(scenario: str = "heavy_top", duration: float | None = None, out: str | Path = "gyroemu-demo",
-             live_seconds: float = 20.0) -> int:
+def run_demo(
+    scenario: str = "heavy_top",
+    duration: float | None = None,
+    out: str | Path = "gyroemu-demo",
+    live_seconds: float = 20.0,
+) -> int:
     """Run the demo and print its summary; returns the exit status (0)."""
     _truth(scenario, duration)
     _sensors()
     _gyrocompass()
     _live_and_bench(Path(out), live_seconds)
-    print("\nmore: 'gyroemu scenarios' and 'gyroemu presets' list what is built in;\n"
-          "      'gyroemu simulate --scenario S --device D --out run.mcap' writes a ROS 2 log, 'gyroemu info run.mcap'\n"
-          "      summarises it, 'gyroemu allan run.mcap' fits its noise; 'gyroemu record' and 'gyroemu stream' go live")
+    print(
+        "\nmore: 'gyroemu scenarios' and 'gyroemu presets' list what is built in;\n"
+        "      'gyroemu simulate --scenario S --device D --out run.mcap' writes a ROS 2 log, 'gyroemu info run.mcap'\n"
+        "      summarises it, 'gyroemu allan run.mcap' fits its noise; 'gyroemu record' and 'gyroemu stream' go live"
+    )
     return 0
 
 
@@ -54,10 +59,14 @@ def _truth(name: str, duration: float | None) -> None:
     rate = np.linalg.norm(traj.omega_b, axis=1)
     force = np.linalg.norm(traj.specific_force_b, axis=1)
     print(f"gyroemu demo\n\n1. truth: '{s.name}' ({s.kind}): {s.description}")
-    print(f"   {len(traj)} samples over {traj.duration:g} s at {s.rate_hz:g} Hz, "
-          f"simulated in {elapsed:.3f} s ({len(traj) / elapsed / 1e6:.2f} M samples/s)")
-    print(f"   |omega_b| {rate.min():.4g} .. {rate.max():.4g} rad/s; |specific force| {force.min():.4g} .. "
-          f"{force.max():.4g} m/s^2; attitude change {np.degrees(quat_angle(traj.q_wb[-1], traj.q_wb[0])):.3f} deg")
+    print(
+        f"   {len(traj)} samples over {traj.duration:g} s at {s.rate_hz:g} Hz, "
+        f"simulated in {elapsed:.3f} s ({len(traj) / elapsed / 1e6:.2f} M samples/s)"
+    )
+    print(
+        f"   |omega_b| {rate.min():.4g} .. {rate.max():.4g} rad/s; |specific force| {force.min():.4g} .. "
+        f"{force.max():.4g} m/s^2; attitude change {np.degrees(quat_angle(traj.q_wb[-1], traj.q_wb[0])):.3f} deg"
+    )
 
 
 def _sensors(seconds: float = 10.0) -> None:
@@ -73,12 +82,22 @@ def _sensors(seconds: float = 10.0) -> None:
         mean = truth.mean_omega(instants)
         error = np.degrees(np.sqrt(np.mean((samples.gyro - mean) ** 2)))
         full_scale = device.gyro_errors.full_scale or device.mechanism.max_rate()
-        note = (f"saturates: the manoeuvre reaches {np.degrees(np.abs(mean).max()):.0f} deg/s, its range "
-                f"{np.degrees(full_scale):.0f}") if np.abs(mean).max() > full_scale else ""
-        print(f"   {device.name:<18}{device.kind:<18}{device.spec.rate_hz:>8g}{error:>22.3g}"
-              f"{seconds / elapsed:>13.0f}  {note}")
-    print("   (error against the true mean rate over each sample interval: bias, scale factor, noise, bandwidth,"
-          "\n    quantisation; the ring laser's is its 2.3 arcsec fringe quantum, counted every millisecond)")
+        note = (
+            (
+                f"saturates: the manoeuvre reaches {np.degrees(np.abs(mean).max()):.0f} deg/s, its range "
+                f"{np.degrees(full_scale):.0f}"
+            )
+            if np.abs(mean).max() > full_scale
+            else ""
+        )
+        print(
+            f"   {device.name:<18}{device.kind:<18}{device.spec.rate_hz:>8g}{error:>22.3g}"
+            f"{seconds / elapsed:>13.0f}  {note}"
+        )
+    print(
+        "   (error against the true mean rate over each sample interval: bias, scale factor, noise, bandwidth,"
+        "\n    quantisation; the ring laser's is its 2.3 arcsec fringe quantum, counted every millisecond)"
+    )
 
 
 def _gyrocompass(seconds: float = 600.0) -> None:
@@ -90,19 +109,27 @@ def _gyrocompass(seconds: float = 600.0) -> None:
     for name in ("navigation_fog", "consumer_mems"):
         device = load_device(name)
         e, a = device.gyro_errors, device.spec.accelerometer.errors.to_si()
-        sigma = heading_uncertainty(latitude, seconds, bias=np.hypot(e.bias[0], e.turn_on_bias[0]),
-                                    noise_density=device.gyro_noise_density[0],
-                                    bias_instability=e.bias_instability[0], random_walk=e.random_walk[0],
-                                    accel_bias=np.hypot(a.bias[0], a.turn_on_bias[0]))
+        sigma = heading_uncertainty(
+            latitude,
+            seconds,
+            bias=np.hypot(e.bias[0], e.turn_on_bias[0]),
+            noise_density=device.gyro_noise_density[0],
+            bias_instability=e.bias_instability[0],
+            random_walk=e.random_walk[0],
+            accel_bias=np.hypot(a.bias[0], a.turn_on_bias[0]),
+        )
         if sigma < np.radians(5.0):
             samples = device.measure(traj)
             found = gyrocompass(samples.gyro, samples.accel)
             error = np.degrees(np.angle(np.exp(1j * (found.heading - north_true))))
-            print(f"   {name}: finds north to {error:+.2f} deg (its noise and bias allow +-{np.degrees(sigma):.2f} deg, 1 sigma)")
+            allowed = np.degrees(sigma)
+            print(f"   {name}: finds north to {error:+.2f} deg (its noise and bias allow +-{allowed:.2f} deg, 1 sigma)")
         else:
             horizontal = np.degrees(7.292115e-5 * np.cos(latitude)) * 3600
-            print(f"   {name}: cannot find north: its gyro errors ({np.degrees(sigma * 7.292115e-5 * np.cos(latitude)) * 3600:.0f} deg/h) "
-                  f"are {sigma:.0f} times the horizontal Earth rate ({horizontal:.1f} deg/h)")
+            print(
+                f"   {name}: cannot find north: its gyro errors ({sigma * horizontal:.0f} deg/h) "
+                f"are {sigma:.0f} times the horizontal Earth rate ({horizontal:.1f} deg/h)"
+            )
 
 
 def _live_and_bench(out: Path, seconds: float) -> None:
@@ -115,17 +142,30 @@ def _live_and_bench(out: Path, seconds: float) -> None:
 
     out.mkdir(parents=True, exist_ok=True)
     log = out / "demo.mcap"
-    print(f"\n4. live: smooth_manoeuvre through consumer_mems for {seconds:g} s over zenoh (peer mode), "
-          "to a recorder process and a live MEKF")
+    print(
+        f"\n4. live: smooth_manoeuvre through consumer_mems for {seconds:g} s over zenoh (peer mode), "
+        "to a recorder process and a live MEKF"
+    )
     # only the demo's own device: other gyroemu streams on this machine's zenoh network are not its data
     name = "imu0"
-    recorder = subprocess.Popen([sys.executable, "-m", "gyroemu", "record", "--out", str(log),
-                                 "--key", topic_to_key(name, "/**")],
-                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    recorder = subprocess.Popen(
+        [sys.executable, "-m", "gyroemu", "record", "--out", str(log), "--key", topic_to_key(name, "/**")],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     try:
         talk = io.StringIO()
-        status = run_stream(scenario="smooth_manoeuvre", device="consumer_mems", device_name=name,
-                            duration=seconds, seed=0, wait_s=20.0, estimate="mekf", out=talk)
+        status = run_stream(
+            scenario="smooth_manoeuvre",
+            device="consumer_mems",
+            device_name=name,
+            duration=seconds,
+            seed=0,
+            wait_s=20.0,
+            estimate="mekf",
+            out=talk,
+        )
         lines = talk.getvalue().splitlines()
         print("\n".join("   " + line for line in lines if line.startswith("stream: ") and "publishing" not in line))
     finally:
@@ -139,8 +179,10 @@ def _live_and_bench(out: Path, seconds: float) -> None:
     recorded = read_mcap(log).device
     if recorded.estimate is not None and recorded.truth is not None:
         err = attitude_errors(recorded.estimate.q_wb, recorded.truth.q_wb)
-        print(f"   live MEKF on the recorded stream: total {rmse_deg(err.total):.2f} deg, inclination "
-              f"{rmse_deg(err.inclination):.2f} deg RMSE over {len(err.total)} samples")
+        print(
+            f"   live MEKF on the recorded stream: total {rmse_deg(err.total):.2f} deg, inclination "
+            f"{rmse_deg(err.inclination):.2f} deg RMSE over {len(err.total)} samples"
+        )
 
     print(f"\n5. benchmark: every available filter over {log.name} against its truth")
     bench = run_bench([LogCase(path=log)], progress=False)

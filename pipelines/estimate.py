@@ -40,15 +40,20 @@ def check_samples(path, name: str, t: np.ndarray, gyro: np.ndarray, accel: np.nd
     bad = np.flatnonzero(~(np.diff(t) > 0))
     if len(bad):
         k = int(bad[0]) + 1
-        raise LogError(f"IMU stamps of device '{name}' are not increasing: sample {k} at {t[k]:.9f} s follows "
-                       f"{t[k - 1]:.9f} s ({len(bad)} such steps)", file=path)
+        raise LogError(
+            f"IMU stamps of device '{name}' are not increasing: sample {k} at {t[k]:.9f} s follows "
+            f"{t[k - 1]:.9f} s ({len(bad)} such steps)",
+            file=path,
+        )
     finite = np.isfinite(gyro).all(axis=1) & np.isfinite(accel).all(axis=1)
     if not finite.any():
         raise LogError(f"every IMU sample of device '{name}' holds NaN", file=path)
     if finite.all():
         return None
-    return (f"{int((~finite).sum())} of {len(t)} IMU samples of device '{name}' hold NaN; they are passed to the "
-            "filters as they are (the built-in filters hold their estimate over them)")
+    return (
+        f"{int((~finite).sum())} of {len(t)} IMU samples of device '{name}' hold NaN; they are passed to the "
+        "filters as they are (the built-in filters hold their estimate over them)"
+    )
 
 
 def rate_of(t: np.ndarray) -> float:
@@ -81,16 +86,26 @@ def estimate_log(path, out, *, filter_name: str = "mekf", use_mag: bool | None =
         t_rel = samples.t - samples.t[0]  # relative times keep float64's resolution for the filter
         est = flt.process(t_rel, samples.gyro, samples.accel, samples.mag if nine else None)
         meta = dev.metadata or {}
-        extra = {k: v for k, v in meta.items()
-                 if k not in ("version", "seed", "scenario", "device", "device_name", "topic_prefix")}
+        extra = {
+            k: v
+            for k, v in meta.items()
+            if k not in ("version", "seed", "scenario", "device", "device_name", "topic_prefix")
+        }
         extra["estimate_filter"] = getattr(flt, "name", filter_name)
-        recordings.append(Recording(
-            samples=samples, truth=dev.truth, estimate=estimate_series(samples.t, est, samples.gyro),
-            device=meta.get("device") or None, seed=int(meta["seed"]) if meta.get("seed") else None,
-            movement=dev.movement, metadata=extra, stamp_ns=dev.stamp_ns))
+        recordings.append(
+            Recording(
+                samples=samples,
+                truth=dev.truth,
+                estimate=estimate_series(samples.t, est, samples.gyro),
+                device=meta.get("device") or None,
+                seed=int(meta["seed"]) if meta.get("seed") else None,
+                movement=dev.movement,
+                metadata=extra,
+                stamp_ns=dev.stamp_ns,
+            )
+        )
         done.append((name, len(samples), getattr(flt, "name", filter_name), nine))
     scenario_text = next((m.get("scenario") for m in log.metadata if m.get("scenario")), None)
     with McapLogWriter(out, scenario=scenario_text, prefix_topics=len(recordings) > 1) as writer:
         writer.write(*recordings)
     return EstimateSummary(path=Path(out), devices=done)
-

@@ -72,8 +72,10 @@ __all__ = [
     "IMPORTERS",
 ]
 
-BROAD_CITATION = ('D. Laidig, M. Caruso, A. Cereatti, T. Seel, "BROAD - A Benchmark for Robust Inertial '
-                  'Orientation Estimation", Data 6(7), 2021')
+BROAD_CITATION = (
+    'D. Laidig, M. Caruso, A. Cereatti, T. Seel, "BROAD - A Benchmark for Robust Inertial '
+    'Orientation Estimation", Data 6(7), 2021'
+)
 BROAD_LICENSE = "CC BY 4.0"
 BROAD_DATASETS = {"imu_gyr": (3,), "imu_acc": (3,), "imu_mag": (3,), "opt_quat": (4,), "movement": ()}
 """The datasets an import reads, with the shape of one sample (every dataset has N rows)."""
@@ -106,9 +108,11 @@ class ImportSummary:
     movement_samples: int
 
     def __str__(self) -> str:
-        return (f"{self.source.name} ({self.format}): {self.samples} samples at {self.rate_hz:.6g} Hz over "
-                f"{self.duration_s:.6g} s, reference NaN in {self.truth_nan_rows} rows, movement in "
-                f"{self.movement_samples} samples -> {self.out}")
+        return (
+            f"{self.source.name} ({self.format}): {self.samples} samples at {self.rate_hz:.6g} Hz over "
+            f"{self.duration_s:.6g} s, reference NaN in {self.truth_nan_rows} rows, movement in "
+            f"{self.movement_samples} samples -> {self.out}"
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -116,11 +120,11 @@ class BroadTrial:
     """A BROAD trial as stored (units of the file: µT for the magnetometer)."""
 
     path: Path
-    gyro: np.ndarray       # (N, 3) rad/s
-    accel: np.ndarray      # (N, 3) m/s²
-    mag_ut: np.ndarray     # (N, 3) µT
-    opt_quat: np.ndarray   # (N, 4) w, x, y, z; NaN rows
-    movement: np.ndarray   # (N,) bool
+    gyro: np.ndarray  # (N, 3) rad/s
+    accel: np.ndarray  # (N, 3) m/s²
+    mag_ut: np.ndarray  # (N, 3) µT
+    opt_quat: np.ndarray  # (N, 4) w, x, y, z; NaN rows
+    movement: np.ndarray  # (N,) bool
     rate_hz: float
     info: str = ""
 
@@ -154,8 +158,9 @@ def read_broad(path) -> BroadTrial:
         for name, width in BROAD_DATASETS.items():
             item = f"dataset '{name}'"
             if name not in f:
-                raise ImportInputError(f"missing (a BROAD trial holds {', '.join(BROAD_DATASETS)})",
-                                       file=path, item=item)
+                raise ImportInputError(
+                    f"missing (a BROAD trial holds {', '.join(BROAD_DATASETS)})", file=path, item=item
+                )
             node = f[name]
             if not isinstance(node, h5py.Dataset):
                 raise ImportInputError("is a group, not a dataset", file=path, item=item)
@@ -163,8 +168,12 @@ def read_broad(path) -> BroadTrial:
                 n = node.shape[0] if node.ndim >= 1 else None
             expected = ("N", *width) if n is None else (n, *width)
             if node.ndim != 1 + len(width) or node.shape[1:] != width or (n is not None and node.shape[0] != n):
-                raise ImportInputError(f"shape {node.shape}, expected ({', '.join(map(str, expected))})"
-                                       + ("" if name == "imu_gyr" else " (N from imu_gyr)"), file=path, item=item)
+                raise ImportInputError(
+                    f"shape {node.shape}, expected ({', '.join(map(str, expected))})"
+                    + ("" if name == "imu_gyr" else " (N from imu_gyr)"),
+                    file=path,
+                    item=item,
+                )
             kind = node.dtype.kind
             if name == "movement":
                 if kind not in "biu":
@@ -190,10 +199,19 @@ def read_broad(path) -> BroadTrial:
         if not np.isin(movement, (0, 1)).all():
             raise ImportInputError("values other than 0 and 1; expected bool", file=path, item="dataset 'movement'")
         movement = movement.astype(bool)
-    as_float = {name: np.asarray(arrays[name], dtype=np.float64)
-                for name in ("imu_gyr", "imu_acc", "imu_mag", "opt_quat")}
-    return BroadTrial(path=path, gyro=as_float["imu_gyr"], accel=as_float["imu_acc"], mag_ut=as_float["imu_mag"],
-                      opt_quat=as_float["opt_quat"], movement=movement, rate_hz=float(rate.flat[0]), info=info)
+    as_float = {
+        name: np.asarray(arrays[name], dtype=np.float64) for name in ("imu_gyr", "imu_acc", "imu_mag", "opt_quat")
+    }
+    return BroadTrial(
+        path=path,
+        gyro=as_float["imu_gyr"],
+        accel=as_float["imu_acc"],
+        mag_ut=as_float["imu_mag"],
+        opt_quat=as_float["opt_quat"],
+        movement=movement,
+        rate_hz=float(rate.flat[0]),
+        info=info,
+    )
 
 
 def broad_stamps_ns(n: int, rate_hz: float) -> np.ndarray:
@@ -242,10 +260,16 @@ def import_broad(path, out, *, device_name: str = "imu0") -> ImportSummary:
     recording = broad_recording(trial, device_name)
     write_mcap(out, recording)
     n = len(trial)
-    return ImportSummary(source=path, out=out, format="BROAD", samples=n, rate_hz=trial.rate_hz,
-                         duration_s=(n - 1) / trial.rate_hz,
-                         truth_nan_rows=int(np.isnan(trial.opt_quat).any(axis=1).sum()),
-                         movement_samples=int(trial.movement.sum()))
+    return ImportSummary(
+        source=path,
+        out=out,
+        format="BROAD",
+        samples=n,
+        rate_hz=trial.rate_hz,
+        duration_s=(n - 1) / trial.rate_hz,
+        truth_nan_rows=int(np.isnan(trial.opt_quat).any(axis=1).sum()),
+        movement_samples=int(trial.movement.sum()),
+    )
 
 
 IMPORTERS = {"broad": import_broad}

@@ -56,7 +56,7 @@ class LiveEstimator:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="gyroemu-live-estimate", daemon=True)
 
-    def start(self) -> "LiveEstimator":
+    def start(self) -> LiveEstimator:
         self._thread.start()
         return self
 

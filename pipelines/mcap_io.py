@@ -66,10 +66,11 @@ import secrets
 import struct
 import warnings
 import zlib
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from io import BytesIO
 from pathlib import Path
-from typing import Iterable, Iterator, NamedTuple, Sequence
+from typing import NamedTuple
 
 import numpy as np
 import zstandard
@@ -92,11 +93,11 @@ from gyroemu.dynamics import ConfigError
 from gyroemu.sensors.samples import ImuSamples
 
 from .messages import (
-    IMU,
-    DecodedBatch,
     FLAG,
+    IMU,
     MAGNETIC_FIELD,
     RAW_MESSAGE_TYPES,
+    DecodedBatch,
     MessageType,
     message_type,
     ns_to_stamps,
@@ -169,6 +170,7 @@ def _version() -> str:
 # ==================================================================================================
 # What goes in and comes out besides ImuSamples.
 
+
 @dataclass(frozen=True, eq=False)
 class ImuSeries:
     """The contents of a body-frame ``sensor_msgs/msg/Imu`` channel (truth or estimate), SI units.
@@ -200,9 +202,14 @@ class ImuSeries:
 
     def __post_init__(self):
         n = len(self.t)
-        for name, width in (("q_wb", (4,)), ("omega_b", (3,)), ("specific_force_b", (3,)),
-                            ("q_wb_covariance", (3, 3)), ("omega_b_covariance", (3, 3)),
-                            ("specific_force_b_covariance", (3, 3))):
+        for name, width in (
+            ("q_wb", (4,)),
+            ("omega_b", (3,)),
+            ("specific_force_b", (3,)),
+            ("q_wb_covariance", (3, 3)),
+            ("omega_b_covariance", (3, 3)),
+            ("specific_force_b_covariance", (3, 3)),
+        ):
             value = getattr(self, name)
             if value is not None and np.shape(value) != (n, *width):
                 raise ValueError(f"{name} must have shape {(n, *width)}, got {np.shape(value)}")
@@ -327,8 +334,9 @@ class McapLog:
     def device(self) -> DeviceLog:
         """The only device (``ValueError`` when the log has several: pick one from :attr:`devices`)."""
         if len(self.devices) != 1:
-            raise ValueError(f"{self.path}: {len(self.devices)} devices ({', '.join(self.devices)}); "
-                             "choose one from .devices")
+            raise ValueError(
+                f"{self.path}: {len(self.devices)} devices ({', '.join(self.devices)}); choose one from .devices"
+            )
         return next(iter(self.devices.values()))
 
     @property
@@ -349,8 +357,14 @@ _MESSAGE_HEAD = 1 + 8 + 2 + 4 + 8 + 8
 """Bytes of a Message record before its data: opcode, record length, channel id, sequence, log and
 publish time."""
 
-_MESSAGE_FIELDS = np.dtype({"names": ["channel_id", "sequence", "log_time", "publish_time"],
-                            "formats": ["<u2", "<u4", "<u8", "<u8"], "offsets": [0, 2, 6, 14], "itemsize": 22})
+_MESSAGE_FIELDS = np.dtype(
+    {
+        "names": ["channel_id", "sequence", "log_time", "publish_time"],
+        "formats": ["<u2", "<u4", "<u8", "<u8"],
+        "offsets": [0, 2, 6, 14],
+        "itemsize": 22,
+    }
+)
 
 
 def _message_records(channel_id: int, sequence: np.ndarray, log_time: np.ndarray, data: np.ndarray) -> np.ndarray:
@@ -363,8 +377,16 @@ def _message_records(channel_id: int, sequence: np.ndarray, log_time: np.ndarray
     out = np.empty((n, _MESSAGE_HEAD + size), dtype=np.uint8)
     out[:, _MESSAGE_HEAD:] = data
     out[:, :11] = np.frombuffer(struct.pack("<BQH", Opcode.MESSAGE, _MESSAGE_HEAD - 9 + size, channel_id), np.uint8)
-    head = out.view(np.dtype({"names": ["sequence", "log_time", "publish_time"], "formats": ["<u4", "<u8", "<u8"],
-                              "offsets": [11, 15, 23], "itemsize": _MESSAGE_HEAD + size}))[:, 0]
+    head = out.view(
+        np.dtype(
+            {
+                "names": ["sequence", "log_time", "publish_time"],
+                "formats": ["<u4", "<u8", "<u8"],
+                "offsets": [11, 15, 23],
+                "itemsize": _MESSAGE_HEAD + size,
+            }
+        )
+    )[:, 0]
     head["sequence"] = sequence
     head["log_time"] = log_time
     head["publish_time"] = log_time
@@ -377,7 +399,7 @@ class _Stream:
 
     channel_id: int
     log_time: np.ndarray  # (N,) uint64
-    records: np.ndarray   # (N, record size) uint8
+    records: np.ndarray  # (N, record size) uint8
 
 
 def _no_messages():
@@ -442,8 +464,15 @@ class McapFileWriter:
         zstd level.
     """
 
-    def __init__(self, stream, *, profile: str = "ros2", library: str | None = None,
-                 chunk_size: int = 1 << 20, compression_level: int = 3):
+    def __init__(
+        self,
+        stream,
+        *,
+        profile: str = "ros2",
+        library: str | None = None,
+        chunk_size: int = 1 << 20,
+        compression_level: int = 3,
+    ):
         self._out = stream
         self._position = 0
         self._chunk_size = int(chunk_size)
@@ -489,8 +518,13 @@ class McapFileWriter:
 
     def register_channel(self, topic: str, message_encoding: str, schema_id: int, metadata: dict | None = None) -> int:
         """A new channel's id (written before any of its messages)."""
-        channel = Channel(id=len(self._channels) + 1, topic=topic, message_encoding=message_encoding,
-                          schema_id=schema_id, metadata=dict(metadata or {}))
+        channel = Channel(
+            id=len(self._channels) + 1,
+            topic=topic,
+            message_encoding=message_encoding,
+            schema_id=schema_id,
+            metadata=dict(metadata or {}),
+        )
         self._channels[channel.id] = channel
         self._channel_counts[channel.id] = 0
         self._write_record(channel)
@@ -500,8 +534,9 @@ class McapFileWriter:
         """A new ``cdr`` channel of type ``mtype`` (its ``ros2msg`` schema, registered once; None: no
         schema) with the ``offered_qos_profiles`` of the ``ros2`` profile, then ``metadata``."""
         schema_id = 0 if mtype is None else self.register_schema(mtype.name, "ros2msg", mtype.schema.encode())
-        return self.register_channel(topic, "cdr", schema_id,
-                                     {"offered_qos_profiles": OFFERED_QOS_PROFILES, **(metadata or {})})
+        return self.register_channel(
+            topic, "cdr", schema_id, {"offered_qos_profiles": OFFERED_QOS_PROFILES, **(metadata or {})}
+        )
 
     def add_metadata(self, name: str, data: dict) -> None:
         """A Metadata record (and its index in the summary)."""
@@ -529,8 +564,10 @@ class McapFileWriter:
             log_time = np.asarray(log_time, dtype=np.int64).reshape(-1)
             payloads = np.asarray(payloads, dtype=np.uint8)
             if payloads.ndim != 2 or len(payloads) != len(log_time):
-                raise ValueError(f"channel {channel_id}: payloads must be an (N, size) array for {len(log_time)} "
-                                 f"log times, got shape {payloads.shape}")
+                raise ValueError(
+                    f"channel {channel_id}: payloads must be an (N, size) array for {len(log_time)} "
+                    f"log times, got shape {payloads.shape}"
+                )
             if len(log_time) and log_time.min() < 0:
                 raise ValueError(f"channel {channel_id}: negative log times")
             checked.append((channel_id, log_time, payloads))
@@ -546,8 +583,9 @@ class McapFileWriter:
             return
         self._message_count += len(log_time)
         lo, hi = int(log_time.min()), int(log_time.max())
-        self._time_range = [lo, hi] if self._time_range is None else [min(self._time_range[0], lo),
-                                                                      max(self._time_range[1], hi)]
+        self._time_range = (
+            [lo, hi] if self._time_range is None else [min(self._time_range[0], lo), max(self._time_range[1], hi)]
+        )
         p_data, p_channel, p_time, p_offset = self._pending
         if len(p_data):
             data = np.concatenate([p_data, data])
@@ -560,9 +598,9 @@ class McapFileWriter:
         bounds = np.concatenate([[0], cuts, [len(offset)]])
         for a, b in zip(bounds[:-2], bounds[1:-1]):
             end = offset[b] if b < len(offset) else len(data)
-            self._write_chunk(data[offset[a]:end], channel[a:b], log_time[a:b], offset[a:b] - offset[a])
+            self._write_chunk(data[offset[a] : end], channel[a:b], log_time[a:b], offset[a:b] - offset[a])
         a = bounds[-2]
-        self._pending = (data[offset[a]:].copy(), channel[a:], log_time[a:], offset[a:] - offset[a])
+        self._pending = (data[offset[a] :].copy(), channel[a:], log_time[a:], offset[a:] - offset[a])
 
     def _write_chunk(self, records: np.ndarray, channel: np.ndarray, log_time: np.ndarray, offset: np.ndarray) -> None:
         """One Chunk record (opcode 0x06) and its Message Index records (0x07)."""
@@ -575,8 +613,13 @@ class McapFileWriter:
         # Chunk: message_start_time u64, message_end_time u64, uncompressed_size u64,
         # uncompressed_crc u32, compression string (u32 length + bytes), records (u64 length + bytes).
         body = 8 + 8 + 8 + 4 + 4 + len(compression) + 8 + len(compressed)
-        head = struct.pack("<BQQQQII", Opcode.CHUNK, body, start_time, end_time, len(raw), zlib.crc32(raw),
-                           len(compression)) + compression + struct.pack("<Q", len(compressed))
+        head = (
+            struct.pack(
+                "<BQQQQII", Opcode.CHUNK, body, start_time, end_time, len(raw), zlib.crc32(raw), len(compression)
+            )
+            + compression
+            + struct.pack("<Q", len(compressed))
+        )
         chunk_start = self._position
         self._write(head)
         self._write(compressed)
@@ -593,11 +636,19 @@ class McapFileWriter:
             index_offsets[int(c)] = self._position
             self._write(struct.pack("<BQHI", Opcode.MESSAGE_INDEX, 2 + 4 + entries.nbytes, int(c), entries.nbytes))
             self._write(entries.tobytes())
-        self._chunk_indexes.append(ChunkIndex(
-            message_start_time=start_time, message_end_time=end_time, chunk_start_offset=chunk_start,
-            chunk_length=chunk_length, message_index_offsets=index_offsets,
-            message_index_length=self._position - index_start, compression=compression.decode(),
-            compressed_size=len(compressed), uncompressed_size=len(raw)))
+        self._chunk_indexes.append(
+            ChunkIndex(
+                message_start_time=start_time,
+                message_end_time=end_time,
+                chunk_start_offset=chunk_start,
+                chunk_length=chunk_length,
+                message_index_offsets=index_offsets,
+                message_index_length=self._position - index_start,
+                compression=compression.decode(),
+                compressed_size=len(compressed),
+                uncompressed_size=len(raw),
+            )
+        )
 
     def finish(self) -> None:
         """Close the last chunk; write Data End, the summary section, its offsets, Footer and magic."""
@@ -615,16 +666,31 @@ class McapFileWriter:
             start = builder.count
             for record in records:
                 record.write(builder)
-            groups.append(SummaryOffset(group_opcode=opcode, group_start=summary_start + start,
-                                        group_length=builder.count - start))
+            groups.append(
+                SummaryOffset(
+                    group_opcode=opcode, group_start=summary_start + start, group_length=builder.count - start
+                )
+            )
 
         start, end = self._time_range or (0, 0)
         group(Opcode.SCHEMA, self._schemas.values())
         group(Opcode.CHANNEL, self._channels.values())
-        group(Opcode.STATISTICS, [Statistics(
-            message_count=self._message_count, schema_count=len(self._schemas), channel_count=len(self._channels),
-            attachment_count=0, metadata_count=self._metadata_count, chunk_count=len(self._chunk_indexes),
-            message_start_time=start, message_end_time=end, channel_message_counts=dict(self._channel_counts))])
+        group(
+            Opcode.STATISTICS,
+            [
+                Statistics(
+                    message_count=self._message_count,
+                    schema_count=len(self._schemas),
+                    channel_count=len(self._channels),
+                    attachment_count=0,
+                    metadata_count=self._metadata_count,
+                    chunk_count=len(self._chunk_indexes),
+                    message_start_time=start,
+                    message_end_time=end,
+                    channel_message_counts=dict(self._channel_counts),
+                )
+            ],
+        )
         group(Opcode.CHUNK_INDEX, self._chunk_indexes)
         group(Opcode.METADATA_INDEX, self._metadata_indexes)
         summary_offset_start = summary_start + builder.count
@@ -634,14 +700,16 @@ class McapFileWriter:
         crc = zlib.crc32(summary)
         crc = zlib.crc32(struct.pack("<BQQQ", Opcode.FOOTER, 8 + 8 + 4, summary_start, summary_offset_start), crc)
         self._write(summary)
-        self._write_record(Footer(summary_start=summary_start, summary_offset_start=summary_offset_start,
-                                  summary_crc=crc))
+        self._write_record(
+            Footer(summary_start=summary_start, summary_offset_start=summary_offset_start, summary_crc=crc)
+        )
         self._write(MAGIC)
         self._finished = True
 
 
 # ==================================================================================================
 # gyroemu logs.
+
 
 @dataclass
 class _DeviceChannels:
@@ -652,11 +720,18 @@ class _DeviceChannels:
     warned: set = field(default_factory=set)
 
 
-def _device_metadata(device_name: str, topic_prefix: str, *, seed: str = "", scenario: str = "",
-                    device: str = "") -> dict:
+def _device_metadata(
+    device_name: str, topic_prefix: str, *, seed: str = "", scenario: str = "", device: str = ""
+) -> dict:
     """A device's ``gyroemu`` metadata record: the writer's own keys (empty: not known)."""
-    return {"version": _version(), "seed": seed, "scenario": scenario, "device": device,
-            "device_name": device_name, "topic_prefix": topic_prefix}
+    return {
+        "version": _version(),
+        "seed": seed,
+        "scenario": scenario,
+        "device": device,
+        "device_name": device_name,
+        "topic_prefix": topic_prefix,
+    }
 
 
 def _toml(value) -> str:
@@ -689,8 +764,15 @@ class McapLogWriter:
             log.write(Recording(samples, truth=truth_series(trajectory, samples), device=device))
     """
 
-    def __init__(self, path, *, scenario=None, prefix_topics: bool | None = None,
-                 chunk_size: int = 1 << 20, compression_level: int = 3):
+    def __init__(
+        self,
+        path,
+        *,
+        scenario=None,
+        prefix_topics: bool | None = None,
+        chunk_size: int = 1 << 20,
+        compression_level: int = 3,
+    ):
         self.path = Path(path)
         if not self.path.parent.is_dir():
             raise FileNotFoundError(f"{self.path.parent} is not a folder")
@@ -732,17 +814,26 @@ class McapLogWriter:
         if self._prefix is None:
             self._prefix = several
         if self._devices and not self._prefix:
-            raise ValueError(f"a second device ({name!r}) in a log without topic prefixes: "
-                             "pass prefix_topics=True to write several devices")
+            raise ValueError(
+                f"a second device ({name!r}) in a log without topic prefixes: "
+                "pass prefix_topics=True to write several devices"
+            )
         if self._prefix and (not _DEVICE_NAME.match(name) or name in _RESERVED_NAMES):
-            raise ValueError(f"device name {name!r} cannot prefix topics: use letters, digits and '_', "
-                             f"starting with a letter, and none of {', '.join(sorted(_RESERVED_NAMES))}")
+            raise ValueError(
+                f"device name {name!r} cannot prefix topics: use letters, digits and '_', "
+                f"starting with a letter, and none of {', '.join(sorted(_RESERVED_NAMES))}"
+            )
         entry = _DeviceChannels(name=name, prefix=f"/{name}" if self._prefix else "", channels={}, frame_id=name)
         self._devices[name] = entry
         device = recording.device
         seed = recording.seed if recording.seed is not None else getattr(device, "seed", None)
-        record = _device_metadata(name, entry.prefix, seed="" if seed is None else str(int(seed)),
-                                 scenario=self._scenario, device=_toml(device))
+        record = _device_metadata(
+            name,
+            entry.prefix,
+            seed="" if seed is None else str(int(seed)),
+            scenario=self._scenario,
+            device=_toml(device),
+        )
         extra = dict(recording.metadata or {})
         clash = sorted(set(extra) & set(record))
         if clash:
@@ -770,8 +861,10 @@ class McapLogWriter:
         if times:
             first = min(int(stamps.min()) for stamps in times)
             if first < self._last_time:
-                raise ValueError(f"this block starts at {first * 1e-9:.9f} s, before the end of the previous "
-                                 f"block ({self._last_time * 1e-9:.9f} s): write blocks in time order")
+                raise ValueError(
+                    f"this block starts at {first * 1e-9:.9f} s, before the end of the previous "
+                    f"block ({self._last_time * 1e-9:.9f} s): write blocks in time order"
+                )
             self._mcap.add_messages(batches)
             self._last_time = max(self._last_time, max(int(stamps.max()) for stamps in times))
 
@@ -794,7 +887,11 @@ class McapLogWriter:
         for role, series in (("truth/imu", recording.truth), ("estimate/imu", recording.estimate)):
             if series is not None:
                 series_ns = _log_stamps(series.t, f"{role.split('/')[0]}.t")
-                if recording.stamp_ns is not None and len(series_ns) == n and np.abs(series_ns - stamp_ns).max(initial=0) <= 1000:
+                if (
+                    recording.stamp_ns is not None
+                    and len(series_ns) == n
+                    and np.abs(series_ns - stamp_ns).max(initial=0) <= 1000
+                ):
                     series_ns = stamp_ns
                 rows = IMU.encode(series_ns, BODY_FRAME, _series_fields(series))
                 batches.append((self._channel(device, role, IMU), series_ns, rows))
@@ -802,14 +899,20 @@ class McapLogWriter:
             if kind not in RAW_MESSAGE_TYPES:
                 if kind not in device.warned:
                     device.warned.add(kind)
-                    warnings.warn(f"{self.path}: no message type for the raw observables of gyro kind {kind!r}; "
-                                  "not recorded", LogWarning, stacklevel=3)
+                    warnings.warn(
+                        f"{self.path}: no message type for the raw observables of gyro kind {kind!r}; not recorded",
+                        LogWarning,
+                        stacklevel=3,
+                    )
                 continue
             mtype, fields, ignored = raw_fields(kind, observables)
             if ignored and kind + "/ignored" not in device.warned:
                 device.warned.add(kind + "/ignored")
-                warnings.warn(f"{self.path}: {mtype.name} has no field for {', '.join(ignored)}; not recorded",
-                              LogWarning, stacklevel=3)
+                warnings.warn(
+                    f"{self.path}: {mtype.name} has no field for {', '.join(ignored)}; not recorded",
+                    LogWarning,
+                    stacklevel=3,
+                )
             for name, value in fields.items():
                 if len(value) != n:
                     raise ValueError(f"raw[{kind!r}][{name!r}] has {len(value)} rows for {n} samples")
@@ -818,8 +921,9 @@ class McapLogWriter:
         if recording.movement is not None:
             movement = np.asarray(recording.movement)
             if movement.shape != (n,) or not (movement.dtype == bool or np.isin(movement, (0, 1)).all()):
-                raise ValueError(f"movement must be {n} booleans (one per sample), got {movement.dtype} "
-                                 f"{movement.shape}")
+                raise ValueError(
+                    f"movement must be {n} booleans (one per sample), got {movement.dtype} {movement.shape}"
+                )
             rows = FLAG.encode(stamp_ns, device.frame_id, {"data": movement.astype(bool)})
             batches.append((self._channel(device, "movement", FLAG), stamp_ns, rows))
         return batches
@@ -851,8 +955,7 @@ class McapLogWriter:
 def _log_stamps(t: np.ndarray, what: str) -> np.ndarray:
     stamp_ns = stamps_to_ns(t)
     if len(stamp_ns) and stamp_ns.min() < 0:
-        raise ValueError(f"{what} has stamps before 0 s ({stamp_ns.min() * 1e-9:g} s): MCAP log times "
-                         "are unsigned")
+        raise ValueError(f"{what} has stamps before 0 s ({stamp_ns.min() * 1e-9:g} s): MCAP log times are unsigned")
     return stamp_ns
 
 
@@ -870,8 +973,12 @@ _NO_ESTIMATE.flags.writeable = False
 
 def _measured_fields(samples: ImuSamples) -> dict:
     """Imu message fields of a device's samples (``/imu``): rate and specific force, no orientation."""
-    return {"orientation": (0.0, 0.0, 0.0, 1.0), "orientation_covariance": _NO_ESTIMATE,
-            "angular_velocity": samples.gyro, "linear_acceleration": samples.accel}
+    return {
+        "orientation": (0.0, 0.0, 0.0, 1.0),
+        "orientation_covariance": _NO_ESTIMATE,
+        "angular_velocity": samples.gyro,
+        "linear_acceleration": samples.accel,
+    }
 
 
 def _series_fields(series: ImuSeries) -> dict:
@@ -892,14 +999,22 @@ def _series_fields(series: ImuSeries) -> dict:
     return fields
 
 
-def write_mcap(path, recordings, *, scenario=None, prefix_topics: bool | None = None,
-               chunk_size: int = 1 << 20, compression_level: int = 3) -> Path:
+def write_mcap(
+    path,
+    recordings,
+    *,
+    scenario=None,
+    prefix_topics: bool | None = None,
+    chunk_size: int = 1 << 20,
+    compression_level: int = 3,
+) -> Path:
     """Write a whole log at once: ``recordings`` is an :class:`ImuSamples`, a :class:`Recording`, or a
     list of them (one per device). Returns the path written. See :class:`McapLogWriter`."""
     if isinstance(recordings, (ImuSamples, Recording)):
         recordings = [recordings]
-    with McapLogWriter(path, scenario=scenario, prefix_topics=prefix_topics, chunk_size=chunk_size,
-                       compression_level=compression_level) as log:
+    with McapLogWriter(
+        path, scenario=scenario, prefix_topics=prefix_topics, chunk_size=chunk_size, compression_level=compression_level
+    ) as log:
         log.write(*recordings)
     return log.path
 
@@ -916,11 +1031,11 @@ class _ChannelData:
     """Messages of one channel gathered while scanning: blocks of equal-length payloads."""
 
     channel: Channel
-    mtype: MessageType | None = None              # None: not decoded
-    order: list = field(default_factory=list)     # global message ordinal per block
-    header: list = field(default_factory=list)    # _MESSAGE_FIELDS arrays
-    payload: list = field(default_factory=list)   # (m, L) uint8
-    loose: list = field(default_factory=list)     # messages outside chunks: (ordinal, (1,) fields, bytes)
+    mtype: MessageType | None = None  # None: not decoded
+    order: list = field(default_factory=list)  # global message ordinal per block
+    header: list = field(default_factory=list)  # _MESSAGE_FIELDS arrays
+    payload: list = field(default_factory=list)  # (m, L) uint8
+    loose: list = field(default_factory=list)  # messages outside chunks: (ordinal, (1,) fields, bytes)
 
 
 class _Scan:
@@ -942,7 +1057,7 @@ class _Scan:
     def error(self, reason: str) -> LogError:
         return LogError(reason, file=self.path)
 
-    def run(self) -> "_Scan":
+    def run(self) -> _Scan:
         for _ in self.walk():
             pass
         return self
@@ -1041,13 +1156,13 @@ class _Scan:
     def _chunk(self, content: bytes, position: int) -> None:
         start, end, usize, crc, clen = _CHUNK_HEAD.unpack_from(content, 0)
         p = _CHUNK_HEAD.size
-        compression = content[p:p + clen].decode()
+        compression = content[p : p + clen].decode()
         p += clen
         (rlen,) = struct.unpack_from("<Q", content, p)
         p += 8
         if p + rlen > len(content):
             raise ValueError("its records run past its end")
-        packed = memoryview(content)[p:p + rlen]
+        packed = memoryview(content)[p : p + rlen]
         try:
             if compression == "zstd":
                 data = zstandard.ZstdDecompressor().decompress(packed, max_output_size=usize)
@@ -1062,8 +1177,9 @@ class _Scan:
         except zstandard.ZstdError as e:
             raise self.error(f"corrupt chunk at byte {position}: {e}") from None
         if len(data) != usize:
-            raise self.error(f"corrupt chunk at byte {position}: {len(data)} bytes after decompression, "
-                             f"{usize} declared")
+            raise self.error(
+                f"corrupt chunk at byte {position}: {len(data)} bytes after decompression, {usize} declared"
+            )
         if crc and zlib.crc32(data) != crc:
             raise self.error(f"corrupt chunk at byte {position}: CRC mismatch")
         self._chunk_records(data, position)
@@ -1101,8 +1217,10 @@ class _Scan:
         for channel_id in np.unique(channel_ids):
             target = self.data.get(int(channel_id))
             if target is None:
-                raise self.error(f"corrupt chunk at byte {position}: a message on channel {int(channel_id)}, "
-                                 "which no Channel record defines")
+                raise self.error(
+                    f"corrupt chunk at byte {position}: a message on channel {int(channel_id)}, "
+                    "which no Channel record defines"
+                )
             if target.mtype is None:
                 continue
             mine = np.flatnonzero(channel_ids == channel_id)
@@ -1147,8 +1265,16 @@ def _record_positions(data: bytes, buffer: np.ndarray) -> tuple[np.ndarray, np.n
         lengths.append(np.array(walked_len, dtype=np.int64))
         if p >= size:
             break
-        period = next((k for k in range(1, 9) if 2 * k <= len(walked_p) and walked_len[-k:] == walked_len[-2 * k:-k]
-                       and walked_op[-k:] == walked_op[-2 * k:-k]), None)
+        period = next(
+            (
+                k
+                for k in range(1, 9)
+                if 2 * k <= len(walked_p)
+                and walked_len[-k:] == walked_len[-2 * k : -k]
+                and walked_op[-k:] == walked_op[-2 * k : -k]
+            ),
+            None,
+        )
         if period is None:
             continue
         pattern_op = np.array(walked_op[-period:], dtype=np.uint8)
@@ -1182,7 +1308,7 @@ def _gather(buffer: np.ndarray, starts: np.ndarray, width: int) -> np.ndarray:
     if m > 1:
         step = starts[1] - starts[0]
         if step >= width and np.all(np.diff(starts) == step):
-            view = np.lib.stride_tricks.as_strided(buffer[starts[0]:], shape=(m, width), strides=(int(step), 1))
+            view = np.lib.stride_tricks.as_strided(buffer[starts[0] :], shape=(m, width), strides=(int(step), 1))
             return view.copy()
     return buffer[starts[:, None] + np.arange(width)]
 
@@ -1195,6 +1321,7 @@ def _opcode_name(opcode: int) -> str:
 
 
 # -- message by message, in log-time order (replay) -------------------------------------------------
+
 
 class McapMessage(NamedTuple):
     """One message as recorded: its channel's topic and schema name, ``log_time`` (ns), payload bytes."""
@@ -1236,15 +1363,20 @@ class _MessageWalk(_Scan):
         self.message_count += len(starts)
         unknown = [int(c) for c in np.unique(header["channel_id"]) if int(c) not in self.wanted]
         if unknown:
-            raise self.error(f"corrupt chunk at byte {position}: a message on channel {unknown[0]}, "
-                             "which no Channel record defines")
+            raise self.error(
+                f"corrupt chunk at byte {position}: a message on channel {unknown[0]}, which no Channel record defines"
+            )
         wanted = self.wanted
         out = self.out
-        for channel_id, log_time, start, length in zip(header["channel_id"].tolist(), header["log_time"].tolist(),
-                                                        (starts + 9 + 22).tolist(), (lengths - 22).tolist()):
+        for channel_id, log_time, start, length in zip(
+            header["channel_id"].tolist(),
+            header["log_time"].tolist(),
+            (starts + 9 + 22).tolist(),
+            (lengths - 22).tolist(),
+        ):
             w = wanted[channel_id]
             if w is not None:
-                out.append(McapMessage(w[0], w[1], log_time, data[start:start + length]))
+                out.append(McapMessage(w[0], w[1], log_time, data[start : start + length]))
 
 
 def iter_mcap_batches(path, topics=None) -> Iterator[list[McapMessage]]:
@@ -1285,7 +1417,7 @@ class ChannelInfo(NamedTuple):
 
     topic: str
     message_encoding: str
-    schema_name: str       # '' when the channel has no schema
+    schema_name: str  # '' when the channel has no schema
     schema_encoding: str
     schema_data: bytes
     metadata: dict
@@ -1296,9 +1428,16 @@ def _channel_info(scan: _Scan) -> list[ChannelInfo]:
     out = []
     for c in scan.channels.values():
         schema = scan.schemas.get(c.schema_id)
-        out.append(ChannelInfo(c.topic, c.message_encoding, schema.name if schema else "",
-                               schema.encoding if schema else "", bytes(schema.data) if schema else b"",
-                               dict(c.metadata)))
+        out.append(
+            ChannelInfo(
+                c.topic,
+                c.message_encoding,
+                schema.name if schema else "",
+                schema.encoding if schema else "",
+                bytes(schema.data) if schema else b"",
+                dict(c.metadata),
+            )
+        )
     return out
 
 
@@ -1307,6 +1446,7 @@ def mcap_channel_info(path) -> list[ChannelInfo]:
     decodes no message; :attr:`McapLog.channels` holds the same). Raises :class:`LogError` as
     :func:`read_mcap` does."""
     return _channel_info(_MessageWalk(Path(path), topics=()).run())
+
 
 # -- from channels to devices -----------------------------------------------------------------------
 
@@ -1337,7 +1477,8 @@ def _decode_channel(scan: _Scan, data: _ChannelData, mtype: MessageType) -> _Dec
         by_width.setdefault(payload.shape[1], []).append((order, header, payload))
     for ordinal, fields, payload in data.loose:
         by_width.setdefault(len(payload), []).append(
-            (np.array([ordinal]), fields, np.frombuffer(payload, np.uint8)[None, :]))
+            (np.array([ordinal]), fields, np.frombuffer(payload, np.uint8)[None, :])
+        )
     for blocks in by_width.values():
         rows = np.concatenate([b[2] for b in blocks]) if len(blocks) > 1 else blocks[0][2]
         try:
@@ -1348,10 +1489,15 @@ def _decode_channel(scan: _Scan, data: _ChannelData, mtype: MessageType) -> _Dec
         headers.append(np.concatenate([b[1] for b in blocks]))
     order = np.concatenate(orders) if len(orders) > 1 else orders[0]
     header = np.concatenate(headers) if len(headers) > 1 else headers[0]
-    batch = batches[0] if len(batches) == 1 else DecodedBatch(
-        stamp_ns=np.concatenate([b.stamp_ns for b in batches]),
-        frame_id=np.concatenate([b.frame_id for b in batches]),
-        fields={name: np.concatenate([b.fields[name] for b in batches]) for name in batches[0].fields})
+    batch = (
+        batches[0]
+        if len(batches) == 1
+        else DecodedBatch(
+            stamp_ns=np.concatenate([b.stamp_ns for b in batches]),
+            frame_id=np.concatenate([b.frame_id for b in batches]),
+            fields={name: np.concatenate([b.fields[name] for b in batches]) for name in batches[0].fields},
+        )
+    )
     log_time = header["log_time"].astype(np.uint64)
     # File order, then a stable sort by log time (both no-ops for files gyroemu writes).
     index = None if np.all(np.diff(order) > 0) else np.argsort(order, kind="stable")
@@ -1361,8 +1507,11 @@ def _decode_channel(scan: _Scan, data: _ChannelData, mtype: MessageType) -> _Dec
         index = by_time if index is None else index[by_time]
     if index is not None:
         log_time = log_time[index]
-        batch = DecodedBatch(stamp_ns=batch.stamp_ns[index], frame_id=batch.frame_id[index],
-                             fields={k: v[index] for k, v in batch.fields.items()})
+        batch = DecodedBatch(
+            stamp_ns=batch.stamp_ns[index],
+            frame_id=batch.frame_id[index],
+            fields={k: v[index] for k, v in batch.fields.items()},
+        )
     return _Decoded(topic=data.channel.topic, mtype=mtype, log_time=log_time, batch=batch)
 
 
@@ -1430,8 +1579,12 @@ def read_mcap(path) -> McapLog:
     skipped = dict(scan.skipped)
 
     if scan.truncated_at is not None:
-        warnings.warn(f"{path}: truncated at byte {scan.truncated_at} (no MCAP footer): recovered "
-                      f"{scan.message_count} messages from {scan.chunks} complete chunks", LogWarning, stacklevel=2)
+        warnings.warn(
+            f"{path}: truncated at byte {scan.truncated_at} (no MCAP footer): recovered "
+            f"{scan.message_count} messages from {scan.chunks} complete chunks",
+            LogWarning,
+            stacklevel=2,
+        )
     for topic, reason in skipped.items():
         warnings.warn(f"{path}: skipping topic {topic}: {reason}", LogWarning, stacklevel=2)
 
@@ -1443,13 +1596,26 @@ def read_mcap(path) -> McapLog:
     metadata = [dict(m.metadata) for m in scan.metadata if m.name == "gyroemu"]
     devices = _devices(path, decoded, metadata, skipped)
     if not devices:
-        state = f"; truncated at byte {scan.truncated_at}, {scan.message_count} messages recovered" \
-            if scan.truncated_at is not None else ""
-        raise LogError(f"holds no sensor_msgs/msg/Imu messages ({len(scan.channels)} channels, "
-                       f"{scan.message_count} messages{state})", file=path)
-    return McapLog(path=path, devices=devices, metadata=metadata, profile=scan.profile,
-                   message_count=scan.message_count, truncated=scan.truncated_at is not None, skipped=skipped,
-                   channels=tuple(_channel_info(scan)))
+        state = (
+            f"; truncated at byte {scan.truncated_at}, {scan.message_count} messages recovered"
+            if scan.truncated_at is not None
+            else ""
+        )
+        raise LogError(
+            f"holds no sensor_msgs/msg/Imu messages ({len(scan.channels)} channels, "
+            f"{scan.message_count} messages{state})",
+            file=path,
+        )
+    return McapLog(
+        path=path,
+        devices=devices,
+        metadata=metadata,
+        profile=scan.profile,
+        message_count=scan.message_count,
+        truncated=scan.truncated_at is not None,
+        skipped=skipped,
+        channels=tuple(_channel_info(scan)),
+    )
 
 
 def _devices(path: Path, decoded: dict, metadata: list, skipped: dict) -> dict:
@@ -1480,7 +1646,7 @@ def _devices(path: Path, decoded: dict, metadata: list, skipped: dict) -> dict:
             for role in ("truth/imu", "estimate/imu"):
                 if role in group:
                     groups[f"{prefix}/{role}"] = {"imu": group.pop(role)}
-            for role, d in group.items():
+            for d in group.values():
                 skipped[d.topic] = "no IMU topic of the same device"
                 warnings.warn(f"{path}: skipping topic {d.topic}: {skipped[d.topic]}", LogWarning, stacklevel=3)
             del groups[prefix]
@@ -1505,8 +1671,12 @@ def _device_log(path: Path, name: str, group: dict, meta: dict | None) -> Device
         if role.startswith("raw/"):
             i, j = _match(stamp_ns[keep], d.batch.stamp_ns)
             if len(i) < len(keep):
-                warnings.warn(f"{path}: {len(keep) - len(i)} samples of {imu.topic} have no message on {d.topic} "
-                              "at their stamp; dropped", LogWarning, stacklevel=4)
+                warnings.warn(
+                    f"{path}: {len(keep) - len(i)} samples of {imu.topic} have no message on {d.topic} "
+                    "at their stamp; dropped",
+                    LogWarning,
+                    stacklevel=4,
+                )
                 keep = keep[i]
                 raw = {k: {n: v[i] for n, v in obs.items()} for k, obs in raw.items()}
             raw[d.mtype.kind] = {n: v[j] for n, v in raw_observables(d.mtype, d.batch).items()}
@@ -1522,8 +1692,12 @@ def _device_log(path: Path, name: str, group: dict, meta: dict | None) -> Device
         movement = np.zeros(len(keep), dtype=bool)
         movement[i] = d.batch["data"][j]
         if len(i) < len(keep):
-            warnings.warn(f"{path}: {len(keep) - len(i)} samples of {imu.topic} have no message on {d.topic} "
-                          "at their stamp; their movement flag is False", LogWarning, stacklevel=4)
+            warnings.warn(
+                f"{path}: {len(keep) - len(i)} samples of {imu.topic} have no message on {d.topic} "
+                "at their stamp; their movement flag is False",
+                LogWarning,
+                stacklevel=4,
+            )
     batch = imu.batch
     samples = ImuSamples(
         t=ns_to_stamps(stamp_ns[keep]),

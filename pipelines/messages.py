@@ -54,8 +54,8 @@ encapsulation identifiers and options); the MCAP specification appendix (``ros2m
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Mapping
 
 import numpy as np
 
@@ -246,10 +246,27 @@ bool data  # the flag at this stamp
 }
 
 _DELIMITER = "\n" + "=" * 80 + "\n"
-_PRIMITIVES = frozenset({
-    "bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16", "int32", "uint32",
-    "int64", "uint64", "string", "wstring", "time", "duration",
-})
+_PRIMITIVES = frozenset(
+    {
+        "bool",
+        "byte",
+        "char",
+        "float32",
+        "float64",
+        "int8",
+        "uint8",
+        "int16",
+        "uint16",
+        "int32",
+        "uint32",
+        "int64",
+        "uint64",
+        "string",
+        "wstring",
+        "time",
+        "duration",
+    }
+)
 _FIELD_TYPE = re.compile(r"^\s*(?:([A-Za-z0-9_]+)/)?([A-Za-z0-9_]+)", re.MULTILINE)
 
 
@@ -292,6 +309,7 @@ def schema_text(name: str, definitions: Mapping[str, str] = ROS_DEFINITIONS) -> 
 # --------------------------------------------------------------------------------------------------
 # Time stamps.
 
+
 def stamps_to_ns(t: np.ndarray) -> np.ndarray:
     """Times in seconds (float) to integer nanoseconds, rounded to nearest: (N,) int64."""
     t = np.asarray(t, dtype=np.float64)
@@ -315,6 +333,7 @@ def _split_ns(ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 # --------------------------------------------------------------------------------------------------
 # Message layouts.
+
 
 @dataclass(frozen=True)
 class FieldSpec:
@@ -424,8 +443,9 @@ class MessageType:
         minimum = 4 + position
         if size is not None and size < minimum:
             raise ValueError(f"{size} bytes is shorter than a {self.name} message ({minimum} bytes)")
-        dtype = np.dtype({"names": names, "formats": formats, "offsets": offsets,
-                          "itemsize": minimum if size is None else size})
+        dtype = np.dtype(
+            {"names": names, "formats": formats, "offsets": offsets, "itemsize": minimum if size is None else size}
+        )
         self._layouts[key] = dtype
         return dtype
 
@@ -435,8 +455,12 @@ class MessageType:
 
     # ---------------------------------------------------------------------------------------------
 
-    def encode(self, stamp_ns: np.ndarray, frame_id: str, fields: Mapping[str, np.ndarray] | None = None,
-               ) -> np.ndarray:
+    def encode(
+        self,
+        stamp_ns: np.ndarray,
+        frame_id: str,
+        fields: Mapping[str, np.ndarray] | None = None,
+    ) -> np.ndarray:
         """Serialise N messages at once.
 
         Parameters
@@ -459,8 +483,10 @@ class MessageType:
         known = {spec.name for spec in self.body}
         unknown = set(fields) - known
         if unknown:
-            raise ValueError(f"{self.name} has no field(s) {', '.join(sorted(unknown))}; "
-                             f"fields: {', '.join(s.name for s in self.body)}")
+            raise ValueError(
+                f"{self.name} has no field(s) {', '.join(sorted(unknown))}; "
+                f"fields: {', '.join(s.name for s in self.body)}"
+            )
         frame = frame_id.encode()
         if b"\x00" in frame:
             raise ValueError("frame_id must not contain NUL characters")
@@ -529,23 +555,27 @@ class MessageType:
             frame_id[index] = batch.frame_id
             for name, values in batch.fields.items():
                 fields[name][index] = values
-        return DecodedBatch(stamp_ns=stamp_ns, frame_id=frame_id.astype(str) if n else np.empty(0, str),
-                            fields=fields)
+        return DecodedBatch(stamp_ns=stamp_ns, frame_id=frame_id.astype(str) if n else np.empty(0, str), fields=fields)
 
     def _decode_block(self, rows: np.ndarray, first: int) -> DecodedBatch:
         """Decode equal-length messages, rows of (M, size) uint8; ``first`` numbers them in errors."""
         m, size = rows.shape
         if m == 0:
-            return DecodedBatch(np.empty(0, np.int64), np.empty(0, str),
-                                {spec.name: np.empty(spec.shape(0), spec.dtype) for spec in self.body})
+            return DecodedBatch(
+                np.empty(0, np.int64),
+                np.empty(0, str),
+                {spec.name: np.empty(spec.shape(0), spec.dtype) for spec in self.body},
+            )
         if size < 4 + _HEADER_FIXED + 1:
             raise ValueError(f"a {size}-byte message is too short for a {self.name}")
         bad = (rows[:, 0] != 0) | (rows[:, 1] != 1)
         if np.any(bad):
             k = int(np.flatnonzero(bad)[0])
-            raise ValueError(f"message {first + k} is not little-endian plain CDR "
-                             f"(encapsulation {bytes(rows[k, :4]).hex(' ')}; expected 00 01 00 00)")
-        string_length = rows[:, 4 + 8:4 + 12].copy().view("<u4")[:, 0]
+            raise ValueError(
+                f"message {first + k} is not little-endian plain CDR "
+                f"(encapsulation {bytes(rows[k, :4]).hex(' ')}; expected 00 01 00 00)"
+            )
+        string_length = rows[:, 4 + 8 : 4 + 12].copy().view("<u4")[:, 0]
         if np.all(string_length == string_length[0]):
             return self._decode_layout(rows, int(string_length[0]), first)
         parts = []
@@ -562,11 +592,12 @@ class MessageType:
             raise ValueError(f"message {first}: a CDR string length of 0 (no NUL terminator)")
         minimum = self.layout(frame_len).itemsize if 4 + _HEADER_FIXED + string_length <= size else size + 4
         if not minimum <= size <= minimum + 3:
-            raise ValueError(f"message {first}: {size} bytes, but a {self.name} with a {frame_len}-byte "
-                             f"frame_id has {minimum}")
+            raise ValueError(
+                f"message {first}: {size} bytes, but a {self.name} with a {frame_len}-byte frame_id has {minimum}"
+            )
         view = rows.view(self.layout(frame_len, size))[:, 0]
         stamp_ns = view["sec"].astype(np.int64) * 1_000_000_000 + view["nanosec"]
-        frames = rows[:, 4 + _HEADER_FIXED:4 + _HEADER_FIXED + frame_len]
+        frames = rows[:, 4 + _HEADER_FIXED : 4 + _HEADER_FIXED + frame_len]
         if frame_len == 0:
             frame_id = np.full(m, "")
         elif np.all(frames == frames[0]):
@@ -582,45 +613,69 @@ def split_payloads(rows: np.ndarray) -> list[bytes]:
     rows = np.ascontiguousarray(rows)
     data = rows.tobytes()
     size = rows.shape[1]
-    return [data[i:i + size] for i in range(0, len(data), size)]
+    return [data[i : i + size] for i in range(0, len(data), size)]
 
 
 # --------------------------------------------------------------------------------------------------
 # The types gyroemu uses.
 
+
 def _f8(name, count=1, **kw):
     return FieldSpec(name, "<f8", count, **kw)
 
 
-IMU = MessageType("sensor_msgs/msg/Imu", (
-    _f8("orientation", 4),                      # x, y, z, w
-    _f8("orientation_covariance", 9),
-    _f8("angular_velocity", 3),
-    _f8("angular_velocity_covariance", 9),
-    _f8("linear_acceleration", 3),
-    _f8("linear_acceleration_covariance", 9),
-))
+IMU = MessageType(
+    "sensor_msgs/msg/Imu",
+    (
+        _f8("orientation", 4),  # x, y, z, w
+        _f8("orientation_covariance", 9),
+        _f8("angular_velocity", 3),
+        _f8("angular_velocity_covariance", 9),
+        _f8("linear_acceleration", 3),
+        _f8("linear_acceleration_covariance", 9),
+    ),
+)
 """``sensor_msgs/msg/Imu``: ``orientation`` is (x, y, z, w), covariances are row-major (9,)."""
 
-MAGNETIC_FIELD = MessageType("sensor_msgs/msg/MagneticField", (
-    _f8("magnetic_field", 3),
-    _f8("magnetic_field_covariance", 9),
-))
+MAGNETIC_FIELD = MessageType(
+    "sensor_msgs/msg/MagneticField",
+    (
+        _f8("magnetic_field", 3),
+        _f8("magnetic_field_covariance", 9),
+    ),
+)
 """``sensor_msgs/msg/MagneticField``: ``magnetic_field`` in tesla."""
 
 RAW_MESSAGE_TYPES: dict[str, MessageType] = {
-    "rlg": MessageType("gyroemu_msgs/msg/RlgRaw", (
-        FieldSpec("fringe_count", "<i8", 3), _f8("beat_phase_rad", 3), _f8("dither_angle_rad", 3)), kind="rlg"),
-    "fog": MessageType("gyroemu_msgs/msg/FogRaw", (
-        _f8("sagnac_phase_rad", 3), _f8("feedback_phase_rad", 3, default=np.nan, present_flag="closed_loop"),
-        _f8("detector_power_w", 3), FieldSpec("closed_loop", "?")), kind="fog"),
-    "mems": MessageType("gyroemu_msgs/msg/MemsRaw", (
-        _f8("sense_in_phase_v", 3), _f8("sense_quadrature_v", 3)), kind="mems"),
+    "rlg": MessageType(
+        "gyroemu_msgs/msg/RlgRaw",
+        (FieldSpec("fringe_count", "<i8", 3), _f8("beat_phase_rad", 3), _f8("dither_angle_rad", 3)),
+        kind="rlg",
+    ),
+    "fog": MessageType(
+        "gyroemu_msgs/msg/FogRaw",
+        (
+            _f8("sagnac_phase_rad", 3),
+            _f8("feedback_phase_rad", 3, default=np.nan, present_flag="closed_loop"),
+            _f8("detector_power_w", 3),
+            FieldSpec("closed_loop", "?"),
+        ),
+        kind="fog",
+    ),
+    "mems": MessageType(
+        "gyroemu_msgs/msg/MemsRaw", (_f8("sense_in_phase_v", 3), _f8("sense_quadrature_v", 3)), kind="mems"
+    ),
     "rate-gyro": MessageType("gyroemu_msgs/msg/RateGyroRaw", (_f8("gimbal_angle_rad", 3),), kind="rate-gyro"),
-    "rate-integrating": MessageType("gyroemu_msgs/msg/RateIntegratingGyroRaw", (
-        _f8("gimbal_angle_rad", 3), _f8("torquer_current_a", 3)), kind="rate-integrating"),
-    "free-gyro": MessageType("gyroemu_msgs/msg/FreeGyroRaw", (
-        _f8("gimbal_angle_rad", 4), _f8("attitude_xyz_rad", 3), FieldSpec("gimbal_lock", "?")), kind="free-gyro"),
+    "rate-integrating": MessageType(
+        "gyroemu_msgs/msg/RateIntegratingGyroRaw",
+        (_f8("gimbal_angle_rad", 3), _f8("torquer_current_a", 3)),
+        kind="rate-integrating",
+    ),
+    "free-gyro": MessageType(
+        "gyroemu_msgs/msg/FreeGyroRaw",
+        (_f8("gimbal_angle_rad", 4), _f8("attitude_xyz_rad", 3), FieldSpec("gimbal_lock", "?")),
+        kind="free-gyro",
+    ),
 }
 """Gyro kind -> its raw-observable message type. Field names are the names of ``ImuSamples.raw[kind]``
 (the ``ideal`` kind has no raw observables); FOG's ``closed_loop`` says whether ``feedback_phase_rad``
@@ -651,8 +706,11 @@ def raw_fields(kind: str, raw: Mapping[str, np.ndarray]) -> tuple[MessageType, d
     mtype = RAW_MESSAGE_TYPES[kind]
     names = {spec.name for spec in mtype.body}
     flags = {spec.present_flag for spec in mtype.body if spec.present_flag}
-    missing = [spec.name for spec in mtype.body
-               if spec.name not in raw and spec.present_flag is None and spec.name not in flags]
+    missing = [
+        spec.name
+        for spec in mtype.body
+        if spec.name not in raw and spec.present_flag is None and spec.name not in flags
+    ]
     if missing:
         raise ValueError(f"raw observables of kind {kind!r} lack {', '.join(missing)} (message {mtype.name})")
     fields = {name: value for name, value in raw.items() if name in names and name not in flags}
@@ -672,4 +730,3 @@ def raw_observables(mtype: MessageType, batch: DecodedBatch) -> dict[str, np.nda
             continue
         out[spec.name] = batch[spec.name]
     return out
-

@@ -41,9 +41,15 @@ class PhaseProgress:
         if enabled and self.phases:
             from tqdm import tqdm
 
-            self.bar = tqdm(total=len(self.phases), desc=label or None, unit="phase", file=self.stream,
-                            leave=False, dynamic_ncols=True,
-                            bar_format="{desc} {bar} {n_fmt}/{total_fmt} phases [{elapsed}]")
+            self.bar = tqdm(
+                total=len(self.phases),
+                desc=label or None,
+                unit="phase",
+                file=self.stream,
+                leave=False,
+                dynamic_ncols=True,
+                bar_format="{desc} {bar} {n_fmt}/{total_fmt} phases [{elapsed}]",
+            )
             self._thread = threading.Thread(target=self._redraw, name="progress", daemon=True)
             self._thread.start()
 

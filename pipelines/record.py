@@ -44,11 +44,28 @@ from pathlib import Path
 import numpy as np
 
 from .messages import IMU, MAGNETIC_FIELD, MESSAGE_TYPES, RAW_MESSAGE_TYPES
-from .zenoh_io import (drain, header_stamp_ns, key_to_topic, open_session, router_config, session_config,
-                       stop_on_signals, subscribe, unpack_attachment)
+from .zenoh_io import (
+    drain,
+    header_stamp_ns,
+    key_to_topic,
+    open_session,
+    router_config,
+    session_config,
+    stop_on_signals,
+    subscribe,
+    unpack_attachment,
+)
 
-__all__ = ["SequenceTracker", "Recorder", "KeyInfo", "gyroemu_key", "ros2_key", "topic_message_type",
-           "run_record", "run_router"]
+__all__ = [
+    "SequenceTracker",
+    "Recorder",
+    "KeyInfo",
+    "gyroemu_key",
+    "ros2_key",
+    "topic_message_type",
+    "run_record",
+    "run_router",
+]
 
 
 def _ranges(numbers) -> list[list[int]]:
@@ -93,9 +110,16 @@ class SequenceTracker:
             self.duplicates += 1
 
     def report(self) -> dict:
-        return {"topic": self.topic, "received": self.received, "first": self.first, "last": self.next - 1,
-                "missing": len(self.missing), "missing_ranges": _ranges(self.missing),
-                "duplicates": self.duplicates, "late": self.late}
+        return {
+            "topic": self.topic,
+            "received": self.received,
+            "first": self.first,
+            "last": self.next - 1,
+            "missing": len(self.missing),
+            "missing_ranges": _ranges(self.missing),
+            "duplicates": self.duplicates,
+            "late": self.late,
+        }
 
 
 def topic_message_type(topic: str):
@@ -245,15 +269,21 @@ class Recorder:
         self._file.close()
 
     def report(self) -> dict:
-        return {"file": str(self.path), "messages": self.messages, "skipped": self.skipped,
-                "without_attachment": self.without_attachment,
-                "publishers": {gid.hex(): t.report() for gid, t in self.trackers.items()}}
+        return {
+            "file": str(self.path),
+            "messages": self.messages,
+            "skipped": self.skipped,
+            "without_attachment": self.without_attachment,
+            "publishers": {gid.hex(): t.report() for gid, t in self.trackers.items()},
+        }
 
 
 def format_report(report: dict) -> str:
-    lines = [f"record: {report['messages']} messages -> {report['file']}"
-             + (f" ({report['skipped']} skipped)" if report["skipped"] else "")
-             + (f" ({report['without_attachment']} without a valid attachment)" if report["without_attachment"] else "")]
+    lines = [
+        f"record: {report['messages']} messages -> {report['file']}"
+        + (f" ({report['skipped']} skipped)" if report["skipped"] else "")
+        + (f" ({report['without_attachment']} without a valid attachment)" if report["without_attachment"] else "")
+    ]
     total_missing = total_dup = 0
     for gid, r in sorted(report["publishers"].items(), key=lambda kv: kv[1]["topic"]):
         total_missing += r["missing"]
@@ -275,9 +305,20 @@ def format_report(report: dict) -> str:
     return "\n".join(lines)
 
 
-def run_record(*, out_path, duration: float | None = None, key_expr: str | None = None, connect=None,
-               listen=None, mode=None, config_file=None, report_path=None, ros2: bool = False,
-               domain: int | None = None, out=sys.stdout) -> int:
+def run_record(
+    *,
+    out_path,
+    duration: float | None = None,
+    key_expr: str | None = None,
+    connect=None,
+    listen=None,
+    mode=None,
+    config_file=None,
+    report_path=None,
+    ros2: bool = False,
+    domain: int | None = None,
+    out=sys.stdout,
+) -> int:
     """Record until SIGINT/SIGTERM or ``duration`` s (see the module's notes). ``key_expr`` defaults to
     ``gyroemu/**`` (``<domain>/**`` with ``ros2``). Raises ``ValueError`` naming the argument at fault."""
     node = None
@@ -297,7 +338,10 @@ def run_record(*, out_path, duration: float | None = None, key_expr: str | None 
             from .ros2_keys import Ros2Node, node_name
 
             node = Ros2Node(session, domain, node_name("record"))
-            on_new_topic = (lambda info: node.subscription(info.ros_topic, info.type_name, info.type_hash))
+
+            def on_new_topic(info: KeyInfo) -> None:
+                node.subscription(info.ros_topic, info.type_name, info.type_hash)
+
         else:
             on_new_topic = None
         recorder = Recorder(out_path, parse_key=parse_key, on_new_topic=on_new_topic)
@@ -343,8 +387,11 @@ def run_router(*, listen=None, connect=None, config_file=None, out=sys.stdout) -
     session = open_session(config)
     with stop_on_signals() as stopping:
         try:
-            print(f"router: {session.zid()} listening on {', '.join(listen or ['tcp/0.0.0.0:7447'])}", file=out,
-                  flush=True)
+            print(
+                f"router: {session.zid()} listening on {', '.join(listen or ['tcp/0.0.0.0:7447'])}",
+                file=out,
+                flush=True,
+            )
             while not stopping:
                 time.sleep(0.1)
         finally:

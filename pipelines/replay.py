@@ -115,8 +115,10 @@ def ros2_topic_keys(keys: dict[str, str], channels, ros) -> tuple[dict[str, str]
             elif c.schema_encoding == "ros2msg":
                 hash_ = type_hash(type_name, parse_definitions(c.schema_data.decode("utf-8"), type_name))
             else:
-                raise Ros2Error(f"no topic_type_hash recorded and a {c.schema_encoding or 'missing'} schema, "
-                                "from which gyroemu cannot compute the type hash")
+                raise Ros2Error(
+                    f"no topic_type_hash recorded and a {c.schema_encoding or 'missing'} schema, "
+                    "from which gyroemu cannot compute the type hash"
+                )
             out[topic] = ros.key(name, type_name, hash_)
         except (ValueError, UnicodeDecodeError) as e:
             bad[topic] = f"no ROS 2 key: {e}"
@@ -169,7 +171,7 @@ class ReadAhead(threading.Thread):
                     while batch:  # free the McapMessage tuples a slice at a time: a deallocation holds
                         del batch[-BATCH:]  # the GIL throughout, and 4000 at once take ~0.5 ms
                     for start in range(0, len(items), BATCH):
-                        if not self._put(items[start:start + BATCH]):
+                        if not self._put(items[start : start + BATCH]):
                             return
                 self.passes += 1
                 if not self.loop or pass_first is None:
@@ -200,9 +202,22 @@ class ReadAhead(threading.Thread):
             yield batch
 
 
-def run_replay(*, path, rate: float = 1.0, loop: bool = False, topics=None, device_name: str = "imu0",
-               wait_s: float = 10.0, connect=None, listen=None, mode=None, config_file=None,
-               ros2: bool = False, domain: int | None = None, out=sys.stdout) -> int:
+def run_replay(
+    *,
+    path,
+    rate: float = 1.0,
+    loop: bool = False,
+    topics=None,
+    device_name: str = "imu0",
+    wait_s: float = 10.0,
+    connect=None,
+    listen=None,
+    mode=None,
+    config_file=None,
+    ros2: bool = False,
+    domain: int | None = None,
+    out=sys.stdout,
+) -> int:
     """Replay ``path`` (see the module's notes). Returns the exit status: 0 when done (or, with
     ``loop``, when stopped by SIGINT/SIGTERM), 130 when a single pass was interrupted. Raises
     :class:`gyroemu.pipelines.mcap_io.LogError` for bad input and ``ValueError`` naming the argument at fault."""
@@ -230,8 +245,7 @@ def run_replay(*, path, rate: float = 1.0, loop: bool = False, topics=None, devi
         known = {c.topic for c in channels}
         for topic in topics:
             if topic not in known:
-                raise ReplayError(f"argument --topics: {path}: no topic {topic!r} "
-                                  f"(it has {', '.join(sorted(known))})")
+                raise ReplayError(f"argument --topics: {path}: no topic {topic!r} (it has {', '.join(sorted(known))})")
             if topic not in cdr:
                 raise ReplayError(f"argument --topics: {path}: topic {topic!r} is not cdr-encoded")
         cdr = [t for t in cdr if t in set(topics)]

@@ -73,8 +73,8 @@ import hashlib
 import json
 import os
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping
 
 from .messages import RAW_MESSAGE_TYPES, ROS_DEFINITIONS
 
@@ -114,18 +114,38 @@ class Ros2Error(ValueError):
 
 # FieldType.msg (type_description_interfaces): element type ids; + 48 array, + 96 bounded, + 144 sequence.
 _TYPE_IDS = {
-    "nested": 1, "int8": 2, "uint8": 3, "int16": 4, "uint16": 5, "int32": 6, "uint32": 7, "int64": 8,
-    "uint64": 9, "float32": 10, "float64": 11, "char": 3, "bool": 15, "byte": 16, "string": 17, "wstring": 18,
-    "bounded_string": 21, "bounded_wstring": 22,
+    "nested": 1,
+    "int8": 2,
+    "uint8": 3,
+    "int16": 4,
+    "uint16": 5,
+    "int32": 6,
+    "uint32": 7,
+    "int64": 8,
+    "uint64": 9,
+    "float32": 10,
+    "float64": 11,
+    "char": 3,
+    "bool": 15,
+    "byte": 16,
+    "string": 17,
+    "wstring": 18,
+    "bounded_string": 21,
+    "bounded_wstring": 22,
 }
 """``.msg`` primitive -> FieldType id. ``char`` is ``uint8`` and ``byte`` is ``octet`` in ROS 2
 (rosidl_adapter's ``MSG_TYPE_TO_IDL``)."""
 _ARRAY, _BOUNDED_SEQUENCE, _SEQUENCE = 48, 96, 144
-_ALIASES = {"time": "builtin_interfaces/msg/Time", "duration": "builtin_interfaces/msg/Duration",
-            "Header": "std_msgs/msg/Header"}
+_ALIASES = {
+    "time": "builtin_interfaces/msg/Time",
+    "duration": "builtin_interfaces/msg/Duration",
+    "Header": "std_msgs/msg/Header",
+}
 """ROS 1 spellings some bags' schemas still use (rosbags writes ``time``; ROS 1 ``Header``)."""
-_TYPE = re.compile(r"^(?P<base>[A-Za-z][A-Za-z0-9_/]*)(?:<=(?P<strcap>\d+))?"
-                   r"(?:\[(?P<bounded><=)?(?P<size>\d*)\])?$")
+_TYPE = re.compile(
+    r"^(?P<base>[A-Za-z][A-Za-z0-9_/]*)(?:<=(?P<strcap>\d+))?"
+    r"(?:\[(?P<bounded><=)?(?P<size>\d*)\])?$"
+)
 _MSG_SECTION = re.compile(r"^MSG: (\S+)\s*$", re.MULTILINE)
 
 
@@ -176,8 +196,7 @@ def _field_type(token: str, package: str) -> dict:
             element, capacity = element + _ARRAY, int(size)
         else:
             element += _SEQUENCE
-    return {"type_id": element, "capacity": capacity, "string_capacity": string_capacity,
-            "nested_type_name": nested}
+    return {"type_id": element, "capacity": capacity, "string_capacity": string_capacity, "nested_type_name": nested}
 
 
 def _fields(name: str, text: str) -> list[dict]:
@@ -200,9 +219,12 @@ def _fields(name: str, text: str) -> list[dict]:
             raise Ros2Error(f"{name}: field name {field_name!r} is not a ROS 2 field name")
         fields.append({"name": field_name, "type": _field_type(type_token, package)})
     if not fields:
-        fields.append({"name": "structure_needs_at_least_one_member",
-                       "type": {"type_id": _TYPE_IDS["uint8"], "capacity": 0, "string_capacity": 0,
-                                "nested_type_name": ""}})
+        fields.append(
+            {
+                "name": "structure_needs_at_least_one_member",
+                "type": {"type_id": _TYPE_IDS["uint8"], "capacity": 0, "string_capacity": 0, "nested_type_name": ""},
+            }
+        )
     return fields
 
 
@@ -219,7 +241,7 @@ def parse_definitions(schema: str, name: str) -> dict[str, str]:
             if section.strip():
                 raise Ros2Error(f"schema of {name}: a section without its 'MSG: pkg/Type' line")
             continue
-        out[full_type_name(m.group(1))] = section[m.end():]
+        out[full_type_name(m.group(1))] = section[m.end() :]
     return out
 
 
@@ -242,14 +264,21 @@ def type_description(name: str, definitions: Mapping[str, str] = ROS_DEFINITIONS
         fields = _fields(current, texts[current])
         described[current] = {"type_name": current, "fields": fields}
         pending.extend(f["type"]["nested_type_name"] for f in fields if f["type"]["nested_type_name"])
-    return {"type_description": described.pop(root),
-            "referenced_type_descriptions": [described[k] for k in sorted(described)]}
+    return {
+        "type_description": described.pop(root),
+        "referenced_type_descriptions": [described[k] for k in sorted(described)],
+    }
 
 
 def type_hash(name: str, definitions: Mapping[str, str] = ROS_DEFINITIONS) -> str:
     """``RIHS01_<sha256 hex>`` of type ``name`` by REP-2011 (see the module's notes)."""
-    text = json.dumps(type_description(name, definitions), ensure_ascii=True, allow_nan=False,
-                      separators=(", ", ": "), sort_keys=False)
+    text = json.dumps(
+        type_description(name, definitions),
+        ensure_ascii=True,
+        allow_nan=False,
+        separators=(", ", ": "),
+        sort_keys=False,
+    )
     return "RIHS01_" + hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
@@ -289,8 +318,10 @@ def ros_topic(device: str, topic: str) -> str:
     tokens = [t.replace("-", "_") for t in tokens]
     for t in tokens:
         if not _TOKEN.match(t):
-            raise Ros2Error(f"{name!r}: {t!r} cannot be part of a ROS 2 topic name (letters, digits and '_', "
-                            "not starting with a digit)")
+            raise Ros2Error(
+                f"{name!r}: {t!r} cannot be part of a ROS 2 topic name (letters, digits and '_', "
+                "not starting with a digit)"
+            )
     return "/" + "/".join(tokens)
 
 
@@ -320,9 +351,9 @@ class DataKey:
     """A parsed rmw_zenoh data key expression."""
 
     domain: int
-    topic: str       # /a/b
-    type_name: str   # pkg/msg/Type
-    type_hash: str   # RIHS01_... (or whatever the publisher put there, e.g. TypeHashNotSupported)
+    topic: str  # /a/b
+    type_name: str  # pkg/msg/Type
+    type_hash: str  # RIHS01_... (or whatever the publisher put there, e.g. TypeHashNotSupported)
 
 
 def parse_data_key(key: str) -> DataKey:
@@ -361,17 +392,21 @@ KEEP_LAST, KEEP_ALL = 1, 2
 _DEFAULT_QOS = {"reliability": RELIABLE, "durability": VOLATILE, "history": KEEP_LAST, "depth": 42}
 
 
-def qos_keyexpr(reliability: int = RELIABLE, durability: int = VOLATILE, history: int = KEEP_ALL,
-                depth: int = 0) -> str:
+def qos_keyexpr(
+    reliability: int = RELIABLE, durability: int = VOLATILE, history: int = KEEP_ALL, depth: int = 0
+) -> str:
     """rmw_zenoh's QoS chunk, each value empty when it is the default; deadline, lifespan and lease
     are infinite (the defaults) and liveliness automatic. ``depth`` 0 means the default depth.
     Default arguments: reliable keep-all (what a BLOCK publisher is): ``::2,:,:,:,,``."""
+
     def part(key, value):
         return "" if value == _DEFAULT_QOS[key] else str(value)
 
     depth = depth or _DEFAULT_QOS["depth"]
-    return (f"{part('reliability', reliability)}:{part('durability', durability)}:"
-            f"{part('history', history)},{part('depth', depth)}:,:,:,,")
+    return (
+        f"{part('reliability', reliability)}:{part('durability', durability)}:"
+        f"{part('history', history)},{part('depth', depth)}:,:,:,,"
+    )
 
 
 def _mangle(name: str) -> str:
@@ -380,19 +415,34 @@ def _mangle(name: str) -> str:
 
 def node_token(domain: int, zid: str, node_id: int, node: str, namespace: str = "/", enclave: str = "/") -> str:
     """``@ros2_lv/<domain>/<zid>/<nid>/<nid>/NN/<enclave>/<namespace>/<node>`` (a node's own id is its nid)."""
-    return (f"{ADMIN_SPACE}/{int(domain)}/{zid}/{node_id}/{node_id}/NN/{_mangle(enclave)}/"
-            f"{_mangle(namespace)}/{_mangle(node)}")
+    return (
+        f"{ADMIN_SPACE}/{int(domain)}/{zid}/{node_id}/{node_id}/NN/{_mangle(enclave)}/"
+        f"{_mangle(namespace)}/{_mangle(node)}"
+    )
 
 
-def entity_token(kind: str, domain: int, zid: str, node_id: int, entity_id: int, node: str, topic: str,
-                 type_name: str, hash_: str, qos: str | None = None, namespace: str = "/",
-                 enclave: str = "/") -> str:
+def entity_token(
+    kind: str,
+    domain: int,
+    zid: str,
+    node_id: int,
+    entity_id: int,
+    node: str,
+    topic: str,
+    type_name: str,
+    hash_: str,
+    qos: str | None = None,
+    namespace: str = "/",
+    enclave: str = "/",
+) -> str:
     """A publisher's (``kind="MP"``) or subscription's (``"MS"``) token (see the module's notes)."""
     if kind not in ("MP", "MS"):
         raise ValueError(f"entity kind {kind!r}: MP or MS")
-    return (f"{ADMIN_SPACE}/{int(domain)}/{zid}/{node_id}/{entity_id}/{kind}/{_mangle(enclave)}/"
-            f"{_mangle(namespace)}/{_mangle(node)}/{_mangle(topic)}/{dds_type_name(type_name)}/{hash_}/"
-            f"{qos if qos is not None else qos_keyexpr()}")
+    return (
+        f"{ADMIN_SPACE}/{int(domain)}/{zid}/{node_id}/{entity_id}/{kind}/{_mangle(enclave)}/"
+        f"{_mangle(namespace)}/{_mangle(node)}/{_mangle(topic)}/{dds_type_name(type_name)}/{hash_}/"
+        f"{qos if qos is not None else qos_keyexpr()}"
+    )
 
 
 class Ros2Node:
@@ -416,8 +466,18 @@ class Ros2Node:
         self.keys.append(key)
 
     def _entity(self, kind: str, topic: str, type_name: str, hash_: str) -> str:
-        key = entity_token(kind, self.domain, self.zid, self.node_id, self._next_id, self.name, topic,
-                           type_name, hash_, namespace=self.namespace)
+        key = entity_token(
+            kind,
+            self.domain,
+            self.zid,
+            self.node_id,
+            self._next_id,
+            self.name,
+            topic,
+            type_name,
+            hash_,
+            namespace=self.namespace,
+        )
         self._next_id += 1
         self._declare(key)
         return key

@@ -67,7 +67,8 @@ class Ros2Keys:
         self.publishers: dict[str, tuple[str, str, str]] = {}  # key -> (ROS topic, type, hash)
 
     def key(self, ros_topic: str, type_name: str, type_hash: str | None = None) -> str:
-        from .ros2_keys import data_key, type_hash as compute
+        from .ros2_keys import data_key
+        from .ros2_keys import type_hash as compute
 
         type_hash = type_hash or compute(type_name)
         key = data_key(self.domain, ros_topic, type_name, type_hash)
@@ -89,10 +90,24 @@ class Ros2Keys:
             self.node.close()
 
 
-def run_stream(*, scenario: str, device: str, duration: float | None = None, seed: int = 0,
-               as_fast_as_possible: bool = False, device_name: str = "imu0", wait_s: float = 10.0,
-               connect=None, listen=None, mode=None, config_file=None, ros2: bool = False,
-               domain: int | None = None, estimate: str | None = None, out=sys.stdout) -> int:
+def run_stream(
+    *,
+    scenario: str,
+    device: str,
+    duration: float | None = None,
+    seed: int = 0,
+    as_fast_as_possible: bool = False,
+    device_name: str = "imu0",
+    wait_s: float = 10.0,
+    connect=None,
+    listen=None,
+    mode=None,
+    config_file=None,
+    ros2: bool = False,
+    domain: int | None = None,
+    estimate: str | None = None,
+    out=sys.stdout,
+) -> int:
     """Simulate, encode and publish (see the module's notes); returns the exit status (0, or 130 when
     stopped by SIGINT/SIGTERM). Raises ``ValueError`` naming the argument at fault, before simulating.
 
@@ -103,7 +118,6 @@ def run_stream(*, scenario: str, device: str, duration: float | None = None, see
     from gyroemu.sensors import load_device
 
     from .mcap_io import truth_series
-
     from .ros2_keys import ros_topic
 
     config = session_config(connect=connect, listen=listen, mode=mode, config_file=config_file)
@@ -131,16 +145,22 @@ def run_stream(*, scenario: str, device: str, duration: float | None = None, see
     encoded = encode_run(samples, truth_series(traj, samples))
     if ros is not None:
         types = topic_types(encoded)
-        batches = {ros.key(ros_topic(device_name, topic), types[topic]): split_payloads(rows)
-                   for topic, rows in encoded.items()}
+        batches = {
+            ros.key(ros_topic(device_name, topic), types[topic]): split_payloads(rows)
+            for topic, rows in encoded.items()
+        }
     else:
         batches = {topic_to_key(device_name, topic): split_payloads(rows) for topic, rows in encoded.items()}
     del encoded  # the batches hold the bytes now (half the memory of a long run)
     n = len(samples.t)
     rate = (n - 1) / float(samples.t[-1] - samples.t[0]) if n > 1 else dev.spec.rate_hz
     rate = float(dev.spec.rate_hz) if dev.spec.rate_hz else rate
-    print(f"stream: {scen.name} through {dev.name}: {n} samples at {rate:g} Hz, {len(batches)} topics "
-          f"(encoded in {time.perf_counter() - started:.2f} s)", file=out, flush=True)
+    print(
+        f"stream: {scen.name} through {dev.name}: {n} samples at {rate:g} Hz, {len(batches)} topics "
+        f"(encoded in {time.perf_counter() - started:.2f} s)",
+        file=out,
+        flush=True,
+    )
 
     session = open_session(config)
     estimator = None
@@ -151,9 +171,15 @@ def run_stream(*, scenario: str, device: str, duration: float | None = None, see
 
         setup = setup_for(dev, scen)
         # a throwaway run first, so that loading the compiled kernels does not stall the paced clock
-        make_filter(estimate, setup).process(samples.t[:64] - samples.t[0], samples.gyro[:64], samples.accel[:64],
-                                             samples.mag[:64] if setup.use_mag else None)
-        estimator = LiveEstimator(open_session(config), device_name, make_filter(estimate, setup), setup.use_mag).start()
+        make_filter(estimate, setup).process(
+            samples.t[:64] - samples.t[0],
+            samples.gyro[:64],
+            samples.accel[:64],
+            samples.mag[:64] if setup.use_mag else None,
+        )
+        estimator = LiveEstimator(
+            open_session(config), device_name, make_filter(estimate, setup), setup.use_mag
+        ).start()
         print(f"  {estimator.key} ({estimate}, {'9D' if setup.use_mag else '6D'}, live)", file=out)
     publisher = None
     with stop_on_signals() as stopping:

@@ -59,9 +59,9 @@ import signal
 import struct
 import sys
 import time
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Sequence
 
 import numpy as np
 import zenoh
@@ -98,6 +98,7 @@ assert ATTACHMENT_SIZE == 33
 # --------------------------------------------------------------------------------------------------
 # Sessions.
 
+
 def _zenoh_message(error: Exception) -> str:
     """zenoh's error text without its Rust source locations."""
     return re.sub(r" at /\S+\.rs:\d+\.?", "", str(error))
@@ -107,8 +108,12 @@ def _insert(config: zenoh.Config, key: str, value) -> None:
     config.insert_json5(key, json.dumps(value))
 
 
-def session_config(connect: Sequence[str] | None = None, listen: Sequence[str] | None = None,
-                   mode: str | None = None, config_file: str | os.PathLike | None = None) -> zenoh.Config:
+def session_config(
+    connect: Sequence[str] | None = None,
+    listen: Sequence[str] | None = None,
+    mode: str | None = None,
+    config_file: str | os.PathLike | None = None,
+) -> zenoh.Config:
     """The zenoh configuration of a gyroemu process (see the module's notes for the default session).
 
     Raises ``ValueError`` naming the argument at fault (mode, config file, endpoints).
@@ -149,11 +154,15 @@ def session_config(connect: Sequence[str] | None = None, listen: Sequence[str] |
     return config
 
 
-def router_config(listen: Sequence[str] | None = None, connect: Sequence[str] | None = None,
-                  config_file: str | os.PathLike | None = None) -> zenoh.Config:
+def router_config(
+    listen: Sequence[str] | None = None,
+    connect: Sequence[str] | None = None,
+    config_file: str | os.PathLike | None = None,
+) -> zenoh.Config:
     """A router's configuration: listens on ``listen`` (default ``tcp/0.0.0.0:7447``)."""
-    return session_config(connect=connect, listen=list(listen or ["tcp/0.0.0.0:7447"]), mode="router",
-                          config_file=config_file)
+    return session_config(
+        connect=connect, listen=list(listen or ["tcp/0.0.0.0:7447"]), mode="router", config_file=config_file
+    )
 
 
 def open_session(config: zenoh.Config) -> zenoh.Session:
@@ -161,8 +170,9 @@ def open_session(config: zenoh.Config) -> zenoh.Session:
     try:
         return zenoh.open(config)
     except Exception as e:
-        raise ValueError(f"argument --connect/--listen/--config: cannot open the zenoh session: "
-                         f"{_zenoh_message(e)}") from None
+        raise ValueError(
+            f"argument --connect/--listen/--config: cannot open the zenoh session: {_zenoh_message(e)}"
+        ) from None
 
 
 @contextlib.contextmanager
@@ -180,6 +190,7 @@ def stop_on_signals():
 
 # --------------------------------------------------------------------------------------------------
 # Key expressions and attachments.
+
 
 def topic_to_key(device: str, topic: str) -> str:
     """``gyroemu/<device>`` + topic: ``("imu0", "/imu") -> "gyroemu/imu0/imu"``."""
@@ -225,6 +236,7 @@ def header_stamp_ns(payload: bytes) -> int:
 # --------------------------------------------------------------------------------------------------
 # Publishing.
 
+
 @dataclass
 class PacingReport:
     """How late each sample went out relative to its deadline (seconds): ``t0 + k / rate``
@@ -240,9 +252,11 @@ class PacingReport:
     def summary(self, against: str = "t0 + k/rate") -> str:
         if not len(self.lateness_s):
             return "pacing: no samples"
-        return (f"pacing: {len(self.lateness_s)} samples, {self.messages} messages in {self.elapsed_s:.3f} s; "
-                f"lateness vs {against}: p50 {self.percentile(50) * 1e3:.3f} ms, "
-                f"p99 {self.percentile(99) * 1e3:.3f} ms, max {self.lateness_s.max() * 1e3:.3f} ms")
+        return (
+            f"pacing: {len(self.lateness_s)} samples, {self.messages} messages in {self.elapsed_s:.3f} s; "
+            f"lateness vs {against}: p50 {self.percentile(50) * 1e3:.3f} ms, "
+            f"p99 {self.percentile(99) * 1e3:.3f} ms, max {self.lateness_s.max() * 1e3:.3f} ms"
+        )
 
 
 @dataclass(frozen=True)
@@ -385,8 +399,9 @@ class PacedPublisher:
         self.timing = timing if timing is not None else PRECISE
         self._topics: dict[str, _Topic] = {}
         for key in keys:
-            pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK,
-                                            reliability=zenoh.Reliability.RELIABLE)
+            pub = session.declare_publisher(
+                key, congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE
+            )
             self._topics[key] = _Topic(key, pub, secrets.token_bytes(16))
 
     def publisher_ids(self) -> dict[str, bytes]:
@@ -496,6 +511,7 @@ class PacedPublisher:
 
 # --------------------------------------------------------------------------------------------------
 # Subscribing.
+
 
 def subscribe(session: zenoh.Session, key_expr: str = f"{KEY_ROOT}/**", capacity: int = 1 << 16) -> zenoh.Subscriber:
     """A subscriber whose samples queue in a FIFO channel (``capacity`` samples; when it is full zenoh

@@ -1,8 +1,9 @@
 """gyroemu's emulated sensors: gyro mechanisms, error terms, accelerometer, magnetometer, IMU devices.
 
 Entry points (``interface.md``): :func:`load_device` and :meth:`Device.measure`, returning
-:class:`ImuSamples`. Mechanisms implement :class:`GyroMechanism` (``gyroemu.sensors.mechanism``); the error
-terms are :func:`apply_errors` (``gyroemu.sensors.errors``); Allan deviation and its fit are in ``gyroemu.sensors.allan``.
+:class:`ImuSamples`. Mechanisms implement :class:`GyroMechanism` (``gyroemu.sensors.mechanism``); the
+error terms are :func:`apply_errors` (``gyroemu.sensors.errors``); Allan deviation and its fit are in
+``gyroemu.sensors.allan``.
 """
 
 from gyroemu.dynamics.config import ConfigError

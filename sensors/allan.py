@@ -150,8 +150,10 @@ def fit_allan(allan: AllanDeviation, terms=TERMS, iterations: int = 5) -> AllanF
         coefficients[used] = c
         model = np.maximum(basis @ coefficients, np.finfo(float).tiny)
 
-    fitted = {name: _read(j, coefficients, basis, model, allan) if use else Coefficient(0.0, 0.0, 0.0)
-              for j, (name, use) in enumerate(zip(TERMS, used))}
+    fitted = {
+        name: _read(j, coefficients, basis, model, allan) if use else Coefficient(0.0, 0.0, 0.0)
+        for j, (name, use) in enumerate(zip(TERMS, used))
+    }
     return AllanFit(allan=allan, **fitted)
 
 

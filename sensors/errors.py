@@ -55,9 +55,9 @@ import scipy.signal
 from pydantic import BeforeValidator, ValidationInfo, field_validator
 
 from gyroemu.dynamics.config import ConfigError, NonNegativeReal, PositiveReal, Real, Section
+from gyroemu.dynamics.jit import njit
 
 from . import noise
-from gyroemu.dynamics.jit import njit
 
 __all__ = ["GyroErrors", "AccelErrors", "ErrorModel", "apply_errors", "STANDARD_GRAVITY"]
 
@@ -358,9 +358,15 @@ class ErrorModel:
     filter_order: int
 
 
-def apply_errors(truth: np.ndarray, t: np.ndarray, spec: GyroErrors | AccelErrors | ErrorModel,
-                 rng: np.random.Generator, *, temperature_degC=None,
-                 specific_force: np.ndarray | None = None) -> np.ndarray:
+def apply_errors(
+    truth: np.ndarray,
+    t: np.ndarray,
+    spec: GyroErrors | AccelErrors | ErrorModel,
+    rng: np.random.Generator,
+    *,
+    temperature_degC=None,
+    specific_force: np.ndarray | None = None,
+) -> np.ndarray:
     """What a three-axis sensor with the error terms ``spec`` outputs for the true input ``truth``.
 
     Parameters
@@ -392,8 +398,11 @@ def apply_errors(truth: np.ndarray, t: np.ndarray, spec: GyroErrors | AccelError
     if not dt > 0 or np.max(np.abs(np.diff(t) - dt)) > 1e-6 * dt:
         raise ValueError("sample times must be uniform and increasing (clock jitter is the IMU layer's)")
     if m.bandwidth_hz is not None and not m.bandwidth_hz < 0.5 / dt:
-        raise ConfigError(f"{m.bandwidth_hz:g} Hz is not below the Nyquist frequency {0.5 / dt:g} Hz "
-                          f"of the {1 / dt:g} Hz sample rate", key="bandwidth_hz")
+        raise ConfigError(
+            f"{m.bandwidth_hz:g} Hz is not below the Nyquist frequency {0.5 / dt:g} Hz "
+            f"of the {1 / dt:g} Hz sample rate",
+            key="bandwidth_hz",
+        )
 
     # Deterministic response: (I + S + M) x + k x² + (b_T + s_T x) ΔT + G f + b + b_on + R t.
     gain = np.eye(3) + np.diag(m.scale_factor) + m.cross_axis
@@ -409,15 +418,26 @@ def apply_errors(truth: np.ndarray, t: np.ndarray, spec: GyroErrors | AccelError
             raise ValueError(f"expected specific_force of shape {(n, 3)}, got {f.shape}")
     bias = m.bias + (m.turn_on_bias * rng.standard_normal(3) if np.any(m.turn_on_bias) else 0.0)
     y = np.empty((n, 3))
-    _response(x, t, dT, f, gain, m.nonlinearity, m.bias_temperature, m.scale_factor_temperature,
-              g_sensitivity, bias, m.ramp, y)
+    _response(
+        x,
+        t,
+        dT,
+        f,
+        gain,
+        m.nonlinearity,
+        m.bias_temperature,
+        m.scale_factor_temperature,
+        g_sensitivity,
+        bias,
+        m.ramp,
+        y,
+    )
 
     # Noise: white, flicker and rate random walk, added in place.
     flicker = None
     if np.any(m.bias_instability):
         flicker = noise.flicker_bank(m.bias_instability, m.bias_instability_tau_range, dt, n_axes=3)
-    noise.sensor_noise(rng, y.shape, dt, white=m.noise_density, random_walk=m.random_walk,
-                       flicker=flicker, out=y)
+    noise.sensor_noise(rng, y.shape, dt, white=m.noise_density, random_walk=m.random_walk, flicker=flicker, out=y)
 
     # Output stage: bandwidth, saturation, quantisation.
     if m.bandwidth_hz is not None:
@@ -438,11 +458,16 @@ def _response(x, t, dT, f, gain, k, b_T, s_T, G, bias, ramp, out):
     for n in range(x.shape[0]):
         for i in range(3):
             out[n, i] = (
-                gain[i, 0] * x[n, 0] + gain[i, 1] * x[n, 1] + gain[i, 2] * x[n, 2]  # (I + S + M) x
+                gain[i, 0] * x[n, 0]
+                + gain[i, 1] * x[n, 1]
+                + gain[i, 2] * x[n, 2]  # (I + S + M) x
                 + k[i] * x[n, i] * x[n, i]  # quadratic nonlinearity
                 + (b_T[i] + s_T[i] * x[n, i]) * dT[n]  # temperature: bias and scale factor
-                + G[i, 0] * f[n, 0] + G[i, 1] * f[n, 1] + G[i, 2] * f[n, 2]  # g-sensitivity
-                + bias[i] + ramp[i] * t[n]  # fixed and turn-on bias, rate ramp
+                + G[i, 0] * f[n, 0]
+                + G[i, 1] * f[n, 1]
+                + G[i, 2] * f[n, 2]  # g-sensitivity
+                + bias[i]
+                + ramp[i] * t[n]  # fixed and turn-on bias, rate ramp
             )
 
 

@@ -152,16 +152,20 @@ class FiberOpticGyro(GyroMechanism):
         if wavelength is not None:
             ideal = ELEMENTARY_CHARGE * wavelength * 1e-9 / (PLANCK * SPEED_OF_LIGHT)  # η = 1
             if responsivity > ideal:
-                raise ValueError(f"{responsivity:g} A/W exceeds e λ/(h c) = {ideal:.4g} A/W at {wavelength:g} nm "
-                                 "(a quantum efficiency above 1)")
+                raise ValueError(
+                    f"{responsivity:g} A/W exceeds e λ/(h c) = {ideal:.4g} A/W at {wavelength:g} nm "
+                    "(a quantum efficiency above 1)"
+                )
         return responsivity
 
     @field_validator("modulation_depth_rad")
     @classmethod
     def _below_first_zero_of_j1(cls, depth):
         if depth >= J1_FIRST_ZERO:
-            raise ValueError(f"{depth:g} rad is not below {J1_FIRST_ZERO:.4f} rad, the first zero of J₁ "
-                             "(where the first-harmonic signal vanishes)")
+            raise ValueError(
+                f"{depth:g} rad is not below {J1_FIRST_ZERO:.4f} rad, the first zero of J₁ "
+                "(where the first-harmonic signal vanishes)"
+            )
         return depth
 
     @field_validator("feedback_range_rad")
@@ -255,11 +259,15 @@ class FiberOpticGyro(GyroMechanism):
         else:
             # Mean of Δφ over each step (exact for the cubic Hermite of Ω), nulled by the ramp step.
             mean_phase = 0.5 * (phase[1:] + phase[:-1]) + (h * S / 12.0) * (alpha[:-1] - alpha[1:])
-            feedback = np.clip(-(mean_phase + float(self.phase_noise(0.0)) / math.sqrt(h) * noise),
-                               -self.feedback_range_rad, self.feedback_range_rad)
+            feedback = np.clip(
+                -(mean_phase + float(self.phase_noise(0.0)) / math.sqrt(h) * noise),
+                -self.feedback_range_rad,
+                self.feedback_range_rad,
+            )
             rate = -feedback / S
-            first = state.get("feedback_phase_rad", np.clip(-phase[0], -self.feedback_range_rad,
-                                                             self.feedback_range_rad))
+            first = state.get(
+                "feedback_phase_rad", np.clip(-phase[0], -self.feedback_range_rad, self.feedback_range_rad)
+            )
             state["feedback_phase_rad"] = feedback[-1].copy()
             residual = phase - np.clip(phase, -self.feedback_range_rad, self.feedback_range_rad)
             raw = {"feedback_phase_rad": np.vstack([first[None, :], feedback])}

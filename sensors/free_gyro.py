@@ -116,14 +116,21 @@ import numpy as np
 from pydantic import Field
 
 from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Real
+from gyroemu.dynamics.jit import njit
 from gyroemu.dynamics.rotation import quat_conjugate, quat_multiply, quat_rotate
 
 from .mechanism import GyroMechanism, GyroResponse, GyroTruth
 from .rate_gyro import RPM
-from gyroemu.dynamics.jit import njit
 
-__all__ = ["FreeGyro", "GimbalLockWarning", "GimbalLockError", "gimbal_angles", "euler_xyz_from_spins",
-           "body_rate_from_euler_xyz", "time_derivative"]
+__all__ = [
+    "FreeGyro",
+    "GimbalLockWarning",
+    "GimbalLockError",
+    "gimbal_angles",
+    "euler_xyz_from_spins",
+    "body_rate_from_euler_xyz",
+    "time_derivative",
+]
 
 #: Rotor directions at uncaging, in the sensor's axes at t[0]: gyro 1 along x, gyro 2 along y.
 SPIN_AXES = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
@@ -169,8 +176,14 @@ class FreeGyro(GyroMechanism):
     @property
     def frictionless(self) -> bool:
         """No bearing friction at all: the rotors hold still and the gimbal angles are exact."""
-        return not any((self.outer_viscous_friction_n_m_s_per_rad, self.outer_coulomb_friction_n_m,
-                        self.inner_viscous_friction_n_m_s_per_rad, self.inner_coulomb_friction_n_m))
+        return not any(
+            (
+                self.outer_viscous_friction_n_m_s_per_rad,
+                self.outer_coulomb_friction_n_m,
+                self.inner_viscous_friction_n_m_s_per_rad,
+                self.inner_coulomb_friction_n_m,
+            )
+        )
 
     def inner_rate_hz(self, output_rate_hz: float) -> float:
         """The output rate: the model has no dynamics of its own to resolve."""
@@ -191,8 +204,9 @@ class FreeGyro(GyroMechanism):
         q_is = np.asarray(truth.q_is, dtype=float)
         q_uncage = state.get("q_uncage", q_is[0])
         q_rel = quat_multiply(quat_conjugate(q_uncage), q_is)
-        spins = self._spins(q_rel, np.asarray(truth.omega, dtype=float), truth.dt,
-                            state.get("spins", SPIN_AXES))                    # (M, 2, 3) rotor frame
+        spins = self._spins(
+            q_rel, np.asarray(truth.omega, dtype=float), truth.dt, state.get("spins", SPIN_AXES)
+        )  # (M, 2, 3) rotor frame
         spins_case = quat_rotate(quat_conjugate(q_rel)[:, None, :], spins)  # (M, 2, 3) case axes
 
         gimbals = gimbal_angles(spins_case)
@@ -217,8 +231,9 @@ class FreeGyro(GyroMechanism):
         state["spins"] = np.array(spins[-1])
         state["attitude_tail"] = unwrapped_history[-5:].copy()  # enough for the end formulas' five points
         state["rate"] = rate[-1].copy()
-        return GyroResponse(rate=rate, raw={"gimbal_angle_rad": gimbals, "attitude_xyz_rad": attitude,
-                                            "gimbal_lock": locked})
+        return GyroResponse(
+            rate=rate, raw={"gimbal_angle_rad": gimbals, "attitude_xyz_rad": attitude, "gimbal_lock": locked}
+        )
 
     def _spins(self, q_rel: np.ndarray, omega: np.ndarray, dt: float, spins0: np.ndarray = SPIN_AXES) -> np.ndarray:
         """Rotor directions (M, 2, 3) in the rotor (inertial) frame from ``spins0`` at the first sample:
@@ -228,19 +243,31 @@ class FreeGyro(GyroMechanism):
             return np.broadcast_to(spins0, (len(q_rel), 2, 3))
         out = np.empty((len(q_rel), 2, 3))
         min_cos2 = math.sin(math.radians(self.gimbal_lock_margin_deg)) ** 2
-        _drift(np.ascontiguousarray(q_rel), np.ascontiguousarray(omega), dt, self.spin_momentum,
-               self.outer_viscous_friction_n_m_s_per_rad, self.outer_coulomb_friction_n_m,
-               self.inner_viscous_friction_n_m_s_per_rad, self.inner_coulomb_friction_n_m, min_cos2, spins0, out)
+        _drift(
+            np.ascontiguousarray(q_rel),
+            np.ascontiguousarray(omega),
+            dt,
+            self.spin_momentum,
+            self.outer_viscous_friction_n_m_s_per_rad,
+            self.outer_coulomb_friction_n_m,
+            self.inner_viscous_friction_n_m_s_per_rad,
+            self.inner_coulomb_friction_n_m,
+            min_cos2,
+            spins0,
+            out,
+        )
         return out
 
     def _report_lock(self, t: np.ndarray, gimbals: np.ndarray, locked: np.ndarray) -> None:
         first = int(np.argmax(locked))
         which = 1 + int(abs(gimbals[first, 2]) > abs(gimbals[first, 0]))
         worst = math.degrees(np.abs(gimbals[:, [0, 2]]).max())
-        message = (f"free gyro {which}'s inner gimbal is within {self.gimbal_lock_margin_deg:g}° of 90° "
-                   f"(gimbal lock) from t = {t[first]:.6g} s, {int(locked.sum())} samples flagged in raw "
-                   f"'gimbal_lock', largest inner gimbal angle {worst:.3f}°; angles and rates there are not "
-                   "what the instrument shows")
+        message = (
+            f"free gyro {which}'s inner gimbal is within {self.gimbal_lock_margin_deg:g}° of 90° "
+            f"(gimbal lock) from t = {t[first]:.6g} s, {int(locked.sum())} samples flagged in raw "
+            f"'gimbal_lock', largest inner gimbal angle {worst:.3f}°; angles and rates there are not "
+            "what the instrument shows"
+        )
         if self.on_gimbal_lock == "raise":
             raise GimbalLockError(message)
         warnings.warn(message, GimbalLockWarning, stacklevel=3)
@@ -258,8 +285,10 @@ def gimbal_angles(spins_case: np.ndarray) -> np.ndarray:
     Gyro 2 (spin y, inner x, outer z): s = Rz(−ψ₂) Rx(−θ₂) e_y = (sin ψ₂ cos θ₂, cos ψ₂ cos θ₂, −sin θ₂).
     """
     (x1, y1, z1), (x2, y2, z2) = np.moveaxis(spins_case[..., 0, :], -1, 0), np.moveaxis(spins_case[..., 1, :], -1, 0)
-    return np.stack([np.arctan2(z1, np.hypot(x1, y1)), np.arctan2(-y1, x1),
-                     np.arctan2(-z2, np.hypot(x2, y2)), np.arctan2(x2, y2)], axis=-1)
+    return np.stack(
+        [np.arctan2(z1, np.hypot(x1, y1)), np.arctan2(-y1, x1), np.arctan2(-z2, np.hypot(x2, y2)), np.arctan2(x2, y2)],
+        axis=-1,
+    )
 
 
 def euler_xyz_from_spins(spins_case: np.ndarray, gimbals: np.ndarray | None = None) -> np.ndarray:
@@ -272,9 +301,9 @@ def euler_xyz_from_spins(spins_case: np.ndarray, gimbals: np.ndarray | None = No
         gimbals = gimbal_angles(spins_case)
     theta, psi, s2 = gimbals[..., 0], gimbals[..., 1], spins_case[..., 1, :]
     cp, sp, ct, st = np.cos(psi), np.sin(psi), np.cos(theta), np.sin(theta)
-    a = cp * s2[..., 0] - sp * s2[..., 1]          # Rz(ψ) s₂, x
-    v_y = sp * s2[..., 0] + cp * s2[..., 1]        # Rz(ψ) s₂, y (Ry(θ) leaves it)
-    v_z = -st * a + ct * s2[..., 2]                # Ry(θ) Rz(ψ) s₂, z
+    a = cp * s2[..., 0] - sp * s2[..., 1]  # Rz(ψ) s₂, x
+    v_y = sp * s2[..., 0] + cp * s2[..., 1]  # Rz(ψ) s₂, y (Ry(θ) leaves it)
+    v_z = -st * a + ct * s2[..., 2]  # Ry(θ) Rz(ψ) s₂, z
     return np.stack([np.arctan2(-v_z, v_y), theta, psi], axis=-1)
 
 
@@ -283,8 +312,9 @@ def body_rate_from_euler_xyz(angles: np.ndarray, rates: np.ndarray) -> np.ndarra
     phi_dot, theta_dot, psi_dot = np.moveaxis(rates, -1, 0)
     theta, psi = angles[..., 1], angles[..., 2]
     ct, st, cp, sp = np.cos(theta), np.sin(theta), np.cos(psi), np.sin(psi)
-    return np.stack([phi_dot * ct * cp + theta_dot * sp, -phi_dot * ct * sp + theta_dot * cp,
-                     phi_dot * st + psi_dot], axis=-1)
+    return np.stack(
+        [phi_dot * ct * cp + theta_dot * sp, -phi_dot * ct * sp + theta_dot * cp, phi_dot * st + psi_dot], axis=-1
+    )
 
 
 def time_derivative(y: np.ndarray, h: float) -> np.ndarray:
@@ -319,20 +349,20 @@ def _rotate(q, v, conjugate):
     w = q[0]
     ux, uy, uz = (-q[1], -q[2], -q[3]) if conjugate else (q[1], q[2], q[3])
     tx, ty, tz = 2 * (uy * v[2] - uz * v[1]), 2 * (uz * v[0] - ux * v[2]), 2 * (ux * v[1] - uy * v[0])
-    return np.array([v[0] + w * tx + uy * tz - uz * ty,
-                     v[1] + w * ty + uz * tx - ux * tz,
-                     v[2] + w * tz + ux * ty - uy * tx])
+    return np.array(
+        [v[0] + w * tx + uy * tz - uz * ty, v[1] + w * ty + uz * tx - ux * tz, v[2] + w * tz + ux * ty - uy * tx]
+    )
 
 
 @njit
 def _spin_rate(q, omega, s, h, b_o, c_o, b_i, c_i, min_cos2):
     """ds/dt (3,) in the rotor frame by (4), for rotor direction ``s`` and the carrier at ``q``, ``omega``."""
-    sc = _rotate(q, s, True)                      # s in case axes; the outer axis a_o is case z
-    cos2 = max(1.0 - sc[2] * sc[2], min_cos2)     # cos²θ of the inner gimbal
+    sc = _rotate(q, s, True)  # s in case axes; the outer axis a_o is case z
+    cos2 = max(1.0 - sc[2] * sc[2], min_cos2)  # cos²θ of the inner gimbal
     cos = math.sqrt(cos2)
-    a_i = np.array([-sc[1] / cos, sc[0] / cos, 0.0])                   # a_o × s / |a_o × s|
+    a_i = np.array([-sc[1] / cos, sc[0] / cos, 0.0])  # a_o × s / |a_o × s|
     m = np.array([-sc[2] * sc[0], -sc[2] * sc[1], 1.0 - sc[2] * sc[2]])  # a_o − (a_o·s) s
-    w_i = -(omega[0] * a_i[0] + omega[1] * a_i[1])                     # bearing rates, carrier-driven
+    w_i = -(omega[0] * a_i[0] + omega[1] * a_i[1])  # bearing rates, carrier-driven
     w_o = -(omega[0] * m[0] + omega[1] * m[1] + omega[2] * m[2]) / cos2
     tau_i = -(b_i * w_i + c_i * np.sign(w_i))
     tau_o = -(b_o * w_o + c_o * np.sign(w_o))

@@ -65,8 +65,17 @@ def gyrocompass(gyro: np.ndarray, accel: np.ndarray) -> Alignment:
     )
 
 
-def heading_uncertainty(latitude_rad: float, duration_s: float, *, bias=0.0, noise_density=0.0,
-                        bias_instability=0.0, random_walk=0.0, accel_bias=0.0, gravity=9.81) -> float:
+def heading_uncertainty(
+    latitude_rad: float,
+    duration_s: float,
+    *,
+    bias=0.0,
+    noise_density=0.0,
+    bias_instability=0.0,
+    random_walk=0.0,
+    accel_bias=0.0,
+    gravity=9.81,
+) -> float:
     """Standard uncertainty of a gyrocompass heading, rad, from the sensors' error terms (SI).
 
     ``bias`` is the gyro's residual (uncalibrated) bias, rad/s; ``noise_density``, ``bias_instability``
@@ -78,7 +87,8 @@ def heading_uncertainty(latitude_rad: float, duration_s: float, *, bias=0.0, noi
     horizontal = EARTH_RATE * np.cos(latitude_rad)
     if horizontal <= 1e-12 * EARTH_RATE:
         return float("inf")
-    rate_error = np.sqrt(bias**2 + noise_density**2 / duration_s + (0.664 * bias_instability) ** 2
-                         + random_walk**2 * duration_s / 3.0)
+    rate_error = np.sqrt(
+        bias**2 + noise_density**2 / duration_s + (0.664 * bias_instability) ** 2 + random_walk**2 * duration_s / 3.0
+    )
     levelling = accel_bias / gravity * np.tan(latitude_rad)
     return float(np.hypot(rate_error / horizontal, levelling))

@@ -59,7 +59,9 @@ class MountingSpec(Section):
     @classmethod
     def _unit(cls, q):
         if abs(math.sqrt(sum(x * x for x in q)) - 1.0) > 1e-6:
-            raise ValueError(f"must be a unit quaternion (w, x, y, z), its norm is {math.sqrt(sum(x * x for x in q)):.6g}")
+            raise ValueError(
+                f"must be a unit quaternion (w, x, y, z), its norm is {math.sqrt(sum(x * x for x in q)):.6g}"
+            )
         return q
 
 
@@ -111,13 +113,15 @@ def validate_mechanism(data: dict, file=None) -> GyroMechanism:
     if kind is None:
         raise ConfigError("missing required key", file=file, key="gyro.mechanism.kind")
     if kind not in GYRO_KINDS:
-        raise ConfigError(f"unknown gyro kind {kind!r}; kinds: {', '.join(GYRO_KINDS)}", file=file,
-                          key="gyro.mechanism.kind")
+        raise ConfigError(
+            f"unknown gyro kind {kind!r}; kinds: {', '.join(GYRO_KINDS)}", file=file, key="gyro.mechanism.kind"
+        )
     return validate(mechanism_class(kind), data, file=file, prefix="gyro.mechanism")
 
 
-def _white_noise_budget(model: ErrorModel, period: float, intrinsic: float, *, keys: GyroErrors | AccelErrors,
-                        prefix: str, what: str, file):
+def _white_noise_budget(
+    model: ErrorModel, period: float, intrinsic: float, *, keys: GyroErrors | AccelErrors, prefix: str, what: str, file
+):
     """Split a specified white-noise density between its sources, so the total at the output is it.
 
     A datasheet's noise density is measured at the output: it holds the mechanism's own noise
@@ -144,9 +148,12 @@ def _white_noise_budget(model: ErrorModel, period: float, intrinsic: float, *, k
         if quantiser:
             parts.append(f"the output quantiser at this rate ({np.sqrt(quantiser):.4g} per sqrt(s))")
         verb = "exceeds" if len(parts) == 1 else "exceed"
-        raise ConfigError(f"{' and '.join(parts)} {verb} the specified white noise {specified.max():.4g} "
-                          "per sqrt(s) (SI): lower them or raise the specification", file=file,
-                          key=f"{prefix}.{given}")
+        raise ConfigError(
+            f"{' and '.join(parts)} {verb} the specified white noise {specified.max():.4g} "
+            "per sqrt(s) (SI): lower them or raise the specification",
+            file=file,
+            key=f"{prefix}.{given}",
+        )
     return dataclasses.replace(model, noise_density=np.sqrt(np.maximum(rest, 0.0))), specified
 
 
@@ -172,30 +179,55 @@ class Device:
         self.mechanism = validate_mechanism(spec.gyro.mechanism, file=where)
         self.inner_rate_hz = float(self.mechanism.inner_rate_hz(spec.rate_hz))
         if self.inner_rate_hz < spec.rate_hz:
-            raise ConfigError(f"the output rate {spec.rate_hz:g} Hz is above the gyro mechanism's inner rate "
-                              f"{self.inner_rate_hz:g} Hz", file=where, key="rate_hz")
+            raise ConfigError(
+                f"the output rate {spec.rate_hz:g} Hz is above the gyro mechanism's inner rate "
+                f"{self.inner_rate_hz:g} Hz",
+                file=where,
+                key="rate_hz",
+            )
         self._gyro_errors = spec.gyro.errors.to_si()
         limit = self.mechanism.max_rate()
         if self._gyro_errors.full_scale is not None and self._gyro_errors.full_scale > limit * (1 + 1e-12):
             raise ConfigError(
                 f"a range of {np.degrees(self._gyro_errors.full_scale):g} deg/s is beyond what the "
                 f"{self.mechanism.kind} mechanism can indicate, {np.degrees(limit):.4g} deg/s",
-                file=where, key="gyro.errors.range_deg_per_s")
+                file=where,
+                key="gyro.errors.range_deg_per_s",
+            )
         self.intrinsic_noise_density = float(self.mechanism.intrinsic_noise_density())
         period = 1.0 / spec.rate_hz
         self._gyro_errors, self._gyro_noise_density = _white_noise_budget(
-            self._gyro_errors, period, self.intrinsic_noise_density, keys=spec.gyro.errors, prefix="gyro.errors",
-            what=f"the {self.mechanism.kind} mechanism's own white noise", file=where)
+            self._gyro_errors,
+            period,
+            self.intrinsic_noise_density,
+            keys=spec.gyro.errors,
+            prefix="gyro.errors",
+            what=f"the {self.mechanism.kind} mechanism's own white noise",
+            file=where,
+        )
         self._accel_errors, _ = _white_noise_budget(
-            spec.accelerometer.errors.to_si(), period, 0.0, keys=spec.accelerometer.errors,
-            prefix="accelerometer.errors", what="nothing", file=where)
+            spec.accelerometer.errors.to_si(),
+            period,
+            0.0,
+            keys=spec.accelerometer.errors,
+            prefix="accelerometer.errors",
+            what="nothing",
+            file=where,
+        )
         for model, prefix in ((self._gyro_errors, "gyro.errors"), (self._accel_errors, "accelerometer.errors")):
             if model.bandwidth_hz is not None and not model.bandwidth_hz < spec.rate_hz / 2:
-                raise ConfigError(f"{model.bandwidth_hz:g} Hz is not below the Nyquist frequency "
-                                  f"{spec.rate_hz / 2:g} Hz of the output rate", file=where, key=f"{prefix}.bandwidth_hz")
+                raise ConfigError(
+                    f"{model.bandwidth_hz:g} Hz is not below the Nyquist frequency "
+                    f"{spec.rate_hz / 2:g} Hz of the output rate",
+                    file=where,
+                    key=f"{prefix}.bandwidth_hz",
+                )
         if spec.clock.jitter_s >= 0.25 / spec.rate_hz:
-            raise ConfigError(f"jitter {spec.clock.jitter_s:g} s is not small against the sample interval "
-                              f"{1 / spec.rate_hz:g} s", file=where, key="clock.jitter_s")
+            raise ConfigError(
+                f"jitter {spec.clock.jitter_s:g} s is not small against the sample interval {1 / spec.rate_hz:g} s",
+                file=where,
+                key="clock.jitter_s",
+            )
 
     @property
     def gyro_noise_density(self) -> np.ndarray:
@@ -248,8 +280,10 @@ class Device:
         t0 = truth.t_start
         count = int(math.floor((truth.t_end - t0) / true_period * (1 + 1e-12)))
         if count < 2:
-            raise ConfigError(f"the trajectory ({truth.t_end - t0:g} s) is shorter than two samples of "
-                              f"the device ({period:g} s)", key="duration")
+            raise ConfigError(
+                f"the trajectory ({truth.t_end - t0:g} s) is shorter than two samples of the device ({period:g} s)",
+                key="duration",
+            )
         instants = t0 + np.arange(count + 1) * true_period  # τ_0 … τ_K
         k = np.arange(1, count + 1)
         stamps = k * period + spec.clock.offset_s
@@ -261,11 +295,21 @@ class Device:
         increments, raw = self._gyro_increments(truth, instants, rng_mech, substeps)
         rate_indicated = increments / period
         force_mean = mean_specific_force(truth, instants, substeps=substeps + substeps % 2)
-        gyro = apply_errors(rate_indicated, instants[1:], self._gyro_errors, rng_gyro,
-                            temperature_degC=temperature,
-                            specific_force=force_mean if self._gyro_errors.g_sensitivity is not None else None)
-        accel = apply_errors(force_mean * (true_period / period), instants[1:], self._accel_errors, rng_accel,
-                             temperature_degC=temperature)
+        gyro = apply_errors(
+            rate_indicated,
+            instants[1:],
+            self._gyro_errors,
+            rng_gyro,
+            temperature_degC=temperature,
+            specific_force=force_mean if self._gyro_errors.g_sensitivity is not None else None,
+        )
+        accel = apply_errors(
+            force_mean * (true_period / period),
+            instants[1:],
+            self._accel_errors,
+            rng_accel,
+            temperature_degC=temperature,
+        )
         if spec.magnetometer is not None:
             mag = spec.magnetometer.measure(truth.magnetic_field(instants[1:]), period, rng_mag)
         else:
@@ -290,8 +334,7 @@ class Device:
         truth_step = trajectory.duration / max(len(trajectory) - 1, 1)
         return max(1, math.ceil(interval / truth_step * (1 - 1e-9)))
 
-    def _gyro_increments(self, truth: SensorTruth, instants: np.ndarray, rng: np.random.Generator,
-                         truth_substeps: int):
+    def _gyro_increments(self, truth: SensorTruth, instants: np.ndarray, rng: np.random.Generator, truth_substeps: int):
         """Indicated angle increments (K, 3) over the intervals between ``instants``, and raw observables.
 
         The inner grid has ``m`` steps per interval: enough for the mechanism's inner rate, and never
@@ -312,7 +355,10 @@ class Device:
             t = t0 + j * h
             omega, alpha = truth.omega_alpha(t)
             chunk = GyroTruth(
-                t=t, dt=h, omega=omega, alpha=alpha,
+                t=t,
+                dt=h,
+                omega=omega,
+                alpha=alpha,
                 specific_force=truth.specific_force(t) if "specific_force" in reads else None,
                 q_is=truth.attitude_inertial(t) if "q_is" in reads else None,
                 temperature_degC=self.spec.temperature.at(t - t0) if "temperature_degC" in reads else None,

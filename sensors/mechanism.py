@@ -46,8 +46,15 @@ import numpy as np
 
 from gyroemu.dynamics.config import Section
 
-__all__ = ["GyroTruth", "GyroResponse", "GyroMechanism", "IdealGyro", "GYRO_KINDS", "mechanism_class",
-           "hermite_integral"]
+__all__ = [
+    "GyroTruth",
+    "GyroResponse",
+    "GyroMechanism",
+    "IdealGyro",
+    "GYRO_KINDS",
+    "mechanism_class",
+    "hermite_integral",
+]
 
 GYRO_KINDS: dict[str, str] = {
     "ideal": "gyroemu.sensors.mechanism:IdealGyro",
@@ -61,7 +68,7 @@ GYRO_KINDS: dict[str, str] = {
 """Gyro kind (the ``kind`` key of a device's ``[gyro.mechanism]`` table) → ``"module:Class"``."""
 
 
-def mechanism_class(kind: str) -> type["GyroMechanism"]:
+def mechanism_class(kind: str) -> type[GyroMechanism]:
     """The mechanism class of a gyro kind (imported on first use)."""
     module, cls = GYRO_KINDS[kind].split(":")
     return getattr(importlib.import_module(module), cls)

@@ -144,10 +144,10 @@ import scipy.signal
 from pydantic import ValidationInfo, field_validator
 
 from gyroemu.dynamics.config import PositiveReal, Real
+from gyroemu.dynamics.jit import njit
 
 from .errors import STANDARD_GRAVITY
 from .mechanism import GyroMechanism, GyroResponse, GyroTruth
-from gyroemu.dynamics.jit import njit
 
 __all__ = ["MemsGyro", "CARRIER_STEPS_PER_CYCLE", "K_BOLTZMANN", "element_axes"]
 
@@ -204,12 +204,16 @@ class MemsGyro(GyroMechanism):
         if drive is None:
             return split
         if drive + split <= 0:
-            raise ValueError(f"the sense mode's frequency f_d + Δf = {drive + split:g} Hz must be positive "
-                             "(a negative stiffness makes the sense mode unstable)")
+            raise ValueError(
+                f"the sense mode's frequency f_d + Δf = {drive + split:g} Hz must be positive "
+                "(a negative stiffness makes the sense mode unstable)"
+            )
         if abs(split) > drive / 4:
-            raise ValueError(f"|{split:g}| Hz is more than a quarter of the drive frequency {drive:g} Hz: "
-                             "the sense mode must lie near the drive for the Coriolis response (and the "
-                             "averaged envelope model) to hold")
+            raise ValueError(
+                f"|{split:g}| Hz is more than a quarter of the drive frequency {drive:g} Hz: "
+                "the sense mode must lie near the drive for the Coriolis response (and the "
+                "averaged envelope model) to hold"
+            )
         return split
 
     @field_validator("sense_quality_factor", "drive_quality_factor")
@@ -238,8 +242,10 @@ class MemsGyro(GyroMechanism):
     def _below_carrier(cls, bandwidth, info: ValidationInfo):
         drive = info.data.get("drive_frequency_hz")
         if bandwidth is not None and drive is not None and not bandwidth <= drive / 4:
-            raise ValueError(f"{bandwidth:g} Hz must be at most a quarter of the drive frequency {drive:g} Hz "
-                             "(the demodulator filter must reject the product at twice the drive frequency)")
+            raise ValueError(
+                f"{bandwidth:g} Hz must be at most a quarter of the drive frequency {drive:g} Hz "
+                "(the demodulator filter must reject the product at twice the drive frequency)"
+            )
         return bandwidth
 
     # ----------------------------------------------------------------------------------------------
@@ -250,8 +256,12 @@ class MemsGyro(GyroMechanism):
         """(ω_d, ω_s), rad/s, at ``temperature_degC`` (scalar or array; None: the reference)."""
         dt = 0.0 if temperature_degC is None else np.asarray(temperature_degC, float) - self.reference_temperature_degC
         w_d = 2 * np.pi * self.drive_frequency_hz * (1 + self.drive_frequency_tc_ppm_per_degC * _PPM * dt)
-        w_s = 2 * np.pi * (self.drive_frequency_hz + self.mode_split_hz) * (
-            1 + self.sense_frequency_tc_ppm_per_degC * _PPM * dt)
+        w_s = (
+            2
+            * np.pi
+            * (self.drive_frequency_hz + self.mode_split_hz)
+            * (1 + self.sense_frequency_tc_ppm_per_degC * _PPM * dt)
+        )
         return w_d, w_s
 
     def sense_response(self, temperature_degC=None):
@@ -341,8 +351,8 @@ class MemsGyro(GyroMechanism):
         if exact:
             q = self.sense_quality_factor
             h0 = self.sense_response()
-            upper = 1 / (w_s**2 - (w_d + w)**2 + 1j * (w_d + w) * w_s / q) / h0
-            lower = 1 / (w_s**2 - (w_d - w)**2 + 1j * (w_d - w) * w_s / q) / h0
+            upper = 1 / (w_s**2 - (w_d + w) ** 2 + 1j * (w_d + w) * w_s / q) / h0
+            lower = 1 / (w_s**2 - (w_d - w) ** 2 + 1j * (w_d - w) * w_s / q) / h0
         else:
             p = self.envelope_pole()
             upper = -p / (1j * w - p)
@@ -357,8 +367,9 @@ class MemsGyro(GyroMechanism):
         """The demodulator filter's gain at angular frequency ``w`` (1 when there is none)."""
         if self.demodulator_bandwidth_hz is None:
             return np.ones_like(w, dtype=complex)
-        b, a = scipy.signal.butter(self.demodulator_filter_order, 2 * np.pi * self.demodulator_bandwidth_hz,
-                                   analog=True)
+        b, a = scipy.signal.butter(
+            self.demodulator_filter_order, 2 * np.pi * self.demodulator_bandwidth_hz, analog=True
+        )
         return scipy.signal.freqs(b, a, w)[1]
 
     def inner_rate_hz(self, output_rate_hz: float) -> float:
@@ -391,8 +402,9 @@ class MemsGyro(GyroMechanism):
         leak = -self.drive_force_sense_coupling_per_m * x0 * w_d**2 / (self.drive_quality_factor * w_s**2)
         out.real = self._coriolis_amplitude(w_d) * omega + leak * force[..., sense]
         # −(k_q/m + α + Ω_d Ω_s) x, with x = Re{−i x₀ e^{iθ}}: in phase with the drive displacement
-        out.imag = x0 * (self.quadrature_stiffness_n_per_m / self.proof_mass_kg + alpha
-                         + omega[..., drive] * omega[..., sense])
+        out.imag = x0 * (
+            self.quadrature_stiffness_n_per_m / self.proof_mass_kg + alpha + omega[..., drive] * omega[..., sense]
+        )
         return out
 
     def _demodulate(self, envelope):
@@ -426,8 +438,10 @@ class MemsGyro(GyroMechanism):
     def _response(self, envelope) -> GyroResponse:
         """Demodulate the (filtered) sense envelope (M, 3) and calibrate: indicated rate I/SF₀."""
         in_phase, quadrature = self._demodulate(envelope)
-        return GyroResponse(rate=in_phase / self.scale_factor_v_per_rad_per_s(),
-                            raw={"sense_in_phase_v": in_phase, "sense_quadrature_v": quadrature})
+        return GyroResponse(
+            rate=in_phase / self.scale_factor_v_per_rad_per_s(),
+            raw={"sense_in_phase_v": in_phase, "sense_quadrature_v": quadrature},
+        )
 
     # ----------------------------------------------------------------------------------------------
     # Simulation
@@ -474,8 +488,9 @@ class MemsGyro(GyroMechanism):
         temperature = np.asarray(truth.temperature_degC, float)
         w_d, w_s = self.frequencies(temperature)
         ratio = self.sense_response(temperature) / self.sense_response()  # H_T/H₀: temperature, exact in steady state
-        forcing = ratio[:, None] * self._forcing(truth.omega, truth.alpha, truth.specific_force,
-                                                 w_d[:, None], w_s[:, None])
+        forcing = ratio[:, None] * self._forcing(
+            truth.omega, truth.alpha, truth.specific_force, w_d[:, None], w_s[:, None]
+        )
         # The complex force n_c + i n_s has two-sided PSD 4 × (the real force's), scaled to the temperature.
         noise_scale = np.abs(ratio) * np.sqrt(self._thermal_psd(temperature) / self._thermal_psd())
         a, b, c = self.baseband_system()
@@ -516,7 +531,7 @@ class MemsGyro(GyroMechanism):
         static = np.ascontiguousarray(-truth.specific_force[:, sense])
 
         # The sense oscillator (y, ẏ): ẋ = A x + b u, discretised exactly over a carrier step.
-        a = np.array([[0.0, 1.0], [-w_s**2, -w_s / self.sense_quality_factor]])
+        a = np.array([[0.0, 1.0], [-(w_s**2), -w_s / self.sense_quality_factor]])
         b = np.array([0.0, 1.0])
         phi, dc0, dc1 = first_order_hold(a, b, h)
         g0, g1 = carrier_hold(a, b, w_d, h)
@@ -529,17 +544,43 @@ class MemsGyro(GyroMechanism):
             x = np.column_stack([settled.real + static[0] / w_s**2, (1j * w_d * settled).real])
             stationary = covariance_factor(stationary_covariance(a, b, psd))
             x = x + rng.standard_normal((3, stationary.shape[1])) @ stationary.T
-            run.update(x=x, acc=2.0 * x[:, 0] + 0j,  # y_0 · 2 e^{−iθ_0}
-                       force_at_j=forcing[0].copy(), static_at_j=static[0].copy(),
-                       filter_state=None, filter_input=settled, held=settled)
+            run.update(
+                x=x,
+                acc=2.0 * x[:, 0] + 0j,  # y_0 · 2 e^{−iθ_0}
+                force_at_j=forcing[0].copy(),
+                static_at_j=static[0].copy(),
+                filter_state=None,
+                filter_input=settled,
+                held=settled,
+            )
         x = np.array(run["x"], dtype=float)  # copies: the kernel updates them in place
         acc = np.array(run["acc"], dtype=complex)
         force_at_j = np.array(run["force_at_j"], dtype=complex)
         static_at_j = np.array(run["static_at_j"], dtype=float)
         cycles = np.empty(((j_end - j0) // steps + 2, 3), complex)
         done = np.empty(len(cycles), np.int64)
-        count = _carrier_run(phi, dc0, dc1, g0, g1, noise, carrier, j0, j_end, (run["t0"] - truth.t[0]) / truth.dt,
-                             h / truth.dt, forcing, static, force_at_j, static_at_j, x, acc, rng, cycles, done)
+        count = _carrier_run(
+            phi,
+            dc0,
+            dc1,
+            g0,
+            g1,
+            noise,
+            carrier,
+            j0,
+            j_end,
+            (run["t0"] - truth.t[0]) / truth.dt,
+            h / truth.dt,
+            forcing,
+            static,
+            force_at_j,
+            static_at_j,
+            x,
+            acc,
+            rng,
+            cycles,
+            done,
+        )
         cycles, done = cycles[:count], done[:count]
 
         # The demodulator filter over the cycle averages, one sample per drive cycle, then held.
@@ -548,8 +589,14 @@ class MemsGyro(GyroMechanism):
         index = np.searchsorted(run["t0"] + done * h, truth.t + 1e-9 * h, side="right") - 1
         held[index < 0] = run["held"]
         held[index >= 0] = filtered[index[index >= 0]]
-        run.update(j=j_end, x=x, acc=acc, force_at_j=force_at_j, static_at_j=static_at_j,
-                   held=filtered[-1] if count else run["held"])
+        run.update(
+            j=j_end,
+            x=x,
+            acc=acc,
+            force_at_j=force_at_j,
+            static_at_j=static_at_j,
+            held=filtered[-1] if count else run["held"],
+        )
         state["carrier"] = run
         return self._response(held)
 
@@ -704,8 +751,28 @@ def _baseband_run(phi, gamma0, gamma1, noise, c, forcing, noise_scale, z, rng, o
 
 
 @njit
-def _carrier_run(phi, dc0, dc1, g0, g1, noise, carrier, j0, j_end, offset, ratio, forcing, static,
-                 force_at_j, static_at_j, x, acc, rng, cycles, done):
+def _carrier_run(
+    phi,
+    dc0,
+    dc1,
+    g0,
+    g1,
+    noise,
+    carrier,
+    j0,
+    j_end,
+    offset,
+    ratio,
+    forcing,
+    static,
+    force_at_j,
+    static_at_j,
+    x,
+    acc,
+    rng,
+    cycles,
+    done,
+):
     """Step the sense oscillators over carrier steps j0 → j_end and demodulate them.
 
     x_{j+1} = Φ x_j + Re{e^{iθ_j}(G₀ F_j + G₁ (F_{j+1} − F_j))} + Γ₀ u_j + Γ₁ u_{j+1} + L w_j: F the
@@ -734,10 +801,24 @@ def _carrier_run(phi, dc0, dc1, g0, g1, noise, carrier, j0, j_end, offset, ratio
             w1 = rng.standard_normal()
             drive0 = e * (g0[0] * f0 + g1[0] * (f1 - f0))
             drive1 = e * (g0[1] * f0 + g1[1] * (f1 - f0))
-            y = (phi[0, 0] * x[a, 0] + phi[0, 1] * x[a, 1] + drive0.real + dc0[0] * s0 + dc1[0] * s1
-                 + noise[0, 0] * w0 + noise[0, 1] * w1)
-            v = (phi[1, 0] * x[a, 0] + phi[1, 1] * x[a, 1] + drive1.real + dc0[1] * s0 + dc1[1] * s1
-                 + noise[1, 0] * w0 + noise[1, 1] * w1)
+            y = (
+                phi[0, 0] * x[a, 0]
+                + phi[0, 1] * x[a, 1]
+                + drive0.real
+                + dc0[0] * s0
+                + dc1[0] * s1
+                + noise[0, 0] * w0
+                + noise[0, 1] * w1
+            )
+            v = (
+                phi[1, 0] * x[a, 0]
+                + phi[1, 1] * x[a, 1]
+                + drive1.real
+                + dc0[1] * s0
+                + dc1[1] * s1
+                + noise[1, 0] * w0
+                + noise[1, 1] * w1
+            )
             x[a, 0] = y
             x[a, 1] = v
             force_at_j[a] = f1

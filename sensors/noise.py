@@ -62,6 +62,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import nnls
+
 from gyroemu.dynamics.jit import njit
 
 __all__ = [
@@ -253,8 +254,7 @@ def gauss_markov_avar(tau, sigma, tau_c, dt: float | None = None):
     phi = 1 - one_minus_phi
     u = -np.expm1(-m * dt / tau_c)  # 1 − φ^m
     with np.errstate(divide="ignore", invalid="ignore"):
-        sampled = sigma**2 * (m * (1 + phi) / one_minus_phi
-                              - (2 * phi * u + phi * u**2) / one_minus_phi**2) / m**2
+        sampled = sigma**2 * (m * (1 + phi) / one_minus_phi - (2 * phi * u + phi * u**2) / one_minus_phi**2) / m**2
     return np.where(tau_c > 1000 * dt, avar, sampled)
 
 
@@ -285,8 +285,9 @@ class FlickerBank:
         return np.sum(gauss_markov_avar(tau, self.sigma, self.tau_c[:, None], dt), axis=-2)
 
 
-def flicker_bank(bias_instability, tau_range: tuple[float, float], dt: float | None = None,
-                 n_axes: int = 1) -> FlickerBank:
+def flicker_bank(
+    bias_instability, tau_range: tuple[float, float], dt: float | None = None, n_axes: int = 1
+) -> FlickerBank:
     """Design the Gauss–Markov sum for flicker noise of bias instability B, flat over ``tau_range``.
 
     Correlation times τ_j are spaced two per decade from τ_min/√10 to τ_max·√10; their variances are
@@ -322,8 +323,9 @@ def flicker_bank(bias_instability, tau_range: tuple[float, float], dt: float | N
     return FlickerBank(tau_c=tau_c[keep], sigma=sigma, tau_range=(tau_min, tau_max))
 
 
-def flicker_noise(rng: np.random.Generator, shape, dt: float, bias_instability,
-                  tau_range: tuple[float, float]) -> np.ndarray:
+def flicker_noise(
+    rng: np.random.Generator, shape, dt: float, bias_instability, tau_range: tuple[float, float]
+) -> np.ndarray:
     """Flicker (1/f) bias-instability noise: Allan deviation flat at 0.664 B over ``tau_range``.
 
     Parameters
@@ -363,8 +365,9 @@ def quantisation_noise(rng: np.random.Generator, shape, dt: float, lsb) -> np.nd
     return (np.diff(e, axis=0) / dt).reshape(shape)
 
 
-def quantise_angle(rate: np.ndarray, dt: float, lsb, rng: np.random.Generator,
-                   out: np.ndarray | None = None) -> np.ndarray:
+def quantise_angle(
+    rate: np.ndarray, dt: float, lsb, rng: np.random.Generator, out: np.ndarray | None = None
+) -> np.ndarray:
     """Quantise the integrated angle of ``rate`` (n,) or (n, A), as a pulse-counting gyro does.
 
     The angle θ_k = θ₀ + Δt Σ_{i≤k} rate_i is counted in whole quanta, c_k = ⌊θ_k / LSB⌋, and the
@@ -414,8 +417,16 @@ def _count_quanta(rate, dt, lsb, theta0, out):
 # --------------------------------------------------------------------------------------------------
 
 
-def sensor_noise(rng: np.random.Generator, shape, dt: float, *, white=0.0, random_walk=0.0,
-                 flicker: FlickerBank | None = None, out: np.ndarray | None = None) -> np.ndarray:
+def sensor_noise(
+    rng: np.random.Generator,
+    shape,
+    dt: float,
+    *,
+    white=0.0,
+    random_walk=0.0,
+    flicker: FlickerBank | None = None,
+    out: np.ndarray | None = None,
+) -> np.ndarray:
     """White noise + rate random walk + flicker, generated together in one pass over the samples.
 
     Statistically the sum of :func:`white_noise`, :func:`random_walk` and :func:`flicker_noise`
@@ -447,8 +458,10 @@ def sensor_noise(rng: np.random.Generator, shape, dt: float, *, white=0.0, rando
 
     # Full-rate terms, as AR(1) rows: white (φ = 0), random walk (φ = 1), fast flicker components.
     phi = [np.zeros(n_axes), np.ones(n_axes)]
-    c = [_per_axis(white, n_axes, "white") / np.sqrt(dt),  # per-sample σ = N / √Δt
-         _per_axis(random_walk, n_axes, "random_walk") * np.sqrt(dt)]  # increment σ = K √Δt
+    c = [
+        _per_axis(white, n_axes, "white") / np.sqrt(dt),  # per-sample σ = N / √Δt
+        _per_axis(random_walk, n_axes, "random_walk") * np.sqrt(dt),
+    ]  # increment σ = K √Δt
     state = [np.zeros(n_axes), np.zeros(n_axes)]
 
     if flicker is not None:

@@ -102,9 +102,9 @@ import scipy.signal
 from pydantic import Field
 
 from gyroemu.dynamics.config import PositiveReal, Real
+from gyroemu.dynamics.jit import njit
 
 from .mechanism import GyroMechanism, GyroResponse, GyroTruth
-from gyroemu.dynamics.jit import njit
 
 __all__ = ["RateGyro", "RPM", "StopAngle", "sdf_axes", "foh_matrices", "simulate_gimbal", "inner_rate_for"]
 
@@ -246,9 +246,18 @@ def foh_matrices(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, n
     return phi, bd[:, 0] - phi @ gamma1, gamma1
 
 
-def simulate_gimbal(a: np.ndarray, b: np.ndarray, dt: float, x0: np.ndarray, spin_momentum: float,
-                    gimbal_inertia: float, w_ia: np.ndarray, w_sra: np.ndarray, a_oa: np.ndarray,
-                    stop: float) -> np.ndarray:
+def simulate_gimbal(
+    a: np.ndarray,
+    b: np.ndarray,
+    dt: float,
+    x0: np.ndarray,
+    spin_momentum: float,
+    gimbal_inertia: float,
+    w_ia: np.ndarray,
+    w_sra: np.ndarray,
+    a_oa: np.ndarray,
+    stop: float,
+) -> np.ndarray:
     """States of a single-degree-of-freedom gimbal loop on the inner grid, (M, 3, n).
 
     Parameters
@@ -269,9 +278,19 @@ def simulate_gimbal(a: np.ndarray, b: np.ndarray, dt: float, x0: np.ndarray, spi
     """
     phi, gamma0, gamma1 = foh_matrices(a, b, dt)
     out = np.empty((w_ia.shape[0], w_ia.shape[1], a.shape[0]))
-    _gimbal_recurrence(phi, gamma0, gamma1, np.ascontiguousarray(x0, dtype=float), spin_momentum,
-                       gimbal_inertia, np.ascontiguousarray(w_ia), np.ascontiguousarray(w_sra),
-                       np.ascontiguousarray(a_oa), stop, out)
+    _gimbal_recurrence(
+        phi,
+        gamma0,
+        gamma1,
+        np.ascontiguousarray(x0, dtype=float),
+        spin_momentum,
+        gimbal_inertia,
+        np.ascontiguousarray(w_ia),
+        np.ascontiguousarray(w_sra),
+        np.ascontiguousarray(a_oa),
+        stop,
+        out,
+    )
     return out
 
 

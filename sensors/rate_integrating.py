@@ -141,8 +141,10 @@ class RateIntegratingGyro(GyroMechanism):
     @field_validator("loop_integral_a_per_rad_s")
     @classmethod
     def _stable_loop(cls, k_i, info: ValidationInfo):
-        j, c, k_p = (info.data.get(key) for key in
-                     ("gimbal_inertia_kgm2", "damping_n_m_s_per_rad", "loop_proportional_a_per_rad"))
+        j, c, k_p = (
+            info.data.get(key)
+            for key in ("gimbal_inertia_kgm2", "damping_n_m_s_per_rad", "loop_proportional_a_per_rad")
+        )
         if info.data.get("torque_rebalance") and None not in (j, c, k_p) and not k_i < c * k_p / j:
             raise ValueError(f"makes the rebalance loop unstable: it needs k_i < c k_p / J = {c * k_p / j:.6g}")
         return k_i
@@ -173,8 +175,14 @@ class RateIntegratingGyro(GyroMechanism):
     def loop_polynomial(self) -> np.ndarray:
         """Coefficients of the closed loop's characteristic polynomial J s³ + c s² + k_t k_p s + k_t k_i."""
         kt = self.torquer_scale_n_m_per_a
-        return np.array([self.gimbal_inertia_kgm2, self.damping_n_m_s_per_rad,
-                         kt * self.loop_proportional_a_per_rad, kt * self.loop_integral_a_per_rad_s])
+        return np.array(
+            [
+                self.gimbal_inertia_kgm2,
+                self.damping_n_m_s_per_rad,
+                kt * self.loop_proportional_a_per_rad,
+                kt * self.loop_integral_a_per_rad_s,
+            ]
+        )
 
     def loop_response(self, frequency_hz) -> np.ndarray:
         """Transfer function (4) from ω_IA to the indicated rate k_t i/H at ``frequency_hz`` (complex)."""
@@ -187,7 +195,7 @@ class RateIntegratingGyro(GyroMechanism):
         """Closed-loop −3 dB bandwidth, Hz, from (5)."""
         j, c = self.gimbal_inertia_kgm2, self.damping_n_m_s_per_rad
         kt, kp, ki = self.torquer_scale_n_m_per_a, self.loop_proportional_a_per_rad, self.loop_integral_a_per_rad_s
-        roots = np.roots([j * j, c * c - 2 * j * kt * kp, -(kt * kt * kp * kp + 2 * c * kt * ki), -(kt * ki) ** 2])
+        roots = np.roots([j * j, c * c - 2 * j * kt * kp, -(kt * kt * kp * kp + 2 * c * kt * ki), -((kt * ki) ** 2)])
         x = roots.real[(np.abs(roots.imag) <= 1e-9 * np.abs(roots)) & (roots.real > 0)].min()
         return math.sqrt(x) / (2 * math.pi)
 
@@ -197,12 +205,14 @@ class RateIntegratingGyro(GyroMechanism):
         if not self.torque_rebalance:
             return np.array([[0.0, 1.0], [0.0, -c / j]]), np.array([0.0, 1.0 / j])
         kt, kp, ki = self.torquer_scale_n_m_per_a, self.loop_proportional_a_per_rad, self.loop_integral_a_per_rad_s
-        a = np.array([
-            [0.0, 1.0, 0.0, 0.0],                          # θ' = θ'
-            [-kt * kp / j, -c / j, -kt * ki / j, 0.0],     # J θ'' = u − c θ' − k_t (k_p θ + k_i ∫θ)
-            [1.0, 0.0, 0.0, 0.0],                          # d/dt ∫θ = θ
-            [kp, 0.0, ki, 0.0],                            # d/dt ∫i = i = k_p θ + k_i ∫θ
-        ])
+        a = np.array(
+            [
+                [0.0, 1.0, 0.0, 0.0],  # θ' = θ'
+                [-kt * kp / j, -c / j, -kt * ki / j, 0.0],  # J θ'' = u − c θ' − k_t (k_p θ + k_i ∫θ)
+                [1.0, 0.0, 0.0, 0.0],  # d/dt ∫θ = θ
+                [kp, 0.0, ki, 0.0],  # d/dt ∫i = i = k_p θ + k_i ∫θ
+            ]
+        )
         return a, np.array([0.0, 1.0 / j, 0.0, 0.0])
 
     # ---- the GyroMechanism interface --------------------------------------------------------------
@@ -237,20 +247,26 @@ class RateIntegratingGyro(GyroMechanism):
             if np.any(np.abs(theta) >= stop) and not state.get("stop_warned", False):
                 state["stop_warned"] = True  # once per run, as one call warns once
                 first = truth.t[np.argmax(np.any(np.abs(theta) >= stop, axis=1))]
-                warnings.warn(f"open-loop rate-integrating gyro reached its ±{self.stop_angle_deg:g}° stops at "
-                              f"t = {first:.6g} s (past (c/H)·θ_stop = {math.degrees(stop / self.gimbal_gain):.3g}° "
-                              "of input angle); it indicates nothing beyond them: set torque_rebalance = true",
-                              RuntimeWarning, stacklevel=2)
+                warnings.warn(
+                    f"open-loop rate-integrating gyro reached its ±{self.stop_angle_deg:g}° stops at "
+                    f"t = {first:.6g} s (past (c/H)·θ_stop = {math.degrees(stop / self.gimbal_gain):.3g}° "
+                    "of input angle); it indicates nothing beyond them: set torque_rebalance = true",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
             # (c/H)(θ − θ₀): from 0 at the first sample (θ₀ = 0 at power-up).
-            return GyroResponse(angle=(theta - theta[0]) / self.gimbal_gain,
-                                raw={"gimbal_angle_rad": theta, "torquer_current_a": np.zeros_like(theta)})
+            return GyroResponse(
+                angle=(theta - theta[0]) / self.gimbal_gain,
+                raw={"gimbal_angle_rad": theta, "torquer_current_a": np.zeros_like(theta)},
+            )
 
         kt, kp, ki = self.torquer_scale_n_m_per_a, self.loop_proportional_a_per_rad, self.loop_integral_a_per_rad_s
         current = kp * theta + ki * states[:, :, 2]
         charge = states[:, :, 3]  # ∫i dt since power-up, A·s
         # (k_t/H)(∫i dt − its value at the first sample): from 0 there (the charge is 0 at power-up).
-        return GyroResponse(angle=(kt / h) * (charge - charge[0]),
-                            raw={"gimbal_angle_rad": theta, "torquer_current_a": current})
+        return GyroResponse(
+            angle=(kt / h) * (charge - charge[0]), raw={"gimbal_angle_rad": theta, "torquer_current_a": current}
+        )
 
     def _initial_state(self, u0: np.ndarray, u_dot: np.ndarray) -> np.ndarray:
         """Equilibrium (3, n) for a torque u0 + u_dot t (3,) (the particular solution; see the notes)."""

@@ -119,9 +119,9 @@ import numpy as np
 from pydantic import Field, ValidationInfo, field_validator
 
 from gyroemu.dynamics.config import NonNegativeReal, PositiveReal
+from gyroemu.dynamics.jit import njit
 
 from .mechanism import GyroMechanism, GyroResponse, GyroTruth
-from gyroemu.dynamics.jit import njit
 
 __all__ = ["RingLaserGyro"]
 
@@ -153,8 +153,10 @@ class RingLaserGyro(GyroMechanism):
     kind: Literal["rlg"] = "rlg"
     reads: ClassVar[frozenset[str]] = frozenset()
     perimeter_m: PositiveReal = 0.30
-    area_m2: PositiveReal = Field(default=0.25 * math.sqrt(3.0) * 0.10**2,  # triangle of 0.10 m sides
-                                  validate_default=True)
+    area_m2: PositiveReal = Field(
+        default=0.25 * math.sqrt(3.0) * 0.10**2,  # triangle of 0.10 m sides
+        validate_default=True,
+    )
     wavelength_nm: PositiveReal = 632.8
     lock_in_rate_deg_per_h: NonNegativeReal = 200.0
     dither_frequency_hz: PositiveReal = 437.0
@@ -167,8 +169,10 @@ class RingLaserGyro(GyroMechanism):
     def _isoperimetric(cls, area, info: ValidationInfo):
         perimeter = info.data.get("perimeter_m")
         if perimeter is not None and area > perimeter**2 / (4 * math.pi) * (1 + 1e-12):
-            raise ValueError(f"{area:g} m² is more than a ring of perimeter {perimeter:g} m can enclose "
-                             f"(at most P²/4π = {perimeter**2 / (4 * math.pi):.4g} m², a circle)")
+            raise ValueError(
+                f"{area:g} m² is more than a ring of perimeter {perimeter:g} m can enclose "
+                f"(at most P²/4π = {perimeter**2 / (4 * math.pi):.4g} m², a circle)"
+            )
         return area
 
     @field_validator("simulation_rate_hz")
@@ -178,14 +182,24 @@ class RingLaserGyro(GyroMechanism):
         if d.get("dither_amplitude_arcsec", 0.0) > 0 and "dither_frequency_hz" in d:
             needed = STEPS_PER_DITHER_CYCLE * d["dither_frequency_hz"]
             if rate < needed:
-                raise ValueError(f"{rate:g} Hz does not resolve the {d['dither_frequency_hz']:g} Hz dither: "
-                                 f"at least {needed:g} Hz ({STEPS_PER_DITHER_CYCLE} steps per cycle) is needed")
+                raise ValueError(
+                    f"{rate:g} Hz does not resolve the {d['dither_frequency_hz']:g} Hz dither: "
+                    f"at least {needed:g} Hz ({STEPS_PER_DITHER_CYCLE} steps per cycle) is needed"
+                )
         if all(key in d for key in ("perimeter_m", "area_m2", "wavelength_nm", "lock_in_rate_deg_per_h")):
-            k_lock = (8 * math.pi * d["area_m2"] / (d["wavelength_nm"] * 1e-9 * d["perimeter_m"])
-                      * d["lock_in_rate_deg_per_h"] * _DEG_PER_H)
+            k_lock = (
+                8
+                * math.pi
+                * d["area_m2"]
+                / (d["wavelength_nm"] * 1e-9 * d["perimeter_m"])
+                * d["lock_in_rate_deg_per_h"]
+                * _DEG_PER_H
+            )
             if rate < k_lock / MAX_LOCK_IN_PER_STEP:
-                raise ValueError(f"{rate:g} Hz does not resolve the lock-in time 1/(K Ω_L) = {1 / k_lock:.3g} s: "
-                                 f"at least {k_lock / MAX_LOCK_IN_PER_STEP:.4g} Hz is needed")
+                raise ValueError(
+                    f"{rate:g} Hz does not resolve the lock-in time 1/(K Ω_L) = {1 / k_lock:.3g} s: "
+                    f"at least {k_lock / MAX_LOCK_IN_PER_STEP:.4g} Hz is needed"
+                )
         return rate
 
     # --- derived quantities (SI) -----------------------------------------------------------------
@@ -241,8 +255,10 @@ class RingLaserGyro(GyroMechanism):
         state = {} if state is None else state
         h = float(truth.dt)
         if h > 1.05 / self.simulation_rate_hz:
-            raise ValueError(f"inner step {h:g} s is coarser than 1/simulation_rate_hz = "
-                             f"{1 / self.simulation_rate_hz:g} s: give the RLG its inner rate")
+            raise ValueError(
+                f"inner step {h:g} s is coarser than 1/simulation_rate_hz = "
+                f"{1 / self.simulation_rate_hz:g} s: give the RLG its inner rate"
+            )
         K = self.beat_phase_per_rad
         if "beat_phase_rad" not in state:  # power-up: the beat starts at an arbitrary phase
             state["t_power_up"] = float(truth.t[0])
@@ -252,14 +268,22 @@ class RingLaserGyro(GyroMechanism):
 
         dither, dither_rate = self._dither(truth.t, rng, state)
         psi = np.empty_like(dither)
-        _adler_kernel(truth.omega, truth.alpha, dither, dither_rate, h, K, K * self.lock_in_rate,
-                      np.asarray(state["beat_phase_rad"], dtype=float), psi)
+        _adler_kernel(
+            truth.omega,
+            truth.alpha,
+            dither,
+            dither_rate,
+            h,
+            K,
+            K * self.lock_in_rate,
+            np.asarray(state["beat_phase_rad"], dtype=float),
+            psi,
+        )
         state["beat_phase_rad"] = psi[-1].copy()
 
         count = np.floor(psi / (2 * math.pi)).astype(np.int64)
         angle = self.fringe_angle_rad * (count - count[0]) - (dither - dither[0])
-        return GyroResponse(angle=angle, raw={"fringe_count": count, "beat_phase_rad": psi,
-                                              "dither_angle_rad": dither})
+        return GyroResponse(angle=angle, raw={"fringe_count": count, "beat_phase_rad": psi, "dither_angle_rad": dither})
 
     # --- dither ------------------------------------------------------------------------------------
 
@@ -283,8 +307,12 @@ class RingLaserGyro(GyroMechanism):
         known, last = state["dither_cycle"], int(np.floor(self.dither_frequency_hz * elapsed[-1]))
         if np.floor(self.dither_frequency_hz * elapsed[0]) < known:
             raise ValueError("a chunk must start where the previous one ended (times went backwards)")
-        table = np.vstack([state["dither_amplitude_rad"],  # amplitudes of cycles known … last + 1
-                           self._cycle_amplitudes(rng, last - known)])
+        table = np.vstack(
+            [
+                state["dither_amplitude_rad"],  # amplitudes of cycles known … last + 1
+                self._cycle_amplitudes(rng, last - known),
+            ]
+        )
         angle, rate = np.empty((len(t), 3)), np.empty((len(t), 3))
         _dither_nodes(elapsed, self.dither_frequency_hz, table, known, angle, rate)
         state["dither_cycle"] = last
@@ -425,7 +453,7 @@ def _dither_nodes(elapsed, frequency_hz, table, first_cycle, angle, rate):
 
 
 # Cody–Waite split of π/2 (fdlibm): PIO2_1 has 33 significant bits, so k·PIO2_1 is exact for |k| < 2²⁰.
-_PIO2_1 = 1.57079632673412561417e+00
+_PIO2_1 = 1.57079632673412561417e00
 _PIO2_2 = 6.07710050630396597660e-11
 _PIO2_3 = 2.02226624879595063154e-21
 
@@ -441,10 +469,43 @@ def _sincos(x):
     k = math.floor(x * (2.0 / math.pi) + 0.5)
     r = ((x - k * _PIO2_1) - k * _PIO2_2) - k * _PIO2_3
     r2 = r * r
-    s = r * (1.0 + r2 * (-1.0 / 6 + r2 * (1.0 / 120 + r2 * (-1.0 / 5040 + r2 * (1.0 / 362880 + r2 * (
-        -1.0 / 39916800 + r2 * (1.0 / 6227020800 + r2 * (-1.0 / 1307674368000))))))))
-    c = 1.0 + r2 * (-0.5 + r2 * (1.0 / 24 + r2 * (-1.0 / 720 + r2 * (1.0 / 40320 + r2 * (-1.0 / 3628800 + r2 * (
-        1.0 / 479001600 + r2 * (-1.0 / 87178291200 + r2 * (1.0 / 20922789888000))))))))
+    s = r * (
+        1.0
+        + r2
+        * (
+            -1.0 / 6
+            + r2
+            * (
+                1.0 / 120
+                + r2
+                * (
+                    -1.0 / 5040
+                    + r2
+                    * (1.0 / 362880 + r2 * (-1.0 / 39916800 + r2 * (1.0 / 6227020800 + r2 * (-1.0 / 1307674368000))))
+                )
+            )
+        )
+    )
+    c = 1.0 + r2 * (
+        -0.5
+        + r2
+        * (
+            1.0 / 24
+            + r2
+            * (
+                -1.0 / 720
+                + r2
+                * (
+                    1.0 / 40320
+                    + r2
+                    * (
+                        -1.0 / 3628800
+                        + r2 * (1.0 / 479001600 + r2 * (-1.0 / 87178291200 + r2 * (1.0 / 20922789888000)))
+                    )
+                )
+            )
+        )
+    )
     quadrant = int(k) & 3
     if quadrant == 0:
         return s, c

@@ -80,8 +80,9 @@ class SensorTruth:
         t = np.asarray(t, dtype=float)
         span = self.t_end - self.t_start
         if t.size and (t.min() < self.t_start - 1e-9 * span or t.max() > self.t_end + 1e-9 * span):
-            raise ValueError(f"times {t.min():g}..{t.max():g} s leave the trajectory's span "
-                             f"{self.t_start:g}..{self.t_end:g} s")
+            raise ValueError(
+                f"times {t.min():g}..{t.max():g} s leave the trajectory's span {self.t_start:g}..{self.t_end:g} s"
+            )
         return np.clip(t, self.t_start, self.t_end)
 
     def omega_alpha(self, t):

@@ -6,8 +6,9 @@ from pathlib import Path
 
 import pytest
 
-BROAD_DIR = Path(os.environ.get("GYROEMU_BROAD_DIR",
-                                Path(__file__).resolve().parents[2] / "shared" / "datasets" / "broad"))
+BROAD_DIR = Path(
+    os.environ.get("GYROEMU_BROAD_DIR", Path(__file__).resolve().parents[2] / "shared" / "datasets" / "broad")
+)
 
 
 def needs_trial(name: str | None = None):

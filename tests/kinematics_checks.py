@@ -115,5 +115,3 @@ def step_bound(n: int) -> float:
     """Bound on the n-th derivative of the smooth step S (n ≥ 1)."""
     m = n - 1
     return 3.2 if m == 0 else (2 * np.pi) ** m * (1.5 + 0.6 * 2**m + 0.1 * 3**m)
-
-

@@ -37,8 +37,9 @@ class Procs:
     def start(self, name, *args):
         out = open(self.folder / f"{name}.log", "wb")
         env = dict(os.environ, PYTHONUNBUFFERED="1")
-        self.procs[name] = subprocess.Popen([sys.executable, "-m", "gyroemu", *args], cwd=ROOT, env=env,
-                                            stdout=out, stderr=subprocess.STDOUT)
+        self.procs[name] = subprocess.Popen(
+            [sys.executable, "-m", "gyroemu", *args], cwd=ROOT, env=env, stdout=out, stderr=subprocess.STDOUT
+        )
         out.close()
         return self.procs[name]
 
@@ -113,8 +114,10 @@ def mcap_messages(path, topic=None) -> list:
     from mcap.reader import make_reader
 
     with open(path, "rb") as f:
-        return [(c.topic, m.log_time, m.data) for _, c, m in
-                make_reader(f).iter_messages(topics=None if topic is None else [topic], log_time_order=True)]
+        return [
+            (c.topic, m.log_time, m.data)
+            for _, c, m in make_reader(f).iter_messages(topics=None if topic is None else [topic], log_time_order=True)
+        ]
 
 
 def write_foreign(path, n, seed=11) -> np.ndarray:
@@ -127,18 +130,31 @@ def write_foreign(path, n, seed=11) -> np.ndarray:
     stamps = 1_700_000_000 * 10**9 + np.cumsum(rng.integers(4_000_000, 6_000_000, n))
     with open(path, "wb") as f:
         writer = Writer(f, chunk_size=16384)
-        imu = writer.register_msgdef("sensor_msgs/msg/Imu", get_typestore(Stores.ROS2_HUMBLE).generate_msgdef(
-            "sensor_msgs/msg/Imu")[0].replace("time stamp", "builtin_interfaces/Time stamp") +
-            "=" * 80 + "\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n")
+        imu = writer.register_msgdef(
+            "sensor_msgs/msg/Imu",
+            get_typestore(Stores.ROS2_HUMBLE)
+            .generate_msgdef("sensor_msgs/msg/Imu")[0]
+            .replace("time stamp", "builtin_interfaces/Time stamp")
+            + "=" * 80
+            + "\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n",
+        )
         text = writer.register_msgdef("std_msgs/msg/String", "string data\n")
         for k in range(n):
             sec, nanosec = divmod(int(stamps[k]), 10**9)
-            writer.write_message("/sensors/imu_raw", imu, {
-                "header": {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": "imu_link"},
-                "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}, "orientation_covariance": [-1.0] + [0.0] * 8,
-                "angular_velocity": dict(zip("xyz", rng.normal(size=3))), "angular_velocity_covariance": [0.0] * 9,
-                "linear_acceleration": dict(zip("xyz", rng.normal(size=3))),
-                "linear_acceleration_covariance": [0.0] * 9}, log_time=int(stamps[k]) + 2_000_000)
+            writer.write_message(
+                "/sensors/imu_raw",
+                imu,
+                {
+                    "header": {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": "imu_link"},
+                    "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0},
+                    "orientation_covariance": [-1.0] + [0.0] * 8,
+                    "angular_velocity": dict(zip("xyz", rng.normal(size=3))),
+                    "angular_velocity_covariance": [0.0] * 9,
+                    "linear_acceleration": dict(zip("xyz", rng.normal(size=3))),
+                    "linear_acceleration_covariance": [0.0] * 9,
+                },
+                log_time=int(stamps[k]) + 2_000_000,
+            )
             if k % 10 == 0:
                 writer.write_message("/rosout_text", text, {"data": f"sample {k}"}, log_time=int(stamps[k]) + 2_000_001)
         writer.finish()

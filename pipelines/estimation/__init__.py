@@ -8,12 +8,23 @@
 - :mod:`.metrics`: BROAD's error definitions; :mod:`.setup`: a setup from a device or a log.
 """
 
-from .metrics import AttitudeErrors, attitude_errors, convergence_time, rmse_deg
 from .mekf import Mekf, MekfParams
+from .metrics import AttitudeErrors, attitude_errors, convergence_time, rmse_deg
 from .protocol import AttitudeFilter, DeviceNoise, Estimate, FilterSetup
 from .setup import noise_from_device, setup_for, setup_from_metadata
 
 __all__ = [
-    "AttitudeErrors", "AttitudeFilter", "DeviceNoise", "Estimate", "FilterSetup", "Mekf", "MekfParams",
-    "attitude_errors", "convergence_time", "noise_from_device", "rmse_deg", "setup_for", "setup_from_metadata",
+    "AttitudeErrors",
+    "AttitudeFilter",
+    "DeviceNoise",
+    "Estimate",
+    "FilterSetup",
+    "Mekf",
+    "MekfParams",
+    "attitude_errors",
+    "convergence_time",
+    "noise_from_device",
+    "rmse_deg",
+    "setup_for",
+    "setup_from_metadata",
 ]

@@ -11,10 +11,11 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from gyroemu.dynamics.jit import njit
+
 from . import mekf_kernels as kern
 from .mekf import MekfParams, earth_rate_enu, initial_state
 from .protocol import Estimate, FilterSetup
-from gyroemu.dynamics.jit import njit
 
 __all__ = ["mekf_batch"]
 
@@ -65,8 +66,9 @@ def _run(q, b, slow, P, t, gyro, delta, accel, mag, earth, params, use_mag, q_ou
         k = 0
         d = delta[r] if delta.shape[0] > 0 else delta[0:0, 0]
         while k < n:
-            end = kern.strapdown(q[r], b[r], slow[r], win, phi, t, gyro[r], d, accel[r], mag[r], earth,
-                                 params, k, q_out[r])
+            end = kern.strapdown(
+                q[r], b[r], slow[r], win, phi, t, gyro[r], d, accel[r], mag[r], earth, params, k, q_out[r]
+            )
             for j in range(k, end):
                 b_out[r, j, :] = b[r]
             if kern.window_due(win, params):
@@ -76,8 +78,9 @@ def _run(q, b, slow, P, t, gyro, delta, accel, mag, earth, params, use_mag, q_ou
             k = end
 
 
-def mekf_batch(setup: FilterSetup, t, gyro, accel, mag=None, *, delta_angle=None,
-               params: MekfParams | None = None) -> Estimate:
+def mekf_batch(
+    setup: FilterSetup, t, gyro, accel, mag=None, *, delta_angle=None, params: MekfParams | None = None
+) -> Estimate:
     """Run the MEKF over R runs that share their stamps.
 
     Parameters
@@ -123,6 +126,5 @@ def mekf_batch(setup: FilterSetup, t, gyro, accel, mag=None, *, delta_angle=None
         q[r], b[r], slow[r], P[r] = init.q, init.b, init.slow, init.P
     q_out = np.empty((runs, n, 4))
     b_out = np.empty((runs, n, 3))
-    _run(q, b, slow, P, t, gyro, delta, accel, mag, earth_rate_enu(setup), params.vector(setup), use_mag,
-         q_out, b_out)
+    _run(q, b, slow, P, t, gyro, delta, accel, mag, earth_rate_enu(setup), params.vector(setup), use_mag, q_out, b_out)
     return Estimate(q_wb=q_out, gyro_bias=b_out)

@@ -28,13 +28,14 @@ otherwise: one parameter set for every log.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
 from gyroemu.dynamics.earth import EARTH_RATE
 from gyroemu.dynamics.rotation import quat_from_rotvec, quat_multiply, quat_rotate
+
 from . import mekf_kernels as kern
 from .peers import initial_attitude
 from .protocol import Estimate, FilterSetup
@@ -142,7 +143,7 @@ class MekfParams:
     gyrocompass_s: float = 10.0
 
     @classmethod
-    def for_setup(cls, setup: FilterSetup, **overrides) -> "MekfParams":
+    def for_setup(cls, setup: FilterSetup, **overrides) -> MekfParams:
         """The defaults with the device's known noise figures in place, then ``overrides``."""
         noise = setup.noise
         known = {}
@@ -232,7 +233,9 @@ def initial_state(t, gyro, accel, mag, setup: FilterSetup, params: MekfParams) -
     q = initial_attitude(a)  # the shortest rotation taking the measured up onto the world's
     heading_var = np.pi**2  # 6D without Earth rate: heading unknown
     slow = np.zeros(kern.S_SIZE)
-    slow[kern.S_GRAVITY] = float(np.nanmean(np.linalg.norm(accel[:n], axis=1))) if np.isfinite(accel[:n]).any() else 9.81
+    slow[kern.S_GRAVITY] = (
+        float(np.nanmean(np.linalg.norm(accel[:n], axis=1))) if np.isfinite(accel[:n]).any() else 9.81
+    )
     m_first = np.einsum("kij,kj->ki", to_first, mag[:n]) if mag is not None else None
     if setup.use_mag and m_first is not None and np.isfinite(m_first).all(axis=1).any():
         m_w = quat_rotate(q, np.nanmean(m_first, axis=0))
@@ -254,10 +257,10 @@ def initial_state(t, gyro, accel, mag, setup: FilterSetup, params: MekfParams) -
     P = np.diag([tilt_var, tilt_var, heading_var] + [params.gyro_bias_sigma**2] * 3 + list(scale_var.ravel()))
     slow[kern.S_T] = t[0] - 1.0 / setup.rate_hz
     g0 = np.nan_to_num(np.asarray(gyro[0], dtype=float))
-    slow[kern.S_OMEGA:kern.S_OMEGA + 3] = g0
-    slow[kern.S_LP_G:kern.S_LP_G + 3] = g0
-    slow[kern.S_LP_A:kern.S_LP_A + 3] = a
-    slow[kern.S_GRAV_LP:kern.S_GRAV_LP2 + 3] = np.tile(quat_rotate(q, a), 2)  # the low-passes at rest
+    slow[kern.S_OMEGA : kern.S_OMEGA + 3] = g0
+    slow[kern.S_LP_G : kern.S_LP_G + 3] = g0
+    slow[kern.S_LP_A : kern.S_LP_A + 3] = a
+    slow[kern.S_GRAV_LP : kern.S_GRAV_LP2 + 3] = np.tile(quat_rotate(q, a), 2)  # the low-passes at rest
     return InitialState(q=q, b=np.zeros(3), P=P, slow=slow)
 
 
@@ -273,11 +276,14 @@ def _gyrocompass_heading(t, gyro, accel, q_tilt, setup, params):
     if len(g) < 2:
         return None
     duration = float(t[min(n, len(t)) - 1] - t[0]) or 1.0 / setup.rate_hz
-    sigma = heading_uncertainty(setup.latitude_rad, duration, bias=params.gyro_bias_sigma,
-                                noise_density=params.gyro_noise_density)
+    sigma = heading_uncertainty(
+        setup.latitude_rad, duration, bias=params.gyro_bias_sigma, noise_density=params.gyro_noise_density
+    )
     # at rest: the rate's spread is the white noise alone (3σ), the force's norm is gravity's
-    still = (np.all(np.std(g, axis=0) < 3 * params.gyro_noise_density * np.sqrt(setup.rate_hz) + 1e-9)
-             and np.std(np.linalg.norm(a, axis=1)) < params.rest_accel)
+    still = (
+        np.all(np.std(g, axis=0) < 3 * params.gyro_noise_density * np.sqrt(setup.rate_hz) + 1e-9)
+        and np.std(np.linalg.norm(a, axis=1)) < params.rest_accel
+    )
     if not (sigma < 20 * _DEG and still):
         return None
     # the data must show Earth's horizontal rate (not, say, a log of zeros): at least half of Ω cos φ
@@ -332,7 +338,9 @@ class Mekf:
         t = np.ascontiguousarray(t, dtype=float)
         accel = np.ascontiguousarray(accel, dtype=float)
         n = len(t)
-        mag = np.full((n, 3), np.nan) if mag is None or not self.setup.use_mag else np.ascontiguousarray(mag, dtype=float)
+        mag = (
+            np.full((n, 3), np.nan) if mag is None or not self.setup.use_mag else np.ascontiguousarray(mag, dtype=float)
+        )
         if self.q is None:
             if n == 0:
                 return Estimate(np.empty((0, 4)), np.empty((0, 3)), np.empty((0, 3, 3)))
@@ -345,11 +353,25 @@ class Mekf:
         b_out = np.empty((n, 3))
         cov_out = np.empty((n, 3, 3))
         k = 0
-        kf, p, x = self.kf, self._p, self.kf.x
+        kf, p = self.kf, self._p
         while k < n:
             try:
-                end = kern.strapdown(self.q, self.b, self._slow, self._win, self._phi, t, gyro, delta, accel, mag,
-                                     self._earth, p, k, q_out)
+                end = kern.strapdown(
+                    self.q,
+                    self.b,
+                    self._slow,
+                    self._win,
+                    self._phi,
+                    t,
+                    gyro,
+                    delta,
+                    accel,
+                    mag,
+                    self._earth,
+                    p,
+                    k,
+                    q_out,
+                )
             except ValueError:
                 bad = k + int(np.argmax(np.diff(np.concatenate([[self._slow[kern.S_T]], t[k:]])) <= 0))
                 raise ValueError(f"sample {bad}: stamp {t[bad]!r} s does not increase") from None

@@ -40,42 +40,43 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from gyroemu.dynamics.jit import njit
 
 # Window accumulator layout (one float64 vector per filter).
-W_ACC_N = 0      # valid accelerometer samples in the window
-W_MAG = 1        # 1:4  Σ R m_b over valid magnetometer samples, T
+W_ACC_N = 0  # valid accelerometer samples in the window
+W_MAG = 1  # 1:4  Σ R m_b over valid magnetometer samples, T
 W_MAG_N = 4
-W_T = 5          # window duration so far, s
-W_N = 6          # samples in the window
-W_EXTRA = 7      # extra attitude variance accrued (held samples, scale-factor uncertainty), rad²
-W_REST_G = 8     # 8:11 Σ ω_m over the window's samples at rest, rad/s
+W_T = 5  # window duration so far, s
+W_N = 6  # samples in the window
+W_EXTRA = 7  # extra attitude variance accrued (held samples, scale-factor uncertainty), rad²
+W_REST_G = 8  # 8:11 Σ ω_m over the window's samples at rest, rad/s
 W_REST_N = 11
-W_MAG_T = 12     # time the heading window has run, s
+W_MAG_T = 12  # time the heading window has run, s
 W_SIZE = 13
 
 # Slow state layout (one float64 vector per filter).
-S_T = 0          # last stamp, s
-S_OMEGA = 1      # 1:4 last valid gyro sample, rad/s
-S_LP_G = 4       # 4:7 low-passed gyro, rad/s
-S_LP_A = 7       # 7:10 low-passed specific force, m/s²
-S_REST_T = 10    # time at rest so far, s
-S_ACC_REJ_T = 11 # time since the last accepted gravity update, s
+S_T = 0  # last stamp, s
+S_OMEGA = 1  # 1:4 last valid gyro sample, rad/s
+S_LP_G = 4  # 4:7 low-passed gyro, rad/s
+S_LP_A = 7  # 7:10 low-passed specific force, m/s²
+S_REST_T = 10  # time at rest so far, s
+S_ACC_REJ_T = 11  # time since the last accepted gravity update, s
 S_MAG_NORM = 12  # reference field: norm, T
-S_MAG_DIP = 13   # and dip (angle below the horizontal), rad
-S_MAG_REJ_T = 14 # time since the last accepted heading update, s
-S_GRAVITY = 15   # gravity magnitude seen at initialisation, m/s²
-S_GRAV_LP = 16   # 16:19 specific force in the world frame, low-passed once, m/s²
+S_MAG_DIP = 13  # and dip (angle below the horizontal), rad
+S_MAG_REJ_T = 14  # time since the last accepted heading update, s
+S_GRAVITY = 15  # gravity magnitude seen at initialisation, m/s²
+S_GRAV_LP = 16  # 16:19 specific force in the world frame, low-passed once, m/s²
 S_GRAV_LP2 = 19  # 19:22 and twice: the gravity measurement, m/s²
-S_LAG1 = 22      # 22:58 D₁ (3×12, row-major): the first low-pass's sensitivity to δb and δM
-S_LAG2 = 58      # 58:94 D₂: the second's (the measurement's); see strapdown and gravity_measurement
-S_SCALE = 94     # 94:103 M̂ (3×3, row-major): the gyro's scale-factor and misalignment errors
+S_LAG1 = 22  # 22:58 D₁ (3×12, row-major): the first low-pass's sensitivity to δb and δM
+S_LAG2 = 58  # 58:94 D₂: the second's (the measurement's); see strapdown and gravity_measurement
+S_SCALE = 94  # 94:103 M̂ (3×3, row-major): the gyro's scale-factor and misalignment errors
 S_SIZE = 103
 
 # Error state layout.
-X_THETA = 0      # 0:3 δθ, rad, world axes
-X_BIAS = 3       # 3:6 δb, rad/s, body axes
-X_SCALE = 6      # 6:15 δM (3×3, row-major), dimensionless
+X_THETA = 0  # 0:3 δθ, rad, world axes
+X_BIAS = 3  # 3:6 δb, rad/s, body axes
+X_SCALE = 6  # 6:15 δM (3×3, row-major), dimensionless
 X_SIZE = 15
 N_DRIFT = X_SIZE - X_BIAS  # the error states that drive the attitude error: δb and δM
 
@@ -128,9 +129,9 @@ def strapdown(q, b, slow, win, phi, t, gyro, delta_angle, accel, mag, earth_rate
     ``t`` (n,) s; ``gyro`` (n, 3) rad/s, or ``delta_angle`` (n, 3) rad when it has rows (then
     ``gyro`` is ignored); ``accel`` (n, 3) m/s²; ``mag`` (n, 3) T (NaN rows: none). ``q``, ``b``,
     ``slow``, ``win``, ``phi`` (3, N_DRIFT: the window's Φ_θb, Φ_θM) are updated in place and
-    ``q_out[k]`` receives the attitude after sample k. Returns the index after the last sample consumed; the window is due for its updates
-    when it has run ``params[P_WINDOW]`` seconds or ``params[P_WINDOW_N]`` samples (see
-    :func:`window_due`). Raises ``ValueError`` on a stamp that does not increase.
+    ``q_out[k]`` receives the attitude after sample k. Returns the index after the last sample consumed;
+    the window is due for its updates when it has run ``params[P_WINDOW]`` seconds or
+    ``params[P_WINDOW_N]`` samples (see :func:`window_due`). Raises ``ValueError`` on a stamp that does not increase.
     """
     n = len(t)
     r = np.empty((3, 3))
@@ -211,7 +212,7 @@ def strapdown(q, b, slow, win, phi, t, gyro, delta_angle, accel, mag, earth_rate
             win[W_REST_N] += 1.0
         else:
             slow[S_REST_T] = 0.0
-            win[W_REST_G:W_REST_N + 1] = 0.0
+            win[W_REST_G : W_REST_N + 1] = 0.0
 
         # Gravity and field in the world frame, summed over the window.
         # The specific force in the world frame through two first-order low-passes in cascade,
@@ -348,8 +349,9 @@ def gravity_measurement(win, slow, params, z, H, R):
         H[0, X_BIAS + j] = -slow[S_LAG2 + N_DRIFT + j]
         H[1, X_BIAS + j] = slow[S_LAG2 + j]
     tau = params[P_ACC_TAU]
-    var = ((params[P_ACC_NOISE] ** 2 + params[P_MOTION] ** 2) / (8.0 * tau)
-           + params[P_MOTION_GAIN] * (norm - g) ** 2) / (g * g)
+    var = (
+        (params[P_ACC_NOISE] ** 2 + params[P_MOTION] ** 2) / (8.0 * tau) + params[P_MOTION_GAIN] * (norm - g) ** 2
+    ) / (g * g)
     var *= 4.0 * tau / max(win[W_T], 1e-9)
     R[:, :] = 0.0
     R[0, 0] = var
@@ -374,7 +376,7 @@ def heading_measurement(win, slow, params):
     if T < params[P_MAG_WINDOW]:
         return False, 0.0, 0.0, 0.0, 0.0
     mx, my, mz = win[W_MAG] / max(n, 1.0), win[W_MAG + 1] / max(n, 1.0), win[W_MAG + 2] / max(n, 1.0)
-    win[W_MAG:W_MAG_N + 1] = 0.0
+    win[W_MAG : W_MAG_N + 1] = 0.0
     win[W_MAG_T] = 0.0
     if n < 1.0:
         return False, 0.0, 0.0, 0.0, 0.0
@@ -390,8 +392,9 @@ def heading_measurement(win, slow, params):
     y = (y + math.pi) % (2.0 * math.pi) - math.pi
     # The field's heading error (residual soft iron, local anomalies) is correlated over
     # heading_correlation_s: a window of T carries T / τ_c of an independent measurement of it.
-    r = (params[P_HEADING_SIGMA] ** 2 * max(params[P_HEADING_CORR] / T, 1.0)
-         + params[P_MAG_NOISE] ** 2 / T / (horizontal * horizontal))
+    r = params[P_HEADING_SIGMA] ** 2 * max(params[P_HEADING_CORR] / T, 1.0) + params[P_MAG_NOISE] ** 2 / T / (
+        horizontal * horizontal
+    )
     tan_dip = -mz / horizontal
     return True, y, r, tan_dip * mx / horizontal, tan_dip * my / horizontal
 

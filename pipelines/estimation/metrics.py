@@ -66,7 +66,7 @@ def convergence_time(t: np.ndarray, error_rad: np.ndarray, threshold_rad: float)
     if not len(above):
         return 0.0
     last = above[-1]
-    valid_after = np.flatnonzero(~np.isnan(e[last + 1:]))
+    valid_after = np.flatnonzero(~np.isnan(e[last + 1 :]))
     if not len(valid_after):
         return float("inf")
     return float(t[last + 1 + valid_after[0]] - t[0])

@@ -77,7 +77,7 @@ __all__ = ["AhrsEkf", "Madgwick", "Mahony", "Vqf", "VqfUnavailable", "initial_at
 
 _SQRT_HALF = math.sqrt(0.5)
 _Q_NWU_TO_ENU = np.array([_SQRT_HALF, 0.0, 0.0, _SQRT_HALF])  # q_z(+90°): NWU coordinates to ENU
-_Q_NED_TO_ENU = np.array([0.0, _SQRT_HALF, _SQRT_HALF, 0.0])   # (x, y, z)_NED -> (y, x, -z)
+_Q_NED_TO_ENU = np.array([0.0, _SQRT_HALF, _SQRT_HALF, 0.0])  # (x, y, z)_NED -> (y, x, -z)
 _Q_IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 
 
@@ -138,8 +138,8 @@ class _AhrsPeer:
     def __init__(self, setup: FilterSetup):
         self.setup = setup
         self.period = 1.0 / float(setup.rate_hz)
-        self._q = None          # the library's quaternion (its own frame)
-        self._t_last = None     # stamp of the last sample the filter took
+        self._q = None  # the library's quaternion (its own frame)
+        self._t_last = None  # stamp of the last sample the filter took
         self._out_rot = quat_from_rotvec([0.0, 0.0, -setup.declination_rad]) if setup.use_mag else _Q_IDENTITY
 
     # The library-specific parts.
@@ -184,8 +184,16 @@ class _AhrsPeer:
                 dt = t[k] - self._t_last
                 if not (dt > 0 and math.isfinite(dt)):
                     dt = dt_nominal
-                self._q = np.asarray(self._step(self._q, gyro[k], accel[k] if finite_a[k] else None,
-                                                mag[k] if mag is not None and finite_m[k] else None, dt), dtype=float)
+                self._q = np.asarray(
+                    self._step(
+                        self._q,
+                        gyro[k],
+                        accel[k] if finite_a[k] else None,
+                        mag[k] if mag is not None and finite_m[k] else None,
+                        dt,
+                    ),
+                    dtype=float,
+                )
                 self._t_last = t[k]
             # (a missing gyro sample holds the last estimate)
             q_out[k] = self._q
@@ -264,8 +272,9 @@ def _import_vqf():
     try:
         from vqf import VQF
     except ImportError as exc:
-        raise VqfUnavailable("the optional 'vqf' package is not installed (pip install 'gyroemu[vqf]' "
-                             f"or pip install vqf): {exc}") from exc
+        raise VqfUnavailable(
+            f"the optional 'vqf' package is not installed (pip install 'gyroemu[vqf]' or pip install vqf): {exc}"
+        ) from exc
     return VQF
 
 
@@ -282,8 +291,9 @@ class Vqf:
         self._last = None  # (q, bias) of the last sample taken, for held samples
 
     def _batch(self, gyro, accel, mag):
-        out = self._f.updateBatch(np.ascontiguousarray(gyro), np.ascontiguousarray(accel),
-                                  None if mag is None else np.ascontiguousarray(mag))
+        out = self._f.updateBatch(
+            np.ascontiguousarray(gyro), np.ascontiguousarray(accel), None if mag is None else np.ascontiguousarray(mag)
+        )
         return (out["quat9D"] if mag is not None else out["quat6D"]), out["bias"]
 
     def process(self, t, gyro, accel, mag=None) -> Estimate:
@@ -302,8 +312,9 @@ class Vqf:
         else:  # runs of usable samples through the library, missing gyro samples hold the estimate
             edges = np.flatnonzero(np.diff(np.r_[0, finite_g.astype(np.int8), 0]))
             for start, stop in zip(edges[::2], edges[1::2]):
-                q[start:stop], b[start:stop] = self._batch(gyro[start:stop], accel[start:stop],
-                                                           None if mag is None else mag[start:stop])
+                q[start:stop], b[start:stop] = self._batch(
+                    gyro[start:stop], accel[start:stop], None if mag is None else mag[start:stop]
+                )
             for k in np.flatnonzero(~finite_g):
                 if k > 0 and np.isfinite(q[k - 1, 0]):
                     q[k], b[k] = q[k - 1], b[k - 1]

@@ -117,11 +117,13 @@ class Estimate:
         return len(self.q_wb)
 
     @staticmethod
-    def concatenate(parts: list["Estimate"]) -> "Estimate":
+    def concatenate(parts: list[Estimate]) -> Estimate:
         """Blocks joined in order (a field is kept only when every block has it)."""
+
         def join(name):
             values = [getattr(p, name) for p in parts]
             return None if any(v is None for v in values) else np.concatenate(values)
+
         return Estimate(q_wb=join("q_wb"), gyro_bias=join("gyro_bias"), q_wb_covariance=join("q_wb_covariance"))
 
 
@@ -131,5 +133,6 @@ class AttitudeFilter(Protocol):
 
     name: str
 
-    def process(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
-                mag: np.ndarray | None = None) -> Estimate: ...
+    def process(
+        self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None
+    ) -> Estimate: ...

@@ -27,8 +27,15 @@ from pathlib import Path
 
 from .protocol import FilterSetup
 
-__all__ = ["FILTERS", "FilterError", "FilterSpec", "available_filters", "filter_class", "make_filter",
-           "unavailable_filters"]
+__all__ = [
+    "FILTERS",
+    "FilterError",
+    "FilterSpec",
+    "available_filters",
+    "filter_class",
+    "make_filter",
+    "unavailable_filters",
+]
 
 
 class FilterError(ValueError):
@@ -62,13 +69,20 @@ class FilterSpec:
         return cls
 
 
-FILTERS: dict[str, FilterSpec] = {s.name: s for s in (
-    FilterSpec("mekf", "gyroemu.pipelines.estimation.mekf:Mekf", "gyroemu's multiplicative Kalman filter (filterpy)"),
-    FilterSpec("madgwick", "gyroemu.pipelines.estimation.peers:Madgwick", "Madgwick (ahrs), gain 0.033 / 0.041"),
-    FilterSpec("mahony", "gyroemu.pipelines.estimation.peers:Mahony", "Mahony (ahrs), k_P 1, k_I 0.3"),
-    FilterSpec("ahrs-ekf", "gyroemu.pipelines.estimation.peers:AhrsEkf", "quaternion EKF (ahrs), default noises"),
-    FilterSpec("vqf", "gyroemu.pipelines.estimation.peers:Vqf", "VQF (vqf package), default parameters", extra="vqf"),
-)}
+FILTERS: dict[str, FilterSpec] = {
+    s.name: s
+    for s in (
+        FilterSpec(
+            "mekf", "gyroemu.pipelines.estimation.mekf:Mekf", "gyroemu's multiplicative Kalman filter (filterpy)"
+        ),
+        FilterSpec("madgwick", "gyroemu.pipelines.estimation.peers:Madgwick", "Madgwick (ahrs), gain 0.033 / 0.041"),
+        FilterSpec("mahony", "gyroemu.pipelines.estimation.peers:Mahony", "Mahony (ahrs), k_P 1, k_I 0.3"),
+        FilterSpec("ahrs-ekf", "gyroemu.pipelines.estimation.peers:AhrsEkf", "quaternion EKF (ahrs), default noises"),
+        FilterSpec(
+            "vqf", "gyroemu.pipelines.estimation.peers:Vqf", "VQF (vqf package), default parameters", extra="vqf"
+        ),
+    )
+}
 
 
 def unavailable_filters() -> dict[str, str]:
@@ -117,13 +131,15 @@ def _user_class(spec: str) -> type:
             try:
                 module = importlib.import_module(module_name)
             except ModuleNotFoundError:
-                raise FilterError(f"filter '{spec}': no module named '{module_name}' (looked in the current "
-                                  "folder too)") from exc
+                raise FilterError(
+                    f"filter '{spec}': no module named '{module_name}' (looked in the current folder too)"
+                ) from exc
             finally:
                 sys.path.remove(cwd)
         except Exception as exc:  # noqa: BLE001
-            raise FilterError(f"filter '{spec}': importing '{module_name}' failed: "
-                              f"{type(exc).__name__}: {exc}") from exc
+            raise FilterError(
+                f"filter '{spec}': importing '{module_name}' failed: {type(exc).__name__}: {exc}"
+            ) from exc
     try:
         cls = getattr(module, attr)
     except AttributeError:
@@ -156,13 +172,16 @@ def make_filter(name_or_spec: str, setup: FilterSetup):
     except FilterError:
         raise
     except Exception as exc:  # noqa: BLE001 - a user's constructor failing is the user's argument at fault
-        raise FilterError(f"filter '{name_or_spec}': {getattr(cls, '__name__', cls)}(setup) failed: "
-                          f"{type(exc).__name__}: {exc}") from exc
+        raise FilterError(
+            f"filter '{name_or_spec}': {getattr(cls, '__name__', cls)}(setup) failed: {type(exc).__name__}: {exc}"
+        ) from exc
     missing = [a for a in ("name", "process") if not hasattr(filt, a)]
-    if missing or not callable(getattr(filt, "process")):
+    if missing or not callable(filt.process):
         what = " and ".join(f"'{a}'" for a in missing) if missing else "a callable 'process'"
-        raise FilterError(f"filter '{name_or_spec}': {type(filt).__name__} has no {what}; a filter needs a "
-                          "'name' and 'process(t, gyro, accel, mag=None)' (see pipelines/estimation/protocol.py)")
+        raise FilterError(
+            f"filter '{name_or_spec}': {type(filt).__name__} has no {what}; a filter needs a "
+            "'name' and 'process(t, gyro, accel, mag=None)' (see pipelines/estimation/protocol.py)"
+        )
     if not isinstance(filt.name, str) or not filt.name:
         raise FilterError(f"filter '{name_or_spec}': its 'name' must be a non-empty string, got {filt.name!r}")
     return filt

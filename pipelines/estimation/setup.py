@@ -26,7 +26,9 @@ def noise_from_device(device) -> DeviceNoise:
     return DeviceNoise(
         gyro_noise_density=float(np.mean(device.gyro_noise_density)),
         # the mechanism's own rest bias (a MEMS quadrature leak, its g-sensitivity) is a bias to learn too
-        gyro_bias_sigma=float(np.sqrt(np.mean(gyro.turn_on_bias**2 + gyro.bias**2) + device.mechanism.rest_bias()**2)),
+        gyro_bias_sigma=float(
+            np.sqrt(np.mean(gyro.turn_on_bias**2 + gyro.bias**2) + device.mechanism.rest_bias() ** 2)
+        ),
         gyro_bias_instability=float(np.mean(gyro.bias_instability)),
         gyro_rate_random_walk=float(np.mean(gyro.random_walk)),
         gyro_scale_sigma=float(np.sqrt(np.mean(gyro.scale_factor**2))),
@@ -60,12 +62,19 @@ def setup_for(device, scenario=None, *, use_mag: bool | None = None) -> FilterSe
             # the simulated field has no anomalies: only the sensor's uncompensated iron turns it, by at
             # most |hard iron| / B_h plus ‖soft iron − I‖ |B| / B_h
             soft = np.linalg.norm(np.asarray(mag.soft_iron) - np.eye(3), 2)
-            heading_sigma = float((np.linalg.norm(mag.hard_iron_uT) + soft * np.linalg.norm([east, north, up]))
-                                  / horizontal)
+            heading_sigma = float(
+                (np.linalg.norm(mag.hard_iron_uT) + soft * np.linalg.norm([east, north, up])) / horizontal
+            )
     if use_mag is None:
         use_mag = mag is not None
-    return FilterSetup(rate_hz=float(device.spec.rate_hz), use_mag=use_mag, noise=noise_from_device(device),
-                       latitude_rad=latitude, declination_rad=declination or 0.0, field_heading_sigma=heading_sigma)
+    return FilterSetup(
+        rate_hz=float(device.spec.rate_hz),
+        use_mag=use_mag,
+        noise=noise_from_device(device),
+        latitude_rad=latitude,
+        declination_rad=declination or 0.0,
+        field_heading_sigma=heading_sigma,
+    )
 
 
 def setup_from_metadata(metadata: dict | None, rate_hz: float, *, use_mag: bool) -> FilterSetup:
@@ -82,8 +91,9 @@ def setup_from_metadata(metadata: dict | None, rate_hz: float, *, use_mag: bool)
             if metadata.get("scenario"):
                 scenario = scenario_from_dict(tomllib.loads(metadata["scenario"]))
         except Exception as exc:  # noqa: BLE001 - any bad embedded config: fall back to the defaults
-            warnings.warn(f"the log's embedded configs do not validate ({exc}); using the filter's defaults",
-                          stacklevel=2)
+            warnings.warn(
+                f"the log's embedded configs do not validate ({exc}); using the filter's defaults", stacklevel=2
+            )
         else:
             return replace(setup_for(device, scenario, use_mag=use_mag), rate_hz=rate_hz)
     return FilterSetup(rate_hz=rate_hz, use_mag=use_mag)

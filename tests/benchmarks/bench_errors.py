@@ -17,19 +17,27 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
+from timing import best_time  # noqa: E402  (tests/benchmarks is the script folder)
 
 from gyroemu.sensors import noise
 from gyroemu.sensors.errors import GyroErrors, apply_errors
-from timing import best_time  # noqa: E402  (tests/benchmarks is the script folder)
 
 TARGET = 20e6
 
 ALL_TERMS = dict(
-    bias_deg_per_h=[1.0, -2.0, 3.0], turn_on_bias_deg_per_h=10.0, bias_temperature_deg_per_h_per_degC=0.1,
-    scale_factor_ppm=100, scale_factor_temperature_ppm_per_degC=5, range_deg_per_s=400,
-    scale_factor_nonlinearity_ppm=50, misalignment_mrad=[0.1, 0.2, 0.3, 0.4, 0.5, 0.6],
-    g_sensitivity_deg_per_h_per_g=[[1, 0.1, 0], [0, 1, 0.1], [0.1, 0, 1]], arw_deg_per_sqrt_h=0.15,
-    bias_instability_deg_per_h=1.0, rrw_deg_per_h_per_sqrt_h=0.1, rate_ramp_deg_per_h_per_h=0.01,
+    bias_deg_per_h=[1.0, -2.0, 3.0],
+    turn_on_bias_deg_per_h=10.0,
+    bias_temperature_deg_per_h_per_degC=0.1,
+    scale_factor_ppm=100,
+    scale_factor_temperature_ppm_per_degC=5,
+    range_deg_per_s=400,
+    scale_factor_nonlinearity_ppm=50,
+    misalignment_mrad=[0.1, 0.2, 0.3, 0.4, 0.5, 0.6],
+    g_sensitivity_deg_per_h_per_g=[[1, 0.1, 0], [0, 1, 0.1], [0.1, 0, 1]],
+    arw_deg_per_sqrt_h=0.15,
+    bias_instability_deg_per_h=1.0,
+    rrw_deg_per_h_per_sqrt_h=0.1,
+    rate_ramp_deg_per_h_per_h=0.01,
     quantisation_rad=1e-7,
 )
 
@@ -52,8 +60,9 @@ def main() -> None:
     other = rng.standard_normal((n, 3))
 
     cases = {
-        "error layer, all terms": lambda: apply_errors(omega, t, model, rng, temperature_degC=temperature,
-                                                       specific_force=force),
+        "error layer, all terms": lambda: apply_errors(
+            omega, t, model, rng, temperature_degC=temperature, specific_force=force
+        ),
         "baseline: white noise (numpy)": lambda: noise.white_noise(rng, (n, 3), dt, 1e-3),
         "baseline: white noise (kernel)": lambda: noise.sensor_noise(rng, (n, 3), dt, white=1e-3),
         "baseline: numpy add of two arrays": lambda: omega + other,
@@ -64,8 +73,10 @@ def main() -> None:
     for name, run in cases.items():
         seconds = best_time(run, args.repeats)
         results[name] = seconds
-        print(f"{name:36s} {seconds * 1e3:8.1f} {seconds / (3 * n) * 1e9:9.2f} "
-              f"{n / seconds / 1e6:13.1f} {3 * n / seconds / 1e6:11.1f}")
+        print(
+            f"{name:36s} {seconds * 1e3:8.1f} {seconds / (3 * n) * 1e9:9.2f} "
+            f"{n / seconds / 1e6:13.1f} {3 * n / seconds / 1e6:11.1f}"
+        )
 
     seconds = results["error layer, all terms"]
     per_axis, values = n / seconds, 3 * n / seconds

@@ -31,12 +31,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
+from timing import best_time  # noqa: E402
+
 from gyroemu.dynamics import load_scenario  # noqa: E402
 from gyroemu.dynamics.rotation import quat_exp, quat_multiply  # noqa: E402
 from gyroemu.pipelines.estimation.registry import available_filters, make_filter, unavailable_filters  # noqa: E402
 from gyroemu.pipelines.estimation.setup import setup_for  # noqa: E402
 from gyroemu.sensors import load_device  # noqa: E402
-from timing import best_time  # noqa: E402
 
 TARGETS = {"mekf": 20e3}
 BATCH_TARGET = 1e6
@@ -53,8 +54,14 @@ def python_loop_integration(t, gyro):
         dq = np.array([np.cos(angle), *(np.sin(angle) / angle * half if angle > 0 else half)])
         w1, x1, y1, z1 = q
         w2, x2, y2, z2 = dq
-        q = np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                      w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+        q = np.array(
+            [
+                w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+                w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+                w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+            ]
+        )
         q /= np.linalg.norm(q)
         out[k] = q
     return out
@@ -81,8 +88,10 @@ def main() -> int:
     setup = setup_for(device, scenario)
     t, gyro, accel, mag = samples.t, samples.gyro, samples.accel, samples.mag
     n = len(t)
-    print(f"smooth_manoeuvre x consumer_mems: {n:,} samples at {setup.rate_hz:g} Hz (9D); best of {args.repeats}; "
-          f"{os.cpu_count()} CPUs")
+    print(
+        f"smooth_manoeuvre x consumer_mems: {n:,} samples at {setup.rate_hz:g} Hz (9D); best of {args.repeats}; "
+        f"{os.cpu_count()} CPUs"
+    )
     for name, why in unavailable_filters().items():
         print(f"  ({name} left out: {why})")
 
@@ -95,8 +104,10 @@ def main() -> int:
     loop_rate = rows[0][1]
 
     for name in args.filter or available_filters():
+
         def run():
             make_filter(name, setup).process(t, gyro, accel, mag)
+
         rows.append((name, n / best_time(run, args.repeats)))
 
     print(f"\n{'filter':48s} {'samples/s':>12s} {'x loop baseline':>16s}")
@@ -117,14 +128,16 @@ def main() -> int:
     g = gyro[:m] + rng.normal(0.0, noise, (r, m, 3))
     a = np.broadcast_to(accel[:m], (r, m, 3)).copy()
     b = np.broadcast_to(mag[:m], (r, m, 3)).copy()
-    mekf_batch(setup, t[:min(m, 100)], g[:2, :min(m, 100)], a[:2, :min(m, 100)], b[:2, :min(m, 100)])  # warm-up
+    mekf_batch(setup, t[: min(m, 100)], g[:2, : min(m, 100)], a[:2, : min(m, 100)], b[:2, : min(m, 100)])  # warm-up
     started = time.perf_counter()
     mekf_batch(setup, t[:m], g, a, b)
     seconds = time.perf_counter() - started
     rate = r * m / seconds
-    print(f"\nmekf_batch: {r} runs x {m:,} samples in {seconds:.2f} s = {rate:,.0f} updates/s "
-          f"({rate / loop_rate:.0f}x the loop baseline); target {BATCH_TARGET / 1e6:.0f} M: "
-          f"{'met' if rate >= BATCH_TARGET else 'MISSED'}")
+    print(
+        f"\nmekf_batch: {r} runs x {m:,} samples in {seconds:.2f} s = {rate:,.0f} updates/s "
+        f"({rate / loop_rate:.0f}x the loop baseline); target {BATCH_TARGET / 1e6:.0f} M: "
+        f"{'met' if rate >= BATCH_TARGET else 'MISSED'}"
+    )
     return 0
 
 

@@ -53,8 +53,13 @@ def free_port() -> int:
 
 def gyroemu(log: Path, *args) -> subprocess.Popen:
     with open(log, "wb") as out:
-        return subprocess.Popen([sys.executable, "-m", "gyroemu", *args], cwd=ROOT, stdout=out,
-                                stderr=subprocess.STDOUT, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+        return subprocess.Popen(
+            [sys.executable, "-m", "gyroemu", *args],
+            cwd=ROOT,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            env=dict(os.environ, PYTHONUNBUFFERED="1"),
+        )
 
 
 def wait_for(log: Path, proc: subprocess.Popen, text: str, timeout: float) -> None:
@@ -92,9 +97,9 @@ def imu_payloads(duration: float) -> list[bytes]:
 # --------------------------------------------------------------------------------------------------
 # (a) many devices through the recorder.
 
+
 def bench_throughput(folder: Path, devices: int, rate: float, duration: float) -> bool:
     payloads = imu_payloads(duration)
-    n = len(payloads)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     keys = [f"gyroemu/d{i:02d}/imu" for i in range(devices)]
     session = open_session(session_config(listen=[endpoint], mode="peer"))
@@ -103,8 +108,18 @@ def bench_throughput(folder: Path, devices: int, rate: float, duration: float) -
     publisher = None
     try:
         publisher = PacedPublisher(session, keys)
-        rec = gyroemu(rec_log, "record", "--out", str(mcap_path), "--connect", endpoint, "--mode", "client",
-                      "--report", str(report_path))
+        rec = gyroemu(
+            rec_log,
+            "record",
+            "--out",
+            str(mcap_path),
+            "--connect",
+            endpoint,
+            "--mode",
+            "client",
+            "--report",
+            str(report_path),
+        )
         wait_for(rec_log, rec, "subscribed", 60)
         if not publisher.wait_for_subscribers(30):
             raise RuntimeError("the recorder's subscription did not reach every key in 30 s")
@@ -126,9 +141,11 @@ def bench_throughput(folder: Path, devices: int, rate: float, duration: float) -
         session.close()
     report = json.loads(report_path.read_text())
     rows = sorted(report["publishers"].values(), key=lambda r: r["topic"])
-    print(f"(a) {devices} devices x {rate:g} Hz /imu ({len(payloads[0])} B payloads) for {duration:g} s "
-          f"= {devices * rate:g} messages/s offered; published {pacing.messages} in {pacing.elapsed_s:.2f} s "
-          f"({pacing.messages / pacing.elapsed_s:,.0f}/s achieved)")
+    print(
+        f"(a) {devices} devices x {rate:g} Hz /imu ({len(payloads[0])} B payloads) for {duration:g} s "
+        f"= {devices * rate:g} messages/s offered; published {pacing.messages} in {pacing.elapsed_s:.2f} s "
+        f"({pacing.messages / pacing.elapsed_s:,.0f}/s achieved)"
+    )
     print(f"    publisher {pacing.summary()}")
     print(f"    {'device':<10} {'sent':>7} {'received':>9} {'loss':>6} {'missing':>8} {'dup':>5} {'late':>5}")
     total_loss = total_dup = 0
@@ -136,11 +153,15 @@ def bench_throughput(folder: Path, devices: int, rate: float, duration: float) -
         loss = sent - r["received"]
         total_loss += loss
         total_dup += r["duplicates"]
-        print(f"    {r['topic']:<10} {sent:>7} {r['received']:>9} {loss:>6} {r['missing']:>8} {r['duplicates']:>5} "
-              f"{r['late']:>5}")
+        print(
+            f"    {r['topic']:<10} {sent:>7} {r['received']:>9} {loss:>6} {r['missing']:>8} {r['duplicates']:>5} "
+            f"{r['late']:>5}"
+        )
     absent = devices - len(rows)
-    print(f"    total: {report['messages']} recorded of {pacing.messages} sent; loss {total_loss + absent * sent}, "
-          f"duplicates {total_dup}; devices never seen {absent}; file {mcap_path.stat().st_size / 1e6:.1f} MB")
+    print(
+        f"    total: {report['messages']} recorded of {pacing.messages} sent; loss {total_loss + absent * sent}, "
+        f"duplicates {total_dup}; devices never seen {absent}; file {mcap_path.stat().st_size / 1e6:.1f} MB"
+    )
     return total_loss == 0 and total_dup == 0 and absent == 0
 
 
@@ -210,8 +231,7 @@ def _figures(name: str, lat: np.ndarray, expected: int) -> str:
     if not len(lat):
         return f"    {name:<34} no samples received"
     p50, p99, mx = (np.percentile(lat, 50) * 1e6, np.percentile(lat, 99) * 1e6, lat.max() * 1e6)
-    return (f"    {name:<34} {len(lat):>6}/{expected} samples: p50 {p50:8.1f} µs, p99 {p99:8.1f} µs, "
-            f"max {mx:9.1f} µs")
+    return f"    {name:<34} {len(lat):>6}/{expected} samples: p50 {p50:8.1f} µs, p99 {p99:8.1f} µs, max {mx:9.1f} µs"
 
 
 def bench_latency(folder: Path, rate: float, duration: float) -> None:
@@ -221,8 +241,22 @@ def bench_latency(folder: Path, rate: float, duration: float) -> None:
     # gyroemu stream -> subscriber
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     log = folder / "stream.log"
-    stream = gyroemu(log, "stream", "--scenario", SCENARIO, "--device", DEVICE, "--duration", str(duration),
-                     "--listen", endpoint, "--device-name", "lat", "--wait", "30")
+    stream = gyroemu(
+        log,
+        "stream",
+        "--scenario",
+        SCENARIO,
+        "--device",
+        DEVICE,
+        "--duration",
+        str(duration),
+        "--listen",
+        endpoint,
+        "--device-name",
+        "lat",
+        "--wait",
+        "30",
+    )
     try:
         wait_for(log, stream, "gyroemu/lat/imu", 120)
         # Every key is subscribed (the stream waits for that before its clock starts); /imu is measured.
@@ -233,16 +267,21 @@ def bench_latency(folder: Path, rate: float, duration: float) -> None:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     raw_log = folder / "raw.log"
     with open(raw_log, "wb") as out:
-        raw = subprocess.Popen([sys.executable, "-c", RAW_PUBLISHER, endpoint, str(size), str(rate), str(duration)],
-                               stdout=out, stderr=subprocess.STDOUT)
+        raw = subprocess.Popen(
+            [sys.executable, "-c", RAW_PUBLISHER, endpoint, str(size), str(rate), str(duration)],
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
     try:
         wait_for(raw_log, raw, "raw: ready", 60)
         base = _latencies(raw, endpoint, "raw/imu", "raw/imu", timeout)
     finally:
         stop(raw)
     topics = sum(1 for line in log.read_text().splitlines() if line.startswith("  gyroemu/lat/"))
-    print(f"(b) one-way latency on loopback at {rate:g} Hz for {duration:g} s, {size} B /imu payloads "
-          f"(arrival in the subscriber's callback minus the attachment's source stamp)")
+    print(
+        f"(b) one-way latency on loopback at {rate:g} Hz for {duration:g} s, {size} B /imu payloads "
+        f"(arrival in the subscriber's callback minus the attachment's source stamp)"
+    )
     print(_figures(f"gyroemu stream /imu ({topics} topics/sample)", lat, n))
     print(_figures("baseline: plain zenoh put (1 topic)", base, n))
 

@@ -33,11 +33,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from mcap.reader import make_reader  # noqa: E402
 from mcap_ros2.decoder import DecoderFactory  # noqa: E402
 from mcap_ros2.writer import Writer as Ros2Writer  # noqa: E402
+from timing import best_time  # noqa: E402
 
 from gyroemu.pipelines.mcap_io import ImuSeries, Recording, read_mcap, write_mcap  # noqa: E402
 from gyroemu.pipelines.messages import schema_text  # noqa: E402
 from gyroemu.sensors.samples import ImuSamples  # noqa: E402
-from timing import best_time  # noqa: E402
 
 TARGET = 200e3
 
@@ -50,8 +50,13 @@ def make_samples(n: int, rng: np.random.Generator, full: bool):
     raw = {}
     truth = None
     if full:
-        raw = {"rlg": {"fringe_count": np.cumsum(rng.integers(0, 3, (n, 3)), axis=0),
-                       "beat_phase_rad": rng.normal(size=(n, 3)), "dither_angle_rad": rng.normal(0, 1e-3, (n, 3))}}
+        raw = {
+            "rlg": {
+                "fringe_count": np.cumsum(rng.integers(0, 3, (n, 3)), axis=0),
+                "beat_phase_rad": rng.normal(size=(n, 3)),
+                "dither_angle_rad": rng.normal(0, 1e-3, (n, 3)),
+            }
+        }
         q = np.column_stack([np.ones(n), rng.normal(0, 1e-3, (n, 3))])
         q /= np.linalg.norm(q, axis=1, keepdims=True)
         truth = ImuSeries(t=t, q_wb=q, omega_b=gyro + rng.normal(0, 1e-4, (n, 3)), specific_force_b=accel)
@@ -68,12 +73,22 @@ def baseline_write(path: Path, samples: ImuSamples) -> None:
         zeros = [0.0] * 9
         for k, (stamp, g, a) in enumerate(zip(stamps.tolist(), samples.gyro.tolist(), samples.accel.tolist())):
             sec, nanosec = divmod(stamp, 1_000_000_000)
-            writer.write_message("/imu", schema, {
-                "header": {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": samples.device},
-                "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}, "orientation_covariance": no_orientation,
-                "angular_velocity": {"x": g[0], "y": g[1], "z": g[2]}, "angular_velocity_covariance": zeros,
-                "linear_acceleration": {"x": a[0], "y": a[1], "z": a[2]}, "linear_acceleration_covariance": zeros,
-            }, log_time=stamp, publish_time=stamp, sequence=k)
+            writer.write_message(
+                "/imu",
+                schema,
+                {
+                    "header": {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": samples.device},
+                    "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0},
+                    "orientation_covariance": no_orientation,
+                    "angular_velocity": {"x": g[0], "y": g[1], "z": g[2]},
+                    "angular_velocity_covariance": zeros,
+                    "linear_acceleration": {"x": a[0], "y": a[1], "z": a[2]},
+                    "linear_acceleration_covariance": zeros,
+                },
+                log_time=stamp,
+                publish_time=stamp,
+                sequence=k,
+            )
         writer.finish()
 
 
@@ -111,12 +126,27 @@ def main() -> int:
 
         case("gyroemu write  /imu", lambda: write_mcap(folder / "imu.mcap", imu_only), n, n, folder / "imu.mcap")
         case("gyroemu read   /imu", lambda: read_mcap(folder / "imu.mcap"), n, n, folder / "imu.mcap")
-        case("gyroemu write  /imu /mag /truth/imu /raw/rlg", lambda: write_mcap(folder / "full.mcap", full),
-             4 * n, n, folder / "full.mcap")
-        case("gyroemu read   /imu /mag /truth/imu /raw/rlg", lambda: read_mcap(folder / "full.mcap"),
-             4 * n, n, folder / "full.mcap")
-        case("mcap_ros2 write /imu (baseline)", lambda: baseline_write(folder / "base.mcap", baseline.samples), m, m,
-             folder / "base.mcap")
+        case(
+            "gyroemu write  /imu /mag /truth/imu /raw/rlg",
+            lambda: write_mcap(folder / "full.mcap", full),
+            4 * n,
+            n,
+            folder / "full.mcap",
+        )
+        case(
+            "gyroemu read   /imu /mag /truth/imu /raw/rlg",
+            lambda: read_mcap(folder / "full.mcap"),
+            4 * n,
+            n,
+            folder / "full.mcap",
+        )
+        case(
+            "mcap_ros2 write /imu (baseline)",
+            lambda: baseline_write(folder / "base.mcap", baseline.samples),
+            m,
+            m,
+            folder / "base.mcap",
+        )
         case("mcap_ros2 read  /imu (baseline)", lambda: baseline_read(folder / "base.mcap"), m, m, folder / "base.mcap")
 
         # the two writers produce the same messages: check on the baseline's content
@@ -124,19 +154,22 @@ def main() -> int:
         t, gyro, accel = baseline_read(folder / "base.mcap")
         assert np.array_equal(ours.gyro, gyro) and np.array_equal(ours.accel, accel)
 
-        print(f"gyroemu {n:,} samples, mcap_ros2 {m:,} samples at 1 kHz; best of {args.repeats}; "
-              f"{os.cpu_count()} CPUs")
+        print(f"gyroemu {n:,} samples, mcap_ros2 {m:,} samples at 1 kHz; best of {args.repeats}; {os.cpu_count()} CPUs")
         print(f"{'case':46s} {'s':>7s} {'k msg/s':>9s} {'k IMU msg/s':>12s} {'MB':>7s}")
         for name, messages, imu_messages, seconds, file in rows:
-            print(f"{name:46s} {seconds:7.3f} {messages / seconds / 1e3:9.0f} {imu_messages / seconds / 1e3:12.0f} "
-                  f"{file.stat().st_size / 1e6:7.1f}")
+            print(
+                f"{name:46s} {seconds:7.3f} {messages / seconds / 1e3:9.0f} {imu_messages / seconds / 1e3:12.0f} "
+                f"{file.stat().st_size / 1e6:7.1f}"
+            )
 
     rate = {name: imu / seconds for name, _, imu, seconds, _ in rows}
     write, read = rate["gyroemu write  /imu"], rate["gyroemu read   /imu"]
     base_write, base_read = rate["mcap_ros2 write /imu (baseline)"], rate["mcap_ros2 read  /imu (baseline)"]
-    print(f"\ntarget {TARGET / 1e3:.0f} k IMU messages/s:  write {write / 1e3:.0f} k/s "
-          f"{'met' if write >= TARGET else 'MISSED'} ({write / base_write:.0f}x mcap_ros2),  read {read / 1e3:.0f} k/s "
-          f"{'met' if read >= TARGET else 'MISSED'} ({read / base_read:.0f}x mcap_ros2)")
+    print(
+        f"\ntarget {TARGET / 1e3:.0f} k IMU messages/s:  write {write / 1e3:.0f} k/s "
+        f"{'met' if write >= TARGET else 'MISSED'} ({write / base_write:.0f}x mcap_ros2),  read {read / 1e3:.0f} k/s "
+        f"{'met' if read >= TARGET else 'MISSED'} ({read / base_read:.0f}x mcap_ros2)"
+    )
     return 0 if write >= TARGET and read >= TARGET else 1
 
 

@@ -36,12 +36,13 @@ from scipy.integrate import solve_ivp  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
+from timing import best_time  # noqa: E402  (tests/benchmarks is the script folder)
+
 from gyroemu.dynamics.rotation import body_rate_from_euler_zyx, quat_conjugate, quat_from_euler_zyx, quat_multiply  # noqa: E402
 from gyroemu.sensors.free_gyro import FreeGyro, _spin_rate  # noqa: E402
 from gyroemu.sensors.mechanism import GyroTruth  # noqa: E402
 from gyroemu.sensors.rate_gyro import RateGyro, sdf_axes, simulate_gimbal  # noqa: E402
 from gyroemu.sensors.rate_integrating import RateIntegratingGyro  # noqa: E402
-from timing import best_time  # noqa: E402  (tests/benchmarks is the script folder)
 
 TARGET = 100.0  # × real time
 
@@ -61,8 +62,15 @@ def carrier(t: np.ndarray) -> GyroTruth:
     accels = -AMPLITUDE * w**2 * np.sin(arg)
     omega, alpha = body_rate_from_euler_zyx(rpy, rates, accels)
     m = t.size
-    return GyroTruth(t=t, dt=float(t[1] - t[0]), omega=omega, alpha=alpha, specific_force=np.zeros((m, 3)),
-                     q_is=quat_from_euler_zyx(rpy), temperature_degC=np.full(m, 25.0))
+    return GyroTruth(
+        t=t,
+        dt=float(t[1] - t[0]),
+        omega=omega,
+        alpha=alpha,
+        specific_force=np.zeros((m, 3)),
+        q_is=quat_from_euler_zyx(rpy),
+        temperature_degC=np.full(m, 25.0),
+    )
 
 
 # --------------------------------------------------------------------------------------------------
@@ -90,8 +98,9 @@ def gimbal_baseline(gyro, truth: GyroTruth, states_ours: np.ndarray):
         return (x @ a.T + u[:, None] * b).ravel()
 
     scale = np.abs(states_ours).max(axis=(0, 1)) + 1e-30
-    sol = solve_ivp(rhs, (t[0], t[-1]), states_ours[0].ravel(), method="RK45", t_eval=t, rtol=1e-8,
-                    atol=np.tile(1e-12 * scale, 3))
+    sol = solve_ivp(
+        rhs, (t[0], t[-1]), states_ours[0].ravel(), method="RK45", t_eval=t, rtol=1e-8, atol=np.tile(1e-12 * scale, 3)
+    )
     theirs = sol.y.T.reshape(-1, 3, n)
     return np.abs(theirs[..., 0] - states_ours[..., 0]).max() / np.abs(states_ours[..., 0]).max()
 
@@ -101,9 +110,14 @@ def free_gyro_baseline(gyro: FreeGyro, truth: GyroTruth, spins_ours: np.ndarray)
     carrier's attitude and rate linearly interpolated between samples."""
     q_rel = quat_multiply(quat_conjugate(truth.q_is[0]), truth.q_is)
     omega, t, h = truth.omega, truth.t, gyro.spin_momentum
-    args = (h, gyro.outer_viscous_friction_n_m_s_per_rad, gyro.outer_coulomb_friction_n_m,
-            gyro.inner_viscous_friction_n_m_s_per_rad, gyro.inner_coulomb_friction_n_m,
-            np.sin(np.radians(gyro.gimbal_lock_margin_deg)) ** 2)
+    args = (
+        h,
+        gyro.outer_viscous_friction_n_m_s_per_rad,
+        gyro.outer_coulomb_friction_n_m,
+        gyro.inner_viscous_friction_n_m_s_per_rad,
+        gyro.inner_coulomb_friction_n_m,
+        np.sin(np.radians(gyro.gimbal_lock_margin_deg)) ** 2,
+    )
 
     def rhs(time_s, x):
         k = min(int(time_s / truth.dt), t.size - 2)
@@ -137,10 +151,14 @@ def main() -> int:
         "free-gyro pair, friction": FreeGyro(),
     }
     rng = np.random.default_rng(0)
-    print(f"{args.seconds:g} s of a tumbling carrier per run, output {args.output_rate_hz:g} Hz, best of "
-          f"{args.repeats}; baseline solve_ivp RK45 over {args.baseline_seconds:g} s, extrapolated\n")
-    print(f"{'mechanism':30s} {'inner Hz':>9s} {'wall s':>8s} {'x real time':>12s} {'baseline x':>11s} "
-          f"{'speed-up':>9s} {'baseline diff':>14s}")
+    print(
+        f"{args.seconds:g} s of a tumbling carrier per run, output {args.output_rate_hz:g} Hz, best of "
+        f"{args.repeats}; baseline solve_ivp RK45 over {args.baseline_seconds:g} s, extrapolated\n"
+    )
+    print(
+        f"{'mechanism':30s} {'inner Hz':>9s} {'wall s':>8s} {'x real time':>12s} {'baseline x':>11s} "
+        f"{'speed-up':>9s} {'baseline diff':>14s}"
+    )
     ok = True
     for name, gyro in mechanisms.items():
         inner = gyro.inner_rate_hz(args.output_rate_hz)
@@ -157,19 +175,33 @@ def main() -> int:
         else:  # the kernel's states from rest, without stops, for the comparison
             a, b = gyro.state_space()
             w_ia, w_sra, a_oa = sdf_axes(short)
-            states = simulate_gimbal(a, b, short.dt, np.zeros((3, a.shape[0])), gyro.spin_momentum,
-                                     gyro.gimbal_inertia_kgm2, w_ia, w_sra, a_oa, np.inf)
+            states = simulate_gimbal(
+                a,
+                b,
+                short.dt,
+                np.zeros((3, a.shape[0])),
+                gyro.spin_momentum,
+                gyro.gimbal_inertia_kgm2,
+                w_ia,
+                w_sra,
+                a_oa,
+                np.inf,
+            )
             run_baseline = lambda: gimbal_baseline(gyro, short, states)  # noqa: E731
         start = time.perf_counter()
         difference = run_baseline()
         baseline_speed = args.baseline_seconds / (time.perf_counter() - start)
 
         ok &= speed >= TARGET
-        print(f"{name:30s} {inner:9.0f} {seconds:8.3f} {speed:12.0f} {baseline_speed:11.1f} "
-              f"{speed / baseline_speed:9.0f} {difference:14.1e}")
-    print("\nbaseline diff: largest difference from solve_ivp over its span, relative to the largest gimbal angle\n"
-          "(single-gimbal gyros: the kernel's second-order error in the θ-dependent cross-coupling torque) or to\n"
-          "the largest rotor drift (free gyro: Heun's step across the Coulomb torque's sign changes)")
+        print(
+            f"{name:30s} {inner:9.0f} {seconds:8.3f} {speed:12.0f} {baseline_speed:11.1f} "
+            f"{speed / baseline_speed:9.0f} {difference:14.1e}"
+        )
+    print(
+        "\nbaseline diff: largest difference from solve_ivp over its span, relative to the largest gimbal angle\n"
+        "(single-gimbal gyros: the kernel's second-order error in the θ-dependent cross-coupling torque) or to\n"
+        "the largest rotor drift (free gyro: Heun's step across the Coulomb torque's sign changes)"
+    )
     print(f"target {TARGET:g} x real time: {'met' if ok else 'NOT met'}")
     return 0 if ok else 1
 

@@ -45,8 +45,15 @@ def truth_chunk(t: np.ndarray, dt: float) -> GyroTruth:
     vibration = 2 * 9.81 * np.sin(2 * np.pi * 150 * t)
     force = np.column_stack([0.1 + 0 * t, vibration, 9.81 + 0.5 * vibration])
     temperature = 40 - 15 * np.exp(-t / 600)
-    return GyroTruth(t=t, dt=dt, omega=omega, alpha=alpha, specific_force=force,
-                     q_is=np.tile([1.0, 0.0, 0.0, 0.0], (len(t), 1)), temperature_degC=temperature)
+    return GyroTruth(
+        t=t,
+        dt=dt,
+        omega=omega,
+        alpha=alpha,
+        specific_force=force,
+        q_is=np.tile([1.0, 0.0, 0.0, 0.0], (len(t), 1)),
+        temperature_degC=temperature,
+    )
 
 
 def run(gyro: MemsGyro, seconds: float, inner_hz: float) -> float:
@@ -80,22 +87,30 @@ def main() -> int:
     carrier = MemsGyro(model="carrier")
     inner_hz = baseband.inner_rate_hz(args.output_rate_hz)
     steps = CARRIER_STEPS_PER_CYCLE * baseband.drive_frequency_hz
-    print(f"MEMS gyro triad (defaults: f_d {baseband.drive_frequency_hz:g} Hz, Δf {baseband.mode_split_hz:g} Hz), "
-          f"output {args.output_rate_hz:g} Hz, inner grid {inner_hz:g} Hz, 3 axes")
+    print(
+        f"MEMS gyro triad (defaults: f_d {baseband.drive_frequency_hz:g} Hz, Δf {baseband.mode_split_hz:g} Hz), "
+        f"output {args.output_rate_hz:g} Hz, inner grid {inner_hz:g} Hz, 3 axes"
+    )
 
     t_base = best(baseband, args.seconds, inner_hz, args.repeats)
     speed_base = args.seconds / t_base
-    print(f"  baseband: {args.seconds:g} s simulated in {t_base:.3f} s  ->  {speed_base:8.1f} x real time "
-          f"({3 * args.seconds * inner_hz / t_base / 1e6:.2f} M axis-steps/s)")
+    print(
+        f"  baseband: {args.seconds:g} s simulated in {t_base:.3f} s  ->  {speed_base:8.1f} x real time "
+        f"({3 * args.seconds * inner_hz / t_base / 1e6:.2f} M axis-steps/s)"
+    )
 
     t_carrier = best(carrier, args.carrier_seconds, inner_hz, args.repeats)
     speed_carrier = args.carrier_seconds / t_carrier
-    print(f"  carrier:  {args.carrier_seconds:g} s simulated in {t_carrier:.3f} s  ->  "
-          f"{speed_carrier:8.1f} x real time "
-          f"({3 * args.carrier_seconds * steps / t_carrier / 1e6:.2f} M axis-steps/s, "
-          f"{CARRIER_STEPS_PER_CYCLE} per drive cycle)")
-    print(f"  baseband / carrier: {speed_base / speed_carrier:.0f} x;  target {TARGET:g} x real time: "
-          f"{'met' if speed_base >= TARGET else 'MISSED'}")
+    print(
+        f"  carrier:  {args.carrier_seconds:g} s simulated in {t_carrier:.3f} s  ->  "
+        f"{speed_carrier:8.1f} x real time "
+        f"({3 * args.carrier_seconds * steps / t_carrier / 1e6:.2f} M axis-steps/s, "
+        f"{CARRIER_STEPS_PER_CYCLE} per drive cycle)"
+    )
+    print(
+        f"  baseband / carrier: {speed_base / speed_carrier:.0f} x;  target {TARGET:g} x real time: "
+        f"{'met' if speed_base >= TARGET else 'MISSED'}"
+    )
     return 0 if speed_base >= TARGET else 1
 
 

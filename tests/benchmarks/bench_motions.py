@@ -87,9 +87,7 @@ def measure(name: str, samples: int, repeats: int, loop_samples: int, in_duratio
     m = spec.world_motion(t)
 
     def earth_in_one_call():
-        return trajectory_from_world_motion(
-            m.t, m.q_wb, m.omega_wb_b, m.alpha_wb_b, m.pos_w, m.vel_w, m.acc_w, env
-        )
+        return trajectory_from_world_motion(m.t, m.q_wb, m.omega_wb_b, m.alpha_wb_b, m.pos_w, m.vel_w, m.acc_w, env)
 
     world = best_time(lambda: spec.world_motion(t), repeats) / n
     earth = best_time(earth_in_one_call, repeats) / n
@@ -121,9 +119,7 @@ COLUMNS = [  # title, unit, width, format of the row's value
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--samples", type=int, default=1_000_000, help="samples per run (default 10^6)")
-    parser.add_argument(
-        "--repeats", type=int, default=3, help="timed runs per figure, the best kept (default 3)"
-    )
+    parser.add_argument("--repeats", type=int, default=3, help="timed runs per figure, the best kept (default 3)")
     parser.add_argument("--loop-samples", type=int, default=2000, help="samples of the per-sample baseline")
     parser.add_argument("--scenarios", nargs="*", default=SCENARIOS, help="built-in scenario names")
     parser.add_argument(

@@ -64,16 +64,25 @@ def vehicle(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def truth_chunk(t: np.ndarray, dt: float) -> GyroTruth:
     omega, alpha = vehicle(t)
     zero = np.zeros_like(omega)
-    return GyroTruth(t=t, dt=dt, omega=omega, alpha=alpha, specific_force=zero,
-                     q_is=np.tile([1.0, 0.0, 0.0, 0.0], (len(t), 1)), temperature_degC=np.full(len(t), 25.0))
+    return GyroTruth(
+        t=t,
+        dt=dt,
+        omega=omega,
+        alpha=alpha,
+        specific_force=zero,
+        q_is=np.tile([1.0, 0.0, 0.0, 0.0], (len(t), 1)),
+        temperature_degC=np.full(len(t), 25.0),
+    )
 
 
 def run_mechanism(gyro, seconds: float, inner_hz: float) -> tuple[float, float]:
     """(wall, CPU) time of ``respond`` over ``seconds`` of truth at ``inner_hz``, in IMU-sized chunks, s."""
     dt = 1.0 / inner_hz
     total = int(round(seconds * inner_hz))
-    chunks = [truth_chunk(np.arange(first, min(first + CHUNK_INNER_SAMPLES, total) + 1) * dt, dt)
-              for first in range(0, total, CHUNK_INNER_SAMPLES)]  # made before the clock starts
+    chunks = [
+        truth_chunk(np.arange(first, min(first + CHUNK_INNER_SAMPLES, total) + 1) * dt, dt)
+        for first in range(0, total, CHUNK_INNER_SAMPLES)
+    ]  # made before the clock starts
     rng, state = np.random.default_rng(0), {}
     start, cpu = time.perf_counter(), time.process_time()
     for chunk in chunks:
@@ -147,8 +156,14 @@ def _adler_rk4(K, k_lock, w_d, amplitude, rate, h, steps):
 def adler_numba(gyro: RingLaserGyro, span: float) -> float:
     """Wall time of the same RK4 compiled with numba over ``span`` s, one axis."""
     h = resolving_step(gyro)
-    args = (gyro.beat_phase_per_rad, gyro.beat_phase_per_rad * gyro.lock_in_rate,
-            2 * math.pi * gyro.dither_frequency_hz, gyro.dither_amplitude, 0.2, h)
+    args = (
+        gyro.beat_phase_per_rad,
+        gyro.beat_phase_per_rad * gyro.lock_in_rate,
+        2 * math.pi * gyro.dither_frequency_hz,
+        gyro.dither_amplitude,
+        0.2,
+        h,
+    )
     _adler_rk4(*args, 10)  # compile
     start = time.perf_counter()
     _adler_rk4(*args, int(span / h))
@@ -188,8 +203,9 @@ def device_run(kind: str, rate_hz: float, seconds: float, repeats: int) -> float
     t = np.arange(int(round(seconds * 200)) + 1) / 200.0  # the trajectory at 200 Hz, the IMU interpolates
     omega, alpha = vehicle(t)
     zero = np.zeros_like(omega)
-    traj = trajectory_from_world_motion(t, np.tile([1.0, 0, 0, 0], (len(t), 1)), omega, alpha, zero, zero, zero,
-                                        Environment.inertial(9.81))
+    traj = trajectory_from_world_motion(
+        t, np.tile([1.0, 0, 0, 0], (len(t), 1)), omega, alpha, zero, zero, zero, Environment.inertial(9.81)
+    )
     device = device_from_dict({"description": kind, "rate_hz": rate_hz, "gyro": {"mechanism": {"kind": kind}}})
     return best(lambda: _timed(lambda: device.measure(traj)), repeats)
 
@@ -214,8 +230,10 @@ def main() -> int:
     fog_closed, fog_open = FiberOpticGyro(), FiberOpticGyro(loop="open")
     rlg_hz, fog_hz = rlg.inner_rate_hz(args.rlg_output_hz), fog_closed.inner_rate_hz(args.fog_output_hz)
 
-    print(f"{seconds:g} s of a three-axis triad, best of {args.repeats}; × real time = simulated s / wall s "
-          "(and per CPU s: on a shared machine the wall figure also counts time the process waited)")
+    print(
+        f"{seconds:g} s of a three-axis triad, best of {args.repeats}; × real time = simulated s / wall s "
+        "(and per CPU s: on a shared machine the wall figure also counts time the process waited)"
+    )
     print(f"{'case':58s} {'wall s':>9s} {'× real time':>12s} {'(CPU)':>8s}")
     failed = False
 
@@ -254,8 +272,10 @@ def main() -> int:
     report(f"RLG: RK4 resolving the beat, numba ({span_nb * 1e3:g} ms)", compiled, 1.0)
     samples = per_second(fog_detector_samples(fog_closed, span_fog, np.random.default_rng(0)), span_fog) / 3
     report(f"FOG: detector sample by sample, numpy ({span_fog * 1e3:g} ms)", samples, 1.0)
-    print(f"\nRLG mechanism vs baselines: {rlg_factor * python:,.0f}× plain Python, {rlg_factor * ivp:,.0f}× "
-          f"solve_ivp, {rlg_factor * compiled:,.0f}× compiled RK4")
+    print(
+        f"\nRLG mechanism vs baselines: {rlg_factor * python:,.0f}× plain Python, {rlg_factor * ivp:,.0f}× "
+        f"solve_ivp, {rlg_factor * compiled:,.0f}× compiled RK4"
+    )
     print(f"FOG mechanism vs the sample-level detector: {fog_factor * samples:,.0f}×")
 
     if not args.no_device:

@@ -65,20 +65,36 @@ def replay_once(log: Path, folder: Path, timing: str, recorder: bool) -> dict:
         if recorder:
             rec_log = folder / "rec.log"
             with open(rec_log, "wb") as out:
-                rec = subprocess.Popen([sys.executable, "-m", "gyroemu", "record", "--out",
-                                        str(folder / "rec.mcap"), "--connect", endpoint, "--mode", "client"],
-                                       cwd=ROOT, stdout=out, stderr=subprocess.STDOUT,
-                                       env=dict(os.environ, PYTHONUNBUFFERED="1"))
+                rec = subprocess.Popen(
+                    [
+                        sys.executable,
+                        "-m",
+                        "gyroemu",
+                        "record",
+                        "--out",
+                        str(folder / "rec.mcap"),
+                        "--connect",
+                        endpoint,
+                        "--mode",
+                        "client",
+                    ],
+                    cwd=ROOT,
+                    stdout=out,
+                    stderr=subprocess.STDOUT,
+                    env=dict(os.environ, PYTHONUNBUFFERED="1"),
+                )
             end = time.monotonic() + 60
             while "subscribed" not in rec_log.read_text(errors="replace"):
                 if time.monotonic() > end or rec.poll() is not None:
                     raise RuntimeError(f"recorder did not start:\n{rec_log.read_text(errors='replace')}")
                 time.sleep(0.05)
             time.sleep(1.0)  # its subscription reaches the replay's router-less peer mesh
-        code = ("import sys, gyroemu.pipelines.zenoh_io as z\n"
-                f"z.PRECISE = z.{timing}\n"
-                "from gyroemu.pipelines.cli import main\n"
-                f"sys.exit(main(['replay', {str(log)!r}, '--connect', {endpoint!r}]))\n")
+        code = (
+            "import sys, gyroemu.pipelines.zenoh_io as z\n"
+            f"z.PRECISE = z.{timing}\n"
+            "from gyroemu.pipelines.cli import main\n"
+            f"sys.exit(main(['replay', {str(log)!r}, '--connect', {endpoint!r}]))\n"
+        )
         run = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=600)
         if run.returncode != 0:
             raise RuntimeError(f"replay failed ({run.returncode}):\n{run.stdout}\n{run.stderr}")
@@ -103,9 +119,15 @@ def replay_once(log: Path, folder: Path, timing: str, recorder: bool) -> dict:
     own = _OWN.search(run.stdout)
     if own is None:
         raise RuntimeError(f"no pacing line in the replay's output:\n{run.stdout}")
-    return {"n": len(sequence), "own_p50": float(own.group(1)) * 1e3, "own_p99": float(own.group(2)) * 1e3,
-            "own_max": float(own.group(3)) * 1e3, "wire_p50": float(np.percentile(wire, 50)),
-            "wire_p99": float(np.percentile(wire, 99)), "wire_max": float(wire.max())}
+    return {
+        "n": len(sequence),
+        "own_p50": float(own.group(1)) * 1e3,
+        "own_p99": float(own.group(2)) * 1e3,
+        "own_max": float(own.group(3)) * 1e3,
+        "wire_p50": float(np.percentile(wire, 50)),
+        "wire_p99": float(np.percentile(wire, 99)),
+        "wire_max": float(wire.max()),
+    }
 
 
 def main(argv=None) -> int:
@@ -116,31 +138,56 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="bench_replay_") as tmp:
         folder = Path(tmp)
         log = folder / "x.mcap"
-        subprocess.run([sys.executable, "-m", "gyroemu", "simulate", "--scenario", SCENARIO, "--device",
-                        DEVICE, "--duration", str(args.duration), "--out", str(log)], cwd=ROOT, check=True,
-                       capture_output=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "gyroemu",
+                "simulate",
+                "--scenario",
+                SCENARIO,
+                "--device",
+                DEVICE,
+                "--duration",
+                str(args.duration),
+                "--out",
+                str(log),
+            ],
+            cwd=ROOT,
+            check=True,
+            capture_output=True,
+        )
         results: dict[tuple[str, bool], list[dict]] = {}
         for repeat in range(args.repeats):
             for recorder in (False, True):
                 for name, timing in TIMINGS.items():
                     r = replay_once(log, folder, timing, recorder)
                     results.setdefault((name, recorder), []).append(r)
-                    print(f"run {repeat + 1}: {name:<22} recorder {'yes' if recorder else 'no ':<3}  "
-                          f"own p50 {r['own_p50']:7.0f} p99 {r['own_p99']:7.0f} max {r['own_max']:8.0f} us | "
-                          f"wire p50 {r['wire_p50']:7.0f} p99 {r['wire_p99']:7.0f} max {r['wire_max']:8.0f} us "
-                          f"({r['n']} /imu)", flush=True)
+                    print(
+                        f"run {repeat + 1}: {name:<22} recorder {'yes' if recorder else 'no ':<3}  "
+                        f"own p50 {r['own_p50']:7.0f} p99 {r['own_p99']:7.0f} max {r['own_max']:8.0f} us | "
+                        f"wire p50 {r['wire_p50']:7.0f} p99 {r['wire_p99']:7.0f} max {r['wire_max']:8.0f} us "
+                        f"({r['n']} /imu)",
+                        flush=True,
+                    )
         load = os.getloadavg()
-        print(f"\nreplay pacing at 1 kHz ({args.duration:g} s log, 4 messages per deadline), median of "
-              f"{args.repeats} runs per row; load average at the end {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} "
-              f"on {os.cpu_count()} cores")
-        print(f"  {'publisher timing':<24}{'recorder':<10}{'own p50':>9}{'own p99':>9}{'own max':>10}"
-              f"{'wire p50':>10}{'wire p99':>10}{'wire max':>10}   (us)")
+        print(
+            f"\nreplay pacing at 1 kHz ({args.duration:g} s log, 4 messages per deadline), median of "
+            f"{args.repeats} runs per row; load average at the end {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} "
+            f"on {os.cpu_count()} cores"
+        )
+        print(
+            f"  {'publisher timing':<24}{'recorder':<10}{'own p50':>9}{'own p99':>9}{'own max':>10}"
+            f"{'wire p50':>10}{'wire p99':>10}{'wire max':>10}   (us)"
+        )
         for recorder in (False, True):
             for name in TIMINGS:
                 rows = results[(name, recorder)]
                 med = {k: float(np.median([r[k] for r in rows])) for k in rows[0]}
-                print(f"  {name:<24}{'yes' if recorder else 'no':<10}{med['own_p50']:9.0f}{med['own_p99']:9.0f}"
-                      f"{med['own_max']:10.0f}{med['wire_p50']:10.0f}{med['wire_p99']:10.0f}{med['wire_max']:10.0f}")
+                print(
+                    f"  {name:<24}{'yes' if recorder else 'no':<10}{med['own_p50']:9.0f}{med['own_p99']:9.0f}"
+                    f"{med['own_max']:10.0f}{med['wire_p50']:10.0f}{med['wire_p99']:10.0f}{med['wire_max']:10.0f}"
+                )
     return 0
 
 

@@ -111,12 +111,14 @@ def lagrange_cos_nutation(a_pivot, c_pivot, mgl, u0, l3, lz, energy, t):
 
 def _quat_rate(q, w):
     """``q̇ = ½ q ⊗ (0, ω)``."""
-    return 0.5 * np.array([
-        -q[1] * w[0] - q[2] * w[1] - q[3] * w[2],
-        q[0] * w[0] + q[2] * w[2] - q[3] * w[1],
-        q[0] * w[1] - q[1] * w[2] + q[3] * w[0],
-        q[0] * w[2] + q[1] * w[1] - q[2] * w[0],
-    ])
+    return 0.5 * np.array(
+        [
+            -q[1] * w[0] - q[2] * w[1] - q[3] * w[2],
+            q[0] * w[0] + q[2] * w[2] - q[3] * w[1],
+            q[0] * w[1] - q[1] * w[2] + q[3] * w[0],
+            q[0] * w[2] + q[1] * w[1] - q[2] * w[0],
+        ]
+    )
 
 
 def free_body_rhs(moments):

@@ -30,13 +30,14 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from gyroemu.pipelines.estimation.mekf import Mekf, MekfParams  # noqa: E402
-from gyroemu.pipelines.importers import read_broad  # noqa: E402
 from gyroemu.pipelines.estimation.metrics import attitude_errors, rmse_deg  # noqa: E402
 from gyroemu.pipelines.estimation.protocol import FilterSetup  # noqa: E402
 from gyroemu.pipelines.estimation.registry import available_filters, make_filter, unavailable_filters  # noqa: E402
+from gyroemu.pipelines.importers import read_broad  # noqa: E402
 
-BROAD_DIR = Path(os.environ.get("GYROEMU_BROAD_DIR",
-                                Path(__file__).resolve().parents[3] / "shared" / "datasets" / "broad"))
+BROAD_DIR = Path(
+    os.environ.get("GYROEMU_BROAD_DIR", Path(__file__).resolve().parents[3] / "shared" / "datasets" / "broad")
+)
 
 
 def main() -> int:
@@ -44,8 +45,13 @@ def main() -> int:
     parser.add_argument("--filter", action="append", default=None, help="filters (default: every available one)")
     parser.add_argument("--trials", nargs="+", default=None, help="trial numbers, e.g. 02 07 (default: all)")
     parser.add_argument("--offline-vqf", action="store_true", help="also vqf.offlineVQF, called directly")
-    parser.add_argument("--mekf-param", action="append", default=[], metavar="NAME=VALUE",
-                        help="override a MekfParams default for the mekf rows (repeatable)")
+    parser.add_argument(
+        "--mekf-param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="override a MekfParams default for the mekf rows (repeatable)",
+    )
     args = parser.parse_args()
     overrides = {}
     for item in args.mekf_param:
@@ -79,13 +85,21 @@ def main() -> int:
                 out = offlineVQF(gyro, accel, mag, 1.0 / fs)
                 e9, e6 = attitude_errors(out["quat9D"], ref), attitude_errors(out["quat6D"], ref)
             else:
-                make = (lambda s: Mekf(s, MekfParams.for_setup(s, **overrides))) if name == "mekf" and overrides \
+                make = (
+                    (lambda s: Mekf(s, MekfParams.for_setup(s, **overrides)))
+                    if name == "mekf" and overrides
                     else (lambda s, name=name: make_filter(name, s))
-                e9 = attitude_errors(make(FilterSetup(rate_hz=fs, use_mag=True)).process(
-                    t, gyro, accel, mag * 1e-6).q_wb, ref)
+                )
+                e9 = attitude_errors(
+                    make(FilterSetup(rate_hz=fs, use_mag=True)).process(t, gyro, accel, mag * 1e-6).q_wb, ref
+                )
                 e6 = attitude_errors(make(FilterSetup(rate_hz=fs, use_mag=False)).process(t, gyro, accel).q_wb, ref)
-            row = (rmse_deg(e9.total, movement), rmse_deg(e9.heading, movement), rmse_deg(e9.inclination, movement),
-                   rmse_deg(e6.inclination, movement))
+            row = (
+                rmse_deg(e9.total, movement),
+                rmse_deg(e9.heading, movement),
+                rmse_deg(e9.inclination, movement),
+                rmse_deg(e6.inclination, movement),
+            )
             results[name].append(row)
             print(f"| {path.stem[:2]} | {name} | " + " | ".join(f"{x:.2f}" for x in row) + " |", flush=True)
     for name in filters:

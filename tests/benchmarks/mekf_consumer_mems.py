@@ -45,11 +45,15 @@ def main() -> int:
 
         def bias_error(k):
             k = min(max(k, half), len(samples.t) - half)
-            return np.degrees(np.linalg.norm(est.gyro_bias[k, :2] - bias[k - half:k + half, :2].mean(axis=0)))
+            return np.degrees(np.linalg.norm(est.gyro_bias[k, :2] - bias[k - half : k + half, :2].mean(axis=0)))
 
         at = [int(np.searchsorted(samples.t, s)) for s in (0.0, 30.0, 60.0, samples.t[-1])]
-        print(f"| {seed} | {rmse_deg(err.inclination):.2f} | {rmse_deg(err.inclination[samples.t >= 60.0]):.2f} | "
-              + " | ".join(f"{bias_error(k):.3f}" for k in at) + " |", flush=True)
+        print(
+            f"| {seed} | {rmse_deg(err.inclination):.2f} | {rmse_deg(err.inclination[samples.t >= 60.0]):.2f} | "
+            + " | ".join(f"{bias_error(k):.3f}" for k in at)
+            + " |",
+            flush=True,
+        )
     return 0
 
 

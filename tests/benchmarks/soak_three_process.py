@@ -59,8 +59,13 @@ class Process:
     def __init__(self, folder: Path, name: str, *args):
         self.name, self.log = name, folder / f"{name}.log"
         with open(self.log, "wb") as out:
-            self.proc = subprocess.Popen([sys.executable, "-m", "gyroemu", *args], cwd=ROOT, stdout=out,
-                                         stderr=subprocess.STDOUT, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", "gyroemu", *args],
+                cwd=ROOT,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                env=dict(os.environ, PYTHONUNBUFFERED="1"),
+            )
         self.cpu_s = 0.0
         self.peak_mb = 0.0
 
@@ -122,12 +127,25 @@ def check(folder: Path, duration: float, seed: int) -> tuple[bool, list[str]]:
     lines.append(f"  sequence numbers (recorder's report, {len(by_topic)} publishers):")
     for topic in TOPICS:
         r = by_topic.get(f"{NAME}{topic}")
-        good = r is not None and (r["received"], r["first"], r["last"], r["missing"], r["duplicates"], r["late"]) \
-            == (n, 0, n - 1, 0, 0, 0)
+        good = r is not None and (r["received"], r["first"], r["last"], r["missing"], r["duplicates"], r["late"]) == (
+            n,
+            0,
+            n - 1,
+            0,
+            0,
+            0,
+        )
         ok &= good
-        lines.append(f"    {topic:<11} " + ("no report" if r is None else
-                     f"received {r['received']} of {n}, seq {r['first']}..{r['last']}, missing {r['missing']}, "
-                     f"duplicates {r['duplicates']}, out of order {r['late']}") + ("" if good else "  <-- FAIL"))
+        lines.append(
+            f"    {topic:<11} "
+            + (
+                "no report"
+                if r is None
+                else f"received {r['received']} of {n}, seq {r['first']}..{r['last']}, missing {r['missing']}, "
+                f"duplicates {r['duplicates']}, out of order {r['late']}"
+            )
+            + ("" if good else "  <-- FAIL")
+        )
     ok &= len(by_topic) == len(TOPICS)
 
     recorded: dict[str, list[bytes]] = {t: [] for t in expected}
@@ -138,21 +156,27 @@ def check(folder: Path, duration: float, seed: int) -> tuple[bool, list[str]]:
                 recorded[m.topic].append(m.data)
             else:
                 other += 1
-    lines.append(f"  the file ({(folder / 'soak.mcap').stat().st_size / 1e6:.1f} MB), per topic against the "
-                 f"library's encoding of the same run:")
+    lines.append(
+        f"  the file ({(folder / 'soak.mcap').stat().st_size / 1e6:.1f} MB), per topic against the "
+        f"library's encoding of the same run:"
+    )
     for topic, rows in expected.items():
         got = recorded[topic]
         stamps = np.array([header_stamp_ns(p) for p in got], dtype=np.int64)
-        want_stamps = rows[:, 4:8].copy().view("<i4")[:, 0].astype(np.int64) * 1_000_000_000 \
-            + rows[:, 8:12].copy().view("<u4")[:, 0]  # int32 sec, uint32 nanosec after the 4-byte encapsulation
+        want_stamps = (
+            rows[:, 4:8].copy().view("<i4")[:, 0].astype(np.int64) * 1_000_000_000
+            + rows[:, 8:12].copy().view("<u4")[:, 0]
+        )  # int32 sec, uint32 nanosec after the 4-byte encapsulation
         unique = len(np.unique(stamps))
         stamps_ok = len(got) == len(rows) and np.array_equal(np.sort(stamps), want_stamps) and unique == len(got)
         bytes_ok = len(got) == len(rows) and b"".join(got) == np.ascontiguousarray(rows).tobytes()
         ok &= stamps_ok and bytes_ok
-        lines.append(f"    {topic:<11} {len(got)} messages of {len(rows)}, {len(got) - unique} repeated stamps, "
-                     f"stamps {'as expected' if stamps_ok else 'DIFFER'}, bytes "
-                     f"{'identical' if bytes_ok else 'DIFFER'} ({rows.shape[1]} B each)"
-                     + ("" if stamps_ok and bytes_ok else "  <-- FAIL"))
+        lines.append(
+            f"    {topic:<11} {len(got)} messages of {len(rows)}, {len(got) - unique} repeated stamps, "
+            f"stamps {'as expected' if stamps_ok else 'DIFFER'}, bytes "
+            f"{'identical' if bytes_ok else 'DIFFER'} ({rows.shape[1]} B each)"
+            + ("" if stamps_ok and bytes_ok else "  <-- FAIL")
+        )
     if other:
         lines.append(f"    {other} messages on other topics  <-- FAIL")
         ok = False
@@ -168,13 +192,42 @@ def run(duration: float, seed: int, folder: Path, out=sys.stdout) -> bool:
     procs = [router]
     try:
         router.wait_for("listening", 60)
-        rec = Process(folder, "record", "record", "--out", str(folder / "soak.mcap"), "--connect", endpoint,
-                      "--mode", "client", "--report", str(folder / "soak.json"))
+        rec = Process(
+            folder,
+            "record",
+            "record",
+            "--out",
+            str(folder / "soak.mcap"),
+            "--connect",
+            endpoint,
+            "--mode",
+            "client",
+            "--report",
+            str(folder / "soak.json"),
+        )
         procs.append(rec)
         rec.wait_for("subscribed", 60)
-        stream = Process(folder, "stream", "stream", "--scenario", SCENARIO, "--device", DEVICE, "--duration",
-                         str(duration), "--seed", str(seed), "--device-name", NAME, "--connect", endpoint,
-                         "--mode", "client", "--wait", "60")
+        stream = Process(
+            folder,
+            "stream",
+            "stream",
+            "--scenario",
+            SCENARIO,
+            "--device",
+            DEVICE,
+            "--duration",
+            str(duration),
+            "--seed",
+            str(seed),
+            "--device-name",
+            NAME,
+            "--connect",
+            endpoint,
+            "--mode",
+            "client",
+            "--wait",
+            "60",
+        )
         procs.append(stream)
         stream.wait_for("publishing", 600)
         publishing = time.monotonic()
@@ -198,20 +251,32 @@ def run(duration: float, seed: int, folder: Path, out=sys.stdout) -> bool:
     ok, lines = check(folder, duration, seed)
     n = int(round(duration * 1000))
     pacing = [line for line in stream.text().splitlines() if "pacing" in line]
-    print(f"soak: {SCENARIO} through {DEVICE} (seed {seed}), {len(TOPICS)} topics at 1 kHz for {duration:g} s: "
-          f"stream -> router -> record, three processes on loopback ({endpoint})", file=out)
-    print(f"  published {n * len(TOPICS)} messages ({n} per topic); {ended - publishing:.1f} s from 'publishing' "
-          f"to the stream's exit; whole run {time.monotonic() - started:.1f} s", file=out)
+    print(
+        f"soak: {SCENARIO} through {DEVICE} (seed {seed}), {len(TOPICS)} topics at 1 kHz for {duration:g} s: "
+        f"stream -> router -> record, three processes on loopback ({endpoint})",
+        file=out,
+    )
+    print(
+        f"  published {n * len(TOPICS)} messages ({n} per topic); {ended - publishing:.1f} s from 'publishing' "
+        f"to the stream's exit; whole run {time.monotonic() - started:.1f} s",
+        file=out,
+    )
     if pacing:
         print(f"  {pacing[0].strip()}", file=out)
     for p in procs:
-        print(f"  {p.name:<7} CPU {p.cpu_s:8.1f} s ({100 * p.cpu_s / max(ended - publishing, 1e-9):5.1f} % of the "
-              f"publishing time), peak memory {p.peak_mb:7.0f} MB", file=out)
+        print(
+            f"  {p.name:<7} CPU {p.cpu_s:8.1f} s ({100 * p.cpu_s / max(ended - publishing, 1e-9):5.1f} % of the "
+            f"publishing time), peak memory {p.peak_mb:7.0f} MB",
+            file=out,
+        )
     print(f"  router exit status {router_status}", file=out)
     for line in lines:
         print(line, file=out)
-    print(f"soak: {'PASS' if ok else 'FAIL'}: "
-          f"{'no sample lost, none duplicated, bytes equal' if ok else 'see the lines marked FAIL'}", file=out)
+    print(
+        f"soak: {'PASS' if ok else 'FAIL'}: "
+        f"{'no sample lost, none duplicated, bytes equal' if ok else 'see the lines marked FAIL'}",
+        file=out,
+    )
     return ok
 
 
@@ -219,8 +284,12 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--duration", type=float, default=600.0, help="seconds of 1 kHz stream (default 600)")
     parser.add_argument("--seed", type=int, default=1, help="seed of the device (default 1)")
-    parser.add_argument("--keep", default=None, metavar="FOLDER",
-                        help="keep the recording, the report and the logs in FOLDER (default: a temporary folder)")
+    parser.add_argument(
+        "--keep",
+        default=None,
+        metavar="FOLDER",
+        help="keep the recording, the report and the logs in FOLDER (default: a temporary folder)",
+    )
     args = parser.parse_args(argv)
     if not args.duration > 0:
         parser.error(f"argument --duration: must be positive, got {args.duration}")

@@ -38,7 +38,9 @@ def test_moving_body_feels_coriolis_and_rotating_world():
     q = quat_from_euler_zyx([[0.0, 0.0, np.pi / 2]])
     omega_wb = np.array([[0.0, 0.0, 0.1]])
     vel = np.array([[0.0, 20.0, 0.0]])
-    traj = trajectory_from_world_motion([0.0], q, omega_wb, np.zeros((1, 3)), np.zeros((1, 3)), vel, np.zeros((1, 3)), env)
+    traj = trajectory_from_world_motion(
+        [0.0], q, omega_wb, np.zeros((1, 3)), np.zeros((1, 3)), vel, np.zeros((1, 3)), env
+    )
     earth_b = quat_rotate(q[0].copy() * [1, -1, -1, -1], env.earth_rate_w)
     np.testing.assert_allclose(traj.omega_b[0], omega_wb[0] + earth_b, rtol=1e-15)
     # α_b = −ω_wb × (R_bw Ω): the Earth rate seen from a turning body rotates.

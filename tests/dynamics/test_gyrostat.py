@@ -9,7 +9,7 @@ Tolerances: DOP853's local error per step is below ``rtol·|y| + atol``; the wor
 import numpy as np
 import pytest
 
-from gyroemu.dynamics.gyrostat import W, GimballedRotor, Gyrostat, Rotor, SpinProfile
+from gyroemu.dynamics.gyrostat import GimballedRotor, Gyrostat, Rotor, SpinProfile, W
 from gyroemu.dynamics.integrate import Jump, integrate
 from gyroemu.dynamics.rotation import quat_from_euler_zyx
 
@@ -58,8 +58,9 @@ def test_spin_up_on_a_free_body_gives_the_closed_form_counter_rotation(axis):
     spin = SpinProfile(0.0, 500.0, t_start=1.0, duration=4.0)
     g = Gyrostat(5.0, np.diag(inertia), rotors=[Rotor(a, 0.01, spin)])
     t = np.linspace(0.0, 8.0, 801)
-    sol = integrate(lambda tt, y: g.derivative(tt, y), t, g.state(), jumps=[Jump(b) for b in g.breakpoints],
-                    rtol=RTOL, atol=1e-14)
+    sol = integrate(
+        lambda tt, y: g.derivative(tt, y), t, g.state(), jumps=[Jump(b) for b in g.breakpoints], rtol=RTOL, atol=1e-14
+    )
     expected = np.outer(-0.01 * spin.rate(t) / inertia[axis], a)  # −ΔH / I
     np.testing.assert_allclose(sol.y[:, W], expected, rtol=0, atol=sol.n_steps * RTOL * 0.01 * 500 / inertia[axis])
     # Final rate: −J ΔΩ / I.
@@ -91,9 +92,17 @@ def test_gimbal_geometry_and_jacobian():
     delta = np.array([0.3, -1.1])
     y = g.state(gimbal_angles=delta)
     step = 1e-6
-    jac_fd = np.stack([(g.rotor_momentum_b(0.0, g.state(gimbal_angles=delta + step * e))
-                        - g.rotor_momentum_b(0.0, g.state(gimbal_angles=delta - step * e))) / (2 * step)
-                       for e in np.eye(2)], axis=1)
+    jac_fd = np.stack(
+        [
+            (
+                g.rotor_momentum_b(0.0, g.state(gimbal_angles=delta + step * e))
+                - g.rotor_momentum_b(0.0, g.state(gimbal_angles=delta - step * e))
+            )
+            / (2 * step)
+            for e in np.eye(2)
+        ],
+        axis=1,
+    )
     np.testing.assert_allclose(g.gimbal_jacobian(0.0, delta), jac_fd, atol=1e-8)
     with pytest.raises(ValueError, match="perpendicular"):
         GimballedRotor((0, 0, 1), (0, 1, 1), 1.0, SpinProfile(1.0))

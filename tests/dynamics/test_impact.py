@@ -19,8 +19,14 @@ EPS = np.finfo(float).eps
 
 
 def drop(contact, initial=None, duration=1.0, rate_hz=1000.0, earth=False):
-    data = {"kind": "drop", "duration_s": duration, "rate_hz": rate_hz, "site": {"earth_rotation": earth},
-            "contact": contact, "initial": initial or {"height_m": 0.5, "rpy_deg": [0, 0, 0], "omega_b": [0, 0, 0]}}
+    data = {
+        "kind": "drop",
+        "duration_s": duration,
+        "rate_hz": rate_hz,
+        "site": {"earth_rotation": earth},
+        "contact": contact,
+        "initial": initial or {"height_m": 0.5, "rpy_deg": [0, 0, 0], "omega_b": [0, 0, 0]},
+    }
     return scenario_from_dict(data).spec.model()
 
 
@@ -119,14 +125,17 @@ def test_tumbling_drop_bounces_settles_and_then_reads_gravity():
 
 
 def test_ideal_impulses_are_reported_per_sample_interval():
-    model = drop({"restitution": 0.5, "pulse_duration_s": 0.0},
-                 initial={"height_m": 0.4, "rpy_deg": [15, -25, 40], "omega_b": [3, 1, -2]}, duration=1.5)
+    model = drop(
+        {"restitution": 0.5, "pulse_duration_s": 0.0},
+        initial={"height_m": 0.4, "rpy_deg": [15, -25, 40], "omega_b": [3, 1, -2]},
+        duration=1.5,
+    )
     t = np.arange(0, 1501) / 1000.0
     traj = model.trajectory(t)
     total = np.sum([j for _, j in model.impulses], axis=0)
     np.testing.assert_allclose(traj.extras["contact_impulse_w"].sum(axis=0), total, rtol=1e-12)
     energy = [model.body.kinetic_energy(a) - model.body.kinetic_energy(b) for _, b, a in model.solve(t).jumps]
-    assert max(energy[:len(model.impulses)]) <= 1e-12  # no impulse adds energy
+    assert max(energy[: len(model.impulses)]) <= 1e-12  # no impulse adds energy
 
 
 @pytest.mark.parametrize(

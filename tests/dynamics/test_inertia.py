@@ -83,7 +83,9 @@ def test_principal_axes_recover_a_rotated_tensor():
 def test_world_tensor_maps_body_momentum():
     q = quat_from_rotvec([0.5, 0.2, -0.4])
     i_body, w_body = np.diag([1.0, 2.0, 3.0]), np.array([0.1, -0.2, 0.3])
-    np.testing.assert_allclose(inertia.world_tensor(q, i_body) @ quat_rotate(q, w_body), quat_rotate(q, i_body @ w_body))
+    np.testing.assert_allclose(
+        inertia.world_tensor(q, i_body) @ quat_rotate(q, w_body), quat_rotate(q, i_body @ w_body)
+    )
 
 
 @pytest.mark.parametrize(

@@ -15,10 +15,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from kinematics_checks import EPS, assert_kinematics, rotation_bounds, step_bound, uniform_times
 from scipy.integrate import simpson
 from scipy.special import j1
 
-from gyroemu.dynamics import KINDS, ConfigError, EARTH_RATE, list_scenarios, load_scenario, normal_gravity, scenario_from_dict
+from gyroemu.dynamics import (
+    EARTH_RATE,
+    KINDS,
+    ConfigError,
+    list_scenarios,
+    load_scenario,
+    normal_gravity,
+    scenario_from_dict,
+)
 from gyroemu.dynamics.motions import (
     ConingSpec,
     OscillationSpec,
@@ -34,8 +43,6 @@ from gyroemu.dynamics.rotation import (
     quat_conjugate,
     quat_rotate,
 )
-
-from kinematics_checks import EPS, assert_kinematics, rotation_bounds, step_bound, uniform_times
 
 SITE = {"latitude_deg": 48.0, "height_m": 500.0}
 
@@ -68,9 +75,7 @@ def test_time_grid_angle_addition_is_as_exact_as_direct_evaluation():
     exact = np.longdouble(omega) * (k.astype(np.longdouble) / np.longdouble(rate)) + np.longdouble(phase)
     direct = omega * t + phase
     err_fast = max(np.abs(c - np.cos(exact)).max(), np.abs(s - np.sin(exact)).max())
-    err_direct = max(
-        np.abs(np.cos(direct) - np.cos(exact)).max(), np.abs(np.sin(direct) - np.sin(exact)).max()
-    )
+    err_direct = max(np.abs(np.cos(direct) - np.cos(exact)).max(), np.abs(np.sin(direct) - np.sin(exact)).max())
     # Both lose about one ulp of the largest phase: the rounding of t = k/rate and of ω t + φ.
     bound = 1.5 * EPS * np.abs(direct).max() + 8 * EPS
     assert err_direct <= bound
@@ -138,9 +143,7 @@ def test_static_tilted_bench_reads_rotated_gravity():
     traj = s.trajectory(uniform_times(0.0, 1.0))
     q = quat_from_rpy_deg([10.0, -20.0, 200.0])
     g = normal_gravity(np.radians(SITE["latitude_deg"]), SITE["height_m"])
-    np.testing.assert_allclose(
-        traj.specific_force_b[0], quat_rotate(quat_conjugate(q), [0, 0, g]), atol=8 * EPS * g
-    )
+    np.testing.assert_allclose(traj.specific_force_b[0], quat_rotate(quat_conjugate(q), [0, 0, g]), atol=8 * EPS * g)
     np.testing.assert_allclose(traj.omega_b[-1], earth_rate_body(q), atol=4 * EPS * EARTH_RATE)
 
 
@@ -154,9 +157,7 @@ def test_rate_table_constant_reads_table_rate_plus_earth_rate():
     s = spec({"kind": "rate-table", "constant": {"rate_deg_s": 37.0}})
     traj = s.trajectory(uniform_times(3.0, 8.0))
     # Level table, no mounting rotation: ω_b = (0, 0, r) + R_bw Ω.
-    np.testing.assert_allclose(
-        traj.omega_b, [0, 0, rate] + earth_rate_body(traj.q_wb), rtol=0, atol=8 * EPS * rate
-    )
+    np.testing.assert_allclose(traj.omega_b, [0, 0, rate] + earth_rate_body(traj.q_wb), rtol=0, atol=8 * EPS * rate)
     np.testing.assert_allclose(traj.extras["table_angle_rad"], rate * traj.t, rtol=4 * EPS)
     assert_kinematics(traj, rotation_bounds(rate, 0, 0, 0))
 
@@ -183,9 +184,7 @@ def test_rate_table_mounting_and_tilted_axis():
 
 def test_rate_table_lever_arm_feels_centripetal_acceleration():
     rate, radius = np.radians(90.0), 0.25
-    s = spec(
-        {"kind": "rate-table", "table": {"lever_arm_m": [radius, 0.0, 0.1]}, "constant": {"rate_deg_s": 90.0}}
-    )
+    s = spec({"kind": "rate-table", "table": {"lever_arm_m": [radius, 0.0, 0.1]}, "constant": {"rate_deg_s": 90.0}})
     traj = s.trajectory(uniform_times(0.0, 4.0))
     m = s.world_motion(traj.t)
     # Uniform circular motion: |a| = r ω², pointing at the axis; |v| = r ω.
@@ -221,9 +220,7 @@ def test_rate_table_steps_reach_each_rate_and_dwell():
     # Ramps take |Δω| / a_max at ±a_max; the rate is continuous at every corner.
     ramps = accel != 0
     np.testing.assert_allclose(np.abs(accel[ramps]), a_max)
-    np.testing.assert_allclose(
-        np.diff(start)[ramps[:-1]], np.abs(np.diff(rate))[ramps[:-1]] / a_max, rtol=8 * EPS
-    )
+    np.testing.assert_allclose(np.diff(start)[ramps[:-1]], np.abs(np.diff(rate))[ramps[:-1]] / a_max, rtol=8 * EPS)
     w1 = np.abs(np.radians(STEPS["rates_deg_s"])).max()
     for corner in start[1:]:
         before, after = s.steps.angle(np.array([corner - 1e-9, corner + 1e-9]))[1]
@@ -316,9 +313,7 @@ def test_oscillation_rate_and_linear_vibration():
     a, w = np.radians(amp), 2 * np.pi * f
     # θ = A sin(ωt + φ) about n_b: |θ⁽ⁿ⁾| ≤ A ωⁿ. Position a sin(ω_l t): |p⁽ⁿ⁾| ≤ |a| ω_lⁿ.
     wl, a_lin = 2 * np.pi * fl, np.sqrt(2) * lin
-    assert_kinematics(
-        traj, rotation_bounds(*(a * w**n for n in range(1, 5)), p3=a_lin * wl**3, p4=a_lin * wl**4)
-    )
+    assert_kinematics(traj, rotation_bounds(*(a * w**n for n in range(1, 5)), p3=a_lin * wl**3, p4=a_lin * wl**4))
     m = s.world_motion(traj.t)
     theta_dot = a * w * np.cos(w * traj.t + np.radians(30.0))
     np.testing.assert_allclose(
@@ -338,9 +333,7 @@ def test_coning_rate_agrees_with_attitude():
     traj = s.trajectory(uniform_times(2.0, 1.0, h=2.0**-13))
     theta, om = np.radians(CONE["half_angle_deg"]), 2 * np.pi * CONE["frequency_hz"]
     # |ω| = 2Ω sin(θ/2), |α| = Ω² sin θ, |α̇| = Ω³ sin θ, |α̈| = Ω⁴ sin θ.
-    assert_kinematics(
-        traj, rotation_bounds(2 * om * np.sin(theta / 2), *(om**n * np.sin(theta) for n in (2, 3, 4)))
-    )
+    assert_kinematics(traj, rotation_bounds(2 * om * np.sin(theta / 2), *(om**n * np.sin(theta) for n in (2, 3, 4))))
 
 
 def test_coning_attitude_is_periodic_but_the_rate_integral_is_not_zero():
@@ -395,9 +388,7 @@ def sculling_spec(phase_deg=0.0):
 def test_sculling_kinematics():
     traj = sculling_spec(25.0).trajectory(uniform_times(1.0, 1.0, h=2.0**-13))
     theta0, om, acc = np.radians(3.0), 2 * np.pi * 8.0, 4.0
-    assert_kinematics(
-        traj, rotation_bounds(*(theta0 * om**n for n in range(1, 5)), p3=acc * om, p4=acc * om**2)
-    )
+    assert_kinematics(traj, rotation_bounds(*(theta0 * om**n for n in range(1, 5)), p3=acc * om, p4=acc * om**2))
 
 
 @pytest.mark.parametrize("phase_deg", [0.0, 60.0, 90.0])
@@ -419,9 +410,7 @@ def test_sculling_rectified_specific_force(phase_deg):
     assert sculling_force[:, 0].mean() == pytest.approx(0.0, abs=64 * EPS * 4.0)
     # Small-angle form of sculling theory, ½ A θ0: J₁(x) = x/2 (1 − x²/8 + …), an alternating series.
     theta0 = np.radians(3.0)
-    assert expected == pytest.approx(
-        -0.5 * 4.0 * theta0 * np.cos(np.radians(phase_deg)), rel=theta0**2 / 8, abs=1e-15
-    )
+    assert expected == pytest.approx(-0.5 * 4.0 * theta0 * np.cos(np.radians(phase_deg)), rel=theta0**2 / 8, abs=1e-15)
     # The body goes nowhere: velocity and position are periodic.
     np.testing.assert_allclose(traj.vel_w[:per_cycle], traj.vel_w[-per_cycle:], atol=1e-13)
 
@@ -430,7 +419,11 @@ def test_sculling_rectified_specific_force(phase_deg):
 # Config files and errors
 # --------------------------------------------------------------------------------------------------
 
-BUILT_IN = [s.name for s in list_scenarios() if KINDS[s.kind].startswith(("gyroemu.dynamics.motions", "gyroemu.dynamics.vehicles"))]
+BUILT_IN = [
+    s.name
+    for s in list_scenarios()
+    if KINDS[s.kind].startswith(("gyroemu.dynamics.motions", "gyroemu.dynamics.vehicles"))
+]
 
 
 @pytest.mark.parametrize("name", BUILT_IN)

@@ -12,8 +12,19 @@ import pytest
 
 from gyroemu.dynamics.gyrostat import Gyrostat
 from gyroemu.dynamics.integrate import Jump, integrate
-from gyroemu.dynamics.rigid_body import (L, P, Q, X, RigidBody, point_acceleration, point_position, point_velocity, rotate,
-                                 rotate_back, rotation_matrix)
+from gyroemu.dynamics.rigid_body import (
+    L,
+    P,
+    Q,
+    RigidBody,
+    X,
+    point_acceleration,
+    point_position,
+    point_velocity,
+    rotate,
+    rotate_back,
+    rotation_matrix,
+)
 from gyroemu.dynamics.rotation import quat_from_euler_zyx, quat_to_matrix
 
 EPS = np.finfo(float).eps
@@ -146,7 +157,7 @@ def test_impulse_changes_momenta_by_j_and_r_cross_j_at_the_event():
     for t_jump in (0.35, 0.4):
         t = np.linspace(0.0, 1.0, 11)
         sol = integrate(lambda tt, y: body.derivative(tt, y), t, y0, jumps=[Jump(t_jump, kick)])
-        (tj, before, after), = sol.jumps
+        ((tj, before, after),) = sol.jumps
         assert tj == t_jump
         lever = rotate(rotation_matrix(before[Q]), (0.1, 0.0, 0.05))
         np.testing.assert_allclose(after[P] - before[P], j, atol=4 * EPS * np.abs(after[P]).max())

@@ -16,15 +16,13 @@ from math import factorial
 
 import numpy as np
 import pytest
+from kinematics_checks import EPS, DerivativeBounds, assert_kinematics, step_bound, uniform_times
 from scipy.integrate import IntegrationWarning, quad
 
-from gyroemu.dynamics import ConfigError, EARTH_RATE, scenario_from_dict
+from gyroemu.dynamics import EARTH_RATE, ConfigError, scenario_from_dict
 from gyroemu.dynamics.motions import smooth_step
 from gyroemu.dynamics.rotation import body_rate_from_euler_zyx, euler_zyx_from_quat, quat_from_euler_zyx
 from gyroemu.dynamics.vehicles import Road, SuspensionTransient, Turn, euler_zyx_motion
-
-
-from kinematics_checks import EPS, DerivativeBounds, assert_kinematics, step_bound, uniform_times
 
 SITE = {"latitude_deg": -33.9, "height_m": 20.0}
 
@@ -46,9 +44,7 @@ class Majorant:
         return cls([b / factorial(n) for n, b in enumerate(bounds)])
 
     def __add__(self, other):
-        return Majorant(
-            self.c + (other.c if isinstance(other, Majorant) else np.r_[other, np.zeros(self.ORDER)])
-        )
+        return Majorant(self.c + (other.c if isinstance(other, Majorant) else np.r_[other, np.zeros(self.ORDER)]))
 
     __radd__ = __add__
 
@@ -178,9 +174,7 @@ def test_random_manoeuvre_same_seed_is_bit_identical_and_seeds_differ():
 def test_random_manoeuvre_draws_within_bounds():
     s = manoeuvre(seed=11)
     (a_rot, w_rot, p_rot), (a_tr, w_tr, _) = s.sines()
-    np.testing.assert_allclose(
-        a_rot.sum(axis=1), np.radians(MANOEUVRE["rotation"]["amplitude_deg"]), rtol=4 * EPS
-    )
+    np.testing.assert_allclose(a_rot.sum(axis=1), np.radians(MANOEUVRE["rotation"]["amplitude_deg"]), rtol=4 * EPS)
     np.testing.assert_allclose(a_tr.sum(axis=1), MANOEUVRE["translation"]["amplitude_m"], rtol=4 * EPS)
     assert a_rot.shape == (3, 5) and a_tr.shape == (3, 4) and (a_rot >= 0).all()
     f = w_rot / (2 * np.pi)
@@ -188,9 +182,7 @@ def test_random_manoeuvre_draws_within_bounds():
     # The attitude stays within the bounds around the mean.
     m = s.world_motion(np.arange(60_001) / 100.0)
     rpy = np.degrees(np.unwrap(euler_zyx_from_quat(m.q_wb), axis=0))
-    assert np.all(
-        np.abs(rpy[:, :2] - MANOEUVRE["rotation"]["mean_rpy_deg"][:2]) <= np.array([30.0, 20.0]) + 1e-9
-    )
+    assert np.all(np.abs(rpy[:, :2] - MANOEUVRE["rotation"]["mean_rpy_deg"][:2]) <= np.array([30.0, 20.0]) + 1e-9)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -248,10 +240,7 @@ def car_bounds(s) -> DerivativeBounds:
     kappa_s = Majorant.of_derivatives(
         [
             max(
-                [
-                    abs(np.radians(tr.angle_deg)) * step_bound(n + 1) / tr.length_m ** (n + 1)
-                    for tr in s.turns
-                ],
+                [abs(np.radians(tr.angle_deg)) * step_bound(n + 1) / tr.length_m ** (n + 1) for tr in s.turns],
                 default=0.0,
             )
             for n in range(7)
@@ -312,9 +301,7 @@ def test_car_speed_profile_heading_and_stop():
     # The peak longitudinal acceleration is accel_m_s2 speeding up and brake_m_s2 slowing down.
     m = s.world_motion(t)
     along = np.einsum("ij,ij->i", m.acc_w[:, :2], m.vel_w[:, :2]) / np.maximum(speed, 1e-12)
-    assert along.max() == pytest.approx(3.0, rel=1e-4) and along[speed > 0.5].min() == pytest.approx(
-        -5.0, rel=1e-4
-    )
+    assert along.max() == pytest.approx(3.0, rel=1e-4) and along[speed > 0.5].min() == pytest.approx(-5.0, rel=1e-4)
     # After both turns the heading is 30 + 90 − 20 = 100°; stopped, the car stays put.
     stopped = t > start - holds[-1] + 1e-9
     yaw = euler_zyx_from_quat(traj.q_wb[stopped])[:, 2]
@@ -332,9 +319,7 @@ def test_car_roll_follows_lateral_and_pitch_longitudinal_acceleration():
     lateral = np.einsum("ij,ij->i", m.acc_w, left)
     longitudinal = np.einsum("ij,ij->i", m.acc_w, forward)
     np.testing.assert_allclose(roll, np.radians(0.6) * lateral, rtol=0, atol=1e-14)  # outward lean
-    np.testing.assert_allclose(
-        pitch, -np.radians(0.4) * longitudinal, rtol=0, atol=1e-14
-    )  # dive when braking
+    np.testing.assert_allclose(pitch, -np.radians(0.4) * longitudinal, rtol=0, atol=1e-14)  # dive when braking
     assert lateral.max() > 3.0  # the 90° left turn at speed
 
 

@@ -17,8 +17,14 @@ RECORD_S, RATE_HZ = 600.0, 5.0
 
 
 def ship(stabiliser, waves=SMALL_SEA, earth=False, seed=3):
-    data = {"kind": "ship", "duration_s": RECORD_S, "rate_hz": RATE_HZ, "seed": seed, "waves": dict(waves),
-            "site": {"earth_rotation": earth}}
+    data = {
+        "kind": "ship",
+        "duration_s": RECORD_S,
+        "rate_hz": RATE_HZ,
+        "seed": seed,
+        "waves": dict(waves),
+        "site": {"earth_rotation": earth},
+    }
     if stabiliser is not None:
         data["stabiliser"] = stabiliser
     return scenario_from_dict(data).spec.model()
@@ -27,8 +33,10 @@ def ship(stabiliser, waves=SMALL_SEA, earth=False, seed=3):
 def record_bound(amplitudes, omega, n, dt):
     """Bound on |mean of x² over n samples − Σ c²/2| for x = Σ c_k cos(ω_k t + ψ_k) sampled every dt:
     each cross term averages a cosine, |(1/n) Σ cos(a t_i + b)| ≤ min(1, 1/(n |sin(a dt/2)|))."""
+
     def average(a):
         return np.minimum(1.0, 1.0 / (n * np.maximum(np.abs(np.sin(a * dt / 2)), 1e-300)))
+
     c, w = amplitudes, omega
     bound = np.sum(c**2 / 2 * average(2 * w))
     cc, wj, wk = np.outer(c, c), w[:, None], w[None, :]
@@ -75,8 +83,7 @@ def test_stabiliser_reduces_roll_as_the_linearised_roll_gimbal_system_predicts()
 
 
 def test_gimbal_stays_within_its_stops_in_a_heavy_sea():
-    model = ship({"gimbal_limit_deg": 45.0, "precession_gain": 12.0}, waves={"significant_height_m": 3.0},
-                 earth=True)
+    model = ship({"gimbal_limit_deg": 45.0, "precession_gain": 12.0}, waves={"significant_height_m": 3.0}, earth=True)
     t = np.arange(0, 301) / 5.0
     traj = model.trajectory(t)
     delta = traj.extras["gimbal_angle_rad"]
@@ -141,15 +148,22 @@ def test_steering_respects_the_gimbal_rate_limit():
 @pytest.mark.parametrize(
     "data, key",
     [
-        ({"kind": "ship", "duration_s": 1, "rate_hz": 1, "stabiliser": {"spin_rate_rpm": 1}}, "stabiliser.spin_rate_rpm"),
+        (
+            {"kind": "ship", "duration_s": 1, "rate_hz": 1, "stabiliser": {"spin_rate_rpm": 1}},
+            "stabiliser.spin_rate_rpm",
+        ),
         ({"kind": "ship", "duration_s": 1, "rate_hz": 1, "waves": {"components": 2.5}}, "waves.components"),
         ({"kind": "ship", "duration_s": 1, "rate_hz": 1, "ship": {"gm_m": -1}}, "ship.gm_m"),
         ({"kind": "ship", "duration_s": 1, "rate_hz": 1, "seed": "7"}, "seed"),
         ({"kind": "spacecraft-cmg", "duration_s": 1, "rate_hz": 1, "slew": {"angle_deg": 200}}, "slew.angle_deg"),
-        ({"kind": "spacecraft-cmg", "duration_s": 1, "rate_hz": 1, "spacecraft": {"inertia_kgm2": [1, 1, 5]}},
-         "spacecraft.inertia_kgm2"),
-        ({"kind": "spacecraft-cmg", "duration_s": 1, "rate_hz": 1, "cmg": {"initial_gimbal_deg": [0, 0, 0]}},
-         "cmg.initial_gimbal_deg[3]"),
+        (
+            {"kind": "spacecraft-cmg", "duration_s": 1, "rate_hz": 1, "spacecraft": {"inertia_kgm2": [1, 1, 5]}},
+            "spacecraft.inertia_kgm2",
+        ),
+        (
+            {"kind": "spacecraft-cmg", "duration_s": 1, "rate_hz": 1, "cmg": {"initial_gimbal_deg": [0, 0, 0]}},
+            "cmg.initial_gimbal_deg[3]",
+        ),
     ],
 )
 def test_bad_keys_raise_config_error_naming_the_key(data, key):

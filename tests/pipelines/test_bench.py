@@ -30,13 +30,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from broad_trials import BROAD_DIR, needs_trial
 from mcap.writer import Writer as PlainMcapWriter
 
 from gyroemu.dynamics.rotation import quat_from_euler_zyx, quat_multiply
 from gyroemu.pipelines import cli
 from gyroemu.pipelines.bench import LogCase, SimCase, evaluate_run, run_bench
 from gyroemu.pipelines.estimation import registry
-from broad_trials import BROAD_DIR, needs_trial
 from gyroemu.pipelines.estimation.metrics import attitude_errors, rmse_deg
 from gyroemu.pipelines.estimation.protocol import Estimate, FilterSetup
 from gyroemu.pipelines.mcap_io import Recording, truth_series, write_mcap
@@ -83,8 +83,9 @@ def configs(tmp_path_factory):
     ideal = (Path(__file__).resolve().parents[2] / "configs" / "devices" / "ideal.toml").read_text()
     assert "rate_hz = 1000" in ideal
     (folder / "ideal200.toml").write_text(ideal.replace("rate_hz = 1000", "rate_hz = 200"))
-    (folder / "jittery200.toml").write_text(ideal.replace("rate_hz = 1000", "rate_hz = 200")
-                                           + "\n[clock]\njitter_s = 1e-5\n")
+    (folder / "jittery200.toml").write_text(
+        ideal.replace("rate_hz = 1000", "rate_hz = 200") + "\n[clock]\njitter_s = 1e-5\n"
+    )
     return folder
 
 
@@ -95,6 +96,7 @@ def _q_axis(axis, angle):
 
 # ==================================================================================================
 # Metrics
+
 
 def test_metrics_closed_forms():
     rng = np.random.default_rng(1)
@@ -152,11 +154,11 @@ def test_evaluate_run_rules():
 # ==================================================================================================
 # Peer adapters on simulated truth
 
+
 def _sim(configs, scenario="rotation.toml", device="ideal200.toml"):
     from gyroemu.dynamics import load_scenario
-    from gyroemu.sensors import load_device
-
     from gyroemu.pipelines.estimation.setup import setup_for
+    from gyroemu.sensors import load_device
 
     sc = load_scenario(configs / scenario)
     dev = load_device(configs / device, seed=0)
@@ -167,9 +169,14 @@ def _sim(configs, scenario="rotation.toml", device="ideal200.toml"):
 
 @pytest.mark.parametrize("name", PEERS)
 def test_peer_on_ideal_rotation(configs, name):
-    report = run_bench([SimCase(str(configs / "rotation.toml"), str(configs / "ideal200.toml"), duration=None),
-                        SimCase(str(configs / "rotation.toml"), str(configs / "ideal200.toml"), duration=None,
-                                six_d=True)], filters=[name], runs=1)
+    report = run_bench(
+        [
+            SimCase(str(configs / "rotation.toml"), str(configs / "ideal200.toml"), duration=None),
+            SimCase(str(configs / "rotation.toml"), str(configs / "ideal200.toml"), duration=None, six_d=True),
+        ],
+        filters=[name],
+        runs=1,
+    )
     nine, six = (c.filters[0].runs[0] for c in report.cases)
     assert [c.mode for c in report.cases] == ["9D", "6D"]
     assert not nine.diverged and not six.diverged
@@ -203,8 +210,9 @@ def test_peer_blocks_and_missing_samples(configs, name):
     whole = registry.make_filter(name, setup).process(s.t, s.gyro, s.accel, s.mag)
     f = registry.make_filter(name, setup)
     cuts = [0, 1, 700, 1500, len(s.t)]
-    parts = Estimate.concatenate([f.process(s.t[a:b], s.gyro[a:b], s.accel[a:b], s.mag[a:b])
-                                  for a, b in zip(cuts, cuts[1:])])
+    parts = Estimate.concatenate(
+        [f.process(s.t[a:b], s.gyro[a:b], s.accel[a:b], s.mag[a:b]) for a, b in zip(cuts, cuts[1:])]
+    )
     np.testing.assert_allclose(parts.q_wb, whole.q_wb, atol=1e-12)
     gyro, accel, mag = s.gyro.copy(), s.accel.copy(), s.mag.copy()
     gyro[[300, 301, 1200]] = np.nan
@@ -308,6 +316,7 @@ def test_vqf_missing_is_reported_not_fatal(monkeypatch, configs):
 # ==================================================================================================
 # The command line, report files, bad input
 
+
 def run_cli(*args) -> int:
     try:
         return cli.main(["bench", *map(str, args)])
@@ -317,9 +326,24 @@ def run_cli(*args) -> int:
 
 def test_cli_writes_the_report(tmp_path, configs, user_filters, capsys):
     out = tmp_path / "report"
-    rc = run_cli("--scenario", configs / "rotation.toml", "--device", configs / "ideal200.toml", "--duration", 3,
-                 "--runs", 2, "--filter", "madgwick", "--filter", f"{user_filters}:TruthFilter",
-                 "--filter", f"{user_filters}:NanFilter", "--out", out)
+    rc = run_cli(
+        "--scenario",
+        configs / "rotation.toml",
+        "--device",
+        configs / "ideal200.toml",
+        "--duration",
+        3,
+        "--runs",
+        2,
+        "--filter",
+        "madgwick",
+        "--filter",
+        f"{user_filters}:TruthFilter",
+        "--filter",
+        f"{user_filters}:NanFilter",
+        "--out",
+        out,
+    )
     printed = capsys.readouterr()
     assert rc == 0, printed.err
     assert sorted(p.name for p in out.iterdir()) == ["bench.json", "bench.md", "rotation_ideal200.png"]
@@ -346,16 +370,28 @@ def write_raw_log(path, stamp_ns, gyro=None, accel=None, truth_q=None, log_time=
         schema = w.register_schema("sensor_msgs/msg/Imu", "ros2msg", IMU.schema.encode())
         streams = []
         if gyro is not None:
-            rows = IMU.encode(stamp_ns, "imu0", {"angular_velocity": gyro, "linear_acceleration": accel,
-                                                 "orientation_covariance": np.r_[-1.0, np.zeros(8)]})
+            rows = IMU.encode(
+                stamp_ns,
+                "imu0",
+                {
+                    "angular_velocity": gyro,
+                    "linear_acceleration": accel,
+                    "orientation_covariance": np.r_[-1.0, np.zeros(8)],
+                },
+            )
             streams.append((w.register_channel("/imu", "cdr", schema), rows))
         if truth_q is not None:
             rows = IMU.encode(stamp_ns, "base_link", {"orientation": np.asarray(truth_q)[:, [1, 2, 3, 0]]})
             streams.append((w.register_channel("/truth/imu", "cdr", schema), rows))
         for k in range(len(stamp_ns)):
             for channel, rows in streams:
-                w.add_message(channel, log_time=int(log_time[k]), data=rows[k].tobytes(),
-                              publish_time=int(log_time[k]), sequence=k)
+                w.add_message(
+                    channel,
+                    log_time=int(log_time[k]),
+                    data=rows[k].tobytes(),
+                    publish_time=int(log_time[k]),
+                    sequence=k,
+                )
         w.finish()
     return path
 
@@ -377,18 +413,26 @@ def test_bad_input_exits_2_naming_it(tmp_path, capsys):
         "--device": (["--device", "no_such_device"], "argument --device: unknown device 'no_such_device'"),
         "--log missing": (["--log", tmp_path / "absent.mcap"], "argument --log: "),
         "not mcap": (["--log", not_mcap], str(not_mcap)),
-        "no imu": (["--log", write_raw_log(tmp_path / "truth_only.mcap", stamps, truth_q=level)],
-                   "holds no IMU channel"),
-        "no truth": (["--log", write_raw_log(tmp_path / "imu_only.mcap", stamps, gyro, accel)],
-                     "has no truth channel"),
-        "stamps": (["--log", write_raw_log(tmp_path / "swapped.mcap", swapped, gyro, accel, level, log_time=stamps)],
-                   "stamps of device 'imu0' are not increasing: sample 101"),
-        "all nan": (["--log", write_raw_log(tmp_path / "nan.mcap", stamps, nan_gyro, accel, level)],
-                    "every IMU sample of device 'imu0' holds NaN"),
+        "no imu": (
+            ["--log", write_raw_log(tmp_path / "truth_only.mcap", stamps, truth_q=level)],
+            "holds no IMU channel",
+        ),
+        "no truth": (["--log", write_raw_log(tmp_path / "imu_only.mcap", stamps, gyro, accel)], "has no truth channel"),
+        "stamps": (
+            ["--log", write_raw_log(tmp_path / "swapped.mcap", swapped, gyro, accel, level, log_time=stamps)],
+            "stamps of device 'imu0' are not increasing: sample 101",
+        ),
+        "all nan": (
+            ["--log", write_raw_log(tmp_path / "nan.mcap", stamps, nan_gyro, accel, level)],
+            "every IMU sample of device 'imu0' holds NaN",
+        ),
     }
     for what, (args, message) in cases.items():
-        rc = run_cli(*args, "--filter", "madgwick", "--out", tmp_path / "out") if what != "--filter" \
+        rc = (
+            run_cli(*args, "--filter", "madgwick", "--out", tmp_path / "out")
+            if what != "--filter"
             else run_cli(*args, "--out", tmp_path / "out")
+        )
         err = capsys.readouterr().err
         assert rc == 2, (what, err)
         assert message in err, (what, err)
@@ -419,14 +463,14 @@ def test_log_case_counts_the_movement_mask(tmp_path, configs, user_filters):
     movement[400:1600] = True
     wrong = truth.q_wb.copy()
     wrong[~movement] = [0.0, 1.0, 0.0, 0.0]  # upside down outside the mask
-    log = write_mcap(tmp_path / "run.mcap", Recording(samples, truth=truth, device=dev, movement=movement),
-                     scenario=sc)
+    log = write_mcap(tmp_path / "run.mcap", Recording(samples, truth=truth, device=dev, movement=movement), scenario=sc)
     module = tmp_path / "masked.py"
     module.write_text(
         "import numpy as np\nfrom gyroemu.pipelines.estimation.protocol import Estimate\n"
         f"Q = np.load({str(tmp_path / 'q.npy')!r})\n"
         "class Masked:\n    name = 'masked'\n    def __init__(self, setup):\n        self.setup = setup\n"
-        "    def process(self, t, gyro, accel, mag=None):\n        return Estimate(q_wb=Q[:len(t)])\n")
+        "    def process(self, t, gyro, accel, mag=None):\n        return Estimate(q_wb=Q[:len(t)])\n"
+    )
     np.save(tmp_path / "q.npy", wrong)
     report = run_bench([LogCase(log)], filters=[f"{module}:Masked", "vqf"])
     (case,) = report.cases
@@ -439,6 +483,7 @@ def test_log_case_counts_the_movement_mask(tmp_path, configs, user_filters):
 
 # ==================================================================================================
 # Batched mode (the plumbing, with a stand-in for gyroemu.pipelines.estimation.batched)
+
 
 def test_batched_mode(monkeypatch, configs):
     calls = []

@@ -84,8 +84,17 @@ def test_simulate_with_a_device_writes_its_samples_reproducibly(tmp_path):
     device.write_text('description = "x"\nrate_hz = 100\n[gyro.errors]\narw_deg_per_sqrt_h = 0.5\n')
     runs = []
     for name in ("a.npz", "b.npz"):
-        result = gyroemu("simulate", "--scenario", str(scenario), "--device", str(device), "--seed", "7",
-                         "--out", str(tmp_path / name))
+        result = gyroemu(
+            "simulate",
+            "--scenario",
+            str(scenario),
+            "--device",
+            str(device),
+            "--seed",
+            "7",
+            "--out",
+            str(tmp_path / name),
+        )
         assert result.returncode == 0, result.stderr
         with np.load(tmp_path / name) as data:
             runs.append(data["imu/gyro"].copy())
@@ -105,8 +114,9 @@ def test_scenarios_lists_every_builtin_and_demo_runs():
 
 def test_simulate_to_mcap_then_info_and_allan(tmp_path):
     log = tmp_path / "run.mcap"
-    result = gyroemu("simulate", "--scenario", "bench_static", "--device", "navigation_fog", "--duration", "30",
-                     "--out", str(log))
+    result = gyroemu(
+        "simulate", "--scenario", "bench_static", "--device", "navigation_fog", "--duration", "30", "--out", str(log)
+    )
     assert result.returncode == 0, result.stderr
     info = gyroemu("info", str(log), "--configs")
     assert info.returncode == 0, info.stderr

@@ -19,6 +19,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from broad_trials import BROAD_DIR, needs_trial
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
@@ -26,7 +27,6 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from gyroemu.pipelines import cli
 from gyroemu.pipelines.importers import BROAD_CITATION, ImportInputError, import_broad, read_broad
 from gyroemu.pipelines.mcap_io import LogWarning, McapFileWriter, Recording, read_mcap, write_mcap
-from broad_trials import BROAD_DIR, needs_trial
 from gyroemu.pipelines.messages import FLAG, IMU, schema_text
 from gyroemu.sensors.samples import ImuSamples
 
@@ -53,6 +53,7 @@ def hdf5_arrays(path):
 
 # ---------------------------------------------------------------------------------------------------
 # A real trial.
+
 
 @pytest.fixture(scope="module")
 def imported(tmp_path_factory):
@@ -134,7 +135,8 @@ def test_real_trial_independent_decoders(imported):
         for centre in centres:
             first, last = max(0, centre - 40), min(n - 1, centre + 40)
             for schema, channel, message, ros in reader.iter_decoded_messages(
-                    topics=list(seen), starting_at=round(first * step), ending_at=round(last * step)):
+                topics=list(seen), starting_at=round(first * step), ending_at=round(last * step)
+            ):
                 k = int(round(message.log_time / step))
                 assert message.log_time == message.publish_time
                 other = store.deserialize_cdr(message.data, schema.name)
@@ -142,10 +144,12 @@ def test_real_trial_independent_decoders(imported):
                     assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == message.log_time
                     if channel.topic == "/imu":
                         assert msg.header.frame_id == "imu0" and msg.orientation_covariance[0] == -1.0
-                        assert [msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z] == \
-                            h5["imu_gyr"][k].tolist()
-                        assert [msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z] == \
-                            h5["imu_acc"][k].tolist()
+                        assert [msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z] == h5[
+                            "imu_gyr"
+                        ][k].tolist()
+                        assert [msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z] == h5[
+                            "imu_acc"
+                        ][k].tolist()
                     elif channel.topic == "/movement":
                         assert schema.name == "gyroemu_msgs/msg/Flag" and msg.header.frame_id == "imu0"
                         assert msg.data is bool(movement[k])
@@ -167,8 +171,11 @@ def test_cli_import_and_info(tmp_path):
     source = BROAD_DIR / TRIAL
     before = fingerprint(source)
     out = tmp_path / "trial.mcap"
-    result = subprocess.run([sys.executable, "-m", "gyroemu", "import", "broad", str(source), "--out", str(out)],
-                            capture_output=True, text=True)
+    result = subprocess.run(
+        [sys.executable, "-m", "gyroemu", "import", "broad", str(source), "--out", str(out)],
+        capture_output=True,
+        text=True,
+    )
     assert result.returncode == 0, result.stderr
     assert fingerprint(source) == before
     n = len(read_broad(source))
@@ -184,15 +191,21 @@ def test_cli_import_and_info(tmp_path):
 # ---------------------------------------------------------------------------------------------------
 # Synthetic trials: round trip, and bad input.
 
+
 def write_trial(path, n=50, rate=100.0, drop=None, replace=None, attrs=True):
     """A small BROAD-like HDF5 file; ``drop`` omits a dataset, ``replace`` swaps datasets' values."""
     rng = np.random.default_rng(3)
     q = rng.normal(size=(n, 4))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     q[5:9] = np.nan
-    data = {"imu_gyr": rng.normal(size=(n, 3)), "imu_acc": rng.normal(size=(n, 3)) + [0, 0, 9.81],
-            "imu_mag": rng.normal(size=(n, 3)) * 30, "opt_quat": q, "opt_pos": rng.normal(size=(n, 3)),
-            "movement": np.arange(n) % 7 < 4}
+    data = {
+        "imu_gyr": rng.normal(size=(n, 3)),
+        "imu_acc": rng.normal(size=(n, 3)) + [0, 0, 9.81],
+        "imu_mag": rng.normal(size=(n, 3)) * 30,
+        "opt_quat": q,
+        "opt_pos": rng.normal(size=(n, 3)),
+        "movement": np.arange(n) % 7 < 4,
+    }
     data.update(replace or {})
     with h5py.File(path, "w") as f:
         for name, value in data.items():
@@ -239,25 +252,28 @@ def test_irrational_rate_stamps_within_half_ns(tmp_path):
     assert np.all(np.abs(stamp_ns - np.arange(3000) * 1e9 / (np.pi * 100)) <= 0.5 + 1e-6)
 
 
-@pytest.mark.parametrize("case, named", [
-    ("missing_file", "no such file"),
-    ("not_hdf5", "not an HDF5 file"),
-    ("folder", "is a folder"),
-    ("no_imu_gyr", "dataset 'imu_gyr': missing"),
-    ("no_imu_mag", "dataset 'imu_mag': missing"),
-    ("no_opt_quat", "dataset 'opt_quat': missing"),
-    ("no_movement", "dataset 'movement': missing"),
-    ("gyro_4_columns", "dataset 'imu_gyr': shape (50, 4), expected (50, 3)"),
-    ("quat_3_columns", "dataset 'opt_quat': shape (50, 3), expected (50, 4)"),
-    ("acc_short", "dataset 'imu_acc': shape (49, 3), expected (50, 3)"),
-    ("movement_2d", "dataset 'movement': shape (50, 1), expected (50)"),
-    ("movement_not_01", "dataset 'movement': values other than 0 and 1"),
-    ("mag_text", "dataset 'imu_mag': type"),
-    ("group", "dataset 'imu_acc': is a group"),
-    ("empty", "dataset 'imu_gyr': holds no samples"),
-    ("no_rate", "attribute 'sampling_rate': missing"),
-    ("zero_rate", "attribute 'sampling_rate'"),
-])
+@pytest.mark.parametrize(
+    "case, named",
+    [
+        ("missing_file", "no such file"),
+        ("not_hdf5", "not an HDF5 file"),
+        ("folder", "is a folder"),
+        ("no_imu_gyr", "dataset 'imu_gyr': missing"),
+        ("no_imu_mag", "dataset 'imu_mag': missing"),
+        ("no_opt_quat", "dataset 'opt_quat': missing"),
+        ("no_movement", "dataset 'movement': missing"),
+        ("gyro_4_columns", "dataset 'imu_gyr': shape (50, 4), expected (50, 3)"),
+        ("quat_3_columns", "dataset 'opt_quat': shape (50, 3), expected (50, 4)"),
+        ("acc_short", "dataset 'imu_acc': shape (49, 3), expected (50, 3)"),
+        ("movement_2d", "dataset 'movement': shape (50, 1), expected (50)"),
+        ("movement_not_01", "dataset 'movement': values other than 0 and 1"),
+        ("mag_text", "dataset 'imu_mag': type"),
+        ("group", "dataset 'imu_acc': is a group"),
+        ("empty", "dataset 'imu_gyr': holds no samples"),
+        ("no_rate", "attribute 'sampling_rate': missing"),
+        ("zero_rate", "attribute 'sampling_rate'"),
+    ],
+)
 def test_bad_input_exits_2_naming_file_and_item(tmp_path, case, named):
     source = tmp_path / "trial.hdf5"
     if case == "not_hdf5":
@@ -271,13 +287,18 @@ def test_bad_input_exits_2_naming_file_and_item(tmp_path, case, named):
         with h5py.File(source, "a") as f:
             f.create_group("imu_acc")
     elif case != "missing_file":
-        replace = {"gyro_4_columns": {"imu_gyr": np.zeros((50, 4))}, "quat_3_columns": {"opt_quat": np.zeros((50, 3))},
-                   "acc_short": {"imu_acc": np.zeros((49, 3))}, "movement_2d": {"movement": np.ones((50, 1), bool)},
-                   "movement_not_01": {"movement": np.full(50, 2)},
-                   "mag_text": {"imu_mag": np.array([["a", "b", "c"]] * 50, dtype="S1")},
-                   "empty": {name: np.zeros((0, w)) for name, w in
-                             (("imu_gyr", 3), ("imu_acc", 3), ("imu_mag", 3), ("opt_quat", 4))} | {
-                                 "movement": np.zeros(0, bool)}}.get(case)
+        replace = {
+            "gyro_4_columns": {"imu_gyr": np.zeros((50, 4))},
+            "quat_3_columns": {"opt_quat": np.zeros((50, 3))},
+            "acc_short": {"imu_acc": np.zeros((49, 3))},
+            "movement_2d": {"movement": np.ones((50, 1), bool)},
+            "movement_not_01": {"movement": np.full(50, 2)},
+            "mag_text": {"imu_mag": np.array([["a", "b", "c"]] * 50, dtype="S1")},
+            "empty": {
+                name: np.zeros((0, w)) for name, w in (("imu_gyr", 3), ("imu_acc", 3), ("imu_mag", 3), ("opt_quat", 4))
+            }
+            | {"movement": np.zeros(0, bool)},
+        }.get(case)
         write_trial(source, replace=replace, attrs=case != "no_rate", rate=0.0 if case == "zero_rate" else 100.0)
     before = fingerprint(source) if source.is_file() else None
     inputs = sorted(tmp_path.iterdir())
@@ -294,12 +315,15 @@ def test_bad_input_exits_2_naming_file_and_item(tmp_path, case, named):
         assert e.value.file == str(source) and (e.value.item or "") in named
 
 
-@pytest.mark.parametrize("argv, named", [
-    (["import", "broad", "{src}", "--out", "{tmp}/no/such/folder/t.mcap"], "argument --out: {tmp}/no/such/folder"),
-    (["import", "broad", "{src}", "--out", "{tmp}/t.npz"], "argument --out: {tmp}/t.npz: write a .mcap file"),
-    (["import", "csv", "{src}", "--out", "{tmp}/t.mcap"], "argument format: invalid choice: 'csv'"),
-    (["import", "broad", "{src}"], "--out"),
-])
+@pytest.mark.parametrize(
+    "argv, named",
+    [
+        (["import", "broad", "{src}", "--out", "{tmp}/no/such/folder/t.mcap"], "argument --out: {tmp}/no/such/folder"),
+        (["import", "broad", "{src}", "--out", "{tmp}/t.npz"], "argument --out: {tmp}/t.npz: write a .mcap file"),
+        (["import", "csv", "{src}", "--out", "{tmp}/t.mcap"], "argument format: invalid choice: 'csv'"),
+        (["import", "broad", "{src}"], "--out"),
+    ],
+)
 def test_bad_arguments_exit_2_naming_them(tmp_path, argv, named):
     source = tmp_path / "trial.hdf5"
     write_trial(source)
@@ -338,10 +362,16 @@ def test_failed_write_leaves_nothing(tmp_path, monkeypatch):
 # ---------------------------------------------------------------------------------------------------
 # The movement channel in general logs.
 
+
 def _samples(n, device="imu0", t0=0.0):
     rng = np.random.default_rng(len(device))
-    return ImuSamples(t=t0 + np.arange(n) * 0.01, gyro=rng.normal(size=(n, 3)), accel=rng.normal(size=(n, 3)),
-                      mag=np.full((n, 3), np.nan), device=device)
+    return ImuSamples(
+        t=t0 + np.arange(n) * 0.01,
+        gyro=rng.normal(size=(n, 3)),
+        accel=rng.normal(size=(n, 3)),
+        mag=np.full((n, 3), np.nan),
+        device=device,
+    )
 
 
 def test_movement_with_topic_prefixes(tmp_path):
@@ -367,10 +397,15 @@ def test_movement_at_unknown_stamps_is_false_with_a_warning(tmp_path):
     with open(path, "wb") as f:
         w = McapFileWriter(f)
         imu = w.register_channel("/imu", "cdr", w.register_schema(IMU.name, "ros2msg", schema_text(IMU.name).encode()))
-        mov = w.register_channel("/movement", "cdr",
-                                 w.register_schema(FLAG.name, "ros2msg", schema_text(FLAG.name).encode()))
-        w.add_messages([(imu, stamps, IMU.encode(stamps, "imu0")),
-                        (mov, flag_stamps, FLAG.encode(flag_stamps, "imu0", {"data": flags}))])
+        mov = w.register_channel(
+            "/movement", "cdr", w.register_schema(FLAG.name, "ros2msg", schema_text(FLAG.name).encode())
+        )
+        w.add_messages(
+            [
+                (imu, stamps, IMU.encode(stamps, "imu0")),
+                (mov, flag_stamps, FLAG.encode(flag_stamps, "imu0", {"data": flags})),
+            ]
+        )
         w.finish()
     with pytest.warns(LogWarning, match=r"20 samples of /imu have no message on /movement .*False"):
         log = read_mcap(path)

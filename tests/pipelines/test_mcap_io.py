@@ -44,8 +44,16 @@ from gyroemu.pipelines.messages import IMU, RAW_MESSAGE_TYPES, schema_text
 from gyroemu.sensors import load_device
 from gyroemu.sensors.samples import ImuSamples
 
-PRESETS = ["classic_rate_gyro", "consumer_mems", "floated_rig", "free_gyro", "ideal", "navigation_fog",
-           "navigation_rlg", "tactical_mems"]
+PRESETS = [
+    "classic_rate_gyro",
+    "consumer_mems",
+    "floated_rig",
+    "free_gyro",
+    "ideal",
+    "navigation_fog",
+    "navigation_rlg",
+    "tactical_mems",
+]
 
 
 @pytest.fixture(scope="module")
@@ -101,6 +109,7 @@ def read_quietly(path):
 
 # ---------------------------------------------------------------------------------------------------
 # Round trips.
+
 
 @pytest.mark.parametrize("preset", PRESETS)
 def test_round_trip_every_preset(tmp_path, runs, scenario, preset):
@@ -159,8 +168,14 @@ def test_blocks_must_follow_in_time(tmp_path, runs):
 
 
 def _slice(s: ImuSamples, a, b) -> ImuSamples:
-    return ImuSamples(t=s.t[a:b], gyro=s.gyro[a:b], accel=s.accel[a:b], mag=s.mag[a:b],
-                      raw={k: {n: v[a:b] for n, v in o.items()} for k, o in s.raw.items()}, device=s.device)
+    return ImuSamples(
+        t=s.t[a:b],
+        gyro=s.gyro[a:b],
+        accel=s.accel[a:b],
+        mag=s.mag[a:b],
+        raw={k: {n: v[a:b] for n, v in o.items()} for k, o in s.raw.items()},
+        device=s.device,
+    )
 
 
 def _slice_series(s: ImuSeries, a, b) -> ImuSeries:
@@ -172,9 +187,13 @@ def test_estimate_channel_round_trip(tmp_path, runs):
     rng = np.random.default_rng(5)
     n = len(samples)
     a = rng.normal(size=(n, 3, 3)) * 1e-3
-    estimate = ImuSeries(t=samples.t, q_wb=truth.q_wb, omega_b=samples.gyro - 1e-4,
-                         q_wb_covariance=a @ a.transpose(0, 2, 1),
-                         omega_b_covariance=np.broadcast_to(np.eye(3) * 1e-6, (n, 3, 3)))
+    estimate = ImuSeries(
+        t=samples.t,
+        q_wb=truth.q_wb,
+        omega_b=samples.gyro - 1e-4,
+        q_wb_covariance=a @ a.transpose(0, 2, 1),
+        omega_b_covariance=np.broadcast_to(np.eye(3) * 1e-6, (n, 3, 3)),
+    )
     log = read_quietly(write_mcap(tmp_path / "e.mcap", Recording(samples, truth=truth, estimate=estimate)))
     got = log.device.estimate
     assert log.device.topics["estimate/imu"] == "/estimate/imu"
@@ -185,8 +204,10 @@ def test_estimate_channel_round_trip(tmp_path, runs):
 
 
 def test_several_devices_prefixed_and_interleaved(tmp_path, runs, scenario):
-    recordings = [Recording(runs[name][1], truth=runs[name][2], device=runs[name][0])
-                  for name in ("consumer_mems", "classic_rate_gyro", "navigation_fog")]  # 1000, 200, 1000 Hz
+    recordings = [
+        Recording(runs[name][1], truth=runs[name][2], device=runs[name][0])
+        for name in ("consumer_mems", "classic_rate_gyro", "navigation_fog")
+    ]  # 1000, 200, 1000 Hz
     path = write_mcap(tmp_path / "three.mcap", recordings, scenario=scenario)
     log = read_quietly(path)
     assert list(log.devices) == ["consumer_mems", "classic_rate_gyro", "navigation_fog"]
@@ -198,7 +219,7 @@ def test_several_devices_prefixed_and_interleaved(tmp_path, runs, scenario):
     assert len(log.metadata) == 3
     _check_contract(path)
     with pytest.raises(ValueError, match="devices"):
-        log.samples
+        _ = log.samples
     with pytest.raises(ValueError, match="prefix"):
         with McapLogWriter(tmp_path / "bad.mcap") as writer:
             writer.write(recordings[0])
@@ -213,8 +234,13 @@ def test_bad_inputs_to_the_writer(tmp_path, runs):
     renamed = ImuSamples(t=samples.t, gyro=samples.gyro, accel=samples.accel, mag=samples.mag, device="raw")
     with pytest.raises(ValueError, match="cannot prefix"):
         write_mcap(tmp_path / "n.mcap", [renamed, samples])
-    odd = ImuSamples(t=samples.t, gyro=samples.gyro, accel=samples.accel, mag=samples.mag,
-                     raw={"laser-vortex": {"x": np.zeros(len(samples))}})
+    odd = ImuSamples(
+        t=samples.t,
+        gyro=samples.gyro,
+        accel=samples.accel,
+        mag=samples.mag,
+        raw={"laser-vortex": {"x": np.zeros(len(samples))}},
+    )
     with pytest.warns(LogWarning, match="laser-vortex"):
         write_mcap(tmp_path / "n.mcap", odd)
     assert read_quietly(tmp_path / "n.mcap").samples.raw == {}
@@ -236,6 +262,7 @@ def test_interrupted_write_leaves_nothing(tmp_path, runs):
 # ---------------------------------------------------------------------------------------------------
 # The file against interface.md and the MCAP specification, read by the mcap library.
 
+
 def _check_contract(path):
     """Profile, encodings, summary, indexes, CRCs, time order, stamps, sequences."""
     data = Path(path).read_bytes()
@@ -255,15 +282,15 @@ def _check_contract(path):
     with open(path, "rb") as f:
         assert [m.name for m in make_reader(f).iter_metadata()].count("gyroemu") >= 1
     # Footer: summary CRC over the summary section and the footer's fields before the CRC.
-    footer = data[-8 - 29:-8]
+    footer = data[-8 - 29 : -8]
     summary_start, summary_offset_start, crc = struct.unpack("<QQI", footer[9:])
     assert data[-8:] == b"\x89MCAP0\r\n" and summary_offset_start > summary_start
-    assert zlib.crc32(data[summary_start:len(data) - 8 - 29] + footer[:25]) == crc
+    assert zlib.crc32(data[summary_start : len(data) - 8 - 29] + footer[:25]) == crc
     # Messages: time order in the file; log = publish = header stamp; sequences from 0 per channel.
     times = [m.log_time for _, _, m in messages]
     assert times == sorted(times)
     counts = {}
-    for schema, channel, message in messages:
+    for _, channel, message in messages:
         sec, nanosec = struct.unpack_from("<iI", message.data, 4)
         assert message.log_time == message.publish_time == sec * 10**9 + nanosec
         assert message.sequence == counts.get(channel.id, 0)
@@ -271,8 +298,13 @@ def _check_contract(path):
     assert counts == summary.statistics.channel_message_counts
     # Message indexes: every channel of every chunk, entries pointing at its Message records.
     for ci in summary.chunk_indexes:
-        chunk = next(StreamReader(BytesIO(data[ci.chunk_start_offset:ci.chunk_start_offset + ci.chunk_length]),
-                                  skip_magic=True, emit_chunks=True).records)
+        chunk = next(
+            StreamReader(
+                BytesIO(data[ci.chunk_start_offset : ci.chunk_start_offset + ci.chunk_length]),
+                skip_magic=True,
+                emit_chunks=True,
+            ).records
+        )
         assert isinstance(chunk, Chunk)
         records = breakup_chunk(chunk, validate_crc=True)
         raw = zstandard.decompress(chunk.data, chunk.uncompressed_size)
@@ -288,14 +320,19 @@ def _check_contract(path):
 
 def test_contract_structure(tmp_path, runs, scenario):
     device, samples, truth = runs["consumer_mems"]
-    path = write_mcap(tmp_path / "c.mcap", Recording(samples, truth=truth, device=device), scenario=scenario,
-                      chunk_size=8192)
+    path = write_mcap(
+        tmp_path / "c.mcap", Recording(samples, truth=truth, device=device), scenario=scenario, chunk_size=8192
+    )
     _check_contract(path)
     with open(path, "rb") as f:
         summary = make_reader(f).get_summary()
     topics = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
-    assert topics == {"/imu": "sensor_msgs/msg/Imu", "/mag": "sensor_msgs/msg/MagneticField",
-                      "/truth/imu": "sensor_msgs/msg/Imu", "/raw/mems": "gyroemu_msgs/msg/MemsRaw"}
+    assert topics == {
+        "/imu": "sensor_msgs/msg/Imu",
+        "/mag": "sensor_msgs/msg/MagneticField",
+        "/truth/imu": "sensor_msgs/msg/Imu",
+        "/raw/mems": "gyroemu_msgs/msg/MemsRaw",
+    }
     assert summary.schemas[1].data.decode() == schema_text(summary.schemas[1].name)
     # Same stamp: /imu, /mag, /truth/imu, /raw/mems in that order, sample after sample.
     with open(path, "rb") as f:
@@ -319,8 +356,9 @@ def test_independent_readers_agree(tmp_path, runs):
     for k, (a, b) in enumerate(rows["/imu"]):
         for msg in (a, b):
             assert [msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z] == list(samples.gyro[k])
-            assert [msg.linear_acceleration.x, msg.linear_acceleration.y,
-                    msg.linear_acceleration.z] == list(samples.accel[k])
+            assert [msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z] == list(
+                samples.accel[k]
+            )
             assert msg.orientation_covariance[0] == -1.0
             assert msg.header.frame_id == device.name
     for k, (a, b) in enumerate(rows["/mag"]):
@@ -348,37 +386,69 @@ def test_messages_identical_to_mcap_ros2_writer(tmp_path, runs):
     raw = samples.raw["rlg"]
     with open(theirs, "wb") as f:
         writer = Ros2McapWriter(f)
-        schemas = {name: writer.register_msgdef(name, schema_text(name))
-                   for name in ("sensor_msgs/msg/Imu", "gyroemu_msgs/msg/RlgRaw")}
+        schemas = {
+            name: writer.register_msgdef(name, schema_text(name))
+            for name in ("sensor_msgs/msg/Imu", "gyroemu_msgs/msg/RlgRaw")
+        }
         for k in range(len(samples)):
             sec, nanosec = divmod(int(round(samples.t[k] * 1e9)), 10**9)
             header = {"stamp": {"sec": sec, "nanosec": nanosec}}
             stamp = sec * 10**9 + nanosec
             vec = lambda v: dict(zip("xyz", map(float, v)))  # noqa: E731
-            writer.write_message("/imu", schemas["sensor_msgs/msg/Imu"], {
-                "header": {**header, "frame_id": samples.device},
-                "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0},
-                "orientation_covariance": [-1.0] + [0.0] * 8, "angular_velocity": vec(samples.gyro[k]),
-                "angular_velocity_covariance": [0.0] * 9, "linear_acceleration": vec(samples.accel[k]),
-                "linear_acceleration_covariance": [0.0] * 9}, log_time=stamp, publish_time=stamp, sequence=k)
+            writer.write_message(
+                "/imu",
+                schemas["sensor_msgs/msg/Imu"],
+                {
+                    "header": {**header, "frame_id": samples.device},
+                    "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0},
+                    "orientation_covariance": [-1.0] + [0.0] * 8,
+                    "angular_velocity": vec(samples.gyro[k]),
+                    "angular_velocity_covariance": [0.0] * 9,
+                    "linear_acceleration": vec(samples.accel[k]),
+                    "linear_acceleration_covariance": [0.0] * 9,
+                },
+                log_time=stamp,
+                publish_time=stamp,
+                sequence=k,
+            )
             q = truth.q_wb[k]
-            writer.write_message("/truth/imu", schemas["sensor_msgs/msg/Imu"], {
-                "header": {**header, "frame_id": BODY_FRAME}, "orientation": dict(zip("wxyz", map(float, q))),
-                "orientation_covariance": [0.0] * 9, "angular_velocity": vec(truth.omega_b[k]),
-                "angular_velocity_covariance": [0.0] * 9, "linear_acceleration": vec(truth.specific_force_b[k]),
-                "linear_acceleration_covariance": [0.0] * 9}, log_time=stamp, publish_time=stamp, sequence=k)
-            writer.write_message("/raw/rlg", schemas["gyroemu_msgs/msg/RlgRaw"], {
-                "header": {**header, "frame_id": samples.device},
-                "fringe_count": [int(x) for x in raw["fringe_count"][k]],
-                "beat_phase_rad": list(map(float, raw["beat_phase_rad"][k])),
-                "dither_angle_rad": list(map(float, raw["dither_angle_rad"][k]))},
-                log_time=stamp, publish_time=stamp, sequence=k)
+            writer.write_message(
+                "/truth/imu",
+                schemas["sensor_msgs/msg/Imu"],
+                {
+                    "header": {**header, "frame_id": BODY_FRAME},
+                    "orientation": dict(zip("wxyz", map(float, q))),
+                    "orientation_covariance": [0.0] * 9,
+                    "angular_velocity": vec(truth.omega_b[k]),
+                    "angular_velocity_covariance": [0.0] * 9,
+                    "linear_acceleration": vec(truth.specific_force_b[k]),
+                    "linear_acceleration_covariance": [0.0] * 9,
+                },
+                log_time=stamp,
+                publish_time=stamp,
+                sequence=k,
+            )
+            writer.write_message(
+                "/raw/rlg",
+                schemas["gyroemu_msgs/msg/RlgRaw"],
+                {
+                    "header": {**header, "frame_id": samples.device},
+                    "fringe_count": [int(x) for x in raw["fringe_count"][k]],
+                    "beat_phase_rad": list(map(float, raw["beat_phase_rad"][k])),
+                    "dither_angle_rad": list(map(float, raw["dither_angle_rad"][k])),
+                },
+                log_time=stamp,
+                publish_time=stamp,
+                sequence=k,
+            )
         writer.finish()
 
     def messages(path):
         with open(path, "rb") as f:
-            return [(c.topic, m.log_time, m.publish_time, m.sequence, m.data)
-                    for _, c, m in make_reader(f).iter_messages(log_time_order=False)]
+            return [
+                (c.topic, m.log_time, m.publish_time, m.sequence, m.data)
+                for _, c, m in make_reader(f).iter_messages(log_time_order=False)
+            ]
 
     assert messages(ours) == messages(theirs)
     # and our reader reads their file to the same numbers
@@ -388,6 +458,7 @@ def test_messages_identical_to_mcap_ros2_writer(tmp_path, runs):
 # ---------------------------------------------------------------------------------------------------
 # Damaged and foreign files.
 
+
 def _chunk_message_counts(path):
     """(end offset, messages per channel topic) of each chunk, from the summary."""
     data = Path(path).read_bytes()
@@ -395,8 +466,13 @@ def _chunk_message_counts(path):
         summary = make_reader(f).get_summary()
     out = []
     for ci in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
-        chunk = next(StreamReader(BytesIO(data[ci.chunk_start_offset:ci.chunk_start_offset + ci.chunk_length]),
-                                  skip_magic=True, emit_chunks=True).records)
+        chunk = next(
+            StreamReader(
+                BytesIO(data[ci.chunk_start_offset : ci.chunk_start_offset + ci.chunk_length]),
+                skip_magic=True,
+                emit_chunks=True,
+            ).records
+        )
         topics = [summary.channels[r.channel_id].topic for r in breakup_chunk(chunk) if hasattr(r, "sequence")]
         out.append((ci.chunk_start_offset + ci.chunk_length, topics))
     return out
@@ -407,7 +483,7 @@ def test_truncated_file_recovers_complete_chunks(tmp_path, runs, fraction):
     _, samples, truth = runs["navigation_rlg"]
     full = write_mcap(tmp_path / "full.mcap", Recording(samples, truth=truth), chunk_size=8192)
     data = full.read_bytes()
-    summary_start = struct.unpack("<QQI", data[-8 - 29 + 9:-8])[0]  # from the Footer record
+    summary_start = struct.unpack("<QQI", data[-8 - 29 + 9 : -8])[0]  # from the Footer record
     cut = summary_start + 40 if fraction == "summary" else int(len(data) * fraction)
     cut_path = tmp_path / "cut.mcap"
     cut_path.write_bytes(data[:cut])
@@ -427,7 +503,7 @@ def test_truncated_file_recovers_complete_chunks(tmp_path, runs, fraction):
     assert any("no message on /raw/rlg" in m for m in messages) == (expected["/imu"] > n)
     assert_samples_equal(log.samples, samples, n=n)
     assert len(log.truth) == expected["/truth/imu"]
-    assert np.array_equal(log.truth.q_wb, truth.q_wb[:expected["/truth/imu"]])
+    assert np.array_equal(log.truth.q_wb, truth.q_wb[: expected["/truth/imu"]])
     assert file_digest(cut_path) == before
     if fraction == "summary":
         assert n == len(samples)
@@ -445,8 +521,9 @@ def test_truncated_before_any_chunk(tmp_path, runs):
         assert e.value.file == str(path)
 
 
-@pytest.mark.parametrize("case", ["text", "empty", "garbage_after_magic", "flipped_chunk_byte", "crc", "folder",
-                                  "missing", "no_imu"])
+@pytest.mark.parametrize(
+    "case", ["text", "empty", "garbage_after_magic", "flipped_chunk_byte", "crc", "folder", "missing", "no_imu"]
+)
 def test_unreadable_files_raise_log_error_naming_the_file(tmp_path, runs, case):
     _, samples, _ = runs["ideal"]
     path = tmp_path / "bad.mcap"
@@ -509,24 +586,45 @@ def test_foreign_file(tmp_path, compression):
     path = tmp_path / "foreign.mcap"
     with open(path, "wb") as f:
         writer = Ros2McapWriter(f, chunk_size=16384, compression=compression)
-        imu = writer.register_msgdef("sensor_msgs/msg/Imu", get_typestore(Stores.ROS2_HUMBLE).generate_msgdef(
-            "sensor_msgs/msg/Imu")[0].replace("time stamp", "builtin_interfaces/Time stamp") +
-            "=" * 80 + "\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n")
+        imu = writer.register_msgdef(
+            "sensor_msgs/msg/Imu",
+            get_typestore(Stores.ROS2_HUMBLE)
+            .generate_msgdef("sensor_msgs/msg/Imu")[0]
+            .replace("time stamp", "builtin_interfaces/Time stamp")
+            + "=" * 80
+            + "\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n",
+        )
         text = writer.register_msgdef("std_msgs/msg/String", "string data\n")
         mag = writer.register_msgdef("sensor_msgs/msg/MagneticField", schema_text("sensor_msgs/msg/MagneticField"))
         for k in range(n):
             sec, nanosec = divmod(int(stamps[k]), 10**9)
             header = {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": ["imu_link", "imu", ""][k % 3]}
-            writer.write_message("/sensors/imu_raw", imu, {
-                "header": header, "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0},
-                "orientation_covariance": [0.0] * 9, "angular_velocity": dict(zip("xyz", gyro[k])),
-                "angular_velocity_covariance": [0.0] * 9, "linear_acceleration": dict(zip("xyz", accel[k])),
-                "linear_acceleration_covariance": [0.0] * 9}, log_time=int(stamps[k]) + 2_000_000)
+            writer.write_message(
+                "/sensors/imu_raw",
+                imu,
+                {
+                    "header": header,
+                    "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0},
+                    "orientation_covariance": [0.0] * 9,
+                    "angular_velocity": dict(zip("xyz", gyro[k])),
+                    "angular_velocity_covariance": [0.0] * 9,
+                    "linear_acceleration": dict(zip("xyz", accel[k])),
+                    "linear_acceleration_covariance": [0.0] * 9,
+                },
+                log_time=int(stamps[k]) + 2_000_000,
+            )
             if k % 10 == 0:
                 writer.write_message("/rosout_text", text, {"data": f"sample {k}"}, log_time=int(stamps[k]) + 2_000_001)
-                writer.write_message("/sensors/mag", mag, {
-                    "header": header, "magnetic_field": {"x": 1e-5, "y": 0.0, "z": 0.0},
-                    "magnetic_field_covariance": [0.0] * 9}, log_time=int(stamps[k]) + 2_000_002)
+                writer.write_message(
+                    "/sensors/mag",
+                    mag,
+                    {
+                        "header": header,
+                        "magnetic_field": {"x": 1e-5, "y": 0.0, "z": 0.0},
+                        "magnetic_field_covariance": [0.0] * 9,
+                    },
+                    log_time=int(stamps[k]) + 2_000_002,
+                )
         writer.finish()
     with pytest.warns(LogWarning) as caught:
         log = read_mcap(path)
@@ -566,7 +664,10 @@ def test_rosbags_anyreader_reads_our_log(tmp_path, runs):
     path = write_mcap(tmp_path / "run.mcap", Recording(samples, truth=truth))
     with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
         assert {c.topic: c.msgtype for c in reader.connections} == {
-            "/imu": "sensor_msgs/msg/Imu", "/truth/imu": "sensor_msgs/msg/Imu", "/raw/rlg": "gyroemu_msgs/msg/RlgRaw"}
+            "/imu": "sensor_msgs/msg/Imu",
+            "/truth/imu": "sensor_msgs/msg/Imu",
+            "/raw/rlg": "gyroemu_msgs/msg/RlgRaw",
+        }
         counts = {}
         for connection, log_time, data in reader.messages():
             msg = reader.deserialize(data, connection.msgtype)
@@ -594,12 +695,16 @@ def test_rosbag2_mcap_written_by_rosbags_is_read(tmp_path):
         for k in range(40):
             sec, nanosec = divmod(int(stamps[k]), 10**9)
             msg = t["sensor_msgs/msg/Imu"](
-                header=t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec),
-                                                frame_id="imu_link"),
+                header=t["std_msgs/msg/Header"](
+                    stamp=t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec), frame_id="imu_link"
+                ),
                 orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
-                orientation_covariance=np.zeros(9), angular_velocity=t["geometry_msgs/msg/Vector3"](*gyro[k]),
-                angular_velocity_covariance=np.zeros(9), linear_acceleration=t["geometry_msgs/msg/Vector3"](*accel[k]),
-                linear_acceleration_covariance=np.zeros(9))
+                orientation_covariance=np.zeros(9),
+                angular_velocity=t["geometry_msgs/msg/Vector3"](*gyro[k]),
+                angular_velocity_covariance=np.zeros(9),
+                linear_acceleration=t["geometry_msgs/msg/Vector3"](*accel[k]),
+                linear_acceleration_covariance=np.zeros(9),
+            )
             bag.write(connection, int(stamps[k]) + 1000, store.serialize_cdr(msg, "sensor_msgs/msg/Imu"))
     log = read_quietly(next((tmp_path / "bag").glob("*.mcap")))
     assert list(log.devices) == ["imu/data"]

@@ -5,12 +5,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from broad_trials import BROAD_DIR, needs_trial
 from scipy.spatial.transform import Rotation
 
-from broad_trials import BROAD_DIR, needs_trial
 from gyroemu.dynamics import load_scenario
 from gyroemu.dynamics.earth import EARTH_RATE
-from gyroemu.dynamics.rotation import quat_rotate, quat_conjugate
+from gyroemu.dynamics.rotation import quat_conjugate, quat_rotate
 from gyroemu.pipelines.estimation import FilterSetup, Mekf, MekfParams, attitude_errors, rmse_deg, setup_for
 from gyroemu.pipelines.estimation import mekf_kernels as kern
 from gyroemu.pipelines.estimation.batched import mekf_batch
@@ -31,8 +31,13 @@ def test_batched_mode_is_the_filterpy_filter(manoeuvre):
     short = traj[:2001]
     runs = [load_device("consumer_mems", seed=s).measure(short) for s in (0, 1)]
     setup = setup_for(load_device("consumer_mems"), scenario)
-    batch = mekf_batch(setup, runs[0].t, np.stack([r.gyro for r in runs]), np.stack([r.accel for r in runs]),
-                       np.stack([r.mag for r in runs]))
+    batch = mekf_batch(
+        setup,
+        runs[0].t,
+        np.stack([r.gyro for r in runs]),
+        np.stack([r.accel for r in runs]),
+        np.stack([r.mag for r in runs]),
+    )
     for i, r in enumerate(runs):
         single = Mekf(setup).process(r.t, r.gyro, r.accel, r.mag)
         assert np.abs(single.q_wb - batch.q_wb[i]).max() < 1e-9
@@ -81,16 +86,16 @@ def test_consumer_mems_meets_the_issue_bars_on_the_smooth_manoeuvre(seed):
     mekf, block = Mekf(setup), int(device.spec.rate_hz)
     q, bias_est, sigma = [], [], []
     for k in range(0, len(samples.t), block):
-        est = mekf.process(samples.t[k:k + block], samples.gyro[k:k + block], samples.accel[k:k + block])
+        est = mekf.process(samples.t[k : k + block], samples.gyro[k : k + block], samples.accel[k : k + block])
         q.append(est.q_wb)
         bias_est.append(est.gyro_bias[-1, :2])
-        sigma.append(np.sqrt(np.diag(mekf.kf.P)[kern.X_BIAS:kern.X_BIAS + 2]))
+        sigma.append(np.sqrt(np.diag(mekf.kf.P)[kern.X_BIAS : kern.X_BIAS + 2]))
     err = attitude_errors(np.concatenate(q), truth_series(traj, samples).q_wb)
     assert rmse_deg(err.inclination) < 1.0
 
     still = device.measure_held_still(traj).gyro
     ends = np.minimum(np.arange(block, len(samples.t) + block, block), len(samples.t)) - 1
-    bias_true = np.array([still[max(e - block // 2, 0):e + block // 2, :2].mean(axis=0) for e in ends])
+    bias_true = np.array([still[max(e - block // 2, 0) : e + block // 2, :2].mean(axis=0) for e in ends])
     t_end, sigma = samples.t[ends] - samples.t[0], np.array(sigma)
     at_60 = int(np.searchsorted(t_end, 60.0))
     assert np.all(sigma[at_60] < setup.noise.gyro_bias_sigma / 4)
@@ -114,7 +119,9 @@ def test_navigation_fog_finds_north_from_earth_rate():
     assert err.heading[-1] < 3 * sigma
     assert np.sqrt(est.q_wb_covariance[-1, 2, 2]) < 3 * sigma
     consumer = load_device("consumer_mems", seed=3)
-    c_est = Mekf(setup_for(consumer, scenario, use_mag=False)).process(*(lambda s: (s.t, s.gyro, s.accel))(consumer.measure(traj)))
+    c_est = Mekf(setup_for(consumer, scenario, use_mag=False)).process(
+        *(lambda s: (s.t, s.gyro, s.accel))(consumer.measure(traj))
+    )
     assert np.sqrt(c_est.q_wb_covariance[-1, 2, 2]) > np.radians(20)  # knows it does not know
 
 
@@ -170,9 +177,9 @@ def test_heading_update_never_touches_inclination():
     r = np.empty((3, 3))
     kern.quat_to_matrix(q, r)
     vertical_b = r[2]  # world up in body axes
-    bias = K[kern.X_BIAS:kern.X_BIAS + 3]
+    bias = K[kern.X_BIAS : kern.X_BIAS + 3]
     assert np.linalg.norm(bias) > 0 and np.allclose(np.cross(bias, vertical_b), 0.0, atol=1e-15)
-    assert np.all(K[kern.X_SCALE:] == 0.0)
+    assert np.all(K[kern.X_SCALE :] == 0.0)
     before = P.copy()
     kern.joseph_update(P, K, h, 0.01)
     assert np.all(np.linalg.eigvalsh(P) > 0) and np.allclose(P, P.T)
@@ -214,21 +221,21 @@ def test_injection_turns_the_low_passed_force_with_the_estimate():
     rng = np.random.default_rng(2)
     x = np.zeros(kern.X_SIZE)
     x[:3] = rng.normal(0.0, 0.05, 3)
-    x[kern.X_BIAS:] = rng.normal(0.0, 0.01, kern.N_DRIFT)
+    x[kern.X_BIAS :] = rng.normal(0.0, 0.01, kern.N_DRIFT)
     q, b = np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3)
     slow = np.zeros(kern.S_SIZE)
     force = rng.normal(0.0, 1.0, (2, 3)) + [0.0, 0.0, 9.81]
     lag = rng.normal(0.0, 0.5, (2, 3, kern.N_DRIFT))  # D₁, D₂: the low-passes' sensitivity to δb, δM
-    slow[kern.S_GRAV_LP:kern.S_GRAV_LP + 3], slow[kern.S_GRAV_LP2:kern.S_GRAV_LP2 + 3] = force
-    slow[kern.S_LAG1:kern.S_LAG1 + lag[0].size], slow[kern.S_LAG2:kern.S_LAG2 + lag[1].size] = lag.reshape(2, -1)
+    slow[kern.S_GRAV_LP : kern.S_GRAV_LP + 3], slow[kern.S_GRAV_LP2 : kern.S_GRAV_LP2 + 3] = force
+    slow[kern.S_LAG1 : kern.S_LAG1 + lag[0].size], slow[kern.S_LAG2 : kern.S_LAG2 + lag[1].size] = lag.reshape(2, -1)
     kern.inject(x.copy(), q, b, slow, np.zeros(kern.W_SIZE), np.zeros((3, kern.N_DRIFT)))
     # each low-pass holds the tilt as it was, δθ + D (δb, δM): it turns by that stage's correction
-    turned = [Rotation.from_rotvec(x[:3] + lag[i] @ x[kern.X_BIAS:]).apply(force[i]) for i in range(2)]
-    assert np.allclose(slow[kern.S_GRAV_LP:kern.S_GRAV_LP + 3], turned[0], atol=1e-12)
-    assert np.allclose(slow[kern.S_GRAV_LP2:kern.S_GRAV_LP2 + 3], turned[1], atol=1e-12)
+    turned = [Rotation.from_rotvec(x[:3] + lag[i] @ x[kern.X_BIAS :]).apply(force[i]) for i in range(2)]
+    assert np.allclose(slow[kern.S_GRAV_LP : kern.S_GRAV_LP + 3], turned[0], atol=1e-12)
+    assert np.allclose(slow[kern.S_GRAV_LP2 : kern.S_GRAV_LP2 + 3], turned[1], atol=1e-12)
     assert np.allclose(q, np.roll(Rotation.from_rotvec(x[:3]).as_quat(), 1), atol=1e-12)
-    assert np.array_equal(b, x[kern.X_BIAS:kern.X_BIAS + 3])
-    assert np.array_equal(slow[kern.S_SCALE:kern.S_SCALE + 9], x[kern.X_SCALE:])
+    assert np.array_equal(b, x[kern.X_BIAS : kern.X_BIAS + 3])
+    assert np.array_equal(slow[kern.S_SCALE : kern.S_SCALE + 9], x[kern.X_SCALE :])
 
 
 def test_low_pass_lag_of_a_steady_drift_is_the_group_delay():
@@ -246,13 +253,30 @@ def test_low_pass_lag_of_a_steady_drift_is_the_group_delay():
     accel = np.tile([0.0, 0.0, 9.81], (n, 1))
     params = MekfParams(accel_tau_s=tau).vector(FilterSetup(rate_hz=rate, use_mag=False))
     q, b, slow = np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3), np.zeros(kern.S_SIZE)
-    slow[kern.S_GRAV_LP:kern.S_GRAV_LP2 + 3] = np.tile([0.0, 0.0, 9.81], 2)
+    slow[kern.S_GRAV_LP : kern.S_GRAV_LP2 + 3] = np.tile([0.0, 0.0, 9.81], 2)
     win, phi, q_out = np.zeros(kern.W_SIZE), np.zeros((3, kern.N_DRIFT)), np.empty((n, 4))
     params[kern.P_WINDOW] = params[kern.P_WINDOW_N] = 1e9  # one window: only the strapdown runs
-    assert kern.strapdown(q, b, slow, win, phi, t, gyro, np.empty((0, 3)), accel, np.full((n, 3), np.nan),
-                          np.zeros(3), params, 0, q_out) == n
-    d1 = slow[kern.S_LAG1:kern.S_LAG1 + 3 * kern.N_DRIFT].reshape(3, kern.N_DRIFT)[:, :3]
-    d2 = slow[kern.S_LAG2:kern.S_LAG2 + 3 * kern.N_DRIFT].reshape(3, kern.N_DRIFT)[:, :3]
+    assert (
+        kern.strapdown(
+            q,
+            b,
+            slow,
+            win,
+            phi,
+            t,
+            gyro,
+            np.empty((0, 3)),
+            accel,
+            np.full((n, 3), np.nan),
+            np.zeros(3),
+            params,
+            0,
+            q_out,
+        )
+        == n
+    )
+    d1 = slow[kern.S_LAG1 : kern.S_LAG1 + 3 * kern.N_DRIFT].reshape(3, kern.N_DRIFT)[:, :3]
+    d2 = slow[kern.S_LAG2 : kern.S_LAG2 + 3 * kern.N_DRIFT].reshape(3, kern.N_DRIFT)[:, :3]
     r_now = Rotation.from_quat(np.roll(q, -1)).as_matrix()
     tol = 1.0 / (rate * tau)
     assert np.isclose(d1[2, 2], tau, rtol=tol) and np.isclose(d2[2, 2], 2 * tau, rtol=tol)
@@ -261,10 +285,10 @@ def test_low_pass_lag_of_a_steady_drift_is_the_group_delay():
         expected = np.array([[h.real, -h.imag], [h.imag, h.real]])
         assert np.allclose(r_now.T[:2, :2] @ d[:2, :2], expected, rtol=0, atol=tol * abs(h))
     # the scale-factor columns: at a steady rate about z, δM_az drifts like δb_a times ω
-    dm = slow[kern.S_LAG2:kern.S_LAG2 + 3 * kern.N_DRIFT].reshape(3, kern.N_DRIFT)[:, 3:]
+    dm = slow[kern.S_LAG2 : kern.S_LAG2 + 3 * kern.N_DRIFT].reshape(3, kern.N_DRIFT)[:, 3:]
     for a in range(3):
         assert np.allclose(dm[:, 3 * a + 2], omega * d2[:, a], rtol=1e-9, atol=1e-12)
-        assert np.all(dm[:, 3 * a:3 * a + 2] == 0.0)
+        assert np.all(dm[:, 3 * a : 3 * a + 2] == 0.0)
 
 
 @needs_trial()
@@ -301,7 +325,9 @@ def test_simulated_field_heading_error_is_the_sensors_iron():
 
     scenario = load_scenario("smooth_manoeuvre")
     assert setup_for(load_device("consumer_mems"), scenario).field_heading_sigma == 0.0
-    config = tomllib.loads((Path(__file__).resolve().parents[2] / "configs" / "devices" / "consumer_mems.toml").read_text())
+    config = tomllib.loads(
+        (Path(__file__).resolve().parents[2] / "configs" / "devices" / "consumer_mems.toml").read_text()
+    )
     config["magnetometer"]["hard_iron_uT"] = [2.0, 0.0, 0.0]
     setup = setup_for(device_from_dict(config, name="iron"), scenario)
     east, north, _ = scenario.spec.site.magnetic_field_enu_uT

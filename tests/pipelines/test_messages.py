@@ -66,10 +66,11 @@ def random_stamps(n, rng):
 # ---------------------------------------------------------------------------------------------------
 # Layout from the CDR rules.
 
+
 @pytest.mark.parametrize("frame_id", FRAME_IDS)
 def test_imu_layout_follows_the_cdr_alignment_rules(frame_id):
     length = len(frame_id.encode()) + 1  # with NUL
-    body = -(-(12 + length) // 8) * 8      # first float64 on an 8-byte boundary of the payload
+    body = -(-(12 + length) // 8) * 8  # first float64 on an 8-byte boundary of the payload
     assert IMU.message_size(frame_id) == 4 + body + (4 + 9 + 3 + 9 + 3 + 9) * 8
     layout = IMU.layout(len(frame_id.encode()))
     assert layout.fields["orientation"][1] == 4 + body
@@ -115,6 +116,7 @@ def test_seconds_to_nanoseconds():
 
 # ---------------------------------------------------------------------------------------------------
 # Round trips.
+
 
 @pytest.mark.parametrize("mtype", ALL_TYPES, ids=lambda t: t.name)
 @pytest.mark.parametrize("frame_id", FRAME_IDS)
@@ -210,6 +212,7 @@ def test_fog_feedback_presence_flag():
 # ---------------------------------------------------------------------------------------------------
 # Independent serialisers: rosbags (Humble type store) and mcap_ros2.
 
+
 def _nested(mtype, stamp_ns, frame_id, fields, k):
     """Message k as the nested dict the ROS definitions describe."""
     sec, nanosec = divmod(int(stamp_ns[k]), 10**9)
@@ -284,6 +287,7 @@ def test_independent_decoders_read_the_same_numbers(mtype):
 # ---------------------------------------------------------------------------------------------------
 # Schemas.
 
+
 @pytest.mark.parametrize("name", ["sensor_msgs/msg/Imu", "sensor_msgs/msg/MagneticField"])
 def test_standard_schemas_define_the_humble_types(name):
     text = schema_text(name)
@@ -292,7 +296,8 @@ def test_standard_schemas_define_the_humble_types(name):
     for type_name, definition in parsed.items():
         assert definition == reference.fielddefs[type_name], type_name
     assert set(parsed) == {name, "geometry_msgs/msg/Vector3", "std_msgs/msg/Header", "builtin_interfaces/msg/Time"} | (
-        {"geometry_msgs/msg/Quaternion"} if name.endswith("Imu") else set())
+        {"geometry_msgs/msg/Quaternion"} if name.endswith("Imu") else set()
+    )
 
 
 def test_schema_concatenation_is_rosbag2s():
@@ -300,8 +305,12 @@ def test_schema_concatenation_is_rosbag2s():
     assert text.startswith("# This is a message to hold data from an IMU (Inertial Measurement Unit)\n")
     # dependencies depth first, sorted at each level, each after "\n" + 80 "=" + "\nMSG: pkg/Type\n"
     order = [line for line in text.splitlines() if line.startswith("MSG: ")]
-    assert order == ["MSG: geometry_msgs/Quaternion", "MSG: geometry_msgs/Vector3", "MSG: std_msgs/Header",
-                     "MSG: builtin_interfaces/Time"]
+    assert order == [
+        "MSG: geometry_msgs/Quaternion",
+        "MSG: geometry_msgs/Vector3",
+        "MSG: std_msgs/Header",
+        "MSG: builtin_interfaces/Time",
+    ]
     assert text.count("\n\n" + "=" * 80 + "\nMSG: ") == 4
     assert text.endswith("uint32 nanosec\n")
 

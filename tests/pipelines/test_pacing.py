@@ -62,8 +62,14 @@ def test_run_schedule_sends_every_batch_in_order():
     try:
         sub = session.declare_subscriber("pace/**", zenoh.handlers.FifoChannel(1 << 12))
         publisher = PacedPublisher(session, ["pace/a", "pace/b"])
-        batches = [[(k * 200_000, key, f"{key}:{k}".encode()) for k in range(j * 10, j * 10 + 10)
-                    for key in ("pace/a", "pace/b")] for j in range(5)]
+        batches = [
+            [
+                (k * 200_000, key, f"{key}:{k}".encode())
+                for k in range(j * 10, j * 10 + 10)
+                for key in ("pace/a", "pace/b")
+            ]
+            for j in range(5)
+        ]
         report = publisher.run_schedule(iter(batches))
         assert report.messages == 100 and len(report.lateness_s) == 50 and report.lateness_s.min() >= 0
         assert report.elapsed_s >= 49 * 200e-6

@@ -22,8 +22,7 @@ def _run_on_pty(args) -> tuple[int, str, str]:
     """Run ``gyroemu ARGS`` with stderr on a pseudo-terminal (120 columns); returns (status, stdout, terminal)."""
     master, slave = os.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 120, 0, 0))
-    proc = subprocess.Popen([sys.executable, "-m", "gyroemu", *args], cwd=ROOT, stderr=slave,
-                            stdout=subprocess.PIPE)
+    proc = subprocess.Popen([sys.executable, "-m", "gyroemu", *args], cwd=ROOT, stderr=slave, stdout=subprocess.PIPE)
     os.close(slave)
     seen = b""
     try:
@@ -56,13 +55,19 @@ def test_bar_on_a_terminal_names_each_phase(tmp_path):
         assert phase in terminal, terminal
     assert "/3 phases" in terminal  # three phases counted (tqdm may skip drawing the last count: it is cleared)
     assert "phases" not in out  # the bar never goes to stdout
-    status, out, terminal = _run_on_pty(["simulate", "--scenario", "heavy_top", "--duration", "2",
-                                         "--out", str(tmp_path / "t.npz")])
+    status, out, terminal = _run_on_pty(
+        ["simulate", "--scenario", "heavy_top", "--duration", "2", "--out", str(tmp_path / "t.npz")]
+    )
     assert status == 0 and "simulate: truth" in terminal and "/2 phases" in terminal and "measure" not in terminal
 
 
 def test_no_bar_when_stderr_is_not_a_terminal(tmp_path):
-    run = subprocess.run([sys.executable, "-m", "gyroemu", *ARGS, "--out", str(tmp_path / "a.mcap")],
-                         cwd=ROOT, capture_output=True, text=True, timeout=120)
+    run = subprocess.run(
+        [sys.executable, "-m", "gyroemu", *ARGS, "--out", str(tmp_path / "a.mcap")],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert run.returncode == 0 and run.stderr == "", run.stderr
     assert (tmp_path / "a.mcap").exists()

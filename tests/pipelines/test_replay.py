@@ -28,8 +28,25 @@ N = 5000  # samples per topic at 1 kHz
 @pytest.fixture(scope="module")
 def gyroemu_mcap(tmp_path_factory):
     path = tmp_path_factory.mktemp("replay") / "x.mcap"
-    subprocess.run([sys.executable, "-m", "gyroemu", "simulate", "--scenario", SCENARIO, "--device", DEVICE,
-                    "--duration", str(DURATION), "--out", str(path)], cwd=ROOT, check=True, capture_output=True)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "gyroemu",
+            "simulate",
+            "--scenario",
+            SCENARIO,
+            "--device",
+            DEVICE,
+            "--duration",
+            str(DURATION),
+            "--out",
+            str(path),
+        ],
+        cwd=ROOT,
+        check=True,
+        capture_output=True,
+    )
     return path
 
 
@@ -45,8 +62,9 @@ def listener():
 def test_gyroemu_file_recorded_back_complete_and_byte_exact(procs, tmp_path, gyroemu_mcap):
     """(1) --rate 1 into `gyroemu record`: every message, sequences 0..N-1 per key, payloads identical."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    procs.start("rec", "record", "--out", str(tmp_path / "r.mcap"), "--listen", endpoint,
-                "--report", str(tmp_path / "r.json"))
+    procs.start(
+        "rec", "record", "--out", str(tmp_path / "r.mcap"), "--listen", endpoint, "--report", str(tmp_path / "r.json")
+    )
     procs.wait_for("rec", "subscribed")
     procs.start("replay", "replay", str(gyroemu_mcap), "--connect", endpoint)
     assert procs.wait("replay", 60) == 0, procs.log("replay")
@@ -58,8 +76,14 @@ def test_gyroemu_file_recorded_back_complete_and_byte_exact(procs, tmp_path, gyr
     by_topic = {r["topic"]: r for r in report["publishers"].values()}
     assert sorted(by_topic) == sorted(f"{DEVICE}{t}" for t in TOPICS)  # the metadata's device_name
     for r in by_topic.values():
-        assert (r["received"], r["first"], r["last"], r["missing"], r["duplicates"], r["late"]) == \
-            (N, 0, N - 1, 0, 0, 0), r
+        assert (r["received"], r["first"], r["last"], r["missing"], r["duplicates"], r["late"]) == (
+            N,
+            0,
+            N - 1,
+            0,
+            0,
+            0,
+        ), r
     for topic in TOPICS:
         got, want = mcap_messages(tmp_path / "r.mcap", topic), mcap_messages(gyroemu_mcap, topic)
         assert len(got) == len(want) == N
@@ -116,8 +140,10 @@ def test_foreign_file_and_pacing(procs, listener, tmp_path):
     p50, p99, worst = np.percentile(error, 50) * 1e3, np.percentile(error, 99) * 1e3, error.max() * 1e3
     drift = (np.median(error[-200:]) - np.median(error[:200])) * 1e3
     own = [line for line in procs.log("replay").splitlines() if "pacing" in line]
-    print(f"replay pacing from attachment stamps ({n} irregular deadlines): p50 {p50:.3f} ms, p99 {p99:.3f} ms, "
-          f"max {worst:.3f} ms; drift over the run {drift:.3f} ms\n{own}")
+    print(
+        f"replay pacing from attachment stamps ({n} irregular deadlines): p50 {p50:.3f} ms, p99 {p99:.3f} ms, "
+        f"max {worst:.3f} ms; drift over the run {drift:.3f} ms\n{own}"
+    )
     assert abs(drift) < 2.0  # ms: no accumulating drift (sleep-per-message would add ~0.1 ms x 1200)
 
 
@@ -125,8 +151,18 @@ def test_loop_repeats_with_increasing_deadlines_until_sigterm(procs, listener, t
     """--loop: passes follow each other (sequences continue), SIGTERM ends it with status 0."""
     path = tmp_path / "short.mcap"
     log_time = write_foreign(path, 100)  # about 0.5 s
-    procs.start("replay", "replay", str(path), "--loop", "--rate", "2", "--topics", "/sensors/imu_raw",
-                "--connect", listener.endpoint)
+    procs.start(
+        "replay",
+        "replay",
+        str(path),
+        "--loop",
+        "--rate",
+        "2",
+        "--topics",
+        "/sensors/imu_raw",
+        "--connect",
+        listener.endpoint,
+    )
     procs.wait_for("replay", "publishing")
     time.sleep(1.2)  # about 4 passes at --rate 2
     assert procs.stop("replay", signal.SIGTERM) == 0, procs.log("replay")
@@ -139,8 +175,10 @@ def test_loop_repeats_with_increasing_deadlines_until_sigterm(procs, listener, t
     stamps = np.array([s[3] for s in samples[:200]])
     gap = (stamps[100] - stamps[99]) * 1e-9  # from the end of pass 0 to the start of pass 1
     interval = (log_time[-1] - log_time[0]) / 99 / 2 * 1e-9
-    print(f"\n--loop: {len(seq)} messages in {len(seq) / 100:.1f} passes; gap between passes {gap * 1e3:.2f} ms "
-          f"(mean interval / rate {interval * 1e3:.2f} ms)")
+    print(
+        f"\n--loop: {len(seq)} messages in {len(seq) / 100:.1f} passes; gap between passes {gap * 1e3:.2f} ms "
+        f"(mean interval / rate {interval * 1e3:.2f} ms)"
+    )
     assert 0 < gap < 10 * interval + 0.01
 
 
@@ -154,7 +192,7 @@ def test_bad_inputs_exit_2_naming_the_file(tmp_path, gyroemu_mcap, capsys):
     bad = {"missing.mcap": None, "text.mcap": b"hello, not an MCAP file\n", "head.mcap": data[:200]}
     corrupt = bytearray(data)
     middle = len(corrupt) // 2
-    corrupt[middle:middle + 64] = bytes(64)
+    corrupt[middle : middle + 64] = bytes(64)
     bad["corrupt.mcap"] = bytes(corrupt)
     for name, content in bad.items():
         if content is not None:
@@ -187,10 +225,18 @@ def test_topic_keys_rule():
 
     meta = [{"device_name": "d0", "topic_prefix": ""}, {"device_name": "a", "topic_prefix": "/a"}]
     keys, bad = topic_keys(["/imu", "/truth/imu", "/a/raw/fog", "/sensors/imu_raw", "/robot/imu", "/x*"], meta, "zz")
-    assert keys == {"/imu": "gyroemu/d0/imu", "/truth/imu": "gyroemu/d0/truth/imu", "/a/raw/fog": "gyroemu/a/raw/fog",
-                    "/sensors/imu_raw": "gyroemu/zz/sensors/imu_raw", "/robot/imu": "gyroemu/zz/robot/imu"}
+    assert keys == {
+        "/imu": "gyroemu/d0/imu",
+        "/truth/imu": "gyroemu/d0/truth/imu",
+        "/a/raw/fog": "gyroemu/a/raw/fog",
+        "/sensors/imu_raw": "gyroemu/zz/sensors/imu_raw",
+        "/robot/imu": "gyroemu/zz/robot/imu",
+    }
     assert list(bad) == ["/x*"]
-    assert topic_keys(["/imu", "/truth/imu"], [])[0] == {"/imu": "gyroemu/imu0/imu", "/truth/imu": "gyroemu/imu0/truth/imu"}
+    assert topic_keys(["/imu", "/truth/imu"], [])[0] == {
+        "/imu": "gyroemu/imu0/imu",
+        "/truth/imu": "gyroemu/imu0/truth/imu",
+    }
 
 
 def test_iter_mcap_batches_in_log_time_order(tmp_path, gyroemu_mcap):

@@ -27,9 +27,20 @@ zenoh = pytest.importorskip("zenoh")
 from live_processes import Listener, free_port, mcap_messages, procs, write_foreign  # noqa: E402,F401
 
 from gyroemu.pipelines import ros2_keys  # noqa: E402
-from gyroemu.pipelines.ros2_keys import (Ros2Error, data_key, domain_id, entity_token, gyroemu_topic,  # noqa: E402
-                                 node_token, parse_data_key, parse_definitions, qos_keyexpr, ros_topic,
-                                 type_description, type_hash)
+from gyroemu.pipelines.ros2_keys import (  # noqa: E402
+    Ros2Error,
+    data_key,
+    domain_id,
+    entity_token,
+    gyroemu_topic,
+    node_token,
+    parse_data_key,
+    parse_definitions,
+    qos_keyexpr,
+    ros_topic,
+    type_description,
+    type_hash,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -43,7 +54,7 @@ PUBLISHED = {
     "geometry_msgs/msg/Vector3": "RIHS01_cc12fe83e4c02719f1ce8070bfd14aecd40f75a96696a67a2a1f37f7dbb0765d",
 }
 STRING_HASH = "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18"  # std_msgs/msg/String
-CHAR_HASH = "RIHS01_3ad2d04dd29ba19d04b16659afa3ccaedd691914b02a64e82e252f2fa6a586a9"    # std_msgs/msg/Char
+CHAR_HASH = "RIHS01_3ad2d04dd29ba19d04b16659afa3ccaedd691914b02a64e82e252f2fa6a586a9"  # std_msgs/msg/Char
 
 
 def test_type_hashes_equal_the_published_values():
@@ -55,10 +66,15 @@ def test_type_hashes_equal_the_published_values():
     assert type_hash("std_msgs/msg/Char", {"std_msgs/Char": "char data\n"}) == CHAR_HASH
     imu = type_description("sensor_msgs/msg/Imu")
     assert [t["type_name"] for t in imu["referenced_type_descriptions"]] == [
-        "builtin_interfaces/msg/Time", "geometry_msgs/msg/Quaternion", "geometry_msgs/msg/Vector3",
-        "std_msgs/msg/Header"]
-    assert imu["type_description"]["fields"][2] == {"name": "orientation_covariance", "type": {
-        "type_id": 59, "capacity": 9, "string_capacity": 0, "nested_type_name": ""}}  # DOUBLE (11) + ARRAY (48)
+        "builtin_interfaces/msg/Time",
+        "geometry_msgs/msg/Quaternion",
+        "geometry_msgs/msg/Vector3",
+        "std_msgs/msg/Header",
+    ]
+    assert imu["type_description"]["fields"][2] == {
+        "name": "orientation_covariance",
+        "type": {"type_id": 59, "capacity": 9, "string_capacity": 0, "nested_type_name": ""},
+    }  # DOUBLE (11) + ARRAY (48)
 
 
 def test_hash_depends_on_fields_only():
@@ -66,13 +82,19 @@ def test_hash_depends_on_fields_only():
     type or an array's size does (each edit below would pass unnoticed by a hash of the wrong input)."""
     base = "float64 x 0\nfloat64[9] c\nstring<=8 s\nint32[<=4] q\nuint8 K=3\n"
     h = type_hash("p/msg/T", {"p/T": base})
-    assert type_hash("p/msg/T", {"p/T": "# hi\n\nfloat64 x 1.5  # default\nfloat64[9] c\nstring<=8 s\n"
-                                         "int32[<=4] q\nuint8 K=4\n"}) == h
-    for changed in ("float64 y\nfloat64[9] c\nstring<=8 s\nint32[<=4] q\n",
-                    "float32 x\nfloat64[9] c\nstring<=8 s\nint32[<=4] q\n",
-                    "float64 x\nfloat64[8] c\nstring<=8 s\nint32[<=4] q\n",
-                    "float64 x\nfloat64[9] c\nstring<=9 s\nint32[<=4] q\n",
-                    "float64 x\nfloat64[9] c\nstring<=8 s\nint32[] q\n"):
+    assert (
+        type_hash(
+            "p/msg/T", {"p/T": "# hi\n\nfloat64 x 1.5  # default\nfloat64[9] c\nstring<=8 s\nint32[<=4] q\nuint8 K=4\n"}
+        )
+        == h
+    )
+    for changed in (
+        "float64 y\nfloat64[9] c\nstring<=8 s\nint32[<=4] q\n",
+        "float32 x\nfloat64[9] c\nstring<=8 s\nint32[<=4] q\n",
+        "float64 x\nfloat64[8] c\nstring<=8 s\nint32[<=4] q\n",
+        "float64 x\nfloat64[9] c\nstring<=9 s\nint32[<=4] q\n",
+        "float64 x\nfloat64[9] c\nstring<=8 s\nint32[] q\n",
+    ):
         assert type_hash("p/msg/T", {"p/T": changed}) != h, changed
     with pytest.raises(Ros2Error, match="no definition"):
         type_hash("p/msg/U", {"p/U": "p/Missing m\n"})
@@ -125,7 +147,12 @@ def test_keys_and_tokens_follow_rmw_zenoh():
     key = data_key(7, "/imu0/imu", "sensor_msgs/msg/Imu", imu)
     assert key == f"7/imu0/imu/sensor_msgs::msg::dds_::Imu_/{imu}"
     parsed = parse_data_key(key)
-    assert (parsed.domain, parsed.topic, parsed.type_name, parsed.type_hash) == (7, "/imu0/imu", "sensor_msgs/msg/Imu", imu)
+    assert (parsed.domain, parsed.topic, parsed.type_name, parsed.type_hash) == (
+        7,
+        "/imu0/imu",
+        "sensor_msgs/msg/Imu",
+        imu,
+    )
     with pytest.raises(Ros2Error):
         parse_data_key("gyroemu/imu0/imu")
 
@@ -133,8 +160,9 @@ def test_keys_and_tokens_follow_rmw_zenoh():
     node = node_token(0, zid, 0, "gyroemu_stream_1")
     assert node == f"@ros2_lv/0/{zid}/0/0/NN/%/%/gyroemu_stream_1"
     pub = entity_token("MP", 0, zid, 0, 3, "gyroemu_stream_1", "/imu0/imu", "sensor_msgs/msg/Imu", imu)
-    assert pub == (f"@ros2_lv/0/{zid}/0/3/MP/%/%/gyroemu_stream_1/%imu0%imu/sensor_msgs::msg::dds_::Imu_/"
-                   f"{imu}/::2,:,:,:,,")
+    assert pub == (
+        f"@ros2_lv/0/{zid}/0/3/MP/%/%/gyroemu_stream_1/%imu0%imu/sensor_msgs::msg::dds_::Imu_/{imu}/::2,:,:,:,,"
+    )
     assert len(node.split("/")) == 9 and len(pub.split("/")) == 13
     assert all(node.split("/")) and all(pub.split("/"))
     qos = pub.split("/")[-1].split(":")  # reliability, durability, history+depth, deadline, lifespan, liveliness
@@ -151,15 +179,24 @@ def test_keys_and_tokens_follow_rmw_zenoh():
 
 def test_bad_ros2_usage_exits_2_naming_the_argument(tmp_path):
     env = dict(os.environ, ROS_DOMAIN_ID="abc")
-    cases = [(["stream", "--scenario", "heavy_top", "--device", "consumer_mems", "--ros2", "--domain", "300"],
-              os.environ, "argument --domain"),
-             (["record", "--out", str(tmp_path / "x.mcap"), "--ros2"], env, "ROS_DOMAIN_ID"),
-             (["replay", str(tmp_path / "x.mcap"), "--domain", "3"], os.environ, "argument --domain: only with --ros2"),
-             (["stream", "--scenario", "heavy_top", "--device", "consumer_mems", "--ros2", "--device-name", "9x"],
-              os.environ, "argument --device-name")]
+    cases = [
+        (
+            ["stream", "--scenario", "heavy_top", "--device", "consumer_mems", "--ros2", "--domain", "300"],
+            os.environ,
+            "argument --domain",
+        ),
+        (["record", "--out", str(tmp_path / "x.mcap"), "--ros2"], env, "ROS_DOMAIN_ID"),
+        (["replay", str(tmp_path / "x.mcap"), "--domain", "3"], os.environ, "argument --domain: only with --ros2"),
+        (
+            ["stream", "--scenario", "heavy_top", "--device", "consumer_mems", "--ros2", "--device-name", "9x"],
+            os.environ,
+            "argument --device-name",
+        ),
+    ]
     for args, environ, text in cases:
-        run = subprocess.run([sys.executable, "-m", "gyroemu", *args], cwd=ROOT, env=environ,
-                             capture_output=True, text=True, timeout=60)
+        run = subprocess.run(
+            [sys.executable, "-m", "gyroemu", *args], cwd=ROOT, env=environ, capture_output=True, text=True, timeout=60
+        )
         assert run.returncode == 2 and text in run.stderr, (args, run.returncode, run.stderr)
     assert not (tmp_path / "x.mcap").exists()
 
@@ -183,15 +220,47 @@ def test_stream_router_record_in_ros2_mode(procs, tmp_path):
     procs.wait_for("router", "listening")
     plain = _client(endpoint)
     try:
-        tokens = plain.liveliness().declare_subscriber(f"@ros2_lv/{domain}/**", zenoh.handlers.FifoChannel(256),
-                                                        history=True)
+        tokens = plain.liveliness().declare_subscriber(
+            f"@ros2_lv/{domain}/**", zenoh.handlers.FifoChannel(256), history=True
+        )
         data = plain.declare_subscriber(f"{domain}/**", zenoh.handlers.FifoChannel(1 << 16))
-        procs.start("rec", "record", "--out", str(tmp_path / "r.mcap"), "--ros2", "--domain", str(domain),
-                    "--connect", endpoint, "--mode", "client", "--report", str(tmp_path / "r.json"))
+        procs.start(
+            "rec",
+            "record",
+            "--out",
+            str(tmp_path / "r.mcap"),
+            "--ros2",
+            "--domain",
+            str(domain),
+            "--connect",
+            endpoint,
+            "--mode",
+            "client",
+            "--report",
+            str(tmp_path / "r.json"),
+        )
         procs.wait_for("rec", "subscribed")
-        procs.start("stream", "stream", "--scenario", "heavy_top", "--device", "consumer_mems", "--duration",
-                    str(duration), "--seed", str(seed), "--device-name", name, "--ros2", "--domain", str(domain),
-                    "--connect", endpoint, "--mode", "client")
+        procs.start(
+            "stream",
+            "stream",
+            "--scenario",
+            "heavy_top",
+            "--device",
+            "consumer_mems",
+            "--duration",
+            str(duration),
+            "--seed",
+            str(seed),
+            "--device-name",
+            name,
+            "--ros2",
+            "--domain",
+            str(domain),
+            "--connect",
+            endpoint,
+            "--mode",
+            "client",
+        )
         assert procs.wait("stream", 120) == 0, procs.log("stream")
         time.sleep(1.0)
         assert procs.stop("rec") == 0, procs.log("rec")
@@ -200,18 +269,18 @@ def test_stream_router_record_in_ros2_mode(procs, tmp_path):
             events.append((str(sample.kind).split(".")[-1], str(sample.key_expr)))
         keys: dict[str, list[int]] = {}
         while (sample := data.try_recv()) is not None:
-            keys.setdefault(str(sample.key_expr), []).append(
-                struct.unpack_from("<q", sample.attachment.to_bytes())[0])
+            keys.setdefault(str(sample.key_expr), []).append(struct.unpack_from("<q", sample.attachment.to_bytes())[0])
     finally:
         plain.close()
     print("\n" + procs.log("stream") + procs.log("rec"))
     n = int(round(duration * 1000))
     imu = PUBLISHED["sensor_msgs/msg/Imu"]
-    expected_keys = {f"{domain}/{name}/imu/sensor_msgs::msg::dds_::Imu_/{imu}",
-                     f"{domain}/{name}/truth/imu/sensor_msgs::msg::dds_::Imu_/{imu}",
-                     f"{domain}/{name}/mag/sensor_msgs::msg::dds_::MagneticField_/"
-                     f"{PUBLISHED['sensor_msgs/msg/MagneticField']}",
-                     f"{domain}/{name}/raw/mems/gyroemu_msgs::msg::dds_::MemsRaw_/{type_hash('gyroemu_msgs/msg/MemsRaw')}"}
+    expected_keys = {
+        f"{domain}/{name}/imu/sensor_msgs::msg::dds_::Imu_/{imu}",
+        f"{domain}/{name}/truth/imu/sensor_msgs::msg::dds_::Imu_/{imu}",
+        f"{domain}/{name}/mag/sensor_msgs::msg::dds_::MagneticField_/{PUBLISHED['sensor_msgs/msg/MagneticField']}",
+        f"{domain}/{name}/raw/mems/gyroemu_msgs::msg::dds_::MemsRaw_/{type_hash('gyroemu_msgs/msg/MemsRaw')}",
+    }
     assert set(keys) == expected_keys
     assert all(seqs == list(range(n)) for seqs in keys.values())  # the plain client saw every message in order
 
@@ -232,8 +301,10 @@ def test_stream_router_record_in_ros2_mode(procs, tmp_path):
     report = json.loads((tmp_path / "r.json").read_text())
     rows = {r["topic"]: r for r in report["publishers"].values()}
     assert sorted(rows) == sorted(f"{name}{t}" for t in ("/imu", "/mag", "/truth/imu", "/raw/mems"))
-    assert all((r["received"], r["first"], r["last"], r["missing"], r["duplicates"]) == (n, 0, n - 1, 0, 0)
-               for r in rows.values()), rows
+    assert all(
+        (r["received"], r["first"], r["last"], r["missing"], r["duplicates"]) == (n, 0, n - 1, 0, 0)
+        for r in rows.values()
+    ), rows
 
     from gyroemu.dynamics import load_scenario
     from gyroemu.pipelines.mcap_io import mcap_channel_info, read_mcap, truth_series
@@ -267,8 +338,9 @@ def test_replay_ros2_of_a_foreign_file(procs, tmp_path):
     write_foreign(path, 200)
     listener = Listener("0/**")
     try:
-        procs.start("replay", "replay", str(path), "--ros2", "--domain", "0", "--rate", "4", "--connect",
-                    listener.endpoint)
+        procs.start(
+            "replay", "replay", str(path), "--ros2", "--domain", "0", "--rate", "4", "--connect", listener.endpoint
+        )
         assert procs.wait("replay", 60) == 0, procs.log("replay")
         time.sleep(0.3)
         got: dict[str, list[bytes]] = {}
@@ -316,12 +388,21 @@ def test_recorder_maps_ros2_keys_back_to_topics(tmp_path):
     raw_payload = bytes(raw.encode(np.array([1_000_000_000]), "dev", {"gimbal_angle_rad": [[0.1, 0.2, 0.3]]})[0])
     gid = bytes(range(16))
     recorder = Recorder(tmp_path / "r.mcap", parse_key=ros2_key)
-    recorder.add(_Sample(data_key(0, "/dev/imu", IMU.name, PUBLISHED[IMU.name]), imu_payload,
-                         pack_attachment(0, 1, gid)))
-    recorder.add(_Sample(data_key(0, ros_topic("dev", "/raw/rate-gyro"), raw.name, raw_hash), raw_payload,
-                         pack_attachment(0, 1, bytes(16))))
-    recorder.add(_Sample(f"0/rosout/rcl_interfaces::msg::dds_::Log_/{PUBLISHED[IMU.name]}", imu_payload,
-                         pack_attachment(0, 1, gid)))
+    recorder.add(
+        _Sample(data_key(0, "/dev/imu", IMU.name, PUBLISHED[IMU.name]), imu_payload, pack_attachment(0, 1, gid))
+    )
+    recorder.add(
+        _Sample(
+            data_key(0, ros_topic("dev", "/raw/rate-gyro"), raw.name, raw_hash),
+            raw_payload,
+            pack_attachment(0, 1, bytes(16)),
+        )
+    )
+    recorder.add(
+        _Sample(
+            f"0/rosout/rcl_interfaces::msg::dds_::Log_/{PUBLISHED[IMU.name]}", imu_payload, pack_attachment(0, 1, gid)
+        )
+    )
     recorder.add(_Sample("gyroemu/dev/imu", imu_payload, pack_attachment(1, 1, gid)))
     recorder.close()
     assert (recorder.messages, recorder.skipped) == (2, 2)

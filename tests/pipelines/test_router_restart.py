@@ -34,8 +34,9 @@ def expected_stamps() -> dict[str, dict[int, int]]:
     traj = load_scenario(SCENARIO).simulate(duration=DURATION)
     samples = load_device(DEVICE, seed=SEED).measure(traj)
     encoded = encode_run(samples, truth_series(traj, samples))
-    return {topic: {header_stamp_ns(p): k for k, p in enumerate(split_payloads(rows))}
-            for topic, rows in encoded.items()}
+    return {
+        topic: {header_stamp_ns(p): k for k, p in enumerate(split_payloads(rows))} for topic, rows in encoded.items()
+    }
 
 
 def test_router_restart_mid_stream_reconnects_and_reports_the_gap(procs, tmp_path):  # noqa: F811
@@ -46,8 +47,23 @@ def test_router_restart_mid_stream_reconnects_and_reports_the_gap(procs, tmp_pat
     procs.wait_for("router1", "listening")
     procs.start("rec", "record", "--out", str(tmp_path / "r.mcap"), *client, "--report", str(tmp_path / "r.json"))
     procs.wait_for("rec", "subscribed")
-    procs.start("stream", "stream", "--scenario", SCENARIO, "--device", DEVICE, "--duration", str(DURATION),
-                "--seed", str(SEED), "--device-name", NAME, "--wait", "30", *client)
+    procs.start(
+        "stream",
+        "stream",
+        "--scenario",
+        SCENARIO,
+        "--device",
+        DEVICE,
+        "--duration",
+        str(DURATION),
+        "--seed",
+        str(SEED),
+        "--device-name",
+        NAME,
+        "--wait",
+        "30",
+        *client,
+    )
     procs.wait_for("stream", "stream: publishing", timeout=60)
     time.sleep(3.0)
     procs.stop("router1", signal.SIGKILL)  # no goodbye to the clients: the links just break

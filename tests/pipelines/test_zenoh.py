@@ -26,7 +26,7 @@ def check_report(report: dict, device: str, n: int):
     """Every topic of ``device``: n messages, sequences 0..n-1, nothing missing or duplicated."""
     by_topic = {r["topic"]: r for r in report["publishers"].values()}
     assert sorted(by_topic) == sorted(f"{device}{t}" for t in TOPICS), by_topic.keys()
-    for topic, r in by_topic.items():
+    for r in by_topic.values():
         assert (r["received"], r["first"], r["last"], r["missing"], r["duplicates"]) == (n, 0, n - 1, 0, 0), r
     assert report["messages"] == n * len(TOPICS)
 
@@ -44,19 +44,35 @@ def test_default_session_both_start_orders_lossless_and_byte_exact(procs, tmp_pa
     the same scenario, device and seed encode in-process."""
     duration, seeds = 20.0, {"ta": 7, "tb": 8}
     stream_args = ["--scenario", SCENARIO, "--device", DEVICE, "--duration", str(duration)]
-    procs.start("rec_a", "record", "--out", str(tmp_path / "a.mcap"), "--key", "gyroemu/ta/**",
-                "--report", str(tmp_path / "a.json"))
+    procs.start(
+        "rec_a",
+        "record",
+        "--out",
+        str(tmp_path / "a.mcap"),
+        "--key",
+        "gyroemu/ta/**",
+        "--report",
+        str(tmp_path / "a.json"),
+    )
     procs.wait_for("rec_a", "subscribed")
     procs.start("stream_a", "stream", *stream_args, "--seed", "7", "--device-name", "ta")
     procs.start("stream_b", "stream", *stream_args, "--seed", "8", "--device-name", "tb")
     procs.wait_for("stream_b", "gyroemu/tb/imu")
-    procs.start("rec_b", "record", "--out", str(tmp_path / "b.mcap"), "--key", "gyroemu/tb/**",
-                "--report", str(tmp_path / "b.json"))
+    procs.start(
+        "rec_b",
+        "record",
+        "--out",
+        str(tmp_path / "b.mcap"),
+        "--key",
+        "gyroemu/tb/**",
+        "--report",
+        str(tmp_path / "b.json"),
+    )
     # A plain zenoh program reaches the streams through the documented endpoint.
     config = zenoh.Config()
     config.insert_json5("mode", '"peer"')
     config.insert_json5("connect/endpoints", '["tcp/127.0.0.1:7447"]')
-    config.insert_json5("listen/endpoints", '[]')
+    config.insert_json5("listen/endpoints", "[]")
     config.insert_json5("scouting/multicast/enabled", "false")
     plain = zenoh.open(config)
     try:
@@ -105,11 +121,35 @@ def test_router_in_between_lossless(procs, tmp_path):
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     procs.start("router", "router", "--listen", endpoint)
     procs.wait_for("router", "listening")
-    procs.start("rec", "record", "--out", str(tmp_path / "r.mcap"), "--connect", endpoint, "--mode", "client",
-                "--report", str(tmp_path / "r.json"))
+    procs.start(
+        "rec",
+        "record",
+        "--out",
+        str(tmp_path / "r.mcap"),
+        "--connect",
+        endpoint,
+        "--mode",
+        "client",
+        "--report",
+        str(tmp_path / "r.json"),
+    )
     procs.wait_for("rec", "subscribed")
-    procs.start("stream", "stream", "--scenario", SCENARIO, "--device", DEVICE, "--duration", "5",
-                "--connect", endpoint, "--mode", "client", "--device-name", "routed")
+    procs.start(
+        "stream",
+        "stream",
+        "--scenario",
+        SCENARIO,
+        "--device",
+        DEVICE,
+        "--duration",
+        "5",
+        "--connect",
+        endpoint,
+        "--mode",
+        "client",
+        "--device-name",
+        "routed",
+    )
     assert procs.wait("stream", 60) == 0, procs.log("stream")
     time.sleep(0.5)
     assert procs.stop("rec") == 0, procs.log("rec")
@@ -124,8 +164,20 @@ def test_sigint_completes_and_sigkill_leaves_readable_chunks(procs, tmp_path):
     from gyroemu.pipelines.mcap_io import LogWarning, read_mcap
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    procs.start("stream", "stream", "--scenario", SCENARIO, "--device", DEVICE, "--duration", "8",
-                "--listen", endpoint, "--device-name", "cut")
+    procs.start(
+        "stream",
+        "stream",
+        "--scenario",
+        SCENARIO,
+        "--device",
+        DEVICE,
+        "--duration",
+        "8",
+        "--listen",
+        endpoint,
+        "--device-name",
+        "cut",
+    )
     procs.wait_for("stream", "gyroemu/cut/imu")
     for name in ("int", "kill"):
         procs.start(name, "record", "--out", str(tmp_path / f"{name}.mcap"), "--connect", endpoint)
@@ -144,8 +196,10 @@ def test_sigint_completes_and_sigkill_leaves_readable_chunks(procs, tmp_path):
     with pytest.warns(LogWarning, match=r"truncated .* recovered (\d+) messages"):
         killed = read_mcap(tmp_path / "kill.mcap")
     assert killed.truncated and killed.message_count > 0
-    print(f"SIGINT: {log.message_count} messages, complete; SIGKILL: {killed.message_count} messages "
-          f"recovered from {(tmp_path / 'kill.mcap').stat().st_size} bytes")
+    print(
+        f"SIGINT: {log.message_count} messages, complete; SIGKILL: {killed.message_count} messages "
+        f"recovered from {(tmp_path / 'kill.mcap').stat().st_size} bytes"
+    )
 
 
 def test_pacing_follows_the_sample_clock(procs):
@@ -157,8 +211,20 @@ def test_pacing_follows_the_sample_clock(procs):
     The p99 error is printed, not asserted: it is a speed figure of a shared machine (README records it).
     """
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    procs.start("stream", "stream", "--scenario", SCENARIO, "--device", DEVICE, "--duration", "5",
-                "--listen", endpoint, "--device-name", "paced")
+    procs.start(
+        "stream",
+        "stream",
+        "--scenario",
+        SCENARIO,
+        "--device",
+        DEVICE,
+        "--duration",
+        "5",
+        "--listen",
+        endpoint,
+        "--device-name",
+        "paced",
+    )
     procs.wait_for("stream", "gyroemu/paced/imu")
     config = zenoh.Config()
     config.insert_json5("mode", '"client"')
@@ -184,8 +250,10 @@ def test_pacing_follows_the_sample_clock(procs):
     error = offset - offset.min()
     p50, p99, worst = np.percentile(error, 50) * 1e3, np.percentile(error, 99) * 1e3, error.max() * 1e3
     own = [line for line in procs.log("stream").splitlines() if "pacing" in line]
-    print(f"\npacing from attachment stamps: p50 {p50:.3f} ms, p99 {p99:.3f} ms, max {worst:.3f} ms; "
-          f"drift over the run {(np.median(error[-500:]) - np.median(error[:500])) * 1e3:.3f} ms\n{own}")
+    print(
+        f"\npacing from attachment stamps: p50 {p50:.3f} ms, p99 {p99:.3f} ms, max {worst:.3f} ms; "
+        f"drift over the run {(np.median(error[-500:]) - np.median(error[:500])) * 1e3:.3f} ms\n{own}"
+    )
     # Drift is in every sample, a busy machine's starvation only in some: compare the least lateness of
     # the first and the last 1000 samples (a drift-free schedule returns to time once it gets the CPU).
     assert abs(error[-1000:].min() - error[:1000].min()) < 2e-3  # seconds: no accumulating drift

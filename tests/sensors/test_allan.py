@@ -81,9 +81,14 @@ def test_static_run_recovers_the_noise_terms():
     """
     dt, hours = 0.01, 4.0
     t = np.arange(int(hours * 3600 / dt)) * dt
-    spec = GyroErrors(arw_deg_per_sqrt_h=0.15, bias_instability_deg_per_h=20.0, rrw_deg_per_h_per_sqrt_h=800.0,
-                      bias_instability_tau_range_s=(0.01, 1e5), turn_on_bias_deg_per_h=100.0,
-                      bias_deg_per_h=[10.0, -20.0, 30.0])
+    spec = GyroErrors(
+        arw_deg_per_sqrt_h=0.15,
+        bias_instability_deg_per_h=20.0,
+        rrw_deg_per_h_per_sqrt_h=800.0,
+        bias_instability_tau_range_s=(0.01, 1e5),
+        turn_on_bias_deg_per_h=100.0,
+        bias_deg_per_h=[10.0, -20.0, 30.0],
+    )
     lsb = 2.7e-5  # rad, angle per count
     rng = np.random.default_rng(0)
     rate = apply_errors(np.zeros((t.size, 3)), t, spec, rng)

@@ -46,8 +46,10 @@ def test_bias(motion):
 
 
 def test_scale_factor(motion):
-    close(measure(GyroErrors(scale_factor_ppm=[100, -200, 300]), motion),
-          motion[1] * (1 + np.array([100, -200, 300]) * 1e-6))
+    close(
+        measure(GyroErrors(scale_factor_ppm=[100, -200, 300]), motion),
+        motion[1] * (1 + np.array([100, -200, 300]) * 1e-6),
+    )
 
 
 def test_misalignment_angles_and_cross_axis_matrix(motion):
@@ -76,8 +78,11 @@ def test_saturation_clips_at_the_range(motion):
 
 def test_temperature_sensitivity_of_bias_and_scale_factor(motion):
     _, omega, _, temperature = motion
-    spec = GyroErrors(bias_temperature_deg_per_h_per_degC=[0.5, -1.0, 2.0],
-                      scale_factor_temperature_ppm_per_degC=[10, 20, -30], reference_temperature_degC=20)
+    spec = GyroErrors(
+        bias_temperature_deg_per_h_per_degC=[0.5, -1.0, 2.0],
+        scale_factor_temperature_ppm_per_degC=[10, 20, -30],
+        reference_temperature_degC=20,
+    )
     dT = (temperature - 20)[:, None]
     expected = omega + np.array([0.5, -1.0, 2.0]) * DEG_PER_H * dT + np.array([10, 20, -30]) * 1e-6 * dT * omega
     close(measure(spec, motion, temperature_degC=temperature), expected)
@@ -96,14 +101,15 @@ def test_g_sensitivity(motion):
 
 def test_rate_ramp(motion):
     t, omega, _, _ = motion
-    close(measure(GyroErrors(rate_ramp_deg_per_h_per_h=[1.0, 0.0, -1.0]), motion),
-          omega + t[:, None] * np.array([1.0, 0.0, -1.0]) * DEG_PER_H / 3600)
+    close(
+        measure(GyroErrors(rate_ramp_deg_per_h_per_h=[1.0, 0.0, -1.0]), motion),
+        omega + t[:, None] * np.array([1.0, 0.0, -1.0]) * DEG_PER_H / 3600,
+    )
 
 
 def test_accelerometer_terms_in_their_own_units(motion):
     t, _, force, temperature = motion
-    spec = AccelErrors(bias_ug=[100, 200, -300], scale_factor_ppm=500, bias_temperature_ug_per_degC=2,
-                       range_g=2)
+    spec = AccelErrors(bias_ug=[100, 200, -300], scale_factor_ppm=500, bias_temperature_ug_per_degC=2, range_g=2)
     y = apply_errors(force, t, spec, np.random.default_rng(0), temperature_degC=temperature)
     expected = force * (1 + 500e-6) + np.array([100, 200, -300]) * UG + 2 * UG * (temperature - 25)[:, None]
     close(y, np.clip(expected, -2 * STANDARD_GRAVITY, 2 * STANDARD_GRAVITY))
@@ -174,12 +180,21 @@ def test_bandwidth_must_be_below_nyquist(motion):
 
 
 ALL_TERMS = dict(
-    bias_deg_per_h=1.0, turn_on_bias_deg_per_h=10.0, bias_temperature_deg_per_h_per_degC=0.1,
-    scale_factor_ppm=100, scale_factor_temperature_ppm_per_degC=5, range_deg_per_s=400,
-    scale_factor_nonlinearity_ppm=50, misalignment_mrad=[0.1, 0.2, 0.3, 0.4, 0.5, 0.6],
-    g_sensitivity_deg_per_h_per_g=[[1, 0, 0], [0, 1, 0], [0, 0, 1]], arw_deg_per_sqrt_h=0.5,
-    bias_instability_deg_per_h=2.0, rrw_deg_per_h_per_sqrt_h=0.5, rate_ramp_deg_per_h_per_h=0.1,
-    quantisation_rad=1e-7, bandwidth_hz=40,
+    bias_deg_per_h=1.0,
+    turn_on_bias_deg_per_h=10.0,
+    bias_temperature_deg_per_h_per_degC=0.1,
+    scale_factor_ppm=100,
+    scale_factor_temperature_ppm_per_degC=5,
+    range_deg_per_s=400,
+    scale_factor_nonlinearity_ppm=50,
+    misalignment_mrad=[0.1, 0.2, 0.3, 0.4, 0.5, 0.6],
+    g_sensitivity_deg_per_h_per_g=[[1, 0, 0], [0, 1, 0], [0, 0, 1]],
+    arw_deg_per_sqrt_h=0.5,
+    bias_instability_deg_per_h=2.0,
+    rrw_deg_per_h_per_sqrt_h=0.5,
+    rate_ramp_deg_per_h_per_h=0.1,
+    quantisation_rad=1e-7,
+    bandwidth_hz=40,
 )
 
 
@@ -196,8 +211,12 @@ def test_other_seeds_give_independent_noise():
     # samples of two seeds are n independent pairs: their correlation is within 4/√n of zero.
     # (Random walks alone would not do: two independent walks are often strongly correlated.)
     t = np.arange(100_000) * 0.01
-    spec = GyroErrors(arw_deg_per_sqrt_h=0.5, bias_instability_deg_per_h=2.0, rrw_deg_per_h_per_sqrt_h=0.5,
-                      turn_on_bias_deg_per_h=10.0)
+    spec = GyroErrors(
+        arw_deg_per_sqrt_h=0.5,
+        bias_instability_deg_per_h=2.0,
+        rrw_deg_per_h_per_sqrt_h=0.5,
+        turn_on_bias_deg_per_h=10.0,
+    )
     a = apply_errors(np.zeros((t.size, 3)), t, spec, np.random.default_rng(1))
     b = apply_errors(np.zeros((t.size, 3)), t, spec, np.random.default_rng(2))
     for axis in range(3):
@@ -248,19 +267,24 @@ def test_sample_times_must_be_uniform(motion):
         (GyroErrors, {"typo_key": 1}, "gyro.typo_key", "unknown key"),
         (GyroErrors, {"bias_instability_deg_per_h": "3 deg/h"}, "gyro.bias_instability_deg_per_h", "number"),
         (GyroErrors, {"scale_factor_ppm": [1, 2]}, "gyro.scale_factor_ppm", "3"),
-        (GyroErrors, {"arw_deg_per_sqrt_h": 0.1, "noise_density_deg_per_s_per_sqrt_hz": 0.01},
-         "gyro.noise_density_deg_per_s_per_sqrt_hz", "not both"),
-        (GyroErrors, {"scale_factor_nonlinearity_ppm": 100}, "gyro.scale_factor_nonlinearity_ppm",
-         "range_deg_per_s"),
-        (GyroErrors, {"cross_axis_matrix": [[1, 0, 0], [0, 0, 0], [0, 0, 0]]}, "gyro.cross_axis_matrix",
-         "diagonal"),
-        (GyroErrors, {"bias_instability_tau_range_s": [100, 10]}, "gyro.bias_instability_tau_range_s",
-         "min < max"),
+        (
+            GyroErrors,
+            {"arw_deg_per_sqrt_h": 0.1, "noise_density_deg_per_s_per_sqrt_hz": 0.01},
+            "gyro.noise_density_deg_per_s_per_sqrt_hz",
+            "not both",
+        ),
+        (GyroErrors, {"scale_factor_nonlinearity_ppm": 100}, "gyro.scale_factor_nonlinearity_ppm", "range_deg_per_s"),
+        (GyroErrors, {"cross_axis_matrix": [[1, 0, 0], [0, 0, 0], [0, 0, 0]]}, "gyro.cross_axis_matrix", "diagonal"),
+        (GyroErrors, {"bias_instability_tau_range_s": [100, 10]}, "gyro.bias_instability_tau_range_s", "min < max"),
         (GyroErrors, {"range_deg_per_s": 0}, "gyro.range_deg_per_s", "greater than 0"),
         (AccelErrors, {"bias_instability_deg_per_h": 1}, "gyro.bias_instability_deg_per_h", "bias_instability_ug"),
         (AccelErrors, {"vrw_m_per_s_per_sqrt_h": -1}, "gyro.vrw_m_per_s_per_sqrt_h", ">= 0"),
-        (AccelErrors, {"g_sensitivity_deg_per_h_per_g": [[0] * 3] * 3}, "gyro.g_sensitivity_deg_per_h_per_g",
-         "unknown key"),
+        (
+            AccelErrors,
+            {"g_sensitivity_deg_per_h_per_g": [[0] * 3] * 3},
+            "gyro.g_sensitivity_deg_per_h_per_g",
+            "unknown key",
+        ),
     ],
 )
 def test_config_errors_name_the_key(model, data, key, words):

@@ -26,9 +26,15 @@ DEG = math.pi / 180
 def make_truth(t, omega, alpha=None):
     """A GyroTruth on the uniform grid ``t`` with rates ``omega`` (3,) or (M, 3)."""
     zero = np.zeros((len(t), 3))
-    return GyroTruth(t=t, dt=float(t[1] - t[0]), omega=zero + np.asarray(omega, float),
-                     alpha=zero if alpha is None else zero + alpha, specific_force=zero,
-                     q_is=np.tile([1.0, 0, 0, 0], (len(t), 1)), temperature_degC=np.full(len(t), 25.0))
+    return GyroTruth(
+        t=t,
+        dt=float(t[1] - t[0]),
+        omega=zero + np.asarray(omega, float),
+        alpha=zero if alpha is None else zero + alpha,
+        specific_force=zero,
+        q_is=np.tile([1.0, 0, 0, 0], (len(t), 1)),
+        temperature_degC=np.full(len(t), 25.0),
+    )
 
 
 def grid(duration, hz):
@@ -150,11 +156,14 @@ def photon_counting(gyro, sagnac_phase, shot, rin, trials=4000, periods=20, per_
     return first_harmonic / (-responsivity * p0 * jv(1, gyro.modulation_depth_rad)), float(periods)
 
 
-@pytest.mark.parametrize("terms, params", [
-    ("shot", {"detector_power_uw": 1e-3}),  # ~10⁴ photo-electrons per sample
-    ("rin", {"spectral_width_nm": 1e-7}),  # RIN = 8·10⁻² /Hz
-    ("total", {"detector_power_uw": 2e-4, "spectral_width_nm": 2e-3}),  # the two comparable
-])
+@pytest.mark.parametrize(
+    "terms, params",
+    [
+        ("shot", {"detector_power_uw": 1e-3}),  # ~10⁴ photo-electrons per sample
+        ("rin", {"spectral_width_nm": 1e-7}),  # RIN = 8·10⁻² /Hz
+        ("total", {"detector_power_uw": 2e-4, "spectral_width_nm": 2e-3}),  # the two comparable
+    ],
+)
 @pytest.mark.parametrize("sagnac_phase", [0.0, 0.7])
 def test_demodulator_noise_formula_against_photon_counting(terms, params, sagnac_phase):
     gyro = FiberOpticGyro(**params)
@@ -212,11 +221,14 @@ def test_noise_scales_with_power_and_source_width():
     base = FiberOpticGyro()
     # Shot noise ∝ 1/√P₀, RIN noise ∝ 1/√Δλ, both divided by S ∝ L D.
     assert FiberOpticGyro(detector_power_uw=80.0).phase_noise(0.0, "shot") == pytest.approx(
-        base.phase_noise(0.0, "shot") / 2, rel=1e-12)
+        base.phase_noise(0.0, "shot") / 2, rel=1e-12
+    )
     assert FiberOpticGyro(spectral_width_nm=120.0).phase_noise(0.0, "rin") == pytest.approx(
-        base.phase_noise(0.0, "rin") / 2, rel=1e-12)
+        base.phase_noise(0.0, "rin") / 2, rel=1e-12
+    )
     assert FiberOpticGyro(coil_length_m=400.0).intrinsic_noise_density() == pytest.approx(
-        base.intrinsic_noise_density() / 2, rel=1e-12)
+        base.intrinsic_noise_density() / 2, rel=1e-12
+    )
 
 
 # --------------------------------------------------------------------------------------------------
@@ -257,8 +269,13 @@ def test_inside_an_imu_the_mechanism_makes_part_of_the_specified_arw():
     q = np.tile([1.0, 0, 0, 0], (len(t), 1))
     zero = np.zeros((len(t), 3))
     traj = trajectory_from_world_motion(t, q, w, zero, zero, zero, zero, Environment.inertial(9.81))
-    device = device_from_dict({"description": "fog", "rate_hz": 200.0,
-                               "gyro": {"mechanism": {"kind": "fog"}, "errors": {"arw_deg_per_sqrt_h": 0.012}}})
+    device = device_from_dict(
+        {
+            "description": "fog",
+            "rate_hz": 200.0,
+            "gyro": {"mechanism": {"kind": "fog"}, "errors": {"arw_deg_per_sqrt_h": 0.012}},
+        }
+    )
     spec = 0.012 * DEG / 60
     assert device.gyro_noise_density == pytest.approx(np.full(3, spec), rel=1e-12)
     samples = device.measure(traj)
@@ -267,15 +284,30 @@ def test_inside_an_imu_the_mechanism_makes_part_of_the_specified_arw():
     assert samples.raw["fog"]["sagnac_phase_rad"].shape == (len(samples), 3)
     # A mechanism noisier than its specification is refused.
     with pytest.raises(ConfigError, match="exceeds? the specified"):
-        device_from_dict({"description": "fog", "rate_hz": 200.0,
-                          "gyro": {"mechanism": {"kind": "fog"}, "errors": {"arw_deg_per_sqrt_h": 0.005}}})
+        device_from_dict(
+            {
+                "description": "fog",
+                "rate_hz": 200.0,
+                "gyro": {"mechanism": {"kind": "fog"}, "errors": {"arw_deg_per_sqrt_h": 0.005}},
+            }
+        )
 
 
-@pytest.mark.parametrize("key, value", [
-    ("coil_length_m", -200.0), ("coil_diameter_m", 0.0), ("wavelength_nm", -1550.0), ("spectral_width_nm", 2000.0),
-    ("detector_power_uw", -20.0), ("detector_power_uw", 0.0), ("responsivity_a_per_w", 1.5),
-    ("modulation_depth_rad", 3.9), ("feedback_range_rad", 4.0), ("loop", "half-open"),
-])
+@pytest.mark.parametrize(
+    "key, value",
+    [
+        ("coil_length_m", -200.0),
+        ("coil_diameter_m", 0.0),
+        ("wavelength_nm", -1550.0),
+        ("spectral_width_nm", 2000.0),
+        ("detector_power_uw", -20.0),
+        ("detector_power_uw", 0.0),
+        ("responsivity_a_per_w", 1.5),
+        ("modulation_depth_rad", 3.9),
+        ("feedback_range_rad", 4.0),
+        ("loop", "half-open"),
+    ],
+)
 def test_bad_parameters_name_their_key(key, value):
     with pytest.raises(ConfigError) as err:
         validate(FiberOpticGyro, {"kind": "fog", key: value}, prefix="gyro.mechanism")

@@ -15,25 +15,44 @@ from scipy.spatial.transform import Rotation
 
 from gyroemu.dynamics.config import ConfigError, validate
 from gyroemu.dynamics.rotation import body_rate_from_euler_zyx, quat_from_euler_zyx
-from gyroemu.sensors.free_gyro import (FreeGyro, GimbalLockError, GimbalLockWarning, body_rate_from_euler_xyz,
-                               time_derivative)
+from gyroemu.sensors.free_gyro import (
+    FreeGyro,
+    GimbalLockError,
+    GimbalLockWarning,
+    body_rate_from_euler_xyz,
+    time_derivative,
+)
 from gyroemu.sensors.mechanism import GyroTruth, mechanism_class
 
-FRICTIONLESS = FreeGyro(outer_viscous_friction_n_m_s_per_rad=0, outer_coulomb_friction_n_m=0,
-                        inner_viscous_friction_n_m_s_per_rad=0, inner_coulomb_friction_n_m=0)
+FRICTIONLESS = FreeGyro(
+    outer_viscous_friction_n_m_s_per_rad=0,
+    outer_coulomb_friction_n_m=0,
+    inner_viscous_friction_n_m_s_per_rad=0,
+    inner_coulomb_friction_n_m=0,
+)
 
 
 def friction(outer=(0.0, 0.0), inner=(0.0, 0.0)):
     """A gyro with (viscous N·m·s/rad, Coulomb N·m) in each bearing."""
-    return FreeGyro(outer_viscous_friction_n_m_s_per_rad=outer[0], outer_coulomb_friction_n_m=outer[1],
-                    inner_viscous_friction_n_m_s_per_rad=inner[0], inner_coulomb_friction_n_m=inner[1])
+    return FreeGyro(
+        outer_viscous_friction_n_m_s_per_rad=outer[0],
+        outer_coulomb_friction_n_m=outer[1],
+        inner_viscous_friction_n_m_s_per_rad=inner[0],
+        inner_coulomb_friction_n_m=inner[1],
+    )
 
 
 def make_truth(q_is, omega, dt):
     m = len(q_is)
-    return GyroTruth(t=np.arange(m) * dt, dt=dt, omega=np.asarray(omega, dtype=float), alpha=np.zeros((m, 3)),
-                     specific_force=np.zeros((m, 3)), q_is=np.asarray(q_is, dtype=float),
-                     temperature_degC=np.full(m, 25.0))
+    return GyroTruth(
+        t=np.arange(m) * dt,
+        dt=dt,
+        omega=np.asarray(omega, dtype=float),
+        alpha=np.zeros((m, 3)),
+        specific_force=np.zeros((m, 3)),
+        q_is=np.asarray(q_is, dtype=float),
+        temperature_degC=np.full(m, 25.0),
+    )
 
 
 def respond(gyro, q_is, omega, dt):
@@ -47,10 +66,12 @@ def wrap(a):
 def tumbling_zyx(t):
     """A carrier rolling, pitching (to ±40°) and turning: q_is and ω_b from the Z-Y-X helpers of
     gyroemu.dynamics.rotation, starting from a non-trivial attitude."""
-    rpy = np.stack([0.3 + 1.2 * np.sin(0.7 * t), 0.2 + 0.5 * np.sin(0.45 * t + 0.3),
-                    2.5 * np.sin(0.2 * t) + 0.3 * t], -1)
-    rates = np.stack([1.2 * 0.7 * np.cos(0.7 * t), 0.5 * 0.45 * np.cos(0.45 * t + 0.3),
-                      0.5 * np.cos(0.2 * t) + 0.3], -1)
+    rpy = np.stack(
+        [0.3 + 1.2 * np.sin(0.7 * t), 0.2 + 0.5 * np.sin(0.45 * t + 0.3), 2.5 * np.sin(0.2 * t) + 0.3 * t], -1
+    )
+    rates = np.stack(
+        [1.2 * 0.7 * np.cos(0.7 * t), 0.5 * 0.45 * np.cos(0.45 * t + 0.3), 0.5 * np.cos(0.2 * t) + 0.3], -1
+    )
     return quat_from_euler_zyx(rpy), body_rate_from_euler_zyx(rpy, rates)
 
 
@@ -303,9 +324,9 @@ def test_chunks_continue_one_run(gyro):
         assert state["spins"].shape == (2, 3) and state["attitude_tail"].shape == (5, 3)
         parts.append(part)
         if last < n:  # a chunk ends as a run ending there: the one-sided formulas, not the next samples
-            alone = gyro.respond(make_truth(q[:last + 1], omega[:last + 1], dt), np.random.default_rng(0), {})
+            alone = gyro.respond(make_truth(q[: last + 1], omega[: last + 1], dt), np.random.default_rng(0), {})
             own = slice(max(last - 1, first + 1) - first, None)
-            np.testing.assert_allclose(part.rate[own], alone.rate[first + own.start:], rtol=0, atol=roundoff)
+            np.testing.assert_allclose(part.rate[own], alone.rate[first + own.start :], rtol=0, atol=roundoff)
 
     for name, values in whole.raw.items():
         joined = np.concatenate([parts[0].raw[name]] + [p.raw[name][1:] for p in parts[1:]])
@@ -322,11 +343,11 @@ def test_chunks_continue_one_run(gyro):
     angle = imu_angle(whole.rate, dt)
     bound = len(t) * np.finfo(float).eps * np.abs(angle).max() + 2 * dt * np.abs(rate[ends] - whole.rate[ends]).max()
     for first, last, part in zip(edges[:-1], edges[1:], parts):
-        np.testing.assert_allclose(imu_angle(part.rate, dt), angle[first:last + 1] - angle[first], rtol=0, atol=bound)
+        np.testing.assert_allclose(imu_angle(part.rate, dt), angle[first : last + 1] - angle[first], rtol=0, atol=bound)
 
     # A fresh state on a later chunk is a power-up there: the rotors are set at its first attitude.
-    fresh = gyro.respond(make_truth(q[edges[-2]:], omega[edges[-2]:], dt), np.random.default_rng(0), {})
-    np.testing.assert_array_equal(fresh.rate, respond(gyro, q[edges[-2]:], omega[edges[-2]:], dt).rate)
+    fresh = gyro.respond(make_truth(q[edges[-2] :], omega[edges[-2] :], dt), np.random.default_rng(0), {})
+    np.testing.assert_array_equal(fresh.rate, respond(gyro, q[edges[-2] :], omega[edges[-2] :], dt).rate)
     np.testing.assert_allclose(fresh.raw["attitude_xyz_rad"][0], 0.0, rtol=0, atol=1e-15)
     assert np.abs(parts[-1].raw["attitude_xyz_rad"][0]).max() > 0.1
 
@@ -336,9 +357,10 @@ def test_gimbal_lock_is_reported_once_per_run():
     state, locked = {}, []
     with pytest.warns(GimbalLockWarning) as record:  # locked from ≈ 0.83 s to 1.17 s: in every chunk
         for first, last in ((0, 900), (900, 1000), (1000, len(t) - 1)):
-            part = FRICTIONLESS.respond(make_truth(q[first:last + 1], omega[first:last + 1], 1e-3),
-                                        np.random.default_rng(0), state)
-            locked.append(part.raw["gimbal_lock"][1 if locked else 0:])
+            part = FRICTIONLESS.respond(
+                make_truth(q[first : last + 1], omega[first : last + 1], 1e-3), np.random.default_rng(0), state
+            )
+            locked.append(part.raw["gimbal_lock"][1 if locked else 0 :])
     assert len(record) == 1 and state["lock_reported"]
     np.testing.assert_array_equal(np.concatenate(locked), np.abs(theta) > math.radians(85.0))
 
@@ -358,12 +380,21 @@ def test_inner_rate_is_the_output_rate_and_nothing_is_drawn():
     assert rng.bit_generator.state == state
 
 
-@pytest.mark.parametrize("key, value", [
-    ("rotor_inertia_kgm2", 0.0), ("spin_speed_rpm", -1.0), ("outer_viscous_friction_n_m_s_per_rad", -1e-6),
-    ("outer_coulomb_friction_n_m", -1e-6), ("inner_viscous_friction_n_m_s_per_rad", -1e-6),
-    ("inner_coulomb_friction_n_m", "3e-6"), ("gimbal_lock_margin_deg", 0), ("gimbal_lock_margin_deg", 90),
-    ("on_gimbal_lock", "ignore"), ("friction_n_m", 1e-6),
-])
+@pytest.mark.parametrize(
+    "key, value",
+    [
+        ("rotor_inertia_kgm2", 0.0),
+        ("spin_speed_rpm", -1.0),
+        ("outer_viscous_friction_n_m_s_per_rad", -1e-6),
+        ("outer_coulomb_friction_n_m", -1e-6),
+        ("inner_viscous_friction_n_m_s_per_rad", -1e-6),
+        ("inner_coulomb_friction_n_m", "3e-6"),
+        ("gimbal_lock_margin_deg", 0),
+        ("gimbal_lock_margin_deg", 90),
+        ("on_gimbal_lock", "ignore"),
+        ("friction_n_m", 1e-6),
+    ],
+)
 def test_bad_parameters_name_the_key(key, value):
     with pytest.raises(ConfigError) as err:
         validate(FreeGyro, {"kind": "free-gyro", key: value})

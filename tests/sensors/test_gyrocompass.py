@@ -11,9 +11,12 @@ from gyroemu.sensors.gyrocompass import gyrocompass, heading_uncertainty
 def expected_sigma(device, latitude_rad, duration_s):
     e, a = device.gyro_errors, device.spec.accelerometer.errors.to_si()
     return heading_uncertainty(
-        latitude_rad, duration_s,
-        bias=np.hypot(e.bias[0], e.turn_on_bias[0]), noise_density=device.gyro_noise_density[0],
-        bias_instability=e.bias_instability[0], random_walk=e.random_walk[0],
+        latitude_rad,
+        duration_s,
+        bias=np.hypot(e.bias[0], e.turn_on_bias[0]),
+        noise_density=device.gyro_noise_density[0],
+        bias_instability=e.bias_instability[0],
+        random_walk=e.random_walk[0],
         accel_bias=np.hypot(a.bias[0], a.turn_on_bias[0]),
     )
 

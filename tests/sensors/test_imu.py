@@ -48,8 +48,9 @@ def test_ideal_gyro_reports_the_exact_mean_rate_over_each_interval():
 def test_mounting_rotation_and_increment_output():
     traj = spinning()
     q_bs = quat_from_rotvec([0.0, 0.0, np.pi / 2])  # sensor x along body y
-    s = device_from_dict({"description": "x", "rate_hz": 100, "output": "increment",
-                          "mounting": {"q_bs": q_bs.tolist()}}).measure(traj)
+    s = device_from_dict(
+        {"description": "x", "rate_hz": 100, "output": "increment", "mounting": {"q_bs": q_bs.tolist()}}
+    ).measure(traj)
     expected = quat_rotate(q_bs * [1, -1, -1, -1], traj.omega_b[0])
     np.testing.assert_allclose(s.gyro, np.broadcast_to(expected, s.gyro.shape), atol=1e-12)
     np.testing.assert_allclose(s.delta_angle, s.gyro / 100, rtol=1e-15)
@@ -67,9 +68,12 @@ def test_lever_arm_accelerometer_reads_centripetal_acceleration():
 def test_clock_rate_error_scales_and_stamps_shift():
     traj = spinning()
     eps_ppm, offset = 200.0, 0.0125
-    s = device_from_dict({"description": "x", "rate_hz": 100,
-                          "clock": {"rate_error_ppm": eps_ppm, "offset_s": offset}}).measure(traj)
-    np.testing.assert_allclose(s.gyro, np.broadcast_to(traj.omega_b[0] * (1 + eps_ppm * 1e-6), s.gyro.shape), rtol=1e-12)
+    s = device_from_dict(
+        {"description": "x", "rate_hz": 100, "clock": {"rate_error_ppm": eps_ppm, "offset_s": offset}}
+    ).measure(traj)
+    np.testing.assert_allclose(
+        s.gyro, np.broadcast_to(traj.omega_b[0] * (1 + eps_ppm * 1e-6), s.gyro.shape), rtol=1e-12
+    )
     np.testing.assert_allclose(s.t, np.arange(1, len(s) + 1) / 100 + offset, rtol=1e-13)
     np.testing.assert_allclose(s.t_true, np.arange(1, len(s) + 1) / 100 * (1 + eps_ppm * 1e-6), rtol=1e-13)
 
@@ -108,8 +112,9 @@ def test_white_noise_through_the_device_matches_the_arw():
 def test_magnetometer_hard_iron_and_soft_iron():
     traj = spinning(rate=(0, 0, 0))
     soft = [[1.1, 0.0, 0.0], [0.0, 0.9, 0.0], [0.0, 0.0, 1.0]]
-    s = device_from_dict({"description": "x", "rate_hz": 50,
-                          "magnetometer": {"hard_iron_uT": [5, -3, 1], "soft_iron": soft}}).measure(traj)
+    s = device_from_dict(
+        {"description": "x", "rate_hz": 50, "magnetometer": {"hard_iron_uT": [5, -3, 1], "soft_iron": soft}}
+    ).measure(traj)
     expected = np.array(soft) @ np.array([0.0, 2e-5, -4e-5]) + np.array([5e-6, -3e-6, 1e-6])
     np.testing.assert_allclose(s.mag, np.broadcast_to(expected, s.mag.shape), atol=1e-18)
 
@@ -129,8 +134,9 @@ def test_mechanism_noisier_than_its_spec_is_refused(monkeypatch):
 
     monkeypatch.setattr(gyroemu.sensors.imu, "mechanism_class", lambda kind: NoisyMechanism)
     with pytest.raises(ConfigError, match="own white noise .* exceeds? the specified white noise") as info:
-        device_from_dict({"description": "x", "rate_hz": 100, "gyro": {"errors": {"arw_deg_per_sqrt_h": 0.5}}},
-                         name="dev.toml")
+        device_from_dict(
+            {"description": "x", "rate_hz": 100, "gyro": {"errors": {"arw_deg_per_sqrt_h": 0.5}}}, name="dev.toml"
+        )
     assert info.value.key == "gyro.errors.arw_deg_per_sqrt_h" and info.value.file == "dev.toml"
 
 
@@ -145,8 +151,10 @@ def test_mechanism_noisier_than_its_spec_is_refused(monkeypatch):
         ({"clock": {"jitter_s": 0.01}}, "clock.jitter_s"),
         ({"mounting": {"q_bs": [1, 1, 0, 0]}}, "mounting.q_bs"),
         # An open-loop FOG reads sin Δφ: beyond Δφ = π/2 (512 deg/s for the default coil) it folds back.
-        ({"gyro": {"mechanism": {"kind": "fog", "loop": "open"}, "errors": {"range_deg_per_s": 600}}},
-         "gyro.errors.range_deg_per_s"),
+        (
+            {"gyro": {"mechanism": {"kind": "fog", "loop": "open"}, "errors": {"range_deg_per_s": 600}}},
+            "gyro.errors.range_deg_per_s",
+        ),
         ({"gyro": {"mechanism": {"kind": "mems", "proof_mass_kg": -1e-9}}}, "gyro.mechanism.proof_mass_kg"),
     ],
 )
@@ -169,8 +177,13 @@ def test_each_mechanism_reads_only_what_it_declares(kind):
         "q_is": quat_from_rotvec(t[:, None] * omega),
         "temperature_degC": np.full(len(t), 25.0),
     }
-    truth = GyroTruth(t=t, dt=1 / hz, omega=omega, alpha=np.zeros_like(omega),
-                      **{k: v for k, v in optional.items() if k in mechanism.reads})
+    truth = GyroTruth(
+        t=t,
+        dt=1 / hz,
+        omega=omega,
+        alpha=np.zeros_like(omega),
+        **{k: v for k, v in optional.items() if k in mechanism.reads},
+    )
     response = mechanism.respond(truth, np.random.default_rng(0), {})
     out = response.angle if response.angle is not None else response.rate
     assert out.shape == (len(t), 3) and np.all(np.isfinite(out))
@@ -188,5 +201,5 @@ def test_output_quantiser_counts_in_the_noise_budget():
     fine = {**spec, "gyro": {"errors": {"arw_deg_per_sqrt_h": 0.5, "quantisation_rad_per_s": np.radians(0.01)}}}
     device = device_from_dict(fine)
     lsb_density2 = np.radians(0.01) ** 2 * 0.01 / 12
-    np.testing.assert_allclose(device.gyro_errors.noise_density ** 2 + lsb_density2, (np.radians(0.5) / 60) ** 2)
+    np.testing.assert_allclose(device.gyro_errors.noise_density**2 + lsb_density2, (np.radians(0.5) / 60) ** 2)
     np.testing.assert_allclose(device.gyro_noise_density, np.radians(0.5) / 60)

@@ -35,9 +35,15 @@ def make_truth(t, omega=None, alpha=None, force=None, temperature=25.0):
     """A GyroTruth on ``t`` (inputs default to zero; ``temperature`` scalar or (M,))."""
     zero = np.zeros((len(t), 3))
     pick = lambda x: zero if x is None else np.broadcast_to(np.asarray(x, float), zero.shape).copy()
-    return GyroTruth(t=t, dt=float(t[1] - t[0]), omega=pick(omega), alpha=pick(alpha), specific_force=pick(force),
-                     q_is=np.tile([1.0, 0, 0, 0], (len(t), 1)),
-                     temperature_degC=np.broadcast_to(np.asarray(temperature, float), t.shape).copy())
+    return GyroTruth(
+        t=t,
+        dt=float(t[1] - t[0]),
+        omega=pick(omega),
+        alpha=pick(alpha),
+        specific_force=pick(force),
+        q_is=np.tile([1.0, 0, 0, 0], (len(t), 1)),
+        temperature_degC=np.broadcast_to(np.asarray(temperature, float), t.shape).copy(),
+    )
 
 
 def noiseless(gyro, truth, reference=None, seed=0, reference_gyro=None):
@@ -46,8 +52,11 @@ def noiseless(gyro, truth, reference=None, seed=0, reference_gyro=None):
     reference = make_truth(truth.t, temperature=truth.temperature_degC) if reference is None else reference
     a = gyro.respond(truth, np.random.default_rng(seed), {})
     b = (reference_gyro or gyro).respond(reference, np.random.default_rng(seed), {})
-    return (a.rate - b.rate, a.raw["sense_in_phase_v"] - b.raw["sense_in_phase_v"],
-            a.raw["sense_quadrature_v"] - b.raw["sense_quadrature_v"])
+    return (
+        a.rate - b.rate,
+        a.raw["sense_in_phase_v"] - b.raw["sense_in_phase_v"],
+        a.raw["sense_quadrature_v"] - b.raw["sense_quadrature_v"],
+    )
 
 
 def step(t, value, at):
@@ -143,8 +152,12 @@ def test_scale_factor_is_the_sense_response_at_the_drive_frequency(split_hz, q):
         # ε²/2 (damping, ε = ω_d ω_s/(Q (ω_s² − ω_d²))).
         w_d, w_s = frequencies(g)
         x, eps = split_hz / (2 * g.drive_frequency_hz), w_d * w_s / (q * (w_s**2 - w_d**2))
-        approx = g.pickoff_gain_v_per_m * g.drive_amplitude_m / abs(2 * np.pi * split_hz) * math.cos(
-            g.demodulation_phase_error_rad)
+        approx = (
+            g.pickoff_gain_v_per_m
+            * g.drive_amplitude_m
+            / abs(2 * np.pi * split_hz)
+            * math.cos(g.demodulation_phase_error_rad)
+        )
         assert abs(measured[0] / approx - 1) <= abs(x) / (1 - abs(x)) + eps**2 / 2
 
 
@@ -205,7 +218,7 @@ def test_rate_response_has_the_envelope_poles():
         # The Coriolis force alone (α = 0): equation (6) of the module notes, written out.
         rate, _, _ = noiseless(g, make_truth(t, omega=omega))
         s = 1j * w
-        expected = (abs(p)**2 - s * p.real) / ((s - p) * (s - np.conj(p)))
+        expected = (abs(p) ** 2 - s * p.real) / ((s - p) * (s - np.conj(p)))
         # The input is linear between samples: its fundamental passes as sinc²(f h).
         expected *= np.sinc(f / hz) ** 2
         assert abs(fit_gain(t[settled], rate[settled, 2], f) - expected) < 1e-5 * abs(expected)
@@ -336,8 +349,13 @@ def test_temperature_moves_the_mode_split_scale_factor_and_phase(model):
     bias, _, _ = noiseless(g, truth, reference=truth, reference_gyro=none)
     w_d, _ = frequencies(g, hot)
     theta = np.angle(sense_response(g, hot) / sense_response(g))
-    expected = -g.quadrature_stiffness_n_per_m / (2 * g.proof_mass_kg * w_d) * math.tan(
-        g.demodulation_phase_error_rad - theta) * scale_factor(g, hot) / scale_factor(g)
+    expected = (
+        -g.quadrature_stiffness_n_per_m
+        / (2 * g.proof_mass_kg * w_d)
+        * math.tan(g.demodulation_phase_error_rad - theta)
+        * scale_factor(g, hot)
+        / scale_factor(g)
+    )
     np.testing.assert_allclose(bias[-1], expected, rtol=1e-6)
     np.testing.assert_allclose(g.steady_state_rate(np.zeros(3), temperature_degC=hot), expected, rtol=1e-9)
 
@@ -363,8 +381,13 @@ def test_chunks_continue_one_run(model):
     whole = g.respond(truth, np.random.default_rng(3), {})
     rng, state, parts = np.random.default_rng(3), {}, []
     for first, last in ((0, 171), (171, 172), (172, 640), (640, len(t) - 1)):
-        chunk = make_truth(t[first:last + 1], truth.omega[first:last + 1], truth.alpha[first:last + 1],
-                           truth.specific_force[first:last + 1], truth.temperature_degC[first:last + 1])
+        chunk = make_truth(
+            t[first : last + 1],
+            truth.omega[first : last + 1],
+            truth.alpha[first : last + 1],
+            truth.specific_force[first : last + 1],
+            truth.temperature_degC[first : last + 1],
+        )
         response = g.respond(chunk, rng, state)
         if parts:  # the shared first sample repeats the previous chunk's last value
             np.testing.assert_array_equal(response.rate[0], parts[-1].rate[-1])
@@ -399,24 +422,27 @@ def test_inner_rate_resolves_the_output_band():
             assert inner / output == round(inner / output) and inner >= 4 * output and inner >= 4 * band
 
 
-@pytest.mark.parametrize("key, value, why", [
-    ("proof_mass_kg", -1e-9, "greater than 0"),
-    ("proof_mass_kg", "4 ug", "expected a number"),
-    ("drive_frequency_hz", -27_000.0, "greater than 0"),
-    ("drive_amplitude_m", 0.0, "greater than 0"),
-    ("sense_quality_factor", -10.0, "greater than 0"),
-    ("sense_quality_factor", 2.0, "at least 5"),
-    ("drive_quality_factor", 0.0, "greater than 0"),
-    ("mode_split_hz", -27_000.0, "unstable"),
-    ("mode_split_hz", -40_000.0, "unstable"),
-    ("mode_split_hz", 8000.0, "quarter"),
-    ("demodulation_phase_error_rad", 2.0, "π/2"),
-    ("demodulator_bandwidth_hz", 10_000.0, "quarter"),
-    ("demodulator_bandwidth_hz", -5.0, "greater than 0"),
-    ("reference_temperature_degC", -300.0, "absolute zero"),
-    ("model", "rk4", "baseband"),
-    ("mode_split_khz", 2.0, "unknown key"),
-])
+@pytest.mark.parametrize(
+    "key, value, why",
+    [
+        ("proof_mass_kg", -1e-9, "greater than 0"),
+        ("proof_mass_kg", "4 ug", "expected a number"),
+        ("drive_frequency_hz", -27_000.0, "greater than 0"),
+        ("drive_amplitude_m", 0.0, "greater than 0"),
+        ("sense_quality_factor", -10.0, "greater than 0"),
+        ("sense_quality_factor", 2.0, "at least 5"),
+        ("drive_quality_factor", 0.0, "greater than 0"),
+        ("mode_split_hz", -27_000.0, "unstable"),
+        ("mode_split_hz", -40_000.0, "unstable"),
+        ("mode_split_hz", 8000.0, "quarter"),
+        ("demodulation_phase_error_rad", 2.0, "π/2"),
+        ("demodulator_bandwidth_hz", 10_000.0, "quarter"),
+        ("demodulator_bandwidth_hz", -5.0, "greater than 0"),
+        ("reference_temperature_degC", -300.0, "absolute zero"),
+        ("model", "rk4", "baseband"),
+        ("mode_split_khz", 2.0, "unknown key"),
+    ],
+)
 def test_bad_parameters_name_the_key(key, value, why):
     with pytest.raises(ConfigError) as error:
         validate(MemsGyro, {"kind": "mems", key: value}, prefix="gyro.mechanism")
@@ -429,8 +455,9 @@ def test_a_device_with_a_mems_gyro_reads_the_rate():
     t = grid(0.5, 2000)
     q = np.tile([1.0, 0, 0, 0], (len(t), 1))  # attitude not needed by the MEMS mechanism
     zero = np.zeros((len(t), 3))
-    traj = trajectory_from_world_motion(t, q, np.tile(rate_b, (len(t), 1)), zero, zero, zero, zero,
-                                        Environment.inertial(9.81))
+    traj = trajectory_from_world_motion(
+        t, q, np.tile(rate_b, (len(t), 1)), zero, zero, zero, zero, Environment.inertial(9.81)
+    )
     device = device_from_dict({"description": "mems", "rate_hz": 1000, "gyro": {"mechanism": {"kind": "mems"}}})
     assert device.inner_rate_hz == MemsGyro().inner_rate_hz(1000)
     samples = device.measure(traj)

@@ -49,8 +49,9 @@ def test_allan_command_fits_a_log_and_draws_the_plot(tmp_path):
     log = tmp_path / "static.npz"
     device = tmp_path / "dev.toml"
     device.write_text('description = "x"\nrate_hz = 50\n[gyro.errors]\narw_deg_per_sqrt_h = 2.0\n')
-    result = gyroemu("simulate", "--scenario", "bench_static", "--device", str(device), "--duration", "600",
-                     "--out", str(log))
+    result = gyroemu(
+        "simulate", "--scenario", "bench_static", "--device", str(device), "--duration", "600", "--out", str(log)
+    )
     assert result.returncode == 0, result.stderr
     result = gyroemu("allan", str(log), "--out", str(tmp_path / "allan.png"))
     assert result.returncode == 0, result.stderr

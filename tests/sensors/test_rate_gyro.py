@@ -30,8 +30,15 @@ WD = WN * math.sqrt(1 - ZETA**2)
 def make_truth(omega, alpha, dt):
     omega, alpha = np.asarray(omega, dtype=float), np.asarray(alpha, dtype=float)
     m = len(omega)
-    return GyroTruth(t=np.arange(m) * dt, dt=dt, omega=omega, alpha=alpha, specific_force=np.zeros((m, 3)),
-                     q_is=np.tile([1.0, 0.0, 0.0, 0.0], (m, 1)), temperature_degC=np.full(m, 25.0))
+    return GyroTruth(
+        t=np.arange(m) * dt,
+        dt=dt,
+        omega=omega,
+        alpha=alpha,
+        specific_force=np.zeros((m, 3)),
+        q_is=np.tile([1.0, 0.0, 0.0, 0.0], (m, 1)),
+        temperature_degC=np.full(m, 25.0),
+    )
 
 
 def respond(omega, alpha, dt, gyro=GYRO):
@@ -41,8 +48,11 @@ def respond(omega, alpha, dt, gyro=GYRO):
 def unit_ramp_response(t):
     """θ(t) for J θ'' + c θ' + K θ = t·1(t) from rest (underdamped; e.g. Ogata, Modern Control Eng., §5-3)."""
     t = np.maximum(t, 0.0)
-    return (t - 2 * ZETA / WN + np.exp(-ZETA * WN * t) * (2 * ZETA / WN * np.cos(WD * t)
-                                                          + (2 * ZETA**2 - 1) / WD * np.sin(WD * t))) / K
+    return (
+        t
+        - 2 * ZETA / WN
+        + np.exp(-ZETA * WN * t) * (2 * ZETA / WN * np.cos(WD * t) + (2 * ZETA**2 - 1) / WD * np.sin(WD * t))
+    ) / K
 
 
 def step_from_rest(w0, dt, duration):
@@ -128,7 +138,8 @@ def test_step_response_overshoot_and_period_give_natural_frequency_and_damping()
     tol_zeta = math.pi**2 / (math.pi**2 + log_m**2) ** 1.5 * tol_overshoot / overshoot
     assert zeta == pytest.approx(ZETA, abs=tol_zeta)
     assert 2 * math.pi / period / math.sqrt(1 - zeta**2) == pytest.approx(
-        WN, rel=tol_period + zeta * tol_zeta / (1 - zeta**2))
+        WN, rel=tol_period + zeta * tol_zeta / (1 - zeta**2)
+    )
 
 
 @pytest.mark.parametrize("f_hz", [5.0, 30.0, 60.0])
@@ -301,7 +312,7 @@ def test_chunks_continue_one_run():
     np.testing.assert_allclose(gimbal, theta, rtol=0, atol=1e-15 * np.abs(theta).max())
     angle = imu_angle(whole.rate, dt)
     for first, last, part in zip(edges[:-1], edges[1:], parts):
-        rebased = angle[first:last + 1] - angle[first]
+        rebased = angle[first : last + 1] - angle[first]
         bound = len(t) * np.finfo(float).eps * np.abs(angle).max()
         np.testing.assert_allclose(imu_angle(part.rate, dt), rebased, rtol=0, atol=bound)
 
@@ -317,11 +328,20 @@ def test_chunks_continue_one_run():
 # --------------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("key, value", [
-    ("rotor_inertia_kgm2", 0.0), ("spin_speed_rpm", -24000), ("gimbal_inertia_kgm2", -1e-6),
-    ("spring_stiffness_n_m_per_rad", 0), ("damping_n_m_s_per_rad", -1e-3), ("stop_angle_deg", 90),
-    ("stop_angle_deg", 0), ("damping_n_m_s_per_rad", "2e-3"), ("spring_stiffness_nm_per_rad", 0.3),
-])
+@pytest.mark.parametrize(
+    "key, value",
+    [
+        ("rotor_inertia_kgm2", 0.0),
+        ("spin_speed_rpm", -24000),
+        ("gimbal_inertia_kgm2", -1e-6),
+        ("spring_stiffness_n_m_per_rad", 0),
+        ("damping_n_m_s_per_rad", -1e-3),
+        ("stop_angle_deg", 90),
+        ("stop_angle_deg", 0),
+        ("damping_n_m_s_per_rad", "2e-3"),
+        ("spring_stiffness_nm_per_rad", 0.3),
+    ],
+)
 def test_bad_parameters_name_the_key(key, value):
     with pytest.raises(ConfigError) as err:
         validate(RateGyro, {"kind": "rate-gyro", key: value})

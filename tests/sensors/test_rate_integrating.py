@@ -26,8 +26,15 @@ KT = LOOP.torquer_scale_n_m_per_a
 def make_truth(omega, alpha, dt):
     omega, alpha = np.asarray(omega, dtype=float), np.asarray(alpha, dtype=float)
     m = len(omega)
-    return GyroTruth(t=np.arange(m) * dt, dt=dt, omega=omega, alpha=alpha, specific_force=np.zeros((m, 3)),
-                     q_is=np.tile([1.0, 0.0, 0.0, 0.0], (m, 1)), temperature_degC=np.full(m, 25.0))
+    return GyroTruth(
+        t=np.arange(m) * dt,
+        dt=dt,
+        omega=omega,
+        alpha=alpha,
+        specific_force=np.zeros((m, 3)),
+        q_is=np.tile([1.0, 0.0, 0.0, 0.0], (m, 1)),
+        temperature_degC=np.full(m, 25.0),
+    )
 
 
 def respond(gyro, omega, alpha, dt):
@@ -84,8 +91,9 @@ def unit_ramp_response(t):
 def test_defaults():
     assert H / C == pytest.approx(1.0053, rel=1e-4)
     assert OPEN.corner_frequency_hz == pytest.approx(79.577, rel=1e-4)
-    np.testing.assert_allclose(np.sort_complex(np.roots(LOOP.loop_polynomial)), [-200 - 200j, -200 + 200j, -100],
-                               rtol=1e-9)
+    np.testing.assert_allclose(
+        np.sort_complex(np.roots(LOOP.loop_polynomial)), [-200 - 200j, -200 + 200j, -100], rtol=1e-9
+    )
     assert LOOP.loop_bandwidth_hz == pytest.approx(60.86, abs=0.01)
     assert mechanism_class("rate-integrating") is RateIntegratingGyro
 
@@ -275,7 +283,7 @@ def test_chunks_continue_one_run(gyro, dt, scale):
         np.testing.assert_allclose(joined, values, rtol=0, atol=1e-15 * np.abs(values).max())
     bound = 4 * np.finfo(float).eps * np.abs(whole.angle).max()
     for first, last, part in zip(edges[:-1], edges[1:], parts):
-        np.testing.assert_allclose(part.angle, whole.angle[first:last + 1] - whole.angle[first], rtol=0, atol=bound)
+        np.testing.assert_allclose(part.angle, whole.angle[first : last + 1] - whole.angle[first], rtol=0, atol=bound)
 
     # A fresh state on a later chunk is a power-up there, not the continued run.
     cut = slice(edges[-2], len(t))
@@ -300,20 +308,23 @@ def test_open_loop_warns_of_its_stops_once_per_run():
 # --------------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("data, key", [
-    ({"gimbal_inertia_kgm2": 0}, "gimbal_inertia_kgm2"),
-    ({"damping_n_m_s_per_rad": -5e-3}, "damping_n_m_s_per_rad"),
-    ({"rotor_inertia_kgm2": -2e-6}, "rotor_inertia_kgm2"),
-    ({"spin_speed_rpm": 0}, "spin_speed_rpm"),
-    ({"stop_angle_deg": 95}, "stop_angle_deg"),
-    ({"torquer_scale_n_m_per_a": 0}, "torquer_scale_n_m_per_a"),
-    ({"loop_proportional_a_per_rad": 0}, "loop_proportional_a_per_rad"),
-    ({"loop_integral_a_per_rad_s": -1}, "loop_integral_a_per_rad_s"),
-    ({"loop_integral_a_per_rad_s": 30000}, "loop_integral_a_per_rad_s"),  # k_i ≥ c k_p/J = 30000
-    ({"loop_proportional_a_per_rad": 5}, "loop_integral_a_per_rad_s"),  # the default k_i is now unstable
-    ({"torque_rebalance": "yes"}, "torque_rebalance"),
-    ({"damping_n_m_s_per_rad_per_degC": 1}, "damping_n_m_s_per_rad_per_degC"),
-])
+@pytest.mark.parametrize(
+    "data, key",
+    [
+        ({"gimbal_inertia_kgm2": 0}, "gimbal_inertia_kgm2"),
+        ({"damping_n_m_s_per_rad": -5e-3}, "damping_n_m_s_per_rad"),
+        ({"rotor_inertia_kgm2": -2e-6}, "rotor_inertia_kgm2"),
+        ({"spin_speed_rpm": 0}, "spin_speed_rpm"),
+        ({"stop_angle_deg": 95}, "stop_angle_deg"),
+        ({"torquer_scale_n_m_per_a": 0}, "torquer_scale_n_m_per_a"),
+        ({"loop_proportional_a_per_rad": 0}, "loop_proportional_a_per_rad"),
+        ({"loop_integral_a_per_rad_s": -1}, "loop_integral_a_per_rad_s"),
+        ({"loop_integral_a_per_rad_s": 30000}, "loop_integral_a_per_rad_s"),  # k_i ≥ c k_p/J = 30000
+        ({"loop_proportional_a_per_rad": 5}, "loop_integral_a_per_rad_s"),  # the default k_i is now unstable
+        ({"torque_rebalance": "yes"}, "torque_rebalance"),
+        ({"damping_n_m_s_per_rad_per_degC": 1}, "damping_n_m_s_per_rad_per_degC"),
+    ],
+)
 def test_bad_parameters_name_the_key(data, key):
     with pytest.raises(ConfigError) as err:
         validate(RateIntegratingGyro, {"kind": "rate-integrating", **data})

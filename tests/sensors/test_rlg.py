@@ -28,9 +28,15 @@ NO_DITHER = {"dither_amplitude_arcsec": 0.0}
 def make_truth(t, omega):
     """A GyroTruth on the uniform grid ``t`` at a constant rate ``omega`` (3,)."""
     zero = np.zeros((len(t), 3))
-    return GyroTruth(t=t, dt=float(t[1] - t[0]), omega=zero + np.asarray(omega, float), alpha=zero,
-                     specific_force=zero, q_is=np.tile([1.0, 0, 0, 0], (len(t), 1)),
-                     temperature_degC=np.full(len(t), 25.0))
+    return GyroTruth(
+        t=t,
+        dt=float(t[1] - t[0]),
+        omega=zero + np.asarray(omega, float),
+        alpha=zero,
+        specific_force=zero,
+        q_is=np.tile([1.0, 0, 0, 0], (len(t), 1)),
+        temperature_degC=np.full(len(t), 25.0),
+    )
 
 
 def run(gyro, duration, omega, seed=0, chunk=400_000, every=1):
@@ -175,8 +181,9 @@ def test_lock_in_through_the_dither_agrees_with_brute_force_rk4(rate, spread):
     # RK4 at ≤ 0.02 rad of beat phase per step at the peak dither rate (~10⁸ steps per second).
     h = 1.0 / gyro.simulation_rate_hz
     every = math.ceil(h * K * gyro.dither_rate_amplitude * 1.2 / 0.02)
-    reference = _brute_force_lock_in(K, k, rate, amplitudes, gyro.dither_frequency_hz, h / every, every,
-                                     chi[0], len(chi))
+    reference = _brute_force_lock_in(
+        K, k, rate, amplitudes, gyro.dither_frequency_hz, h / every, every, chi[0], len(chi)
+    )
     # Each turn-around kicks χ by ~KΩ_L √(2π/a) = 0.022 rad (a = K Ω_d ω_d); 44 of them here. Agree to
     # 2 % of one kick all along (4·10⁻⁴ rad of beat phase, 8·10⁻¹⁰ rad of angle); measured ~10⁻⁴.
     kick = k * math.sqrt(2 * math.pi / (K * gyro.dither_rate_amplitude * 2 * math.pi * gyro.dither_frequency_hz))
@@ -216,8 +223,9 @@ def test_fixed_dither_leaves_the_bessel_residual_dead_band():
     assert residual / gyro.lock_in_rate == pytest.approx(0.0184, abs=1e-4)
     omega = np.array([0.8, -0.8, 2.0]) * residual
     out = run(gyro, duration, omega, seed=1)
-    cycle_starts = np.searchsorted(out["t"], np.arange(1, duration * gyro.dither_frequency_hz)
-                                   / gyro.dither_frequency_hz)
+    cycle_starts = np.searchsorted(
+        out["t"], np.arange(1, duration * gyro.dither_frequency_hz) / gyro.dither_frequency_hz
+    )
     slow = (out["beat_phase_rad"] - K * out["dither_angle_rad"])[cycle_starts]  # ψ̄, once per dither cycle
     t = out["t"][cycle_starts]
     # Inside: locked, the slow phase stands still (after the pull-in) …
@@ -305,8 +313,13 @@ def test_inside_an_imu():
     q = np.tile([1.0, 0, 0, 0], (len(t), 1))
     zero = np.zeros((len(t), 3))
     traj = trajectory_from_world_motion(t, q, w, zero, zero, zero, zero, Environment.inertial(9.81))
-    device = device_from_dict({"description": "rlg", "rate_hz": 1000.0,
-                               "gyro": {"mechanism": {"kind": "rlg"}, "errors": {"arw_deg_per_sqrt_h": 0.0035}}})
+    device = device_from_dict(
+        {
+            "description": "rlg",
+            "rate_hz": 1000.0,
+            "gyro": {"mechanism": {"kind": "rlg"}, "errors": {"arw_deg_per_sqrt_h": 0.0035}},
+        }
+    )
     assert device.inner_rate_hz == RingLaserGyro().simulation_rate_hz
     samples = device.measure(traj)
     # The body rate, to within a fringe per sample at worst, and to the ARW over the whole run.
@@ -316,11 +329,21 @@ def test_inside_an_imu():
     assert samples.raw["rlg"]["fringe_count"].shape == (len(samples), 3)
 
 
-@pytest.mark.parametrize("key, value", [
-    ("perimeter_m", -0.3), ("area_m2", -1e-3), ("area_m2", 0.01), ("wavelength_nm", 0.0),
-    ("lock_in_rate_deg_per_h", -10.0), ("dither_frequency_hz", -400.0), ("dither_amplitude_arcsec", -1.0),
-    ("dither_amplitude_noise_fraction", 0.8), ("simulation_rate_hz", 10_000.0), ("simulation_rate_hz", -1.0),
-])
+@pytest.mark.parametrize(
+    "key, value",
+    [
+        ("perimeter_m", -0.3),
+        ("area_m2", -1e-3),
+        ("area_m2", 0.01),
+        ("wavelength_nm", 0.0),
+        ("lock_in_rate_deg_per_h", -10.0),
+        ("dither_frequency_hz", -400.0),
+        ("dither_amplitude_arcsec", -1.0),
+        ("dither_amplitude_noise_fraction", 0.8),
+        ("simulation_rate_hz", 10_000.0),
+        ("simulation_rate_hz", -1.0),
+    ],
+)
 def test_bad_parameters_name_their_key(key, value):
     with pytest.raises(ConfigError) as err:
         validate(RingLaserGyro, {"kind": "rlg", key: value}, prefix="gyro.mechanism")
