@@ -17,6 +17,7 @@ import importlib.resources
 import math
 import os
 import tomllib
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
 
@@ -128,7 +129,7 @@ def validate(model: type[M], data: Any, *, file: str | Path | None = None, prefi
         raise ConfigError("\n  ".join(lines), file=file, key=key) from None
 
 
-def _describe(model: type[BaseModel], err: dict) -> tuple[str, str]:
+def _describe(model: type[BaseModel], err: Mapping[str, Any]) -> tuple[str, str]:
     loc = [p for p in err["loc"] if not str(p).startswith("function-")]
     key = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in loc).lstrip(".")
     loc = [str(p) for p in loc]

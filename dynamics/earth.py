@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Annotated
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from pydantic import Field
 
 from .config import Real, Section, Vec3
@@ -44,7 +45,7 @@ _E2 = 0.00669437999013  # first eccentricity squared
 _M = 0.00344978650684  # ω² a² b / GM
 
 
-def normal_gravity(latitude_rad, height_m=0.0):
+def normal_gravity(latitude_rad: ArrayLike, height_m: ArrayLike = 0.0) -> float | NDArray[np.float64]:
     """Magnitude of normal gravity (gravitation plus centrifugal), m/s².
 
     Somigliana's closed form on the WGS 84 ellipsoid, with the second-order free-air correction for
@@ -59,7 +60,7 @@ def normal_gravity(latitude_rad, height_m=0.0):
     return g0 * (1.0 - 2.0 / WGS84_A * (1.0 + WGS84_F + _M - 2.0 * WGS84_F * s2) * h + 3.0 * h * h / WGS84_A**2)
 
 
-def earth_rate_enu(latitude_rad) -> np.ndarray:
+def earth_rate_enu(latitude_rad: float) -> NDArray[np.float64]:
     """Earth's rotation vector in the local ENU frame, rad/s: ``Ω (0, cos φ, sin φ)``."""
     return EARTH_RATE * np.array([0.0, np.cos(latitude_rad), np.sin(latitude_rad)])
 
@@ -105,6 +106,6 @@ class Environment:
     magnetic_field_w: np.ndarray
 
     @classmethod
-    def inertial(cls, gravity_m_s2: float = 0.0, magnetic_field_w=(0.0, 0.0, 0.0)) -> Environment:
+    def inertial(cls, gravity_m_s2: float = 0.0, magnetic_field_w: ArrayLike = (0.0, 0.0, 0.0)) -> Environment:
         """A non-rotating world with uniform gravity ``-gravity_m_s2`` along z."""
         return cls(np.array([0.0, 0.0, -gravity_m_s2]), np.zeros(3), np.asarray(magnetic_field_w, float))

@@ -46,6 +46,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -207,6 +208,13 @@ class Gyrostat:
     rotors: Sequence[Rotor] = ()
     gimbals: Sequence[GimballedRotor] = ()
     frame_rate_w: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    if TYPE_CHECKING:  # set by __post_init__; declared for the type checker only, not dataclass fields
+        _inertia_inv: np.ndarray = field(init=False, repr=False)
+        _rotating: bool = field(init=False, repr=False)
+        _s0: np.ndarray = field(init=False, repr=False)
+        _t0: np.ndarray = field(init=False, repr=False)
+        _j: np.ndarray = field(init=False, repr=False)
+        _jw_constant: np.ndarray | None = field(init=False, repr=False)
 
     def __post_init__(self):
         if not self.mass > 0:
@@ -234,7 +242,8 @@ class Gyrostat:
     @property
     def breakpoints(self) -> tuple[float, ...]:
         """Times where a spin profile's acceleration has a kink."""
-        return tuple(sorted({b for r in (*self.rotors, *self.gimbals) for b in r.spin.breakpoints}))
+        rotors: tuple[Rotor | GimballedRotor, ...] = (*self.rotors, *self.gimbals)
+        return tuple(sorted({b for r in rotors for b in r.spin.breakpoints}))
 
     def state(self, pos_w=(0, 0, 0), q_wb=(1, 0, 0, 0), vel_w=(0, 0, 0), omega_b=(0, 0, 0), gimbal_angles=()):
         """State vector ``[x, q, P, ω, δ]`` (1-D)."""

@@ -469,7 +469,9 @@ class WorldMotion:
         return cls(t, q_wb, omega_wb_b, alpha_wb_b, pos, vel, acc, extras or {})
 
 
-def _motion_arrays(n: int, moves: bool):
+def _motion_arrays(
+    n: int, moves: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Outputs for a kind's kernel: ``q_wb`` (N, 4), ``ω_wb``, ``α_wb`` (N, 3), position, velocity,
     acceleration (N, 3). The kernel writes all of them if the body ``moves``; else position, velocity and
     acceleration are zeros (``np.zeros`` maps fresh zero pages lazily, cheaper than writing zeros; for

@@ -40,6 +40,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -236,6 +237,9 @@ class RigidBody:
     mass: float
     inertia_b: np.ndarray
     frame_rate_w: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    if TYPE_CHECKING:  # set by __post_init__; declared for the type checker only, not dataclass fields
+        _inertia_inv: np.ndarray = field(init=False, repr=False)
+        _rotating: bool = field(init=False, repr=False)
 
     def __post_init__(self):
         if not self.mass > 0:

@@ -67,10 +67,21 @@ class Scenario:
         self.name = name
         self.path = path
 
-    kind = property(lambda self: self.spec.kind)
-    duration_s = property(lambda self: self.spec.duration_s)
-    rate_hz = property(lambda self: self.spec.rate_hz)
-    description = property(lambda self: self.spec.description)
+    @property
+    def kind(self) -> str:
+        return self.spec.kind
+
+    @property
+    def duration_s(self) -> float:
+        return self.spec.duration_s
+
+    @property
+    def rate_hz(self) -> float:
+        return self.spec.rate_hz
+
+    @property
+    def description(self) -> str:
+        return self.spec.description
 
     def times(self, duration: float | None = None, rate_hz: float | None = None) -> np.ndarray:
         """Sample times ``k / rate_hz`` for ``k = 0 … round(duration · rate_hz)``, s."""
@@ -94,7 +105,7 @@ class Scenario:
         return f"Scenario({self.name!r}, kind={self.kind!r}, duration_s={self.duration_s}, rate_hz={self.rate_hz})"
 
 
-def _spec_class(kind) -> type[ScenarioSpec]:
+def _spec_class(kind: str) -> type[ScenarioSpec]:
     module, cls = KINDS[kind].split(":")
     return getattr(importlib.import_module(module), cls)
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .earth import Environment
 from .jit import njit
@@ -124,13 +125,13 @@ def _world_to_imu(
 
 
 def trajectory_from_world_motion(
-    t,
-    q_wb,
-    omega_wb_b,
-    alpha_wb_b,
-    pos_w,
-    vel_w,
-    acc_w,
+    t: ArrayLike,
+    q_wb: ArrayLike,
+    omega_wb_b: ArrayLike,
+    alpha_wb_b: ArrayLike,
+    pos_w: ArrayLike,
+    vel_w: ArrayLike,
+    acc_w: ArrayLike,
     environment: Environment,
     extras: dict | None = None,
 ) -> Trajectory:

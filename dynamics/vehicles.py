@@ -369,7 +369,11 @@ class SpeedProfile:
         for leg in legs:
             dv = leg.speed_m_s - v
             duration = 16 * abs(dv) / (5 * (drive.accel_m_s2 if dv > 0 else drive.brake_m_s2))  # peak Δv S′/T = a_peak
-            start.append(t), dist.append(s), speed.append(v), change.append(dv), ramp.append(duration or 1.0)
+            start.append(t)
+            dist.append(s)
+            speed.append(v)
+            change.append(dv)
+            ramp.append(duration or 1.0)
             s += (v + 0.5 * dv) * duration  # I(1) = ½
             dist_end.append(s)
             s += leg.speed_m_s * leg.hold_s

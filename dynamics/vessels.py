@@ -50,7 +50,7 @@ scaled down uniformly when a rate exceeds the gimbal rate limit.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import pydantic
@@ -258,12 +258,15 @@ class Ship:
         waves = WaveComponents.from_spectrum(
             rng, sea.significant_height_m, sea.peak_period_s, sea.peak_enhancement, sea.components, g
         )
-        gimbals, extra = (), {}
+        gimbals: tuple[GimballedRotor, ...] = ()
+        extra: dict[str, Any] = {}
         if spec.stabiliser is not None:
             st = spec.stabiliser
             spin = SpinProfile(st.spin_rpm * RPM)
             # Spin axis vertical at zero gimbal angle, gimbal (precession) axis athwartships.
-            gimbals = (GimballedRotor((0.0, 1.0, 0.0), (0.0, 0.0, 1.0), st.rotor_inertia_kgm2, spin),)
+            gimbals = (
+                GimballedRotor(np.array((0.0, 1.0, 0.0)), np.array((0.0, 0.0, 1.0)), st.rotor_inertia_kgm2, spin),
+            )
             extra = dict(
                 gain=st.precession_gain, centring=st.centring_rate_per_s, gimbal_limit=np.radians(st.gimbal_limit_deg)
             )

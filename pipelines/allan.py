@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -67,7 +68,10 @@ def allan_report(gyro: np.ndarray, dt: float, spec: ErrorModel | None = None) ->
         raise ValueError(f"an Allan analysis needs a (N, 3) gyro record with N >= 64, got shape {gyro.shape}")
     if not np.all(np.isfinite(gyro)):
         raise ValueError("the gyro record has NaN or infinite samples")
-    fits = tuple(fit_allan(allan_deviation(gyro[:, i] - gyro[:, i].mean(), dt)) for i in range(3))
+    fits = cast(  # one per axis: three
+        tuple[AllanFit, AllanFit, AllanFit],
+        tuple(fit_allan(allan_deviation(gyro[:, i] - gyro[:, i].mean(), dt)) for i in range(3)),
+    )
     return AllanReport(fits=fits, spec=spec)
 
 

@@ -52,8 +52,10 @@ import re
 import sys
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 
@@ -181,7 +183,7 @@ class FilterResult:
         for convergence also how many never converged."""
         values = [getattr(r, metric) for r in self.runs if not r.diverged or metric in ("throughput", "wall_s")]
         values = [v for v in values if v is not None]
-        out = {"mean": None, "std": None, "n": 0}
+        out: dict[str, float | None] = {"mean": None, "std": None, "n": 0}
         if metric == "convergence_s":
             out["never"] = sum(1 for v in values if math.isinf(v))
         finite = [v for v in values if math.isfinite(v)]
@@ -430,7 +432,8 @@ def _write_atomic(path: Path, text: str) -> None:
 
 
 def _unique_stems(names: list[str]) -> list[str]:
-    stems, seen = [], {}
+    stems: list[str] = []
+    seen: dict[str, int] = {}
     for name in names:
         stem = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("_.") or "case"
         seen[stem] = seen.get(stem, 0) + 1
@@ -686,6 +689,7 @@ def _sim_run(traj, device, seed) -> _Run:
 
     samples = device.measure(traj)
     truth = truth_series(traj, samples)
+    assert truth.q_wb is not None  # truth_series always gives the attitude
     mag = samples.mag if np.isfinite(samples.mag).any() else None
     return _Run(
         t=np.asarray(samples.t, float),
@@ -842,7 +846,7 @@ def run_bench(
         raise BenchError("argument --runs: must be at least 1")
     cases = [SimCase()] if cases is None else list(cases)
     filters, unavailable = _resolve_filters(filters)
-    batch_fn = None
+    batch_fn: Callable[..., Estimate] | None = None
     if batched and "mekf" in filters and any(isinstance(c, SimCase) for c in cases):
         try:
             from .estimation.batched import mekf_batch as batch_fn
@@ -850,7 +854,7 @@ def run_bench(
             raise BenchError(f"argument --batched: the batched mekf is not available ({exc})") from exc
 
     # Load everything first: bad names and bad logs fail before any work.
-    prepared = []
+    prepared: list[tuple[str, SimCase | LogCase, Any]] = []
     for case in cases:
         if isinstance(case, SimCase):
             prepared.append(("sim", case, _sim_case(case, runs, seed)))
@@ -866,6 +870,7 @@ def run_bench(
     try:
         for kind, case, item in prepared:
             if kind == "sim":
+                assert isinstance(case, SimCase)  # "sim" items are made from SimCases above
                 results.append(_bench_sim(case, item, filters, runs, seed, threshold_deg, batch_fn, bar))
             else:
                 results.append(_bench_log(item, filters, threshold_deg, bar))
@@ -894,9 +899,9 @@ def _bench_sim(case: SimCase, item, filters, runs, seed, threshold_deg, batch_fn
     six_d = mode == "6D"
     traj = scenario.simulate(duration=case.duration)
     per_run = [f for f in filters if not (batch_fn is not None and f == "mekf")]
-    results = {f: None for f in filters}
+    results: dict[str, FilterResult | None] = {f: None for f in filters}
     kept = []  # the runs, for the batched mekf
-    first = None
+    first: _Run | None = None
     for r, device in enumerate(devices):
         run = _sim_run(traj, device, seed + r)
         if first is None:
@@ -906,10 +911,11 @@ def _bench_sim(case: SimCase, item, filters, runs, seed, threshold_deg, batch_fn
             if r == 0:
                 _warm_up(spec, setup, run, six_d)
             res, errors, fname = _run_filter(spec, setup, run, six_d=six_d, threshold_deg=threshold_deg)
-            if results[spec] is None:
-                results[spec] = FilterResult(filter=spec, name=fname, batched=False, runs=[])
-                _curve(results[spec], run.t, errors)
-            results[spec].runs.append(res)
+            fr = results[spec]
+            if fr is None:
+                fr = results[spec] = FilterResult(filter=spec, name=fname, batched=False, runs=[])
+                _curve(fr, run.t, errors)
+            fr.runs.append(res)
             bar.step()
         if batch_fn is not None:
             kept.append(run)
@@ -917,6 +923,7 @@ def _bench_sim(case: SimCase, item, filters, runs, seed, threshold_deg, batch_fn
         bar.describe(f"{name}: mekf, {len(kept)} runs batched")
         results["mekf"] = _bench_batched(batch_fn, setup, kept, six_d, threshold_deg)
         bar.step(len(kept))
+    assert first is not None  # runs >= 1: one device at least
     return CaseResult(
         name=name,
         kind="simulated",
@@ -931,7 +938,8 @@ def _bench_sim(case: SimCase, item, filters, runs, seed, threshold_deg, batch_fn
             "duration_s": case.duration,
             "seeds": [seed + r for r in range(runs)],
         },
-        filters=[results[f] for f in filters],
+        # every filter has its result: set on the first run, or by the batched mekf
+        filters=cast(list[FilterResult], [results[f] for f in filters]),
     )
 
 
@@ -952,7 +960,8 @@ def _bench_batched(batch_fn, setup, runs: list[_Run], six_d, threshold_deg) -> F
             runs[0].t[:k],
             np.stack([r.gyro[:k] for r in runs[:2]]),
             np.stack([r.accel[:k] for r in runs[:2]]),
-            None if six_d or runs[0].mag is None else np.stack([r.mag[:k] for r in runs[:2]]),
+            # one device config: every run has a field when the first has (else np.stack raises, as before)
+            None if six_d or runs[0].mag is None else np.stack([cast(np.ndarray, r.mag)[:k] for r in runs[:2]]),
         )
     except Exception:  # noqa: BLE001 - the timed call reports it
         pass
@@ -960,7 +969,7 @@ def _bench_batched(batch_fn, setup, runs: list[_Run], six_d, threshold_deg) -> F
         n = len(group[0].t)
         gyro = np.stack([r.gyro for r in group])
         accel = np.stack([r.accel for r in group])
-        mag = None if six_d or group[0].mag is None else np.stack([r.mag for r in group])
+        mag = None if six_d or group[0].mag is None else np.stack([cast(np.ndarray, r.mag) for r in group])
         started = time.perf_counter()
         reason = ""
         try:

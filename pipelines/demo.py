@@ -101,7 +101,10 @@ def _sensors(seconds: float = 10.0) -> None:
 
 
 def _gyrocompass(seconds: float = 600.0) -> None:
+    from gyroemu.dynamics.motions import EarthBoundSpec
+
     scenario = load_scenario("bench_static")
+    assert isinstance(scenario.spec, EarthBoundSpec)  # kind "static", at a [site]
     latitude = np.radians(scenario.spec.site.latitude_deg)
     traj = scenario.simulate(duration=seconds)
     north_true = gyrocompass(traj.omega_b, traj.specific_force_b).heading
@@ -178,6 +181,8 @@ def _live_and_bench(out: Path, seconds: float) -> None:
         return
     recorded = read_mcap(log).device
     if recorded.estimate is not None and recorded.truth is not None:
+        # the stream's truth and live MEKF estimate both carry the attitude
+        assert recorded.estimate.q_wb is not None and recorded.truth.q_wb is not None
         err = attitude_errors(recorded.estimate.q_wb, recorded.truth.q_wb)
         print(
             f"   live MEKF on the recorded stream: total {rmse_deg(err.total):.2f} deg, inclination "

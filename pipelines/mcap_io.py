@@ -606,7 +606,7 @@ class McapFileWriter:
         """One Chunk record (opcode 0x06) and its Message Index records (0x07)."""
         if not len(channel):
             return
-        raw = memoryview(np.ascontiguousarray(records))
+        raw = memoryview(np.ascontiguousarray(records))  # type: ignore[arg-type]  # numpy stubs: __buffer__ 3.12+ only
         compressed = self._compressor.compress(raw)
         compression = b"zstd"
         start_time, end_time = int(log_time.min()), int(log_time.max())
@@ -849,13 +849,13 @@ class McapLogWriter:
         """
         if self._closed:
             raise ValueError(f"{self.path}: the log is closed")
-        recordings = [r if isinstance(r, Recording) else Recording(samples=r) for r in recordings]
-        names = [r.samples.device for r in recordings]
+        block = [r if isinstance(r, Recording) else Recording(samples=r) for r in recordings]
+        names = [r.samples.device for r in block]
         if len(set(names)) != len(names):
             raise ValueError(f"one block holds device {max(names, key=names.count)!r} twice")
         batches = []
-        for recording in recordings:
-            device = self._device(recording, several=len(recordings) > 1)
+        for recording in block:
+            device = self._device(recording, several=len(block) > 1)
             batches += self._encode(device, recording)
         times = [stamps for _, stamps, _ in batches if len(stamps)]
         if times:
@@ -984,7 +984,7 @@ def _measured_fields(samples: ImuSamples) -> dict:
 def _series_fields(series: ImuSeries) -> dict:
     """Imu message fields of an :class:`ImuSeries` (scalar-first quaternions to x, y, z, w)."""
     n = len(series)
-    fields = {}
+    fields: dict[str, np.ndarray | tuple[float, ...]] = {}
     for value_name, cov_name, field_name, cov_field in _IMU_QUANTITIES:
         value, cov = getattr(series, value_name), getattr(series, cov_name)
         if value is None:
@@ -1466,7 +1466,7 @@ class _Decoded:
     topic: str
     mtype: MessageType
     log_time: np.ndarray
-    batch: object  # DecodedBatch
+    batch: DecodedBatch
 
 
 def _decode_channel(scan: _Scan, data: _ChannelData, mtype: MessageType) -> _Decoded:
@@ -1520,7 +1520,7 @@ def _imu_series(decoded: _Decoded) -> ImuSeries:
     None or NaN rows)."""
     batch = decoded.batch
     n = len(batch)
-    out = {}
+    out: dict[str, np.ndarray | None] = {}
     for value_name, cov_name, field_name, cov_field in _IMU_QUANTITIES:
         cov = batch[cov_field]
         absent = cov[:, 0] == -1.0
@@ -1666,7 +1666,7 @@ def _device_log(path: Path, name: str, group: dict, meta: dict | None) -> Device
     imu = group["imu"]
     stamp_ns = imu.batch.stamp_ns
     keep = np.arange(len(stamp_ns))
-    raw = {}
+    raw: dict[str, dict[str, np.ndarray]] = {}
     for role, d in group.items():
         if role.startswith("raw/"):
             i, j = _match(stamp_ns[keep], d.batch.stamp_ns)

@@ -38,6 +38,7 @@ from __future__ import annotations
 import json
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -70,7 +71,7 @@ __all__ = [
 
 def _ranges(numbers) -> list[list[int]]:
     """Sorted integers as [first, last] ranges."""
-    out = []
+    out: list[list[int]] = []
     for n in sorted(numbers):
         if out and n == out[-1][1] + 1:
             out[-1][1] = n
@@ -333,13 +334,17 @@ def run_record(
         key_expr = key_expr or "gyroemu/**"
     config = session_config(connect=connect, listen=listen, mode=mode, config_file=config_file)
     session = open_session(config)
+    on_new_topic: Callable[[KeyInfo], None] | None
     try:
         if ros2:
             from .ros2_keys import Ros2Node, node_name
 
+            assert domain is not None  # domain_id() above gave it its value
             node = Ros2Node(session, domain, node_name("record"))
 
             def on_new_topic(info: KeyInfo) -> None:
+                # ros2_key, the parser in ROS 2 mode, sets all three
+                assert info.ros_topic is not None and info.type_name is not None and info.type_hash is not None
                 node.subscription(info.ros_topic, info.type_name, info.type_hash)
 
         else:

@@ -160,6 +160,7 @@ class ReadAhead(threading.Thread):
                         pass_first = batch[0].log_time
                         if first is None:
                             first = pass_first
+                    assert first is not None  # set from the first batch of the first pass
                     shift = offset - first
                     items = []
                     for m in batch:
@@ -176,6 +177,7 @@ class ReadAhead(threading.Thread):
                 self.passes += 1
                 if not self.loop or pass_first is None:
                     break
+                assert last is not None  # set with pass_first, by every batch
                 span = last - pass_first
                 interval = span / (distinct - 1) if distinct > 1 else 1e9
                 offset += span + round(interval)

@@ -75,8 +75,12 @@ import os
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from .messages import RAW_MESSAGE_TYPES, ROS_DEFINITIONS
+
+if TYPE_CHECKING:
+    import zenoh
 
 __all__ = [
     "ADMIN_SPACE",
@@ -458,7 +462,7 @@ class Ros2Node:
         self.node_id = 0
         self._next_id = 1
         self.keys: list[str] = []
-        self._tokens = []
+        self._tokens: list[zenoh.LivelinessToken] = []
         self._declare(node_token(self.domain, self.zid, self.node_id, name, namespace))
 
     def _declare(self, key: str) -> None:

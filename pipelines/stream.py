@@ -20,11 +20,15 @@ from __future__ import annotations
 
 import sys
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .messages import IMU, MAGNETIC_FIELD, RAW_MESSAGE_TYPES, raw_fields, split_payloads, stamps_to_ns
 from .zenoh_io import PacedPublisher, open_session, session_config, stop_on_signals, topic_to_key
+
+if TYPE_CHECKING:
+    from .ros2_keys import Ros2Node
 
 __all__ = ["encode_run", "topic_types", "run_stream", "Ros2Keys"]
 
@@ -63,7 +67,7 @@ class Ros2Keys:
 
         self.domain = domain_id(domain)  # Ros2Error (a ValueError) names --domain or ROS_DOMAIN_ID
         self.node_name = node_name(command)
-        self.node = None
+        self.node: Ros2Node | None = None
         self.publishers: dict[str, tuple[str, str, str]] = {}  # key -> (ROS topic, type, hash)
 
     def key(self, ros_topic: str, type_name: str, type_hash: str | None = None) -> str:

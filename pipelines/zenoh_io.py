@@ -59,9 +59,10 @@ import signal
 import struct
 import sys
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import overload
 
 import numpy as np
 import zenoh
@@ -176,7 +177,7 @@ def open_session(config: zenoh.Config) -> zenoh.Session:
 
 
 @contextlib.contextmanager
-def stop_on_signals():
+def stop_on_signals() -> Iterator[list]:
     """For the block, SIGINT and SIGTERM append to the list it yields instead of ending the process
     (the command's loops poll it to stop cleanly); the previous handlers are back after the block."""
     stopping: list = []
@@ -360,7 +361,15 @@ def hot_loop(timing: Timing):
         sys.setswitchinterval(interval)
 
 
-def _wait_until(deadline_ns: int, spin_ns: int, stop=None, poll_ns: int = 100_000_000) -> int | None:
+@overload
+def _wait_until(deadline_ns: int, spin_ns: int, stop: None = None, poll_ns: int = ...) -> int: ...
+@overload
+def _wait_until(
+    deadline_ns: int, spin_ns: int, stop: Callable[[], object] | None, poll_ns: int = ...
+) -> int | None: ...
+def _wait_until(
+    deadline_ns: int, spin_ns: int, stop: Callable[[], object] | None = None, poll_ns: int = 100_000_000
+) -> int | None:
     """Return the monotonic time (ns) at or after ``deadline_ns``: sleep until ``spin_ns`` before it,
     then spin on the clock. ``stop()`` is polled at least every ``poll_ns`` while sleeping; True
     returns None at once."""
@@ -409,7 +418,10 @@ class PacedPublisher:
 
     def matched(self) -> bool:
         """Whether every publisher has at least one matching subscriber."""
-        return all(t.publisher.matching_status.matching for t in self._topics.values())
+        return all(
+            t.publisher.matching_status.matching  # type: ignore[attr-defined]  # stub: bool; really a MatchingStatus
+            for t in self._topics.values()
+        )
 
     def wait_for_subscribers(self, timeout_s: float, stop=None) -> bool:
         """Wait (up to ``timeout_s``, or until ``stop()`` is true) until every key has a subscriber;

@@ -145,7 +145,13 @@ class RateIntegratingGyro(GyroMechanism):
             info.data.get(key)
             for key in ("gimbal_inertia_kgm2", "damping_n_m_s_per_rad", "loop_proportional_a_per_rad")
         )
-        if info.data.get("torque_rebalance") and None not in (j, c, k_p) and not k_i < c * k_p / j:
+        if (
+            info.data.get("torque_rebalance")
+            and j is not None
+            and c is not None
+            and k_p is not None
+            and not k_i < c * k_p / j
+        ):
             raise ValueError(f"makes the rebalance loop unstable: it needs k_i < c k_p / J = {c * k_p / j:.6g}")
         return k_i
 

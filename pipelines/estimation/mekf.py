@@ -143,7 +143,7 @@ class MekfParams:
     gyrocompass_s: float = 10.0
 
     @classmethod
-    def for_setup(cls, setup: FilterSetup, **overrides) -> MekfParams:
+    def for_setup(cls, setup: FilterSetup, **overrides: float) -> MekfParams:
         """The defaults with the device's known noise figures in place, then ``overrides``."""
         noise = setup.noise
         known = {}
@@ -261,6 +261,7 @@ def initial_state(t, gyro, accel, mag, setup: FilterSetup, params: MekfParams) -
     slow[kern.S_LP_G : kern.S_LP_G + 3] = g0
     slow[kern.S_LP_A : kern.S_LP_A + 3] = a
     slow[kern.S_GRAV_LP : kern.S_GRAV_LP2 + 3] = np.tile(quat_rotate(q, a), 2)  # the low-passes at rest
+    assert q is not None  # quat_rotate just above raises on None
     return InitialState(q=q, b=np.zeros(3), P=P, slow=slow)
 
 
@@ -316,7 +317,7 @@ class Mekf:
         self._p = self.params.vector(setup)
         self._earth = earth_rate_enu(setup)
         self.kf = KalmanFilter(dim_x=kern.X_SIZE, dim_z=2)
-        self.q = None
+        self.q: np.ndarray | None = None
         self.b = np.zeros(3)
         self._slow = np.zeros(kern.S_SIZE)
         self._win = np.zeros(kern.W_SIZE)
@@ -324,12 +325,14 @@ class Mekf:
         self._F = np.eye(kern.X_SIZE)
         self._Q = np.zeros((kern.X_SIZE, kern.X_SIZE))
 
-    def process(self, t, gyro, accel, mag=None) -> Estimate:
+    def process(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None) -> Estimate:
         """Filter the next block: ``t`` (N,) s, ``gyro`` (N, 3) rad/s, ``accel`` (N, 3) m/s², ``mag``
         (N, 3) T or None. Returns the attitude, bias and attitude covariance after each sample."""
         return self._run(t, np.asarray(gyro, dtype=float), np.empty((0, 3)), accel, mag)
 
-    def process_increments(self, t, delta_angle, accel, mag=None) -> Estimate:
+    def process_increments(
+        self, t: np.ndarray, delta_angle: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None
+    ) -> Estimate:
         """As :meth:`process`, with the gyro's angle increments over ``[t_{k−1}, t_k]`` (N, 3), rad."""
         delta = np.asarray(delta_angle, dtype=float)
         return self._run(t, delta / np.diff(t, prepend=t[0] - 1 / self.setup.rate_hz)[:, None], delta, accel, mag)

@@ -138,8 +138,8 @@ class _AhrsPeer:
     def __init__(self, setup: FilterSetup):
         self.setup = setup
         self.period = 1.0 / float(setup.rate_hz)
-        self._q = None  # the library's quaternion (its own frame)
-        self._t_last = None  # stamp of the last sample the filter took
+        self._q: np.ndarray | None = None  # the library's quaternion (its own frame)
+        self._t_last: float | None = None  # stamp of the last sample the filter took
         self._out_rot = quat_from_rotvec([0.0, 0.0, -setup.declination_rad]) if setup.use_mag else _Q_IDENTITY
 
     # The library-specific parts.
@@ -165,6 +165,7 @@ class _AhrsPeer:
         b_out = np.full((n, 3), np.nan) if self.has_bias else None
         finite_g = np.isfinite(gyro).all(axis=1)
         finite_a = np.isfinite(accel).all(axis=1) & (np.abs(accel).sum(axis=1) > 0)
+        # None exactly when mag is None (the loop tests it in mag's stead)
         finite_m = None if mag is None else np.isfinite(mag).all(axis=1) & (np.abs(mag).sum(axis=1) > 0)
         dt_nominal = self.period
         for k in range(n):
@@ -172,7 +173,7 @@ class _AhrsPeer:
                 if not (finite_g[k] and finite_a[k]):
                     continue  # not started: NaN
                 # The field of this sample, or of the block's next one that has it (a slower magnetometer).
-                later = None if mag is None else np.flatnonzero(finite_m[k:])
+                later = None if finite_m is None else np.flatnonzero(finite_m[k:])
                 m0 = mag[k + later[0]] if later is not None and len(later) else None
                 q0 = initial_attitude(accel[k], m0)
                 if q0 is None:
@@ -189,7 +190,7 @@ class _AhrsPeer:
                         self._q,
                         gyro[k],
                         accel[k] if finite_a[k] else None,
-                        mag[k] if mag is not None and finite_m[k] else None,
+                        mag[k] if finite_m is not None and finite_m[k] else None,
                         dt,
                     ),
                     dtype=float,
@@ -288,7 +289,7 @@ class Vqf:
         self.setup = setup
         self._f = VQF(1.0 / float(setup.rate_hz))
         self._out_rot = quat_from_rotvec([0.0, 0.0, -setup.declination_rad]) if setup.use_mag else _Q_IDENTITY
-        self._last = None  # (q, bias) of the last sample taken, for held samples
+        self._last: tuple[np.ndarray, np.ndarray] | None = None  # (q, bias) of the last sample, for held ones
 
     def _batch(self, gyro, accel, mag):
         out = self._f.updateBatch(

@@ -113,6 +113,8 @@ def _user_class(spec: str) -> type:
             raise FilterError(f"filter '{spec}': no such file {path}")
         mod_id = f"gyroemu_user_filter_{abs(hash(str(path.resolve())))}"
         loader_spec = importlib.util.spec_from_file_location(mod_id, path)
+        if loader_spec is None or loader_spec.loader is None:
+            raise FilterError(f"filter '{spec}': {path} is not a Python file")
         module = importlib.util.module_from_spec(loader_spec)
         try:
             loader_spec.loader.exec_module(module)

@@ -10,15 +10,20 @@ from __future__ import annotations
 import tomllib
 import warnings
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .protocol import DeviceNoise, FilterSetup
 
+if TYPE_CHECKING:
+    from gyroemu.dynamics import Scenario
+    from gyroemu.sensors import Device
+
 __all__ = ["noise_from_device", "setup_for", "setup_from_metadata"]
 
 
-def noise_from_device(device) -> DeviceNoise:
+def noise_from_device(device: Device) -> DeviceNoise:
     """The noise figures of a :class:`gyroemu.sensors.Device` (the mean over its three axes), SI."""
     gyro = device.gyro_errors
     accel = device.spec.accelerometer.errors.to_si()
@@ -43,7 +48,7 @@ def _site(scenario):
     return getattr(scenario.spec, "site", None) if scenario is not None else None
 
 
-def setup_for(device, scenario=None, *, use_mag: bool | None = None) -> FilterSetup:
+def setup_for(device: Device, scenario: Scenario | None = None, *, use_mag: bool | None = None) -> FilterSetup:
     """The setup for a filter run on ``device``'s samples of ``scenario``.
 
     ``use_mag`` defaults to whether the device has a magnetometer. The latitude is the site's when the
