@@ -238,7 +238,7 @@ def test_heavy_top_nutates_between_the_roots_of_the_cubic(heavy_top_100s):
     # It reaches both: near a turning point u ≈ u_i + ½ ü (t − t_i)², ü = f'(u_i)/2, and a sample
     # lies within h/2 of t_i.
     h = traj.t[1] - traj.t[0]
-    reach = np.abs(f.deriv()([u1, u2])).max() / 4 * (h / 2) ** 2 + integration
+    reach = np.abs(f.deriv()(np.array([u1, u2]))).max() / 4 * (h / 2) ** 2 + integration
     assert u.min() < u1 + reach and u.max() > u2 - reach
 
 

@@ -135,7 +135,7 @@ def test_real_trial_independent_decoders(imported):
         for centre in centres:
             first, last = max(0, centre - 40), min(n - 1, centre + 40)
             for schema, channel, message, ros in reader.iter_decoded_messages(
-                topics=list(seen), starting_at=round(first * step), ending_at=round(last * step)
+                topics=list(seen), start_time=round(first * step), end_time=round(last * step) + 1
             ):
                 k = int(round(message.log_time / step))
                 assert message.log_time == message.publish_time
