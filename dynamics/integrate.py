@@ -32,7 +32,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 __all__ = ["Jump", "Jumped", "Event", "Solution", "integrate"]
 
@@ -232,6 +231,8 @@ def integrate(
         t_stop = stops[0][0] if stops else t_end
         last = t_stop >= t_end
         if t_stop > t:
+            from scipy.integrate import solve_ivp  # scipy where it is used: the CLI's listings skip it
+
             sol = solve_ivp(
                 fun,
                 (t, t_stop),

@@ -14,10 +14,17 @@ inter-process lock:
 * :func:`njit` is ``numba.njit`` with ``cache=True`` whose dispatcher compiles under
   :func:`compile_lock`: the lock wraps that one dispatcher's ``compile`` (the path of lazy
   compilation on first call, of a callee compiled while its caller is typed, and of a cache load);
-* :func:`guvectorize` takes the lock around numba's eager gufunc build.
+* :func:`guvectorize` takes the lock around numba's gufunc build.
 
 Nothing of numba's own is changed: other libraries' compiled functions in the same process compile
 as numba alone would compile them.
+
+**numba is imported on first use, not on import.** Importing numba costs about 0.25 s, which a
+command that only lists the built-in devices should not pay. So :func:`njit` and :func:`guvectorize`
+return a :class:`Deferred` that holds the Python function and hands it to numba when it is first
+called. A compiled function's compiled callees must be numba dispatchers by the time numba types it:
+before handing a function over, its deferred callees (the names its code uses, in its module's
+globals or as attributes of a module it uses) are handed over first and put in their place.
 
 The lock is ``fcntl.flock`` on a file in the user's cache folder, one per gyroemu version
 (``$XDG_CACHE_HOME/gyroemu/<version>/numba.lock``, ``~/.cache`` when unset), re-entrant within a
@@ -29,17 +36,15 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import functools
 import os
 import threading
+import types
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
-import numba
-
-from gyroemu import __version__
-
-__all__ = ["compile_lock", "guvectorize", "lock_path", "njit"]
+__all__ = ["Deferred", "compile_lock", "guvectorize", "lock_path", "njit"]
 
 _thread_lock = threading.RLock()
 _depth = 0
@@ -48,8 +53,10 @@ _handle: IO[str] | None = None
 
 def lock_path() -> Path:
     """The lock file: per user (in the user's cache folder) and per gyroemu version."""
+    import gyroemu
+
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "gyroemu" / __version__ / "numba.lock"
+    return Path(base) / "gyroemu" / gyroemu.__version__ / "numba.lock"
 
 
 @contextlib.contextmanager
@@ -73,15 +80,75 @@ def compile_lock() -> Iterator[None]:
                 _handle = None
 
 
-def njit(function: Callable[..., Any] | None = None, **options: Any) -> Any:
-    """``numba.njit(cache=True, **options)`` whose compiles and cache loads run under :func:`compile_lock`.
+def _names_used(code: types.CodeType) -> set[str]:
+    """Global and attribute names a function's code (and the code nested in it) refers to."""
+    names = set(code.co_names)
+    for const in code.co_consts:
+        if isinstance(const, types.CodeType):
+            names |= _names_used(const)
+    return names
 
-    Used bare (``@njit``) or with numba's options (``@njit(parallel=True)``). Only the returned
-    dispatcher is locked: its ``compile`` is replaced on the instance, not on numba's class.
+
+class Deferred:
+    """A function to be compiled by numba, handed to numba on first use (see the module's notes).
+
+    Calling it calls the compiled function; any other attribute is the numba object's.
+    """
+
+    def __init__(self, function: Callable[..., Any], build: Callable[[Callable[..., Any]], Any]) -> None:
+        functools.update_wrapper(self, function)
+        self.py_func = function
+        self._build = build
+        self._compiled: Any = None
+        self._building = False
+
+    def compiled(self) -> Any:
+        """The numba dispatcher (or gufunc), made on the first call of this method."""
+        if self._compiled is None:
+            with _thread_lock:
+                if self._compiled is None and not self._building:
+                    self._building = True
+                    try:
+                        self._hand_over_callees()
+                        self._compiled = self._build(self.py_func)
+                    finally:
+                        self._building = False
+                    namespace = self.py_func.__globals__
+                    if namespace.get(self.py_func.__name__) is self:
+                        namespace[self.py_func.__name__] = self._compiled
+        return self._compiled
+
+    def _hand_over_callees(self) -> None:
+        namespace = self.py_func.__globals__
+        names = _names_used(self.py_func.__code__)
+        for name in names:
+            value = namespace.get(name)
+            if isinstance(value, Deferred):
+                namespace[name] = value.compiled()
+            elif isinstance(value, types.ModuleType):
+                for attribute in names:
+                    member = getattr(value, attribute, None)
+                    if isinstance(member, Deferred):
+                        setattr(value, attribute, member.compiled())
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        return self.compiled()(*args, **kwargs)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.compiled(), name)
+
+
+def njit(function: Callable[..., Any] | None = None, **options: Any) -> Any:
+    """``numba.njit(cache=True, **options)``, deferred to first use, compiling under :func:`compile_lock`.
+
+    Used bare (``@njit``) or with numba's options (``@njit(parallel=True)``). Only the dispatcher made
+    here is locked: its ``compile`` is replaced on the instance, not on numba's class.
     """
     options.setdefault("cache", True)
 
-    def decorate(fn: Callable[..., Any]) -> Any:
+    def build(fn: Callable[..., Any]) -> Any:
+        import numba
+
         dispatcher = numba.njit(**options)(fn)
         unlocked = dispatcher.compile
 
@@ -93,16 +160,23 @@ def njit(function: Callable[..., Any] | None = None, **options: Any) -> Any:
         dispatcher.compile = compile
         return dispatcher
 
+    def decorate(fn: Callable[..., Any]) -> Deferred:
+        return Deferred(fn, build)
+
     return decorate(function) if function is not None else decorate
 
 
-def guvectorize(*args: Any, **kwargs: Any) -> Callable[[Callable[..., Any]], Any]:
-    """``numba.guvectorize`` (with ``cache=True``) whose eager build runs under :func:`compile_lock`."""
+def guvectorize(*args: Any, **kwargs: Any) -> Callable[[Callable[..., Any]], Deferred]:
+    """``numba.guvectorize(*args, cache=True, **kwargs)``, deferred to first use, built under :func:`compile_lock`."""
     kwargs.setdefault("cache", True)
-    decorate = numba.guvectorize(*args, **kwargs)
 
-    def locked(function: Callable[..., Any]) -> Any:
+    def build(fn: Callable[..., Any]) -> Any:
+        import numba
+
         with compile_lock():
-            return decorate(function)
+            return numba.guvectorize(*args, **kwargs)(fn)
 
-    return locked
+    def decorate(fn: Callable[..., Any]) -> Deferred:
+        return Deferred(fn, build)
+
+    return decorate

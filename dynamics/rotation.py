@@ -4,9 +4,10 @@ Conventions (``interface.md``): Hamilton quaternions, unit norm, stored scalar-f
 in arrays of shape ``(..., 4)``. ``q_wb`` rotates a body-frame vector into the world frame:
 ``v_w = q_wb ⊗ v_b ⊗ q_wb*``, and ``R(q_wb)`` is the matrix that does the same.
 
-Conversions defer to :class:`scipy.spatial.transform.Rotation`; the product and the vector rotation,
-which sit on hot paths, are compiled numba ufuncs that broadcast like numpy (about 3x faster than
-the same formulas in numpy on millions of samples, which allocate a temporary per term).
+Conversions defer to :class:`scipy.spatial.transform.Rotation` (imported where used: importing
+scipy.spatial costs 0.25 s, which the command line's listings should not pay); the product and the
+vector rotation, which sit on hot paths, are compiled numba ufuncs that broadcast like numpy (about
+3x faster than the same formulas in numpy on millions of samples, which allocate a temporary per term).
 
 Euler angles
 ------------
@@ -18,10 +19,15 @@ Euler angles
 
 from __future__ import annotations
 
+import warnings
+from typing import TYPE_CHECKING
+
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from .jit import guvectorize
+
+if TYPE_CHECKING:
+    from scipy.spatial.transform import Rotation
 
 __all__ = [
     "quat_multiply",
@@ -163,6 +169,8 @@ def quat_rotate(q, v) -> np.ndarray:
 
 def quat_to_matrix(q) -> np.ndarray:
     """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)``."""
+    from scipy.spatial.transform import Rotation
+
     q = _q(q)
     m = Rotation.from_quat(q.reshape(-1, 4), scalar_first=True).as_matrix()
     return m.reshape(q.shape[:-1] + (3, 3))
@@ -170,6 +178,8 @@ def quat_to_matrix(q) -> np.ndarray:
 
 def quat_from_matrix(m) -> np.ndarray:
     """Unit quaternions ``(..., 4)``, ``w >= 0``, of rotation matrices ``(..., 3, 3)``."""
+    from scipy.spatial.transform import Rotation
+
     m = np.asarray(m, dtype=float)
     q = Rotation.from_matrix(m.reshape(-1, 3, 3)).as_quat(canonical=True, scalar_first=True)
     return q.reshape(m.shape[:-2] + (4,))
@@ -177,20 +187,34 @@ def quat_from_matrix(m) -> np.ndarray:
 
 def quat_from_euler_zxz(angles) -> np.ndarray:
     """Quaternions of Z-X-Z angles ``(..., 3)`` = (precession φ, nutation θ, spin ψ), rad."""
+    from scipy.spatial.transform import Rotation
+
     a = _v(angles)
     q = Rotation.from_euler("ZXZ", a.reshape(-1, 3)).as_quat(scalar_first=True)
     return q.reshape(a.shape[:-1] + (4,))
 
 
+def _as_euler(rotation: Rotation, seq: str) -> np.ndarray:
+    """``rotation.as_euler(seq)`` without scipy's gimbal-lock warning: at the lock the split of the
+    angles is a convention, documented by the callers (``suppress_warnings=`` needs scipy 1.17)."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "Gimbal lock detected", UserWarning)
+        return rotation.as_euler(seq)
+
+
 def euler_zxz_from_quat(q) -> np.ndarray:
     """Z-X-Z angles (φ, θ, ψ) with ``θ`` in ``[0, π]``; at ``θ = 0`` or ``π`` only φ±ψ is defined."""
+    from scipy.spatial.transform import Rotation
+
     q = _q(q)
-    a = Rotation.from_quat(q.reshape(-1, 4), scalar_first=True).as_euler("ZXZ", suppress_warnings=True)
+    a = _as_euler(Rotation.from_quat(q.reshape(-1, 4), scalar_first=True), "ZXZ")
     return a.reshape(q.shape[:-1] + (3,))
 
 
 def quat_from_euler_zyx(rpy) -> np.ndarray:
     """Quaternions of (roll φ, pitch θ, yaw ψ) ``(..., 3)``, rad, with ``R = Rz(ψ) Ry(θ) Rx(φ)``."""
+    from scipy.spatial.transform import Rotation
+
     a = _v(rpy)
     q = Rotation.from_euler("ZYX", a.reshape(-1, 3)[:, ::-1]).as_quat(scalar_first=True)
     return q.reshape(a.shape[:-1] + (4,))
@@ -198,8 +222,10 @@ def quat_from_euler_zyx(rpy) -> np.ndarray:
 
 def euler_zyx_from_quat(q) -> np.ndarray:
     """(roll, pitch, yaw), rad, pitch in ``[-π/2, π/2]``, of unit quaternions."""
+    from scipy.spatial.transform import Rotation
+
     q = _q(q)
-    a = Rotation.from_quat(q.reshape(-1, 4), scalar_first=True).as_euler("ZYX", suppress_warnings=True)
+    a = _as_euler(Rotation.from_quat(q.reshape(-1, 4), scalar_first=True), "ZYX")
     return a[:, ::-1].reshape(q.shape[:-1] + (3,))
 
 

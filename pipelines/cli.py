@@ -13,10 +13,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
-from gyroemu.dynamics import ConfigError, list_scenarios, load_scenario
-
 __all__ = ["main"]
 
 
@@ -25,6 +21,8 @@ class UsageError(Exception):
 
 
 def _cmd_scenarios(args) -> int:
+    from gyroemu.dynamics import list_scenarios
+
     scenarios = list_scenarios()
     width = max(len(s.name) for s in scenarios)
     kwidth = max(len(s.kind) for s in scenarios)
@@ -35,6 +33,8 @@ def _cmd_scenarios(args) -> int:
 
 def write_npz_atomic(path: Path, arrays: dict) -> None:
     """Write ``arrays`` to ``path`` (.npz) through a temporary file, so no partial file is left."""
+    import numpy as np
+
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
     try:
@@ -47,6 +47,8 @@ def write_npz_atomic(path: Path, arrays: dict) -> None:
 
 
 def _cmd_simulate(args) -> int:
+    from gyroemu.dynamics import load_scenario
+
     out = Path(args.out)
     if out.suffix not in (".npz", ".mcap"):
         raise UsageError(f"argument --out: {out}: write a .mcap (ROS 2) or .npz file (got '{out.suffix}')")
@@ -78,12 +80,13 @@ def _cmd_simulate(args) -> int:
             if out.suffix == ".mcap":
                 from .mcap_io import Recording, truth_series, write_mcap
 
+                assert samples is not None  # an .mcap needs a device: checked above
                 write_mcap(out, Recording(samples, truth=truth_series(traj, samples), device=device), scenario=scenario)
             else:
                 write_npz_atomic(out, _npz_arrays(scenario, traj, device, samples))
     elapsed = time.perf_counter() - started
     summary = f"{len(traj)} truth samples"
-    if device is not None:
+    if device is not None and samples is not None:
         summary += f", {len(samples)} samples of {device.name} ({device.kind})"
     print(f"{scenario.name}: {summary} over {traj.duration:g} s in {elapsed:.2f} s -> {out}")
     return 0
@@ -91,6 +94,8 @@ def _cmd_simulate(args) -> int:
 
 def _npz_arrays(scenario, traj, device, samples) -> dict:
     """The arrays of an .npz run: ``truth/...``, ``imu/...``, ``raw/<kind>/...`` and the configs."""
+    import numpy as np
+
     arrays = {
         f"truth/{name}": getattr(traj, name)
         for name in ("t", "q_wb", "omega_b", "alpha_b", "specific_force_b", "pos_w", "vel_w", "mag_b")
@@ -188,6 +193,8 @@ def _cmd_estimate(args) -> int:
 
 
 def _cmd_presets(args) -> int:
+    import numpy as np
+
     from gyroemu.sensors import list_devices
 
     devices = list_devices()
@@ -203,6 +210,8 @@ def _cmd_presets(args) -> int:
 
 
 def _cmd_allan(args) -> int:
+    import numpy as np
+
     from .allan import allan_report, plot_allan
 
     log = Path(args.log)
@@ -254,6 +263,8 @@ def _cmd_allan(args) -> int:
 def _cmd_bench(args) -> int:
     import warnings
 
+    from gyroemu.dynamics import ConfigError, load_scenario
+
     from .bench import BenchWarning, LogCase, SimCase, run_bench
     from .estimation.registry import FilterError, filter_class
 
@@ -279,7 +290,7 @@ def _cmd_bench(args) -> int:
                     if e.file is not None:
                         raise  # a bad file: names the file and key
                     raise UsageError(f"argument {flag}: {e}") from None
-    cases = (
+    cases: list[SimCase | LogCase] = (
         [
             SimCase(scenario=sc, device=dev, duration=args.duration, six_d=args.six_d)
             for sc in dict.fromkeys(scenarios)
@@ -395,6 +406,8 @@ def _cmd_record(args) -> int:
 
 
 def _cmd_replay(args) -> int:
+    from gyroemu.dynamics import ConfigError
+
     from .replay import run_replay
 
     try:
@@ -465,8 +478,28 @@ def _positive(text: str) -> float:
     return value
 
 
+class _VersionAction(argparse.Action):
+    """``--version``: the installed package's version, looked up only when asked for."""
+
+    def __init__(self, option_strings: list[str], dest: str, help: str | None = None) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help=help)
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: object,
+        option_string: str | None = None,
+    ) -> None:
+        import gyroemu
+
+        print(f"gyroemu {gyroemu.__version__}")
+        parser.exit(0)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="gyroemu", description="Gyroscope and IMU emulator.")
+    parser.add_argument("--version", action=_VersionAction, help="print gyroemu's version and exit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser("demo", help="run the main job on built-in defaults and print a summary")
@@ -684,9 +717,6 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return args.func(args)
-    except ConfigError as e:
-        print(f"gyroemu {args.command}: error: {e}", file=sys.stderr)
-        return 2
     except UsageError as e:
         parser.exit(2, f"gyroemu {args.command}: error: {e}\n")
     except KeyboardInterrupt:
@@ -694,6 +724,14 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # the reader went away (`gyroemu info run.mcap | head`): stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except ValueError as e:
+        # Bad input (a config, a log): imported here, where the library that raised it is loaded already.
+        from gyroemu.dynamics.config import ConfigError
+
+        if not isinstance(e, ConfigError):
+            raise
+        print(f"gyroemu {args.command}: error: {e}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -51,7 +51,7 @@ from dataclasses import dataclass
 from typing import Annotated, ClassVar, Literal
 
 import numpy as np
-import scipy.signal
+from numpy.typing import ArrayLike
 from pydantic import BeforeValidator, ValidationInfo, field_validator
 
 from gyroemu.dynamics.config import ConfigError, NonNegativeReal, PositiveReal, Real, Section
@@ -364,7 +364,7 @@ def apply_errors(
     spec: GyroErrors | AccelErrors | ErrorModel,
     rng: np.random.Generator,
     *,
-    temperature_degC=None,
+    temperature_degC: ArrayLike | None = None,
     specific_force: np.ndarray | None = None,
 ) -> np.ndarray:
     """What a three-axis sensor with the error terms ``spec`` outputs for the true input ``truth``.
@@ -478,6 +478,8 @@ def _low_pass(y: np.ndarray, dt: float, bandwidth_hz: float, order: int) -> None
     −3 dB point is exactly ``bandwidth_hz``) and started in steady state at the first sample
     (``scipy.signal.lfilter_zi``): a constant input passes unchanged, with no start-up transient.
     """
+    import scipy.signal  # here, not at the top: it costs 0.5 s to import, and few devices need it
+
     b, a = scipy.signal.butter(order, bandwidth_hz, btype="low", fs=1.0 / dt)
     zi = scipy.signal.lfilter_zi(b, a)[:, None] * y[0]
     _lfilter_into(b, a, zi, y)

@@ -29,7 +29,6 @@ from typing import Annotated, Literal
 import numpy as np
 import tomli_w
 from pydantic import Field, field_validator
-from scipy.integrate import cumulative_trapezoid
 
 from gyroemu.dynamics import ConfigError, Trajectory
 from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3, validate
@@ -236,7 +235,7 @@ class Device:
         return self._gyro_noise_density
 
     @property
-    def gyro_errors(self):
+    def gyro_errors(self) -> ErrorModel:
         """The gyro error terms in SI (:class:`gyroemu.sensors.errors.ErrorModel`), white noise as added on
         top of the mechanism's own."""
         return self._gyro_errors
@@ -367,6 +366,8 @@ class Device:
             if response.angle is not None:
                 angle = response.angle - response.angle[0]
             else:  # a rate: trapezoid on the inner grid (the mechanisms' bandwidth is far below 1/h)
+                from scipy.integrate import cumulative_trapezoid  # scipy where used: the CLI's listings skip it
+
                 angle = cumulative_trapezoid(response.rate, dx=h, axis=0, initial=0)
             at_outputs = angle[::m]  # inner index 0, m, 2m, … are τ_first … τ_last
             increments[first:last] = np.diff(at_outputs, axis=0)

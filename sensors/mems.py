@@ -139,8 +139,6 @@ import math
 from typing import ClassVar, Literal
 
 import numpy as np
-import scipy.linalg
-import scipy.signal
 from pydantic import ValidationInfo, field_validator
 
 from gyroemu.dynamics.config import PositiveReal, Real
@@ -367,6 +365,8 @@ class MemsGyro(GyroMechanism):
         """The demodulator filter's gain at angular frequency ``w`` (1 when there is none)."""
         if self.demodulator_bandwidth_hz is None:
             return np.ones_like(w, dtype=complex)
+        import scipy.signal  # here, not at the top: it costs 0.5 s to import
+
         b, a = scipy.signal.butter(
             self.demodulator_filter_order, 2 * np.pi * self.demodulator_bandwidth_hz, analog=True
         )
@@ -425,6 +425,8 @@ class MemsGyro(GyroMechanism):
         """
         if self.demodulator_bandwidth_hz is None:
             return None
+        import scipy.signal  # here, not at the top: it costs 0.5 s to import
+
         poles = scipy.signal.buttap(self.demodulator_filter_order)[1] * 2 * np.pi * self.demodulator_bandwidth_hz
         n = len(poles)
         a = np.diag(poles).astype(complex)
@@ -517,7 +519,9 @@ class MemsGyro(GyroMechanism):
         steps = CARRIER_STEPS_PER_CYCLE
         power_up = run is None
         if power_up:  # the carrier grid starts at power-up; its temperature is held from then on
+            assert truth.temperature_degC is not None  # in self.reads, and respond() compared it
             run = {"t0": float(truth.t[0]), "temperature_degC": float(truth.temperature_degC[0]), "j": 0}
+        assert run is not None  # given in state, or set at power-up just above
         temperature = run["temperature_degC"]
         w_d, w_s = self.frequencies(temperature)
         h = 2 * np.pi / (steps * w_d)  # carrier step: N per drive cycle, θ_j = 2π j/N
@@ -528,6 +532,7 @@ class MemsGyro(GyroMechanism):
         # The forces at the truth samples; the carrier steps see them linear in between, like the
         # baseband model. F: complex amplitude at the carrier; −f_s: the DC force (deflection y_g).
         forcing = self._forcing(truth.omega, truth.alpha, truth.specific_force, w_d, w_s)
+        assert truth.specific_force is not None  # in self.reads
         static = np.ascontiguousarray(-truth.specific_force[:, sense])
 
         # The sense oscillator (y, ẏ): ẋ = A x + b u, discretised exactly over a carrier step.
@@ -634,6 +639,8 @@ def first_order_hold(a: np.ndarray, b: np.ndarray, h: float):
     m[:s, :s] = a * h
     m[:s, s] = b * h
     m[s, s + 1] = 1.0
+    import scipy.linalg  # scipy where it is used: the CLI's listings skip it
+
     e = scipy.linalg.expm(m)
     return e[:s, :s], e[:s, s] - e[:s, s + 1], e[:s, s + 1]
 
@@ -654,6 +661,8 @@ def carrier_hold(a: np.ndarray, b: np.ndarray, w: float, h: float):
     m0[:s, s + 1] = b  # x driven by u₀
     m1 = m.copy()
     m1[:s, s] = b  # x driven by u₁
+    import scipy.linalg
+
     return scipy.linalg.expm(m0 * h)[:s, s + 1], scipy.linalg.expm(m1 * h)[:s, s + 1]
 
 
@@ -667,6 +676,8 @@ def discrete_noise_covariance(a: np.ndarray, b: np.ndarray, psd: float, h: float
     m[:s, :s] = -a
     m[:s, s:] = psd * np.outer(b, np.conj(b))
     m[s:, s:] = np.conj(a).T
+    import scipy.linalg
+
     e = scipy.linalg.expm(m * h)
     phi = np.conj(e[s:, s:]).T
     q = phi @ e[:s, s:]

@@ -61,7 +61,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import nnls
 
 from gyroemu.dynamics.jit import njit
 
@@ -317,6 +316,8 @@ def flicker_bank(
     tau_c = np.logspace(lo, hi, int(np.ceil((hi - lo) * _PER_DECADE)) + 1)
     tau = np.geomspace(tau_min, tau_max, 200)
     design = gauss_markov_avar(tau[:, None], 1.0, tau_c[None, :], dt)  # (τ, component), unit variances
+    from scipy.optimize import nnls  # here, not at the top: scipy.optimize costs 0.3 s to import
+
     weights, _ = nnls(design / FLICKER_FLOOR**2, np.ones(tau.size))  # σ_j² per unit B²
     keep = weights > 0
     sigma = np.sqrt(weights[keep])[:, None] * b[None, :]
@@ -457,12 +458,12 @@ def sensor_noise(
         raise ValueError(f"out must be a C-contiguous float64 array of shape {(n, n_axes)}")
 
     # Full-rate terms, as AR(1) rows: white (φ = 0), random walk (φ = 1), fast flicker components.
-    phi = [np.zeros(n_axes), np.ones(n_axes)]
-    c = [
+    phi: list[np.ndarray] | np.ndarray = [np.zeros(n_axes), np.ones(n_axes)]
+    c: list[np.ndarray] | np.ndarray = [
         _per_axis(white, n_axes, "white") / np.sqrt(dt),  # per-sample σ = N / √Δt
         _per_axis(random_walk, n_axes, "random_walk") * np.sqrt(dt),
     ]  # increment σ = K √Δt
-    state = [np.zeros(n_axes), np.zeros(n_axes)]
+    state: list[np.ndarray] | np.ndarray = [np.zeros(n_axes), np.zeros(n_axes)]
 
     if flicker is not None:
         fast = _add_slow_flicker(rng, flicker, dt, out)

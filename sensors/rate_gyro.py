@@ -98,7 +98,6 @@ import math
 from typing import Annotated, ClassVar, Literal
 
 import numpy as np
-import scipy.signal
 from pydantic import Field
 
 from gyroemu.dynamics.config import PositiveReal, Real
@@ -241,6 +240,8 @@ def foh_matrices(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, n
     state x̃ = x − Γ₁ u (so D_d = Γ₁ and B_d = Γ₀ + Φ Γ₁).
     """
     n = a.shape[0]
+    import scipy.signal  # here, not at the top: it costs 0.5 s to import
+
     phi, bd, _, dd, _ = scipy.signal.cont2discrete((a, b[:, None], np.eye(n), np.zeros((n, 1))), dt, method="foh")
     gamma1 = dd[:, 0]
     return phi, bd[:, 0] - phi @ gamma1, gamma1

@@ -22,8 +22,6 @@ from __future__ import annotations
 from functools import cached_property
 
 import numpy as np
-from scipy.interpolate import CubicHermiteSpline, CubicSpline
-from scipy.spatial.transform import Rotation, Slerp
 
 from gyroemu.dynamics import Trajectory
 from gyroemu.dynamics.rigid_body import point_acceleration
@@ -54,6 +52,8 @@ class SensorTruth:
         self.q_bs = quat_normalize(np.asarray(q_bs, dtype=float))
         self.q_sb = quat_conjugate(self.q_bs)
         self.lever_arm_b = np.asarray(lever_arm_b, dtype=float)
+        from scipy.interpolate import CubicHermiteSpline, CubicSpline  # scipy where used: the CLI's listings skip it
+
         self._omega = CubicHermiteSpline(t, trajectory.omega_b, trajectory.alpha_b, axis=0)
         self._alpha = self._omega.derivative()
         self._force = CubicSpline(t, trajectory.specific_force_b, axis=0)
@@ -70,10 +70,14 @@ class SensorTruth:
 
     @cached_property
     def _mag(self):
+        from scipy.interpolate import CubicSpline
+
         return CubicSpline(self._trajectory.t, self._trajectory.mag_b, axis=0)
 
     @cached_property
     def _attitude(self):
+        from scipy.spatial.transform import Rotation, Slerp
+
         return Slerp(self._trajectory.t, Rotation.from_quat(self._trajectory.q_wb, scalar_first=True))
 
     def _check(self, t):

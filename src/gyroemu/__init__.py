@@ -8,14 +8,23 @@ mapped under this root by ``pyproject.toml`` (``[tool.setuptools.package-dir]``)
 - :mod:`gyroemu.pipelines` (``pipelines/``): files, streams, estimation and the command line;
 - :mod:`gyroemu.configs` (``configs/``): the built-in scenario and device files, as package data.
 
-Importing ``gyroemu`` loads nothing heavy: each subpackage is imported when asked for.
+Importing ``gyroemu`` loads nothing: each subpackage is imported when asked for, and ``__version__``
+(from the installed package's metadata) when it is first read.
 """
 
-from importlib.metadata import PackageNotFoundError, version
-
-try:
-    __version__: str = version("gyroemu")
-except PackageNotFoundError:  # pragma: no cover - only a source tree that was never installed
-    __version__ = "0+unknown"
+from typing import Any
 
 __all__ = ["__version__"]
+
+
+def __getattr__(name: str) -> Any:
+    if name == "__version__":
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            value = version("gyroemu")
+        except PackageNotFoundError:  # pragma: no cover - a source tree that was never installed
+            value = "0+unknown"
+        globals()["__version__"] = value
+        return value
+    raise AttributeError(f"module 'gyroemu' has no attribute {name!r}")

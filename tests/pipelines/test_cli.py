@@ -102,6 +102,7 @@ def test_simulate_with_a_device_writes_its_samples_reproducibly(tmp_path):
     assert runs[0].tobytes() == runs[1].tobytes()
 
 
+@pytest.mark.slow
 def test_scenarios_lists_every_builtin_and_demo_runs():
     result = gyroemu("scenarios")
     assert result.returncode == 0, result.stderr

@@ -291,6 +291,7 @@ def test_low_pass_lag_of_a_steady_drift_is_the_group_delay():
         assert np.all(dm[:, 3 * a : 3 * a + 2] == 0.0)
 
 
+@pytest.mark.slow
 @needs_trial()
 def test_broad_targets_with_one_parameter_set():
     """The issue's bars on the BROAD trials in shared, defaults only: mean 9D total RMSE at or below

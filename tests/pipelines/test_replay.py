@@ -59,6 +59,7 @@ def listener():
         lst.close()
 
 
+@pytest.mark.slow
 def test_gyroemu_file_recorded_back_complete_and_byte_exact(procs, tmp_path, gyroemu_mcap):
     """(1) --rate 1 into `gyroemu record`: every message, sequences 0..N-1 per key, payloads identical."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
@@ -113,6 +114,7 @@ def test_rate_4_takes_a_quarter_of_the_time(procs, listener, gyroemu_mcap):
     assert 0.15 * duration_s < span_s < 0.6 * duration_s
 
 
+@pytest.mark.slow
 def test_foreign_file_and_pacing(procs, listener, tmp_path):
     """(3) someone else's /sensors/imu_raw goes to gyroemu/imu0/sensors/imu_raw, bytes unchanged (and
     its String topic to gyroemu/imu0/rosout_text). (4) Pacing: send stamps against

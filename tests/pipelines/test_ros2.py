@@ -208,6 +208,7 @@ def _client(endpoint: str):
     return zenoh.open(config)
 
 
+@pytest.mark.slow
 def test_stream_router_record_in_ros2_mode(procs, tmp_path):
     """``stream --ros2`` and ``record --ros2`` as clients of ``gyroemu router`` (three processes), with a
     plain zenoh client beside them that watches the liveliness tokens and the data keys: the tokens

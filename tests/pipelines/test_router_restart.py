@@ -16,6 +16,8 @@ pytest.importorskip("zenoh")
 
 from live_processes import free_port, procs  # noqa: E402,F401  (procs is a fixture)
 
+pytestmark = pytest.mark.slow  # long statistical or multi-process runs: `pytest -m slow`
+
 SCENARIO, DEVICE, RATE = "heavy_top", "consumer_mems", 1000.0
 TOPICS = ("/imu", "/mag", "/truth/imu", "/raw/mems")
 

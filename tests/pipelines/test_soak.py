@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow  # long statistical or multi-process runs: `pytest -m slow`
+
 pytest.importorskip("zenoh")
 
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "soak_three_process.py"

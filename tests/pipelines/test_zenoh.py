@@ -38,6 +38,7 @@ def mcap_payloads(path, topic) -> list:
         return [(m.log_time, m.publish_time, m.data) for _, _, m in make_reader(f).iter_messages(topics=[topic])]
 
 
+@pytest.mark.slow
 def test_default_session_both_start_orders_lossless_and_byte_exact(procs, tmp_path):
     """Default session (no flags): recorder A started before its stream, recorder B after its stream;
     20 s at 1 kHz each, both at once; no message lost or duplicated; the recorded /imu bytes are what
@@ -116,6 +117,7 @@ def test_default_session_both_start_orders_lossless_and_byte_exact(procs, tmp_pa
         np.testing.assert_array_equal(log.device.samples.gyro, samples.gyro)
 
 
+@pytest.mark.slow
 def test_router_in_between_lossless(procs, tmp_path):
     """Publisher and recorder as clients of a router in a third process (free port): no loss."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
@@ -158,6 +160,7 @@ def test_router_in_between_lossless(procs, tmp_path):
     assert procs.stop("router") == 0
 
 
+@pytest.mark.slow
 @pytest.mark.filterwarnings("ignore:.*have no message on")  # the kill may cut a sample's group of messages
 def test_sigint_completes_and_sigkill_leaves_readable_chunks(procs, tmp_path):
     """SIGINT mid-stream: a complete MCAP (summary, indexes). SIGKILL: the complete chunks read back."""
@@ -202,6 +205,7 @@ def test_sigint_completes_and_sigkill_leaves_readable_chunks(procs, tmp_path):
     )
 
 
+@pytest.mark.slow
 def test_pacing_follows_the_sample_clock(procs):
     """Send times (source stamps of the attachments) against t0 + k/rate: no accumulating drift.
 

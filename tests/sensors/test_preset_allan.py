@@ -23,6 +23,8 @@ from gyroemu.dynamics.config import config_dir
 from gyroemu.pipelines.allan import allan_report
 from gyroemu.sensors import device_from_dict
 
+pytestmark = pytest.mark.slow  # long statistical or multi-process runs: `pytest -m slow`
+
 RUNS = {  # preset: (output rate Hz, hours). The consumer part runs at its own rate: its 16-bit output
     # quantiser is only dithered by the noise (and so white, as its datasheet measures) at 1 kHz.
     "consumer_mems": (1000.0, 1.0),
