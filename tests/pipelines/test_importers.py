@@ -19,7 +19,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from broad_trials import BROAD_DIR, needs_trial
+from broad_trials import BROAD_DIR, needs_trial, require_trial
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
@@ -58,8 +58,7 @@ def hdf5_arrays(path):
 @pytest.fixture(scope="module")
 def imported(tmp_path_factory):
     """The trial imported once (library call), with the input's fingerprint before and after."""
-    if not (BROAD_DIR / TRIAL).is_file():
-        pytest.skip(f"BROAD trials not found at {BROAD_DIR} (set GYROEMU_BROAD_DIR)")
+    require_trial(TRIAL)
     source = BROAD_DIR / TRIAL
     before = fingerprint(source)
     out = tmp_path_factory.mktemp("broad") / "trial.mcap"
