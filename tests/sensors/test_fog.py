@@ -129,6 +129,66 @@ def test_the_outputs_follow_a_varying_rate():
     assert np.all(np.abs(expected - true_angle[-1])[:2] > 5 * walk)  # the full-swing axes: visibly short
 
 
+class ZeroDraws:
+    """A Generator stand-in whose standard normal draws are all zero. The FOG's only random input is one
+    standard normal per inner step and axis, scaled by σ(Δφ)/√h (module notes, "Random draws"), so this
+    switches the shot noise and the excess RIN off and leaves the loop's deterministic response."""
+
+    def standard_normal(self, size=None):
+        return np.zeros(size)
+
+
+def test_closed_loop_nulls_the_exact_mean_sagnac_phase_of_every_step():
+    """Closed loop, noiseless: the ramp step of each inner step [t_k, t_k+1] is minus the step's mean
+    Sagnac phase, φ_f,k = −(S/h) ∫ Ω dt, computed by the loop as the corrected trapezoid rule
+    (h/2)(Ω_k + Ω_k+1) + (h²/12)(α_k − α_k+1): exact for cubics. For Ω = c + A sin(w t + p), exactly
+
+        (1/h) ∫ Ω dt = c + A sin(w t_m + p) · sin(w h/2)/(w h/2),      t_m the step's midpoint,
+
+    the indicated rate of the step is that mean, and the angle its running integral.
+
+    Bounds: the rule's error is h⁵/720 Ω⁗(ξ) per step, so |Δ mean phase| ≤ S h⁴ A w⁴/720 = 3.1·10⁻⁹ rad
+    (on axis 3, A = 2 rad/s; rounding, a few ε of S|Ω| ~ 10⁻¹⁶ rad, is far below), while the h² term is
+    up to S h² A w²/12 = 7.4·10⁻⁵ rad: with (α_k − α_k+1) reversed the steps would be off by twice that,
+    2·10⁴ times the bound. The rate is the phase over S; the angle accumulates the steps' errors (t h⁴
+    A w⁴/720) and the running sum's rounding (M ε max|angle|).
+    """
+    gyro = FiberOpticGyro()  # closed loop, range ±π
+    S, hz = gyro.scale_factor_s, 1000.0
+    t = grid(0.4, hz)  # 3.2 periods of an 8 Hz swing
+    h = t[1] - t[0]
+    c, amp, p = np.array([0.3, -0.5, 0.1]), np.array([1.0, 1.5, 2.0]), np.array([0.0, 1.0, -2.0])
+    w = 2 * math.pi * 8.0
+    omega = c + amp * np.sin(w * t[:, None] + p)
+    alpha = amp * w * np.cos(w * t[:, None] + p)
+    theta = c * t[:, None] + amp / w * (np.cos(p) - np.cos(w * t[:, None] + p))  # ∫₀ᵗ Ω dt
+    mid, dt = 0.5 * (t[1:] + t[:-1])[:, None], np.diff(t)[:, None]
+    mean_rate = c + amp * np.sin(w * mid + p) * np.sin(0.5 * w * dt) / (0.5 * w * dt)
+
+    response = gyro.respond(make_truth(t, omega, alpha), ZeroDraws())
+    feedback = response.raw["feedback_phase_rad"]
+    assert np.all(np.abs(S * omega) < 0.5 * gyro.feedback_range_rad)  # well inside the range: no clipping
+
+    truncation = S * h**4 * amp * w**4 / 720  # (3,) rad
+    rounding = 8 * np.finfo(float).eps * S * np.abs(omega).max(axis=0)
+    h2_term = S * h**2 * amp * w**2 / 12
+    assert np.all(h2_term > 1e4 * (truncation + rounding))  # the O(h²) term is resolved
+
+    np.testing.assert_allclose(feedback[0], -S * omega[0], rtol=0, atol=4 * np.finfo(float).eps)  # power-up
+    err = np.abs(feedback[1:] + S * mean_rate)
+    assert np.all(err <= truncation + rounding), (err.max(axis=0), truncation + rounding)
+    # The increments, as the IMU reports them: each is the step's rate × h, rounded with the running sum
+    # (a few ε of the angle and of the increment).
+    rate = np.diff(response.angle, axis=0) / h
+    eps = np.finfo(float).eps
+    increment_rounding = 4 * eps * (np.abs(theta).max(axis=0) / h + np.abs(omega).max(axis=0))
+    err = np.abs(rate - mean_rate)
+    assert np.all(err <= (truncation + rounding) / S + increment_rounding), (err.max(axis=0), truncation / S)
+    angle_rounding = len(t) * eps * np.abs(theta).max(axis=0)  # the running sum: one rounding per step
+    err = np.abs(response.angle - theta)
+    assert np.all(err <= t[:, None] * truncation / S + angle_rounding), (err.max(axis=0), t[-1] * truncation / S)
+
+
 # --------------------------------------------------------------------------------------------------
 # Noise: the formula against photon counting, and the gyro's output against the formula
 # --------------------------------------------------------------------------------------------------
