@@ -50,8 +50,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .body_kernels import cross, pure_quat, quat_product, rotate, rotate_back, rotation_matrix, stack_state
 from .inertia import check_inertia
-from .rigid_body import _omega_quat, _quat_product, _stack_state, cross, rotate, rotate_back, rotation_matrix
 
 __all__ = ["SpinProfile", "Rotor", "GimballedRotor", "Gyrostat", "X", "Q", "P", "W", "GIMBALS"]
 
@@ -353,9 +353,9 @@ class Gyrostat:
         big_h = omega @ self.inertia_b.T + h  # H = I ω + h
         omega_dot = (tau - cross(omega, big_h) - h_dot) @ self._inertia_inv.T  # I ω̇ = τ − ω×H − ḣ
         omega_wb = omega - rotate_back(rotation_matrix(q), self.frame_rate_w) if self._rotating else omega  # to world
-        q_dot = 0.5 * _quat_product(q, _omega_quat(omega_wb))  # q̇ = ½ q ⊗ ω_b
+        q_dot = 0.5 * quat_product(q, pure_quat(omega_wb))  # q̇ = ½ q ⊗ ω_b
         x_dot = y[..., P] / self.mass  # ẋ = P/m
         p_dot = np.asarray(f, dtype=float)  # Ṗ = F − 2Ω×P
         if self._rotating:
             p_dot = p_dot - 2.0 * cross(self.frame_rate_w, y[..., P])
-        return _stack_state(lead, [x_dot, q_dot, p_dot, omega_dot, np.asarray(delta_dot, dtype=float)])
+        return stack_state(lead, [x_dot, q_dot, p_dot, omega_dot, np.asarray(delta_dot, dtype=float)])

@@ -57,23 +57,12 @@ import numpy as np
 import pydantic
 from pydantic import Field
 
+from .body_kernels import cross, quat_product, rotate, rotation_matrix
 from .config import NonNegativeReal, PositiveReal, Real, Section, Vec3
 from .earth import Environment, Site
 from .inertia import box, inertia_config
 from .integrate import Event, Jump, Jumped, integrate
-from .rigid_body import (
-    L,
-    P,
-    Q,
-    RigidBody,
-    X,
-    _quat_product,
-    contact_mass_matrix,
-    cross,
-    rotate,
-    rotation_matrix,
-    world_motion_trajectory,
-)
+from .rigid_body import L, P, Q, RigidBody, X, contact_mass_matrix, world_motion_trajectory
 from .rotation import quat_from_euler_zyx, quat_from_rotvec
 from .scenarios import ScenarioSpec
 from .trajectory import Trajectory
@@ -412,7 +401,7 @@ class Drop:
         down = np.array([0.0, 0.0, -1.0])
         axis = cross(face_w, down)
         fix = quat_from_rotvec(axis / np.linalg.norm(axis) * tilt) if tilt > 0 else np.array([1.0, 0.0, 0.0, 0.0])
-        q = _quat_product(fix, y[Q])
+        q = quat_product(fix, y[Q])
         r = rotation_matrix(q)
         spin = float(self.body.omega_wb_w(y, r)[2])  # s: rotation about the vertical, kept
         v = self.body.velocity(y) * np.array([1.0, 1.0, 0.0])  # horizontal slide, kept

@@ -23,11 +23,12 @@ Kinds
 ``sculling``
     Angular oscillation about x in phase with linear oscillation along y (Savage 1998, part 2).
 
-Building blocks shared with :mod:`gyroemu.dynamics.vehicles`: :class:`TimeGrid` (sinusoids on uniform grids by
-angle addition), :func:`smooth_step` (a C⁵ step from 0 to 1), :func:`rotation_basis`, :class:`WorldMotion` and
-:class:`EarthBoundSpec`. Each kind evaluates its closed forms in one compiled kernel (numba) that
-writes every output once; the kernels share compiled pieces of these blocks (``_sines_block``,
-``_phasor_block``, ``_sincos_block``, ``_smooth_step_at``; see "Speed" below).
+Each kind is an :class:`~gyroemu.dynamics.prescribed.EarthBoundSpec` that returns a
+:class:`~gyroemu.dynamics.prescribed.WorldMotion` (the prescribed-motion base, shared with
+:mod:`gyroemu.dynamics.vehicles`), and evaluates its closed forms in one compiled kernel (numba) that writes
+every output once, block by block, from the compiled building blocks of :mod:`gyroemu.dynamics.motion_kernels`
+(:class:`~gyroemu.dynamics.motion_kernels.TimeGrid` and its ``phasor_block``, ``sines_block``; ``sin_cos``,
+``sincos_block``, ``smooth_step_at``, ``rotation_basis``; see "Speed" there).
 
 Attitudes in config files are ``rpy_deg = [roll, pitch, yaw]`` in degrees with
 ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (:func:`gyroemu.dynamics.rotation.quat_from_euler_zyx`); in the ENU world,
@@ -43,27 +44,30 @@ algorithms", J. Guidance, Control, and Dynamics 21(2), 208–221, 1998 (sculling
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from .config import NonNegativeReal, PositiveReal, Real, Section, Vec3
-from .earth import Site
 from .jit import njit
-from .rotation import quat_conjugate, quat_from_euler_zyx, quat_multiply, quat_rotate, quat_to_rotvec
-from .scenarios import ScenarioSpec
-from .trajectory import Trajectory, trajectory_from_world_motion
+from .motion_kernels import (
+    TimeGrid,
+    cross_xyz,
+    phasor_block,
+    quat_rotate_xyz,
+    rotation_basis,
+    segment_index,
+    sin_cos,
+    sincos_block,
+    sines_block,
+    smooth_step,
+    smooth_step_at,
+)
+from .prescribed import Attitude, EarthBoundSpec, WorldMotion, motion_arrays, quat_from_rpy_deg
+from .rotation import quat_conjugate, quat_multiply, quat_rotate, quat_to_rotvec
 
 __all__ = [
-    "TimeGrid",
-    "smooth_step",
-    "quat_from_rpy_deg",
-    "rotation_basis",
-    "WorldMotion",
-    "EarthBoundSpec",
-    "Attitude",
     "StaticSpec",
     "Table",
     "ConstantRate",
@@ -77,352 +81,14 @@ __all__ = [
     "ConingSpec",
     "Sculling",
     "ScullingSpec",
+    # Re-exported: imported from here by pipelines.demo (EarthBoundSpec) and the tests.
+    "EarthBoundSpec",
+    "TimeGrid",
+    "quat_from_rpy_deg",
+    "smooth_step",
 ]
 
-_EPS = np.finfo(float).eps
 _E_Z = np.array([0.0, 0.0, 1.0])
-
-
-# --------------------------------------------------------------------------------------------------
-# Building blocks
-# --------------------------------------------------------------------------------------------------
-#
-# Speed. The kinds evaluate their closed forms in compiled kernels (numba) that write every output once,
-# in place, block by block (``TimeGrid.BLOCK`` samples, whose scratch arrays stay in the CPU cache).
-# Measured on 10⁶ samples: a fresh (N, 3) array costs 2–3 ns per sample in first touches of new memory,
-# and written in numpy a kind needs dozens of them; a sine and cosine from the C library cost about
-# 10 ns, by angle addition (TimeGrid) or from _sincos_block about 1 ns.
-
-
-class TimeGrid:
-    """Sample times, and sinusoids ``sin(ω t + φ)`` evaluated on them.
-
-    Sinusoids are most of the cost of a closed-form motion: ``sin`` and ``cos`` take about
-    10 ns per sample, a multiplication 0.3 ns. On a uniform grid ``t_n = t_0 + n h`` the angle-addition
-    theorem removes almost all of them. With ``n = j B + i`` (block ``j`` of ``B`` samples, offset ``i``)::
-
-        exp(i(ω t_n + φ)) = exp(i(ω t_{jB} + φ)) · exp(i ω i h)
-
-    so ``N`` samples need ``N/B + B`` sines and cosines and one complex product each. The product adds
-    a few ulp to what direct evaluation loses already in rounding ``ω t + φ`` (the tests compare both
-    against long-double references). A grid counts as uniform when it deviates from
-    ``t_0 + n h`` by at most 8 ulp of its largest time, which ``Scenario.times`` (``k / rate_hz``) meets;
-    other grids are evaluated directly.
-
-    The kinds' kernels take the tables of :meth:`phasor` and :meth:`sines` and evaluate block by block
-    (:func:`_phasor_block`, :func:`_sines_block`).
-
-    Parameters
-    ----------
-    t : array_like (N,)
-        Sample times, s.
-    """
-
-    BLOCK = 1024
-    """Samples per block ``B``: the offset tables and the kernels' scratch arrays."""
-
-    def __init__(self, t):
-        self.t = np.asarray(t, dtype=float)
-        if self.t.ndim != 1:
-            raise ValueError(f"sample times must be 1-D, got shape {self.t.shape}")
-        n = len(self.t)
-        self.t0 = float(self.t[0]) if n else 0.0
-        self.h = float(self.t[-1] - self.t[0]) / (n - 1) if n > 1 else 0.0
-        self.uniform = False
-        if n >= 4 * self.BLOCK and self.h > 0:
-            deviation = _grid_deviation(self.t, self.t0, self.h)  # max |t_n − (t_0 + n h)|
-            self.uniform = bool(deviation <= 8 * _EPS * np.abs(self.t[[0, -1]]).max())
-
-    def __len__(self) -> int:
-        return len(self.t)
-
-    def _offset_tables(self, omega):
-        """``cos(ω i h)`` and ``sin(ω i h)`` for ``i < B``, shape ``omega.shape + (B,)``; empty (last axis
-        0) on other grids, whose kernels evaluate directly."""
-        omega = np.asarray(omega, dtype=float)
-        if not self.uniform:
-            empty = np.empty(omega.shape + (0,))
-            return empty, empty
-        angle = omega[..., None] * (np.arange(self.BLOCK) * self.h)
-        return np.cos(angle), np.sin(angle)
-
-    def phasor(self, omega: float, phase: float = 0.0):
-        """What :func:`_phasor_block` needs for ``cos(ω t + φ)``, ``sin(ω t + φ)``: ``(ω, φ, cos table,
-        sin table)``."""
-        return (float(omega), float(phase)) + self._offset_tables(float(omega))
-
-    def sines(self, amplitude, omega, phase):
-        """What :func:`_sines_block` needs for ``x_c = Σ_k A_ck sin(ω_ck t + φ_ck)``: the arrays (C, K)
-        broadcast from ``amplitude, omega, phase`` (any of (C, K), (C, 1), (K,), scalar) and the offset
-        tables (C, K, B)."""
-        a, w, p = (
-            np.ascontiguousarray(x)
-            for x in np.broadcast_arrays(
-                *(np.atleast_2d(np.asarray(x, dtype=float)) for x in (amplitude, omega, phase))
-            )
-        )
-        return (a, w, p) + self._offset_tables(w)
-
-    def cos_sin(self, omega: float, phase: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-        """``cos(ω t + φ)`` and ``sin(ω t + φ)``, each (N,); ``ω`` in rad/s, ``φ`` in rad."""
-        c, s = np.empty(len(self.t)), np.empty(len(self.t))
-        _cos_sin_kernel(self.t, self.uniform, self.BLOCK, self.phasor(omega, phase), c, s)
-        return c, s
-
-    def sum_of_sines(self, amplitude, omega, phase) -> np.ndarray:
-        """Sums of sinusoids per channel and their first two time derivatives.
-
-        ``x_c(t) = Σ_k A_ck sin(ω_ck t + φ_ck)``, ``ẋ_c = Σ A ω cos(…)``,
-        ``ẍ_c = −Σ A ω² sin(…)``.
-
-        Parameters
-        ----------
-        amplitude, omega, phase : array_like (C, K)
-            Amplitudes (any unit), angular frequencies (rad/s), phases (rad) of ``K`` terms per channel.
-
-        Returns
-        -------
-        ndarray (3, C, N)
-            Value, first and second derivative of each channel.
-        """
-        sines = self.sines(amplitude, omega, phase)
-        out = np.empty((3, sines[0].shape[0], len(self.t)))
-        _sum_of_sines_kernel(self.t, self.uniform, self.BLOCK, sines, out)
-        return out
-
-
-# Sine and cosine, vectorisable. Every kind needs cos(x/2) and sin(x/2) of angles that are not linear
-# in time (Euler angles, oscillation angles), up to three per sample. The C library's sin and cos are
-# calls the compiler cannot vectorise, about 10 ns a pair; the same argument reduction and polynomials
-# as the C library's (fdlibm, Sun Microsystems 1993: __ieee754_rem_pio2, __kernel_sin, __kernel_cos),
-# written out without branches, vectorise and take about 1 ns a pair in the loops of _sincos_block.
-# Error below 0.8 ulp (the library's: 0.5); results differ from the library's by one ulp in about 3 % of
-# arguments. Valid for |x| ≤ _SINCOS_LIMIT, where the reduction below is exact; callers fall back to
-# the library beyond it (and for NaN, inf).
-
-_SINCOS_LIMIT = 1e6
-"""|x| up to which :func:`_sincos` is accurate: ``n = round(2x/π) < 2²⁰``, so that ``n`` times the
-33-bit parts of π/2 is exact."""
-
-
-@njit(inline="always")
-def _sincos(x):  # pragma: no cover - compiled
-    """``(sin x, cos x)`` for ``|x| ≤ _SINCOS_LIMIT``, branch-free (see the comment above)."""
-    # x = n π/2 + y0 + y1 with |y0 + y1| ≤ π/4: π/2 in 33-bit parts (each product with n exact) and a
-    # tail, fdlibm's reduction to 118 bits (its "second iteration", here always taken).
-    n = np.rint(x * 6.36619772367581382433e-01)  # 2/π
-    hi = x - n * 1.57079632673412561417e00  # π/2, first 33 bits: exact
-    w = n * 6.07710050630396597660e-11  # π/2, next 33 bits
-    r = hi - w
-    w = n * 2.02226624879595063154e-21 - ((hi - r) - w)  # π/2, the rest; and the rounding of r
-    y0 = r - w
-    y1 = (r - y0) - w
-    # fdlibm's __kernel_sin(y0, y1) and __kernel_cos(y0, y1): minimax polynomials on [−π/4, π/4].
-    z = y0 * y0
-    v = z * y0
-    s2, s3, s4 = 8.33333333332248946124e-03, -1.98412698298579493134e-04, 2.75573137070700676789e-06
-    s5, s6 = -2.50507602534068634195e-08, 1.58969099521155010221e-10
-    ps = s2 + z * (s3 + z * (s4 + z * (s5 + z * s6)))
-    sin = y0 - ((z * (0.5 * y1 - v * ps) - y1) + v * 1.66666666666666324348e-01)  # S1 = −1/6 + …
-    c1, c2, c3 = 4.16666666666666019037e-02, -1.38888888888741095749e-03, 2.48015872894767294178e-05
-    c4, c5, c6 = -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.13596475577881948265e-11
-    pc = z * (c1 + z * (c2 + z * (c3 + z * (c4 + z * (c5 + z * c6)))))
-    hz = 0.5 * z
-    one_hz = 1.0 - hz
-    cos = one_hz + (((1.0 - one_hz) - hz) + (z * pc - y0 * y1))
-    # Quadrant n mod 4 (as a float: no integer conversion of a NaN): sin(y + nπ/2) is sin y, cos y,
-    # −sin y, −cos y for n mod 4 = 0, 1, 2, 3; cos(y + nπ/2) is cos y, −sin y, −cos y, sin y.
-    quadrant = n - 4.0 * np.floor(0.25 * n)
-    odd = quadrant == 1.0 or quadrant == 3.0
-    s, c = (cos, sin) if odd else (sin, cos)
-    return (-s if quadrant >= 2.0 else s), (-c if quadrant == 1.0 or quadrant == 2.0 else c)
-
-
-@njit
-def _sin_cos(x):  # pragma: no cover - compiled
-    """``(sin x, cos x)`` for one argument: :func:`_sincos`, or the library beyond its range."""
-    if abs(x) <= _SINCOS_LIMIT:
-        return _sincos(x)
-    return np.sin(x), np.cos(x)
-
-
-@njit
-def _sincos_block(x, count, s, c):  # pragma: no cover - compiled
-    """``s[i], c[i] = sin x[i], cos x[i]`` for ``i < count``: one vectorised loop, then the library for
-    arguments beyond :data:`_SINCOS_LIMIT` (and NaN)."""
-    for i in range(count):
-        s[i], c[i] = _sincos(x[i])
-    for i in range(count):
-        if not abs(x[i]) <= _SINCOS_LIMIT:
-            s[i], c[i] = np.sin(x[i]), np.cos(x[i])
-
-
-@njit
-def _grid_deviation(t, t0, h):  # pragma: no cover - compiled
-    """``max_n |t_n − (t_0 + n h)|`` in one pass (numpy would make three temporaries of N)."""
-    deviation = 0.0
-    for n in range(len(t)):
-        deviation = max(deviation, abs(t[n] - (t0 + n * h)))
-    return deviation
-
-
-@njit
-def _phasor_block(t, start, count, uniform, phasor, c, s):  # pragma: no cover - compiled
-    """``cos(ω t + φ)``, ``sin(ω t + φ)`` at the samples ``start … start + count − 1`` into
-    ``c[:count]``, ``s[:count]``; ``phasor`` from :meth:`TimeGrid.phasor`. On a uniform grid ``start``
-    must begin a block (a multiple of ``B``)."""
-    omega, phase, offset_cos, offset_sin = phasor
-    if uniform:
-        angle = omega * t[start] + phase
-        cb, sb = np.cos(angle), np.sin(angle)
-        for i in range(count):
-            # cos(a + b) = cos a cos b − sin a sin b,  sin(a + b) = sin a cos b + cos a sin b
-            c[i] = cb * offset_cos[i] - sb * offset_sin[i]
-            s[i] = sb * offset_cos[i] + cb * offset_sin[i]
-    else:
-        for i in range(count):
-            angle = omega * t[start + i] + phase
-            c[i], s[i] = np.cos(angle), np.sin(angle)
-
-
-@njit
-def _sines_block(t, start, count, uniform, sines, out):  # pragma: no cover - compiled
-    """Value, first and second derivative of the sums of sinusoids ``sines`` (:meth:`TimeGrid.sines`)
-    at the samples ``start … start + count − 1`` into ``out[d, c, :count]`` (d = 0, 1, 2).
-
-    On a uniform grid each term is ``Im(P Q_i)`` with the block phasor ``P = exp(i(ω t_start + φ))``
-    and the offset phasor ``Q_i`` from the table: ``sin(P + Q) = sin P cos Q + cos P sin Q``. The loops
-    over the block's samples are innermost, where the compiler vectorises them.
-    """
-    amplitude, omega, phase, offset_cos, offset_sin = sines
-    channels, terms = amplitude.shape
-    for ch in range(channels):
-        value, first, second = out[0, ch], out[1, ch], out[2, ch]
-        value[:count] = 0.0
-        first[:count] = 0.0
-        second[:count] = 0.0
-        for k in range(terms):
-            a, w = amplitude[ch, k], omega[ch, k]
-            a1 = a * w  # ẋ = Σ A ω cos(ω t + φ)
-            a2 = a1 * w  # ẍ = −Σ A ω² sin(ω t + φ)
-            if uniform:
-                angle = w * t[start] + phase[ch, k]
-                pc, ps = np.cos(angle), np.sin(angle)
-                qc, qs = offset_cos[ch, k], offset_sin[ch, k]
-                for i in range(count):
-                    sin = ps * qc[i] + pc * qs[i]
-                    cos = pc * qc[i] - ps * qs[i]
-                    value[i] += a * sin
-                    first[i] += a1 * cos
-                    second[i] -= a2 * sin
-            else:
-                for i in range(count):
-                    sin, cos = _sin_cos(w * t[start + i] + phase[ch, k])
-                    value[i] += a * sin
-                    first[i] += a1 * cos
-                    second[i] -= a2 * sin
-
-
-@njit
-def _cos_sin_kernel(t, uniform, block, phasor, c, s):  # pragma: no cover - compiled
-    """:meth:`TimeGrid.cos_sin` block by block."""
-    for start in range(0, len(t), block):
-        count = min(block, len(t) - start)
-        _phasor_block(t, start, count, uniform, phasor, c[start:], s[start:])
-
-
-@njit
-def _sum_of_sines_kernel(t, uniform, block, sines, out):  # pragma: no cover - compiled
-    """:meth:`TimeGrid.sum_of_sines` block by block, into ``out`` (3, C, N)."""
-    for start in range(0, len(t), block):
-        count = min(block, len(t) - start)
-        _sines_block(t, start, count, uniform, sines, out[:, :, start:])
-
-
-@njit
-def _smooth_step_at(u):  # pragma: no cover - compiled
-    """``(S, S′, S″, S‴, I)`` of :func:`smooth_step` at one ``u``."""
-    if u <= 0.0:
-        return 0.0, 0.0, 0.0, 0.0, 0.0
-    if u >= 1.0:
-        return 1.0, 0.0, 0.0, 0.0, u - 0.5
-    s, c = _sincos(2 * np.pi * u)
-    # The harmonics of 4πu and 6πu in c = cos 2πu, s = sin 2πu, factored on (1 − c) = 2 sin² πu so
-    # that the derivatives vanish exactly at the ends.
-    d = 1 - c
-    return (
-        u - s * (22 - 9 * c + 2 * c * c) / (30 * np.pi),  # S
-        0.4 * (d * d * d),  # S′ = (16/5) sin⁶ πu
-        (12 * np.pi / 5) * s * (d * d),  # S″
-        (24 * np.pi**2 / 5) * (d * d) * (2 + 3 * c),  # S‴
-        0.5 * u * u - d * (109 - 23 * c + 4 * c * c) / (360 * np.pi**2),  # I
-    )
-
-
-@njit
-def _smooth_step_kernel(u, out):  # pragma: no cover - compiled
-    """:func:`smooth_step` of every ``u`` (N,) into ``out`` (5, N)."""
-    for n in range(len(u)):
-        out[0, n], out[1, n], out[2, n], out[3, n], out[4, n] = _smooth_step_at(u[n])
-
-
-def smooth_step(u, derivatives: int = 3, integral: bool = False):
-    """A smooth step from 0 to 1 with its derivatives, for speed changes, turns and tumble moves.
-
-    ``S′(u) = (16/5) sin⁶(πu)`` is a bump of unit area on [0, 1], so::
-
-        S(u) = u − (3/4π) sin 2πu + (3/20π) sin 4πu − (1/60π) sin 6πu
-
-    held at 0 before ``u = 0`` and at 1 after ``u = 1``. Its first five derivatives vanish at both ends:
-    a motion built from ``S`` is five times continuously differentiable, so ω, α and α̇ stay continuous
-    even where ``S`` is composed with products (roll ∝ κ v²). The peak slope is ``S′(½) = 16/5``; the
-    ``n``-th derivative of ``S′`` is at most ``(2π)ⁿ (1.5 + 0.6·2ⁿ + 0.1·3ⁿ)``.
-
-    Parameters
-    ----------
-    u : array_like
-        Normalised time or distance; values outside [0, 1] lie on the flat parts.
-    derivatives : int
-        How many derivatives to return (0 to 3).
-    integral : bool
-        Also return ``I(u) = ∫₀ᵘ S`` (``= u − ½`` for ``u ≥ 1``), e.g. for the distance over a speed
-        change.
-
-    Returns
-    -------
-    tuple of ndarray
-        ``(S, S′, …, S^(derivatives))``, then ``I`` when asked for.
-    """
-    u = np.asarray(u, dtype=float)
-    out = np.empty((5,) + u.shape)  # S, S′, S″, S‴, I
-    _smooth_step_kernel(u.reshape(-1), out.reshape(5, -1))  # the kinds' kernels call _smooth_step_at
-    return tuple(out[k, ...] for k in range(derivatives + 1)) + ((out[4, ...],) if integral else ())
-
-
-def quat_from_rpy_deg(rpy_deg) -> np.ndarray:
-    """Quaternion (4,) or (K, 4) of ``[roll, pitch, yaw]`` in degrees, ``R = Rz(yaw) Ry(pitch) Rx(roll)``."""
-    return quat_from_euler_zyx(np.radians(np.asarray(rpy_deg, dtype=float)))
-
-
-def rotation_basis(axis, q_left=(1.0, 0.0, 0.0, 0.0), q_right=(1.0, 0.0, 0.0, 0.0)):
-    """The two constant quaternions of a rotation about a fixed axis.
-
-    ``q_left ⊗ exp(½ θ n) ⊗ q_right = cos(θ/2) A + sin(θ/2) B`` with ``A = q_left ⊗ q_right`` and
-    ``B = q_left ⊗ (0, n) ⊗ q_right``: the quaternion is linear in the cosine and sine of the half angle.
-
-    Parameters
-    ----------
-    axis : array_like (..., 3)
-        Unit rotation axis ``n`` (in the frame between ``q_left`` and ``q_right``).
-    q_left, q_right : array_like (..., 4)
-
-    Returns
-    -------
-    A, B : ndarray (..., 4)
-    """
-    axis = np.asarray(axis, dtype=float)
-    pure = np.concatenate([np.zeros(axis.shape[:-1] + (1,)), axis], axis=-1)
-    return quat_multiply(q_left, q_right), quat_multiply(quat_multiply(q_left, pure), q_right)
 
 
 def _unit(v, what: str) -> np.ndarray:
@@ -431,125 +97,6 @@ def _unit(v, what: str) -> np.ndarray:
     if not norm > 0:
         raise ValueError(f"{what} must be a non-zero vector")
     return v / norm
-
-
-@dataclass(frozen=True, eq=False)
-class WorldMotion:
-    """A body's motion relative to the world (ENU) frame, sampled at ``t``: what a kind prescribes.
-
-    Attributes (N samples, SI)
-    ----------
-    t : ndarray (N,)
-        s.
-    q_wb : ndarray (N, 4)
-        Attitude, body to world.
-    omega_wb_b, alpha_wb_b : ndarray (N, 3)
-        Angular velocity of the body relative to the world, body axes, rad/s, and its derivative, rad/s².
-    pos_w, vel_w, acc_w : ndarray (N, 3)
-        Position, velocity, acceleration relative to the world frame, world axes: m, m/s, m/s².
-    extras : dict of str to ndarray
-        Truth particular to the kind (table angle, car speed, ...), first axis N.
-    """
-
-    t: np.ndarray
-    q_wb: np.ndarray
-    omega_wb_b: np.ndarray
-    alpha_wb_b: np.ndarray
-    pos_w: np.ndarray
-    vel_w: np.ndarray
-    acc_w: np.ndarray
-    extras: dict = field(default_factory=dict)
-
-    @classmethod
-    def rotation_only(cls, t, q_wb, omega_wb_b, alpha_wb_b, extras=None) -> WorldMotion:
-        """A body that rotates about its fixed reference point at the world origin."""
-        # Three calls, not copies of one: np.zeros maps zero pages lazily, copies would write them.
-        n = len(t)
-        pos, vel, acc = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
-        return cls(t, q_wb, omega_wb_b, alpha_wb_b, pos, vel, acc, extras or {})
-
-
-def _motion_arrays(
-    n: int, moves: bool
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Outputs for a kind's kernel: ``q_wb`` (N, 4), ``ω_wb``, ``α_wb`` (N, 3), position, velocity,
-    acceleration (N, 3). The kernel writes all of them if the body ``moves``; else position, velocity and
-    acceleration are zeros (``np.zeros`` maps fresh zero pages lazily, cheaper than writing zeros; for
-    arrays the kernel writes anyway ``np.empty`` spares the zeroing of reused memory)."""
-    q, omega, alpha = np.empty((n, 4)), np.empty((n, 3)), np.empty((n, 3))
-    new = np.empty if moves else np.zeros
-    return q, omega, alpha, new((n, 3)), new((n, 3)), new((n, 3))
-
-
-@njit
-def _rotate(q, x, y, z):  # pragma: no cover - compiled
-    """``q ⊗ (0, v) ⊗ q*`` for one vector ``v = (x, y, z)``: the formula of
-    :func:`gyroemu.dynamics.rotation.quat_rotate`, ``v + 2w (u × v) + 2 u × (u × v)``."""
-    w, qx, qy, qz = q[0], q[1], q[2], q[3]
-    tx = 2.0 * (qy * z - qz * y)  # t = 2 u × v
-    ty = 2.0 * (qz * x - qx * z)
-    tz = 2.0 * (qx * y - qy * x)
-    return (
-        x + w * tx + (qy * tz - qz * ty),  # v + w t + u × t
-        y + w * ty + (qz * tx - qx * tz),
-        z + w * tz + (qx * ty - qy * tx),
-    )
-
-
-@njit
-def _cross(ax, ay, az, bx, by, bz):  # pragma: no cover - compiled
-    """``a × b`` as ``np.cross`` computes it."""
-    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-
-
-@njit
-def _segment(edges, x, k):  # pragma: no cover - compiled
-    """``max(searchsorted(edges, x, side="right") − 1, 0)``: the last of the sorted ``edges`` at or
-    before ``x`` (0 before the first). Tries ``k``, the previous sample's segment, first: consecutive
-    samples mostly share it."""
-    last = len(edges) - 1
-    if (k == 0 or edges[k] <= x) and (k == last or x < edges[k + 1]):
-        return k
-    return max(np.searchsorted(edges, x, side="right") - 1, 0)
-
-
-class EarthBoundSpec(ScenarioSpec):
-    """Base of the kinds that move on the Earth at a ``[site]``: they prescribe :meth:`world_motion`."""
-
-    site: Site = Field(default_factory=Site)
-
-    def world_motion(self, t: np.ndarray) -> WorldMotion:
-        """The motion relative to the world frame at the times ``t`` (N,), s."""
-        raise NotImplementedError
-
-    def evaluator(self):
-        """A callable ``t -> WorldMotion`` with the time-independent setup (series, schedules) done once,
-        for evaluating the motion piece by piece (a stream); by default :meth:`world_motion` itself."""
-        return self.world_motion
-
-    def trajectory(self, t) -> Trajectory:
-        m = self.world_motion(np.asarray(t, dtype=float))
-        return trajectory_from_world_motion(
-            m.t,
-            m.q_wb,
-            m.omega_wb_b,
-            m.alpha_wb_b,
-            m.pos_w,
-            m.vel_w,
-            m.acc_w,
-            self.site.environment(),
-            m.extras,
-        )
-
-
-class Attitude(Section):
-    """``[attitude]``: ``rpy_deg = [roll, pitch, yaw]``, degrees, ``R_wb = Rz(yaw) Ry(pitch) Rx(roll)``."""
-
-    rpy_deg: Vec3 = (0.0, 0.0, 0.0)
-
-    def quat(self) -> np.ndarray:
-        """``q_wb`` (4,)."""
-        return quat_from_rpy_deg(self.rpy_deg)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -745,7 +292,7 @@ class RateTableSpec(EarthBoundSpec):
         axis_b = quat_rotate(quat_conjugate(q_mount), _E_Z)  # u_b = R_mount^T e_z
         n = len(t)
         lever = np.asarray(self.table.lever_arm_m, dtype=float)
-        arrays = _motion_arrays(n, moves=bool(lever.any()))
+        arrays = motion_arrays(n, moves=bool(lever.any()))
         angle, rate = np.empty(n), np.empty(n)
         _rate_table_kernel(
             t,
@@ -774,7 +321,7 @@ class RateTableSpec(EarthBoundSpec):
         a, b = rotation_basis(axes, quat_multiply(q_base, positions), q_mount)
         axes_b = quat_rotate(quat_conjugate(q_mount), axes)  # R_mount^T φ̂_k
         lever = np.asarray(self.table.lever_arm_m, dtype=float)
-        arrays = _motion_arrays(len(t), moves=bool(lever.any()))
+        arrays = motion_arrays(len(t), moves=bool(lever.any()))
         _tumble_kernel(
             t,
             tumble.dwell_s + tumble.move_s,
@@ -819,10 +366,10 @@ def _rate_table_kernel(
     ``schedule``: segments of constant angular acceleration (:meth:`RateSteps.schedule`), which give the
     table angle, rate and acceleration of each sample. ``cos(θ/2)``, ``sin(θ/2)`` of the block come from
     the phasor ``half`` of ``θ/2`` (:meth:`TimeGrid.phasor`) when ``by_phasor`` (constant rate), else from
-    :func:`_sincos_block`.
+    :func:`sincos_block`.
     """
     start_s, angle0, rate0, accel0 = schedule
-    n_w = _rotate(q_base, 0.0, 0.0, 1.0)  # the table axis in the world
+    n_w = quat_rotate_xyz(q_base, 0.0, 0.0, 1.0)  # the table axis in the world
     has_lever = lever[0] != 0.0 or lever[1] != 0.0 or lever[2] != 0.0
     c, s, half_angle, accels = np.empty(block), np.empty(block), np.empty(block), np.empty(block)
     k = 0
@@ -830,16 +377,16 @@ def _rate_table_kernel(
         count = min(block, len(t) - start)
         for i in range(count):
             j = start + i
-            k = _segment(start_s, t[j], k)
+            k = segment_index(start_s, t[j], k)
             tau = t[j] - start_s[k]
             accels[i] = accel0[k]
             rate_out[j] = rate0[k] + accel0[k] * tau
             angle_out[j] = angle0[k] + (rate0[k] + 0.5 * accel0[k] * tau) * tau  # θ0 + ω0 τ + ½ a τ²
             half_angle[i] = 0.5 * angle_out[j]
         if by_phasor:
-            _phasor_block(t, start, count, uniform, half, c, s)
+            phasor_block(t, start, count, uniform, half, c, s)
         else:
-            _sincos_block(half_angle, count, s, c)
+            sincos_block(half_angle, count, s, c)
         for i in range(count):
             j = start + i
             rate, accel = rate_out[j], accels[i]
@@ -851,10 +398,12 @@ def _rate_table_kernel(
             if has_lever:
                 # p = R_base Rz(θ) r, with cos θ = c² − s², sin θ = 2 s c from the half angle.
                 cos, sin = c[i] * c[i] - s[i] * s[i], 2 * s[i] * c[i]
-                px, py, pz = _rotate(q_base, lever[0] * cos - lever[1] * sin, lever[0] * sin + lever[1] * cos, lever[2])
+                px, py, pz = quat_rotate_xyz(
+                    q_base, lever[0] * cos - lever[1] * sin, lever[0] * sin + lever[1] * cos, lever[2]
+                )
                 # v = θ̇ n × p,  a = θ̈ n × p + θ̇² n × (n × p)
-                nx, ny, nz = _cross(n_w[0], n_w[1], n_w[2], px, py, pz)
-                nnx, nny, nnz = _cross(n_w[0], n_w[1], n_w[2], nx, ny, nz)
+                nx, ny, nz = cross_xyz(n_w[0], n_w[1], n_w[2], px, py, pz)
+                nnx, nny, nnz = cross_xyz(n_w[0], n_w[1], n_w[2], nx, ny, nz)
                 rate2 = rate * rate
                 pos[j, 0], pos[j, 1], pos[j, 2] = px, py, pz
                 vel[j, 0], vel[j, 1], vel[j, 2] = rate * nx, rate * ny, rate * nz
@@ -874,12 +423,12 @@ def _tumble_kernel(
         k = int(min(max(np.floor(t[j] / period), 0.0), last))
         # u ≤ 0 while dwelling, 0 → 1 while moving
         u = (t[j] - k * period - dwell) / move
-        step, slope, curvature, _, _ = _smooth_step_at(u)
+        step, slope, curvature, _, _ = smooth_step_at(u)
         angle = angles[k]
         # While dwelling the half angle is 0: cos 1, sin 0; the trigonometry only for the moves.
         c, s = 1.0, 0.0
         if step * angle != 0.0:
-            s, c = _sin_cos(0.5 * angle * step)
+            s, c = sin_cos(0.5 * angle * step)
         for m in range(4):
             q[j, m] = c * a[k, m] + s * b[k, m]
         rate = angle * slope / move  # d/dt (S |φ|) = |φ| S′ / T
@@ -900,12 +449,12 @@ def _tumble_kernel(
             )
             wx, wy, wz = rate * axes[k, 0], rate * axes[k, 1], rate * axes[k, 2]
             ax, ay, az = accel * axes[k, 0], accel * axes[k, 1], accel * axes[k, 2]
-            wrx, wry, wrz = _cross(wx, wy, wz, lever[0], lever[1], lever[2])
-            arx, ary, arz = _cross(ax, ay, az, lever[0], lever[1], lever[2])
-            wwx, wwy, wwz = _cross(wx, wy, wz, wrx, wry, wrz)
-            pos[j, 0], pos[j, 1], pos[j, 2] = _rotate(q_wt, lever[0], lever[1], lever[2])
-            vel[j, 0], vel[j, 1], vel[j, 2] = _rotate(q_wt, wrx, wry, wrz)
-            acc[j, 0], acc[j, 1], acc[j, 2] = _rotate(q_wt, arx + wwx, ary + wwy, arz + wwz)
+            wrx, wry, wrz = cross_xyz(wx, wy, wz, lever[0], lever[1], lever[2])
+            arx, ary, arz = cross_xyz(ax, ay, az, lever[0], lever[1], lever[2])
+            wwx, wwy, wwz = cross_xyz(wx, wy, wz, wrx, wry, wrz)
+            pos[j, 0], pos[j, 1], pos[j, 2] = quat_rotate_xyz(q_wt, lever[0], lever[1], lever[2])
+            vel[j, 0], vel[j, 1], vel[j, 2] = quat_rotate_xyz(q_wt, wrx, wry, wrz)
+            acc[j, 0], acc[j, 1], acc[j, 2] = quat_rotate_xyz(q_wt, arx + wwx, ary + wwy, arz + wwz)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -963,7 +512,7 @@ class OscillationSpec(EarthBoundSpec):
             directions = np.asarray(lin.amplitude_m, dtype=float)[None, :]
         sines = grid.sines(*np.array(channels).T[:, :, None])  # each (C, 1)
         a, b = rotation_basis(axis, self.attitude.quat())
-        arrays = _motion_arrays(len(t), moves=self.linear is not None)
+        arrays = motion_arrays(len(t), moves=self.linear is not None)
         _axis_oscillation_kernel(t, grid.uniform, grid.BLOCK, sines, a, b, axis, directions, *arrays)
         return WorldMotion(t, *arrays)
 
@@ -984,10 +533,10 @@ def _axis_oscillation_kernel(
     half, c, s = np.empty(block), np.empty(block), np.empty(block)
     for start in range(0, len(t), block):
         count = min(block, len(t) - start)
-        _sines_block(t, start, count, uniform, sines, buf)
+        sines_block(t, start, count, uniform, sines, buf)
         for i in range(count):
             half[i] = 0.5 * buf[0, 0, i]
-        _sincos_block(half, count, s, c)
+        sincos_block(half, count, s, c)
         for i in range(count):
             j = start + i
             for m in range(4):
@@ -1080,7 +629,7 @@ def _coning_kernel(t, uniform, block, phasor, sj, sk, cq, rate_x, w, ow, q, rate
     c, s = np.empty(block), np.empty(block)
     for start in range(0, len(t), block):
         count = min(block, len(t) - start)
-        _phasor_block(t, start, count, uniform, phasor, c, s)
+        phasor_block(t, start, count, uniform, phasor, c, s)
         for i in range(count):
             j = start + i
             for m in range(4):
@@ -1143,7 +692,7 @@ class ScullingSpec(EarthBoundSpec):
         q_ref = quat_from_rpy_deg(sc.reference_rpy_deg)
         e_x = np.array([1.0, 0.0, 0.0])
         y_w = quat_rotate(q_ref, [0.0, 1.0, 0.0])  # the reference y axis in the world
-        arrays = _motion_arrays(len(t), moves=True)
+        arrays = motion_arrays(len(t), moves=True)
         _axis_oscillation_kernel(
             t, grid.uniform, grid.BLOCK, sines, *rotation_basis(e_x, q_ref), e_x, y_w[None, :], *arrays
         )

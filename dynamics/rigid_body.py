@@ -34,6 +34,10 @@ which is also the inertial angular acceleration in body axes.
 Arrays: every function here takes states of shape ``(13,)`` or ``(..., 13)`` and times that broadcast
 against the leading axes, so the integrator's single states and a whole sampled trajectory go
 through the same code.
+
+The small vectorised kernels these formulas use (rotation matrices, ``R v``, ``Rᵀ v``, cross and Hamilton
+products) live in :mod:`gyroemu.dynamics.body_kernels`; :func:`rotation_matrix`, :func:`rotate`,
+:func:`rotate_back` and :func:`cross` stay importable from here as well.
 """
 
 from __future__ import annotations
@@ -44,9 +48,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .body_kernels import cross, pure_quat, quat_product, rotate, rotate_back, rotation_matrix, stack_state
 from .earth import Environment
 from .inertia import check_inertia
-from .rotation import quat_multiply
 from .trajectory import Trajectory, trajectory_from_world_motion
 
 __all__ = [
@@ -56,14 +60,14 @@ __all__ = [
     "P",
     "L",
     "RigidBody",
-    "rotation_matrix",
-    "rotate",
-    "rotate_back",
+    "rotation_matrix",  # from .body_kernels
+    "rotate",  # from .body_kernels
+    "rotate_back",  # from .body_kernels
     "point_position",
     "point_velocity",
     "point_acceleration",
     "contact_mass_matrix",
-    "cross",
+    "cross",  # from .body_kernels
     "world_motion_trajectory",
 ]
 
@@ -75,89 +79,6 @@ L = slice(10, 13)
 
 ForceFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """``force(t, y) -> (..., 3)``: world axes, newtons (or N m for a torque about the centre of mass)."""
-
-
-# --------------------------------------------------------------------------------------------
-# Small vectorised helpers, written out because they sit on the integrator's hot path.
-# --------------------------------------------------------------------------------------------
-
-
-def rotation_matrix(q) -> np.ndarray:
-    """``R(q)`` of shape ``(..., 3, 3)``; ``q`` need not be of unit norm (it is normalised first)."""
-    q = np.asarray(q, dtype=float)
-    if q.ndim == 1:  # the integrator's case: plain floats are several times faster than array ops
-        w, x, y, z = q.tolist()
-        n = 1.0 / (w * w + x * x + y * y + z * z)
-        return np.array(
-            [
-                [1 - 2 * (y * y + z * z) * n, 2 * (x * y - w * z) * n, 2 * (x * z + w * y) * n],
-                [2 * (x * y + w * z) * n, 1 - 2 * (x * x + z * z) * n, 2 * (y * z - w * x) * n],
-                [2 * (x * z - w * y) * n, 2 * (y * z + w * x) * n, 1 - 2 * (x * x + y * y) * n],
-            ]
-        )
-    q = q / np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        -2,
-    )
-
-
-def rotate(r, v) -> np.ndarray:
-    """``R v`` for matrices ``(..., 3, 3)`` and vectors ``(..., 3)``: body to world."""
-    return np.matmul(r, np.asarray(v, dtype=float)[..., None])[..., 0]
-
-
-def rotate_back(r, v) -> np.ndarray:
-    """``Rᵀ v``: world to body."""
-    return np.matmul(np.asarray(v, dtype=float)[..., None, :], r)[..., 0, :]
-
-
-def cross(a, b) -> np.ndarray:
-    """``a × b`` over the last axis, broadcasting (``numpy.cross`` without its overhead)."""
-    a = np.asarray(a, dtype=float)
-    b = np.asarray(b, dtype=float)
-    if a.ndim == 1 and b.ndim == 1:
-        a1, a2, a3 = a.tolist()
-        b1, b2, b3 = b.tolist()
-        return np.array([a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1])
-    a1, a2, a3 = a[..., 0], a[..., 1], a[..., 2]
-    b1, b2, b3 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1], axis=-1)
-
-
-def _stack_state(lead, parts) -> np.ndarray:
-    """Concatenate state parts along the last axis, broadcasting each to the leading shape ``lead``."""
-    return np.concatenate(
-        [a if a.shape[:-1] == lead else np.broadcast_to(a, lead + a.shape[-1:]) for a in parts], axis=-1
-    )
-
-
-def _omega_quat(omega) -> np.ndarray:
-    """The pure quaternion ``(0, ω)``."""
-    omega = np.asarray(omega, dtype=float)
-    return np.concatenate([np.zeros(omega.shape[:-1] + (1,)), omega], axis=-1)
-
-
-def _quat_product(p, q) -> np.ndarray:
-    """Hamilton product ``p ⊗ q``: :func:`gyroemu.dynamics.rotation.quat_multiply`, with plain floats for two
-    single quaternions (the integrator's case, where they beat the compiled ufunc's call overhead)."""
-    if p.ndim == 1 and q.ndim == 1:
-        pw, px, py, pz = p.tolist()
-        qw, qx, qy, qz = q.tolist()
-        return np.array(
-            [
-                pw * qw - px * qx - py * qy - pz * qz,
-                pw * qx + px * qw + py * qz - pz * qy,
-                pw * qy - px * qz + py * qw + pz * qx,
-                pw * qz + px * qy - py * qx + pz * qw,
-            ]
-        )
-    return quat_multiply(p, q)
 
 
 # --------------------------------------------------------------------------------------------
@@ -261,7 +182,7 @@ class RigidBody:
         momentum = self.mass * vel  # P = m v
         angular_momentum = rotate(r, np.asarray(omega) @ self.inertia_b.T)  # L = R I_b ω_b
         shape = np.broadcast_shapes(pos.shape[:-1], q.shape[:-1], vel.shape[:-1], omega.shape[:-1])
-        return _stack_state(shape, [pos, q, momentum, angular_momentum])
+        return stack_state(shape, [pos, q, momentum, angular_momentum])
 
     def omega_b(self, y, r=None) -> np.ndarray:
         """Inertial angular velocity in body axes: ``ω_b = I_b⁻¹ Rᵀ L``; ``(..., 3)``."""
@@ -300,12 +221,12 @@ class RigidBody:
         f = np.zeros(y.shape[:-1] + (3,)) if force is None else force(t, y)
         tau = np.zeros(y.shape[:-1] + (3,)) if torque is None else torque(t, y)
         x_dot = y[..., P] / self.mass  # ẋ = P/m
-        q_dot = 0.5 * _quat_product(_omega_quat(omega_wb_w), q)  # q̇ = ½ ω ⊗ q
+        q_dot = 0.5 * quat_product(pure_quat(omega_wb_w), q)  # q̇ = ½ ω ⊗ q
         p_dot, l_dot = np.asarray(f, dtype=float), np.asarray(tau, dtype=float)  # Ṗ = F, L̇ = τ
         if self._rotating:
             p_dot = p_dot - 2.0 * cross(self.frame_rate_w, y[..., P])  # Coriolis: − 2Ω×P
             l_dot = l_dot - cross(self.frame_rate_w, y[..., L])  # turning axes: − Ω×L
-        return _stack_state(y.shape[:-1], [x_dot, q_dot, p_dot, l_dot])
+        return stack_state(y.shape[:-1], [x_dot, q_dot, p_dot, l_dot])
 
     def accelerations(self, t, y, force: ForceFn | None = None, torque: ForceFn | None = None):
         """Exact accelerations at states ``(..., 13)``.

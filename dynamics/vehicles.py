@@ -33,18 +33,16 @@ from pydantic import Field, StrictInt, field_validator
 
 from .config import NonNegativeReal, PositiveReal, Real, Section, Vec3
 from .jit import njit
-from .motions import (
-    EarthBoundSpec,
+from .motion_kernels import (
     TimeGrid,
-    WorldMotion,
-    _motion_arrays,
-    _segment,
-    _sin_cos,
-    _sincos_block,
-    _sines_block,
-    _smooth_step_at,
+    segment_index,
+    sin_cos,
+    sincos_block,
+    sines_block,
     smooth_step,
+    smooth_step_at,
 )
+from .prescribed import EarthBoundSpec, WorldMotion, motion_arrays
 
 __all__ = [
     "euler_zyx_motion",
@@ -229,7 +227,7 @@ class RandomManoeuvreSpec(EarthBoundSpec):
         t = np.asarray(t, dtype=float)
         grid = TimeGrid(t)
         rotation, translation = self.sines()
-        arrays = _motion_arrays(len(t), moves=True)
+        arrays = motion_arrays(len(t), moves=True)
         _manoeuvre_kernel(
             t,
             grid.uniform,
@@ -252,12 +250,12 @@ def _manoeuvre_kernel(
     half, sin, cos = np.empty((3, block)), np.empty((3, block)), np.empty((3, block))
     for start in range(0, len(t), block):
         count = min(block, len(t) - start)
-        _sines_block(t, start, count, uniform, rotation, angles)
-        _sines_block(t, start, count, uniform, translation, coordinates)
+        sines_block(t, start, count, uniform, rotation, angles)
+        sines_block(t, start, count, uniform, translation, coordinates)
         for m in range(3):  # the half angles of roll, pitch, yaw, their sines and cosines
             for i in range(count):
                 half[m, i] = 0.5 * (angles[0, m, i] + mean[m])
-            _sincos_block(half[m], count, sin[m], cos[m])
+            sincos_block(half[m], count, sin[m], cos[m])
         for i in range(count):
             j = start + i
             _euler_zyx_sample(
@@ -290,7 +288,7 @@ class Drive(Section):
     """``[drive]``: start heading and the peak longitudinal accelerations.
 
     ``initial_yaw_deg`` is the ENU yaw of the road's start (0 east, 90 north). Speed changes follow
-    :func:`~gyroemu.dynamics.motions.smooth_step`, whose acceleration peaks at ``accel_m_s2`` (speeding up) or
+    :func:`~gyroemu.dynamics.motion_kernels.smooth_step`, whose acceleration peaks at ``accel_m_s2`` (speeding up) or
     ``brake_m_s2`` (slowing down): a change ``Δv`` takes ``16 |Δv| / (5 a_peak)`` seconds.
     """
 
@@ -354,7 +352,7 @@ class SpeedProfile:
     holds it.
 
     Leg ``k`` starts at ``t_k`` with speed ``v_k`` and distance ``s_k`` and changes speed by ``Δv_k`` over
-    ``T_k``; with ``u = (t − t_k)/T_k`` and :func:`~gyroemu.dynamics.motions.smooth_step`::
+    ``T_k``; with ``u = (t − t_k)/T_k`` and :func:`~gyroemu.dynamics.motion_kernels.smooth_step`::
 
         v = v_k + Δv S(u),   s = s_k + v_k τ + Δv T I(u),
         a = Δv S′/T,         j = Δv S″/T²,               ȷ̇ = Δv S‴/T³
@@ -633,7 +631,7 @@ class CarMotion:
     def __call__(self, t) -> WorldMotion:
         t = np.asarray(t, dtype=float)
         n = len(t)
-        arrays = _motion_arrays(n, moves=True)
+        arrays = motion_arrays(n, moves=True)
         speed, distance = np.empty(n), np.empty(n)
         _car_kernel(t, TimeGrid.BLOCK, *self._tables, *arrays, speed, distance)
         return WorldMotion(t, *arrays, extras={"speed_m_s": speed, "distance_m": distance})
@@ -695,7 +693,7 @@ def _transients_block(
         arg[i] = lam.imag * tau[i]
     if not inside.any():
         return
-    _sincos_block(arg, count, sin, cos)
+    sincos_block(arg, count, sin, cos)
     w = weights
     for i in range(count):
         er, ei, r = envelope[i] * cos[i], envelope[i] * sin[i], rho[i]  # e^{λτ}, ρ
@@ -773,14 +771,14 @@ def _car_kernel(
         for i in range(count):
             j = start + i
             # Speed profile (SpeedProfile): leg k changes speed by Δv along S(τ/T), then holds it.
-            leg = _segment(t_leg, t[j], leg)
+            leg = segment_index(t_leg, t[j], leg)
             tau = t[j] - t_leg[leg]
             ramp, dv, v0 = ramp_leg[leg], dv_leg[leg], v_leg[leg]
             if tau >= ramp:  # after the change (S = 1, S′ = S″ = S‴ = 0): s = s_end + v (τ − T), exactly
                 s = s_after_leg[leg] + (v0 + dv) * (tau - ramp)
                 v, a, jerk, djerk = v0 + dv, 0.0, 0.0, 0.0
             else:
-                step, slope, curve, jolt, area = _smooth_step_at(tau / ramp)
+                step, slope, curve, jolt, area = smooth_step_at(tau / ramp)
                 s = s_leg[leg] + v0 * tau + dv * ramp * area
                 v = v0 + dv * step
                 a = dv * slope / ramp
@@ -792,7 +790,7 @@ def _car_kernel(
                 psi, cos, sin = heading[0], cos_heading[0], sin_heading[0]
                 x, y = s * cos, s * sin
             else:
-                turn = _segment(s_turn, s, turn)
+                turn = segment_index(s_turn, s, turn)
                 sigma = s - s_turn[turn]
                 u = sigma / length[turn]
                 if u >= 1.0:  # straight road after turn k (from its end)
@@ -800,10 +798,10 @@ def _car_kernel(
                     x = end[turn, 0] + (sigma - length[turn]) * cos
                     y = end[turn, 1] + (sigma - length[turn]) * sin
                 elif u > 0.0:  # in turn k: ψ = ψ_k + Δψ S(σ/L), κ = Δψ S′/L, …; position from the series
-                    step_t, slope_t, curve_t, jolt_t, _ = _smooth_step_at(u)
+                    step_t, slope_t, curve_t, jolt_t, _ = smooth_step_at(u)
                     angle = turn_angle[turn]
                     psi = heading[turn] + angle * step_t
-                    sin, cos = _sin_cos(psi)
+                    sin, cos = sin_cos(psi)
                     kappa = angle * slope_t / length[turn]
                     dkappa = angle * curve_t / length2[turn]
                     ddkappa = angle * jolt_t / length3[turn]
@@ -887,7 +885,7 @@ def _car_kernel(
         for m in range(3):
             for i in range(count):
                 half[i] = 0.5 * angles[m, i]
-            _sincos_block(half, count, sin_half[m], cos_half[m])
+            sincos_block(half, count, sin_half[m], cos_half[m])
         for i in range(count):
             _euler_zyx_sample(
                 cos_half[0, i],

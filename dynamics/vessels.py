@@ -56,12 +56,13 @@ import numpy as np
 import pydantic
 from pydantic import Field, StrictInt
 
+from .body_kernels import cross, quat_product, rotate_back, rotation_matrix
 from .config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3
 from .earth import Environment, Site
 from .gyrostat import GIMBALS, GimballedRotor, Gyrostat, P, Q, SpinProfile, W, X
 from .inertia import inertia_config, inertia_tensor
 from .integrate import Jump, integrate
-from .rigid_body import _quat_product, cross, rotate_back, rotation_matrix, world_motion_trajectory
+from .rigid_body import world_motion_trajectory
 from .rotation import body_rate_from_euler_zyx, euler_zyx_from_quat, quat_conjugate, quat_from_euler_zyx, quat_positive
 from .scenarios import ScenarioSpec
 from .trajectory import Trajectory
@@ -589,7 +590,7 @@ class Spacecraft:
         return cls(
             body=body,
             q0=q0,
-            q_target=_quat_product(q0, turn),
+            q_target=quat_product(q0, turn),
             start=slew.start_s,
             k=2.0 * wn**2,
             c=2.0 * zeta * wn,
@@ -607,7 +608,7 @@ class Spacecraft:
 
     def attitude_error(self, t, q) -> np.ndarray:
         """``q_e = q_c* ⊗ q`` (body-axes error), sign chosen with ``w ≥ 0`` (the short way round)."""
-        qe = _quat_product(quat_conjugate(self.commanded_attitude(t)), np.asarray(q, dtype=float))
+        qe = quat_product(quat_conjugate(self.commanded_attitude(t)), np.asarray(q, dtype=float))
         return quat_positive(qe)
 
     def control_torque(self, t, y) -> np.ndarray:
