@@ -24,6 +24,8 @@ from typing import Annotated, Any, TypeVar
 import pydantic
 from pydantic import BaseModel, ConfigDict, Field
 
+from gyroemu.errors import ConfigError
+
 __all__ = [
     "ConfigError",
     "Section",
@@ -38,34 +40,6 @@ __all__ = [
     "config_dir",
     "resolve_config",
 ]
-
-
-class ConfigError(ValueError):
-    """A config file, key or value that gyroemu cannot use.
-
-    Attributes
-    ----------
-    file : str or None
-        The file at fault, when there is one.
-    key : str or None
-        Dotted key within the file (``body.inertia_kgm2``), when one key is at fault.
-    reason : str
-        What is wrong, in words.
-    """
-
-    def __init__(self, reason: str, *, file: str | Path | None = None, key: str | None = None):
-        self.reason = reason
-        self.file = None if file is None else str(file)
-        self.key = key
-        super().__init__(str(self))
-
-    def __str__(self) -> str:
-        where = []
-        if self.file:
-            where.append(self.file)
-        if self.key:
-            where.append(f"key '{self.key}'")
-        return (": ".join(where) + ": " if where else "") + self.reason
 
 
 def as_number(value: Any) -> float:

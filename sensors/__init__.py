@@ -6,7 +6,7 @@ error terms are :func:`apply_errors` (``gyroemu.sensors.errors``); Allan deviati
 ``gyroemu.sensors.allan``.
 """
 
-from gyroemu.dynamics.config import ConfigError
+from gyroemu.errors import ConfigError
 
 from .errors import AccelErrors, GyroErrors, apply_errors
 from .imu import Device, DeviceSpec

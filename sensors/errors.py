@@ -54,8 +54,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 from pydantic import BeforeValidator, ValidationInfo, field_validator
 
-from gyroemu.dynamics.config import ConfigError, NonNegativeReal, PositiveReal, Real, Section
+from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Real, Section
 from gyroemu.dynamics.jit import njit
+from gyroemu.errors import ConfigError
 
 from . import noise
 

@@ -30,8 +30,9 @@ import numpy as np
 import tomli_w
 from pydantic import Field, field_validator
 
-from gyroemu.dynamics import ConfigError, Trajectory
+from gyroemu.dynamics import Trajectory
 from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3, validate
+from gyroemu.errors import ConfigError
 
 from .accelerometer import AccelerometerSpec, mean_specific_force
 from .errors import AccelErrors, ErrorModel, GyroErrors, apply_errors

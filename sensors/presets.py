@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gyroemu.dynamics.config import ConfigError, config_dir, read_toml, resolve_config, validate
+from gyroemu.dynamics.config import config_dir, read_toml, resolve_config, validate
+from gyroemu.errors import ConfigError
 
 from .imu import Device, DeviceSpec
 
