@@ -5,7 +5,7 @@ Cases
 - :class:`SimCase` (a scenario × a device): the scenario's trajectory is simulated once; each Monte Carlo
   run measures it with the device seeded ``seed + run`` (``gyroemu.sensors.load_device(name, seed)``), and the
   truth is the body's attitude and rate at the instants the device sampled
-  (:func:`gyroemu.pipelines.mcap_io.truth_series`). Every sample counts.
+  (:func:`gyroemu.pipelines.mcap_log.truth_series`). Every sample counts.
 - :class:`LogCase` (an MCAP log): every device of the log with a truth channel (``/truth/imu``) is a
   case with one run. The samples counted are the log's ``/movement`` mask when it has one (an imported
   BROAD trial), otherwise all; truth rows that are NaN (a reference that lost tracking) are ignored.
@@ -685,7 +685,7 @@ def _sim_case(case: SimCase, runs: int, seed: int):
 
 
 def _sim_run(traj, device, seed) -> _Run:
-    from .mcap_io import truth_series
+    from .mcap_log import truth_series
 
     samples = device.measure(traj)
     truth = truth_series(traj, samples)
@@ -707,7 +707,7 @@ def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, li
     """The devices of a log to bench: (name, mode, setup, run, source, notes) each."""
     from .estimate import check_samples
     from .estimation.setup import setup_from_metadata
-    from .mcap_io import read_mcap
+    from .mcap_log import read_mcap
 
     path = Path(case.path)
     if not path.is_file():

@@ -78,7 +78,7 @@ def _cmd_simulate(args) -> int:
                 samples = device.measure(traj)
         with progress.phase("write"):
             if out.suffix == ".mcap":
-                from .mcap_io import Recording, truth_series, write_mcap
+                from .mcap_log import Recording, truth_series, write_mcap
 
                 assert samples is not None  # an .mcap needs a device: checked above
                 write_mcap(out, Recording(samples, truth=truth_series(traj, samples), device=device), scenario=scenario)
@@ -114,7 +114,7 @@ def _npz_arrays(scenario, traj, device, samples) -> dict:
 
 
 def _cmd_info(args) -> int:
-    from .mcap_io import read_mcap
+    from .mcap_log import read_mcap
 
     path = Path(args.log)
     log = read_mcap(path)
@@ -218,7 +218,7 @@ def _cmd_allan(args) -> int:
     if not log.is_file():
         raise UsageError(f"argument LOG: {log}: no such file")
     if log.suffix == ".mcap":
-        from .mcap_io import read_mcap
+        from .mcap_log import read_mcap
 
         device_log = read_mcap(log).device
         gyro, t = device_log.samples.gyro, device_log.samples.t

@@ -139,7 +139,7 @@ def _live_and_bench(out: Path, seconds: float) -> None:
     """Stages 4 and 5 (see the module's docstring)."""
     from .bench import LogCase, run_bench
     from .estimation.metrics import attitude_errors, rmse_deg
-    from .mcap_io import read_mcap
+    from .mcap_log import read_mcap
     from .stream import run_stream
     from .zenoh_io import topic_to_key
 

@@ -14,10 +14,12 @@ from pathlib import Path
 
 import numpy as np
 
+from .channels import ImuSeries
 from .estimation.protocol import Estimate
 from .estimation.registry import make_filter
 from .estimation.setup import setup_from_metadata
-from .mcap_io import ImuSeries, LogError, McapLogWriter, Recording, read_mcap
+from .mcap_log import METADATA_KEYS, McapLogWriter, Recording, read_mcap
+from .mcap_records import LogError
 
 __all__ = ["EstimateSummary", "estimate_log", "estimate_series", "check_samples"]
 
@@ -86,11 +88,7 @@ def estimate_log(path, out, *, filter_name: str = "mekf", use_mag: bool | None =
         t_rel = samples.t - samples.t[0]  # relative times keep float64's resolution for the filter
         est = flt.process(t_rel, samples.gyro, samples.accel, samples.mag if nine else None)
         meta = dev.metadata or {}
-        extra = {
-            k: v
-            for k, v in meta.items()
-            if k not in ("version", "seed", "scenario", "device", "device_name", "topic_prefix")
-        }
+        extra = {k: v for k, v in meta.items() if k not in METADATA_KEYS}
         extra["estimate_filter"] = getattr(flt, "name", filter_name)
         recordings.append(
             Recording(

@@ -7,6 +7,8 @@ Messages queue in FIFO channels; the worker drains them, pairs each ``/imu`` sam
 sample of the same stamp (when the filter is 9D; a field that has not arrived when a later sample's
 has is taken as missing), feeds the block to the filter (whose state carries over between blocks) and
 publishes one ``/estimate/imu`` message per sample, BLOCK congestion control, rmw_zenoh attachment.
+Topics and the encoding of the estimate are the channel vocabulary's (:mod:`gyroemu.pipelines.channels`),
+so the live estimate holds the bytes ``gyroemu estimate`` writes into a file.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import time
 
 import numpy as np
 
+from .channels import ESTIMATE_ROLE, IMU_ROLE, MAG_ROLE, encode_series, role_topic
 from .estimate import estimate_series
 from .messages import IMU, MAGNETIC_FIELD
 from .zenoh_io import PacedPublisher, drain, subscribe, topic_to_key
@@ -46,9 +49,9 @@ class LiveEstimator:
         self.flt = flt
         self.use_mag = use_mag
         self.published = 0
-        self._imu = subscribe(session, topic_to_key(device, "/imu"))
-        self._mag = subscribe(session, topic_to_key(device, "/mag")) if use_mag else None
-        self.key = topic_to_key(device, "/estimate/imu")
+        self._imu = subscribe(session, topic_to_key(device, role_topic(IMU_ROLE)))
+        self._mag = subscribe(session, topic_to_key(device, role_topic(MAG_ROLE))) if use_mag else None
+        self.key = topic_to_key(device, role_topic(ESTIMATE_ROLE))
         self._out = PacedPublisher(session, [self.key])
         self._pending: list[tuple[int, np.ndarray, np.ndarray]] = []  # (stamp ns, gyro, accel)
         self._fields: dict[int, np.ndarray] = {}
@@ -117,10 +120,7 @@ class LiveEstimator:
             self._t0_ns = int(stamp_ns[0])
         t_rel = (stamp_ns - self._t0_ns) * 1e-9
         estimate = self.flt.process(t_rel, gyro, accel, field)
-        series = estimate_series(stamp_ns * 1e-9, estimate, gyro)
-        from .mcap_io import BODY_FRAME, _series_fields
-
-        rows = IMU.encode(stamp_ns, BODY_FRAME, _series_fields(series))
+        rows = encode_series(stamp_ns, estimate_series(stamp_ns * 1e-9, estimate, gyro))
         for row in rows:
             self._out.put(self.key, row.tobytes())
         self.published += len(rows)

@@ -6,12 +6,13 @@ The recorder subscribes to ``gyroemu/**`` (FIFO channel handler), maps each key 
 topic (:func:`gyroemu.pipelines.zenoh_io.key_to_topic`) and copies the payload bytes into an MCAP file (profile
 ``ros2``, zstd chunks) without re-encoding: only the header stamp is read, and it becomes the message's
 ``log_time`` and ``publish_time``. Channels are registered per topic as they appear, with the schema the
-topic's role names (``/imu`` and ``/truth/imu``: ``sensor_msgs/msg/Imu``, ``/mag``: MagneticField,
-``/raw/<kind>``: the kind's raw type; other topics get no schema). The first device's topics are
-unprefixed (``/imu``), any further device's are prefixed (``/<device>/imu``); a ``gyroemu`` metadata
-record per device gives its name and prefix, so :func:`gyroemu.pipelines.mcap_io.read_mcap` names it.
+topic's role names (:func:`gyroemu.pipelines.channels.topic_message_type`: ``/imu`` and ``/truth/imu``:
+``sensor_msgs/msg/Imu``, ``/mag``: MagneticField, ``/raw/<kind>``: the kind's raw type; other topics get
+no schema). The first device's topics are unprefixed (``/imu``), any further device's are prefixed
+(``/<device>/imu``); a ``gyroemu`` metadata record per device gives its name and prefix
+(:func:`gyroemu.pipelines.mcap_log.device_metadata`), so :func:`gyroemu.pipelines.mcap_log.read_mcap` names it.
 
-The file is written in place (not through a temporary name): :class:`~gyroemu.pipelines.mcap_io.McapFileWriter`
+The file is written in place (not through a temporary name): :class:`~gyroemu.pipelines.mcap_records.McapFileWriter`
 writes sequentially, and the recorder flushes after every batch, so a recorder killed with SIGKILL leaves
 a file whose complete chunks read back (chunks of 256 KiB, so at most that much is lost).
 SIGINT/SIGTERM (or ``--duration``) end the recording properly: the remaining messages, the summary and
@@ -44,7 +45,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .messages import IMU, MAGNETIC_FIELD, MESSAGE_TYPES, RAW_MESSAGE_TYPES
+from .channels import topic_message_type
+from .messages import MESSAGE_TYPES
 from .zenoh_io import (
     drain,
     header_stamp_ns,
@@ -123,19 +125,6 @@ class SequenceTracker:
         }
 
 
-def topic_message_type(topic: str):
-    """The message type of a gyroemu topic by its role (``/imu``, ``/truth/imu``: Imu; ``/mag``:
-    MagneticField; ``/raw/<kind>``: the kind's raw type), or None."""
-    role = topic.rsplit("/", 2)
-    if topic.endswith("/imu"):
-        return IMU
-    if topic.endswith("/mag"):
-        return MAGNETIC_FIELD
-    if len(role) >= 2 and role[-2] == "raw":
-        return RAW_MESSAGE_TYPES.get(role[-1])
-    return None
-
-
 @dataclass(frozen=True)
 class KeyInfo:
     """What a key expression says: the device and topic to record under, and (ROS 2 keys) the type."""
@@ -168,7 +157,7 @@ class Recorder:
     :func:`ros2_key` in ROS 2 mode); ``on_new_topic(info)`` is called once per new channel."""
 
     def __init__(self, path, chunk_size: int = 1 << 18, parse_key=gyroemu_key, on_new_topic=None):
-        from .mcap_io import McapFileWriter
+        from .mcap_records import McapFileWriter
 
         self.path = Path(path)
         self._file = open(self.path, "wb")
@@ -185,7 +174,7 @@ class Recorder:
         self.without_attachment = 0
 
     def _channel(self, info: KeyInfo) -> int:
-        from .mcap_io import _device_metadata
+        from .mcap_log import device_metadata
 
         key = (info.device, info.topic)
         if key not in self._channels:
@@ -193,7 +182,7 @@ class Recorder:
             if device not in self._devices:
                 prefix = "" if not self._devices else f"/{device}"
                 self._devices[device] = prefix
-                self._mcap.add_metadata("gyroemu", _device_metadata(device, prefix))
+                self._mcap.add_metadata("gyroemu", device_metadata(device, prefix))
             mtype = MESSAGE_TYPES.get(info.type_name) if info.type_name else topic_message_type(topic)
             # the type hash as rosbag2 (Iron and later) records it
             metadata = {"topic_type_hash": info.type_hash} if info.type_hash else None

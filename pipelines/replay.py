@@ -5,10 +5,11 @@ What goes out
 Every ``cdr`` channel of the file (or those named by ``--topics``), each message's recorded bytes
 unchanged, on the key expression of its topic (``interface.md``, "Live streams: Eclipse Zenoh"):
 
-- gyroemu's topics (``/imu``, ``/mag``, ``/truth/imu``, ``/estimate/imu``, ``/raw/<kind>``) go to
-  ``gyroemu/<device>/<topic>``. The device is the topic's prefix when the file's ``gyroemu`` metadata
-  names that prefix (``/<device>/imu`` of a several-device file), else the ``device_name`` of the
-  file's ``gyroemu`` metadata for unprefixed topics, else ``--device-name`` (default ``imu0``).
+- gyroemu's topics (``/imu``, ``/mag``, ``/truth/imu``, ``/estimate/imu``, ``/raw/<kind>``: the roles
+  of live streams, :func:`gyroemu.pipelines.channels.is_stream_role`) go to ``gyroemu/<device>/<topic>``.
+  The device is the topic's prefix when the file's ``gyroemu`` metadata names that prefix
+  (``/<device>/imu`` of a several-device file), else the ``device_name`` of the file's ``gyroemu``
+  metadata for unprefixed topics, else ``--device-name`` (default ``imu0``).
 - any other topic ``/a/b`` (someone else's file) goes to ``gyroemu/<device-name>/a/b``.
 
 The attachment is the publisher's (:class:`gyroemu.pipelines.zenoh_io.PacedPublisher`): a sequence per key
@@ -30,7 +31,7 @@ behind, so its error never accumulates (:meth:`PacedPublisher.run_schedule`). Wi
 is shifted by k times the file's span plus one mean message interval, so deadlines keep increasing
 (the payloads, header stamps included, are the recorded bytes every pass).
 
-A reader thread walks the file a chunk at a time (:func:`gyroemu.pipelines.mcap_io.iter_mcap_batches`),
+A reader thread walks the file a chunk at a time (:func:`gyroemu.pipelines.mcap_records.iter_mcap_batches`),
 turns each chunk's messages into batches of ``BATCH`` ``(deadline offset, key, payload)`` and queues
 them (a bounded queue of ``READ_AHEAD`` batches), so decompressing a chunk happens while the
 publisher waits for its deadlines, never on its schedule; memory stays bounded by the queue, whatever
@@ -40,7 +41,7 @@ a whole 1 MiB chunk's 4000 took ~0.7 ms, long enough to make the next deadline l
 frees its own per-chunk objects a slice at a time for the same reason. How the publisher waits and
 keeps the reader from delaying it: :class:`gyroemu.pipelines.zenoh_io.Timing`.
 
-Before the clock starts the file is validated with :func:`gyroemu.pipelines.mcap_io.read_mcap` (not MCAP,
+Before the clock starts the file is validated with :func:`gyroemu.pipelines.mcap_log.read_mcap` (not MCAP,
 corrupt, truncated before its first chunk, no ``sensor_msgs/msg/Imu`` message: a ``LogError`` naming the
 file), the replay waits (``--wait``, default 10 s) until every key has a subscriber, as
 ``gyroemu stream`` does, and then until the reader has filled its queue (at most 10 s more): its
@@ -51,20 +52,20 @@ only ever opened for reading.
 from __future__ import annotations
 
 import queue
-import re
 import sys
 import threading
 import time
 import warnings
 
-from .mcap_io import LogWarning, iter_mcap_batches, read_mcap
+from .channels import is_device_prefix, is_stream_role, role_topic, split_topic
+from .mcap_log import LogWarning, read_mcap
+from .mcap_records import iter_mcap_batches
 from .zenoh_io import PacedPublisher, key_to_topic, open_session, session_config, stop_on_signals, topic_to_key
 
 __all__ = ["topic_keys", "ros2_topic_keys", "ReadAhead", "run_replay", "READ_AHEAD", "BATCH"]
 
 READ_AHEAD = 64  # batches queued ahead of the publisher
 BATCH = 256  # messages per batch: the publisher frees a spent batch (~50 us for 256) right after a send
-_ROLE = re.compile(r"^(?P<prefix>(/[^/]+)??)(?P<role>/imu|/mag|/truth/imu|/estimate/imu|/raw/[^/]+)$")
 
 
 class ReplayError(ValueError):
@@ -80,11 +81,9 @@ def topic_keys(topics, metadata: list[dict], device_name: str = "imu0") -> tuple
     for topic in topics:
         name = topic if topic.startswith("/") else "/" + topic
         device, rest = device_name, name
-        m = _ROLE.match(name)
-        if m:
-            prefix = m.group("prefix")
-            if prefix in by_prefix:
-                device, rest = by_prefix[prefix] or prefix.strip("/") or device_name, m.group("role")
+        prefix, role = split_topic(name)
+        if is_stream_role(role) and is_device_prefix(prefix) and prefix in by_prefix:
+            device, rest = by_prefix[prefix] or prefix.strip("/") or device_name, role_topic(role)
         try:
             if any(c in rest for c in "*$?#"):
                 raise ValueError(f"topic {topic!r}: '*', '$', '?' and '#' cannot go in a key expression")
@@ -96,7 +95,7 @@ def topic_keys(topics, metadata: list[dict], device_name: str = "imu0") -> tuple
 
 def ros2_topic_keys(keys: dict[str, str], channels, ros) -> tuple[dict[str, str], dict[str, str]]:
     """ROS 2 mode: ``({topic: rmw_zenoh key}, {topic: why not})`` from the gyroemu keys of
-    :func:`topic_keys`, the file's :class:`gyroemu.pipelines.mcap_io.ChannelInfo` and a
+    :func:`topic_keys`, the file's :class:`gyroemu.pipelines.mcap_records.ChannelInfo` and a
     :class:`gyroemu.pipelines.stream.Ros2Keys` (which keeps each key's topic, type and hash for its tokens)."""
     from .ros2_keys import Ros2Error, full_type_name, is_type_hash, parse_definitions, ros_topic, type_hash
 
@@ -222,7 +221,7 @@ def run_replay(
 ) -> int:
     """Replay ``path`` (see the module's notes). Returns the exit status: 0 when done (or, with
     ``loop``, when stopped by SIGINT/SIGTERM), 130 when a single pass was interrupted. Raises
-    :class:`gyroemu.pipelines.mcap_io.LogError` for bad input and ``ValueError`` naming the argument at fault."""
+    :class:`gyroemu.pipelines.mcap_records.LogError` for bad input and ``ValueError`` naming the argument at fault."""
     config = session_config(connect=connect, listen=listen, mode=mode, config_file=config_file)
     if not rate > 0:
         raise ReplayError(f"argument --rate: must be positive, got {rate}")

@@ -36,7 +36,8 @@ A message of ROS topic ``/a/b`` of type ``pkg/msg/T`` in domain ``D`` goes on::
 (the topic without its leading slash, then the DDS type name, then the type hash), with the payload
 the CDR bytes and the 33-byte attachment of :func:`gyroemu.pipelines.zenoh_io.pack_attachment`.
 
-gyroemu's topics become ROS topics by the same rule as its own keys (``interface.md``): device
+gyroemu's topics (:mod:`gyroemu.pipelines.channels`) become ROS topics by the same rule as its own keys
+(``interface.md``): device
 ``imu0``'s ``/imu`` is ``/imu0/imu``, ``/raw/fog`` is ``/imu0/raw/fog``; a replayed file's ``/a/b``
 is ``/<device>/a/b``. ROS 2 names allow only letters, digits and ``_`` (a token not starting with a
 digit), so ``-`` becomes ``_`` (``/imu0/raw/rate_gyro``); the recorder restores a raw topic's kind
@@ -77,7 +78,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from .messages import RAW_MESSAGE_TYPES, ROS_DEFINITIONS
+from .channels import raw_role, role_topic
+from .messages import MESSAGE_TYPES, ROS_DEFINITIONS
 
 if TYPE_CHECKING:
     import zenoh
@@ -329,9 +331,6 @@ def ros_topic(device: str, topic: str) -> str:
     return "/" + "/".join(tokens)
 
 
-_RAW_KINDS = {mtype.name: kind for kind, mtype in RAW_MESSAGE_TYPES.items()}
-
-
 def gyroemu_topic(topic: str, type_name: str | None = None) -> tuple[str, str]:
     """``(device, topic)`` of ROS 2 topic ``/<device>/<rest>``; a gyroemu raw type restores its kind's
     topic (``/imu0/raw/rate_gyro`` of ``gyroemu_msgs/msg/RateGyroRaw`` -> ``("imu0", "/raw/rate-gyro")``)."""
@@ -339,9 +338,11 @@ def gyroemu_topic(topic: str, type_name: str | None = None) -> tuple[str, str]:
     if len(tokens) < 2 or not all(tokens):
         raise Ros2Error(f"ROS 2 topic {topic!r} is not /<device>/<topic>")
     device, rest = tokens[0], "/" + "/".join(tokens[1:])
-    kind = _RAW_KINDS.get(type_name or "")
-    if kind is not None and rest.replace("-", "_") == f"/raw/{kind}".replace("-", "_"):
-        rest = f"/raw/{kind}"
+    mtype = MESSAGE_TYPES.get(type_name or "")
+    if mtype is not None and mtype.kind is not None:
+        raw_topic = role_topic(raw_role(mtype.kind))
+        if rest.replace("-", "_") == raw_topic.replace("-", "_"):
+            rest = raw_topic
     return device, rest
 
 

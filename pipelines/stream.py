@@ -1,7 +1,8 @@
 """``gyroemu stream``: simulate a scenario through a device, then publish it live over zenoh.
 
 The whole run is simulated and encoded first (the same CDR bytes an MCAP log of the run holds: frame
-ids and fields as :class:`gyroemu.pipelines.mcap_io.McapLogWriter` writes them), then sample k's messages
+ids and fields by the channel vocabulary, :mod:`gyroemu.pipelines.channels`, as
+:class:`gyroemu.pipelines.mcap_log.McapLogWriter` writes them), then sample k's messages
 (``/imu``, ``/mag`` when the device has a magnetometer, ``/truth/imu``, ``/raw/<kind>``) go out at
 ``t0 + k / rate`` on ``gyroemu/<device-name>/<topic>`` (:mod:`gyroemu.pipelines.zenoh_io`).
 
@@ -20,42 +21,61 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .messages import IMU, MAGNETIC_FIELD, RAW_MESSAGE_TYPES, raw_fields, split_payloads, stamps_to_ns
+from .channels import (
+    IMU_ROLE,
+    MAG_ROLE,
+    TRUTH_ROLE,
+    encode_mag,
+    encode_measured,
+    encode_raw,
+    encode_series,
+    raw_role,
+    role_message_type,
+    role_topic,
+    topic_message_type,
+)
+from .messages import split_payloads, stamps_to_ns
 from .zenoh_io import PacedPublisher, open_session, session_config, stop_on_signals, topic_to_key
 
 if TYPE_CHECKING:
+    from gyroemu.sensors.samples import ImuSamples
+
+    from .channels import ImuSeries
     from .ros2_keys import Ros2Node
 
 __all__ = ["encode_run", "topic_types", "run_stream", "Ros2Keys"]
 
 
-def encode_run(samples, truth=None) -> dict[str, np.ndarray]:
+def encode_run(samples: ImuSamples, truth: ImuSeries | None = None) -> dict[str, np.ndarray]:
     """Topic -> ``(N, size)`` encoded rows of a device's samples (and truth), as an MCAP log holds them."""
-    from .mcap_io import BODY_FRAME, _measured_fields, _series_fields
-
     stamp_ns = stamps_to_ns(samples.t)
     frame = samples.device
-    out = {"/imu": IMU.encode(stamp_ns, frame, _measured_fields(samples))}
+    out = {role_topic(IMU_ROLE): encode_measured(stamp_ns, frame, samples)}
     if samples.has_mag:
-        out["/mag"] = MAGNETIC_FIELD.encode(stamp_ns, frame, {"magnetic_field": samples.mag})
+        out[role_topic(MAG_ROLE)] = encode_mag(stamp_ns, frame, samples)
     if truth is not None:
-        out["/truth/imu"] = IMU.encode(stamps_to_ns(truth.t), BODY_FRAME, _series_fields(truth))
+        out[role_topic(TRUTH_ROLE)] = encode_series(stamps_to_ns(truth.t), truth)
     for kind, observables in samples.raw.items():
-        if kind in RAW_MESSAGE_TYPES:
-            mtype, fields, _ = raw_fields(kind, observables)
-            out[f"/raw/{kind}"] = mtype.encode(stamp_ns, frame, fields)
+        if role_message_type(raw_role(kind)) is not None:
+            out[role_topic(raw_role(kind))] = encode_raw(stamp_ns, frame, kind, observables)[1]
     return out
 
 
-def topic_types(topics) -> dict[str, str]:
-    """``{topic: ROS type name}`` of gyroemu topics (``/imu`` -> ``sensor_msgs/msg/Imu``, ...)."""
-    from .record import topic_message_type
-
-    return {topic: topic_message_type(topic).name for topic in topics}
+def topic_types(topics: Iterable[str]) -> dict[str, str]:
+    """``{topic: ROS type name}`` of gyroemu topics (``/imu`` -> ``sensor_msgs/msg/Imu``, ...);
+    ``ValueError`` for a topic that has no gyroemu message type."""
+    out = {}
+    for topic in topics:
+        mtype = topic_message_type(topic)
+        if mtype is None:
+            raise ValueError(f"topic {topic!r} has no gyroemu message type")
+        out[topic] = mtype.name
+    return out
 
 
 class Ros2Keys:
@@ -121,15 +141,15 @@ def run_stream(
     from gyroemu.dynamics import load_scenario
     from gyroemu.sensors import load_device
 
-    from .mcap_io import truth_series
+    from .mcap_log import truth_series
     from .ros2_keys import ros_topic
 
     config = session_config(connect=connect, listen=listen, mode=mode, config_file=config_file)
     ros = Ros2Keys(domain, "stream") if ros2 else None
     try:
-        topic_to_key(device_name, "/imu")  # checks the device name before the (slow) simulation
+        topic_to_key(device_name, role_topic(IMU_ROLE))  # checks the device name before the (slow) simulation
         if ros is not None:
-            ros_topic(device_name, "/imu")
+            ros_topic(device_name, role_topic(IMU_ROLE))
     except ValueError as e:
         raise ValueError(f"argument --device-name: {e}") from None
     if estimate is not None and ros is not None:

@@ -39,7 +39,7 @@ from gyroemu.pipelines.bench import LogCase, SimCase, evaluate_run, run_bench
 from gyroemu.pipelines.estimation import registry
 from gyroemu.pipelines.estimation.metrics import attitude_errors, rmse_deg
 from gyroemu.pipelines.estimation.protocol import Estimate, FilterSetup
-from gyroemu.pipelines.mcap_io import Recording, truth_series, write_mcap
+from gyroemu.pipelines.mcap_log import Recording, truth_series, write_mcap
 from gyroemu.pipelines.messages import IMU
 
 PEERS = ["madgwick", "mahony", "ahrs-ekf", "vqf"]

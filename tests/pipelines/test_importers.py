@@ -26,7 +26,8 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from gyroemu.pipelines import cli
 from gyroemu.pipelines.importers import BROAD_CITATION, ImportInputError, import_broad, read_broad
-from gyroemu.pipelines.mcap_io import LogWarning, McapFileWriter, Recording, read_mcap, write_mcap
+from gyroemu.pipelines.mcap_log import LogWarning, Recording, read_mcap, write_mcap
+from gyroemu.pipelines.mcap_records import McapFileWriter
 from gyroemu.pipelines.messages import FLAG, IMU, schema_text
 from gyroemu.sensors.samples import ImuSamples
 

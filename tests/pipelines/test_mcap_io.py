@@ -29,17 +29,9 @@ from mcap_ros2.writer import Writer as Ros2McapWriter
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from gyroemu.dynamics import ConfigError, load_scenario
-from gyroemu.pipelines.mcap_io import (
-    BODY_FRAME,
-    ImuSeries,
-    LogError,
-    LogWarning,
-    McapLogWriter,
-    Recording,
-    read_mcap,
-    truth_series,
-    write_mcap,
-)
+from gyroemu.pipelines.channels import BODY_FRAME, ImuSeries
+from gyroemu.pipelines.mcap_log import LogWarning, McapLogWriter, Recording, read_mcap, truth_series, write_mcap
+from gyroemu.pipelines.mcap_records import LogError
 from gyroemu.pipelines.messages import IMU, RAW_MESSAGE_TYPES, schema_text
 from gyroemu.sensors import load_device
 from gyroemu.sensors.samples import ImuSamples

@@ -14,7 +14,7 @@ from gyroemu.dynamics.rotation import quat_conjugate, quat_rotate
 from gyroemu.pipelines.estimation import FilterSetup, Mekf, MekfParams, attitude_errors, rmse_deg, setup_for
 from gyroemu.pipelines.estimation import mekf_kernels as kern
 from gyroemu.pipelines.estimation.batched import mekf_batch
-from gyroemu.pipelines.mcap_io import truth_series
+from gyroemu.pipelines.mcap_log import truth_series
 from gyroemu.sensors import load_device
 from gyroemu.sensors.gyrocompass import heading_uncertainty
 

@@ -246,7 +246,7 @@ def test_iter_mcap_batches_in_log_time_order(tmp_path, gyroemu_mcap):
     shuffled (within a chunk and across neighbouring chunks), and --topics filtering."""
     from mcap_ros2.writer import Writer
 
-    from gyroemu.pipelines.mcap_io import iter_mcap_batches
+    from gyroemu.pipelines.mcap_records import iter_mcap_batches
 
     def flat(path, topics=None):
         return [(m.topic, m.log_time, m.data) for batch in iter_mcap_batches(path, topics) for m in batch]

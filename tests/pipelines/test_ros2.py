@@ -308,7 +308,8 @@ def test_stream_router_record_in_ros2_mode(procs, tmp_path):
     ), rows
 
     from gyroemu.dynamics import load_scenario
-    from gyroemu.pipelines.mcap_io import mcap_channel_info, read_mcap, truth_series
+    from gyroemu.pipelines.mcap_log import read_mcap, truth_series
+    from gyroemu.pipelines.mcap_records import mcap_channel_info
     from gyroemu.pipelines.stream import encode_run
     from gyroemu.sensors import load_device
 
@@ -378,7 +379,7 @@ def test_recorder_maps_ros2_keys_back_to_topics(tmp_path):
     one-token topic (``/rosout``) or of another form is skipped, counted."""
     import numpy as np
 
-    from gyroemu.pipelines.mcap_io import mcap_channel_info
+    from gyroemu.pipelines.mcap_records import mcap_channel_info
     from gyroemu.pipelines.messages import IMU, RAW_MESSAGE_TYPES
     from gyroemu.pipelines.record import Recorder, ros2_key
     from gyroemu.pipelines.zenoh_io import pack_attachment

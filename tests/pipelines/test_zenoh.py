@@ -96,7 +96,7 @@ def test_default_session_both_start_orders_lossless_and_byte_exact(procs, tmp_pa
     n = int(round(duration * RATE))
 
     from gyroemu.dynamics import load_scenario
-    from gyroemu.pipelines.mcap_io import Recording, read_mcap, truth_series, write_mcap
+    from gyroemu.pipelines.mcap_log import Recording, read_mcap, truth_series, write_mcap
     from gyroemu.pipelines.zenoh_io import header_stamp_ns
     from gyroemu.sensors import load_device
 
@@ -164,7 +164,7 @@ def test_router_in_between_lossless(procs, tmp_path):
 @pytest.mark.filterwarnings("ignore:.*have no message on")  # the kill may cut a sample's group of messages
 def test_sigint_completes_and_sigkill_leaves_readable_chunks(procs, tmp_path):
     """SIGINT mid-stream: a complete MCAP (summary, indexes). SIGKILL: the complete chunks read back."""
-    from gyroemu.pipelines.mcap_io import LogWarning, read_mcap
+    from gyroemu.pipelines.mcap_log import LogWarning, read_mcap
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     procs.start(

@@ -1,0 +1,698 @@
+"""gyroemu's recorded logs: devices' samples, truth, estimates and metadata as MCAP files (profile ``ros2``).
+
+This is the upper of the two MCAP layers: it gives the channels of :mod:`gyroemu.pipelines.channels`
+their meaning in a file, and leaves the records to :mod:`gyroemu.pipelines.mcap_records` (the bulk
+writer, the scanner). :mod:`gyroemu.pipelines.mcap_io` re-exports both layers' public names.
+
+What a gyroemu file holds (``interface.md``)
+--------------------------------------------
+Schema encoding ``ros2msg``, message encoding ``cdr`` (the bytes of :mod:`gyroemu.pipelines.messages`),
+zstd-compressed chunks, message indexes after each chunk, and a summary (schemas, channels,
+statistics, chunk and metadata indexes, summary offsets). Channels, per device:
+
+=================  ===================================  =========================================
+topic              type                                 holds
+=================  ===================================  =========================================
+``/imu``           ``sensor_msgs/msg/Imu``              ``gyro``, ``accel``; ``orientation_covariance[0] = -1``
+``/mag``           ``sensor_msgs/msg/MagneticField``    ``mag`` (tesla), only for devices with one
+``/truth/imu``     ``sensor_msgs/msg/Imu``              true ``q_wb``, ``omega_b``, ``specific_force_b``
+``/estimate/imu``  ``sensor_msgs/msg/Imu``              estimated ``q_wb`` (+ covariance), rate, ...
+``/raw/<kind>``    ``gyroemu_msgs/msg/<Kind>Raw``       the gyro kind's physical observables
+``/movement``      ``gyroemu_msgs/msg/Flag``            an imported dataset's mask of the samples that count
+=================  ===================================  =========================================
+
+With several devices the topics are prefixed: ``/<device>/imu``. Every message's ``log_time`` and
+``publish_time`` are its header stamp (ns), ``sequence`` counts from 0 per channel, and messages are
+in time order across channels (same stamp: the order of the table). Frame ids: the device name for
+what the sensor measures (``/imu``, ``/mag``, ``/raw/...``), ``base_link`` for body-frame truth and
+estimates. Each device has a metadata record ``gyroemu`` with ``version``, ``seed``, ``scenario``
+(TOML), ``device`` (TOML), ``device_name`` and ``topic_prefix`` (:func:`device_metadata`), plus any
+keys the recording adds (an imported file: ``source``, ``source_format``, ``citation``, ...;
+:mod:`gyroemu.pipelines.importers`).
+
+Writing
+-------
+:class:`McapLogWriter` (and :func:`write_mcap`) encode every channel of a block of samples as one
+``(N, size)`` array (the ``encode_*`` functions of :mod:`gyroemu.pipelines.channels`) and hand the
+block to :class:`~gyroemu.pipelines.mcap_records.McapFileWriter`, which interleaves, chunks and
+compresses it. The file is written to a temporary name in the target folder and renamed when complete,
+so an interrupted write leaves no partial file under the name.
+
+Reading
+-------
+:func:`read_mcap` reads any ``ros2`` MCAP file (:class:`~gyroemu.pipelines.mcap_records.McapScan`)
+and gathers each channel's messages into arrays. Every channel of type ``sensor_msgs/msg/Imu``
+counts, whatever its topic; channels of unknown types are skipped with a :class:`LogWarning`. A file
+cut short (a recorder killed mid-write, no footer) yields the messages of its complete chunks, with a
+warning that says so and how many were recovered. Files that are not MCAP, are corrupt, or hold no IMU
+messages raise :class:`~gyroemu.pipelines.mcap_records.LogError`, which names the file. The input is
+opened read-only.
+"""
+
+from __future__ import annotations
+
+import os
+import secrets
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+import gyroemu
+from gyroemu.sensors.samples import ImuSamples
+
+from .channels import (
+    ESTIMATE_ROLE,
+    IMU_ROLE,
+    MAG_ROLE,
+    MOVEMENT_ROLE,
+    RESERVED_DEVICE_NAMES,
+    TRUTH_ROLE,
+    ImuSeries,
+    encode_mag,
+    encode_measured,
+    encode_movement,
+    encode_raw,
+    encode_series,
+    is_prefix_name,
+    raw_kind,
+    raw_role,
+    role_accepts,
+    role_message_type,
+    role_topic,
+    series_from_batch,
+    split_topic,
+)
+from .mcap_records import DecodedChannel, LogError, McapFileWriter, McapScan
+from .messages import IMU, ns_to_stamps, raw_observables, stamps_to_ns
+
+if TYPE_CHECKING:
+    from gyroemu.dynamics import Scenario, Trajectory
+
+__all__ = [
+    "LogWarning",
+    "ImuSeries",
+    "Recording",
+    "DeviceLog",
+    "McapLog",
+    "METADATA_KEYS",
+    "device_metadata",
+    "McapLogWriter",
+    "write_mcap",
+    "read_mcap",
+    "truth_series",
+]
+
+
+class LogWarning(UserWarning):
+    """Something in a log that was skipped or recovered: an unknown channel, a truncated file."""
+
+
+# ==================================================================================================
+# What goes in and comes out besides ImuSamples.
+
+
+def truth_series(trajectory: Trajectory, samples: ImuSamples) -> ImuSeries:
+    """Body truth at the instants the device sampled (``samples.t_true``), stamped with the device's
+    stamps ``samples.t``: what ``/truth/imu`` holds."""
+    from gyroemu.sensors.sampling import SensorTruth
+
+    instants = samples.t_true if samples.t_true is not None else samples.t
+    q_wb, omega_b, force_b = SensorTruth(trajectory).body_truth(instants)
+    return ImuSeries(t=np.asarray(samples.t, dtype=float), q_wb=q_wb, omega_b=omega_b, specific_force_b=force_b)
+
+
+@dataclass(frozen=True, eq=False)
+class Recording:
+    """One device's block of output for :class:`McapLogWriter`.
+
+    Attributes
+    ----------
+    samples : ImuSamples
+        The device's samples; ``samples.device`` names it.
+    truth, estimate : ImuSeries, optional
+        Written to ``/truth/imu`` and ``/estimate/imu``.
+    device : Device or str, optional
+        The device (or its resolved config as TOML text), for the metadata record.
+    seed : int, optional
+        The run's seed (default: ``device.seed`` when ``device`` is a Device).
+    movement : ndarray (N,) bool, optional
+        A mask aligned to ``samples`` (an imported dataset's samples over which errors are computed),
+        written to ``/movement`` as ``gyroemu_msgs/msg/Flag`` at the samples' stamps.
+    stamp_ns : ndarray (N,) int64, optional
+        The samples' stamps exactly, ns, used instead of ``samples.t`` (which, as float seconds, does
+        not resolve nanoseconds at Unix-epoch times); a truth or estimate series of the same length
+        and times is stamped with them too. For rewriting a log read by :func:`read_mcap`.
+    metadata : dict of str to str, optional
+        Further keys of the device's ``gyroemu`` metadata record (e.g. an import's ``source``); they
+        may not replace the writer's own keys (``version``, ``seed``, ``scenario``, ``device``,
+        ``device_name``, ``topic_prefix``).
+    """
+
+    samples: ImuSamples
+    truth: ImuSeries | None = None
+    estimate: ImuSeries | None = None
+    device: object = None
+    seed: int | None = None
+    movement: np.ndarray | None = None
+    metadata: dict | None = None
+    stamp_ns: np.ndarray | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class DeviceLog:
+    """One device's channels in a log.
+
+    Attributes
+    ----------
+    name : str
+        ``imu0``-style device name: the topic prefix without slashes, the gyroemu metadata's
+        ``device_name`` for an unprefixed file, or a foreign IMU topic without its leading slash.
+    topics : dict of str to str
+        Role (``imu``, ``mag``, ``truth``, ``estimate``, ``raw/<kind>``) to topic.
+    samples : ImuSamples
+    stamp_ns : ndarray (N,) int64
+        The samples' header stamps exactly, ns (``samples.t`` is their float64 value in seconds, which
+        resolves 0.24 us at Unix-epoch times).
+    truth, estimate : ImuSeries or None
+    metadata : dict of str to str or None
+        The device's ``gyroemu`` metadata record, when there is one.
+    movement : ndarray (N,) bool or None
+        The ``/movement`` flags at the samples' stamps (False, with a warning, for samples without a
+        flag at their stamp); None when the device has no ``/movement`` topic.
+    """
+
+    name: str
+    topics: dict
+    samples: ImuSamples
+    stamp_ns: np.ndarray
+    truth: ImuSeries | None = None
+    estimate: ImuSeries | None = None
+    metadata: dict | None = None
+    movement: np.ndarray | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class McapLog:
+    """What :func:`read_mcap` found.
+
+    Attributes
+    ----------
+    path : Path
+    devices : dict of str to DeviceLog
+        Keyed by device name, in the order of their IMU channels.
+    metadata : list of dict
+        Every ``gyroemu`` metadata record.
+    profile : str
+        The MCAP header's profile.
+    message_count : int
+        Messages read (every channel, decoded or not).
+    truncated : bool
+        The file ends before its footer: only complete chunks were read.
+    skipped : dict of str to str
+        Topics not decoded, with the reason.
+    channels : tuple of ChannelInfo
+        Every channel of the file (decoded or not) with its schema, in file order.
+    """
+
+    path: Path
+    devices: dict
+    metadata: list
+    profile: str
+    message_count: int
+    truncated: bool = False
+    skipped: dict = field(default_factory=dict)
+    channels: tuple = ()
+
+    @property
+    def device(self) -> DeviceLog:
+        """The only device (``ValueError`` when the log has several: pick one from :attr:`devices`)."""
+        if len(self.devices) != 1:
+            raise ValueError(
+                f"{self.path}: {len(self.devices)} devices ({', '.join(self.devices)}); choose one from .devices"
+            )
+        return next(iter(self.devices.values()))
+
+    @property
+    def samples(self) -> ImuSamples:
+        """The only device's samples."""
+        return self.device.samples
+
+    @property
+    def truth(self) -> ImuSeries | None:
+        """The only device's truth."""
+        return self.device.truth
+
+
+# ==================================================================================================
+# Writing.
+
+METADATA_KEYS = ("version", "seed", "scenario", "device", "device_name", "topic_prefix")
+"""The writer's own keys of a device's ``gyroemu`` metadata record (:func:`device_metadata`)."""
+
+
+def device_metadata(
+    device_name: str, topic_prefix: str, *, seed: str = "", scenario: str = "", device: str = ""
+) -> dict[str, str]:
+    """A device's ``gyroemu`` metadata record: the writer's own keys, :data:`METADATA_KEYS` (empty: not
+    known; ``version`` is gyroemu's)."""
+    return {
+        "version": gyroemu.__version__,
+        "seed": seed,
+        "scenario": scenario,
+        "device": device,
+        "device_name": device_name,
+        "topic_prefix": topic_prefix,
+    }
+
+
+@dataclass
+class _DeviceChannels:
+    name: str
+    prefix: str
+    channels: dict  # role -> channel id
+    frame_id: str
+    warned: set = field(default_factory=set)
+
+
+def _toml(value) -> str:
+    """A scenario's or device's resolved config as TOML text (given as an object or as the text)."""
+    if value is None:
+        return ""
+    return value if isinstance(value, str) else value.to_toml()
+
+
+class McapLogWriter:
+    """Writes a gyroemu log: devices' samples, truth and estimates as ``ros2`` MCAP channels.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write; it appears (atomically) when :meth:`close` succeeds.
+    scenario : Scenario or str, optional
+        The scenario (or its TOML text) for the metadata records.
+    prefix_topics : bool, optional
+        Prefix topics with the device name (``/<device>/imu``). Default: when the first :meth:`write`
+        holds more than one device.
+    chunk_size : int
+        Uncompressed bytes per chunk (default 1 MiB, as the ``mcap`` library).
+    compression_level : int
+        zstd level (default 3, zstd's default).
+
+    Use as a context manager: on an exception inside the block the temporary file is removed and
+    nothing appears at ``path``::
+
+        with McapLogWriter("run.mcap", scenario=scenario) as log:
+            log.write(Recording(samples, truth=truth_series(trajectory, samples), device=device))
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        scenario: Scenario | str | None = None,
+        prefix_topics: bool | None = None,
+        chunk_size: int = 1 << 20,
+        compression_level: int = 3,
+    ) -> None:
+        self.path = Path(path)
+        if not self.path.parent.is_dir():
+            raise FileNotFoundError(f"{self.path.parent} is not a folder")
+        self._tmp = self.path.with_name(f".{self.path.name}.{secrets.token_hex(4)}.tmp")
+        fd = os.open(self._tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)  # mode 0o666 minus umask
+        self._file = os.fdopen(fd, "wb", buffering=1 << 20)
+        try:
+            self._mcap = McapFileWriter(self._file, chunk_size=chunk_size, compression_level=compression_level)
+        except BaseException:
+            self._file.close()
+            self._tmp.unlink(missing_ok=True)
+            raise
+        self._scenario = _toml(scenario)
+        self._prefix = prefix_topics
+        self._devices: dict[str, _DeviceChannels] = {}
+        self._last_time = -1
+        self._closed = False
+
+    def __enter__(self) -> McapLogWriter:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+    # ---------------------------------------------------------------------------------------------
+
+    def _channel(self, device: _DeviceChannels, role: str) -> int:
+        if role not in device.channels:
+            topic = role_topic(role, device.prefix)
+            device.channels[role] = self._mcap.register_ros2_channel(topic, role_message_type(role))
+        return device.channels[role]
+
+    def _device(self, recording: Recording, several: bool) -> _DeviceChannels:
+        name = recording.samples.device
+        if name in self._devices:
+            return self._devices[name]
+        if self._prefix is None:
+            self._prefix = several
+        if self._devices and not self._prefix:
+            raise ValueError(
+                f"a second device ({name!r}) in a log without topic prefixes: "
+                "pass prefix_topics=True to write several devices"
+            )
+        if self._prefix and not is_prefix_name(name):
+            raise ValueError(
+                f"device name {name!r} cannot prefix topics: use letters, digits and '_', "
+                f"starting with a letter, and none of {', '.join(sorted(RESERVED_DEVICE_NAMES))}"
+            )
+        entry = _DeviceChannels(name=name, prefix=f"/{name}" if self._prefix else "", channels={}, frame_id=name)
+        self._devices[name] = entry
+        device = recording.device
+        seed = recording.seed if recording.seed is not None else getattr(device, "seed", None)
+        record = device_metadata(
+            name,
+            entry.prefix,
+            seed="" if seed is None else str(int(seed)),
+            scenario=self._scenario,
+            device=_toml(device),
+        )
+        extra = dict(recording.metadata or {})
+        clash = sorted(set(extra) & set(record))
+        if clash:
+            raise ValueError(f"Recording.metadata may not set the writer's own key(s) {', '.join(clash)}")
+        self._mcap.add_metadata("gyroemu", {**record, **extra})
+        return entry
+
+    def write(self, *recordings: Recording | ImuSamples) -> None:
+        """Append a block: one :class:`Recording` (or bare :class:`ImuSamples`) per device.
+
+        All channels of all devices in one call are interleaved in time order; successive calls must
+        follow each other in time (``ValueError`` otherwise).
+        """
+        if self._closed:
+            raise ValueError(f"{self.path}: the log is closed")
+        block = [r if isinstance(r, Recording) else Recording(samples=r) for r in recordings]
+        names = [r.samples.device for r in block]
+        if len(set(names)) != len(names):
+            raise ValueError(f"one block holds device {max(names, key=names.count)!r} twice")
+        batches = []
+        for recording in block:
+            device = self._device(recording, several=len(block) > 1)
+            batches += self._encode(device, recording)
+        times = [stamps for _, stamps, _ in batches if len(stamps)]
+        if times:
+            first = min(int(stamps.min()) for stamps in times)
+            if first < self._last_time:
+                raise ValueError(
+                    f"this block starts at {first * 1e-9:.9f} s, before the end of the previous "
+                    f"block ({self._last_time * 1e-9:.9f} s): write blocks in time order"
+                )
+            self._mcap.add_messages(batches)
+            self._last_time = max(self._last_time, max(int(stamps.max()) for stamps in times))
+
+    def _encode(self, device: _DeviceChannels, recording: Recording) -> list[tuple]:
+        """``(channel_id, stamp_ns, payloads)`` of every channel of a recording."""
+        samples = recording.samples
+        stamp_ns = _log_stamps(samples.t, "samples.t")
+        if recording.stamp_ns is not None:
+            exact = np.asarray(recording.stamp_ns, dtype=np.int64)
+            if exact.shape != stamp_ns.shape or np.abs(exact - stamp_ns).max(initial=0) > 1000:
+                raise ValueError("stamp_ns must be the samples' stamps (samples.t) in ns")
+            stamp_ns = exact
+        n = len(stamp_ns)
+        batches = []
+        rows = encode_measured(stamp_ns, device.frame_id, samples)
+        batches.append((self._channel(device, IMU_ROLE), stamp_ns, rows))
+        if samples.has_mag or MAG_ROLE in device.channels:
+            rows = encode_mag(stamp_ns, device.frame_id, samples)
+            batches.append((self._channel(device, MAG_ROLE), stamp_ns, rows))
+        for role, what, series in (
+            (TRUTH_ROLE, "truth", recording.truth),
+            (ESTIMATE_ROLE, "estimate", recording.estimate),
+        ):
+            if series is not None:
+                series_ns = _log_stamps(series.t, f"{what}.t")
+                if (
+                    recording.stamp_ns is not None
+                    and len(series_ns) == n
+                    and np.abs(series_ns - stamp_ns).max(initial=0) <= 1000
+                ):
+                    series_ns = stamp_ns
+                rows = encode_series(series_ns, series)
+                batches.append((self._channel(device, role), series_ns, rows))
+        for kind, observables in samples.raw.items():
+            role = raw_role(kind)
+            if role_message_type(role) is None:
+                if kind not in device.warned:
+                    device.warned.add(kind)
+                    warnings.warn(
+                        f"{self.path}: no message type for the raw observables of gyro kind {kind!r}; not recorded",
+                        LogWarning,
+                        stacklevel=3,
+                    )
+                continue
+            mtype, rows, ignored = encode_raw(stamp_ns, device.frame_id, kind, observables)
+            if ignored and kind + "/ignored" not in device.warned:
+                device.warned.add(kind + "/ignored")
+                warnings.warn(
+                    f"{self.path}: {mtype.name} has no field for {', '.join(ignored)}; not recorded",
+                    LogWarning,
+                    stacklevel=3,
+                )
+            batches.append((self._channel(device, role), stamp_ns, rows))
+        if recording.movement is not None:
+            rows = encode_movement(stamp_ns, device.frame_id, recording.movement)
+            batches.append((self._channel(device, MOVEMENT_ROLE), stamp_ns, rows))
+        return batches
+
+    def close(self) -> None:
+        """Finish the file (summary, footer), flush it to disk and move it to :attr:`path`."""
+        if self._closed:
+            return
+        try:
+            self._mcap.finish()
+            self._file.flush()
+            os.fsync(self._file.fileno())
+            self._file.close()
+            os.replace(self._tmp, self.path)
+        except BaseException:
+            self.abort()
+            raise
+        self._closed = True
+
+    def abort(self) -> None:
+        """Drop the temporary file; nothing appears at :attr:`path`."""
+        self._closed = True
+        try:
+            self._file.close()
+        finally:
+            self._tmp.unlink(missing_ok=True)
+
+
+def _log_stamps(t: np.ndarray, what: str) -> np.ndarray:
+    stamp_ns = stamps_to_ns(t)
+    if len(stamp_ns) and stamp_ns.min() < 0:
+        raise ValueError(f"{what} has stamps before 0 s ({stamp_ns.min() * 1e-9:g} s): MCAP log times are unsigned")
+    return stamp_ns
+
+
+def write_mcap(
+    path: str | os.PathLike[str],
+    recordings: ImuSamples | Recording | Sequence[ImuSamples | Recording],
+    *,
+    scenario: Scenario | str | None = None,
+    prefix_topics: bool | None = None,
+    chunk_size: int = 1 << 20,
+    compression_level: int = 3,
+) -> Path:
+    """Write a whole log at once: ``recordings`` is an :class:`ImuSamples`, a :class:`Recording`, or a
+    list of them (one per device). Returns the path written. See :class:`McapLogWriter`."""
+    if isinstance(recordings, (ImuSamples, Recording)):
+        recordings = [recordings]
+    with McapLogWriter(
+        path, scenario=scenario, prefix_topics=prefix_topics, chunk_size=chunk_size, compression_level=compression_level
+    ) as log:
+        log.write(*recordings)
+    return log.path
+
+
+# ==================================================================================================
+# Reading: from channels to devices.
+
+
+def _match(reference_ns: np.ndarray, stamp_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Indices ``(i, j)`` with ``reference_ns[i] == stamp_ns[j]`` (first match of each, in order)."""
+    if len(reference_ns) == len(stamp_ns) and np.array_equal(reference_ns, stamp_ns):
+        index = np.arange(len(stamp_ns))
+        return index, index
+    if not len(stamp_ns):
+        return np.empty(0, np.int64), np.empty(0, np.int64)
+    order = np.argsort(stamp_ns, kind="stable")
+    ordered = stamp_ns[order]
+    position = np.minimum(np.searchsorted(ordered, reference_ns), len(ordered) - 1)
+    i = np.flatnonzero(ordered[position] == reference_ns)
+    return i, order[position[i]]
+
+
+def read_mcap(path: str | os.PathLike[str]) -> McapLog:
+    """Read a ``ros2`` MCAP log: every ``sensor_msgs/msg/Imu`` channel becomes a device's samples.
+
+    Topics named as gyroemu names them (``[/<device>]/imu``, ``/mag``, ``/truth/imu``,
+    ``/estimate/imu``, ``/raw/<kind>``, ``/movement``) are grouped by device; any other Imu topic is a
+    device of its own, named after the topic. Measured samples get the ``/mag`` field (NaN where absent)
+    and the raw observables at their stamps (samples without raw counterparts are dropped, with a
+    warning); ``/movement`` becomes :attr:`DeviceLog.movement` at the same stamps (False, with a warning,
+    where a sample has none).
+
+    Raises
+    ------
+    LogError
+        The file cannot be opened, is not MCAP, is corrupt, or holds no IMU messages (also when it is
+        truncated before the first complete chunk).
+
+    Warns
+    -----
+    LogWarning
+        For channels of types gyroemu does not decode (skipped), and for a truncated file (with the
+        number of messages recovered).
+    """
+    path = Path(path)
+    scan = McapScan(path).run()
+    skipped = dict(scan.skipped)
+
+    if scan.truncated_at is not None:
+        warnings.warn(
+            f"{path}: truncated at byte {scan.truncated_at} (no MCAP footer): recovered "
+            f"{scan.message_count} messages from {scan.chunks} complete chunks",
+            LogWarning,
+            stacklevel=2,
+        )
+    for topic, reason in skipped.items():
+        warnings.warn(f"{path}: skipping topic {topic}: {reason}", LogWarning, stacklevel=2)
+
+    decoded = scan.decode()
+    metadata = [dict(m.metadata) for m in scan.metadata if m.name == "gyroemu"]
+    devices = _devices(path, decoded, metadata, skipped)
+    if not devices:
+        state = (
+            f"; truncated at byte {scan.truncated_at}, {scan.message_count} messages recovered"
+            if scan.truncated_at is not None
+            else ""
+        )
+        raise LogError(
+            f"holds no sensor_msgs/msg/Imu messages ({len(scan.channels)} channels, "
+            f"{scan.message_count} messages{state})",
+            file=path,
+        )
+    return McapLog(
+        path=path,
+        devices=devices,
+        metadata=metadata,
+        profile=scan.profile,
+        message_count=scan.message_count,
+        truncated=scan.truncated_at is not None,
+        skipped=skipped,
+        channels=tuple(scan.channel_info()),
+    )
+
+
+def _devices(path: Path, decoded: dict, metadata: list, skipped: dict) -> dict:
+    """Group decoded channels into devices."""
+    groups: dict[str, dict[str, DecodedChannel]] = {}
+    for d in decoded.values():
+        prefix, role = split_topic(d.topic)
+        if role and not role_accepts(role, d.mtype):
+            role = ""  # e.g. a /raw/x topic of a standard type: take it as a plain topic
+        if not role:
+            if d.mtype is IMU:
+                groups.setdefault(d.topic, {})[IMU_ROLE] = d
+            else:
+                skipped[d.topic] = f"a {d.mtype.name} topic that belongs to no IMU topic"
+                warnings.warn(f"{path}: skipping topic {d.topic}: {skipped[d.topic]}", LogWarning, stacklevel=3)
+            continue
+        groups.setdefault(prefix, {})[role] = d
+    # Truth or estimate without a measured IMU: a device of its own (it holds Imu messages).
+    for prefix in list(groups):
+        group = groups[prefix]
+        if IMU_ROLE not in group:
+            for role in (TRUTH_ROLE, ESTIMATE_ROLE):
+                if role in group:
+                    groups[role_topic(role, prefix)] = {IMU_ROLE: group.pop(role)}
+            for d in group.values():
+                skipped[d.topic] = "no IMU topic of the same device"
+                warnings.warn(f"{path}: skipping topic {d.topic}: {skipped[d.topic]}", LogWarning, stacklevel=3)
+            del groups[prefix]
+    records = {m.get("topic_prefix", ""): m for m in metadata}
+    devices = {}
+    for prefix, group in groups.items():
+        if not len(group[IMU_ROLE].batch):
+            continue
+        meta = records.get(prefix) or (metadata[0] if prefix == "" and len(metadata) == 1 else None)
+        name = (meta or {}).get("device_name") or (prefix.strip("/") or "imu0")
+        device = _device_log(path, name, group, meta)
+        devices[name] = device
+    return devices
+
+
+def _device_log(path: Path, name: str, group: dict, meta: dict | None) -> DeviceLog:
+    imu = group[IMU_ROLE]
+    stamp_ns = imu.batch.stamp_ns
+    keep = np.arange(len(stamp_ns))
+    raw: dict[str, dict[str, np.ndarray]] = {}
+    for role, d in group.items():
+        if raw_kind(role) is not None:
+            i, j = _match(stamp_ns[keep], d.batch.stamp_ns)
+            if len(i) < len(keep):
+                warnings.warn(
+                    f"{path}: {len(keep) - len(i)} samples of {imu.topic} have no message on {d.topic} "
+                    "at their stamp; dropped",
+                    LogWarning,
+                    stacklevel=4,
+                )
+                keep = keep[i]
+                raw = {k: {n: v[i] for n, v in obs.items()} for k, obs in raw.items()}
+            raw[d.mtype.kind] = {n: v[j] for n, v in raw_observables(d.mtype, d.batch).items()}
+    mag = np.full((len(keep), 3), np.nan)
+    if MAG_ROLE in group:
+        d = group[MAG_ROLE]
+        i, j = _match(stamp_ns[keep], d.batch.stamp_ns)
+        mag[i] = d.batch["magnetic_field"][j]
+    movement = None
+    if MOVEMENT_ROLE in group:
+        d = group[MOVEMENT_ROLE]
+        i, j = _match(stamp_ns[keep], d.batch.stamp_ns)
+        movement = np.zeros(len(keep), dtype=bool)
+        movement[i] = d.batch["data"][j]
+        if len(i) < len(keep):
+            warnings.warn(
+                f"{path}: {len(keep) - len(i)} samples of {imu.topic} have no message on {d.topic} "
+                "at their stamp; their movement flag is False",
+                LogWarning,
+                stacklevel=4,
+            )
+    batch = imu.batch
+    samples = ImuSamples(
+        t=ns_to_stamps(stamp_ns[keep]),
+        gyro=batch["angular_velocity"][keep],
+        accel=batch["linear_acceleration"][keep],
+        mag=mag,
+        raw=raw,
+        device=name,
+    )
+    return DeviceLog(
+        name=name,
+        topics={role: d.topic for role, d in group.items()},
+        samples=samples,
+        stamp_ns=stamp_ns[keep],
+        truth=series_from_batch(group[TRUTH_ROLE].batch) if TRUTH_ROLE in group else None,
+        estimate=series_from_batch(group[ESTIMATE_ROLE].batch) if ESTIMATE_ROLE in group else None,
+        metadata=meta,
+        movement=movement,
+    )

@@ -1,0 +1,985 @@
+"""MCAP records: a bulk writer, a scanner and a message walk, for any ``ros2`` MCAP file.
+
+This is the lower of the two MCAP layers. It knows MCAP records (the MCAP specification) and the CDR
+message types of :mod:`gyroemu.pipelines.messages`, but not what gyroemu's channels mean: devices,
+truth, recordings and metadata are :mod:`gyroemu.pipelines.mcap_log`'s, which is built on this module
+(and so is ``gyroemu record``, which copies received bytes into a file with :class:`McapFileWriter`).
+
+Writing
+-------
+:class:`McapFileWriter` takes messages in bulk: per channel an ``(N, size)`` array of serialised
+payloads (:meth:`MessageType.encode`). It builds the MCAP Message records of a block with numpy (one
+structured row per message), interleaves the channels in time order (when the channels share their
+stamps, by concatenating rows: no sort), cuts the result into chunks of ``chunk_size`` uncompressed
+bytes and compresses each with zstd; message indexes follow each chunk, and :meth:`McapFileWriter.finish`
+writes the summary (schemas, channels, statistics, chunk and metadata indexes, summary offsets). The
+small records (header, schemas, channels, metadata, indexes, statistics, summary offsets, footer) are
+``mcap.records`` objects serialised by the ``mcap`` library; Chunk and Message Index records are packed
+here because they carry the bulk. ``mcap.writer.Writer`` is not used for the messages: it costs about
+3 us per message in Python (about 300 k/s for empty payloads on the development machine), which alone
+exceeds the budget of 200 k IMU messages/s with four channels per sample. Channels of the ``ros2``
+profile (:meth:`McapFileWriter.register_ros2_channel`) carry :data:`OFFERED_QOS_PROFILES`.
+
+Reading
+-------
+:class:`McapScan` walks a file record by record, decompresses each chunk, finds its Message records in
+one pass and gathers the payloads of each channel of a type gyroemu decodes (:class:`ChannelData`);
+:meth:`McapScan.decode` turns them into :class:`DecodedChannel` batches in log-time order. Channels of
+other types, encodings or without a schema are noted in :attr:`McapScan.skipped`. A file cut short (a
+recorder killed mid-write, no footer) yields the messages of its complete chunks and says where it was
+cut (:attr:`McapScan.truncated_at`). Files that are not MCAP or are corrupt raise :class:`LogError`,
+which names the file. Inputs are opened read-only.
+
+:func:`iter_mcap_batches` walks the same records but hands out every message (topic, schema name, log
+time, payload bytes) in log-time order, a batch per chunk, for ``gyroemu replay``;
+:func:`mcap_channel_info` lists a file's channels with their schemas.
+
+Sources: MCAP format specification (https://mcap.dev/spec) and its appendix (well-known encodings,
+``ros2`` profile); ``rosbag2_storage_mcap`` (channel metadata ``offered_qos_profiles``).
+"""
+
+from __future__ import annotations
+
+import bisect
+import operator
+import os
+import struct
+import zlib
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
+from io import BytesIO
+from pathlib import Path
+from typing import BinaryIO, NamedTuple
+
+import numpy as np
+import zstandard
+from mcap.data_stream import ReadDataStream, RecordBuilder
+from mcap.opcode import Opcode
+from mcap.records import (
+    Channel,
+    ChunkIndex,
+    DataEnd,
+    Footer,
+    Header,
+    Metadata,
+    MetadataIndex,
+    Schema,
+    Statistics,
+    SummaryOffset,
+)
+
+import gyroemu
+from gyroemu.dynamics import ConfigError
+
+from .messages import DecodedBatch, MessageType, message_type
+
+__all__ = [
+    "MAGIC",
+    "OFFERED_QOS_PROFILES",
+    "LogError",
+    "McapFileWriter",
+    "McapScan",
+    "ChannelData",
+    "DecodedChannel",
+    "McapMessage",
+    "iter_mcap_batches",
+    "ChannelInfo",
+    "mcap_channel_info",
+]
+
+MAGIC = b"\x89MCAP0\r\n"
+"""The 8 bytes that start and end every MCAP file."""
+
+OFFERED_QOS_PROFILES = (
+    "- history: 3\n  depth: 0\n  reliability: 1\n  durability: 2\n"
+    "  deadline:\n    sec: 2147483647\n    nsec: 4294967295\n"
+    "  lifespan:\n    sec: 2147483647\n    nsec: 4294967295\n"
+    "  liveliness: 1\n"
+    "  liveliness_lease_duration:\n    sec: 2147483647\n    nsec: 4294967295\n"
+    "  avoid_ros_namespace_conventions: false\n"
+)
+"""Channel metadata the ``ros2`` profile requires: a reliable, volatile publisher, as rosbag2 (Humble)
+records it, so ``ros2 bag play`` replays gyroemu files with matching QoS."""
+
+
+class LogError(ConfigError):
+    """A log file gyroemu cannot read: not MCAP, corrupt, or without IMU messages.
+
+    A :class:`gyroemu.dynamics.ConfigError` (so a ``ValueError``): ``file`` names the file, ``reason`` says what
+    is wrong, and the command line reports it with exit status 2.
+    """
+
+
+# ==================================================================================================
+# Writing: Message records in bulk.
+
+_MESSAGE_HEAD = 1 + 8 + 2 + 4 + 8 + 8
+"""Bytes of a Message record before its data: opcode, record length, channel id, sequence, log and
+publish time."""
+
+_MESSAGE_FIELDS = np.dtype(
+    {
+        "names": ["channel_id", "sequence", "log_time", "publish_time"],
+        "formats": ["<u2", "<u4", "<u8", "<u8"],
+        "offsets": [0, 2, 6, 14],
+        "itemsize": 22,
+    }
+)
+
+
+def _message_records(channel_id: int, sequence: np.ndarray, log_time: np.ndarray, data: np.ndarray) -> np.ndarray:
+    """MCAP Message records of N payloads of equal size, one per row: (N, 31 + size) uint8.
+
+    Record layout (MCAP spec, "Message", opcode 0x05): opcode u8, record length u64 (= 22 + size),
+    channel_id u16, sequence u32, log_time u64, publish_time u64, then the payload; all little endian.
+    """
+    n, size = data.shape
+    out = np.empty((n, _MESSAGE_HEAD + size), dtype=np.uint8)
+    out[:, _MESSAGE_HEAD:] = data
+    out[:, :11] = np.frombuffer(struct.pack("<BQH", Opcode.MESSAGE, _MESSAGE_HEAD - 9 + size, channel_id), np.uint8)
+    head = out.view(
+        np.dtype(
+            {
+                "names": ["sequence", "log_time", "publish_time"],
+                "formats": ["<u4", "<u8", "<u8"],
+                "offsets": [11, 15, 23],
+                "itemsize": _MESSAGE_HEAD + size,
+            }
+        )
+    )[:, 0]
+    head["sequence"] = sequence
+    head["log_time"] = log_time
+    head["publish_time"] = log_time
+    return out
+
+
+@dataclass
+class _Stream:
+    """Encoded messages of one channel in a block."""
+
+    channel_id: int
+    log_time: np.ndarray  # (N,) uint64
+    records: np.ndarray  # (N, record size) uint8
+
+
+def _no_messages():
+    """``(data, channel_id, log_time, offset)`` of no message (see :func:`_interleave`)."""
+    return np.empty(0, np.uint8), np.empty(0, np.uint16), np.empty(0, np.uint64), np.empty(0, np.int64)
+
+
+def _interleave(streams: Sequence[_Stream]):
+    """Records of several channels in time order (ties: the order of ``streams``).
+
+    Returns ``(data, channel_id, log_time, offset)``: the concatenated records (uint8) and, per message,
+    its channel, log time and offset in ``data``.
+    """
+    streams = [s for s in streams if len(s.log_time)]
+    if not streams:
+        return _no_messages()
+    sizes = np.array([s.records.shape[1] for s in streams], dtype=np.int64)
+    first = streams[0].log_time
+    if all(len(s.log_time) == len(first) and np.array_equal(s.log_time, first) for s in streams[1:]):
+        # Same stamps on every channel: row k of every stream, in stream order, is sample k's group.
+        n, k = len(first), len(streams)
+        data = np.concatenate([s.records for s in streams], axis=1) if k > 1 else streams[0].records
+        data = data.reshape(-1)
+        channel = np.tile(np.array([s.channel_id for s in streams], dtype=np.uint16), n)
+        log_time = np.repeat(first, k)
+        offset = np.concatenate([[0], np.cumsum(np.tile(sizes, n))[:-1]]).astype(np.int64)
+        return data, channel, log_time, offset
+    # General case: a stable sort of every message by time, then a byte gather in pieces.
+    log_time = np.concatenate([s.log_time for s in streams])
+    which = np.repeat(np.arange(len(streams)), [len(s.log_time) for s in streams])
+    row = np.concatenate([np.arange(len(s.log_time)) for s in streams])
+    order = np.argsort(log_time, kind="stable")
+    log_time, which, row = log_time[order], which[order], row[order]
+    size = sizes[which]
+    offset = np.concatenate([[0], np.cumsum(size)[:-1]]).astype(np.int64)
+    source = np.concatenate([s.records.reshape(-1) for s in streams])
+    base = np.concatenate([[0], np.cumsum([s.records.size for s in streams])[:-1]]).astype(np.int64)
+    start = base[which] + row * size
+    data = np.empty(int(size.sum()), dtype=np.uint8)
+    piece = 1 << 16  # messages per gather: bounds the index array
+    for a in range(0, len(order), piece):
+        b = min(a + piece, len(order))
+        lo, hi = offset[a], offset[b - 1] + size[b - 1]
+        index = np.repeat(start[a:b] - offset[a:b], size[a:b]) + np.arange(lo, hi)
+        data[lo:hi] = source[index]
+    channel = np.array([s.channel_id for s in streams], dtype=np.uint16)[which]
+    return data, channel, log_time, offset
+
+
+class McapFileWriter:
+    """An MCAP writer that takes messages in bulk: chunked, zstd, message and chunk indexes, summary.
+
+    Parameters
+    ----------
+    stream : binary file
+        Written sequentially (never seeked).
+    profile : str
+        The Header record's profile.
+    library : str, optional
+        The Header record's library (default ``gyroemu/<version>``).
+    chunk_size : int
+        Uncompressed bytes of records after which a chunk is closed.
+    compression_level : int
+        zstd level.
+    """
+
+    def __init__(
+        self,
+        stream: BinaryIO,
+        *,
+        profile: str = "ros2",
+        library: str | None = None,
+        chunk_size: int = 1 << 20,
+        compression_level: int = 3,
+    ) -> None:
+        self._out = stream
+        self._position = 0
+        self._chunk_size = int(chunk_size)
+        self._compressor = zstandard.ZstdCompressor(level=compression_level)
+        self._schemas: dict[int, Schema] = {}
+        self._schema_ids: dict[tuple, int] = {}
+        self._channels: dict[int, Channel] = {}
+        self._chunk_indexes: list[ChunkIndex] = []
+        self._metadata_indexes: list[MetadataIndex] = []
+        self._message_count = 0
+        self._channel_counts: dict[int, int] = {}
+        self._time_range: list[int] | None = None
+        self._metadata_count = 0
+        self._pending = _no_messages()
+        self._finished = False
+        self._write(MAGIC)
+        self._write_record(Header(profile=profile, library=library or f"gyroemu/{gyroemu.__version__}"))
+
+    # ---------------------------------------------------------------------------------------------
+
+    def _write(self, data: bytes) -> None:
+        self._out.write(data)
+        self._position += len(data)
+
+    def _write_record(self, record) -> int:
+        """Write one ``mcap.records`` record; returns its offset."""
+        builder = RecordBuilder()
+        record.write(builder)
+        data = builder.end()
+        offset = self._position
+        self._write(data)
+        return offset
+
+    def register_schema(self, name: str, encoding: str, data: bytes) -> int:
+        """Schema id of ``name`` (written once)."""
+        key = (name, encoding, bytes(data))
+        if key not in self._schema_ids:
+            schema = Schema(id=len(self._schemas) + 1, name=name, encoding=encoding, data=bytes(data))
+            self._schemas[schema.id] = schema
+            self._schema_ids[key] = schema.id
+            self._write_record(schema)
+        return self._schema_ids[key]
+
+    def register_channel(self, topic: str, message_encoding: str, schema_id: int, metadata: dict | None = None) -> int:
+        """A new channel's id (written before any of its messages)."""
+        channel = Channel(
+            id=len(self._channels) + 1,
+            topic=topic,
+            message_encoding=message_encoding,
+            schema_id=schema_id,
+            metadata=dict(metadata or {}),
+        )
+        self._channels[channel.id] = channel
+        self._channel_counts[channel.id] = 0
+        self._write_record(channel)
+        return channel.id
+
+    def register_ros2_channel(self, topic: str, mtype: MessageType | None, metadata: dict | None = None) -> int:
+        """A new ``cdr`` channel of type ``mtype`` (its ``ros2msg`` schema, registered once; None: no
+        schema) with the ``offered_qos_profiles`` of the ``ros2`` profile, then ``metadata``."""
+        schema_id = 0 if mtype is None else self.register_schema(mtype.name, "ros2msg", mtype.schema.encode())
+        return self.register_channel(
+            topic, "cdr", schema_id, {"offered_qos_profiles": OFFERED_QOS_PROFILES, **(metadata or {})}
+        )
+
+    def add_metadata(self, name: str, data: dict) -> None:
+        """A Metadata record (and its index in the summary)."""
+        offset = self._write_record(Metadata(name=name, metadata={str(k): str(v) for k, v in data.items()}))
+        self._metadata_indexes.append(MetadataIndex(offset=offset, length=self._position - offset, name=name))
+        self._metadata_count += 1
+
+    def add_messages(self, batches: Iterable[tuple[int, np.ndarray, np.ndarray]]) -> None:
+        """Append messages of several channels, interleaved in time order.
+
+        Parameters
+        ----------
+        batches : iterable of (channel_id, log_time_ns, payloads)
+            Per channel: ``log_time_ns`` (N,) non-negative integers, also written as publish time, and
+            ``payloads`` (N, size) uint8, one serialised message per row (e.g. from
+            :meth:`MessageType.encode`, or received bytes stacked with ``np.frombuffer``). Messages with
+            equal times keep the order of ``batches``; sequence numbers continue per channel from 0.
+        """
+        if self._finished:
+            raise ValueError("the MCAP file is finished")
+        checked = []
+        for channel_id, log_time, payloads in batches:  # check everything before changing any state
+            if channel_id not in self._channels:
+                raise ValueError(f"channel {channel_id} is not registered")
+            log_time = np.asarray(log_time, dtype=np.int64).reshape(-1)
+            payloads = np.asarray(payloads, dtype=np.uint8)
+            if payloads.ndim != 2 or len(payloads) != len(log_time):
+                raise ValueError(
+                    f"channel {channel_id}: payloads must be an (N, size) array for {len(log_time)} "
+                    f"log times, got shape {payloads.shape}"
+                )
+            if len(log_time) and log_time.min() < 0:
+                raise ValueError(f"channel {channel_id}: negative log times")
+            checked.append((channel_id, log_time, payloads))
+        streams = []
+        for channel_id, log_time, payloads in checked:
+            first = self._channel_counts[channel_id]
+            sequence = (np.arange(first, first + len(log_time), dtype=np.int64) % (1 << 32)).astype(np.uint32)
+            self._channel_counts[channel_id] += len(log_time)
+            log_time = log_time.astype(np.uint64)
+            streams.append(_Stream(channel_id, log_time, _message_records(channel_id, sequence, log_time, payloads)))
+        data, channel, log_time, offset = _interleave(streams)
+        if not len(log_time):
+            return
+        self._message_count += len(log_time)
+        lo, hi = int(log_time.min()), int(log_time.max())
+        self._time_range = (
+            [lo, hi] if self._time_range is None else [min(self._time_range[0], lo), max(self._time_range[1], hi)]
+        )
+        p_data, p_channel, p_time, p_offset = self._pending
+        if len(p_data):
+            data = np.concatenate([p_data, data])
+            offset = np.concatenate([p_offset, offset + len(p_data)])
+            channel = np.concatenate([p_channel, channel])
+            log_time = np.concatenate([p_time, log_time])
+        # Chunk k holds the messages that start in [k, k + 1) * chunk_size: at most one message over.
+        chunk = offset // self._chunk_size
+        cuts = np.flatnonzero(np.diff(chunk)) + 1
+        bounds = np.concatenate([[0], cuts, [len(offset)]])
+        for a, b in zip(bounds[:-2], bounds[1:-1]):
+            end = offset[b] if b < len(offset) else len(data)
+            self._write_chunk(data[offset[a] : end], channel[a:b], log_time[a:b], offset[a:b] - offset[a])
+        a = bounds[-2]
+        self._pending = (data[offset[a] :].copy(), channel[a:], log_time[a:], offset[a:] - offset[a])
+
+    def _write_chunk(self, records: np.ndarray, channel: np.ndarray, log_time: np.ndarray, offset: np.ndarray) -> None:
+        """One Chunk record (opcode 0x06) and its Message Index records (0x07)."""
+        if not len(channel):
+            return
+        raw = memoryview(np.ascontiguousarray(records))  # type: ignore[arg-type]  # numpy stubs: __buffer__ 3.12+ only
+        compressed = self._compressor.compress(raw)
+        compression = b"zstd"
+        start_time, end_time = int(log_time.min()), int(log_time.max())
+        # Chunk: message_start_time u64, message_end_time u64, uncompressed_size u64,
+        # uncompressed_crc u32, compression string (u32 length + bytes), records (u64 length + bytes).
+        body = 8 + 8 + 8 + 4 + 4 + len(compression) + 8 + len(compressed)
+        head = (
+            struct.pack(
+                "<BQQQQII", Opcode.CHUNK, body, start_time, end_time, len(raw), zlib.crc32(raw), len(compression)
+            )
+            + compression
+            + struct.pack("<Q", len(compressed))
+        )
+        chunk_start = self._position
+        self._write(head)
+        self._write(compressed)
+        chunk_length = self._position - chunk_start
+        # Message Index per channel: channel_id u16, records (u32 byte length + (log_time u64, offset u64)...).
+        index_start = self._position
+        index_offsets = {}
+        channels, first = np.unique(channel, return_index=True)
+        for c in channels[np.argsort(first)]:
+            mask = channel == c
+            entries = np.empty((int(mask.sum()), 2), dtype="<u8")
+            entries[:, 0] = log_time[mask]
+            entries[:, 1] = offset[mask]
+            index_offsets[int(c)] = self._position
+            self._write(struct.pack("<BQHI", Opcode.MESSAGE_INDEX, 2 + 4 + entries.nbytes, int(c), entries.nbytes))
+            self._write(entries.tobytes())
+        self._chunk_indexes.append(
+            ChunkIndex(
+                message_start_time=start_time,
+                message_end_time=end_time,
+                chunk_start_offset=chunk_start,
+                chunk_length=chunk_length,
+                message_index_offsets=index_offsets,
+                message_index_length=self._position - index_start,
+                compression=compression.decode(),
+                compressed_size=len(compressed),
+                uncompressed_size=len(raw),
+            )
+        )
+
+    def finish(self) -> None:
+        """Close the last chunk; write Data End, the summary section, its offsets, Footer and magic."""
+        if self._finished:
+            return
+        data, channel, log_time, offset = self._pending
+        self._write_chunk(data, channel, log_time, offset)
+        self._pending = _no_messages()
+        self._write_record(DataEnd(data_section_crc=0))
+        summary_start = self._position
+        builder = RecordBuilder()
+        groups = []
+
+        def group(opcode, records):
+            start = builder.count
+            for record in records:
+                record.write(builder)
+            groups.append(
+                SummaryOffset(
+                    group_opcode=opcode, group_start=summary_start + start, group_length=builder.count - start
+                )
+            )
+
+        start, end = self._time_range or (0, 0)
+        group(Opcode.SCHEMA, self._schemas.values())
+        group(Opcode.CHANNEL, self._channels.values())
+        group(
+            Opcode.STATISTICS,
+            [
+                Statistics(
+                    message_count=self._message_count,
+                    schema_count=len(self._schemas),
+                    channel_count=len(self._channels),
+                    attachment_count=0,
+                    metadata_count=self._metadata_count,
+                    chunk_count=len(self._chunk_indexes),
+                    message_start_time=start,
+                    message_end_time=end,
+                    channel_message_counts=dict(self._channel_counts),
+                )
+            ],
+        )
+        group(Opcode.CHUNK_INDEX, self._chunk_indexes)
+        group(Opcode.METADATA_INDEX, self._metadata_indexes)
+        summary_offset_start = summary_start + builder.count
+        for offset_record in groups:
+            offset_record.write(builder)
+        summary = builder.end()
+        crc = zlib.crc32(summary)
+        crc = zlib.crc32(struct.pack("<BQQQ", Opcode.FOOTER, 8 + 8 + 4, summary_start, summary_offset_start), crc)
+        self._write(summary)
+        self._write_record(
+            Footer(summary_start=summary_start, summary_offset_start=summary_offset_start, summary_crc=crc)
+        )
+        self._write(MAGIC)
+        self._finished = True
+
+
+# ==================================================================================================
+# Reading: a scan that gathers channels, a walk that hands out messages.
+
+_RECORD_HEAD = struct.Struct("<BQ")
+_CHUNK_HEAD = struct.Struct("<QQQII")  # start, end, uncompressed size, crc, compression length
+
+
+@dataclass
+class ChannelData:
+    """Messages of one channel gathered while scanning: blocks of equal-length payloads."""
+
+    channel: Channel
+    mtype: MessageType | None = None  # None: not decoded
+    order: list = field(default_factory=list)  # global message ordinal per block
+    header: list = field(default_factory=list)  # _MESSAGE_FIELDS arrays
+    payload: list = field(default_factory=list)  # (m, L) uint8
+    loose: list = field(default_factory=list)  # messages outside chunks: (ordinal, (1,) fields, bytes)
+
+
+@dataclass
+class DecodedChannel:
+    """A channel's messages decoded (:meth:`McapScan.decode`), in log-time order."""
+
+    topic: str
+    mtype: MessageType
+    log_time: np.ndarray  # (N,) uint64, ns
+    batch: DecodedBatch
+
+
+class McapScan:
+    """A pass over an MCAP file: schemas, channels, metadata and the messages of the channels gyroemu
+    decodes (see the module's notes). :meth:`run` reads the whole file, :meth:`walk` a record at a time.
+
+    Attributes
+    ----------
+    path : Path
+    profile : str
+        The Header record's profile.
+    schemas, channels : dict of int to mcap.records.Schema, Channel
+        By id, in file order.
+    metadata : list of mcap.records.Metadata
+    data : dict of int to ChannelData
+        Per channel id, its gathered messages.
+    skipped : dict of str to str
+        Topics not gathered, with the reason.
+    message_count, chunks : int
+        Messages (every channel) and complete chunks read.
+    truncated_at : int or None
+        The byte offset where a file without footer ends.
+    footer : bool
+        The footer and closing magic were read.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.profile = ""
+        self.schemas: dict[int, Schema] = {}
+        self.channels: dict[int, Channel] = {}
+        self.metadata: list[Metadata] = []
+        self.data: dict[int, ChannelData] = {}
+        self.skipped: dict[str, str] = {}
+        self.message_count = 0
+        self.chunks = 0
+        self.truncated_at: int | None = None
+        self.footer = False
+
+    def error(self, reason: str) -> LogError:
+        """A :class:`LogError` about this file."""
+        return LogError(reason, file=self.path)
+
+    def run(self) -> McapScan:
+        """Walk the whole file; returns the scan."""
+        for _ in self.walk():
+            pass
+        return self
+
+    def decode(self) -> dict[int, DecodedChannel]:
+        """Channel id -> the channel's gathered messages decoded, for every channel of a type gyroemu
+        decodes that has messages (:class:`LogError` for a message its type cannot decode)."""
+        decoded: dict[int, DecodedChannel] = {}
+        for channel_id, data in self.data.items():
+            if data.mtype is not None and (data.payload or data.loose):
+                decoded[channel_id] = _decode_channel(self.path, data, data.mtype)
+        return decoded
+
+    def channel_info(self) -> list[ChannelInfo]:
+        """The channels found, with their schemas, in file order."""
+        out = []
+        for c in self.channels.values():
+            schema = self.schemas.get(c.schema_id)
+            out.append(
+                ChannelInfo(
+                    c.topic,
+                    c.message_encoding,
+                    schema.name if schema else "",
+                    schema.encoding if schema else "",
+                    bytes(schema.data) if schema else b"",
+                    dict(c.metadata),
+                )
+            )
+        return out
+
+    def walk(self) -> Iterator[int]:
+        """Read the file record by record (chunks decompressed and handled whole), yielding after each."""
+        try:
+            f = open(self.path, "rb")
+        except IsADirectoryError:
+            raise self.error("is a folder, not an MCAP file") from None
+        except OSError as e:
+            raise self.error(f"cannot open: {e.strerror or e}") from None
+        with f:
+            size = os.fstat(f.fileno()).st_size
+            if f.read(8) != MAGIC:
+                raise self.error("not an MCAP file (it does not start with the MCAP magic bytes)")
+            position = 8
+            while True:
+                if position == size:
+                    self.truncated_at = position
+                    break
+                head = f.read(9)
+                if len(head) < 9:
+                    self.truncated_at = position
+                    break
+                opcode, length = _RECORD_HEAD.unpack(head)
+                if length > size - position - 9:
+                    self.truncated_at = position
+                    break
+                content = f.read(length)
+                try:
+                    self._record(opcode, content, position)
+                except LogError:
+                    raise
+                except (ValueError, struct.error, UnicodeDecodeError, IndexError, KeyError) as e:
+                    raise self.error(f"corrupt {_opcode_name(opcode)} record at byte {position}: {e}") from None
+                position += 9 + length
+                if opcode == Opcode.FOOTER:
+                    if f.read(8) != MAGIC:
+                        self.truncated_at = position
+                    else:
+                        self.footer = True
+                    break
+                yield opcode
+
+    def _record(self, opcode: int, content: bytes, position: int) -> None:
+        if opcode == Opcode.HEADER:
+            self.profile = Header.read(ReadDataStream(BytesIO(content))).profile
+        elif opcode == Opcode.SCHEMA:
+            schema = Schema.read(ReadDataStream(BytesIO(content)))
+            self.schemas[schema.id] = schema
+        elif opcode == Opcode.CHANNEL:
+            self._channel(Channel.read(ReadDataStream(BytesIO(content))))
+        elif opcode == Opcode.CHUNK:
+            self._chunk(content, position)
+        elif opcode == Opcode.MESSAGE:
+            self._loose_message(content)
+        elif opcode == Opcode.METADATA:
+            self.metadata.append(Metadata.read(ReadDataStream(BytesIO(content))))
+
+    def _channel(self, channel: Channel) -> None:
+        """Register a channel (once: the summary repeats them) and decide whether to decode it."""
+        if channel.id in self.channels:
+            return
+        self.channels[channel.id] = channel
+        schema = self.schemas.get(channel.schema_id)
+        mtype = message_type(schema.name) if schema is not None else None
+        if schema is None:
+            reason = "no schema"
+        elif channel.message_encoding != "cdr":
+            reason = f"message encoding {channel.message_encoding!r}, not cdr"
+        elif mtype is None:
+            reason = f"type {schema.name} is not one gyroemu decodes"
+        else:
+            reason = ""
+        if reason:
+            self.skipped[channel.topic] = reason
+        self.data[channel.id] = ChannelData(channel, mtype=None if reason else mtype)
+
+    def _loose_fields(self, content: bytes) -> tuple[np.ndarray, int]:
+        """The fixed fields (``(1,)`` :data:`_MESSAGE_FIELDS`) and channel id of a Message record outside chunks."""
+        if len(content) < 22:
+            raise ValueError("a Message record shorter than its fixed fields")
+        fields = np.frombuffer(content[:22], dtype=_MESSAGE_FIELDS)
+        channel_id = int(fields["channel_id"][0])
+        if channel_id not in self.data:
+            raise ValueError(f"a message on channel {channel_id}, which no Channel record defines")
+        return fields, channel_id
+
+    def _loose_message(self, content: bytes) -> None:
+        fields, channel_id = self._loose_fields(content)
+        if self.data[channel_id].mtype is not None:
+            self.data[channel_id].loose.append((self.message_count, fields, content[22:]))
+        self.message_count += 1
+
+    def _chunk(self, content: bytes, position: int) -> None:
+        start, end, usize, crc, clen = _CHUNK_HEAD.unpack_from(content, 0)
+        p = _CHUNK_HEAD.size
+        compression = content[p : p + clen].decode()
+        p += clen
+        (rlen,) = struct.unpack_from("<Q", content, p)
+        p += 8
+        if p + rlen > len(content):
+            raise ValueError("its records run past its end")
+        packed = memoryview(content)[p : p + rlen]
+        try:
+            if compression == "zstd":
+                data = zstandard.ZstdDecompressor().decompress(packed, max_output_size=usize)
+            elif compression == "lz4":
+                import lz4.frame
+
+                data = lz4.frame.decompress(packed)
+            elif compression == "":
+                data = bytes(packed)
+            else:
+                raise self.error(f"chunk at byte {position}: unknown compression {compression!r}")
+        except zstandard.ZstdError as e:
+            raise self.error(f"corrupt chunk at byte {position}: {e}") from None
+        if len(data) != usize:
+            raise self.error(
+                f"corrupt chunk at byte {position}: {len(data)} bytes after decompression, {usize} declared"
+            )
+        if crc and zlib.crc32(data) != crc:
+            raise self.error(f"corrupt chunk at byte {position}: CRC mismatch")
+        self._chunk_records(data, position)
+        self.chunks += 1
+
+    def _chunk_records(self, data: bytes, position: int) -> None:
+        """Read the Schema and Channel records of a decompressed chunk, then hand its Message records'
+        fixed fields (``header``), starts and lengths to :meth:`_chunk_messages`."""
+        buffer = np.frombuffer(data, dtype=np.uint8)
+        try:
+            starts, opcodes, lengths = _record_positions(data, buffer)
+        except ValueError as e:
+            raise self.error(f"corrupt chunk at byte {position}: {e}") from None
+        for index in np.flatnonzero(opcodes != Opcode.MESSAGE):
+            p, q = int(starts[index]) + 9, int(starts[index] + 9 + lengths[index])
+            if opcodes[index] == Opcode.SCHEMA:
+                schema = Schema.read(ReadDataStream(BytesIO(data[p:q])))
+                self.schemas[schema.id] = schema
+            elif opcodes[index] == Opcode.CHANNEL:
+                self._channel(Channel.read(ReadDataStream(BytesIO(data[p:q]))))
+        is_message = opcodes == Opcode.MESSAGE
+        starts, lengths = starts[is_message], lengths[is_message]
+        if not len(starts):
+            return
+        if lengths.min() < 22:
+            raise self.error(f"corrupt chunk at byte {position}: a Message record shorter than its fixed fields")
+        header = _gather(buffer, starts + 9, 22).view(_MESSAGE_FIELDS)[:, 0]
+        self._chunk_messages(data, buffer, header, starts, lengths, position)
+
+    def _chunk_messages(self, data, buffer, header, starts, lengths, position) -> None:
+        """Gather each wanted channel's payloads, in bulk."""
+        ordinal = self.message_count + np.arange(len(starts))
+        self.message_count += len(starts)
+        channel_ids = header["channel_id"]
+        for channel_id in np.unique(channel_ids):
+            target = self.data.get(int(channel_id))
+            if target is None:
+                raise self.error(
+                    f"corrupt chunk at byte {position}: a message on channel {int(channel_id)}, "
+                    "which no Channel record defines"
+                )
+            if target.mtype is None:
+                continue
+            mine = np.flatnonzero(channel_ids == channel_id)
+            payload_length = lengths[mine] - 22
+            distinct = np.unique(payload_length)
+            for length in distinct:
+                sub = mine if len(distinct) == 1 else mine[payload_length == length]
+                target.order.append(ordinal[sub])
+                target.header.append(header[sub])
+                target.payload.append(_gather(buffer, starts[sub] + 9 + 22, int(length)))
+
+
+def _record_positions(data: bytes, buffer: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Start offset, opcode and content length of every record in a decompressed chunk.
+
+    Records follow each other (opcode u8, length u64, content), so finding them is a walk. It runs in
+    Python until the last few records repeat a pattern (a sample's group of channels: the same opcodes
+    and lengths every P records, B bytes); then it predicts the following records' positions a whole
+    array at a time and checks each predicted opcode and length. Every checked record proves where the
+    next one starts, so the accepted run is exact; the walk resumes after the first mismatch.
+    """
+    unpack = _RECORD_HEAD.unpack_from
+    size = len(data)
+    starts, opcodes, lengths = [], [], []
+    p = 0
+    while p < size:
+        walked_p, walked_op, walked_len = [], [], []
+        for _ in range(32):
+            if p >= size:
+                break
+            if size - p < 9:
+                raise ValueError("a partial record at its end")
+            opcode, length = unpack(data, p)
+            if length > size - p - 9:
+                raise ValueError("a record runs past its end")
+            walked_p.append(p)
+            walked_op.append(opcode)
+            walked_len.append(length)
+            p += 9 + length
+        starts.append(np.array(walked_p, dtype=np.int64))
+        opcodes.append(np.array(walked_op, dtype=np.uint8))
+        lengths.append(np.array(walked_len, dtype=np.int64))
+        if p >= size:
+            break
+        period = next(
+            (
+                k
+                for k in range(1, 9)
+                if 2 * k <= len(walked_p)
+                and walked_len[-k:] == walked_len[-2 * k : -k]
+                and walked_op[-k:] == walked_op[-2 * k : -k]
+            ),
+            None,
+        )
+        if period is None:
+            continue
+        pattern_op = np.array(walked_op[-period:], dtype=np.uint8)
+        pattern_len = np.array(walked_len[-period:], dtype=np.int64)
+        within = np.concatenate([[0], np.cumsum(9 + pattern_len)[:-1]])
+        stride = int(np.sum(9 + pattern_len))
+        repeats = (size - p) // stride
+        if repeats == 0:
+            continue
+        predicted = p + np.arange(repeats, dtype=np.int64)[:, None] * stride + within  # (repeats, period)
+        found_op = buffer[predicted]
+        found_len = buffer[(predicted + 1)[..., None] + np.arange(8)].view("<u8")[..., 0].astype(np.int64)
+        good = np.all((found_op == pattern_op) & (found_len == pattern_len), axis=1)
+        accepted = int(np.argmin(good)) if not good.all() else repeats
+        if accepted:
+            starts.append(predicted[:accepted].reshape(-1))
+            opcodes.append(np.tile(pattern_op, accepted))
+            lengths.append(np.tile(pattern_len, accepted))
+            p += accepted * stride
+    if not starts:
+        return np.empty(0, np.int64), np.empty(0, np.uint8), np.empty(0, np.int64)
+    return np.concatenate(starts), np.concatenate(opcodes), np.concatenate(lengths)
+
+
+def _gather(buffer: np.ndarray, starts: np.ndarray, width: int) -> np.ndarray:
+    """Rows ``buffer[s:s + width]`` for each start ``s``: (M, width) uint8, a copy. Equally spaced
+    starts (the usual case inside a chunk of interleaved channels) are taken with one strided copy."""
+    m = len(starts)
+    if m == 0:
+        return np.empty((0, width), np.uint8)
+    if m > 1:
+        step = starts[1] - starts[0]
+        if step >= width and np.all(np.diff(starts) == step):
+            view = np.lib.stride_tricks.as_strided(buffer[starts[0] :], shape=(m, width), strides=(int(step), 1))
+            return view.copy()
+    return buffer[starts[:, None] + np.arange(width)]
+
+
+def _opcode_name(opcode: int) -> str:
+    try:
+        return Opcode(opcode).name.title().replace("_", " ")
+    except ValueError:
+        return f"opcode 0x{opcode:02x}"
+
+
+def _decode_channel(path: Path, data: ChannelData, mtype: MessageType) -> DecodedChannel:
+    """All messages of a channel, decoded, in log-time order (file order for equal times)."""
+    orders, headers, batches = [], [], []
+    by_width: dict[int, list] = {}
+    for order, header, payload in zip(data.order, data.header, data.payload):
+        by_width.setdefault(payload.shape[1], []).append((order, header, payload))
+    for ordinal, fields, payload in data.loose:
+        by_width.setdefault(len(payload), []).append(
+            (np.array([ordinal]), fields, np.frombuffer(payload, np.uint8)[None, :])
+        )
+    for blocks in by_width.values():
+        rows = np.concatenate([b[2] for b in blocks]) if len(blocks) > 1 else blocks[0][2]
+        try:
+            batches.append(mtype.decode(rows))
+        except ValueError as e:
+            raise LogError(f"topic {data.channel.topic}: corrupt {mtype.name} message: {e}", file=path) from None
+        orders.append(np.concatenate([b[0] for b in blocks]))
+        headers.append(np.concatenate([b[1] for b in blocks]))
+    order = np.concatenate(orders) if len(orders) > 1 else orders[0]
+    header = np.concatenate(headers) if len(headers) > 1 else headers[0]
+    batch = (
+        batches[0]
+        if len(batches) == 1
+        else DecodedBatch(
+            stamp_ns=np.concatenate([b.stamp_ns for b in batches]),
+            frame_id=np.concatenate([b.frame_id for b in batches]),
+            fields={name: np.concatenate([b.fields[name] for b in batches]) for name in batches[0].fields},
+        )
+    )
+    log_time = header["log_time"].astype(np.uint64)
+    # File order, then a stable sort by log time (both no-ops for files gyroemu writes).
+    index = None if np.all(np.diff(order) > 0) else np.argsort(order, kind="stable")
+    ordered = log_time if index is None else log_time[index]
+    if np.any(ordered[1:] < ordered[:-1]):
+        by_time = np.argsort(ordered, kind="stable")
+        index = by_time if index is None else index[by_time]
+    if index is not None:
+        log_time = log_time[index]
+        batch = DecodedBatch(
+            stamp_ns=batch.stamp_ns[index],
+            frame_id=batch.frame_id[index],
+            fields={k: v[index] for k, v in batch.fields.items()},
+        )
+    return DecodedChannel(topic=data.channel.topic, mtype=mtype, log_time=log_time, batch=batch)
+
+
+# -- message by message, in log-time order (replay) -------------------------------------------------
+
+
+class McapMessage(NamedTuple):
+    """One message as recorded: its channel's topic and schema name, ``log_time`` (ns), payload bytes."""
+
+    topic: str
+    schema: str
+    log_time: int
+    data: bytes
+
+
+class _MessageWalk(McapScan):
+    """A :class:`McapScan` that hands out each record's messages (of the wanted topics) instead of gathering
+    channel arrays; Schema and Channel records are registered as the scan does."""
+
+    def __init__(self, path: Path, topics: Iterable[str] | None = None) -> None:
+        super().__init__(path)
+        self.topics = None if topics is None else frozenset(topics)
+        self.out: list[McapMessage] = []
+        self.wanted: dict[int, tuple[str, str] | None] = {}  # channel id -> (topic, schema name) or None
+
+    def _channel(self, channel: Channel) -> None:
+        if channel.id in self.channels:
+            return
+        self.channels[channel.id] = channel
+        self.data[channel.id] = ChannelData(channel)  # mtype None: nothing gathered
+        schema = self.schemas.get(channel.schema_id)
+        keep = self.topics is None or channel.topic in self.topics
+        self.wanted[channel.id] = (channel.topic, schema.name if schema is not None else "") if keep else None
+
+    def _loose_message(self, content: bytes) -> None:
+        fields, channel_id = self._loose_fields(content)
+        self.message_count += 1
+        wanted = self.wanted[channel_id]
+        if wanted is not None:
+            self.out.append(McapMessage(wanted[0], wanted[1], int(fields["log_time"][0]), bytes(content[22:])))
+
+    def _chunk_messages(self, data, buffer, header, starts, lengths, position) -> None:
+        """Hand out each wanted message as its own :class:`McapMessage`, in file order."""
+        self.message_count += len(starts)
+        unknown = [int(c) for c in np.unique(header["channel_id"]) if int(c) not in self.wanted]
+        if unknown:
+            raise self.error(
+                f"corrupt chunk at byte {position}: a message on channel {unknown[0]}, which no Channel record defines"
+            )
+        wanted = self.wanted
+        out = self.out
+        for channel_id, log_time, start, length in zip(
+            header["channel_id"].tolist(),
+            header["log_time"].tolist(),
+            (starts + 9 + 22).tolist(),
+            (lengths - 22).tolist(),
+        ):
+            w = wanted[channel_id]
+            if w is not None:
+                out.append(McapMessage(w[0], w[1], log_time, data[start : start + length]))
+
+
+def iter_mcap_batches(path: str | os.PathLike[str], topics: Iterable[str] | None = None) -> Iterator[list[McapMessage]]:
+    """The messages of an MCAP file (of ``topics`` only, when given), in log-time order, a batch per chunk.
+
+    The file is read record by record (one decompressed chunk in memory at a time, plus what is held
+    back for ordering): each chunk's messages are sorted by log time (stable: file order for equal
+    times) and merged with those held back; the messages earlier than the start of the chunk just
+    read are handed out. So files whose chunks start in time order (what writers that log as they go
+    produce; gyroemu's chunks do not even overlap) come out in exact log-time order with one chunk of
+    look-ahead. A file cut short ends with the messages of its complete chunks. Raises
+    :class:`LogError` (naming the file) for a file that is not MCAP or is corrupt.
+    The input is opened read-only.
+    """
+    walk = _MessageWalk(Path(path), topics)
+    held: list[McapMessage] = []
+    by_time = operator.attrgetter("log_time")
+    for _ in walk.walk():
+        if not walk.out:
+            continue
+        batch, walk.out = walk.out, []
+        batch.sort(key=by_time)
+        threshold = batch[0].log_time
+        overlap = held and held[-1].log_time > threshold
+        held.extend(batch)
+        if overlap:
+            held.sort(key=by_time)  # two sorted runs: a linear merge for timsort
+        cut = bisect.bisect_left(held, threshold, key=by_time)
+        if cut:
+            yield held[:cut]
+            held = held[cut:]
+    if held:
+        yield held
+
+
+class ChannelInfo(NamedTuple):
+    """A channel of an MCAP file with its schema (what ``gyroemu replay --ros2`` needs to name its type)."""
+
+    topic: str
+    message_encoding: str
+    schema_name: str  # '' when the channel has no schema
+    schema_encoding: str
+    schema_data: bytes
+    metadata: dict
+
+
+def mcap_channel_info(path: str | os.PathLike[str]) -> list[ChannelInfo]:
+    """Every channel of an MCAP file with its schema record and metadata, in file order (a pass that
+    decodes no message; :attr:`gyroemu.pipelines.mcap_log.McapLog.channels` holds the same). Raises
+    :class:`LogError` for a file that is not MCAP or is corrupt."""
+    return _MessageWalk(Path(path), topics=()).run().channel_info()
