@@ -13,6 +13,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from gyroemu.errors import GyroemuError
+
 __all__ = ["main"]
 
 
@@ -406,7 +408,6 @@ def _cmd_record(args) -> int:
 
 
 def _cmd_replay(args) -> int:
-    from gyroemu.dynamics import ConfigError
 
     from .replay import run_replay
 
@@ -421,8 +422,8 @@ def _cmd_replay(args) -> int:
             **_zenoh_options(args),
             **_ros2_options(args),
         )
-    except ConfigError:
-        raise  # LogError: names the file
+    except GyroemuError:
+        raise  # a LogError: names the file
     except ValueError as e:
         raise _argument_error(e, "--connect/--listen") from None
 
@@ -724,12 +725,7 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # the reader went away (`gyroemu info run.mcap | head`): stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-    except ValueError as e:
-        # Bad input (a config, a log): imported here, where the library that raised it is loaded already.
-        from gyroemu.dynamics.config import ConfigError
-
-        if not isinstance(e, ConfigError):
-            raise
+    except GyroemuError as e:  # bad input (a config, a log): the message names the file and key
         print(f"gyroemu {args.command}: error: {e}", file=sys.stderr)
         return 2
 

@@ -69,7 +69,7 @@ from mcap.records import (
 )
 
 import gyroemu
-from gyroemu.dynamics import ConfigError
+from gyroemu.errors import LogError
 
 from .messages import DecodedBatch, MessageType, message_type
 
@@ -100,14 +100,6 @@ OFFERED_QOS_PROFILES = (
 )
 """Channel metadata the ``ros2`` profile requires: a reliable, volatile publisher, as rosbag2 (Humble)
 records it, so ``ros2 bag play`` replays gyroemu files with matching QoS."""
-
-
-class LogError(ConfigError):
-    """A log file gyroemu cannot read: not MCAP, corrupt, or without IMU messages.
-
-    A :class:`gyroemu.dynamics.ConfigError` (so a ``ValueError``): ``file`` names the file, ``reason`` says what
-    is wrong, and the command line reports it with exit status 2.
-    """
 
 
 # ==================================================================================================
@@ -535,9 +527,9 @@ class McapScan:
         self.truncated_at: int | None = None
         self.footer = False
 
-    def error(self, reason: str) -> LogError:
-        """A :class:`LogError` about this file."""
-        return LogError(reason, file=self.path)
+    def error(self, reason: str, offset: int | None = None) -> LogError:
+        """A :class:`LogError` about this file (``offset``: the byte of the record at fault)."""
+        return LogError(reason, file=self.path, offset=offset)
 
     def run(self) -> McapScan:
         """Walk the whole file; returns the scan."""
@@ -602,7 +594,9 @@ class McapScan:
                 except LogError:
                     raise
                 except (ValueError, struct.error, UnicodeDecodeError, IndexError, KeyError) as e:
-                    raise self.error(f"corrupt {_opcode_name(opcode)} record at byte {position}: {e}") from None
+                    raise self.error(
+                        f"corrupt {_opcode_name(opcode)} record at byte {position}: {e}", position
+                    ) from None
                 position += 9 + length
                 if opcode == Opcode.FOOTER:
                     if f.read(8) != MAGIC:
@@ -682,15 +676,15 @@ class McapScan:
             elif compression == "":
                 data = bytes(packed)
             else:
-                raise self.error(f"chunk at byte {position}: unknown compression {compression!r}")
+                raise self.error(f"chunk at byte {position}: unknown compression {compression!r}", position)
         except zstandard.ZstdError as e:
-            raise self.error(f"corrupt chunk at byte {position}: {e}") from None
+            raise self.error(f"corrupt chunk at byte {position}: {e}", position) from None
         if len(data) != usize:
             raise self.error(
-                f"corrupt chunk at byte {position}: {len(data)} bytes after decompression, {usize} declared"
+                f"corrupt chunk at byte {position}: {len(data)} bytes after decompression, {usize} declared", position
             )
         if crc and zlib.crc32(data) != crc:
-            raise self.error(f"corrupt chunk at byte {position}: CRC mismatch")
+            raise self.error(f"corrupt chunk at byte {position}: CRC mismatch", position)
         self._chunk_records(data, position)
         self.chunks += 1
 
@@ -701,7 +695,7 @@ class McapScan:
         try:
             starts, opcodes, lengths = _record_positions(data, buffer)
         except ValueError as e:
-            raise self.error(f"corrupt chunk at byte {position}: {e}") from None
+            raise self.error(f"corrupt chunk at byte {position}: {e}", position) from None
         for index in np.flatnonzero(opcodes != Opcode.MESSAGE):
             p, q = int(starts[index]) + 9, int(starts[index] + 9 + lengths[index])
             if opcodes[index] == Opcode.SCHEMA:
@@ -714,7 +708,9 @@ class McapScan:
         if not len(starts):
             return
         if lengths.min() < 22:
-            raise self.error(f"corrupt chunk at byte {position}: a Message record shorter than its fixed fields")
+            raise self.error(
+                f"corrupt chunk at byte {position}: a Message record shorter than its fixed fields", position
+            )
         header = _gather(buffer, starts + 9, 22).view(_MESSAGE_FIELDS)[:, 0]
         self._chunk_messages(data, buffer, header, starts, lengths, position)
 
@@ -728,7 +724,8 @@ class McapScan:
             if target is None:
                 raise self.error(
                     f"corrupt chunk at byte {position}: a message on channel {int(channel_id)}, "
-                    "which no Channel record defines"
+                    "which no Channel record defines",
+                    position,
                 )
             if target.mtype is None:
                 continue
@@ -919,7 +916,8 @@ class _MessageWalk(McapScan):
         unknown = [int(c) for c in np.unique(header["channel_id"]) if int(c) not in self.wanted]
         if unknown:
             raise self.error(
-                f"corrupt chunk at byte {position}: a message on channel {unknown[0]}, which no Channel record defines"
+                f"corrupt chunk at byte {position}: a message on channel {unknown[0]}, which no Channel record defines",
+                position,
             )
         wanted = self.wanted
         out = self.out

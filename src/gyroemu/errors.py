@@ -3,7 +3,7 @@
 - :class:`GyroemuError`: the base of every error gyroemu raises about its input;
 - :class:`ConfigError`: a config file, key or value (``.file``, ``.key``);
 - :class:`LogError`: a log file that cannot be read (``.file``, and where known ``.offset``, the byte
-  offset of the record at fault).
+  offset of the record at fault; a log error is not a config error).
 
 Both are also ``ValueError``\\ s, as they were before this module existed, so code that caught a bad
 value still catches them.
@@ -67,8 +67,5 @@ class LogError(GyroemuError, ValueError):
     """
 
     def __init__(self, reason: str, *, file: str | Path | None = None, offset: int | None = None) -> None:
-        self.offset = offset
+        self.offset = offset  # the reason says it in words too ("corrupt chunk at byte 1234")
         super().__init__(reason, file=file)
-
-    def _where(self) -> list[str]:
-        return super()._where() + ([f"byte {self.offset}"] if self.offset is not None else [])

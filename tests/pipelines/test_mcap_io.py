@@ -29,6 +29,7 @@ from mcap_ros2.writer import Writer as Ros2McapWriter
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from gyroemu.dynamics import ConfigError, load_scenario
+from gyroemu.errors import GyroemuError
 from gyroemu.pipelines.channels import BODY_FRAME, ImuSeries
 from gyroemu.pipelines.mcap_log import LogWarning, McapLogWriter, Recording, read_mcap, truth_series, write_mcap
 from gyroemu.pipelines.mcap_records import LogError
@@ -562,7 +563,8 @@ def test_unreadable_files_raise_log_error_naming_the_file(tmp_path, runs, case):
         with pytest.raises(LogError, match=match) as e:
             read_mcap(path)
     assert e.value.file == str(path) and str(path) in str(e.value)
-    assert isinstance(e.value, ConfigError) and isinstance(e.value, ValueError)
+    assert isinstance(e.value, GyroemuError) and isinstance(e.value, ValueError)
+    assert not isinstance(e.value, ConfigError)  # a log is not a config
     if before is not None:
         assert file_digest(path) == before
 
