@@ -1,5 +1,8 @@
 """``gyroemu allan``: fit the IEEE 952 noise terms to a static gyro log and draw the Allan plot.
 
+:func:`allan_of_log` reads the log (an .mcap, or an .npz of ``gyroemu simulate``) and fits it;
+:func:`write_allan_plot` draws the plot.
+
 The fit is :func:`gyroemu.sensors.allan.fit_allan` over ``allantools``' overlapping Allan deviation, axis by
 axis. The plot shows each axis's measured curve with its confidence band, the fitted model, and,
 when the log carries its device's config, the specification's lines (quantisation, ARW, bias
@@ -8,6 +11,7 @@ instability floor, RRW) beside them.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
@@ -17,7 +21,15 @@ import numpy as np
 from gyroemu.sensors.allan import AllanFit, allan_deviation, fit_allan
 from gyroemu.sensors.errors import ErrorModel
 
-__all__ = ["AllanReport", "allan_report", "plot_allan", "SPEC_UNITS"]
+__all__ = [
+    "AllanLogError",
+    "AllanReport",
+    "allan_report",
+    "allan_of_log",
+    "plot_allan",
+    "write_allan_plot",
+    "SPEC_UNITS",
+]
 
 _DEG = 180.0 / np.pi
 SPEC_UNITS = {  # term: (SI to datasheet factor, datasheet unit)
@@ -73,6 +85,71 @@ def allan_report(gyro: np.ndarray, dt: float, spec: ErrorModel | None = None) ->
         tuple(fit_allan(allan_deviation(gyro[:, i] - gyro[:, i].mean(), dt)) for i in range(3)),
     )
     return AllanReport(fits=fits, spec=spec)
+
+
+class AllanLogError(ValueError):
+    """A log :func:`allan_of_log` cannot analyse: missing, not a gyroemu log, no or too few gyro samples.
+    The message starts with the file's name."""
+
+
+def _read_gyro(log: Path) -> tuple[np.ndarray, np.ndarray, str | None]:
+    """``(gyro (N, 3) rad/s, t (N,) s, device TOML or None)`` of an .mcap or .npz log."""
+    if log.suffix == ".mcap":
+        from .mcap_log import read_mcap
+
+        device_log = read_mcap(log).device
+        device_toml = (device_log.metadata or {}).get("device") or None
+        return device_log.samples.gyro, device_log.samples.t, device_toml
+    try:
+        with np.load(log, allow_pickle=False) as data:
+            if "imu/gyro" not in data or "imu/t" not in data:
+                gyro = None
+            else:
+                gyro, t = data["imu/gyro"], data["imu/t"]
+                device_toml = str(data["device_toml"]) if "device_toml" in data else None
+    except (OSError, ValueError) as e:
+        raise AllanLogError(f"{log}: not a gyroemu log (.mcap or .npz): {e}") from None
+    if gyro is None:
+        raise AllanLogError(f"{log}: holds no gyro samples (write one with 'gyroemu simulate --device ...')")
+    return gyro, t, device_toml
+
+
+def allan_of_log(path: str | os.PathLike) -> AllanReport:
+    """Fit a static gyro log: an .mcap (its device, with the device's config when the log carries it),
+    or an .npz of ``gyroemu simulate --device`` (``imu/gyro``, ``imu/t``, ``device_toml``). The sample
+    interval is the median step of the stamps. Raises :class:`AllanLogError` for a log it cannot use,
+    :class:`gyroemu.errors.LogError` for an .mcap it cannot read."""
+    log = Path(path)
+    if not log.is_file():
+        raise AllanLogError(f"{log}: no such file")
+    gyro, t, device_toml = _read_gyro(log)
+    spec = None
+    if device_toml is not None:
+        import dataclasses
+        import tomllib
+
+        from gyroemu.sensors import device_from_dict
+
+        device = device_from_dict(tomllib.loads(device_toml), name=log.name)
+        spec = dataclasses.replace(device.gyro_errors, noise_density=device.gyro_noise_density)
+    dt = float(np.median(np.diff(t)))
+    try:
+        return allan_report(gyro, dt, spec)
+    except ValueError as e:
+        raise AllanLogError(f"{log}: {e}") from None
+
+
+def write_allan_plot(report: AllanReport, out: str | os.PathLike, title: str = "") -> Path:
+    """:func:`plot_allan` to ``out`` (a PNG whatever its suffix) through a temporary file beside it, so
+    that no partial plot is left; returns ``out``."""
+    out = Path(out)
+    tmp = out.with_name(f".{out.name}.tmp.png")
+    try:
+        plot_allan(report, tmp, title=title)
+        tmp.replace(out)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return out
 
 
 def plot_allan(report: AllanReport, out: str | Path, title: str = "") -> Path:

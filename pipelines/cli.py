@@ -9,11 +9,18 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import tempfile
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from gyroemu.errors import GyroemuError
+
+if TYPE_CHECKING:  # the job modules are imported where used: they pull in numpy, zenoh, ...
+    from .record import RecordOptions
+    from .replay import ReplayOptions
+    from .simulate import SimulateOptions
+    from .stream import StreamOptions
+    from .zenoh_io import PacingOptions, SessionOptions
 
 __all__ = ["main"]
 
@@ -33,86 +40,31 @@ def _cmd_scenarios(args) -> int:
     return 0
 
 
-def write_npz_atomic(path: Path, arrays: dict) -> None:
-    """Write ``arrays`` to ``path`` (.npz) through a temporary file, so no partial file is left."""
-    import numpy as np
+def _simulate_options(args: argparse.Namespace) -> SimulateOptions:
+    from .simulate import SimulateOptions
 
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
+    return SimulateOptions(
+        scenario=args.scenario,
+        out=Path(args.out),
+        device=args.device,
+        duration=args.duration,
+        rate=args.rate,
+        seed=args.seed,
+    )
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    from .simulate import SimulateError, run_simulate
+
     try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def _cmd_simulate(args) -> int:
-    from gyroemu.dynamics import load_scenario
-
-    out = Path(args.out)
-    if out.suffix not in (".npz", ".mcap"):
-        raise UsageError(f"argument --out: {out}: write a .mcap (ROS 2) or .npz file (got '{out.suffix}')")
-    if not out.parent.is_dir():
-        raise UsageError(f"argument --out: {out.parent} is not a folder")
-    if out.suffix == ".mcap" and not args.device:
-        raise UsageError(
-            "argument --device: an .mcap log holds a device's samples: name a device ('gyroemu presets' lists them)"
-        )
-    scenario = load_scenario(args.scenario)
-    device = None
-    if args.device:
-        from gyroemu.sensors import load_device  # imported where used: it pulls in scipy.signal (0.7 s)
-
-        device = load_device(args.device, seed=args.seed)
-    from .progress import PhaseProgress  # a bar on stderr when it is a terminal, nothing otherwise
-
-    started = time.perf_counter()
-    with PhaseProgress(
-        ["truth", "measure", "write"] if device is not None else ["truth", "write"], label="simulate"
-    ) as progress:
-        with progress.phase("truth"):
-            traj = scenario.simulate(duration=args.duration, rate_hz=args.rate)
-        samples = None
-        if device is not None:
-            with progress.phase("measure"):
-                samples = device.measure(traj)
-        with progress.phase("write"):
-            if out.suffix == ".mcap":
-                from .mcap_log import Recording, truth_series, write_mcap
-
-                assert samples is not None  # an .mcap needs a device: checked above
-                write_mcap(out, Recording(samples, truth=truth_series(traj, samples), device=device), scenario=scenario)
-            else:
-                write_npz_atomic(out, _npz_arrays(scenario, traj, device, samples))
-    elapsed = time.perf_counter() - started
-    summary = f"{len(traj)} truth samples"
-    if device is not None and samples is not None:
-        summary += f", {len(samples)} samples of {device.name} ({device.kind})"
-    print(f"{scenario.name}: {summary} over {traj.duration:g} s in {elapsed:.2f} s -> {out}")
+        summary = run_simulate(_simulate_options(args))
+    except SimulateError as e:
+        raise UsageError(str(e)) from None
+    what = f"{summary.truth_samples} truth samples"
+    if summary.samples is not None:
+        what += f", {summary.samples} samples of {summary.device} ({summary.device_kind})"
+    print(f"{summary.scenario}: {what} over {summary.duration_s:g} s in {summary.elapsed_s:.2f} s -> {summary.out}")
     return 0
-
-
-def _npz_arrays(scenario, traj, device, samples) -> dict:
-    """The arrays of an .npz run: ``truth/...``, ``imu/...``, ``raw/<kind>/...`` and the configs."""
-    import numpy as np
-
-    arrays = {
-        f"truth/{name}": getattr(traj, name)
-        for name in ("t", "q_wb", "omega_b", "alpha_b", "specific_force_b", "pos_w", "vel_w", "mag_b")
-    }
-    arrays.update({f"truth/extras/{k}": v for k, v in traj.extras.items()})
-    arrays["scenario_toml"] = np.array(scenario.to_toml())
-    if device is not None:
-        for name in ("t", "t_true", "gyro", "accel", "mag", "temperature_degC", "delta_angle", "delta_velocity"):
-            if getattr(samples, name) is not None:
-                arrays[f"imu/{name}"] = getattr(samples, name)
-        for kind, observables in samples.raw.items():
-            arrays.update({f"raw/{kind}/{k}": v for k, v in observables.items()})
-        arrays["device_toml"] = np.array(device.to_toml())
-        arrays["seed"] = np.array(device.seed)
-    return arrays
 
 
 def _cmd_info(args) -> int:
@@ -211,53 +163,18 @@ def _cmd_presets(args) -> int:
     return 0
 
 
-def _cmd_allan(args) -> int:
-    import numpy as np
-
-    from .allan import allan_report, plot_allan
+def _cmd_allan(args: argparse.Namespace) -> int:
+    from .allan import AllanLogError, allan_of_log, write_allan_plot
 
     log = Path(args.log)
-    if not log.is_file():
-        raise UsageError(f"argument LOG: {log}: no such file")
-    if log.suffix == ".mcap":
-        from .mcap_log import read_mcap
-
-        device_log = read_mcap(log).device
-        gyro, t = device_log.samples.gyro, device_log.samples.t
-        device_toml = (device_log.metadata or {}).get("device") or None
-    else:
-        try:
-            with np.load(log, allow_pickle=False) as data:
-                if "imu/gyro" not in data or "imu/t" not in data:
-                    raise UsageError(
-                        f"argument LOG: {log}: holds no gyro samples (write one with 'gyroemu simulate --device ...')"
-                    )
-                gyro, t = data["imu/gyro"], data["imu/t"]
-                device_toml = str(data["device_toml"]) if "device_toml" in data else None
-        except (OSError, ValueError) as e:
-            raise UsageError(f"argument LOG: {log}: not a gyroemu log (.mcap or .npz): {e}") from None
-    spec = None
-    if device_toml is not None:
-        import dataclasses
-        import tomllib
-
-        from gyroemu.sensors import device_from_dict
-
-        device = device_from_dict(tomllib.loads(device_toml), name=log.name)
-        spec = dataclasses.replace(device.gyro_errors, noise_density=device.gyro_noise_density)
-    dt = float(np.median(np.diff(t)))
     try:
-        report = allan_report(gyro, dt, spec)
-    except ValueError as e:
-        raise UsageError(f"argument LOG: {log}: {e}") from None
+        report = allan_of_log(log)
+    except AllanLogError as e:
+        raise UsageError(f"argument LOG: {e}") from None
     print(report.table())
-    out = Path(args.out) if args.out else log.with_suffix(".allan.png")
-    tmp = out.with_name(f".{out.name}.tmp.png")
-    try:
-        plot_allan(report, tmp, title=f"Allan deviation: {log.name}")
-        tmp.replace(out)
-    finally:
-        tmp.unlink(missing_ok=True)
+    out = write_allan_plot(
+        report, Path(args.out) if args.out else log.with_suffix(".allan.png"), f"Allan deviation: {log.name}"
+    )
     print(f"Allan plot -> {out}")
     return 0
 
@@ -341,98 +258,129 @@ def _cmd_demo(args) -> int:
     return run_demo(scenario=args.scenario, duration=args.duration, out=out, live_seconds=args.live_seconds)
 
 
-def _argument_error(error: ValueError, fallback: str) -> UsageError:
+def _argument_error(error: ValueError, fallback: str) -> Exception:
     """A live command's ``ValueError`` as a usage error: its message names the argument, or else it is
-    zenoh's complaint about ``fallback`` (the endpoints)."""
+    zenoh's complaint about ``fallback`` (the endpoints). gyroemu's own errors (a bad scenario, device or
+    log) name their file already and pass through."""
+    if isinstance(error, GyroemuError):
+        return error
     text = str(error)
     return UsageError(text if text.startswith("argument") else f"argument {fallback}: {text}")
 
 
-def _zenoh_options(args) -> dict:
-    return {"connect": args.connect, "listen": args.listen, "mode": args.mode, "config_file": args.config}
+def _session_options(args: argparse.Namespace) -> SessionOptions:
+    """``--connect``, ``--listen``, ``--mode``, ``--config``, and ``--ros2`` with ``--domain`` (default:
+    ``ROS_DOMAIN_ID``, else 0), the domain checked before any work. A command without some of these
+    flags (the router) leaves them at their defaults."""
+    from .zenoh_io import SessionOptions
 
-
-def _ros2_options(args) -> dict:
-    """``--ros2`` and ``--domain`` (default: ``ROS_DOMAIN_ID``, else 0), checked before any work."""
-    if not args.ros2:
-        if args.domain is not None:
+    ros2, domain = getattr(args, "ros2", False), getattr(args, "domain", None)
+    if not ros2:
+        if domain is not None:
             raise UsageError("argument --domain: only with --ros2")
-        return {}
-    from .ros2_keys import Ros2Error, domain_id
+    else:
+        from .ros2_keys import Ros2Error, domain_id
 
-    try:
-        return {"ros2": True, "domain": domain_id(args.domain)}
-    except Ros2Error as e:  # names --domain or ROS_DOMAIN_ID
-        raise UsageError(str(e)) from None
+        try:
+            domain = domain_id(domain)
+        except Ros2Error as e:  # names --domain or ROS_DOMAIN_ID
+            raise UsageError(str(e)) from None
+    return SessionOptions(
+        connect=tuple(args.connect or ()),
+        listen=tuple(args.listen or ()),
+        mode=getattr(args, "mode", None),
+        config_file=None if args.config is None else Path(args.config),
+        ros2=ros2,
+        domain=domain,
+    )
 
 
-def _cmd_stream(args) -> int:
+def _pacing_options(args: argparse.Namespace) -> PacingOptions:
+    from .zenoh_io import PacingOptions
+
+    return PacingOptions(wait_s=args.wait)
+
+
+def _stream_options(args: argparse.Namespace) -> StreamOptions:
+    from .stream import StreamOptions
+
+    return StreamOptions(
+        scenario=args.scenario,
+        device=args.device,
+        duration=args.duration,
+        seed=args.seed,
+        device_name=args.device_name,
+        estimate=args.estimate,
+        as_fast_as_possible=args.as_fast_as_possible,
+        session=_session_options(args),
+        pacing=_pacing_options(args),
+    )
+
+
+def _cmd_stream(args: argparse.Namespace) -> int:
     from .stream import run_stream
 
     try:
-        return run_stream(
-            scenario=args.scenario,
-            device=args.device,
-            duration=args.duration,
-            seed=args.seed,
-            as_fast_as_possible=args.as_fast_as_possible,
-            device_name=args.device_name,
-            wait_s=args.wait,
-            estimate=args.estimate,
-            **_zenoh_options(args),
-            **_ros2_options(args),
-        )
+        return run_stream(_stream_options(args))
     except ValueError as e:
         raise _argument_error(e, "--connect/--listen") from None
 
 
-def _cmd_record(args) -> int:
-    from .record import run_record
+def _record_options(args: argparse.Namespace) -> RecordOptions:
+    from .record import RecordOptions
 
     out = Path(args.out)
     if not out.parent.is_dir():
         raise UsageError(f"argument --out: {out.parent} is not a folder")
+    return RecordOptions(
+        out_path=out,
+        duration=args.duration,
+        key_expr=args.key,
+        report_path=args.report,
+        session=_session_options(args),
+    )
+
+
+def _cmd_record(args: argparse.Namespace) -> int:
+    from .record import run_record
+
+    options = _record_options(args)
     try:
-        return run_record(
-            out_path=out,
-            duration=args.duration,
-            key_expr=args.key,
-            report_path=args.report,
-            **_zenoh_options(args),
-            **_ros2_options(args),
-        )
+        return run_record(options)
     except ValueError as e:
         raise _argument_error(e, "--connect/--listen") from None
     except OSError as e:
-        raise UsageError(f"argument --out: {out}: {e.strerror or e}") from None
+        raise UsageError(f"argument --out: {options.out_path}: {e.strerror or e}") from None
 
 
-def _cmd_replay(args) -> int:
+def _replay_options(args: argparse.Namespace) -> ReplayOptions:
+    from .replay import ReplayOptions
 
+    return ReplayOptions(
+        path=Path(args.log),
+        rate=args.rate,
+        loop=args.loop,
+        topics=args.topics,
+        device_name=args.device_name,
+        session=_session_options(args),
+        pacing=_pacing_options(args),
+    )
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
     from .replay import run_replay
 
     try:
-        return run_replay(
-            path=Path(args.log),
-            rate=args.rate,
-            loop=args.loop,
-            topics=args.topics,
-            device_name=args.device_name,
-            wait_s=args.wait,
-            **_zenoh_options(args),
-            **_ros2_options(args),
-        )
-    except GyroemuError:
-        raise  # a LogError: names the file
+        return run_replay(_replay_options(args))
     except ValueError as e:
         raise _argument_error(e, "--connect/--listen") from None
 
 
-def _cmd_router(args) -> int:
+def _cmd_router(args: argparse.Namespace) -> int:
     from .record import run_router
 
     try:
-        return run_router(listen=args.listen, connect=args.connect, config_file=args.config)
+        return run_router(_session_options(args))
     except ValueError as e:
         raise _argument_error(e, "--listen") from None
 

@@ -10,6 +10,10 @@
    its own filters the stream and publishes its estimate; the recorder writes it all to an MCAP log.
 5. Benchmark: every available filter over the recorded log against its truth: the table, the error
    plot, and where the files are.
+
+The demo is an orchestrator: unlike the jobs, which never import one another, it calls them (the
+stream, :func:`gyroemu.pipelines.stream.run_stream`, in this process; the recorder as a ``gyroemu
+record`` process; the benchmark, :func:`gyroemu.pipelines.bench.run_bench`).
 """
 
 from __future__ import annotations
@@ -140,8 +144,8 @@ def _live_and_bench(out: Path, seconds: float) -> None:
     from .bench import LogCase, run_bench
     from .estimation.metrics import attitude_errors, rmse_deg
     from .mcap_log import read_mcap
-    from .stream import run_stream
-    from .zenoh_io import topic_to_key
+    from .stream import StreamOptions, run_stream
+    from .zenoh_io import PacingOptions, topic_to_key
 
     out.mkdir(parents=True, exist_ok=True)
     log = out / "demo.mcap"
@@ -159,16 +163,16 @@ def _live_and_bench(out: Path, seconds: float) -> None:
     )
     try:
         talk = io.StringIO()
-        status = run_stream(
+        options = StreamOptions(
             scenario="smooth_manoeuvre",
             device="consumer_mems",
             device_name=name,
             duration=seconds,
             seed=0,
-            wait_s=20.0,
             estimate="mekf",
-            out=talk,
+            pacing=PacingOptions(wait_s=20.0),  # the recorder process starts meanwhile
         )
+        status = run_stream(options, out=talk)
         lines = talk.getvalue().splitlines()
         print("\n".join("   " + line for line in lines if line.startswith("stream: ") and "publishing" not in line))
     finally:

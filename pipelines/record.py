@@ -32,46 +32,54 @@ schema the key's type names when gyroemu knows the type, and the type hash in th
 ``topic_type_hash`` metadata, as rosbag2 records it. Keys of topics with a single name token
 (``/rosout``) have no device and are skipped (counted). The process appears in the ROS graph as node
 ``gyroemu_record_<pid>``, with a subscription token per topic it records.
+
+From Python: ``run_record(RecordOptions(out_path=Path("run.mcap"), duration=10.0))``
+(:class:`RecordOptions`) and ``run_router(SessionOptions(listen=("tcp/0.0.0.0:7447",)))``.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 
 from .channels import topic_message_type
 from .messages import MESSAGE_TYPES
 from .zenoh_io import (
+    SessionOptions,
     drain,
     header_stamp_ns,
     key_to_topic,
+    live_session,
     open_session,
-    router_config,
-    session_config,
-    stop_on_signals,
     subscribe,
     unpack_attachment,
 )
 
+if TYPE_CHECKING:
+    import zenoh
+
 __all__ = [
+    "RecordOptions",
     "SequenceTracker",
     "Recorder",
     "KeyInfo",
     "gyroemu_key",
     "ros2_key",
-    "topic_message_type",
+    "format_report",
     "run_record",
     "run_router",
 ]
 
 
-def _ranges(numbers) -> list[list[int]]:
+def _ranges(numbers: Iterable[int]) -> list[list[int]]:
     """Sorted integers as [first, last] ranges."""
     out: list[list[int]] = []
     for n in sorted(numbers):
@@ -112,7 +120,8 @@ class SequenceTracker:
         else:
             self.duplicates += 1
 
-    def report(self) -> dict:
+    def report(self) -> dict[str, Any]:
+        """The publisher's counts (JSON-ready)."""
         return {
             "topic": self.topic,
             "received": self.received,
@@ -156,7 +165,13 @@ class Recorder:
     ``parse_key`` turns a sample's key expression into a :class:`KeyInfo` (:func:`gyroemu_key`, or
     :func:`ros2_key` in ROS 2 mode); ``on_new_topic(info)`` is called once per new channel."""
 
-    def __init__(self, path, chunk_size: int = 1 << 18, parse_key=gyroemu_key, on_new_topic=None):
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        chunk_size: int = 1 << 18,
+        parse_key: Callable[[str], KeyInfo] = gyroemu_key,
+        on_new_topic: Callable[[KeyInfo], None] | None = None,
+    ) -> None:
         from .mcap_records import McapFileWriter
 
         self.path = Path(path)
@@ -208,7 +223,8 @@ class Recorder:
         self._keys[key] = found
         return found
 
-    def add(self, sample) -> None:
+    def add(self, sample: zenoh.Sample) -> None:
+        """Take in one received sample (skipped, and counted, when its key or payload is not a recording's)."""
         found = self._key(str(sample.key_expr))
         if found is None:
             self.skipped += 1
@@ -253,12 +269,14 @@ class Recorder:
         self._file.flush()
 
     def close(self) -> None:
+        """Write what is pending, the summary, indexes and footer, and close the file."""
         self.flush()
         self._mcap.finish()
         self._file.flush()
         self._file.close()
 
-    def report(self) -> dict:
+    def report(self) -> dict[str, Any]:
+        """Counts of the recording and of each publisher (JSON-ready; :func:`format_report` prints it)."""
         return {
             "file": str(self.path),
             "messages": self.messages,
@@ -268,7 +286,8 @@ class Recorder:
         }
 
 
-def format_report(report: dict) -> str:
+def format_report(report: dict[str, Any]) -> str:
+    """The :meth:`Recorder.report` as the lines ``gyroemu record`` prints."""
     lines = [
         f"record: {report['messages']} messages -> {report['file']}"
         + (f" ({report['skipped']} skipped)" if report["skipped"] else "")
@@ -295,41 +314,58 @@ def format_report(report: dict) -> str:
     return "\n".join(lines)
 
 
-def run_record(
-    *,
-    out_path,
-    duration: float | None = None,
-    key_expr: str | None = None,
-    connect=None,
-    listen=None,
-    mode=None,
-    config_file=None,
-    report_path=None,
-    ros2: bool = False,
-    domain: int | None = None,
-    out=sys.stdout,
-) -> int:
-    """Record until SIGINT/SIGTERM or ``duration`` s (see the module's notes). ``key_expr`` defaults to
-    ``gyroemu/**`` (``<domain>/**`` with ``ros2``). Raises ``ValueError`` naming the argument at fault."""
-    node = None
+@dataclass(frozen=True)
+class RecordOptions:
+    """What ``gyroemu record`` records, and where.
+
+    Attributes
+    ----------
+    out_path : Path
+        The MCAP file to write (in place).
+    duration : float or None
+        Seconds to record; None: until SIGINT/SIGTERM.
+    key_expr : str or None
+        Key expression to subscribe to; None: ``gyroemu/**`` (``<domain>/**`` in ROS 2 mode).
+    report_path : Path or None
+        Also write the sequence report there as JSON.
+    session : SessionOptions
+        The zenoh session (and ROS 2 mode: rmw_zenoh's keys, a ROS 2 node with a subscription token per topic).
+    """
+
+    out_path: Path
+    duration: float | None = None
+    key_expr: str | None = None
+    report_path: Path | None = None
+    session: SessionOptions = field(default_factory=SessionOptions)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "out_path", Path(self.out_path))
+        if self.report_path is not None:
+            object.__setattr__(self, "report_path", Path(self.report_path))
+
+
+def run_record(options: RecordOptions, *, out: TextIO = sys.stdout) -> int:
+    """Record until SIGINT/SIGTERM or ``options.duration`` s (see the module's notes); the report goes to
+    ``out``. Returns the exit status (0). Raises ``ValueError`` naming the argument at fault."""
+    ros2, key_expr = options.session.ros2, options.key_expr
+    domain = None
     if ros2:
         from .ros2_keys import domain_id
 
-        domain = domain_id(domain)
+        domain = domain_id(options.session.domain)
         parse_key = ros2_key
         key_expr = key_expr or f"{domain}/**"
     else:
         parse_key = gyroemu_key
         key_expr = key_expr or "gyroemu/**"
-    config = session_config(connect=connect, listen=listen, mode=mode, config_file=config_file)
-    session = open_session(config)
+    session = open_session(options.session.config())
     on_new_topic: Callable[[KeyInfo], None] | None
-    try:
+    with live_session(session) as live:
         if ros2:
             from .ros2_keys import Ros2Node, node_name
 
             assert domain is not None  # domain_id() above gave it its value
-            node = Ros2Node(session, domain, node_name("record"))
+            node = live.node = Ros2Node(session, domain, node_name("record"))
 
             def on_new_topic(info: KeyInfo) -> None:
                 # ros2_key, the parser in ROS 2 mode, sets all three
@@ -338,20 +374,14 @@ def run_record(
 
         else:
             on_new_topic = None
-        recorder = Recorder(out_path, parse_key=parse_key, on_new_topic=on_new_topic)
-    except BaseException:
-        if node is not None:
-            node.close()
-        session.close()
-        raise
-    with stop_on_signals() as stopping:
+        recorder = Recorder(options.out_path, parse_key=parse_key, on_new_topic=on_new_topic)
         try:
             subscriber = subscribe(session, key_expr)
             what = f"ROS 2 domain {domain}: " if ros2 else ""
             print(f"record: subscribed to {what}{key_expr} -> {recorder.path}", file=out, flush=True)
-            end = None if duration is None else time.monotonic() + duration
+            end = None if options.duration is None else time.monotonic() + options.duration
             last_flush = time.monotonic()
-            while not stopping and (end is None or time.monotonic() < end):
+            while not live.stopped() and (end is None or time.monotonic() < end):
                 samples = drain(subscriber)
                 for sample in samples:
                     recorder.add(sample)
@@ -366,28 +396,24 @@ def run_record(
             subscriber.undeclare()
         finally:
             recorder.close()
-            if node is not None:
-                node.close()
-            session.close()
     report = recorder.report()
     print(format_report(report), file=out, flush=True)
-    if report_path:
-        Path(report_path).write_text(json.dumps(report, indent=1))
+    if options.report_path:
+        options.report_path.write_text(json.dumps(report, indent=1))
     return 0
 
 
-def run_router(*, listen=None, connect=None, config_file=None, out=sys.stdout) -> int:
-    config = router_config(listen=listen, connect=connect, config_file=config_file)
-    session = open_session(config)
-    with stop_on_signals() as stopping:
-        try:
-            print(
-                f"router: {session.zid()} listening on {', '.join(listen or ['tcp/0.0.0.0:7447'])}",
-                file=out,
-                flush=True,
-            )
-            while not stopping:
-                time.sleep(0.1)
-        finally:
-            session.close()
+def run_router(session: SessionOptions, *, out: TextIO = sys.stdout) -> int:
+    """Run a zenoh router until SIGINT/SIGTERM: it listens on ``session.listen`` (default
+    ``tcp/0.0.0.0:7447``) and connects to ``session.connect`` (other routers); ``mode`` and the ROS 2
+    fields do not apply. Returns the exit status (0). Raises ``ValueError`` naming the argument at fault."""
+    zenoh_session = open_session(session.router_config())
+    with live_session(zenoh_session) as live:
+        print(
+            f"router: {zenoh_session.zid()} listening on {', '.join(session.listen or ['tcp/0.0.0.0:7447'])}",
+            file=out,
+            flush=True,
+        )
+        while not live.stopped():
+            time.sleep(0.1)
     return 0

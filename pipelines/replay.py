@@ -47,22 +47,33 @@ file), the replay waits (``--wait``, default 10 s) until every key has a subscri
 ``gyroemu stream`` does, and then until the reader has filled its queue (at most 10 s more): its
 start-up, competing for the GIL with the first deadlines, made them up to 15 ms late. The input is
 only ever opened for reading.
+
+From Python: ``run_replay(ReplayOptions(path=Path("run.mcap"), rate=2.0))`` (:class:`ReplayOptions`).
 """
 
 from __future__ import annotations
 
+import os
 import queue
 import sys
 import threading
 import time
 import warnings
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, TextIO
 
 from .channels import is_device_prefix, is_stream_role, role_topic, split_topic
 from .mcap_log import LogWarning, read_mcap
 from .mcap_records import iter_mcap_batches
-from .zenoh_io import PacedPublisher, key_to_topic, open_session, session_config, stop_on_signals, topic_to_key
+from .zenoh_io import PacingOptions, SessionOptions, key_to_topic, live_session, open_session, topic_to_key
 
-__all__ = ["topic_keys", "ros2_topic_keys", "ReadAhead", "run_replay", "READ_AHEAD", "BATCH"]
+if TYPE_CHECKING:
+    from .mcap_records import ChannelInfo
+    from .ros2_keys import Ros2Keys
+
+__all__ = ["ReplayOptions", "topic_keys", "ros2_topic_keys", "ReadAhead", "run_replay", "READ_AHEAD", "BATCH"]
 
 READ_AHEAD = 64  # batches queued ahead of the publisher
 BATCH = 256  # messages per batch: the publisher frees a spent batch (~50 us for 256) right after a send
@@ -72,7 +83,46 @@ class ReplayError(ValueError):
     """Bad usage of ``gyroemu replay`` (the message names the argument)."""
 
 
-def topic_keys(topics, metadata: list[dict], device_name: str = "imu0") -> tuple[dict[str, str], dict[str, str]]:
+@dataclass(frozen=True)
+class ReplayOptions:
+    """What ``gyroemu replay`` republishes and how.
+
+    Attributes
+    ----------
+    path : Path
+        The MCAP file to replay (only ever read).
+    rate : float
+        Speed factor, > 0: message i goes out at ``t_start + (log_time_i - log_time_0) / rate``
+        (2: twice as fast as recorded).
+    loop : bool
+        Repeat the file until SIGINT/SIGTERM, deadlines increasing across passes.
+    topics : tuple of str or None
+        Replay only these topics (each must be in the file and cdr-encoded); None: every cdr topic.
+    device_name : str
+        Device of the topics the file's ``gyroemu`` metadata does not name (keys ``gyroemu/<device_name>/...``).
+    session : SessionOptions
+        The zenoh session (and ROS 2 mode).
+    pacing : PacingOptions
+        Waiting for subscribers, how deadlines are waited for, lingering at the end.
+    """
+
+    path: Path
+    rate: float = 1.0
+    loop: bool = False
+    topics: tuple[str, ...] | None = None
+    device_name: str = "imu0"
+    session: SessionOptions = field(default_factory=SessionOptions)
+    pacing: PacingOptions = field(default_factory=PacingOptions)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "path", Path(self.path))
+        if self.topics is not None:
+            object.__setattr__(self, "topics", tuple(self.topics))
+
+
+def topic_keys(
+    topics: Iterable[str], metadata: list[dict], device_name: str = "imu0"
+) -> tuple[dict[str, str], dict[str, str]]:
     """``({topic: key}, {topic: why it cannot be published})`` by the rule in the module's notes."""
     by_prefix = {m.get("topic_prefix", ""): m.get("device_name") or "" for m in metadata}
     if "" not in by_prefix and len(metadata) == 1:
@@ -93,10 +143,12 @@ def topic_keys(topics, metadata: list[dict], device_name: str = "imu0") -> tuple
     return keys, bad
 
 
-def ros2_topic_keys(keys: dict[str, str], channels, ros) -> tuple[dict[str, str], dict[str, str]]:
+def ros2_topic_keys(
+    keys: dict[str, str], channels: Iterable[ChannelInfo], ros: Ros2Keys
+) -> tuple[dict[str, str], dict[str, str]]:
     """ROS 2 mode: ``({topic: rmw_zenoh key}, {topic: why not})`` from the gyroemu keys of
     :func:`topic_keys`, the file's :class:`gyroemu.pipelines.mcap_records.ChannelInfo` and a
-    :class:`gyroemu.pipelines.stream.Ros2Keys` (which keeps each key's topic, type and hash for its tokens)."""
+    :class:`gyroemu.pipelines.ros2_keys.Ros2Keys` (which keeps each key's topic, type and hash for its tokens)."""
     from .ros2_keys import Ros2Error, full_type_name, is_type_hash, parse_definitions, ros_topic, type_hash
 
     info = {c.topic: c for c in channels}
@@ -128,7 +180,9 @@ class ReadAhead(threading.Thread):
     """Reads the file in a thread and queues ``[(deadline offset ns, key, payload), ...]`` batches (of
     at most ``BATCH``); ``None`` ends the stream, an exception object is raised by :meth:`batches`."""
 
-    def __init__(self, path, keys: dict[str, str], rate: float, loop: bool, depth: int = READ_AHEAD):
+    def __init__(
+        self, path: str | os.PathLike, keys: dict[str, str], rate: float, loop: bool, depth: int = READ_AHEAD
+    ) -> None:
         super().__init__(name="replay-read-ahead", daemon=True)
         self.path, self.keys, self.rate, self.loop = path, keys, float(rate), loop
         self.queue: queue.Queue = queue.Queue(depth)
@@ -186,7 +240,7 @@ class ReadAhead(threading.Thread):
             self.ready.set()
             self._put(None)
 
-    def batches(self, stop=lambda: False):
+    def batches(self, stop: Callable[[], bool] = lambda: False) -> Iterator[list[tuple[int, str, bytes]]]:
         """The queued batches, lists of ``(deadline offset ns, key, payload)`` in order (blocks
         while the reader is behind; ``stop()`` is polled every 0.1 s meanwhile)."""
         while True:
@@ -203,35 +257,18 @@ class ReadAhead(threading.Thread):
             yield batch
 
 
-def run_replay(
-    *,
-    path,
-    rate: float = 1.0,
-    loop: bool = False,
-    topics=None,
-    device_name: str = "imu0",
-    wait_s: float = 10.0,
-    connect=None,
-    listen=None,
-    mode=None,
-    config_file=None,
-    ros2: bool = False,
-    domain: int | None = None,
-    out=sys.stdout,
-) -> int:
-    """Replay ``path`` (see the module's notes). Returns the exit status: 0 when done (or, with
-    ``loop``, when stopped by SIGINT/SIGTERM), 130 when a single pass was interrupted. Raises
-    :class:`gyroemu.pipelines.mcap_records.LogError` for bad input and ``ValueError`` naming the argument at fault."""
-    config = session_config(connect=connect, listen=listen, mode=mode, config_file=config_file)
-    if not rate > 0:
-        raise ReplayError(f"argument --rate: must be positive, got {rate}")
+def _channels_to_publish(options: ReplayOptions, out: TextIO) -> tuple[dict[str, str], Ros2Keys | None]:
+    """Validate the file and the options; ``({topic: key}, ROS 2 keys or None)``, skipped topics said on ``out``."""
+    path, topics = options.path, options.topics
+    if not options.rate > 0:
+        raise ReplayError(f"argument --rate: must be positive, got {options.rate}")
     ros = None
-    if ros2:
-        from .stream import Ros2Keys
+    if options.session.ros2:
+        from .ros2_keys import Ros2Keys
 
-        ros = Ros2Keys(domain, "replay")  # Ros2Error names --domain or ROS_DOMAIN_ID
+        ros = Ros2Keys(options.session.domain, "replay")  # Ros2Error names --domain or ROS_DOMAIN_ID
     try:
-        topic_to_key(device_name, "/imu")
+        topic_to_key(options.device_name, "/imu")
     except ValueError as e:
         raise ReplayError(f"argument --device-name: {e}") from None
     with warnings.catch_warnings(record=True) as caught:
@@ -253,7 +290,7 @@ def run_replay(
     for c in channels:
         if c.message_encoding != "cdr" and not topics:
             print(f"replay: skipping {c.topic}: message encoding {c.message_encoding!r}, not cdr", file=out)
-    keys, bad = topic_keys(cdr, log.metadata, device_name)
+    keys, bad = topic_keys(cdr, log.metadata, options.device_name)
     if ros is not None:
         keys, more = ros2_topic_keys(keys, channels, ros)
         bad.update(more)
@@ -263,39 +300,47 @@ def run_replay(
         print(f"replay: skipping {topic}: {why}", file=out)
     if not keys:
         raise ReplayError(f"argument LOG: {path}: no topic to publish")
+    return keys, ros
+
+
+def run_replay(options: ReplayOptions, *, out: TextIO = sys.stdout) -> int:
+    """Replay ``options.path`` (see the module's notes); progress goes to ``out``. Returns the exit
+    status: 0 when done (or, with ``loop``, when stopped by SIGINT/SIGTERM), 130 when a single pass
+    was interrupted. Raises :class:`gyroemu.pipelines.mcap_records.LogError` for bad input and
+    ``ValueError`` naming the argument at fault."""
+    config = options.session.config()
+    keys, ros = _channels_to_publish(options, out)
+    path, rate, loop, pacing = options.path, options.rate, options.loop, options.pacing
 
     print(f"replay: {path}: {len(keys)} topics at rate x{rate:g}{', looping' if loop else ''}", file=out)
     for topic, key in keys.items():
         print(f"  {topic} -> {key}", file=out)
     session = open_session(config)
-    publisher = reader = None
-    with stop_on_signals() as stopping:
+    reader = None
+    with live_session(session) as live:
         try:
-            publisher = PacedPublisher(session, sorted(set(keys.values())))
+            live.node = ros
+            publisher = live.publish(sorted(set(keys.values())), pacing.timing)
             if ros is not None:
                 ros.declare(session, out)
             reader = ReadAhead(path, keys, rate, loop)
             reader.start()  # fills its queue while we wait for subscribers
-            stop = lambda: bool(stopping)  # noqa: E731
+            stop = live.stopped
+            wait_s = pacing.wait_s
             if wait_s > 0 and not publisher.wait_for_subscribers(wait_s, stop=stop):
                 print(f"replay: no subscriber on every key after {wait_s:g} s: publishing anyway", file=out)
             # The reader's start-up (imports, the first chunks) would compete with the first deadlines for
             # the GIL: start the clock once its queue is full (at most 10 s from here).
             end = time.monotonic() + 10.0
-            while not reader.ready.wait(0.1) and not stopping and time.monotonic() < end:
+            while not reader.ready.wait(0.1) and not stop() and time.monotonic() < end:
                 pass
             print("replay: publishing", file=out, flush=True)
             report = publisher.run_schedule(reader.batches(stop), stop=stop)
             print(f"replay: sent {report.messages} messages ({reader.passes} complete passes)", file=out)
             print(f"replay: {report.summary('t_start + (log_time - log_time_0) / rate')}", file=out)
-            time.sleep(0.5)  # let queued messages drain before the session closes
+            time.sleep(pacing.linger_s)  # let queued messages drain before the session closes
         finally:
             if reader is not None:
                 reader.stopping.set()
-            if publisher is not None:
-                publisher.close()
-            if ros is not None:
-                ros.close()
-            session.close()
     out.flush()
-    return 130 if stopping and not loop else 0
+    return 130 if live.stopped() and not loop else 0

@@ -76,7 +76,7 @@ import os
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TextIO
 
 from .channels import raw_role, role_topic
 from .messages import MESSAGE_TYPES, ROS_DEFINITIONS
@@ -103,6 +103,7 @@ __all__ = [
     "node_token",
     "entity_token",
     "Ros2Node",
+    "Ros2Keys",
     "node_name",
     "DataKey",
 ]
@@ -507,3 +508,38 @@ class Ros2Node:
 def node_name(command: str) -> str:
     """The node name of a gyroemu process: ``gyroemu_<command>_<pid>`` (unique on the machine)."""
     return f"gyroemu_{command}_{os.getpid()}"
+
+
+class Ros2Keys:
+    """Keys and graph tokens of a ROS 2 mode publisher (``stream --ros2``, ``replay --ros2``): one ROS 2
+    node per process, a publisher token per key. :meth:`key` gives a topic's rmw_zenoh key and keeps
+    its topic, type and hash; :meth:`declare` declares the tokens.
+
+    ``domain`` None: ``$ROS_DOMAIN_ID``, else 0 (:func:`domain_id`: :class:`Ros2Error` names
+    ``--domain`` or ``ROS_DOMAIN_ID``); ``command`` names the node (:func:`node_name`)."""
+
+    def __init__(self, domain: int | None, command: str) -> None:
+        self.domain = domain_id(domain)
+        self.node_name = node_name(command)
+        self.node: Ros2Node | None = None
+        self.publishers: dict[str, tuple[str, str, str]] = {}  # key -> (ROS topic, type, hash)
+
+    def key(self, ros_topic: str, type_name: str, hash_: str | None = None) -> str:
+        """The data key of ``ros_topic`` (``hash_`` None: the type's hash from gyroemu's definitions)."""
+        hash_ = hash_ or type_hash(type_name)
+        key = data_key(self.domain, ros_topic, type_name, hash_)
+        self.publishers[key] = (ros_topic, type_name, hash_)
+        return key
+
+    def declare(self, session: zenoh.Session, out: TextIO) -> None:
+        """Declare the node's and the publishers' liveliness tokens on ``session`` and print them to ``out``."""
+        self.node = Ros2Node(session, self.domain, self.node_name)
+        print(f"  ROS 2 domain {self.domain}, node /{self.node_name}; liveliness tokens:", file=out)
+        print(f"    {self.node.keys[0]}", file=out)
+        for ros_topic, type_name, type_hash in self.publishers.values():
+            print(f"    {self.node.publisher(ros_topic, type_name, type_hash)}", file=out)
+
+    def close(self) -> None:
+        """Withdraw the tokens (if declared)."""
+        if self.node is not None:
+            self.node.close()

@@ -15,6 +15,10 @@ ROS 2 mode (``--ros2``, ``--domain``): the same bytes go on rmw_zenoh's keys ins
 and the process declares the liveliness tokens of a ROS 2 node ``gyroemu_stream_<pid>`` and of one
 publisher per topic, so that ROS 2 nodes on rmw_zenoh see and subscribe to the topics
 (:mod:`gyroemu.pipelines.ros2_keys`).
+
+From Python: ``run_stream(StreamOptions(scenario="smooth_manoeuvre", device="consumer_mems",
+session=SessionOptions(connect=("tcp/host:7447",))))`` (:class:`StreamOptions`; the session and pacing
+options are :mod:`gyroemu.pipelines.zenoh_io`'s).
 """
 
 from __future__ import annotations
@@ -22,7 +26,8 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Iterable
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, TextIO
 
 import numpy as np
 
@@ -40,15 +45,58 @@ from .channels import (
     topic_message_type,
 )
 from .messages import split_payloads, stamps_to_ns
-from .zenoh_io import PacedPublisher, open_session, session_config, stop_on_signals, topic_to_key
+from .zenoh_io import PacingOptions, SessionOptions, live_session, open_session, topic_to_key
 
 if TYPE_CHECKING:
+    from gyroemu.dynamics import Scenario
+    from gyroemu.sensors import Device
     from gyroemu.sensors.samples import ImuSamples
 
     from .channels import ImuSeries
-    from .ros2_keys import Ros2Node
+    from .live_estimate import LiveEstimator
 
-__all__ = ["encode_run", "topic_types", "run_stream", "Ros2Keys"]
+__all__ = ["StreamOptions", "encode_run", "topic_types", "run_stream"]
+
+
+@dataclass(frozen=True)
+class StreamOptions:
+    """What ``gyroemu stream`` simulates and how it publishes it.
+
+    Attributes
+    ----------
+    scenario : str
+        Built-in scenario name or TOML path.
+    device : str
+        Built-in device name or TOML path.
+    duration : float or None
+        Seconds to simulate; None: the scenario's.
+    seed : int
+        Seed of every random draw of the device.
+    device_name : str
+        The device's name on the wire: keys ``gyroemu/<device_name>/<topic>`` (ROS 2 topics
+        ``/<device_name>/<topic>``).
+    estimate : str or None
+        A filter (``mekf``, ...; :mod:`gyroemu.pipelines.estimation.registry`) to run live on the stream,
+        in this process but on a session of its own (:class:`gyroemu.pipelines.live_estimate.LiveEstimator`),
+        publishing ``gyroemu/<device_name>/estimate/imu``; None: none. Not with ROS 2 mode.
+    as_fast_as_possible : bool
+        Publish without pacing to the sample clock (otherwise sample k goes out at ``t0 + k / rate``,
+        the device's output rate in Hz).
+    session : SessionOptions
+        The zenoh session (and ROS 2 mode).
+    pacing : PacingOptions
+        Waiting for subscribers, how deadlines are waited for, lingering at the end.
+    """
+
+    scenario: str
+    device: str
+    duration: float | None = None
+    seed: int = 0
+    device_name: str = "imu0"
+    estimate: str | None = None
+    as_fast_as_possible: bool = False
+    session: SessionOptions = field(default_factory=SessionOptions)
+    pacing: PacingOptions = field(default_factory=PacingOptions)
 
 
 def encode_run(samples: ImuSamples, truth: ImuSeries | None = None) -> dict[str, np.ndarray]:
@@ -78,93 +126,68 @@ def topic_types(topics: Iterable[str]) -> dict[str, str]:
     return out
 
 
-class Ros2Keys:
-    """Keys and graph tokens of a ROS 2 mode publisher (``--ros2``): one ROS 2 node per process, a
-    publisher token per key. :meth:`key` gives a topic's rmw_zenoh key; :meth:`declare` the tokens."""
+def _check(options: StreamOptions) -> None:
+    """Refuse a bad device name or filter before the (slow) simulation: ``ValueError`` naming the argument."""
+    from .ros2_keys import ros_topic
 
-    def __init__(self, domain: int | None, command: str):
-        from .ros2_keys import domain_id, node_name
+    try:
+        topic_to_key(options.device_name, role_topic(IMU_ROLE))
+        if options.session.ros2:
+            ros_topic(options.device_name, role_topic(IMU_ROLE))
+    except ValueError as e:
+        raise ValueError(f"argument --device-name: {e}") from None
+    if options.estimate is not None and options.session.ros2:
+        raise ValueError("argument --estimate: not available with --ros2")
+    if options.estimate is not None:
+        from .estimation.registry import FilterError, filter_class
 
-        self.domain = domain_id(domain)  # Ros2Error (a ValueError) names --domain or ROS_DOMAIN_ID
-        self.node_name = node_name(command)
-        self.node: Ros2Node | None = None
-        self.publishers: dict[str, tuple[str, str, str]] = {}  # key -> (ROS topic, type, hash)
-
-    def key(self, ros_topic: str, type_name: str, type_hash: str | None = None) -> str:
-        from .ros2_keys import data_key
-        from .ros2_keys import type_hash as compute
-
-        type_hash = type_hash or compute(type_name)
-        key = data_key(self.domain, ros_topic, type_name, type_hash)
-        self.publishers[key] = (ros_topic, type_name, type_hash)
-        return key
-
-    def declare(self, session, out) -> None:
-        """Declare the node's and the publishers' liveliness tokens on ``session`` and print them."""
-        from .ros2_keys import Ros2Node
-
-        self.node = Ros2Node(session, self.domain, self.node_name)
-        print(f"  ROS 2 domain {self.domain}, node /{self.node_name}; liveliness tokens:", file=out)
-        print(f"    {self.node.keys[0]}", file=out)
-        for ros_topic, type_name, type_hash in self.publishers.values():
-            print(f"    {self.node.publisher(ros_topic, type_name, type_hash)}", file=out)
-
-    def close(self) -> None:
-        if self.node is not None:
-            self.node.close()
+        try:
+            filter_class(options.estimate)
+        except FilterError as e:
+            raise ValueError(f"argument --estimate: {e}") from None
 
 
-def run_stream(
-    *,
-    scenario: str,
-    device: str,
-    duration: float | None = None,
-    seed: int = 0,
-    as_fast_as_possible: bool = False,
-    device_name: str = "imu0",
-    wait_s: float = 10.0,
-    connect=None,
-    listen=None,
-    mode=None,
-    config_file=None,
-    ros2: bool = False,
-    domain: int | None = None,
-    estimate: str | None = None,
-    out=sys.stdout,
-) -> int:
-    """Simulate, encode and publish (see the module's notes); returns the exit status (0, or 130 when
-    stopped by SIGINT/SIGTERM). Raises ``ValueError`` naming the argument at fault, before simulating.
+def _start_estimator(options: StreamOptions, dev: Device, scen: Scenario, samples: ImuSamples) -> LiveEstimator:
+    """The live filter of ``options.estimate``, on a session of its own, started."""
+    from .estimation.registry import make_filter
+    from .estimation.setup import setup_for
+    from .live_estimate import LiveEstimator
 
-    ``estimate``: a filter name (``mekf``, ...; see :mod:`gyroemu.pipelines.estimation.registry`) to run live on
-    the stream, in this process but on a session of its own (:class:`gyroemu.pipelines.live_estimate.LiveEstimator`),
-    publishing ``gyroemu/<device>/estimate/imu``."""
+    assert options.estimate is not None
+    setup = setup_for(dev, scen)
+    # a throwaway run first, so that loading the compiled kernels does not stall the paced clock
+    make_filter(options.estimate, setup).process(
+        samples.t[:64] - samples.t[0],
+        samples.gyro[:64],
+        samples.accel[:64],
+        samples.mag[:64] if setup.use_mag else None,
+    )
+    return LiveEstimator(
+        open_session(options.session.config()),
+        options.device_name,
+        make_filter(options.estimate, setup),
+        setup.use_mag,
+    ).start()
+
+
+def run_stream(options: StreamOptions, *, out: TextIO = sys.stdout) -> int:
+    """Simulate, encode and publish (see the module's notes); progress goes to ``out``. Returns the exit
+    status (0, or 130 when stopped by SIGINT/SIGTERM). Raises ``ValueError`` naming the argument at
+    fault, before simulating."""
     from gyroemu.dynamics import load_scenario
     from gyroemu.sensors import load_device
 
     from .mcap_log import truth_series
-    from .ros2_keys import ros_topic
+    from .ros2_keys import Ros2Keys, ros_topic
 
-    config = session_config(connect=connect, listen=listen, mode=mode, config_file=config_file)
-    ros = Ros2Keys(domain, "stream") if ros2 else None
-    try:
-        topic_to_key(device_name, role_topic(IMU_ROLE))  # checks the device name before the (slow) simulation
-        if ros is not None:
-            ros_topic(device_name, role_topic(IMU_ROLE))
-    except ValueError as e:
-        raise ValueError(f"argument --device-name: {e}") from None
-    if estimate is not None and ros is not None:
-        raise ValueError("argument --estimate: not available with --ros2")
-    if estimate is not None:
-        from .estimation.registry import FilterError, filter_class
-
-        try:
-            filter_class(estimate)
-        except FilterError as e:
-            raise ValueError(f"argument --estimate: {e}") from None
-    scen = load_scenario(scenario)
-    dev = load_device(device, seed=seed)
+    config = options.session.config()
+    ros = Ros2Keys(options.session.domain, "stream") if options.session.ros2 else None
+    _check(options)
+    device_name, pacing = options.device_name, options.pacing
+    scen = load_scenario(options.scenario)
+    dev = load_device(options.device, seed=options.seed)
     started = time.perf_counter()
-    traj = scen.simulate(duration=duration)
+    traj = scen.simulate(duration=options.duration)
     samples = dev.measure(traj)
     encoded = encode_run(samples, truth_series(traj, samples))
     if ros is not None:
@@ -188,39 +211,26 @@ def run_stream(
 
     session = open_session(config)
     estimator = None
-    if estimate is not None:
-        from .estimation.registry import make_filter
-        from .estimation.setup import setup_for
-        from .live_estimate import LiveEstimator
-
-        setup = setup_for(dev, scen)
-        # a throwaway run first, so that loading the compiled kernels does not stall the paced clock
-        make_filter(estimate, setup).process(
-            samples.t[:64] - samples.t[0],
-            samples.gyro[:64],
-            samples.accel[:64],
-            samples.mag[:64] if setup.use_mag else None,
-        )
-        estimator = LiveEstimator(
-            open_session(config), device_name, make_filter(estimate, setup), setup.use_mag
-        ).start()
-        print(f"  {estimator.key} ({estimate}, {'9D' if setup.use_mag else '6D'}, live)", file=out)
-    publisher = None
-    with stop_on_signals() as stopping:
+    if options.estimate is not None:
+        estimator = _start_estimator(options, dev, scen, samples)
+        print(f"  {estimator.key} ({options.estimate}, {'9D' if estimator.use_mag else '6D'}, live)", file=out)
+    with live_session(session) as live:
         try:
-            publisher = PacedPublisher(session, list(batches))
+            live.node = ros
+            publisher = live.publish(list(batches), pacing.timing)
             for key in batches:
                 print(f"  {key}", file=out)
             if ros is not None:
                 ros.declare(session, out)
-            if wait_s > 0 and not publisher.wait_for_subscribers(wait_s, stop=lambda: bool(stopping)):
+            wait_s = pacing.wait_s
+            if wait_s > 0 and not publisher.wait_for_subscribers(wait_s, stop=live.stopped):
                 print(f"stream: no subscriber on every key after {wait_s:g} s: publishing anyway", file=out)
             print("stream: publishing", file=out, flush=True)
-            report = publisher.run(batches, None if as_fast_as_possible else rate, stop=lambda: bool(stopping))
+            report = publisher.run(batches, None if options.as_fast_as_possible else rate, stop=live.stopped)
             print(f"stream: sent {report.messages} messages", file=out)
-            if not as_fast_as_possible:
+            if not options.as_fast_as_possible:
                 print(f"stream: {report.summary()}", file=out)
-            time.sleep(0.5)  # let queued messages drain before the session closes
+            time.sleep(pacing.linger_s)  # let queued messages drain before the session closes
             if estimator is not None:
                 estimator.close(drain_s=2.0)
                 print(f"stream: {estimator.published} estimates published", file=out)
@@ -228,10 +238,5 @@ def run_stream(
         finally:
             if estimator is not None:
                 estimator.close(drain_s=0.0)
-            if publisher is not None:
-                publisher.close()
-            if ros is not None:
-                ros.close()
-            session.close()
     out.flush()
-    return 130 if stopping else 0
+    return 130 if live.stopped() else 0

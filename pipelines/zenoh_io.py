@@ -41,6 +41,13 @@ clock, a 50 us GIL switch interval and the garbage collector paused while the ru
 give the measured reasons) or :data:`SLEEP_ONLY` (the former behaviour, the benchmarks' baseline).
 ROS 2 key expressions and liveliness tokens (``--ros2``) are :mod:`gyroemu.pipelines.ros2_keys`'.
 
+The live jobs
+-------------
+Every live job (stream, record, replay, router) takes its session as a :class:`SessionOptions`, and a
+publishing job (stream, replay) its pacing as a :class:`PacingOptions`. Each runs its live stretch in
+:func:`live_session`, which holds their one teardown: publisher undeclared, ROS 2 node closed,
+session closed, signal handlers restored.
+
 Sources: zenoh-python 1.x API (``zenoh.Config.insert_json5``, ``Session.declare_publisher``,
 ``CongestionControl.BLOCK``, ``handlers.FifoChannel``); the zenoh DEFAULT_CONFIG.json5 (listen, connect,
 scouting keys); rmw_zenoh design notes (attachment layout).
@@ -62,7 +69,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import overload
+from typing import Protocol, overload
 
 import numpy as np
 import zenoh
@@ -71,9 +78,13 @@ __all__ = [
     "DEFAULT_ENDPOINT",
     "KEY_ROOT",
     "ATTACHMENT_SIZE",
+    "SessionOptions",
+    "PacingOptions",
     "session_config",
     "router_config",
     "open_session",
+    "LiveSession",
+    "live_session",
     "topic_to_key",
     "key_to_topic",
     "pack_attachment",
@@ -174,6 +185,54 @@ def open_session(config: zenoh.Config) -> zenoh.Session:
         raise ValueError(
             f"argument --connect/--listen/--config: cannot open the zenoh session: {_zenoh_message(e)}"
         ) from None
+
+
+@dataclass(frozen=True)
+class SessionOptions:
+    """How a live job (stream, record, replay, router) joins zenoh: ``--connect``, ``--listen``, ``--mode``,
+    ``--config``, ``--ros2``, ``--domain``. All defaults: the default session of the module's notes.
+
+    Attributes
+    ----------
+    connect : tuple of str
+        zenoh endpoints to connect to, e.g. ``tcp/host:7447``; empty: none given.
+    listen : tuple of str
+        zenoh endpoints to listen on, e.g. ``tcp/0.0.0.0:7447``; empty: none given.
+    mode : str or None
+        zenoh session mode, ``"peer"`` or ``"client"``; None: not given (a peer). A router's is always
+        ``"router"``.
+    config_file : Path or None
+        A zenoh JSON5 config file, loaded as is; the three fields above then override its
+        ``connect/endpoints``, ``listen/endpoints`` and ``mode``.
+    ros2 : bool
+        ROS 2 mode: rmw_zenoh's key expressions and the liveliness tokens of a ROS 2 node
+        (:mod:`gyroemu.pipelines.ros2_keys`) instead of ``gyroemu/<device>/<topic>``.
+    domain : int or None
+        The ROS 2 domain of ``ros2`` (0..232); None: ``$ROS_DOMAIN_ID``, else 0.
+
+    Lists are kept as tuples and a config file name as a :class:`~pathlib.Path`.
+    """
+
+    connect: tuple[str, ...] = ()
+    listen: tuple[str, ...] = ()
+    mode: str | None = None
+    config_file: Path | None = None
+    ros2: bool = False
+    domain: int | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "connect", tuple(self.connect or ()))
+        object.__setattr__(self, "listen", tuple(self.listen or ()))
+        if self.config_file is not None:
+            object.__setattr__(self, "config_file", Path(self.config_file))
+
+    def config(self) -> zenoh.Config:
+        """The session's zenoh configuration (:func:`session_config`; ``ValueError`` names the argument)."""
+        return session_config(connect=self.connect, listen=self.listen, mode=self.mode, config_file=self.config_file)
+
+    def router_config(self) -> zenoh.Config:
+        """A router's configuration (:func:`router_config`): ``mode`` does not apply."""
+        return router_config(listen=self.listen, connect=self.connect, config_file=self.config_file)
 
 
 @contextlib.contextmanager
@@ -316,6 +375,28 @@ dominate every figure; nothing inside the process removes either.
 SLEEP_ONLY = Timing(spin_s=0.0, switch_interval_s=None, quiet_gc=False, timer_slack_ns=None)
 """Sleep to each deadline and change nothing in the process: gyroemu's pacing before :data:`PRECISE`
 (the baseline of the pacing benchmark)."""
+
+
+@dataclass(frozen=True)
+class PacingOptions:
+    """How a publishing job (stream, replay) starts, paces and ends its run.
+
+    Attributes
+    ----------
+    wait_s : float
+        Before the clock starts, wait up to this many seconds until every key has a subscriber
+        (``--wait``; when it runs out the job publishes anyway); 0: do not wait.
+    timing : Timing
+        How the publisher waits for each deadline (:data:`PRECISE`, or :data:`SLEEP_ONLY`).
+    linger_s : float
+        Seconds to wait after the last message before the session closes, so that queued messages
+        reach their subscribers.
+    """
+
+    wait_s: float = 10.0
+    timing: Timing = PRECISE
+    linger_s: float = 0.5
+
 
 _PR_SET_TIMERSLACK, _PR_GET_TIMERSLACK = 29, 30
 
@@ -519,6 +600,67 @@ class PacedPublisher:
                 t.publisher.undeclare()
             except Exception:
                 pass
+
+
+# --------------------------------------------------------------------------------------------------
+# A live job's session and its teardown.
+
+
+class _Closable(Protocol):
+    def close(self) -> None: ...
+
+
+class LiveSession:
+    """A live job's zenoh session and what the job declares on it, for :func:`live_session` to tear down.
+
+    Attributes
+    ----------
+    session : zenoh.Session
+        The job's session.
+    stopping : list
+        Non-empty once SIGINT or SIGTERM has arrived (:meth:`stopped`).
+    publisher : PacedPublisher or None
+        The job's publisher (:meth:`publish`); undeclared at the end.
+    node : object with ``close()``, or None
+        The job's ROS 2 node (a :class:`gyroemu.pipelines.ros2_keys.Ros2Node` or
+        :class:`~gyroemu.pipelines.ros2_keys.Ros2Keys`), set by the job; closed at the end.
+    """
+
+    def __init__(self, session: zenoh.Session, stopping: list) -> None:
+        self.session = session
+        self.stopping = stopping
+        self.publisher: PacedPublisher | None = None
+        self.node: _Closable | None = None
+
+    def stopped(self) -> bool:
+        """Whether SIGINT or SIGTERM has arrived."""
+        return bool(self.stopping)
+
+    def publish(self, keys: Sequence[str], timing: Timing | None = None) -> PacedPublisher:
+        """Declare the job's :class:`PacedPublisher` of ``keys`` on the session."""
+        self.publisher = PacedPublisher(self.session, keys, timing)
+        return self.publisher
+
+
+@contextlib.contextmanager
+def live_session(session: zenoh.Session) -> Iterator[LiveSession]:
+    """The live stretch of a job on ``session``, and the one teardown of every live job.
+
+    For the block SIGINT and SIGTERM stop the job instead of the process (:func:`stop_on_signals`:
+    the job polls :meth:`LiveSession.stopped`). At its end, however it ends: the publisher is
+    undeclared, the ROS 2 node closed (its liveliness tokens withdrawn), the session closed, and the
+    previous signal handlers are back. Clean-up of the job's own (a reader thread, a recorder, a live
+    filter) goes in a ``try``/``finally`` inside the block, so that it runs first."""
+    with stop_on_signals() as stopping:
+        live = LiveSession(session, stopping)
+        try:
+            yield live
+        finally:
+            if live.publisher is not None:
+                live.publisher.close()
+            if live.node is not None:
+                live.node.close()
+            session.close()
 
 
 # --------------------------------------------------------------------------------------------------

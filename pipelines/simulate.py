@@ -1,0 +1,208 @@
+"""``gyroemu simulate``: simulate a scenario's truth (and a device's samples of it) and write a file.
+
+Two outputs, by the file's suffix:
+
+- ``.mcap``: a ROS 2 log of the device's samples with their truth (:func:`gyroemu.pipelines.mcap_log.write_mcap`);
+  it needs a device.
+- ``.npz``: NumPy arrays (:func:`npz_arrays`): ``truth/<field>`` and ``truth/extras/<name>`` of the
+  trajectory and ``scenario_toml``; with a device also ``imu/<field>``, ``raw/<kind>/<observable>``,
+  ``device_toml`` and ``seed``. Written through a temporary file (:func:`write_npz_atomic`).
+
+The run goes in phases (``truth``, ``measure`` with a device, ``write``), shown as a bar on stderr when
+it is a terminal (:class:`gyroemu.pipelines.progress.PhaseProgress`).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from gyroemu.dynamics import Scenario
+    from gyroemu.dynamics.trajectory import Trajectory
+    from gyroemu.sensors import Device
+    from gyroemu.sensors.samples import ImuSamples
+
+__all__ = [
+    "SimulateError",
+    "SimulateOptions",
+    "SimulateSummary",
+    "check_options",
+    "run_simulate",
+    "npz_arrays",
+    "write_npz_atomic",
+]
+
+_TRUTH_FIELDS = ("t", "q_wb", "omega_b", "alpha_b", "specific_force_b", "pos_w", "vel_w", "mag_b")
+_IMU_FIELDS = ("t", "t_true", "gyro", "accel", "mag", "temperature_degC", "delta_angle", "delta_velocity")
+
+
+class SimulateError(ValueError):
+    """Bad options of ``gyroemu simulate``, found before any work (the message names the argument)."""
+
+
+@dataclass(frozen=True)
+class SimulateOptions:
+    """What ``gyroemu simulate`` simulates, and where it writes it.
+
+    Attributes
+    ----------
+    scenario : str
+        Built-in scenario name or TOML path.
+    out : Path
+        The file to write: ``.mcap`` (a ROS 2 log; needs ``device``) or ``.npz`` (arrays), in an
+        existing folder.
+    device : str or None
+        Built-in device name or TOML path; None: the truth only.
+    duration : float or None
+        Seconds to simulate; None: the scenario's.
+    rate : float or None
+        Output rate of the truth, Hz; None: the scenario's.
+    seed : int
+        Seed of every random draw of the device.
+    progress : bool or None
+        Show the phases as a bar on stderr; None: when stderr is a terminal.
+    """
+
+    scenario: str
+    out: Path
+    device: str | None = None
+    duration: float | None = None
+    rate: float | None = None
+    seed: int = 0
+    progress: bool | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "out", Path(self.out))
+
+
+@dataclass(frozen=True)
+class SimulateSummary:
+    """What a simulate run did.
+
+    Attributes
+    ----------
+    scenario : str
+        The scenario's name.
+    truth_samples : int
+        Samples of the truth trajectory.
+    duration_s : float
+        The trajectory's span, seconds.
+    device : str or None
+        The device's name (None: truth only).
+    device_kind : str or None
+        The device's gyro kind (``mems``, ``fog``, ...).
+    samples : int or None
+        The device's samples.
+    elapsed_s : float
+        Wall-clock seconds of the whole run (simulation, measurement, writing).
+    out : Path
+        The file written.
+    """
+
+    scenario: str
+    truth_samples: int
+    duration_s: float
+    device: str | None
+    device_kind: str | None
+    samples: int | None
+    elapsed_s: float
+    out: Path
+
+
+def check_options(options: SimulateOptions) -> None:
+    """:class:`SimulateError` for an output that cannot be written: a suffix other than .mcap or .npz, a
+    missing folder, an .mcap without a device."""
+    out = options.out
+    if out.suffix not in (".npz", ".mcap"):
+        raise SimulateError(f"argument --out: {out}: write a .mcap (ROS 2) or .npz file (got '{out.suffix}')")
+    if not out.parent.is_dir():
+        raise SimulateError(f"argument --out: {out.parent} is not a folder")
+    if out.suffix == ".mcap" and not options.device:
+        raise SimulateError(
+            "argument --device: an .mcap log holds a device's samples: name a device ('gyroemu presets' lists them)"
+        )
+
+
+def run_simulate(options: SimulateOptions) -> SimulateSummary:
+    """Simulate and write ``options.out`` (see the module's notes). Raises :class:`SimulateError` before
+    any work for bad options, and ``ConfigError`` for an unknown or bad scenario or device."""
+    from gyroemu.dynamics import load_scenario
+
+    from .progress import PhaseProgress  # a bar on stderr when it is a terminal, nothing otherwise
+
+    check_options(options)
+    out = options.out
+    scenario = load_scenario(options.scenario)
+    device = None
+    if options.device:
+        from gyroemu.sensors import load_device  # imported where used: it pulls in scipy.signal (0.7 s)
+
+        device = load_device(options.device, seed=options.seed)
+    started = time.perf_counter()
+    phases = ["truth", "measure", "write"] if device is not None else ["truth", "write"]
+    with PhaseProgress(phases, label="simulate", enabled=options.progress) as progress:
+        with progress.phase("truth"):
+            traj = scenario.simulate(duration=options.duration, rate_hz=options.rate)
+        samples = None
+        if device is not None:
+            with progress.phase("measure"):
+                samples = device.measure(traj)
+        with progress.phase("write"):
+            if out.suffix == ".mcap":
+                from .mcap_log import Recording, truth_series, write_mcap
+
+                assert samples is not None  # an .mcap needs a device: checked above
+                write_mcap(out, Recording(samples, truth=truth_series(traj, samples), device=device), scenario=scenario)
+            else:
+                write_npz_atomic(out, npz_arrays(scenario, traj, device, samples))
+    return SimulateSummary(
+        scenario=scenario.name,
+        truth_samples=len(traj),
+        duration_s=traj.duration,
+        device=None if device is None else device.name,
+        device_kind=None if device is None else device.kind,
+        samples=None if samples is None else len(samples),
+        elapsed_s=time.perf_counter() - started,
+        out=out,
+    )
+
+
+def npz_arrays(
+    scenario: Scenario, traj: Trajectory, device: Device | None = None, samples: ImuSamples | None = None
+) -> dict[str, np.ndarray]:
+    """The arrays of an .npz run: ``truth/...``, ``imu/...``, ``raw/<kind>/...`` and the configs
+    (``samples``: ``device``'s measurement of ``traj``)."""
+    arrays = {f"truth/{name}": getattr(traj, name) for name in _TRUTH_FIELDS}
+    arrays.update({f"truth/extras/{k}": v for k, v in traj.extras.items()})
+    arrays["scenario_toml"] = np.array(scenario.to_toml())
+    if device is not None:
+        assert samples is not None, "a device's run needs its samples"
+        for name in _IMU_FIELDS:
+            if getattr(samples, name) is not None:
+                arrays[f"imu/{name}"] = getattr(samples, name)
+        for kind, observables in samples.raw.items():
+            arrays.update({f"raw/{kind}/{k}": v for k, v in observables.items()})
+        arrays["device_toml"] = np.array(device.to_toml())
+        arrays["seed"] = np.array(device.seed)
+    return arrays
+
+
+def write_npz_atomic(path: str | os.PathLike, arrays: Mapping[str, Any]) -> None:
+    """Write ``arrays`` (name: array-like) to ``path`` (.npz) through a temporary file, so no partial file is left."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            np.savez(f, **arrays)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
