@@ -163,7 +163,31 @@ def test_a_box_starting_in_the_ground_is_refused():
 def test_drop_config_file_loads_and_simulates_a_short_span():
     scenario = load_scenario("drop_impact")
     assert scenario.description
-    traj = scenario.simulate(duration=0.5)
+    t = scenario.times(duration=0.5)
+    model = scenario.spec.model()
+    traj = model.trajectory(t)  # what scenario.simulate(duration=0.5) returns, with the model's contact history
     assert len(traj) == 1001
     assert np.all(np.isfinite(traj.specific_force_b))
     assert np.abs(traj.specific_force_b[:100]).max() < 1e-9  # free fall until the first contact
+    # Free flight, up to the first contact: no specific force; torque-free, so Euler's equations
+    # I α + ω × I ω = 0 hold at every sample to round-off (I of the box, m/12 (b² + c², a² + c², a² + b²)),
+    # and |L| = |I ω| and E = ½ ω·I ω keep their initial values to the solver's error: twice the distance to a
+    # 1000 times tighter solve bounds e_ω, which moves |L| by ≤ √3 |I| e_ω and E by ≤ √3 |I ω| e_ω.
+    assert model.pulses and 0.3 < model.pulses[0][0] < 0.5  # a 1 m fall lasts √(2 h/g) ≈ 0.45 s
+    flight = t < model.pulses[0][0]
+    body = scenario.spec.body
+    a, b, c = body.size_m
+    inertia = body.mass_kg / 12 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
+    g = np.linalg.norm(traj.environment.gravity_w)
+    assert np.abs(traj.specific_force_b[flight]).max() <= 16 * EPS * g
+    w, alpha = traj.omega_b[flight], traj.alpha_b[flight]
+    i_w = w @ inertia.T
+    euler = alpha @ inertia.T + np.cross(w, i_w)
+    scale = np.abs(alpha @ inertia.T).max() + np.abs(np.cross(w, i_w)).max()
+    assert np.abs(euler).max() <= 16 * EPS * scale
+    tight = scenario.spec.model().trajectory(t[flight], rtol=1e-13)
+    e_w = 2 * np.abs(w - tight.omega_b).max()
+    momentum, energy = np.linalg.norm(i_w, axis=1), 0.5 * np.sum(w * i_w, axis=1)
+    bound = 2 * np.sqrt(3) * e_w
+    assert np.abs(momentum - momentum[0]).max() <= bound * np.abs(inertia).max() + 16 * EPS * momentum[0]
+    assert np.abs(energy - energy[0]).max() <= bound * momentum.max() + 16 * EPS * energy[0]

@@ -4,11 +4,72 @@ import tomllib
 
 import numpy as np
 import pytest
+from kinematics_checks import EPS, assert_kinematics, rotation_bounds, uniform_times
 
-from gyroemu.dynamics import KINDS, ConfigError, Trajectory, list_scenarios, load_scenario, scenario_from_dict
+from gyroemu.dynamics import (
+    EARTH_RATE,
+    KINDS,
+    ConfigError,
+    Trajectory,
+    list_scenarios,
+    load_scenario,
+    scenario_from_dict,
+)
 from gyroemu.dynamics.config import config_dir
+from gyroemu.dynamics.rotation import quat_conjugate, quat_rotate
 
 BUILTIN = sorted(p.stem for p in (config_dir() / "scenarios").glob("*.toml"))
+# Kinds integrated by DOP853 (dynamics/integrate.py, default rtol 1e-10): their samples carry the solver's error.
+INTEGRATED = {"ship", "spacecraft-cmg"}
+
+
+def rate_step_corners(steps):
+    """Times where a rate-step table's acceleration jumps: it starts at rest at 0, ramps at ±max_accel to
+    each rate and dwells there for its dwell time (the [steps] table's documented profile)."""
+    t, rate, corners = 0.0, 0.0, [0.0]
+    for target, dwell in zip(np.radians(steps.rates_deg_s), steps.dwell_s):
+        t += abs(target - rate) / np.radians(steps.max_accel_deg_s2)
+        corners += [t, t + dwell]
+        t, rate = t + dwell, target
+    return corners
+
+
+def estimated_bounds(traj, keep, tight=None):
+    """Derivative bounds for :func:`assert_kinematics` from the trajectory's own derivative channels.
+
+    A difference quotient of n-th order is the n-th derivative at some point of its stencil (mean value
+    theorem); between such points the derivative can exceed it by a step's worth of the next one, which a
+    factor 2 covers while the samples resolve the motion. So |α̇|, |α̈| come from α_b's differences and
+    |p⃛|, |p⁗| from those of the world acceleration a_w = R_wb f_b + g_w − 2 Ω × v_w (the definition of f_b),
+    on the stencils ``keep`` (none straddling a corner). A solver's error e in the samples enters a central
+    difference as e/h, as a third-derivative bound 6e/h³ would (a second difference: 4e/h², as a
+    fourth-derivative bound 48e/h⁴). ``tight``: the same motion solved at a 1000 times tighter tolerance,
+    whose difference from ``traj`` is the solver's error to 10⁻³ of itself; twice it bounds e.
+    """
+    h = traj.t[1] - traj.t[0]
+    env = traj.environment
+    alpha = traj.alpha_b
+    a_w = quat_rotate(traj.q_wb, traj.specific_force_b) + env.gravity_w - 2 * np.cross(env.earth_rate_w, traj.vel_w)
+
+    def rate_of_change(x, order):
+        d = np.linalg.norm(np.diff(x, order, axis=0), axis=1) / h**order
+        mask = keep[: len(d)] if order == 2 else np.concatenate([keep, keep[-1:]])[: len(d)]
+        return 2 * d[mask].max(initial=0.0)
+
+    # rotation_bounds wants the rates relative to the world, ω_wb = ω_b − R_bw Ω: each derivative of the
+    # Earth term e is bounded by Ω_E times those of the motion (ė = −ω × e, ë = −α × e + ω × (ω × e), …).
+    w1 = np.linalg.norm(traj.omega_b, axis=1).max() + EARTH_RATE
+    w2 = np.linalg.norm(alpha, axis=1).max() + EARTH_RATE * w1
+    w3 = rate_of_change(alpha, 1) + EARTH_RATE * (w2 + w1**2)
+    w4 = rate_of_change(alpha, 2) + EARTH_RATE * (w3 + 3 * w1 * w2 + w1**3)
+    bounds = rotation_bounds(w1, w2, w3, w4, rate_of_change(a_w, 1), rate_of_change(a_w, 2))
+    if tight is not None:
+        err = lambda name: 2 * np.abs(getattr(traj, name) - getattr(tight, name)).max()
+        bounds.q3 += 6 * err("q_wb") / h**3
+        bounds.w3 += 6 * err("omega_b") / h**3
+        bounds.p3 += 6 * err("pos_w") / h**3
+        bounds.p4 += 48 * err("pos_w") / h**4
+    return bounds
 
 
 def test_every_kind_has_a_builtin_scenario():
@@ -30,6 +91,25 @@ def test_builtin_scenario_simulates_a_short_span(name):
         if isinstance(value, np.ndarray):
             assert np.all(np.isfinite(value)), name_
     np.testing.assert_allclose(np.linalg.norm(traj.q_wb, axis=1), 1.0, atol=1e-12)
+    # The field in body axes is the world field turned by the attitude: R_bw m_w to round-off.
+    m_w = traj.environment.magnetic_field_w
+    expected = quat_rotate(quat_conjugate(traj.q_wb), m_w)
+    np.testing.assert_allclose(traj.mag_b, expected, rtol=0, atol=16 * EPS * np.linalg.norm(m_w))
+    # Kinematic consistency: ω_b with the differenced attitude, α_b with the differenced ω_b, v_w with the
+    # differenced position, f_b = R_bw(p̈ + 2Ω×v − g) with its second differences, each to the central
+    # differences' truncation bound (kinematics_checks), on an exact binary grid at least as fine as the
+    # file's rate, not across the corners of the rate steps' ramps. Not the drop: its 1 ms contact shocks
+    # span two samples (test_impact checks its free flight and contacts).
+    if scenario.kind != "drop":
+        t = uniform_times(0.0, duration, 2.0 ** np.floor(np.log2(1 / scenario.rate_hz)))
+        corners = rate_step_corners(scenario.spec.steps) if getattr(scenario.spec, "steps", None) else []
+        traj = scenario.spec.trajectory(t)
+        # A 1000 times tighter solve of the integrated kinds measures their solver's error.
+        tight = scenario.spec.model().trajectory(t, rtol=1e-13) if scenario.kind in INTEGRATED else None
+        keep = np.ones(len(t) - 2, dtype=bool)
+        for c in corners:
+            keep &= ~((t[:-2] < c) & (c < t[2:]))
+        assert_kinematics(traj, estimated_bounds(traj, keep, tight), breakpoints=corners, sharp=1e-2)
     # The fully resolved TOML reloads to the same spec.
     again = scenario_from_dict(tomllib.loads(scenario.to_toml()))
     assert again.spec == scenario.spec

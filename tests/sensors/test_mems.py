@@ -113,6 +113,35 @@ def fit_gain(t, y, f):
     return c[0] + 1j * c[1]
 
 
+def carrier_rate_gain(g, f, t):
+    """The carrier model's fitted gain (``fit_gain`` on samples ``t``) for Ω = cos 2πft about one axis with
+    its angular acceleration, in closed form: the steady sidebands of the sense oscillator, demodulated
+    and held as the carrier model does (module notes, "Two models"). Independent of the module's code.
+
+    Force amplitude F = c Ω + i x₀ Ω̇ = (c/2)[(1+ε) e^{iωt} + (1−ε) e^{−iωt}], c = −2x₀ω_d, ε = ω/2ω_d:
+    the sidebands ω_d ± ω reach y = Re{Σ (c/2)(1 ± ε) H(ω_d ± ω) e^{i(ω_d ± ω)t}}, H(ν) = 1/(ω_s² − ν² +
+    iνω_s/Q_s). Cycle k averages 2 y_j e^{−iθ_j} over carrier steps j = kN … kN + N − 1 (θ_j = 2πj/N,
+    N = CARRIER_STEPS_PER_CYCLE), so its 2ω_d products leak O(ε) into the result; it is read as
+    Re{· e^{−iφ_ref}}/SF₀ and held from step kN + N − 1 until the next cycle is done.
+    """
+    w = 2 * np.pi * f
+    w_d, w_s = frequencies(g)
+    cycle, n = 2 * np.pi / w_d, CARRIER_STEPS_PER_CYCLE
+    h = cycle / n
+    oscillator = lambda nu: 1 / (w_s**2 - nu**2 + 1j * nu * w_s / g.sense_quality_factor)
+    c, eps = -2 * g.drive_amplitude_m * w_d, w / (2 * w_d)
+    upper, lower = c / 2 * (1 + eps) * oscillator(w_d + w), c / 2 * (1 - eps) * oscillator(w_d - w)
+    cycles = np.arange(int(t[-1] / cycle) + 1)
+    tj = (cycles[:, None] * n + np.arange(n)) * h  # (cycle, step)
+    y = np.real(upper * np.exp(1j * (w_d + w) * tj) + lower * np.exp(1j * (w_d - w) * tj))
+    demodulated = np.mean(2 * y * np.exp(-2j * np.pi * np.arange(n) / n), axis=1)
+    coriolis = sense_response(g) * c  # the steady response to Ω = 1, whose phase the reference carries
+    reference = np.exp(-1j * (np.angle(coriolis) + g.demodulation_phase_error_rad))
+    rate = np.real(demodulated * reference) / np.real(coriolis * reference)
+    held = np.floor((t - (n - 1) * h) / cycle + 1e-9).astype(int)  # the last cycle done at or before t
+    return fit_gain(t, rate[held], f)
+
+
 # --------------------------------------------------------------------------------------------------
 # Defaults and closed forms
 # --------------------------------------------------------------------------------------------------
@@ -269,7 +298,17 @@ def test_carrier_rate_response_matches_the_baseband_to_second_order():
         # first-order terms in f/f_d cancel (the averaged model is what a cycle-averaging demodulator
         # sees), so they agree to second order.
         assert abs(abs(ratio) / np.sinc(f * period) ** 2 - 1) < (f * period) ** 2
-        assert np.angle(ratio) == pytest.approx(-w * period, rel=0.1)
+        # Exactly, the ratio is carrier_rate_gain / rate_response (both see the same piecewise-linear
+        # input, whose sinc²(f/hz) cancels). To first order in ε = f/2f_d that is sinc²(fT_d) e^{−iωT_d}
+        # (1 + 2iγε), γ = arg H₀ (the 2ω_d leak of the cycle average turns with the sense phase; its
+        # discrete −πε/12 cancels the cycle sum's half-step advance ωh/2). Neglected: the carrier steps
+        # interpolate the piecewise-linear input once more, cutting each truth knot's corner, on average
+        # (ωh)²/12 of the signal (h the carrier step); twice that bounds gain and phase.
+        expected = carrier_rate_gain(base, f, t[settled]) / base.rate_response(f)
+        h = period / CARRIER_STEPS_PER_CYCLE
+        bound = 2 * (w * h) ** 2 / 12
+        assert abs(abs(ratio / expected) - 1) <= bound, (f, abs(ratio / expected) - 1, bound)
+        assert abs(np.angle(ratio / expected)) <= bound, (f, np.angle(ratio / expected), bound)
 
 
 # --------------------------------------------------------------------------------------------------
