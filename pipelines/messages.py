@@ -590,7 +590,11 @@ class MessageType:
         frame_len = string_length - 1
         if frame_len < 0:
             raise ValueError(f"message {first}: a CDR string length of 0 (no NUL terminator)")
-        minimum = self.layout(frame_len).itemsize if 4 + _HEADER_FIXED + string_length <= size else size + 4
+        if 4 + _HEADER_FIXED + string_length > size:  # checked first: a corrupt length can be huge
+            raise ValueError(
+                f"message {first}: {size} bytes, but its frame_id's {string_length}-byte CDR string runs past the end"
+            )
+        minimum = self.layout(frame_len).itemsize
         if not minimum <= size <= minimum + 3:
             raise ValueError(
                 f"message {first}: {size} bytes, but a {self.name} with a {frame_len}-byte frame_id has {minimum}"

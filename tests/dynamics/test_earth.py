@@ -54,3 +54,29 @@ def test_inertial_environment():
     env = Environment.inertial(9.81)
     np.testing.assert_array_equal(env.gravity_w, [0, 0, -9.81])
     assert not env.earth_rate_w.any()
+
+
+@pytest.mark.parametrize("height_m", [0.0, 1000.0])
+def test_normal_gravity_is_somiglianas_closed_form_at_30_degrees(height_m):
+    """TR8350.2 eqs. 4-1 and 4-3 with the constants computed here from the defining parameters (a, 1/f,
+    GM, ω) and the published γe and k; at 30° sin²φ = 1/4 differs from sin φ = 1/2. e² and k are
+    published to 14 decimals, so one unit in their last place moves γ by at most sin²φ (1 + 1/2)·1e-14
+    relative; the rest is round-off."""
+    a, f, gm, omega = 6378137.0, 1 / 298.257223563, 3986004.418e8, 7292115e-11
+    b, e2 = a * (1 - f), f * (2 - f)
+    m = omega**2 * a**2 * b / gm
+    gamma_e, k = 9.7803253359, 0.00193185265241
+    s2 = 0.25
+    gamma0 = gamma_e * (1 + k * s2) / np.sqrt(1 - e2 * s2)
+    expected = gamma0 * (1 - 2 / a * (1 + f + m - 2 * f * s2) * height_m + 3 * height_m**2 / a**2)
+    tol = s2 * 1.5e-14 + 8 * np.finfo(float).eps
+    assert normal_gravity(np.radians(30.0), height_m) == pytest.approx(expected, rel=tol, abs=0)
+    assert normal_gravity(np.radians(-30.0), height_m) == pytest.approx(expected, rel=tol, abs=0)
+
+
+def test_default_site_field_is_the_documented_one_in_tesla():
+    """Site's default field (1.63, 18.6, −46.4) µT ENU (about 50 µT, inclination about 68°), in T."""
+    field = Site().environment().magnetic_field_w
+    np.testing.assert_allclose(field, [1.63e-6, 18.6e-6, -46.4e-6], rtol=2 * np.finfo(float).eps, atol=0)
+    assert np.linalg.norm(field) == pytest.approx(50e-6, rel=0.01)
+    assert np.degrees(np.arctan2(-field[2], np.hypot(field[0], field[1]))) == pytest.approx(68, abs=0.5)

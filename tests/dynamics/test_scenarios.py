@@ -120,3 +120,16 @@ def test_unknown_and_missing_kind_are_named():
         scenario_from_dict({"kind": "spinning-plate", "duration_s": 1, "rate_hz": 1}, name="x.toml")
     with pytest.raises(ConfigError, match="key 'kind': missing required key"):
         scenario_from_dict({"duration_s": 1, "rate_hz": 1}, name="x.toml")
+
+
+@pytest.mark.parametrize("name", ["omega_b", "alpha_b", "specific_force_b", "pos_w", "vel_w", "mag_b"])
+@pytest.mark.parametrize("shape", [(4, 4), (3, 3), (4,)])
+def test_trajectory_refuses_a_vector_of_the_wrong_shape_naming_it(name, shape):
+    """Every (N, 3) channel of a Trajectory is checked against N = len(t)."""
+    n = 4
+    arrays = {k: np.zeros((n, 3)) for k in ("omega_b", "alpha_b", "specific_force_b", "pos_w", "vel_w", "mag_b")}
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    assert len(Trajectory(t=np.arange(n, dtype=float), q_wb=q, **arrays)) == n
+    arrays[name] = np.zeros(shape)
+    with pytest.raises(ValueError, match=rf"^{name} must have shape \(4, 3\), got \({', '.join(map(str, shape))},?\)$"):
+        Trajectory(t=np.arange(n, dtype=float), q_wb=q, **arrays)

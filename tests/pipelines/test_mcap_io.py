@@ -704,3 +704,51 @@ def test_rosbag2_mcap_written_by_rosbags_is_read(tmp_path):
     assert list(log.devices) == ["imu/data"]
     assert np.array_equal(log.samples.gyro, gyro) and np.array_equal(log.samples.accel, accel)
     assert np.array_equal(log.device.stamp_ns, stamps)
+
+
+def test_chunks_split_where_messages_start(tmp_path):
+    """McapFileWriter's chunk k holds the messages whose records start in [k, k + 1) × chunk_size of the
+    records laid end to end (31 bytes of Message record head before each payload), from the first call:
+    with chunk_size = 3 r + 1, message 3 starts at byte 3 r = chunk_size − 1, still in chunk 0."""
+    from gyroemu.pipelines.mcap_records import McapFileWriter
+
+    n = 12
+    payloads = IMU.encode(np.arange(n), "imu0")
+    record = 31 + payloads.shape[1]
+    chunk_size = 3 * record + 1
+    path = tmp_path / "chunks.mcap"
+    with open(path, "wb") as f:
+        writer = McapFileWriter(f, chunk_size=chunk_size)
+        channel = writer.register_ros2_channel("/imu", IMU)
+        writer.add_messages([(channel, 10 * np.arange(n), payloads)])
+        writer.finish()
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    chunk_of = np.arange(n) * record // chunk_size
+    expected = [
+        (10 * int(np.flatnonzero(chunk_of == k)[0]), 10 * int(np.flatnonzero(chunk_of == k)[-1]))
+        for k in range(chunk_of[-1] + 1)
+    ]
+    assert expected[0] == (0, 30)
+    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    assert [(c.message_start_time, c.message_end_time) for c in chunks] == expected
+    assert [c.uncompressed_size for c in chunks] == [record * int(np.sum(chunk_of == k)) for k in range(len(expected))]
+
+
+def test_imu_series_compares_by_identity_and_is_hashable():
+    """Like every array record of the package (frozen, eq=False): == is identity (a field-wise == of
+    arrays would be ambiguous) and a series can key a dict."""
+    t = np.arange(3.0)
+    a = ImuSeries(t=t, omega_b=np.zeros((3, 3)))
+    b = ImuSeries(t=t, omega_b=np.zeros((3, 3)))
+    assert a == a and a != b
+    assert {a: "a", b: "b"}[b] == "b"
+
+
+def test_stamps_match_nothing_on_an_empty_channel():
+    from gyroemu.pipelines.mcap_log import _match
+
+    i, j = _match(np.array([5, 7, 9], np.int64), np.empty(0, np.int64))
+    assert i.shape == j.shape == (0,) and i.dtype == j.dtype == np.int64
+    i, j = _match(np.array([5, 7, 9], np.int64), np.array([9, 5], np.int64))
+    assert list(i) == [0, 2] and list(j) == [1, 0]

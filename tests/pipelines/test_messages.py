@@ -184,6 +184,24 @@ def test_decode_rejects_malformed(damage):
         IMU.decode(rows)
 
 
+def test_decode_numbers_the_bad_message_among_mixed_lengths():
+    """Payloads 1 and 2 share a length (frame ids "ab" and "abc" pad to the same size) but not a string
+    length; payload 2's string length is then zeroed: the error names message 2."""
+    first, second, third = (split_payloads(IMU.encode([k], f))[0] for k, f in enumerate(["base_link", "ab", "abc"]))
+    assert len(first) != len(second) == len(third)
+    third = third[:12] + bytes(4) + third[16:]
+    with pytest.raises(ValueError, match=r"^message 2: a CDR string length of 0"):
+        IMU.decode([first, second, third])
+
+
+@pytest.mark.parametrize("mtype", [IMU, MAGNETIC_FIELD], ids=lambda t: t.name)
+def test_decode_of_no_rows_is_empty(mtype):
+    decoded = mtype.decode(np.empty((0, mtype.message_size("imu0")), np.uint8))
+    assert len(decoded) == 0 and decoded.stamp_ns.shape == (0,) and decoded.frame_id.shape == (0,)
+    for spec in mtype.body:
+        assert decoded[spec.name].shape[0] == 0
+
+
 def test_encode_checks_names_and_shapes():
     with pytest.raises(ValueError, match="no field"):
         IMU.encode([0], "x", {"gyro": np.zeros((1, 3))})

@@ -219,6 +219,19 @@ def test_default_drift_is_a_few_degrees_per_hour():
     assert 1.0 < deg_per_h < 10.0
 
 
+def test_friction_rotation_kernel_is_the_quaternion_rotation():
+    """The friction model's kernel turns vectors by q ⊗ v ⊗ q* (case to rotor) and q* ⊗ v ⊗ q (back):
+    against scipy's rotation matrix, for a generic rotation and vector, to a few ε of |v|."""
+    from gyroemu.sensors.free_gyro import _rotate
+
+    q = np.array([0.36, -0.48, 0.64, 0.48])  # unit, scalar first; no component zero
+    v = np.array([0.3, -1.7, 2.9])
+    rotation = Rotation.from_quat(np.roll(q, -1))
+    tol = 8 * np.finfo(float).eps * np.linalg.norm(v)
+    np.testing.assert_allclose(_rotate(q, v, False), rotation.apply(v), rtol=0, atol=tol)
+    np.testing.assert_allclose(_rotate(q, v, True), rotation.inv().apply(v), rtol=0, atol=tol)
+
+
 # --------------------------------------------------------------------------------------------------
 # Gimbal lock
 # --------------------------------------------------------------------------------------------------

@@ -489,6 +489,12 @@ def test_bad_parameters_name_the_key(key, value, why):
     assert why in error.value.reason
 
 
+def test_a_negative_sense_frequency_is_stated():
+    """f_d + Δf = 27 000 − 40 000 = −13 000 Hz, in the message."""
+    with pytest.raises(ConfigError, match=r"f_d \+ Δf = -13000 Hz must be positive"):
+        validate(MemsGyro, {"kind": "mems", "mode_split_hz": -40_000.0}, prefix="gyro.mechanism")
+
+
 def test_a_device_with_a_mems_gyro_reads_the_rate():
     rate_b = np.array([0.3, -0.2, 2.0])
     t = grid(0.5, 2000)

@@ -102,6 +102,23 @@ def test_static_balance_with_the_tilted_input_axis():
     np.testing.assert_allclose(r.rate[:, 0], w * math.cos(theta), rtol=1e-13)
 
 
+def test_power_up_balance_holds_near_the_cross_coupling_limit():
+    """A steady rate with a large cross rate on the spin axis (H |ω|/K = 0.995 < 1, so the balance
+    K θ = H (ω_IA cos θ − ω_SRA sin θ) has one root and positive stiffness K + H (ω_IA sin θ + ω_SRA cos θ)
+    = 0.031 N·m/rad there): the gimbals start in that equilibrium and stay, θ constant from the first
+    sample. Tolerance: the balance's round-off ε (K|θ| + H|ω|) over its stiffness, 4 times."""
+    gyro = RateGyro(stop_angle_deg=85.0)
+    w_ia, w_sra = 0.5, -29.7  # gyro x: IA = x, SRA = z
+    m = 50
+    r = respond(np.tile([w_ia, 0.0, w_sra], (m, 1)), np.zeros((m, 3)), 1e-4, gyro=gyro)
+    balance = lambda th: K * th - H * (w_ia * math.cos(th) - w_sra * math.sin(th))  # noqa: E731
+    theta = scipy.optimize.brentq(balance, -1.4, 1.4, xtol=1e-16, rtol=4 * np.finfo(float).eps)
+    stiffness = K + H * (w_ia * math.sin(theta) + w_sra * math.cos(theta))
+    assert 0 < stiffness < 0.11 * K
+    tol = 4 * np.finfo(float).eps * (K * theta + H * math.hypot(w_ia, w_sra)) / stiffness
+    np.testing.assert_allclose(r.raw["gimbal_angle_rad"][:, 0], theta, rtol=0, atol=tol)
+
+
 def test_step_response_equals_the_closed_form_sample_by_sample():
     """Exact for the input the simulation sees (a ramp over the first step, then constant)."""
     dt, w0 = 1e-3, 1e-5

@@ -146,6 +146,21 @@ def test_open_loop_stops_warn_and_hold_the_angle():
     assert r.angle[-1, 0] == pytest.approx(OPEN.stop_angle_rad / OPEN.gimbal_gain, rel=1e-15)
 
 
+def test_open_loop_starts_in_balance_so_a_steady_rate_reads_exactly():
+    """A steady rate from t[0]: the float starts on the particular solution θ' = H ω/c of
+    J θ'' + c θ' = H ω, so the indicated angle is ω t from the first sample (no lag J/c to settle
+    into, which would cost ω J/c = 2e-3 of ω t at 1 s). One axis: θ ≈ 1e-7 rad keeps cos θ = 1 to
+    5e-15 and, with no rate on any spin axis, there is no cross-coupling."""
+    dt = 1e-3
+    w = 1e-7
+    t = np.arange(1001) * dt
+    omega = np.zeros((t.size, 3))
+    omega[:, 0] = w
+    r = respond(OPEN, omega, np.zeros_like(omega), dt)
+    np.testing.assert_allclose(r.angle[:, 0], w * t, rtol=1e-12, atol=1e-12 * w * dt)
+    np.testing.assert_array_equal(r.angle[:, 1:], 0.0)
+
+
 # --------------------------------------------------------------------------------------------------
 # Torque rebalance
 # --------------------------------------------------------------------------------------------------
