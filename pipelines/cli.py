@@ -16,11 +16,11 @@ from typing import TYPE_CHECKING
 from gyroemu.errors import GyroemuError
 
 if TYPE_CHECKING:  # the job modules are imported where used: they pull in numpy, zenoh, ...
-    from .record import RecordOptions
-    from .replay import ReplayOptions
-    from .simulate import SimulateOptions
-    from .stream import StreamOptions
-    from .zenoh_io import PacingOptions, SessionOptions
+    from gyroemu.pipelines.jobs.simulate import SimulateOptions
+    from gyroemu.pipelines.transport.record import RecordOptions
+    from gyroemu.pipelines.transport.replay import ReplayOptions
+    from gyroemu.pipelines.transport.stream import StreamOptions
+    from gyroemu.pipelines.transport.zenoh_io import PacingOptions, SessionOptions
 
 __all__ = ["main"]
 
@@ -41,7 +41,7 @@ def _cmd_scenarios(args) -> int:
 
 
 def _simulate_options(args: argparse.Namespace) -> SimulateOptions:
-    from .simulate import SimulateOptions
+    from gyroemu.pipelines.jobs.simulate import SimulateOptions
 
     return SimulateOptions(
         scenario=args.scenario,
@@ -54,7 +54,7 @@ def _simulate_options(args: argparse.Namespace) -> SimulateOptions:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
-    from .simulate import SimulateError, run_simulate
+    from gyroemu.pipelines.jobs.simulate import SimulateError, run_simulate
 
     try:
         summary = run_simulate(_simulate_options(args))
@@ -68,7 +68,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _cmd_info(args) -> int:
-    from .mcap_log import read_mcap
+    from gyroemu.pipelines.formats.mcap_log import read_mcap
 
     path = Path(args.log)
     log = read_mcap(path)
@@ -111,7 +111,7 @@ def _mcap_out(text: str) -> Path:
 
 
 def _cmd_import(args) -> int:
-    from .importers import IMPORTERS
+    from gyroemu.pipelines.formats.importers import IMPORTERS
 
     source, out = Path(args.file), _mcap_out(args.out)
     started = time.perf_counter()
@@ -124,8 +124,8 @@ def _cmd_import(args) -> int:
 
 
 def _cmd_estimate(args) -> int:
-    from .estimate import estimate_log
-    from .estimation.registry import FilterError, filter_class
+    from gyroemu.pipelines.estimation.registry import FilterError, filter_class
+    from gyroemu.pipelines.jobs.estimate import estimate_log
 
     try:
         filter_class(args.filter)
@@ -164,7 +164,7 @@ def _cmd_presets(args) -> int:
 
 
 def _cmd_allan(args: argparse.Namespace) -> int:
-    from .allan import AllanLogError, allan_of_log, write_allan_plot
+    from gyroemu.pipelines.jobs.allan import AllanLogError, allan_of_log, write_allan_plot
 
     log = Path(args.log)
     try:
@@ -183,9 +183,8 @@ def _cmd_bench(args) -> int:
     import warnings
 
     from gyroemu.dynamics import ConfigError, load_scenario
-
-    from .bench import BenchWarning, LogCase, SimCase, run_bench
-    from .estimation.registry import FilterError, filter_class
+    from gyroemu.pipelines.estimation.registry import FilterError, filter_class
+    from gyroemu.pipelines.jobs.bench import BenchWarning, LogCase, SimCase, run_bench
 
     # Names first, so that a typo fails at once and names its argument.
     for spec in args.filter or ():
@@ -250,7 +249,7 @@ def _cmd_bench(args) -> int:
 
 
 def _cmd_demo(args) -> int:
-    from .demo import run_demo
+    from gyroemu.pipelines.jobs.demo import run_demo
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():
@@ -272,14 +271,14 @@ def _session_options(args: argparse.Namespace) -> SessionOptions:
     """``--connect``, ``--listen``, ``--mode``, ``--config``, and ``--ros2`` with ``--domain`` (default:
     ``ROS_DOMAIN_ID``, else 0), the domain checked before any work. A command without some of these
     flags (the router) leaves them at their defaults."""
-    from .zenoh_io import SessionOptions
+    from gyroemu.pipelines.transport.zenoh_io import SessionOptions
 
     ros2, domain = getattr(args, "ros2", False), getattr(args, "domain", None)
     if not ros2:
         if domain is not None:
             raise UsageError("argument --domain: only with --ros2")
     else:
-        from .ros2_keys import Ros2Error, domain_id
+        from gyroemu.pipelines.formats.ros2_keys import Ros2Error, domain_id
 
         try:
             domain = domain_id(domain)
@@ -296,13 +295,13 @@ def _session_options(args: argparse.Namespace) -> SessionOptions:
 
 
 def _pacing_options(args: argparse.Namespace) -> PacingOptions:
-    from .zenoh_io import PacingOptions
+    from gyroemu.pipelines.transport.zenoh_io import PacingOptions
 
     return PacingOptions(wait_s=args.wait)
 
 
 def _stream_options(args: argparse.Namespace) -> StreamOptions:
-    from .stream import StreamOptions
+    from gyroemu.pipelines.transport.stream import StreamOptions
 
     return StreamOptions(
         scenario=args.scenario,
@@ -318,7 +317,7 @@ def _stream_options(args: argparse.Namespace) -> StreamOptions:
 
 
 def _cmd_stream(args: argparse.Namespace) -> int:
-    from .stream import run_stream
+    from gyroemu.pipelines.transport.stream import run_stream
 
     try:
         return run_stream(_stream_options(args))
@@ -327,7 +326,7 @@ def _cmd_stream(args: argparse.Namespace) -> int:
 
 
 def _record_options(args: argparse.Namespace) -> RecordOptions:
-    from .record import RecordOptions
+    from gyroemu.pipelines.transport.record import RecordOptions
 
     out = Path(args.out)
     if not out.parent.is_dir():
@@ -342,7 +341,7 @@ def _record_options(args: argparse.Namespace) -> RecordOptions:
 
 
 def _cmd_record(args: argparse.Namespace) -> int:
-    from .record import run_record
+    from gyroemu.pipelines.transport.record import run_record
 
     options = _record_options(args)
     try:
@@ -354,7 +353,7 @@ def _cmd_record(args: argparse.Namespace) -> int:
 
 
 def _replay_options(args: argparse.Namespace) -> ReplayOptions:
-    from .replay import ReplayOptions
+    from gyroemu.pipelines.transport.replay import ReplayOptions
 
     return ReplayOptions(
         path=Path(args.log),
@@ -368,7 +367,7 @@ def _replay_options(args: argparse.Namespace) -> ReplayOptions:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from .replay import run_replay
+    from gyroemu.pipelines.transport.replay import run_replay
 
     try:
         return run_replay(_replay_options(args))
@@ -377,7 +376,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
 
 def _cmd_router(args: argparse.Namespace) -> int:
-    from .record import run_router
+    from gyroemu.pipelines.transport.record import run_router
 
     try:
         return run_router(_session_options(args))

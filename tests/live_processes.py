@@ -91,7 +91,7 @@ class Listener:
     collecting ``(key, payload, sequence, send stamp ns)`` of everything under ``key_expr``."""
 
     def __init__(self, key_expr="gyroemu/**"):
-        from gyroemu.pipelines.zenoh_io import open_session, session_config, subscribe
+        from gyroemu.pipelines.transport.zenoh_io import open_session, session_config, subscribe
 
         self.endpoint = f"tcp/127.0.0.1:{free_port()}"
         self.session = open_session(session_config(listen=[self.endpoint], mode="peer"))

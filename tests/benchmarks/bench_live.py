@@ -6,7 +6,7 @@ A script, not a test (pytest does not collect it). Everything stays on 127.0.0.1
 scouting), every wait is bounded, and the started processes are killed on the way out.
 
 (a) Throughput: this script publishes ``--devices`` keys ``gyroemu/dNN/imu`` at ``--rate`` each for
-    ``--duration`` s with :class:`gyroemu.pipelines.zenoh_io.PacedPublisher` (one process: ``gyroemu stream``
+    ``--duration`` s with :class:`gyroemu.pipelines.transport.zenoh_io.PacedPublisher` (one process: ``gyroemu stream``
     publishes one device per process, and 50 such processes would be too heavy for a small machine);
     the payload is the ``/imu`` CDR of a simulated consumer MEMS device. ``gyroemu record`` (a separate
     process, zenoh client of the publisher's listening endpoint) writes them to an MCAP file; its JSON
@@ -40,7 +40,7 @@ sys.path.insert(0, str(ROOT))
 
 import zenoh  # noqa: E402
 
-from gyroemu.pipelines.zenoh_io import PacedPublisher, open_session, session_config  # noqa: E402
+from gyroemu.pipelines.transport.zenoh_io import PacedPublisher, open_session, session_config  # noqa: E402
 
 SCENARIO, DEVICE = "heavy_top", "consumer_mems"
 
@@ -86,8 +86,8 @@ def stop(proc: subprocess.Popen, timeout: float = 30.0) -> int | None:
 
 def imu_payloads(duration: float) -> list[bytes]:
     from gyroemu.dynamics import load_scenario
-    from gyroemu.pipelines.messages import split_payloads
-    from gyroemu.pipelines.stream import encode_run
+    from gyroemu.pipelines.formats.messages import split_payloads
+    from gyroemu.pipelines.transport.stream import encode_run
     from gyroemu.sensors import load_device
 
     traj = load_scenario(SCENARIO).simulate(duration=duration)

@@ -35,8 +35,8 @@ from mcap_ros2.decoder import DecoderFactory  # noqa: E402
 from mcap_ros2.writer import Writer as Ros2Writer  # noqa: E402
 from timing import best_time  # noqa: E402
 
+from gyroemu.pipelines.formats.messages import schema_text  # noqa: E402
 from gyroemu.pipelines.mcap_io import ImuSeries, Recording, read_mcap, write_mcap  # noqa: E402
-from gyroemu.pipelines.messages import schema_text  # noqa: E402
 from gyroemu.sensors.samples import ImuSamples  # noqa: E402
 
 TARGET = 200e3

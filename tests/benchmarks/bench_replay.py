@@ -18,9 +18,9 @@ less the smallest such offset of the run (so it counts from the earliest message
 unknown ``t_start``). Each configuration runs ``--repeats`` times, interleaved so that machine load
 hits them alike; the table gives each run, then the median of the runs.
 
-Baseline, in the same run: the same replay with :data:`gyroemu.pipelines.zenoh_io.SLEEP_ONLY` (sleep to each
+Baseline, in the same run: the same replay with :data:`gyroemu.pipelines.transport.zenoh_io.SLEEP_ONLY` (sleep to each
 deadline, Python's 5 ms GIL switch interval, the garbage collector on, the kernel's 50 us timer
-slack: the replay before :data:`gyroemu.pipelines.zenoh_io.PRECISE`).
+slack: the replay before :data:`gyroemu.pipelines.transport.zenoh_io.PRECISE`).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from gyroemu.pipelines.zenoh_io import open_session, session_config, subscribe  # noqa: E402
+from gyroemu.pipelines.transport.zenoh_io import open_session, session_config, subscribe  # noqa: E402
 
 SCENARIO, DEVICE = "heavy_top", "consumer_mems"
 TIMINGS = {"baseline (SLEEP_ONLY)": "SLEEP_ONLY", "gyroemu (PRECISE)": "PRECISE"}
@@ -56,7 +56,7 @@ def free_port() -> int:
 
 
 def replay_once(log: Path, folder: Path, timing: str, recorder: bool) -> dict:
-    """One replay of ``log`` with ``gyroemu.pipelines.zenoh_io.<timing>`` as the publisher's default."""
+    """One replay of ``log`` with ``gyroemu.pipelines.transport.zenoh_io.<timing>`` as the publisher's default."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     session = open_session(session_config(listen=[endpoint], mode="peer"))
     rec = None
@@ -90,7 +90,7 @@ def replay_once(log: Path, folder: Path, timing: str, recorder: bool) -> dict:
                 time.sleep(0.05)
             time.sleep(1.0)  # its subscription reaches the replay's router-less peer mesh
         code = (
-            "import sys, gyroemu.pipelines.zenoh_io as z\n"
+            "import sys, gyroemu.pipelines.transport.zenoh_io as z\n"
             f"z.PRECISE = z.{timing}\n"
             "from gyroemu.pipelines.cli import main\n"
             f"sys.exit(main(['replay', {str(log)!r}, '--connect', {endpoint!r}]))\n"

@@ -33,7 +33,7 @@ from gyroemu.pipelines.estimation.mekf import Mekf, MekfParams  # noqa: E402
 from gyroemu.pipelines.estimation.metrics import attitude_errors, rmse_deg  # noqa: E402
 from gyroemu.pipelines.estimation.protocol import FilterSetup  # noqa: E402
 from gyroemu.pipelines.estimation.registry import available_filters, make_filter, unavailable_filters  # noqa: E402
-from gyroemu.pipelines.importers import read_broad  # noqa: E402
+from gyroemu.pipelines.formats.importers import read_broad  # noqa: E402
 
 BROAD_DIR = Path(
     os.environ.get("GYROEMU_BROAD_DIR", Path(__file__).resolve().parents[3] / "shared" / "datasets" / "broad")

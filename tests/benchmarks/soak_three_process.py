@@ -17,7 +17,7 @@ When the stream has ended the recorder is stopped with SIGINT and the checks run
 - the file, independently: each topic holds N messages whose header stamps are the N expected ones,
   each once;
 - bytes: the payloads recorded on each topic are, in order, the bytes the library encodes for the
-  same scenario, device and seed (:func:`gyroemu.pipelines.stream.encode_run`, what the stream published).
+  same scenario, device and seed (:func:`gyroemu.pipelines.transport.stream.encode_run`, what the stream published).
 
 It prints the figures (messages, rates, the stream's pacing, each process's CPU time and peak memory,
 the file's size) and exits with status 1 on any loss, duplicate or byte mismatch (2 on bad usage).
@@ -106,7 +106,7 @@ def expected_payloads(duration: float, seed: int) -> dict[str, np.ndarray]:
     """Topic -> (N, size) rows: what the stream encodes and publishes for this scenario, device and seed."""
     from gyroemu.dynamics import load_scenario
     from gyroemu.pipelines.mcap_io import truth_series
-    from gyroemu.pipelines.stream import encode_run
+    from gyroemu.pipelines.transport.stream import encode_run
     from gyroemu.sensors import load_device
 
     traj = load_scenario(SCENARIO).simulate(duration=duration)
@@ -117,7 +117,7 @@ def expected_payloads(duration: float, seed: int) -> dict[str, np.ndarray]:
 def check(folder: Path, duration: float, seed: int) -> tuple[bool, list[str]]:
     """The checks of the module's notes on ``folder/soak.mcap`` and ``folder/soak.json``: (ok, lines)."""
     from gyroemu.pipelines.mcap_io import iter_mcap_batches
-    from gyroemu.pipelines.zenoh_io import header_stamp_ns
+    from gyroemu.pipelines.transport.zenoh_io import header_stamp_ns
 
     expected = expected_payloads(duration, seed)
     n = len(expected["/imu"])

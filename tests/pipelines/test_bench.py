@@ -1,4 +1,5 @@
-"""The filter bench (gyroemu.pipelines.bench), the peer adapters (gyroemu.pipelines.estimation.peers) and the registry.
+"""The filter bench (gyroemu.pipelines.jobs.bench), the peer adapters (gyroemu.pipelines.estimation.peers) and
+the registry.
 
 Bounds, and where they come from
 --------------------------------
@@ -35,12 +36,12 @@ from mcap.writer import Writer as PlainMcapWriter
 
 from gyroemu.dynamics.rotation import quat_from_euler_zyx, quat_multiply
 from gyroemu.pipelines import cli
-from gyroemu.pipelines.bench import LogCase, SimCase, evaluate_run, run_bench
 from gyroemu.pipelines.estimation import registry
 from gyroemu.pipelines.estimation.metrics import attitude_errors, rmse_deg
 from gyroemu.pipelines.estimation.protocol import Estimate, FilterSetup
-from gyroemu.pipelines.mcap_log import Recording, truth_series, write_mcap
-from gyroemu.pipelines.messages import IMU
+from gyroemu.pipelines.formats.mcap_log import Recording, truth_series, write_mcap
+from gyroemu.pipelines.formats.messages import IMU
+from gyroemu.pipelines.jobs.bench import LogCase, SimCase, evaluate_run, run_bench
 
 PEERS = ["madgwick", "mahony", "ahrs-ekf", "vqf"]
 TRIAL_02 = BROAD_DIR / "02_undisturbed_slow_rotation_B.hdf5"
@@ -530,7 +531,7 @@ DIRECT_02 = {
 
 @pytest.fixture(scope="module")
 def trial_02():
-    from gyroemu.pipelines.importers import read_broad
+    from gyroemu.pipelines.formats.importers import read_broad
 
     return read_broad(TRIAL_02)
 

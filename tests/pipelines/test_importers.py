@@ -25,10 +25,10 @@ from mcap_ros2.decoder import DecoderFactory
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from gyroemu.pipelines import cli
-from gyroemu.pipelines.importers import BROAD_CITATION, ImportInputError, import_broad, read_broad
-from gyroemu.pipelines.mcap_log import LogWarning, Recording, read_mcap, write_mcap
-from gyroemu.pipelines.mcap_records import McapFileWriter
-from gyroemu.pipelines.messages import FLAG, IMU, schema_text
+from gyroemu.pipelines.formats.importers import BROAD_CITATION, ImportInputError, import_broad, read_broad
+from gyroemu.pipelines.formats.mcap_log import LogWarning, Recording, read_mcap, write_mcap
+from gyroemu.pipelines.formats.mcap_records import McapFileWriter
+from gyroemu.pipelines.formats.messages import FLAG, IMU, schema_text
 from gyroemu.sensors.samples import ImuSamples
 
 TRIAL = "33_disturbed_attached_magnet_2cm.hdf5"  # the smallest of the eight (48,279 samples)

@@ -30,10 +30,10 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from gyroemu.dynamics import ConfigError, load_scenario
 from gyroemu.errors import GyroemuError
-from gyroemu.pipelines.channels import BODY_FRAME, ImuSeries
-from gyroemu.pipelines.mcap_log import LogWarning, McapLogWriter, Recording, read_mcap, truth_series, write_mcap
-from gyroemu.pipelines.mcap_records import LogError
-from gyroemu.pipelines.messages import IMU, RAW_MESSAGE_TYPES, schema_text
+from gyroemu.pipelines.formats.channels import BODY_FRAME, ImuSeries
+from gyroemu.pipelines.formats.mcap_log import LogWarning, McapLogWriter, Recording, read_mcap, truth_series, write_mcap
+from gyroemu.pipelines.formats.mcap_records import LogError
+from gyroemu.pipelines.formats.messages import IMU, RAW_MESSAGE_TYPES, schema_text
 from gyroemu.sensors import load_device
 from gyroemu.sensors.samples import ImuSamples
 
@@ -710,7 +710,7 @@ def test_chunks_split_where_messages_start(tmp_path):
     """McapFileWriter's chunk k holds the messages whose records start in [k, k + 1) × chunk_size of the
     records laid end to end (31 bytes of Message record head before each payload), from the first call:
     with chunk_size = 3 r + 1, message 3 starts at byte 3 r = chunk_size − 1, still in chunk 0."""
-    from gyroemu.pipelines.mcap_records import McapFileWriter
+    from gyroemu.pipelines.formats.mcap_records import McapFileWriter
 
     n = 12
     payloads = IMU.encode(np.arange(n), "imu0")
@@ -746,7 +746,7 @@ def test_imu_series_compares_by_identity_and_is_hashable():
 
 
 def test_stamps_match_nothing_on_an_empty_channel():
-    from gyroemu.pipelines.mcap_log import _match
+    from gyroemu.pipelines.formats.mcap_log import _match
 
     i, j = _match(np.array([5, 7, 9], np.int64), np.empty(0, np.int64))
     assert i.shape == j.shape == (0,) and i.dtype == j.dtype == np.int64

@@ -14,7 +14,7 @@ from gyroemu.dynamics.rotation import quat_conjugate, quat_rotate
 from gyroemu.pipelines.estimation import FilterSetup, Mekf, MekfParams, attitude_errors, rmse_deg, setup_for
 from gyroemu.pipelines.estimation import mekf_kernels as kern
 from gyroemu.pipelines.estimation.batched import mekf_batch
-from gyroemu.pipelines.mcap_log import truth_series
+from gyroemu.pipelines.formats.mcap_log import truth_series
 from gyroemu.sensors import load_device
 from gyroemu.sensors.gyrocompass import heading_uncertainty
 
@@ -299,7 +299,7 @@ def test_broad_targets_with_one_parameter_set():
     its quoted 0.7°, both well below Madgwick's 4.96° (the dataset authors' best global set)."""
     from vqf import VQF
 
-    from gyroemu.pipelines.importers import read_broad
+    from gyroemu.pipelines.formats.importers import read_broad
 
     total, inclination, vqf_total = [], [], []
     for path in sorted(BROAD_DIR.glob("*.hdf5")):

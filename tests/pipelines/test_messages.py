@@ -1,4 +1,4 @@
-"""CDR codecs of gyroemu.pipelines.messages against the CDR rules and two independent ROS 2 serialisers.
+"""CDR codecs of gyroemu.pipelines.formats.messages against the CDR rules and two independent ROS 2 serialisers.
 
 Exactness: encoding copies float64/int64/bool values into bytes and decoding copies them back, so
 round trips are bit-exact (no tolerance); stamps are integers. The only rounding is seconds to
@@ -14,7 +14,7 @@ import pytest
 from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from gyroemu.pipelines.messages import (
+from gyroemu.pipelines.formats.messages import (
     IMU,
     MAGNETIC_FIELD,
     MESSAGE_TYPES,

@@ -1,4 +1,5 @@
-"""The paced publisher's waiting machinery (:class:`gyroemu.pipelines.zenoh_io.Timing`), without timing figures:
+"""The paced publisher's waiting machinery (:class:`gyroemu.pipelines.transport.zenoh_io.Timing`), without timing
+figures:
 what it changes in the process and puts back, that it never sends before a deadline, and that a
 schedule of batches goes out complete and in order. The figures are ``tests/benchmarks/bench_replay.py``'s.
 """
@@ -11,8 +12,8 @@ import pytest
 
 zenoh = pytest.importorskip("zenoh")
 
-from gyroemu.pipelines import zenoh_io  # noqa: E402
-from gyroemu.pipelines.zenoh_io import PRECISE, SLEEP_ONLY, PacedPublisher, Timing, hot_loop  # noqa: E402
+from gyroemu.pipelines.transport import zenoh_io  # noqa: E402
+from gyroemu.pipelines.transport.zenoh_io import PRECISE, SLEEP_ONLY, PacedPublisher, Timing, hot_loop  # noqa: E402
 
 
 def _read_slack():

@@ -223,7 +223,7 @@ def test_bad_inputs_exit_2_naming_the_file(tmp_path, gyroemu_mcap, capsys):
 
 def test_topic_keys_rule():
     """Without processes: gyroemu topics by prefix / metadata / --device-name; foreign topics under the device."""
-    from gyroemu.pipelines.replay import topic_keys
+    from gyroemu.pipelines.transport.replay import topic_keys
 
     meta = [{"device_name": "d0", "topic_prefix": ""}, {"device_name": "a", "topic_prefix": "/a"}]
     keys, bad = topic_keys(["/imu", "/truth/imu", "/a/raw/fog", "/sensors/imu_raw", "/robot/imu", "/x*"], meta, "zz")
@@ -246,7 +246,7 @@ def test_iter_mcap_batches_in_log_time_order(tmp_path, gyroemu_mcap):
     shuffled (within a chunk and across neighbouring chunks), and --topics filtering."""
     from mcap_ros2.writer import Writer
 
-    from gyroemu.pipelines.mcap_records import iter_mcap_batches
+    from gyroemu.pipelines.formats.mcap_records import iter_mcap_batches
 
     def flat(path, topics=None):
         return [(m.topic, m.log_time, m.data) for batch in iter_mcap_batches(path, topics) for m in batch]

@@ -26,8 +26,8 @@ zenoh = pytest.importorskip("zenoh")
 
 from live_processes import Listener, free_port, mcap_messages, procs, write_foreign  # noqa: E402,F401
 
-from gyroemu.pipelines import ros2_keys  # noqa: E402
-from gyroemu.pipelines.ros2_keys import (  # noqa: E402
+from gyroemu.pipelines.formats import ros2_keys  # noqa: E402
+from gyroemu.pipelines.formats.ros2_keys import (  # noqa: E402
     Ros2Error,
     data_key,
     domain_id,
@@ -125,7 +125,7 @@ def test_hash_agrees_with_rosbags_for_every_ros2_type():
 def test_gyroemu_mcap_schema_gives_the_same_hash(tmp_path):
     """The ``ros2msg`` schema gyroemu writes into MCAP (definition + MSG: sections) parses back to the
     same hash, for Imu and for every raw type."""
-    from gyroemu.pipelines.messages import MESSAGE_TYPES
+    from gyroemu.pipelines.formats.messages import MESSAGE_TYPES
 
     for name, mtype in MESSAGE_TYPES.items():
         assert type_hash(name, parse_definitions(mtype.schema, name)) == type_hash(name), name
@@ -308,9 +308,9 @@ def test_stream_router_record_in_ros2_mode(procs, tmp_path):
     ), rows
 
     from gyroemu.dynamics import load_scenario
-    from gyroemu.pipelines.mcap_log import read_mcap, truth_series
-    from gyroemu.pipelines.mcap_records import mcap_channel_info
-    from gyroemu.pipelines.stream import encode_run
+    from gyroemu.pipelines.formats.mcap_log import read_mcap, truth_series
+    from gyroemu.pipelines.formats.mcap_records import mcap_channel_info
+    from gyroemu.pipelines.transport.stream import encode_run
     from gyroemu.sensors import load_device
 
     traj = load_scenario("heavy_top").simulate(duration=duration)
@@ -379,10 +379,10 @@ def test_recorder_maps_ros2_keys_back_to_topics(tmp_path):
     one-token topic (``/rosout``) or of another form is skipped, counted."""
     import numpy as np
 
-    from gyroemu.pipelines.mcap_records import mcap_channel_info
-    from gyroemu.pipelines.messages import IMU, RAW_MESSAGE_TYPES
-    from gyroemu.pipelines.record import Recorder, ros2_key
-    from gyroemu.pipelines.zenoh_io import pack_attachment
+    from gyroemu.pipelines.formats.mcap_records import mcap_channel_info
+    from gyroemu.pipelines.formats.messages import IMU, RAW_MESSAGE_TYPES
+    from gyroemu.pipelines.transport.record import Recorder, ros2_key
+    from gyroemu.pipelines.transport.zenoh_io import pack_attachment
 
     raw = RAW_MESSAGE_TYPES["rate-gyro"]
     raw_hash = type_hash(raw.name)

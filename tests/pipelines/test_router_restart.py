@@ -27,10 +27,10 @@ DURATION, SEED, NAME = 12.0, 3, "restarted"
 def expected_stamps() -> dict[str, dict[int, int]]:
     """Topic -> {header stamp (ns): sequence number} of what the stream sends (same code, same seed)."""
     from gyroemu.dynamics import load_scenario
-    from gyroemu.pipelines.mcap_log import truth_series
-    from gyroemu.pipelines.messages import split_payloads
-    from gyroemu.pipelines.stream import encode_run
-    from gyroemu.pipelines.zenoh_io import header_stamp_ns
+    from gyroemu.pipelines.formats.mcap_log import truth_series
+    from gyroemu.pipelines.formats.messages import split_payloads
+    from gyroemu.pipelines.transport.stream import encode_run
+    from gyroemu.pipelines.transport.zenoh_io import header_stamp_ns
     from gyroemu.sensors import load_device
 
     traj = load_scenario(SCENARIO).simulate(duration=DURATION)
@@ -83,7 +83,7 @@ def test_router_restart_mid_stream_reconnects_and_reports_the_gap(procs, tmp_pat
     by_topic = {r["topic"]: r for r in report["publishers"].values()}
     assert sorted(by_topic) == sorted(f"{NAME}{t}" for t in TOPICS), by_topic.keys()
 
-    from gyroemu.pipelines.mcap_records import iter_mcap_batches
+    from gyroemu.pipelines.formats.mcap_records import iter_mcap_batches
 
     recorded: dict[str, list[int]] = {t: [] for t in TOPICS}
     stamps = expected_stamps()

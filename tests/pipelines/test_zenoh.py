@@ -96,8 +96,8 @@ def test_default_session_both_start_orders_lossless_and_byte_exact(procs, tmp_pa
     n = int(round(duration * RATE))
 
     from gyroemu.dynamics import load_scenario
-    from gyroemu.pipelines.mcap_log import Recording, read_mcap, truth_series, write_mcap
-    from gyroemu.pipelines.zenoh_io import header_stamp_ns
+    from gyroemu.pipelines.formats.mcap_log import Recording, read_mcap, truth_series, write_mcap
+    from gyroemu.pipelines.transport.zenoh_io import header_stamp_ns
     from gyroemu.sensors import load_device
 
     traj = load_scenario(SCENARIO).simulate(duration=duration)
@@ -164,7 +164,7 @@ def test_router_in_between_lossless(procs, tmp_path):
 @pytest.mark.filterwarnings("ignore:.*have no message on")  # the kill may cut a sample's group of messages
 def test_sigint_completes_and_sigkill_leaves_readable_chunks(procs, tmp_path):
     """SIGINT mid-stream: a complete MCAP (summary, indexes). SIGKILL: the complete chunks read back."""
-    from gyroemu.pipelines.mcap_log import LogWarning, read_mcap
+    from gyroemu.pipelines.formats.mcap_log import LogWarning, read_mcap
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     procs.start(
@@ -265,8 +265,8 @@ def test_pacing_follows_the_sample_clock(procs):
 
 def test_keys_attachments_and_sequence_report():
     """Without processes: the key <-> topic rule, the 33-byte attachment, the gap accounting."""
-    from gyroemu.pipelines.record import SequenceTracker
-    from gyroemu.pipelines.zenoh_io import key_to_topic, pack_attachment, topic_to_key, unpack_attachment
+    from gyroemu.pipelines.transport.record import SequenceTracker
+    from gyroemu.pipelines.transport.zenoh_io import key_to_topic, pack_attachment, topic_to_key, unpack_attachment
 
     assert topic_to_key("imu0", "/raw/fog") == "gyroemu/imu0/raw/fog"
     assert key_to_topic("gyroemu/imu0/truth/imu") == ("imu0", "/truth/imu")

@@ -43,7 +43,7 @@ from scipy.stats import chi2
 
 from gyroemu.dynamics import load_scenario
 from gyroemu.dynamics.config import config_dir
-from gyroemu.pipelines.allan import allan_report
+from gyroemu.pipelines.jobs.allan import allan_report
 from gyroemu.sensors import device_from_dict
 from gyroemu.sensors.noise import flicker_bank, gauss_markov_avar
 

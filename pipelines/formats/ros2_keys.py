@@ -4,7 +4,7 @@
 protocol of ``rmw_zenoh_cpp`` (the ROS 2 Jazzy RMW on Eclipse Zenoh), so that a ROS 2 node on
 rmw_zenoh subscribes to gyroemu's streams, and gyroemu records a ROS 2 node's topics. Everything
 ROS-2-specific lives in this module; the transport (sessions, the paced publisher, the 33-byte
-attachment) is :mod:`gyroemu.pipelines.zenoh_io`'s.
+attachment) is :mod:`gyroemu.pipelines.transport.zenoh_io`'s.
 
 Type hashes (REP-2011, "RIHS01")
 --------------------------------
@@ -25,7 +25,7 @@ float32 10, float64 11, int8..uint64 2..9, string 17, wstring 18, bounded string
 ``T[<=N]`` (capacity N), 144 for an unbounded sequence ``T[]``; ``string_capacity`` is N of
 ``string<=N``. A type without fields gets rosidl's placeholder ``uint8
 structure_needs_at_least_one_member``. :func:`type_hash` computes it from ``.msg`` texts (gyroemu's
-own definitions, :data:`gyroemu.pipelines.messages.ROS_DEFINITIONS`, or an MCAP file's ``ros2msg`` schema).
+own definitions, :data:`gyroemu.pipelines.formats.messages.ROS_DEFINITIONS`, or an MCAP file's ``ros2msg`` schema).
 
 Key expressions (rmw_zenoh ``TopicInfo``)
 -----------------------------------------
@@ -34,9 +34,9 @@ A message of ROS topic ``/a/b`` of type ``pkg/msg/T`` in domain ``D`` goes on::
     D/a/b/pkg::msg::dds_::T_/RIHS01_<hash>
 
 (the topic without its leading slash, then the DDS type name, then the type hash), with the payload
-the CDR bytes and the 33-byte attachment of :func:`gyroemu.pipelines.zenoh_io.pack_attachment`.
+the CDR bytes and the 33-byte attachment of :func:`gyroemu.pipelines.transport.zenoh_io.pack_attachment`.
 
-gyroemu's topics (:mod:`gyroemu.pipelines.channels`) become ROS topics by the same rule as its own keys
+gyroemu's topics (:mod:`gyroemu.pipelines.formats.channels`) become ROS topics by the same rule as its own keys
 (``interface.md``): device
 ``imu0``'s ``/imu`` is ``/imu0/imu``, ``/raw/fog`` is ``/imu0/raw/fog``; a replayed file's ``/a/b``
 is ``/<device>/a/b``. ROS 2 names allow only letters, digits and ``_`` (a token not starting with a
@@ -78,8 +78,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, TextIO
 
-from .channels import raw_role, role_topic
-from .messages import MESSAGE_TYPES, ROS_DEFINITIONS
+from gyroemu.pipelines.formats.channels import raw_role, role_topic
+from gyroemu.pipelines.formats.messages import MESSAGE_TYPES, ROS_DEFINITIONS
 
 if TYPE_CHECKING:
     import zenoh

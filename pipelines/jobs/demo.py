@@ -12,8 +12,8 @@
    plot, and where the files are.
 
 The demo is an orchestrator: unlike the jobs, which never import one another, it calls them (the
-stream, :func:`gyroemu.pipelines.stream.run_stream`, in this process; the recorder as a ``gyroemu
-record`` process; the benchmark, :func:`gyroemu.pipelines.bench.run_bench`).
+stream, :func:`gyroemu.pipelines.transport.stream.run_stream`, in this process; the recorder as a ``gyroemu
+record`` process; the benchmark, :func:`gyroemu.pipelines.jobs.bench.run_bench`).
 """
 
 from __future__ import annotations
@@ -141,11 +141,11 @@ def _gyrocompass(seconds: float = 600.0) -> None:
 
 def _live_and_bench(out: Path, seconds: float) -> None:
     """Stages 4 and 5 (see the module's docstring)."""
-    from .bench import LogCase, run_bench
-    from .estimation.metrics import attitude_errors, rmse_deg
-    from .mcap_log import read_mcap
-    from .stream import StreamOptions, run_stream
-    from .zenoh_io import PacingOptions, topic_to_key
+    from gyroemu.pipelines.estimation.metrics import attitude_errors, rmse_deg
+    from gyroemu.pipelines.formats.mcap_log import read_mcap
+    from gyroemu.pipelines.jobs.bench import LogCase, run_bench
+    from gyroemu.pipelines.transport.stream import StreamOptions, run_stream
+    from gyroemu.pipelines.transport.zenoh_io import PacingOptions, topic_to_key
 
     out.mkdir(parents=True, exist_ok=True)
     log = out / "demo.mcap"

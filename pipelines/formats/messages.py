@@ -3,7 +3,7 @@
 gyroemu records and streams ``sensor_msgs/msg/Imu``, ``sensor_msgs/msg/MagneticField`` and its own
 raw-observable messages (``gyroemu_msgs/msg/<Kind>Raw``, one per gyro kind) in the serialisation ROS 2
 puts on the wire and in bags: **XCDR1 (plain CDR), little endian**. The same bytes go into MCAP files
-(:mod:`gyroemu.pipelines.mcap_log`) and zenoh payloads (``interface.md``).
+(:mod:`gyroemu.pipelines.formats.mcap_log`) and zenoh payloads (``interface.md``).
 
 Byte layout
 -----------

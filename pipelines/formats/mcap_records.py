@@ -1,8 +1,8 @@
 """MCAP records: a bulk writer, a scanner and a message walk, for any ``ros2`` MCAP file.
 
 This is the lower of the two MCAP layers. It knows MCAP records (the MCAP specification) and the CDR
-message types of :mod:`gyroemu.pipelines.messages`, but not what gyroemu's channels mean: devices,
-truth, recordings and metadata are :mod:`gyroemu.pipelines.mcap_log`'s, which is built on this module
+message types of :mod:`gyroemu.pipelines.formats.messages`, but not what gyroemu's channels mean: devices,
+truth, recordings and metadata are :mod:`gyroemu.pipelines.formats.mcap_log`'s, which is built on this module
 (and so is ``gyroemu record``, which copies received bytes into a file with :class:`McapFileWriter`).
 
 Writing
@@ -70,8 +70,7 @@ from mcap.records import (
 
 import gyroemu
 from gyroemu.errors import LogError
-
-from .messages import DecodedBatch, MessageType, message_type
+from gyroemu.pipelines.formats.messages import DecodedBatch, MessageType, message_type
 
 __all__ = [
     "MAGIC",
@@ -978,6 +977,6 @@ class ChannelInfo(NamedTuple):
 
 def mcap_channel_info(path: str | os.PathLike[str]) -> list[ChannelInfo]:
     """Every channel of an MCAP file with its schema record and metadata, in file order (a pass that
-    decodes no message; :attr:`gyroemu.pipelines.mcap_log.McapLog.channels` holds the same). Raises
+    decodes no message; :attr:`gyroemu.pipelines.formats.mcap_log.McapLog.channels` holds the same). Raises
     :class:`LogError` for a file that is not MCAP or is corrupt."""
     return _MessageWalk(Path(path), topics=()).run().channel_info()

@@ -12,16 +12,12 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
+from gyroemu.pipelines.estimation.registry import make_filter
+from gyroemu.pipelines.estimation.series import check_samples, estimate_series, rate_of
+from gyroemu.pipelines.estimation.setup import setup_from_metadata
+from gyroemu.pipelines.formats.mcap_log import METADATA_KEYS, McapLogWriter, Recording, read_mcap
 
-from .channels import ImuSeries
-from .estimation.protocol import Estimate
-from .estimation.registry import make_filter
-from .estimation.setup import setup_from_metadata
-from .mcap_log import METADATA_KEYS, McapLogWriter, Recording, read_mcap
-from .mcap_records import LogError
-
-__all__ = ["EstimateSummary", "estimate_log", "estimate_series", "check_samples"]
+__all__ = ["EstimateSummary", "estimate_log"]
 
 
 @dataclass(frozen=True)
@@ -30,43 +26,6 @@ class EstimateSummary:
 
     path: Path
     devices: list
-
-
-def check_samples(path, name: str, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray) -> str | None:
-    """Refuse samples a filter cannot run on, naming the file (:class:`LogError`): fewer than two,
-    stamps that do not increase, or NaN everywhere. Some NaN samples are usable (the filters skip
-    them): returns a note saying how many, None when there are none."""
-    t = np.asarray(t, dtype=float)
-    if len(t) < 2:
-        raise LogError(f"device '{name}' has {len(t)} IMU sample(s): too few to run a filter", file=path)
-    bad = np.flatnonzero(~(np.diff(t) > 0))
-    if len(bad):
-        k = int(bad[0]) + 1
-        raise LogError(
-            f"IMU stamps of device '{name}' are not increasing: sample {k} at {t[k]:.9f} s follows "
-            f"{t[k - 1]:.9f} s ({len(bad)} such steps)",
-            file=path,
-        )
-    finite = np.isfinite(gyro).all(axis=1) & np.isfinite(accel).all(axis=1)
-    if not finite.any():
-        raise LogError(f"every IMU sample of device '{name}' holds NaN", file=path)
-    if finite.all():
-        return None
-    return (
-        f"{int((~finite).sum())} of {len(t)} IMU samples of device '{name}' hold NaN; they are passed to the "
-        "filters as they are (the built-in filters hold their estimate over them)"
-    )
-
-
-def rate_of(t: np.ndarray) -> float:
-    """The nominal sample rate of stamps ``t``: the inverse of the median interval, Hz."""
-    return 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 1.0
-
-
-def estimate_series(t, estimate: Estimate, gyro) -> ImuSeries:
-    """The ``/estimate/imu`` content of an estimate: attitude, covariance, bias-corrected rate."""
-    rate = gyro - estimate.gyro_bias if estimate.gyro_bias is not None else None
-    return ImuSeries(t=t, q_wb=estimate.q_wb, omega_b=rate, q_wb_covariance=estimate.q_wb_covariance)
 
 
 def estimate_log(path, out, *, filter_name: str = "mekf", use_mag: bool | None = None) -> EstimateSummary:

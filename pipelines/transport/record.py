@@ -3,16 +3,19 @@
 Recording
 ---------
 The recorder subscribes to ``gyroemu/**`` (FIFO channel handler), maps each key back to its device and
-topic (:func:`gyroemu.pipelines.zenoh_io.key_to_topic`) and copies the payload bytes into an MCAP file (profile
+topic (:func:`~gyroemu.pipelines.transport.zenoh_io.key_to_topic`) and copies the payload bytes into an MCAP file
+(profile
 ``ros2``, zstd chunks) without re-encoding: only the header stamp is read, and it becomes the message's
 ``log_time`` and ``publish_time``. Channels are registered per topic as they appear, with the schema the
-topic's role names (:func:`gyroemu.pipelines.channels.topic_message_type`: ``/imu`` and ``/truth/imu``:
+topic's role names (:func:`gyroemu.pipelines.formats.channels.topic_message_type`: ``/imu`` and ``/truth/imu``:
 ``sensor_msgs/msg/Imu``, ``/mag``: MagneticField, ``/raw/<kind>``: the kind's raw type; other topics get
 no schema). The first device's topics are unprefixed (``/imu``), any further device's are prefixed
 (``/<device>/imu``); a ``gyroemu`` metadata record per device gives its name and prefix
-(:func:`gyroemu.pipelines.mcap_log.device_metadata`), so :func:`gyroemu.pipelines.mcap_log.read_mcap` names it.
+(:func:`~gyroemu.pipelines.formats.mcap_log.device_metadata`), so
+:func:`~gyroemu.pipelines.formats.mcap_log.read_mcap` names it.
 
-The file is written in place (not through a temporary name): :class:`~gyroemu.pipelines.mcap_records.McapFileWriter`
+The file is written in place (not through a temporary name):
+:class:`~gyroemu.pipelines.formats.mcap_records.McapFileWriter`
 writes sequentially, and the recorder flushes after every batch, so a recorder killed with SIGKILL leaves
 a file whose complete chunks read back (chunks of 256 KiB, so at most that much is lost).
 SIGINT/SIGTERM (or ``--duration``) end the recording properly: the remaining messages, the summary and
@@ -25,7 +28,7 @@ arrivals, and prints the report at the end (``--report FILE.json`` also writes i
 ROS 2 mode (``--ros2``)
 -----------------------
 The recorder subscribes to ``<domain>/**`` instead (the data keys of rmw_zenoh,
-:mod:`gyroemu.pipelines.ros2_keys`): a key ``<domain>/<device>/<rest>/<pkg::msg::dds_::T_>/<RIHS01 hash>``
+:mod:`gyroemu.pipelines.formats.ros2_keys`): a key ``<domain>/<device>/<rest>/<pkg::msg::dds_::T_>/<RIHS01 hash>``
 is recorded on topic ``/<rest>`` of device ``<device>`` (so what ``gyroemu stream --ros2`` publishes
 comes back on the topics of a plain recording; a raw topic gets its kind back from its type), with the
 schema the key's type names when gyroemu knows the type, and the type hash in the channel's
@@ -50,9 +53,9 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 
-from .channels import topic_message_type
-from .messages import MESSAGE_TYPES
-from .zenoh_io import (
+from gyroemu.pipelines.formats.channels import topic_message_type
+from gyroemu.pipelines.formats.messages import MESSAGE_TYPES
+from gyroemu.pipelines.transport.zenoh_io import (
     SessionOptions,
     drain,
     header_stamp_ns,
@@ -152,7 +155,7 @@ def gyroemu_key(key: str) -> KeyInfo:
 
 def ros2_key(key: str) -> KeyInfo:
     """``<domain>/<device>/<rest>/<type>/<hash>`` (rmw_zenoh) -> device, ``/<rest>``, type and hash."""
-    from .ros2_keys import gyroemu_topic, parse_data_key
+    from gyroemu.pipelines.formats.ros2_keys import gyroemu_topic, parse_data_key
 
     parsed = parse_data_key(key)
     device, topic = gyroemu_topic(parsed.topic, parsed.type_name)
@@ -172,7 +175,7 @@ class Recorder:
         parse_key: Callable[[str], KeyInfo] = gyroemu_key,
         on_new_topic: Callable[[KeyInfo], None] | None = None,
     ) -> None:
-        from .mcap_records import McapFileWriter
+        from gyroemu.pipelines.formats.mcap_records import McapFileWriter
 
         self.path = Path(path)
         self._file = open(self.path, "wb")
@@ -189,7 +192,7 @@ class Recorder:
         self.without_attachment = 0
 
     def _channel(self, info: KeyInfo) -> int:
-        from .mcap_log import device_metadata
+        from gyroemu.pipelines.formats.mcap_log import device_metadata
 
         key = (info.device, info.topic)
         if key not in self._channels:
@@ -350,7 +353,7 @@ def run_record(options: RecordOptions, *, out: TextIO = sys.stdout) -> int:
     ros2, key_expr = options.session.ros2, options.key_expr
     domain = None
     if ros2:
-        from .ros2_keys import domain_id
+        from gyroemu.pipelines.formats.ros2_keys import domain_id
 
         domain = domain_id(options.session.domain)
         parse_key = ros2_key
@@ -362,7 +365,7 @@ def run_record(options: RecordOptions, *, out: TextIO = sys.stdout) -> int:
     on_new_topic: Callable[[KeyInfo], None] | None
     with live_session(session) as live:
         if ros2:
-            from .ros2_keys import Ros2Node, node_name
+            from gyroemu.pipelines.formats.ros2_keys import Ros2Node, node_name
 
             assert domain is not None  # domain_id() above gave it its value
             node = live.node = Ros2Node(session, domain, node_name("record"))

@@ -1,12 +1,12 @@
 """gyroemu's recorded logs: devices' samples, truth, estimates and metadata as MCAP files (profile ``ros2``).
 
-This is the upper of the two MCAP layers: it gives the channels of :mod:`gyroemu.pipelines.channels`
-their meaning in a file, and leaves the records to :mod:`gyroemu.pipelines.mcap_records` (the bulk
+This is the upper of the two MCAP layers: it gives the channels of :mod:`gyroemu.pipelines.formats.channels`
+their meaning in a file, and leaves the records to :mod:`gyroemu.pipelines.formats.mcap_records` (the bulk
 writer, the scanner). :mod:`gyroemu.pipelines.mcap_io` re-exports both layers' public names.
 
 What a gyroemu file holds (``interface.md``)
 --------------------------------------------
-Schema encoding ``ros2msg``, message encoding ``cdr`` (the bytes of :mod:`gyroemu.pipelines.messages`),
+Schema encoding ``ros2msg``, message encoding ``cdr`` (the bytes of :mod:`gyroemu.pipelines.formats.messages`),
 zstd-compressed chunks, message indexes after each chunk, and a summary (schemas, channels,
 statistics, chunk and metadata indexes, summary offsets). Channels, per device:
 
@@ -28,24 +28,24 @@ what the sensor measures (``/imu``, ``/mag``, ``/raw/...``), ``base_link`` for b
 estimates. Each device has a metadata record ``gyroemu`` with ``version``, ``seed``, ``scenario``
 (TOML), ``device`` (TOML), ``device_name`` and ``topic_prefix`` (:func:`device_metadata`), plus any
 keys the recording adds (an imported file: ``source``, ``source_format``, ``citation``, ...;
-:mod:`gyroemu.pipelines.importers`).
+:mod:`gyroemu.pipelines.formats.importers`).
 
 Writing
 -------
 :class:`McapLogWriter` (and :func:`write_mcap`) encode every channel of a block of samples as one
-``(N, size)`` array (the ``encode_*`` functions of :mod:`gyroemu.pipelines.channels`) and hand the
-block to :class:`~gyroemu.pipelines.mcap_records.McapFileWriter`, which interleaves, chunks and
+``(N, size)`` array (the ``encode_*`` functions of :mod:`gyroemu.pipelines.formats.channels`) and hand the
+block to :class:`~gyroemu.pipelines.formats.mcap_records.McapFileWriter`, which interleaves, chunks and
 compresses it. The file is written to a temporary name in the target folder and renamed when complete,
 so an interrupted write leaves no partial file under the name.
 
 Reading
 -------
-:func:`read_mcap` reads any ``ros2`` MCAP file (:class:`~gyroemu.pipelines.mcap_records.McapScan`)
+:func:`read_mcap` reads any ``ros2`` MCAP file (:class:`~gyroemu.pipelines.formats.mcap_records.McapScan`)
 and gathers each channel's messages into arrays. Every channel of type ``sensor_msgs/msg/Imu``
 counts, whatever its topic; channels of unknown types are skipped with a :class:`LogWarning`. A file
 cut short (a recorder killed mid-write, no footer) yields the messages of its complete chunks, with a
 warning that says so and how many were recovered. Files that are not MCAP, are corrupt, or hold no IMU
-messages raise :class:`~gyroemu.pipelines.mcap_records.LogError`, which names the file. The input is
+messages raise :class:`~gyroemu.pipelines.formats.mcap_records.LogError`, which names the file. The input is
 opened read-only.
 """
 
@@ -63,9 +63,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 import gyroemu
-from gyroemu.sensors.samples import ImuSamples
-
-from .channels import (
+from gyroemu.pipelines.formats.channels import (
     ESTIMATE_ROLE,
     IMU_ROLE,
     MAG_ROLE,
@@ -87,8 +85,9 @@ from .channels import (
     series_from_batch,
     split_topic,
 )
-from .mcap_records import DecodedChannel, LogError, McapFileWriter, McapScan
-from .messages import IMU, ns_to_stamps, raw_observables, stamps_to_ns
+from gyroemu.pipelines.formats.mcap_records import DecodedChannel, LogError, McapFileWriter, McapScan
+from gyroemu.pipelines.formats.messages import IMU, ns_to_stamps, raw_observables, stamps_to_ns
+from gyroemu.sensors.samples import ImuSamples
 
 if TYPE_CHECKING:
     from gyroemu.dynamics import Scenario, Trajectory

@@ -95,7 +95,7 @@ class AllanLogError(ValueError):
 def _read_gyro(log: Path) -> tuple[np.ndarray, np.ndarray, str | None]:
     """``(gyro (N, 3) rad/s, t (N,) s, device TOML or None)`` of an .mcap or .npz log."""
     if log.suffix == ".mcap":
-        from .mcap_log import read_mcap
+        from gyroemu.pipelines.formats.mcap_log import read_mcap
 
         device_log = read_mcap(log).device
         device_toml = (device_log.metadata or {}).get("device") or None

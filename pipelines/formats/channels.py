@@ -15,16 +15,16 @@ role                type                                    holds               
 ``movement``        ``gyroemu_msgs/msg/Flag``               an imported dataset's sample mask  the device
 ==================  ======================================  =================================  ===========
 
-Live streams (:mod:`gyroemu.pipelines.zenoh_io`) carry the same roles but ``movement``
+Live streams (:mod:`gyroemu.pipelines.transport.zenoh_io`) carry the same roles but ``movement``
 (:func:`is_stream_role`). :func:`split_topic` is the one parser of a topic into its prefix and role; the
-modules that name channels (the MCAP log writer and reader :mod:`gyroemu.pipelines.mcap_log`, the
-stream, the live estimator, the recorder, replay and the ROS 2 names of :mod:`gyroemu.pipelines.ros2_keys`)
+modules that name channels (the MCAP log writer and reader :mod:`gyroemu.pipelines.formats.mcap_log`, the
+stream, the live estimator, the recorder, replay and the ROS 2 names of :mod:`gyroemu.pipelines.formats.ros2_keys`)
 ask it, and build topics with :func:`role_topic`.
 
 The encoding of what a channel holds into message fields is here too, once: :func:`measured_fields`
 (``/imu``), :func:`series_fields` (``/truth/imu``, ``/estimate/imu``; :func:`series_from_batch` reads it
 back) and the ``encode_*`` functions that turn them into CDR rows with :meth:`MessageType.encode`
-(:mod:`gyroemu.pipelines.messages`), so a file, a stream and a live estimate hold the same bytes.
+(:mod:`gyroemu.pipelines.formats.messages`), so a file, a stream and a live estimate hold the same bytes.
 """
 
 from __future__ import annotations
@@ -36,7 +36,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .messages import FLAG, IMU, MAGNETIC_FIELD, RAW_MESSAGE_TYPES, DecodedBatch, MessageType, ns_to_stamps, raw_fields
+from gyroemu.pipelines.formats.messages import (
+    FLAG,
+    IMU,
+    MAGNETIC_FIELD,
+    RAW_MESSAGE_TYPES,
+    DecodedBatch,
+    MessageType,
+    ns_to_stamps,
+    raw_fields,
+)
 
 if TYPE_CHECKING:
     from gyroemu.sensors.samples import ImuSamples

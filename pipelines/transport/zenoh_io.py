@@ -4,7 +4,7 @@ What goes on the wire (``interface.md``, "Live streams: Eclipse Zenoh")
 ----------------------------------------------------------------------
 - Key expression: ``gyroemu/<device>`` followed by the MCAP topic: ``gyroemu/imu0/imu``,
   ``gyroemu/imu0/truth/imu``, ``gyroemu/imu0/raw/fog``, ... (:func:`topic_to_key`, :func:`key_to_topic`).
-- Payload: the CDR bytes of the MCAP message (:mod:`gyroemu.pipelines.messages`), unchanged.
+- Payload: the CDR bytes of the MCAP message (:mod:`gyroemu.pipelines.formats.messages`), unchanged.
 - Attachment: 33 bytes as rmw_zenoh writes them: int64 LE sequence number (from 0, per publisher),
   int64 LE source timestamp (ns since the Unix epoch, taken when the message is sent), one byte 16 (the
   length of what follows), then the 16-byte publisher id (random per publisher, one publisher per
@@ -39,7 +39,7 @@ sleep per sample, so its error does not accumulate. How it waits for a deadline 
 :data:`PRECISE` (the default: timer slack 1 ns, sleep to 300 us before the deadline then spin on the
 clock, a 50 us GIL switch interval and the garbage collector paused while the run lasts; its notes
 give the measured reasons) or :data:`SLEEP_ONLY` (the former behaviour, the benchmarks' baseline).
-ROS 2 key expressions and liveliness tokens (``--ros2``) are :mod:`gyroemu.pipelines.ros2_keys`'.
+ROS 2 key expressions and liveliness tokens (``--ros2``) are :mod:`gyroemu.pipelines.formats.ros2_keys`'.
 
 The live jobs
 -------------
@@ -206,7 +206,7 @@ class SessionOptions:
         ``connect/endpoints``, ``listen/endpoints`` and ``mode``.
     ros2 : bool
         ROS 2 mode: rmw_zenoh's key expressions and the liveliness tokens of a ROS 2 node
-        (:mod:`gyroemu.pipelines.ros2_keys`) instead of ``gyroemu/<device>/<topic>``.
+        (:mod:`gyroemu.pipelines.formats.ros2_keys`) instead of ``gyroemu/<device>/<topic>``.
     domain : int or None
         The ROS 2 domain of ``ros2`` (0..232); None: ``$ROS_DOMAIN_ID``, else 0.
 
@@ -622,8 +622,8 @@ class LiveSession:
     publisher : PacedPublisher or None
         The job's publisher (:meth:`publish`); undeclared at the end.
     node : object with ``close()``, or None
-        The job's ROS 2 node (a :class:`gyroemu.pipelines.ros2_keys.Ros2Node` or
-        :class:`~gyroemu.pipelines.ros2_keys.Ros2Keys`), set by the job; closed at the end.
+        The job's ROS 2 node (a :class:`gyroemu.pipelines.formats.ros2_keys.Ros2Node` or
+        :class:`~gyroemu.pipelines.formats.ros2_keys.Ros2Keys`), set by the job; closed at the end.
     """
 
     def __init__(self, session: zenoh.Session, stopping: list) -> None:

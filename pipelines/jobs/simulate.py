@@ -2,14 +2,14 @@
 
 Two outputs, by the file's suffix:
 
-- ``.mcap``: a ROS 2 log of the device's samples with their truth (:func:`gyroemu.pipelines.mcap_log.write_mcap`);
-  it needs a device.
+- ``.mcap``: a ROS 2 log of the device's samples with their truth
+  (:func:`~gyroemu.pipelines.formats.mcap_log.write_mcap`); it needs a device.
 - ``.npz``: NumPy arrays (:func:`npz_arrays`): ``truth/<field>`` and ``truth/extras/<name>`` of the
   trajectory and ``scenario_toml``; with a device also ``imu/<field>``, ``raw/<kind>/<observable>``,
   ``device_toml`` and ``seed``. Written through a temporary file (:func:`write_npz_atomic`).
 
 The run goes in phases (``truth``, ``measure`` with a device, ``write``), shown as a bar on stderr when
-it is a terminal (:class:`gyroemu.pipelines.progress.PhaseProgress`).
+it is a terminal (:class:`gyroemu.pipelines.jobs.progress.PhaseProgress`).
 """
 
 from __future__ import annotations
@@ -135,8 +135,9 @@ def run_simulate(options: SimulateOptions) -> SimulateSummary:
     """Simulate and write ``options.out`` (see the module's notes). Raises :class:`SimulateError` before
     any work for bad options, and ``ConfigError`` for an unknown or bad scenario or device."""
     from gyroemu.dynamics import load_scenario
-
-    from .progress import PhaseProgress  # a bar on stderr when it is a terminal, nothing otherwise
+    from gyroemu.pipelines.jobs.progress import (
+        PhaseProgress,  # a bar on stderr when it is a terminal, nothing otherwise
+    )
 
     check_options(options)
     out = options.out
@@ -157,7 +158,7 @@ def run_simulate(options: SimulateOptions) -> SimulateSummary:
                 samples = device.measure(traj)
         with progress.phase("write"):
             if out.suffix == ".mcap":
-                from .mcap_log import Recording, truth_series, write_mcap
+                from gyroemu.pipelines.formats.mcap_log import Recording, truth_series, write_mcap
 
                 assert samples is not None  # an .mcap needs a device: checked above
                 write_mcap(out, Recording(samples, truth=truth_series(traj, samples), device=device), scenario=scenario)

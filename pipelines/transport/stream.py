@@ -1,10 +1,10 @@
 """``gyroemu stream``: simulate a scenario through a device, then publish it live over zenoh.
 
 The whole run is simulated and encoded first (the same CDR bytes an MCAP log of the run holds: frame
-ids and fields by the channel vocabulary, :mod:`gyroemu.pipelines.channels`, as
-:class:`gyroemu.pipelines.mcap_log.McapLogWriter` writes them), then sample k's messages
+ids and fields by the channel vocabulary, :mod:`gyroemu.pipelines.formats.channels`, as
+:class:`gyroemu.pipelines.formats.mcap_log.McapLogWriter` writes them), then sample k's messages
 (``/imu``, ``/mag`` when the device has a magnetometer, ``/truth/imu``, ``/raw/<kind>``) go out at
-``t0 + k / rate`` on ``gyroemu/<device-name>/<topic>`` (:mod:`gyroemu.pipelines.zenoh_io`).
+``t0 + k / rate`` on ``gyroemu/<device-name>/<topic>`` (:mod:`gyroemu.pipelines.transport.zenoh_io`).
 
 Before its clock starts the stream waits (``--wait``, default 10 s) until every key has a subscriber,
 so a recorder started just after the stream loses nothing; when the wait runs out it starts anyway.
@@ -14,11 +14,11 @@ ROS 2 mode (``--ros2``, ``--domain``): the same bytes go on rmw_zenoh's keys ins
 ``<domain>/<device>/<topic>/<type>/<RIHS01 hash>`` (``0/imu0/imu/sensor_msgs::msg::dds_::Imu_/RIHS01_7d9a...``),
 and the process declares the liveliness tokens of a ROS 2 node ``gyroemu_stream_<pid>`` and of one
 publisher per topic, so that ROS 2 nodes on rmw_zenoh see and subscribe to the topics
-(:mod:`gyroemu.pipelines.ros2_keys`).
+(:mod:`gyroemu.pipelines.formats.ros2_keys`).
 
 From Python: ``run_stream(StreamOptions(scenario="smooth_manoeuvre", device="consumer_mems",
 session=SessionOptions(connect=("tcp/host:7447",))))`` (:class:`StreamOptions`; the session and pacing
-options are :mod:`gyroemu.pipelines.zenoh_io`'s).
+options are :mod:`gyroemu.pipelines.transport.zenoh_io`'s).
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, TextIO
 
 import numpy as np
 
-from .channels import (
+from gyroemu.pipelines.formats.channels import (
     IMU_ROLE,
     MAG_ROLE,
     TRUTH_ROLE,
@@ -44,16 +44,15 @@ from .channels import (
     role_topic,
     topic_message_type,
 )
-from .messages import split_payloads, stamps_to_ns
-from .zenoh_io import PacingOptions, SessionOptions, live_session, open_session, topic_to_key
+from gyroemu.pipelines.formats.messages import split_payloads, stamps_to_ns
+from gyroemu.pipelines.transport.zenoh_io import PacingOptions, SessionOptions, live_session, open_session, topic_to_key
 
 if TYPE_CHECKING:
     from gyroemu.dynamics import Scenario
+    from gyroemu.pipelines.formats.channels import ImuSeries
+    from gyroemu.pipelines.transport.live_estimate import LiveEstimator
     from gyroemu.sensors import Device
     from gyroemu.sensors.samples import ImuSamples
-
-    from .channels import ImuSeries
-    from .live_estimate import LiveEstimator
 
 __all__ = ["StreamOptions", "encode_run", "topic_types", "run_stream"]
 
@@ -77,7 +76,7 @@ class StreamOptions:
         ``/<device_name>/<topic>``).
     estimate : str or None
         A filter (``mekf``, ...; :mod:`gyroemu.pipelines.estimation.registry`) to run live on the stream,
-        in this process but on a session of its own (:class:`gyroemu.pipelines.live_estimate.LiveEstimator`),
+        in this process but on a session of its own (:class:`gyroemu.pipelines.transport.live_estimate.LiveEstimator`),
         publishing ``gyroemu/<device_name>/estimate/imu``; None: none. Not with ROS 2 mode.
     as_fast_as_possible : bool
         Publish without pacing to the sample clock (otherwise sample k goes out at ``t0 + k / rate``,
@@ -128,7 +127,7 @@ def topic_types(topics: Iterable[str]) -> dict[str, str]:
 
 def _check(options: StreamOptions) -> None:
     """Refuse a bad device name or filter before the (slow) simulation: ``ValueError`` naming the argument."""
-    from .ros2_keys import ros_topic
+    from gyroemu.pipelines.formats.ros2_keys import ros_topic
 
     try:
         topic_to_key(options.device_name, role_topic(IMU_ROLE))
@@ -139,7 +138,7 @@ def _check(options: StreamOptions) -> None:
     if options.estimate is not None and options.session.ros2:
         raise ValueError("argument --estimate: not available with --ros2")
     if options.estimate is not None:
-        from .estimation.registry import FilterError, filter_class
+        from gyroemu.pipelines.estimation.registry import FilterError, filter_class
 
         try:
             filter_class(options.estimate)
@@ -149,9 +148,9 @@ def _check(options: StreamOptions) -> None:
 
 def _start_estimator(options: StreamOptions, dev: Device, scen: Scenario, samples: ImuSamples) -> LiveEstimator:
     """The live filter of ``options.estimate``, on a session of its own, started."""
-    from .estimation.registry import make_filter
-    from .estimation.setup import setup_for
-    from .live_estimate import LiveEstimator
+    from gyroemu.pipelines.estimation.registry import make_filter
+    from gyroemu.pipelines.estimation.setup import setup_for
+    from gyroemu.pipelines.transport.live_estimate import LiveEstimator
 
     assert options.estimate is not None
     setup = setup_for(dev, scen)
@@ -175,10 +174,9 @@ def run_stream(options: StreamOptions, *, out: TextIO = sys.stdout) -> int:
     status (0, or 130 when stopped by SIGINT/SIGTERM). Raises ``ValueError`` naming the argument at
     fault, before simulating."""
     from gyroemu.dynamics import load_scenario
+    from gyroemu.pipelines.formats.mcap_log import truth_series
+    from gyroemu.pipelines.formats.ros2_keys import Ros2Keys, ros_topic
     from gyroemu.sensors import load_device
-
-    from .mcap_log import truth_series
-    from .ros2_keys import Ros2Keys, ros_topic
 
     config = options.session.config()
     ros = Ros2Keys(options.session.domain, "stream") if options.session.ros2 else None

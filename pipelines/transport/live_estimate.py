@@ -7,7 +7,7 @@ Messages queue in FIFO channels; the worker drains them, pairs each ``/imu`` sam
 sample of the same stamp (when the filter is 9D; a field that has not arrived when a later sample's
 has is taken as missing), feeds the block to the filter (whose state carries over between blocks) and
 publishes one ``/estimate/imu`` message per sample, BLOCK congestion control, rmw_zenoh attachment.
-Topics and the encoding of the estimate are the channel vocabulary's (:mod:`gyroemu.pipelines.channels`),
+Topics and the encoding of the estimate are the channel vocabulary's (:mod:`gyroemu.pipelines.formats.channels`),
 so the live estimate holds the bytes ``gyroemu estimate`` writes into a file.
 """
 
@@ -18,10 +18,10 @@ import time
 
 import numpy as np
 
-from .channels import ESTIMATE_ROLE, IMU_ROLE, MAG_ROLE, encode_series, role_topic
-from .estimate import estimate_series
-from .messages import IMU, MAGNETIC_FIELD
-from .zenoh_io import PacedPublisher, drain, subscribe, topic_to_key
+from gyroemu.pipelines.estimation.series import estimate_series
+from gyroemu.pipelines.formats.channels import ESTIMATE_ROLE, IMU_ROLE, MAG_ROLE, encode_series, role_topic
+from gyroemu.pipelines.formats.messages import IMU, MAGNETIC_FIELD
+from gyroemu.pipelines.transport.zenoh_io import PacedPublisher, drain, subscribe, topic_to_key
 
 __all__ = ["LiveEstimator"]
 

@@ -5,7 +5,7 @@ Cases
 - :class:`SimCase` (a scenario × a device): the scenario's trajectory is simulated once; each Monte Carlo
   run measures it with the device seeded ``seed + run`` (``gyroemu.sensors.load_device(name, seed)``), and the
   truth is the body's attitude and rate at the instants the device sampled
-  (:func:`gyroemu.pipelines.mcap_log.truth_series`). Every sample counts.
+  (:func:`gyroemu.pipelines.formats.mcap_log.truth_series`). Every sample counts.
 - :class:`LogCase` (an MCAP log): every device of the log with a truth channel (``/truth/imu``) is a
   case with one run. The samples counted are the log's ``/movement`` mask when it has one (an imported
   BROAD trial), otherwise all; truth rows that are NaN (a reference that lost tracking) are ignored.
@@ -60,10 +60,15 @@ from typing import Any, cast
 import numpy as np
 
 from gyroemu.dynamics import ConfigError
-
-from .estimation.metrics import attitude_errors, convergence_time, rmse_deg
-from .estimation.protocol import Estimate, FilterSetup
-from .estimation.registry import FilterError, available_filters, filter_class, make_filter, unavailable_filters
+from gyroemu.pipelines.estimation.metrics import attitude_errors, convergence_time, rmse_deg
+from gyroemu.pipelines.estimation.protocol import Estimate, FilterSetup
+from gyroemu.pipelines.estimation.registry import (
+    FilterError,
+    available_filters,
+    filter_class,
+    make_filter,
+    unavailable_filters,
+)
 
 __all__ = [
     "BenchError",
@@ -671,9 +676,8 @@ class _Progress:
 def _sim_case(case: SimCase, runs: int, seed: int):
     """Load a simulated case: (scenario, devices per run, setup, traj, name, mode)."""
     from gyroemu.dynamics import load_scenario
+    from gyroemu.pipelines.estimation.setup import setup_for
     from gyroemu.sensors import load_device
-
-    from .estimation.setup import setup_for
 
     scenario = load_scenario(case.scenario)  # ConfigError: unknown name, or the file and key at fault
     devices = [load_device(case.device, seed=seed + r) for r in range(runs)]
@@ -685,7 +689,7 @@ def _sim_case(case: SimCase, runs: int, seed: int):
 
 
 def _sim_run(traj, device, seed) -> _Run:
-    from .mcap_log import truth_series
+    from gyroemu.pipelines.formats.mcap_log import truth_series
 
     samples = device.measure(traj)
     truth = truth_series(traj, samples)
@@ -705,9 +709,9 @@ def _sim_run(traj, device, seed) -> _Run:
 
 def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, list[str]]]:
     """The devices of a log to bench: (name, mode, setup, run, source, notes) each."""
-    from .estimate import check_samples
-    from .estimation.setup import setup_from_metadata
-    from .mcap_log import read_mcap
+    from gyroemu.pipelines.estimation.series import check_samples
+    from gyroemu.pipelines.estimation.setup import setup_from_metadata
+    from gyroemu.pipelines.formats.mcap_log import read_mcap
 
     path = Path(case.path)
     if not path.is_file():
@@ -849,7 +853,7 @@ def run_bench(
     batch_fn: Callable[..., Estimate] | None = None
     if batched and "mekf" in filters and any(isinstance(c, SimCase) for c in cases):
         try:
-            from .estimation.batched import mekf_batch as batch_fn
+            from gyroemu.pipelines.estimation.batched import mekf_batch as batch_fn
         except ImportError as exc:
             raise BenchError(f"argument --batched: the batched mekf is not available ({exc})") from exc
 

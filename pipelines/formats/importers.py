@@ -25,7 +25,7 @@ before anything is written. What is written (one device, ``imu0``, topics unpref
 - ``/mag``: ``imu_mag · 1e-6`` (tesla, the ROS unit).
 - ``/truth/imu``: ``opt_quat`` as ``q_wb`` (NaN rows kept as NaN, covariance zeros = "unknown"); the
   true rate and specific force are not known, so they are written as "no estimate"
-  (``covariance[0] = -1``) and read back as None (:class:`gyroemu.pipelines.channels.ImuSeries`).
+  (``covariance[0] = -1``) and read back as None (:class:`gyroemu.pipelines.formats.channels.ImuSeries`).
 - ``/movement``: ``movement`` as ``gyroemu_msgs/msg/Flag`` (read back as ``DeviceLog.movement``).
 
 **Time stamps.** BROAD's samples are equally spaced and carry no clock of their own, so sample k is
@@ -42,7 +42,7 @@ has one).
 
 Bad input raises :class:`ImportInputError` (a :class:`gyroemu.dynamics.ConfigError`) naming the file and the
 dataset or attribute at fault; the output is written through a temporary file renamed at the end
-(:class:`gyroemu.pipelines.mcap_log.McapLogWriter`), so a failure leaves nothing at ``out``.
+(:class:`gyroemu.pipelines.formats.mcap_log.McapLogWriter`), so a failure leaves nothing at ``out``.
 """
 
 from __future__ import annotations
@@ -54,11 +54,10 @@ from pathlib import Path
 import numpy as np
 
 from gyroemu.dynamics import ConfigError
+from gyroemu.pipelines.formats.channels import ImuSeries
+from gyroemu.pipelines.formats.mcap_log import Recording, write_mcap
+from gyroemu.pipelines.formats.messages import ns_to_stamps
 from gyroemu.sensors.samples import ImuSamples
-
-from .channels import ImuSeries
-from .mcap_log import Recording, write_mcap
-from .messages import ns_to_stamps
 
 __all__ = [
     "ImportInputError",

@@ -6,18 +6,18 @@ Every ``cdr`` channel of the file (or those named by ``--topics``), each message
 unchanged, on the key expression of its topic (``interface.md``, "Live streams: Eclipse Zenoh"):
 
 - gyroemu's topics (``/imu``, ``/mag``, ``/truth/imu``, ``/estimate/imu``, ``/raw/<kind>``: the roles
-  of live streams, :func:`gyroemu.pipelines.channels.is_stream_role`) go to ``gyroemu/<device>/<topic>``.
+  of live streams, :func:`gyroemu.pipelines.formats.channels.is_stream_role`) go to ``gyroemu/<device>/<topic>``.
   The device is the topic's prefix when the file's ``gyroemu`` metadata names that prefix
   (``/<device>/imu`` of a several-device file), else the ``device_name`` of the file's ``gyroemu``
   metadata for unprefixed topics, else ``--device-name`` (default ``imu0``).
 - any other topic ``/a/b`` (someone else's file) goes to ``gyroemu/<device-name>/a/b``.
 
-The attachment is the publisher's (:class:`gyroemu.pipelines.zenoh_io.PacedPublisher`): a sequence per key
+The attachment is the publisher's (:class:`gyroemu.pipelines.transport.zenoh_io.PacedPublisher`): a sequence per key
 from 0 (continuing across ``--loop`` passes), the send time, a random publisher id per key.
 
 ROS 2 mode (``--ros2``, ``--domain``): the topic that would go to ``gyroemu/<device>/<topic>`` goes to
 ROS 2 topic ``/<device>/<topic>`` on rmw_zenoh's key ``<domain>/<device>/<topic>/<type>/<hash>``
-(:mod:`gyroemu.pipelines.ros2_keys`), with the liveliness tokens of a node ``gyroemu_replay_<pid>`` and its
+(:mod:`gyroemu.pipelines.formats.ros2_keys`), with the liveliness tokens of a node ``gyroemu_replay_<pid>`` and its
 publishers. The type is the channel's schema name; the hash is the channel's ``topic_type_hash``
 metadata (rosbag2 records it since Iron) or else computed by REP-2011 from the channel's ``ros2msg``
 schema. A channel with neither (no schema, an IDL schema and no recorded hash) is skipped with a
@@ -31,7 +31,7 @@ behind, so its error never accumulates (:meth:`PacedPublisher.run_schedule`). Wi
 is shifted by k times the file's span plus one mean message interval, so deadlines keep increasing
 (the payloads, header stamps included, are the recorded bytes every pass).
 
-A reader thread walks the file a chunk at a time (:func:`gyroemu.pipelines.mcap_records.iter_mcap_batches`),
+A reader thread walks the file a chunk at a time (:func:`gyroemu.pipelines.formats.mcap_records.iter_mcap_batches`),
 turns each chunk's messages into batches of ``BATCH`` ``(deadline offset, key, payload)`` and queues
 them (a bounded queue of ``READ_AHEAD`` batches), so decompressing a chunk happens while the
 publisher waits for its deadlines, never on its schedule; memory stays bounded by the queue, whatever
@@ -39,9 +39,9 @@ the file's size. Batches are small because the publisher frees each spent one (a
 bytes: one deallocation per object, holding the GIL) just after a send: 256 messages take ~50 us,
 a whole 1 MiB chunk's 4000 took ~0.7 ms, long enough to make the next deadline late. The reader
 frees its own per-chunk objects a slice at a time for the same reason. How the publisher waits and
-keeps the reader from delaying it: :class:`gyroemu.pipelines.zenoh_io.Timing`.
+keeps the reader from delaying it: :class:`gyroemu.pipelines.transport.zenoh_io.Timing`.
 
-Before the clock starts the file is validated with :func:`gyroemu.pipelines.mcap_log.read_mcap` (not MCAP,
+Before the clock starts the file is validated with :func:`gyroemu.pipelines.formats.mcap_log.read_mcap` (not MCAP,
 corrupt, truncated before its first chunk, no ``sensor_msgs/msg/Imu`` message: a ``LogError`` naming the
 file), the replay waits (``--wait``, default 10 s) until every key has a subscriber, as
 ``gyroemu stream`` does, and then until the reader has filled its queue (at most 10 s more): its
@@ -64,14 +64,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
-from .channels import is_device_prefix, is_stream_role, role_topic, split_topic
-from .mcap_log import LogWarning, read_mcap
-from .mcap_records import iter_mcap_batches
-from .zenoh_io import PacingOptions, SessionOptions, key_to_topic, live_session, open_session, topic_to_key
+from gyroemu.pipelines.formats.channels import is_device_prefix, is_stream_role, role_topic, split_topic
+from gyroemu.pipelines.formats.mcap_log import LogWarning, read_mcap
+from gyroemu.pipelines.formats.mcap_records import iter_mcap_batches
+from gyroemu.pipelines.transport.zenoh_io import (
+    PacingOptions,
+    SessionOptions,
+    key_to_topic,
+    live_session,
+    open_session,
+    topic_to_key,
+)
 
 if TYPE_CHECKING:
-    from .mcap_records import ChannelInfo
-    from .ros2_keys import Ros2Keys
+    from gyroemu.pipelines.formats.mcap_records import ChannelInfo
+    from gyroemu.pipelines.formats.ros2_keys import Ros2Keys
 
 __all__ = ["ReplayOptions", "topic_keys", "ros2_topic_keys", "ReadAhead", "run_replay", "READ_AHEAD", "BATCH"]
 
@@ -147,9 +154,17 @@ def ros2_topic_keys(
     keys: dict[str, str], channels: Iterable[ChannelInfo], ros: Ros2Keys
 ) -> tuple[dict[str, str], dict[str, str]]:
     """ROS 2 mode: ``({topic: rmw_zenoh key}, {topic: why not})`` from the gyroemu keys of
-    :func:`topic_keys`, the file's :class:`gyroemu.pipelines.mcap_records.ChannelInfo` and a
-    :class:`gyroemu.pipelines.ros2_keys.Ros2Keys` (which keeps each key's topic, type and hash for its tokens)."""
-    from .ros2_keys import Ros2Error, full_type_name, is_type_hash, parse_definitions, ros_topic, type_hash
+    :func:`topic_keys`, the file's :class:`gyroemu.pipelines.formats.mcap_records.ChannelInfo` and a
+    :class:`~gyroemu.pipelines.formats.ros2_keys.Ros2Keys` (which keeps each key's topic, type and hash for
+    its tokens)."""
+    from gyroemu.pipelines.formats.ros2_keys import (
+        Ros2Error,
+        full_type_name,
+        is_type_hash,
+        parse_definitions,
+        ros_topic,
+        type_hash,
+    )
 
     info = {c.topic: c for c in channels}
     out, bad = {}, {}
@@ -264,7 +279,7 @@ def _channels_to_publish(options: ReplayOptions, out: TextIO) -> tuple[dict[str,
         raise ReplayError(f"argument --rate: must be positive, got {options.rate}")
     ros = None
     if options.session.ros2:
-        from .ros2_keys import Ros2Keys
+        from gyroemu.pipelines.formats.ros2_keys import Ros2Keys
 
         ros = Ros2Keys(options.session.domain, "replay")  # Ros2Error names --domain or ROS_DOMAIN_ID
     try:
@@ -306,7 +321,7 @@ def _channels_to_publish(options: ReplayOptions, out: TextIO) -> tuple[dict[str,
 def run_replay(options: ReplayOptions, *, out: TextIO = sys.stdout) -> int:
     """Replay ``options.path`` (see the module's notes); progress goes to ``out``. Returns the exit
     status: 0 when done (or, with ``loop``, when stopped by SIGINT/SIGTERM), 130 when a single pass
-    was interrupted. Raises :class:`gyroemu.pipelines.mcap_records.LogError` for bad input and
+    was interrupted. Raises :class:`gyroemu.pipelines.formats.mcap_records.LogError` for bad input and
     ``ValueError`` naming the argument at fault."""
     config = options.session.config()
     keys, ros = _channels_to_publish(options, out)

@@ -1,0 +1,55 @@
+"""Samples as a filter takes them, and its estimate as a series: shared by the offline jobs (estimate,
+bench) and the live filter.
+
+- :func:`check_samples`: refuse samples no filter can run on, naming the file (:class:`LogError`);
+- :func:`rate_of`: the nominal rate of stamps;
+- :func:`estimate_series`: the ``/estimate/imu`` content of an :class:`Estimate`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gyroemu.errors import LogError
+from gyroemu.pipelines.formats.channels import ImuSeries
+
+from .protocol import Estimate
+
+__all__ = ["check_samples", "estimate_series", "rate_of"]
+
+
+def check_samples(path, name: str, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray) -> str | None:
+    """Refuse samples a filter cannot run on, naming the file (:class:`LogError`): fewer than two,
+    stamps that do not increase, or NaN everywhere. Some NaN samples are usable (the filters skip
+    them): returns a note saying how many, None when there are none."""
+    t = np.asarray(t, dtype=float)
+    if len(t) < 2:
+        raise LogError(f"device '{name}' has {len(t)} IMU sample(s): too few to run a filter", file=path)
+    bad = np.flatnonzero(~(np.diff(t) > 0))
+    if len(bad):
+        k = int(bad[0]) + 1
+        raise LogError(
+            f"IMU stamps of device '{name}' are not increasing: sample {k} at {t[k]:.9f} s follows "
+            f"{t[k - 1]:.9f} s ({len(bad)} such steps)",
+            file=path,
+        )
+    finite = np.isfinite(gyro).all(axis=1) & np.isfinite(accel).all(axis=1)
+    if not finite.any():
+        raise LogError(f"every IMU sample of device '{name}' holds NaN", file=path)
+    if finite.all():
+        return None
+    return (
+        f"{int((~finite).sum())} of {len(t)} IMU samples of device '{name}' hold NaN; they are passed to the "
+        "filters as they are (the built-in filters hold their estimate over them)"
+    )
+
+
+def rate_of(t: np.ndarray) -> float:
+    """The nominal sample rate of stamps ``t``: the inverse of the median interval, Hz."""
+    return 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+
+
+def estimate_series(t, estimate: Estimate, gyro) -> ImuSeries:
+    """The ``/estimate/imu`` content of an estimate: attitude, covariance, bias-corrected rate."""
+    rate = gyro - estimate.gyro_bias if estimate.gyro_bias is not None else None
+    return ImuSeries(t=t, q_wb=estimate.q_wb, omega_b=rate, q_wb_covariance=estimate.q_wb_covariance)

@@ -1,0 +1,9 @@
+"""The offline jobs the command line calls, each a function over an options object or arguments.
+
+- :mod:`.simulate`: truth and device into an MCAP log or arrays (``gyroemu simulate``);
+- :mod:`.estimate`: a filter over a log, its estimate added to a copy (``gyroemu estimate``);
+- :mod:`.allan`: Allan deviation fit and plot of a log (``gyroemu allan``);
+- :mod:`.bench`: filters against truth over simulated cases and logs (``gyroemu bench``);
+- :mod:`.demo`: the main job on built-in defaults, an orchestrator of the others (``gyroemu demo``);
+- :mod:`.progress`: simulate's progress bar.
+"""
