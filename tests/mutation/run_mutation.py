@@ -57,7 +57,11 @@ MODULES: dict[str, list[str]] = {
     "dynamics/rigid_body.py": ["tests/dynamics/test_rigid_body.py", "tests/dynamics/test_impact.py"],
     "dynamics/body_kernels.py": ["tests/dynamics/test_rigid_body.py", "tests/dynamics/test_impact.py"],
     "dynamics/rotation.py": ["tests/dynamics/test_rotation.py"],
-    "dynamics/trajectory.py": ["tests/dynamics/test_earth.py", "tests/dynamics/test_motions.py"],
+    "dynamics/trajectory.py": [
+        "tests/dynamics/test_earth.py",
+        "tests/dynamics/test_motions.py",
+        "tests/dynamics/test_scenarios.py",
+    ],
     "dynamics/earth.py": ["tests/dynamics/test_earth.py"],
     "pipelines/estimation/mekf_kernels.py": ["tests/pipelines/test_mekf.py"],
     "pipelines/formats/messages.py": ["tests/pipelines/test_messages.py"],

@@ -30,10 +30,10 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from gyroemu.dynamics import ConfigError, load_scenario
 from gyroemu.errors import GyroemuError
-from gyroemu.pipelines.formats.channels import BODY_FRAME, ImuSeries
+from gyroemu.pipelines.formats.channels import BODY_FRAME, ImuSeries, encode_movement, topic_message_type
 from gyroemu.pipelines.formats.mcap_log import LogWarning, McapLogWriter, Recording, read_mcap, truth_series, write_mcap
 from gyroemu.pipelines.formats.mcap_records import LogError
-from gyroemu.pipelines.formats.messages import IMU, RAW_MESSAGE_TYPES, schema_text
+from gyroemu.pipelines.formats.messages import FLAG, IMU, MAGNETIC_FIELD, RAW_MESSAGE_TYPES, schema_text
 from gyroemu.sensors import load_device
 from gyroemu.sensors.samples import ImuSamples
 
@@ -752,3 +752,64 @@ def test_stamps_match_nothing_on_an_empty_channel():
     assert i.shape == j.shape == (0,) and i.dtype == j.dtype == np.int64
     i, j = _match(np.array([5, 7, 9], np.int64), np.array([9, 5], np.int64))
     assert list(i) == [0, 2] and list(j) == [1, 0]
+
+
+def test_topic_message_types_by_role():
+    """Live-stream topics by their role, whatever the device prefix; /movement is for files only."""
+    assert topic_message_type("/imu") is IMU and topic_message_type("/imu0/imu") is IMU
+    assert topic_message_type("/truth/imu") is IMU and topic_message_type("/a/b/estimate/imu") is IMU
+    assert topic_message_type("/imu0/mag") is MAGNETIC_FIELD
+    assert topic_message_type("/imu0/raw/fog") is RAW_MESSAGE_TYPES["fog"]
+    assert topic_message_type("/movement") is None and topic_message_type("/camera") is None
+
+
+def test_movement_flags_as_booleans_or_zeros_and_ones():
+    stamp_ns = np.array([10, 20, 30, 40], np.int64)
+    flags = np.array([False, True, True, False])
+    rows = encode_movement(stamp_ns, "imu0", flags)
+    assert np.array_equal(FLAG.decode(rows)["data"], flags)
+    assert np.array_equal(encode_movement(stamp_ns, "imu0", flags.astype(np.int64)), rows)
+    assert np.array_equal(encode_movement(stamp_ns, "imu0", flags.astype(float)), rows)
+    for bad in (np.array([0, 1, 2, 0]), flags[:3], np.array([0.0, 0.5, 1.0, 1.0])):
+        with pytest.raises(ValueError, match="movement must be 4 booleans"):
+            encode_movement(stamp_ns, "imu0", bad)
+
+
+def test_exact_stamps_reach_a_truth_at_the_same_times_only(tmp_path, runs):
+    """With ``stamp_ns``, a truth within 1 us of the samples' times is stamped with them exactly; one
+    2 us off keeps its own stamps (to the nanosecond)."""
+    _, samples, truth = runs["ideal"]
+    stamp_ns = np.rint(samples.t * 1e9).astype(np.int64) + 7  # not what samples.t rounds to
+    for shift_ns, want_ns in ((400, stamp_ns), (2000, np.rint(samples.t * 1e9).astype(np.int64) + 2000)):
+        shifted = ImuSeries(t=truth.t + shift_ns * 1e-9, q_wb=truth.q_wb, omega_b=truth.omega_b)
+        path = write_mcap(tmp_path / f"{shift_ns}.mcap", Recording(samples, truth=shifted, stamp_ns=stamp_ns))
+        with open(path, "rb") as f:
+            stamps = [
+                message.log_time
+                for _, channel, message in make_reader(f).iter_messages()
+                if channel.topic == "/truth/imu"
+            ]
+        assert np.array_equal(stamps, want_ns), shift_ns
+
+
+def test_raw_observables_without_a_field_warn_once_per_device(tmp_path, runs):
+    _, samples, _ = runs["navigation_fog"]
+    extra = {k: {**o, "coil_temperature_degC": np.full(len(samples), 25.0)} for k, o in samples.raw.items()}
+    odd = ImuSamples(t=samples.t, gyro=samples.gyro, accel=samples.accel, mag=samples.mag, raw=extra)
+    with pytest.warns(LogWarning, match="has no field for coil_temperature_degC; not recorded") as caught:
+        with McapLogWriter(tmp_path / "odd.mcap") as log:
+            log.write(_slice(odd, 0, 50))
+            log.write(_slice(odd, 50, len(odd)))
+    assert sum("coil_temperature_degC" in str(w.message) for w in caught) == 1
+    assert_samples_equal(read_quietly(tmp_path / "odd.mcap").samples, samples)
+
+
+def test_samples_without_a_movement_flag_read_as_false_with_a_warning(tmp_path, runs):
+    _, samples, _ = runs["ideal"]
+    n = len(samples)
+    with McapLogWriter(tmp_path / "part.mcap") as log:
+        log.write(Recording(_slice(samples, 0, 100), movement=np.ones(100, bool)))
+        log.write(_slice(samples, 100, n))
+    with pytest.warns(LogWarning, match=f"{n - 100} samples of /imu have no message on /movement"):
+        d = read_mcap(tmp_path / "part.mcap").device
+    assert d.movement[:100].all() and not d.movement[100:].any()

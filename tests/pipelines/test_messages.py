@@ -184,6 +184,15 @@ def test_decode_rejects_malformed(damage):
         IMU.decode(rows)
 
 
+@pytest.mark.parametrize("size", [1, 4, 5, 12, 16])
+def test_decode_refuses_messages_shorter_than_a_header(size):
+    """A message needs the 4-byte encapsulation, the 12 fixed header bytes (stamp and the frame id's
+    string length) and at least the string's NUL: anything up to 16 bytes is too short, whatever it holds."""
+    rows = IMU.encode([1, 2], "imu0")[:, :size]
+    with pytest.raises(ValueError, match=rf"^a {size}-byte message is too short for a sensor_msgs/msg/Imu$"):
+        IMU.decode(rows)
+
+
 def test_decode_numbers_the_bad_message_among_mixed_lengths():
     """Payloads 1 and 2 share a length (frame ids "ab" and "abc" pad to the same size) but not a string
     length; payload 2's string length is then zeroed: the error names message 2."""
@@ -316,6 +325,17 @@ def test_standard_schemas_define_the_humble_types(name):
     assert set(parsed) == {name, "geometry_msgs/msg/Vector3", "std_msgs/msg/Header", "builtin_interfaces/msg/Time"} | (
         {"geometry_msgs/msg/Quaternion"} if name.endswith("Imu") else set()
     )
+
+
+def test_schema_names_in_any_form():
+    """``pkg/msg/Type`` and ``pkg/Type`` name the same schema; a name in neither form is looked up as
+    given (an unknown one is a KeyError naming it)."""
+    assert schema_text("sensor_msgs/Imu") == schema_text("sensor_msgs/msg/Imu")
+    assert schema_text("Point", {"Point": "float64 x\n"}) == "float64 x\n"
+    with pytest.raises(KeyError, match="Imu"):
+        schema_text("Imu")
+    with pytest.raises(KeyError, match="sensor_msgs/srv/Imu"):
+        schema_text("sensor_msgs/srv/Imu")
 
 
 def test_schema_concatenation_is_rosbag2s():

@@ -376,3 +376,16 @@ def test_bad_parameters_name_their_key(key, value):
     with pytest.raises(ConfigError) as err:
         device_from_dict({"description": "x", "rate_hz": 100.0, "gyro": {"mechanism": {"kind": "fog", key: value}}})
     assert err.value.key == f"gyro.mechanism.{key}"
+
+
+def test_defaults_are_checked_against_the_given_wavelength():
+    """The default spectral width (30 nm) and responsivity (0.9 A/W) are validated against a given
+    wavelength too: at 20 nm the width is not narrower than the wavelength (a responsivity below
+    e λ/(h c) = 0.016 A/W isolates that check); at 1000 nm 0.9 A/W exceeds e λ/(h c) = 0.807 A/W."""
+    with pytest.raises(ConfigError) as err:
+        validate(FiberOpticGyro, {"kind": "fog", "wavelength_nm": 20.0, "responsivity_a_per_w": 0.01}, prefix="m")
+    assert err.value.key == "m.spectral_width_nm"
+    with pytest.raises(ConfigError) as err:
+        validate(FiberOpticGyro, {"kind": "fog", "wavelength_nm": 1000.0}, prefix="m")
+    assert err.value.key == "m.responsivity_a_per_w"
+    assert FiberOpticGyro(wavelength_nm=1200.0).spectral_width_nm == 30.0

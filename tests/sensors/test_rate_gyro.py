@@ -261,6 +261,27 @@ def test_saturates_at_the_gimbal_stop():
     assert theta[-1] == pytest.approx(settled, rel=1e-12)
 
 
+def test_a_gimbal_on_its_stop_rests_there():
+    """An inelastic stop: a gimbal driven past its stop sits on it at zero velocity (the state a next
+    chunk continues from), and once the input is removed it leaves the stop from rest, as the free
+    loop J θ'' + c θ' + K θ = 0 from (θ_stop, 0): moving inwards, never past the stop."""
+    dt = 1e-4
+    t, omega = step_from_rest(1.5 * GYRO.range_rad_per_s, dt, 0.1)
+    state = {}
+    theta = GYRO.respond(make_truth(omega, np.zeros_like(omega), dt), np.random.default_rng(0), state).raw[
+        "gimbal_angle_rad"
+    ][:, 0]
+    assert theta[-1] == GYRO.stop_angle_rad
+    assert state["gimbal_state"][0, 0] == GYRO.stop_angle_rad and state["gimbal_state"][0, 1] == 0.0
+    # Released (the rate falls to zero over the first step): from rest on the stop, the gimbal only moves in.
+    off = np.zeros((200, 3))
+    off[0, 0] = omega[-1, 0]
+    theta = GYRO.respond(make_truth(off, np.zeros_like(off), dt), np.random.default_rng(0), state).raw[
+        "gimbal_angle_rad"
+    ][:, 0]
+    assert theta[0] == GYRO.stop_angle_rad and np.all(np.diff(theta[:20]) < 0)
+
+
 def test_inner_rate_resolves_the_natural_frequency():
     for output in (100.0, 400.0, 1000.0, 2000.0):
         inner = GYRO.inner_rate_hz(output)

@@ -203,6 +203,24 @@ def test_starts_in_balance_so_a_steady_rate_reads_exactly():
     np.testing.assert_allclose(r.angle, np.outer(t, w), rtol=1e-12, atol=1e-15)
 
 
+def test_proportional_loop_starts_in_balance_on_a_ramping_rate():
+    """With k_i = 0 the loop is proportional only: for ω = ω₀ + β t (u = H ω) the particular solution
+    is θ = u/(k_t k_p) − c u'/(k_t k_p)², θ' = u'/(k_t k_p), and the gyro starts on it, so θ follows
+    it from the first sample to round-off (the first-order hold is exact for the ramp). The rate is
+    kept tiny so that cos θ = 1 to round-off."""
+    gyro = RateIntegratingGyro(loop_integral_a_per_rad_s=0.0)
+    gain = KT * gyro.loop_proportional_a_per_rad
+    dt, w0, beta = 1e-3, 1e-6, 2e-6
+    t = np.arange(500) * dt
+    omega, alpha = np.zeros((t.size, 3)), np.zeros((t.size, 3))
+    omega[:, 0], alpha[:, 0] = w0 + beta * t, beta
+    r = respond(gyro, omega, alpha, dt)
+    want = H * (w0 + beta * t) / gain - C * H * beta / gain**2
+    theta = r.raw["gimbal_angle_rad"][:, 0]
+    np.testing.assert_allclose(theta, want, rtol=64 * np.finfo(float).eps, atol=0)
+    np.testing.assert_allclose(r.raw["torquer_current_a"][:, 0], gyro.loop_proportional_a_per_rad * want, rtol=1e-13)
+
+
 def test_bandwidth_formula():
     """|T(j ω_b)| = 1/√2 for ω_b from the cubic (5); and the J → 0 second-order formula is close
     when the float is much faster than the loop."""
