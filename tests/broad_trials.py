@@ -2,7 +2,7 @@
 
 The folder is ``$GYROEMU_BROAD_DIR`` when set, otherwise ``shared/datasets/broad`` beside the project's
 root (``<root>/../shared/datasets/broad``), wherever the checkout sits. A test that needs a trial skips
-and says where it looked; with ``GYROEMU_REQUIRE_DATA=1`` (CI sets it when ``shared/`` lies beside the
+and says where it looked; with ``GYROEMU_REQUIRE_DATA=1`` (CI sets it when ``shared/datasets/broad`` lies beside the
 checkout) it fails instead, so a moved or missing dataset can never pass as a skip.
 """
 
