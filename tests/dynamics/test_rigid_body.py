@@ -323,3 +323,12 @@ def test_projectile_on_the_rotating_earth_is_deflected_as_the_first_order_closed
     deflection = (sol.y[:, X] - r0) @ right
     np.testing.assert_array_less(np.abs(deflection - omega[2] * vmag * t**2), r_rem + pos_int + 1e-12)
     assert deflection[-1] > 1.4
+
+
+def test_state_stores_the_attitude_normalised():
+    """A quaternion handed in at any scale is stored as the unit quaternion of the same attitude."""
+    body = RigidBody(3.0, INERTIA)
+    q = quat_from_euler_zyx([0.3, -0.2, 0.5])
+    for scale in (3.0, 0.25):
+        y = body.state((0.0, 0.0, 0.0), scale * q, (0.0, 0.0, 0.0), (0.1, 0.2, 0.3))
+        np.testing.assert_allclose(y[Q], q, rtol=0, atol=4 * EPS)

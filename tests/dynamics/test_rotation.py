@@ -124,3 +124,12 @@ def test_bad_shapes_are_refused():
         quat_multiply([1, 0, 0], [1, 0, 0, 0])
     with pytest.raises(ValueError, match="zero quaternion"):
         quat_normalize([0, 0, 0, 0])
+
+
+def test_quat_exp_of_a_vector_too_small_for_its_norm_is_one_plus_the_vector():
+    """exp(0, v) = (cos|v|, sin|v| v/|v|) → (1, v) as v → 0, even where |v|² underflows and the norm
+    reads 0: the rotation is tiny, not absent."""
+    for v in ([1e-170, -2e-170, 0.0], [0.0, 3e-200, 5e-190]):
+        q = quat_exp(np.array(v))
+        assert q[0] == 1.0
+        np.testing.assert_allclose(q[1:], v, rtol=2 * EPS, atol=0)

@@ -133,3 +133,24 @@ def test_trajectory_refuses_a_vector_of_the_wrong_shape_naming_it(name, shape):
     arrays[name] = np.zeros(shape)
     with pytest.raises(ValueError, match=rf"^{name} must have shape \(4, 3\), got \({', '.join(map(str, shape))},?\)$"):
         Trajectory(t=np.arange(n, dtype=float), q_wb=q, **arrays)
+
+
+@pytest.mark.parametrize("shape", [(4, 5), (5, 4), (4, 4, 1), (4, 3)])
+def test_trajectory_refuses_an_attitude_of_the_wrong_shape(shape):
+    n = 4
+    arrays = {k: np.zeros((n, 3)) for k in ("omega_b", "alpha_b", "specific_force_b", "pos_w", "vel_w", "mag_b")}
+    with pytest.raises(ValueError, match=r"^q_wb must have shape \(4, 4\)"):
+        Trajectory(t=np.arange(n, dtype=float), q_wb=np.ones(shape), **arrays)
+
+
+@pytest.mark.parametrize("index", [0, 2, 4, -1, -2, -5, np.int64(3)])
+def test_trajectory_integer_index_gives_that_one_sample(index):
+    n = 5
+    arrays = {k: np.arange(3 * n, dtype=float).reshape(n, 3) for k in ("omega_b", "alpha_b", "pos_w", "vel_w")}
+    arrays |= {k: np.zeros((n, 3)) for k in ("specific_force_b", "mag_b")}
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    traj = Trajectory(t=np.arange(n, dtype=float), q_wb=q, **arrays)
+    one = traj[index]
+    assert len(one) == 1
+    assert one.t[0] == traj.t[index]
+    assert np.array_equal(one.omega_b[0], traj.omega_b[index])

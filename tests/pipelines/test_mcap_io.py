@@ -813,3 +813,65 @@ def test_samples_without_a_movement_flag_read_as_false_with_a_warning(tmp_path, 
     with pytest.warns(LogWarning, match=f"{n - 100} samples of /imu have no message on /movement"):
         d = read_mcap(tmp_path / "part.mcap").device
     assert d.movement[:100].all() and not d.movement[100:].any()
+
+
+def test_exact_stamps_reach_a_short_truth_too(tmp_path, runs):
+    """The same snapping for a recording of a few samples (lengths compared by value, at any length)."""
+    _, full, truth = runs["ideal"]
+    k = 100
+    samples = ImuSamples(t=full.t[:k], gyro=full.gyro[:k], accel=full.accel[:k], mag=full.mag[:k])
+    stamp_ns = np.rint(samples.t * 1e9).astype(np.int64) + 7
+    shifted = ImuSeries(t=truth.t[:k] + 400e-9, q_wb=truth.q_wb[:k], omega_b=truth.omega_b[:k])
+    path = write_mcap(tmp_path / "short.mcap", Recording(samples, truth=shifted, stamp_ns=stamp_ns))
+    with open(path, "rb") as f:
+        stamps = [m.log_time for _, c, m in make_reader(f).iter_messages() if c.topic == "/truth/imu"]
+    assert np.array_equal(stamps, stamp_ns)
+
+
+def test_truth_series_is_taken_at_the_true_sampling_instants(trajectory, runs):
+    """``/truth/imu`` is the body truth at ``t_true`` (where the device really sampled), stamped ``t``."""
+    _, full, _ = runs["ideal"]
+    t = full.t[5:-5]
+    late = t + 0.37 * (t[1] - t[0])
+    stamped = ImuSamples(t=t, gyro=full.gyro[5:-5], accel=full.accel[5:-5], mag=full.mag[5:-5], t_true=late)
+    at_late = ImuSamples(t=late, gyro=stamped.gyro, accel=stamped.accel, mag=stamped.mag)
+    a, b = truth_series(trajectory, stamped), truth_series(trajectory, at_late)
+    assert np.array_equal(a.t, t)
+    assert np.array_equal(a.omega_b, b.omega_b) and np.array_equal(a.q_wb, b.q_wb)
+    assert (
+        np.abs(
+            a.omega_b
+            - truth_series(trajectory, ImuSamples(t=t, gyro=stamped.gyro, accel=stamped.accel, mag=stamped.mag)).omega_b
+        ).max()
+        > 0
+    )
+
+
+def test_a_chunk_of_unknown_compression_is_refused_by_name(tmp_path, runs):
+    """A chunk whose compression is not "", "lz4" or "zstd" is refused, naming it, even when its bytes
+    happen to be valid zstd (here the name "zstd" is overwritten with "zzzz")."""
+    _, samples, truth = runs["ideal"]
+    path = write_mcap(tmp_path / "z.mcap", Recording(samples, truth=truth))
+    data = path.read_bytes()
+    assert data.count(b"\x04\x00\x00\x00zstd") >= 1
+    path.write_bytes(data.replace(b"\x04\x00\x00\x00zstd", b"\x04\x00\x00\x00zzzz"))
+    with pytest.raises(LogError, match="unknown compression 'zzzz'"):
+        read_mcap(path)
+
+
+def test_messages_of_equal_log_time_keep_their_file_order(tmp_path):
+    """Log-time order, file order for equal times: a chunked file whose messages all share one log
+    time reads back in the order written, chunk by chunk."""
+    path = tmp_path / "same_time.mcap"
+    rows = IMU.encode(np.arange(1, 51) * 10**7, "imu", {"angular_velocity": np.arange(150.0).reshape(50, 3)})
+    with open(path, "wb") as f:
+        writer = PlainMcapWriter(f, chunk_size=1024, compression=CompressionType.NONE)
+        writer.start("ros2", "test")
+        schema = writer.register_schema("sensor_msgs/msg/Imu", "ros2msg", IMU.schema.encode())
+        channel = writer.register_channel("/imu", "cdr", schema)
+        for k, row in enumerate(rows):
+            writer.add_message(channel, log_time=10**9, data=row.tobytes(), publish_time=0, sequence=k)
+        writer.finish()
+    log = read_quietly(path)
+    assert np.array_equal(log.samples.gyro, np.arange(150.0).reshape(50, 3))
+    assert np.array_equal(log.device.stamp_ns, np.arange(1, 51) * 10**7)

@@ -389,3 +389,10 @@ def test_defaults_are_checked_against_the_given_wavelength():
         validate(FiberOpticGyro, {"kind": "fog", "wavelength_nm": 1000.0}, prefix="m")
     assert err.value.key == "m.responsivity_a_per_w"
     assert FiberOpticGyro(wavelength_nm=1200.0).spectral_width_nm == 30.0
+
+
+def test_max_rate_is_the_feedback_range_closed_loop_and_the_sine_extremum_open_loop():
+    closed, opened = FiberOpticGyro(feedback_range_rad=2.5), FiberOpticGyro(loop="open", feedback_range_rad=2.5)
+    eps = np.finfo(float).eps
+    assert closed.max_rate() == pytest.approx(2.5 / closed.scale_factor_s, rel=4 * eps)
+    assert opened.max_rate() == pytest.approx(0.5 * np.pi / opened.scale_factor_s, rel=4 * eps)

@@ -414,3 +414,25 @@ def test_bad_parameters_name_the_key(key, value):
     with pytest.raises(ConfigError) as err:
         validate(FreeGyro, {"kind": "free-gyro", key: value})
     assert err.value.key == key
+
+
+def test_euler_angles_from_the_spins_alone():
+    """Without the gimbal angles at hand, the attitude R = Rx(φ) Ry(θ) Rz(ψ) comes back from the rotor
+    directions in case axes (rows of R: the rotors hold e_x and e_y) to round-off."""
+    from gyroemu.sensors.free_gyro import euler_xyz_from_spins
+
+    angles = np.array([[0.3, -0.7, 2.1], [-2.5, 1.2, -0.4], [1.0, 0.1, 3.0]])
+    spins = Rotation.from_euler("XYZ", angles).as_matrix()[:, :2, :]
+    assert np.abs(euler_xyz_from_spins(spins) - angles).max() < 8 * np.finfo(float).eps * np.pi
+
+
+def test_inner_bearing_friction_ignores_a_turn_about_the_outer_axis():
+    """Rotor along case y: the inner axis is a_o × s = −x. Turning the case about z (the outer axis) does
+    not turn the inner bearing, so viscous inner friction alone gives no drift; turning it about x at
+    ω does, and the drift is b_i ω a_i × (1/H) in magnitude: (b_i ω / H) along x."""
+    from gyroemu.sensors.free_gyro import _spin_rate
+
+    q, s, h, b_i = np.array([1.0, 0.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), 2.0, 1.0
+    assert np.all(_spin_rate(q, np.array([0.0, 0.0, 1.0]), s, h, 0.0, 0.0, b_i, 0.0, 1e-12) == 0.0)
+    rate = _spin_rate(q, np.array([1.0, 0.0, 0.0]), s, h, 0.0, 0.0, b_i, 0.0, 1e-12)
+    assert np.allclose(rate, [b_i / h, 0.0, 0.0], rtol=0, atol=4 * np.finfo(float).eps)

@@ -203,3 +203,12 @@ def test_output_quantiser_counts_in_the_noise_budget():
     lsb_density2 = np.radians(0.01) ** 2 * 0.01 / 12
     np.testing.assert_allclose(device.gyro_errors.noise_density**2 + lsb_density2, (np.radians(0.5) / 60) ** 2)
     np.testing.assert_allclose(device.gyro_noise_density, np.radians(0.5) / 60)
+
+
+def test_gyro_truth_compares_and_hashes_by_identity():
+    """GyroTruth holds arrays: it compares by identity (no ambiguous element-wise ==) and can key a dict."""
+    t = np.arange(4) * 0.01
+    a = GyroTruth(t=t, dt=0.01, omega=np.zeros((4, 3)), alpha=np.zeros((4, 3)))
+    b = GyroTruth(t=t, dt=0.01, omega=np.zeros((4, 3)), alpha=np.zeros((4, 3)))
+    assert a == a and a != b
+    assert {a: 1, b: 2}[a] == 1

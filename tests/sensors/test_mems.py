@@ -514,3 +514,14 @@ def test_a_device_with_a_mems_gyro_reads_the_rate():
     raw = samples.raw["mems"]
     assert raw["sense_in_phase_v"].shape == raw["sense_quadrature_v"].shape == (len(samples), 3)
     assert CARRIER_STEPS_PER_CYCLE >= 20
+
+
+@pytest.mark.parametrize("order", [1, 2, 3, 4])
+def test_baseband_system_passes_the_sense_response_at_dc(order):
+    """ż = A z + b F, Ã = c·z: the envelope (DC gain: the sense response) then a unit-DC-gain Butterworth
+    filter of any order, so −c·A⁻¹b is the sense response, to round-off (A is well conditioned)."""
+    gyro = MemsGyro(demodulator_filter_order=order)
+    a, b, c = gyro.baseband_system()
+    assert a.shape == (order + 1, order + 1) and b.shape == c.shape == (order + 1,)
+    dc = c @ np.linalg.solve(a, -b)
+    assert abs(dc / gyro.sense_response() - 1) < 50 * np.finfo(float).eps

@@ -385,3 +385,35 @@ def test_bad_parameters_name_the_key(key, value):
         validate(RateGyro, {"kind": "rate-gyro", key: value})
     assert err.value.key == key
     assert key in str(err.value)
+
+
+def test_gimbal_step_solves_its_implicit_torque_equation_to_round_off():
+    """Each step solves θ_{k+1} = p + g u(θ_{k+1}), u(θ) = H (ω_IA cos θ − ω_SRA sin θ) − J ω'_OA, by
+    Newton from the predictor. With Φ = I, Γ₀ = 0, Γ₁ = (g, 0), p = θ_k: a strongly θ-dependent torque
+    (g H = 0.5, both rates 1 rad/s, starting 1 rad off) must still leave a round-off residual."""
+    from gyroemu.sensors.rate_gyro import _gimbal_recurrence
+
+    g, h, steps = 0.5, 1.0, 20
+    w = np.ones((steps, 1))
+    out = np.empty((steps, 1, 2))
+    _gimbal_recurrence(
+        np.eye(2), np.zeros(2), np.array([g, 0.0]), np.array([[1.0, 0.0]]), h, 0.0, w, w, 0 * w, 10.0, out
+    )
+    theta = out[:, 0, 0]
+    residual = theta[1:] - theta[:-1] - g * h * (np.cos(theta[1:]) - np.sin(theta[1:]))
+    assert np.abs(residual).max() < 8 * np.finfo(float).eps
+    assert abs(theta[-1] - np.pi / 4) < 1e-3  # heading for the balance cos θ = sin θ
+
+
+@pytest.mark.parametrize("w_ia, torque", [(-0.43, 0.0), (-0.434, -0.0078)])
+def test_static_balance_solves_a_hard_unique_balance_to_round_off(w_ia, torque):
+    """K θ = H (ω_IA cos θ − ω_SRA sin θ) + torque with K > H |ω| has exactly one root; a large ω_SRA
+    (H|ω| at 97 % of K, the slope down to 3 % of K near it) is the hard case for Newton, and eight
+    steps from H ω_IA/K must still reach it to round-off, inside the stops."""
+    from gyroemu.sensors.rate_gyro import _static_balance
+
+    k, h, w_sra, stop = 5.57, 1.0, -5.4, 1.5
+    theta = _static_balance(k, h, np.array([w_ia]), np.array([w_sra]), np.array([torque]), stop)
+    assert abs(theta[0]) < stop
+    residual = k * theta - h * (w_ia * np.cos(theta) - w_sra * np.sin(theta)) - torque
+    assert abs(residual[0]) < 16 * np.finfo(float).eps * (k * abs(theta[0]) + h * math.hypot(w_ia, w_sra))

@@ -375,3 +375,14 @@ def test_kernel_sine_and_cosine_are_accurate_to_round_off():
     bound = 2.2e-16 + 2.2e-16
     assert np.abs(got[:, 0] - np.sin(x)).max() <= bound
     assert np.abs(got[:, 1] - np.cos(x)).max() <= bound
+
+
+def test_filon_weight_series_matches_the_closed_form_within_its_truncation():
+    """Below |x| = 0.05 f = (e^{ix} − 1)/(ix) comes from its Taylor series; written stably, the closed
+    form is Re f = sin x / x, Im f = 2 sin²(x/2)/x, and the series must agree within 10⁻⁹."""
+    from gyroemu.sensors.rlg import _filon_weights
+
+    for x in (0.049, -0.045, 0.03, 0.01):
+        f, _, _ = _filon_weights(complex(math.cos(x), math.sin(x)), x)
+        assert abs(f.real - math.sin(x) / x) < 1e-9
+        assert abs(f.imag - 2 * math.sin(0.5 * x) ** 2 / x) < 1e-9
