@@ -61,7 +61,6 @@ from .motion_kernels import (
     sin_cos,
     sincos_block,
     sines_block,
-    smooth_step,
     smooth_step_at,
 )
 from .prescribed import Attitude, EarthBoundSpec, WorldMotion, motion_arrays, quat_from_rpy_deg
@@ -81,11 +80,6 @@ __all__ = [
     "ConingSpec",
     "Sculling",
     "ScullingSpec",
-    # Re-exported: imported from here by pipelines.demo (EarthBoundSpec) and the tests.
-    "EarthBoundSpec",
-    "TimeGrid",
-    "quat_from_rpy_deg",
-    "smooth_step",
 ]
 
 _E_Z = np.array([0.0, 0.0, 1.0])

@@ -36,8 +36,7 @@ against the leading axes, so the integrator's single states and a whole sampled 
 through the same code.
 
 The small vectorised kernels these formulas use (rotation matrices, ``R v``, ``Rᵀ v``, cross and Hamilton
-products) live in :mod:`gyroemu.dynamics.body_kernels`; :func:`rotation_matrix`, :func:`rotate`,
-:func:`rotate_back` and :func:`cross` stay importable from here as well.
+products) live in :mod:`gyroemu.dynamics.body_kernels`.
 """
 
 from __future__ import annotations
@@ -60,14 +59,10 @@ __all__ = [
     "P",
     "L",
     "RigidBody",
-    "rotation_matrix",  # from .body_kernels
-    "rotate",  # from .body_kernels
-    "rotate_back",  # from .body_kernels
     "point_position",
     "point_velocity",
     "point_acceleration",
     "contact_mass_matrix",
-    "cross",  # from .body_kernels
     "world_motion_trajectory",
 ]
 

@@ -105,7 +105,7 @@ def _sensors(seconds: float = 10.0) -> None:
 
 
 def _gyrocompass(seconds: float = 600.0) -> None:
-    from gyroemu.dynamics.motions import EarthBoundSpec
+    from gyroemu.dynamics.prescribed import EarthBoundSpec
 
     scenario = load_scenario("bench_static")
     assert isinstance(scenario.spec, EarthBoundSpec)  # kind "static", at a [site]

@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 from gyroemu.dynamics import ConfigError, load_scenario, scenario_from_dict
+from gyroemu.dynamics.body_kernels import rotation_matrix
 from gyroemu.dynamics.impact import contact_impulse
 from gyroemu.dynamics.inertia import box
-from gyroemu.dynamics.rigid_body import P, contact_mass_matrix, rotation_matrix
+from gyroemu.dynamics.rigid_body import P, contact_mass_matrix
 
 EPS = np.finfo(float).eps
 

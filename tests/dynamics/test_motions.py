@@ -28,16 +28,15 @@ from gyroemu.dynamics import (
     normal_gravity,
     scenario_from_dict,
 )
+from gyroemu.dynamics.motion_kernels import TimeGrid, smooth_step
 from gyroemu.dynamics.motions import (
     ConingSpec,
     OscillationSpec,
     RateTableSpec,
     ScullingSpec,
     StaticSpec,
-    TimeGrid,
-    quat_from_rpy_deg,
-    smooth_step,
 )
+from gyroemu.dynamics.prescribed import quat_from_rpy_deg
 from gyroemu.dynamics.rotation import (
     quat_angle,
     quat_conjugate,

@@ -10,6 +10,7 @@ quadratic one, like energy); finite differences err by their truncation terms ``
 import numpy as np
 import pytest
 
+from gyroemu.dynamics.body_kernels import rotate, rotate_back, rotation_matrix
 from gyroemu.dynamics.earth import earth_rate_enu, normal_gravity
 from gyroemu.dynamics.gyrostat import Gyrostat
 from gyroemu.dynamics.integrate import Jump, integrate
@@ -22,9 +23,6 @@ from gyroemu.dynamics.rigid_body import (
     point_acceleration,
     point_position,
     point_velocity,
-    rotate,
-    rotate_back,
-    rotation_matrix,
 )
 from gyroemu.dynamics.rotation import quat_from_euler_zyx, quat_multiply, quat_to_matrix
 

@@ -20,7 +20,7 @@ from kinematics_checks import EPS, DerivativeBounds, assert_kinematics, step_bou
 from scipy.integrate import IntegrationWarning, quad
 
 from gyroemu.dynamics import EARTH_RATE, ConfigError, scenario_from_dict
-from gyroemu.dynamics.motions import smooth_step
+from gyroemu.dynamics.motion_kernels import smooth_step
 from gyroemu.dynamics.rotation import body_rate_from_euler_zyx, euler_zyx_from_quat, quat_from_euler_zyx
 from gyroemu.dynamics.vehicles import Road, SuspensionTransient, Turn, euler_zyx_motion
 
