@@ -4,24 +4,42 @@ An accelerometer (or its integrating ADC) reports the specific force averaged ov
 interval, ``Δv_k / T = (1/T) ∫ f_s dt`` over ``[τ_{k−1}, τ_k]`` in sensor axes. The integral is taken
 by composite Simpson's rule on a grid two or more points per trajectory sample (error ``O(h⁴)``),
 then :func:`gyroemu.sensors.errors.apply_errors` adds bias, scale factor, misalignment, noise and the rest.
+With a ``latency_s`` ``L`` the interval is ``[τ_{k−1} − L, τ_k − L]`` (see :mod:`gyroemu.sensors.imu`).
 """
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Annotated
 
-from gyroemu.dynamics.config import Section
+import numpy as np
+from pydantic import Field
+
+from gyroemu.dynamics.config import Real, Section
 
 from .errors import AccelErrors
 from .sampling import SensorTruth
 
-__all__ = ["AccelerometerSpec", "mean_specific_force"]
+__all__ = ["AccelerometerSpec", "LatencySeconds", "mean_specific_force"]
+
+
+def _is_zero(value: float) -> bool:
+    return value == 0.0
+
+
+LatencySeconds = Annotated[Real, Field(gt=-1.0, lt=1.0, exclude_if=_is_zero)]
+"""A sensor's ``latency_s`` key (``[gyro]``, ``[accelerometer]``, ``[magnetometer]``), s, ``|L| < 1``:
+the sample stamped ``t_k`` measures the motion at the true instant ``τ_k − L``; positive, the sensor
+lags the truth. Left out of a dumped config when 0, so configs without it resolve to the same text."""
 
 
 class AccelerometerSpec(Section):
-    """``[accelerometer]`` of a device: the error terms in datasheet units (see :class:`AccelErrors`)."""
+    """``[accelerometer]`` of a device: the error terms in datasheet units (see :class:`AccelErrors`)
+    and the latency."""
 
     errors: AccelErrors = AccelErrors()
+    latency_s: LatencySeconds = 0.0
+    """The sample stamped ``t_k`` is the mean specific force over ``[τ_{k−1} − L, τ_k − L]``, the motion
+    ``latency_s`` earlier than the true instants; positive: the sensor lags the truth."""
 
 
 def mean_specific_force(truth: SensorTruth, instants: np.ndarray, substeps: int) -> np.ndarray:

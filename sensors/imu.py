@@ -15,6 +15,23 @@
 4. **Accelerometer**: mean specific force over the same intervals at the sensor's lever arm, then its
    error terms. **Magnetometer**: the field sampled at ``τ_k``, then hard and soft iron and noise.
 
+**Latency.** Each sensor has its own ``latency_s`` (``[gyro]``, ``[accelerometer]``,
+``[magnetometer]``; default 0, ``|L| < 1 s``): the sample stamped ``t_k`` measures the motion at the
+true instant ``τ_k − L``; positive, the sensor lags the truth (a real IMU's gyro lags an optical
+reference by about 4 ms, its magnetometer by 9–16 ms). The gyro's sample ``k`` is then the indicated
+increment over ``[τ_{k−1} − L_g, τ_k − L_g]``, the accelerometer's the mean force over
+``[τ_{k−1} − L_a, τ_k − L_a]``, the magnetometer's the field at ``τ_k − L_m``. The clock, the
+temperature and every error process keep running on the device's own instants ``τ_k``; only the
+truth is read earlier (or later). ``t_true`` stays ``τ_k``, the instant the sample is taken.
+
+The truth has no motion before its first sample or after its last, so a device with latency drops
+the samples that would need it: its samples are the ``k`` (same indices, same stamps ``k T + offset``)
+for which every sensor's shifted interval lies in the truth's span, i.e. ``K₁ ≤ k ≤ K₂`` with
+``K₁ = 1 + ceil(L_max / T')`` and ``K₂ = floor((t_end − t₀ + L_min) / T')``, where
+``L_max = max(0, L_g, L_a, L_m)``, ``L_min = min(0, L_g, L_a, L_m)`` and ``T'`` the true period. The
+three sensors always give the same number of samples, at the same stamps; with every latency 0
+this is ``1 … K``, the samples without latency, computed by the same code, bit for bit.
+
 Random draws come from independent streams spawned from the device's seed (clock, gyro mechanism,
 gyro errors, accelerometer, magnetometer), so adding a magnetometer does not change the gyro's noise.
 """
@@ -34,7 +51,7 @@ from gyroemu.dynamics import Trajectory
 from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3, validate
 from gyroemu.errors import ConfigError
 
-from .accelerometer import AccelerometerSpec, mean_specific_force
+from .accelerometer import AccelerometerSpec, LatencySeconds, mean_specific_force
 from .errors import AccelErrors, ErrorModel, GyroErrors, apply_errors
 from .magnetometer import MagnetometerSpec
 from .mechanism import GYRO_KINDS, GyroMechanism, GyroTruth, mechanism_class
@@ -86,10 +103,13 @@ class TemperatureSpec(Section):
 
 
 class GyroSpec(Section):
-    """``[gyro]``: the mechanism (``[gyro.mechanism]``, with its ``kind``) and the error terms."""
+    """``[gyro]``: the mechanism (``[gyro.mechanism]``, with its ``kind``), the error terms and the latency."""
 
     mechanism: dict = {"kind": "ideal"}
     errors: GyroErrors = GyroErrors()
+    latency_s: LatencySeconds = 0.0
+    """The sample stamped ``t_k`` measures the motion at the true instant ``τ_k − latency_s``;
+    positive: the sensor lags the truth. Left out of the resolved config when 0."""
 
 
 class DeviceSpec(Section):
@@ -242,6 +262,17 @@ class Device:
         return self._gyro_errors
 
     @property
+    def latencies(self) -> tuple[float, float, float]:
+        """``(L_gyro, L_accel, L_mag)``, s: each sensor's sample stamped ``t_k`` measures the motion at
+        ``τ_k − L``; positive, the sensor lags the truth. ``L_mag`` is 0 without a magnetometer."""
+        mag = self.spec.magnetometer
+        return (
+            float(self.spec.gyro.latency_s),
+            float(self.spec.accelerometer.latency_s),
+            0.0 if mag is None else float(mag.latency_s),
+        )
+
+    @property
     def kind(self) -> str:
         """The gyro mechanism's kind."""
         return self.mechanism.kind
@@ -268,7 +299,9 @@ class Device:
     def measure(self, trajectory: Trajectory) -> ImuSamples:
         """Emulate the device over ``trajectory``: one output sample per interval ``[τ_{k−1}, τ_k]``.
 
-        Returns an :class:`ImuSamples` with ``floor(duration · rate_hz / (1 + ε))`` samples.
+        Returns an :class:`ImuSamples` with ``floor(duration · rate_hz / (1 + ε))`` samples when no
+        sensor has a latency; with latencies, the samples ``K₁ … K₂`` whose shifted intervals lie in
+        the trajectory's span (module notes), the same for the three sensors.
         """
         spec = self.spec
         streams = [np.random.default_rng(s) for s in np.random.SeedSequence(self.seed).spawn(5)]
@@ -278,23 +311,35 @@ class Device:
         period = 1.0 / spec.rate_hz  # what the device believes
         true_period = period * (1.0 + spec.clock.rate_error_ppm * 1e-6)
         t0 = truth.t_start
-        count = int(math.floor((truth.t_end - t0) / true_period * (1 + 1e-12)))
+        latency_gyro, latency_accel, latency_mag = self.latencies
+        if latency_gyro == latency_accel == latency_mag == 0.0:
+            first = 1
+            count = int(math.floor((truth.t_end - t0) / true_period * (1 + 1e-12)))
+        else:
+            # K₁ = 1 + ceil(L_max / T'), K₂ = floor((t_end − t₀ + L_min) / T'): every sensor's shifted
+            # interval [τ_{k−1} − L, τ_k − L] within the truth's span (module notes).
+            lag = max(0.0, latency_gyro, latency_accel, latency_mag)
+            lead = min(0.0, latency_gyro, latency_accel, latency_mag)
+            first = 1 + int(math.ceil(lag / true_period * (1 - 1e-12)))
+            count = int(math.floor((truth.t_end - t0 + lead) / true_period * (1 + 1e-12))) - first + 1
         if count < 2:
             raise ConfigError(
-                f"the trajectory ({truth.t_end - t0:g} s) is shorter than two samples of the device ({period:g} s)",
+                f"the trajectory ({truth.t_end - t0:g} s) is shorter than two samples of the device ({period:g} s)"
+                + (" and its sensors' latencies" if any(self.latencies) else ""),
                 key="duration",
             )
-        instants = t0 + np.arange(count + 1) * true_period  # τ_0 … τ_K
-        k = np.arange(1, count + 1)
+        k = np.arange(first, first + count)
+        instants = t0 + np.arange(first - 1, first + count) * true_period  # τ_{K₁−1} … τ_{K₂}
         stamps = k * period + spec.clock.offset_s
         if spec.clock.jitter_s > 0:
             stamps = stamps + spec.clock.jitter_s * rng_clock.standard_normal(count)
         temperature = spec.temperature.at(instants[1:] - t0)
 
         substeps = self._substeps(trajectory, true_period)
-        increments, raw = self._gyro_increments(truth, instants, rng_mech, substeps)
+        increments, raw = self._gyro_increments(truth, instants, rng_mech, substeps, latency=latency_gyro)
         rate_indicated = increments / period
-        force_mean = mean_specific_force(truth, instants, substeps=substeps + substeps % 2)
+        force_instants = instants if latency_accel == 0.0 else instants - latency_accel
+        force_mean = mean_specific_force(truth, force_instants, substeps=substeps + substeps % 2)
         gyro = apply_errors(
             rate_indicated,
             instants[1:],
@@ -311,7 +356,8 @@ class Device:
             temperature_degC=temperature,
         )
         if spec.magnetometer is not None:
-            mag = spec.magnetometer.measure(truth.magnetic_field(instants[1:]), period, rng_mag)
+            field_instants = instants[1:] if latency_mag == 0.0 else instants[1:] - latency_mag
+            mag = spec.magnetometer.measure(truth.magnetic_field(field_instants), period, rng_mag)
         else:
             mag = np.full((count, 3), np.nan)
         increment = spec.output == "increment"
@@ -334,11 +380,20 @@ class Device:
         truth_step = trajectory.duration / max(len(trajectory) - 1, 1)
         return max(1, math.ceil(interval / truth_step * (1 - 1e-9)))
 
-    def _gyro_increments(self, truth: SensorTruth, instants: np.ndarray, rng: np.random.Generator, truth_substeps: int):
+    def _gyro_increments(
+        self,
+        truth: SensorTruth,
+        instants: np.ndarray,
+        rng: np.random.Generator,
+        truth_substeps: int,
+        latency: float = 0.0,
+    ):
         """Indicated angle increments (K, 3) over the intervals between ``instants``, and raw observables.
 
         The inner grid has ``m`` steps per interval: enough for the mechanism's inner rate, and never
-        coarser than the trajectory's own samples.
+        coarser than the trajectory's own samples. ``instants`` are the device's; with a ``latency``
+        ``L`` the mechanism runs on them (its clock, temperature, dither) but reads the motion at
+        ``t − L``.
         """
         count = len(instants) - 1
         m = max(truth_substeps, math.ceil(self.inner_rate_hz / self.spec.rate_hz - 1e-9))
@@ -348,20 +403,22 @@ class Device:
         increments = np.empty((count, 3))
         raw_chunks: dict[str, list] = {}
         t0 = instants[0]
+        power_up = truth.t_start  # the temperature's origin (t0 itself when the device starts at τ_0)
         reads = self.mechanism.reads
         for first in range(0, count, per_chunk):
             last = min(first + per_chunk, count)
             j = np.arange(first * m, last * m + 1)
             t = t0 + j * h
-            omega, alpha = truth.omega_alpha(t)
+            seen = t if latency == 0.0 else t - latency  # the motion's instants
+            omega, alpha = truth.omega_alpha(seen)
             chunk = GyroTruth(
                 t=t,
                 dt=h,
                 omega=omega,
                 alpha=alpha,
-                specific_force=truth.specific_force(t) if "specific_force" in reads else None,
-                q_is=truth.attitude_inertial(t) if "q_is" in reads else None,
-                temperature_degC=self.spec.temperature.at(t - t0) if "temperature_degC" in reads else None,
+                specific_force=truth.specific_force(seen) if "specific_force" in reads else None,
+                q_is=truth.attitude_inertial(seen) if "q_is" in reads else None,
+                temperature_degC=self.spec.temperature.at(t - power_up) if "temperature_degC" in reads else None,
             )
             response = self.mechanism.respond(chunk, rng, state)
             if response.angle is not None:

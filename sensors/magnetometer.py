@@ -5,7 +5,9 @@ Measurement model (the usual calibration model, e.g. Vasconcelos et al., IEEE TI
     m_meas = S m_s + h + n,      n ~ white, density N (tesla/√Hz; per sample σ = N/√T)
 
 with ``S`` the soft-iron (and scale/misalignment) matrix and ``h`` the hard-iron offset, both in the
-sensor's axes; the output is then clipped to the range and rounded to the quantum.
+sensor's axes; the output is then clipped to the range and rounded to the quantum. With a
+``latency_s`` ``L``, ``m_s`` of the sample stamped ``t_k`` is the field at the true instant ``τ_k − L``
+(see :mod:`gyroemu.sensors.imu`).
 """
 
 from __future__ import annotations
@@ -13,6 +15,8 @@ from __future__ import annotations
 import numpy as np
 
 from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Section, Vec3
+
+from .accelerometer import LatencySeconds
 
 __all__ = ["MagnetometerSpec"]
 
@@ -27,6 +31,9 @@ class MagnetometerSpec(Section):
     soft_iron: tuple[Vec3, Vec3, Vec3] = _IDENTITY
     range_uT: PositiveReal | None = None
     quantisation_uT: PositiveReal | None = None
+    latency_s: LatencySeconds = 0.0
+    """The sample stamped ``t_k`` measures the field at the true instant ``τ_k − latency_s``; positive:
+    the sensor lags the truth (a real IMU's magnetometer: 9–16 ms)."""
 
     def measure(self, field_s: np.ndarray, dt: float, rng: np.random.Generator) -> np.ndarray:
         """Measured field (N, 3), tesla, for the true sensor-axes field ``field_s`` (N, 3) sampled every ``dt``."""

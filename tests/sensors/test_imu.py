@@ -212,3 +212,156 @@ def test_gyro_truth_compares_and_hashes_by_identity():
     b = GyroTruth(t=t, dt=0.01, omega=np.zeros((4, 3)), alpha=np.zeros((4, 3)))
     assert a == a and a != b
     assert {a: 1, b: 2}[a] == 1
+
+
+# --- latency: each sensor reads its truth latency_s earlier than the device's instants ---------------
+
+AMP, OMEGA = 0.3, 2 * np.pi * 2.0  # roll oscillation θ(t) = A sin Ωt about body (and world) x, rad, rad/s
+SWAY, OMEGA_X = 0.01, 2 * np.pi * 3.0  # sway along world x, p(t) = a sin Ω_x t, m, rad/s
+FIELD_W = np.array([3e-6, 2e-5, -4e-5])  # tesla
+GRAVITY = 9.81
+
+
+def oscillating(duration=3.0, hz=1000.0):
+    """Roll θ(t) = A sin Ωt and sway p(t) = a sin Ω_x t along x, closed form at every instant:
+
+    ω_b = θ' x,   f_b = R_bw (a_w − g_w) = (p'', g sin θ, g cos θ),
+    m_b = R_bw m_w = (m_x, m_y cos θ + m_z sin θ, −m_y sin θ + m_z cos θ).
+    """
+    t = np.arange(int(round(duration * hz)) + 1) / hz
+    theta = AMP * np.sin(OMEGA * t)
+    x = np.array([1.0, 0.0, 0.0])
+    q = quat_from_rotvec(theta[:, None] * x)
+    w = (AMP * OMEGA * np.cos(OMEGA * t))[:, None] * x
+    a = (-AMP * OMEGA**2 * np.sin(OMEGA * t))[:, None] * x
+    pos = (SWAY * np.sin(OMEGA_X * t))[:, None] * x
+    vel = (SWAY * OMEGA_X * np.cos(OMEGA_X * t))[:, None] * x
+    acc = (-SWAY * OMEGA_X**2 * np.sin(OMEGA_X * t))[:, None] * x
+    env = Environment.inertial(GRAVITY, magnetic_field_w=FIELD_W)
+    return trajectory_from_world_motion(t, q, w, a, pos, vel, acc, env)
+
+
+def _gauss_mean(f, start, end, points=12):
+    """Mean of ``f`` over each interval ``[start, end]`` by Gauss–Legendre (exact to round-off here)."""
+    x, wts = np.polynomial.legendre.leggauss(points)
+    mid, half = (start + end) / 2, (end - start) / 2
+    values = f(mid[:, None] + half[:, None] * x[None, :])  # (K, points, 3)
+    return np.einsum("kpj,p->kj", values, wts) / 2
+
+
+def _force_b(t):
+    theta = AMP * np.sin(OMEGA * t)
+    return np.stack([-SWAY * OMEGA_X**2 * np.sin(OMEGA_X * t), GRAVITY * np.sin(theta), GRAVITY * np.cos(theta)], -1)
+
+
+def _field_b(t):
+    theta = AMP * np.sin(OMEGA * t)
+    c, s = np.cos(theta), np.sin(theta)
+    m = FIELD_W
+    return np.stack([np.full_like(t, m[0]), m[1] * c + m[2] * s, -m[1] * s + m[2] * c], -1)
+
+
+def _fourth_derivative_bound(f, t):
+    """max |f⁽⁴⁾| over ``t`` by a fourth central difference on a fine grid (a bound up to O(δ²))."""
+    d = 1e-3 / 16
+    return np.max(np.abs(f(t + 2 * d) - 4 * f(t + d) + 6 * f(t) - 4 * f(t - d) + f(t - 2 * d))) / d**4
+
+
+LATENCY = {"gyro": 0.0043, "accelerometer": -0.0021, "magnetometer": 0.0127}
+
+
+def test_latency_each_sensor_reads_the_truth_latency_earlier():
+    hz, rate = 1000.0, 200.0
+    traj = oscillating(hz=hz)
+    spec = {
+        "description": "lagging",
+        "rate_hz": rate,
+        "gyro": {"latency_s": LATENCY["gyro"]},
+        "accelerometer": {"latency_s": LATENCY["accelerometer"]},
+        "magnetometer": {"latency_s": LATENCY["magnetometer"]},
+    }
+    s = device_from_dict(spec).measure(traj)
+    period = 1 / rate
+    # First sample K₁ = 1 + ceil(L_max / T) = 1 + ceil(12.7 / 5) = 4; last K₂ = floor((3 − 0.0021) / T) = 599.
+    k = np.arange(4, 600)
+    assert len(s) == len(k)
+    np.testing.assert_allclose(s.t, k * period, rtol=1e-13)
+    np.testing.assert_allclose(s.t_true, k * period, rtol=1e-13)  # taken at τ_k: only the truth is shifted
+    h = 1 / hz
+    grid = np.linspace(0.01, 2.99, 30001)
+
+    # Gyro: the mean rate over [τ_{k−1} − L, τ_k − L] is (θ(τ_k − L) − θ(τ_{k−1} − L)) / T, closed form.
+    # The device integrates the cubic Hermite interpolant of (ω, α) at the truth's samples, whose error
+    # is at most h⁴/384 max|ω⁽⁴⁾| = h⁴ A Ω⁵ / 384 (twice: re-sampled on the inner grid); round-off of
+    # the cumulative sums adds ~ n_inner eps |θ|.
+    lag = LATENCY["gyro"]
+    end, start = s.t_true - lag, s.t_true - period - lag
+    theta = lambda t: AMP * np.sin(OMEGA * t)  # noqa: E731
+    expected = (theta(end) - theta(start)) / period
+    bound = 2 * h**4 * AMP * OMEGA**5 / 384 + 10 * len(traj) * EPS * AMP / period
+    assert np.max(np.abs(s.gyro[:, 0] - expected)) < bound
+    np.testing.assert_array_equal(s.gyro[:, 1:], 0.0)
+    unshifted = (theta(end + lag) - theta(start + lag)) / period
+    assert np.max(np.abs(s.gyro[:, 0] - unshifted)) > 1e4 * bound  # the latency is what is seen
+
+    # Accelerometer: mean of f_b over the shifted interval (x closed form, y and z by Gauss–Legendre);
+    # the truth's cubic spline errs by at most 5h⁴/384 max|f⁽⁴⁾|, Simpson's rule far less.
+    lag = LATENCY["accelerometer"]
+    end, start = s.t_true - lag, s.t_true - period - lag
+    expected = _gauss_mean(_force_b, start, end)
+    expected[:, 0] = SWAY * OMEGA_X * (np.cos(OMEGA_X * end) - np.cos(OMEGA_X * start)) / period
+    bound = 2 * 5 * h**4 / 384 * _fourth_derivative_bound(_force_b, grid) + 100 * EPS * GRAVITY
+    assert np.max(np.abs(s.accel - expected)) < bound
+
+    # Magnetometer: the field at τ_k − L, cubic spline of the truth's samples.
+    lag = LATENCY["magnetometer"]
+    expected = _field_b(s.t_true - lag)
+    bound = 2 * 5 * h**4 / 384 * _fourth_derivative_bound(_field_b, grid) + 100 * EPS * np.linalg.norm(FIELD_W)
+    assert np.max(np.abs(s.mag - expected)) < bound
+
+
+def test_latency_zero_is_the_device_without_it_and_round_trips_through_toml(tmp_path):
+    from gyroemu.sensors import load_device
+
+    traj = oscillating(duration=2.0)
+    base = {**NOISY, "magnetometer": {"noise_density_uT_per_sqrt_hz": 0.1}}
+    plain = device_from_dict(base, seed=5)
+    zero = device_from_dict(
+        {
+            **base,
+            "gyro": {**base["gyro"], "latency_s": 0.0},
+            "accelerometer": {**base["accelerometer"], "latency_s": 0},
+            "magnetometer": {**base["magnetometer"], "latency_s": 0.0},
+        },
+        seed=5,
+    )
+    assert zero.to_toml() == plain.to_toml() and "latency_s" not in plain.to_toml()
+    a, b = plain.measure(traj), zero.measure(traj)
+    for name in ("t", "gyro", "accel", "mag"):
+        assert getattr(a, name).tobytes() == getattr(b, name).tobytes()
+
+    lagging = device_from_dict(
+        {
+            **base,
+            "gyro": {**base["gyro"], "latency_s": 0.004},
+            "accelerometer": {**base["accelerometer"], "latency_s": 0.002},
+            "magnetometer": {**base["magnetometer"], "latency_s": 0.016},
+        },
+        seed=5,
+    )
+    path = tmp_path / "lagging.toml"
+    path.write_text(lagging.to_toml())
+    again = load_device(path, seed=5)
+    assert again.latencies == (0.004, 0.002, 0.016) == lagging.latencies
+    assert again.to_toml() == lagging.to_toml()
+    c, d = lagging.measure(traj), again.measure(traj)
+    assert len(c) == len(a) - 4  # K₁ = 1 + ceil(16 ms / 5 ms) = 5: four samples fewer at the start
+    for name in ("t", "gyro", "accel", "mag"):
+        assert getattr(c, name).tobytes() == getattr(d, name).tobytes()
+
+
+@pytest.mark.parametrize("table", ["gyro", "accelerometer", "magnetometer"])
+def test_latency_of_a_second_or_more_is_refused(table):
+    with pytest.raises(ConfigError) as err:
+        device_from_dict({"description": "x", "rate_hz": 100, table: {"latency_s": 1.0}})
+    assert f"{table}.latency_s" in str(err.value)
