@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 from pydantic import Field
 
 from .config import Real, Section, Vec3
+from .magnetic_environment import MagneticEnvironmentSpec, reference_field
 
 __all__ = [
     "EARTH_RATE",
@@ -69,7 +70,10 @@ class Site(Section):
     """Where an Earth-bound scenario stands: the ``[site]`` table of a scenario file.
 
     The default magnetic field is WMM-2025's at the default site (Berlin: declination about 5° E,
-    inclination about 68°, 50 µT), as (east, north, up) components.
+    inclination about 68°, 50 µT), as (east, north, up) components. An optional
+    ``[site.magnetic_environment]`` table (:mod:`gyroemu.dynamics.magnetic_environment`) makes it
+    vary over the working volume; its ``norm_uT`` and ``dip_deg`` replace the norm and dip of
+    ``magnetic_field_enu_uT`` (declination kept), and the environment's field is then that one.
     """
 
     latitude_deg: Annotated[Real, Field(ge=-90.0, le=90.0)] = 52.5
@@ -77,13 +81,17 @@ class Site(Section):
     height_m: Real = 34.0
     magnetic_field_enu_uT: Vec3 = (1.63, 18.6, -46.4)
     earth_rotation: bool = True
+    magnetic_environment: MagneticEnvironmentSpec | None = None
 
     def environment(self) -> Environment:
         lat = np.radians(self.latitude_deg)
+        field_w = np.asarray(self.magnetic_field_enu_uT) * 1e-6
+        if self.magnetic_environment is not None:
+            field_w = reference_field(self.magnetic_environment, field_w)
         return Environment(
             gravity_w=np.array([0.0, 0.0, -float(normal_gravity(lat, self.height_m))]),
             earth_rate_w=earth_rate_enu(lat) if self.earth_rotation else np.zeros(3),
-            magnetic_field_w=np.asarray(self.magnetic_field_enu_uT) * 1e-6,
+            magnetic_field_w=field_w,
         )
 
 
