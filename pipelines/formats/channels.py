@@ -13,10 +13,13 @@ role                type                                    holds               
 ``estimate/imu``    ``sensor_msgs/msg/Imu``                 an :class:`ImuSeries` (estimate)   ``base_link``
 ``raw/<kind>``      ``gyroemu_msgs/msg/<Kind>Raw``          the gyro kind's raw observables    the device
 ``movement``        ``gyroemu_msgs/msg/Flag``               an imported dataset's sample mask  the device
+``truth/pose``      ``geometry_msgs/msg/PoseStamped``       a :class:`PoseSeries` (truth)      ``map``
 ==================  ======================================  =================================  ===========
 
-Live streams (:mod:`gyroemu.pipelines.transport.zenoh_io`) carry the same roles but ``movement``
-(:func:`is_stream_role`). :func:`split_topic` is the one parser of a topic into its prefix and role; the
+A pose's ``frame_id`` is the frame it is given in, the world (ENU), which REP 105 calls ``map``.
+
+Live streams (:mod:`gyroemu.pipelines.transport.zenoh_io`) carry the same roles but ``movement`` and
+``truth/pose`` (:func:`is_stream_role`). :func:`split_topic` is the one parser of a topic into its prefix and role; the
 modules that name channels (the MCAP log writer and reader :mod:`gyroemu.pipelines.formats.mcap_log`, the
 stream, the live estimator, the recorder, replay and the ROS 2 names of :mod:`gyroemu.pipelines.formats.ros2_keys`)
 ask it, and build topics with :func:`role_topic`.
@@ -40,6 +43,7 @@ from gyroemu.pipelines.formats.messages import (
     FLAG,
     IMU,
     MAGNETIC_FIELD,
+    POSE_STAMPED,
     RAW_MESSAGE_TYPES,
     DecodedBatch,
     MessageType,
@@ -56,7 +60,9 @@ __all__ = [
     "TRUTH_ROLE",
     "ESTIMATE_ROLE",
     "MOVEMENT_ROLE",
+    "POSE_ROLE",
     "BODY_FRAME",
+    "WORLD_FRAME",
     "RESERVED_DEVICE_NAMES",
     "raw_role",
     "raw_kind",
@@ -69,6 +75,7 @@ __all__ = [
     "role_accepts",
     "topic_message_type",
     "ImuSeries",
+    "PoseSeries",
     "measured_fields",
     "series_fields",
     "series_from_batch",
@@ -77,6 +84,8 @@ __all__ = [
     "encode_series",
     "encode_raw",
     "encode_movement",
+    "encode_pose",
+    "pose_from_batch",
 ]
 
 IMU_ROLE = "imu"
@@ -89,17 +98,22 @@ ESTIMATE_ROLE = "estimate/imu"
 """An attitude filter's estimate (``sensor_msgs/msg/Imu``)."""
 MOVEMENT_ROLE = "movement"
 """An imported dataset's mask of the samples that count (``gyroemu_msgs/msg/Flag``); files only."""
+POSE_ROLE = "truth/pose"
+"""True position and attitude in the world frame (``geometry_msgs/msg/PoseStamped``); files only."""
 _RAW = "raw/"
 
 BODY_FRAME = "base_link"
 """``frame_id`` of body-frame channels (``/truth/imu``, ``/estimate/imu``), REP-105's name for the body."""
+
+WORLD_FRAME = "map"
+"""``frame_id`` of world-frame channels (``/truth/pose``): the ENU world, REP-105's ``map``."""
 
 RESERVED_DEVICE_NAMES = frozenset({"truth", "estimate", "raw", "imu", "mag"})
 """Names that cannot prefix topics: ``/imu/imu`` or ``/raw/imu`` would read as another device's role."""
 _DEVICE_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
 _ROLE = re.compile(
-    rf"^(?P<prefix>.*?)/(?P<role>{TRUTH_ROLE}|{ESTIMATE_ROLE}|{_RAW}[^/]+|{IMU_ROLE}|{MAG_ROLE}|{MOVEMENT_ROLE})$"
+    rf"^(?P<prefix>.*?)/(?P<role>{TRUTH_ROLE}|{POSE_ROLE}|{ESTIMATE_ROLE}|{_RAW}[^/]+|{IMU_ROLE}|{MAG_ROLE}|{MOVEMENT_ROLE})$"
 )
 _DEVICE_PREFIX = re.compile(r"^(/[^/]+)?$")
 
@@ -141,7 +155,7 @@ def is_prefix_name(name: str) -> bool:
 
 
 def is_stream_role(role: str) -> bool:
-    """Whether ``role`` goes on live streams too: every role but ``movement``."""
+    """Whether ``role`` goes on live streams too: every role but ``movement`` and ``truth/pose``."""
     return role in (IMU_ROLE, MAG_ROLE, TRUTH_ROLE, ESTIMATE_ROLE) or raw_kind(role) is not None
 
 
@@ -156,6 +170,7 @@ def role_message_type(role: str) -> MessageType | None:
         TRUTH_ROLE: IMU,
         ESTIMATE_ROLE: IMU,
         MOVEMENT_ROLE: FLAG,
+        POSE_ROLE: POSE_STAMPED,
     }.get(role)
 
 
@@ -235,6 +250,49 @@ _IMU_QUANTITIES = (
 _NO_ESTIMATE = np.array([-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
 _NO_ESTIMATE.flags.writeable = False
 """An Imu covariance with element 0 at -1: "no estimate" of its quantity (sensor_msgs/msg/Imu)."""
+
+
+@dataclass(frozen=True, eq=False)
+class PoseSeries:
+    """The contents of a ``geometry_msgs/msg/PoseStamped`` channel (``/truth/pose``), SI units.
+
+    Attributes
+    ----------
+    t : ndarray (N,)
+        Stamps, s.
+    pos_w : ndarray (N, 3)
+        Position of the body's reference point, world frame (ENU), m.
+    q_wb : ndarray (N, 4)
+        Attitude, unit quaternion (w, x, y, z) turning body vectors into the world frame.
+    """
+
+    t: np.ndarray
+    pos_w: np.ndarray
+    q_wb: np.ndarray
+
+    def __post_init__(self):
+        n = len(self.t)
+        for name, width in (("pos_w", 3), ("q_wb", 4)):
+            if np.shape(getattr(self, name)) != (n, width):
+                raise ValueError(f"{name} must have shape ({n}, {width}), got {np.shape(getattr(self, name))}")
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+def encode_pose(stamp_ns: np.ndarray, pose: PoseSeries) -> np.ndarray:
+    """``/truth/pose`` rows of ``pose`` at ``stamp_ns``, frame :data:`WORLD_FRAME`."""
+    q = np.asarray(pose.q_wb, dtype=float)
+    return POSE_STAMPED.encode(
+        stamp_ns, WORLD_FRAME, {"position": np.asarray(pose.pos_w, dtype=float), "orientation": q[:, [1, 2, 3, 0]]}
+    )
+
+
+def pose_from_batch(batch: DecodedBatch) -> PoseSeries:
+    """A :class:`PoseSeries` from decoded PoseStamped messages (x, y, z, w to scalar-first)."""
+    return PoseSeries(
+        t=ns_to_stamps(batch.stamp_ns), pos_w=batch["position"].copy(), q_wb=batch["orientation"][:, [3, 0, 1, 2]]
+    )
 
 
 def measured_fields(samples: ImuSamples) -> dict:

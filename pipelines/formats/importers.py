@@ -17,8 +17,9 @@ dataset        shape    holds
 ``movement``   (N,)     bool: the samples over which the dataset's errors are computed
 =============  =======  ==================================================================
 
-and the attribute ``sampling_rate`` (Hz; 285.714 for every trial). ``opt_pos`` (the IMU's position,
-m) has no topic in the contract and is not imported. The file is opened read-only and read whole
+and the attribute ``sampling_rate`` (Hz; 285.714 for every trial), and, in every published trial,
+``opt_pos`` (N, 3), the optical reference's position of the IMU in m, NaN rows where lost (optional
+here: a trial without it imports without ``/truth/pose``). The file is opened read-only and read whole
 before anything is written. What is written (one device, ``imu0``, topics unprefixed):
 
 - ``/imu``: ``imu_gyr`` and ``imu_acc`` unchanged (``orientation_covariance[0] = -1``).
@@ -26,6 +27,8 @@ before anything is written. What is written (one device, ``imu0``, topics unpref
 - ``/truth/imu``: ``opt_quat`` as ``q_wb`` (NaN rows kept as NaN, covariance zeros = "unknown"); the
   true rate and specific force are not known, so they are written as "no estimate"
   (``covariance[0] = -1``) and read back as None (:class:`gyroemu.pipelines.formats.channels.ImuSeries`).
+- ``/truth/pose``: ``opt_pos`` and ``opt_quat`` as ``geometry_msgs/msg/PoseStamped`` in the world
+  frame ``map`` (ENU), NaN rows kept.
 - ``/movement``: ``movement`` as ``gyroemu_msgs/msg/Flag`` (read back as ``DeviceLog.movement``).
 
 **Time stamps.** BROAD's samples are equally spaced and carry no clock of their own, so sample k is
@@ -54,7 +57,7 @@ from pathlib import Path
 import numpy as np
 
 from gyroemu.dynamics import ConfigError
-from gyroemu.pipelines.formats.channels import ImuSeries
+from gyroemu.pipelines.formats.channels import ImuSeries, PoseSeries
 from gyroemu.pipelines.formats.mcap_log import Recording, write_mcap
 from gyroemu.pipelines.formats.messages import ns_to_stamps
 from gyroemu.sensors.samples import ImuSamples
@@ -127,6 +130,7 @@ class BroadTrial:
     movement: np.ndarray  # (N,) bool
     rate_hz: float
     info: str = ""
+    opt_pos: np.ndarray | None = None  # (N, 3) m; NaN rows
 
     def __len__(self) -> int:
         return len(self.gyro)
@@ -192,6 +196,17 @@ def read_broad(path) -> BroadTrial:
         rate = np.asarray(f.attrs["sampling_rate"])
         if rate.size != 1 or rate.dtype.kind not in "fiu" or not np.isfinite(rate).all() or not float(rate.flat[0]) > 0:
             raise ImportInputError(f"{rate.tolist()!r}: expected a positive number of Hz", file=path, item=item)
+        opt_pos = None
+        if "opt_pos" in f:
+            node = f["opt_pos"]
+            item = "dataset 'opt_pos'"
+            if not isinstance(node, h5py.Dataset) or node.shape != (n, 3) or node.dtype.kind not in "fiu":
+                shape = getattr(node, "shape", "a group")
+                raise ImportInputError(f"{shape}: expected ({n}, 3) numbers (m)", file=path, item=item)
+            try:
+                opt_pos = np.asarray(node[()], dtype=np.float64)
+            except (OSError, ValueError, TypeError) as e:
+                raise ImportInputError(f"cannot be read: {e}", file=path, item=item) from None
         info = f.attrs.get("info", "")
         info = info.decode("utf-8", "replace") if isinstance(info, bytes) else str(info)
     movement = arrays["movement"]
@@ -211,6 +226,7 @@ def read_broad(path) -> BroadTrial:
         movement=movement,
         rate_hz=float(rate.flat[0]),
         info=info,
+        opt_pos=opt_pos,
     )
 
 
@@ -237,7 +253,8 @@ def broad_recording(trial: BroadTrial, device_name: str = "imu0") -> Recording:
     }
     if trial.info:
         metadata["source_info"] = trial.info
-    return Recording(samples, truth=truth, movement=trial.movement, metadata=metadata)
+    pose = None if trial.opt_pos is None else PoseSeries(t=t, pos_w=trial.opt_pos, q_wb=trial.opt_quat)
+    return Recording(samples, truth=truth, pose=pose, movement=trial.movement, metadata=metadata)
 
 
 def import_broad(path, out, *, device_name: str = "imu0") -> ImportSummary:

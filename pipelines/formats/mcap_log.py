@@ -68,15 +68,19 @@ from gyroemu.pipelines.formats.channels import (
     IMU_ROLE,
     MAG_ROLE,
     MOVEMENT_ROLE,
+    POSE_ROLE,
     RESERVED_DEVICE_NAMES,
     TRUTH_ROLE,
     ImuSeries,
+    PoseSeries,
     encode_mag,
     encode_measured,
     encode_movement,
+    encode_pose,
     encode_raw,
     encode_series,
     is_prefix_name,
+    pose_from_batch,
     raw_kind,
     raw_role,
     role_accepts,
@@ -104,6 +108,7 @@ __all__ = [
     "write_mcap",
     "read_mcap",
     "truth_series",
+    "truth_pose",
 ]
 
 
@@ -125,6 +130,20 @@ def truth_series(trajectory: Trajectory, samples: ImuSamples) -> ImuSeries:
     return ImuSeries(t=np.asarray(samples.t, dtype=float), q_wb=q_wb, omega_b=omega_b, specific_force_b=force_b)
 
 
+def truth_pose(trajectory: Trajectory, samples: ImuSamples) -> PoseSeries:
+    """The body's true position and attitude in the world at the instants the device sampled, stamped
+    with the device's stamps: what ``/truth/pose`` holds. The position is the cubic Hermite spline
+    through the trajectory's ``pos_w`` with slopes ``vel_w``."""
+    from scipy.interpolate import CubicHermiteSpline
+
+    from gyroemu.sensors.sampling import SensorTruth
+
+    instants = samples.t_true if samples.t_true is not None else samples.t
+    q_wb = SensorTruth(trajectory).attitude_world(instants)
+    pos_w = CubicHermiteSpline(trajectory.t, trajectory.pos_w, trajectory.vel_w, axis=0)(instants)
+    return PoseSeries(t=np.asarray(samples.t, dtype=float), pos_w=pos_w, q_wb=q_wb)
+
+
 @dataclass(frozen=True, eq=False)
 class Recording:
     """One device's block of output for :class:`McapLogWriter`.
@@ -139,6 +158,8 @@ class Recording:
         The device (or its resolved config as TOML text), for the metadata record.
     seed : int, optional
         The run's seed (default: ``device.seed`` when ``device`` is a Device).
+    pose : PoseSeries, optional
+        Written to ``/truth/pose``: the body's true position and attitude in the world frame.
     movement : ndarray (N,) bool, optional
         A mask aligned to ``samples`` (an imported dataset's samples over which errors are computed),
         written to ``/movement`` as ``gyroemu_msgs/msg/Flag`` at the samples' stamps.
@@ -160,6 +181,7 @@ class Recording:
     movement: np.ndarray | None = None
     metadata: dict | None = None
     stamp_ns: np.ndarray | None = None
+    pose: PoseSeries | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -183,6 +205,8 @@ class DeviceLog:
     movement : ndarray (N,) bool or None
         The ``/movement`` flags at the samples' stamps (False, with a warning, for samples without a
         flag at their stamp); None when the device has no ``/movement`` topic.
+    pose : PoseSeries or None
+        ``/truth/pose``, at its own stamps; None when the device has none.
     """
 
     name: str
@@ -193,6 +217,7 @@ class DeviceLog:
     estimate: ImuSeries | None = None
     metadata: dict | None = None
     movement: np.ndarray | None = None
+    pose: PoseSeries | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -446,6 +471,15 @@ class McapLogWriter:
                     series_ns = stamp_ns
                 rows = encode_series(series_ns, series)
                 batches.append((self._channel(device, role), series_ns, rows))
+        if recording.pose is not None:
+            pose_ns = _log_stamps(recording.pose.t, "pose.t")
+            if (
+                recording.stamp_ns is not None
+                and len(pose_ns) == n
+                and np.abs(pose_ns - stamp_ns).max(initial=0) <= 1000
+            ):
+                pose_ns = stamp_ns
+            batches.append((self._channel(device, POSE_ROLE), pose_ns, encode_pose(pose_ns, recording.pose)))
         for kind, observables in samples.raw.items():
             role = raw_role(kind)
             if role_message_type(role) is None:
@@ -621,7 +655,7 @@ def _devices(path: Path, decoded: dict, metadata: list, skipped: dict) -> dict:
     for prefix in list(groups):
         group = groups[prefix]
         if IMU_ROLE not in group:
-            for role in (TRUTH_ROLE, ESTIMATE_ROLE):
+            for role in (TRUTH_ROLE, ESTIMATE_ROLE):  # a lone /truth/pose has no Imu messages: skipped
                 if role in group:
                     groups[role_topic(role, prefix)] = {IMU_ROLE: group.pop(role)}
             for d in group.values():
@@ -694,4 +728,5 @@ def _device_log(path: Path, name: str, group: dict, meta: dict | None) -> Device
         estimate=series_from_batch(group[ESTIMATE_ROLE].batch) if ESTIMATE_ROLE in group else None,
         metadata=meta,
         movement=movement,
+        pose=pose_from_batch(group[POSE_ROLE].batch) if POSE_ROLE in group else None,
     )

@@ -67,6 +67,7 @@ __all__ = [
     "IMU",
     "MAGNETIC_FIELD",
     "FLAG",
+    "POSE_STAMPED",
     "RAW_MESSAGE_TYPES",
     "MESSAGE_TYPES",
     "message_type",
@@ -117,6 +118,24 @@ float64 x 0
 float64 y 0
 float64 z 0
 float64 w 1
+""",
+    "geometry_msgs/Point": """\
+# This contains the position of a point in free space
+float64 x
+float64 y
+float64 z
+""",
+    "geometry_msgs/Pose": """\
+# A representation of pose in free space, composed of position and orientation.
+
+Point position
+Quaternion orientation
+""",
+    "geometry_msgs/PoseStamped": """\
+# A Pose with reference coordinate frame and timestamp
+
+std_msgs/Header header
+Pose pose
 """,
     "geometry_msgs/Vector3": """\
 # This represents a vector in free space.
@@ -688,7 +707,12 @@ RAW_MESSAGE_TYPES: dict[str, MessageType] = {
 FLAG = MessageType("gyroemu_msgs/msg/Flag", (FieldSpec("data", "?"),))
 """``gyroemu_msgs/msg/Flag``: one ``bool data`` per stamp (the ``/movement`` mask of imported datasets)."""
 
-MESSAGE_TYPES: dict[str, MessageType] = {t.name: t for t in (IMU, MAGNETIC_FIELD, FLAG, *RAW_MESSAGE_TYPES.values())}
+POSE_STAMPED = MessageType("geometry_msgs/msg/PoseStamped", (_f8("position", 3), _f8("orientation", 4)))
+"""``geometry_msgs/msg/PoseStamped``: ``position`` (m) and ``orientation`` (x, y, z, w)."""
+
+MESSAGE_TYPES: dict[str, MessageType] = {
+    t.name: t for t in (IMU, MAGNETIC_FIELD, FLAG, POSE_STAMPED, *RAW_MESSAGE_TYPES.values())
+}
 """Every type this module encodes and decodes, by ROS name (``package/msg/Type``)."""
 
 

@@ -80,8 +80,14 @@ def test_real_trial_reads_back_exactly(imported):
     log = read_quietly(out)
     assert list(log.devices) == ["imu0"] and not log.truncated and not log.skipped
     d = log.device
-    assert d.topics == {"imu": "/imu", "mag": "/mag", "truth/imu": "/truth/imu", "movement": "/movement"}
-    assert log.message_count == 4 * n
+    assert d.topics == {
+        "imu": "/imu",
+        "mag": "/mag",
+        "truth/imu": "/truth/imu",
+        "truth/pose": "/truth/pose",
+        "movement": "/movement",
+    }
+    assert log.message_count == 5 * n
     s = d.samples
     assert len(s) == n
     assert s.gyro.dtype == h5["imu_gyr"].dtype and s.gyro.tobytes() == h5["imu_gyr"].tobytes()
@@ -92,6 +98,9 @@ def test_real_trial_reads_back_exactly(imported):
     assert np.array_equal(np.isnan(q), np.isnan(h5["opt_quat"]))
     assert q.tobytes() == h5["opt_quat"].tobytes()  # bit-identical, NaN payloads included
     assert d.truth.omega_b is None and d.truth.specific_force_b is None and d.truth.q_wb_covariance is None
+    # Reference position with the same attitude, bit-identical, on the same stamps.
+    assert d.pose.pos_w.tobytes() == h5["opt_pos"].tobytes() and d.pose.q_wb.tobytes() == h5["opt_quat"].tobytes()
+    assert np.array_equal(d.pose.t, d.truth.t)
     # Movement mask.
     assert d.movement.dtype == bool and np.array_equal(d.movement, h5["movement"])
     assert 0 < d.movement.sum() < n

@@ -18,6 +18,7 @@ from gyroemu.pipelines.formats.messages import (
     IMU,
     MAGNETIC_FIELD,
     MESSAGE_TYPES,
+    POSE_STAMPED,
     RAW_MESSAGE_TYPES,
     message_type,
     ns_to_stamps,
@@ -248,12 +249,14 @@ def _nested(mtype, stamp_ns, frame_id, fields, k):
         value = fields[spec.name][k]
         if spec.name in ("orientation",):
             msg[spec.name] = dict(zip("xyzw", map(float, value)))
-        elif mtype in (IMU, MAGNETIC_FIELD) and spec.count == 3:
+        elif mtype in (IMU, MAGNETIC_FIELD, POSE_STAMPED) and spec.count == 3:
             msg[spec.name] = dict(zip("xyz", map(float, value)))
         elif spec.count == 1:
             msg[spec.name] = value.item()
         else:
             msg[spec.name] = value.tolist()
+    if mtype is POSE_STAMPED:  # geometry_msgs/Pose holds the position and orientation
+        msg["pose"] = {"position": msg.pop("position"), "orientation": msg.pop("orientation")}
     return msg
 
 
@@ -303,10 +306,10 @@ def test_independent_decoders_read_the_same_numbers(mtype):
             assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == stamps[k]
             assert msg.header.frame_id == "imu0"
             for spec in mtype.body:
-                value = getattr(msg, spec.name)
+                value = getattr(msg.pose if mtype is POSE_STAMPED else msg, spec.name)
                 if spec.name == "orientation":
                     value = [value.x, value.y, value.z, value.w]
-                elif mtype in (IMU, MAGNETIC_FIELD) and spec.count == 3:
+                elif mtype in (IMU, MAGNETIC_FIELD, POSE_STAMPED) and spec.count == 3:
                     value = [value.x, value.y, value.z]
                 assert np.array_equal(np.asarray(value, dtype=spec.dtype), fields[spec.name][k], equal_nan=True)
 

@@ -21,7 +21,7 @@ from live_processes import Listener, free_port, mcap_messages, procs, write_fore
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO, DEVICE, DURATION = "heavy_top", "consumer_mems", 5.0
-TOPICS = ("/imu", "/mag", "/truth/imu", "/raw/mems")
+TOPICS = ("/imu", "/mag", "/truth/imu", "/truth/pose", "/raw/mems")  # every topic of the simulated file
 N = 5000  # samples per topic at 1 kHz
 
 
