@@ -32,6 +32,7 @@ KINDS: dict[str, str] = {
     "ship": "gyroemu.dynamics.vessels:ShipSpec",
     "spacecraft-cmg": "gyroemu.dynamics.vessels:SpacecraftSpec",
     "drop": "gyroemu.dynamics.impact:DropSpec",
+    "recorded": "gyroemu.pipelines.recorded_scenario:RecordedSpec",
 }
 """Scenario kind → ``"module:SpecClass"``."""
 
@@ -47,6 +48,26 @@ class ScenarioSpec(Section):
     def trajectory(self, t: np.ndarray) -> Trajectory:
         """Truth sampled at the times ``t`` (s, uniform from 0 at ``rate_hz``)."""
         raise NotImplementedError
+
+    def span_s(self) -> float:
+        """Seconds simulated when the caller names none: ``duration_s`` (a kind may compute it)."""
+        return self.duration_s
+
+    def default_rate_hz(self) -> float:
+        """Truth rate when the caller names none: ``rate_hz`` (a kind may compute it)."""
+        return self.rate_hz
+
+    def max_span_s(self) -> float | None:
+        """The longest span the kind can simulate, s (None: any)."""
+        return None
+
+    @classmethod
+    def prepare(cls, data: dict, path: Path | None) -> dict:
+        """The file's table before validation, given the file's ``path`` (a kind may resolve relative paths)."""
+        return data
+
+    def load(self, file: str | Path | None = None) -> None:
+        """Read what the scenario refers to, raising :class:`ConfigError` now rather than mid-run."""
 
 
 class Scenario:
@@ -73,29 +94,42 @@ class Scenario:
 
     @property
     def duration_s(self) -> float:
-        return self.spec.duration_s
+        return self.spec.span_s()
 
     @property
     def rate_hz(self) -> float:
-        return self.spec.rate_hz
+        return self.spec.default_rate_hz()
 
     @property
     def description(self) -> str:
         return self.spec.description
 
     def times(self, duration: float | None = None, rate_hz: float | None = None) -> np.ndarray:
-        """Sample times ``k / rate_hz`` for ``k = 0 … round(duration · rate_hz)``, s."""
-        duration = self.spec.duration_s if duration is None else float(duration)
-        rate_hz = self.spec.rate_hz if rate_hz is None else float(rate_hz)
+        """Sample times ``k / rate_hz`` for ``k = 0 … round(duration · rate_hz)``, s (rounded down where the
+        kind's span is bounded, :meth:`ScenarioSpec.max_span_s`)."""
+        duration = self.spec.span_s() if duration is None else float(duration)
+        rate_hz = self.spec.default_rate_hz() if rate_hz is None else float(rate_hz)
         if not duration > 0:
             raise ConfigError(f"duration must be positive, got {duration}", key="duration")
         if not rate_hz > 0:
             raise ConfigError(f"rate must be positive, got {rate_hz}", key="rate_hz")
-        return np.arange(int(round(duration * rate_hz)) + 1) / rate_hz
+        count = int(round(duration * rate_hz))
+        if count / rate_hz > duration and self.spec.max_span_s() is not None:
+            count = int(np.floor(duration * rate_hz * (1 + 1e-12)))  # a bounded span (a recording): stay inside
+        return np.arange(count + 1) / rate_hz
 
     def simulate(self, duration: float | None = None, rate_hz: float | None = None) -> Trajectory:
-        """Simulate the truth; ``duration`` (s) and ``rate_hz`` override the file's values."""
-        return self.spec.trajectory(self.times(duration, rate_hz))
+        """Simulate the truth; ``duration`` (s) and ``rate_hz`` override the file's values.
+
+        A ``[site.magnetic_environment]`` replaces the uniform field by the field along the path
+        (:func:`gyroemu.dynamics.magnetic_environment.with_magnetic_environment`)."""
+        traj = self.spec.trajectory(self.times(duration, rate_hz))
+        site = getattr(self.spec, "site", None)
+        if site is not None and site.magnetic_environment is not None:
+            from .magnetic_environment import with_magnetic_environment
+
+            traj = with_magnetic_environment(traj, site.magnetic_environment)
+        return traj
 
     def to_toml(self) -> str:
         """The fully resolved config (defaults filled in) as TOML text."""
@@ -120,7 +154,10 @@ def scenario_from_dict(data: dict, name: str = "<dict>", path: Path | None = Non
         raise ConfigError("missing required key", file=where, key="kind")
     if kind not in KINDS:
         raise ConfigError(f"unknown kind {kind!r}; kinds: {', '.join(KINDS)}", file=where, key="kind")
-    return Scenario(validate(_spec_class(kind), data, file=where), name=name, path=path)
+    spec_class = _spec_class(kind)
+    spec = validate(spec_class, spec_class.prepare(data, path), file=where)
+    spec.load(where)
+    return Scenario(spec, name=name, path=path)
 
 
 def load_scenario(name_or_path: str | Path) -> Scenario:

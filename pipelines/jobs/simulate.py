@@ -147,21 +147,36 @@ def run_simulate(options: SimulateOptions) -> SimulateSummary:
         from gyroemu.sensors import load_device  # imported where used: it pulls in scipy.signal (0.7 s)
 
         device = load_device(options.device, seed=options.seed)
+    rate = options.rate
+    if rate is None and device is not None and getattr(scenario.spec, "rate_hz", 0.0) is None:
+        rate = device.spec.rate_hz  # a recorded motion's truth at the device's own rate
+    longest = scenario.spec.max_span_s()
+    span = scenario.duration_s if options.duration is None else options.duration
+    if longest is not None and span > longest * (1 + 1e-9):
+        raise SimulateError(f"argument --duration: {span:g} s is longer than the recording's {longest:.6g} s")
+    if device is not None and span < 2.0 / device.spec.rate_hz:
+        raise SimulateError(
+            f"{scenario.path or scenario.name}: {span:.6g} s of motion is shorter than two samples of "
+            f"device {device.name} ({2.0 / device.spec.rate_hz:g} s at {device.spec.rate_hz:g} Hz)"
+        )
     started = time.perf_counter()
     phases = ["truth", "measure", "write"] if device is not None else ["truth", "write"]
     with PhaseProgress(phases, label="simulate", enabled=options.progress) as progress:
         with progress.phase("truth"):
-            traj = scenario.simulate(duration=options.duration, rate_hz=options.rate)
+            traj = scenario.simulate(duration=options.duration, rate_hz=rate)
         samples = None
         if device is not None:
             with progress.phase("measure"):
                 samples = device.measure(traj)
         with progress.phase("write"):
             if out.suffix == ".mcap":
-                from gyroemu.pipelines.formats.mcap_log import Recording, truth_series, write_mcap
+                from gyroemu.pipelines.formats.mcap_log import Recording, truth_pose, truth_series, write_mcap
 
                 assert samples is not None  # an .mcap needs a device: checked above
-                write_mcap(out, Recording(samples, truth=truth_series(traj, samples), device=device), scenario=scenario)
+                recording = Recording(
+                    samples, truth=truth_series(traj, samples), pose=truth_pose(traj, samples), device=device
+                )
+                write_mcap(out, recording, scenario=scenario)
             else:
                 write_npz_atomic(out, npz_arrays(scenario, traj, device, samples))
     return SimulateSummary(

@@ -1,0 +1,165 @@
+"""The ``recorded`` scenario kind: a recorded motion (a motion capture, a dataset's ground truth, a
+log's truth) as the truth an emulated device senses.
+
+A scenario file::
+
+    kind = "recorded"
+    path = "walk.tum"              # absolute, or relative to the scenario file
+    format = "tum"                 # mcap, broad, tum or csv (gyroemu.pipelines.formats.motion_files)
+    time_offset_s = 0.0            # scenario time 0 is this far after the first valid sample
+    # duration_s = 60.0            # default: the rest of the recording
+    # rate_hz = 1000.0             # default: the device's rate (simulate), else the recording's
+    # world_to_enu_quat = [w, x, y, z]   # turns the file's world axes into ENU (default: it is ENU)
+
+    [smoothing]                    # all optional: GCV chooses the smoothing from the data
+    position_noise_m = 1e-4        # a stated noise level chooses it by the unbiased risk instead
+    orientation_noise_deg = 0.05
+    # position_lambda_s3, orientation_lambda_s3: λ outright
+    max_gap_s = 0.25               # a longer gap without valid samples is an error
+
+    [site]                         # where the motion took place (gyroemu.dynamics.earth.Site)
+
+The file is read and checked when the scenario is loaded (errors name the file and the line, before any
+work); the splines are fitted on the first :meth:`RecordedSpec.trajectory`
+(:class:`gyroemu.dynamics.recorded.RecordedMotion`).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import PrivateAttr
+
+from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Quat, Section
+from gyroemu.dynamics.earth import Site
+from gyroemu.dynamics.recorded import MotionSamples, RecordedMotion, RecordedMotionError, SmoothingOptions
+from gyroemu.dynamics.scenarios import ScenarioSpec
+from gyroemu.dynamics.trajectory import Trajectory
+from gyroemu.errors import ConfigError
+
+__all__ = ["SmoothingSpec", "RecordedSpec"]
+
+
+class SmoothingSpec(Section):
+    """``[smoothing]`` of a recorded scenario (see :class:`gyroemu.dynamics.recorded.SmoothingOptions`)."""
+
+    position_noise_m: PositiveReal | None = None
+    orientation_noise_deg: PositiveReal | None = None
+    position_lambda_s3: NonNegativeReal | None = None
+    orientation_lambda_s3: NonNegativeReal | None = None
+    max_gap_s: PositiveReal = 0.25
+
+    def options(self) -> SmoothingOptions:
+        return SmoothingOptions(
+            position_noise_m=self.position_noise_m,
+            orientation_noise_rad=None
+            if self.orientation_noise_deg is None
+            else math.radians(self.orientation_noise_deg),
+            position_lambda=self.position_lambda_s3,
+            orientation_lambda=self.orientation_lambda_s3,
+            max_gap_s=self.max_gap_s,
+        )
+
+
+class RecordedSpec(ScenarioSpec):
+    """A ``kind = "recorded"`` scenario file (module notes)."""
+
+    kind: Literal["recorded"]
+    duration_s: PositiveReal | None = None  # type: ignore[assignment]
+    rate_hz: PositiveReal | None = None  # type: ignore[assignment]
+    path: str
+    format: Literal["mcap", "broad", "tum", "csv"]
+    time_offset_s: NonNegativeReal = 0.0
+    world_to_enu_quat: Quat | None = None
+    smoothing: SmoothingSpec = SmoothingSpec()
+    site: Site = Site()
+
+    _samples: MotionSamples | None = PrivateAttr(default=None)
+    _motion: RecordedMotion | None = PrivateAttr(default=None)
+
+    def __eq__(self, other: object) -> bool:
+        """Equal configs (the loaded recording, a cache, does not count)."""
+        return isinstance(other, RecordedSpec) and type(other) is type(self) and self.model_dump() == other.model_dump()
+
+    def __hash__(self) -> int:
+        return hash(self.model_dump_json())
+
+    @classmethod
+    def prepare(cls, data: dict[str, Any], path: Path | None) -> dict[str, Any]:
+        """``data`` with a relative ``path`` made absolute against the scenario file's folder."""
+        source = data.get("path")
+        if isinstance(source, str) and path is not None and not Path(source).is_absolute():
+            data = {**data, "path": str((path.parent / source).resolve())}
+        return data
+
+    def load(self, file: str | Path | None = None) -> None:
+        """Read and check the recording now (:class:`ConfigError` naming the scenario ``file``, the key and
+        the recording's file and line)."""
+        from gyroemu.pipelines.formats.motion_files import read_motion
+
+        if self._samples is not None:
+            return
+        source = Path(self.path)
+        if not source.is_file():
+            reason = f"{source}: no such file" if not source.exists() else f"{source}: not a file"
+            raise ConfigError(reason, file=file, key="path")
+        try:
+            samples = read_motion(source, self.format, self.world_to_enu_quat)
+            samples.check()
+        except RecordedMotionError as e:
+            raise ConfigError(str(e), file=file, key="path") from None
+        self._samples = samples
+        valid = samples.t[samples.valid()]
+        span = float(valid[-1] - valid[0])
+        if self.time_offset_s >= span:
+            raise ConfigError(
+                f"{self.time_offset_s:g} s is not inside the recording's {span:.6g} s", file=file, key="time_offset_s"
+            )
+        if self.duration_s is not None and self.time_offset_s + self.duration_s > span * (1 + 1e-9):
+            raise ConfigError(
+                f"{self.duration_s:g} s from time_offset_s = {self.time_offset_s:g} s runs past the end of the "
+                f"recording ({span:.6g} s)",
+                file=file,
+                key="duration_s",
+            )
+
+    def motion(self) -> RecordedMotion:
+        """The smoothed motion (fitted on first use)."""
+        if self._motion is None:
+            self.load()
+            assert self._samples is not None
+            try:
+                self._motion = RecordedMotion(self._samples, self.smoothing.options())
+            except RecordedMotionError as e:
+                raise ConfigError(str(e), key="smoothing.max_gap_s") from None
+        return self._motion
+
+    def max_span_s(self) -> float:
+        """From ``time_offset_s`` to the last valid sample, s."""
+        self.load()
+        assert self._samples is not None
+        valid = self._samples.t[self._samples.valid()]
+        return float(valid[-1] - valid[0]) - self.time_offset_s
+
+    def span_s(self) -> float:
+        return self.duration_s if self.duration_s is not None else self.max_span_s()
+
+    def default_rate_hz(self) -> float:
+        if self.rate_hz is not None:
+            return self.rate_hz
+        self.load()
+        assert self._samples is not None
+        return float(1.0 / np.median(np.diff(self._samples.t[self._samples.valid()])))
+
+    def trajectory(self, t: np.ndarray) -> Trajectory:
+        """The truth at scenario times ``t`` (s; motion time ``t + time_offset_s``), stamped ``t``."""
+        motion = self.motion()
+        traj = motion.trajectory(np.asarray(t, dtype=float) + self.time_offset_s, self.site.environment())
+        if self.time_offset_s:
+            import dataclasses
+
+            traj = dataclasses.replace(traj, t=np.asarray(t, dtype=float).copy())
+        return traj

@@ -1,0 +1,260 @@
+"""The ``recorded`` scenario kind: a motion written by gyroemu read back as truth, against the original.
+
+The bound of issue 14: a motion sampled at 120 Hz with position noise σ_p = 0.1 mm and attitude noise
+σ_θ = 0.05° per axis. For the λ the fit chose, the smoother is linear in the samples, so its error is
+the sum of two parts:
+
+- the **smoothing bias**, the same spline's error on the samples without noise (deterministic);
+- the **noise**, whose standard deviation per axis is the closed form
+  :func:`~gyroemu.dynamics.smoothing_spline.derivative_noise_std`: for the rate σ_θ g₁(λ_q) (a turn δ
+  moves the quaternion's components by δ/2, and ω is twice their derivative), for the specific force
+  sqrt((σ_p g₂(λ_p))² + (g σ_θ g₀(λ_q))²) (the position's second derivative, and gravity seen through
+  the attitude's error).
+
+By Minkowski's inequality the RMS error is at most the bias's RMS plus the noise's; the noise's RMS
+over the span exceeds its standard deviation by 5/sqrt(2 n_eff) with negligible probability, n_eff the
+independent values (span × 2 f_c per axis). Without noise, the fit's error is the cubic spline's
+interpolation error, bounded by Hall & Meyer (J. Approx. Theory 16, 1976): |e'| ≤ h³ |f⁽⁴⁾| / 24 and
+|e''| ≤ 3 h² |f⁽⁴⁾| / 8, with |f⁽⁴⁾| measured on the truth by finite differences at 1 kHz.
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gyroemu.dynamics import ConfigError, load_scenario
+from gyroemu.dynamics.recorded import MotionSamples, RecordedMotion, SmoothingOptions
+from gyroemu.dynamics.rotation import quat_from_rotvec, quat_multiply, quat_rotate
+from gyroemu.dynamics.smoothing_spline import derivative_noise_std
+from gyroemu.pipelines.formats.motion_files import read_csv, read_tum, write_csv, write_tum
+
+RATE, SIGMA_P, SIGMA_THETA = 120.0, 1e-4, math.radians(0.05)
+SPAN = 120.0
+EDGE = 2.0  # s left out at each end: the natural end conditions' boundary layer
+
+
+def rms(x):
+    return np.sqrt(np.mean(x**2, axis=0))
+
+
+def noisy_copy(truth, seed):
+    rng = np.random.default_rng(seed)
+    q = quat_multiply(truth.q_wb, quat_from_rotvec(SIGMA_THETA * rng.standard_normal((len(truth), 3))))
+    p = truth.pos_w + SIGMA_P * rng.standard_normal(truth.pos_w.shape)
+    return q, p
+
+
+def write_scenario(folder: Path, motion: str, fmt: str, extra: str = "") -> Path:
+    path = folder / "motion.toml"
+    path.write_text(f'kind = "recorded"\npath = "{motion}"\nformat = "{fmt}"\n{extra}')
+    return path
+
+
+@pytest.mark.parametrize("name", ["smooth_manoeuvre", "car_drive"])
+def test_noisy_recording_within_the_derived_bound(tmp_path, name):
+    scenario = load_scenario(name)
+    truth = scenario.simulate(duration=SPAN, rate_hz=RATE)
+    q, p = noisy_copy(truth, seed=1)
+    write_tum(tmp_path / "m.tum", truth.t, q, p)
+    recorded = load_scenario(write_scenario(tmp_path, "m.tum", "tum"))
+    got = recorded.simulate(rate_hz=1000.0)
+    ref = scenario.simulate(duration=SPAN, rate_hz=1000.0)
+    assert len(got) == len(ref) and np.array_equal(got.t, ref.t)
+    motion = recorded.spec.motion()
+    clean = RecordedMotion(
+        MotionSamples(truth.t, truth.q_wb, truth.pos_w),
+        SmoothingOptions(position_lambda=motion.position_lambda, orientation_lambda=motion.orientation_lambda),
+    ).trajectory(got.t, got.environment)
+    h = 1.0 / RATE
+    g0, g1 = (derivative_noise_std(motion.orientation_lambda, h, k, SIGMA_THETA) for k in (0, 1))
+    g2 = derivative_noise_std(motion.position_lambda, h, 2, SIGMA_P)
+    inner = (got.t > EDGE) & (got.t < SPAN - EDGE)
+    for field, sigma, fc in (
+        ("omega_b", g1, motion.orientation_cutoff_hz),
+        ("specific_force_b", math.hypot(g2, 9.81 * g0), min(motion.orientation_cutoff_hz, motion.position_cutoff_hz)),
+    ):
+        error = rms((getattr(got, field) - getattr(ref, field))[inner])
+        bias = rms((getattr(clean, field) - getattr(ref, field))[inner])
+        n_eff = (SPAN - 2 * EDGE) * 2 * fc
+        bound = bias + sigma * (1 + 5 / math.sqrt(2 * n_eff))
+        assert np.all(error <= bound), (field, error, bias, sigma)
+        # The noise part is the closed form's, not smaller: the bound is not loose by construction.
+        noise = rms((getattr(got, field) - getattr(clean, field))[inner])
+        assert np.all(np.abs(noise / sigma - 1) <= 5 / math.sqrt(2 * n_eff)), (field, noise, sigma)
+
+
+@pytest.mark.parametrize("name", ["smooth_manoeuvre", "car_drive"])
+def test_clean_recording_within_the_interpolation_error(tmp_path, name):
+    scenario = load_scenario(name)
+    span = 60.0
+    truth = scenario.simulate(duration=span, rate_hz=RATE)
+    write_tum(tmp_path / "m.tum", truth.t, truth.q_wb, truth.pos_w)
+    got = load_scenario(write_scenario(tmp_path, "m.tum", "tum")).simulate(rate_hz=1000.0)
+    ref = scenario.simulate(duration=span, rate_hz=1000.0)
+    env = ref.environment
+    d = 1e-3
+    q = ref.q_wb
+    q4 = (q[4:] - 4 * q[3:-1] + 6 * q[2:-2] - 4 * q[1:-3] + q[:-4]) / d**4
+    # p⁽⁴⁾ = d²a/dt², a_w = R_wb f_b − 2 Ω × v + g (the Trajectory's definition of f_b, inverted)
+    acc = quat_rotate(ref.q_wb, ref.specific_force_b) - 2 * np.cross(env.earth_rate_w, ref.vel_w) + env.gravity_w
+    p4 = (acc[2:] - 2 * acc[1:-1] + acc[:-2]) / d**2
+    inner = (ref.t > EDGE) & (ref.t < span - EDGE)
+    q4max, p4max = np.abs(q4[inner[2:-2]]).max(), np.abs(p4[inner[1:-1]]).max()
+    h = 1.0 / RATE
+    # |δω| ≤ 2 |δq̇| ≤ 2 · 2 · h³ max|q_i⁽⁴⁾| / 24 (four components); |δf| ≤ |δa| + g |δθ|, δθ ≤ 2 |δq|.
+    bound_omega = 4 * h**3 / 24 * q4max
+    bound_force = math.sqrt(3) * 3 / 8 * h**2 * p4max + 9.81 * 4 * 5 / 384 * h**4 * q4max
+    assert np.linalg.norm(got.omega_b - ref.omega_b, axis=1)[inner].max() <= bound_omega
+    assert np.linalg.norm(got.specific_force_b - ref.specific_force_b, axis=1)[inner].max() <= bound_force
+
+
+def test_formats_agree_and_world_rotation_applies(tmp_path):
+    truth = load_scenario("smooth_manoeuvre").simulate(duration=20.0, rate_hz=RATE)
+    write_tum(tmp_path / "m.tum", truth.t, truth.q_wb, truth.pos_w)
+    write_csv(tmp_path / "m.csv", truth.t, truth.q_wb, truth.pos_w)
+    a, b = read_tum(tmp_path / "m.tum"), read_csv(tmp_path / "m.csv")
+    assert np.array_equal(a.t, b.t) and np.array_equal(a.q_wb, b.q_wb) and np.array_equal(a.pos_w, b.pos_w)
+    assert np.array_equal(a.t, truth.t) and np.array_equal(a.pos_w, truth.pos_w)  # full precision text
+    # A world whose x points north: ENU is it turned +90° about z.
+    q_ew = np.array([math.cos(math.pi / 4), 0, 0, math.sin(math.pi / 4)])
+    q_file = quat_multiply(q_ew * [1, -1, -1, -1], truth.q_wb)
+    p_file = quat_rotate(q_ew * [1, -1, -1, -1], truth.pos_w)
+    write_tum(tmp_path / "n.tum", truth.t, q_file, p_file)
+    turned = load_scenario(
+        write_scenario(tmp_path, "n.tum", "tum", f"world_to_enu_quat = {list(map(float, q_ew))}\n")
+    ).simulate(rate_hz=RATE)
+    plain = load_scenario(write_scenario(tmp_path, "m.csv", "csv")).simulate(rate_hz=RATE)
+    for field in ("omega_b", "specific_force_b", "pos_w", "mag_b"):
+        assert np.allclose(getattr(turned, field), getattr(plain, field), rtol=0, atol=1e-9), field
+
+
+def test_simulate_writes_truth_pose_and_reads_back_as_recorded(tmp_path):
+    from gyroemu.pipelines.formats.mcap_log import read_mcap
+
+    out = tmp_path / "run.mcap"
+    run = [sys.executable, "-m", "gyroemu", "simulate", "--scenario", "smooth_manoeuvre", "--device", "ideal"]
+    subprocess.run([*run, "--duration", "10", "--out", str(out)], check=True, capture_output=True)
+    device = read_mcap(out).device
+    ref = load_scenario("smooth_manoeuvre").simulate(duration=10.0, rate_hz=1000.0)
+    assert device.pose is not None and np.array_equal(device.pose.t, device.truth.t)
+    assert np.array_equal(device.pose.q_wb, device.truth.q_wb)
+    k = np.rint(device.pose.t * 1000).astype(int)  # the ideal device stamps its true instants k T
+    on_grid = (np.abs(device.pose.t - k / 1000) < 1e-9) & (k < len(ref))
+    assert on_grid.sum() > 10
+    assert np.allclose(device.pose.pos_w[on_grid], ref.pos_w[k[on_grid]], rtol=0, atol=1e-9)
+    recorded = load_scenario(write_scenario(tmp_path, "run.mcap", "mcap"))
+    motion = recorded.spec.motion()
+    assert motion.has_position and motion.duration == pytest.approx(device.truth.t[-1] - device.truth.t[0])
+
+
+@pytest.mark.parametrize(
+    "device",
+    [
+        "ideal",
+        "consumer_mems",
+        "tactical_mems",
+        "navigation_fog",
+        "navigation_rlg",
+        "classic_rate_gyro",
+        "floated_rig",
+        "free_gyro",
+    ],
+)
+def test_every_preset_measures_a_recorded_motion(tmp_path, device):
+    from gyroemu.pipelines.jobs.simulate import SimulateOptions, run_simulate
+    from gyroemu.sensors import load_device
+
+    truth = load_scenario("smooth_manoeuvre").simulate(duration=4.0, rate_hz=RATE)
+    write_tum(tmp_path / "m.tum", truth.t, truth.q_wb, truth.pos_w)
+    scenario = write_scenario(tmp_path, "m.tum", "tum")
+    summary = run_simulate(SimulateOptions(scenario=str(scenario), out=tmp_path / "twin.npz", device=device))
+    rate = load_device(device).spec.rate_hz
+    data = np.load(tmp_path / "twin.npz")
+    assert summary.duration_s == pytest.approx(4.0)
+    assert np.median(np.diff(data["truth/t"])) == pytest.approx(1.0 / rate)  # truth at the device's rate
+    assert summary.samples >= int(4.0 * rate) - 2
+
+
+def test_broad_trial_as_recorded_motion():
+    from broad_trials import BROAD_DIR, require_trial
+
+    trial = "16_undisturbed_fast_translation_B.hdf5"
+    require_trial(trial)
+    scenario = load_scenario_dict({"kind": "recorded", "path": str(BROAD_DIR / trial), "format": "broad"})
+    motion = scenario.spec.motion()
+    assert motion.has_position and motion.gaps.invalid_rows > 0 and 0 < motion.gaps.longest_s < 0.25
+    traj = scenario.simulate(rate_hz=285.714)
+    assert np.all(np.isfinite(traj.omega_b)) and np.all(np.isfinite(traj.specific_force_b))
+    # At rest before the movement the optical truth gives gravity: |f| ≈ g within the smoothing's noise.
+    assert abs(np.median(np.linalg.norm(traj.specific_force_b[:200], axis=1)) - 9.81) < 0.05
+
+
+def load_scenario_dict(data):
+    from gyroemu.dynamics.scenarios import scenario_from_dict
+
+    return scenario_from_dict(data)
+
+
+# ---------------------------------------------------------------------------------------------------
+# Bad input: exit 2 naming the file and line or key, nothing written.
+
+
+def gyroemu_simulate(scenario: Path, out: Path, *extra: str) -> subprocess.CompletedProcess:
+    command = [sys.executable, "-m", "gyroemu", "simulate", "--scenario", str(scenario), "--device", "ideal"]
+    return subprocess.run([*command, "--out", str(out), *extra], capture_output=True, text=True)
+
+
+def tum_lines(n=40, rate=RATE):
+    t = np.arange(n) / rate
+    return [f"{float(ti)!r} 0 0 0 0 0 0 1" for ti in t]
+
+
+@pytest.mark.parametrize(
+    "body, fmt, needle",
+    [
+        (None, "xyz", "format"),
+        ("\n".join(tum_lines(5)), "tum", "valid samples"),
+        ("\n".join(tum_lines()[:10] + [tum_lines()[10].replace(" 1", " 2")] + tum_lines()[11:]), "tum", "line 11"),
+        ("\n".join(tum_lines()[:10] + [tum_lines()[10].replace(" 1", " 0")] + tum_lines()[11:]), "tum", "all zero"),
+        ("\n".join(tum_lines()[:10] + [tum_lines()[8]] + tum_lines()[11:]), "tum", "line 11"),
+        (
+            "\n".join(tum_lines()[:10] + [tum_lines()[10].replace(" 0 0 0", " zero 0 0", 1)] + tum_lines()[11:]),
+            "tum",
+            "11",
+        ),
+        ("t_s, qw, qx, qy, qz, speed\n0, 1, 0, 0, 0, 3", "csv", "speed"),
+    ],
+)
+def test_bad_recordings_exit_2_before_any_work(tmp_path, body, fmt, needle):
+    motion = tmp_path / "m.txt"
+    motion.write_text(body if body is not None else "0 0 0 0 0 0 0 1\n")
+    scenario = write_scenario(tmp_path, "m.txt", fmt)
+    out = tmp_path / "twin.mcap"
+    result = gyroemu_simulate(scenario, out)
+    assert result.returncode == 2, result.stderr
+    assert needle in result.stderr and ("m.txt" in result.stderr or "format" in result.stderr), result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.txt", "motion.toml"]
+
+
+def test_long_gap_and_short_span_are_refused(tmp_path):
+    t = np.r_[np.arange(100), 200 + np.arange(100)] / RATE  # 100 samples missing: 0.83 s
+    q = np.tile([1.0, 0, 0, 0], (len(t), 1))
+    write_tum(tmp_path / "m.tum", t, q, np.zeros((len(t), 3)))
+    scenario = load_scenario(write_scenario(tmp_path, "m.tum", "tum"))
+    with pytest.raises(ConfigError, match=r"gap of 0\.8.* s .*after t = 0\.825"):
+        scenario.simulate()
+    allowed = load_scenario(write_scenario(tmp_path, "m.tum", "tum", "[smoothing]\nmax_gap_s = 1.0\n"))
+    assert len(allowed.spec.motion().gaps.gaps) == 1
+    # Longer than the recording, and shorter than two of the device's samples.
+    result = gyroemu_simulate(tmp_path / "motion.toml", tmp_path / "a.mcap", "--duration", "100")
+    assert result.returncode == 2 and "--duration" in result.stderr
+    write_tum(tmp_path / "s.tum", np.arange(8) / 5000.0, q[:8], np.zeros((8, 3)))
+    result = gyroemu_simulate(write_scenario(tmp_path, "s.tum", "tum"), tmp_path / "b.mcap")
+    assert result.returncode == 2 and "shorter than two samples" in result.stderr, result.stderr
+    assert not (tmp_path / "a.mcap").exists() and not (tmp_path / "b.mcap").exists()
