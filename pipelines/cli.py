@@ -179,6 +179,37 @@ def _cmd_allan(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_identify(args: argparse.Namespace) -> int:
+    from gyroemu.pipelines.jobs.identify import IdentifyError, IdentifyOptions, run_identify
+
+    rest = []
+    for text in args.rest or ():
+        try:
+            a, b = (float(x) for x in text.split(":"))
+        except ValueError:
+            raise UsageError(f"argument --rest: expected START:STOP in seconds, got {text!r}") from None
+        rest.append((a, b))
+    options = IdentifyOptions(
+        logs=[Path(p) for p in args.log],
+        out=Path(args.out),
+        site_out=Path(args.site_out) if args.site_out else None,
+        force=args.force,
+        rest_intervals=rest or None,
+        gravity_m_s2=args.gravity,
+    )
+    try:
+        summary = run_identify(options)
+    except IdentifyError as e:
+        raise UsageError(e.reason) from None
+    mag = "" if summary.mag_latency_ms is None else f", mag {summary.mag_latency_ms:.2f} ms"
+    print(f"{len(summary.logs)} log(s): gyro latency {summary.gyro_latency_ms:.2f} ms{mag} -> {summary.out}")
+    if summary.site_out is not None:
+        print(f"magnetic environment -> {summary.site_out}")
+    for note in summary.notes:
+        print(f"note: {note}")
+    return 0
+
+
 def _cmd_bench(args) -> int:
     import warnings
 
@@ -575,6 +606,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("log", metavar="LOG", help="a static gyro log (.mcap, or .npz from 'gyroemu simulate')")
     p.add_argument("--out", default=None, help="PNG to write (default: LOG with .allan.png)")
     p.set_defaults(func=_cmd_allan)
+
+    p = sub.add_parser(
+        "identify",
+        help="fit a device config (and the site's magnetic environment) to logs with a truth",
+        description="Fit a device TOML to recordings with a truth attitude: latencies, gyro bias, scale "
+        "factor and misalignment, accelerometer bias, magnetometer hard and soft iron, and noise terms "
+        "from the rest phases, each with its uncertainty (in comments); terms the recordings cannot "
+        "show are said so and not written. Several logs of one device are pooled.",
+    )
+    p.add_argument("log", nargs="+", metavar="LOG", help="an .mcap log with /truth/imu, or a BROAD .hdf5 trial")
+    p.add_argument("--out", required=True, help="device TOML to write")
+    p.add_argument("--site-out", default=None, help="also write the magnetic environment as a [site] TOML snippet")
+    p.add_argument(
+        "--rest",
+        action="append",
+        default=None,
+        metavar="START:STOP",
+        help="a rest interval in seconds of every log (repeatable; default: found from the data)",
+    )
+    p.add_argument("--gravity", type=_positive, default=9.81, help="local gravity, m/s^2 (default: 9.81)")
+    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    p.set_defaults(func=_cmd_identify)
 
     zenoh_note = (
         "Without --connect/--listen/--mode/--config, gyroemu processes on one machine find each other "

@@ -1,0 +1,51 @@
+"""Identification of a device (and its site's magnetic environment) from recordings with a truth.
+
+One module per idea: :mod:`.rest` (rest phases), :mod:`.noise` (Allan noise terms from them),
+:mod:`.truth` (kinematics of the truth track), :mod:`.timing` (latencies), :mod:`.calibration`
+(gyro, accelerometer, magnetometer errors), :mod:`.magnetic_environment`, :mod:`.trial` (one
+recording) and :mod:`.result` (pooling, device and site TOML). Every fit takes plain arrays.
+"""
+
+from .calibration import AccelCalibration, GyroCalibration, MagCalibration, fit_accel, fit_gyro, fit_mag
+from .magnetic_environment import MagneticEnvironment, magnetic_environment, pool_heading_offsets, world_field
+from .noise import AxisNoise, NoiseTerm, SensorNoise, pooled_allan, sensor_noise
+from .rest import RestPhase, find_rest_phases, phases_from_intervals
+from .result import Identification, Pooled, identify, pool_estimates
+from .timing import LatencyEstimate, accel_latency, estimate_latency, gyro_latency, mag_latency
+from .trial import TrialData, TrialIdentification, TrialSettings, identify_trial
+from .truth import truth_angular_velocity
+
+__all__ = [
+    "AccelCalibration",
+    "AxisNoise",
+    "GyroCalibration",
+    "Identification",
+    "LatencyEstimate",
+    "MagCalibration",
+    "MagneticEnvironment",
+    "NoiseTerm",
+    "Pooled",
+    "RestPhase",
+    "SensorNoise",
+    "TrialData",
+    "TrialIdentification",
+    "TrialSettings",
+    "accel_latency",
+    "estimate_latency",
+    "find_rest_phases",
+    "fit_accel",
+    "fit_gyro",
+    "fit_mag",
+    "gyro_latency",
+    "identify",
+    "identify_trial",
+    "mag_latency",
+    "magnetic_environment",
+    "phases_from_intervals",
+    "pool_estimates",
+    "pool_heading_offsets",
+    "pooled_allan",
+    "sensor_noise",
+    "truth_angular_velocity",
+    "world_field",
+]

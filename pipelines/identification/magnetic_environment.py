@@ -1,0 +1,167 @@
+"""The magnetic field a recording moved through, in the world frame, from a calibrated magnetometer.
+
+    m_w(t) = R_wb(t − d) K⁻¹ (m_m(t) − h)            (d the magnetometer's latency; K, h its calibration)
+
+From m_w over the samples:
+
+- **norm** |m_w| and **dip** I = atan2(−U, √(E² + N²)) (positive down, as in the northern hemisphere),
+  and the **heading** of the horizontal field ψ = atan2(E, N) (from north towards east, in the truth's
+  world frame);
+- the **spread** along the path: per-axis standard deviation of m_w over the movement samples, and
+  ``spatial_sigma`` = √(mean of the three variances);
+- the **correlation length**: ρ(r) = ⟨δm(x)·δm(x′)⟩ / ⟨|δm|²⟩ over pairs of movement samples binned by
+  their distance r = |x − x′| (δm = m_w − its mean), and the first r where ρ falls below 1/e. Without a
+  position track the same over time lags gives a correlation time instead;
+- the **heading offset** between the field at rest (the first rest phase) and in the working volume
+  (movement samples): circular mean of ψ(t) − ψ_rest. :func:`pool_heading_offsets` turns several
+  trials' offsets into a mean and a standard deviation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .truth import interpolate_attitude, moving_average, rotation_bw
+
+__all__ = ["MagneticEnvironment", "world_field", "magnetic_environment", "pool_heading_offsets"]
+
+_PAIR_POINTS = 2000  # points of the correlation's pair sums (N² pairs)
+
+
+def world_field(
+    t: np.ndarray, mag_body: np.ndarray, truth_t: np.ndarray, q_wb: np.ndarray, latency_s: float = 0.0
+) -> np.ndarray:
+    """(N, 3) world-axes field of calibrated body-axes measurements ``mag_body`` (N, 3) at ``t`` (N,),
+    turned by the truth attitude at t − ``latency_s``; NaN where the truth is unknown."""
+    q = interpolate_attitude(truth_t, q_wb, np.asarray(t, dtype=float) - latency_s)
+    return np.einsum("nji,nj->ni", rotation_bw(q), np.asarray(mag_body, dtype=float))  # R_wb = R_bwᵀ
+
+
+def _heading(m: np.ndarray) -> np.ndarray:
+    return np.arctan2(m[..., 0], m[..., 1])
+
+
+@dataclass(frozen=True)
+class MagneticEnvironment:
+    """One recording's magnetic environment (tesla, rad, m, s).
+
+    Attributes
+    ----------
+    rest_field_w : (3,) mean world field over the first rest phase (E, N, U).
+    norm, dip, heading : of ``rest_field_w``: |m|, inclination (positive down), heading from north.
+    axis_sigma : (3,) standard deviation of m_w over the movement samples, per world axis.
+    spatial_sigma : √(mean of the three variances).
+    heading_offset, heading_offset_sigma : circular mean and standard deviation of ψ(t) − ψ_rest over the
+        movement samples, rad.
+    correlation_length_m : first distance where the correlation falls below 1/e (None without a
+        position track; ``inf`` when it never does within half the largest distance).
+    correlation_time_s : the same over time lags.
+    samples : movement samples used.
+    """
+
+    rest_field_w: np.ndarray
+    norm: float
+    dip: float
+    heading: float
+    axis_sigma: np.ndarray
+    spatial_sigma: float
+    heading_offset: float
+    heading_offset_sigma: float
+    correlation_length_m: float | None
+    correlation_time_s: float
+    samples: int
+
+
+def _first_below(x: np.ndarray, rho: np.ndarray, level: float) -> float:
+    """First x where rho (sampled at x) falls below level, linearly interpolated; inf if never."""
+    below = np.flatnonzero(rho < level)
+    if not len(below):
+        return float("inf")
+    j = below[0]
+    if j == 0:
+        return float(x[0])
+    return float(x[j - 1] + (x[j] - x[j - 1]) * (rho[j - 1] - level) / (rho[j - 1] - rho[j]))
+
+
+def magnetic_environment(
+    t: np.ndarray,
+    field_w: np.ndarray,
+    rest: slice,
+    movement: np.ndarray,
+    pos_w: np.ndarray | None = None,
+    bins: int = 25,
+    smooth_s: float = 0.25,
+) -> MagneticEnvironment:
+    """The environment (module notes) of a world field ``field_w`` (N, 3) tesla at ``t`` (N,) s.
+
+    ``rest``: the samples of the first rest phase; ``movement`` (N,) bool: the working-volume samples;
+    ``pos_w`` (N, 3) m at the same samples, or None. The field is first averaged over ``smooth_s`` so
+    that the sensor's white noise does not pass for a spatial variation.
+    """
+    dt = float(np.median(np.diff(t)))
+    field_w = moving_average(np.asarray(field_w, dtype=float), max(1, int(round(smooth_s / dt))))
+    movement = np.asarray(movement, dtype=bool) & np.all(np.isfinite(field_w), axis=1)
+    if pos_w is not None:
+        movement &= np.all(np.isfinite(pos_w), axis=1)
+    rest_field = np.nanmean(field_w[rest], axis=0)  # smoothing does not change a mean
+    m = field_w[movement]
+    if len(m) < 10:
+        raise ValueError(f"only {len(m)} movement samples with a known field")
+    horizontal = np.hypot(rest_field[0], rest_field[1])
+    delta = m - m.mean(axis=0)
+    axis_sigma = delta.std(axis=0)
+    offsets = np.angle(np.exp(1j * (_heading(m) - _heading(rest_field))))
+    mean_vec = np.mean(np.exp(1j * offsets))
+    circ_sigma = float(np.sqrt(-2.0 * np.log(min(abs(mean_vec), 1.0))))
+
+    idx = np.linspace(0, len(m) - 1, min(_PAIR_POINTS, len(m))).astype(int)  # evenly along the path
+    d = delta[idx]
+    var = float(np.mean(np.sum(d * d, axis=1)))
+    products = d @ d.T / var
+    length = None
+    if pos_w is not None:
+        x = np.asarray(pos_w, dtype=float)[movement][idx]
+        dist = np.linalg.norm(x[:, None, :] - x[None, :, :], axis=-1)
+        edges = np.linspace(0.0, dist.max() / 2, bins + 1)
+        which = np.digitize(dist.ravel(), edges) - 1
+        inside = (which >= 0) & (which < bins)
+        sums = np.bincount(which[inside], weights=products.ravel()[inside], minlength=bins)
+        counts = np.bincount(which[inside], minlength=bins)
+        have = counts > 0
+        length = _first_below(0.5 * (edges[:-1] + edges[1:])[have], sums[have] / counts[have], np.exp(-1.0))
+    lag_t = np.asarray(t, dtype=float)[movement][idx]
+    lags = np.abs(lag_t[:, None] - lag_t[None, :])
+    edges = np.linspace(0.0, lags.max() / 2, bins + 1)
+    which = np.digitize(lags.ravel(), edges) - 1
+    inside = (which >= 0) & (which < bins)
+    sums = np.bincount(which[inside], weights=products.ravel()[inside], minlength=bins)
+    counts = np.bincount(which[inside], minlength=bins)
+    have = counts > 0
+    corr_time = _first_below(0.5 * (edges[:-1] + edges[1:])[have], sums[have] / counts[have], np.exp(-1.0))
+    return MagneticEnvironment(
+        rest_field_w=rest_field,
+        norm=float(np.linalg.norm(rest_field)),
+        dip=float(np.arctan2(-rest_field[2], horizontal)),
+        heading=float(_heading(rest_field)),
+        axis_sigma=axis_sigma,
+        spatial_sigma=float(np.sqrt(np.mean(axis_sigma**2))),
+        heading_offset=float(np.angle(mean_vec)),
+        heading_offset_sigma=circ_sigma,
+        correlation_length_m=length,
+        correlation_time_s=corr_time,
+        samples=int(len(m)),
+    )
+
+
+def pool_heading_offsets(environments: Sequence[MagneticEnvironment]) -> tuple[float, float]:
+    """(mean, standard deviation) of the trials' heading offsets, rad: circular mean and, for two or more
+    trials, their sample standard deviation (one trial: its own within-trial spread)."""
+    offsets = np.array([e.heading_offset for e in environments])
+    mean = float(np.angle(np.mean(np.exp(1j * offsets))))
+    if len(offsets) < 2:
+        return mean, float(environments[0].heading_offset_sigma)
+    wrapped = np.angle(np.exp(1j * (offsets - mean)))
+    return mean, float(np.std(wrapped, ddof=1))

@@ -1,0 +1,391 @@
+"""Several recordings of one device pooled into a device config and a site snippet (TOML).
+
+Per-trial estimates x_i ± σ_i (of the trials where the term was observable) are pooled by the
+inverse-variance weighted mean, its uncertainty inflated by the Birge ratio when the trials scatter
+more than their own uncertainties say (a formal σ from correlated residuals is optimistic):
+
+    x̄ = Σ x_i/σ_i² / Σ 1/σ_i²,    σ̄ = max(1, √(χ²/(n−1))) / √(Σ 1/σ_i²),    χ² = Σ (x_i − x̄)²/σ_i²
+
+The gyro bias of each trial is one power-up: the device's ``bias_deg_per_h`` is their mean and, with
+two trials or more, ``turn_on_bias_deg_per_h`` their standard deviation. Noise terms come from the
+rest phases of every trial pooled (:func:`gyroemu.pipelines.identification.noise.sensor_noise`).
+
+The device TOML uses the device keys of :class:`gyroemu.sensors.imu.DeviceSpec` plus the per-sensor
+``latency_s``; the uncertainties, what was not observable and the provenance are written as comments.
+The site snippet holds ``[site] magnetic_field_enu_uT`` (the rest field, in the truth's world frame,
+as strong as the calibrated magnetometer measures it) and ``[site.magnetic_environment]``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from gyroemu.dynamics.rotation import quat_from_matrix
+
+from .calibration import polar_decomposition
+from .magnetic_environment import MagneticEnvironment, magnetic_environment, pool_heading_offsets, world_field
+from .noise import SensorNoise, sensor_noise
+from .timing import LatencyEstimate
+from .trial import TrialData, TrialIdentification, TrialSettings, identify_trial
+
+__all__ = ["Pooled", "Identification", "pool_estimates", "identify"]
+
+_DEG = 180.0 / np.pi
+_G0 = 9.80665
+_UG = 1e-6 * _G0
+
+
+@dataclass(frozen=True)
+class Pooled:
+    """A pooled estimate: value and standard uncertainty (arrays of any shape), the trials used."""
+
+    value: np.ndarray
+    sigma: np.ndarray
+    trials: int
+
+
+def pool_estimates(values: Sequence[np.ndarray], sigmas: Sequence[np.ndarray]) -> Pooled:
+    """Inverse-variance mean with Birge inflation (module notes), element by element."""
+    x = np.asarray(values, dtype=float)
+    s = np.asarray(sigmas, dtype=float)
+    if not len(x):
+        raise ValueError("nothing to pool")
+    known = np.isfinite(s) & (s > 0)
+    w = np.where(known, 1.0 / np.where(known, s, 1.0) ** 2, 0.0)
+    total = np.sum(w, axis=0)
+    weighted = total > 0  # elements without any uncertainty (fixed zeros): plain mean, σ 0
+    safe = np.where(weighted, total, 1.0)
+    mean = np.where(weighted, np.sum(w * x, axis=0) / safe, x.mean(axis=0))
+    sigma = np.where(weighted, 1.0 / np.sqrt(safe), 0.0)
+    if len(x) > 1:
+        birge = np.sqrt(np.sum(w * (x - mean) ** 2, axis=0) / (len(x) - 1))
+        sigma = sigma * np.maximum(1.0, birge)
+    return Pooled(mean, sigma, len(x))
+
+
+@dataclass(frozen=True, eq=False)
+class Identification:
+    """Everything identified from a set of recordings of one device."""
+
+    trials: list[TrialIdentification]
+    rate_hz: float
+    latency: dict  # sensor -> Pooled (s)
+    gyro_bias: Pooled  # rad/s
+    gyro_bias_spread: np.ndarray  # (3,) rad/s, std across trials (0 for one trial)
+    gyro_scale: Pooled | None
+    gyro_misalignment: Pooled | None
+    c_sb: np.ndarray
+    accel_bias: Pooled
+    accel_scale: Pooled | None
+    accel_cross_axis: Pooled | None
+    hard_iron: Pooled | None
+    soft_iron: Pooled | None
+    k_matrix: np.ndarray | None
+    gyro_noise: SensorNoise | None
+    accel_noise: SensorNoise | None
+    mag_noise: SensorNoise | None
+    environments: list[MagneticEnvironment | None]
+    notes: list[str]
+
+    # ----------------------------------------------------------------------------------------------
+    def device_dict(self) -> dict:
+        """The device config (keys of :class:`gyroemu.sensors.imu.DeviceSpec`, plus ``latency_s``)."""
+        names = ", ".join(t.name for t in self.trials)
+        gyro_errors: dict = {"bias_deg_per_h": _list(self.gyro_bias.value * _DEG * 3600)}
+        if len(self.trials) > 1:
+            gyro_errors["turn_on_bias_deg_per_h"] = _list(self.gyro_bias_spread * _DEG * 3600)
+        if self.gyro_scale is not None and self.gyro_misalignment is not None:
+            gyro_errors["scale_factor_ppm"] = _list(self.gyro_scale.value * 1e6)
+            gyro_errors["cross_axis_matrix"] = [_list(r) for r in self.gyro_misalignment.value]
+        if self.gyro_noise is not None:
+            n = self.gyro_noise
+            gyro_errors["noise_density_deg_per_s_per_sqrt_hz"] = _list(n.values("noise_density") * _DEG, 4)
+            gyro_errors["bias_instability_deg_per_h"] = _list(n.values("bias_instability") * _DEG * 3600, 4)
+            gyro_errors["rrw_deg_per_h_per_sqrt_h"] = _list(n.values("random_walk") * _DEG * 3600 * 60, 4)
+        accel_errors: dict = {"bias_ug": _list(self.accel_bias.value / _UG)}
+        if self.accel_scale is not None and self.accel_cross_axis is not None:
+            accel_errors["scale_factor_ppm"] = _list(self.accel_scale.value * 1e6)
+            accel_errors["cross_axis_matrix"] = [_list(r) for r in self.accel_cross_axis.value]
+        if self.accel_noise is not None:
+            n = self.accel_noise
+            accel_errors["noise_density_ug_per_sqrt_hz"] = _list(n.values("noise_density") / _UG, 4)
+            accel_errors["bias_instability_ug"] = _list(n.values("bias_instability") / _UG, 4)
+            accel_errors["random_walk_ug_per_sqrt_h"] = _list(n.values("random_walk") / _UG * 60, 4)
+        q_bs = quat_from_matrix(self.c_sb.T)
+        out: dict = {
+            "description": f"Identified by gyroemu identify from {names}",
+            "rate_hz": round(float(self.rate_hz), 6),
+            "mounting": {"q_bs": _list(q_bs, 9)},
+            "gyro": {"latency_s": round(float(self.latency["gyro"].value), 6), "errors": gyro_errors},
+            "accelerometer": {
+                "latency_s": round(float(self.latency["accelerometer"].value), 6),
+                "errors": accel_errors,
+            },
+        }
+        if "magnetometer" in self.latency:
+            mag: dict = {"latency_s": round(float(self.latency["magnetometer"].value), 6)}
+            if self.mag_noise is not None:
+                mag["noise_density_uT_per_sqrt_hz"] = round(
+                    float(np.mean(self.mag_noise.values("noise_density"))) * 1e6, 5
+                )
+            if self.hard_iron is not None and self.soft_iron is not None:
+                mag["hard_iron_uT"] = _list(self.hard_iron.value * 1e6)
+                mag["soft_iron"] = [_list(r, 5) for r in self.soft_iron.value]
+            out["magnetometer"] = mag
+        return out
+
+    def device_comments(self) -> list[str]:
+        """Comment lines (without '#'): provenance, uncertainties (1σ), what was not observable."""
+        lines = ["Fitted by 'gyroemu identify'. Uncertainties are standard (1 sigma); noise intervals 68 %."]
+        for t in self.trials:
+            rest = ", ".join(f"{p.t_start:.1f}-{p.t_stop:.1f} s" for p in t.rest) or "none"
+            lines.append(f"trial {t.name}: {t.samples} samples at {t.rate_hz:.3f} Hz; rest phases {rest}")
+            lines.append(
+                f"  latency ms: gyro {_pm(t.gyro_latency.latency_s * 1e3, t.gyro_latency.sigma_s * 1e3)}, accel "
+                f"{_pm(t.accel_latency.latency_s * 1e3, t.accel_latency.sigma_s * 1e3)}"
+                + (
+                    f", mag {_pm(t.mag_latency.latency_s * 1e3, t.mag_latency.sigma_s * 1e3)}"
+                    if t.mag_latency is not None
+                    else ""
+                )
+            )
+            for what, note in (
+                ("gyro", t.gyro.note),
+                ("accelerometer", t.accel.note),
+                ("magnetometer", t.mag.note if t.mag else ""),
+            ):
+                if note:
+                    lines.append(f"  {what}: {note}")
+            lines.extend(f"  {n}" for n in t.notes)
+        for sensor, p in self.latency.items():
+            lines.append(f"{sensor}.latency_s = {_pm(p.value, p.sigma)} over {p.trials} trials")
+        lines.append(f"gyro.errors.bias_deg_per_h sigma {_list(self.gyro_bias.sigma * _DEG * 3600)}")
+        if self.gyro_scale is not None and self.gyro_misalignment is not None:
+            lines.append(
+                f"gyro.errors.scale_factor_ppm sigma {_list(self.gyro_scale.sigma * 1e6)} "
+                f"({self.gyro_scale.trials} trials)"
+            )
+            lines.append(f"gyro.errors.cross_axis_matrix sigma {[_list(r) for r in self.gyro_misalignment.sigma]}")
+        else:
+            lines.append("gyro scale factor and misalignment: not observable in any trial (not written)")
+        lines.append(f"accelerometer.errors.bias_ug sigma {_list(self.accel_bias.sigma / _UG)}")
+        if self.accel_scale is not None:
+            lines.append(f"accelerometer.errors.scale_factor_ppm sigma {_list(self.accel_scale.sigma * 1e6)}")
+        else:
+            lines.append(
+                "accelerometer scale factor and cross-axis: not observable (too few slow attitudes): not written"
+            )
+        if self.hard_iron is not None and self.soft_iron is not None:
+            lines.append(
+                f"magnetometer.hard_iron_uT sigma {_list(self.hard_iron.sigma * 1e6)} ({self.hard_iron.trials} trials)"
+            )
+            lines.append(
+                f"magnetometer.soft_iron sigma {[_list(r, 5) for r in self.soft_iron.sigma]} (normalised: det = 1)"
+            )
+        elif "magnetometer" in self.latency:
+            lines.append("magnetometer hard and soft iron: not observable in any trial (not written)")
+        for sensor, noise, scale, unit in (
+            (
+                "gyro",
+                self.gyro_noise,
+                (_DEG, _DEG * 3600, _DEG * 3600 * 60),
+                ("deg/s/sqrt(Hz)", "deg/h", "deg/h/sqrt(h)"),
+            ),
+            ("accelerometer", self.accel_noise, (1 / _UG, 1 / _UG, 60 / _UG), ("ug/sqrt(Hz)", "ug", "ug/sqrt(h)")),
+            ("magnetometer", self.mag_noise, (1e6, 1e6, 1e6), ("uT/sqrt(Hz)", "uT", "uT/sqrt(s)")),
+        ):
+            if noise is None:
+                continue
+            lines.append(
+                f"{sensor} noise from {noise.phases} rest phases, {noise.rest_s:.1f} s; "
+                f"Allan tau up to {noise.tau_max_s:.3g} s:"
+            )
+            for term, f, u in zip(("noise_density", "bias_instability", "random_walk"), scale, unit):
+                parts = []
+                for axis, a in zip("xyz", noise.axes):
+                    c = getattr(a, term)
+                    if c.status == "fitted":
+                        parts.append(f"{axis} {c.value * f:.4g} [{c.low * f:.4g}, {c.high * f:.4g}]")
+                    else:
+                        parts.append(f"{axis} < {c.high * f:.4g} (not observable: written 0)")
+                lines.append(f"  {term} {u}: " + "; ".join(parts))
+        lines.extend(self.notes)
+        return lines
+
+    def device_toml(self) -> str:
+        """The device config as TOML text, comments first."""
+        import tomli_w
+
+        head = "".join(f"# {line}\n" for line in self.device_comments())
+        return head + "\n" + tomli_w.dumps(self.device_dict())
+
+    # ----------------------------------------------------------------------------------------------
+    def site_dict(self) -> dict | None:
+        """``[site]`` with ``magnetic_field_enu_uT`` and ``[site.magnetic_environment]``; None without a
+        magnetometer environment."""
+        envs = [e for e in self.environments if e is not None]
+        if not envs:
+            return None
+        mean, sigma = pool_heading_offsets(envs)
+        field = np.mean([e.rest_field_w for e in envs], axis=0)
+        env: dict = {
+            "spatial_sigma_uT": round(float(np.mean([e.spatial_sigma for e in envs])) * 1e6, 4),
+            "heading_offset_mean_deg": round(float(np.degrees(mean)), 4),
+            "heading_offset_sigma_deg": round(float(np.degrees(sigma)), 4),
+        }
+        lengths = [e.correlation_length_m for e in envs if e.correlation_length_m is not None]
+        finite = [x for x in lengths if np.isfinite(x)]
+        if finite:
+            env["correlation_length_m"] = round(float(np.mean(finite)), 4)
+        return {"site": {"magnetic_field_enu_uT": _list(field * 1e6, 4), "magnetic_environment": env}}
+
+    def site_toml(self) -> str | None:
+        """The site snippet as TOML text with per-trial comments; None without a magnetometer."""
+        import tomli_w
+
+        data = self.site_dict()
+        if data is None:
+            return None
+        lines = ["Magnetic environment identified by 'gyroemu identify' (world frame: the truth's ENU)."]
+        for t, e in zip(self.trials, self.environments):
+            if e is None:
+                continue
+            corr = (
+                f"correlation length {e.correlation_length_m:.3g} m"
+                if e.correlation_length_m is not None
+                else "no position track: correlation length unavailable"
+            )
+            lines.append(
+                f"{t.name}: |m| {e.norm * 1e6:.2f} uT, dip {np.degrees(e.dip):.2f} deg, "
+                f"heading {np.degrees(e.heading):.2f} deg; "
+                f"spread {_list(e.axis_sigma * 1e6, 3)} uT (E, N, U); heading offset "
+                f"{np.degrees(e.heading_offset):.2f} +- {np.degrees(e.heading_offset_sigma):.2f} deg; {corr}; "
+                f"correlation time {e.correlation_time_s:.3g} s; {e.samples} movement samples"
+            )
+        n = sum(e is not None for e in self.environments)
+        lines.append(
+            "heading_offset_sigma_deg: "
+            + (
+                "standard deviation across the trials"
+                if n > 1
+                else "within the one trial (give several logs for a spread across trials)"
+            )
+        )
+        return "".join(f"# {line}\n" for line in lines) + "\n" + tomli_w.dumps(data)
+
+
+def _list(x, digits: int = 6) -> list:
+    return [float(f"{v:.{digits}g}") for v in np.ravel(x)]
+
+
+def _pm(x: float, s: float) -> str:
+    return f"{x:.4g} +- {s:.2g}"
+
+
+def _pool_latency(estimates: Sequence[LatencyEstimate]) -> Pooled:
+    p = pool_estimates([np.array([e.latency_s]) for e in estimates], [np.array([e.sigma_s]) for e in estimates])
+    return Pooled(p.value[0], p.sigma[0], p.trials)
+
+
+def _pool_field(results, attr: str, sigma_attr: str) -> Pooled | None:
+    vals = [getattr(r, attr) for r in results]
+    sigs = [getattr(r, sigma_attr) for r in results]
+    return pool_estimates(vals, sigs) if vals else None
+
+
+def identify(trials: Sequence[TrialData], settings: TrialSettings | None = None) -> Identification:
+    """Identify each recording (:func:`identify_trial`), pool them (module notes), and map each one's
+    magnetic environment with its own magnetometer calibration (or the pooled one where its own is not
+    observable)."""
+    if not trials:
+        raise ValueError("no recordings")
+    settings = settings if settings is not None else TrialSettings()
+    results = [identify_trial(d, settings) for d in trials]
+    notes: list[str] = []
+    latency = {
+        "gyro": _pool_latency([r.gyro_latency for r in results]),
+        "accelerometer": _pool_latency([r.accel_latency for r in results]),
+    }
+    mag_latencies = [r.mag_latency for r in results if r.mag_latency is not None]
+    if mag_latencies:
+        latency["magnetometer"] = _pool_latency(mag_latencies)
+
+    gyros = [r.gyro for r in results if r.gyro.observable]
+    biases = np.array([r.gyro.bias for r in results])
+    formal = pool_estimates(list(biases), [r.gyro.bias_sigma for r in results]).sigma
+    scatter = biases.std(axis=0, ddof=1) / np.sqrt(len(biases)) if len(biases) > 1 else np.zeros(3)
+    gyro_bias = Pooled(biases.mean(axis=0), np.maximum(formal, scatter), len(biases))
+    spread = biases.std(axis=0, ddof=1) if len(biases) > 1 else np.zeros(3)
+    c_sb = polar_decomposition(np.mean([g.c_sb for g in gyros], axis=0))[1] if gyros else np.eye(3)
+    accels = [r.accel for r in results if r.accel.observable]
+    mag_fits = [r.mag for r in results if r.mag is not None and r.mag.observable]
+    k_matrix = None
+    if mag_fits:
+        k_matrix = np.mean([m.k_matrix for m in mag_fits], axis=0)
+        k_matrix = k_matrix / np.cbrt(np.linalg.det(k_matrix))
+    soft = _pool_field(mag_fits, "soft_iron", "soft_iron_sigma")
+
+    all_rest = [(d, r) for d, r in zip(trials, results) if r.rest]
+    dt = float(np.median([d.dt for d in trials]))
+    gyro_noise = accel_noise = mag_noise = None
+    if all_rest:
+        segs = [(d, slice(p.start, p.stop)) for d, r in all_rest for p in r.rest]
+        gyro_noise = sensor_noise([d.gyro[s] for d, s in segs], dt)
+        accel_noise = sensor_noise([d.accel[s] for d, s in segs], dt)
+        msegs = [d.mag[s] for d, s in segs if d.mag is not None and np.isfinite(d.mag[s]).all()]
+        if msegs:
+            mag_noise = sensor_noise(msegs, dt, tau_min_s=settings.mag_tau_min_s)
+    else:
+        notes.append("no rest phase in any recording: noise terms not identified")
+
+    environments: list[MagneticEnvironment | None] = []
+    for d, r in zip(trials, results):
+        cal = r.mag if (r.mag is not None and r.mag.observable) else (mag_fits[0] if mag_fits else None)
+        if d.mag is None or cal is None or r.mag_latency is None or not r.rest:
+            environments.append(None)
+            continue
+        if cal is not r.mag:
+            notes.append(f"{d.name}: magnetic environment with another trial's magnetometer calibration")
+        body = cal.calibrated_body(d.mag)
+        field_w = world_field(d.t, body, d.truth_t, d.q_wb, r.mag_latency.latency_s)
+        rest_set = np.zeros(len(d.t), dtype=bool)
+        for p in r.rest:
+            rest_set[p.start : p.stop] = True
+        movement = d.movement if d.movement is not None else ~rest_set
+        pos = None
+        if d.pos_w is not None:
+            from .truth import interpolate_vectors
+
+            pos = interpolate_vectors(d.truth_t, d.pos_w, d.t)
+        try:
+            environments.append(
+                magnetic_environment(d.t, field_w, slice(r.rest[0].start, r.rest[0].stop), movement, pos)
+            )
+        except ValueError as e:
+            notes.append(f"{d.name}: magnetic environment: {e}")
+            environments.append(None)
+
+    return Identification(
+        trials=results,
+        rate_hz=1.0 / dt,
+        latency=latency,
+        gyro_bias=gyro_bias,
+        gyro_bias_spread=spread,
+        gyro_scale=_pool_field(gyros, "scale", "scale_sigma"),
+        gyro_misalignment=_pool_field(gyros, "misalignment", "misalignment_sigma") if gyros else None,
+        c_sb=c_sb,
+        accel_bias=pool_estimates([r.accel.bias for r in results], [r.accel.bias_sigma for r in results]),
+        accel_scale=_pool_field(accels, "scale", "scale_sigma"),
+        accel_cross_axis=_pool_field(accels, "cross_axis", "cross_axis_sigma") if accels else None,
+        hard_iron=_pool_field(mag_fits, "hard_iron", "hard_iron_sigma"),
+        soft_iron=soft,
+        k_matrix=k_matrix,
+        gyro_noise=gyro_noise,
+        accel_noise=accel_noise,
+        mag_noise=mag_noise,
+        environments=environments,
+        notes=notes,
+    )

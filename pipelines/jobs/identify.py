@@ -1,0 +1,223 @@
+"""``gyroemu identify``: fit a device config (and a site's magnetic environment) to recordings.
+
+Each log is adapted to :class:`gyroemu.pipelines.identification.TrialData` (plain arrays):
+
+- ``.mcap``: its device's ``/imu``, ``/mag`` (tesla) and ``/truth/imu`` attitude, the ``/movement``
+  flags when present, and the truth position when the log reader provides one (a ``pose`` with
+  ``t`` and ``pos_w``); otherwise position is unavailable;
+- ``.hdf5``: a BROAD trial, read directly, with its ``opt_pos`` (m) as the position track.
+
+The logs are identified together (:func:`gyroemu.pipelines.identification.identify`) and the device
+TOML (and with ``site_out`` the site snippet) written atomically: through a temporary file in the same
+folder and ``os.replace``, never over an existing file without ``force``. Every option is checked
+before any work (:class:`IdentifyError`, naming the argument).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from gyroemu.errors import ConfigError
+
+if TYPE_CHECKING:
+    from gyroemu.pipelines.identification import Identification, TrialData
+
+__all__ = ["IdentifyError", "IdentifyOptions", "IdentifySummary", "check_options", "read_trial", "run_identify"]
+
+_SUFFIXES = (".mcap", ".hdf5", ".h5")
+
+
+class IdentifyError(ConfigError):
+    """Bad options of ``gyroemu identify``, found before any work (the message names the argument)."""
+
+
+@dataclass(frozen=True)
+class IdentifyOptions:
+    """What ``gyroemu identify`` reads and writes.
+
+    Attributes
+    ----------
+    logs : the recordings (.mcap with a /truth/imu attitude, or BROAD .hdf5), one device, pooled.
+    out : the device TOML to write.
+    site_out : the site TOML snippet to write (magnetic environment), or None.
+    force : overwrite existing outputs.
+    rest_intervals : [(t_start, t_stop), …] s of every log, or None to find the rest phases.
+    gravity_m_s2 : local gravity.
+    """
+
+    logs: Sequence[Path]
+    out: Path
+    site_out: Path | None = None
+    force: bool = False
+    rest_intervals: Sequence[tuple[float, float]] | None = None
+    gravity_m_s2: float = 9.81
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "logs", tuple(Path(p) for p in self.logs))
+        object.__setattr__(self, "out", Path(self.out))
+        if self.site_out is not None:
+            object.__setattr__(self, "site_out", Path(self.site_out))
+
+
+@dataclass(frozen=True)
+class IdentifySummary:
+    """What an identify run did: the files written, the pooled figures, and the seconds it took."""
+
+    out: Path
+    site_out: Path | None
+    logs: tuple[str, ...]
+    gyro_latency_ms: float
+    mag_latency_ms: float | None
+    gyro_noise_density_deg_per_s_per_sqrt_hz: tuple[float, ...] | None
+    elapsed_s: float
+    notes: list[str] = field(default_factory=list)
+
+
+def _check_out(path: Path, argument: str, force: bool) -> None:
+    if path.suffix != ".toml":
+        raise IdentifyError(f"argument {argument}: {path}: write a .toml file (got '{path.suffix}')")
+    if not path.parent.is_dir():
+        raise IdentifyError(f"argument {argument}: {path.parent} is not a folder")
+    if path.exists() and not force:
+        raise IdentifyError(f"argument {argument}: {path} exists (use --force to overwrite it)")
+
+
+def check_options(options: IdentifyOptions) -> None:
+    """:class:`IdentifyError` for a missing or unreadable log, an output that cannot be written or would
+    be overwritten without ``force``, bad rest intervals."""
+    if not options.logs:
+        raise IdentifyError("argument LOG: give at least one log")
+    for log in options.logs:
+        if not log.is_file():
+            raise IdentifyError(f"argument LOG: {log}: no such file")
+        if log.suffix not in _SUFFIXES:
+            raise IdentifyError(f"argument LOG: {log}: expected an .mcap log or a BROAD .hdf5 trial")
+    _check_out(options.out, "--out", options.force)
+    if options.site_out is not None:
+        _check_out(options.site_out, "--site-out", options.force)
+        if options.site_out.resolve() == options.out.resolve():
+            raise IdentifyError("argument --site-out: the same file as --out")
+    for a, b in options.rest_intervals or ():
+        if not a < b:
+            raise IdentifyError(f"argument --rest: {a:g}:{b:g}: start must be before stop")
+    if not options.gravity_m_s2 > 0:
+        raise IdentifyError(f"argument --gravity: must be positive, got {options.gravity_m_s2:g}")
+
+
+def read_trial(path: Path) -> TrialData:
+    """A log as :class:`TrialData` (module notes). Raises ``LogError``/``ConfigError`` naming the file."""
+    import numpy as np
+
+    from gyroemu.errors import LogError
+    from gyroemu.pipelines.identification import TrialData
+
+    path = Path(path)
+    if path.suffix in (".hdf5", ".h5"):
+        import h5py
+
+        from gyroemu.pipelines.formats.importers import read_broad
+
+        trial = read_broad(path)
+        t = np.arange(len(trial)) / trial.rate_hz
+        with h5py.File(path, "r") as f:
+            pos = np.asarray(f["opt_pos"][()], dtype=float) if "opt_pos" in f else None
+        return TrialData(
+            name=path.name,
+            t=t,
+            gyro=trial.gyro,
+            accel=trial.accel,
+            mag=trial.mag_ut * 1e-6,
+            truth_t=t,
+            q_wb=trial.opt_quat,
+            pos_w=pos,
+            movement=trial.movement,
+        )
+    from gyroemu.pipelines.formats.mcap_log import read_mcap
+
+    try:
+        log = read_mcap(path).device
+    except ValueError as e:
+        raise LogError(str(e), file=path) from None
+    truth = log.truth
+    if truth is None or truth.q_wb is None:
+        raise LogError("has no /truth/imu attitude to identify against", file=path)
+    s = log.samples
+    mag = s.mag if s.mag is not None and np.isfinite(s.mag).any() else None
+    pose = getattr(log, "pose", None)  # the /truth/pose track, once the log reader provides it
+    pos, truth_t, q = None, truth.t, truth.q_wb
+    if pose is not None and getattr(pose, "pos_w", None) is not None:
+        from gyroemu.pipelines.identification.truth import interpolate_vectors
+
+        pos = interpolate_vectors(np.asarray(pose.t), np.asarray(pose.pos_w), truth_t)
+    return TrialData(
+        name=path.name,
+        t=s.t,
+        gyro=s.gyro,
+        accel=s.accel,
+        mag=mag,
+        truth_t=truth_t,
+        q_wb=q,
+        pos_w=pos,
+        movement=log.movement,
+    )
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def identify_logs(options: IdentifyOptions) -> Identification:
+    """Read and identify the logs of ``options`` (no files written)."""
+    from gyroemu.pipelines.identification import TrialSettings, identify
+
+    trials = [read_trial(p) for p in options.logs]
+    settings = TrialSettings(rest_intervals=options.rest_intervals, gravity_m_s2=options.gravity_m_s2)
+    try:
+        return identify(trials, settings)
+    except ValueError as e:
+        if isinstance(e, ConfigError):
+            raise
+        raise ConfigError(f"cannot identify: {e}", file=", ".join(str(p) for p in options.logs)) from None
+
+
+def run_identify(options: IdentifyOptions) -> IdentifySummary:
+    """Identify the logs and write ``options.out`` (and ``site_out``). Raises :class:`IdentifyError` before
+    any work for bad options; ``LogError``/``ConfigError`` for a log that cannot be used."""
+    check_options(options)
+    started = time.perf_counter()
+    result = identify_logs(options)
+    site = result.site_toml() if options.site_out is not None else None
+    _write_atomic(options.out, result.device_toml())
+    notes = list(result.notes)
+    if options.site_out is not None:
+        if site is None:
+            notes.append("no magnetometer environment: --site-out not written")
+        else:
+            _write_atomic(options.site_out, site)
+    mag = result.latency.get("magnetometer")
+    noise = result.gyro_noise
+    return IdentifySummary(
+        out=options.out,
+        site_out=options.site_out if site is not None else None,
+        logs=tuple(str(p) for p in options.logs),
+        gyro_latency_ms=float(result.latency["gyro"].value) * 1e3,
+        mag_latency_ms=None if mag is None else float(mag.value) * 1e3,
+        gyro_noise_density_deg_per_s_per_sqrt_hz=None
+        if noise is None
+        else tuple(float(v) * 57.29577951308232 for v in noise.values("noise_density")),
+        elapsed_s=time.perf_counter() - started,
+        notes=notes,
+    )
