@@ -22,11 +22,14 @@ data, and differentiates the splines analytically:
   gravity of the site.
 
 **Smoothing.** λ minimises generalised cross-validation by default; a stated noise level
-(``position_noise_m``, ``orientation_noise_rad``) selects the unbiased-risk λ instead, and a λ can be
-given outright. :attr:`RecordedMotion.position_cutoff_hz` and :attr:`orientation_cutoff_hz` report
-where the spline's gain falls to one half. Natural end conditions hold the second derivative at zero
-at the first and last sample, so within about one cut-off period of the ends the acceleration (and the
-angular acceleration) are pulled towards zero.
+(``position_noise_m``, ``orientation_noise_rad``) selects the unbiased-risk λ instead; a cut-off
+(``position_cutoff_hz``, ``orientation_cutoff_hz``) or a λ can be given outright. GCV assumes noise
+that is white at the sampling rate; a reference that was filtered or resampled before it was
+recorded (an optical track at 120 Hz resampled to an IMU's 286 Hz) has coloured noise that GCV takes
+for motion, and wants a stated cut-off. :attr:`RecordedMotion.position_cutoff_hz` and
+:attr:`orientation_cutoff_hz` report where the spline's gain falls to one half. Natural end
+conditions hold the second derivative at zero at the first and last sample, so within about one
+cut-off period of the ends the acceleration (and the angular acceleration) are pulled towards zero.
 
 **Gaps.** Rows with NaN, dropped frames and uneven stamps are bridged by the spline (it is fitted on
 the valid samples' own stamps). A step between valid samples longer than 1.5 times the median step
@@ -43,7 +46,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .earth import Environment
-from .smoothing_spline import SmoothingSpline, choose_lambda, contiguous_runs, cutoff_hz, smoothing_spline
+from .smoothing_spline import (
+    SmoothingSpline,
+    choose_lambda,
+    contiguous_runs,
+    cutoff_hz,
+    lambda_for_cutoff,
+    smoothing_spline,
+)
 from .trajectory import Trajectory, trajectory_from_world_motion
 
 __all__ = [
@@ -152,8 +162,11 @@ class SmoothingOptions:
     position_noise_m, orientation_noise_rad : float or None
         The recording's noise (standard deviation per coordinate; per axis of the attitude error); None:
         choose λ by generalised cross-validation.
+    position_cutoff_hz, orientation_cutoff_hz : float or None
+        The frequency where the spline's gain is 1/2 (:func:`~gyroemu.dynamics.smoothing_spline.lambda_for_cutoff`
+        at the median step); overrides the noise level.
     position_lambda, orientation_lambda : float or None
-        λ outright (s³; the orientation's on quaternion components); overrides the noise level.
+        λ outright (s³; the orientation's on quaternion components); overrides the rest.
     max_gap_s : float
         Longest gap bridged, s.
     """
@@ -163,6 +176,8 @@ class SmoothingOptions:
     position_lambda: float | None = None
     orientation_lambda: float | None = None
     max_gap_s: float = 0.25
+    position_cutoff_hz: float | None = None
+    orientation_cutoff_hz: float | None = None
 
 
 @dataclass(frozen=True)
@@ -255,7 +270,7 @@ class RecordedMotion:
         flips = np.cumsum(np.einsum("ij,ij->i", q[1:], q[:-1]) < 0) % 2
         q[1:][flips == 1] *= -1.0
         self.orientation_lambda = self._lambda(
-            tm, q, options.orientation_lambda, options.orientation_noise_rad, scale=0.5
+            tm, q, options.orientation_lambda, options.orientation_cutoff_hz, options.orientation_noise_rad, scale=0.5
         )
         self._q: SmoothingSpline = smoothing_spline(tm, q, self.orientation_lambda)
         self.has_position = samples.pos_w is not None
@@ -263,13 +278,21 @@ class RecordedMotion:
         self.position_lambda = float("nan")
         if samples.pos_w is not None:
             p = np.asarray(samples.pos_w[rows], dtype=float)
-            self.position_lambda = self._lambda(tm, p, options.position_lambda, options.position_noise_m)
+            self.position_lambda = self._lambda(
+                tm, p, options.position_lambda, options.position_cutoff_hz, options.position_noise_m
+            )
             self._p = smoothing_spline(tm, p, self.position_lambda)
 
-    @staticmethod
-    def _lambda(t: np.ndarray, y: np.ndarray, lam: float | None, noise: float | None, scale: float = 1.0) -> float:
+    def _lambda(
+        self, t: np.ndarray, y: np.ndarray, lam: float | None, cutoff: float | None, noise: float | None, scale=1.0
+    ) -> float:
         if lam is not None:
             return float(lam)
+        if cutoff is not None:
+            try:
+                return lambda_for_cutoff(cutoff, self.gaps.median_step_s)
+            except ValueError as e:
+                raise RecordedMotionError(f"{self.source}: {e}") from None
         # A small turn δ (rad, per axis) moves the quaternion's components by δ/2: scale 0.5.
         return choose_lambda(t, y, None if noise is None else noise * scale)
 

@@ -61,6 +61,10 @@ class ScenarioSpec(Section):
         """The longest span the kind can simulate, s (None: any)."""
         return None
 
+    def report(self) -> str:
+        """What the user should know of the last simulation beyond its size (empty: nothing)."""
+        return ""
+
     @classmethod
     def prepare(cls, data: dict, path: Path | None) -> dict:
         """The file's table before validation, given the file's ``path`` (a kind may resolve relative paths)."""

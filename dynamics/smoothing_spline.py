@@ -61,6 +61,7 @@ __all__ = [
     "reinsch",
     "choose_lambda",
     "cutoff_hz",
+    "lambda_for_cutoff",
     "derivative_noise_std",
     "contiguous_runs",
 ]
@@ -229,6 +230,15 @@ def cutoff_hz(lam: float, h: float) -> float:
 
     x = brentq(lambda x: lam * 48.0 * np.sin(x / 2.0) ** 4 / (h**3 * (2.0 + np.cos(x))) - 1.0, 1e-12, np.pi)
     return float(x / (2.0 * np.pi * h))
+
+
+def lambda_for_cutoff(f_hz: float, h: float) -> float:
+    """The λ (s³) whose gain is 1/2 at ``f_hz`` for samples every ``h`` s: ``λ μ(2π f) = 1``, the inverse
+    of :func:`cutoff_hz`; ``f_hz`` must lie below the Nyquist frequency ``1 / (2h)``."""
+    if not 0 < f_hz < 0.5 / h:
+        raise ValueError(f"a cut-off of {f_hz:g} Hz is not between 0 and the Nyquist frequency {0.5 / h:g} Hz")
+    x = 2.0 * np.pi * f_hz * h
+    return float(h**3 * (2.0 + np.cos(x)) / (48.0 * np.sin(x / 2.0) ** 4))
 
 
 def derivative_noise_std(lam: float, h: float, order: int, sigma: float = 1.0) -> float:

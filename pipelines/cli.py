@@ -64,6 +64,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     if summary.samples is not None:
         what += f", {summary.samples} samples of {summary.device} ({summary.device_kind})"
     print(f"{summary.scenario}: {what} over {summary.duration_s:g} s in {summary.elapsed_s:.2f} s -> {summary.out}")
+    if summary.notes:
+        print(summary.notes)
     return 0
 
 
@@ -272,6 +274,39 @@ def _cmd_bench(args) -> int:
         except FilterError as e:
             raise UsageError(f"argument --filter: {e}") from None
     paths = report.save(out)
+    print(report.to_markdown())
+    print(f"report -> {paths['markdown']}, {paths['json']}")
+    for png in paths["plots"]:
+        print(f"plot -> {png}")
+    return 0
+
+
+def _cmd_twin(args: argparse.Namespace) -> int:
+    from gyroemu.pipelines.jobs.twin import TwinError, TwinOptions, run_twin
+
+    smoothing: dict[str, float] = {}
+    for item in args.smoothing or ():
+        key, _, value = item.partition("=")
+        try:
+            smoothing[key] = float(value)
+        except ValueError:
+            raise UsageError(f"argument --smoothing: expected KEY=NUMBER, got {item!r}") from None
+    options = TwinOptions(
+        trials=[Path(p) for p in args.trial],
+        device=args.device,
+        seeds=args.seeds,
+        filters=args.filter,
+        out=Path(args.out),
+        force=args.force,
+        workers=args.workers,
+        smoothing=smoothing or None,
+        **({"site": Path(args.site)} if args.site else {}),
+    )
+    try:
+        report = run_twin(options)
+    except TwinError as e:
+        raise UsageError(e.reason) from None
+    paths = report.save(options.out)
     print(report.to_markdown())
     print(f"report -> {paths['markdown']}, {paths['json']}")
     for png in paths["plots"]:
@@ -578,6 +613,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--threshold-deg", type=_positive, default=2.0, help="convergence threshold, degrees (default: 2)")
     p.add_argument("--out", default="bench", help="folder for the report (default: ./bench)")
     p.set_defaults(func=_cmd_bench)
+
+    p = sub.add_parser(
+        "twin",
+        help="compare attitude filters on a recording with truth and on its emulated twins",
+        description="Run attitude filters over a recording with truth (a BROAD .hdf5 trial or a gyroemu .mcap "
+        "log) and over --seeds twins of it (the recorded motion sensed by --device in the site's modelled "
+        "field; twin i: device and magnetic-environment seed i), and write twin.md, twin.json and one plot "
+        "per recording (residual Allan deviations and spectra at rest, real vs twin) into --out.",
+    )
+    p.add_argument("trial", nargs="+", metavar="TRIAL", help="a BROAD .hdf5 trial or a .mcap log with /truth/imu")
+    p.add_argument("--device", default="aktos_t_broad", help="built-in device or TOML path (default: aktos_t_broad)")
+    p.add_argument("--seeds", type=int, default=5, help="twins per recording (default: 5)")
+    p.add_argument(
+        "--filter", action="append", default=None, metavar="NAME", help="a filter (repeatable; default: all available)"
+    )
+    p.add_argument("--site", default=None, help="TOML file with a [site] table (default: built-in broad_lab)")
+    p.add_argument(
+        "--smoothing",
+        action="append",
+        default=None,
+        metavar="KEY=VALUE",
+        help="a [smoothing] key of the recorded scenario, e.g. orientation_noise_deg=0.1 (repeatable)",
+    )
+    p.add_argument("--workers", type=int, default=2, help="processes for the runs (default: 2)")
+    p.add_argument("--out", default="twin", help="folder for the report (default: ./twin)")
+    p.add_argument("--force", action="store_true", help="write into an existing non-empty --out folder")
+    p.set_defaults(func=_cmd_twin)
 
     p = sub.add_parser(
         "estimate",

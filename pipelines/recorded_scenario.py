@@ -14,6 +14,7 @@ A scenario file::
     [smoothing]                    # all optional: GCV chooses the smoothing from the data
     position_noise_m = 1e-4        # a stated noise level chooses it by the unbiased risk instead
     orientation_noise_deg = 0.05
+    # position_cutoff_hz, orientation_cutoff_hz: where the gain is 1/2 (a reference with coloured noise)
     # position_lambda_s3, orientation_lambda_s3: λ outright
     max_gap_s = 0.25               # a longer gap without valid samples is an error
 
@@ -48,6 +49,8 @@ class SmoothingSpec(Section):
 
     position_noise_m: PositiveReal | None = None
     orientation_noise_deg: PositiveReal | None = None
+    position_cutoff_hz: PositiveReal | None = None
+    orientation_cutoff_hz: PositiveReal | None = None
     position_lambda_s3: NonNegativeReal | None = None
     orientation_lambda_s3: NonNegativeReal | None = None
     max_gap_s: PositiveReal = 0.25
@@ -61,6 +64,8 @@ class SmoothingSpec(Section):
             position_lambda=self.position_lambda_s3,
             orientation_lambda=self.orientation_lambda_s3,
             max_gap_s=self.max_gap_s,
+            position_cutoff_hz=self.position_cutoff_hz,
+            orientation_cutoff_hz=self.orientation_cutoff_hz,
         )
 
 
@@ -153,6 +158,25 @@ class RecordedSpec(ScenarioSpec):
         self.load()
         assert self._samples is not None
         return float(1.0 / np.median(np.diff(self._samples.t[self._samples.valid()])))
+
+    def report(self) -> str:
+        """The smoothing chosen and the gaps bridged (empty before the motion is fitted)."""
+        motion = self._motion
+        if motion is None:
+            return ""
+        sm = self.smoothing
+        if sm.orientation_lambda_s3 is not None or sm.orientation_cutoff_hz is not None:
+            chosen = "given"
+        else:
+            chosen = "unbiased risk" if sm.orientation_noise_deg is not None else "GCV"
+        parts = [f"recorded motion {Path(self.path).name}: {motion.duration:.6g} s at {motion.rate_hz:.6g} Hz"]
+        parts.append(f"attitude smoothed to {motion.orientation_cutoff_hz:.3g} Hz ({chosen})")
+        if motion.has_position:
+            parts.append(f"position to {motion.position_cutoff_hz:.3g} Hz")
+        else:
+            parts.append("no position recorded: the body is held at the origin")
+        parts.append(str(motion.gaps))
+        return "; ".join(parts)
 
     def trajectory(self, t: np.ndarray) -> Trajectory:
         """The truth at scenario times ``t`` (s; motion time ``t + time_offset_s``), stamped ``t``."""

@@ -18,11 +18,14 @@ role                type                                    holds               
 
 A pose's ``frame_id`` is the frame it is given in, the world (ENU), which REP 105 calls ``map``.
 
-Live streams (:mod:`gyroemu.pipelines.transport.zenoh_io`) carry the same roles but ``movement`` and
-``truth/pose`` (:func:`is_stream_role`). :func:`split_topic` is the one parser of a topic into its prefix and role; the
-modules that name channels (the MCAP log writer and reader :mod:`gyroemu.pipelines.formats.mcap_log`, the
-stream, the live estimator, the recorder, replay and the ROS 2 names of :mod:`gyroemu.pipelines.formats.ros2_keys`)
-ask it, and build topics with :func:`role_topic`.
+Live streams (:mod:`gyroemu.pipelines.transport.zenoh_io`) carry the same roles but ``movement``
+(:func:`is_stream_role`); ``gyroemu stream`` does not publish ``truth/pose``, but a replayed file's
+pose goes out under its device's key and a recorder stores it back.
+
+:func:`split_topic` is the one parser of a topic into its prefix and role; the modules that name
+channels (the MCAP log writer and reader :mod:`gyroemu.pipelines.formats.mcap_log`, the stream, the live
+estimator, the recorder, replay and the ROS 2 names of :mod:`gyroemu.pipelines.formats.ros2_keys`) ask
+it, and build topics with :func:`role_topic`.
 
 The encoding of what a channel holds into message fields is here too, once: :func:`measured_fields`
 (``/imu``), :func:`series_fields` (``/truth/imu``, ``/estimate/imu``; :func:`series_from_batch` reads it
@@ -99,7 +102,7 @@ ESTIMATE_ROLE = "estimate/imu"
 MOVEMENT_ROLE = "movement"
 """An imported dataset's mask of the samples that count (``gyroemu_msgs/msg/Flag``); files only."""
 POSE_ROLE = "truth/pose"
-"""True position and attitude in the world frame (``geometry_msgs/msg/PoseStamped``); files only."""
+"""True position and attitude in the world frame (``geometry_msgs/msg/PoseStamped``)."""
 _RAW = "raw/"
 
 BODY_FRAME = "base_link"
@@ -155,8 +158,8 @@ def is_prefix_name(name: str) -> bool:
 
 
 def is_stream_role(role: str) -> bool:
-    """Whether ``role`` goes on live streams too: every role but ``movement`` and ``truth/pose``."""
-    return role in (IMU_ROLE, MAG_ROLE, TRUTH_ROLE, ESTIMATE_ROLE) or raw_kind(role) is not None
+    """Whether ``role`` goes on live streams too: every role but ``movement``."""
+    return role in (IMU_ROLE, MAG_ROLE, TRUTH_ROLE, ESTIMATE_ROLE, POSE_ROLE) or raw_kind(role) is not None
 
 
 def role_message_type(role: str) -> MessageType | None:

@@ -31,7 +31,6 @@ file renamed at the end).
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -41,6 +40,7 @@ from numpy.typing import ArrayLike
 from gyroemu.dynamics.recorded import MotionSamples
 from gyroemu.dynamics.rotation import quat_multiply, quat_rotate
 from gyroemu.errors import ConfigError
+from gyroemu.pipelines.formats.atomic import write_text_atomic
 
 __all__ = [
     "MOTION_FORMATS",
@@ -204,24 +204,12 @@ def read_motion(path: str | os.PathLike[str], format: str, world_to_enu_quat: Ar
     )
 
 
-def _write_text(path: Path, text: str) -> Path:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
-
-
 def write_tum(path: str | os.PathLike[str], t: ArrayLike, q_wb: ArrayLike, pos_w: ArrayLike) -> Path:
     """Write a TUM trajectory: ``t`` (N,) s, ``q_wb`` (N, 4) w-first, ``pos_w`` (N, 3) m; full precision."""
     t, q, p = (np.asarray(a, dtype=float) for a in (t, q_wb, pos_w))
     data = np.column_stack([t, p, q[:, 1:], q[:, :1]])
     lines = ["# timestamp tx ty tz qx qy qz qw"] + [" ".join(repr(float(v)) for v in row) for row in data]
-    return _write_text(Path(path), "\n".join(lines) + "\n")
+    return write_text_atomic(path, "\n".join(lines) + "\n")
 
 
 def write_csv(path: str | os.PathLike[str], t: ArrayLike, q_wb: ArrayLike, pos_w: ArrayLike | None = None) -> Path:
@@ -231,4 +219,4 @@ def write_csv(path: str | os.PathLike[str], t: ArrayLike, q_wb: ArrayLike, pos_w
     names = CSV_COLUMNS if pos_w is not None else ("t_s", "qw", "qx", "qy", "qz")
     data = np.column_stack(columns)
     lines = [", ".join(names)] + [", ".join(repr(float(v)) for v in row) for row in data]
-    return _write_text(Path(path), "\n".join(lines) + "\n")
+    return write_text_atomic(path, "\n".join(lines) + "\n")

@@ -48,7 +48,6 @@ from __future__ import annotations
 import datetime
 import json
 import math
-import re
 import sys
 import time
 import warnings
@@ -69,6 +68,8 @@ from gyroemu.pipelines.estimation.registry import (
     make_filter,
     unavailable_filters,
 )
+from gyroemu.pipelines.formats.atomic import write_text_atomic
+from gyroemu.pipelines.formats.file_names import unique_stems
 
 __all__ = [
     "BenchError",
@@ -383,7 +384,7 @@ class BenchReport:
 
         directory = Path(directory)
         written = []
-        for case, stem in zip(self.cases, _unique_stems([c.name for c in self.cases])):
+        for case, stem in zip(self.cases, unique_stems([c.name for c in self.cases])):
             panels = (
                 [("total", "curve_total_deg"), ("inclination", "curve_inclination_deg")]
                 if case.mode == "9D"
@@ -421,29 +422,10 @@ class BenchReport:
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         paths = {"markdown": directory / "bench.md", "json": directory / "bench.json"}
-        _write_atomic(paths["json"], self.to_json())
-        _write_atomic(paths["markdown"], self.to_markdown())
+        write_text_atomic(paths["json"], self.to_json())
+        write_text_atomic(paths["markdown"], self.to_markdown())
         paths["plots"] = self.save_plots(directory)
         return paths
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
-def _unique_stems(names: list[str]) -> list[str]:
-    stems: list[str] = []
-    seen: dict[str, int] = {}
-    for name in names:
-        stem = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("_.") or "case"
-        seen[stem] = seen.get(stem, 0) + 1
-        stems.append(stem if seen[stem] == 1 else f"{stem}_{seen[stem]}")
-    return stems
 
 
 def _json_number(v):

@@ -3,20 +3,19 @@
 Each log is adapted to :class:`gyroemu.pipelines.identification.TrialData` (plain arrays):
 
 - ``.mcap``: its device's ``/imu``, ``/mag`` (tesla) and ``/truth/imu`` attitude, the ``/movement``
-  flags when present, and the truth position when the log reader provides one (a ``pose`` with
-  ``t`` and ``pos_w``); otherwise position is unavailable;
+  flags when present, and the ``/truth/pose`` position when the log has it; otherwise position is
+  unavailable;
 - ``.hdf5``: a BROAD trial, read directly, with its ``opt_pos`` (m) as the position track.
 
 The logs are identified together (:func:`gyroemu.pipelines.identification.identify`) and the device
 TOML (and with ``site_out`` the site snippet) written atomically: through a temporary file in the same
-folder and ``os.replace``, never over an existing file without ``force``. Every option is checked
+folder renamed at the end (:mod:`gyroemu.pipelines.formats.atomic`), never over an existing file
+without ``force``. Every option is checked
 before any work (:class:`IdentifyError`, naming the argument).
 """
 
 from __future__ import annotations
 
-import os
-import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -24,6 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from gyroemu.errors import ConfigError
+from gyroemu.pipelines.formats.atomic import write_text_atomic
 
 if TYPE_CHECKING:
     from gyroemu.pipelines.identification import Identification, TrialData
@@ -149,12 +149,11 @@ def read_trial(path: Path) -> TrialData:
         raise LogError("has no /truth/imu attitude to identify against", file=path)
     s = log.samples
     mag = s.mag if s.mag is not None and np.isfinite(s.mag).any() else None
-    pose = getattr(log, "pose", None)  # the /truth/pose track, once the log reader provides it
     pos, truth_t, q = None, truth.t, truth.q_wb
-    if pose is not None and getattr(pose, "pos_w", None) is not None:
+    if log.pose is not None:  # /truth/pose, at its own stamps
         from gyroemu.pipelines.identification.truth import interpolate_vectors
 
-        pos = interpolate_vectors(np.asarray(pose.t), np.asarray(pose.pos_w), truth_t)
+        pos = interpolate_vectors(log.pose.t, log.pose.pos_w, truth_t)
     return TrialData(
         name=path.name,
         t=s.t,
@@ -166,17 +165,6 @@ def read_trial(path: Path) -> TrialData:
         pos_w=pos,
         movement=log.movement,
     )
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def identify_logs(options: IdentifyOptions) -> Identification:
@@ -200,13 +188,13 @@ def run_identify(options: IdentifyOptions) -> IdentifySummary:
     started = time.perf_counter()
     result = identify_logs(options)
     site = result.site_toml() if options.site_out is not None else None
-    _write_atomic(options.out, result.device_toml())
+    write_text_atomic(options.out, result.device_toml())
     notes = list(result.notes)
     if options.site_out is not None:
         if site is None:
             notes.append("no magnetometer environment: --site-out not written")
         else:
-            _write_atomic(options.site_out, site)
+            write_text_atomic(options.site_out, site)
     mag = result.latency.get("magnetometer")
     noise = result.gyro_noise
     return IdentifySummary(

@@ -15,7 +15,6 @@ it is a terminal (:class:`gyroemu.pipelines.jobs.progress.PhaseProgress`).
 from __future__ import annotations
 
 import os
-import tempfile
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -105,6 +104,8 @@ class SimulateSummary:
         Wall-clock seconds of the whole run (simulation, measurement, writing).
     out : Path
         The file written.
+    notes : str
+        What the scenario reports of its truth (a recorded motion: its smoothing and gaps), or "".
     """
 
     scenario: str
@@ -115,6 +116,7 @@ class SimulateSummary:
     samples: int | None
     elapsed_s: float
     out: Path
+    notes: str = ""
 
 
 def check_options(options: SimulateOptions) -> None:
@@ -188,6 +190,7 @@ def run_simulate(options: SimulateOptions) -> SimulateSummary:
         samples=None if samples is None else len(samples),
         elapsed_s=time.perf_counter() - started,
         out=out,
+        notes=scenario.spec.report(),
     )
 
 
@@ -212,13 +215,8 @@ def npz_arrays(
 
 
 def write_npz_atomic(path: str | os.PathLike, arrays: Mapping[str, Any]) -> None:
-    """Write ``arrays`` (name: array-like) to ``path`` (.npz) through a temporary file, so no partial file is left."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """Write ``arrays`` (name: array-like) to ``path`` (.npz) whole or not at all
+    (:func:`gyroemu.pipelines.formats.atomic.write_atomic`)."""
+    from gyroemu.pipelines.formats.atomic import write_atomic
+
+    write_atomic(path, lambda f: np.savez(f, **arrays))

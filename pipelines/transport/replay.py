@@ -5,8 +5,9 @@ What goes out
 Every ``cdr`` channel of the file (or those named by ``--topics``), each message's recorded bytes
 unchanged, on the key expression of its topic (``interface.md``, "Live streams: Eclipse Zenoh"):
 
-- gyroemu's topics (``/imu``, ``/mag``, ``/truth/imu``, ``/estimate/imu``, ``/raw/<kind>``: the roles
-  of live streams, :func:`gyroemu.pipelines.formats.channels.is_stream_role`) go to ``gyroemu/<device>/<topic>``.
+- gyroemu's topics (``/imu``, ``/mag``, ``/truth/imu``, ``/truth/pose``, ``/estimate/imu``,
+  ``/raw/<kind>``: the roles of live streams, :func:`gyroemu.pipelines.formats.channels.is_stream_role`)
+  go to ``gyroemu/<device>/<topic>``.
   The device is the topic's prefix when the file's ``gyroemu`` metadata names that prefix
   (``/<device>/imu`` of a several-device file), else the ``device_name`` of the file's ``gyroemu``
   metadata for unprefixed topics, else ``--device-name`` (default ``imu0``).

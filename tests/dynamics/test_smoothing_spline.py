@@ -12,6 +12,7 @@ from gyroemu.dynamics.smoothing_spline import (
     contiguous_runs,
     cutoff_hz,
     derivative_noise_std,
+    lambda_for_cutoff,
     smoothing_spline,
     spline_gain,
 )
@@ -109,3 +110,13 @@ def test_gain_and_cutoff():
     assert fc == pytest.approx((lam * h) ** -0.25 / (2 * np.pi), rel=0.02)  # μ ≈ ω⁴ h well below Nyquist
     assert spline_gain(lam, h, 0.0) == 1.0
     assert cutoff_hz(0.0, h) == pytest.approx(50.0)
+
+
+@pytest.mark.parametrize("f_hz", [0.3, 5.0, 40.0])
+def test_lambda_for_cutoff_inverts_cutoff(f_hz):
+    h = 1 / 120
+    lam = lambda_for_cutoff(f_hz, h)
+    assert cutoff_hz(lam, h) == pytest.approx(f_hz, rel=1e-9)
+    assert spline_gain(lam, h, 2 * np.pi * f_hz) == pytest.approx(0.5, rel=1e-12)
+    with pytest.raises(ValueError, match="Nyquist"):
+        lambda_for_cutoff(60.0, h)

@@ -258,3 +258,15 @@ def test_long_gap_and_short_span_are_refused(tmp_path):
     result = gyroemu_simulate(write_scenario(tmp_path, "s.tum", "tum"), tmp_path / "b.mcap")
     assert result.returncode == 2 and "shorter than two samples" in result.stderr, result.stderr
     assert not (tmp_path / "a.mcap").exists() and not (tmp_path / "b.mcap").exists()
+
+
+def test_stated_cutoffs_set_the_smoothing(tmp_path):
+    truth = load_scenario("smooth_manoeuvre").simulate(duration=10.0, rate_hz=RATE)
+    write_tum(tmp_path / "m.tum", truth.t, truth.q_wb, truth.pos_w)
+    extra = "[smoothing]\norientation_cutoff_hz = 5.0\nposition_cutoff_hz = 3.0\n"
+    motion = load_scenario(write_scenario(tmp_path, "m.tum", "tum", extra)).spec.motion()
+    assert motion.orientation_cutoff_hz == pytest.approx(5.0, rel=1e-6)
+    assert motion.position_cutoff_hz == pytest.approx(3.0, rel=1e-6)
+    bad = load_scenario(write_scenario(tmp_path, "m.tum", "tum", "[smoothing]\norientation_cutoff_hz = 80.0\n"))
+    with pytest.raises(ConfigError, match="Nyquist"):
+        bad.spec.motion()

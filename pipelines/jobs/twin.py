@@ -1,0 +1,951 @@
+"""``gyroemu twin``: a recording with truth beside its emulated twins, through the attitude filters.
+
+A **twin** of a recording is its own recorded motion (the truth of the recording, smoothed by the
+``recorded`` scenario kind, :mod:`gyroemu.pipelines.recorded_scenario`) sensed by an emulated device in
+the modelled field of a site. Twin ``i`` uses device seed ``i`` and magnetic-environment seed ``i``.
+
+Inputs: a BROAD trial (``.hdf5``: IMU, magnetometer in µT, optical attitude and position, ``movement``
+mask) or a gyroemu MCAP log (one device with ``/imu``, ``/truth/imu`` and usually ``/truth/pose``; its
+``/movement`` mask when it has one, otherwise every sample counts).
+
+Times. The recorded scenario's time 0 is the recording's first valid truth sample, at stamp ``t0``
+(``scenario.spec.motion().t0``) in the recording's clock (BROAD: ``k / sampling_rate``; MCAP: the stamps
+less the first truth stamp). A twin sample taken at true instant ``t`` corresponds to the real time
+``t + t0``; the real trial's movement mask and rest phase are carried over to the twin by the nearest
+real sample.
+
+Filters. Each filter runs 9D (with the magnetometer, when both the recording and the device have one)
+and 6D, with the **same** :class:`FilterSetup` on the real log and on its twins: what ``gyroemu bench``
+uses for the real log (``setup_from_metadata`` of an MCAP log; the defaults at the file's rate for a
+BROAD trial, as ``tests/benchmarks/broad_filters.py``). Magnetometers go to the filters in tesla (BROAD's
+µT × 1e-6). Errors are BROAD's (:mod:`gyroemu.pipelines.estimation.metrics`): RMSE, degrees, over the
+movement samples with a finite reference.
+
+Residuals. Measured minus truth, over the first rest phase of the real recording
+(:func:`gyroemu.pipelines.identification.find_rest_phases`; else the samples before the first movement
+sample): real gyro and accelerometer minus the log's truth rate and specific force when it has them
+(an MCAP log), else minus 0 and ``R_bw (0, 0, g)`` (BROAD); twin gyro and accelerometer minus the
+trajectory's truth at the sample instants
+(:func:`gyroemu.pipelines.formats.mcap_log.truth_series`). Their Allan deviations per axis at τ from
+0.01 to 10 s (those the phase holds twice), the twin's (RMS over seeds) over the real's per τ, and
+Welch spectra. (At rest the real truth is taken as ω = 0 and ``R_bw (0, 0, g)``: the differentiated
+optical attitude is dominated by its noise there, several °/s at BROAD's rate.)
+
+Outputs in ``--out``: ``twin.md``, ``twin.json`` and ``<trial>.png`` (Allan deviations and spectra, real
+against twin), each written through a temporary file. An existing non-empty folder is refused without
+``force``. Every option is checked before any work (:class:`TwinError`, naming the argument); the runs
+(the real log and each twin, every filter) go to ``workers`` processes.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import math
+import os
+import time
+import tomllib
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gyroemu.errors import ConfigError
+
+__all__ = [
+    "METRICS",
+    "RANKED_FILTERS",
+    "TwinError",
+    "TwinOptions",
+    "TwinReport",
+    "check_options",
+    "default_site_file",
+    "run_twin",
+]
+
+METRICS = ("total_9d", "heading_9d", "inclination_9d", "inclination_6d")
+RANKED_FILTERS = ("mekf", "vqf", "madgwick", "mahony")
+TAUS_S = np.logspace(-2, 1, 16)
+GRAVITY_M_S2 = 9.81
+_SUFFIXES = {".hdf5": "broad", ".h5": "broad", ".mcap": "mcap"}
+
+
+class TwinError(ConfigError):
+    """Bad options of ``gyroemu twin``, found before any work (the message names the argument)."""
+
+
+TWIN_SMOOTHING = {"orientation_cutoff_hz": 5.0, "position_cutoff_hz": 3.0}
+"""The twins' smoothing of the recorded reference, one setting for every trial. An optical reference
+resampled to the IMU's rate has noise that is not white at that rate, so GCV leaves it almost
+unsmoothed (cut-offs of 54 Hz and 143 Hz on BROAD's trial 07) and the twin's device senses the
+reference's noise as motion: at rest 1–15 °/s and 0.5–9 m/s² where the real sensor reads 0.1 °/s and
+0.05 m/s². The real gyro puts 90 % of its movement-phase power below 2.4–8.5 Hz on the undisturbed
+trials; 5 Hz and 3 Hz keep most of the motion and bring the twin's residual at rest to the real one's
+(README, "The twin": the figures with other cut-offs)."""
+
+
+def default_site_file() -> Path:
+    """The built-in site of the BROAD lab: ``configs/sites/broad_lab.toml``."""
+    from gyroemu.dynamics.config import config_dir
+
+    return Path(config_dir()) / "sites" / "broad_lab.toml"
+
+
+@dataclass(frozen=True)
+class TwinOptions:
+    """What ``gyroemu twin`` reads and writes.
+
+    Attributes
+    ----------
+    trials : recordings with truth (BROAD ``.hdf5`` or gyroemu ``.mcap``).
+    device : the emulated device (built-in name or TOML path).
+    seeds : number of twins per trial (seeds 0 … seeds − 1).
+    filters : filter names (default: every available built-in).
+    out : folder for ``twin.md``, ``twin.json`` and the plots.
+    force : write into an existing non-empty folder.
+    site : TOML file whose ``[site]`` table is the twins' site.
+    workers : processes for the runs (1: in this process).
+    smoothing : the recorded scenario's ``[smoothing]`` table (default :data:`TWIN_SMOOTHING`).
+    """
+
+    trials: Sequence[Path]
+    device: str = "aktos_t_broad"
+    seeds: int = 5
+    filters: Sequence[str] | None = None
+    out: Path = Path("twin")
+    force: bool = False
+    site: Path = field(default_factory=default_site_file)
+    workers: int = 2
+    smoothing: dict | None = None
+
+    def __post_init__(self) -> None:
+        if self.smoothing is None:
+            object.__setattr__(self, "smoothing", dict(TWIN_SMOOTHING))
+        object.__setattr__(self, "trials", tuple(Path(p) for p in self.trials))
+        object.__setattr__(self, "out", Path(self.out))
+        object.__setattr__(self, "site", Path(self.site))
+        if self.filters is not None:
+            object.__setattr__(self, "filters", tuple(dict.fromkeys(self.filters)))
+
+
+# ==================================================================================================
+# Checking and loading (before any work)
+
+
+@dataclass
+class _Real:
+    """A real recording, as the filters and the residuals need it (times in the motion's clock)."""
+
+    name: str
+    path: Path
+    format: str
+    t: np.ndarray  # (N,) s, recording clock (BROAD k/fs; MCAP stamps − first truth stamp)
+    gyro: np.ndarray
+    accel: np.ndarray
+    mag: np.ndarray | None  # tesla
+    q_true: np.ndarray  # (N, 4), NaN rows without reference
+    mask: np.ndarray  # (N,) bool: samples that count
+    rate_hz: float
+    metadata: dict | None
+    counted: str
+    omega_true: np.ndarray | None = None  # (N, 3) rad/s, a log's /truth/imu rate
+    force_true: np.ndarray | None = None  # (N, 3) m/s², a log's /truth/imu specific force
+
+
+def check_options(options: TwinOptions) -> tuple[list[str], dict, dict, Any]:
+    """:class:`TwinError` for any bad option. Returns the filters, those left out, the site table and the
+    device (seed 0)."""
+    from gyroemu.pipelines.estimation.registry import FilterError, available_filters, filter_class, unavailable_filters
+    from gyroemu.sensors import load_device
+
+    if not options.trials:
+        raise TwinError("argument TRIAL: give at least one recording")
+    for trial in options.trials:
+        if not trial.is_file():
+            raise TwinError(f"argument TRIAL: {trial}: no such file")
+        if trial.suffix.lower() not in _SUFFIXES:
+            raise TwinError(f"argument TRIAL: {trial}: expected a BROAD .hdf5 trial or a gyroemu .mcap log")
+    if isinstance(options.seeds, bool) or not isinstance(options.seeds, int) or options.seeds < 1:
+        raise TwinError(f"argument --seeds: must be a whole number of at least 1, got {options.seeds!r}")
+    if isinstance(options.workers, bool) or not isinstance(options.workers, int) or options.workers < 1:
+        raise TwinError(f"argument --workers: must be a whole number of at least 1, got {options.workers!r}")
+    unavailable: dict = {}
+    if options.filters is None:
+        filters = available_filters()
+        unavailable = unavailable_filters()
+    else:
+        filters = list(options.filters)
+        if not filters:
+            raise TwinError("argument --filter: give at least one filter")
+        for spec in filters:
+            try:
+                filter_class(spec)
+            except FilterError as e:
+                raise TwinError(f"argument --filter: {e}") from None
+    try:
+        device = load_device(options.device, seed=0)
+    except ConfigError as e:
+        raise TwinError(f"argument --device: {e}") from None
+    site = _read_site(options.site)
+    out = options.out
+    if out.exists():
+        if not out.is_dir():
+            raise TwinError(f"argument --out: {out} is not a folder")
+        if any(out.iterdir()) and not options.force:
+            raise TwinError(f"argument --out: {out} is not empty (use --force to write into it)")
+    elif not out.parent.is_dir() and out.parent != Path(""):
+        raise TwinError(f"argument --out: {out.parent} is not a folder")
+    return filters, unavailable, site, device
+
+
+def _read_site(path: Path) -> dict:
+    from gyroemu.dynamics.earth import Site
+
+    if not path.is_file():
+        raise TwinError(f"argument --site: {path}: no such file")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+        raise TwinError(f"argument --site: {path}: {e}") from None
+    site = data.get("site")
+    if not isinstance(site, dict):
+        raise TwinError(f"argument --site: {path}: has no [site] table")
+    env = site.get("magnetic_environment")
+    if env is not None and not isinstance(env, dict):
+        raise TwinError(f"argument --site: {path}: [site.magnetic_environment] is not a table")
+    try:
+        Site.model_validate(_site_with_seed(site, 0))
+    except Exception as e:  # noqa: BLE001 - pydantic's ValidationError, named
+        raise TwinError(f"argument --site: {path}: {e}") from None
+    return site
+
+
+def _site_with_seed(site: dict, seed: int) -> dict:
+    out = dict(site)
+    env = dict(out.get("magnetic_environment") or {})
+    if env:
+        env["seed"] = seed
+        out["magnetic_environment"] = env
+    return out
+
+
+def _scenario(real: _Real, site: dict, seed: int, smoothing: dict | None = None):
+    from gyroemu.dynamics.scenarios import scenario_from_dict
+
+    data = {"kind": "recorded", "path": str(real.path), "format": real.format, "site": _site_with_seed(site, seed)}
+    if smoothing:
+        data["smoothing"] = dict(smoothing)
+    return scenario_from_dict(data, name=real.name)
+
+
+def _load_real(path: Path) -> _Real:
+    """A recording (errors name the file)."""
+    fmt = _SUFFIXES[path.suffix.lower()]
+    if fmt == "broad":
+        from gyroemu.pipelines.formats.importers import read_broad
+
+        trial = read_broad(path)
+        t = np.arange(len(trial)) / trial.rate_hz
+        mask = np.asarray(trial.movement, bool)
+        return _Real(
+            name=path.name,
+            path=path,
+            format=fmt,
+            t=t,
+            gyro=np.asarray(trial.gyro, float),
+            accel=np.asarray(trial.accel, float),
+            mag=np.asarray(trial.mag_ut, float) * 1e-6,
+            q_true=np.asarray(trial.opt_quat, float),
+            mask=mask if mask.any() else np.ones(len(t), bool),
+            rate_hz=float(trial.rate_hz),
+            metadata=None,
+            counted="movement mask" if mask.any() else "every sample",
+        )
+    from gyroemu.pipelines.formats.mcap_log import read_mcap
+
+    log = read_mcap(path)
+    if len(log.devices) != 1:
+        raise TwinError(f"argument TRIAL: {path}: holds {len(log.devices)} devices; a twin needs exactly one")
+    dev = log.device
+    if dev.truth is None or dev.truth.q_wb is None:
+        raise TwinError(f"argument TRIAL: {path}: has no /truth/imu attitude")
+    s = dev.samples
+    tt = np.asarray(dev.truth.t, float)
+    t = np.asarray(s.t, float)
+    dt = float(np.median(np.diff(t)))
+    j = np.clip(np.searchsorted(tt, t), 1, len(tt) - 1)
+    j = np.where(np.abs(tt[j - 1] - t) <= np.abs(tt[j] - t), j - 1, j)
+    hit = np.abs(tt[j] - t) <= 0.25 * dt
+    q_true = np.full((len(t), 4), np.nan)
+    q_true[hit] = dev.truth.q_wb[j[hit]]
+    extra = {}
+    for key, attr in (("omega_true", "omega_b"), ("force_true", "specific_force_b")):
+        v = getattr(dev.truth, attr, None)
+        if v is not None and np.isfinite(v).any():
+            extra[key] = np.full((len(t), 3), np.nan)
+            extra[key][hit] = np.asarray(v, float)[j[hit]]
+    movement = getattr(dev, "movement", None)
+    has_mask = movement is not None and np.asarray(movement, bool).any()
+    mag = np.asarray(s.mag, float)
+    return _Real(
+        name=path.name,
+        path=path,
+        format=fmt,
+        t=t - tt[0],  # the motion file's clock (read_mcap_motion: truth stamps − the first)
+        gyro=np.asarray(s.gyro, float),
+        accel=np.asarray(s.accel, float),
+        mag=mag if np.isfinite(mag).all(axis=1).any() else None,
+        q_true=q_true,
+        mask=np.asarray(movement, bool) if has_mask else np.ones(len(t), bool),
+        rate_hz=1.0 / dt,
+        metadata=dev.metadata,
+        counted="movement mask" if has_mask else "every sample",
+        **extra,
+    )
+
+
+# ==================================================================================================
+# One run: the real log or one twin, every filter, and its residuals at rest
+
+
+def _filter_errors(filters, setup9, setup6, t, gyro, accel, mag, q_true, mask, timings) -> dict:
+    """{filter: {metric: RMSE deg or None}} and wall times in ``timings``."""
+    from gyroemu.pipelines.estimation.metrics import attitude_errors, rmse_deg
+    from gyroemu.pipelines.estimation.registry import make_filter
+
+    counted = mask & np.isfinite(q_true).all(axis=1)
+    out: dict[str, dict] = {}
+    for spec in filters:
+        row: dict[str, Any] = dict.fromkeys(METRICS)
+        row["error"] = None
+        for mode, setup in (("9d", setup9), ("6d", setup6)):
+            if setup is None:
+                continue
+            started = time.perf_counter()
+            try:
+                est = make_filter(spec, setup).process(t, gyro, accel, mag if mode == "9d" else None)
+                q = np.asarray(est.q_wb, float)
+                if q.shape != (len(t), 4):
+                    raise ValueError(f"returned q_wb of shape {q.shape}")
+            except Exception as exc:  # noqa: BLE001 - a failing filter is reported, not fatal
+                row["error"] = f"{mode}: {type(exc).__name__}: {exc}"
+                continue
+            finally:
+                timings[f"filter {spec} {mode}"] = timings.get(f"filter {spec} {mode}", 0.0) + (
+                    time.perf_counter() - started
+                )
+            with np.errstate(invalid="ignore", divide="ignore"):
+                err = attitude_errors(q, q_true)
+            if mode == "9d":
+                row["total_9d"] = rmse_deg(err.total, counted)
+                row["heading_9d"] = rmse_deg(err.heading, counted)
+                row["inclination_9d"] = rmse_deg(err.inclination, counted)
+            else:
+                row["inclination_6d"] = rmse_deg(err.inclination, counted)
+        out[spec] = row
+    return out
+
+
+def _adev_at(x: np.ndarray, dt: float) -> np.ndarray:
+    """(len(TAUS_S), 3) Allan deviation per axis at TAUS_S (NaN where the series is too short)."""
+    from gyroemu.sensors.allan import allan_deviation
+
+    out = np.full((len(TAUS_S), 3), np.nan)
+    taus = TAUS_S[(TAUS_S >= dt) & (TAUS_S <= 0.5 * len(x) * dt)]
+    if len(x) < 8 or not len(taus):
+        return out
+    for axis in range(3):
+        a = allan_deviation(x[:, axis] - np.mean(x[:, axis]), dt, taus=taus)
+        for tau, adev in zip(a.tau, a.adev):
+            i = int(np.argmin(np.abs(np.log(TAUS_S / tau))))
+            if abs(math.log(TAUS_S[i] / tau)) < 0.1:
+                out[i, axis] = adev
+    return out
+
+
+def _spectrum(x: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    from scipy.signal import welch
+
+    nper = int(min(len(x), 2 ** int(math.log2(max(8.0, 2.0 * fs)))))
+    f, p = welch(x - x.mean(axis=0), fs=fs, nperseg=nper, axis=0)
+    return f, p
+
+
+def _residuals(gyro_res: np.ndarray, accel_res: np.ndarray, fs: float) -> dict:
+    ok = np.isfinite(gyro_res).all(axis=1) & np.isfinite(accel_res).all(axis=1)
+    g, a = gyro_res[ok], accel_res[ok]
+    out: dict[str, Any] = {"samples": int(ok.sum())}
+    for key, x in (("gyro", g), ("accel", a)):
+        out[f"{key}_adev"] = _adev_at(x, 1.0 / fs)
+        if len(x) >= 16:
+            out[f"{key}_psd_f"], out[f"{key}_psd"] = _spectrum(x, fs)
+        else:
+            out[f"{key}_psd_f"], out[f"{key}_psd"] = np.zeros(0), np.zeros((0, 3))
+        out[f"{key}_std"] = np.std(x, axis=0) if len(x) else np.full(3, np.nan)
+    return out
+
+
+def _run_real(real: _Real, filters, setup9, setup6, rest: slice) -> dict:
+    from gyroemu.pipelines.identification.truth import rotation_bw
+
+    timings: dict[str, float] = {}
+    errors = _filter_errors(
+        filters, setup9, setup6, real.t, real.gyro, real.accel, real.mag, real.q_true, real.mask, timings
+    )
+    started = time.perf_counter()
+    # At rest the truth is ω = 0 (Earth's rate, ≤ 0.0042 °/s, is constant: no Allan or spectral
+    # content) and f = R_bw (0, 0, g): the differentiated optical attitude would be its noise (°/s).
+    # A log's own truth rate and specific force are used when it has them.
+    q = real.q_true[rest]
+    omega = np.zeros((len(q), 3)) if real.omega_true is None else real.omega_true[rest]
+    force = (
+        np.einsum("nij,j->ni", rotation_bw(q), np.array([0.0, 0.0, GRAVITY_M_S2]))
+        if real.force_true is None
+        else real.force_true[rest]
+    )
+    res = _residuals(real.gyro[rest] - omega, real.accel[rest] - force, real.rate_hz)
+    timings["residuals"] = time.perf_counter() - started
+    return {"errors": errors, "residuals": res, "timings": timings}
+
+
+def _run_twin(real: _Real, site: dict, smoothing, device_name: str, seed: int, filters, setup9, setup6, rest_t) -> dict:
+    from gyroemu.pipelines.formats.mcap_log import truth_series
+    from gyroemu.sensors import load_device
+
+    timings: dict[str, float] = {}
+    started = time.perf_counter()
+    scenario = _scenario(real, site, seed, smoothing)
+    device = load_device(device_name, seed=seed)
+    t0 = float(scenario.spec.motion().t0)
+    timings["scenario (load, fit)"] = time.perf_counter() - started
+    started = time.perf_counter()
+    traj = scenario.simulate(rate_hz=device.spec.rate_hz)
+    timings["simulate"] = time.perf_counter() - started
+    started = time.perf_counter()
+    samples = device.measure(traj)
+    timings["measure"] = time.perf_counter() - started
+    started = time.perf_counter()
+    truth = truth_series(traj, samples)
+    instants = np.asarray(samples.t_true if samples.t_true is not None else samples.t, float)
+    timings["truth"] = time.perf_counter() - started
+    # The real trial's mask, by the nearest real sample to each twin instant (real time = t + t0).
+    real_time = instants + t0
+    k = np.clip(np.searchsorted(real.t, real_time), 1, len(real.t) - 1)
+    k = np.where(np.abs(real.t[k - 1] - real_time) <= np.abs(real.t[k] - real_time), k - 1, k)
+    inside = (real_time >= real.t[0] - 0.5 / real.rate_hz) & (real_time <= real.t[-1] + 0.5 / real.rate_hz)
+    mask = real.mask[k] & inside
+    t = np.asarray(samples.t, float)
+    mag: np.ndarray | None = np.asarray(samples.mag, float) if samples.mag is not None else None
+    if mag is not None and not np.isfinite(mag).all(axis=1).any():
+        mag = None
+    assert truth.q_wb is not None
+    errors = _filter_errors(
+        filters,
+        setup9 if mag is not None else None,
+        setup6,
+        t,
+        samples.gyro,
+        samples.accel,
+        mag,
+        truth.q_wb,
+        mask,
+        timings,
+    )
+    started = time.perf_counter()
+    at_rest = (real_time >= rest_t[0]) & (real_time <= rest_t[1])
+    assert truth.omega_b is not None and truth.specific_force_b is not None
+    res = _residuals(
+        samples.gyro[at_rest] - truth.omega_b[at_rest],
+        samples.accel[at_rest] - truth.specific_force_b[at_rest],
+        float(device.spec.rate_hz),
+    )
+    timings["residuals"] = time.perf_counter() - started
+    return {
+        "errors": errors,
+        "residuals": res,
+        "timings": timings,
+        "t0": t0,
+        "samples": len(t),
+        "counted": int(mask.sum()),
+    }
+
+
+def _task(payload: tuple) -> tuple[tuple, dict]:
+    key, fn, args = payload
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        started = time.perf_counter()
+        out = fn(*args)
+        out["wall_s"] = time.perf_counter() - started
+    return key, out
+
+
+# ==================================================================================================
+# Report
+
+
+def _finite(x) -> float | None:
+    if x is None:
+        return None
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _list(a: np.ndarray, digits: int = 6) -> list:
+    return [_list(v, digits) if np.ndim(v) else _finite(float(f"{v:.{digits}g}")) for v in np.asarray(a)]
+
+
+@dataclass
+class TrialResult:
+    """One recording beside its twins."""
+
+    name: str
+    source: dict
+    mode: str
+    rate_hz: float
+    twin_rate_hz: float
+    t0_s: float
+    rest: dict
+    filters: list[dict]
+    ranking: dict
+    residuals: dict
+    curves: dict  # for the plot: real and twin Allan deviations and spectra
+    notes: list[str] = field(default_factory=list)
+
+
+@dataclass
+class TwinReport:
+    """What :func:`run_twin` found."""
+
+    trials: list[TrialResult]
+    settings: dict
+    timings: dict
+    notes: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return {
+            "gyroemu_twin": 1,
+            "settings": self.settings,
+            "definitions": {
+                "errors": "BROAD: q_err = q_est ⊗ conj(q_true); total 2 acos|w|, heading 2 atan|z/w|, "
+                "inclination 2 acos sqrt(w²+z²); RMSE in degrees over the movement samples with a finite "
+                "reference (twins: the real mask at the nearest real sample, real time = twin time + t0)",
+                "twin": "mean, std (ddof 1), n over the seeds whose run gave a finite value; values per seed",
+                "ratio": "twin mean / real",
+                "ranking": f"order of {', '.join(RANKED_FILTERS)} by 9D total RMSE, real and twin mean",
+                "residuals": "measured − truth over the first rest phase; Allan deviation per axis (x, y, z) "
+                "at tau_s, twin: RMS over seeds; ratio twin/real per tau and axis; psd_ratio: median over "
+                "1 Hz … rate/4 of the twin's mean Welch spectrum over the real's, per axis",
+            },
+            "timings_s": self.timings,
+            "notes": self.notes,
+            "trials": [
+                {
+                    "name": tr.name,
+                    "source": tr.source,
+                    "mode": tr.mode,
+                    "rate_hz": tr.rate_hz,
+                    "twin_rate_hz": tr.twin_rate_hz,
+                    "t0_s": tr.t0_s,
+                    "rest": tr.rest,
+                    "filters": tr.filters,
+                    "ranking": tr.ranking,
+                    "residuals": tr.residuals,
+                    "notes": tr.notes,
+                }
+                for tr in self.trials
+            ],
+        }
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=1, ensure_ascii=False, allow_nan=False)
+
+    def to_markdown(self) -> str:
+        s = self.settings
+        lines = [
+            "# gyroemu twin",
+            "",
+            f"Device `{s['device']}`, {s['seeds']} twin(s) per recording (device and magnetic-environment "
+            f"seeds 0…{s['seeds'] - 1}), site `{s['site']}`. Twin: mean ± standard deviation over the seeds; "
+            "ratio: twin mean / real. RMSE in degrees (BROAD's definitions) over the movement samples.",
+            "",
+        ]
+        for tr in self.trials:
+            lines += [f"## {tr.name} ({tr.mode})", ""]
+            lines.append(
+                "| filter | 9D total real | 9D total twin | ratio | 9D heading real | 9D heading twin | ratio "
+                "| 9D inclination real | 9D inclination twin | ratio | 6D inclination real | 6D inclination twin "
+                "| ratio |"
+            )
+            lines.append("|---|" + "---|" * 12)
+            for fr in tr.filters:
+                cells = [fr["filter"]]
+                for m in METRICS:
+                    real = fr["real"][m]
+                    tw = fr["twin"][m]
+                    cells.append("—" if real is None else f"{real:.2f}")
+                    if tw["mean"] is None:
+                        cells.append("—")
+                    else:
+                        cells.append(f"{tw['mean']:.2f} ± {tw['std']:.2f}" if tw["n"] > 1 else f"{tw['mean']:.2f}")
+                    cells.append("—" if fr["ratio"][m] is None else f"{fr['ratio'][m]:.2f}")
+                lines.append("| " + " | ".join(cells) + " |")
+            lines.append("")
+            rk = tr.ranking
+            if rk["same"] is None:
+                lines.append(f"Ranking by 9D total: not available ({rk.get('why', '')}).")
+            else:
+                lines.append(
+                    f"Ranking by 9D total: real {' < '.join(rk['real'])}; twin {' < '.join(rk['twin'])} — "
+                    + ("**same**." if rk["same"] else "**differs**.")
+                )
+            rest = tr.rest
+            lines.append("")
+            lines.append(
+                f"Residuals at rest ({rest['source']}: {rest['t_start_s']:.2f}…{rest['t_stop_s']:.2f} s of the "
+                f"recording, {rest['real_samples']} real samples):"
+            )
+            lines.append("")
+            lines.append(
+                "| sensor | real std (x, y, z) | twin std (x, y, z) | Allan ratio twin/real min … max "
+                "| PSD ratio (x, y, z) |"
+            )
+            lines.append("|---|---|---|---|---|")
+            for key, unit in (("gyro", "°/s"), ("accel", "m/s²")):
+                r = tr.residuals[key]
+                scale = math.degrees(1.0) if key == "gyro" else 1.0
+
+                def fmt(v, scale=scale):
+                    return "—" if v is None else f"{v * scale:.3g}"
+
+                ratio = (
+                    "—"
+                    if r["ratio_min"] is None
+                    else f"{r['ratio_min']:.2f} … {r['ratio_max']:.2f} (τ {r['tau_min_s']:.2g}…{r['tau_max_s']:.2g} s)"
+                )
+                psd = ", ".join("—" if v is None else f"{v:.2f}" for v in r["psd_ratio"])
+                lines.append(
+                    f"| {key} | {', '.join(fmt(v) for v in r['real_std'])} {unit} | "
+                    f"{', '.join(fmt(v) for v in r['twin_std'])} {unit} | {ratio} | {psd} |"
+                )
+            for n in tr.notes:
+                lines.append(f"- {n}")
+            lines.append("")
+        lines.append(
+            "Timings (s, summed over processes): " + ", ".join(f"{k} {v:.1f}" for k, v in self.timings.items())
+        )
+        if self.notes:
+            lines += ["", "Notes:"] + [f"- {n}" for n in self.notes]
+        return "\n".join(lines) + "\n"
+
+    def save_plots(self, directory) -> list[Path]:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        from gyroemu.pipelines.formats.file_names import unique_stems
+
+        directory = Path(directory)
+        written = []
+        for tr, stem in zip(self.trials, unique_stems([Path(t.name).stem for t in self.trials])):
+            fig, axes = plt.subplots(2, 2, figsize=(11, 7.5))
+            colours = ("C0", "C1", "C2")
+            for col, (key, unit, scale) in enumerate((("gyro", "°/s", math.degrees(1.0)), ("accel", "m/s²", 1.0))):
+                c = tr.curves[key]
+                ax = axes[0, col]
+                for axis in range(3):
+                    ax.loglog(
+                        TAUS_S, c["real_adev"][:, axis] * scale, "-", color=colours[axis], label=f"real {'xyz'[axis]}"
+                    )
+                    ax.loglog(
+                        TAUS_S, c["twin_adev"][:, axis] * scale, "--", color=colours[axis], label=f"twin {'xyz'[axis]}"
+                    )
+                ax.set_title(f"{key} residual at rest: Allan deviation")
+                ax.set_xlabel("τ, s")
+                ax.set_ylabel(unit)
+                ax.grid(True, which="both", alpha=0.3)
+                ax.legend(fontsize=7, ncol=2)
+                ax = axes[1, col]
+                for axis in range(3):
+                    if len(c["real_f"]):
+                        ax.semilogy(c["real_f"], c["real_psd"][:, axis] * scale**2, "-", color=colours[axis], lw=0.8)
+                    if len(c["twin_f"]):
+                        ax.semilogy(c["twin_f"], c["twin_psd"][:, axis] * scale**2, "--", color=colours[axis], lw=0.8)
+                ax.set_title(f"{key} residual at rest: spectrum (solid real, dashed twin)")
+                ax.set_xlabel("Hz")
+                ax.set_ylabel(f"({unit})²/Hz")
+                ax.grid(True, which="both", alpha=0.3)
+            fig.suptitle(f"{tr.name}: real vs twin ({self.settings['device']}, {self.settings['seeds']} seeds)")
+            fig.tight_layout()
+            path = directory / f"{stem}.png"
+            tmp = directory / f".{stem}.tmp.png"
+            try:
+                fig.savefig(tmp, dpi=100)
+                tmp.replace(path)
+            finally:
+                plt.close(fig)
+                tmp.unlink(missing_ok=True)
+            written.append(path)
+        return written
+
+    def save(self, directory) -> dict:
+        """``twin.md``, ``twin.json`` and the plots in ``directory`` (made if missing); their paths."""
+        from gyroemu.pipelines.formats.atomic import write_text_atomic
+
+        directory = Path(directory)
+        directory.mkdir(parents=True, exist_ok=True)
+        paths: dict[str, Any] = {"markdown": directory / "twin.md", "json": directory / "twin.json"}
+        write_text_atomic(paths["json"], self.to_json())
+        write_text_atomic(paths["markdown"], self.to_markdown())
+        paths["plots"] = self.save_plots(directory)
+        return paths
+
+
+def _summary(values: list) -> dict:
+    finite = [float(v) for v in values if v is not None and math.isfinite(v)]
+    return {
+        "mean": float(np.mean(finite)) if finite else None,
+        "std": (float(np.std(finite, ddof=1)) if len(finite) > 1 else 0.0) if finite else None,
+        "n": len(finite),
+        "values": [_finite(v) for v in values],
+    }
+
+
+def _rank(values: dict) -> list[str]:
+    return sorted(values, key=lambda f: values[f])
+
+
+def _trial_result(real: _Real, real_run: dict, twins: list[dict], filters, mode, rest, seeds, twin_rate) -> TrialResult:
+    rows = []
+    for spec in filters:
+        r = real_run["errors"][spec]
+        tw = {m: _summary([tr["errors"][spec][m] for tr in twins]) for m in METRICS}
+        ratio = {
+            m: (tw[m]["mean"] / r[m] if tw[m]["mean"] is not None and _finite(r[m]) and r[m] > 0 else None)
+            for m in METRICS
+        }
+        errs = [e for e in [r.get("error")] + [tr["errors"][spec].get("error") for tr in twins] if e]
+        rows.append(
+            {
+                "filter": spec,
+                "real": {m: _finite(r[m]) for m in METRICS},
+                "twin": tw,
+                "ratio": ratio,
+                "errors": errs,
+            }
+        )
+    ranked = [f for f in RANKED_FILTERS if f in filters]
+    ranking: dict[str, Any] = {"filters": ranked, "real": None, "twin": None, "same": None}
+    if mode != "9D":
+        ranking["why"] = "6D only"
+    elif len(ranked) < 2:
+        ranking["why"] = f"fewer than two of {', '.join(RANKED_FILTERS)}"
+    else:
+        by = {row["filter"]: row for row in rows}
+        real_v = {f: by[f]["real"]["total_9d"] for f in ranked}
+        twin_v = {f: by[f]["twin"]["total_9d"]["mean"] for f in ranked}
+        if any(v is None for v in real_v.values()) or any(v is None for v in twin_v.values()):
+            ranking["why"] = "a filter without a 9D total"
+        else:
+            ranking.update(real=_rank(real_v), twin=_rank(twin_v))
+            ranking["same"] = ranking["real"] == ranking["twin"]
+    residuals: dict[str, Any] = {"tau_s": _list(TAUS_S, 4)}
+    curves: dict[str, Any] = {}
+    rr = real_run["residuals"]
+    for key in ("gyro", "accel"):
+        real_adev = rr[f"{key}_adev"]
+        twin_adev = np.sqrt(np.nanmean(np.stack([t["residuals"][f"{key}_adev"] ** 2 for t in twins]), axis=0))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratio = twin_adev / real_adev
+        ok = np.isfinite(ratio)
+        taus_ok = TAUS_S[ok.any(axis=1)]
+        psd_ratio: list[float | None] = [None, None, None]
+        f_real, p_real = rr[f"{key}_psd_f"], rr[f"{key}_psd"]
+        twin_p = [t["residuals"][f"{key}_psd"] for t in twins if len(t["residuals"][f"{key}_psd_f"])]
+        f_twin = twins[0]["residuals"][f"{key}_psd_f"]
+        p_twin = np.mean(np.stack(twin_p), axis=0) if twin_p and all(len(p) == len(twin_p[0]) for p in twin_p) else None
+        if len(f_real) and p_twin is not None:
+            band = (f_real >= 1.0) & (f_real <= real.rate_hz / 4)
+            if band.any():
+                interp = np.stack([np.interp(f_real[band], f_twin, p_twin[:, a]) for a in range(3)], axis=1)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    psd_ratio = [_finite(v) for v in np.median(interp / p_real[band], axis=0)]
+        residuals[key] = {
+            "unit": "rad/s" if key == "gyro" else "m/s²",
+            "real_adev": _list(real_adev),
+            "twin_adev": _list(twin_adev),
+            "ratio": _list(ratio, 4),
+            "ratio_min": _finite(np.min(ratio[ok])) if ok.any() else None,
+            "ratio_max": _finite(np.max(ratio[ok])) if ok.any() else None,
+            "tau_min_s": _finite(taus_ok.min()) if len(taus_ok) else None,
+            "tau_max_s": _finite(taus_ok.max()) if len(taus_ok) else None,
+            "real_std": _list(rr[f"{key}_std"]),
+            "twin_std": _list(np.mean(np.stack([t["residuals"][f"{key}_std"] for t in twins]), axis=0)),
+            "psd_ratio": psd_ratio,
+        }
+        curves[key] = {
+            "real_adev": real_adev,
+            "twin_adev": twin_adev,
+            "real_f": f_real,
+            "real_psd": p_real,
+            "twin_f": f_twin if p_twin is not None else np.zeros(0),
+            "twin_psd": p_twin if p_twin is not None else np.zeros((0, 3)),
+        }
+    rest = dict(rest)
+    rest["real_samples"] = int(rr["samples"])
+    rest["twin_samples"] = [int(t["residuals"]["samples"]) for t in twins]
+    notes = [
+        f"real: {int(real.mask.sum())} samples counted ({real.counted}); twins: "
+        + ", ".join(str(t["counted"]) for t in twins)
+    ]
+    for row in rows:
+        for e in row["errors"]:
+            notes.append(f"{row['filter']} failed: {e}")
+    return TrialResult(
+        name=real.name,
+        source={"path": str(real.path), "format": real.format, "seeds": list(range(seeds))},
+        mode=mode,
+        rate_hz=real.rate_hz,
+        twin_rate_hz=twin_rate,
+        t0_s=float(twins[0]["t0"]),
+        rest=rest,
+        filters=rows,
+        ranking=ranking,
+        residuals=residuals,
+        curves=curves,
+        notes=notes,
+    )
+
+
+def _rest_phase(real: _Real) -> tuple[slice, dict]:
+    """The first rest phase of the real recording: (its samples, a description)."""
+    from gyroemu.pipelines.identification import find_rest_phases
+
+    valid = np.isfinite(real.q_true).all(axis=1)
+    for p in find_rest_phases(real.t, real.gyro, real.accel):
+        ok = np.flatnonzero(valid[p.start : p.stop])  # the phase's span with a reference
+        if len(ok) >= 16:
+            a, b = p.start + int(ok[0]), p.start + int(ok[-1]) + 1
+            return slice(a, b), {
+                "source": "first rest phase",
+                "t_start_s": float(real.t[a]),
+                "t_stop_s": float(real.t[b - 1]),
+            }
+    first = np.flatnonzero(real.mask)
+    stop = int(first[0]) if len(first) and first[0] > 0 else len(real.t)
+    idx = np.flatnonzero(valid[:stop])
+    start = int(idx[0]) if len(idx) else 0
+    return slice(start, stop), {
+        "source": "samples before the first movement sample",
+        "t_start_s": float(real.t[start]),
+        "t_stop_s": float(real.t[max(start, stop - 1)]),
+    }
+
+
+def run_twin(options: TwinOptions) -> TwinReport:
+    """Run the real recordings and their twins through the filters (module notes) and return the report
+    (:meth:`TwinReport.save` writes it).
+
+    Raises
+    ------
+    TwinError
+        A bad option, named, before any work (also a recording that cannot be read or has no truth).
+    """
+    from gyroemu.pipelines.estimation.protocol import FilterSetup
+    from gyroemu.pipelines.estimation.setup import setup_from_metadata
+
+    started = time.perf_counter()
+    filters, unavailable, site, device = check_options(options)
+    reals: list[_Real] = []
+    for path in options.trials:
+        try:
+            real = _load_real(path)
+            _scenario(real, site, 0, options.smoothing)  # the recorded motion reads and checks
+        except TwinError:
+            raise
+        except ConfigError as e:
+            raise TwinError(f"argument TRIAL: {e}") from None
+        except Exception as e:  # noqa: BLE001 - LogError and friends: the file at fault
+            raise TwinError(f"argument TRIAL: {path}: {e}") from None
+        reals.append(real)
+    timings: dict[str, float] = {"load and check": time.perf_counter() - started}
+    has_dev_mag = device.spec.magnetometer is not None
+    plans = []
+    tasks: list[tuple[Any, Any, Any]] = []
+    for i, real in enumerate(reals):
+        mode = "9D" if real.mag is not None and has_dev_mag else "6D"
+        setup9: FilterSetup | None
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            if real.metadata:
+                setup9 = setup_from_metadata(real.metadata, real.rate_hz, use_mag=True)
+                setup6 = setup_from_metadata(real.metadata, real.rate_hz, use_mag=False)
+            else:
+                setup9, setup6 = FilterSetup(rate_hz=real.rate_hz, use_mag=True), FilterSetup(rate_hz=real.rate_hz)
+        if mode == "6D":
+            setup9 = None
+        rest, rest_info = _rest_phase(real)
+        plans.append((mode, rest_info))
+        tasks.append(((i, None), _run_real, (real, filters, setup9, setup6, rest)))
+        rest_t = (rest_info["t_start_s"], rest_info["t_stop_s"])
+        for seed in range(options.seeds):
+            tasks.append(
+                (
+                    (i, seed),
+                    _run_twin,
+                    (real, site, options.smoothing, options.device, seed, filters, setup9, setup6, rest_t),
+                )
+            )
+    results: dict[tuple, dict] = {}
+    run_started = time.perf_counter()
+    workers = min(options.workers, len(tasks))
+    if workers > 1:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        # Heaviest first (the real run and the twins cost alike): plain order is fine.
+        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork")) as pool:
+            for key, out in pool.map(_task, tasks):
+                results[key] = out
+    else:
+        for task in tasks:
+            key, out = _task(task)
+            results[key] = out
+    timings["runs (wall)"] = time.perf_counter() - run_started
+    for out in results.values():
+        for k, v in out["timings"].items():
+            timings[k] = timings.get(k, 0.0) + v
+    trials = []
+    for i, real in enumerate(reals):
+        mode, rest_info = plans[i]
+        twins = [results[(i, s)] for s in range(options.seeds)]
+        trials.append(
+            _trial_result(real, results[(i, None)], twins, filters, mode, rest_info, options.seeds, device.spec.rate_hz)
+        )
+    timings["total"] = time.perf_counter() - started
+    settings = {
+        "device": options.device,
+        "seeds": options.seeds,
+        "filters": filters,
+        "site": str(options.site),
+        "workers": workers,
+        "smoothing": dict(options.smoothing or {}),
+        "trials": [str(p) for p in options.trials],
+        "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+    }
+    notes = [f"{name} left out: {why}" for name, why in unavailable.items()]
+    notes.append(
+        "filter setup: the same for the real log and its twins (the log's gyroemu metadata, else the "
+        "filters' defaults at the recording's rate, as gyroemu bench does)"
+    )
+    timings = {k: round(v, 3) for k, v in timings.items()}
+    return TwinReport(trials=trials, settings=settings, timings=timings, notes=notes)
+
+
+def cpu_workers() -> int:
+    """Default worker count: 2, or 1 on a single core."""
+    return max(1, min(2, os.cpu_count() or 1))

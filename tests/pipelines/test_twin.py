@@ -1,0 +1,152 @@
+"""``gyroemu twin``: a recording with truth beside its emulated twins.
+
+The synthetic case: ``gyroemu simulate`` writes 30 s of ``smooth_manoeuvre`` sensed by ``tactical_mems``
+(seed 0), and the twins sense the same (smooth, noise-free) motion with the same device, seeds 0 and 1.
+The twins are then draws of the very process that made the "real" log, so their RMSE and residual
+Allan deviations differ from the real ones only by the seed-to-seed spread (about ±10 % on 30 s) and
+the spline's re-fit of the truth (well below the sensor noise): ratios within [0.6, 1.6] for the
+filter errors and [0.5, 2] for the Allan deviations (the long τ hold few clusters) are a loose bound
+that a wrong truth alignment, unit or mask (factors of many) cannot meet.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from broad_trials import BROAD_DIR, needs_trial  # noqa: E402
+
+from gyroemu.pipelines import cli  # noqa: E402
+from gyroemu.pipelines.jobs.twin import METRICS, TwinError, TwinOptions, run_twin  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def synthetic(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("twin") / "syn.mcap"
+    code = cli.main(
+        [
+            "simulate",
+            "--scenario",
+            "smooth_manoeuvre",
+            "--duration",
+            "30",
+            "--device",
+            "tactical_mems",
+            "--out",
+            str(out),
+        ]
+    )
+    assert code in (0, None)
+    return out
+
+
+@pytest.fixture(scope="module")
+def report(synthetic, tmp_path_factory):
+    out = tmp_path_factory.mktemp("twin_out") / "report"
+    code = cli.main(
+        [
+            "twin",
+            str(synthetic),
+            "--device",
+            "tactical_mems",
+            "--seeds",
+            "2",
+            "--filter",
+            "mekf",
+            "--filter",
+            "vqf",
+            "--workers",
+            "1",
+            "--out",
+            str(out),
+        ]
+    )
+    assert code == 0
+    return out
+
+
+def test_report_files_and_fields(report):
+    assert (report / "twin.md").is_file() and (report / "syn.png").is_file()
+    data = json.loads((report / "twin.json").read_text())
+    assert data["settings"]["seeds"] == 2 and data["settings"]["filters"] == ["mekf", "vqf"]
+    (trial,) = data["trials"]
+    assert trial["mode"] == "6D"  # tactical_mems has no magnetometer
+    for fr in trial["filters"]:
+        assert set(fr["real"]) == set(METRICS) == set(fr["twin"]) == set(fr["ratio"])
+        assert len(fr["twin"]["inclination_6d"]["values"]) == 2
+        assert 0.6 <= fr["ratio"]["inclination_6d"] <= 1.6, fr
+    for key in ("gyro", "accel"):
+        r = trial["residuals"][key]
+        assert len(r["ratio"]) == len(trial["residuals"]["tau_s"])
+        assert 0.5 <= r["ratio_min"] <= r["ratio_max"] <= 2.0, (key, r["ratio_min"], r["ratio_max"])
+        assert all(0.7 <= v <= 1.4 for v in r["psd_ratio"]), r["psd_ratio"]
+    assert "ranking" in trial and "timings_s" in data
+    md = (report / "twin.md").read_text()
+    assert "6D inclination" in md and "Allan ratio" in md
+
+
+def test_existing_out_refused_without_force(synthetic, report, capsys):
+    args = [
+        "twin",
+        str(synthetic),
+        "--device",
+        "tactical_mems",
+        "--seeds",
+        "1",
+        "--filter",
+        "vqf",
+        "--out",
+        str(report),
+    ]
+    with pytest.raises(SystemExit) as e:
+        cli.main(args)
+    assert e.value.code == 2 and "--out" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "extra, named",
+    [
+        (["--seeds", "0"], "--seeds"),
+        (["--filter", "no_such_filter"], "--filter"),
+        (["--device", "no_such_device"], "--device"),
+        (["--site", "/nonexistent/site.toml"], "--site"),
+        (["--workers", "0"], "--workers"),
+    ],
+)
+def test_argument_errors_exit_2_before_work(synthetic, tmp_path, capsys, extra, named):
+    out = tmp_path / "o"
+    with pytest.raises(SystemExit) as e:
+        cli.main(["twin", str(synthetic), "--out", str(out), *extra])
+    assert e.value.code == 2
+    assert named in capsys.readouterr().err
+    assert not out.exists()  # nothing written
+
+
+def test_missing_trial_named(tmp_path):
+    with pytest.raises(TwinError, match="TRIAL"):
+        run_twin(TwinOptions(trials=[tmp_path / "nope.hdf5"], out=tmp_path / "o"))
+
+
+@pytest.mark.slow
+@needs_trial("07_undisturbed_fast_rotation_B.hdf5")
+def test_broad_trial_end_to_end(tmp_path):
+    rep = run_twin(
+        TwinOptions(
+            trials=[BROAD_DIR / "07_undisturbed_fast_rotation_B.hdf5"], seeds=2, filters=["mekf", "vqf"], out=tmp_path
+        )
+    )
+    paths = rep.save(tmp_path / "out")
+    data = json.loads(Path(paths["json"]).read_text())
+    (trial,) = data["trials"]
+    assert trial["mode"] == "9D" and trial["ranking"]["same"] in (True, False)
+    for fr in trial["filters"]:
+        for m in METRICS:
+            assert fr["real"][m] is not None and math.isfinite(fr["real"][m]) and fr["real"][m] > 0
+            assert fr["twin"][m]["n"] == 2 and fr["twin"][m]["mean"] > 0 and fr["ratio"][m] > 0
+    for key in ("gyro", "accel"):
+        assert trial["residuals"][key]["ratio_min"] > 0
