@@ -3,7 +3,7 @@
 A ``[site.magnetic_environment]`` table (:class:`MagneticEnvironmentSpec`) makes the site's field
 depend on where the body is, as indoors, near steel, on a bench::
 
-    B(p) = R_z(w(p) ψ) B₀ + δ(p)                                        (world axes, tesla)
+    B(p) = R_z(w(p) ψ) B₀ + δ(p) + Σ_k B_dipole,k(p)                     (world axes, tesla)
 
 * ``B₀``, the **reference field**: the site's ``magnetic_field_enu_uT``, with its norm and dip
   replaced by ``norm_uT`` and ``dip_deg`` when given, its declination kept (:func:`reference_field`).
@@ -20,6 +20,9 @@ depend on where the body is, as indoors, near steel, on a bench::
   position (one per world axis), stationary, of covariance
 
       E[δ_i(p) δ_j(p + d)] = σ² exp(−|d|² / (2 ℓ²)) [i = j],     σ = spatial_sigma_uT, ℓ = correlation_length_m.
+
+* ``B_dipole,k``, **dipoles** fixed in the world (``[[site.magnetic_environment.dipoles]]``, a
+  magnet near the working volume; :mod:`gyroemu.dynamics.dipole`). They draw nothing at random.
 
 How δ is sampled: random Fourier features
 -----------------------------------------
@@ -66,6 +69,7 @@ from numpy.typing import ArrayLike, NDArray
 from pydantic import Field
 
 from .config import NonNegativeReal, PositiveReal, Real, Section
+from .dipole import DipoleSpec, dipole_field
 from .jit import njit
 from .rotation import quat_conjugate, quat_from_rotvec, quat_rotate
 
@@ -108,6 +112,8 @@ class MagneticEnvironmentSpec(Section):
     """Replaces the norm of the site's ``magnetic_field_enu_uT`` (declination and dip kept), µT."""
     dip_deg: Annotated[Real, Field(ge=-90.0, le=90.0)] | None = None
     """Replaces its dip (inclination, positive downward; declination and norm kept), deg."""
+    dipoles: tuple[DipoleSpec, ...] = ()
+    """Point dipoles fixed in the world, each ``{position_m, moment_A_m2}``."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,6 +134,8 @@ class MagneticRealisation:
         ``ω_m``, rad/m (M = 0 when the field has no spatial variation).
     cos_weights, sin_weights : ndarray (M, 3)
         ``σ a_im / √M`` and ``σ c_im / √M``, tesla.
+    dipoles : tuple of DipoleSpec
+        Point dipoles fixed in the world.
     """
 
     reference_w: NDArray[np.float64]
@@ -137,6 +145,7 @@ class MagneticRealisation:
     wavevectors: NDArray[np.float64]
     cos_weights: NDArray[np.float64]
     sin_weights: NDArray[np.float64]
+    dipoles: tuple[DipoleSpec, ...] = ()
 
     def variation(self, pos_w: ArrayLike) -> NDArray[np.float64]:
         """``δ(p)`` at positions ``pos_w`` (N, 3), m: (N, 3), tesla."""
@@ -170,7 +179,10 @@ class MagneticRealisation:
 
     def field(self, pos_w: ArrayLike) -> NDArray[np.float64]:
         """``B(p)`` at positions ``pos_w`` (N, 3), m, world axes: (N, 3), tesla."""
-        return self.turned_reference(pos_w) + self.variation(pos_w)
+        field = self.turned_reference(pos_w) + self.variation(pos_w)
+        for d in self.dipoles:
+            field += dipole_field(pos_w, d.position_m, d.moment_A_m2)
+        return field
 
 
 def reference_field(spec: MagneticEnvironmentSpec, field_enu_T: ArrayLike) -> NDArray[np.float64]:
@@ -225,6 +237,7 @@ def draw_realisation(
         wavevectors=wavevectors,
         cos_weights=cos_weights,
         sin_weights=sin_weights,
+        dipoles=tuple(spec.dipoles),
     )
 
 

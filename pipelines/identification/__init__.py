@@ -2,11 +2,13 @@
 
 One module per idea: :mod:`.rest` (rest phases), :mod:`.noise` (Allan noise terms from them),
 :mod:`.truth` (kinematics of the truth track), :mod:`.timing` (latencies), :mod:`.calibration`
-(gyro, accelerometer, magnetometer errors), :mod:`.magnetic_environment`, :mod:`.trial` (one
+(gyro, accelerometer, magnetometer errors), :mod:`.magnetic_environment`, :mod:`.dipole` (a magnet
+beside the path), :mod:`.trial` (one
 recording) and :mod:`.result` (pooling, device and site TOML). Every fit takes plain arrays.
 """
 
 from .calibration import AccelCalibration, GyroCalibration, MagCalibration, fit_accel, fit_gyro, fit_mag
+from .dipole import DipoleFit, fit_dipole
 from .magnetic_environment import MagneticEnvironment, magnetic_environment, pool_heading_offsets, world_field
 from .noise import AxisNoise, NoiseTerm, SensorNoise, pooled_allan, sensor_noise
 from .rest import RestPhase, find_rest_phases, phases_from_intervals
@@ -18,6 +20,7 @@ from .truth import truth_angular_velocity
 __all__ = [
     "AccelCalibration",
     "AxisNoise",
+    "DipoleFit",
     "GyroCalibration",
     "Identification",
     "LatencyEstimate",
@@ -33,6 +36,7 @@ __all__ = [
     "accel_latency",
     "estimate_latency",
     "find_rest_phases",
+    "fit_dipole",
     "fit_accel",
     "fit_gyro",
     "fit_mag",

@@ -180,3 +180,37 @@ def test_bad_keys_are_refused_by_name(table, key):
     spec = validate(Site, {"magnetic_environment": {"spatial_sigma_uT": 1.0}}).magnetic_environment
     with pytest.raises(Exception):
         spec.seed = 3  # frozen
+
+
+def test_dipole_field_closed_form_and_superposition():
+    from gyroemu.dynamics.dipole import MU0_OVER_4PI, dipole_field
+
+    m = np.array([0.0, 0.0, 0.5])
+    r = 0.2
+    on_axis = dipole_field([[0.0, 0.0, r]], [0.0, 0.0, 0.0], m)[0]
+    equator = dipole_field([[r, 0.0, 0.0]], [0.0, 0.0, 0.0], m)[0]
+    eps = np.finfo(float).eps
+    # On the axis B = μ₀/4π · 2m/r³, on the equator −μ₀/4π · m/r³ (Jackson 5.56).
+    assert np.allclose(on_axis, [0, 0, MU0_OVER_4PI * 2 * 0.5 / r**3], rtol=0, atol=8 * eps * 1e-5)
+    assert np.allclose(equator, [0, 0, -MU0_OVER_4PI * 0.5 / r**3], rtol=0, atol=8 * eps * 1e-5)
+    spec = MagneticEnvironmentSpec(dipoles=[{"position_m": [0, 0, 0], "moment_A_m2": list(m)}])
+    b0 = np.array([1e-6, 2e-5, -4e-5])
+    got = field_along_path(spec, b0, [[0.0, 0.0, r], [r, 0.0, 0.0]])
+    assert np.allclose(got, b0 + np.array([on_axis, equator]), rtol=0, atol=8 * eps * 1e-4)
+
+
+def test_fitted_dipole_recovers_a_synthetic_magnet():
+    from gyroemu.dynamics.dipole import dipole_field
+    from gyroemu.pipelines.identification.dipole import fit_dipole
+
+    rng = np.random.default_rng(4)
+    pos = np.cumsum(rng.normal(0, 0.01, (4000, 3)), axis=0) * 0.5 + [0.0, 0.0, 1.0]
+    p_d, m, b0 = np.array([0.45, -0.2, 1.1]), np.array([0.3, -0.5, 0.8]), np.array([0.0, 14e-6, -40e-6])
+    sigma = 0.05e-6  # T of white noise per axis
+    field = b0 + dipole_field(pos, p_d, m) + sigma * rng.standard_normal(pos.shape)
+    fit = fit_dipole(pos, field)
+    # Each parameter within 5 of its standard uncertainties (s² (JᵀJ)⁻¹ from the same residuals).
+    assert np.all(np.abs(fit.position_m - p_d) <= 5 * fit.position_sigma_m + 1e-9)
+    assert np.all(np.abs(fit.moment_A_m2 - m) <= 5 * fit.moment_sigma_A_m2 + 1e-12)
+    assert np.all(np.abs(fit.background_T - b0) <= 5 * fit.background_sigma_T + 1e-15)
+    assert fit.rms_after == pytest.approx(sigma * np.sqrt(3), rel=0.1)  # what is left is the noise
