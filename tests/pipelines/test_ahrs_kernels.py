@@ -13,12 +13,11 @@ above what happens. Measured on the simulated 20 s at 1 kHz: at most 26 ε (4 e-
 mode but the 6D EKF, 424 ε (9 e-14; its heading is unobservable, so round-off random-walks in it),
 and ``max |Δq_k| / (k ε)`` ≤ 0.34: the bound holds with a margin of about 3000.
 
-``PYTHONPATH=tests python tests/pipelines/test_ahrs_kernels.py`` prints the throughput of both paths (not a test).
+``python tests/benchmarks/bench_ahrs.py`` prints the throughput of both paths.
 """
 
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -149,26 +148,3 @@ def test_importing_the_kernels_does_not_import_numba():
         "assert 'numba' not in sys.modules"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
-
-
-def benchmark(duration=20.0):
-    """Samples per second of each adapter, compiled and through the library (20 s at 1 kHz)."""
-    t, gyro, accel, mag = _simulated(duration)
-    rate = 1.0 / np.median(np.diff(t))
-    for name, cls in FILTERS.items():
-        for mode, use_mag in MODES.items():
-            setup = FilterSetup(rate_hz=rate, use_mag=use_mag)
-            cls(setup).process(t[:10], gyro[:10], accel[:10], mag[:10])  # compile (or load the cache)
-            rates = []
-            for reference in (True, False):
-                f = cls(setup)
-                f._reference = reference
-                start = time.perf_counter()
-                f.process(t, gyro, accel, mag)
-                rates.append(len(t) / (time.perf_counter() - start))
-            gain = rates[1] / rates[0]
-            print(f"{name:9s} {mode}: library {rates[0]:8.0f} /s, compiled {rates[1]:10.0f} /s, x{gain:.0f}")
-
-
-if __name__ == "__main__":
-    benchmark()
