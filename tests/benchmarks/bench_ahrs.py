@@ -45,7 +45,9 @@ def main() -> None:
                 f.process(t, gyro, accel, mag)
                 rates.append(len(t) / (time.perf_counter() - start))
             library, compiled = rates[0] / 1e3, rates[1] / 1e6
-            print(f"{name:9s} {mode}: library {library:7.1f} k samples/s, compiled {compiled:6.2f} M samples/s, ", end="")
+            print(
+                f"{name:9s} {mode}: library {library:7.1f} k samples/s, compiled {compiled:6.2f} M samples/s, ", end=""
+            )
             print(f"x{rates[1] / rates[0]:.0f}")
 
 
