@@ -7,11 +7,22 @@ From m_w over the samples:
 - **norm** |m_w| and **dip** I = atan2(−U, √(E² + N²)) (positive down, as in the northern hemisphere),
   and the **heading** of the horizontal field ψ = atan2(E, N) (from north towards east, in the truth's
   world frame);
-- the **spread** along the path: per-axis standard deviation of m_w over the movement samples, and
-  ``spatial_sigma`` = √(mean of the three variances);
+- the **spread** along the path: per-axis standard deviation of m_w over the movement samples
+  (``raw_sigma``), and the part of it that is a function of **position** (``axis_sigma``,
+  ``spatial_sigma`` = √(mean of the three variances)). With the attitude and a position track, m_w's
+  deviation is fitted by least squares on the attitude (the nine elements of R_bw: what a
+  magnetometer's calibration residual makes, since it turns with the sensor) and on a quadratic in
+  position (the field's variation over the working volume); the spatial variance per axis is what
+  the position terms explain beyond the attitude terms, ``var(r_att) − var(r_att+pos)``. On BROAD's
+  undisturbed trials the attitude terms explain most of the spread (0.43–1.29 µT per axis down to
+  0.23–0.48 µT) and position 0.06–0.28 µT more: a random field of the raw spread is far stronger than
+  what the filters meet (README, "The twin"). Variation on scales shorter than the quadratic resolves
+  is not separated from the noise, and where attitude and position go together along the path the
+  attitude terms take their shared part: the split errs towards a calmer field;
 - the **correlation length**: ρ(r) = ⟨δm(x)·δm(x′)⟩ / ⟨|δm|²⟩ over pairs of movement samples binned by
-  their distance r = |x − x′| (δm = m_w − its mean), and the first r where ρ falls below 1/e. Without a
-  position track the same over time lags gives a correlation time instead;
+  their distance r = |x − x′| (δm = the position-explained part when it was fitted, else m_w − its
+  mean), and the first r where ρ falls below 1/e. Without a position track the same over time lags
+  gives a correlation time instead;
 - the **heading offset** between the field at rest (the first rest phase) and in the working volume
   (movement samples): circular mean of ψ(t) − ψ_rest. :func:`pool_heading_offsets` turns several
   trials' offsets into a mean and a standard deviation.
@@ -52,8 +63,10 @@ class MagneticEnvironment:
     ----------
     rest_field_w : (3,) mean world field over the first rest phase (E, N, U).
     norm, dip, heading : of ``rest_field_w``: |m|, inclination (positive down), heading from north.
-    axis_sigma : (3,) standard deviation of m_w over the movement samples, per world axis.
+    axis_sigma : (3,) standard deviation of the position-explained part of m_w, per world axis (the raw
+        spread without an attitude and a position track).
     spatial_sigma : √(mean of the three variances).
+    raw_sigma : (3,) standard deviation of m_w over the movement samples, per world axis.
     heading_offset, heading_offset_sigma : circular mean and standard deviation of ψ(t) − ψ_rest over the
         movement samples, rad.
     correlation_length_m : first distance where the correlation falls below 1/e (None without a
@@ -73,6 +86,23 @@ class MagneticEnvironment:
     correlation_length_m: float | None
     correlation_time_s: float
     samples: int
+    raw_sigma: np.ndarray | None = None
+
+
+def _spatial_part(delta: np.ndarray, pos: np.ndarray, r_bw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The position-explained part of ``delta`` (N, 3) beyond the attitude's (module notes), and its
+    per-axis standard deviation ``sqrt(var(r_att) − var(r_att+pos))``."""
+    p = pos - pos.mean(axis=0)
+    quadratic = np.column_stack([p, p**2, p[:, [0]] * p[:, [1]], p[:, [0]] * p[:, [2]], p[:, [1]] * p[:, [2]]])
+    attitude = np.column_stack([r_bw.reshape(len(r_bw), 9), np.ones(len(r_bw))])
+    c_att, *_ = np.linalg.lstsq(attitude, delta, rcond=None)
+    r_att = delta - attitude @ c_att
+    both = np.column_stack([attitude, quadratic])
+    c_both, *_ = np.linalg.lstsq(both, delta, rcond=None)
+    r_both = delta - both @ c_both
+    spatial = quadratic @ c_both[attitude.shape[1] :]
+    sigma = np.sqrt(np.clip(r_att.var(axis=0) - r_both.var(axis=0), 0.0, None))
+    return spatial - spatial.mean(axis=0), sigma
 
 
 def _first_below(x: np.ndarray, rho: np.ndarray, level: float) -> float:
@@ -94,25 +124,32 @@ def magnetic_environment(
     pos_w: np.ndarray | None = None,
     bins: int = 25,
     smooth_s: float = 0.25,
+    r_bw: np.ndarray | None = None,
 ) -> MagneticEnvironment:
     """The environment (module notes) of a world field ``field_w`` (N, 3) tesla at ``t`` (N,) s.
 
     ``rest``: the samples of the first rest phase; ``movement`` (N,) bool: the working-volume samples;
-    ``pos_w`` (N, 3) m at the same samples, or None. The field is first averaged over ``smooth_s`` so
-    that the sensor's white noise does not pass for a spatial variation.
+    ``pos_w`` (N, 3) m at the same samples, or None; ``r_bw`` (N, 3, 3) the attitude R_bw the field was
+    turned with, or None. The field is first averaged over ``smooth_s`` so that the sensor's white noise
+    does not pass for a spatial variation.
     """
     dt = float(np.median(np.diff(t)))
     field_w = moving_average(np.asarray(field_w, dtype=float), max(1, int(round(smooth_s / dt))))
     movement = np.asarray(movement, dtype=bool) & np.all(np.isfinite(field_w), axis=1)
     if pos_w is not None:
         movement &= np.all(np.isfinite(pos_w), axis=1)
+    if r_bw is not None:
+        movement &= np.all(np.isfinite(np.asarray(r_bw).reshape(len(t), 9)), axis=1)
     rest_field = np.nanmean(field_w[rest], axis=0)  # smoothing does not change a mean
     m = field_w[movement]
     if len(m) < 10:
         raise ValueError(f"only {len(m)} movement samples with a known field")
     horizontal = np.hypot(rest_field[0], rest_field[1])
     delta = m - m.mean(axis=0)
-    axis_sigma = delta.std(axis=0)
+    raw_sigma = delta.std(axis=0)
+    axis_sigma = raw_sigma
+    if pos_w is not None and r_bw is not None:
+        delta, axis_sigma = _spatial_part(delta, np.asarray(pos_w)[movement], np.asarray(r_bw)[movement])
     offsets = np.angle(np.exp(1j * (_heading(m) - _heading(rest_field))))
     mean_vec = np.mean(np.exp(1j * offsets))
     circ_sigma = float(np.sqrt(-2.0 * np.log(min(abs(mean_vec), 1.0))))
@@ -153,6 +190,7 @@ def magnetic_environment(
         correlation_length_m=length,
         correlation_time_s=corr_time,
         samples=int(len(m)),
+        raw_sigma=raw_sigma,
     )
 
 

@@ -30,6 +30,7 @@ from .magnetic_environment import MagneticEnvironment, magnetic_environment, poo
 from .noise import SensorNoise, sensor_noise
 from .timing import LatencyEstimate
 from .trial import TrialData, TrialIdentification, TrialSettings, identify_trial
+from .truth import interpolate_attitude, rotation_bw
 
 __all__ = ["Pooled", "Identification", "pool_estimates", "identify"]
 
@@ -261,7 +262,12 @@ class Identification:
             lines.append(
                 f"{t.name}: |m| {e.norm * 1e6:.2f} uT, dip {np.degrees(e.dip):.2f} deg, "
                 f"heading {np.degrees(e.heading):.2f} deg; "
-                f"spread {_list(e.axis_sigma * 1e6, 3)} uT (E, N, U); heading offset "
+                + (
+                    f"spread {_list(e.raw_sigma * 1e6, 3)} uT, of it a function of position "
+                    if e.raw_sigma is not None
+                    else "spread "
+                )
+                + f"{_list(e.axis_sigma * 1e6, 3)} uT (E, N, U); heading offset "
                 f"{np.degrees(e.heading_offset):.2f} +- {np.degrees(e.heading_offset_sigma):.2f} deg; {corr}; "
                 f"correlation time {e.correlation_time_s:.3g} s; {e.samples} movement samples"
             )
@@ -360,9 +366,10 @@ def identify(trials: Sequence[TrialData], settings: TrialSettings | None = None)
             from .truth import interpolate_vectors
 
             pos = interpolate_vectors(d.truth_t, d.pos_w, d.t)
+        r_bw = rotation_bw(interpolate_attitude(d.truth_t, d.q_wb, d.t - r.mag_latency.latency_s))
         try:
             environments.append(
-                magnetic_environment(d.t, field_w, slice(r.rest[0].start, r.rest[0].stop), movement, pos)
+                magnetic_environment(d.t, field_w, slice(r.rest[0].start, r.rest[0].stop), movement, pos, r_bw=r_bw)
             )
         except ValueError as e:
             notes.append(f"{d.name}: magnetic environment: {e}")
