@@ -21,15 +21,16 @@ BROAD trial, as ``tests/benchmarks/broad_filters.py``). Magnetometers go to the 
 µT × 1e-6). Errors are BROAD's (:mod:`gyroemu.pipelines.estimation.metrics`): RMSE, degrees, over the
 movement samples with a finite reference.
 
-Residuals. Measured minus truth, over the first rest phase of the real recording
-(:func:`gyroemu.pipelines.identification.find_rest_phases`; else the samples before the first movement
-sample): real gyro and accelerometer minus the log's truth rate and specific force when it has them
-(an MCAP log), else minus 0 and ``R_bw (0, 0, g)`` (BROAD); twin gyro and accelerometer minus the
-trajectory's truth at the sample instants
-(:func:`gyroemu.pipelines.formats.mcap_log.truth_series`). Their Allan deviations per axis at τ from
-0.01 to 10 s (those the phase holds twice), the twin's (RMS over seeds) over the real's per τ, and
-Welch spectra. (At rest the real truth is taken as ω = 0 and ``R_bw (0, 0, g)``: the differentiated
-optical attitude is dominated by its noise there, several °/s at BROAD's rate.)
+Residuals. Measured minus truth, over the rest phases of the real recording
+(:func:`gyroemu.pipelines.identification.find_rest_phases`, each trimmed to the reference; else the
+samples before the first movement sample), pooled: real gyro and accelerometer minus the log's truth
+rate and specific force when it has them (an MCAP log), else minus 0 and ``R_bw (0, 0, g)`` (BROAD);
+twin gyro and accelerometer minus the trajectory's truth at the instants they measured (the sample's
+instant minus the sensor's latency). Their Allan deviations per axis at τ from
+0.01 to 10 s (those a phase holds twice; the phases' Allan variances weighted by their clusters), the
+twin's (RMS over seeds) over the real's per τ, and Welch spectra (averaged over the phases). (At rest
+the real truth is taken as ω = 0 and ``R_bw (0, 0, g)``: the differentiated optical attitude is
+dominated by its noise there, several °/s at BROAD's rate.)
 
 Outputs in ``--out``: ``twin.md``, ``twin.json`` and ``<trial>.png`` (Allan deviations and spectra, real
 against twin), each written through a temporary file. An existing non-empty folder is refused without
@@ -349,46 +350,64 @@ def _filter_errors(filters, setup9, setup6, t, gyro, accel, mag, q_true, mask, t
     return out
 
 
-def _adev_at(x: np.ndarray, dt: float) -> np.ndarray:
-    """(len(TAUS_S), 3) Allan deviation per axis at TAUS_S (NaN where the series is too short)."""
+def _adev_at(segments: list[np.ndarray], dt: float) -> np.ndarray:
+    """(len(TAUS_S), 3) Allan deviation per axis at TAUS_S, pooled over the segments (each (n_i, 3)): the
+    Allan variances weighted by their clusters, as :func:`gyroemu.pipelines.identification.pooled_allan`
+    does (NaN where every segment is shorter than 2 τ)."""
     from gyroemu.sensors.allan import allan_deviation
 
-    out = np.full((len(TAUS_S), 3), np.nan)
-    taus = TAUS_S[(TAUS_S >= dt) & (TAUS_S <= 0.5 * len(x) * dt)]
-    if len(x) < 8 or not len(taus):
-        return out
-    for axis in range(3):
-        a = allan_deviation(x[:, axis] - np.mean(x[:, axis]), dt, taus=taus)
-        for tau, adev in zip(a.tau, a.adev):
-            i = int(np.argmin(np.abs(np.log(TAUS_S / tau))))
-            if abs(math.log(TAUS_S[i] / tau)) < 0.1:
-                out[i, axis] = adev
-    return out
+    avar = np.zeros((len(TAUS_S), 3))
+    clusters = np.zeros((len(TAUS_S), 3))
+    for x in segments:
+        taus = TAUS_S[(TAUS_S >= dt) & (TAUS_S <= 0.5 * len(x) * dt)]
+        if len(x) < 8 or not len(taus):
+            continue
+        for axis in range(3):
+            a = allan_deviation(x[:, axis] - np.mean(x[:, axis]), dt, taus=taus)
+            for tau, adev, n in zip(a.tau, a.adev, a.clusters):
+                i = int(np.argmin(np.abs(np.log(TAUS_S / tau))))
+                if abs(math.log(TAUS_S[i] / tau)) < 0.1:
+                    avar[i, axis] += n * adev**2
+                    clusters[i, axis] += n
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(clusters > 0, np.sqrt(avar / np.maximum(clusters, 1)), np.nan)
 
 
-def _spectrum(x: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
+def _spectrum(segments: list[np.ndarray], fs: float) -> tuple[np.ndarray, np.ndarray]:
+    """Welch spectrum per axis averaged over the segments, weighted by their lengths."""
     from scipy.signal import welch
 
-    nper = int(min(len(x), 2 ** int(math.log2(max(8.0, 2.0 * fs)))))
-    f, p = welch(x - x.mean(axis=0), fs=fs, nperseg=nper, axis=0)
-    return f, p
+    shortest = min(len(x) for x in segments)
+    nper = int(min(shortest, 2 ** int(math.log2(max(8.0, 2.0 * fs)))))
+    total, weight, f = None, 0, np.zeros(0)
+    for x in segments:
+        f, p = welch(x - x.mean(axis=0), fs=fs, nperseg=nper, axis=0)
+        total = p * len(x) if total is None else total + p * len(x)
+        weight += len(x)
+    return f, (total / weight if total is not None else np.zeros((0, 3)))
 
 
-def _residuals(gyro_res: np.ndarray, accel_res: np.ndarray, fs: float) -> dict:
-    ok = np.isfinite(gyro_res).all(axis=1) & np.isfinite(accel_res).all(axis=1)
-    g, a = gyro_res[ok], accel_res[ok]
-    out: dict[str, Any] = {"samples": int(ok.sum())}
-    for key, x in (("gyro", g), ("accel", a)):
-        out[f"{key}_adev"] = _adev_at(x, 1.0 / fs)
-        if len(x) >= 16:
-            out[f"{key}_psd_f"], out[f"{key}_psd"] = _spectrum(x, fs)
+def _residuals(gyro_res: list[np.ndarray], accel_res: list[np.ndarray], fs: float) -> dict:
+    """Allan deviations, spectra and standard deviations of the residuals over the rest segments."""
+    gs, acs = [], []
+    for g, a in zip(gyro_res, accel_res):
+        ok = np.isfinite(g).all(axis=1) & np.isfinite(a).all(axis=1)
+        if ok.sum() >= 16:
+            gs.append(g[ok])
+            acs.append(a[ok])
+    out: dict[str, Any] = {"samples": int(sum(len(x) for x in gs))}
+    for key, xs in (("gyro", gs), ("accel", acs)):
+        out[f"{key}_adev"] = _adev_at(xs, 1.0 / fs)
+        if xs:
+            out[f"{key}_psd_f"], out[f"{key}_psd"] = _spectrum(xs, fs)
+            out[f"{key}_std"] = np.std(np.concatenate([x - x.mean(axis=0) for x in xs]), axis=0)
         else:
             out[f"{key}_psd_f"], out[f"{key}_psd"] = np.zeros(0), np.zeros((0, 3))
-        out[f"{key}_std"] = np.std(x, axis=0) if len(x) else np.full(3, np.nan)
+            out[f"{key}_std"] = np.full(3, np.nan)
     return out
 
 
-def _run_real(real: _Real, filters, setup9, setup6, rest: slice) -> dict:
+def _run_real(real: _Real, filters, setup9, setup6, rests: list[slice]) -> dict:
     from gyroemu.pipelines.identification.truth import rotation_bw
 
     timings: dict[str, float] = {}
@@ -399,14 +418,18 @@ def _run_real(real: _Real, filters, setup9, setup6, rest: slice) -> dict:
     # At rest the truth is ω = 0 (Earth's rate, ≤ 0.0042 °/s, is constant: no Allan or spectral
     # content) and f = R_bw (0, 0, g): the differentiated optical attitude would be its noise (°/s).
     # A log's own truth rate and specific force are used when it has them.
-    q = real.q_true[rest]
-    omega = np.zeros((len(q), 3)) if real.omega_true is None else real.omega_true[rest]
-    force = (
-        np.einsum("nij,j->ni", rotation_bw(q), np.array([0.0, 0.0, GRAVITY_M_S2]))
-        if real.force_true is None
-        else real.force_true[rest]
-    )
-    res = _residuals(real.gyro[rest] - omega, real.accel[rest] - force, real.rate_hz)
+    gyro_res, accel_res = [], []
+    for rest in rests:
+        q = real.q_true[rest]
+        omega = np.zeros((len(q), 3)) if real.omega_true is None else real.omega_true[rest]
+        force = (
+            np.einsum("nij,j->ni", rotation_bw(q), np.array([0.0, 0.0, GRAVITY_M_S2]))
+            if real.force_true is None
+            else real.force_true[rest]
+        )
+        gyro_res.append(real.gyro[rest] - omega)
+        accel_res.append(real.accel[rest] - force)
+    res = _residuals(gyro_res, accel_res, real.rate_hz)
     timings["residuals"] = time.perf_counter() - started
     return {"errors": errors, "residuals": res, "timings": timings}
 
@@ -455,13 +478,22 @@ def _run_twin(real: _Real, site: dict, smoothing, device_name: str, seed: int, f
         timings,
     )
     started = time.perf_counter()
-    at_rest = (real_time >= rest_t[0]) & (real_time <= rest_t[1])
-    assert truth.omega_b is not None and truth.specific_force_b is not None
-    res = _residuals(
-        samples.gyro[at_rest] - truth.omega_b[at_rest],
-        samples.accel[at_rest] - truth.specific_force_b[at_rest],
-        float(device.spec.rate_hz),
-    )
+    # The sensor's error: measured minus the truth at the instant each sensor measured, τ − latency (at
+    # rest the real truth is still, so its latency adds nothing there; the twin's truth carries what is
+    # left of the reference's noise after smoothing, which a latency would turn into a residual).
+    from gyroemu.sensors.sampling import SensorTruth
+
+    body = SensorTruth(traj)
+    lat_gyro, lat_accel, _ = device.latencies
+    span = (float(traj.t[0]), float(traj.t[-1]))
+    omega_at = body.body_truth(np.clip(instants - lat_gyro, *span))[1]
+    force_at = body.body_truth(np.clip(instants - lat_accel, *span))[2]
+    gyro_res, accel_res = [], []
+    for start, stop in rest_t:
+        at_rest = (real_time >= start) & (real_time <= stop)
+        gyro_res.append(samples.gyro[at_rest] - omega_at[at_rest])
+        accel_res.append(samples.accel[at_rest] - force_at[at_rest])
+    res = _residuals(gyro_res, accel_res, float(device.spec.rate_hz))
     timings["residuals"] = time.perf_counter() - started
     return {
         "errors": errors,
@@ -536,7 +568,7 @@ class TwinReport:
                 "twin": "mean, std (ddof 1), n over the seeds whose run gave a finite value; values per seed",
                 "ratio": "twin mean / real",
                 "ranking": f"order of {', '.join(RANKED_FILTERS)} by 9D total RMSE, real and twin mean",
-                "residuals": "measured − truth over the first rest phase; Allan deviation per axis (x, y, z) "
+                "residuals": "measured − truth over the rest phases, pooled; Allan deviation per axis (x, y, z) "
                 "at tau_s, twin: RMS over seeds; ratio twin/real per tau and axis; psd_ratio: median over "
                 "1 Hz … rate/4 of the twin's mean Welch spectrum over the real's, per axis",
             },
@@ -604,9 +636,10 @@ class TwinReport:
                 )
             rest = tr.rest
             lines.append("")
+            spans = ", ".join(f"{a:.2f}…{b:.2f}" for a, b in rest["intervals_s"])
             lines.append(
-                f"Residuals at rest ({rest['source']}: {rest['t_start_s']:.2f}…{rest['t_stop_s']:.2f} s of the "
-                f"recording, {rest['real_samples']} real samples):"
+                f"Residuals at rest ({rest['source']}: {spans} s of the recording, "
+                f"{rest['real_samples']} real samples):"
             )
             lines.append("")
             lines.append(
@@ -821,28 +854,29 @@ def _trial_result(real: _Real, real_run: dict, twins: list[dict], filters, mode,
     )
 
 
-def _rest_phase(real: _Real) -> tuple[slice, dict]:
-    """The first rest phase of the real recording: (its samples, a description)."""
+def _rest_phases(real: _Real) -> tuple[list[slice], dict]:
+    """The rest phases of the real recording with a reference (each trimmed to it, at least 64 samples):
+    (their samples, a description)."""
     from gyroemu.pipelines.identification import find_rest_phases
 
     valid = np.isfinite(real.q_true).all(axis=1)
+    rests = []
     for p in find_rest_phases(real.t, real.gyro, real.accel):
         ok = np.flatnonzero(valid[p.start : p.stop])  # the phase's span with a reference
-        if len(ok) >= 16:
-            a, b = p.start + int(ok[0]), p.start + int(ok[-1]) + 1
-            return slice(a, b), {
-                "source": "first rest phase",
-                "t_start_s": float(real.t[a]),
-                "t_stop_s": float(real.t[b - 1]),
-            }
+        if len(ok) >= 64:
+            rests.append(slice(p.start + int(ok[0]), p.start + int(ok[-1]) + 1))
+    if rests:
+        return rests, {
+            "source": f"{len(rests)} rest phase(s)",
+            "intervals_s": [(float(real.t[r.start]), float(real.t[r.stop - 1])) for r in rests],
+        }
     first = np.flatnonzero(real.mask)
     stop = int(first[0]) if len(first) and first[0] > 0 else len(real.t)
     idx = np.flatnonzero(valid[:stop])
     start = int(idx[0]) if len(idx) else 0
-    return slice(start, stop), {
+    return [slice(start, stop)], {
         "source": "samples before the first movement sample",
-        "t_start_s": float(real.t[start]),
-        "t_stop_s": float(real.t[max(start, stop - 1)]),
+        "intervals_s": [(float(real.t[start]), float(real.t[max(start, stop - 1)]))],
     }
 
 
@@ -888,10 +922,10 @@ def run_twin(options: TwinOptions) -> TwinReport:
                 setup9, setup6 = FilterSetup(rate_hz=real.rate_hz, use_mag=True), FilterSetup(rate_hz=real.rate_hz)
         if mode == "6D":
             setup9 = None
-        rest, rest_info = _rest_phase(real)
+        rests, rest_info = _rest_phases(real)
         plans.append((mode, rest_info))
-        tasks.append(((i, None), _run_real, (real, filters, setup9, setup6, rest)))
-        rest_t = (rest_info["t_start_s"], rest_info["t_stop_s"])
+        tasks.append(((i, None), _run_real, (real, filters, setup9, setup6, rests)))
+        rest_t = rest_info["intervals_s"]
         for seed in range(options.seeds):
             tasks.append(
                 (
