@@ -116,13 +116,18 @@ class Identification:
             accel_errors["bias_instability_ug"] = _list(n.values("bias_instability") / _UG, 4)
             accel_errors["random_walk_ug_per_sqrt_h"] = _list(n.values("random_walk") / _UG * 60, 4)
         q_bs = quat_from_matrix(self.c_sb.T)
+        # A measured latency d is the delay of the instant a sample matches (the truth at t − d). gyroemu's
+        # gyro and accelerometer samples are means over their interval [τ − T, τ] shifted by latency_s,
+        # which matches the motion at its middle, τ − T/2 − latency_s (to second order in T): the
+        # device's latency_s = d − T/2. Its magnetometer samples at τ − latency_s: latency_s = d.
+        half = 0.5 / float(self.rate_hz)
         out: dict = {
             "description": f"Identified by gyroemu identify from {names}",
             "rate_hz": round(float(self.rate_hz), 6),
             "mounting": {"q_bs": _list(q_bs, 9)},
-            "gyro": {"latency_s": round(float(self.latency["gyro"].value), 6), "errors": gyro_errors},
+            "gyro": {"latency_s": round(float(self.latency["gyro"].value) - half, 6), "errors": gyro_errors},
             "accelerometer": {
-                "latency_s": round(float(self.latency["accelerometer"].value), 6),
+                "latency_s": round(float(self.latency["accelerometer"].value) - half, 6),
                 "errors": accel_errors,
             },
         }
@@ -162,7 +167,10 @@ class Identification:
                     lines.append(f"  {what}: {note}")
             lines.extend(f"  {n}" for n in t.notes)
         for sensor, p in self.latency.items():
-            lines.append(f"{sensor}.latency_s = {_pm(p.value, p.sigma)} over {p.trials} trials")
+            lines.append(
+                f"{sensor}: measured delay {_pm(p.value, p.sigma)} s over {p.trials} trials"
+                + (" (latency_s = delay − T/2: the interval mean adds T/2)" if sensor != "magnetometer" else "")
+            )
         lines.append(f"gyro.errors.bias_deg_per_h sigma {_list(self.gyro_bias.sigma * _DEG * 3600)}")
         if self.gyro_scale is not None and self.gyro_misalignment is not None:
             lines.append(

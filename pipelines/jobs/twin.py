@@ -78,14 +78,17 @@ class TwinError(ConfigError):
     """Bad options of ``gyroemu twin``, found before any work (the message names the argument)."""
 
 
-TWIN_SMOOTHING = {"orientation_cutoff_hz": 5.0, "position_cutoff_hz": 3.0}
+TWIN_SMOOTHING = {"orientation_cutoff_hz": 5.0, "position_cutoff_hz": 10.0}
 """The twins' smoothing of the recorded reference, one setting for every trial. An optical reference
 resampled to the IMU's rate has noise that is not white at that rate, so GCV leaves it almost
 unsmoothed (cut-offs of 54 Hz and 143 Hz on BROAD's trial 07) and the twin's device senses the
-reference's noise as motion: at rest 1–15 °/s and 0.5–9 m/s² where the real sensor reads 0.1 °/s and
-0.05 m/s². The real gyro puts 90 % of its movement-phase power below 2.4–8.5 Hz on the undisturbed
-trials; 5 Hz and 3 Hz keep most of the motion and bring the twin's residual at rest to the real one's
-(README, "The twin": the figures with other cut-offs)."""
+reference's noise as motion: 1–15 °/s and 0.5–9 m/s² at rest where the real sensor reads 0.1 °/s and
+0.05 m/s². The attitude's cut-off is 5 Hz: the real gyro puts 90 % of its movement power below
+2.4–8.5 Hz on the undisturbed trials, and at 10 Hz the reference's noise, sensed as rotation, keeps
+VQF's rest detection from seeing the rests (its twins' 9D errors triple on trials 11 and 16). The
+position's is 10 Hz: the real accelerometer's movement power reaches 7–20 Hz (99 %), and at 3 Hz the
+twins lose the linear acceleration that the accelerometer-led filters suffer (their 6D inclination
+ratios 0.58–0.73 on the fast trials). README, "The twin", lists the settings tried."""
 
 
 def default_site_file() -> Path:
