@@ -46,6 +46,7 @@ against time, first run). :meth:`BenchReport.save` writes all three, each throug
 from __future__ import annotations
 
 import datetime
+import functools
 import json
 import math
 import sys
@@ -68,7 +69,7 @@ from gyroemu.pipelines.estimation.registry import (
     make_filter,
     unavailable_filters,
 )
-from gyroemu.pipelines.formats.atomic import write_text_atomic
+from gyroemu.pipelines.formats.atomic import write_atomic, write_text_atomic
 from gyroemu.pipelines.formats.file_names import unique_stems
 
 __all__ = [
@@ -407,13 +408,10 @@ class BenchReport:
             axes[-1, 0].set_xlabel("time, s")
             fig.tight_layout()
             path = directory / f"{stem}.png"
-            tmp = directory / f".{stem}.tmp.png"
             try:
-                fig.savefig(tmp, dpi=110)
-                tmp.replace(path)
+                write_atomic(path, functools.partial(fig.savefig, dpi=110, format="png"))
             finally:
                 plt.close(fig)
-                tmp.unlink(missing_ok=True)
             written.append(path)
         return written
 

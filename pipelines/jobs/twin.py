@@ -41,6 +41,7 @@ against twin), each written through a temporary file. An existing non-empty fold
 from __future__ import annotations
 
 import datetime
+import functools
 import json
 import math
 import os
@@ -683,6 +684,7 @@ class TwinReport:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
+        from gyroemu.pipelines.formats.atomic import write_atomic
         from gyroemu.pipelines.formats.file_names import unique_stems
 
         directory = Path(directory)
@@ -718,13 +720,10 @@ class TwinReport:
             fig.suptitle(f"{tr.name}: real vs twin ({self.settings['device']}, {self.settings['seeds']} seeds)")
             fig.tight_layout()
             path = directory / f"{stem}.png"
-            tmp = directory / f".{stem}.tmp.png"
             try:
-                fig.savefig(tmp, dpi=100)
-                tmp.replace(path)
+                write_atomic(path, functools.partial(fig.savefig, dpi=100, format="png"))
             finally:
                 plt.close(fig)
-                tmp.unlink(missing_ok=True)
             written.append(path)
         return written
 
