@@ -17,9 +17,10 @@ terms in their own units (IEEE Std 1293-2018). For each axis i, with ΔT = T −
 
 The small terms act on the true input (first order in the errors). The noise n is made by
 :func:`gyroemu.sensors.noise.sensor_noise`; the module notes of :mod:`gyroemu.sensors.noise` define the noise density
-(single-sided: the Allan deviation at τ = 1 s, σ = N/√Δt per sample; MATLAB's ``imuSensor`` is √2
-lower for the same number) and the flicker model. Quantisation is either of the integrated output
-(``quantisation_rad`` / ``quantisation_m_per_s``: a pulse-counting sensor that never loses angle) or
+N (the Allan deviation at τ = 1 s, σ = N/√Δt per sample: IEEE 952's ARW coefficient, whose two-sided
+PSD is N² and one-sided PSD 2N²; a datasheet's one-sided spectral density √S₁ is √2·N, which is how
+MATLAB's ``imuSensor`` reads its ``NoiseDensity``) and the flicker model. Quantisation is either of the
+integrated output (``quantisation_rad`` / ``quantisation_m_per_s``: a pulse-counting sensor that never loses angle) or
 of the output itself (``quantisation_rad_per_s`` / ``quantisation_m_per_s2``: a rate ADC, which adds
 white noise of σ = LSB/√12 per sample when the signal spans many LSBs). The pulse counter gives IEEE
 952's quantisation term (Allan slope −1, σ(τ) = √3 Q/τ, Q = LSB/√12) when the angle moves by an LSB or
@@ -68,6 +69,7 @@ STANDARD_GRAVITY = 9.80665
 _DEG = np.pi / 180  # rad per degree
 _HOUR = 3600.0  # s per hour
 _SQRT_HOUR = 60.0  # √s per √h
+_SQRT2 = float(np.sqrt(2.0))  # one-sided PSD amplitude √S₁ per density N (Allan deviation at 1 s)
 _PPM = 1e-6
 _MRAD = 1e-3
 _UG = 1e-6 * STANDARD_GRAVITY  # m/s² per µg
@@ -137,8 +139,8 @@ class _CommonErrors(Section):
             raise ValueError(f"expected (min, max) with min < max, got {value}")
         return value
 
-    white_noise_keys: ClassVar[tuple[str, str]]
-    """The two alternative keys of the white noise (in its two datasheet forms)."""
+    white_noise_keys: ClassVar[tuple[str, ...]]
+    """The alternative keys of the white noise (its datasheet forms); a config gives at most one."""
 
     def white_noise_key(self) -> str | None:
         """Which of :attr:`white_noise_keys` the config gives (None: neither, no white noise)."""
@@ -154,12 +156,15 @@ class _CommonErrors(Section):
         return m
 
 
-def _exclusive(first: str):
-    """A validator for the second of two alternative keys: refuse it when ``first`` is given too."""
+def _exclusive(*earlier: str):
+    """A validator for the last of alternative keys: refuse it when one of the ``earlier`` keys (declared
+    before it) is given too, naming both."""
 
     def check(cls, value, info: ValidationInfo):
-        if value is not None and info.data.get(first) is not None:
-            raise ValueError(f"give either {first} or {info.field_name}, not both")
+        if value is not None:
+            for first in earlier:
+                if info.data.get(first) is not None:
+                    raise ValueError(f"give either {first} or {info.field_name}, not both")
         return value
 
     return classmethod(check)
@@ -179,8 +184,12 @@ def _needs_range(range_key: str):
 class GyroErrors(_CommonErrors):
     """A gyro's error terms, each key in the datasheet unit its name says. All default to off.
 
-    Noise: ``arw_deg_per_sqrt_h`` or ``noise_density_deg_per_s_per_sqrt_hz`` (one of them; single-sided,
-    = Allan deviation at 1 s), ``bias_instability_deg_per_h`` (flicker floor 0.664 B, flat over
+    White noise, one key at most, converted to the density N (the Allan deviation at τ = 1 s; module
+    notes of :mod:`gyroemu.sensors.noise`): ``arw_deg_per_sqrt_h`` (IEEE 952 ARW, N in °/√h) or
+    ``noise_density_deg_per_s_per_sqrt_hz`` (the same N in °/s/√Hz: an Allan/ARW-style density, as
+    Kalibr's ``gyroscope_noise_density``) or ``psd_one_sided_deg_per_s_per_sqrt_hz`` (the amplitude √S₁
+    of a one-sided power spectral density, as MATLAB's ``imuSensor`` reads a datasheet; N = √S₁/√2).
+    Others: ``bias_instability_deg_per_h`` (flicker floor 0.664 B, flat over
     ``bias_instability_tau_range_s``), ``rrw_deg_per_h_per_sqrt_h``. Quantisation: ``quantisation_rad``
     (angle per count of an integrating output) or ``quantisation_rad_per_s`` (rate LSB).
     ``g_sensitivity_deg_per_h_per_g``: 3x3, row i = output axis, column j = specific-force axis.
@@ -194,15 +203,21 @@ class GyroErrors(_CommonErrors):
     g_sensitivity_deg_per_h_per_g: Matrix3 | None = None
     arw_deg_per_sqrt_h: PerAxisNonNegative | None = None
     noise_density_deg_per_s_per_sqrt_hz: PerAxisNonNegative | None = None
+    psd_one_sided_deg_per_s_per_sqrt_hz: PerAxisNonNegative | None = None
     bias_instability_deg_per_h: PerAxisNonNegative = _ZERO
     rrw_deg_per_h_per_sqrt_h: PerAxisNonNegative = _ZERO
     rate_ramp_deg_per_h_per_h: PerAxis = _ZERO
     quantisation_rad: PositiveReal | None = None
     quantisation_rad_per_s: PositiveReal | None = None
 
-    white_noise_keys = ("arw_deg_per_sqrt_h", "noise_density_deg_per_s_per_sqrt_hz")
+    white_noise_keys = (
+        "arw_deg_per_sqrt_h",
+        "noise_density_deg_per_s_per_sqrt_hz",
+        "psd_one_sided_deg_per_s_per_sqrt_hz",
+    )
     _nonlinearity = field_validator("scale_factor_nonlinearity_ppm")(_needs_range("range_deg_per_s"))
     _density = field_validator("noise_density_deg_per_s_per_sqrt_hz")(_exclusive("arw_deg_per_sqrt_h"))
+    _psd = field_validator("psd_one_sided_deg_per_s_per_sqrt_hz")(_exclusive(*white_noise_keys[:2]))
     _quantum = field_validator("quantisation_rad_per_s")(_exclusive("quantisation_rad"))
 
     def to_si(self) -> ErrorModel:
@@ -210,6 +225,8 @@ class GyroErrors(_CommonErrors):
         deg_per_h = _DEG / _HOUR  # rad/s per deg/h
         if self.noise_density_deg_per_s_per_sqrt_hz is not None:
             density = np.array(self.noise_density_deg_per_s_per_sqrt_hz) * _DEG
+        elif self.psd_one_sided_deg_per_s_per_sqrt_hz is not None:
+            density = np.array(self.psd_one_sided_deg_per_s_per_sqrt_hz) * _DEG / _SQRT2
         else:
             density = np.array(self.arw_deg_per_sqrt_h or _ZERO) * _DEG / _SQRT_HOUR
         full_scale = None if self.range_deg_per_s is None else self.range_deg_per_s * _DEG
@@ -240,8 +257,12 @@ class GyroErrors(_CommonErrors):
 class AccelErrors(_CommonErrors):
     """An accelerometer's error terms, each key in the datasheet unit its name says. All default to off.
 
-    Noise: ``vrw_m_per_s_per_sqrt_h`` or ``noise_density_ug_per_sqrt_hz`` (one of them; single-sided,
-    = Allan deviation at 1 s), ``bias_instability_ug`` (flicker floor 0.664 B over
+    White noise, one key at most, converted to the density N (the Allan deviation at τ = 1 s; module
+    notes of :mod:`gyroemu.sensors.noise`): ``vrw_m_per_s_per_sqrt_h`` (velocity random walk, N in
+    m/s/√h) or ``noise_density_ug_per_sqrt_hz`` (the same N in µg/√Hz: an Allan/VRW-style density, as
+    Kalibr's ``accelerometer_noise_density``) or ``psd_one_sided_ug_per_sqrt_hz`` (the amplitude √S₁ of
+    a one-sided power spectral density, as MATLAB's ``imuSensor`` reads a datasheet; N = √S₁/√2).
+    Others: ``bias_instability_ug`` (flicker floor 0.664 B over
     ``bias_instability_tau_range_s``), ``random_walk_ug_per_sqrt_h`` (the accelerometer's rate random
     walk). Quantisation: ``quantisation_m_per_s`` (velocity per count of an integrating output) or
     ``quantisation_m_per_s2`` (acceleration LSB). µg is written ``ug``.
@@ -254,21 +275,25 @@ class AccelErrors(_CommonErrors):
     scale_factor_nonlinearity_ppm: PerAxis = _ZERO
     vrw_m_per_s_per_sqrt_h: PerAxisNonNegative | None = None
     noise_density_ug_per_sqrt_hz: PerAxisNonNegative | None = None
+    psd_one_sided_ug_per_sqrt_hz: PerAxisNonNegative | None = None
     bias_instability_ug: PerAxisNonNegative = _ZERO
     random_walk_ug_per_sqrt_h: PerAxisNonNegative = _ZERO
     ramp_ug_per_h: PerAxis = _ZERO
     quantisation_m_per_s: PositiveReal | None = None
     quantisation_m_per_s2: PositiveReal | None = None
 
-    white_noise_keys = ("vrw_m_per_s_per_sqrt_h", "noise_density_ug_per_sqrt_hz")
+    white_noise_keys = ("vrw_m_per_s_per_sqrt_h", "noise_density_ug_per_sqrt_hz", "psd_one_sided_ug_per_sqrt_hz")
     _nonlinearity = field_validator("scale_factor_nonlinearity_ppm")(_needs_range("range_g"))
     _density = field_validator("noise_density_ug_per_sqrt_hz")(_exclusive("vrw_m_per_s_per_sqrt_h"))
+    _psd = field_validator("psd_one_sided_ug_per_sqrt_hz")(_exclusive(*white_noise_keys[:2]))
     _quantum = field_validator("quantisation_m_per_s2")(_exclusive("quantisation_m_per_s"))
 
     def to_si(self) -> ErrorModel:
         """The same terms in SI units (m/s, m/s², s)."""
         if self.noise_density_ug_per_sqrt_hz is not None:
             density = np.array(self.noise_density_ug_per_sqrt_hz) * _UG
+        elif self.psd_one_sided_ug_per_sqrt_hz is not None:
+            density = np.array(self.psd_one_sided_ug_per_sqrt_hz) * _UG / _SQRT2
         else:
             density = np.array(self.vrw_m_per_s_per_sqrt_h or _ZERO) / _SQRT_HOUR
         full_scale = None if self.range_g is None else self.range_g * STANDARD_GRAVITY

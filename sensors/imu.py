@@ -150,7 +150,7 @@ def _white_noise_budget(
     rest, ``N_add² = N_spec² − N_mech² − LSB² T / 12``; a negative rest cannot work.
 
     ``keys``: the config the model came from, where the white noise is specified (or not) by one of
-    two keys; errors name it under ``prefix``.
+    its white-noise keys (``GyroErrors.white_noise_keys``); errors name it under ``prefix``.
 
     Returns the model with ``noise_density = N_add`` and the total density at the output (3,).
     """

@@ -20,13 +20,25 @@ Gauss–Markov              σ, rad/s; correlation time τ_c, s      see :func:`
 ========================  =====================================  ==============================  =====
 
 Noise density
-    N is a single-sided noise density in IEEE 952's sense: it equals the Allan deviation at τ = 1 s
-    (the −½ line read at τ = 1 s), and white noise sampled every Δt has a per-sample standard deviation
-    σ = N / √Δt. MATLAB's ``imuSensor`` (``NoiseDensity`` of ``gyroparams``/``accelparams``) draws
-    σ = N·√(Fs/2) = N / √(2Δt) for the same number N: √2 lower, as for a double-sided density. To
-    reproduce a MATLAB model here use ``N = NoiseDensity / √2``; to get our noise in MATLAB set
-    ``NoiseDensity = √2·N``. Kalibr's ``gyroscope_noise_density`` / ``accelerometer_noise_density``
-    (σ_d = σ_c/√Δt) and ``*_random_walk`` (σ_bd = σ_b √Δt) are the same numbers as N and K here.
+    N is the coefficient of IEEE 952's angle random walk (velocity random walk for an accelerometer):
+    the white noise's Allan deviation is N/√τ, so N is its Allan deviation at τ = 1 s, and white noise
+    sampled every Δt has per-sample standard deviation σ = N/√Δt. Its power spectral density is N²
+    two-sided (over −Fs/2 … Fs/2: σ²Δt = N²; IEEE 952 Annex C writes S_Ω = N² with
+    σ²(τ) = 4 ∫₀^∞ S_Ω(f) sin⁴(πfτ)/(πfτ)² df) and 2N² one-sided (over 0 … Fs/2). So N is not the
+    amplitude of a one-sided spectral density: that amplitude is √S₁ = √2·N. The same N is Kalibr's
+    continuous-time noise density (``gyroscope_noise_density`` / ``accelerometer_noise_density``,
+    σ_d = σ_c/√Δt) and imusim's; Kalibr's ``*_random_walk`` (σ_bd = σ_b √Δt) is K here. MATLAB's
+    ``imuSensor`` reads ``NoiseDensity`` (of ``gyroparams``/``accelparams``) as a one-sided amplitude √S₁
+    and draws σ = NoiseDensity·√(Fs/2) = √S₁/√(2Δt): to reproduce a MATLAB model use
+    N = NoiseDensity/√2, to get our noise in MATLAB set ``NoiseDensity = √2·N``.
+
+    A datasheet's figure in unit/√Hz may be either reading. An ARW/VRW figure (°/√h, m/s/√h), or a
+    density read off an Allan plot, is N. A "noise (spectral) density" measured as a spectrum is, by
+    the usual electronics convention, the one-sided amplitude √S₁, √2 above N, unless the datasheet says
+    otherwise. The device keys name the reading (:class:`gyroemu.sensors.errors.GyroErrors`,
+    :class:`~gyroemu.sensors.errors.AccelErrors`): ``arw_deg_per_sqrt_h``, ``vrw_m_per_s_per_sqrt_h``,
+    ``noise_density_deg_per_s_per_sqrt_hz`` and ``noise_density_ug_per_sqrt_hz`` give N;
+    ``psd_one_sided_deg_per_s_per_sqrt_hz`` and ``psd_one_sided_ug_per_sqrt_hz`` give √S₁ (N = √S₁/√2).
     Datasheet units: N[rad/√s] = N[deg/√h]·(π/180)/60; K[rad/s/√s] = K[deg/h/√h]·(π/180)/3600/60.
 
 How each term is made
@@ -160,7 +172,7 @@ def white_noise(rng: np.random.Generator, shape, dt: float, density) -> np.ndarr
     ----------
     density : float or (axes,)
         N in rad/s/√Hz ≡ rad/√s (gyro) or m/s²/√Hz ≡ m/s/√s (accelerometer); N is the Allan deviation
-        at τ = 1 s (see the module notes on single- and double-sided densities).
+        at τ = 1 s (two-sided PSD N², one-sided 2N²: see the module notes).
 
     Returns
     -------
@@ -439,7 +451,7 @@ def sensor_noise(
     ----------
     shape : (n, A)
     white : float or (A,)
-        Noise density N, rad/√s.
+        Noise density N, rad/√s (the Allan deviation at τ = 1 s; one-sided PSD 2N²).
     random_walk : float or (A,)
         Rate random walk K, rad/s/√s (starts from 0 at the first sample).
     flicker : FlickerBank or None
