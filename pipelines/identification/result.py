@@ -145,7 +145,11 @@ class Identification:
 
     def device_comments(self) -> list[str]:
         """Comment lines (without '#'): provenance, uncertainties (1σ), what was not observable."""
-        lines = ["Fitted by 'gyroemu identify'. Uncertainties are standard (1 sigma); noise intervals 68 %."]
+        lines = [
+            "Fitted by 'gyroemu identify'. Uncertainties are standard (1 sigma); noise intervals 68 %.",
+            "Noise densities are Allan readings (N = Allan deviation at 1 s, fitted from the rest phases'",
+            "Allan deviations): N as gyroemu draws it, not a one-sided spectral density (sensors/noise.py).",
+        ]
         for t in self.trials:
             rest = ", ".join(f"{p.t_start:.1f}-{p.t_stop:.1f} s" for p in t.rest) or "none"
             lines.append(f"trial {t.name}: {t.samples} samples at {t.rate_hz:.3f} Hz; rest phases {rest}")
