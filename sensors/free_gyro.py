@@ -56,11 +56,30 @@ T = τ_i a_i + τ_o m/cos²θ (its component along a_o is τ_o, along a_i is τ_
 Outer-bearing friction thus tilts the spin axis about the inner gimbal axis at τ_o/(H cos θ) (for
 gyro 1, sin θ₁ grows at τ_o/H), and inner-bearing friction turns it about the outer axis, ψ₁' =
 −τ_i/(H cos θ₁): the lecture's "drift due to friction". The bearing rates that set the friction are
-the carrier-driven ones above; the drift's own contribution (≲ τ/H ~ 10⁻⁵ rad/s) is left out: at
-such rates real instrument bearings are in their pre-sliding (stiction) regime, not at the sliding
-torque, and leaving it out keeps Coulomb friction from chattering on a carrier at rest. (4) is
-integrated in the inertial frame by Heun's method with renormalisation, in a numba kernel; inside the
-gimbal-lock band the 1/cos²θ factor is held at its value at the band's edge.
+the carrier-driven ones above; the drift's own contribution (≲ τ/H ~ 10⁻⁵ rad/s) is left out: it is
+cross-coupled (an inner-bearing torque moves the outer bearing and vice versa) and small beside the
+carrier's rate while the carrier turns, and leaving it out keeps Coulomb friction from chattering on
+a carrier at rest. (4) is integrated in the inertial frame by Heun's method with renormalisation, in
+a numba kernel; inside the gimbal-lock band the 1/cos²θ factor is held at its value at the band's edge.
+
+**Pre-sliding (Dahl).** The sign law above is rate-independent: a bearing turning at Earth rate
+(~5·10⁻⁵ rad/s on a bench) already gets the full τ_c. That is what ball bearings do once they have
+turned through more than their pre-sliding displacement: their friction depends on the displacement,
+not the speed (P. R. Dahl, "A solid friction model", Aerospace Corp. TOR-0158(3107-18)-1, 1968, from
+ball-bearing measurements; B. Armstrong-Hélouvry, P. Dupont, C. Canudas de Wit, Automatica 30(7),
+1083, 1994: pre-sliding displacement, then sliding). With
+``presliding_displacement_rad`` θ_d > 0 the Coulomb part z of each bearing's torque follows Dahl's
+model (exponent 1), dz/dx = (τ_c/θ_d)(1 − z sgn(ẋ)/τ_c) in the bearing's angle x, integrated
+exactly over each step's displacement Δx (trapezoid of the bearing rate):
+z ← τ_c sgn Δx + (z − τ_c sgn Δx) e^{−|Δx|/θ_d}. From an unloaded bearing (z = 0 at uncaging) turning
+steadily at w, z = τ_c sgn w (1 − e^{−|w| t/θ_d}): the sign law after a transient of θ_d/|w| (a few
+seconds at Earth rate for θ_d ~ 10⁻⁴ rad), a stiffness τ_c/θ_d for small reversals (vibration). The
+default θ_d = 0 is the rigid limit, the sign law itself. A static bench turns the bearings through
+~3·10⁻² rad in 10 min, far past any ball bearing's θ_d: either law then drifts τ_c/H ≈ 4.4 °/h off
+the Earth-rate components (yaw Ω sin φ − τ_c/H, pitch Ω cos φ + τ_c/H, roll −τ_c/H), as a real
+directional gyro with such bearings would. Dahl's law differs where a bearing turns through less than
+θ_d: the first θ_d/|w| after uncaging or a reversal, and bearings the carrier turns only through a
+geometric coupling (on the bench gyro 2's inner one, at ~Ω² t: the sign law gives it the full τ_c).
 
 Chunks
 ------
@@ -70,8 +89,10 @@ what ties the chunks into one run:
 * ``state["q_uncage"]`` (4,): q_is at the run's first sample, the attitude in which the rotors were set
   (the rotor frame); every chunk's attitude is taken relative to it.
 * ``state["spins"]`` (2, 3): the rotor directions in the rotor frame at the chunk's last sample, where
-  (4) continues by the same Heun steps. The friction torques are memoryless (set by the carrier-driven
-  bearing rates of each sample), so the rotor directions are all the friction drift carries.
+  (4) continues by the same Heun steps. With the sign law the friction torques are memoryless (set by
+  the carrier-driven bearing rates of each sample), so the rotor directions are all the friction drift
+  carries; with Dahl's law ``state["bearing_torque"]`` (2, 2) carries each gyro's (inner, outer)
+  Coulomb-part torque z, N·m, at the last sample.
 * ``state["attitude_tail"]`` (≤ 5, 3): the unwrapped (φ, θ, ψ) of the last five samples so far (the
   shared sample last). The next chunk's angles are unwrapped on from it, and its differences reach
   back into it: from its second sample on, the central and end formulas see the samples a single
@@ -153,6 +174,8 @@ class FreeGyro(GyroMechanism):
     spin_speed_rpm : rotor speed, rpm.
     outer_viscous_friction_n_m_s_per_rad, outer_coulomb_friction_n_m : outer gimbal bearing.
     inner_viscous_friction_n_m_s_per_rad, inner_coulomb_friction_n_m : inner gimbal bearing.
+    presliding_displacement_rad : Dahl's pre-sliding displacement θ_d = τ_c/σ₀ of every bearing, rad;
+        0 (the default): the rigid limit, Coulomb's sign law.
     gimbal_lock_margin_deg : an inner gimbal within this of ±90° is locked.
     on_gimbal_lock : ``"warn"`` (default) or ``"raise"``.
     """
@@ -165,6 +188,7 @@ class FreeGyro(GyroMechanism):
     outer_coulomb_friction_n_m: NonNegativeReal = 3.0e-6
     inner_viscous_friction_n_m_s_per_rad: NonNegativeReal = 2.0e-6
     inner_coulomb_friction_n_m: NonNegativeReal = 3.0e-6
+    presliding_displacement_rad: NonNegativeReal = 0.0
     gimbal_lock_margin_deg: Annotated[Real, Field(gt=0, lt=90)] = 5.0
     on_gimbal_lock: Literal["warn", "raise"] = "warn"
 
@@ -205,7 +229,7 @@ class FreeGyro(GyroMechanism):
         q_uncage = state.get("q_uncage", q_is[0])
         q_rel = quat_multiply(quat_conjugate(q_uncage), q_is)
         spins = self._spins(
-            q_rel, np.asarray(truth.omega, dtype=float), truth.dt, state.get("spins", SPIN_AXES)
+            q_rel, np.asarray(truth.omega, dtype=float), truth.dt, state.get("spins", SPIN_AXES), state
         )  # (M, 2, 3) rotor frame
         spins_case = quat_rotate(quat_conjugate(q_rel)[:, None, :], spins)  # (M, 2, 3) case axes
 
@@ -235,14 +259,42 @@ class FreeGyro(GyroMechanism):
             rate=rate, raw={"gimbal_angle_rad": gimbals, "attitude_xyz_rad": attitude, "gimbal_lock": locked}
         )
 
-    def _spins(self, q_rel: np.ndarray, omega: np.ndarray, dt: float, spins0: np.ndarray = SPIN_AXES) -> np.ndarray:
+    def _spins(
+        self,
+        q_rel: np.ndarray,
+        omega: np.ndarray,
+        dt: float,
+        spins0: np.ndarray = SPIN_AXES,
+        state: dict | None = None,
+    ) -> np.ndarray:
         """Rotor directions (M, 2, 3) in the rotor (inertial) frame from ``spins0`` at the first sample:
-        fixed, or drifting by (4)."""
+        fixed, or drifting by (4). With Dahl's law the bearing torques continue from
+        ``state["bearing_torque"]`` (unloaded without it) and are stored back there."""
         spins0 = np.ascontiguousarray(spins0, dtype=float)
         if self.frictionless:
             return np.broadcast_to(spins0, (len(q_rel), 2, 3))
         out = np.empty((len(q_rel), 2, 3))
         min_cos2 = math.sin(math.radians(self.gimbal_lock_margin_deg)) ** 2
+        if self.presliding_displacement_rad > 0:
+            state = {} if state is None else state
+            z = np.array(state.get("bearing_torque", np.zeros((2, 2))), dtype=float)
+            _drift_dahl(
+                np.ascontiguousarray(q_rel),
+                np.ascontiguousarray(omega),
+                dt,
+                self.spin_momentum,
+                self.outer_viscous_friction_n_m_s_per_rad,
+                self.outer_coulomb_friction_n_m,
+                self.inner_viscous_friction_n_m_s_per_rad,
+                self.inner_coulomb_friction_n_m,
+                min_cos2,
+                self.presliding_displacement_rad,
+                spins0,
+                z,
+                out,
+            )
+            state["bearing_torque"] = z
+            return out
         _drift(
             np.ascontiguousarray(q_rel),
             np.ascontiguousarray(omega),
@@ -385,3 +437,54 @@ def _drift(q_rel, omega, dt, h, b_o, c_o, b_i, c_i, min_cos2, spins0, out):
             s = s + 0.5 * dt * (f0 + f1)
             s /= math.sqrt(s[0] ** 2 + s[1] ** 2 + s[2] ** 2)
             out[k, g] = s
+
+
+# Dahl's law (``presliding_displacement_rad`` > 0). Separate kernels, so that the sign law's path stays
+# the same arithmetic as before.
+
+
+@njit
+def _bearings(q, omega, s, min_cos2):
+    """Inner axis a_i, m = a_o − (a_o·s) s (case axes), cos²θ and the carrier-driven bearing rates."""
+    sc = _rotate(q, s, True)
+    cos2 = max(1.0 - sc[2] * sc[2], min_cos2)
+    cos = math.sqrt(cos2)
+    a_i = np.array([-sc[1] / cos, sc[0] / cos, 0.0])
+    m = np.array([-sc[2] * sc[0], -sc[2] * sc[1], 1.0 - sc[2] * sc[2]])
+    w_i = -(omega[0] * a_i[0] + omega[1] * a_i[1])
+    w_o = -(omega[0] * m[0] + omega[1] * m[1] + omega[2] * m[2]) / cos2
+    return a_i, m, cos2, w_i, w_o
+
+
+@njit
+def _dahl(z, coulomb, displacement, theta_d):
+    """Dahl's model over a bearing displacement: z relaxes towards τ_c sgn Δx as e^{−|Δx|/θ_d}."""
+    if displacement == 0.0:
+        return z
+    target = coulomb if displacement > 0.0 else -coulomb
+    return target + (z - target) * math.exp(-abs(displacement) / theta_d)
+
+
+@njit
+def _drift_dahl(q_rel, omega, dt, h, b_o, c_o, b_i, c_i, min_cos2, theta_d, spins0, z, out):
+    """Heun's method for (4) with Dahl's Coulomb part; ``z`` (2, 2) = (inner, outer) per gyro, in and out."""
+    n = q_rel.shape[0]
+    for g in range(spins0.shape[0]):
+        s = spins0[g].copy()
+        z_i, z_o = z[g, 0], z[g, 1]
+        out[0, g] = s
+        for k in range(1, n):
+            a_i, m, cos2, w_i0, w_o0 = _bearings(q_rel[k - 1], omega[k - 1], s, min_cos2)
+            torque = -(b_i * w_i0 + z_i) * a_i - ((b_o * w_o0 + z_o) / cos2) * m
+            f0 = _rotate(q_rel[k - 1], torque, False) / h
+            guess = s + dt * f0
+            guess /= math.sqrt(guess[0] ** 2 + guess[1] ** 2 + guess[2] ** 2)
+            a_i, m, cos2, w_i1, w_o1 = _bearings(q_rel[k], omega[k], guess, min_cos2)
+            z_i = _dahl(z_i, c_i, 0.5 * dt * (w_i0 + w_i1), theta_d)
+            z_o = _dahl(z_o, c_o, 0.5 * dt * (w_o0 + w_o1), theta_d)
+            torque = -(b_i * w_i1 + z_i) * a_i - ((b_o * w_o1 + z_o) / cos2) * m
+            f1 = _rotate(q_rel[k], torque, False) / h
+            s = s + 0.5 * dt * (f0 + f1)
+            s /= math.sqrt(s[0] ** 2 + s[1] ** 2 + s[2] ** 2)
+            out[k, g] = s
+        z[g, 0], z[g, 1] = z_i, z_o

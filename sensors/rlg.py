@@ -87,7 +87,7 @@ Defaults
 --------
 A navigation-grade RLG of the GG1320AN class (Honeywell; datasheet: ARW < 0.0035°/√h, bias stability
 < 0.0035°/h, scale-factor stability < 5 ppm): an equilateral triangular He-Ne cavity of 0.10 m sides
-(P = 0.30 m, A = 4.33 cm², λ = 632.8 nm: K = 5.73·10⁵, q = 2.26″), lock-in 200°/h, dither 437 Hz ×
+(P = 0.30 m, A = 43.3 cm², λ = 632.8 nm: K = 5.73·10⁵, q = 2.26″), lock-in 200°/h, dither 437 Hz ×
 200″ (peak dither rate 153°/s) randomised by 5 % per cycle. The dither random walk is then
 0.0027°/√h, inside the 0.0035°/√h specification (the IMU adds the rest). The bias instability and
 scale-factor terms are not the mechanism's: give them in the device's ``[gyro.errors]``. (The cavity

@@ -436,3 +436,137 @@ def test_inner_bearing_friction_ignores_a_turn_about_the_outer_axis():
     assert np.all(_spin_rate(q, np.array([0.0, 0.0, 1.0]), s, h, 0.0, 0.0, b_i, 0.0, 1e-12) == 0.0)
     rate = _spin_rate(q, np.array([1.0, 0.0, 0.0]), s, h, 0.0, 0.0, b_i, 0.0, 1e-12)
     assert np.allclose(rate, [b_i / h, 0.0, 0.0], rtol=0, atol=4 * np.finfo(float).eps)
+
+
+# --------------------------------------------------------------------------------------------------
+# The static bench: Earth rate, and friction at Earth-rate bearing speeds (issue 18 item 6)
+# --------------------------------------------------------------------------------------------------
+
+EARTH_RATE = 7.292115e-5  # rad/s
+LATITUDE = math.radians(52.5)  # bench_static's site
+# Sensor axes on the bench (yaw 0): x east, y north, z up, so the carrier turns at (0, Ω cos φ, Ω sin φ):
+# 9.16 °/h about y (pitch) and 11.93 °/h about z (yaw).
+BENCH_OMEGA = EARTH_RATE * np.array([0.0, math.cos(LATITUDE), math.sin(LATITUDE)])
+
+
+def bench(gyro, duration=60.0, dt=0.01):
+    """The pair on a static bench: the case turns with the Earth about a fixed axis at BENCH_OMEGA."""
+    t = np.arange(round(duration / dt) + 1) * dt
+    angle = EARTH_RATE * t
+    axis = BENCH_OMEGA / EARTH_RATE
+    q = np.column_stack([np.cos(angle / 2), np.sin(angle / 2)[:, None] * axis])
+    return t, respond(gyro, q, np.tile(BENCH_OMEGA, (len(t), 1)), dt)
+
+
+def test_frictionless_bench_reads_the_earth_rate_components():
+    """Without friction the rotors hold still: the pair indicates (0, Ω cos φ, Ω sin φ) (9.16, 11.93 °/h)
+    to round-off and the differences' h⁴ remainder (nil for this rotation about a fixed axis)."""
+    t, r = bench(FRICTIONLESS)
+    np.testing.assert_allclose(r.rate, np.tile(BENCH_OMEGA, (len(t), 1)), rtol=0, atol=1e-12)
+    assert math.degrees(BENCH_OMEGA[2]) * 3600 == pytest.approx(11.93, abs=0.005)
+    assert math.degrees(BENCH_OMEGA[1]) * 3600 == pytest.approx(9.16, abs=0.005)
+
+
+def bench_closed_form(gyro, z_inner, z_outer):
+    """Indicated rate on the bench to first order in the angles, for Coulomb-part torques z (N·m).
+
+    Gyro 1 (spin x): its inner bearing (y) turns at w_i = −Ω cos φ, its outer (z) at w_o = −Ω sin φ; the
+    torques τ = −(b w + z) push s along +y at τ_i/H (a drift about z) and along +z at τ_o/H (about −y).
+    Gyro 2 (spin y): its inner bearing (x) does not turn, its outer one (z) turns at −Ω sin φ and tilts s₂
+    towards +z (a drift about x). The pair indicates ω − ω_drift."""
+    h = gyro.spin_momentum
+    tau_i = gyro.inner_viscous_friction_n_m_s_per_rad * BENCH_OMEGA[1] + z_inner
+    tau_o = gyro.outer_viscous_friction_n_m_s_per_rad * BENCH_OMEGA[2] + z_outer
+    return np.column_stack([-tau_o / h, BENCH_OMEGA[1] + tau_o / h, BENCH_OMEGA[2] - tau_i / h])
+
+
+def bench_tolerance(t, drift):
+    """First-order closed form: its neglected terms are products of an angle (case turn plus drift,
+    ≤ (Ω + τ/H) T) and a rate (≤ Ω + τ/H) in (1)–(4), two of them at most per component (e.g. θ' sin ψ
+    in (3)); plus the Heun steps' and the differences' round-off."""
+    return 2 * (EARTH_RATE + drift) ** 2 * t[-1] + 1e-12
+
+
+def test_coulomb_bench_drift_is_tau_over_h_off_the_earth_rate():
+    """The sign law (default, θ_d = 0) slides at τ_c at Earth-rate bearing speeds: yaw reads
+    Ω sin φ − τ_c/H = 11.93 − 4.38 = 7.56 °/h, pitch Ω cos φ + τ_c/H = 9.16 + 4.38 = 13.53 °/h."""
+    gyro = FreeGyro()
+    t, r = bench(gyro)
+    expected = bench_closed_form(gyro, gyro.inner_coulomb_friction_n_m, gyro.outer_coulomb_friction_n_m)
+    drift = gyro.inner_coulomb_friction_n_m / gyro.spin_momentum
+    assert np.abs(r.rate - expected).max() <= bench_tolerance(t, drift)
+    deg_h = np.degrees(r.rate.mean(axis=0)) * 3600
+    assert deg_h[2] == pytest.approx(7.56, abs=0.02)  # not 11.93
+    assert deg_h[1] == pytest.approx(13.53, abs=0.02)  # not 9.16
+
+
+@pytest.mark.parametrize("theta_d", [2e-4, 1e-3])
+def test_dahl_bench_drift_grows_over_the_presliding_displacement(theta_d):
+    """Dahl's law from unloaded bearings: at a steady bearing rate w the Coulomb part is
+    z = τ_c (1 − e^{−|w| t/θ_d}) (sign of −w), so the indicated rate moves from the Earth-rate components
+    to the sign law's values with time constants θ_d/(Ω cos φ) (yaw) and θ_d/(Ω sin φ) (pitch, roll)."""
+    gyro = FreeGyro(presliding_displacement_rad=theta_d)
+    t, r = bench(gyro, 30.0)
+    c_i, c_o = gyro.inner_coulomb_friction_n_m, gyro.outer_coulomb_friction_n_m
+    z_i = c_i * -np.expm1(-BENCH_OMEGA[1] * t / theta_d)
+    z_o = c_o * -np.expm1(-BENCH_OMEGA[2] * t / theta_d)
+    expected = bench_closed_form(gyro, z_i, z_o)
+    drift = c_i / gyro.spin_momentum
+    # The exact displacement update leaves the trapezoid of w's O(dt² × drift) change per step; the
+    # differences see z's curvature, h⁴ z⁽⁵⁾/30 ≪ the angles' term for these time constants (≥ 2.7 s).
+    assert np.abs(r.rate[2:-2] - expected[2:-2]).max() <= bench_tolerance(t, drift)
+
+
+def test_dahl_bench_mean_drift_closed_form():
+    """Mean indicated yaw rate over T: Ω sin φ − (τ_c/H)(1 − (θ_d/(wT))(1 − e^{−wT/θ_d})), w = Ω cos φ."""
+    theta_d, duration = 1e-3, 60.0
+    gyro = FreeGyro(presliding_displacement_rad=theta_d)
+    t, r = bench(gyro, duration)
+    w = BENCH_OMEGA[1]
+    x = w * duration / theta_d
+    drift = gyro.inner_coulomb_friction_n_m / gyro.spin_momentum
+    viscous = gyro.inner_viscous_friction_n_m_s_per_rad * w / gyro.spin_momentum
+    expected = BENCH_OMEGA[2] - drift * (1 - (1 - math.exp(-x)) / x) - viscous
+    mean = 0.5 * np.mean(r.rate[1:, 2] + r.rate[:-1, 2])  # trapezoid mean over [0, T]
+    # trapezoid mean of the rate: exact for the ends' angles up to the differences' one-sided ends
+    assert mean == pytest.approx(expected, abs=bench_tolerance(t, drift))
+
+
+def test_dahl_keeps_high_rate_behaviour():
+    """At 0.5 rad/s a bearing passes θ_d = 1e-4 rad in 0.2 ms: after the first step the drift is the
+    sign law's (the outer-bearing test's closed form), the transient costing ≤ τ_c θ_d/(H w) of angle."""
+    rate, dt, m = 0.5, 1e-3, 2000
+    t = np.arange(m) * dt
+    q = np.column_stack([np.cos(rate * t / 2), 0 * t, 0 * t, np.sin(rate * t / 2)])
+    omega = np.tile([0.0, 0.0, rate], (m, 1))
+    coulomb = respond(friction(outer=(0.0, 3e-6)), q, omega, dt)
+    gyro = FreeGyro(
+        outer_viscous_friction_n_m_s_per_rad=0.0,
+        outer_coulomb_friction_n_m=3e-6,
+        inner_viscous_friction_n_m_s_per_rad=0.0,
+        inner_coulomb_friction_n_m=0.0,
+        presliding_displacement_rad=1e-4,
+    )
+    dahl = respond(gyro, q, omega, dt)
+    lag = 3e-6 / gyro.spin_momentum * (1e-4 / rate + dt)  # the transient's angle, at most
+    diff = np.abs(dahl.raw["gimbal_angle_rad"] - coulomb.raw["gimbal_angle_rad"]).max()
+    assert 0 < diff <= lag
+
+
+def test_dahl_chunks_continue_one_run():
+    """The bearing torques carry across chunks: a bench run in two chunks sharing their edge sample
+    gives one call's rotor directions (to round-off)."""
+    gyro = FreeGyro(presliding_displacement_rad=1e-3)
+    t, whole = bench(gyro, 30.0)
+    angle = EARTH_RATE * t
+    axis = BENCH_OMEGA / EARTH_RATE
+    q = np.column_stack([np.cos(angle / 2), np.sin(angle / 2)[:, None] * axis])
+    omega = np.tile(BENCH_OMEGA, (len(t), 1))
+    state: dict = {}
+    parts = []
+    for a, b in [(0, 1001), (1000, len(t))]:
+        truth = make_truth(q[a:b], omega[a:b], 0.01)
+        parts.append(gyro.respond(truth, np.random.default_rng(0), state).raw["gimbal_angle_rad"])
+    chunked = np.concatenate([parts[0], parts[1][1:]])
+    np.testing.assert_allclose(chunked, whole.raw["gimbal_angle_rad"], rtol=0, atol=1e-15)
+    assert state["bearing_torque"].shape == (2, 2)
