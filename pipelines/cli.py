@@ -634,7 +634,8 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         default=None,
         metavar="KEY=VALUE",
-        help="a [smoothing] key of the recorded scenario, e.g. orientation_noise_deg=0.1 (repeatable)",
+        help="a [smoothing] key of the recorded scenario, e.g. orientation_cutoff_hz=8 (repeatable; default "
+        "orientation_cutoff_hz=5 and position_cutoff_hz=10; any key given replaces both defaults)",
     )
     p.add_argument("--workers", type=int, default=2, help="processes for the runs (default: 2)")
     p.add_argument("--out", default="twin", help="folder for the report (default: ./twin)")
