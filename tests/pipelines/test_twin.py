@@ -150,3 +150,36 @@ def test_broad_trial_end_to_end(tmp_path):
             assert fr["twin"][m]["n"] == 2 and fr["twin"][m]["mean"] > 0 and fr["ratio"][m] > 0
     for key in ("gyro", "accel"):
         assert trial["residuals"][key]["ratio_min"] > 0
+
+
+UNDISTURBED = [
+    "02_undisturbed_slow_rotation_B.hdf5",
+    "07_undisturbed_fast_rotation_B.hdf5",
+    "11_undisturbed_slow_translation_B.hdf5",
+    "16_undisturbed_fast_translation_B.hdf5",
+]
+
+
+@pytest.mark.slow
+@needs_trial()
+def test_twin_meets_the_9d_and_ranking_targets_on_the_undisturbed_trials(tmp_path):
+    """Issue 15's targets that the twin meets, held against regressions (README, "The twin"): for each
+    filter the mean over the four trials of the twin/real 9D total RMSE lies in 0.75–1.33 and no trial
+    outside 0.5–2; mekf, vqf, madgwick and mahony rank alike on twin and real in at least three trials.
+    The 6D inclination target (every ratio in 0.75–1.33) is printed, not asserted: two of twenty miss."""
+    for name in UNDISTURBED:
+        if not (BROAD_DIR / name).is_file():
+            pytest.skip(f"BROAD data: {name} not found in {BROAD_DIR}")
+    rep = run_twin(TwinOptions(trials=[BROAD_DIR / n for n in UNDISTURBED], seeds=5, out=tmp_path))
+    data = json.loads(rep.to_json())
+    ratios: dict[str, list[float]] = {}
+    six_d = []
+    for trial in data["trials"]:
+        for fr in trial["filters"]:
+            ratios.setdefault(fr["filter"], []).append(fr["ratio"]["total_9d"])
+            six_d.append(fr["ratio"]["inclination_6d"])
+    for name, values in ratios.items():
+        assert 0.75 <= sum(values) / len(values) <= 1.33, (name, values)
+        assert all(0.5 <= v <= 2.0 for v in values), (name, values)
+    assert sum(trial["ranking"]["same"] for trial in data["trials"]) >= 3
+    print(f"6D inclination ratios inside 0.75–1.33: {sum(0.75 <= r <= 1.33 for r in six_d)} of {len(six_d)}")
