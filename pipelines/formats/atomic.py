@@ -13,7 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["write_atomic", "write_text_atomic"]
+__all__ = ["write_atomic", "write_text_atomic", "write_figure_atomic"]
 
 
 def write_atomic(path: str | os.PathLike[str], write: Callable[[IO[Any]], object], *, binary: bool = True) -> Path:
@@ -34,3 +34,13 @@ def write_atomic(path: str | os.PathLike[str], write: Callable[[IO[Any]], object
 def write_text_atomic(path: str | os.PathLike[str], text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` whole or not at all."""
     return write_atomic(path, lambda f: f.write(text), binary=False)
+
+
+def write_figure_atomic(fig: Any, path: str | os.PathLike[str], dpi: int) -> Path:
+    """Save the matplotlib figure ``fig`` as a PNG at ``path`` whole or not at all, and close it."""
+    import matplotlib.pyplot as plt
+
+    try:
+        return write_atomic(path, lambda f: fig.savefig(f, dpi=dpi, format="png"))
+    finally:
+        plt.close(fig)

@@ -46,7 +46,6 @@ against time, first run). :meth:`BenchReport.save` writes all three, each throug
 from __future__ import annotations
 
 import datetime
-import functools
 import json
 import math
 import sys
@@ -69,7 +68,7 @@ from gyroemu.pipelines.estimation.registry import (
     make_filter,
     unavailable_filters,
 )
-from gyroemu.pipelines.formats.atomic import write_atomic, write_text_atomic
+from gyroemu.pipelines.formats.atomic import write_figure_atomic, write_text_atomic
 from gyroemu.pipelines.formats.file_names import unique_stems
 
 __all__ = [
@@ -408,11 +407,7 @@ class BenchReport:
             axes[-1, 0].set_xlabel("time, s")
             fig.tight_layout()
             path = directory / f"{stem}.png"
-            try:
-                write_atomic(path, functools.partial(fig.savefig, dpi=110, format="png"))
-            finally:
-                plt.close(fig)
-            written.append(path)
+            written.append(write_figure_atomic(fig, path, dpi=110))
         return written
 
     def save(self, directory) -> dict:

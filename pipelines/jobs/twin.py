@@ -41,7 +41,6 @@ against twin), each written through a temporary file. An existing non-empty fold
 from __future__ import annotations
 
 import datetime
-import functools
 import json
 import math
 import os
@@ -684,7 +683,7 @@ class TwinReport:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        from gyroemu.pipelines.formats.atomic import write_atomic
+        from gyroemu.pipelines.formats.atomic import write_figure_atomic
         from gyroemu.pipelines.formats.file_names import unique_stems
 
         directory = Path(directory)
@@ -720,11 +719,7 @@ class TwinReport:
             fig.suptitle(f"{tr.name}: real vs twin ({self.settings['device']}, {self.settings['seeds']} seeds)")
             fig.tight_layout()
             path = directory / f"{stem}.png"
-            try:
-                write_atomic(path, functools.partial(fig.savefig, dpi=100, format="png"))
-            finally:
-                plt.close(fig)
-            written.append(path)
+            written.append(write_figure_atomic(fig, path, dpi=100))
         return written
 
     def save(self, directory) -> dict:
