@@ -147,7 +147,8 @@ def _white_noise_budget(
     A datasheet's noise density is measured at the output: it holds the mechanism's own noise
     ``N_mech`` and, for a digital output of step ``LSB`` dithered by the noise, the quantiser's white
     noise of variance ``LSB²/12`` per sample, i.e. density² ``LSB² T / 12``. The error layer adds the
-    rest, ``N_add² = N_spec² − N_mech² − LSB² T / 12``; a negative rest cannot work.
+    rest, ``N_add² = N_spec² − N_mech² − LSB² T / 12``; a negative rest cannot work, and neither does a
+    quantiser the noise does not dither (:func:`_check_dithered`, :data:`DITHER_MIN_SIGMA_LSB`).
 
     ``keys``: the config the model came from, where the white noise is specified (or not) by one of
     its white-noise keys (``GyroErrors.white_noise_keys``); errors name it under ``prefix``.
@@ -174,7 +175,68 @@ def _white_noise_budget(
             file=file,
             key=f"{prefix}.{given}",
         )
+    _check_dithered(model, period, specified, keys=keys, prefix=prefix, given=given, file=file)
     return dataclasses.replace(model, noise_density=np.sqrt(np.maximum(rest, 0.0))), specified
+
+
+DITHER_MIN_SIGMA_LSB = 0.5
+"""The least white-noise σ ahead of an output quantiser, in LSB, for the budget's ``LSB²/12`` to hold.
+
+For Gaussian noise of σ and mean μ ahead of a rounding quantiser of step ``q``, the error
+``e = Q(x) − x`` has the Fourier series ``e = Σ_k (q/πk)(−1)^k sin(2πkx/q)``, and
+``E sin(2πkx/q) = sin(2πkμ/q) exp(−2π²k²σ²/q²)`` (Widrow & Kollár, *Quantization Noise*, 2008: the
+characteristic-function condition). To first order in ``ε = exp(−2π²σ²/q²)`` the output's variance is
+``Var Q(x) = σ² + q²/12 − ε cos(2πμ/q) (4σ² + q²/π²)``: the ``4σ²`` from ``2 Cov(x, e)``, the
+``q²/π²`` from ``E e²``. The sample-to-sample noise is white, so ADEV(1 s)² = ``T · Var Q(x)``, off
+the budget's ``T (σ² + q²/12)`` by up to ``ε (4σ² + q²/π²) / (2 (σ² + q²/12))`` in ratio as the bias
+moves within an LSB. At σ = q/2 that is 1.19 % (exactly, summing every level: 0.9880 … 1.0118);
+at 0.47 q it is 2.1 %, at 0.36 q (``consumer_mems`` at 100 Hz) 12 %. A configuration below
+σ = q/2 cannot promise its specified density whatever the bias, and is refused."""
+
+
+def _check_dithered(
+    model: ErrorModel, period: float, specified: np.ndarray, *, keys: GyroErrors | AccelErrors, prefix: str, given, file
+) -> None:
+    """Refuse an output quantiser the white noise ahead of it does not dither (:data:`DITHER_MIN_SIGMA_LSB`).
+
+    The white noise ahead of the quantiser is the specification less the quantiser's share:
+    ``σ² = N_spec²/T − LSB²/12`` per sample, times the noise-power gain of the output low-pass when
+    ``bandwidth_hz`` is set. Coloured terms (bias instability, random walks) are not counted: over
+    a second they move the bias within an LSB rather than dither it.
+    """
+    lsb = model.output_lsb
+    if not lsb:
+        return
+    sigma2 = np.asarray(specified, dtype=float) ** 2 / period - lsb**2 / 12.0
+    if model.bandwidth_hz is not None and model.bandwidth_hz < 0.5 / period:
+        sigma2 = sigma2 * _low_pass_noise_gain(period, model.bandwidth_hz, model.filter_order)
+    ratio = float(np.sqrt(max(float(np.min(sigma2)), 0.0)) / lsb)
+    if ratio >= DITHER_MIN_SIGMA_LSB:
+        return
+    quantum = "quantisation_rad_per_s" if isinstance(keys, GyroErrors) else "quantisation_m_per_s2"
+    rate_hz = 1.0 / period
+    filtered = f" after the {prefix}.bandwidth_hz low-pass" if model.bandwidth_hz is not None else ""
+    raise ConfigError(
+        f"the white noise ahead of the output quantiser ({prefix}.{quantum}) is {ratio:.3g} LSB per sample "
+        f"at rate_hz = {rate_hz:g} with {prefix}.{given}{filtered}, below the {DITHER_MIN_SIGMA_LSB:g} LSB "
+        "needed for the quantiser to add white noise of LSB²/12 whatever the bias: the output's ADEV(1 s) "
+        "would depend on where the bias sits within an LSB and miss the specified density. Lower "
+        f"{prefix}.{quantum}, raise rate_hz or raise {prefix}.{given}",
+        file=file,
+        key=f"{prefix}.{quantum}",
+    )
+
+
+def _low_pass_noise_gain(period: float, bandwidth_hz: float, order: int) -> float:
+    """Variance out over variance in of the output low-pass (:func:`gyroemu.sensors.errors._low_pass`) for
+    white noise: ``C P Cᵀ + D²`` with ``P`` the steady state covariance of its state-space form."""
+    import scipy.linalg
+    import scipy.signal
+
+    b, a = scipy.signal.butter(order, bandwidth_hz, btype="low", fs=1.0 / period)
+    A, B, C, D = scipy.signal.tf2ss(b, a)
+    P = scipy.linalg.solve_discrete_lyapunov(A, B @ B.T)
+    return float((C @ P @ C.T)[0, 0] + D[0, 0] ** 2)
 
 
 class Device:
