@@ -353,10 +353,10 @@ def _filter_errors(filters, setup9, setup6, t, gyro, accel, mag, q_true, mask, t
     return out
 
 
-def _adev_at(segments: list[np.ndarray], dt: float) -> np.ndarray:
+def _adev_at(segments: list[np.ndarray], dt: float) -> tuple[np.ndarray, np.ndarray]:
     """(len(TAUS_S), 3) Allan deviation per axis at TAUS_S, pooled over the segments (each (n_i, 3)): the
     Allan variances weighted by their clusters, as :func:`gyroemu.pipelines.identification.pooled_allan`
-    does (NaN where every segment is shorter than 2 τ)."""
+    does (NaN where every segment is shorter than 2 τ); and the clusters behind each value."""
     from gyroemu.sensors.allan import allan_deviation
 
     avar = np.zeros((len(TAUS_S), 3))
@@ -373,7 +373,7 @@ def _adev_at(segments: list[np.ndarray], dt: float) -> np.ndarray:
                     avar[i, axis] += n * adev**2
                     clusters[i, axis] += n
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(clusters > 0, np.sqrt(avar / np.maximum(clusters, 1)), np.nan)
+        return np.where(clusters > 0, np.sqrt(avar / np.maximum(clusters, 1)), np.nan), clusters
 
 
 def _spectrum(segments: list[np.ndarray], fs: float) -> tuple[np.ndarray, np.ndarray]:
@@ -400,7 +400,7 @@ def _residuals(gyro_res: list[np.ndarray], accel_res: list[np.ndarray], fs: floa
             acs.append(a[ok])
     out: dict[str, Any] = {"samples": int(sum(len(x) for x in gs))}
     for key, xs in (("gyro", gs), ("accel", acs)):
-        out[f"{key}_adev"] = _adev_at(xs, 1.0 / fs)
+        out[f"{key}_adev"], out[f"{key}_clusters"] = _adev_at(xs, 1.0 / fs)
         if xs:
             out[f"{key}_psd_f"], out[f"{key}_psd"] = _spectrum(xs, fs)
             out[f"{key}_std"] = np.std(np.concatenate([x - x.mean(axis=0) for x in xs]), axis=0)
@@ -559,6 +559,7 @@ class TwinReport:
     settings: dict
     timings: dict
     notes: list[str] = field(default_factory=list)
+    pooled_residuals: dict | None = None
 
     def to_dict(self) -> dict:
         return {
@@ -577,6 +578,12 @@ class TwinReport:
             },
             "timings_s": self.timings,
             "notes": self.notes,
+            "residuals_pooled": None
+            if self.pooled_residuals is None
+            else {
+                k: (_list(v) if k == "tau_s" else {name: _list(arr) for name, arr in v.items()})
+                for k, v in self.pooled_residuals.items()
+            },
             "trials": [
                 {
                     "name": tr.name,
@@ -669,6 +676,19 @@ class TwinReport:
                 )
             for n in tr.notes:
                 lines.append(f"- {n}")
+            lines.append("")
+        if self.pooled_residuals is not None and len(self.trials) > 1:
+            lines += [f"## Residuals at rest, pooled over the {len(self.trials)} recordings", ""]
+            lines += [
+                "| sensor | Allan ratio twin/real min … max, τ 0.01…10 s | real clusters at 10 s |",
+                "|---|---|---|",
+            ]
+            for key in ("gyro", "accel"):
+                r = self.pooled_residuals[key]
+                pooled_ratio = np.asarray(r["ratio"], dtype=float)
+                kept = pooled_ratio[np.isfinite(pooled_ratio)]
+                span = f"{kept.min():.2f} … {kept.max():.2f}" if kept.size else "—"
+                lines.append(f"| {key} | {span} | {int(np.min(r['real_clusters'][-1]))} |")
             lines.append("")
         lines.append(
             "Timings (s, summed over processes): " + ", ".join(f"{k} {v:.1f}" for k, v in self.timings.items())
@@ -974,7 +994,38 @@ def run_twin(options: TwinOptions) -> TwinReport:
         "filters' defaults at the recording's rate, as gyroemu bench does)"
     )
     timings = {k: round(v, 3) for k, v in timings.items()}
-    return TwinReport(trials=trials, settings=settings, timings=timings, notes=notes)
+    pooled = _pooled_residuals(
+        [results[(i, None)] for i in range(len(reals))],
+        [[results[(i, seed)] for i in range(len(reals))] for seed in range(options.seeds)],
+    )
+    return TwinReport(trials=trials, settings=settings, timings=timings, notes=notes, pooled_residuals=pooled)
+
+
+def _pool_adev(runs: list[dict], key: str) -> tuple[np.ndarray, np.ndarray]:
+    """Allan deviation (len(TAUS_S), 3) pooled over runs (their variances weighted by clusters), clusters."""
+    avar = np.zeros((len(TAUS_S), 3))
+    clusters = np.zeros((len(TAUS_S), 3))
+    for run in runs:
+        adev, n = run["residuals"][f"{key}_adev"], run["residuals"][f"{key}_clusters"]
+        ok = np.isfinite(adev)
+        avar[ok] += n[ok] * adev[ok] ** 2
+        clusters += np.where(ok, n, 0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(clusters > 0, np.sqrt(avar / np.maximum(clusters, 1)), np.nan), clusters
+
+
+def _pooled_residuals(real_runs: list[dict], twin_runs_by_seed: list[list[dict]]) -> dict:
+    """The residual Allan deviations at rest pooled over every recording's rest phases, real and twin
+    (RMS over seeds), their ratio per τ and axis, and the real clusters behind each τ."""
+    out: dict[str, Any] = {"tau_s": TAUS_S}
+    for key in ("gyro", "accel"):
+        real, clusters = _pool_adev(real_runs, key)
+        twins = [_pool_adev(runs, key)[0] for runs in twin_runs_by_seed]
+        twin = np.sqrt(np.nanmean(np.stack([t**2 for t in twins]), axis=0)) if twins else np.full_like(real, np.nan)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratio = twin / real
+        out[key] = {"real_adev": real, "twin_adev": twin, "ratio": ratio, "real_clusters": clusters}
+    return out
 
 
 def cpu_workers() -> int:
