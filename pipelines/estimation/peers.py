@@ -86,7 +86,7 @@ from gyroemu.dynamics.rotation import quat_conjugate, quat_from_matrix, quat_fro
 from .ahrs_kernels import ekf_block, madgwick_block, mahony_block
 from .protocol import Estimate, FilterSetup
 
-__all__ = ["AhrsEkf", "Madgwick", "Mahony", "Vqf", "VqfUnavailable", "initial_attitude"]
+__all__ = ["AhrsEkf", "Madgwick", "Mahony", "Vqf", "VqfUnavailable", "import_vqf", "initial_attitude"]
 
 _SQRT_HALF = math.sqrt(0.5)
 _Q_NWU_TO_ENU = np.array([_SQRT_HALF, 0.0, 0.0, _SQRT_HALF])  # q_z(+90°): NWU coordinates to ENU
@@ -328,7 +328,8 @@ class AhrsEkf(_AhrsPeer):
         )
 
 
-def _import_vqf():
+def import_vqf() -> type:
+    """The :class:`vqf.VQF` class, or :class:`VqfUnavailable` naming how to install the optional package."""
     try:
         from vqf import VQF
     except ImportError as exc:
@@ -344,7 +345,7 @@ class Vqf:
     name = "vqf"
 
     def __init__(self, setup: FilterSetup):
-        VQF = _import_vqf()
+        VQF = import_vqf()
         self.setup = setup
         self._f = VQF(1.0 / float(setup.rate_hz))
         self._out_rot = quat_from_rotvec([0.0, 0.0, -setup.declination_rad]) if setup.use_mag else _Q_IDENTITY

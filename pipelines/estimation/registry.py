@@ -60,10 +60,10 @@ class FilterSpec:
             hint = f" (pip install 'gyroemu[{self.extra}]')" if self.extra else ""
             raise FilterError(f"filter '{self.name}' is not available: {exc}{hint}") from exc
         if self.name == "vqf":  # the adapter imports vqf when made: check now, so the registry can tell
-            from .peers import _import_vqf
+            from .peers import import_vqf
 
             try:
-                _import_vqf()
+                import_vqf()
             except ImportError as exc:
                 raise FilterError(f"filter 'vqf' is not available: {exc}") from exc
         return cls
