@@ -139,7 +139,7 @@ class RecordedSpec(ScenarioSpec):
             try:
                 self._motion = RecordedMotion(self._samples, self.smoothing.options())
             except RecordedMotionError as e:
-                raise ConfigError(str(e), key="smoothing.max_gap_s") from None
+                raise ConfigError(str(e), key="smoothing") from None  # a gap or a cut-off: the message says which
         return self._motion
 
     def max_span_s(self) -> float:

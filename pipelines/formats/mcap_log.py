@@ -95,6 +95,7 @@ from gyroemu.sensors.samples import ImuSamples
 
 if TYPE_CHECKING:
     from gyroemu.dynamics import Scenario, Trajectory
+    from gyroemu.sensors.sampling import SensorTruth
 
 __all__ = [
     "LogWarning",
@@ -120,26 +121,29 @@ class LogWarning(UserWarning):
 # What goes in and comes out besides ImuSamples.
 
 
-def truth_series(trajectory: Trajectory, samples: ImuSamples) -> ImuSeries:
+def truth_series(trajectory: Trajectory, samples: ImuSamples, sensor_truth: SensorTruth | None = None) -> ImuSeries:
     """Body truth at the instants the device sampled (``samples.t_true``), stamped with the device's
-    stamps ``samples.t``: what ``/truth/imu`` holds."""
+    stamps ``samples.t``: what ``/truth/imu`` holds. ``sensor_truth``: the trajectory's interpolants,
+    when the caller has built them already."""
     from gyroemu.sensors.sampling import SensorTruth
 
     instants = samples.t_true if samples.t_true is not None else samples.t
-    q_wb, omega_b, force_b = SensorTruth(trajectory).body_truth(instants)
+    body = sensor_truth if sensor_truth is not None else SensorTruth(trajectory)
+    q_wb, omega_b, force_b = body.body_truth(instants)
     return ImuSeries(t=np.asarray(samples.t, dtype=float), q_wb=q_wb, omega_b=omega_b, specific_force_b=force_b)
 
 
-def truth_pose(trajectory: Trajectory, samples: ImuSamples) -> PoseSeries:
+def truth_pose(trajectory: Trajectory, samples: ImuSamples, sensor_truth: SensorTruth | None = None) -> PoseSeries:
     """The body's true position and attitude in the world at the instants the device sampled, stamped
     with the device's stamps: what ``/truth/pose`` holds. The position is the cubic Hermite spline
-    through the trajectory's ``pos_w`` with slopes ``vel_w``."""
+    through the trajectory's ``pos_w`` with slopes ``vel_w``. ``sensor_truth`` as for
+    :func:`truth_series`."""
     from scipy.interpolate import CubicHermiteSpline
 
     from gyroemu.sensors.sampling import SensorTruth
 
     instants = samples.t_true if samples.t_true is not None else samples.t
-    q_wb = SensorTruth(trajectory).attitude_world(instants)
+    q_wb = (sensor_truth if sensor_truth is not None else SensorTruth(trajectory)).attitude_world(instants)
     pos_w = CubicHermiteSpline(trajectory.t, trajectory.pos_w, trajectory.vel_w, axis=0)(instants)
     return PoseSeries(t=np.asarray(samples.t, dtype=float), pos_w=pos_w, q_wb=q_wb)
 

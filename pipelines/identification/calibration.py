@@ -42,6 +42,7 @@ __all__ = [
     "fit_mag",
     "polar_decomposition",
     "window_means",
+    "paired_windows",
     "truth_specific_force_world",
 ]
 
@@ -52,6 +53,19 @@ def window_means(x: np.ndarray, length: int) -> np.ndarray:
     x = np.asarray(x, dtype=float)
     k = len(x) // length
     return x[: k * length].reshape((k, length) + x.shape[1:]).mean(axis=1)
+
+
+def paired_windows(
+    t: np.ndarray, truth: np.ndarray, measured: np.ndarray, mask: np.ndarray | None, window_s: float
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Window means of a truth and a measurement at the samples ``t`` (N,): the measurement is NaN
+    outside ``mask`` (N,) bool, the windows last ``window_s`` (at least one sample); returns both
+    windowed arrays and the window's length in samples."""
+    meas = np.asarray(measured, dtype=float).copy()
+    if mask is not None:
+        meas[~np.asarray(mask, dtype=bool)] = np.nan
+    length = max(1, int(round(window_s / float(np.median(np.diff(t))))))
+    return window_means(truth, length), window_means(meas, length), length
 
 
 def polar_decomposition(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -148,11 +162,7 @@ def fit_gyro(
     if earth_rate_w is not None:
         r_bw = rotation_bw(interpolate_attitude(truth_t, q_wb, times))
         omega = omega + r_bw @ np.asarray(earth_rate_w, dtype=float)
-    meas = np.asarray(gyro, dtype=float).copy()
-    if mask is not None:
-        meas[~np.asarray(mask, dtype=bool)] = np.nan
-    length = max(1, int(round(window_s / float(np.median(np.diff(t))))))
-    w_true, w_meas = window_means(omega, length), window_means(meas, length)
+    w_true, w_meas, _ = paired_windows(t, omega, gyro, mask, window_s)
     ok = np.all(np.isfinite(w_true), axis=1) & np.all(np.isfinite(w_meas), axis=1)
     w_true, w_meas = w_true[ok], w_meas[ok]
     k = len(w_true)
@@ -268,11 +278,7 @@ def fit_accel(
     q = interpolate_attitude(truth_t, q_wb, times)
     force_w = interpolate_vectors(truth_t, truth_specific_force_world(truth_t, pos_w, gravity_m_s2), times)
     force_b = np.einsum("nij,nj->ni", rotation_bw(q), force_w)
-    meas = np.asarray(accel, dtype=float).copy()
-    if mask is not None:
-        meas[~np.asarray(mask, dtype=bool)] = np.nan
-    length = max(1, int(round(window_s / float(np.median(np.diff(t))))))
-    w_true, w_meas = window_means(force_b, length), window_means(meas, length)
+    w_true, w_meas, length = paired_windows(t, force_b, accel, mask, window_s)
     ok = np.all(np.isfinite(w_true), axis=1) & np.all(np.isfinite(w_meas), axis=1)
     # Slow windows only: turning makes centripetal and tangential forces at the sensor's lever arm from
     # the truth's reference point, which neither model holds. Without a_w also |f| ≈ g.
@@ -381,11 +387,7 @@ def fit_mag(
     (M, 4) at ``truth_t``; ``c_sb`` (3, 3) the gyro's mounting (None: C from K's polar decomposition)."""
     times = np.asarray(t, dtype=float) - latency_s
     r_bw = rotation_bw(interpolate_attitude(truth_t, q_wb, times)).reshape(len(times), 9)
-    meas = np.asarray(mag, dtype=float).copy()
-    if mask is not None:
-        meas[~np.asarray(mask, dtype=bool)] = np.nan
-    length = max(1, int(round(window_s / float(np.median(np.diff(t))))))
-    w_true, w_meas = window_means(r_bw, length), window_means(meas, length)
+    w_true, w_meas, _ = paired_windows(t, r_bw, mag, mask, window_s)
     ok = np.all(np.isfinite(w_true), axis=1) & np.all(np.isfinite(w_meas), axis=1)
     w_true, w_meas = w_true[ok], w_meas[ok]
     k = len(w_true)

@@ -105,6 +105,18 @@ def _spatial_part(delta: np.ndarray, pos: np.ndarray, r_bw: np.ndarray) -> tuple
     return spatial - spatial.mean(axis=0), sigma
 
 
+def _e_folding_separation(separation: np.ndarray, products: np.ndarray, bins: int) -> float:
+    """The separation (a distance or a lag) where the correlation ``products`` (n, n), binned by their
+    pair ``separation`` (n, n) over half its range, first falls below 1/e."""
+    edges = np.linspace(0.0, separation.max() / 2, bins + 1)
+    which = np.digitize(separation.ravel(), edges) - 1
+    inside = (which >= 0) & (which < bins)
+    sums = np.bincount(which[inside], weights=products.ravel()[inside], minlength=bins)
+    counts = np.bincount(which[inside], minlength=bins)
+    have = counts > 0
+    return _first_below(0.5 * (edges[:-1] + edges[1:])[have], sums[have] / counts[have], np.exp(-1.0))
+
+
 def _first_below(x: np.ndarray, rho: np.ndarray, level: float) -> float:
     """First x where rho (sampled at x) falls below level, linearly interpolated; inf if never."""
     below = np.flatnonzero(rho < level)
@@ -161,23 +173,9 @@ def magnetic_environment(
     length = None
     if pos_w is not None:
         x = np.asarray(pos_w, dtype=float)[movement][idx]
-        dist = np.linalg.norm(x[:, None, :] - x[None, :, :], axis=-1)
-        edges = np.linspace(0.0, dist.max() / 2, bins + 1)
-        which = np.digitize(dist.ravel(), edges) - 1
-        inside = (which >= 0) & (which < bins)
-        sums = np.bincount(which[inside], weights=products.ravel()[inside], minlength=bins)
-        counts = np.bincount(which[inside], minlength=bins)
-        have = counts > 0
-        length = _first_below(0.5 * (edges[:-1] + edges[1:])[have], sums[have] / counts[have], np.exp(-1.0))
+        length = _e_folding_separation(np.linalg.norm(x[:, None, :] - x[None, :, :], axis=-1), products, bins)
     lag_t = np.asarray(t, dtype=float)[movement][idx]
-    lags = np.abs(lag_t[:, None] - lag_t[None, :])
-    edges = np.linspace(0.0, lags.max() / 2, bins + 1)
-    which = np.digitize(lags.ravel(), edges) - 1
-    inside = (which >= 0) & (which < bins)
-    sums = np.bincount(which[inside], weights=products.ravel()[inside], minlength=bins)
-    counts = np.bincount(which[inside], minlength=bins)
-    have = counts > 0
-    corr_time = _first_below(0.5 * (edges[:-1] + edges[1:])[have], sums[have] / counts[have], np.exp(-1.0))
+    corr_time = _e_folding_separation(np.abs(lag_t[:, None] - lag_t[None, :]), products, bins)
     return MagneticEnvironment(
         rest_field_w=rest_field,
         norm=float(np.linalg.norm(rest_field)),

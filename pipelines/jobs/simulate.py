@@ -150,7 +150,7 @@ def run_simulate(options: SimulateOptions) -> SimulateSummary:
 
         device = load_device(options.device, seed=options.seed)
     rate = options.rate
-    if rate is None and device is not None and getattr(scenario.spec, "rate_hz", 0.0) is None:
+    if rate is None and device is not None and scenario.spec.rate_hz is None:
         rate = device.spec.rate_hz  # a recorded motion's truth at the device's own rate
     longest = scenario.spec.max_span_s()
     span = scenario.duration_s if options.duration is None else options.duration
@@ -175,9 +175,11 @@ def run_simulate(options: SimulateOptions) -> SimulateSummary:
                 from gyroemu.pipelines.formats.mcap_log import Recording, truth_pose, truth_series, write_mcap
 
                 assert samples is not None  # an .mcap needs a device: checked above
-                recording = Recording(
-                    samples, truth=truth_series(traj, samples), pose=truth_pose(traj, samples), device=device
-                )
+                from gyroemu.sensors.sampling import SensorTruth
+
+                body = SensorTruth(traj)  # one set of interpolants for both truth channels
+                truth, pose = truth_series(traj, samples, body), truth_pose(traj, samples, body)
+                recording = Recording(samples, truth=truth, pose=pose, device=device)
                 write_mcap(out, recording, scenario=scenario)
             else:
                 write_npz_atomic(out, npz_arrays(scenario, traj, device, samples))

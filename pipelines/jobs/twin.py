@@ -440,6 +440,7 @@ def _run_real(real: _Real, filters, setup9, setup6, rests: list[slice]) -> dict:
 def _run_twin(real: _Real, site: dict, smoothing, device_name: str, seed: int, filters, setup9, setup6, rest_t) -> dict:
     from gyroemu.pipelines.formats.mcap_log import truth_series
     from gyroemu.sensors import load_device
+    from gyroemu.sensors.sampling import SensorTruth
 
     timings: dict[str, float] = {}
     started = time.perf_counter()
@@ -454,7 +455,8 @@ def _run_twin(real: _Real, site: dict, smoothing, device_name: str, seed: int, f
     samples = device.measure(traj)
     timings["measure"] = time.perf_counter() - started
     started = time.perf_counter()
-    truth = truth_series(traj, samples)
+    body = SensorTruth(traj)  # the trajectory's interpolants, for the truth at τ and at τ − latency
+    truth = truth_series(traj, samples, body)
     instants = np.asarray(samples.t_true if samples.t_true is not None else samples.t, float)
     timings["truth"] = time.perf_counter() - started
     # The real trial's mask, by the nearest real sample to each twin instant (real time = t + t0).
@@ -484,9 +486,6 @@ def _run_twin(real: _Real, site: dict, smoothing, device_name: str, seed: int, f
     # The sensor's error: measured minus the truth at the instant each sensor measured, τ − latency (at
     # rest the real truth is still, so its latency adds nothing there; the twin's truth carries what is
     # left of the reference's noise after smoothing, which a latency would turn into a residual).
-    from gyroemu.sensors.sampling import SensorTruth
-
-    body = SensorTruth(traj)
     lat_gyro, lat_accel, _ = device.latencies
     span = (float(traj.t[0]), float(traj.t[-1]))
     omega_at = body.body_truth(np.clip(instants - lat_gyro, *span))[1]
