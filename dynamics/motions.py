@@ -44,7 +44,7 @@ algorithms", J. Guidance, Control, and Dynamics 21(2), 208–221, 1998 (sculling
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, ClassVar, Literal
 
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator, model_validator
@@ -106,6 +106,7 @@ class StaticSpec(EarthBoundSpec):
     """
 
     kind: Literal["static"] = "static"
+    pointwise: ClassVar[bool] = True  # the truth is a closed form in t
     attitude: Attitude = Field(default_factory=Attitude)
 
     def world_motion(self, t):
@@ -241,6 +242,7 @@ class RateTableSpec(EarthBoundSpec):
     """
 
     kind: Literal["rate-table"] = "rate-table"
+    pointwise: ClassVar[bool] = True  # the truth is a closed form in t
     table: Table = Field(default_factory=Table)
     constant: ConstantRate | None = None
     steps: RateSteps | None = None
@@ -487,6 +489,7 @@ class OscillationSpec(EarthBoundSpec):
     """
 
     kind: Literal["oscillation"] = "oscillation"
+    pointwise: ClassVar[bool] = True  # the truth is a closed form in t
     attitude: Attitude = Field(default_factory=Attitude)
     angular: AngularOscillation
     linear: LinearOscillation | None = None
@@ -585,6 +588,7 @@ class ConingSpec(EarthBoundSpec):
     """
 
     kind: Literal["coning"] = "coning"
+    pointwise: ClassVar[bool] = True  # the truth is a closed form in t
     coning: Coning
 
     def world_motion(self, t):
@@ -671,6 +675,7 @@ class ScullingSpec(EarthBoundSpec):
     """
 
     kind: Literal["sculling"] = "sculling"
+    pointwise: ClassVar[bool] = True  # the truth is a closed form in t
     sculling: Sculling
 
     def world_motion(self, t):

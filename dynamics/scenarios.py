@@ -10,14 +10,26 @@ from __future__ import annotations
 
 import importlib
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import tomli_w
 
 from .config import ConfigError, PositiveReal, Section, config_dir, read_toml, resolve_config, validate
-from .trajectory import Trajectory
+from .trajectory import Trajectory, concatenate_trajectories
 
-__all__ = ["ScenarioSpec", "Scenario", "KINDS", "load_scenario", "scenario_from_dict", "list_scenarios"]
+__all__ = [
+    "ScenarioSpec",
+    "Scenario",
+    "KINDS",
+    "SEGMENT_SAMPLES",
+    "segment_bounds",
+    "segment_index",
+    "segment_count",
+    "load_scenario",
+    "scenario_from_dict",
+    "list_scenarios",
+]
 
 KINDS: dict[str, str] = {
     "free-rigid-body": "gyroemu.dynamics.tops:FreeRigidBodySpec",
@@ -44,6 +56,12 @@ class ScenarioSpec(Section):
     duration_s: PositiveReal
     rate_hz: PositiveReal
     description: str = ""
+
+    pointwise: ClassVar[bool] = False
+    """Whether the truth at ``t`` depends on ``t`` alone (a closed form, or a fitted spline): then
+    :meth:`Scenario.simulate` evaluates it in segments of :data:`SEGMENT_SAMPLES` (:meth:`Scenario.segment`)
+    and a long run reads those segments one at a time (:mod:`gyroemu.dynamics.truth_source`), never the
+    whole. Kinds that integrate equations of motion need the whole past and are not."""
 
     def trajectory(self, t: np.ndarray) -> Trajectory:
         """Truth sampled at the times ``t`` (s, uniform from 0 at ``rate_hz``)."""
@@ -125,9 +143,17 @@ class Scenario:
     def simulate(self, duration: float | None = None, rate_hz: float | None = None) -> Trajectory:
         """Simulate the truth; ``duration`` (s) and ``rate_hz`` override the file's values.
 
-        A ``[site.magnetic_environment]`` replaces the uniform field by the field along the path
+        A pointwise kind (:attr:`ScenarioSpec.pointwise`) is evaluated segment by segment
+        (:meth:`segment`), the same bytes as a run that reads the segments one at a time. A
+        ``[site.magnetic_environment]`` replaces the uniform field by the field along the path
         (:func:`gyroemu.dynamics.magnetic_environment.with_magnetic_environment`)."""
-        traj = self.spec.trajectory(self.times(duration, rate_hz))
+        t = self.times(duration, rate_hz)
+        if self.spec.pointwise and len(t) > SEGMENT_SAMPLES:
+            rate = self.spec.default_rate_hz() if rate_hz is None else float(rate_hz)
+            last = len(t) - 1
+            traj = concatenate_trajectories([self.segment(j, rate, last) for j in range(segment_count(last))])
+        else:
+            traj = self.spec.trajectory(t)
         site = getattr(self.spec, "site", None)
         if site is not None and site.magnetic_environment is not None:
             from .magnetic_environment import with_magnetic_environment
@@ -135,12 +161,43 @@ class Scenario:
             traj = with_magnetic_environment(traj, site.magnetic_environment)
         return traj
 
+    def segment(self, index: int, rate_hz: float, last: int | None) -> Trajectory:
+        """Segment ``index`` of a pointwise kind's run at ``rate_hz`` whose last sample is ``last`` (None:
+        a run without end): the samples ``k`` of :func:`segment_bounds`, at ``t_k = k / rate_hz``."""
+        lo, hi = segment_bounds(index, last)
+        return self.spec.trajectory(np.arange(lo, hi) / rate_hz)  # Scenario.times's t_k
+
     def to_toml(self) -> str:
         """The fully resolved config (defaults filled in) as TOML text."""
         return tomli_w.dumps(self.spec.model_dump(mode="json", exclude_none=True))
 
     def __repr__(self) -> str:
         return f"Scenario({self.name!r}, kind={self.kind!r}, duration_s={self.duration_s}, rate_hz={self.rate_hz})"
+
+
+SEGMENT_SAMPLES = 1 << 16
+"""Samples per segment of a pointwise kind's truth (:meth:`Scenario.segment`)."""
+
+
+def segment_count(last: int) -> int:
+    """Segments of a run whose last sample is ``last``."""
+    return max(1, (last + 1) // SEGMENT_SAMPLES)
+
+
+def segment_index(k: int, last: int | None) -> int:
+    """The segment holding sample ``k`` of a run whose last sample is ``last`` (None: without end)."""
+    index = k // SEGMENT_SAMPLES
+    return index if last is None else min(index, segment_count(last) - 1)
+
+
+def segment_bounds(index: int, last: int | None) -> tuple[int, int]:
+    """Samples ``lo … hi − 1`` of segment ``index``: every :data:`SEGMENT_SAMPLES` from 0, the last
+    segment of a bounded run taking the remainder (so none is shorter than a segment, bar a run's only one)."""
+    lo = index * SEGMENT_SAMPLES
+    hi = lo + SEGMENT_SAMPLES
+    if last is not None and index == segment_count(last) - 1:
+        hi = last + 1
+    return lo, hi
 
 
 def _spec_class(kind: str) -> type[ScenarioSpec]:

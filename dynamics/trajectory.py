@@ -10,7 +10,7 @@ from numpy.typing import ArrayLike
 from .earth import Environment
 from .jit import njit
 
-__all__ = ["Trajectory", "trajectory_from_world_motion"]
+__all__ = ["Trajectory", "trajectory_from_world_motion", "concatenate_trajectories"]
 
 _VECTORS = ("omega_b", "alpha_b", "specific_force_b", "pos_w", "vel_w", "mag_b")
 
@@ -84,6 +84,20 @@ class Trajectory:
     def duration(self) -> float:
         """Time span from the first to the last sample, s."""
         return float(self.t[-1] - self.t[0]) if len(self.t) else 0.0
+
+
+def concatenate_trajectories(parts: list[Trajectory]) -> Trajectory:
+    """One trajectory of consecutive ``parts`` (in time order, the same extras; the first's environment)."""
+    first = parts[0]
+    if len(parts) == 1:
+        return first
+    return Trajectory(
+        t=np.concatenate([p.t for p in parts]),
+        q_wb=np.concatenate([p.q_wb for p in parts]),
+        **{name: np.concatenate([getattr(p, name) for p in parts]) for name in _VECTORS},
+        extras={k: np.concatenate([p.extras[k] for p in parts]) for k in first.extras},
+        environment=first.environment,
+    )
 
 
 @njit

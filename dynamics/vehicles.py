@@ -25,7 +25,7 @@ quadrature; see :class:`Road`), independent of the output grid.
 from __future__ import annotations
 
 from functools import lru_cache
-from typing import Annotated, Literal
+from typing import Annotated, ClassVar, Literal
 
 import numpy as np
 from numpy.polynomial import Chebyshev
@@ -209,6 +209,7 @@ class RandomManoeuvreSpec(EarthBoundSpec):
     """
 
     kind: Literal["random-manoeuvre"] = "random-manoeuvre"
+    pointwise: ClassVar[bool] = True  # the truth is a closed form in t
     seed: Annotated[StrictInt, Field(ge=0)] = 0
     rotation: RotationBand = Field(default_factory=RotationBand)
     translation: TranslationBand = Field(default_factory=TranslationBand)
@@ -520,6 +521,7 @@ class CarSpec(EarthBoundSpec):
     """
 
     kind: Literal["car"] = "car"
+    pointwise: ClassVar[bool] = True  # the truth is a closed form in t
     drive: Drive = Field(default_factory=Drive)
     legs: list[Leg] = Field(min_length=1)
     turns: list[Turn] = Field(default_factory=list)

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import PrivateAttr
@@ -73,6 +73,7 @@ class RecordedSpec(ScenarioSpec):
     """A ``kind = "recorded"`` scenario file (module notes)."""
 
     kind: Literal["recorded"]
+    pointwise: ClassVar[bool] = True  # the truth is a closed form in t
     duration_s: PositiveReal | None = None  # type: ignore[assignment]
     rate_hz: PositiveReal | None = None  # type: ignore[assignment]
     path: str

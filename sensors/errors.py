@@ -61,7 +61,7 @@ from gyroemu.errors import ConfigError
 
 from . import noise
 
-__all__ = ["GyroErrors", "AccelErrors", "ErrorModel", "apply_errors", "STANDARD_GRAVITY"]
+__all__ = ["GyroErrors", "AccelErrors", "ErrorModel", "apply_errors", "SensorErrors", "STANDARD_GRAVITY"]
 
 #: The unit g₀ in key names (``_per_g``, ``_ug``), m/s²; not the local gravity of a scenario.
 STANDARD_GRAVITY = 9.80665
@@ -395,6 +395,8 @@ def apply_errors(
 ) -> np.ndarray:
     """What a three-axis sensor with the error terms ``spec`` outputs for the true input ``truth``.
 
+    One power-up, all samples at once: :class:`SensorErrors` with the interval of ``t``, applied once.
+
     Parameters
     ----------
     truth : (N, 3)
@@ -414,7 +416,6 @@ def apply_errors(
     -------
     (N, 3) float64: the measured rate (rad/s) or specific force (m/s²).
     """
-    m = spec if isinstance(spec, ErrorModel) else spec.to_si()
     x = np.asarray(truth, dtype=float)
     t = np.asarray(t, dtype=float)
     n = x.shape[0]
@@ -423,59 +424,121 @@ def apply_errors(
     dt = (t[-1] - t[0]) / (n - 1)
     if not dt > 0 or np.max(np.abs(np.diff(t) - dt)) > 1e-6 * dt:
         raise ValueError("sample times must be uniform and increasing (clock jitter is the IMU layer's)")
-    if m.bandwidth_hz is not None and not m.bandwidth_hz < 0.5 / dt:
-        raise ConfigError(
-            f"{m.bandwidth_hz:g} Hz is not below the Nyquist frequency {0.5 / dt:g} Hz "
-            f"of the {1 / dt:g} Hz sample rate",
-            key="bandwidth_hz",
+    errors = SensorErrors(spec, dt, rng)
+    return errors.apply(x, t, temperature_degC=temperature_degC, specific_force=specific_force)
+
+
+class SensorErrors:
+    """The error terms of one sensor triad over one power-up, applied chunk after chunk.
+
+    Construction is the power-up: it draws the turn-on bias, the noise's stationary starts and the
+    pulse counter's initial fraction, in that order. Each :meth:`apply` then continues the run with
+    the next samples: the noise recurrences (:class:`gyroemu.sensors.noise.SensorNoise`), the
+    low-pass filter's state and the pulse counter's angle carry from one call to the next.
+
+    Parameters
+    ----------
+    spec : GyroErrors, AccelErrors or ErrorModel
+    dt : float
+        Sample interval, s.
+    rng : numpy.random.Generator
+        Source of every random draw.
+    """
+
+    def __init__(self, spec: GyroErrors | AccelErrors | ErrorModel, dt: float, rng: np.random.Generator) -> None:
+        m = spec if isinstance(spec, ErrorModel) else spec.to_si()
+        if m.bandwidth_hz is not None and not m.bandwidth_hz < 0.5 / dt:
+            raise ConfigError(
+                f"{m.bandwidth_hz:g} Hz is not below the Nyquist frequency {0.5 / dt:g} Hz "
+                f"of the {1 / dt:g} Hz sample rate",
+                key="bandwidth_hz",
+            )
+        self.model = m
+        self.dt = float(dt)
+        self._gain = np.eye(3) + np.diag(m.scale_factor) + m.cross_axis
+        self._bias = m.bias + (m.turn_on_bias * rng.standard_normal(3) if np.any(m.turn_on_bias) else 0.0)
+        flicker = None
+        if np.any(m.bias_instability):
+            flicker = noise.flicker_bank(m.bias_instability, m.bias_instability_tau_range, dt, n_axes=3)
+        self._noise = noise.SensorNoise(rng, 3, dt, white=m.noise_density, random_walk=m.random_walk, flicker=flicker)
+        self._filter: tuple[np.ndarray, np.ndarray] | None = None
+        self._filter_state: np.ndarray | None = None  # set from the first sample
+        if m.bandwidth_hz is not None:
+            import scipy.signal  # here, not at the top: it costs 0.5 s to import, and few devices need it
+
+            self._filter = scipy.signal.butter(m.filter_order, m.bandwidth_hz, btype="low", fs=1.0 / dt)
+        self._counter_angle = None if m.integral_lsb is None else rng.random(3) * m.integral_lsb
+
+    @property
+    def bias(self) -> np.ndarray:
+        """The power-up's bias b + b_on (3,), unit."""
+        return np.array(self._bias, dtype=float) * np.ones(3)
+
+    def apply(
+        self,
+        truth: np.ndarray,
+        t: np.ndarray,
+        *,
+        temperature_degC: ArrayLike | None = None,
+        specific_force: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """The output for the run's next samples: ``truth`` (n, 3) at times ``t`` (n,), s since power-up
+        (read only by the rate ramp); other parameters as :func:`apply_errors`. Returns (n, 3)."""
+        m = self.model
+        x = np.asarray(truth, dtype=float)
+        t = np.asarray(t, dtype=float)
+        n = x.shape[0]
+        if x.shape != (n, 3) or t.shape != (n,):
+            raise ValueError(f"expected truth (n, 3) and t (n,), got {x.shape} and {t.shape}")
+        # Deterministic response: (I + S + M) x + k x² + (b_T + s_T x) ΔT + G f + b + b_on + R t.
+        if temperature_degC is None:
+            temperature_degC = m.reference_temperature_degC
+        dT = np.broadcast_to(np.asarray(temperature_degC, dtype=float) - m.reference_temperature_degC, (n,))
+        g_sensitivity, f = np.zeros((3, 3)), np.broadcast_to(np.zeros(3), (n, 3))
+        if m.g_sensitivity is not None:
+            if specific_force is None:
+                raise ValueError("this gyro has a g-sensitivity: pass the specific force (N, 3), m/s²")
+            g_sensitivity, f = m.g_sensitivity, np.asarray(specific_force, dtype=float)
+            if f.shape != (n, 3):
+                raise ValueError(f"expected specific_force of shape {(n, 3)}, got {f.shape}")
+        y = np.empty((n, 3))
+        if n == 0:
+            return y
+        bias = np.asarray(self._bias, dtype=float) * np.ones(3)
+        _response(
+            x,
+            t,
+            dT,
+            f,
+            self._gain,
+            m.nonlinearity,
+            m.bias_temperature,
+            m.scale_factor_temperature,
+            g_sensitivity,
+            bias,
+            m.ramp,
+            y,
         )
 
-    # Deterministic response: (I + S + M) x + k x² + (b_T + s_T x) ΔT + G f + b + b_on + R t.
-    gain = np.eye(3) + np.diag(m.scale_factor) + m.cross_axis
-    if temperature_degC is None:
-        temperature_degC = m.reference_temperature_degC
-    dT = np.broadcast_to(np.asarray(temperature_degC, dtype=float) - m.reference_temperature_degC, (n,))
-    g_sensitivity, f = np.zeros((3, 3)), np.broadcast_to(np.zeros(3), (n, 3))
-    if m.g_sensitivity is not None:
-        if specific_force is None:
-            raise ValueError("this gyro has a g-sensitivity: pass the specific force (N, 3), m/s²")
-        g_sensitivity, f = m.g_sensitivity, np.asarray(specific_force, dtype=float)
-        if f.shape != (n, 3):
-            raise ValueError(f"expected specific_force of shape {(n, 3)}, got {f.shape}")
-    bias = m.bias + (m.turn_on_bias * rng.standard_normal(3) if np.any(m.turn_on_bias) else 0.0)
-    y = np.empty((n, 3))
-    _response(
-        x,
-        t,
-        dT,
-        f,
-        gain,
-        m.nonlinearity,
-        m.bias_temperature,
-        m.scale_factor_temperature,
-        g_sensitivity,
-        bias,
-        m.ramp,
-        y,
-    )
+        # Noise: white, flicker and rate random walk, added in place.
+        self._noise.add_into(y)
 
-    # Noise: white, flicker and rate random walk, added in place.
-    flicker = None
-    if np.any(m.bias_instability):
-        flicker = noise.flicker_bank(m.bias_instability, m.bias_instability_tau_range, dt, n_axes=3)
-    noise.sensor_noise(rng, y.shape, dt, white=m.noise_density, random_walk=m.random_walk, flicker=flicker, out=y)
+        # Output stage: bandwidth, saturation, quantisation.
+        if self._filter is not None:
+            b, a = self._filter
+            if self._filter_state is None:  # in steady state at the first sample: no start-up transient
+                import scipy.signal
 
-    # Output stage: bandwidth, saturation, quantisation.
-    if m.bandwidth_hz is not None:
-        _low_pass(y, dt, m.bandwidth_hz, m.filter_order)
-    if m.full_scale is not None:
-        np.clip(y, -m.full_scale, m.full_scale, out=y)
-    if m.integral_lsb is not None:
-        noise.quantise_angle(y, dt, m.integral_lsb, rng, out=y)
-    if m.output_lsb is not None:
-        np.round(y / m.output_lsb, out=y)
-        y *= m.output_lsb
-    return y
+                self._filter_state = scipy.signal.lfilter_zi(b, a)[:, None] * y[0]
+            _lfilter_into(b, a, self._filter_state, y)
+        if m.full_scale is not None:
+            np.clip(y, -m.full_scale, m.full_scale, out=y)
+        if self._counter_angle is not None:
+            noise.quantise_angle(y, self.dt, m.integral_lsb, None, out=y, angle=self._counter_angle)
+        if m.output_lsb is not None:
+            np.round(y / m.output_lsb, out=y)
+            y *= m.output_lsb
+        return y
 
 
 @njit
@@ -497,29 +560,15 @@ def _response(x, t, dT, f, gain, k, b_T, s_T, G, bias, ramp, out):
             )
 
 
-def _low_pass(y: np.ndarray, dt: float, bandwidth_hz: float, order: int) -> None:
-    """Butterworth low-pass of ``order`` with −3 dB at ``bandwidth_hz``, in place on ``y`` (n, 3).
-
-    Designed by ``scipy.signal.butter`` (bilinear transform with pre-warping, so the digital filter's
-    −3 dB point is exactly ``bandwidth_hz``) and started in steady state at the first sample
-    (``scipy.signal.lfilter_zi``): a constant input passes unchanged, with no start-up transient.
-    """
-    import scipy.signal  # here, not at the top: it costs 0.5 s to import, and few devices need it
-
-    b, a = scipy.signal.butter(order, bandwidth_hz, btype="low", fs=1.0 / dt)
-    zi = scipy.signal.lfilter_zi(b, a)[:, None] * y[0]
-    _lfilter_into(b, a, zi, y)
-
-
 @njit
-def _lfilter_into(b, a, zi, y):
-    """``scipy.signal.lfilter(b, a, y, axis=0, zi=zi)[0]`` written into ``y`` (n, A); a[0] = 1.
+def _lfilter_into(b, a, z, y):
+    """``scipy.signal.lfilter(b, a, y, axis=0, zi=z)`` written into ``y`` (n, A), with the final
+    state ``zf`` written into ``z`` (order, A); a[0] = 1.
 
     The same direct form II transposed: out = b₀x + z₀; z_j = b_{j+1}x − a_{j+1}out + z_{j+1}.
     """
     n, n_axes = y.shape
     order = a.shape[0] - 1
-    z = zi.copy()
     for k in range(n):
         for i in range(n_axes):
             x = y[k, i]

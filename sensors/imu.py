@@ -49,19 +49,17 @@ from pydantic import Field, field_validator
 
 from gyroemu.dynamics import Trajectory
 from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3, validate
+from gyroemu.dynamics.truth_source import SampledTruth, TruthSource
 from gyroemu.errors import ConfigError
 
-from .accelerometer import AccelerometerSpec, LatencySeconds, mean_specific_force
-from .errors import AccelErrors, ErrorModel, GyroErrors, apply_errors
+from .accelerometer import AccelerometerSpec, LatencySeconds
+from .device_run import DeviceRun, concatenate_samples
+from .errors import AccelErrors, ErrorModel, GyroErrors
 from .magnetometer import MagnetometerSpec
-from .mechanism import GYRO_KINDS, GyroMechanism, GyroTruth, mechanism_class
+from .mechanism import GYRO_KINDS, GyroMechanism, mechanism_class
 from .samples import ImuSamples
-from .sampling import SensorTruth
 
 __all__ = ["DeviceSpec", "Device", "MountingSpec", "ClockSpec", "TemperatureSpec", "GyroSpec"]
-
-CHUNK_INNER_SAMPLES = 1 << 20
-"""Inner samples per chunk handed to a gyro mechanism (bounds memory on long, fast runs)."""
 
 
 class MountingSpec(Section):
@@ -228,7 +226,7 @@ def _check_dithered(
 
 
 def _low_pass_noise_gain(period: float, bandwidth_hz: float, order: int) -> float:
-    """Variance out over variance in of the output low-pass (:func:`gyroemu.sensors.errors._low_pass`) for
+    """Variance out over variance in of the output low-pass (:class:`gyroemu.sensors.errors.SensorErrors`) for
     white noise: ``C P Cᵀ + D²`` with ``P`` the steady state covariance of its state-space form."""
     import scipy.linalg
     import scipy.signal
@@ -324,6 +322,12 @@ class Device:
         return self._gyro_errors
 
     @property
+    def accel_errors(self) -> ErrorModel:
+        """The accelerometer's error terms in SI (:class:`gyroemu.sensors.errors.ErrorModel`), white
+        noise as specified less the output quantiser's share."""
+        return self._accel_errors
+
+    @property
     def latencies(self) -> tuple[float, float, float]:
         """``(L_gyro, L_accel, L_mag)``, s: each sensor's sample stamped ``t_k`` measures the motion at
         ``τ_k − L``; positive, the sensor lags the truth. ``L_mag`` is 0 without a magnetometer."""
@@ -363,135 +367,13 @@ class Device:
 
         Returns an :class:`ImuSamples` with ``floor(duration · rate_hz / (1 + ε))`` samples when no
         sensor has a latency; with latencies, the samples ``K₁ … K₂`` whose shifted intervals lie in
-        the trajectory's span (module notes), the same for the three sensors.
+        the trajectory's span (module notes), the same for the three sensors. The run is made a block
+        at a time (:class:`gyroemu.sensors.device_run.DeviceRun`), the same bytes as :meth:`run` gives.
         """
-        spec = self.spec
-        streams = [np.random.default_rng(s) for s in np.random.SeedSequence(self.seed).spawn(5)]
-        rng_clock, rng_mech, rng_gyro, rng_accel, rng_mag = streams
-        truth = SensorTruth(trajectory, spec.mounting.q_bs, spec.mounting.lever_arm_m)
+        return concatenate_samples(list(self.run(SampledTruth(trajectory)).samples()))
 
-        period = 1.0 / spec.rate_hz  # what the device believes
-        true_period = period * (1.0 + spec.clock.rate_error_ppm * 1e-6)
-        t0 = truth.t_start
-        latency_gyro, latency_accel, latency_mag = self.latencies
-        if latency_gyro == latency_accel == latency_mag == 0.0:
-            first = 1
-            count = int(math.floor((truth.t_end - t0) / true_period * (1 + 1e-12)))
-        else:
-            # K₁ = 1 + ceil(L_max / T'), K₂ = floor((t_end − t₀ + L_min) / T'): every sensor's shifted
-            # interval [τ_{k−1} − L, τ_k − L] within the truth's span (module notes).
-            lag = max(0.0, latency_gyro, latency_accel, latency_mag)
-            lead = min(0.0, latency_gyro, latency_accel, latency_mag)
-            first = 1 + int(math.ceil(lag / true_period * (1 - 1e-12)))
-            count = int(math.floor((truth.t_end - t0 + lead) / true_period * (1 + 1e-12))) - first + 1
-        if count < 2:
-            raise ConfigError(
-                f"the trajectory ({truth.t_end - t0:g} s) is shorter than two samples of the device ({period:g} s)"
-                + (" and its sensors' latencies" if any(self.latencies) else ""),
-                key="duration",
-            )
-        k = np.arange(first, first + count)
-        instants = t0 + np.arange(first - 1, first + count) * true_period  # τ_{K₁−1} … τ_{K₂}
-        stamps = k * period + spec.clock.offset_s
-        if spec.clock.jitter_s > 0:
-            stamps = stamps + spec.clock.jitter_s * rng_clock.standard_normal(count)
-        temperature = spec.temperature.at(instants[1:] - t0)
-
-        substeps = self._substeps(trajectory, true_period)
-        increments, raw = self._gyro_increments(truth, instants, rng_mech, substeps, latency=latency_gyro)
-        rate_indicated = increments / period
-        force_instants = instants if latency_accel == 0.0 else instants - latency_accel
-        force_mean = mean_specific_force(truth, force_instants, substeps=substeps + substeps % 2)
-        gyro = apply_errors(
-            rate_indicated,
-            instants[1:],
-            self._gyro_errors,
-            rng_gyro,
-            temperature_degC=temperature,
-            specific_force=force_mean if self._gyro_errors.g_sensitivity is not None else None,
-        )
-        accel = apply_errors(
-            force_mean * (true_period / period),
-            instants[1:],
-            self._accel_errors,
-            rng_accel,
-            temperature_degC=temperature,
-        )
-        if spec.magnetometer is not None:
-            field_instants = instants[1:] if latency_mag == 0.0 else instants[1:] - latency_mag
-            mag = spec.magnetometer.measure(truth.magnetic_field(field_instants), period, rng_mag)
-        else:
-            mag = np.full((count, 3), np.nan)
-        increment = spec.output == "increment"
-        return ImuSamples(
-            t=stamps,
-            gyro=gyro,
-            accel=accel,
-            mag=mag,
-            raw={self.kind: raw} if raw else {},
-            delta_angle=gyro * period if increment else None,
-            delta_velocity=accel * period if increment else None,
-            t_true=instants[1:],
-            temperature_degC=temperature,
-            device=self.name,
-        )
-
-    @staticmethod
-    def _substeps(trajectory: Trajectory, interval: float) -> int:
-        """Sub-steps per output interval that are at least as fine as the trajectory's samples."""
-        truth_step = trajectory.duration / max(len(trajectory) - 1, 1)
-        return max(1, math.ceil(interval / truth_step * (1 - 1e-9)))
-
-    def _gyro_increments(
-        self,
-        truth: SensorTruth,
-        instants: np.ndarray,
-        rng: np.random.Generator,
-        truth_substeps: int,
-        latency: float = 0.0,
-    ):
-        """Indicated angle increments (K, 3) over the intervals between ``instants``, and raw observables.
-
-        The inner grid has ``m`` steps per interval: enough for the mechanism's inner rate, and never
-        coarser than the trajectory's own samples. ``instants`` are the device's; with a ``latency``
-        ``L`` the mechanism runs on them (its clock, temperature, dither) but reads the motion at
-        ``t − L``.
-        """
-        count = len(instants) - 1
-        m = max(truth_substeps, math.ceil(self.inner_rate_hz / self.spec.rate_hz - 1e-9))
-        h = (instants[1] - instants[0]) / m
-        per_chunk = max(1, CHUNK_INNER_SAMPLES // m)
-        state: dict = {}
-        increments = np.empty((count, 3))
-        raw_chunks: dict[str, list] = {}
-        t0 = instants[0]
-        power_up = truth.t_start  # the temperature's origin (t0 itself when the device starts at τ_0)
-        reads = self.mechanism.reads
-        for first in range(0, count, per_chunk):
-            last = min(first + per_chunk, count)
-            j = np.arange(first * m, last * m + 1)
-            t = t0 + j * h
-            seen = t if latency == 0.0 else t - latency  # the motion's instants
-            omega, alpha = truth.omega_alpha(seen)
-            chunk = GyroTruth(
-                t=t,
-                dt=h,
-                omega=omega,
-                alpha=alpha,
-                specific_force=truth.specific_force(seen) if "specific_force" in reads else None,
-                q_is=truth.attitude_inertial(seen) if "q_is" in reads else None,
-                temperature_degC=self.spec.temperature.at(t - power_up) if "temperature_degC" in reads else None,
-            )
-            response = self.mechanism.respond(chunk, rng, state)
-            if response.angle is not None:
-                angle = response.angle - response.angle[0]
-            else:  # a rate: trapezoid on the inner grid (the mechanisms' bandwidth is far below 1/h)
-                from scipy.integrate import cumulative_trapezoid  # scipy where used: the CLI's listings skip it
-
-                angle = cumulative_trapezoid(response.rate, dx=h, axis=0, initial=0)
-            at_outputs = angle[::m]  # inner index 0, m, 2m, … are τ_first … τ_last
-            increments[first:last] = np.diff(at_outputs, axis=0)
-            for name, values in response.raw.items():
-                raw_chunks.setdefault(name, []).append(np.asarray(values)[m::m])
-        raw = {name: np.concatenate(parts) for name, parts in raw_chunks.items()}
-        return increments, raw
+    def run(self, source: TruthSource) -> DeviceRun:
+        """The device measuring the truth of ``source`` from power-up, as an iterator of blocks that
+        carry every state (:class:`gyroemu.sensors.device_run.DeviceRun`): a run in bounded memory, or
+        without end when ``source.t_end`` is None."""
+        return DeviceRun(self, source)

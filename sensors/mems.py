@@ -486,7 +486,8 @@ class MemsGyro(GyroMechanism):
         return 2 * K_BOLTZMANN * (temp + ZERO_CELSIUS_K) * w_s / (self.proof_mass_kg * self.sense_quality_factor)
 
     def _respond_baseband(self, truth: GyroTruth, rng, state: dict) -> GyroResponse:
-        """The envelope system on the inner grid; ``state["envelope_state"]`` (3, S) carries it."""
+        """The envelope system on the inner grid; ``state["envelope_state"]`` (3, S) carries it, and
+        ``state["discretisation"]`` keeps its step matrices for the next chunk of the same step."""
         temperature = np.asarray(truth.temperature_degC, float)
         w_d, w_s = self.frequencies(temperature)
         ratio = self.sense_response(temperature) / self.sense_response()  # H_T/H₀: temperature, exact in steady state
@@ -496,11 +497,15 @@ class MemsGyro(GyroMechanism):
         # The complex force n_c + i n_s has two-sided PSD 4 × (the real force's), scaled to the temperature.
         noise_scale = np.abs(ratio) * np.sqrt(self._thermal_psd(temperature) / self._thermal_psd())
         a, b, c = self.baseband_system()
-        phi, gamma0, gamma1 = first_order_hold(a, b, truth.dt)
         psd = 4 * self._thermal_psd()
-        # Every state is an envelope in metres, so the covariance's small directions can be dropped:
-        # with the 4th-order filter two of five carry 10⁻⁶ of the variance (and would cost 40 % of the time).
-        noise = covariance_factor(discrete_noise_covariance(a, b, psd, truth.dt), drop=_NOISE_DROP)
+        held = state.get("discretisation")
+        if held is None or held[0] != truth.dt:  # the same grid step chunk after chunk: computed once
+            phi, gamma0, gamma1 = first_order_hold(a, b, truth.dt)
+            # Every state is an envelope in metres, so the covariance's small directions can be dropped:
+            # with the 4th-order filter two of five carry 10⁻⁶ of the variance (and would cost 40 % of the time).
+            noise = covariance_factor(discrete_noise_covariance(a, b, psd, truth.dt), drop=_NOISE_DROP)
+            held = state["discretisation"] = (truth.dt, phi, gamma0, gamma1, noise)
+        _, phi, gamma0, gamma1, noise = held
         z = state.get("envelope_state")
         if z is None:  # power-up: settled on the first input, thermal motion from its stationary law
             z = np.outer(forcing[0], np.linalg.solve(a, -b))

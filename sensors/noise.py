@@ -89,6 +89,7 @@ __all__ = [
     "quantisation_noise",
     "quantise_angle",
     "sensor_noise",
+    "SensorNoise",
 ]
 
 #: Allan deviation of flicker noise per unit bias instability B: σ(τ) = B·√(2 ln2/π) ≈ 0.664 B.
@@ -126,22 +127,6 @@ def _ar1_sum_into(rng, phi, c, state, out):
                 state[j, a] = x
                 total += x
             out[k, a] += total
-
-
-@njit
-def _interpolate_into(coarse, ratio, out):
-    """Add to ``out`` (n, A) the linear interpolation of ``coarse`` (m, A), whose knots lie every
-    ``ratio`` samples of ``out`` starting at sample 0 (so m ≥ (n − 1) // ratio + 1, and one more knot
-    unless the last sample sits on a knot). Only knots the samples need are read."""
-    n, n_axes = out.shape
-    for i in range((n + ratio - 1) // ratio):  # coarse interval i covers samples i·ratio …
-        k = i * ratio
-        for a in range(n_axes):  # on the knot itself: coarse[i] alone (coarse[i + 1] may not exist)
-            out[k, a] += coarse[i, a]
-        for r in range(1, min(ratio, n - k)):
-            u = r / ratio
-            for a in range(n_axes):
-                out[k + r, a] += coarse[i, a] + u * (coarse[i + 1, a] - coarse[i, a])
 
 
 def _shape2d(shape) -> tuple[tuple[int, ...], tuple[int, int]]:
@@ -379,7 +364,13 @@ def quantisation_noise(rng: np.random.Generator, shape, dt: float, lsb) -> np.nd
 
 
 def quantise_angle(
-    rate: np.ndarray, dt: float, lsb, rng: np.random.Generator, out: np.ndarray | None = None
+    rate: np.ndarray,
+    dt: float,
+    lsb,
+    rng: np.random.Generator | None,
+    out: np.ndarray | None = None,
+    *,
+    angle: np.ndarray | None = None,
 ) -> np.ndarray:
     """Quantise the integrated angle of ``rate`` (n,) or (n, A), as a pulse-counting gyro does.
 
@@ -395,13 +386,22 @@ def quantise_angle(
     lsb : float or (A,), rad per count (> 0)
     out : ndarray like ``rate`` (C-contiguous float64), optional
         Where to write the result; may be ``rate`` itself.
+    angle : ndarray (A,) float64, optional
+        The counter's running angle θ, rad, to continue a run: read as θ₀ (then ``rng`` is not used and
+        may be None) and left holding the angle after the last sample.
     """
     rate = np.asarray(rate, dtype=float)
     rate2 = np.ascontiguousarray(rate.reshape(rate.shape[0], -1))
     q = _per_axis(lsb, rate2.shape[1], "lsb")
     if np.any(q <= 0):
         raise ValueError(f"lsb must be > 0, got {lsb}")
-    theta0 = rng.random(rate2.shape[1]) * q
+    if angle is None:
+        if rng is None:
+            raise ValueError("quantise_angle needs a Generator for the counter's initial fraction, or its angle")
+        angle = rng.random(rate2.shape[1]) * q
+    elif angle.shape != (rate2.shape[1],) or angle.dtype != np.float64:
+        raise ValueError(f"angle must be a float64 array of shape ({rate2.shape[1]},)")
+    theta0 = angle
     if out is None:
         out = np.empty(rate.shape)
     if out.shape != rate.shape or out.dtype != np.float64 or not out.flags.c_contiguous:
@@ -413,7 +413,8 @@ def quantise_angle(
 @njit
 def _count_quanta(rate, dt, lsb, theta0, out):
     """Write to ``out`` the rate of whole quanta counted from the running angle θ₀ + Δt Σ rate
-    (see quantise_angle); ``out`` may be ``rate``."""
+    (see quantise_angle); ``out`` may be ``rate``. ``theta0`` (A,) is left holding the final angle,
+    where a next call continues the count."""
     n, n_axes = rate.shape
     for a in range(n_axes):
         theta = theta0[a]
@@ -423,6 +424,7 @@ def _count_quanta(rate, dt, lsb, theta0, out):
             new_count = np.floor(theta / lsb[a])
             out[k, a] = (new_count - count) * (lsb[a] / dt)
             count = new_count
+        theta0[a] = theta
 
 
 # --------------------------------------------------------------------------------------------------
@@ -443,9 +445,8 @@ def sensor_noise(
     """White noise + rate random walk + flicker, generated together in one pass over the samples.
 
     Statistically the sum of :func:`white_noise`, :func:`random_walk` and :func:`flicker_noise`
-    (not the same numbers: the draws interleave). Terms that are zero draw nothing. Draw order: the
-    slow flicker components (coarsest step first: stationary starts, then their steps), the stationary
-    starts of the fast ones, then every sample (axis by axis, term by term).
+    (not the same numbers: the draws interleave). One call of :meth:`SensorNoise.add_into` on a fresh
+    :class:`SensorNoise`: see there for the draw order.
 
     Parameters
     ----------
@@ -468,53 +469,154 @@ def sensor_noise(
         out = np.zeros((n, n_axes))
     if out.shape != (n, n_axes) or out.dtype != np.float64 or not out.flags.c_contiguous:
         raise ValueError(f"out must be a C-contiguous float64 array of shape {(n, n_axes)}")
-
-    # Full-rate terms, as AR(1) rows: white (φ = 0), random walk (φ = 1), fast flicker components.
-    phi: list[np.ndarray] | np.ndarray = [np.zeros(n_axes), np.ones(n_axes)]
-    c: list[np.ndarray] | np.ndarray = [
-        _per_axis(white, n_axes, "white") / np.sqrt(dt),  # per-sample σ = N / √Δt
-        _per_axis(random_walk, n_axes, "random_walk") * np.sqrt(dt),
-    ]  # increment σ = K √Δt
-    state: list[np.ndarray] | np.ndarray = [np.zeros(n_axes), np.zeros(n_axes)]
-
-    if flicker is not None:
-        fast = _add_slow_flicker(rng, flicker, dt, out)
-        phi_f, c_f, x0_f = _gauss_markov_rows(rng, flicker.sigma[fast], flicker.tau_c[fast, None], dt)
-        phi, c, state = phi + list(phi_f), c + list(c_f), state + list(x0_f)
-
-    phi, c, state = np.array(phi), np.array(c), np.array(state)
-    on = np.any(c != 0, axis=1)
-    if np.any(on):
-        _ar1_sum_into(rng, phi[on], c[on], state[on], out)
+    SensorNoise(rng, n_axes, dt, white=white, random_walk=random_walk, flicker=flicker).add_into(out)
     return out
 
 
-def _add_slow_flicker(rng, flicker: FlickerBank, dt: float, out: np.ndarray) -> np.ndarray:
-    """Add to ``out`` the flicker components slow enough to simulate at a coarser step; return a mask
-    of the others (to be simulated at every sample).
+@dataclass
+class _SlowLevel:
+    """Flicker components simulated every ``step`` samples: knots ``base, base + 1, …`` (at samples
+    ``k · step``) held in ``knots``, each the level's own AR(1) sum plus the coarser levels' sum
+    interpolated there; ``state`` the components' last values (J, A); ``rng`` the level's own draws."""
 
-    Component j is simulated every L_j samples, L_j the largest power of two ≤ τ_j / (16 Δt), and
-    linearly interpolated. Components sharing a step are summed on their own grid; the grids are
-    visited from the coarsest, each one's sum interpolated onto the next finer grid, and the finest
-    onto the samples, so the cost is about one pass over the samples whatever the number of levels.
+    step: int
+    phi: np.ndarray
+    c: np.ndarray
+    state: np.ndarray
+    rng: np.random.Generator
+    base: int
+    knots: np.ndarray
+
+
+class SensorNoise:
+    """White noise + rate random walk + flicker of one sensor triad, made chunk after chunk.
+
+    Every term is a recurrence whose state this object carries (the AR(1) values, the random walk,
+    the slow flicker levels' knots), so successive :meth:`add_into` calls continue one run.
+
+    Draws: each slow flicker level draws from a generator of its own, spawned from ``rng``
+    (``rng.spawn``), its stationary start at construction and its knots in order as calls need them;
+    ``rng`` itself draws the fast components' stationary starts at construction, then every sample
+    (axis by axis, term by term). So any division of a run into calls gives the same numbers.
+
+    Slow flicker components (correlation time τ_j ≥ 32 Δt) are simulated every L_j samples, L_j the
+    largest power of two ≤ τ_j / (16 Δt), and linearly interpolated (module notes). Levels sharing a
+    step are summed on their own knots; each level's knots add the next coarser level's sum
+    interpolated to them, and the finest slow level is interpolated onto the samples. Only the knots
+    still needed are kept, so the state is a few knots per level whatever the run's length.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Source of every draw.
+    n_axes : int
+        A, the number of axes.
+    dt : float
+        Sample interval Δt, s.
+    white, random_walk, flicker
+        As :func:`sensor_noise`.
     """
-    n, n_axes = out.shape
-    longest = max(n - 1, 1)  # no step beyond the record
-    steps = np.clip(flicker.tau_c / (_STEPS_PER_TAU * dt), 1.0, longest)
-    steps = 2 ** np.floor(np.log2(steps)).astype(int)
 
-    coarse, coarse_step = None, 0  # the running sum of the slower levels, on its own grid
-    for step in sorted(set(steps[steps > 1].tolist()), reverse=True):
-        level = np.zeros(((n - 1) // step + 2, n_axes))  # knots 0, L, 2L, … past the last sample
-        if coarse is not None:
-            _interpolate_into(coarse, coarse_step // step, level)
-        j = steps == step
-        phi, c, x0 = _gauss_markov_rows(rng, flicker.sigma[j], flicker.tau_c[j, None], step * dt)
-        _ar1_sum_into(rng, phi, c, x0, level)
-        coarse, coarse_step = level, step
-    if coarse is not None:
-        _interpolate_into(coarse, coarse_step, out)
-    return steps == 1
+    def __init__(
+        self,
+        rng: np.random.Generator,
+        n_axes: int,
+        dt: float,
+        *,
+        white=0.0,
+        random_walk=0.0,
+        flicker: FlickerBank | None = None,
+    ) -> None:
+        self._rng = rng
+        self.n_axes = int(n_axes)
+        self.dt = float(dt)
+        self._sample = 0  # index of the next sample to make
+        self._levels: list[_SlowLevel] = []
+        # Full-rate terms, as AR(1) rows: white (φ = 0), random walk (φ = 1), fast flicker components.
+        phi = [np.zeros(n_axes), np.ones(n_axes)]
+        c = [
+            _per_axis(white, n_axes, "white") / np.sqrt(dt),  # per-sample σ = N / √Δt
+            _per_axis(random_walk, n_axes, "random_walk") * np.sqrt(dt),  # increment σ = K √Δt
+        ]
+        state = [np.zeros(n_axes), np.zeros(n_axes)]
+        if flicker is not None:
+            steps = np.maximum(flicker.tau_c / (_STEPS_PER_TAU * dt), 1.0)
+            steps = 2 ** np.floor(np.log2(steps)).astype(np.int64)
+            slow = sorted(set(steps[steps > 1].tolist()), reverse=True)
+            for step, level_rng in zip(slow, rng.spawn(len(slow)), strict=True):
+                j = steps == step
+                phi_j, c_j, x0_j = _gauss_markov_rows(level_rng, flicker.sigma[j], flicker.tau_c[j, None], step * dt)
+                self._levels.append(_SlowLevel(int(step), phi_j, c_j, x0_j, level_rng, 0, np.zeros((0, n_axes))))
+            fast = steps == 1
+            phi_f, c_f, x0_f = _gauss_markov_rows(rng, flicker.sigma[fast], flicker.tau_c[fast, None], dt)
+            phi, c, state = phi + list(phi_f), c + list(c_f), state + list(x0_f)
+        on = np.any(np.array(c) != 0, axis=1)
+        self._phi = np.ascontiguousarray(np.array(phi)[on])
+        self._c = np.ascontiguousarray(np.array(c)[on])
+        self._state = np.ascontiguousarray(np.array(state)[on])
+
+    @property
+    def held_knots(self) -> int:
+        """Knots the slow flicker levels hold now: the state beyond the AR(1) values, a few per level."""
+        return sum(len(level.knots) for level in self._levels)
+
+    def add_into(self, out: np.ndarray) -> np.ndarray:
+        """Add the run's next ``len(out)`` samples of noise to ``out`` (n, A), C-contiguous float64."""
+        n, n_axes = out.shape
+        if n_axes != self.n_axes or out.dtype != np.float64 or not out.flags.c_contiguous:
+            raise ValueError(f"out must be a C-contiguous float64 array of shape (n, {self.n_axes})")
+        if n == 0:
+            return out
+        first = self._sample
+        if self._levels:
+            finest = self._levels[-1]
+            self._extend(len(self._levels) - 1, (first + n - 1) // finest.step + 1)
+            out += _interpolated(finest, np.arange(first, first + n, dtype=np.int64), finest.step)
+            _trim(finest, (first + n) // finest.step)
+        if self._phi.shape[0]:
+            _ar1_sum_into(self._rng, self._phi, self._c, self._state, out)
+        self._sample = first + n
+        return out
+
+    def _extend(self, i: int, last: int) -> None:
+        """Make level ``i``'s knots up to index ``last``, drawing the coarser levels' first."""
+        level = self._levels[i]
+        made = level.base + len(level.knots)
+        if last < made:
+            return
+        index = np.arange(made, last + 1, dtype=np.int64)
+        block = np.zeros((len(index), self.n_axes))
+        if i > 0:
+            coarser = self._levels[i - 1]
+            ratio = coarser.step // level.step
+            self._extend(i - 1, -(-last // ratio))  # the coarser knot at or after the last new one
+            block += _interpolated(coarser, index, ratio)
+            _trim(coarser, last // ratio)
+        _ar1_sum_into(level.rng, level.phi, level.c, level.state, block)
+        level.knots = np.concatenate([level.knots, block])
+
+
+def _interpolated(level: _SlowLevel, index: np.ndarray, ratio: int) -> np.ndarray:
+    """The linear interpolation of ``level``'s knots at ``index / ratio`` (knot units), (len(index), A):
+    ``v_j + (r / ratio)(v_{j+1} − v_j)`` with ``j = index // ratio``, ``r = index % ratio``; on a knot, v_j."""
+    j, r = np.divmod(index, ratio)
+    lo = level.knots[j - level.base]
+    on_knot = r == 0
+    out = lo.copy()
+    between = ~on_knot
+    if np.any(between):
+        u = (r[between] / ratio)[:, None]
+        hi = level.knots[j[between] + 1 - level.base]
+        out[between] = lo[between] + u * (hi - lo[between])
+    return out
+
+
+def _trim(level: _SlowLevel, keep_from: int) -> None:
+    """Forget ``level``'s knots before index ``keep_from`` (no later sample needs them)."""
+    drop = keep_from - level.base
+    if drop > 0:
+        level.knots = level.knots[drop:].copy()
+        level.base = keep_from
 
 
 def _gauss_markov_rows(rng, sigma, tau_c, step):

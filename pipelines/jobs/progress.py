@@ -16,7 +16,7 @@ import contextlib
 import sys
 import threading
 
-__all__ = ["PhaseProgress"]
+__all__ = ["PhaseProgress", "CountProgress"]
 
 
 class PhaseProgress:
@@ -74,6 +74,52 @@ class PhaseProgress:
         if self._thread is not None:
             self._thread.join()
             self._thread = None
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+class CountProgress:
+    """A run's progress in samples as a tqdm bar on ``stream`` (default stderr), on a terminal only.
+
+    ``total`` None: a run without end (the bar counts up). Call :meth:`advance` as samples are made;
+    use the object as a context manager (or call :meth:`close`). ``enabled`` as :class:`PhaseProgress`.
+    """
+
+    def __init__(
+        self, total: int | None, *, label: str = "", unit: str = "samples", stream=None, enabled: bool | None = None
+    ):
+        self.stream = sys.stderr if stream is None else stream
+        if enabled is None:
+            isatty = getattr(self.stream, "isatty", None)
+            enabled = bool(isatty and isatty())
+        self.bar = None
+        if enabled:
+            from tqdm import tqdm
+
+            self.bar = tqdm(
+                total=total,
+                desc=label or None,
+                unit=f" {unit}",
+                unit_scale=True,
+                file=self.stream,
+                leave=False,
+                dynamic_ncols=True,
+                mininterval=0.5,
+            )
+
+    def advance(self, count: int) -> None:
+        """Count ``count`` more samples made."""
+        if self.bar is not None:
+            self.bar.update(count)
+
+    def close(self) -> None:
         if self.bar is not None:
             self.bar.close()
             self.bar = None

@@ -3,13 +3,19 @@
 Two outputs, by the file's suffix:
 
 - ``.mcap``: a ROS 2 log of the device's samples with their truth
-  (:func:`~gyroemu.pipelines.formats.mcap_log.write_mcap`); it needs a device.
+  (:class:`~gyroemu.pipelines.formats.mcap_log.McapLogWriter`); it needs a device. The run goes a block
+  at a time (:class:`gyroemu.sensors.device_run.DeviceRun`): the truth is read a window at a time
+  (evaluated window by window where the scenario's kind is pointwise,
+  :mod:`gyroemu.dynamics.truth_source`), and each block is written on a thread of its own while the
+  next is computed (:class:`~gyroemu.pipelines.formats.background_writer.BackgroundWriter`), so memory
+  does not grow with the duration. The bytes are those of a run made whole in memory.
 - ``.npz``: NumPy arrays (:func:`npz_arrays`): ``truth/<field>`` and ``truth/extras/<name>`` of the
   trajectory and ``scenario_toml``; with a device also ``imu/<field>``, ``raw/<kind>/<observable>``,
-  ``device_toml`` and ``seed``. Written through a temporary file (:func:`write_npz_atomic`).
+  ``device_toml`` and ``seed``. Made in memory and written through a temporary file
+  (:func:`write_npz_atomic`).
 
-The run goes in phases (``truth``, ``measure`` with a device, ``write``), shown as a bar on stderr when
-it is a terminal (:class:`gyroemu.pipelines.jobs.progress.PhaseProgress`).
+A bar on stderr shows the samples made (.mcap) or the phases (.npz) when it is a terminal
+(:mod:`gyroemu.pipelines.jobs.progress`).
 """
 
 from __future__ import annotations
@@ -137,9 +143,6 @@ def run_simulate(options: SimulateOptions) -> SimulateSummary:
     """Simulate and write ``options.out`` (see the module's notes). Raises :class:`SimulateError` before
     any work for bad options, and ``ConfigError`` for an unknown or bad scenario or device."""
     from gyroemu.dynamics import load_scenario
-    from gyroemu.pipelines.jobs.progress import (
-        PhaseProgress,  # a bar on stderr when it is a terminal, nothing otherwise
-    )
 
     check_options(options)
     out = options.out
@@ -162,6 +165,58 @@ def run_simulate(options: SimulateOptions) -> SimulateSummary:
             f"device {device.name} ({2.0 / device.spec.rate_hz:g} s at {device.spec.rate_hz:g} Hz)"
         )
     started = time.perf_counter()
+    samples: int | None
+    if out.suffix == ".mcap":
+        assert device is not None  # an .mcap needs a device: checked above
+        truth_samples, duration_s, samples = _simulate_mcap(options, scenario, device, rate)
+    else:
+        truth_samples, duration_s, samples = _simulate_npz(options, scenario, device, rate)
+    return SimulateSummary(
+        scenario=scenario.name,
+        truth_samples=truth_samples,
+        duration_s=duration_s,
+        device=None if device is None else device.name,
+        device_kind=None if device is None else device.kind,
+        samples=samples,
+        elapsed_s=time.perf_counter() - started,
+        out=out,
+        notes=scenario.spec.report(),
+    )
+
+
+def _simulate_mcap(
+    options: SimulateOptions, scenario: Scenario, device: Device, rate: float | None
+) -> tuple[int, float, int]:
+    """Truth → device → MCAP a block at a time (:class:`gyroemu.sensors.device_run.DeviceRun`), the
+    writer on its own thread; returns the truth's sample count and span and the device's sample count."""
+    from gyroemu.dynamics.truth_source import truth_source
+    from gyroemu.pipelines.formats.background_writer import BackgroundWriter
+    from gyroemu.pipelines.formats.mcap_log import McapLogWriter, Recording, truth_pose, truth_series
+    from gyroemu.pipelines.jobs.progress import CountProgress
+    from gyroemu.sensors.sampling import SensorTruth
+
+    source = truth_source(scenario, options.duration, rate)
+    run = device.run(source)
+    made = 0
+    with CountProgress(run.count, label="simulate", enabled=options.progress) as progress:
+        with McapLogWriter(options.out, scenario=scenario) as log, BackgroundWriter(log.write) as writer:
+            for block in run:
+                body = SensorTruth(block.truth)  # one set of interpolants for both truth channels
+                truth = truth_series(block.truth, block.samples, body)
+                pose = truth_pose(block.truth, block.samples, body)
+                writer.put(Recording(block.samples, truth=truth, pose=pose, device=device))
+                made += len(block.samples)
+                progress.advance(len(block.samples))
+    assert source.n_samples is not None and source.t_end is not None  # a bounded run
+    return source.n_samples, source.t_end - source.t_start, made
+
+
+def _simulate_npz(
+    options: SimulateOptions, scenario: Scenario, device: Device | None, rate: float | None
+) -> tuple[int, float, int | None]:
+    """Truth (and a device's samples) in memory, written as one .npz."""
+    from gyroemu.pipelines.jobs.progress import PhaseProgress
+
     phases = ["truth", "measure", "write"] if device is not None else ["truth", "write"]
     with PhaseProgress(phases, label="simulate", enabled=options.progress) as progress:
         with progress.phase("truth"):
@@ -171,29 +226,8 @@ def run_simulate(options: SimulateOptions) -> SimulateSummary:
             with progress.phase("measure"):
                 samples = device.measure(traj)
         with progress.phase("write"):
-            if out.suffix == ".mcap":
-                from gyroemu.pipelines.formats.mcap_log import Recording, truth_pose, truth_series, write_mcap
-
-                assert samples is not None  # an .mcap needs a device: checked above
-                from gyroemu.sensors.sampling import SensorTruth
-
-                body = SensorTruth(traj)  # one set of interpolants for both truth channels
-                truth, pose = truth_series(traj, samples, body), truth_pose(traj, samples, body)
-                recording = Recording(samples, truth=truth, pose=pose, device=device)
-                write_mcap(out, recording, scenario=scenario)
-            else:
-                write_npz_atomic(out, npz_arrays(scenario, traj, device, samples))
-    return SimulateSummary(
-        scenario=scenario.name,
-        truth_samples=len(traj),
-        duration_s=traj.duration,
-        device=None if device is None else device.name,
-        device_kind=None if device is None else device.kind,
-        samples=None if samples is None else len(samples),
-        elapsed_s=time.perf_counter() - started,
-        out=out,
-        notes=scenario.spec.report(),
-    )
+            write_npz_atomic(options.out, npz_arrays(scenario, traj, device, samples))
+    return len(traj), traj.duration, None if samples is None else len(samples)
 
 
 def npz_arrays(

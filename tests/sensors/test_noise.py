@@ -187,15 +187,39 @@ def test_shapes_and_per_axis_coefficients():
         noise.flicker_bank(1.0, (10.0, 1.0))
 
 
-def test_interpolation_reads_no_knot_beyond_the_last_sample():
-    # The last sample of ``out`` sits exactly on the last knot: the knot after it does not exist. Back
-    # ``coarse`` by a larger array whose next row is NaN, so reading past its end would show.
-    from gyroemu.sensors.noise import _interpolate_into
+def test_a_slow_component_is_linear_between_its_knots():
+    # One Gauss–Markov component of τ_c = 1024 Δt is simulated every L = τ_c / (16 Δt) = 64 samples and
+    # interpolated: the output is a straight line between knots (second differences vanish but at the
+    # knots, to round-off of the values).
+    dt, step = 0.01, 64
+    bank = noise.FlickerBank(tau_c=np.array([16 * step * dt]), sigma=np.array([[1.0, 2.0]]), tau_range=(1.0, 10.0))
+    n = 10 * step + 17
+    whole = noise.SensorNoise(np.random.default_rng(3), 2, dt, flicker=bank).add_into(np.zeros((n, 2)))
+    curvature = np.diff(whole, 2, axis=0)  # row i is centred on sample i + 1
+    off_knot = (np.arange(1, n - 1) % step) != 0
+    bound = 8 * np.finfo(float).eps * np.abs(whole).max()
+    assert np.all(np.abs(curvature[off_knot]) <= bound)
+    assert np.all(np.abs(curvature[~off_knot]).max(axis=0) > 1e3 * bound)  # the knots do bend it
 
-    ratio, knots = 4, 3
-    backing = np.full((knots + 1, 2), np.nan)
-    backing[:knots] = [[0.0, 1.0], [4.0, 5.0], [8.0, 9.0]]
-    out = np.zeros(((knots - 1) * ratio + 1, 2))
-    _interpolate_into(backing[:knots], ratio, out)
-    expected = np.column_stack([np.arange(len(out)), np.arange(len(out)) + 1.0]).astype(float)
-    np.testing.assert_array_equal(out, expected)
+
+def test_any_division_into_calls_continues_one_run_in_a_few_knots():
+    # White noise, a random walk and a flicker bank with fast and three slow levels: the state carries
+    # across calls, each slow level draws from its own stream, so the numbers do not depend on where
+    # the calls divide the run, and the slow levels hold two knots each at most between calls.
+    dt = 0.01
+    bank = noise.flicker_bank([1e-3, 2e-3, 3e-3], (0.05, 200.0), dt, n_axes=3)
+    assert len(bank.tau_c) >= 6 and bank.tau_c.max() / (16 * dt) >= 4 * 64  # fast and slow components
+    n = 5000
+
+    def generator():
+        return noise.SensorNoise(np.random.default_rng(11), 3, dt, white=0.1, random_walk=0.01, flicker=bank)
+
+    whole = generator().add_into(np.zeros((n, 3)))
+    gen, parts, made = generator(), [], 0
+    levels = int(np.sum(np.unique(np.floor(np.log2(np.maximum(bank.tau_c / (16 * dt), 1.0)))) > 0))
+    for size in (1, 63, 64, 65, 1000, 3, 2 * n):
+        size = min(size, n - made)
+        parts.append(gen.add_into(np.zeros((size, 3))))
+        made += size
+        assert gen.held_knots <= 2 * levels
+    np.testing.assert_array_equal(np.concatenate(parts), whole)
