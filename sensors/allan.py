@@ -39,7 +39,15 @@ import allantools
 import numpy as np
 from scipy.optimize import nnls
 
-__all__ = ["AllanDeviation", "Coefficient", "AllanFit", "allan_deviation", "fit_allan", "TERMS"]
+__all__ = [
+    "AllanDeviation",
+    "Coefficient",
+    "AllanFit",
+    "allan_deviation",
+    "allan_confidence",
+    "fit_allan",
+    "TERMS",
+]
 
 #: The IEEE 952 terms in the order of the fit's coefficients.
 TERMS = ("quantisation", "arw", "bias_instability", "rrw", "rate_ramp")
@@ -92,6 +100,26 @@ def allan_deviation(data: np.ndarray, dt: float, taus="octave") -> AllanDeviatio
     tau, adev, clusters = tau[keep], adev[keep], clusters[keep]
     edf = clusters - 1
     bounds = np.array([allantools.confidence_interval(s, nu, ci=_ONE_SIGMA) for s, nu in zip(adev, edf)])
+    return AllanDeviation(tau=tau, adev=adev, clusters=clusters, edf=edf, low=bounds[:, 0], high=bounds[:, 1])
+
+
+def allan_confidence(tau: np.ndarray, adev: np.ndarray, clusters: np.ndarray) -> AllanDeviation:
+    """An :class:`AllanDeviation` from σ(τ) computed elsewhere (a streamed estimate), with the confidence
+    :func:`allan_deviation` gives: ν = clusters − 1 and the 68 % chi-squared interval of σ(τ).
+
+    Parameters
+    ----------
+    tau : (M,) averaging times, s.
+    adev : (M,) Allan deviation σ(τ), in the data's unit.
+    clusters : (M,) independent clusters ⌊n/m⌋ of each τ = mΔt, each at least 2.
+    """
+    tau, adev = np.asarray(tau, dtype=float), np.asarray(adev, dtype=float)
+    clusters = np.asarray(clusters, dtype=float)
+    if np.any(clusters < 2):
+        raise ValueError("every τ needs at least two independent clusters (ν ≥ 1)")
+    edf = clusters - 1
+    bounds = np.array([allantools.confidence_interval(s, nu, ci=_ONE_SIGMA) for s, nu in zip(adev, edf)])
+    bounds = bounds.reshape(len(adev), 2)
     return AllanDeviation(tau=tau, adev=adev, clusters=clusters, edf=edf, low=bounds[:, 0], high=bounds[:, 1])
 
 

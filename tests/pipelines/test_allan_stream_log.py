@@ -1,0 +1,172 @@
+"""``gyroemu allan`` reading a log in batches (``allan_of_log``) against the in-memory path (``read_mcap``
+and ``allan_report``), and its errors for logs it cannot use.
+
+Tolerances: the streamed and allantools' Allan deviations differ by round-off only, bounded as in
+``tests/sensors/test_allan_stream.py``: a second difference has an error of at most
+ε·[P·(m + 2r + 5.5) + m·Δt·Y] (P the largest phase magnitude rounded, r the re-basings of a point, Y the
+largest |y − offset|), a relative error of σ of at most δ/rms(D) + ½(δ/rms(D))², for each of the two
+computations. The accumulator's phases are differences of sums of y − c with c its offset (a mean of
+samples, so |ȳ − c| ≤ max|y − ȳ| = Y), hence P ≤ 2(P_ref + Y·N·Δt) with P_ref allantools' largest
+|x|. The sample intervals: the in-memory path takes the median step of the float stamps t = ns/10⁹,
+the streamed one the median of the integer steps, /10⁹; each float stamp is within ε/2·T of its value
+(T the largest stamp), so the steps, and τ, agree within ε(T/Δt + 2) relative.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+
+import numpy as np
+import pytest
+
+from gyroemu.errors import LogError
+from gyroemu.pipelines.formats.mcap_log import LogWarning, read_mcap, write_mcap
+from gyroemu.pipelines.jobs.allan import BATCH, AllanLogError, allan_of_log, allan_report
+from gyroemu.pipelines.jobs.simulate import SimulateOptions, run_simulate
+from gyroemu.sensors.samples import ImuSamples
+
+EPS = np.finfo(float).eps
+
+
+def assert_reports_agree(streamed, reference, gyro, t, dt):
+    """σ within the round-off bound, τ within the stamps' rounding, and the printed tables equal."""
+    n = len(gyro)
+    tau_bound = EPS * (np.abs(t).max() / dt + 2) + 4 * EPS
+    for axis, (ours, ref) in enumerate(zip(streamed.fits, reference.fits)):
+        a, b = ours.allan, ref.allan
+        np.testing.assert_array_equal(a.clusters, b.clusters)
+        np.testing.assert_allclose(a.tau, b.tau, rtol=tau_bound, atol=0)
+        y = gyro[:, axis] - gyro[:, axis].mean()
+        x = np.concatenate([[0.0], np.cumsum(y) * dt])
+        P_ref, Y = np.abs(x).max(), np.abs(y).max()
+        P_ours = 2 * (P_ref + Y * n * dt)
+        for i, m in enumerate(np.round(b.tau / dt).astype(int)):
+            d = x[2 * m :] - 2 * x[m:-m] + x[: -2 * m]
+            rms = np.sqrt(np.mean(d * d))
+            rebases = min(2 * m, n // BATCH + 1)
+            bound = 8 * EPS * np.log2(n)
+            for P, r in ((P_ref, 0), (P_ours, rebases)):
+                q = EPS * (P * (m + 2 * r + 5.5) + m * dt * Y) / rms
+                bound += q + q * q / 2
+            assert abs(a.adev[i] / b.adev[i] - 1) <= bound, (axis, m, a.adev[i] / b.adev[i] - 1, bound)
+    assert streamed.spec == reference.spec
+    assert streamed.table() == reference.table()
+
+
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("allan")
+    logs = {}
+    for suffix in ("mcap", "npz"):
+        logs[suffix] = folder / f"static.{suffix}"
+        run_simulate(
+            SimulateOptions(
+                scenario="bench_static", out=logs[suffix], device="consumer_mems", duration=120.0, progress=False
+            )
+        )
+    return logs
+
+
+def test_mcap_log_gives_the_in_memory_result(simulated):
+    """120 000 samples: two batches, octaves up to 2^15 (all exact: 2m ≤ N − 1)."""
+    streamed = allan_of_log(simulated["mcap"])
+    samples = read_mcap(simulated["mcap"]).device.samples
+    dt = float(np.median(np.diff(samples.t)))
+    reference = allan_report(samples.gyro, dt, streamed.spec)
+    assert_reports_agree(streamed, reference, samples.gyro, samples.t, dt)
+
+
+def test_npz_log_gives_the_in_memory_result(simulated):
+    streamed = allan_of_log(simulated["npz"])
+    with np.load(simulated["npz"]) as data:
+        gyro, t = data["imu/gyro"], data["imu/t"]
+    dt = float(np.median(np.diff(t)))
+    assert_reports_agree(streamed, allan_report(gyro, dt, streamed.spec), gyro, np.zeros(1), dt)
+
+
+def samples(n, rate=100.0, device="imu0", seed=0, start=1.0):
+    rng = np.random.default_rng(seed)
+    t = start + np.arange(n) / rate
+    gyro = rng.normal(0.0, 1e-3, (n, 3))
+    accel = np.tile([0.0, 0.0, 9.81], (n, 1))
+    return ImuSamples(t=t, gyro=gyro, accel=accel, mag=np.full((n, 3), np.nan), device=device)
+
+
+def test_truncated_mcap_warns_as_read_mcap_and_uses_the_recovered_samples(tmp_path):
+    whole = write_mcap(tmp_path / "whole.mcap", samples(20000), chunk_size=1 << 16)
+    cut = tmp_path / "cut.mcap"
+    data = whole.read_bytes()
+    cut.write_bytes(data[: len(data) * 2 // 3])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        recovered = read_mcap(cut).device.samples
+        streamed = allan_of_log(cut)
+    messages = [str(w.message) for w in caught if issubclass(w.category, LogWarning)]
+    assert len(messages) == 2 and messages[0] == messages[1] and re.search(r"truncated at byte \d+", messages[0])
+    assert 64 < len(recovered.t) < 20000
+    dt = float(np.median(np.diff(recovered.t)))
+    assert_reports_agree(streamed, allan_report(recovered.gyro, dt), recovered.gyro, recovered.t, dt)
+
+
+def test_a_file_that_is_not_mcap_raises_read_mcaps_error(tmp_path):
+    bad = tmp_path / "notes.mcap"
+    bad.write_text("not a log\n")
+    with pytest.raises(LogError) as expected:
+        read_mcap(bad)
+    with pytest.raises(LogError) as got:
+        allan_of_log(bad)
+    assert str(got.value) == str(expected.value)
+
+
+def test_a_short_log_and_a_log_with_nan_are_refused_as_before(tmp_path):
+    short = write_mcap(tmp_path / "short.mcap", samples(40))
+    with pytest.raises(
+        AllanLogError,
+        match=re.escape(f"{short}: an Allan analysis needs a (N, 3) gyro record with N >= 64, got shape (40, 3)"),
+    ):
+        allan_of_log(short)
+    bad = samples(500)
+    bad.gyro[300, 1] = np.nan
+    nan_log = write_mcap(tmp_path / "nan.mcap", bad)
+    with pytest.raises(AllanLogError, match=re.escape(f"{nan_log}: the gyro record has NaN or infinite samples")):
+        allan_of_log(nan_log)
+    with pytest.raises(AllanLogError, match="no such file"):
+        allan_of_log(tmp_path / "missing.mcap")
+
+
+def test_a_log_of_two_devices_raises_what_read_mcap_raises(tmp_path):
+    log = write_mcap(tmp_path / "two.mcap", [samples(200, device="a"), samples(200, device="b", seed=1)])
+    with pytest.raises(ValueError) as expected:
+        _ = read_mcap(log).device
+    with pytest.raises(ValueError) as got:
+        allan_of_log(log)
+    assert str(got.value) == str(expected.value)
+
+
+def test_a_prefixed_single_device_log_is_read(tmp_path):
+    log = write_mcap(tmp_path / "one.mcap", samples(3000, device="left"), prefix_topics=True)
+    device = read_mcap(log).device
+    assert device.topics["imu"] == "/left/imu"
+    dt = float(np.median(np.diff(device.samples.t)))
+    reference = allan_report(device.samples.gyro, dt)
+    assert_reports_agree(allan_of_log(log), reference, device.samples.gyro, device.samples.t, dt)
+
+
+def test_jittered_stamps_give_the_median_step_within_half_a_bin(tmp_path):
+    """Stamps jittered by ±100 us at 100 Hz: about 200 000 distinct steps in ns, more than the step
+    histogram's 65 536 bins, so they are merged by powers of two. With steps spread over a range W ns,
+    2^s-ns bins number at most W/2^s + 2, so s ≤ ⌈log2(W/65 534)⌉; the median is the middle of its
+    bin, within 2^(s−1) ns of ``np.median`` of the integer steps (plus the float stamps' rounding)."""
+    rng = np.random.default_rng(2)
+    n = 150_000
+    jittered = samples(n)
+    t = jittered.t + rng.uniform(-1e-4, 1e-4, n)
+    log = write_mcap(tmp_path / "jitter.mcap", ImuSamples(t, jittered.gyro, jittered.accel, jittered.mag))
+    stamps = read_mcap(log).device.stamp_ns
+    steps = np.diff(stamps)
+    assert len(np.unique(steps)) > 1 << 16
+    shift = int(np.ceil(np.log2((steps.max() - steps.min()) / (65536 - 2))))
+    tau = allan_of_log(log).fits[0].allan.tau[0]
+    expected = float(np.median(steps)) * 1e-9
+    assert abs(tau - expected) <= 2 ** (shift - 1) * 1e-9 + 4 * EPS * expected
