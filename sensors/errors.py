@@ -1,7 +1,8 @@
 """The standard error terms of inertial sensors, shared by every gyro and accelerometer kind.
 
-One vectorised function, :func:`apply_errors`, turns the true signal of a three-axis sensor (angular
-rate ω in rad/s, or specific force f in m/s²) into what the sensor outputs, following the models of
+One vectorised function, :func:`apply_errors` (:class:`SensorErrors` chunk by chunk), turns the true
+signal of a three-axis sensor (angular rate ω in rad/s, or specific force f in m/s²) into what the
+sensor outputs, following the models of
 IEEE Std 952-1997 (fibre-optic gyros; its Annex C gives the Allan-variance terms), IEEE Std 647-2006
 (ring-laser gyros) and IEEE Std 1431-2004 (Coriolis vibratory gyros); accelerometers take the same
 terms in their own units (IEEE Std 1293-2018). For each axis i, with ΔT = T − T_ref:
@@ -12,6 +13,7 @@ terms in their own units (IEEE Std 1293-2018). For each axis i, with ΔT = T −
         + Σ_j G_ij f_j                        g-sensitivity (gyro only; f = specific force, m/s²)
         + b_i + b_on,i + R_i t               fixed bias, turn-on bias (random per power-up), ramp
         + n_i(t)                             ARW/VRW white noise + bias instability (flicker) + RRW
+                                             + Gauss–Markov (exponentially correlated) noise
 
     y = Q( clip( LPF(u), ±range ) )          bandwidth (Butterworth low-pass), saturation, quantisation
 
@@ -32,9 +34,12 @@ the wrong unit is an unknown key. Per-axis keys take one number for all axes or 
 z). ``g`` in a key name is the unit g₀ = 9.80665 m/s², not local gravity. :class:`GyroErrors` and
 :class:`AccelErrors` convert to one SI :class:`ErrorModel`, which is all :func:`apply_errors` needs.
 
-Randomness: every draw comes from the Generator passed in, in a fixed order (turn-on bias, then the
-noise, then the quantiser's initial fraction); a term that is off draws nothing. One call is one
-power-up: call again with the same Generator for the next run's turn-on bias.
+Randomness: every draw comes from the Generator passed in (and from generators spawned from it for the
+slow flicker levels, :class:`gyroemu.sensors.noise.SensorNoise`), in a fixed order: at power-up the
+turn-on bias, the noise's stationary starts and the pulse counter's initial fraction, then the noise
+sample by sample; a term that is off draws nothing. :func:`apply_errors` is one power-up over all its
+samples; :class:`SensorErrors` is one power-up applied chunk after chunk, any division of the run
+giving the same numbers (the IMU layer's blocks, :mod:`gyroemu.sensors.device_run`).
 
 Implementation: numpy prepares, and three small numba kernels make one pass each over the samples
 (the deterministic response, the noise recurrences, the filter; the quantiser is a fourth), so the
@@ -48,12 +53,12 @@ choice of which truth array feeds which sensor. The sample times given here must
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Annotated, ClassVar, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
-from pydantic import BeforeValidator, ValidationInfo, field_validator
+from pydantic import BeforeValidator, ValidationInfo, Field, field_validator
 
 from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Real, Section
 from gyroemu.dynamics.jit import njit
@@ -146,6 +151,17 @@ class _CommonErrors(Section):
         """Which of :attr:`white_noise_keys` the config gives (None: neither, no white noise)."""
         return next((key for key in self.white_noise_keys if getattr(self, key) is not None), None)
 
+    markov_keys: ClassVar[tuple[str, str]]
+    """The Gauss–Markov term's keys (σ in the sensor's unit, τ_c in s), both given or neither."""
+
+    def _markov_si(self, unit: float) -> tuple[np.ndarray, np.ndarray]:
+        """(σ, τ_c) of the Gauss–Markov term in SI, σ given in ``unit`` (zeros when off)."""
+        sigma_key, tau_key = self.markov_keys
+        sigma, tau = getattr(self, sigma_key), getattr(self, tau_key)
+        if sigma is None:
+            return np.zeros(3), np.zeros(3)
+        return np.array(sigma, dtype=float) * unit, np.array(tau, dtype=float)
+
     def _cross_axis(self) -> np.ndarray:
         if self.cross_axis_matrix is not None:
             return np.array(self.cross_axis_matrix, dtype=float)
@@ -165,6 +181,23 @@ def _exclusive(*earlier: str):
             for first in earlier:
                 if info.data.get(first) is not None:
                     raise ValueError(f"give either {first} or {info.field_name}, not both")
+        return value
+
+    return classmethod(check)
+
+
+def _markov_pair(sigma_key: str):
+    """A validator for ``markov_tau_s`` (validated even when absent): the Gauss–Markov term takes both
+    keys or neither, and τ_c > 0 wherever σ > 0."""
+
+    def check(cls, value, info: ValidationInfo):
+        if sigma_key not in info.data:  # σ itself was refused: its own error says why
+            return value
+        sigma = info.data[sigma_key]
+        if (sigma is None) != (value is None):
+            raise ValueError(f"give both {sigma_key} and {info.field_name} (a Gauss–Markov term), or neither")
+        if sigma is not None and any(s > 0 and not t > 0 for s, t in zip(sigma, value)):
+            raise ValueError(f"must be > 0 on every axis where {sigma_key} is > 0")
         return value
 
     return classmethod(check)
@@ -190,8 +223,11 @@ class GyroErrors(_CommonErrors):
     Kalibr's ``gyroscope_noise_density``) or ``psd_one_sided_deg_per_s_per_sqrt_hz`` (the amplitude √S₁
     of a one-sided power spectral density, as MATLAB's ``imuSensor`` reads a datasheet; N = √S₁/√2).
     Others: ``bias_instability_deg_per_h`` (flicker floor 0.664 B, flat over
-    ``bias_instability_tau_range_s``), ``rrw_deg_per_h_per_sqrt_h``. Quantisation: ``quantisation_rad``
-    (angle per count of an integrating output) or ``quantisation_rad_per_s`` (rate LSB).
+    ``bias_instability_tau_range_s``), ``rrw_deg_per_h_per_sqrt_h``. Gauss–Markov (exponentially
+    correlated) noise: ``markov_sigma_deg_per_h`` (its standard deviation σ) with ``markov_tau_s`` (its
+    correlation time τ_c), both or neither; Allan variance :func:`gyroemu.sensors.noise.gauss_markov_avar`.
+    Quantisation: ``quantisation_rad`` (angle per count of an integrating output) or
+    ``quantisation_rad_per_s`` (rate LSB).
     ``g_sensitivity_deg_per_h_per_g``: 3x3, row i = output axis, column j = specific-force axis.
     """
 
@@ -206,6 +242,8 @@ class GyroErrors(_CommonErrors):
     psd_one_sided_deg_per_s_per_sqrt_hz: PerAxisNonNegative | None = None
     bias_instability_deg_per_h: PerAxisNonNegative = _ZERO
     rrw_deg_per_h_per_sqrt_h: PerAxisNonNegative = _ZERO
+    markov_sigma_deg_per_h: PerAxisNonNegative | None = None
+    markov_tau_s: PerAxisNonNegative | None = Field(default=None, validate_default=True)
     rate_ramp_deg_per_h_per_h: PerAxis = _ZERO
     quantisation_rad: PositiveReal | None = None
     quantisation_rad_per_s: PositiveReal | None = None
@@ -215,10 +253,12 @@ class GyroErrors(_CommonErrors):
         "noise_density_deg_per_s_per_sqrt_hz",
         "psd_one_sided_deg_per_s_per_sqrt_hz",
     )
+    markov_keys = ("markov_sigma_deg_per_h", "markov_tau_s")
     _nonlinearity = field_validator("scale_factor_nonlinearity_ppm")(_needs_range("range_deg_per_s"))
     _density = field_validator("noise_density_deg_per_s_per_sqrt_hz")(_exclusive("arw_deg_per_sqrt_h"))
     _psd = field_validator("psd_one_sided_deg_per_s_per_sqrt_hz")(_exclusive(*white_noise_keys[:2]))
     _quantum = field_validator("quantisation_rad_per_s")(_exclusive("quantisation_rad"))
+    _markov = field_validator("markov_tau_s")(_markov_pair("markov_sigma_deg_per_h"))
 
     def to_si(self) -> ErrorModel:
         """The same terms in SI units (rad, rad/s, s, m/s²)."""
@@ -231,6 +271,7 @@ class GyroErrors(_CommonErrors):
             density = np.array(self.arw_deg_per_sqrt_h or _ZERO) * _DEG / _SQRT_HOUR
         full_scale = None if self.range_deg_per_s is None else self.range_deg_per_s * _DEG
         g_sens = self.g_sensitivity_deg_per_h_per_g
+        markov_sigma, markov_tau = self._markov_si(deg_per_h)
         return ErrorModel(
             bias=np.array(self.bias_deg_per_h) * deg_per_h,
             turn_on_bias=np.array(self.turn_on_bias_deg_per_h) * deg_per_h,
@@ -251,6 +292,8 @@ class GyroErrors(_CommonErrors):
             full_scale=full_scale,
             bandwidth_hz=self.bandwidth_hz,
             filter_order=self.filter_order,
+            markov_sigma=markov_sigma,
+            markov_tau_s=markov_tau,
         )
 
 
@@ -264,8 +307,9 @@ class AccelErrors(_CommonErrors):
     a one-sided power spectral density, as MATLAB's ``imuSensor`` reads a datasheet; N = √S₁/√2).
     Others: ``bias_instability_ug`` (flicker floor 0.664 B over
     ``bias_instability_tau_range_s``), ``random_walk_ug_per_sqrt_h`` (the accelerometer's rate random
-    walk). Quantisation: ``quantisation_m_per_s`` (velocity per count of an integrating output) or
-    ``quantisation_m_per_s2`` (acceleration LSB). µg is written ``ug``.
+    walk), ``markov_sigma_ug`` with ``markov_tau_s`` (Gauss–Markov noise: standard deviation σ and
+    correlation time τ_c, both or neither). Quantisation: ``quantisation_m_per_s`` (velocity per count
+    of an integrating output) or ``quantisation_m_per_s2`` (acceleration LSB). µg is written ``ug``.
     """
 
     bias_ug: PerAxis = _ZERO
@@ -278,15 +322,19 @@ class AccelErrors(_CommonErrors):
     psd_one_sided_ug_per_sqrt_hz: PerAxisNonNegative | None = None
     bias_instability_ug: PerAxisNonNegative = _ZERO
     random_walk_ug_per_sqrt_h: PerAxisNonNegative = _ZERO
+    markov_sigma_ug: PerAxisNonNegative | None = None
+    markov_tau_s: PerAxisNonNegative | None = Field(default=None, validate_default=True)
     ramp_ug_per_h: PerAxis = _ZERO
     quantisation_m_per_s: PositiveReal | None = None
     quantisation_m_per_s2: PositiveReal | None = None
 
     white_noise_keys = ("vrw_m_per_s_per_sqrt_h", "noise_density_ug_per_sqrt_hz", "psd_one_sided_ug_per_sqrt_hz")
+    markov_keys = ("markov_sigma_ug", "markov_tau_s")
     _nonlinearity = field_validator("scale_factor_nonlinearity_ppm")(_needs_range("range_g"))
     _density = field_validator("noise_density_ug_per_sqrt_hz")(_exclusive("vrw_m_per_s_per_sqrt_h"))
     _psd = field_validator("psd_one_sided_ug_per_sqrt_hz")(_exclusive(*white_noise_keys[:2]))
     _quantum = field_validator("quantisation_m_per_s2")(_exclusive("quantisation_m_per_s"))
+    _markov = field_validator("markov_tau_s")(_markov_pair("markov_sigma_ug"))
 
     def to_si(self) -> ErrorModel:
         """The same terms in SI units (m/s, m/s², s)."""
@@ -297,6 +345,7 @@ class AccelErrors(_CommonErrors):
         else:
             density = np.array(self.vrw_m_per_s_per_sqrt_h or _ZERO) / _SQRT_HOUR
         full_scale = None if self.range_g is None else self.range_g * STANDARD_GRAVITY
+        markov_sigma, markov_tau = self._markov_si(_UG)
         return ErrorModel(
             bias=np.array(self.bias_ug) * _UG,
             turn_on_bias=np.array(self.turn_on_bias_ug) * _UG,
@@ -317,6 +366,8 @@ class AccelErrors(_CommonErrors):
             full_scale=full_scale,
             bandwidth_hz=self.bandwidth_hz,
             filter_order=self.filter_order,
+            markov_sigma=markov_sigma,
+            markov_tau_s=markov_tau,
         )
 
 
@@ -361,6 +412,9 @@ class ErrorModel:
     full_scale : float or None
         Saturation limit (unit).
     bandwidth_hz : float or None; filter_order : 1 or 2
+    markov_sigma : (3,) unit; markov_tau_s : (3,) s
+        Gauss–Markov noise: standard deviation σ and correlation time τ_c (> 0 where σ > 0); σ = 0
+        (the default) is off and draws nothing.
     """
 
     bias: np.ndarray
@@ -382,6 +436,8 @@ class ErrorModel:
     full_scale: float | None
     bandwidth_hz: float | None
     filter_order: int
+    markov_sigma: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    markov_tau_s: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 def apply_errors(
@@ -460,7 +516,10 @@ class SensorErrors:
         flicker = None
         if np.any(m.bias_instability):
             flicker = noise.flicker_bank(m.bias_instability, m.bias_instability_tau_range, dt, n_axes=3)
-        self._noise = noise.SensorNoise(rng, 3, dt, white=m.noise_density, random_walk=m.random_walk, flicker=flicker)
+        markov = (m.markov_sigma, m.markov_tau_s) if np.any(m.markov_sigma) else None
+        self._noise = noise.SensorNoise(
+            rng, 3, dt, white=m.noise_density, random_walk=m.random_walk, flicker=flicker, markov=markov
+        )
         self._filter: tuple[np.ndarray, np.ndarray] | None = None
         self._filter_state: np.ndarray | None = None  # set from the first sample
         if m.bandwidth_hz is not None:
