@@ -701,7 +701,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--scenario", required=True, help="built-in name or TOML path")
     p.add_argument("--device", required=True, help="built-in device name or TOML path")
-    p.add_argument("--duration", type=_positive, default=None, help="seconds (default: the scenario's)")
+    p.add_argument(
+        "--duration",
+        type=_positive,
+        default=None,
+        help="seconds (default: until SIGINT/SIGTERM for a motion given in closed form; the scenario's own "
+        "duration for a recording or a simulated body: heavy-top, free-rigid-body, ship, spacecraft-cmg, drop)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of every random draw (default: 0)")
     p.add_argument("--as-fast-as-possible", action="store_true", help="do not pace to the sample clock")
     p.add_argument("--device-name", default="imu0", help="key expressions gyroemu/<NAME>/... (default: imu0)")

@@ -32,7 +32,8 @@ behind, so its error never accumulates (:meth:`PacedPublisher.run_schedule`). Wi
 is shifted by k times the file's span plus one mean message interval, so deadlines keep increasing
 (the payloads, header stamps included, are the recorded bytes every pass).
 
-A reader thread walks the file a chunk at a time (:func:`gyroemu.pipelines.formats.mcap_records.iter_mcap_batches`),
+A reader thread (:class:`gyroemu.pipelines.transport.read_ahead.ReadAheadThread`, shared with ``gyroemu
+stream``) walks the file a chunk at a time (:func:`gyroemu.pipelines.formats.mcap_records.iter_mcap_batches`),
 turns each chunk's messages into batches of ``BATCH`` ``(deadline offset, key, payload)`` and queues
 them (a bounded queue of ``READ_AHEAD`` batches), so decompressing a chunk happens while the
 publisher waits for its deadlines, never on its schedule; memory stays bounded by the queue, whatever
@@ -55,12 +56,10 @@ From Python: ``run_replay(ReplayOptions(path=Path("run.mcap"), rate=2.0))`` (:cl
 from __future__ import annotations
 
 import os
-import queue
 import sys
-import threading
 import time
 import warnings
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Generator, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
@@ -68,6 +67,7 @@ from typing import TYPE_CHECKING, TextIO
 from gyroemu.pipelines.formats.channels import is_device_prefix, is_stream_role, role_topic, split_topic
 from gyroemu.pipelines.formats.mcap_log import LogWarning, read_mcap
 from gyroemu.pipelines.formats.mcap_records import iter_mcap_batches
+from gyroemu.pipelines.transport.read_ahead import BATCH, READ_AHEAD, Batch, ReadAheadThread
 from gyroemu.pipelines.transport.zenoh_io import (
     PacingOptions,
     SessionOptions,
@@ -82,9 +82,6 @@ if TYPE_CHECKING:
     from gyroemu.pipelines.formats.ros2_keys import Ros2Keys
 
 __all__ = ["ReplayOptions", "topic_keys", "ros2_topic_keys", "ReadAhead", "run_replay", "READ_AHEAD", "BATCH"]
-
-READ_AHEAD = 64  # batches queued ahead of the publisher
-BATCH = 256  # messages per batch: the publisher frees a spent batch (~50 us for 256) right after a send
 
 
 class ReplayError(ValueError):
@@ -192,85 +189,50 @@ def ros2_topic_keys(
     return out, bad
 
 
-class ReadAhead(threading.Thread):
+class ReadAhead(ReadAheadThread):
     """Reads the file in a thread and queues ``[(deadline offset ns, key, payload), ...]`` batches (of
-    at most ``BATCH``); ``None`` ends the stream, an exception object is raised by :meth:`batches`."""
+    at most ``BATCH``; :class:`gyroemu.pipelines.transport.read_ahead.ReadAheadThread`): ``None`` ends
+    the stream, an exception object is raised by :meth:`batches`."""
 
     def __init__(
         self, path: str | os.PathLike, keys: dict[str, str], rate: float, loop: bool, depth: int = READ_AHEAD
     ) -> None:
-        super().__init__(name="replay-read-ahead", daemon=True)
+        super().__init__(depth, name="replay-read-ahead")
         self.path, self.keys, self.rate, self.loop = path, keys, float(rate), loop
-        self.queue: queue.Queue = queue.Queue(depth)
-        self.stopping = threading.Event()
-        self.ready = threading.Event()  # set once the queue is full (or the file read): start the clock then
         self.passes = 0
 
-    def _put(self, item) -> bool:
+    def produce(self) -> Generator[Batch, None, None]:
+        keys, rate = self.keys, self.rate
+        offset = 0  # ns of log time added to this pass
+        first = None
         while not self.stopping.is_set():
-            try:
-                self.queue.put(item, timeout=0.1)
-                return True
-            except queue.Full:
-                self.ready.set()
-                continue
-        return False
-
-    def run(self) -> None:
-        try:
-            keys, rate = self.keys, self.rate
-            offset = 0  # ns of log time added to this pass
-            first = None
-            while not self.stopping.is_set():
-                pass_first = last = previous = None
-                distinct = 0
-                for batch in iter_mcap_batches(self.path, topics=keys):
-                    if pass_first is None:
-                        pass_first = batch[0].log_time
-                        if first is None:
-                            first = pass_first
-                    assert first is not None  # set from the first batch of the first pass
-                    shift = offset - first
-                    items = []
-                    for m in batch:
-                        if m.log_time != previous:
-                            distinct += 1
-                            previous = m.log_time
-                        items.append((round((m.log_time + shift) / rate), keys[m.topic], m.data))
-                    last = batch[-1].log_time
-                    while batch:  # free the McapMessage tuples a slice at a time: a deallocation holds
-                        del batch[-BATCH:]  # the GIL throughout, and 4000 at once take ~0.5 ms
-                    for start in range(0, len(items), BATCH):
-                        if not self._put(items[start : start + BATCH]):
-                            return
-                self.passes += 1
-                if not self.loop or pass_first is None:
-                    break
-                assert last is not None  # set with pass_first, by every batch
-                span = last - pass_first
-                interval = span / (distinct - 1) if distinct > 1 else 1e9
-                offset += span + round(interval)
-        except BaseException as e:  # handed to the publishing thread
-            self._put(e)
-        finally:
-            self.ready.set()
-            self._put(None)
-
-    def batches(self, stop: Callable[[], bool] = lambda: False) -> Iterator[list[tuple[int, str, bytes]]]:
-        """The queued batches, lists of ``(deadline offset ns, key, payload)`` in order (blocks
-        while the reader is behind; ``stop()`` is polled every 0.1 s meanwhile)."""
-        while True:
-            try:
-                batch = self.queue.get(timeout=0.1)
-            except queue.Empty:
-                if stop():
-                    return
-                continue
-            if batch is None:
-                return
-            if isinstance(batch, BaseException):
-                raise batch
-            yield batch
+            pass_first = last = previous = None
+            distinct = 0
+            for batch in iter_mcap_batches(self.path, topics=keys):
+                if pass_first is None:
+                    pass_first = batch[0].log_time
+                    if first is None:
+                        first = pass_first
+                assert first is not None  # set from the first batch of the first pass
+                shift = offset - first
+                items = []
+                for m in batch:
+                    if m.log_time != previous:
+                        distinct += 1
+                        previous = m.log_time
+                    items.append((round((m.log_time + shift) / rate), keys[m.topic], m.data))
+                last = batch[-1].log_time
+                while batch:  # free the McapMessage tuples a slice at a time: a deallocation holds
+                    del batch[-BATCH:]  # the GIL throughout, and 4000 at once take ~0.5 ms
+                for start in range(0, len(items), BATCH):
+                    yield items[start : start + BATCH]
+            self.passes += 1
+            if not self.loop or pass_first is None:
+                break
+            assert last is not None  # set with pass_first, by every batch
+            span = last - pass_first
+            interval = span / (distinct - 1) if distinct > 1 else 1e9
+            offset += span + round(interval)
 
 
 def _channels_to_publish(options: ReplayOptions, out: TextIO) -> tuple[dict[str, str], Ros2Keys | None]:

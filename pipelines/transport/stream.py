@@ -1,14 +1,31 @@
-"""``gyroemu stream``: simulate a scenario through a device, then publish it live over zenoh.
+"""``gyroemu stream``: simulate a scenario through a device and publish it live over zenoh, as it computes.
 
-The whole run is simulated and encoded first (the same CDR bytes an MCAP log of the run holds: frame
-ids and fields by the channel vocabulary, :mod:`gyroemu.pipelines.formats.channels`, as
-:class:`gyroemu.pipelines.formats.mcap_log.McapLogWriter` writes them), then sample k's messages
-(``/imu``, ``/mag`` when the device has a magnetometer, ``/truth/imu``, ``/raw/<kind>``) go out at
-``t0 + k / rate`` on ``gyroemu/<device-name>/<topic>`` (:mod:`gyroemu.pipelines.transport.zenoh_io`).
+Sample k's messages (``/imu``, ``/mag`` when the device has a magnetometer, ``/truth/imu``,
+``/raw/<kind>``: the same CDR bytes an MCAP log of the run holds, frame ids and fields by the channel
+vocabulary, :mod:`gyroemu.pipelines.formats.channels`, as
+:class:`gyroemu.pipelines.formats.mcap_log.McapLogWriter` writes them) go out at ``t0 + k / rate`` on
+``gyroemu/<device-name>/<topic>`` (:mod:`gyroemu.pipelines.transport.zenoh_io`), in that topic order.
+
+The run is computed a block at a time (:class:`gyroemu.sensors.device_run.DeviceRun` reading its truth
+a window at a time, :mod:`gyroemu.dynamics.truth_source`): a thread (:class:`BlockProducer`) measures
+and encodes each block and queues its messages, a bounded queue of a block's worth and some
+(:class:`gyroemu.pipelines.transport.read_ahead.ReadAheadThread`, as ``gyroemu replay`` reads ahead),
+while the publisher sends them at their deadlines
+(:meth:`gyroemu.pipelines.transport.zenoh_io.PacedPublisher.run_schedule`). Memory is that of a few
+blocks whatever the run's length, and the first message goes out once the queue has filled, not after
+the whole run. The bytes are those of the whole run simulated and encoded at once: a run's samples do
+not depend on its blocks, and ``/truth/imu``, interpolated in each block's window of truth, agrees
+with the whole run's interpolation to round-off (bit for bit in practice).
+
+How long: ``--duration`` seconds; without it, a scenario whose motion is a closed form in time
+(:func:`runs_without_end`) streams until SIGINT/SIGTERM (exit status 130), and a recording (a bounded
+span), a kind that integrates equations of motion (simulated whole before the first message) or a
+motion with a magnetic environment along its path stream the scenario's own duration.
 
 Before its clock starts the stream waits (``--wait``, default 10 s) until every key has a subscriber,
 so a recorder started just after the stream loses nothing; when the wait runs out it starts anyway.
-After the last sample it lingers briefly so that queued messages reach their subscribers.
+Then it waits (at most 10 s more) until the producer has filled its queue, so that the first deadlines
+are not missed. After the last sample it lingers briefly so that queued messages reach their subscribers.
 
 ROS 2 mode (``--ros2``, ``--domain``): the same bytes go on rmw_zenoh's keys instead,
 ``<domain>/<device>/<topic>/<type>/<RIHS01 hash>`` (``0/imu0/imu/sensor_msgs::msg::dds_::Imu_/RIHS01_7d9a...``),
@@ -23,9 +40,11 @@ options are :mod:`gyroemu.pipelines.transport.zenoh_io`'s).
 
 from __future__ import annotations
 
+import itertools
+import math
 import sys
 import time
-from collections.abc import Iterable
+from collections.abc import Generator, Iterable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, TextIO
 
@@ -45,16 +64,33 @@ from gyroemu.pipelines.formats.channels import (
     topic_message_type,
 )
 from gyroemu.pipelines.formats.messages import split_payloads, stamps_to_ns
-from gyroemu.pipelines.transport.zenoh_io import PacingOptions, SessionOptions, live_session, open_session, topic_to_key
+from gyroemu.pipelines.transport.read_ahead import BATCH, READ_AHEAD, Batch, ReadAheadThread
+from gyroemu.pipelines.transport.zenoh_io import (
+    SLEEP_ONLY,
+    PacingOptions,
+    SessionOptions,
+    live_session,
+    open_session,
+    topic_to_key,
+)
 
 if TYPE_CHECKING:
     from gyroemu.dynamics import Scenario
     from gyroemu.pipelines.formats.channels import ImuSeries
     from gyroemu.pipelines.transport.live_estimate import LiveEstimator
     from gyroemu.sensors import Device
+    from gyroemu.sensors.device_run import MeasuredBlock
     from gyroemu.sensors.samples import ImuSamples
 
-__all__ = ["StreamOptions", "encode_run", "topic_types", "run_stream"]
+__all__ = [
+    "StreamOptions",
+    "encode_run",
+    "encode_block",
+    "topic_types",
+    "runs_without_end",
+    "BlockProducer",
+    "run_stream",
+]
 
 
 @dataclass(frozen=True)
@@ -68,7 +104,8 @@ class StreamOptions:
     device : str
         Built-in device name or TOML path.
     duration : float or None
-        Seconds to simulate; None: the scenario's.
+        Seconds to stream; None: until SIGINT/SIGTERM where the scenario allows it
+        (:func:`runs_without_end`), else the scenario's own duration.
     seed : int
         Seed of every random draw of the device.
     device_name : str
@@ -169,12 +206,89 @@ def _start_estimator(options: StreamOptions, dev: Device, scen: Scenario, sample
     ).start()
 
 
-def run_stream(options: StreamOptions, *, out: TextIO = sys.stdout) -> int:
-    """Simulate, encode and publish (see the module's notes); progress goes to ``out``. Returns the exit
-    status (0, or 130 when stopped by SIGINT/SIGTERM). Raises ``ValueError`` naming the argument at
-    fault, before simulating."""
-    from gyroemu.dynamics import load_scenario
+def runs_without_end(scenario: Scenario) -> bool:
+    """Whether ``gyroemu stream`` without ``--duration`` streams ``scenario`` until stopped: its kind is
+    pointwise (:attr:`gyroemu.dynamics.scenarios.ScenarioSpec.pointwise`) with no bounded span (a
+    recording's is) and no magnetic environment along the path (simulated whole). Otherwise the
+    scenario's own duration."""
+    spec = scenario.spec
+    site = getattr(spec, "site", None)
+    return bool(spec.pointwise) and spec.max_span_s() is None and getattr(site, "magnetic_environment", None) is None
+
+
+class BlockProducer(ReadAheadThread):
+    """Encodes a device run's blocks in a thread and queues their messages as batches
+    ``[(round(k * 1e9 / rate), key, payload), ...]`` (k: the sample's index from the run's start),
+    sample by sample, each sample's messages in the order of ``keys``.
+
+    Parameters
+    ----------
+    blocks : iterable of MeasuredBlock
+        The run's blocks, in order from its start (a :class:`gyroemu.sensors.device_run.DeviceRun`, or
+        what is left of one): iterated in the thread, a block computed as the queue has room.
+    keys : dict
+        ``{topic: key expression}`` of every topic a block encodes to (:func:`encode_block`).
+    rate : float or None
+        Samples per second of the deadlines; None: every deadline 0 (as fast as possible).
+    depth : int
+        Batches queued ahead of the publisher, at most.
+
+    Attributes
+    ----------
+    samples : int
+        Samples queued so far.
+    """
+
+    def __init__(
+        self,
+        blocks: Iterable[MeasuredBlock],
+        keys: dict[str, str],
+        rate: float | None,
+        depth: int = READ_AHEAD,
+    ) -> None:
+        super().__init__(depth, name="stream-read-ahead")
+        self._blocks = blocks
+        self.keys = dict(keys)
+        self.rate = None if rate is None else float(rate)
+        self.samples = 0
+
+    def produce(self) -> Generator[Batch, None, None]:
+        keys = list(self.keys.values())
+        per_batch = max(1, BATCH // len(keys))  # samples per batch
+        for block in self._blocks:
+            encoded = encode_block(block)
+            del block  # the block's arrays are not needed past its encoding
+            if list(encoded) != list(self.keys):
+                raise RuntimeError(f"a block encoded to topics {list(encoded)}, the run's first to {list(self.keys)}")
+            columns = [split_payloads(encoded[topic]) for topic in self.keys]
+            del encoded
+            n, k0 = len(columns[0]), self.samples
+            if self.rate is None:
+                offsets = [0] * n
+            else:
+                offsets = [round(k * 1e9 / self.rate) for k in range(k0, k0 + n)]
+            for start in range(0, n, per_batch):
+                stop = min(start + per_batch, n)
+                yield [(offsets[i], key, column[i]) for i in range(start, stop) for key, column in zip(keys, columns)]
+                self.samples = k0 + stop
+            del columns, offsets
+
+
+def encode_block(block: MeasuredBlock) -> dict[str, np.ndarray]:
+    """Topic -> encoded rows of one block of a device run (:class:`gyroemu.sensors.device_run.MeasuredBlock`):
+    :func:`encode_run` of its samples and of its ``/truth/imu`` (interpolated in the block's truth window)."""
     from gyroemu.pipelines.formats.mcap_log import truth_series
+    from gyroemu.sensors.sampling import SensorTruth
+
+    return encode_run(block.samples, truth_series(block.truth, block.samples, SensorTruth(block.truth)))
+
+
+def run_stream(options: StreamOptions, *, out: TextIO = sys.stdout) -> int:
+    """Simulate, encode and publish a block at a time (see the module's notes); progress goes to ``out``.
+    Returns the exit status (0, or 130 when stopped by SIGINT/SIGTERM). Raises ``ValueError`` naming the
+    argument at fault, before simulating."""
+    from gyroemu.dynamics import load_scenario
+    from gyroemu.dynamics.truth_source import ScenarioTruth, truth_source
     from gyroemu.pipelines.formats.ros2_keys import Ros2Keys, ros_topic
     from gyroemu.sensors import load_device
 
@@ -185,46 +299,59 @@ def run_stream(options: StreamOptions, *, out: TextIO = sys.stdout) -> int:
     scen = load_scenario(options.scenario)
     dev = load_device(options.device, seed=options.seed)
     started = time.perf_counter()
-    traj = scen.simulate(duration=options.duration)
-    samples = dev.measure(traj)
-    encoded = encode_run(samples, truth_series(traj, samples))
+    endless = options.duration is None and runs_without_end(scen)
+    # an integrated kind is simulated whole here (truth_source); a pointwise one is read window by window
+    source = ScenarioTruth(scen, None) if endless else truth_source(scen, options.duration)
+    run = dev.run(source)
+    blocks = iter(run)
+    first = next(blocks)  # computed here: it names the topics, and the live filter warms up on it
+    topics = list(encode_block(first))
     if ros is not None:
-        types = topic_types(encoded)
-        batches = {
-            ros.key(ros_topic(device_name, topic), types[topic]): split_payloads(rows)
-            for topic, rows in encoded.items()
-        }
+        types = topic_types(topics)
+        keys = {topic: ros.key(ros_topic(device_name, topic), types[topic]) for topic in topics}
     else:
-        batches = {topic_to_key(device_name, topic): split_payloads(rows) for topic, rows in encoded.items()}
-    del encoded  # the batches hold the bytes now (half the memory of a long run)
-    n = len(samples.t)
-    rate = (n - 1) / float(samples.t[-1] - samples.t[0]) if n > 1 else dev.spec.rate_hz
-    rate = float(dev.spec.rate_hz) if dev.spec.rate_hz else rate
+        keys = {topic: topic_to_key(device_name, topic) for topic in topics}
+    rate = float(dev.spec.rate_hz)
+    what = "until stopped (Ctrl-C)" if run.count is None else f"{run.count} samples"
     print(
-        f"stream: {scen.name} through {dev.name}: {n} samples at {rate:g} Hz, {len(batches)} topics "
-        f"(encoded in {time.perf_counter() - started:.2f} s)",
+        f"stream: {scen.name} through {dev.name}: {what} at {rate:g} Hz, {len(keys)} topics "
+        f"(computed and sent in blocks of {run.block_samples} samples; the first ready in "
+        f"{time.perf_counter() - started:.2f} s)",
         file=out,
         flush=True,
     )
-
-    session = open_session(config)
+    # The queue holds a block's messages and some: the next block is computed while it drains.
+    depth = READ_AHEAD + math.ceil(run.block_samples / max(1, BATCH // len(keys)))
+    pace = None if options.as_fast_as_possible else rate
+    producer = BlockProducer(itertools.chain([first], blocks), keys, pace, depth)
     estimator = None
-    if options.estimate is not None:
-        estimator = _start_estimator(options, dev, scen, samples)
-        print(f"  {estimator.key} ({options.estimate}, {'9D' if estimator.use_mag else '6D'}, live)", file=out)
-    with live_session(session) as live:
-        try:
+    try:
+        if options.estimate is not None:
+            estimator = _start_estimator(options, dev, scen, first.samples)
+        del first
+        producer.start()  # fills its queue while the session opens and subscribers are waited for
+        session = open_session(config)
+        if estimator is not None:
+            print(f"  {estimator.key} ({options.estimate}, {'9D' if estimator.use_mag else '6D'}, live)", file=out)
+        with live_session(session) as live:
             live.node = ros
-            publisher = live.publish(list(batches), pacing.timing)
-            for key in batches:
+            timing = SLEEP_ONLY if options.as_fast_as_possible else pacing.timing
+            publisher = live.publish(list(keys.values()), timing)
+            for key in keys.values():
                 print(f"  {key}", file=out)
             if ros is not None:
                 ros.declare(session, out)
+            stop = live.stopped
             wait_s = pacing.wait_s
-            if wait_s > 0 and not publisher.wait_for_subscribers(wait_s, stop=live.stopped):
+            if wait_s > 0 and not publisher.wait_for_subscribers(wait_s, stop=stop):
                 print(f"stream: no subscriber on every key after {wait_s:g} s: publishing anyway", file=out)
+            # The producer's start-up would compete with the first deadlines for the GIL: start the clock
+            # once its queue is full (at most 10 s from here), as replay does.
+            end = time.monotonic() + 10.0
+            while not producer.ready.wait(0.1) and not stop() and time.monotonic() < end:
+                pass
             print("stream: publishing", file=out, flush=True)
-            report = publisher.run(batches, None if options.as_fast_as_possible else rate, stop=live.stopped)
+            report = publisher.run_schedule(producer.batches(stop), stop=stop)
             print(f"stream: sent {report.messages} messages", file=out)
             if not options.as_fast_as_possible:
                 print(f"stream: {report.summary()}", file=out)
@@ -233,8 +360,11 @@ def run_stream(options: StreamOptions, *, out: TextIO = sys.stdout) -> int:
                 estimator.close(drain_s=2.0)
                 print(f"stream: {estimator.published} estimates published", file=out)
                 estimator = None
-        finally:
-            if estimator is not None:
-                estimator.close(drain_s=0.0)
+    finally:
+        producer.stopping.set()
+        if producer.is_alive():
+            producer.join(timeout=10.0)  # it stops at its next batch, a block's computation at most
+        if estimator is not None:
+            estimator.close(drain_s=0.0)
     out.flush()
     return 130 if live.stopped() else 0
