@@ -58,7 +58,7 @@ from typing import Annotated, ClassVar, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
-from pydantic import BeforeValidator, ValidationInfo, Field, field_validator
+from pydantic import BeforeValidator, Field, ValidationInfo, field_validator
 
 from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Real, Section
 from gyroemu.dynamics.jit import njit

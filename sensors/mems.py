@@ -407,6 +407,29 @@ class MemsGyro(GyroMechanism):
         )
         return out
 
+    def _forcing_on_grid(self, omega, alpha, force, w_d, w_s):
+        """:meth:`_forcing` on the inner grid, (M, 3) complex, bit for bit: ``omega``, ``alpha``, ``force``
+        (M, 3), ``w_d``, ``w_s`` (M,), in one compiled pass (no temporaries)."""
+        drive, sense = element_axes()
+        x0 = self.drive_amplitude_m
+        out = np.empty(omega.shape, complex)
+        _forcing_run(
+            np.ascontiguousarray(omega, dtype=float),
+            np.ascontiguousarray(alpha, dtype=float),
+            np.ascontiguousarray(force, dtype=float),
+            np.ascontiguousarray(w_d, dtype=float),
+            np.ascontiguousarray(w_s, dtype=float),
+            drive,
+            sense,
+            x0,
+            -self.drive_force_sense_coupling_per_m * x0,
+            float(self.drive_quality_factor),
+            -2.0 * x0,
+            self.quadrature_stiffness_n_per_m / self.proof_mass_kg,
+            out,
+        )
+        return out
+
     def _demodulate(self, envelope):
         """(I, Q) volts of a sense envelope A (m): G_p Re{A e^{−iφ_ref}} and −G_p Im{A e^{−iφ_ref}}.
 
@@ -439,7 +462,10 @@ class MemsGyro(GyroMechanism):
 
     def _response(self, envelope) -> GyroResponse:
         """Demodulate the (filtered) sense envelope (M, 3) and calibrate: indicated rate I/SF₀."""
-        in_phase, quadrature = self._demodulate(envelope)
+        return self._calibrated(*self._demodulate(envelope))
+
+    def _calibrated(self, in_phase, quadrature) -> GyroResponse:
+        """The indicated rate I/SF₀ of the demodulated channels (M, 3), with the channels as raw observables."""
         return GyroResponse(
             rate=in_phase / self.scale_factor_v_per_rad_per_s(),
             raw={"sense_in_phase_v": in_phase, "sense_quadrature_v": quadrature},
@@ -491,9 +517,7 @@ class MemsGyro(GyroMechanism):
         temperature = np.asarray(truth.temperature_degC, float)
         w_d, w_s = self.frequencies(temperature)
         ratio = self.sense_response(temperature) / self.sense_response()  # H_T/H₀: temperature, exact in steady state
-        forcing = ratio[:, None] * self._forcing(
-            truth.omega, truth.alpha, truth.specific_force, w_d[:, None], w_s[:, None]
-        )
+        forcing = ratio[:, None] * self._forcing_on_grid(truth.omega, truth.alpha, truth.specific_force, w_d, w_s)
         # The complex force n_c + i n_s has two-sided PSD 4 × (the real force's), scaled to the temperature.
         noise_scale = np.abs(ratio) * np.sqrt(self._thermal_psd(temperature) / self._thermal_psd())
         a, b, c = self.baseband_system()
@@ -512,10 +536,28 @@ class MemsGyro(GyroMechanism):
             stationary = covariance_factor(stationary_covariance(a, b, psd), drop=_NOISE_DROP)
             z = z + noise_scale[0] * _circular_normal(rng, (3, stationary.shape[1])) @ stationary.T
         z = np.array(z, dtype=complex)  # a copy: the kernel updates it in place
-        envelope = np.empty(forcing.shape, complex)
-        _baseband_run(phi, gamma0, gamma1, noise, c, np.ascontiguousarray(forcing), noise_scale, z, rng, envelope)
+        # The kernel demodulates each envelope sample as it makes it (the arithmetic of _demodulate).
+        phase = self.reference_phase()
+        gain = self.pickoff_gain_v_per_m
+        in_phase = np.empty(forcing.shape)
+        quadrature = np.empty(forcing.shape)
+        _baseband_run(
+            phi,
+            gamma0,
+            gamma1,
+            noise,
+            c,
+            np.ascontiguousarray(forcing),
+            noise_scale,
+            z,
+            rng,
+            gain * math.cos(phase),
+            gain * math.sin(phase),
+            in_phase,
+            quadrature,
+        )
         state["envelope_state"] = z
-        return self._response(envelope)
+        return self._calibrated(in_phase, quadrature)
 
     def _respond_carrier(self, truth: GyroTruth, rng, state: dict) -> GyroResponse:
         """The sense oscillators on the phase-locked carrier grid, from power-up (``state["carrier"]``
@@ -727,13 +769,34 @@ def _circular_normal(rng: np.random.Generator, shape) -> np.ndarray:
 
 
 @njit
-def _baseband_run(phi, gamma0, gamma1, noise, c, forcing, noise_scale, z, rng, out):
-    """z_{k+1} = Φ z_k + Γ₀ F_k + Γ₁ F_{k+1} + s_k L w_k on each axis; out[k] = c·z_k.
+def _forcing_run(omega, alpha, force, w_d, w_s, drive, sense, x0, leak_scale, q_d, coriolis_scale, quad, out):
+    """:meth:`MemsGyro._forcing` sample by sample, the same operations in the same order (so the same
+    bits): leak = (−κ x₀) ω_d² / (Q_d ω_s²), Re F = (−2 x₀) ω_d Ω_k + leak f_s,
+    Im F = x₀ ((k_q/m + α_k) + Ω_d Ω_s). ``omega``, ``alpha``, ``force`` (M, 3); ``w_d``, ``w_s`` (M,)."""
+    n, n_axes = omega.shape
+    for k in range(n):
+        wd = w_d[k]
+        ws = w_s[k]
+        leak = leak_scale * (wd * wd) / (q_d * (ws * ws))
+        coriolis = coriolis_scale * wd
+        for a in range(n_axes):
+            d = drive[a]
+            s = sense[a]
+            re = coriolis * omega[k, a] + leak * force[k, s]
+            im = x0 * ((quad + alpha[k, a]) + omega[k, d] * omega[k, s])
+            out[k, a] = complex(re, im)
+
+
+@njit
+def _baseband_run(phi, gamma0, gamma1, noise, c, forcing, noise_scale, z, rng, dem_cos, dem_sin, in_phase, quadrature):
+    """z_{k+1} = Φ z_k + Γ₀ F_k + Γ₁ F_{k+1} + s_k L w_k on each axis; y_k = c·z_k demodulated:
+    in_phase[k] = cos·Re y + sin·Im y, quadrature[k] = cos·(−Im y) + sin·Re y (:meth:`MemsGyro._demodulate`'s
+    arithmetic, ``dem_cos``, ``dem_sin`` its G_p cos φ_ref and G_p sin φ_ref).
 
     ``phi`` (S, S), ``noise`` L (S, R); ``gamma0``, ``gamma1``, ``c`` (S,); ``forcing`` (M, A);
     ``noise_scale`` s (M,), real; ``z`` (A, S): the state at sample 0 on entry, at sample M−1 on exit;
-    ``out`` (M, A). w_k: R circular normals (E|w|² = 1) per axis, real then imaginary part, drawn
-    sample by sample, axis by axis.
+    ``in_phase``, ``quadrature`` (M, A), real. w_k: R circular normals (E|w|² = 1) per axis, real then
+    imaginary part, drawn sample by sample, axis by axis.
     """
     n, n_axes = forcing.shape
     size = phi.shape[0]
@@ -748,7 +811,8 @@ def _baseband_run(phi, gamma0, gamma1, noise, c, forcing, noise_scale, z, rng, o
             for i in range(size):
                 now[i] = z[a, i]
                 y += c[i] * now[i]
-            out[k, a] = y
+            in_phase[k, a] = dem_cos * y.real + dem_sin * y.imag
+            quadrature[k, a] = dem_cos * -y.imag + dem_sin * y.real
             if k == n - 1:
                 continue
             for j in range(rank):

@@ -73,6 +73,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from gyroemu.dynamics.jit import njit
 
@@ -515,6 +516,12 @@ class SensorNoise:
         Sample interval Δt, s.
     white, random_walk, flicker
         As :func:`sensor_noise`.
+    markov : (sigma, tau_c) or None
+        A first-order Gauss–Markov term (:func:`gauss_markov`): standard deviation σ (A,) or scalar,
+        rad/s, and correlation time τ_c (A,) or scalar, s (> 0 where σ > 0). One more full-rate AR(1)
+        row, φ = exp(−Δt/τ_c), c = σ√(1−φ²), its stationary start drawn from ``rng`` after the fast
+        flicker components'. None, or σ = 0 on every axis, draws nothing (the other terms' numbers
+        are unchanged).
     """
 
     def __init__(
@@ -526,6 +533,7 @@ class SensorNoise:
         white=0.0,
         random_walk=0.0,
         flicker: FlickerBank | None = None,
+        markov: tuple[ArrayLike, ArrayLike] | None = None,
     ) -> None:
         self._rng = rng
         self.n_axes = int(n_axes)
@@ -550,6 +558,15 @@ class SensorNoise:
             fast = steps == 1
             phi_f, c_f, x0_f = _gauss_markov_rows(rng, flicker.sigma[fast], flicker.tau_c[fast, None], dt)
             phi, c, state = phi + list(phi_f), c + list(c_f), state + list(x0_f)
+        if markov is not None:
+            sigma_m = _per_axis(markov[0], n_axes, "markov sigma")
+            tau_m = _per_axis(markov[1], n_axes, "markov tau_c")
+            if np.any((sigma_m > 0) & ~(tau_m > 0)):
+                raise ValueError(f"markov tau_c must be > 0 where sigma > 0, got sigma {sigma_m}, tau_c {tau_m}")
+            if np.any(sigma_m > 0):
+                tau_m = np.where(sigma_m > 0, tau_m, 1.0)  # an axis without the term: c = 0, x = 0
+                phi_m, c_m, x0_m = _gauss_markov_rows(rng, sigma_m[None, :], tau_m[None, :], dt)
+                phi, c, state = phi + list(phi_m), c + list(c_m), state + list(x0_m)
         on = np.any(np.array(c) != 0, axis=1)
         self._phi = np.ascontiguousarray(np.array(phi)[on])
         self._c = np.ascontiguousarray(np.array(c)[on])
@@ -599,16 +616,28 @@ class SensorNoise:
 def _interpolated(level: _SlowLevel, index: np.ndarray, ratio: int) -> np.ndarray:
     """The linear interpolation of ``level``'s knots at ``index / ratio`` (knot units), (len(index), A):
     ``v_j + (r / ratio)(v_{j+1} − v_j)`` with ``j = index // ratio``, ``r = index % ratio``; on a knot, v_j."""
-    j, r = np.divmod(index, ratio)
-    lo = level.knots[j - level.base]
-    on_knot = r == 0
-    out = lo.copy()
-    between = ~on_knot
-    if np.any(between):
-        u = (r[between] / ratio)[:, None]
-        hi = level.knots[j[between] + 1 - level.base]
-        out[between] = lo[between] + u * (hi - lo[between])
+    out = np.empty((len(index), level.knots.shape[1]))
+    _interpolate_into(np.ascontiguousarray(level.knots), level.base, np.ascontiguousarray(index), ratio, out)
     return out
+
+
+@njit
+def _interpolate_into(knots, base, index, ratio, out):
+    """:func:`_interpolated`'s arithmetic sample by sample (the same bits): ``out[k] = v_j`` on a knot,
+    else ``v_j + (r / ratio)(v_{j+1} − v_j)``; ``knots`` (K, A) from index ``base``, ``index`` (n,) ≥ 0."""
+    n_axes = knots.shape[1]
+    for k in range(index.shape[0]):
+        j = index[k] // ratio
+        r = index[k] - j * ratio
+        row = j - base
+        if r == 0:
+            for a in range(n_axes):
+                out[k, a] = knots[row, a]
+        else:
+            u = r / ratio
+            for a in range(n_axes):
+                lo = knots[row, a]
+                out[k, a] = lo + u * (knots[row + 1, a] - lo)
 
 
 def _trim(level: _SlowLevel, keep_from: int) -> None:

@@ -128,3 +128,9 @@ class SensorTruth:
         """Body-frame truth at ``t`` as ``(q_wb, omega_b, specific_force_b)``, for truth channels."""
         t = self._check(t)
         return self._attitude(t).as_quat(scalar_first=True), self._omega(t), self._force(t)
+
+    def body_rates(self, t):
+        """Body-frame ``(omega_b, specific_force_b)`` at ``t``: :meth:`body_truth` without the attitude
+        (for a caller that has it from :meth:`attitude_world` already)."""
+        t = self._check(t)
+        return self._omega(t), self._force(t)

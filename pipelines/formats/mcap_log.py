@@ -121,29 +121,45 @@ class LogWarning(UserWarning):
 # What goes in and comes out besides ImuSamples.
 
 
-def truth_series(trajectory: Trajectory, samples: ImuSamples, sensor_truth: SensorTruth | None = None) -> ImuSeries:
+def truth_series(
+    trajectory: Trajectory,
+    samples: ImuSamples,
+    sensor_truth: SensorTruth | None = None,
+    q_wb: np.ndarray | None = None,
+) -> ImuSeries:
     """Body truth at the instants the device sampled (``samples.t_true``), stamped with the device's
     stamps ``samples.t``: what ``/truth/imu`` holds. ``sensor_truth``: the trajectory's interpolants,
-    when the caller has built them already."""
+    when the caller has built them already; ``q_wb`` (N, 4): the attitude at those instants, when the
+    caller has evaluated it already (``sensor_truth.attitude_world(instants)``, shared with
+    :func:`truth_pose`)."""
     from gyroemu.sensors.sampling import SensorTruth
 
     instants = samples.t_true if samples.t_true is not None else samples.t
     body = sensor_truth if sensor_truth is not None else SensorTruth(trajectory)
-    q_wb, omega_b, force_b = body.body_truth(instants)
+    if q_wb is None:
+        q_wb, omega_b, force_b = body.body_truth(instants)
+    else:
+        omega_b, force_b = body.body_rates(instants)
     return ImuSeries(t=np.asarray(samples.t, dtype=float), q_wb=q_wb, omega_b=omega_b, specific_force_b=force_b)
 
 
-def truth_pose(trajectory: Trajectory, samples: ImuSamples, sensor_truth: SensorTruth | None = None) -> PoseSeries:
+def truth_pose(
+    trajectory: Trajectory,
+    samples: ImuSamples,
+    sensor_truth: SensorTruth | None = None,
+    q_wb: np.ndarray | None = None,
+) -> PoseSeries:
     """The body's true position and attitude in the world at the instants the device sampled, stamped
     with the device's stamps: what ``/truth/pose`` holds. The position is the cubic Hermite spline
-    through the trajectory's ``pos_w`` with slopes ``vel_w``. ``sensor_truth`` as for
+    through the trajectory's ``pos_w`` with slopes ``vel_w``. ``sensor_truth`` and ``q_wb`` as for
     :func:`truth_series`."""
     from scipy.interpolate import CubicHermiteSpline
 
     from gyroemu.sensors.sampling import SensorTruth
 
     instants = samples.t_true if samples.t_true is not None else samples.t
-    q_wb = (sensor_truth if sensor_truth is not None else SensorTruth(trajectory)).attitude_world(instants)
+    if q_wb is None:
+        q_wb = (sensor_truth if sensor_truth is not None else SensorTruth(trajectory)).attitude_world(instants)
     pos_w = CubicHermiteSpline(trajectory.t, trajectory.pos_w, trajectory.vel_w, axis=0)(instants)
     return PoseSeries(t=np.asarray(samples.t, dtype=float), pos_w=pos_w, q_wb=q_wb)
 

@@ -8,7 +8,9 @@ more than their own uncertainties say (a formal σ from correlated residuals is 
 
 The gyro bias of each trial is one power-up: the device's ``bias_deg_per_h`` is their mean and, with
 two trials or more, ``turn_on_bias_deg_per_h`` their standard deviation. Noise terms come from the
-rest phases of every trial pooled (:func:`gyroemu.pipelines.identification.noise.sensor_noise`).
+rest phases of every trial pooled (:func:`gyroemu.pipelines.identification.noise.sensor_noise`), the
+gyro's and accelerometer's with a Gauss–Markov term where it is significant (written as
+``markov_sigma_*`` and ``markov_tau_s``, 0 on axes without it).
 
 The device TOML uses the device keys of :class:`gyroemu.sensors.imu.DeviceSpec` plus the per-sensor
 ``latency_s``; the uncertainties, what was not observable and the provenance are written as comments.
@@ -106,6 +108,10 @@ class Identification:
             gyro_errors["noise_density_deg_per_s_per_sqrt_hz"] = _list(n.values("noise_density") * _DEG, 4)
             gyro_errors["bias_instability_deg_per_h"] = _list(n.values("bias_instability") * _DEG * 3600, 4)
             gyro_errors["rrw_deg_per_h_per_sqrt_h"] = _list(n.values("random_walk") * _DEG * 3600 * 60, 4)
+            markov = n.markov()
+            if markov is not None:
+                gyro_errors["markov_sigma_deg_per_h"] = _list(markov[0] * _DEG * 3600, 4)
+                gyro_errors["markov_tau_s"] = _list(markov[1], 4)
         accel_errors: dict = {"bias_ug": _list(self.accel_bias.value / _UG)}
         if self.accel_scale is not None and self.accel_cross_axis is not None:
             accel_errors["scale_factor_ppm"] = _list(self.accel_scale.value * 1e6)
@@ -115,6 +121,10 @@ class Identification:
             accel_errors["noise_density_ug_per_sqrt_hz"] = _list(n.values("noise_density") / _UG, 4)
             accel_errors["bias_instability_ug"] = _list(n.values("bias_instability") / _UG, 4)
             accel_errors["random_walk_ug_per_sqrt_h"] = _list(n.values("random_walk") / _UG * 60, 4)
+            markov = n.markov()
+            if markov is not None:
+                accel_errors["markov_sigma_ug"] = _list(markov[0] / _UG, 4)
+                accel_errors["markov_tau_s"] = _list(markov[1], 4)
         q_bs = quat_from_matrix(self.c_sb.T)
         # A measured latency d is the delay of the instant a sample matches (the truth at t − d). gyroemu's
         # gyro and accelerometer samples are means over their interval [τ − T, τ] shifted by latency_s,
@@ -225,6 +235,24 @@ class Identification:
                     else:
                         parts.append(f"{axis} < {c.high * f:.4g} (not observable: written 0)")
                 lines.append(f"  {term} {u}: " + "; ".join(parts))
+            if any(a.markov is not None for a in noise.axes):
+                lines.append(f"  gauss_markov sigma {unit[1]}, tau_c s (kept if F > F_0.99(2, M-6)):")
+                for axis, a in zip("xyz", noise.axes):
+                    m = a.markov
+                    if m is None:
+                        continue
+                    test = f"F {m.f_ratio:.3g} vs {m.f_critical:.3g}, chi2 {m.chi2_without:.3g} -> {m.chi2_with:.3g}"
+                    if m.kept:
+                        lines.append(
+                            f"    {axis} {m.sigma.value * scale[1]:.4g} [{m.sigma.low * scale[1]:.4g}, "
+                            f"{m.sigma.high * scale[1]:.4g}] at tau_c {m.tau_c.value:.3g} "
+                            f"[{m.tau_c.low:.3g}, {m.tau_c.high:.3g}] ({test})"
+                        )
+                    else:
+                        lines.append(
+                            f"    {axis} < {m.sigma.high * scale[1]:.4g} (best tau_c "
+                            f"{m.tau_c.low:.3g}-{m.tau_c.high:.3g}; not significant: {test}; not written)"
+                        )
         lines.extend(self.notes)
         return lines
 
@@ -355,7 +383,7 @@ def identify(trials: Sequence[TrialData], settings: TrialSettings | None = None)
         accel_noise = sensor_noise([d.accel[s] for d, s in segs], dt)
         msegs = [d.mag[s] for d, s in segs if d.mag is not None and np.isfinite(d.mag[s]).all()]
         if msegs:
-            mag_noise = sensor_noise(msegs, dt, tau_min_s=settings.mag_tau_min_s)
+            mag_noise = sensor_noise(msegs, dt, tau_min_s=settings.mag_tau_min_s, markov=False)
     else:
         notes.append("no rest phase in any recording: noise terms not identified")
 

@@ -202,8 +202,10 @@ def _simulate_mcap(
         with McapLogWriter(options.out, scenario=scenario) as log, BackgroundWriter(log.write) as writer:
             for block in run:
                 body = SensorTruth(block.truth)  # one set of interpolants for both truth channels
-                truth = truth_series(block.truth, block.samples, body)
-                pose = truth_pose(block.truth, block.samples, body)
+                instants = block.samples.t_true if block.samples.t_true is not None else block.samples.t
+                q_wb = body.attitude_world(instants)  # the attitude's Slerp, evaluated once for both
+                truth = truth_series(block.truth, block.samples, body, q_wb)
+                pose = truth_pose(block.truth, block.samples, body, q_wb)
                 writer.put(Recording(block.samples, truth=truth, pose=pose, device=device))
                 made += len(block.samples)
                 progress.advance(len(block.samples))

@@ -570,7 +570,9 @@ class TwinReport:
                 "reference (twins: the real mask at the nearest real sample, real time = twin time + t0)",
                 "twin": "mean, std (ddof 1), n over the seeds whose run gave a finite value; values per seed",
                 "ratio": "twin mean / real",
-                "ranking": f"order of {', '.join(RANKED_FILTERS)} by 9D total RMSE, real and twin mean",
+                "ranking": f"order of {', '.join(RANKED_FILTERS)} by 9D total RMSE, real and twin mean; "
+                "unresolved: pairs whose paired seed differences are not significant (Student t, 5 %); "
+                "same_within_spread: every pair the twin swaps is unresolved",
                 "residuals": "measured − truth over the rest phases, pooled; Allan deviation per axis (x, y, z) "
                 "at tau_s, twin: RMS over seeds; ratio twin/real per tau and axis; psd_ratio: median over "
                 "1 Hz … rate/4 of the twin's mean Welch spectrum over the real's, per axis",
@@ -639,9 +641,14 @@ class TwinReport:
             if rk["same"] is None:
                 lines.append(f"Ranking by 9D total: not available ({rk.get('why', '')}).")
             else:
+                if rk["same"]:
+                    verdict = "**same**."
+                elif rk["same_within_spread"]:
+                    verdict = "**differs** within the seeds' spread (every swapped pair unresolved at 5 %)."
+                else:
+                    verdict = "**differs** beyond the seeds' spread."
                 lines.append(
-                    f"Ranking by 9D total: real {' < '.join(rk['real'])}; twin {' < '.join(rk['twin'])} — "
-                    + ("**same**." if rk["same"] else "**differs**.")
+                    f"Ranking by 9D total: real {' < '.join(rk['real'])}; twin {' < '.join(rk['twin'])} — " + verdict
                 )
             rest = tr.rest
             lines.append("")
@@ -768,6 +775,30 @@ def _rank(values: dict) -> list[str]:
     return sorted(values, key=lambda f: values[f])
 
 
+def _discordant_pairs(real: list[str], twin: list[str]) -> list[list[str]]:
+    """Pairs ``[a, b]`` (``a`` before ``b`` on the real ranking) that the twin ranking orders the other way."""
+    return [[a, b] for i, a in enumerate(real) for b in real[i + 1 :] if twin.index(a) > twin.index(b)]
+
+
+def _unresolved_pairs(real: list[str], means: dict, seeds: dict) -> list[list[str]]:
+    """Pairs of filters whose twin mean 9D totals the seeds cannot tell apart: the seeds share their
+    data, so the paired differences ``d_s`` are tested, ``|mean d| < t_{0.975, n−1} · sd(d)/√n``
+    (Student's t, two-sided 5 %). Listed in the real ranking's order."""
+    from scipy.stats import t as student_t
+
+    out = []
+    for i, a in enumerate(real):
+        for b in real[i + 1 :]:
+            d = np.array([x - y for x, y in zip(seeds[a], seeds[b], strict=True) if x is not None and y is not None])
+            if len(d) < 2:
+                out.append([a, b])  # one seed cannot order them
+                continue
+            bound = float(student_t.ppf(0.975, len(d) - 1)) * float(np.std(d, ddof=1)) / np.sqrt(len(d))
+            if abs(float(np.mean(d))) < bound:
+                out.append([a, b])
+    return out
+
+
 def _trial_result(real: _Real, real_run: dict, twins: list[dict], filters, mode, rest, seeds, twin_rate) -> TrialResult:
     rows = []
     for spec in filters:
@@ -788,7 +819,14 @@ def _trial_result(real: _Real, real_run: dict, twins: list[dict], filters, mode,
             }
         )
     ranked = [f for f in RANKED_FILTERS if f in filters]
-    ranking: dict[str, Any] = {"filters": ranked, "real": None, "twin": None, "same": None}
+    ranking: dict[str, Any] = {
+        "filters": ranked,
+        "real": None,
+        "twin": None,
+        "same": None,
+        "same_within_spread": None,
+        "unresolved": [],
+    }
     if mode != "9D":
         ranking["why"] = "6D only"
     elif len(ranked) < 2:
@@ -802,6 +840,10 @@ def _trial_result(real: _Real, real_run: dict, twins: list[dict], filters, mode,
         else:
             ranking.update(real=_rank(real_v), twin=_rank(twin_v))
             ranking["same"] = ranking["real"] == ranking["twin"]
+            seeds_9d = {f: by[f]["twin"]["total_9d"]["values"] for f in ranked}
+            ranking["unresolved"] = _unresolved_pairs(ranking["real"], twin_v, seeds_9d)
+            discordant = _discordant_pairs(ranking["real"], ranking["twin"])
+            ranking["same_within_spread"] = all(pair in ranking["unresolved"] for pair in discordant)
     residuals: dict[str, Any] = {"tau_s": _list(TAUS_S, 4)}
     curves: dict[str, Any] = {}
     rr = real_run["residuals"]

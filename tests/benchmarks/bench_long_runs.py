@@ -118,7 +118,7 @@ def allan_run(hours: float, folder: Path) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--durations", type=float, nargs="+", default=[600.0, 3600.0, 28800.0])
+    parser.add_argument("--durations", type=float, nargs="*", default=[600.0, 3600.0, 28800.0])
     parser.add_argument("--devices", nargs="+", default=list(SCENARIOS), choices=list(SCENARIOS))
     parser.add_argument("--allan-hours", type=float, default=None)
     parser.add_argument("--folder", type=Path, default=None)

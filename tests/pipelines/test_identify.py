@@ -300,3 +300,55 @@ def test_spatial_spread_excludes_what_turns_with_the_sensor():
     # (0.05 in σ) on the weakest axis, σ_s = 0.07 µT; three of those: 15 %.
     assert np.allclose(env.axis_sigma, expected, rtol=0.15, atol=0)
     assert np.all(env.raw_sigma > expected * 1.05)  # the raw spread holds the (blurred) attitude part too
+
+
+def _rest_segments(seed: int, markov) -> list[np.ndarray]:
+    """Eight 33 s rest phases at 286 Hz (BROAD's layout) of white noise N = 2.7e-3 m/s²·√s, and a
+    Gauss–Markov term ``markov`` = (σ, τ_c) or None, as the emulator draws them."""
+    from gyroemu.sensors.noise import SensorNoise
+
+    rng, dt = np.random.default_rng(seed), 1 / 285.714286
+    return [
+        SensorNoise(rng, 3, dt, white=2.7e-3, markov=markov).add_into(np.zeros((int(33 / dt), 3))) for _ in range(8)
+    ]
+
+
+def test_gauss_markov_term_is_fitted_where_present_and_written_to_the_device(synthetic):
+    """A Gauss–Markov term of σ = 6·10⁻³ m/s², τ_c = 0.8 s beside white noise: identify keeps it (F-test,
+    pipelines/identification/noise.py) on every axis, σ within K_SIGMA half-widths of its 68 % interval
+    (as the white noise in test_noise_density_within_its_allan_interval), τ_c within K_SIGMA times its
+    interval's half-width in log τ (the Δχ² = 1 profile widened by the grid step), the white noise as
+    before; and the device TOML takes ``markov_sigma_ug`` / ``markov_tau_s``, which load back to the
+    same SI term. Without the term (same layout, white noise alone), no axis keeps one."""
+    sigma, tau_c = 6e-3, 0.8
+    dt = 1 / 285.714286
+    noise = sensor_noise(_rest_segments(3, (sigma, tau_c)), dt)
+    for axis in noise.axes:
+        m = axis.markov
+        assert m is not None and m.kept, m
+        assert m.f_ratio > m.f_critical
+        half = (m.sigma.high - m.sigma.low) / 2
+        assert abs(m.sigma.value - sigma) <= K_SIGMA * half, m.sigma
+        log_half = np.log(m.tau_c.high / m.tau_c.low) / 2
+        assert abs(np.log(m.tau_c.value / tau_c)) <= K_SIGMA * log_half, m.tau_c
+        c = axis.noise_density
+        assert abs(c.value - 2.7e-3) <= K_SIGMA * (c.high - c.low) / 2, c
+    markov = noise.markov()
+    assert markov is not None
+
+    result, _ = synthetic
+    data = dataclasses.replace(result, accel_noise=noise).device_dict()
+    errors = data["accelerometer"]["errors"]
+    ug = 1e-6 * 9.80665
+    np.testing.assert_allclose(np.array(errors["markov_sigma_ug"]) * ug, markov[0], rtol=1e-4)
+    np.testing.assert_allclose(errors["markov_tau_s"], markov[1], rtol=1e-4)
+    for table in ("gyro", "accelerometer", "magnetometer"):
+        data[table].pop("latency_s", None)
+    device = device_from_dict(data)
+    model = device.spec.accelerometer.errors.to_si()
+    np.testing.assert_allclose(model.markov_sigma, markov[0], rtol=1e-4)
+    assert "gauss_markov" in "\n".join(dataclasses.replace(result, accel_noise=noise).device_comments())
+
+    plain = sensor_noise(_rest_segments(4, None), dt)
+    assert plain.markov() is None
+    assert all(a.markov is not None and not a.markov.kept for a in plain.axes)

@@ -346,3 +346,56 @@ def test_config_errors_name_the_key(model, data, key, words):
     assert error.value.key == key
     assert error.value.file == "device.toml"
     assert words in str(error.value)
+
+
+def test_gauss_markov_keys_in_datasheet_units_give_the_closed_form_allan_deviation():
+    """``markov_sigma_ug`` / ``markov_sigma_deg_per_h`` with ``markov_tau_s`` (both or neither): σ in the
+    key's unit, τ_c in s. The output of a sensor at rest with this term alone has the Allan deviation of
+    the sampled Gauss–Markov process (``noise.gauss_markov_avar``) at every octave τ, within SIGMAS
+    relative standard deviations 1/√(2(n/m − 1)) (IEEE 952 Annex C), per axis; an axis with σ = 0 gets
+    none, and the gyro's key converts as deg/h."""
+    dt, n = 0.005, 2**19
+    sigma_ug, tau_c = np.array([300.0, 0.0, 150.0]), np.array([0.8, 0.0, 2.0])
+    spec = AccelErrors(markov_sigma_ug=sigma_ug.tolist(), markov_tau_s=tau_c.tolist())
+    model = spec.to_si()
+    np.testing.assert_allclose(model.markov_sigma, sigma_ug * UG, rtol=1e-15)
+    t = np.arange(n) * dt
+    y = apply_errors(np.zeros((n, 3)), t, spec, np.random.default_rng(77))
+    np.testing.assert_array_equal(y[:, 1], 0.0)
+    taus = dt * 2.0 ** np.arange(0, 12)  # 0.005 … 10.24 s
+    for axis in (0, 2):
+        allan = allan_deviation(y[:, axis], dt, taus=taus)
+        expected = np.sqrt(noise.gauss_markov_avar(allan.tau, sigma_ug[axis] * UG, tau_c[axis], dt))
+        tolerance = SIGMAS / np.sqrt(2 * (n / np.round(allan.tau / dt) - 1))
+        assert np.all(np.abs(allan.adev / expected - 1) < tolerance), (axis, allan.adev / expected - 1)
+
+    gyro = GyroErrors(markov_sigma_deg_per_h=36.0, markov_tau_s=5.0).to_si()
+    np.testing.assert_allclose(gyro.markov_sigma, 36.0 * DEG_PER_H, rtol=1e-15)
+    np.testing.assert_array_equal(gyro.markov_tau_s, 5.0)
+    assert not np.any(GyroErrors().to_si().markov_sigma)  # off by default
+
+
+@pytest.mark.parametrize(
+    "model, data, key, words",
+    [
+        (AccelErrors, {"markov_sigma_ug": 10.0}, "accelerometer.markov_tau_s", "give both"),
+        (AccelErrors, {"markov_tau_s": 1.0}, "accelerometer.markov_tau_s", "give both"),
+        (
+            GyroErrors,
+            {"markov_sigma_deg_per_h": [1, 0, 1], "markov_tau_s": [1, 1, 0]},
+            "accelerometer.markov_tau_s",
+            "> 0",
+        ),
+        (
+            GyroErrors,
+            {"markov_sigma_deg_per_h": -1.0, "markov_tau_s": 1.0},
+            "accelerometer.markov_sigma_deg_per_h",
+            ">= 0",
+        ),
+    ],
+)
+def test_gauss_markov_keys_come_in_pairs(model, data, key, words):
+    with pytest.raises(ConfigError) as error:
+        validate(model, data, file="device.toml", prefix="accelerometer")
+    assert error.value.key == key
+    assert words in str(error.value)

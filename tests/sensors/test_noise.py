@@ -223,3 +223,40 @@ def test_any_division_into_calls_continues_one_run_in_a_few_knots():
         made += size
         assert gen.held_knots <= 2 * levels
     np.testing.assert_array_equal(np.concatenate(parts), whole)
+
+
+def test_sensor_noise_gauss_markov_row_matches_its_allan_closed_form():
+    """A Gauss–Markov term in SensorNoise (one more AR(1) row, φ = e^{−Δt/τ_c}, stationary start): its
+    Allan deviation is ``gauss_markov_avar`` of the sampled process, at every octave τ from Δt to 20 τ_c,
+    within SIGMAS relative standard deviations of the estimate (1/√(2(n/m − 1)) per axis, IEEE 952 Annex
+    C; averaged over the axes of equal σ and τ_c). A term that is off draws nothing."""
+    dt, n, sigma, tau_c = 0.01, 2**20, 2e-3, 0.5
+    gen = noise.SensorNoise(np.random.default_rng(21), 3, dt, markov=(sigma, tau_c))
+    x = gen.add_into(np.zeros((n, 3)))
+    taus = dt * 2.0 ** np.arange(0, 11)  # 0.01 … 10.24 s
+    measured = adev(x, dt, taus).mean(axis=0)
+    expected = np.sqrt(noise.gauss_markov_avar(taus, sigma, tau_c, dt))
+    tolerance = np.array([adev_tolerance(n, tau, dt, axes=3) for tau in taus])
+    assert np.all(np.abs(measured / expected - 1) < tolerance), (measured / expected - 1, tolerance)
+    # The variance σ² (AR(1) sample variance: relative sd √(2(1+φ²)/(n(1−φ²))), per axis).
+    phi = np.exp(-dt / tau_c)
+    var_sd = np.sqrt(2 * (1 + phi**2) / (n * (1 - phi**2)))
+    assert np.all(np.abs(x.var(axis=0) / sigma**2 - 1) < SIGMAS * var_sd)
+
+    # Off (None, or σ = 0 on every axis): the same numbers as without the keyword, the same draws.
+    bank = noise.flicker_bank(1e-3, (0.1, 100.0), dt, n_axes=3)
+    runs = []
+    for markov in (None, (0.0, 1.0), ([0.0, 0.0, 0.0], [0.0, 0.0, 0.0])):
+        rng = np.random.default_rng(5)
+        out = noise.SensorNoise(rng, 3, dt, white=1e-2, random_walk=1e-4, flicker=bank, markov=markov)
+        runs.append((out.add_into(np.zeros((4096, 3))), rng.bit_generator.state))
+    for values, state in runs[1:]:
+        np.testing.assert_array_equal(values, runs[0][0])
+        assert state == runs[0][1]
+    # On one axis only: the others get nothing from it.
+    y = noise.SensorNoise(np.random.default_rng(6), 3, dt, markov=([0.0, sigma, 0.0], [0.0, tau_c, 0.0]))
+    y = y.add_into(np.zeros((1000, 3)))
+    np.testing.assert_array_equal(y[:, [0, 2]], 0.0)
+    assert y[:, 1].std() > 0
+    with pytest.raises(ValueError, match="tau_c"):
+        noise.SensorNoise(np.random.default_rng(0), 3, dt, markov=(sigma, 0.0))
