@@ -1,14 +1,18 @@
 """The ``gyroemu`` command line: a thin layer over the library.
 
 Each subcommand parses its arguments, calls one library function, and prints. Bad usage or bad
-input ends with exit status 2 and a message naming the file, key or argument at fault.
+input ends with exit status 2 and a message naming the file, key or argument at fault, before any work.
+SIGINT ends a command with status 130, SIGTERM with 143, after its clean-up (a partial output removed).
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -22,7 +26,7 @@ if TYPE_CHECKING:  # the job modules are imported where used: they pull in numpy
     from gyroemu.pipelines.transport.stream import StreamOptions
     from gyroemu.pipelines.transport.zenoh_io import PacingOptions, SessionOptions
 
-__all__ = ["main"]
+__all__ = ["Terminated", "main"]
 
 
 class UsageError(Exception):
@@ -50,6 +54,7 @@ def _simulate_options(args: argparse.Namespace) -> SimulateOptions:
         duration=args.duration,
         rate=args.rate,
         seed=args.seed,
+        force=args.force,
     )
 
 
@@ -118,7 +123,7 @@ def _cmd_import(args) -> int:
     source, out = Path(args.file), _mcap_out(args.out)
     started = time.perf_counter()
     try:
-        summary = IMPORTERS[args.format](source, out)
+        summary = IMPORTERS[args.format](source, out, force=args.force)
     except OSError as e:  # reading errors are ImportInputError (a ConfigError); this is the output
         raise UsageError(f"argument --out: {out}: {e.strerror or e}") from None
     print(f"{summary} in {time.perf_counter() - started:.2f} s")
@@ -127,7 +132,7 @@ def _cmd_import(args) -> int:
 
 def _cmd_estimate(args) -> int:
     from gyroemu.pipelines.estimation.registry import FilterError, filter_class
-    from gyroemu.pipelines.jobs.estimate import estimate_log
+    from gyroemu.pipelines.jobs.estimate import EstimateError, check_options, estimate_log
 
     try:
         filter_class(args.filter)
@@ -138,13 +143,26 @@ def _cmd_estimate(args) -> int:
         raise UsageError(f"argument --out: {out} is the input: the input is never modified")
     started = time.perf_counter()
     try:
-        summary = estimate_log(source, out, filter_name=args.filter, use_mag=False if args.six_d else None)
+        check_options(source, out, force=args.force)
+        summary = estimate_log(
+            source,
+            out,
+            filter_name=args.filter,
+            use_mag=False if args.six_d else None,
+            force=args.force,
+            topic=args.topic,
+            topic_out=args.topic_out,
+        )
+    except EstimateError as e:  # names its argument
+        raise UsageError(str(e)) from None
     except ValueError as e:  # a filter refusing the data (e.g. stamps): name the file
         raise UsageError(f"{source}: {e}") from None
     elapsed = time.perf_counter() - started
     for name, n, flt, nine in summary.devices:
         print(f"{name}: {n} samples, {flt} ({'9D' if nine else '6D'})")
-    print(f"/estimate/imu written in {elapsed:.2f} s -> {out}")
+    for topic, topic_out, count in summary.topics:
+        print(f"{topic} -> {topic_out}: {count} estimates")
+    print(f"input copied with its estimate in {elapsed:.2f} s -> {out}")
     return 0
 
 
@@ -166,18 +184,49 @@ def _cmd_presets(args) -> int:
 
 
 def _cmd_allan(args: argparse.Namespace) -> int:
-    from gyroemu.pipelines.jobs.allan import AllanLogError, allan_of_log, write_allan_plot
+    import warnings
+
+    from gyroemu.pipelines.jobs.allan import (
+        AllanLogError,
+        MotionWarning,
+        allan_of_log,
+        plot_format,
+        write_allan_plot,
+        write_kalibr_yaml,
+    )
 
     log = Path(args.log)
+    out = Path(args.out) if args.out else log.with_suffix(".allan.png")
     try:
-        report = allan_of_log(log)
-    except AllanLogError as e:
-        raise UsageError(f"argument LOG: {e}") from None
-    print(report.table())
-    out = write_allan_plot(
-        report, Path(args.out) if args.out else log.with_suffix(".allan.png"), f"Allan deviation: {log.name}"
-    )
-    print(f"Allan plot -> {out}")
+        plot_format(out)  # refused before any work
+    except ValueError as e:
+        raise UsageError(f"argument --out: {e}") from None
+    if args.kalibr and Path(args.kalibr).exists() and not args.force:
+        raise UsageError(f"argument --kalibr: {args.kalibr} exists (pass --force to overwrite it)")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", MotionWarning)
+        try:
+            report = allan_of_log(log, allow_motion=args.allow_motion)
+        except AllanLogError as e:
+            raise UsageError(f"argument LOG: {e}") from None
+    for w in caught:
+        if issubclass(w.category, MotionWarning):
+            print(f"gyroemu allan: warning: {w.message}", file=sys.stderr)
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+    if args.json:
+        print(report.to_json())
+    else:
+        print(report.tables())
+    done = sys.stderr if args.json else sys.stdout
+    out = write_allan_plot(report, out, f"Allan deviation: {log.name}")
+    print(f"Allan plot -> {out}", file=done)
+    if args.kalibr:
+        try:
+            kalibr = write_kalibr_yaml(report, args.kalibr, force=args.force)
+        except (ValueError, FileExistsError) as e:
+            raise UsageError(f"argument --kalibr: {e}") from None
+        print(f"Kalibr imu.yaml -> {kalibr}", file=done)
     return 0
 
 
@@ -403,6 +452,7 @@ def _record_options(args: argparse.Namespace) -> RecordOptions:
         key_expr=args.key,
         report_path=args.report,
         session=_session_options(args),
+        force=args.force,
     )
 
 
@@ -429,6 +479,7 @@ def _replay_options(args: argparse.Namespace) -> ReplayOptions:
         device_name=args.device_name,
         session=_session_options(args),
         pacing=_pacing_options(args),
+        clock=args.clock,
     )
 
 
@@ -487,8 +538,31 @@ def _positive(text: str) -> float:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text}")
     if not value > 0:
         raise argparse.ArgumentTypeError(f"must be positive, got {text}")
+    return value
+
+
+def _duration(text: str) -> float:
+    """Seconds: a finite positive number, at most ``MAX_DURATION_S`` (about 116 days)."""
+    from gyroemu.pipelines.jobs.simulate import MAX_DURATION_S
+
+    value = _positive(text)
+    if value > MAX_DURATION_S:
+        raise argparse.ArgumentTypeError(f"{value:g} s is more than the limit of {MAX_DURATION_S:g} s")
+    return value
+
+
+def _seed(text: str) -> int:
+    """A seed of numpy's generators: an integer 0 <= seed < 2**128."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if not 0 <= value < 2**128:
+        raise argparse.ArgumentTypeError(f"must be an integer from 0 to 2**128 - 1, got {text}")
     return value
 
 
@@ -535,11 +609,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("simulate", help="simulate a scenario's truth and write it to a file")
     p.add_argument("--scenario", required=True, help="built-in name or TOML path")
-    p.add_argument("--duration", type=_positive, default=None, help="seconds (default: the scenario's)")
+    p.add_argument("--duration", type=_duration, default=None, help="seconds (default: the scenario's)")
     p.add_argument("--rate", type=_positive, default=None, help="output rate, Hz (default: the scenario's)")
     p.add_argument("--device", default=None, help="built-in device name or TOML path (default: truth only)")
-    p.add_argument("--seed", type=int, default=0, help="seed of every random draw (default: 0)")
+    p.add_argument("--seed", type=int, default=0, help="seed of every random draw, 0 to 2**128 - 1 (default: 0)")
     p.add_argument("--out", required=True, help="output file: .mcap (ROS 2 log) or .npz (arrays)")
+    p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     p.set_defaults(func=_cmd_simulate)
 
     p = sub.add_parser("info", help="summarise an MCAP log: devices, topics, counts, rates, configs")
@@ -557,6 +632,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("format", choices=("broad",), help="the input's format")
     p.add_argument("file", metavar="FILE", help="the recording to import (read only), e.g. TRIAL.hdf5")
     p.add_argument("--out", required=True, help="MCAP file to write")
+    p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     p.set_defaults(func=_cmd_import)
 
     p = sub.add_parser(
@@ -586,9 +662,9 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="NAME",
         help="built-in device or TOML path (repeatable; default: consumer_mems unless only --log)",
     )
-    p.add_argument("--duration", type=_positive, default=60.0, help="seconds per simulated run (default: 60)")
+    p.add_argument("--duration", type=_duration, default=60.0, help="seconds per simulated run (default: 60)")
     p.add_argument("--runs", type=int, default=3, help="Monte Carlo runs per simulated case (default: 3)")
-    p.add_argument("--seed", type=int, default=0, help="device seed of the first run (default: 0)")
+    p.add_argument("--seed", type=_seed, default=0, help="device seed of the first run (default: 0)")
     p.add_argument(
         "--log",
         action="append",
@@ -645,14 +721,18 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "estimate",
         help="run an attitude filter over an MCAP log and write its /estimate/imu",
-        description="Filter every device of FILE.mcap and write OUT.mcap: the input's channels plus /estimate/imu, "
-        "one message per /imu message at the same stamp (estimated q_wb with its covariance, "
-        "bias-corrected rate). 9D where the device has a magnetometer, unless --6d. A gyroemu log "
+        description="Filter an IMU topic of FILE.mcap and write OUT.mcap: every channel of the input copied "
+        "unchanged (messages, times, schemas, metadata; /tf and any other topic included) plus the estimate "
+        "on --topic-out (default /estimate/imu), one sensor_msgs/msg/Imu message per IMU message at the "
+        "same stamps and frame_id (estimated q_wb with its covariance, bias-corrected rate). A file with "
+        "several IMU topics needs --topic; a gyroemu log of several devices gets every device filtered, "
+        "each to /<device>/estimate/imu. 9D where the device has a magnetometer, unless --6d. A gyroemu log "
         "gives the filter its device's noise figures and the site's latitude; other logs use the "
         "filter's defaults.",
     )
     p.add_argument("file", metavar="FILE.mcap", help="the log to filter (read only)")
     p.add_argument("--out", required=True, help="MCAP file to write")
+    p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     p.add_argument(
         "--filter",
         default="mekf",
@@ -660,14 +740,30 @@ def build_parser() -> argparse.ArgumentParser:
         help="mekf (default), madgwick, mahony, ahrs-ekf, vqf, or module:Class",
     )
     p.add_argument("--6d", dest="six_d", action="store_true", help="ignore the magnetometer")
+    p.add_argument(
+        "--topic", default=None, metavar="TOPIC", help="the sensor_msgs/msg/Imu topic to filter (needed when several)"
+    )
+    p.add_argument("--topic-out", default=None, metavar="TOPIC", help="topic of the estimate (default: /estimate/imu)")
     p.set_defaults(func=_cmd_estimate)
 
     p = sub.add_parser("presets", help="list the built-in devices as a table")
     p.set_defaults(func=_cmd_presets)
 
-    p = sub.add_parser("allan", help="fit the noise terms of a static gyro log and draw its Allan plot")
+    p = sub.add_parser("allan", help="fit the noise terms of a static IMU log and draw its Allan plot")
     p.add_argument("log", metavar="LOG", help="a static gyro log (.mcap, or .npz from 'gyroemu simulate')")
-    p.add_argument("--out", default=None, help="PNG to write (default: LOG with .allan.png)")
+    p.add_argument(
+        "--out",
+        default=None,
+        help="plot to write, in the format its suffix names: .png, .pdf, .svg, ... (default: LOG with .allan.png)",
+    )
+    p.add_argument(
+        "--allow-motion", action="store_true", help="analyse a log that is not static (a warning, not an error)"
+    )
+    p.add_argument("--json", action="store_true", help="print the report as JSON instead of the tables")
+    p.add_argument(
+        "--kalibr", default=None, metavar="IMU.yaml", help="also write the noise model as Kalibr's/OpenVINS's imu.yaml"
+    )
+    p.add_argument("--force", action="store_true", help="overwrite an existing --kalibr file")
     p.set_defaults(func=_cmd_allan)
 
     p = sub.add_parser(
@@ -703,12 +799,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--device", required=True, help="built-in device name or TOML path")
     p.add_argument(
         "--duration",
-        type=_positive,
+        type=_duration,
         default=None,
         help="seconds (default: until SIGINT/SIGTERM for a motion given in closed form; the scenario's own "
         "duration for a recording or a simulated body: heavy-top, free-rigid-body, ship, spacecraft-cmg, drop)",
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of every random draw (default: 0)")
+    p.add_argument("--seed", type=_seed, default=0, help="seed of every random draw (default: 0)")
     p.add_argument("--as-fast-as-possible", action="store_true", help="do not pace to the sample clock")
     p.add_argument("--device-name", default="imu0", help="key expressions gyroemu/<NAME>/... (default: imu0)")
     p.add_argument(
@@ -732,7 +828,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("record", help="record gyroemu zenoh streams into an MCAP file", epilog=zenoh_note)
     p.add_argument("--out", required=True, help="MCAP file to write (written in place)")
-    p.add_argument("--duration", type=_positive, default=None, help="seconds (default: until SIGINT/SIGTERM)")
+    p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    p.add_argument("--duration", type=_duration, default=None, help="seconds (default: until SIGINT/SIGTERM)")
     p.add_argument(
         "--key", default=None, help="key expression to subscribe to (default: gyroemu/**; with --ros2: <domain>/**)"
     )
@@ -749,8 +846,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("log", metavar="LOG", help="an MCAP file (ROS 2) holding sensor_msgs/msg/Imu messages")
     p.add_argument("--rate", type=_positive, default=1.0, help="speed factor: 2 replays twice as fast (default: 1)")
-    p.add_argument("--loop", action="store_true", help="repeat until SIGINT/SIGTERM (deadlines keep increasing)")
+    p.add_argument(
+        "--loop",
+        action="store_true",
+        help="repeat until SIGINT/SIGTERM (deadlines and header stamps keep increasing)",
+    )
     p.add_argument("--topics", nargs="+", default=None, metavar="TOPIC", help="replay only these topics")
+    p.add_argument(
+        "--clock",
+        action="store_true",
+        help="also publish rosgraph_msgs/Clock on /clock: the replayed log time, at most 40 Hz "
+        "(key gyroemu/<device>/clock; with --ros2 the ROS 2 topic /clock)",
+    )
     p.add_argument(
         "--device-name",
         default="imu0",
@@ -782,21 +889,64 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread while :func:`main` runs a command, so that the command's
+    clean-up runs (a temporary file removed) as it does for SIGINT's ``KeyboardInterrupt``."""
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise Terminated()
+
+
+def _forget_unhandled_interrupt() -> None:
+    """Let a caught SIGINT end with :func:`main`'s status 130. CPython notes a ``KeyboardInterrupt``
+    that escapes any ``exec`` of a string (scipy's imports run some) as unhandled, and at exit kills
+    the process with SIGINT (status -2) even when the exception was caught further up; every ``exec``
+    of a string clears that note first (``run_eval_code_obj`` in CPython's pythonrun.c)."""
+    exec("None")
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run the ``gyroemu`` command ``argv`` (default: ``sys.argv[1:]``) and return its exit status.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments after ``gyroemu``.
+
+    Returns
+    -------
+    int
+        0 on success; 2 for bad usage or bad input (the message names the file, key or argument);
+        130 when stopped by SIGINT, 143 by SIGTERM (the partial output removed, no traceback).
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
+    # SIGTERM's default action ends the process without any clean-up: for the command it raises
+    # Terminated instead (only the main thread can set handlers; an ignored SIGTERM stays ignored);
+    # the previous handler is back after.
+    handling = (
+        threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGTERM) != signal.SIG_IGN
+    )
+    previous = signal.signal(signal.SIGTERM, _raise_terminated) if handling else None
     try:
         return args.func(args)
     except UsageError as e:
         parser.exit(2, f"gyroemu {args.command}: error: {e}\n")
     except KeyboardInterrupt:
+        _forget_unhandled_interrupt()
         return 130
+    except Terminated:
+        return 143
     except BrokenPipeError:  # the reader went away (`gyroemu info run.mcap | head`): stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except GyroemuError as e:  # bad input (a config, a log): the message names the file and key
         print(f"gyroemu {args.command}: error: {e}", file=sys.stderr)
         return 2
+    finally:
+        if handling:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
 
 
 if __name__ == "__main__":

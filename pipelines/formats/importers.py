@@ -50,6 +50,7 @@ dataset or attribute at fault; the output is written through a temporary file re
 
 from __future__ import annotations
 
+import errno
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -257,8 +258,9 @@ def broad_recording(trial: BroadTrial, device_name: str = "imu0") -> Recording:
     return Recording(samples, truth=truth, pose=pose, movement=trial.movement, metadata=metadata)
 
 
-def import_broad(path, out, *, device_name: str = "imu0") -> ImportSummary:
-    """Turn the BROAD trial ``path`` into the MCAP log ``out`` (see the module's notes).
+def import_broad(path, out, *, device_name: str = "imu0", force: bool = False) -> ImportSummary:
+    """Turn the BROAD trial ``path`` into the MCAP log ``out`` (see the module's notes); an existing
+    ``out`` is replaced only with ``force``.
 
     Raises
     ------
@@ -267,12 +269,18 @@ def import_broad(path, out, *, device_name: str = "imu0") -> ImportSummary:
         is the input file itself.
     FileNotFoundError
         ``out``'s folder does not exist.
+    FileExistsError
+        ``out`` exists (a file: without ``force``; a folder: always).
     """
     path, out = Path(path), Path(out)
     if out.exists() and path.exists() and os.path.samefile(out, path):
         raise ImportInputError("is the input file: the import never overwrites its input", file=out)
     if not out.parent.is_dir():
         raise FileNotFoundError(f"{out.parent} is not a folder")
+    if out.is_dir():
+        raise FileExistsError(errno.EEXIST, "is a folder: name a file in it")
+    if out.exists() and not force:
+        raise FileExistsError(errno.EEXIST, "exists (use --force to overwrite it)")
     trial = read_broad(path)
     recording = broad_recording(trial, device_name)
     write_mcap(out, recording)
@@ -290,4 +298,4 @@ def import_broad(path, out, *, device_name: str = "imu0") -> ImportSummary:
 
 
 IMPORTERS = {"broad": import_broad}
-"""Format name (``gyroemu import FORMAT``) -> importer ``(path, out) -> ImportSummary``."""
+"""Format name (``gyroemu import FORMAT``) -> importer ``(path, out, *, force=False) -> ImportSummary``."""

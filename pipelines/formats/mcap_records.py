@@ -84,6 +84,8 @@ __all__ = [
     "iter_mcap_batches",
     "ChannelInfo",
     "mcap_channel_info",
+    "RawMessages",
+    "McapRecordWalk",
 ]
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -334,6 +336,80 @@ class McapFileWriter:
         data, channel, log_time, offset = _interleave(streams)
         if not len(log_time):
             return
+        self._append(data, channel, log_time, offset)
+
+    def add_raw_messages(
+        self,
+        channel_id: np.ndarray,
+        sequence: np.ndarray,
+        log_time: np.ndarray,
+        publish_time: np.ndarray,
+        buffer: np.ndarray,
+        start: np.ndarray,
+        size: np.ndarray,
+    ) -> None:
+        """Append messages exactly as given, in the given order (no interleaving, no renumbering).
+
+        For copying another file's messages (:class:`McapRecordWalk`) with their own sequence numbers
+        and publish times, payloads of any length. The caller keeps the file's log times in the order it
+        wants (a copy keeps the input's).
+
+        Parameters
+        ----------
+        channel_id, sequence, log_time, publish_time : array_like (M,)
+            Each message's Message record fields; ``channel_id`` must be registered here.
+        buffer : ndarray uint8
+            Bytes holding the payloads.
+        start, size : array_like (M,) int
+            Message k's payload is ``buffer[start[k] : start[k] + size[k]]``.
+        """
+        if self._finished:
+            raise ValueError("the MCAP file is finished")
+        channel = np.asarray(channel_id, dtype=np.uint16).reshape(-1)
+        n = len(channel)
+        if not n:
+            return
+        unknown = sorted(set(np.unique(channel).tolist()) - set(self._channels))
+        if unknown:
+            raise ValueError(f"channel {unknown[0]} is not registered")
+        start = np.asarray(start, dtype=np.int64).reshape(-1)
+        size = np.asarray(size, dtype=np.int64).reshape(-1)
+        buffer = np.asarray(buffer, dtype=np.uint8).reshape(-1)
+        if size.min() < 0 or (start.min() < 0 or (start + size).max() > len(buffer)):
+            raise ValueError("a payload runs outside the buffer")
+        head = np.empty(
+            n,
+            dtype=np.dtype(
+                {
+                    "names": ["opcode", "length", "channel_id", "sequence", "log_time", "publish_time"],
+                    "formats": ["u1", "<u8", "<u2", "<u4", "<u8", "<u8"],
+                    "offsets": [0, 1, 9, 11, 15, 23],
+                    "itemsize": _MESSAGE_HEAD,
+                }
+            ),
+        )
+        head["opcode"] = Opcode.MESSAGE
+        head["length"] = _MESSAGE_HEAD - 9 + size
+        head["channel_id"] = channel
+        head["sequence"] = np.asarray(sequence, dtype=np.uint32).reshape(-1)
+        log_time = np.asarray(log_time, dtype=np.uint64).reshape(-1)
+        head["log_time"] = log_time
+        head["publish_time"] = np.asarray(publish_time, dtype=np.uint64).reshape(-1)
+        record = _MESSAGE_HEAD + size
+        offset = np.concatenate([[0], np.cumsum(record)[:-1]]).astype(np.int64)
+        data = np.empty(int(record.sum()), dtype=np.uint8)
+        data[offset[:, None] + np.arange(_MESSAGE_HEAD)] = head.view(np.uint8).reshape(n, _MESSAGE_HEAD)
+        first = np.concatenate([[0], np.cumsum(size)[:-1]]).astype(np.int64)  # payload k's first byte, laid end to end
+        within = np.arange(int(size.sum()), dtype=np.int64)
+        data[np.repeat(offset + _MESSAGE_HEAD - first, size) + within] = buffer[np.repeat(start - first, size) + within]
+        ids, counts = np.unique(channel, return_counts=True)
+        for c, k in zip(ids.tolist(), counts.tolist()):
+            self._channel_counts[c] += k
+        self._append(data, channel, log_time, offset)
+
+    def _append(self, data: np.ndarray, channel: np.ndarray, log_time: np.ndarray, offset: np.ndarray) -> None:
+        """Queue Message records (``data``; per message its channel, log time and offset in ``data``)
+        for the chunks, writing every chunk they complete."""
         self._message_count += len(log_time)
         lo, hi = int(log_time.min()), int(log_time.max())
         self._time_range = (
@@ -980,3 +1056,86 @@ def mcap_channel_info(path: str | os.PathLike[str]) -> list[ChannelInfo]:
     decodes no message; :attr:`gyroemu.pipelines.formats.mcap_log.McapLog.channels` holds the same). Raises
     :class:`LogError` for a file that is not MCAP or is corrupt."""
     return _MessageWalk(Path(path), topics=()).run().channel_info()
+
+
+# -- every message record as found (copying a file) -------------------------------------------------
+
+
+class RawMessages(NamedTuple):
+    """The Message records of one chunk (or one record outside chunks), in file order, fields as found.
+
+    Message k's payload is ``buffer[start[k] : start[k] + size[k]]``
+    (:meth:`McapFileWriter.add_raw_messages` takes the same arrays).
+    """
+
+    channel_id: np.ndarray  # (M,) uint16
+    sequence: np.ndarray  # (M,) uint32
+    log_time: np.ndarray  # (M,) uint64
+    publish_time: np.ndarray  # (M,) uint64
+    buffer: np.ndarray  # uint8
+    start: np.ndarray  # (M,) int64
+    size: np.ndarray  # (M,) int64
+
+    def payload(self, k: int) -> bytes:
+        """Message k's payload bytes."""
+        return self.buffer[int(self.start[k]) : int(self.start[k] + self.size[k])].tobytes()
+
+
+class McapRecordWalk(McapScan):
+    """A :class:`McapScan` that hands out every Message record unchanged, a :class:`RawMessages` per chunk
+    (:meth:`batches`), for copying a file; nothing is decoded. :attr:`schemas`, :attr:`channels` and
+    :attr:`metadata` grow as their records are read: a batch's channels are known when it is handed out.
+    """
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        super().__init__(Path(path))
+        self.out: list[RawMessages] = []
+
+    def _channel(self, channel: Channel) -> None:
+        if channel.id in self.channels:
+            return
+        self.channels[channel.id] = channel
+        self.data[channel.id] = ChannelData(channel)  # mtype None: nothing gathered
+
+    def _loose_message(self, content: bytes) -> None:
+        fields, _ = self._loose_fields(content)
+        self.message_count += 1
+        buffer = np.frombuffer(content, dtype=np.uint8)
+        self.out.append(
+            RawMessages(
+                fields["channel_id"].astype(np.uint16),
+                fields["sequence"].astype(np.uint32),
+                fields["log_time"].astype(np.uint64),
+                fields["publish_time"].astype(np.uint64),
+                buffer,
+                np.array([22], dtype=np.int64),
+                np.array([len(content) - 22], dtype=np.int64),
+            )
+        )
+
+    def _chunk_messages(self, data, buffer, header, starts, lengths, position) -> None:
+        self.message_count += len(starts)
+        unknown = [int(c) for c in np.unique(header["channel_id"]) if int(c) not in self.channels]
+        if unknown:
+            raise self.error(
+                f"corrupt chunk at byte {position}: a message on channel {unknown[0]}, which no Channel record defines",
+                position,
+            )
+        self.out.append(
+            RawMessages(
+                header["channel_id"].astype(np.uint16),
+                header["sequence"].astype(np.uint32),
+                header["log_time"].astype(np.uint64),
+                header["publish_time"].astype(np.uint64),
+                buffer,
+                (starts + 9 + 22).astype(np.int64),
+                (lengths - 22).astype(np.int64),
+            )
+        )
+
+    def batches(self) -> Iterator[RawMessages]:
+        """Walk the file (:meth:`McapScan.walk`), handing out its Message records as they are read."""
+        for _ in self.walk():
+            if self.out:
+                batches, self.out = self.out, []
+                yield from batches

@@ -54,6 +54,7 @@ encapsulation identifiers and options); the MCAP specification appendix (``ros2m
 from __future__ import annotations
 
 import re
+import struct
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -78,6 +79,10 @@ __all__ = [
     "raw_fields",
     "raw_observables",
     "ROS_DEFINITIONS",
+    "starts_with_header",
+    "shift_header_stamp",
+    "CLOCK_TYPE",
+    "encode_clock",
 ]
 
 ENCAPSULATION_CDR_LE = b"\x00\x01\x00\x00"
@@ -758,3 +763,66 @@ def raw_observables(mtype: MessageType, batch: DecodedBatch) -> dict[str, np.nda
             continue
         out[spec.name] = batch[spec.name]
     return out
+
+
+# --------------------------------------------------------------------------------------------------
+# Header stamps of serialised messages of any type.
+
+_FIRST_FIELD = re.compile(r"^\s*([A-Za-z0-9_/]+)(?:\[[^\]]*\])?\s+[A-Za-z_]", re.MULTILINE)
+
+
+def starts_with_header(name: str, schema: str = "") -> bool:
+    """True when messages of type ``name`` start with a ``std_msgs/Header`` (so their CDR bytes carry
+    the header stamp right after the encapsulation header): every type of :data:`MESSAGE_TYPES`, and a
+    type whose ``ros2msg`` ``schema`` text has ``std_msgs/Header`` (or ``Header``) as its first field."""
+    if message_type(name) is not None:
+        return True
+    text = schema.split(_DELIMITER, 1)[0]
+    for line in text.splitlines():
+        line = line.split("#", 1)[0].strip()
+        if not line:
+            continue
+        match = _FIRST_FIELD.match(line)
+        return match is not None and match.group(1) in ("std_msgs/Header", "std_msgs/msg/Header", "Header")
+    return False
+
+
+def shift_header_stamp(payload: bytes, shift_ns: int) -> bytes:
+    """``payload`` (a CDR message that starts with a ``std_msgs/Header``) with ``header.stamp`` moved by
+    ``shift_ns`` nanoseconds; the other bytes unchanged.
+
+    The stamp is ``int32 sec, uint32 nanosec`` right after the 4-byte encapsulation header, in the
+    byte order it names (``00 01``: little endian, ``00 00``: big endian). A payload too short, of
+    another encapsulation, or whose shifted stamp leaves the int32 seconds, is returned unchanged.
+    """
+    if not shift_ns or len(payload) < 12 or payload[0] != 0 or payload[1] not in (0, 1):
+        return payload
+    order = "<" if payload[1] == 1 else ">"
+    sec, nanosec = struct.unpack_from(order + "iI", payload, 4)
+    sec, nanosec = divmod(sec * 1_000_000_000 + nanosec + int(shift_ns), 1_000_000_000)
+    if not -(2**31) <= sec < 2**31:
+        return payload
+    out = bytearray(payload)
+    struct.pack_into(order + "iI", out, 4, sec, nanosec)
+    return bytes(out)
+
+
+# --------------------------------------------------------------------------------------------------
+# rosgraph_msgs/msg/Clock (``gyroemu replay --clock``).
+
+ROS_DEFINITIONS["rosgraph_msgs/Clock"] = """\
+# This message communicates the current time.
+#
+# For more information, see https://design.ros2.org/articles/clock_and_time.html.
+builtin_interfaces/Time clock
+"""
+
+CLOCK_TYPE = "rosgraph_msgs/msg/Clock"
+"""The type of ROS 2's ``/clock`` topic: one ``builtin_interfaces/Time clock`` (no header)."""
+
+
+def encode_clock(stamp_ns: int) -> bytes:
+    """A ``rosgraph_msgs/msg/Clock`` message at ``stamp_ns``: the encapsulation header, ``int32 sec``,
+    ``uint32 nanosec`` (12 bytes)."""
+    sec, nanosec = _split_ns(np.array([stamp_ns]))
+    return ENCAPSULATION_CDR_LE + struct.pack("<iI", int(sec[0]), int(nanosec[0]))

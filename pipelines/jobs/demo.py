@@ -156,7 +156,7 @@ def _live_and_bench(out: Path, seconds: float) -> None:
     # only the demo's own device: other gyroemu streams on this machine's zenoh network are not its data
     name = "imu0"
     recorder = subprocess.Popen(
-        [sys.executable, "-m", "gyroemu", "record", "--out", str(log), "--key", topic_to_key(name, "/**")],
+        [sys.executable, "-m", "gyroemu", "record", "--out", str(log), "--force", "--key", topic_to_key(name, "/**")],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,

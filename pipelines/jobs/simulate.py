@@ -39,6 +39,8 @@ __all__ = [
     "SimulateError",
     "SimulateOptions",
     "SimulateSummary",
+    "MAX_DURATION_S",
+    "MAX_RATE_HZ",
     "check_options",
     "run_simulate",
     "npz_arrays",
@@ -74,6 +76,8 @@ class SimulateOptions:
         Seed of every random draw of the device.
     progress : bool or None
         Show the phases as a bar on stderr; None: when stderr is a terminal.
+    force : bool
+        Overwrite ``out`` if it exists (otherwise :class:`SimulateError`).
     """
 
     scenario: str
@@ -83,6 +87,7 @@ class SimulateOptions:
     rate: float | None = None
     seed: int = 0
     progress: bool | None = None
+    force: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "out", Path(self.out))
@@ -125,18 +130,158 @@ class SimulateSummary:
     notes: str = ""
 
 
-def check_options(options: SimulateOptions) -> None:
-    """:class:`SimulateError` for an output that cannot be written: a suffix other than .mcap or .npz, a
-    missing folder, an .mcap without a device."""
+MAX_DURATION_S = 1e7
+"""The longest ``--duration`` :func:`check_options` accepts, seconds (about 116 days)."""
+
+MAX_RATE_HZ = 1e6
+"""The highest ``--rate`` :func:`check_options` accepts, Hz."""
+
+_SEED_LIMIT = 2**128  # numpy's SeedSequence takes integers 0 <= seed < 2**128 here
+
+_MCAP_RECORD_OVERHEAD = 31 + 16  # a message record's header, plus its entry in the chunk's message index
+_TRUTH_NPZ_BYTES = 8 * 23  # float64 t, q_wb (4), omega_b, alpha_b, specific_force_b, pos_w, vel_w, mag_b (3 each)
+_IMU_NPZ_BYTES = 8 * 18  # float64 t, t_true, gyro, accel, mag, temperature, delta_angle, delta_velocity
+
+
+def _size(n_bytes: float) -> str:
+    """``n_bytes`` for people: ``12.3 GB``."""
+    for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n_bytes >= scale:
+            return f"{n_bytes / scale:.3g} {unit}"
+    return f"{n_bytes:.0f} bytes"
+
+
+def _check_number(value: float | None, argument: str, unit: str, limit: float) -> None:
+    """A finite ``value`` in (0, limit], or None."""
+    if value is None:
+        return
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise SimulateError(f"argument {argument}: expected a number of {unit}, got {value!r}")
+    if not np.isfinite(value):
+        raise SimulateError(f"argument {argument}: must be a finite number of {unit}, got {value}")
+    if not value > 0:
+        raise SimulateError(f"argument {argument}: must be positive, got {value:g}")
+    if value > limit:
+        raise SimulateError(f"argument {argument}: {value:g} {unit} is more than the limit of {limit:g} {unit}")
+
+
+def _mcap_bytes_per_sample(device: Device) -> int:
+    """Bytes one device sample takes in an .mcap log before compression: its messages (/imu, /mag when
+    the device has a magnetometer, /raw/<kind>, /truth/imu, /truth/pose), each with its record overhead."""
+    from gyroemu.pipelines.formats.channels import (
+        IMU_ROLE,
+        MAG_ROLE,
+        POSE_ROLE,
+        TRUTH_ROLE,
+        raw_role,
+        role_message_type,
+    )
+
+    roles = [IMU_ROLE, TRUTH_ROLE, POSE_ROLE, raw_role(device.kind)]
+    if getattr(device.spec, "magnetometer", None) is not None:
+        roles.append(MAG_ROLE)
+    total = 0
+    for role in roles:
+        mtype = role_message_type(role)
+        if mtype is not None:
+            total += mtype.message_size(device.name) + _MCAP_RECORD_OVERHEAD
+    return total
+
+
+def _raw_npz_bytes(device: Device) -> int:
+    """Bytes of a device sample's raw observables in an .npz (their message's size: an upper bound)."""
+    from gyroemu.pipelines.formats.channels import raw_role, role_message_type
+
+    mtype = role_message_type(raw_role(device.kind))
+    return 0 if mtype is None else mtype.message_size(device.name)
+
+
+def _check_size(options: SimulateOptions, scenario: Scenario, device: Device | None) -> None:
+    """Refuse a run whose output needs more disk than is free in ``--out``'s folder or, for an .npz
+    (made in memory), more memory than the machine has."""
+    import shutil
+
+    span = float(scenario.duration_s if options.duration is None else options.duration)
+    device_rate = None if device is None else float(device.spec.rate_hz)
+    truth_rate = options.rate or getattr(scenario.spec, "rate_hz", None) or device_rate
+    folder = options.out.parent
+    free = shutil.disk_usage(folder).free
+    if options.out.suffix == ".mcap":
+        assert device is not None and device_rate is not None  # an .mcap needs a device: checked before
+        samples = span * device_rate + 1
+        per = _mcap_bytes_per_sample(device)
+        need = samples * per
+        what = f"{samples:.4g} samples x {per} bytes"
+        change = "shorten --duration"
+    else:
+        truth = 0.0 if truth_rate is None else span * float(truth_rate) + 1
+        need = truth * _TRUTH_NPZ_BYTES
+        what = f"{truth:.4g} truth samples x {_TRUTH_NPZ_BYTES} bytes"
+        if device is not None and device_rate is not None:
+            samples = span * device_rate + 1
+            per = _IMU_NPZ_BYTES + _raw_npz_bytes(device)
+            need += samples * per
+            what += f" + {samples:.4g} device samples x {per} bytes"
+        change = "shorten --duration" + (" or lower --rate" if truth_rate is not None else "")
+        try:
+            memory = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        except (ValueError, OSError, AttributeError):  # not every system says
+            memory = None
+        if memory is not None and memory > 0 and need > memory:
+            raise SimulateError(
+                f"argument --duration: {span:g} s needs about {_size(need)} of memory ({what}; an .npz is made "
+                f"in memory), more than this machine's {_size(memory)}: {change}, or write an .mcap log "
+                "(--out run.mcap, made block by block)"
+            )
+    if need > free:
+        raise SimulateError(
+            f"argument --duration: {span:g} s needs about {_size(need)} of disk ({what}, before compression), "
+            f"but {folder} has {_size(free)} free: {change}, or write to another folder (--out)"
+        )
+
+
+def check_options(options: SimulateOptions, scenario: Scenario | None = None, device: Device | None = None) -> None:
+    """Check ``options`` before any work; raise :class:`SimulateError` naming the argument at fault.
+
+    Parameters
+    ----------
+    options : SimulateOptions
+        What to simulate.
+    scenario : Scenario, optional
+        The loaded scenario; with it the output's size is checked too.
+    device : Device, optional
+        The loaded device (with ``scenario``), None for truth only.
+
+    Raises
+    ------
+    SimulateError
+        ``duration`` or ``rate`` not finite and positive or above :data:`MAX_DURATION_S` or
+        :data:`MAX_RATE_HZ`; ``seed`` not an integer ``0 <= seed < 2**128``; ``out`` with a suffix other
+        than .mcap or .npz, in a missing folder, naming a folder, or an existing file without ``force``;
+        an .mcap without a device; and, given ``scenario``, an output that needs more disk than is free
+        in ``out``'s folder or (.npz, made in memory) more memory than the machine has.
+    """
+    _check_number(options.duration, "--duration", "s", MAX_DURATION_S)
+    _check_number(options.rate, "--rate", "Hz", MAX_RATE_HZ)
+    seed = options.seed
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < _SEED_LIMIT:
+        raise SimulateError(f"argument --seed: must be an integer from 0 to 2**128 - 1, got {seed!r}")
     out = options.out
+    if out.is_dir():
+        raise SimulateError(f"argument --out: {out} is a folder: name a file in it")
     if out.suffix not in (".npz", ".mcap"):
         raise SimulateError(f"argument --out: {out}: write a .mcap (ROS 2) or .npz file (got '{out.suffix}')")
     if not out.parent.is_dir():
-        raise SimulateError(f"argument --out: {out.parent} is not a folder")
+        what = "is not a folder" if out.parent.exists() else "no such folder"
+        raise SimulateError(f"argument --out: {out.parent}: {what}")
+    if out.exists() and not options.force:
+        raise SimulateError(f"argument --out: {out} exists (use --force to overwrite it)")
     if out.suffix == ".mcap" and not options.device:
         raise SimulateError(
             "argument --device: an .mcap log holds a device's samples: name a device ('gyroemu presets' lists them)"
         )
+    if scenario is not None:
+        _check_size(options, scenario, device)
 
 
 def run_simulate(options: SimulateOptions) -> SimulateSummary:
@@ -164,6 +309,7 @@ def run_simulate(options: SimulateOptions) -> SimulateSummary:
             f"{scenario.path or scenario.name}: {span:.6g} s of motion is shorter than two samples of "
             f"device {device.name} ({2.0 / device.spec.rate_hz:g} s at {device.spec.rate_hz:g} Hz)"
         )
+    check_options(options, scenario, device)  # again, with the output's size
     started = time.perf_counter()
     samples: int | None
     if out.suffix == ".mcap":

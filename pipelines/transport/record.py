@@ -19,7 +19,9 @@ The file is written in place (not through a temporary name):
 writes sequentially, and the recorder flushes after every batch, so a recorder killed with SIGKILL leaves
 a file whose complete chunks read back (chunks of 256 KiB, so at most that much is lost).
 SIGINT/SIGTERM (or ``--duration``) end the recording properly: the remaining messages, the summary and
-indexes, the footer.
+indexes, the footer. The file is created when the first recorded key arrives: a recording that
+receives nothing says so and leaves no file (an existing file given with ``--force`` stays as it was),
+and an existing file is replaced only with ``--force`` (:attr:`RecordOptions.force`).
 
 From each message's attachment (sequence number, publisher id) the recorder counts, per publisher,
 messages received, sequence gaps (the exact missing numbers), duplicates and late (out-of-order)
@@ -166,7 +168,8 @@ class Recorder:
     """Copies received zenoh samples into an MCAP file (see the module's notes).
 
     ``parse_key`` turns a sample's key expression into a :class:`KeyInfo` (:func:`gyroemu_key`, or
-    :func:`ros2_key` in ROS 2 mode); ``on_new_topic(info)`` is called once per new channel."""
+    :func:`ros2_key` in ROS 2 mode); ``on_new_topic(info)`` is called once per new channel. The file is
+    created with the first channel; :meth:`close` removes it if no message was recorded."""
 
     def __init__(
         self,
@@ -175,11 +178,10 @@ class Recorder:
         parse_key: Callable[[str], KeyInfo] = gyroemu_key,
         on_new_topic: Callable[[KeyInfo], None] | None = None,
     ) -> None:
-        from gyroemu.pipelines.formats.mcap_records import McapFileWriter
-
         self.path = Path(path)
-        self._file = open(self.path, "wb")
-        self._mcap = McapFileWriter(self._file, chunk_size=chunk_size)
+        self._chunk_size = chunk_size
+        self._file: Any = None  # opened with the first channel (:meth:`_writer`)
+        self._mcap: Any = None
         self._channels: dict[tuple[str, str], int] = {}
         self._devices: dict[str, str] = {}  # device -> topic prefix
         self._pending: dict[tuple[int, int], tuple[list, list]] = {}  # (channel, size) -> stamps, payloads
@@ -191,11 +193,21 @@ class Recorder:
         self.skipped = 0
         self.without_attachment = 0
 
+    def _writer(self) -> Any:
+        """The MCAP writer, opening the file the first time."""
+        if self._mcap is None:
+            from gyroemu.pipelines.formats.mcap_records import McapFileWriter
+
+            self._file = open(self.path, "wb")
+            self._mcap = McapFileWriter(self._file, chunk_size=self._chunk_size)
+        return self._mcap
+
     def _channel(self, info: KeyInfo) -> int:
         from gyroemu.pipelines.formats.mcap_log import device_metadata
 
         key = (info.device, info.topic)
         if key not in self._channels:
+            self._writer()
             device, topic = info.device, info.topic
             if device not in self._devices:
                 prefix = "" if not self._devices else f"/{device}"
@@ -272,11 +284,24 @@ class Recorder:
         self._file.flush()
 
     def close(self) -> None:
-        """Write what is pending, the summary, indexes and footer, and close the file."""
-        self.flush()
-        self._mcap.finish()
-        self._file.flush()
-        self._file.close()
+        """Write what is pending, the summary, indexes and footer, and close the file; remove it if it
+        holds no message (nothing recorded: no file)."""
+        if self._mcap is None:
+            return
+        try:
+            self.flush()
+            self._mcap.finish()
+            self._file.flush()
+        finally:
+            self._file.close()
+            self._mcap = None
+            if self.messages == 0:
+                self.path.unlink(missing_ok=True)
+
+    @property
+    def written(self) -> bool:
+        """Whether the recording left a file (it recorded at least one message)."""
+        return self.messages > 0 and self.path.is_file()
 
     def report(self) -> dict[str, Any]:
         """Counts of the recording and of each publisher (JSON-ready; :func:`format_report` prints it)."""
@@ -333,6 +358,8 @@ class RecordOptions:
         Also write the sequence report there as JSON.
     session : SessionOptions
         The zenoh session (and ROS 2 mode: rmw_zenoh's keys, a ROS 2 node with a subscription token per topic).
+    force : bool
+        Replace ``out_path`` if it exists (otherwise ``ValueError`` before any work).
     """
 
     out_path: Path
@@ -340,6 +367,7 @@ class RecordOptions:
     key_expr: str | None = None
     report_path: Path | None = None
     session: SessionOptions = field(default_factory=SessionOptions)
+    force: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "out_path", Path(self.out_path))
@@ -349,7 +377,15 @@ class RecordOptions:
 
 def run_record(options: RecordOptions, *, out: TextIO = sys.stdout) -> int:
     """Record until SIGINT/SIGTERM or ``options.duration`` s (see the module's notes); the report goes to
-    ``out``. Returns the exit status (0). Raises ``ValueError`` naming the argument at fault."""
+    ``out``. Returns the exit status (0). Raises ``ValueError`` naming the argument at fault (an
+    existing ``out_path`` without ``force`` among them). Nothing received: says so, writes no log."""
+    out_path = options.out_path
+    if out_path.is_dir():
+        raise ValueError(f"argument --out: {out_path} is a folder: name a file in it")
+    if not out_path.parent.is_dir():
+        raise ValueError(f"argument --out: {out_path.parent} is not a folder")
+    if out_path.exists() and not options.force:
+        raise ValueError(f"argument --out: {out_path} exists (use --force to overwrite it)")
     ros2, key_expr = options.session.ros2, options.key_expr
     domain = None
     if ros2:
@@ -400,7 +436,10 @@ def run_record(options: RecordOptions, *, out: TextIO = sys.stdout) -> int:
         finally:
             recorder.close()
     report = recorder.report()
-    print(format_report(report), file=out, flush=True)
+    if recorder.written:
+        print(format_report(report), file=out, flush=True)
+    else:
+        print(f"record: nothing received on {key_expr}: no file written ({recorder.path})", file=out, flush=True)
     if options.report_path:
         options.report_path.write_text(json.dumps(report, indent=1))
     return 0

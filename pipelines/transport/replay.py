@@ -29,8 +29,12 @@ Timing
 Message i goes out at ``t_start + (log_time_i - log_time_0) / rate`` (``t_start``: when publishing
 starts, monotonic clock): the publisher sleeps until each absolute deadline, or sends at once when
 behind, so its error never accumulates (:meth:`PacedPublisher.run_schedule`). With ``--loop``, pass k
-is shifted by k times the file's span plus one mean message interval, so deadlines keep increasing
-(the payloads, header stamps included, are the recorded bytes every pass).
+is shifted by k times the file's span plus one mean message interval, so deadlines keep increasing,
+and so do the stamps a subscriber sees: from pass 1 on, the header stamp of every message whose type
+starts with a ``std_msgs/Header`` (gyroemu's types, and any type whose schema says so:
+:func:`gyroemu.pipelines.formats.messages.starts_with_header`) is moved by the same shift
+(:func:`~gyroemu.pipelines.formats.messages.shift_header_stamp`); the other bytes, and every byte of
+pass 0 and of headerless types, are the recorded ones.
 
 A reader thread (:class:`gyroemu.pipelines.transport.read_ahead.ReadAheadThread`, shared with ``gyroemu
 stream``) walks the file a chunk at a time (:func:`gyroemu.pipelines.formats.mcap_records.iter_mcap_batches`),
@@ -50,6 +54,15 @@ file), the replay waits (``--wait``, default 10 s) until every key has a subscri
 start-up, competing for the GIL with the first deadlines, made them up to 15 ms late. The input is
 only ever opened for reading.
 
+Clock (``--clock``)
+------------------
+A ``rosgraph_msgs/msg/Clock`` on ``/clock`` (key ``gyroemu/<device>/clock``, the device of the replayed
+keys or ``--device-name``; in ROS 2 mode ROS 2 topic ``/clock`` on its rmw_zenoh key): the replayed log
+time (shifted as the stamps are, so it only moves forward across ``--loop`` passes), sent with the
+first message of each log-time step of at least ``rate / CLOCK_HZ`` s (:data:`CLOCK_HZ` a second of
+wall time, as ``ros2 bag play --clock``), at that message's deadline. ``--wait`` waits for a ``/clock``
+subscriber too.
+
 From Python: ``run_replay(ReplayOptions(path=Path("run.mcap"), rate=2.0))`` (:class:`ReplayOptions`).
 """
 
@@ -67,6 +80,7 @@ from typing import TYPE_CHECKING, TextIO
 from gyroemu.pipelines.formats.channels import is_device_prefix, is_stream_role, role_topic, split_topic
 from gyroemu.pipelines.formats.mcap_log import LogWarning, read_mcap
 from gyroemu.pipelines.formats.mcap_records import iter_mcap_batches
+from gyroemu.pipelines.formats.messages import CLOCK_TYPE, encode_clock, shift_header_stamp, starts_with_header
 from gyroemu.pipelines.transport.read_ahead import BATCH, READ_AHEAD, Batch, ReadAheadThread
 from gyroemu.pipelines.transport.zenoh_io import (
     PacingOptions,
@@ -81,7 +95,19 @@ if TYPE_CHECKING:
     from gyroemu.pipelines.formats.mcap_records import ChannelInfo
     from gyroemu.pipelines.formats.ros2_keys import Ros2Keys
 
-__all__ = ["ReplayOptions", "topic_keys", "ros2_topic_keys", "ReadAhead", "run_replay", "READ_AHEAD", "BATCH"]
+__all__ = [
+    "ReplayOptions",
+    "topic_keys",
+    "ros2_topic_keys",
+    "ReadAhead",
+    "run_replay",
+    "READ_AHEAD",
+    "BATCH",
+    "CLOCK_HZ",
+]
+
+CLOCK_HZ = 40.0
+"""``--clock``: /clock messages a second of wall time, at most (``ros2 bag play --clock``'s default)."""
 
 
 class ReplayError(ValueError):
@@ -109,6 +135,8 @@ class ReplayOptions:
         The zenoh session (and ROS 2 mode).
     pacing : PacingOptions
         Waiting for subscribers, how deadlines are waited for, lingering at the end.
+    clock : bool
+        Also publish ``rosgraph_msgs/msg/Clock`` on ``/clock`` (see the module's notes).
     """
 
     path: Path
@@ -118,6 +146,7 @@ class ReplayOptions:
     device_name: str = "imu0"
     session: SessionOptions = field(default_factory=SessionOptions)
     pacing: PacingOptions = field(default_factory=PacingOptions)
+    clock: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "path", Path(self.path))
@@ -192,17 +221,34 @@ def ros2_topic_keys(
 class ReadAhead(ReadAheadThread):
     """Reads the file in a thread and queues ``[(deadline offset ns, key, payload), ...]`` batches (of
     at most ``BATCH``; :class:`gyroemu.pipelines.transport.read_ahead.ReadAheadThread`): ``None`` ends
-    the stream, an exception object is raised by :meth:`batches`."""
+    the stream, an exception object is raised by :meth:`batches`.
+
+    With ``loop``, the messages of the topics in ``stamped`` (types that start with a header) get their
+    header stamps moved by each pass's shift (none in pass 0). ``clock_key``: a ``rosgraph_msgs/msg/Clock``
+    of the (shifted) log time goes there with the first message of every log-time step of at least
+    ``rate / CLOCK_HZ`` s.
+    """
 
     def __init__(
-        self, path: str | os.PathLike, keys: dict[str, str], rate: float, loop: bool, depth: int = READ_AHEAD
+        self,
+        path: str | os.PathLike,
+        keys: dict[str, str],
+        rate: float,
+        loop: bool,
+        depth: int = READ_AHEAD,
+        stamped: Iterable[str] = (),
+        clock_key: str | None = None,
     ) -> None:
         super().__init__(depth, name="replay-read-ahead")
         self.path, self.keys, self.rate, self.loop = path, keys, float(rate), loop
+        self.stamped = frozenset(stamped)
+        self.clock_key = clock_key
         self.passes = 0
 
     def produce(self) -> Generator[Batch, None, None]:
-        keys, rate = self.keys, self.rate
+        keys, rate, stamped, clock_key = self.keys, self.rate, self.stamped, self.clock_key
+        clock_step = round(rate * 1e9 / CLOCK_HZ)  # ns of log time between /clock messages, at least
+        clock_next = None
         offset = 0  # ns of log time added to this pass
         first = None
         while not self.stopping.is_set():
@@ -220,7 +266,12 @@ class ReadAhead(ReadAheadThread):
                     if m.log_time != previous:
                         distinct += 1
                         previous = m.log_time
-                    items.append((round((m.log_time + shift) / rate), keys[m.topic], m.data))
+                    data = shift_header_stamp(m.data, offset) if offset and m.topic in stamped else m.data
+                    deadline = round((m.log_time + shift) / rate)
+                    if clock_key is not None and (clock_next is None or m.log_time + offset >= clock_next):
+                        items.append((deadline, clock_key, encode_clock(m.log_time + offset)))
+                        clock_next = m.log_time + offset + clock_step
+                    items.append((deadline, keys[m.topic], data))
                 last = batch[-1].log_time
                 while batch:  # free the McapMessage tuples a slice at a time: a deallocation holds
                     del batch[-BATCH:]  # the GIL throughout, and 4000 at once take ~0.5 ms
@@ -235,8 +286,9 @@ class ReadAhead(ReadAheadThread):
             offset += span + round(interval)
 
 
-def _channels_to_publish(options: ReplayOptions, out: TextIO) -> tuple[dict[str, str], Ros2Keys | None]:
-    """Validate the file and the options; ``({topic: key}, ROS 2 keys or None)``, skipped topics said on ``out``."""
+def _channels_to_publish(options: ReplayOptions, out: TextIO) -> tuple[dict[str, str], Ros2Keys | None, frozenset[str]]:
+    """Validate the file and the options; ``({topic: key}, ROS 2 keys or None, the topics whose type
+    starts with a header)``, skipped topics said on ``out``."""
     path, topics = options.path, options.topics
     if not options.rate > 0:
         raise ReplayError(f"argument --rate: must be positive, got {options.rate}")
@@ -278,7 +330,29 @@ def _channels_to_publish(options: ReplayOptions, out: TextIO) -> tuple[dict[str,
         print(f"replay: skipping {topic}: {why}", file=out)
     if not keys:
         raise ReplayError(f"argument LOG: {path}: no topic to publish")
-    return keys, ros
+    stamped = frozenset(
+        c.topic
+        for c in channels
+        if c.topic in keys
+        and starts_with_header(
+            c.schema_name, c.schema_data.decode("utf-8", "replace") if c.schema_encoding == "ros2msg" else ""
+        )
+    )
+    return keys, ros, stamped
+
+
+def _clock_key(options: ReplayOptions, keys: dict[str, str], ros: Ros2Keys | None) -> str:
+    """The key of ``/clock``: ROS 2 topic ``/clock``'s in ROS 2 mode, else ``gyroemu/<device>/clock``
+    with the device of every replayed key when they share one, else ``--device-name``."""
+    if ros is not None:
+        key = ros.key("/clock", CLOCK_TYPE)
+    else:
+        devices = {key_to_topic(k)[0] for k in keys.values()}
+        key = topic_to_key(devices.pop() if len(devices) == 1 else options.device_name, "/clock")
+    clash = [t for t, k in keys.items() if k == key]
+    if clash:
+        raise ReplayError(f"argument --clock: topic {clash[0]} of {options.path} is already published on {key}")
+    return key
 
 
 def run_replay(options: ReplayOptions, *, out: TextIO = sys.stdout) -> int:
@@ -287,21 +361,24 @@ def run_replay(options: ReplayOptions, *, out: TextIO = sys.stdout) -> int:
     was interrupted. Raises :class:`gyroemu.pipelines.formats.mcap_records.LogError` for bad input and
     ``ValueError`` naming the argument at fault."""
     config = options.session.config()
-    keys, ros = _channels_to_publish(options, out)
+    keys, ros, stamped = _channels_to_publish(options, out)
+    clock_key = _clock_key(options, keys, ros) if options.clock else None
     path, rate, loop, pacing = options.path, options.rate, options.loop, options.pacing
 
     print(f"replay: {path}: {len(keys)} topics at rate x{rate:g}{', looping' if loop else ''}", file=out)
     for topic, key in keys.items():
         print(f"  {topic} -> {key}", file=out)
+    if clock_key is not None:
+        print(f"  /clock -> {clock_key} ({CLOCK_TYPE}, the log time, {CLOCK_HZ:g} Hz at most)", file=out)
     session = open_session(config)
     reader = None
     with live_session(session) as live:
         try:
             live.node = ros
-            publisher = live.publish(sorted(set(keys.values())), pacing.timing)
+            publisher = live.publish(sorted(set(keys.values()) | ({clock_key} if clock_key else set())), pacing.timing)
             if ros is not None:
                 ros.declare(session, out)
-            reader = ReadAhead(path, keys, rate, loop)
+            reader = ReadAhead(path, keys, rate, loop, stamped=stamped, clock_key=clock_key)
             reader.start()  # fills its queue while we wait for subscribers
             stop = live.stopped
             wait_s = pacing.wait_s

@@ -9,8 +9,10 @@ does not grow with the duration; the target (issue 18) is under 1 GB at every du
 
 With ``--allan-hours H`` it then makes an H-hour static ``navigation_rlg`` run and reads it with
 ``gyroemu allan`` (``allan_of_log``, which reads a log in bounded memory): the fitted quantisation,
-ARW and bias instability against the preset's (each within 10 %), and where the Allan curve has its
-minimum against where the preset's terms put it.
+ARW and bias instability with their 68 % intervals against the preset's (the issue asks for 10 %), and
+the measured Allan deviation over the preset's theoretical curve at every τ from 500 s, with its
+interval, around the τ where the ARW meets the bias-instability floor (``--keep FILE`` keeps the log,
+and reuses it when it exists).
 
     python tests/benchmarks/bench_long_runs.py --durations 600 3600 28800 [--devices ...] [--allan-hours 12]
 
@@ -80,40 +82,52 @@ def long_runs(devices: list[str], durations: list[float], folder: Path) -> None:
             )
 
 
-def allan_run(hours: float, folder: Path) -> None:
+def allan_run(hours: float, folder: Path, keep: Path | None) -> None:
     import numpy as np
 
     from gyroemu.pipelines.jobs.allan import SPEC_UNITS, allan_of_log
     from gyroemu.sensors import load_device
+    from gyroemu.sensors.noise import flicker_bank
 
-    out = folder / f"navigation_rlg_{hours:g}h.mcap"
-    elapsed, peak = measure(simulate_argv("navigation_rlg", "bench_static", hours * 3600, out))
-    print(f"\nnavigation_rlg, bench_static, {hours:g} h: simulate {elapsed:.0f} s, peak {peak:.3f} GB")
+    out = keep if keep is not None and keep.is_file() else (keep or folder / f"navigation_rlg_{hours:g}h.mcap")
+    if not out.is_file():
+        elapsed, peak = measure(simulate_argv("navigation_rlg", "bench_static", hours * 3600, out))
+        print(f"\nnavigation_rlg, bench_static, {hours:g} h: simulate {elapsed:.0f} s, peak {peak:.3f} GB")
     started = time.perf_counter()
     report = allan_of_log(out)
     print(f"allan_of_log: {time.perf_counter() - started:.0f} s")
-    out.unlink()
+    if keep is None:
+        out.unlink()
     device = load_device("navigation_rlg")
+    model = device.gyro_errors
+    q = float(device.mechanism.fringe_angle_rad) / np.sqrt(12.0)  # type: ignore[attr-defined]
     spec = {
-        "quantisation": float(device.mechanism.fringe_angle_rad) / np.sqrt(12.0),  # type: ignore[attr-defined]
+        "quantisation": q,
         "arw": float(device.gyro_noise_density[0]),
-        "bias_instability": float(device.gyro_errors.bias_instability[0]),
+        "bias_instability": float(model.bias_instability[0]),
     }
-    print(f"{'term':<18}{'unit':<14}{'x':>10}{'y':>10}{'z':>10}{'preset':>10}  within 10 %")
+    print(f"{'term':<18}{'unit':<13}" + "".join(f"{a + ' (68 % interval)':>30}" for a in "xyz") + f"{'preset':>10}")
     for term, value in spec.items():
         factor, unit = SPEC_UNITS[term]
-        fitted = np.array([getattr(f, term).value for f in report.fits])
-        ok = np.all(np.abs(fitted / value - 1) <= 0.10)
-        print(
-            f"{term:<18}{unit:<14}" + "".join(f"{v * factor:10.4g}" for v in fitted) + f"{value * factor:10.4g}  {ok}"
-        )
-    # Where the preset's terms put the minimum: σ²(τ) = 3Q²/τ² + N²/τ + (0.664 B)² (IEEE 952 Annex C).
-    tau = np.geomspace(1.0, 1e5, 4001)
-    model = 3 * spec["quantisation"] ** 2 / tau**2 + spec["arw"] ** 2 / tau + (0.664 * spec["bias_instability"]) ** 2
-    theory = tau[np.argmin(model)]
-    for axis, fit in zip("xyz", report.fits, strict=True):
-        measured = fit.allan.tau[np.argmin(fit.allan.adev)]
-        print(f"minimum of the Allan curve, {axis}: tau = {measured:.0f} s (theory {theory:.0f} s)")
+        cells = []
+        for fit in report.fits:
+            c = getattr(fit, term)
+            cells.append(f"{c.value * factor:.4g} ({c.low * factor:.3g}–{c.high * factor:.3g})")
+        print(f"{term:<18}{unit:<13}" + "".join(f"{c:>30}" for c in cells) + f"{value * factor:10.4g}")
+    # The preset's Allan curve (IEEE 952 Annex C): 3Q²/τ² + N²/τ + the flicker bank's own variance, which
+    # is flat at (0.664 B)² over its τ range. ARW and the floor cross at τ = (N / 0.664 B)².
+    bank = flicker_bank(spec["bias_instability"], model.bias_instability_tau_range, 1.0 / device.spec.rate_hz)
+    crossing = (spec["arw"] / (0.664 * spec["bias_instability"])) ** 2
+    print(f"ARW meets the bias-instability floor at tau = {crossing:.0f} s; measured / theory (68 % interval):")
+    fit = report.fits[0]
+    taus = fit.allan.tau
+    for i in np.flatnonzero(taus >= 500.0):
+        tau = taus[i]
+        theory = np.sqrt(3 * q**2 / tau**2 + spec["arw"] ** 2 / tau + float(bank.avar(tau)[0]))
+        row = []
+        for f in report.fits:
+            row.append(f"{f.allan.adev[i] / theory:.2f} ({f.allan.low[i] / theory:.2f}–{f.allan.high[i] / theory:.2f})")
+        print(f"  tau {tau:8.0f} s, {int(fit.allan.clusters[i]):4d} clusters: " + "  ".join(row))
 
 
 def main() -> None:
@@ -122,12 +136,13 @@ def main() -> None:
     parser.add_argument("--devices", nargs="+", default=list(SCENARIOS), choices=list(SCENARIOS))
     parser.add_argument("--allan-hours", type=float, default=None)
     parser.add_argument("--folder", type=Path, default=None)
+    parser.add_argument("--keep", type=Path, default=None, help="the long run's MCAP: kept, and reused if it exists")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(dir=args.folder) as tmp:
         if args.durations:
             long_runs(args.devices, args.durations, Path(tmp))
         if args.allan_hours:
-            allan_run(args.allan_hours, Path(tmp))
+            allan_run(args.allan_hours, Path(tmp), args.keep)
 
 
 if __name__ == "__main__":

@@ -362,7 +362,7 @@ def test_failed_write_leaves_nothing(tmp_path, monkeypatch):
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(McapFileWriter, "add_messages", fail)
-    code, _, stderr = run_cli(["import", "broad", str(source), "--out", str(out)])
+    code, _, stderr = run_cli(["import", "broad", str(source), "--out", str(out), "--force"])
     assert code == 2 and f"argument --out: {out}: No space left on device" in stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.mcap", "trial.hdf5"]
     assert out.read_bytes() == b"an older file"

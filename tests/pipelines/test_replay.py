@@ -7,6 +7,7 @@ Every process is killed in a ``finally`` block; ports are picked free. About 30 
 import json
 import os
 import signal
+import struct
 import subprocess
 import sys
 import time
@@ -173,7 +174,11 @@ def test_loop_repeats_with_increasing_deadlines_until_sigterm(procs, listener, t
     seq = [s[2] for s in samples]
     assert seq == list(range(len(seq))) and len(seq) > 2 * 100
     payloads = [m[2] for m in mcap_messages(path, "/sensors/imu_raw")]
-    assert [s[1] for s in samples] == [payloads[k % 100] for k in range(len(seq))]
+    assert [s[1] for s in samples[:100]] == payloads  # pass 0: the recorded bytes
+    # Later passes: the recorded bytes but the header stamp (bytes 4-11), moved forward.
+    assert [s[1][:4] + s[1][12:] for s in samples] == [
+        payloads[k % 100][:4] + payloads[k % 100][12:] for k in range(len(seq))
+    ]
     stamps = np.array([s[3] for s in samples[:200]])
     gap = (stamps[100] - stamps[99]) * 1e-9  # from the end of pass 0 to the start of pass 1
     interval = (log_time[-1] - log_time[0]) / 99 / 2 * 1e-9
@@ -265,3 +270,126 @@ def test_iter_mcap_batches_in_log_time_order(tmp_path, gyroemu_mcap):
     got = flat(path)
     assert [g[1] for g in got] == sorted(times.tolist())
     assert sorted(g[2] for g in got) == sorted(m[2] for m in mcap_messages(path))
+
+
+def _short_gyroemu_log(path, n=50):
+    """A gyroemu log of ``n`` samples at 100 Hz (with /mag); returns the /imu header stamps, ns."""
+    from gyroemu.pipelines.formats.mcap_log import McapLogWriter
+    from gyroemu.sensors.samples import ImuSamples
+
+    rng = np.random.default_rng(5)
+    samples = ImuSamples(
+        t=100.0 + np.arange(n) * 0.01,
+        gyro=rng.normal(size=(n, 3)),
+        accel=rng.normal(size=(n, 3)),
+        mag=rng.normal(size=(n, 3)),
+        device="imu0",
+    )
+    with McapLogWriter(path) as log:
+        log.write(samples)
+    return np.round(samples.t * 1e9).astype(np.int64)
+
+
+def test_loop_moves_header_stamps_forward_each_pass(tmp_path):
+    """--loop (the reader thread alone): pass 0 is the recorded bytes; pass k's header stamps are pass 0's
+    plus k (span + one interval), so they keep increasing; only the stamp's 8 bytes differ."""
+    from gyroemu.pipelines.formats.messages import IMU, MAGNETIC_FIELD
+    from gyroemu.pipelines.transport.replay import ReadAhead
+
+    path = tmp_path / "short.mcap"
+    stamps = _short_gyroemu_log(path, 20)
+    recorded = {t: [m[2] for m in mcap_messages(path, t)] for t in ("/imu", "/mag")}
+    reader = ReadAhead(path, {"/imu": "k/imu", "/mag": "k/mag"}, 1.0, True, depth=4, stamped={"/imu", "/mag"})
+    reader.start()
+    got = {"k/imu": [], "k/mag": []}
+    deadlines = []
+    try:
+        for batch in reader.batches():
+            for deadline, key, payload in batch:
+                got[key].append(payload)
+                deadlines.append(deadline)
+            if len(got["k/imu"]) >= 60:
+                break
+    finally:
+        reader.stopping.set()
+    imu = got["k/imu"][:60]
+    assert imu[:20] == recorded["/imu"]  # pass 0 unchanged
+    shift = (stamps[-1] - stamps[0]) + 10_000_000  # span + one interval
+    t = IMU.decode(imu).stamp_ns
+    assert np.all(np.diff(t) > 0)
+    assert np.array_equal(t[20:40], t[:20] + shift) and np.array_equal(t[40:60], t[20:40] + shift)
+    assert all(a[:4] + a[12:] == b[:4] + b[12:] for a, b in zip(imu[20:], recorded["/imu"] * 2))
+    m = MAGNETIC_FIELD.decode(got["k/mag"][:40]).stamp_ns
+    assert np.array_equal(m[20:40], m[:20] + shift)
+    assert np.all(np.diff(deadlines) >= 0)
+
+
+@pytest.mark.slow
+def test_loop_stamps_increase_at_the_subscriber(procs, listener, tmp_path):
+    """``gyroemu replay --loop --clock`` of a gyroemu log: the subscriber sees header stamps that increase
+    across the pass boundary, pass 2's = pass 1's + span + one interval, and a /clock that only moves
+    forward, from the first stamp."""
+    from gyroemu.pipelines.formats.messages import IMU
+
+    path = tmp_path / "short.mcap"
+    stamps = _short_gyroemu_log(path, 50)  # 0.5 s
+    procs.start(
+        "replay",
+        "replay",
+        str(path),
+        "--loop",
+        "--clock",
+        "--rate",
+        "4",
+        "--topics",
+        "/imu",
+        "--connect",
+        listener.endpoint,
+    )
+    procs.wait_for("replay", "publishing")
+    deadline = time.monotonic() + 20
+    while len(listener.drain()) < 120 and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert procs.stop("replay", signal.SIGTERM) == 0, procs.log("replay")
+    received = listener.drain()
+    samples = [s for s in received if s[0] == "gyroemu/imu0/imu"]
+    clock = [struct.unpack("<iI", s[1][4:]) for s in received if s[0] == "gyroemu/imu0/clock"]
+    assert len(samples) >= 100, procs.log("replay")
+    clock_ns = np.array([sec * 10**9 + nanosec for sec, nanosec in clock])
+    assert len(clock_ns) > 4 and clock_ns[0] == stamps[0] and np.all(np.diff(clock_ns) > 0)
+    t = IMU.decode([s[1] for s in samples]).stamp_ns
+    assert np.all(np.diff(t) > 0)
+    assert np.array_equal(t[:50], stamps)
+    assert np.array_equal(t[50:100], stamps + (stamps[-1] - stamps[0]) + 10_000_000)
+
+
+def test_clock_messages_and_keys(tmp_path):
+    """--clock: a rosgraph_msgs/Clock of the shifted log time with the first message of each step of at
+    least rate / CLOCK_HZ; its key gyroemu/<device>/clock, or in ROS 2 mode /clock's rmw_zenoh key."""
+    from gyroemu.pipelines.formats.ros2_keys import Ros2Keys
+    from gyroemu.pipelines.transport.replay import CLOCK_HZ, ReadAhead, ReplayOptions, _clock_key
+
+    path = tmp_path / "short.mcap"
+    stamps = _short_gyroemu_log(path, 20)  # 100 Hz: a clock every 3rd sample at CLOCK_HZ 40
+    reader = ReadAhead(path, {"/imu": "k/imu"}, 1.0, True, depth=4, clock_key="k/clock")
+    reader.start()
+    clock = []
+    try:
+        for batch in reader.batches():
+            clock += [struct.unpack("<iI", p[4:]) for _, key, p in batch if key == "k/clock"]
+            if len(clock) >= 16:
+                break
+    finally:
+        reader.stopping.set()
+    ns = np.array([s * 10**9 + n for s, n in clock])
+    assert ns[0] == stamps[0] and np.all(np.diff(ns) >= 1e9 / CLOCK_HZ) and np.all(np.diff(ns) <= 3e7)
+    shift = (stamps[-1] - stamps[0]) + 10_000_000  # each pass's: span + one interval
+    assert set(ns.tolist()) <= set(np.concatenate([stamps, stamps + shift, stamps + 2 * shift]).tolist())
+    assert ns[-1] >= stamps[0] + 2 * shift  # into pass 2
+    options = ReplayOptions(path=path, clock=True)
+    assert _clock_key(options, {"/imu": "gyroemu/left/imu"}, None) == "gyroemu/left/clock"
+    assert _clock_key(options, {"/a": "gyroemu/x/a", "/b": "gyroemu/y/b"}, None) == "gyroemu/imu0/clock"
+    key = _clock_key(options, {}, Ros2Keys(0, "replay"))
+    rosbags = pytest.importorskip("rosbags.typesys")
+    hash_ = rosbags.get_typestore(rosbags.Stores.ROS2_JAZZY).hash_rihs01("rosgraph_msgs/msg/Clock")
+    assert key.startswith("0/clock/rosgraph_msgs::msg::dds_::Clock_/") and key.endswith(hash_)

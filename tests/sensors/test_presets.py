@@ -1,5 +1,6 @@
 """Every built-in device loads, measures, and is reproducible; presets list and Allan commands work."""
 
+import json
 import math
 import subprocess
 import sys
@@ -173,11 +174,13 @@ def test_allan_command_fits_a_log_and_draws_the_plot(tmp_path):
         "simulate", "--scenario", "bench_static", "--device", str(device), "--duration", "600", "--out", str(log)
     )
     assert result.returncode == 0, result.stderr
-    result = gyroemu("allan", str(log), "--out", str(tmp_path / "allan.png"))
+    result = gyroemu("allan", str(log), "--out", str(tmp_path / "allan.png"), "--json")
     assert result.returncode == 0, result.stderr
-    arw = [float(v) for v in next(line for line in result.stdout.splitlines() if line.startswith("arw")).split()[2:6]]
+    fitted = json.loads(result.stdout)["gyro"]["arw"]
+    arw = [fitted[axis]["value"] for axis in "xyz"]
     # 30 000 samples: the ARW read off the curve is within a few percent of 2 deg/sqrt(h); allow 15 %.
-    assert all(abs(v / 2.0 - 1) < 0.15 for v in arw[:3]) and arw[3] == pytest.approx(2.0)
+    assert fitted["unit"] == "deg/sqrt(h)" and all(fitted[axis]["resolved"] for axis in "xyz")
+    assert all(abs(v / 2.0 - 1) < 0.15 for v in arw) and fitted["spec"] == pytest.approx(2.0)
     assert (tmp_path / "allan.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     bad = gyroemu("allan", str(device))
     assert bad.returncode == 2 and str(device) in bad.stderr

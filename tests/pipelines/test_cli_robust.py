@@ -1,0 +1,299 @@
+"""The command line holds up: bad numbers, outputs that would overwrite or not fit, and interruptions.
+
+The contract: exit 2 on bad usage or bad input, before any work, with a message naming the argument;
+130 or 143 when stopped by SIGINT or SIGTERM, with the partial file removed and no traceback; no
+command overwrites an existing file without ``--force``.
+"""
+
+import contextlib
+import io
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+from live_processes import free_port
+
+from gyroemu.pipelines import cli
+from gyroemu.pipelines.jobs.simulate import SimulateError, SimulateOptions, check_options
+
+
+def run_cli(argv):
+    """``gyroemu ARGS`` in this process: (exit status, stdout, stderr)."""
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        try:
+            code = cli.main(argv)
+        except SystemExit as e:
+            code = e.code
+    return code, stdout.getvalue(), stderr.getvalue()
+
+
+def gyroemu(*args, **kwargs):
+    return subprocess.run([sys.executable, "-m", "gyroemu", *args], capture_output=True, text=True, **kwargs)
+
+
+# ---------------------------------------------------------------------------------------------------
+# Bad numbers and outputs: exit 2 before any work, the argument named.
+
+
+@pytest.mark.parametrize(
+    "options, named",
+    [
+        (["--duration", "1e12"], "argument --duration: 1e+12 s is more than the limit"),
+        (["--duration", "inf"], "argument --duration: must be a finite number"),
+        (["--duration", "nan"], "argument --duration: must be a finite number"),
+        (["--duration", "-3"], "argument --duration: must be positive"),
+        (["--duration", "0"], "argument --duration: must be positive"),
+        (["--duration", "ten"], "argument --duration: expected a number"),
+        (["--rate", "1e9"], "argument --rate: 1e+09 Hz is more than the limit"),
+        (["--rate", "inf"], "argument --rate: must be a finite number"),
+        (["--seed", "-1"], "argument --seed: must be an integer from 0 to 2**128 - 1"),
+        (["--seed", str(2**128)], "argument --seed: must be an integer from 0 to 2**128 - 1"),
+        (["--seed", "1.5"], "argument --seed: invalid int value"),
+    ],
+)
+def test_simulate_refuses_bad_numbers(tmp_path, options, named):
+    code, _, stderr = run_cli(["simulate", "--scenario", "heavy_top", *options, "--out", str(tmp_path / "t.npz")])
+    assert code == 2 and named in stderr, stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("command", ["stream", "bench"])
+@pytest.mark.parametrize(
+    "options, named",
+    [
+        (["--duration", "inf"], "argument --duration: must be a finite number"),
+        (["--duration", "1e12"], "argument --duration: 1e+12 s is more than the limit"),
+        (["--seed", "-1"], "argument --seed: must be an integer from 0 to 2**128 - 1"),
+    ],
+)
+def test_stream_and_bench_refuse_bad_numbers(tmp_path, command, options, named):
+    argv = [command, *options]
+    if command == "stream":
+        argv += ["--scenario", "heavy_top", "--device", "consumer_mems"]
+    else:
+        argv += ["--out", str(tmp_path / "bench")]
+    code, _, stderr = run_cli(argv)
+    assert code == 2 and named in stderr, stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_record_refuses_a_bad_duration(tmp_path):
+    code, _, stderr = run_cli(["record", "--out", str(tmp_path / "r.mcap"), "--duration", "nan"])
+    assert code == 2 and "argument --duration: must be a finite number" in stderr, stderr
+
+
+@pytest.mark.parametrize(
+    "out, named",
+    [
+        ("folder", "argument --out: {tmp}/folder is a folder"),
+        ("folder.npz", "argument --out: {tmp}/folder.npz is a folder"),
+        ("missing/t.npz", "argument --out: {tmp}/missing: no such folder"),
+        ("t.csv", "argument --out: {tmp}/t.csv: write a .mcap (ROS 2) or .npz file"),
+    ],
+)
+def test_simulate_refuses_an_out_it_cannot_write(tmp_path, out, named):
+    (tmp_path / "folder").mkdir()
+    (tmp_path / "folder.npz").mkdir()
+    code, _, stderr = run_cli(["simulate", "--scenario", "heavy_top", "--out", str(tmp_path / out)])
+    assert code == 2 and named.format(tmp=tmp_path) in stderr, stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["folder", "folder.npz"]
+
+
+@pytest.mark.parametrize(
+    "change, named",
+    [
+        ({"duration": float("nan")}, "argument --duration: must be a finite number of s, got nan"),
+        ({"duration": float("inf")}, "argument --duration: must be a finite number of s, got inf"),
+        ({"duration": 1e12}, "argument --duration: 1e+12 s is more than the limit"),
+        ({"duration": -1.0}, "argument --duration: must be positive"),
+        ({"duration": "10"}, "argument --duration: expected a number of s"),
+        ({"rate": 1e9}, "argument --rate: 1e+09 Hz is more than the limit"),
+        ({"rate": 0}, "argument --rate: must be positive"),
+        ({"seed": -1}, "argument --seed: must be an integer from 0 to 2**128 - 1, got -1"),
+        ({"seed": 2**128}, "argument --seed: must be an integer"),
+        ({"seed": 1.0}, "argument --seed: must be an integer"),
+        ({"seed": True}, "argument --seed: must be an integer"),
+    ],
+)
+def test_check_options_refuses_bad_numbers_from_python(tmp_path, change, named):
+    options = SimulateOptions(scenario="heavy_top", out=tmp_path / "t.npz", **change)
+    with pytest.raises(SimulateError) as e:
+        check_options(options)
+    assert named in str(e.value)
+
+
+def test_check_options_accepts_good_numbers(tmp_path):
+    check_options(
+        SimulateOptions(scenario="heavy_top", out=tmp_path / "t.npz", duration=2, rate=500.0, seed=2**128 - 1)
+    )
+
+
+def test_simulate_mcap_larger_than_the_free_disk_is_refused(tmp_path, monkeypatch):
+    free = shutil.disk_usage(tmp_path)
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: free._replace(free=50_000_000))
+    argv = ["simulate", "--scenario", "bench_static", "--device", "consumer_mems", "--duration", "3600"]
+    code, _, stderr = run_cli([*argv, "--out", str(tmp_path / "run.mcap")])
+    assert code == 2, stderr
+    assert "argument --duration: 3600 s needs about" in stderr and "of disk" in stderr
+    assert "50 MB free" in stderr and "shorten --duration" in stderr
+    assert list(tmp_path.iterdir()) == []
+    code, _, stderr = run_cli([*argv[:-1], "10", "--out", str(tmp_path / "run.mcap")])  # 10 s fits in 50 MB
+    assert code == 0, stderr
+
+
+def test_simulate_npz_larger_than_the_memory_is_refused(tmp_path, monkeypatch):
+    sysconf = os.sysconf
+    monkeypatch.setattr(os, "sysconf", lambda name: 1000 if name == "SC_PHYS_PAGES" else sysconf(name))
+    memory = 1000 * sysconf("SC_PAGE_SIZE")
+    code, _, stderr = run_cli(["simulate", "--scenario", "heavy_top", "--out", str(tmp_path / "t.npz")])
+    assert code == 2, stderr
+    assert "argument --duration: 60 s needs about" in stderr and "of memory" in stderr
+    assert f"this machine's {memory / 1e6:.3g} MB" in stderr and "lower --rate" in stderr and ".mcap" in stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------------------------------------------------
+# Other people's files: --force, or exit 2 naming --out and --force.
+
+
+def test_simulate_overwrites_only_with_force(tmp_path):
+    out = tmp_path / "t.npz"
+    out.write_bytes(b"someone's file")
+    argv = ["simulate", "--scenario", "heavy_top", "--duration", "0.05", "--out", str(out)]
+    code, _, stderr = run_cli(argv)
+    assert code == 2 and f"argument --out: {out} exists (use --force to overwrite it)" in stderr, stderr
+    assert out.read_bytes() == b"someone's file"
+    code, _, stderr = run_cli([*argv, "--force"])
+    assert code == 0, stderr
+    assert out.read_bytes()[:2] == b"PK"  # the .npz (a zip) replaced it
+    assert [p.name for p in tmp_path.iterdir()] == ["t.npz"]
+
+
+@pytest.mark.parametrize("command", ["import", "estimate", "record"])
+def test_import_estimate_record_refuse_an_existing_out(tmp_path, command):
+    source = tmp_path / "in.hdf5"
+    source.write_bytes(b"an input")  # refused before any reading: the input's content does not matter
+    out = tmp_path / "out.mcap"
+    out.write_bytes(b"someone's log")
+    argv = {
+        "import": ["import", "broad", str(source), "--out", str(out)],
+        "estimate": ["estimate", str(source), "--out", str(out)],
+        "record": ["record", "--out", str(out), "--duration", "1"],
+    }[command]
+    code, _, stderr = run_cli(argv)
+    assert code == 2, stderr
+    assert f"argument --out: {out}" in stderr and "exists" in stderr and "--force" in stderr, stderr
+    assert out.read_bytes() == b"someone's log" and source.read_bytes() == b"an input"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.hdf5", "out.mcap"]
+
+
+@pytest.mark.parametrize("command", ["import", "record"])
+def test_import_and_record_refuse_a_folder_as_out(tmp_path, command):
+    source = tmp_path / "in.hdf5"
+    source.write_bytes(b"an input")
+    out = tmp_path / "out.mcap"
+    out.mkdir()
+    argv = {
+        "import": ["import", "broad", str(source), "--out", str(out), "--force"],
+        "record": ["record", "--out", str(out), "--duration", "1", "--force"],
+    }[command]
+    code, _, stderr = run_cli(argv)
+    assert code == 2 and f"argument --out: {out}" in stderr and "is a folder" in stderr, stderr
+    assert list(out.iterdir()) == []
+
+
+def test_recorder_that_records_nothing_leaves_no_file(tmp_path):
+    from gyroemu.pipelines.transport.record import Recorder
+
+    recorder = Recorder(tmp_path / "r.mcap")
+    assert not (tmp_path / "r.mcap").exists()  # made with the first channel
+    recorder.close()
+    assert not recorder.written and list(tmp_path.iterdir()) == []
+
+
+def test_record_receiving_nothing_says_so_and_keeps_the_old_file(tmp_path):
+    """With --force over an existing file, nothing received: the file stays as it was."""
+    out = tmp_path / "r.mcap"
+    out.write_bytes(b"an older recording")
+    port = free_port()
+    key = f"gyroemu/robust{os.getpid()}x{port}/**"  # nobody publishes there
+    result = gyroemu(
+        "record", "--out", str(out), "--force", "--duration", "0.5", "--key", key, "--listen", f"tcp/127.0.0.1:{port}",
+        timeout=60,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert f"record: nothing received on {key}: no file written" in result.stdout, result.stdout
+    assert out.read_bytes() == b"an older recording"
+    assert [p.name for p in tmp_path.iterdir()] == ["r.mcap"]
+
+
+def test_bench_out_is_a_folder_and_has_no_force(tmp_path):
+    """bench writes its reports into a folder (each file whole, :mod:`gyroemu.pipelines.formats.atomic`);
+    a file there is refused, and it has no --force."""
+    report = tmp_path / "bench"
+    report.write_text("a file")
+    code, _, stderr = run_cli(["bench", "--out", str(report)])
+    assert code == 2 and f"argument --out: {report} is not a folder" in stderr, stderr
+    assert report.read_text() == "a file"
+    code, stdout, _ = run_cli(["bench", "--help"])
+    assert code == 0 and "--out" in stdout and "--force" not in stdout
+
+
+# ---------------------------------------------------------------------------------------------------
+# SIGTERM in main: an exception, exit 143, the previous handler back.
+
+
+@pytest.mark.skipif(threading.current_thread() is not threading.main_thread(), reason="signals: main thread only")
+def test_sigterm_in_main_exits_143_and_restores_the_handler(monkeypatch):
+    import gyroemu.dynamics
+
+    def terminated():
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)  # the handler raises before this ends
+        raise AssertionError("SIGTERM did not interrupt the command")
+
+    before = signal.getsignal(signal.SIGTERM)
+    monkeypatch.setattr(gyroemu.dynamics, "list_scenarios", terminated)
+    assert run_cli(["scenarios"])[0] == 143
+    assert signal.getsignal(signal.SIGTERM) is before
+
+
+# ---------------------------------------------------------------------------------------------------
+# Interruptions: a real process, signalled once its temporary file exists.
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_simulate_interrupted_leaves_nothing(tmp_path, sig, status):
+    out = tmp_path / "long.mcap"
+    argv = ["simulate", "--scenario", "bench_static", "--device", "consumer_mems", "--duration", "3600"]
+    child = subprocess.Popen(
+        [sys.executable, "-m", "gyroemu", *argv, "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        # an interactive shell's background job ignores SIGINT: this one must not
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while not any(p.stat().st_size for p in tmp_path.glob(".long.mcap.*.tmp")):  # blocks being written
+            assert child.poll() is None, child.communicate()
+            assert time.monotonic() < deadline, "no data in a temporary file after 60 s"
+            time.sleep(0.05)
+        child.send_signal(sig)
+        stdout, stderr = child.communicate(timeout=60)
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.wait()
+    assert child.returncode == status, stderr
+    assert "Traceback" not in stderr, stderr
+    assert list(tmp_path.iterdir()) == []  # no .tmp left, no output
+    assert str(out) not in stdout

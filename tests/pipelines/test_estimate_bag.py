@@ -1,0 +1,149 @@
+"""``gyroemu estimate`` on someone else's bag: every input message survives, the estimate is added."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from gyroemu.pipelines.cli import main
+from gyroemu.pipelines.formats.messages import IMU
+
+N = 60
+
+
+def _write_bag(folder):
+    """A rosbag2 MCAP bag (rosbags' writer): /imu_a (a_link) and /imu_b (b_link) at 100 Hz with log times
+    1 ms after their stamps, and a /tf every 5th sample. Returns the file."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    t = store.types
+    rng = np.random.default_rng(3)
+    stamps = 1_700_000_000 * 10**9 + np.arange(N) * 10_000_000
+    with Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP) as bag:
+        conns = {
+            name: bag.add_connection(name, "sensor_msgs/msg/Imu", typestore=store) for name in ("/imu_a", "/imu_b")
+        }
+        tf = bag.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=store)
+        for k in range(N):
+            sec, nanosec = divmod(int(stamps[k]), 10**9)
+            stamp = t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
+            for name, frame in (("/imu_a", "a_link"), ("/imu_b", "b_link")):
+                msg = t["sensor_msgs/msg/Imu"](
+                    header=t["std_msgs/msg/Header"](stamp=stamp, frame_id=frame),
+                    orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+                    orientation_covariance=np.zeros(9),
+                    angular_velocity=t["geometry_msgs/msg/Vector3"](*rng.normal(0, 0.01, 3)),
+                    angular_velocity_covariance=np.zeros(9),
+                    linear_acceleration=t["geometry_msgs/msg/Vector3"](*(rng.normal(0, 0.05, 3) + [0, 0, 9.81])),
+                    linear_acceleration_covariance=np.zeros(9),
+                )
+                bag.write(conns[name], int(stamps[k]) + 1_000_000, store.serialize_cdr(msg, "sensor_msgs/msg/Imu"))
+            if k % 5 == 0:
+                transform = t["geometry_msgs/msg/TransformStamped"](
+                    header=t["std_msgs/msg/Header"](stamp=stamp, frame_id="odom"),
+                    child_frame_id="base_link",
+                    transform=t["geometry_msgs/msg/Transform"](
+                        translation=t["geometry_msgs/msg/Vector3"](x=0.1 * k, y=0.0, z=0.0),
+                        rotation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+                    ),
+                )
+                msg = t["tf2_msgs/msg/TFMessage"](transforms=[transform])
+                bag.write(tf, int(stamps[k]) + 2_000_000, store.serialize_cdr(msg, "tf2_msgs/msg/TFMessage"))
+    return next(folder.glob("*.mcap"))
+
+
+def _read(path):
+    """``{topic: [(data, log_time, publish_time)]}`` and ``{topic: (schema name, encoding, data)}``."""
+    messages, schemas = {}, {}
+    with open(path, "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            messages.setdefault(channel.topic, []).append((bytes(message.data), message.log_time, message.publish_time))
+            schemas[channel.topic] = (schema.name, schema.encoding, bytes(schema.data), dict(channel.metadata))
+    return messages, schemas
+
+
+@pytest.fixture(scope="module")
+def bag(tmp_path_factory):
+    return _write_bag(tmp_path_factory.mktemp("bag") / "bag")
+
+
+def test_estimate_keeps_every_message_of_a_foreign_bag(bag, tmp_path, capsys):
+    out = tmp_path / "out.mcap"
+    assert main(["estimate", str(bag), "--out", str(out), "--topic", "/imu_b", "--filter", "madgwick"]) == 0
+    before, schemas_before = _read(bag)
+    after, schemas_after = _read(out)
+    assert set(after) == set(before) | {"/estimate/imu"}
+    for topic, messages in before.items():
+        assert after[topic] == messages, topic  # bytes, log and publish times, order
+        assert schemas_after[topic] == schemas_before[topic], topic  # schema and channel metadata
+    estimates = after["/estimate/imu"]
+    imu_b = before["/imu_b"]
+    assert len(estimates) == len(imu_b) == N
+    got, want = IMU.decode([m[0] for m in estimates]), IMU.decode([m[0] for m in imu_b])
+    assert np.array_equal(got.stamp_ns, want.stamp_ns)
+    assert set(got.frame_id.tolist()) == {"b_link"}
+    assert [m[1:] for m in estimates] == [m[1:] for m in imu_b]  # stamped like the IMU messages
+    assert np.allclose(np.linalg.norm(got["orientation"], axis=1), 1.0)
+    assert schemas_after["/estimate/imu"][0] == "sensor_msgs/msg/Imu"
+    assert "/imu_b -> /estimate/imu: 60 estimates" in capsys.readouterr().out
+
+
+def test_estimate_topic_out_and_several_imu_topics(bag, tmp_path, capsys):
+    out = tmp_path / "out.mcap"
+    with pytest.raises(SystemExit) as exit_:
+        main(["estimate", str(bag), "--out", str(out), "--filter", "madgwick"])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert "--topic" in err and "/imu_a" in err and "/imu_b" in err
+    assert not out.exists()
+    args = ["estimate", str(bag), "--out", str(out), "--topic", "imu_a", "--topic-out", "/a/attitude"]
+    assert main([*args, "--filter", "madgwick"]) == 0
+    after, _ = _read(out)
+    assert "/estimate/imu" not in after
+    got = IMU.decode([m[0] for m in after["/a/attitude"]])
+    assert set(got.frame_id.tolist()) == {"a_link"} and len(got) == N
+    with pytest.raises(SystemExit) as exit_:
+        main(["estimate", str(bag), "--out", str(tmp_path / "x.mcap"), "--topic", "/nope"])
+    assert exit_.value.code == 2
+    assert "/imu_a" in capsys.readouterr().err
+
+
+def _samples(name, n=200, seed=0):
+    from gyroemu.sensors.samples import ImuSamples
+
+    rng = np.random.default_rng(seed)
+    return ImuSamples(
+        t=10.0 + np.arange(n) * 0.01,
+        gyro=rng.normal(0, 0.01, (n, 3)),
+        accel=rng.normal(0, 0.05, (n, 3)) + [0, 0, 9.81],
+        mag=np.tile([2e-5, 0.0, -4e-5], (n, 1)),
+        device=name,
+    )
+
+
+def test_estimate_of_a_gyroemu_log_of_two_devices(tmp_path):
+    """Every device filtered, each estimate on /<device>/estimate/imu in base_link; the rest unchanged."""
+    from gyroemu.pipelines.formats.mcap_log import McapLogWriter, read_mcap
+    from gyroemu.pipelines.jobs.estimate import estimate_log
+
+    source = tmp_path / "two.mcap"
+    with McapLogWriter(source) as writer:
+        writer.write(_samples("left"), _samples("right", seed=1))
+    summary = estimate_log(source, tmp_path / "out.mcap", filter_name="madgwick")
+    assert summary.topics == [("/left/imu", "/left/estimate/imu", 200), ("/right/imu", "/right/estimate/imu", 200)]
+    before, _ = _read(source)
+    after, _ = _read(tmp_path / "out.mcap")
+    assert {t: m for t, m in after.items() if "estimate" not in t} == before
+    log = read_mcap(tmp_path / "out.mcap")
+    for name in ("left", "right"):
+        device = log.devices[name]
+        assert device.topics["estimate/imu"] == f"/{name}/estimate/imu" and len(device.estimate) == 200
+    got = IMU.decode([m[0] for m in after["/left/estimate/imu"]])
+    assert set(got.frame_id.tolist()) == {"base_link"}
+    # Run again on the output: the estimates are replaced, not doubled.
+    estimate_log(tmp_path / "out.mcap", tmp_path / "again.mcap", filter_name="madgwick")
+    again, _ = _read(tmp_path / "again.mcap")
+    assert set(again) == set(after) and len(again["/left/estimate/imu"]) == 200
