@@ -108,6 +108,7 @@ __all__ = [
     "McapLogWriter",
     "write_mcap",
     "read_mcap",
+    "no_imu_error",
     "truth_series",
     "truth_pose",
 ]
@@ -594,6 +595,20 @@ def _match(reference_ns: np.ndarray, stamp_ns: np.ndarray) -> tuple[np.ndarray, 
     return i, order[position[i]]
 
 
+def no_imu_error(scan: McapScan, path: str | Path) -> LogError:
+    """The error for a scanned file that holds no IMU messages: what it holds instead, and where it
+    was cut off when truncated."""
+    state = (
+        f"; truncated at byte {scan.truncated_at}, {scan.message_count} messages recovered"
+        if scan.truncated_at is not None
+        else ""
+    )
+    return LogError(
+        f"holds no sensor_msgs/msg/Imu messages ({len(scan.channels)} channels, {scan.message_count} messages{state})",
+        file=path,
+    )
+
+
 def read_mcap(path: str | os.PathLike[str]) -> McapLog:
     """Read a ``ros2`` MCAP log: every ``sensor_msgs/msg/Imu`` channel becomes a device's samples.
 
@@ -634,16 +649,7 @@ def read_mcap(path: str | os.PathLike[str]) -> McapLog:
     metadata = [dict(m.metadata) for m in scan.metadata if m.name == "gyroemu"]
     devices = _devices(path, decoded, metadata, skipped)
     if not devices:
-        state = (
-            f"; truncated at byte {scan.truncated_at}, {scan.message_count} messages recovered"
-            if scan.truncated_at is not None
-            else ""
-        )
-        raise LogError(
-            f"holds no sensor_msgs/msg/Imu messages ({len(scan.channels)} channels, "
-            f"{scan.message_count} messages{state})",
-            file=path,
-        )
+        raise no_imu_error(scan, path)
     return McapLog(
         path=path,
         devices=devices,

@@ -669,7 +669,7 @@ def _mcap_series(log: Path) -> tuple[_GyroSeries, float, str | None, _TruthStats
     a whole-file sort would order it) is refused.
     """
     from gyroemu.pipelines.formats.channels import ESTIMATE_ROLE, IMU_ROLE, TRUTH_ROLE, role_accepts, split_topic
-    from gyroemu.pipelines.formats.mcap_log import LogWarning
+    from gyroemu.pipelines.formats.mcap_log import LogWarning, no_imu_error
     from gyroemu.pipelines.formats.mcap_records import LogError, McapScan
     from gyroemu.pipelines.formats.messages import IMU
 
@@ -760,16 +760,7 @@ def _mcap_series(log: Path) -> tuple[_GyroSeries, float, str | None, _TruthStats
         return records.get(key) or (metadata[0] if key == "" and len(metadata) == 1 else None)
 
     if not devices:
-        state = (
-            f"; truncated at byte {scan.truncated_at}, {scan.message_count} messages recovered"
-            if scan.truncated_at is not None
-            else ""
-        )
-        raise LogError(
-            f"holds no sensor_msgs/msg/Imu messages ({len(scan.channels)} channels, "
-            f"{scan.message_count} messages{state})",
-            file=log,
-        )
+        raise no_imu_error(scan, log)
     if len(devices) != 1:
         names = [(meta(c) or {}).get("device_name") or (keys[c][0].strip("/") or "imu0") for c in devices]
         raise ValueError(f"{log}: {len(devices)} devices ({', '.join(names)}); choose one from .devices")

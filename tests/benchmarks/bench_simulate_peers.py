@@ -30,11 +30,11 @@ import os
 import subprocess
 import sys
 import tempfile
-import time
 import tomllib
 from pathlib import Path
 
 import numpy as np
+from timing import median_time  # (tests/benchmarks is the script folder)
 
 from gyroemu.dynamics import load_scenario
 from gyroemu.sensors import Device, device_from_dict
@@ -70,17 +70,6 @@ def toml_text(data: dict) -> str:
     import tomli_w
 
     return tomli_w.dumps(data)
-
-
-def median_time(run, repeats: int) -> float:
-    """Median wall time (s) of ``repeats`` calls of ``run()``, after one warm-up call."""
-    run()
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        run()
-        times.append(time.perf_counter() - start)
-    return float(np.median(times))
 
 
 def bench_rate(rate: float, samples: int, repeats: int, folder: Path) -> dict[str, float]:
