@@ -8,6 +8,7 @@ SIGINT ends a command with status 130, SIGTERM with 143, after its clean-up (a p
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import signal
@@ -37,6 +38,10 @@ def _cmd_scenarios(args) -> int:
     from gyroemu.dynamics import list_scenarios
 
     scenarios = list_scenarios()
+    if args.json:
+        rows = [{"name": s.name, "kind": s.kind, "description": s.description} for s in scenarios]
+        print(json.dumps(rows, indent=2))
+        return 0
     width = max(len(s.name) for s in scenarios)
     kwidth = max(len(s.kind) for s in scenarios)
     for s in scenarios:
@@ -75,35 +80,10 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _cmd_info(args) -> int:
-    from gyroemu.pipelines.formats.mcap_log import read_mcap
+    from gyroemu.pipelines.jobs.info import log_info
 
-    path = Path(args.log)
-    log = read_mcap(path)
-    size = path.stat().st_size
-    state = "TRUNCATED: only complete chunks were recovered" if log.truncated else "complete (summary and indexes)"
-    print(f"{path}: MCAP, profile '{log.profile}', {size / 1e6:.3g} MB, {log.message_count} messages, {state}")
-    for name, dev in log.devices.items():
-        t = dev.samples.t
-        span = float(t[-1] - t[0]) if len(t) > 1 else 0.0
-        rate = (len(t) - 1) / span if span > 0 else float("nan")
-        print(f"  device '{name}': {len(t)} samples over {span:.6g} s ({rate:.6g} Hz)")
-        for role, topic in dev.topics.items():
-            print(f"    {topic:<28} {role}")
-        if dev.metadata:
-            seed = dev.metadata.get("seed", "?")
-            print(f"    gyroemu {dev.metadata.get('version', '?')}" + (f", seed {seed}" if seed else ""))
-            if dev.metadata.get("source"):
-                print(f"    imported from {dev.metadata['source']} ({dev.metadata.get('source_format', '?')})")
-                if dev.metadata.get("citation"):
-                    licence = f" ({dev.metadata['license']})" if dev.metadata.get("license") else ""
-                    print(f"    cite: {dev.metadata['citation']}{licence}")
-            if args.configs:
-                for key in ("scenario", "device"):
-                    if dev.metadata.get(key):
-                        print(f"    --- {key} ---")
-                        print("\n".join("    " + line for line in dev.metadata[key].splitlines()))
-    for topic, why in log.skipped.items():
-        print(f"  skipped {topic}: {why}")
+    info = log_info(Path(args.log))
+    print(json.dumps(info.to_dict(configs=args.configs), indent=2) if args.json else info.text(configs=args.configs))
     return 0
 
 
@@ -158,6 +138,23 @@ def _cmd_estimate(args) -> int:
     except ValueError as e:  # a filter refusing the data (e.g. stamps): name the file
         raise UsageError(f"{source}: {e}") from None
     elapsed = time.perf_counter() - started
+    if args.json:
+        document = {
+            "input": str(source),
+            "out": str(out),
+            "elapsed_s": elapsed,
+            "devices": [
+                {"name": name, "samples": n, "filter": flt, "mode": "9D" if nine else "6D"}
+                for name, n, flt, nine in summary.devices
+            ],
+            "topics": [
+                {"topic": topic, "topic_out": topic_out, "estimates": count}
+                for topic, topic_out, count in summary.topics
+            ],
+        }
+        print(json.dumps(document, indent=2))
+        print(f"input copied with its estimate in {elapsed:.2f} s -> {out}", file=sys.stderr)
+        return 0
     for name, n, flt, nine in summary.devices:
         print(f"{name}: {n} samples, {flt} ({'9D' if nine else '6D'})")
     for topic, topic_out, count in summary.topics:
@@ -172,6 +169,20 @@ def _cmd_presets(args) -> int:
     from gyroemu.sensors import list_devices
 
     devices = list_devices()
+    if args.json:
+        document = [
+            {
+                "name": d.name,
+                "kind": d.kind,
+                "rate_hz": float(d.spec.rate_hz),
+                "arw_deg_sqrt_h": float(np.degrees(d.gyro_noise_density.max()) * 60),
+                "bias_instability_deg_h": float(np.degrees(d.gyro_errors.bias_instability.max()) * 3600),
+                "resembles": d.spec.resembles,
+            }
+            for d in devices
+        ]
+        print(json.dumps(document, indent=2))
+        return 0
     rows = [("name", "gyro kind", "rate Hz", "ARW deg/sqrt(h)", "bias inst. deg/h", "resembles")]
     for d in devices:
         arw = np.degrees(d.gyro_noise_density.max()) * 60
@@ -501,6 +512,13 @@ def _cmd_router(args: argparse.Namespace) -> int:
         raise _argument_error(e, "--listen") from None
 
 
+def _cmd_completion(args: argparse.Namespace) -> int:
+    from gyroemu.pipelines.completion import completion_script
+
+    print(completion_script(build_parser(), args.shell), end="")
+    return 0
+
+
 def _add_zenoh_arguments(p, modes=True) -> None:
     p.add_argument(
         "--connect",
@@ -588,6 +606,9 @@ class _VersionAction(argparse.Action):
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="gyroemu", description="Gyroscope and IMU emulator.")
     parser.add_argument("--version", action=_VersionAction, help="print gyroemu's version and exit")
+    loudness = parser.add_mutually_exclusive_group()
+    loudness.add_argument("-q", "--quiet", action="store_true", help="print errors only, no warnings")
+    loudness.add_argument("-v", "--verbose", action="store_true", help="also print info and debug messages")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser("demo", help="run the main job on built-in defaults and print a summary")
@@ -605,6 +626,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_demo)
 
     p = sub.add_parser("scenarios", help="list the built-in scenarios, one line each")
+    p.add_argument("--json", action="store_true", help="print the list as JSON")
     p.set_defaults(func=_cmd_scenarios)
 
     p = sub.add_parser("simulate", help="simulate a scenario's truth and write it to a file")
@@ -617,9 +639,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     p.set_defaults(func=_cmd_simulate)
 
-    p = sub.add_parser("info", help="summarise an MCAP log: devices, topics, counts, rates, configs")
+    p = sub.add_parser(
+        "info",
+        help="summarise an MCAP log: devices, topics, counts, rates, gaps, configs",
+        description="Summarise an MCAP log: its devices, and per topic the message count, first and last "
+        "log time, mean rate (count - 1) / span and gaps (intervals longer than 1.5 times the median).",
+    )
     p.add_argument("log", metavar="LOG", help="an MCAP file")
     p.add_argument("--configs", action="store_true", help="also print the embedded scenario and device configs")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=_cmd_info)
 
     p = sub.add_parser(
@@ -744,9 +772,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--topic", default=None, metavar="TOPIC", help="the sensor_msgs/msg/Imu topic to filter (needed when several)"
     )
     p.add_argument("--topic-out", default=None, metavar="TOPIC", help="topic of the estimate (default: /estimate/imu)")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON (the closing note on stderr)")
     p.set_defaults(func=_cmd_estimate)
 
     p = sub.add_parser("presets", help="list the built-in devices as a table")
+    p.add_argument("--json", action="store_true", help="print the list as JSON")
     p.set_defaults(func=_cmd_presets)
 
     p = sub.add_parser("allan", help="fit the noise terms of a static IMU log and draw its Allan plot")
@@ -886,6 +916,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--config", default=None, metavar="FILE.json5", help="a zenoh JSON5 config file")
     p.set_defaults(func=_cmd_router)
+
+    p = sub.add_parser(
+        "completion",
+        help="print a shell completion script (bash or zsh)",
+        description="Print a completion script for bash or zsh, generated from gyroemu's arguments.",
+        epilog="bash: gyroemu completion bash > ~/.local/share/bash-completion/completions/gyroemu; "
+        "zsh: gyroemu completion zsh > ~/.zfunc/_gyroemu (a folder in $fpath), or source <(gyroemu completion zsh)",
+    )
+    p.add_argument("shell", choices=("bash", "zsh"), help="the shell")
+    p.set_defaults(func=_cmd_completion)
     return parser
 
 
@@ -919,7 +959,15 @@ def main(argv: list[str] | None = None) -> int:
     int
         0 on success; 2 for bad usage or bad input (the message names the file, key or argument);
         130 when stopped by SIGINT, 143 by SIGTERM (the partial output removed, no traceback).
+
+    Notes
+    -----
+    While the command runs, warnings and the ``gyroemu`` loggers print one line each on stderr,
+    ``gyroemu: warning: <message>`` (:func:`gyroemu.pipelines.log_setup.cli_logging`); the global
+    options ``-q`` (errors only) and ``-v`` (info and debug too) set the level.
     """
+    from gyroemu.pipelines.log_setup import cli_logging, verbosity_level
+
     parser = build_parser()
     args = parser.parse_args(argv)
     # SIGTERM's default action ends the process without any clean-up: for the command it raises
@@ -930,7 +978,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     previous = signal.signal(signal.SIGTERM, _raise_terminated) if handling else None
     try:
-        return args.func(args)
+        with cli_logging(verbosity_level(quiet=args.quiet, verbose=args.verbose)):
+            return args.func(args)
     except UsageError as e:
         parser.exit(2, f"gyroemu {args.command}: error: {e}\n")
     except KeyboardInterrupt:

@@ -7,9 +7,11 @@
    the consumer MEMS gyro cannot, and the demo says by how much.
 4. Live: a recorder process starts, this process streams the consumer MEMS on the smooth manoeuvre
    over zenoh (peer mode, the default session) paced to its clock while a live MEKF on a session of
-   its own filters the stream and publishes its estimate; the recorder writes it all to an MCAP log.
+   its own filters the stream and publishes its estimate; the recorder writes it all to an MCAP log,
+   with the device's config, which the stream announces on ``gyroemu/imu0/config``.
 5. Benchmark: every available filter over the recorded log against its truth: the table, the error
-   plot, and where the files are.
+   plot, and where the files are. The log carries the device's config, so the filters start from its
+   noise figures (as on a simulated log) and the MEKF ranks as in the README's benchmarks.
 
 The demo is an orchestrator: unlike the jobs, which never import one another, it calls them (the
 stream, :func:`gyroemu.pipelines.transport.stream.run_stream`, in this process; the recorder as a ``gyroemu

@@ -23,6 +23,16 @@ indexes, the footer. The file is created when the first recorded key arrives: a 
 receives nothing says so and leaves no file (an existing file given with ``--force`` stays as it was),
 and an existing file is replaced only with ``--force`` (:attr:`RecordOptions.force`).
 
+Each device's record also holds its resolved config (``device``, ``seed``, ``scenario``: what
+``gyroemu stream`` announces on ``gyroemu/<device>/config``,
+:class:`~gyroemu.pipelines.transport.zenoh_io.ConfigAnnouncer`), so ``read_mcap(...).device``, ``gyroemu
+estimate`` and ``gyroemu bench --log`` start from the device's noise. When the recorder first sees a
+device it ``get``s that key (the stream's queryable answers, however late the recorder started), and a
+config put on the key is taken too (not recorded as a topic). The record is written when the config
+comes, or after :attr:`Recorder.config_grace_s` (1 s) with name and prefix only (a publisher that is no
+gyroemu stream); a config coming later still writes a complete record, which supersedes the first
+(readers take a device's last record). The report says which devices got their config.
+
 From each message's attachment (sequence number, publisher id) the recorder counts, per publisher,
 messages received, sequence gaps (the exact missing numbers), duplicates and late (out-of-order)
 arrivals, and prints the report at the end (``--report FILE.json`` also writes it as JSON).
@@ -48,6 +58,7 @@ import json
 import os
 import sys
 import time
+from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -58,7 +69,11 @@ import numpy as np
 from gyroemu.pipelines.formats.channels import topic_message_type
 from gyroemu.pipelines.formats.messages import MESSAGE_TYPES
 from gyroemu.pipelines.transport.zenoh_io import (
+    CONFIG_TOPIC,
     SessionOptions,
+    config_fields,
+    config_key,
+    connect_warning,
     drain,
     header_stamp_ns,
     key_to_topic,
@@ -177,8 +192,15 @@ class Recorder:
         chunk_size: int = 1 << 18,
         parse_key: Callable[[str], KeyInfo] = gyroemu_key,
         on_new_topic: Callable[[KeyInfo], None] | None = None,
+        on_new_device: Callable[[str], None] | None = None,
+        config_grace_s: float = 1.0,
     ) -> None:
         self.path = Path(path)
+        self._on_new_device = on_new_device
+        self.config_grace_s = config_grace_s
+        self._configs: dict[str, dict[str, str]] = {}  # device -> metadata fields from its config
+        self._seen: dict[str, float] = {}  # device -> when first seen (monotonic), until its record is written
+        self._described: dict[str, bool] = {}  # device -> whether its written record holds its config
         self._chunk_size = chunk_size
         self._file: Any = None  # opened with the first channel (:meth:`_writer`)
         self._mcap: Any = None
@@ -203,8 +225,6 @@ class Recorder:
         return self._mcap
 
     def _channel(self, info: KeyInfo) -> int:
-        from gyroemu.pipelines.formats.mcap_log import device_metadata
-
         key = (info.device, info.topic)
         if key not in self._channels:
             self._writer()
@@ -212,7 +232,14 @@ class Recorder:
             if device not in self._devices:
                 prefix = "" if not self._devices else f"/{device}"
                 self._devices[device] = prefix
-                self._mcap.add_metadata("gyroemu", device_metadata(device, prefix))
+                self._seen[device] = time.monotonic()
+                if device in self._configs:
+                    self._describe(device)
+                elif self._on_new_device is not None:
+                    try:
+                        self._on_new_device(device)
+                    except Exception:  # asking for the config is advisory: never lose data over it
+                        pass
             mtype = MESSAGE_TYPES.get(info.type_name) if info.type_name else topic_message_type(topic)
             # the type hash as rosbag2 (Iron and later) records it
             metadata = {"topic_type_hash": info.type_hash} if info.type_hash else None
@@ -223,6 +250,40 @@ class Recorder:
                 except Exception:  # a graph token is advisory: never lose data over it
                     pass
         return self._channels[key]
+
+    def _describe(self, device: str) -> None:
+        """Write ``device``'s ``gyroemu`` metadata record: its name, prefix and (when known) config."""
+        from gyroemu.pipelines.formats.mcap_log import device_metadata
+
+        fields = self._configs.get(device, {})
+        self._mcap.add_metadata("gyroemu", device_metadata(device, self._devices[device], **fields))
+        self._seen.pop(device, None)
+        self._described[device] = bool(fields)
+
+    def add_config(self, device: str, fields: dict[str, str]) -> None:
+        """Take in ``device``'s config (:func:`gyroemu.pipelines.transport.zenoh_io.config_fields`: ``device``,
+        ``seed``, ``scenario``). Its metadata record is written now if the device has been seen, else
+        when it is; a record already written without a config is superseded by a complete one
+        (readers take a device's last record)."""
+        fields = {k: v for k, v in fields.items() if k in ("device", "seed", "scenario")}
+        if self._configs.get(device) == fields:
+            return
+        self._configs[device] = fields
+        if device in self._devices and not self._described.get(device, False):
+            self._describe(device)
+
+    def _describe_overdue(self, everyone: bool = False) -> None:
+        """Write the records of devices seen ``config_grace_s`` ago (all of them: ``everyone``) whose
+        config has not come: name and prefix only."""
+        now = time.monotonic()
+        for device, seen in list(self._seen.items()):
+            if everyone or now - seen >= self.config_grace_s:
+                self._describe(device)
+
+    @property
+    def configured(self) -> list[str]:
+        """The devices whose metadata record holds their config."""
+        return [d for d, done in self._described.items() if done]
 
     def _key(self, key: str) -> tuple[KeyInfo, int] | None:
         """The parsed key and its channel (cached per key expression); None for keys not recorded."""
@@ -240,7 +301,10 @@ class Recorder:
 
     def add(self, sample: zenoh.Sample) -> None:
         """Take in one received sample (skipped, and counted, when its key or payload is not a recording's)."""
-        found = self._key(str(sample.key_expr))
+        key = str(sample.key_expr)
+        if key.endswith(CONFIG_TOPIC) and self._take_config(key, sample):
+            return
+        found = self._key(key)
         if found is None:
             self.skipped += 1
             return
@@ -271,8 +335,29 @@ class Recorder:
         payloads.append(payload)
         self.messages += 1
 
+    def _take_config(self, key: str, sample: zenoh.Sample) -> bool:
+        """A sample on ``gyroemu/<device>/config``: its config taken in (a bad one is skipped); False for
+        other keys."""
+        try:
+            device, topic = key_to_topic(key)
+        except ValueError:
+            return False
+        if topic != CONFIG_TOPIC:
+            return False
+        try:
+            attachment = sample.attachment
+            fields = config_fields(sample.payload.to_bytes(), None if attachment is None else attachment.to_bytes())
+        except ValueError:
+            self.skipped += 1
+            return True
+        self.add_config(device, fields)
+        return True
+
     def flush(self) -> None:
-        """Hand the pending messages to the MCAP writer (complete chunks reach the disk)."""
+        """Hand the pending messages to the MCAP writer (complete chunks reach the disk), and write the
+        metadata records of devices whose config has not come within ``config_grace_s``."""
+        if self._mcap is not None and self._seen:
+            self._describe_overdue()
         if not self._pending:
             return
         batches = []
@@ -290,6 +375,7 @@ class Recorder:
             return
         try:
             self.flush()
+            self._describe_overdue(everyone=True)
             self._mcap.finish()
             self._file.flush()
         finally:
@@ -297,6 +383,11 @@ class Recorder:
             self._mcap = None
             if self.messages == 0:
                 self.path.unlink(missing_ok=True)
+
+    @property
+    def devices(self) -> list[str]:
+        """The devices recorded, in the order they appeared."""
+        return list(self._devices)
 
     @property
     def written(self) -> bool:
@@ -375,6 +466,16 @@ class RecordOptions:
             object.__setattr__(self, "report_path", Path(self.report_path))
 
 
+def _take_reply(recorder: Recorder, device: str, sample: zenoh.Sample) -> None:
+    """A reply to the recorder's ``get`` of ``device``'s config: into the recorder (a bad one is ignored)."""
+    try:
+        attachment = sample.attachment
+        fields = config_fields(sample.payload.to_bytes(), None if attachment is None else attachment.to_bytes())
+    except ValueError:
+        return
+    recorder.add_config(device, fields)
+
+
 def run_record(options: RecordOptions, *, out: TextIO = sys.stdout) -> int:
     """Record until SIGINT/SIGTERM or ``options.duration`` s (see the module's notes); the report goes to
     ``out``. Returns the exit status (0). Raises ``ValueError`` naming the argument at fault (an
@@ -413,17 +514,31 @@ def run_record(options: RecordOptions, *, out: TextIO = sys.stdout) -> int:
 
         else:
             on_new_topic = None
-        recorder = Recorder(options.out_path, parse_key=parse_key, on_new_topic=on_new_topic)
+        replies: deque[tuple[str, zenoh.Sample]] = deque()  # config replies, from zenoh's threads
+
+        def ask_config(device: str) -> None:
+            def on_reply(reply: zenoh.Reply) -> None:
+                if reply.ok is not None:
+                    replies.append((device, reply.ok))
+
+            session.get(config_key(device), on_reply, timeout=10.0)
+
+        recorder = Recorder(options.out_path, parse_key=parse_key, on_new_topic=on_new_topic, on_new_device=ask_config)
         try:
             subscriber = subscribe(session, key_expr)
             what = f"ROS 2 domain {domain}: " if ros2 else ""
             print(f"record: subscribed to {what}{key_expr} -> {recorder.path}", file=out, flush=True)
+            warning = connect_warning(session, options.session.connect)
+            if warning:
+                print(f"record: {warning}", file=out, flush=True)
             end = None if options.duration is None else time.monotonic() + options.duration
             last_flush = time.monotonic()
             while not live.stopped() and (end is None or time.monotonic() < end):
                 samples = drain(subscriber)
                 for sample in samples:
                     recorder.add(sample)
+                while replies:
+                    _take_reply(recorder, *replies.popleft())
                 now = time.monotonic()
                 if now - last_flush > 0.2:
                     recorder.flush()
@@ -432,12 +547,20 @@ def run_record(options: RecordOptions, *, out: TextIO = sys.stdout) -> int:
                     time.sleep(0.002)
             for sample in drain(subscriber, 1 << 30):
                 recorder.add(sample)
+            while replies:
+                _take_reply(recorder, *replies.popleft())
             subscriber.undeclare()
         finally:
             recorder.close()
     report = recorder.report()
     if recorder.written:
         print(format_report(report), file=out, flush=True)
+        configured = recorder.configured
+        bare = sorted(set(recorder.devices) - set(configured))
+        if configured:
+            print(f"record: device config stored for {', '.join(sorted(configured))}", file=out, flush=True)
+        if bare:
+            print(f"record: no device config came for {', '.join(bare)} (not a gyroemu stream?)", file=out, flush=True)
     else:
         print(f"record: nothing received on {key_expr}: no file written ({recorder.path})", file=out, flush=True)
     if options.report_path:
@@ -456,6 +579,9 @@ def run_router(session: SessionOptions, *, out: TextIO = sys.stdout) -> int:
             file=out,
             flush=True,
         )
+        warning = connect_warning(zenoh_session, session.connect)
+        if warning:
+            print(f"router: {warning}", file=out, flush=True)
         while not live.stopped():
             time.sleep(0.1)
     return 0

@@ -22,6 +22,12 @@ How long: ``--duration`` seconds; without it, a scenario whose motion is a close
 span), a kind that integrates equations of motion (simulated whole before the first message) or a
 motion with a magnetic environment along its path stream the scenario's own duration.
 
+The device's resolved config (``Device.to_toml()``, with the seed and the scenario's TOML) is announced
+on ``gyroemu/<device-name>/config`` (:class:`gyroemu.pipelines.transport.zenoh_io.ConfigAnnouncer`): a
+queryable answers every ``get`` while the stream runs (a recorder asks when it first sees the device,
+whenever it started), and the config is also put once as publishing starts. ``gyroemu record`` stores it
+in the device's ``gyroemu`` metadata record, so filters run on the log start from the device's noise.
+
 Before its clock starts the stream waits (``--wait``, default 10 s) until every key has a subscriber,
 so a recorder started just after the stream loses nothing; when the wait runs out it starts anyway.
 Then it waits (at most 10 s more) until the producer has filled its queue, so that the first deadlines
@@ -67,8 +73,10 @@ from gyroemu.pipelines.formats.messages import split_payloads, stamps_to_ns
 from gyroemu.pipelines.transport.read_ahead import BATCH, READ_AHEAD, Batch, ReadAheadThread
 from gyroemu.pipelines.transport.zenoh_io import (
     SLEEP_ONLY,
+    ConfigAnnouncer,
     PacingOptions,
     SessionOptions,
+    connect_warning,
     live_session,
     open_session,
     topic_to_key,
@@ -335,10 +343,16 @@ def run_stream(options: StreamOptions, *, out: TextIO = sys.stdout) -> int:
             print(f"  {estimator.key} ({options.estimate}, {'9D' if estimator.use_mag else '6D'}, live)", file=out)
         with live_session(session) as live:
             live.node = ros
+            warning = connect_warning(session, options.session.connect)
+            if warning:
+                print(f"stream: {warning}", file=out, flush=True)
+            # the device's config, for recorders: answered to every get for as long as the stream runs
+            announcer = ConfigAnnouncer(session, device_name, dev.to_toml(), options.seed, scen.to_toml())
             timing = SLEEP_ONLY if options.as_fast_as_possible else pacing.timing
             publisher = live.publish(list(keys.values()), timing)
             for key in keys.values():
                 print(f"  {key}", file=out)
+            print(f"  {announcer.key} (the device's config, queryable)", file=out)
             if ros is not None:
                 ros.declare(session, out)
             stop = live.stopped
@@ -350,6 +364,7 @@ def run_stream(options: StreamOptions, *, out: TextIO = sys.stdout) -> int:
             end = time.monotonic() + 10.0
             while not producer.ready.wait(0.1) and not stop() and time.monotonic() < end:
                 pass
+            announcer.announce()
             print("stream: publishing", file=out, flush=True)
             report = publisher.run_schedule(producer.batches(stop), stop=stop)
             print(f"stream: sent {report.messages} messages", file=out)
@@ -360,6 +375,7 @@ def run_stream(options: StreamOptions, *, out: TextIO = sys.stdout) -> int:
                 estimator.close(drain_s=2.0)
                 print(f"stream: {estimator.published} estimates published", file=out)
                 estimator = None
+            announcer.close()
     finally:
         producer.stopping.set()
         if producer.is_alive():

@@ -57,6 +57,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import errno
 import gc
 import json
 import os
@@ -83,6 +84,13 @@ __all__ = [
     "session_config",
     "router_config",
     "open_session",
+    "port_is_free",
+    "zenoh_answers",
+    "connect_warning",
+    "config_key",
+    "ConfigAnnouncer",
+    "CONFIG_TOPIC",
+    "config_fields",
     "LiveSession",
     "live_session",
     "topic_to_key",
@@ -177,14 +185,129 @@ def router_config(
     )
 
 
+def _config_value(config: zenoh.Config, key: str):
+    """A value of ``config`` (None when unset or unreadable)."""
+    try:
+        return json.loads(config.get_json(key))
+    except Exception:
+        return None
+
+
+def _tcp_address(endpoint: str) -> tuple[str, int] | None:
+    """``(host, port)`` of a ``tcp/host:port`` endpoint (its ``#...`` config dropped); None for others."""
+    match = re.fullmatch(r"tcp/\[?([^\]#]*?)\]?:(\d+)(#.*)?", endpoint)
+    return (match.group(1), int(match.group(2))) if match else None
+
+
+def port_is_free(endpoint: str) -> bool | None:
+    """Whether a ``tcp/host:port`` endpoint could be listened on now (None: not a TCP endpoint, or not
+    an address of this machine): a plain socket binds it and lets go at once."""
+    address = _tcp_address(endpoint)
+    if address is None or address[1] == 0:
+        return None
+    import socket
+
+    family = socket.AF_INET6 if ":" in address[0] else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as zenoh binds: TIME_WAIT is no owner
+        try:
+            s.bind(address)
+        except OSError as e:
+            return False if e.errno == errno.EADDRINUSE else None
+    return True
+
+
+def zenoh_answers(endpoint: str, timeout_s: float = 1.0) -> bool:
+    """Whether a zenoh router or peer answers at ``endpoint``: a client session tries to open there,
+    giving up after ``timeout_s`` (a program that accepts the connection but speaks no zenoh never
+    completes the handshake)."""
+    config = zenoh.Config()
+    try:
+        _insert(config, "mode", "client")
+        _insert(config, "connect/endpoints", [endpoint])
+        _insert(config, "scouting/multicast/enabled", False)
+        _insert(config, "transport/unicast/open_timeout", max(1, round(timeout_s * 1000)))
+        _insert(config, "connect/timeout_ms", max(1, round(timeout_s * 1000)))
+        probe = zenoh.open(config)
+    except Exception:
+        return False
+    with contextlib.suppress(Exception):
+        probe.close()
+    return True
+
+
+def _taken(endpoint: str, detail: str) -> str:
+    """The message of a listen endpoint another process holds: a zenoh one or another program."""
+    if zenoh_answers(endpoint):
+        return (
+            f"argument --listen: {endpoint} is taken by a zenoh process (a router, or another gyroemu "
+            f"process): join it with --connect {endpoint}, or name a free endpoint with --listen"
+        )
+    return f"argument --listen: {endpoint} is taken by another program (not a zenoh router): {detail}"
+
+
+def _open_error(error: Exception, listen: Sequence[str], connect: Sequence[str], mode: str) -> str:
+    """zenoh's refusal to open a session as a message naming the argument at fault."""
+    text = _zenoh_message(error)
+    if "Address already in use" in text or "Can not create a new TCP listener" in text:
+        bound = re.search(r"bound to (\S+?):? \[", text)
+        endpoint = bound.group(1) if bound else (listen[0] if len(listen) == 1 else ", ".join(listen))
+        detail = re.search(r"\[(?:[^\]]*: )?([^\]]*)\]", text)
+        return _taken(endpoint, detail.group(1) if detail else text)
+    if "Unable to connect to any of" in text:
+        return (
+            f"argument --connect: no zenoh router answers at {', '.join(connect) or 'the configured endpoints'} "
+            f"(a {mode} cannot start without one): {text}"
+        )
+    return f"argument --connect/--listen/--config: cannot open the zenoh session: {text}"
+
+
 def open_session(config: zenoh.Config) -> zenoh.Session:
-    """Open a session; zenoh's errors become ``ValueError`` (bad endpoints, port taken, ...)."""
+    """Open a session; zenoh's errors become ``ValueError`` naming the argument at fault.
+
+    - A listen endpoint another process holds (zenoh's "Address already in use"): ``argument --listen:
+      <endpoint> is taken by another program (not a zenoh router): ...``, or, when a zenoh session
+      answers there (:func:`zenoh_answers`), a message that says to ``--connect`` to it instead.
+    - The default session (``tcp/127.0.0.1:7447`` listened on without ``exit_on_failure``) checks that
+      endpoint first: held by a program that speaks no zenoh, gyroemu processes could not meet there, so
+      it is the same ``--listen`` error (held by a zenoh process, it is the normal case: carry on).
+    - A client that reaches no router (zenoh's "Unable to connect to any of"): ``argument --connect:
+      no zenoh router answers at ...``. A peer or router does not fail there (zenoh keeps trying in the
+      background): :func:`connect_warning` tells after the session is open.
+    """
+    listen = [str(e) for e in _config_value(config, "listen/endpoints") or []]
+    connect = [str(e) for e in _config_value(config, "connect/endpoints") or []]
+    mode = str(_config_value(config, "mode") or "peer")
+    if DEFAULT_ENDPOINT in listen and _config_value(config, "listen/exit_on_failure") is False:
+        if port_is_free(DEFAULT_ENDPOINT) is False and not zenoh_answers(DEFAULT_ENDPOINT):
+            raise ValueError(
+                f"argument --listen: {DEFAULT_ENDPOINT} (the default session's endpoint) is taken by another "
+                "program (not a zenoh router): gyroemu processes cannot meet there; free it, or name the "
+                "endpoints with --listen/--connect"
+            )
     try:
         return zenoh.open(config)
     except Exception as e:
-        raise ValueError(
-            f"argument --connect/--listen/--config: cannot open the zenoh session: {_zenoh_message(e)}"
-        ) from None
+        raise ValueError(_open_error(e, listen, connect, mode)) from None
+
+
+def connect_warning(session: zenoh.Session, connect: Sequence[str]) -> str | None:
+    """After a peer or router opened with ``--connect`` endpoints: a warning when none answered (no
+    router or peer linked: ``session.info`` lists none), else None. zenoh's peers and routers wait up to
+    its connect timeout on open and then keep retrying in the background, so this is a warning: what
+    starts later at those endpoints is still joined."""
+    if not connect:
+        return None
+    try:
+        linked = list(session.info.routers_zid()) + list(session.info.peers_zid())
+    except Exception:
+        return None
+    if linked:
+        return None
+    return (
+        f"warning: nothing answers at --connect {', '.join(connect)} yet (zenoh keeps trying in the "
+        "background; check the endpoint if no data comes)"
+    )
 
 
 @dataclass(frozen=True)
@@ -267,6 +390,97 @@ def key_to_topic(key: str) -> tuple[str, str]:
     if len(parts) < 3 or parts[0] != KEY_ROOT or not parts[1]:
         raise ValueError(f"key expression {key!r} is not gyroemu/<device>/<topic>")
     return parts[1], "/" + "/".join(parts[2:])
+
+
+CONFIG_TOPIC = "/config"
+
+
+def config_key(device: str) -> str:
+    """``gyroemu/<device>/config``: where a stream announces its device's resolved config."""
+    return topic_to_key(device, CONFIG_TOPIC)
+
+
+def config_fields(payload: bytes, attachment: bytes | None = None) -> dict[str, str]:
+    """The ``gyroemu`` metadata fields a config sample or reply carries (:class:`ConfigAnnouncer`).
+
+    Parameters
+    ----------
+    payload : bytes
+        The device's resolved config as TOML text (UTF-8).
+    attachment : bytes or None
+        A JSON object with ``seed`` and ``scenario`` (the scenario's TOML), strings; None: neither.
+
+    Returns
+    -------
+    dict of str to str
+        ``device`` and, when the attachment gives them, ``seed`` and ``scenario``.
+
+    Raises
+    ------
+    ValueError
+        The payload is not UTF-8 TOML.
+    """
+    import tomllib
+
+    device = bytes(payload).decode("utf-8")
+    tomllib.loads(device)  # TOMLDecodeError is a ValueError
+    fields = {"device": device}
+    if attachment:
+        with contextlib.suppress(ValueError):
+            extra = json.loads(bytes(attachment))
+            if isinstance(extra, dict):
+                fields.update({k: extra[k] for k in ("seed", "scenario") if isinstance(extra.get(k), str)})
+    return fields
+
+
+class ConfigAnnouncer:
+    """Announces a device's resolved config on ``gyroemu/<device>/config`` (:func:`config_key`).
+
+    A queryable on the key answers every ``get`` for as long as the session lives, so a recorder that
+    starts (or sees the device) at any time asks for it and gets it; :meth:`announce` also puts it once
+    for plain subscribers. The payload is the device's TOML (``Device.to_toml()``), the attachment a JSON
+    object ``{"seed": "0", "scenario": "<the scenario's TOML>"}`` (:func:`config_fields` reads both).
+
+    Parameters
+    ----------
+    session : zenoh.Session
+        The stream's session.
+    device_name : str
+        The device's name on the wire.
+    device_toml : str
+        The device's resolved config as TOML.
+    seed : int or None
+        The device's seed.
+    scenario_toml : str
+        The scenario's config as TOML ("" when not known).
+    """
+
+    def __init__(
+        self, session: zenoh.Session, device_name: str, device_toml: str, seed: int | None, scenario_toml: str = ""
+    ) -> None:
+        self.key = config_key(device_name)
+        self.payload = device_toml.encode("utf-8")
+        extra = {"seed": "" if seed is None else str(int(seed)), "scenario": scenario_toml}
+        self.attachment = json.dumps(extra).encode()
+        self.queries = 0
+        self._session = session
+        self._queryable = session.declare_queryable(self.key, self._reply)
+
+    def _reply(self, query: zenoh.Query) -> None:
+        try:
+            query.reply(self.key, self.payload, attachment=self.attachment)
+            self.queries += 1
+        except Exception:  # a query gone (timed out) by now: nothing to answer
+            pass
+
+    def announce(self) -> None:
+        """Put the config once on the key (for subscribers; recorders ask the queryable)."""
+        self._session.put(self.key, self.payload, attachment=self.attachment)
+
+    def close(self) -> None:
+        """Undeclare the queryable."""
+        with contextlib.suppress(Exception):
+            self._queryable.undeclare()
 
 
 def pack_attachment(sequence: int, source_timestamp_ns: int, publisher_id: bytes) -> bytes:

@@ -1,0 +1,67 @@
+"""Live commands say clearly when their zenoh endpoints do not work: a ``--listen`` endpoint another
+program holds (exit status 2, ``argument --listen: ... is taken by another program``), and a
+``--connect`` endpoint where no router answers (a client: exit status 2; a peer: a warning, since zenoh
+keeps trying in the background)."""
+
+import socket
+import subprocess
+import sys
+
+import pytest
+
+pytest.importorskip("zenoh")
+
+from gyroemu.pipelines.transport.zenoh_io import port_is_free  # noqa: E402
+
+
+def gyroemu(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "gyroemu", *args], capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture
+def held_port():
+    """A port a plain socket listens on (a program that speaks no zenoh)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        yield s.getsockname()[1]
+
+
+@pytest.mark.parametrize("command", ["router", "record"])
+def test_listen_on_a_port_held_by_another_program_exits_2(held_port, tmp_path, command):
+    endpoint = f"tcp/127.0.0.1:{held_port}"
+    extra = ["--out", str(tmp_path / "r.mcap"), "--duration", "1"] if command == "record" else []
+    result = gyroemu(command, "--listen", endpoint, *extra)
+    assert result.returncode == 2, result.stderr
+    assert f"gyroemu {command}: error: argument --listen: {endpoint} is taken by another program " in result.stderr
+    assert "(not a zenoh router)" in result.stderr and "Traceback" not in result.stderr
+    assert not (tmp_path / "r.mcap").exists()
+
+
+def test_port_is_free(held_port):
+    assert port_is_free(f"tcp/127.0.0.1:{held_port}") is False
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        free = s.getsockname()[1]
+    assert port_is_free(f"tcp/127.0.0.1:{free}") is True
+    assert port_is_free("udp/127.0.0.1:7447") is None
+
+
+def test_client_connect_where_no_router_answers_exits_2(tmp_path):
+    with socket.socket() as s:  # a port nobody listens on: the connection is refused at once
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    endpoint = f"tcp/127.0.0.1:{port}"
+    result = gyroemu("record", "--out", str(tmp_path / "r.mcap"), "--connect", endpoint, "--mode", "client")
+    assert result.returncode == 2, result.stderr
+    assert f"argument --connect: no zenoh router answers at {endpoint}" in result.stderr, result.stderr
+
+
+def test_peer_connect_where_nothing_answers_warns(tmp_path):
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    endpoint = f"tcp/127.0.0.1:{port}"
+    result = gyroemu("record", "--out", str(tmp_path / "r.mcap"), "--connect", endpoint, "--duration", "0.5")
+    assert result.returncode == 0, result.stderr
+    assert f"record: warning: nothing answers at --connect {endpoint} yet" in result.stdout, result.stdout
