@@ -131,9 +131,9 @@ class _Intervals:
         self.previous: int | None = None
         self.out_of_order = 0
         self.longest = 0
-        self.bins = np.empty(0, np.int64)
-        self.counts = np.empty(0, np.int64)
-        self.sums = np.empty(0, np.float64)
+        self.bins: np.ndarray = np.empty(0, np.int64)
+        self.counts: np.ndarray = np.empty(0, np.int64)
+        self.sums: np.ndarray = np.empty(0, np.float64)
 
     def add(self, times: np.ndarray) -> None:
         """Take the next chunk's log times (ns, uint64) of the channel."""
@@ -228,9 +228,9 @@ def topic_stats(path: str | os.PathLike[str]) -> list[TopicStats]:
         for ids, group in zip(np.split(channel, cuts), np.split(times, cuts)):
             intervals.setdefault(int(ids[0]), _Intervals()).add(group)
     out = []
-    for channel_id, channel in walk.channels.items():
-        schema = walk.schemas.get(channel.schema_id)
-        out.append(intervals.get(channel_id, _Intervals()).stats(channel.topic, schema.name if schema else ""))
+    for channel_id, record in walk.channels.items():
+        schema = walk.schemas.get(record.schema_id)
+        out.append(intervals.get(channel_id, _Intervals()).stats(record.topic, schema.name if schema else ""))
     return out
 
 
