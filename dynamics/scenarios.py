@@ -213,7 +213,7 @@ def scenario_from_dict(data: dict, name: str = "<dict>", path: Path | None = Non
     kind = data.get("kind")
     if kind is None:
         raise ConfigError("missing required key", file=where, key="kind")
-    if kind not in KINDS:
+    if not isinstance(kind, str) or kind not in KINDS:
         raise ConfigError(f"unknown kind {kind!r}; kinds: {', '.join(KINDS)}", file=where, key="kind")
     spec_class = _spec_class(kind)
     spec = validate(spec_class, spec_class.prepare(data, path), file=where)

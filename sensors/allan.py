@@ -1,7 +1,10 @@
 """Allan deviation of a sensor's output, and a fit of the IEEE Std 952 noise terms to it.
 
-The overlapping Allan deviation (NIST SP 1065, eq. 11) is computed by ``allantools.oadev`` on the rate
-(or specific-force) samples at octave-spaced averaging times τ = Δt, 2Δt, 4Δt, …
+The overlapping Allan deviation (NIST SP 1065, eq. 11) of the rate (or specific-force) samples is our
+own: at octave-spaced averaging times τ = Δt, 2Δt, 4Δt, … it is the streamed accumulator
+(:class:`~gyroemu.sensors.allan_stream.OverlappingAllanAccumulator`) fed the whole series as one chunk,
+every octave exact; at τ given explicitly it is summed in numpy from the phase. Both equal
+``allantools.oadev`` to round-off (the tests hold them against it; allantools is a test dependency only).
 
 The fit uses the model of IEEE Std 952-1997 Annex C, where the independent terms add in variance:
 
@@ -22,9 +25,9 @@ model's σ² rather than the noisy estimate (iterated a few times) keeps the fit
 that happen to be low; relative weights make it a fit of the log curve. Each coefficient's 68 %
 confidence interval is read as IEEE 952 reads the coefficient itself, off one point of the curve: the τ
 where that term is best determined (largest share of σ² for its ν), as a chi-squared interval
-(``allantools.confidence_interval``) with ν·share² degrees of freedom. Octave points share data (and
-for random-walk noise are strongly correlated), so combining them as independent would overstate the
-confidence; the one-point interval is on the cautious side.
+(:func:`chi2_interval`, as allantools' ``confidence_interval``) with ν·share² degrees of freedom.
+Octave points share data (and for random-walk noise are strongly correlated), so combining them as
+independent would overstate the confidence; the one-point interval is on the cautious side.
 
 A term is *resolved* when the data show it: at some τ its share of σ² exceeds :data:`RESOLVE_SIGMAS` (2)
 times the relative standard deviation √(2/ν) of the Allan variance estimate there, i.e. the
@@ -48,9 +51,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import allantools
 import numpy as np
 from scipy.optimize import nnls
+
+from gyroemu.sensors.allan_stream import OverlappingAllanAccumulator
 
 __all__ = [
     "AllanDeviation",
@@ -58,6 +62,7 @@ __all__ = [
     "AllanFit",
     "allan_deviation",
     "allan_confidence",
+    "chi2_interval",
     "fit_allan",
     "TERMS",
     "RESOLVE_SIGMAS",
@@ -71,6 +76,68 @@ TERMS = ("quantisation", "arw", "bias_instability", "rrw", "rate_ramp")
 RESOLVE_SIGMAS = 2.0
 
 _ONE_SIGMA = 0.682689492137086  # probability within ±1σ of a normal distribution
+_TAU_KEYWORDS = ("octave", "all", "decade", "log10")
+
+
+def chi2_interval(
+    dev: float | np.ndarray, edf: float | np.ndarray, ci: float = _ONE_SIGMA
+) -> tuple[np.ndarray, np.ndarray]:
+    """Chi-squared confidence interval of a deviation estimated with ``edf`` degrees of freedom.
+
+    With α = 1 − ``ci`` (NIST SP 1065 eq. 45; what ``allantools.confidence_interval`` gives)::
+
+        low  = dev·√(edf / χ²_ppf(1 − α/2, edf)),   high = dev·√(edf / χ²_ppf(α/2, edf))
+
+    Parameters
+    ----------
+    dev : deviation(s) σ, any unit.
+    edf : equivalent degrees of freedom ν > 0, broadcast against ``dev``.
+    ci : probability the interval holds, 0 < ci < 1 (default 0.6827, one sigma).
+
+    Returns
+    -------
+    (low, high) : arrays of the broadcast shape of ``dev`` and ``edf`` (0-d for scalars).
+    """
+    from scipy.stats import chi2  # about 0.2 s to import: only when an interval is asked for
+
+    tail = min(abs(ci), abs(ci - 1)) / 2  # α/2
+    dev = np.asarray(dev, dtype=float)
+    edf = np.asarray(edf, dtype=float)
+    variance = dev * dev
+    low = np.sqrt(edf * variance / chi2.ppf(1 - tail, edf))
+    high = np.sqrt(edf * variance / chi2.ppf(tail, edf))
+    return low, high
+
+
+def _keyword_taus(keyword: str, n: int, dt: float) -> np.ndarray:
+    """The τ list allantools' keywords name, for n samples (n + 1 phase points) at Δt."""
+    points = n + 1
+    if keyword == "all":
+        return dt * np.linspace(1.0, points, points)
+    if keyword == "log10":
+        top = np.log10(points)
+        return dt * np.logspace(0, top, int(10 * top), base=10.0)
+    if keyword == "decade":
+        return dt * np.array([f * 10.0**k for k in range(int(np.floor(np.log10(points))) + 1) for f in (1.0, 2.0, 4.0)])
+    top = int(np.floor(np.log2(points)))  # "octave"
+    return dt * np.logspace(0, top, top + 1, base=2.0)
+
+
+def _explicit_oadev(data: np.ndarray, dt: float, taus: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(τ, σ(τ)) at the given τ, overlapping estimator (NIST SP 1065 eq. 11) from the phase.
+
+    x_k = Δt Σ_{j<k} (y_j − ȳ), k = 0 … n, and σ²(τ) = Σ_k (x_{k+2m} − 2x_{k+m} + x_k)² / (2τ²(n + 1 − 2m)),
+    τ = mΔt with m = round(τ/Δt). As ``allantools.oadev``: m sorted and unique, 0 < m ≤ n, and τ with
+    fewer than two terms (2m > n − 1) dropped.
+    """
+    x = np.concatenate([[0.0], np.cumsum(data - data.mean()) * dt])
+    m = np.round(np.asarray(taus, dtype=float).ravel() / dt)
+    m = np.unique(m[(m > 0) & (m < len(x)) & (len(x) - 2 * m > 1)]).astype(np.int64)
+    adev = np.empty(len(m))
+    for i, mj in enumerate(m):
+        d = x[2 * mj :] - 2 * x[mj:-mj] + x[: -2 * mj]
+        adev[i] = np.sqrt(np.sum(d * d) / (2.0 * len(d))) / (mj * dt)
+    return m * dt, adev
 
 
 @dataclass(frozen=True)
@@ -98,27 +165,44 @@ class AllanDeviation:
         return np.diff(np.log(self.adev)) / np.diff(np.log(self.tau))
 
 
-def allan_deviation(data: np.ndarray, dt: float, taus="octave") -> AllanDeviation:
+def allan_deviation(data: np.ndarray, dt: float, taus: str | np.ndarray = "octave") -> AllanDeviation:
     """Overlapping Allan deviation of rate samples ``data`` (n,) taken every ``dt`` seconds.
 
     Parameters
     ----------
-    data : (n,) rate, rad/s (or specific force, m/s²).
+    data : (n,) rate, rad/s (or specific force, m/s²), finite.
     dt : sample interval, s.
-    taus : "octave" (τ = Δt·2^k, the default), another allantools keyword, or an array of τ in s.
+    taus : "octave" (τ = Δt·2^k, the default), "all", "decade" or "log10" (allantools' τ lists), or an
+        array of τ in s (each rounded to a multiple m of Δt; repeats merged, sorted).
 
-    Keeps the τ with at least two independent clusters (ν ≥ 1).
+    Keeps the τ with at least two terms of the estimator (2m ≤ n − 1), hence at least two independent
+    clusters (ν ≥ 1); an explicit τ list none of whose τ qualifies gives an empty result.
+
+    Raises
+    ------
+    ValueError
+        For fewer than 4 samples, a series that is not 1-D, NaN or infinite samples, a ``dt`` that is not
+        a positive number, or an unknown ``taus`` keyword.
     """
     data = np.asarray(data, dtype=float)
     if data.ndim != 1 or data.size < 4:
         raise ValueError(f"expected a 1-D series of at least 4 samples, got shape {data.shape}")
-    tau, adev, _, _ = allantools.oadev(data, rate=1.0 / dt, data_type="freq", taus=taus)
+    if not np.all(np.isfinite(data)):
+        raise ValueError("the series has NaN or infinite samples")
+    if not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be a positive number of seconds, got {dt}")
+    if isinstance(taus, str) and taus not in _TAU_KEYWORDS:
+        raise ValueError(f"unknown taus {taus!r}; expected one of {', '.join(_TAU_KEYWORDS)} or an array of τ")
+    if isinstance(taus, str) and taus == "octave":
+        # One chunk, every octave exact (max_exact_m ≥ the largest reported m, n/2).
+        exact = 1 << max(0, (data.size // 2).bit_length())
+        acc = OverlappingAllanAccumulator(dt, n_axes=1, max_exact_m=exact, coarse_overlap=1)
+        acc.update(data[:, None])
+        (allan,) = acc.deviations()
+        return allan
+    tau, adev = _explicit_oadev(data, dt, _keyword_taus(taus, data.size, dt) if isinstance(taus, str) else taus)
     clusters = np.floor(data.size / np.round(tau / dt))
-    keep = clusters >= 2
-    tau, adev, clusters = tau[keep], adev[keep], clusters[keep]
-    edf = clusters - 1
-    bounds = np.array([allantools.confidence_interval(s, nu, ci=_ONE_SIGMA) for s, nu in zip(adev, edf)])
-    return AllanDeviation(tau=tau, adev=adev, clusters=clusters, edf=edf, low=bounds[:, 0], high=bounds[:, 1])
+    return allan_confidence(tau, adev, clusters)
 
 
 def allan_confidence(tau: np.ndarray, adev: np.ndarray, clusters: np.ndarray) -> AllanDeviation:
@@ -136,9 +220,8 @@ def allan_confidence(tau: np.ndarray, adev: np.ndarray, clusters: np.ndarray) ->
     if np.any(clusters < 2):
         raise ValueError("every τ needs at least two independent clusters (ν ≥ 1)")
     edf = clusters - 1
-    bounds = np.array([allantools.confidence_interval(s, nu, ci=_ONE_SIGMA) for s, nu in zip(adev, edf)])
-    bounds = bounds.reshape(len(adev), 2)
-    return AllanDeviation(tau=tau, adev=adev, clusters=clusters, edf=edf, low=bounds[:, 0], high=bounds[:, 1])
+    low, high = chi2_interval(adev, edf)
+    return AllanDeviation(tau=tau, adev=adev, clusters=clusters, edf=edf, low=low, high=high)
 
 
 @dataclass(frozen=True)
@@ -243,5 +326,5 @@ def _read(j: int, c: np.ndarray, basis: np.ndarray, model: np.ndarray, allan: Al
     dof = allan.edf[best] * share[best] ** 2
     if dof < 1.0:  # the term never holds enough of the variance to be pinned: undetermined
         return Coefficient(float(value), 0.0, float("inf"), limit)
-    low, high = allantools.confidence_interval(value, dof, ci=_ONE_SIGMA)
+    low, high = chi2_interval(value, dof)
     return Coefficient(float(value), float(low), float(high), limit)

@@ -60,7 +60,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:  # imported where used: gyroemu.sensors.allan pulls in allantools and scipy (about 0.7 s)
+if TYPE_CHECKING:  # imported where used: gyroemu.sensors.allan pulls in scipy
     from gyroemu.sensors.allan import AllanDeviation
 
 __all__ = ["OverlappingAllanAccumulator"]

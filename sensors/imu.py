@@ -130,7 +130,7 @@ def validate_mechanism(data: dict, file=None) -> GyroMechanism:
     kind = data.get("kind")
     if kind is None:
         raise ConfigError("missing required key", file=file, key="gyro.mechanism.kind")
-    if kind not in GYRO_KINDS:
+    if not isinstance(kind, str) or kind not in GYRO_KINDS:
         raise ConfigError(
             f"unknown gyro kind {kind!r}; kinds: {', '.join(GYRO_KINDS)}", file=file, key="gyro.mechanism.kind"
         )

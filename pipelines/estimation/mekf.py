@@ -231,6 +231,9 @@ def initial_state(t, gyro, accel, mag, setup: FilterSetup, params: MekfParams) -
     a = np.nanmean(a_first, axis=0) if np.isfinite(a_first).any() else np.array([0.0, 0.0, 9.81])
     gravity = float(np.linalg.norm(a)) or 9.81
     q = initial_attitude(a)  # the shortest rotation taking the measured up onto the world's
+    if q is None:  # no usable up (a zero or overflowing mean force): level, with the tilt unknown below
+        q = np.array([1.0, 0.0, 0.0, 0.0])
+        a = np.array([0.0, 0.0, 9.81])
     heading_var = np.pi**2  # 6D without Earth rate: heading unknown
     slow = np.zeros(kern.S_SIZE)
     slow[kern.S_GRAVITY] = (

@@ -137,6 +137,23 @@ class BroadTrial:
         return len(self.gyro)
 
 
+_MAX_EXPANSION = 64
+"""A dataset may hold at most this many times the file's bytes (room for compression): a larger shape,
+from a corrupt dataspace, would have the read allocate memory the file cannot fill."""
+
+
+def _check_size(node, path: Path, item: str) -> None:
+    """Refuse a dataset whose shape asks for more bytes than the file could hold (:data:`_MAX_EXPANSION`)."""
+    limit = _MAX_EXPANSION * path.stat().st_size + (1 << 20)
+    if node.size * node.dtype.itemsize > limit:
+        raise ImportInputError(
+            f"shape {node.shape} ({node.size * node.dtype.itemsize} bytes) is more than the file could hold: "
+            "a corrupt file",
+            file=path,
+            item=item,
+        )
+
+
 def read_broad(path) -> BroadTrial:
     """Read and check a BROAD trial (opened read-only). Raises :class:`ImportInputError`."""
     import h5py  # imported where used: only importers need it
@@ -155,61 +172,75 @@ def read_broad(path) -> BroadTrial:
         raise ImportInputError("not an HDF5 file (no HDF5 signature); a BROAD trial is an .hdf5 file", file=path)
     try:
         f = h5py.File(path, "r")
-    except OSError as e:
+    except (OSError, KeyError, RuntimeError, TypeError, ValueError) as e:
         raise ImportInputError(f"cannot open as HDF5: {e}", file=path) from None
-    with f:
-        arrays = {}
-        n = None
-        for name, width in BROAD_DATASETS.items():
-            item = f"dataset '{name}'"
-            if name not in f:
-                raise ImportInputError(
-                    f"missing (a BROAD trial holds {', '.join(BROAD_DATASETS)})", file=path, item=item
-                )
-            node = f[name]
-            if not isinstance(node, h5py.Dataset):
-                raise ImportInputError("is a group, not a dataset", file=path, item=item)
-            if n is None:
-                n = node.shape[0] if node.ndim >= 1 else None
-            expected = ("N", *width) if n is None else (n, *width)
-            if node.ndim != 1 + len(width) or node.shape[1:] != width or (n is not None and node.shape[0] != n):
-                raise ImportInputError(
-                    f"shape {node.shape}, expected ({', '.join(map(str, expected))})"
-                    + ("" if name == "imu_gyr" else " (N from imu_gyr)"),
-                    file=path,
-                    item=item,
-                )
-            kind = node.dtype.kind
-            if name == "movement":
-                if kind not in "biu":
-                    raise ImportInputError(f"type {node.dtype}, expected bool", file=path, item=item)
-            elif kind not in "fiu":
-                raise ImportInputError(f"type {node.dtype}, expected numbers (float64)", file=path, item=item)
-            try:
-                arrays[name] = node[()]
-            except (OSError, ValueError, TypeError) as e:
-                raise ImportInputError(f"cannot be read: {e}", file=path, item=item) from None
-        if not n:
-            raise ImportInputError("holds no samples", file=path, item="dataset 'imu_gyr'")
-        item = "attribute 'sampling_rate'"
-        if "sampling_rate" not in f.attrs:
-            raise ImportInputError("missing (the sampling rate in Hz)", file=path, item=item)
-        rate = np.asarray(f.attrs["sampling_rate"])
-        if rate.size != 1 or rate.dtype.kind not in "fiu" or not np.isfinite(rate).all() or not float(rate.flat[0]) > 0:
-            raise ImportInputError(f"{rate.tolist()!r}: expected a positive number of Hz", file=path, item=item)
-        opt_pos = None
-        if "opt_pos" in f:
-            node = f["opt_pos"]
-            item = "dataset 'opt_pos'"
-            if not isinstance(node, h5py.Dataset) or node.shape != (n, 3) or node.dtype.kind not in "fiu":
-                shape = getattr(node, "shape", "a group")
-                raise ImportInputError(f"{shape}: expected ({n}, 3) numbers (m)", file=path, item=item)
-            try:
-                opt_pos = np.asarray(node[()], dtype=np.float64)
-            except (OSError, ValueError, TypeError) as e:
-                raise ImportInputError(f"cannot be read: {e}", file=path, item=item) from None
-        info = f.attrs.get("info", "")
-        info = info.decode("utf-8", "replace") if isinstance(info, bytes) else str(info)
+    # A corrupt file makes h5py raise KeyError, RuntimeError, TypeError, ValueError or OSError from
+    # wherever its structure breaks (a link, a heap, an object header): all are the file's fault.
+    try:
+        with f:
+            arrays = {}
+            n = None
+            for name, width in BROAD_DATASETS.items():
+                item = f"dataset '{name}'"
+                if name not in f:
+                    raise ImportInputError(
+                        f"missing (a BROAD trial holds {', '.join(BROAD_DATASETS)})", file=path, item=item
+                    )
+                node = f[name]
+                if not isinstance(node, h5py.Dataset):
+                    raise ImportInputError("is a group, not a dataset", file=path, item=item)
+                if n is None:
+                    n = node.shape[0] if node.ndim >= 1 else None
+                expected = ("N", *width) if n is None else (n, *width)
+                if node.ndim != 1 + len(width) or node.shape[1:] != width or (n is not None and node.shape[0] != n):
+                    raise ImportInputError(
+                        f"shape {node.shape}, expected ({', '.join(map(str, expected))})"
+                        + ("" if name == "imu_gyr" else " (N from imu_gyr)"),
+                        file=path,
+                        item=item,
+                    )
+                kind = node.dtype.kind
+                if name == "movement":
+                    if kind not in "biu":
+                        raise ImportInputError(f"type {node.dtype}, expected bool", file=path, item=item)
+                elif kind not in "fiu":
+                    raise ImportInputError(f"type {node.dtype}, expected numbers (float64)", file=path, item=item)
+                _check_size(node, path, item)
+                try:
+                    arrays[name] = node[()]
+                except (OSError, ValueError, TypeError) as e:
+                    raise ImportInputError(f"cannot be read: {e}", file=path, item=item) from None
+            if not n:
+                raise ImportInputError("holds no samples", file=path, item="dataset 'imu_gyr'")
+            item = "attribute 'sampling_rate'"
+            if "sampling_rate" not in f.attrs:
+                raise ImportInputError("missing (the sampling rate in Hz)", file=path, item=item)
+            rate = np.asarray(f.attrs["sampling_rate"])
+            if (
+                rate.size != 1
+                or rate.dtype.kind not in "fiu"
+                or not np.isfinite(rate).all()
+                or not float(rate.flat[0]) > 0
+            ):
+                raise ImportInputError(f"{rate.tolist()!r}: expected a positive number of Hz", file=path, item=item)
+            opt_pos = None
+            if "opt_pos" in f:
+                node = f["opt_pos"]
+                item = "dataset 'opt_pos'"
+                if not isinstance(node, h5py.Dataset) or node.shape != (n, 3) or node.dtype.kind not in "fiu":
+                    shape = getattr(node, "shape", "a group")
+                    raise ImportInputError(f"{shape}: expected ({n}, 3) numbers (m)", file=path, item=item)
+                _check_size(node, path, item)
+                try:
+                    opt_pos = np.asarray(node[()], dtype=np.float64)
+                except (OSError, ValueError, TypeError) as e:
+                    raise ImportInputError(f"cannot be read: {e}", file=path, item=item) from None
+            info = f.attrs.get("info", "")
+            info = info.decode("utf-8", "replace") if isinstance(info, bytes) else str(info)
+    except ImportInputError:
+        raise
+    except (OSError, KeyError, RuntimeError, TypeError, ValueError) as e:
+        raise ImportInputError(f"corrupt HDF5 file: {e}", file=path) from None
     movement = arrays["movement"]
     if movement.dtype != bool:
         if not np.isin(movement, (0, 1)).all():

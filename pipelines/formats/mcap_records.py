@@ -54,6 +54,7 @@ from typing import BinaryIO, NamedTuple
 import numpy as np
 import zstandard
 from mcap.data_stream import ReadDataStream, RecordBuilder
+from mcap.exceptions import McapError
 from mcap.opcode import Opcode
 from mcap.records import (
     Channel,
@@ -668,6 +669,11 @@ class McapScan:
                     self._record(opcode, content, position)
                 except LogError:
                     raise
+                except McapError as e:  # mcap's record parsers: a field runs past the record (EndOfFile)
+                    reason = str(e) or "a field runs past the end of the record"
+                    raise self.error(
+                        f"corrupt {_opcode_name(opcode)} record at byte {position}: {reason}", position
+                    ) from None
                 except (ValueError, struct.error, UnicodeDecodeError, IndexError, KeyError) as e:
                     raise self.error(
                         f"corrupt {_opcode_name(opcode)} record at byte {position}: {e}", position
@@ -743,16 +749,22 @@ class McapScan:
         packed = memoryview(content)[p : p + rlen]
         try:
             if compression == "zstd":
-                data = zstandard.ZstdDecompressor().decompress(packed, max_output_size=usize)
+                data = _zstd_decompress(packed, usize)
             elif compression == "lz4":
-                import lz4.frame
-
+                try:
+                    import lz4.frame
+                except ImportError:
+                    raise self.error(
+                        f"chunk at byte {position}: lz4 compression needs the lz4 package (pip install lz4)", position
+                    ) from None
                 data = lz4.frame.decompress(packed)
             elif compression == "":
                 data = bytes(packed)
             else:
                 raise self.error(f"chunk at byte {position}: unknown compression {compression!r}", position)
-        except zstandard.ZstdError as e:
+        except LogError:
+            raise
+        except (zstandard.ZstdError, ValueError, RuntimeError) as e:  # lz4 raises RuntimeError
             raise self.error(f"corrupt chunk at byte {position}: {e}", position) from None
         if len(data) != usize:
             raise self.error(
@@ -812,6 +824,31 @@ class McapScan:
                 target.order.append(ordinal[sub])
                 target.header.append(header[sub])
                 target.payload.append(_gather(buffer, starts[sub] + 9 + 22, int(length)))
+
+
+_ZSTD_PIECE = 1 << 20
+"""Bytes a Chunk's zstd stream is read in: what is held never exceeds what the data decompress to."""
+
+
+def _zstd_decompress(packed: memoryview, usize: int) -> bytes:
+    """A chunk's records from their zstd frame, read piece by piece and never more than ``usize`` + 1 bytes.
+
+    Neither the chunk's declared size ``usize`` nor the frame's own content size is trusted to size a
+    buffer (a corrupt length would ask for GBs): memory follows the data actually decompressed. A frame
+    that declares a size other than ``usize`` is corrupt (``ValueError``); the caller checks the length.
+    """
+    declared = zstandard.get_frame_parameters(packed).content_size  # ZstdError for a corrupt frame header
+    if declared != zstandard.CONTENTSIZE_UNKNOWN and declared != usize:
+        raise ValueError(f"its zstd frame declares {declared} bytes, the chunk {usize}")
+    pieces, total = [], 0
+    with zstandard.ZstdDecompressor().stream_reader(packed, read_across_frames=True) as reader:
+        while total <= usize:
+            piece = reader.read(min(_ZSTD_PIECE, usize + 1 - total))
+            if not piece:
+                break
+            pieces.append(piece)
+            total += len(piece)
+    return b"".join(pieces)
 
 
 def _record_positions(data: bytes, buffer: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -6,7 +6,7 @@ weighted by their independent clusters c_i = ⌊n_i/m⌋:
 
     σ²(τ) = Σ c_i σ_i²(τ) / Σ c_i,        ν(τ) = Σ (c_i − 1)        (chi-squared degrees of freedom)
 
-and the 68 % interval of σ(τ) is the chi-squared one of ν (Lesage–Audoin; ``allantools``). τ is kept
+and the 68 % interval of σ(τ) is the chi-squared one of ν (Lesage–Audoin; NIST SP 1065 eq. 45). τ is kept
 only up to a third of the longest phase (each phase contributes up to a third of its own length):
 beyond it there are fewer than three independent clusters and nothing is observable. The IEEE 952
 terms are fitted to the pooled curve by :func:`gyroemu.sensors.allan.fit_allan`, whose intervals are
@@ -55,7 +55,7 @@ from typing import Literal
 
 import numpy as np
 
-from gyroemu.sensors.allan import AllanDeviation, AllanFit, Coefficient, allan_deviation, fit_allan
+from gyroemu.sensors.allan import AllanDeviation, AllanFit, Coefficient, allan_deviation, chi2_interval, fit_allan
 from gyroemu.sensors.noise import gauss_markov_avar
 
 __all__ = ["NoiseTerm", "MarkovTerm", "AxisNoise", "SensorNoise", "pooled_allan", "sensor_noise", "fit_markov"]
@@ -182,10 +182,8 @@ def pooled_allan(segments: Sequence[np.ndarray], dt: float, tau_min_s: float = 0
         raise ValueError("rest phases too short for an Allan deviation (need at least two octaves of τ)")
     tau, clusters, edf = octaves[keep], clusters[keep], edf[keep]
     adev = np.sqrt(avar[keep] / clusters)
-    import allantools
-
-    bounds = np.array([allantools.confidence_interval(s, nu, ci=_ONE_SIGMA) for s, nu in zip(adev, edf)])
-    return AllanDeviation(tau=tau, adev=adev, clusters=clusters, edf=edf, low=bounds[:, 0], high=bounds[:, 1])
+    low, high = chi2_interval(adev, edf, ci=_ONE_SIGMA)
+    return AllanDeviation(tau=tau, adev=adev, clusters=clusters, edf=edf, low=low, high=high)
 
 
 def _four_basis(tau: np.ndarray) -> np.ndarray:
@@ -215,15 +213,13 @@ def _one_point(value2: float, column: np.ndarray, model: np.ndarray, allan: Alla
     """The 68 % interval of a coefficient √value2 read where its term holds the largest share of the
     Allan variance for its degrees of freedom (as ``fit_allan`` reads every term; (0, ∞) when it never
     holds one degree of freedom)."""
-    import allantools
-
     relative_sd = np.sqrt(2 / allan.edf)
     share = value2 * column / model
     best = int(np.argmin(relative_sd / share))
     dof = allan.edf[best] * share[best] ** 2
     if dof < 1.0:
         return 0.0, float("inf")
-    low, high = allantools.confidence_interval(np.sqrt(value2), dof, ci=_ONE_SIGMA)
+    low, high = chi2_interval(np.sqrt(value2), dof, ci=_ONE_SIGMA)
     return float(low), float(high)
 
 

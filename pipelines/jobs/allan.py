@@ -7,7 +7,7 @@ The fit is :func:`gyroemu.sensors.allan.fit_allan` over the overlapping Allan de
 :func:`allan_of_log` computes that deviation with
 :class:`gyroemu.sensors.allan_stream.OverlappingAllanAccumulator`, fed the log a batch of samples at a
 time, so the memory it needs does not grow with the log's length (a 12-hour run at hundreds of Hz);
-:func:`allan_report` takes a record already in memory and uses ``allantools`` (``allan_deviation``).
+:func:`allan_report` takes a record already in memory (``allan_deviation``).
 The two agree to round-off for τ up to the accumulator's exact range (2^15 samples); beyond it the
 streamed one is the overlapping estimator with a coarser overlap step (see that module).
 
@@ -795,7 +795,11 @@ def allan_of_log(path: str | os.PathLike, allow_motion: bool = False) -> AllanRe
 
         from gyroemu.sensors import device_from_dict
 
-        device = device_from_dict(tomllib.loads(device_toml), name=log.name)
+        try:
+            table = tomllib.loads(device_toml)
+        except tomllib.TOMLDecodeError as e:
+            raise AllanLogError(f"{log}: its embedded device config is not TOML: {e}") from None
+        device = device_from_dict(table, name=log.name)
         spec = dataclasses.replace(device.gyro_errors, noise_density=device.gyro_noise_density)
         accel_spec = device.spec.accelerometer.errors.to_si()
     try:
