@@ -29,7 +29,11 @@ globals or as attributes of a module it uses) are handed over first and put in t
 The lock is ``fcntl.flock`` on a file in the user's cache folder, one per gyroemu version
 (``$XDG_CACHE_HOME/gyroemu/<version>/numba.lock``, ``~/.cache`` when unset), re-entrant within a
 process (a compile can trigger the compile of a callee). Once the cache is warm, a process takes the
-lock once per compiled signature to load it, which costs microseconds.
+lock once per compiled signature to load it, which costs microseconds. The compiled functions of
+:func:`njit` are cached beside the lock (``…/<version>/numba/``, :func:`cache_path`), through numba's
+public cache classes given to each dispatcher (numba's own locators, its class and its config are
+untouched); where that folder cannot be written, numba's own cache beside the sources is used. The
+four :func:`guvectorize` ufuncs compile when built, in numba's own cache.
 """
 
 from __future__ import annotations
@@ -44,19 +48,68 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["Deferred", "compile_lock", "guvectorize", "lock_path", "njit"]
+__all__ = ["Deferred", "cache_path", "compile_lock", "guvectorize", "lock_path", "njit"]
 
 _thread_lock = threading.RLock()
 _depth = 0
 _handle: IO[str] | None = None
 
 
-def lock_path() -> Path:
-    """The lock file: per user (in the user's cache folder) and per gyroemu version."""
+def _user_folder() -> Path:
+    """``$XDG_CACHE_HOME/gyroemu/<version>`` (``~/.cache`` when unset): per user and per gyroemu version."""
     import gyroemu
 
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "gyroemu" / gyroemu.__version__ / "numba.lock"
+    return Path(base) / "gyroemu" / gyroemu.__version__
+
+
+def lock_path() -> Path:
+    """The lock file: per user (in the user's cache folder) and per gyroemu version."""
+    return _user_folder() / "numba.lock"
+
+
+def cache_path() -> Path:
+    """numba's on-disk cache of gyroemu's functions: per user and per gyroemu version, beside the lock."""
+    return _user_folder() / "numba"
+
+
+def _user_cache(py_func: Callable[..., Any]) -> Any:
+    """A numba ``FunctionCache`` of ``py_func`` kept under :func:`cache_path` (mirroring the source
+    tree below it, as numba's user-wide cache does), or None where numba lacks the public classes this
+    needs (then numba's own cache, beside the sources, is used)."""
+    try:
+        from numba.core.caching import CompileResultCacheImpl, FunctionCache, UserWideCacheLocator
+    except ImportError:
+        return None
+
+    class Locator(UserWideCacheLocator):
+        def __init__(self, py_func: Callable[..., Any], py_file: str) -> None:
+            super().__init__(py_func, py_file)
+            self._cache_path = os.path.join(str(cache_path()), self.get_suitable_cache_subpath(py_file))
+
+    class Impl(CompileResultCacheImpl):
+        _locator_classes = [Locator]
+
+    class Cache(FunctionCache):
+        _impl_class = Impl
+
+    try:
+        return Cache(py_func)
+    except RuntimeError:  # no locator: a function without a source file
+        return None
+
+
+def _relocate_cache(holder: Any, attribute: str, py_func: Callable[..., Any]) -> None:
+    """Put :func:`_user_cache` in place of the numba ``FunctionCache`` at ``holder.attribute`` (a
+    dispatcher's); where numba keeps its cache elsewhere, leave numba's own."""
+    try:
+        from numba.core.caching import FunctionCache
+    except ImportError:
+        return
+    if isinstance(getattr(holder, attribute, None), FunctionCache):
+        cache = _user_cache(py_func)
+        if cache is not None:
+            setattr(holder, attribute, cache)
 
 
 @contextlib.contextmanager
@@ -150,6 +203,8 @@ def njit(function: Callable[..., Any] | None = None, **options: Any) -> Any:
         import numba
 
         dispatcher = numba.njit(**options)(fn)
+        if options.get("cache"):
+            _relocate_cache(dispatcher, "_cache", fn)  # this dispatcher only: numba's class and config stay
         unlocked = dispatcher.compile
 
         def compile(sig: Any) -> Any:
@@ -173,7 +228,7 @@ def guvectorize(*args: Any, **kwargs: Any) -> Callable[[Callable[..., Any]], Def
     def build(fn: Callable[..., Any]) -> Any:
         import numba
 
-        with compile_lock():
+        with compile_lock():  # compiled (or loaded) at once, in numba's own cache beside the sources
             return numba.guvectorize(*args, **kwargs)(fn)
 
     def decorate(fn: Callable[..., Any]) -> Deferred:

@@ -160,3 +160,27 @@ def test_public_api_is_fully_annotated(package):
             if signature.return_annotation is inspect.Signature.empty and function.__name__ != "__init__":
                 missing.append(f"{qualified} -> ?")
     assert missing == []
+
+
+def test_numba_caches_gyroemu_per_user_and_version(tmp_path):
+    """gyroemu's compiled functions are cached under ``$XDG_CACHE_HOME/gyroemu/<version>/numba``, beside
+    the compile lock, and a second process loads them from there (its index lists the signature)."""
+    code = """
+import numpy as np
+from gyroemu.sensors.noise import sensor_noise
+sensor_noise(np.random.default_rng(0), (10, 3), 0.01, white=1.0)
+from gyroemu.dynamics.jit import cache_path, lock_path
+print(cache_path()); print(lock_path())
+"""
+    env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path)}
+    done = subprocess.run([sys.executable, "-P", "-c", code], capture_output=True, text=True, cwd=ROOT.parent, env=env)
+    assert done.returncode == 0, done.stderr
+    cache, lock = (Path(line) for line in done.stdout.split())
+    assert cache == tmp_path / "gyroemu" / version("gyroemu") / "numba" and lock.parent == cache.parent
+    assert len(list(cache.rglob("noise._ar1_sum_into-*.nbi"))) == 1
+    written = {p: p.stat().st_mtime_ns for p in cache.rglob("*.nb*")}
+    assert any(p.suffix == ".nbc" for p in written)
+    again = subprocess.run([sys.executable, "-P", "-c", code], capture_output=True, text=True, cwd=ROOT.parent, env=env)
+    assert again.returncode == 0, again.stderr
+    # Loaded, not compiled again: the second process wrote nothing into the cache.
+    assert {p: p.stat().st_mtime_ns for p in cache.rglob("*.nb*")} == written
