@@ -60,10 +60,15 @@ class MeasuredBlock:
         The block's output samples.
     truth : Trajectory
         The truth samples the block read (its window, margins included).
+    interpolants : SensorTruth
+        The window's interpolants the device measured with; their body-frame methods
+        (``attitude_world``, ``body_truth``, ``body_rates``) give the block's truth channels without
+        building the splines again.
     """
 
     samples: ImuSamples
     truth: Trajectory
+    interpolants: SensorTruth
 
 
 class DeviceRun:
@@ -172,7 +177,7 @@ class DeviceRun:
                 temperature_degC=temperature,
                 device=device.name,
             )
-            yield MeasuredBlock(samples, window)
+            yield MeasuredBlock(samples, window, truth)
             done += n
 
     def samples(self) -> Iterator[ImuSamples]:

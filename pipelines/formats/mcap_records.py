@@ -1117,6 +1117,20 @@ class RawMessages(NamedTuple):
         """Message k's payload bytes."""
         return self.buffer[int(self.start[k]) : int(self.start[k] + self.size[k])].tobytes()
 
+    @classmethod
+    def from_headers(cls, headers: np.ndarray, buffer: np.ndarray, start: np.ndarray, size: np.ndarray) -> RawMessages:
+        """The messages whose 22-byte headers are ``headers`` (fields ``channel_id``, ``sequence``,
+        ``log_time``, ``publish_time``), their payloads at ``start`` (M,) of ``size`` (M,) in ``buffer``."""
+        return cls(
+            headers["channel_id"].astype(np.uint16),
+            headers["sequence"].astype(np.uint32),
+            headers["log_time"].astype(np.uint64),
+            headers["publish_time"].astype(np.uint64),
+            buffer,
+            np.asarray(start, dtype=np.int64),
+            np.asarray(size, dtype=np.int64),
+        )
+
 
 class McapRecordWalk(McapScan):
     """A :class:`McapScan` that hands out every Message record unchanged, a :class:`RawMessages` per chunk
@@ -1138,17 +1152,7 @@ class McapRecordWalk(McapScan):
         fields, _ = self._loose_fields(content)
         self.message_count += 1
         buffer = np.frombuffer(content, dtype=np.uint8)
-        self.out.append(
-            RawMessages(
-                fields["channel_id"].astype(np.uint16),
-                fields["sequence"].astype(np.uint32),
-                fields["log_time"].astype(np.uint64),
-                fields["publish_time"].astype(np.uint64),
-                buffer,
-                np.array([22], dtype=np.int64),
-                np.array([len(content) - 22], dtype=np.int64),
-            )
-        )
+        self.out.append(RawMessages.from_headers(fields, buffer, np.array([22]), np.array([len(content) - 22])))
 
     def _chunk_messages(self, data, buffer, header, starts, lengths, position) -> None:
         self.message_count += len(starts)
@@ -1158,17 +1162,7 @@ class McapRecordWalk(McapScan):
                 f"corrupt chunk at byte {position}: a message on channel {unknown[0]}, which no Channel record defines",
                 position,
             )
-        self.out.append(
-            RawMessages(
-                header["channel_id"].astype(np.uint16),
-                header["sequence"].astype(np.uint32),
-                header["log_time"].astype(np.uint64),
-                header["publish_time"].astype(np.uint64),
-                buffer,
-                (starts + 9 + 22).astype(np.int64),
-                (lengths - 22).astype(np.int64),
-            )
-        )
+        self.out.append(RawMessages.from_headers(header, buffer, starts + 9 + 22, lengths - 22))
 
     def batches(self) -> Iterator[RawMessages]:
         """Walk the file (:meth:`McapScan.walk`), handing out its Message records as they are read."""

@@ -5,5 +5,7 @@
 - :mod:`.allan`: Allan deviation fit and plot of a log (``gyroemu allan``);
 - :mod:`.bench`: filters against truth over simulated cases and logs (``gyroemu bench``);
 - :mod:`.demo`: the main job on built-in defaults, an orchestrator of the others (``gyroemu demo``);
-- :mod:`.progress`: simulate's progress bar.
+- :mod:`.identify`, :mod:`.twin`: a device fitted to recordings, and its twins held against them;
+- :mod:`.info`: what a log holds, per device and per topic (``gyroemu info``);
+- :mod:`.progress`: progress bars, by phase or by samples.
 """

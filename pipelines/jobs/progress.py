@@ -19,6 +19,14 @@ import threading
 __all__ = ["PhaseProgress", "CountProgress"]
 
 
+def _shown(stream, enabled: bool | None) -> bool:
+    """Whether a bar goes on ``stream``: ``enabled`` when given, else whether ``stream`` is a terminal."""
+    if enabled is not None:
+        return enabled
+    isatty = getattr(stream, "isatty", None)
+    return bool(isatty and isatty())
+
+
 class PhaseProgress:
     """Phases of a run as a tqdm bar on ``stream`` (default stderr), shown only on a terminal.
 
@@ -30,9 +38,7 @@ class PhaseProgress:
 
     def __init__(self, phases: list[str], *, label: str = "", stream=None, enabled: bool | None = None):
         self.stream = sys.stderr if stream is None else stream
-        if enabled is None:
-            isatty = getattr(self.stream, "isatty", None)
-            enabled = bool(isatty and isatty())
+        enabled = _shown(self.stream, enabled)
         self.phases = list(phases)
         self.label = label
         self.bar = None
@@ -96,9 +102,7 @@ class CountProgress:
         self, total: int | None, *, label: str = "", unit: str = "samples", stream=None, enabled: bool | None = None
     ):
         self.stream = sys.stderr if stream is None else stream
-        if enabled is None:
-            isatty = getattr(self.stream, "isatty", None)
-            enabled = bool(isatty and isatty())
+        enabled = _shown(self.stream, enabled)
         self.bar = None
         if enabled:
             from tqdm import tqdm

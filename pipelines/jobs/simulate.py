@@ -339,7 +339,6 @@ def _simulate_mcap(
     from gyroemu.pipelines.formats.background_writer import BackgroundWriter
     from gyroemu.pipelines.formats.mcap_log import McapLogWriter, Recording, truth_pose, truth_series
     from gyroemu.pipelines.jobs.progress import CountProgress
-    from gyroemu.sensors.sampling import SensorTruth
 
     source = truth_source(scenario, options.duration, rate)
     run = device.run(source)
@@ -347,7 +346,7 @@ def _simulate_mcap(
     with CountProgress(run.count, label="simulate", enabled=options.progress) as progress:
         with McapLogWriter(options.out, scenario=scenario) as log, BackgroundWriter(log.write) as writer:
             for block in run:
-                body = SensorTruth(block.truth)  # one set of interpolants for both truth channels
+                body = block.interpolants  # the device's own: the splines are built once per block
                 instants = block.samples.t_true if block.samples.t_true is not None else block.samples.t
                 q_wb = body.attitude_world(instants)  # the attitude's Slerp, evaluated once for both
                 truth = truth_series(block.truth, block.samples, body, q_wb)

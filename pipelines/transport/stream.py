@@ -286,9 +286,8 @@ def encode_block(block: MeasuredBlock) -> dict[str, np.ndarray]:
     """Topic -> encoded rows of one block of a device run (:class:`gyroemu.sensors.device_run.MeasuredBlock`):
     :func:`encode_run` of its samples and of its ``/truth/imu`` (interpolated in the block's truth window)."""
     from gyroemu.pipelines.formats.mcap_log import truth_series
-    from gyroemu.sensors.sampling import SensorTruth
 
-    return encode_run(block.samples, truth_series(block.truth, block.samples, SensorTruth(block.truth)))
+    return encode_run(block.samples, truth_series(block.truth, block.samples, block.interpolants))
 
 
 def run_stream(options: StreamOptions, *, out: TextIO = sys.stdout) -> int:

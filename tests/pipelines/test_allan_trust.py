@@ -13,8 +13,8 @@ import warnings
 
 import numpy as np
 import pytest
+from cli_runs import run_cli
 
-from gyroemu.pipelines.cli import main
 from gyroemu.pipelines.formats.mcap_log import read_mcap
 from gyroemu.pipelines.jobs.allan import (
     AllanMotionError,
@@ -39,14 +39,9 @@ def logs(tmp_path_factory):
     return out
 
 
-def run(capsys, *args):
+def run(*args):
     """``gyroemu allan ARGS`` in this process: (exit status, stdout, stderr)."""
-    try:
-        status = main(["allan", *map(str, args)])
-    except SystemExit as e:
-        status = e.code
-    captured = capsys.readouterr()
-    return status, captured.out, captured.err
+    return run_cli(["allan", *map(str, args)])
 
 
 def test_a_static_log_passes_the_static_check(logs):
@@ -58,10 +53,10 @@ def test_a_static_log_passes_the_static_check(logs):
     assert check.moving() == ""
 
 
-def test_a_moving_log_is_refused_naming_the_figure_unless_motion_is_allowed(logs, capsys):
+def test_a_moving_log_is_refused_naming_the_figure_unless_motion_is_allowed(logs):
     with pytest.raises(AllanMotionError, match=r"the accelerometer's direction moves by [\d.]+ deg \(static: < "):
         allan_of_log(logs["moving"])
-    status, _, err = run(capsys, logs["moving"], "--out", logs["moving"].with_suffix(".png"))
+    status, _, err = run(logs["moving"], "--out", logs["moving"].with_suffix(".png"))
     assert status == 2
     assert "not a static log" in err and "the true attitude turns by" in err and "--allow-motion" in err
     with warnings.catch_warnings(record=True) as caught:
@@ -100,9 +95,9 @@ def test_the_accelerometer_is_analysed_as_the_in_memory_path_does(logs):
     assert all(f.arw.low * 60.0 < vrw * 1.05 and f.arw.high * 60.0 > vrw * 0.95 for f in report.accel_fits)
 
 
-def test_tables_plots_in_the_named_formats_and_kalibr_yaml(logs, capsys, tmp_path):
+def test_tables_plots_in_the_named_formats_and_kalibr_yaml(logs, tmp_path):
     pdf, svg, yaml = tmp_path / "a.pdf", tmp_path / "a.svg", tmp_path / "imu.yaml"
-    status, out, err = run(capsys, logs["static"], "--out", pdf, "--kalibr", yaml)
+    status, out, err = run(logs["static"], "--out", pdf, "--kalibr", yaml)
     assert status == 0, err
     assert "gyro term" in out and "accel term" in out
     accel_rows = {line.split()[0] for line in out.split("accel term", 1)[1].splitlines()[1:]}
@@ -131,24 +126,24 @@ def test_tables_plots_in_the_named_formats_and_kalibr_yaml(logs, capsys, tmp_pat
         assert "upper limit: not resolved" in yaml.read_text()
 
     before = yaml.read_text()
-    status, _, err = run(capsys, logs["static"], "--out", svg, "--kalibr", yaml)
+    status, _, err = run(logs["static"], "--out", svg, "--kalibr", yaml)
     assert status == 2 and "--force" in err and not svg.exists()
-    status, _, err = run(capsys, logs["static"], "--out", svg, "--kalibr", yaml, "--force")
+    status, _, err = run(logs["static"], "--out", svg, "--kalibr", yaml, "--force")
     assert status == 0, err
     assert yaml.read_text() == before
     head = svg.read_bytes()[:200].lstrip()
     assert head.startswith(b"<?xml") or head.startswith(b"<svg")
 
 
-def test_an_unknown_plot_suffix_is_refused_before_any_work(capsys, tmp_path):
-    status, _, err = run(capsys, tmp_path / "missing.mcap", "--out", tmp_path / "plot.xyz")
+def test_an_unknown_plot_suffix_is_refused_before_any_work(tmp_path):
+    status, _, err = run(tmp_path / "missing.mcap", "--out", tmp_path / "plot.xyz")
     assert status == 2
     assert "argument --out" in err and ".xyz" in err and "missing.mcap" not in err.split("argument --out")[0]
     assert not (tmp_path / "plot.xyz").exists()
 
 
-def test_json_report(logs, capsys, tmp_path):
-    status, out, err = run(capsys, logs["static"], "--json", "--out", tmp_path / "a.png")
+def test_json_report(logs, tmp_path):
+    status, out, err = run(logs["static"], "--json", "--out", tmp_path / "a.png")
     assert status == 0, err
     data = json.loads(out)
     for sensor in ("gyro", "accel"):

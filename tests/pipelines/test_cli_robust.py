@@ -5,8 +5,6 @@ The contract: exit 2 on bad usage or bad input, before any work, with a message 
 command overwrites an existing file without ``--force``.
 """
 
-import contextlib
-import io
 import os
 import shutil
 import signal
@@ -16,21 +14,10 @@ import threading
 import time
 
 import pytest
+from cli_runs import run_cli
 from live_processes import free_port
 
-from gyroemu.pipelines import cli
 from gyroemu.pipelines.jobs.simulate import SimulateError, SimulateOptions, check_options
-
-
-def run_cli(argv):
-    """``gyroemu ARGS`` in this process: (exit status, stdout, stderr)."""
-    stdout, stderr = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
-        try:
-            code = cli.main(argv)
-        except SystemExit as e:
-            code = e.code
-    return code, stdout.getvalue(), stderr.getvalue()
 
 
 def gyroemu(*args, **kwargs):

@@ -23,9 +23,7 @@ The fast tier runs a few cases per property (:data:`FAST`, derandomised); ``pyte
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
-import io
 import itertools
 import os
 import struct
@@ -39,13 +37,13 @@ from typing import Any
 
 import pytest
 import tomli_w
+from cli_runs import run_cli
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from gyroemu.dynamics.config import config_dir
 from gyroemu.dynamics.scenarios import load_scenario, scenario_from_dict
 from gyroemu.errors import ConfigError, GyroemuError
-from gyroemu.pipelines.cli import main
 from gyroemu.pipelines.formats.mcap_log import read_mcap
 from gyroemu.pipelines.formats.mcap_records import iter_mcap_batches
 from gyroemu.pipelines.jobs.allan import AllanLogError, allan_of_log
@@ -107,16 +105,10 @@ def bounded(call: Callable[[], Any], allowed: tuple[type[BaseException], ...] = 
     return result
 
 
-def run_cli(argv: list[str]) -> int:
-    """``gyroemu argv`` with its output captured: the exit status, 0 or 2 (a ``SystemExit(2)`` of bad
-    usage counts as 2)."""
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):
-        try:
-            status = main(argv)
-        except SystemExit as e:
-            status = e.code
-    assert status in (0, 2), (status, out.getvalue()[-2000:])
+def run_status(argv: list[str]) -> int:
+    """``gyroemu argv``'s exit status, which must be 0 or 2 (a ``SystemExit(2)`` of bad usage counts as 2)."""
+    status, out, err = run_cli(argv)
+    assert status in (0, 2), (status, (out + err)[-2000:])
     return status
 
 
@@ -347,7 +339,7 @@ def corrupted_log(draw: st.DrawFn, base: bytes) -> LogCase:
 
 def _readers(out: Path) -> dict[str, Callable[[Path], None]]:
     def estimate(path: Path) -> None:
-        run_cli(["estimate", str(path), "--out", str(out / f"est{next(_CASE)}.mcap")])
+        run_status(["estimate", str(path), "--out", str(out / f"est{next(_CASE)}.mcap")])
 
     def batches(path: Path) -> None:
         for _ in iter_mcap_batches(path):
@@ -355,7 +347,7 @@ def _readers(out: Path) -> dict[str, Callable[[Path], None]]:
 
     return {
         "read_mcap": read_mcap,
-        "info": lambda path: run_cli(["info", str(path), "--configs"]),
+        "info": lambda path: run_status(["info", str(path), "--configs"]),
         "estimate": estimate,
         "allan": allan_of_log,
         "iter_mcap_batches": batches,
@@ -382,7 +374,7 @@ def test_the_base_log_reads_with_every_reader(folder: Path, valid_log: bytes) ->
         check_log(folder, valid_log, reader)
     path = folder / "base.mcap"
     path.write_bytes(valid_log)
-    assert run_cli(["info", str(path)]) == 0
+    assert run_status(["info", str(path)]) == 0
 
 
 @pytest.mark.parametrize("reader", READERS)
@@ -439,7 +431,7 @@ def check_import(folder: Path, data: bytes) -> None:
     source.write_bytes(data)
     out = folder / f"imported{next(_CASE)}.mcap"
     try:
-        bounded(lambda: run_cli(["import", "broad", str(source), "--out", str(out), "--force"]))
+        bounded(lambda: run_status(["import", "broad", str(source), "--out", str(out), "--force"]))
     finally:
         source.unlink()
         out.unlink(missing_ok=True)
@@ -448,7 +440,7 @@ def check_import(folder: Path, data: bytes) -> None:
 def test_the_base_trial_imports(folder: Path, valid_trial: bytes) -> None:
     source = folder / "trial_copy.hdf5"
     source.write_bytes(valid_trial)
-    assert run_cli(["import", "broad", str(source), "--out", str(folder / "trial.mcap"), "--force"]) == 0
+    assert run_status(["import", "broad", str(source), "--out", str(folder / "trial.mcap"), "--force"]) == 0
 
 
 @FAST
@@ -498,12 +490,8 @@ def test_estimate_of_a_log_with_a_huge_accelerometer_sample_ends_cleanly(folder:
     records = records.replace(struct.pack("<d", first), struct.pack("<d", -9.14e232), 1)
     path = folder / "huge_accel.mcap"
     path.write_bytes(valid_log[:p] + _chunk(head, records) + valid_log[p + 9 + length :])
-    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-        try:
-            status = main(["estimate", str(path), "--out", str(folder / "huge_accel_estimate.mcap"), "--force"])
-        except SystemExit as e:  # a refusal of the data goes through argparse's exit
-            status = e.code
-    assert status in (0, 2)  # a level start with the tilt unknown, or a refusal: never a traceback
+    # A level start with the tilt unknown, or a refusal (exit 2): never a traceback.
+    run_status(["estimate", str(path), "--out", str(folder / "huge_accel_estimate.mcap"), "--force"])
 
 
 def _zstd_chunk(head: bytes, records: bytes, usize: int, frame_size: int | None) -> bytes:

@@ -20,11 +20,11 @@ import h5py
 import numpy as np
 import pytest
 from broad_trials import BROAD_DIR, needs_trial, require_trial
+from cli_runs import run_cli
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from gyroemu.pipelines import cli
 from gyroemu.pipelines.formats.importers import BROAD_CITATION, ImportInputError, import_broad, read_broad
 from gyroemu.pipelines.formats.mcap_log import LogWarning, Recording, read_mcap, write_mcap
 from gyroemu.pipelines.formats.mcap_records import McapFileWriter
@@ -223,20 +223,6 @@ def write_trial(path, n=50, rate=100.0, drop=None, replace=None, attrs=True):
         if attrs:
             f.attrs["sampling_rate"] = rate
     return data
-
-
-def run_cli(argv):
-    """``gyroemu ARGS`` in this process: (exit status, stdout, stderr)."""
-    import contextlib
-    import io
-
-    stdout, stderr = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
-        try:
-            code = cli.main(argv)
-        except SystemExit as e:
-            code = e.code
-    return code, stdout.getvalue(), stderr.getvalue()
 
 
 def test_synthetic_round_trip_and_nan_rows(tmp_path):
