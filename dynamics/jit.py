@@ -13,15 +13,16 @@ inter-process lock:
 
 * :func:`njit` is ``numba.njit`` with ``cache=True`` whose dispatcher compiles under
   :func:`compile_lock`: the lock wraps that one dispatcher's ``compile`` (the path of lazy
-  compilation on first call, of a callee compiled while its caller is typed, and of a cache load);
-* :func:`guvectorize` takes the lock around numba's gufunc build.
+  compilation on first call, of a callee compiled while its caller is typed, and of a cache load).
+  gyroemu compiles nothing else (its quaternion product and rotation are ``njit`` loops, not
+  ``guvectorize`` ufuncs, whose build would write numba's cache beside the sources).
 
 Nothing of numba's own is changed: other libraries' compiled functions in the same process compile
 as numba alone would compile them.
 
 **numba is imported on first use, not on import.** Importing numba costs about 0.25 s, which a
-command that only lists the built-in devices should not pay. So :func:`njit` and :func:`guvectorize`
-return a :class:`Deferred` that holds the Python function and hands it to numba when it is first
+command that only lists the built-in devices should not pay. So :func:`njit` returns a
+:class:`Deferred` that holds the Python function and hands it to numba when it is first
 called. A compiled function's compiled callees must be numba dispatchers by the time numba types it:
 before handing a function over, its deferred callees (the names its code uses, in its module's
 globals or as attributes of a module it uses) are handed over first and put in their place.
@@ -32,8 +33,7 @@ process (a compile can trigger the compile of a callee). Once the cache is warm,
 lock once per compiled signature to load it, which costs microseconds. The compiled functions of
 :func:`njit` are cached beside the lock (``…/<version>/numba/``, :func:`cache_path`), through numba's
 public cache classes given to each dispatcher (numba's own locators, its class and its config are
-untouched); where that folder cannot be written, numba's own cache beside the sources is used. The
-four :func:`guvectorize` ufuncs compile when built, in numba's own cache.
+untouched); where that folder cannot be written, numba's own cache beside the sources is used.
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["Deferred", "cache_path", "compile_lock", "guvectorize", "lock_path", "njit"]
+__all__ = ["Deferred", "cache_path", "compile_lock", "lock_path", "njit"]
 
 _thread_lock = threading.RLock()
 _depth = 0
@@ -219,19 +219,3 @@ def njit(function: Callable[..., Any] | None = None, **options: Any) -> Any:
         return Deferred(fn, build)
 
     return decorate(function) if function is not None else decorate
-
-
-def guvectorize(*args: Any, **kwargs: Any) -> Callable[[Callable[..., Any]], Deferred]:
-    """``numba.guvectorize(*args, cache=True, **kwargs)``, deferred to first use, built under :func:`compile_lock`."""
-    kwargs.setdefault("cache", True)
-
-    def build(fn: Callable[..., Any]) -> Any:
-        import numba
-
-        with compile_lock():  # compiled (or loaded) at once, in numba's own cache beside the sources
-            return numba.guvectorize(*args, **kwargs)(fn)
-
-    def decorate(fn: Callable[..., Any]) -> Deferred:
-        return Deferred(fn, build)
-
-    return decorate

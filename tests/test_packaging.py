@@ -4,6 +4,7 @@ The wheel is built from this checkout without build isolation (setuptools from t
 test needs no network. Imports are checked in fresh interpreters, where nothing else has loaded numba.
 """
 
+import importlib
 import json
 import os
 import subprocess
@@ -164,20 +165,29 @@ def test_public_api_is_fully_annotated(package):
 
 def test_numba_caches_gyroemu_per_user_and_version(tmp_path):
     """gyroemu's compiled functions are cached under ``$XDG_CACHE_HOME/gyroemu/<version>/numba``, beside
-    the compile lock, and a second process loads them from there (its index lists the signature)."""
+    the compile lock, and a second process loads them from there (its index lists the signature); the
+    quaternion kernels too, and nothing is written beside the installed sources."""
     code = """
 import numpy as np
 from gyroemu.sensors.noise import sensor_noise
+from gyroemu.dynamics.rotation import quat_multiply, quat_rotate
 sensor_noise(np.random.default_rng(0), (10, 3), 0.01, white=1.0)
+quat_rotate(quat_multiply(np.ones((2, 4)), np.ones(4)), np.ones(3))
 from gyroemu.dynamics.jit import cache_path, lock_path
 print(cache_path()); print(lock_path())
 """
     env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path)}
+    sources = [Path(importlib.import_module(f"gyroemu.{name}").__file__).parent for name in ("dynamics", "sensors")]
+    beside_sources = lambda: {p: p.stat().st_mtime_ns for folder in sources for p in folder.rglob("*.nb[ic]")}
+    before = beside_sources()
     done = subprocess.run([sys.executable, "-P", "-c", code], capture_output=True, text=True, cwd=ROOT.parent, env=env)
     assert done.returncode == 0, done.stderr
     cache, lock = (Path(line) for line in done.stdout.split())
     assert cache == tmp_path / "gyroemu" / version("gyroemu") / "numba" and lock.parent == cache.parent
     assert len(list(cache.rglob("noise._ar1_sum_into-*.nbi"))) == 1
+    assert len(list(cache.rglob("rotation._multiply_rows-*.nbi"))) == 1
+    assert len(list(cache.rglob("rotation._rotate_rows-*.nbi"))) == 1
+    assert beside_sources() == before
     written = {p: p.stat().st_mtime_ns for p in cache.rglob("*.nb*")}
     assert any(p.suffix == ".nbc" for p in written)
     again = subprocess.run([sys.executable, "-P", "-c", code], capture_output=True, text=True, cwd=ROOT.parent, env=env)
