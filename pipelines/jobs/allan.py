@@ -38,6 +38,7 @@ from typing import cast
 
 import numpy as np
 
+from gyroemu.errors import LogError
 from gyroemu.pipelines.formats.atomic import write_atomic, write_text_atomic
 from gyroemu.sensors.allan import TERMS, AllanDeviation, AllanFit, Coefficient, allan_deviation, fit_allan
 from gyroemu.sensors.allan_stream import OverlappingAllanAccumulator
@@ -315,9 +316,9 @@ def allan_report(
     return AllanReport(fits=fits, spec=spec, accel_fits=accel_fits, accel_spec=accel_spec, rate_hz=1.0 / dt)
 
 
-class AllanLogError(ValueError):
-    """A log :func:`allan_of_log` cannot analyse: missing, not a gyroemu log, no or too few gyro samples.
-    The message starts with the file's name."""
+class AllanLogError(LogError):
+    """A log :func:`allan_of_log` cannot analyse: missing, not a gyroemu log, no or too few gyro samples
+    (a :class:`gyroemu.errors.LogError`: ``.file`` is the log, and the message starts with its name)."""
 
 
 class AllanMotionError(AllanLogError):
@@ -640,12 +641,12 @@ def _npz_series(log: Path) -> tuple[_GyroSeries, float, str | None, _TruthStats 
                     for start in range(0, len(omega), BATCH):
                         truth.add(omega[start : start + BATCH], q[start : start + BATCH])
     except (OSError, ValueError) as e:
-        raise AllanLogError(f"{log}: not a gyroemu log (.mcap or .npz): {e}") from None
+        raise AllanLogError(f"not a gyroemu log (.mcap or .npz): {e}", file=log) from None
     if gyro is None:
-        raise AllanLogError(f"{log}: holds no gyro samples (write one with 'gyroemu simulate --device ...')")
+        raise AllanLogError("holds no gyro samples (write one with 'gyroemu simulate --device ...')", file=log)
     gyro = np.asarray(gyro, dtype=float)
     if gyro.ndim != 2 or gyro.shape[1] != 3 or len(gyro) < _MIN_SAMPLES:
-        raise AllanLogError(f"{log}: {_shape_error(gyro.shape)}")
+        raise AllanLogError(_shape_error(gyro.shape), file=log)
     if accel is not None and accel.shape != gyro.shape:
         accel = None
     dt = float(np.median(np.diff(t)))
@@ -731,8 +732,9 @@ def _mcap_series(log: Path) -> tuple[_GyroSeries, float, str | None, _TruthStats
         target = series.setdefault(channel_id, _GyroSeries())
         if target.last_log_time is not None and log_time[0] < target.last_log_time:
             raise AllanLogError(
-                f"{log}: the chunks of {data.channel.topic} overlap in time; "
-                "rewrite the log in time order (e.g. 'mcap sort') to analyse it"
+                f"the chunks of {data.channel.topic} overlap in time; "
+                "rewrite the log in time order (e.g. 'mcap sort') to analyse it",
+                file=log,
             )
         target.last_log_time = int(log_time[-1])
         target.add(gyro, stamps, accel)
@@ -783,7 +785,7 @@ def allan_of_log(path: str | os.PathLike, allow_motion: bool = False) -> AllanRe
     """
     log = Path(path)
     if not log.is_file():
-        raise AllanLogError(f"{log}: no such file")
+        raise AllanLogError("no such file", file=log)
     if log.suffix == ".mcap":
         series, dt, device_toml, truth, topic = _mcap_series(log)
     else:
@@ -798,7 +800,7 @@ def allan_of_log(path: str | os.PathLike, allow_motion: bool = False) -> AllanRe
         try:
             table = tomllib.loads(device_toml)
         except tomllib.TOMLDecodeError as e:
-            raise AllanLogError(f"{log}: its embedded device config is not TOML: {e}") from None
+            raise AllanLogError(f"its embedded device config is not TOML: {e}", file=log) from None
         device = device_from_dict(table, name=log.name)
         spec = dataclasses.replace(device.gyro_errors, noise_density=device.gyro_noise_density)
         accel_spec = device.spec.accelerometer.errors.to_si()
@@ -806,7 +808,7 @@ def allan_of_log(path: str | os.PathLike, allow_motion: bool = False) -> AllanRe
         deviations = series.deviations(dt)
         fits = cast(tuple[AllanFit, AllanFit, AllanFit], tuple(fit_allan(d) for d in deviations))
     except ValueError as e:
-        raise AllanLogError(f"{log}: {e}") from None
+        raise AllanLogError(str(e), file=log) from None
     accel_deviations = series.accel_deviations(dt)
     accel_fits = None
     if accel_deviations is not None:
@@ -815,8 +817,9 @@ def allan_of_log(path: str | os.PathLike, allow_motion: bool = False) -> AllanRe
     if not static.static:
         if not allow_motion:
             raise AllanMotionError(
-                f"{log}: not a static log: {static.moving()}; an Allan analysis of a moving sensor "
-                "mixes its motion into the noise (pass --allow-motion to analyse it anyway)"
+                f"not a static log: {static.moving()}; an Allan analysis of a moving sensor "
+                "mixes its motion into the noise (pass --allow-motion to analyse it anyway)",
+                file=log,
             )
         warnings.warn(f"{log}: not a static log: {static.moving()}", MotionWarning, stacklevel=2)
     return AllanReport(

@@ -131,8 +131,10 @@ def test_a_short_log_and_a_log_with_nan_are_refused_as_before(tmp_path):
     nan_log = write_mcap(tmp_path / "nan.mcap", bad)
     with pytest.raises(AllanLogError, match=re.escape(f"{nan_log}: the gyro record has NaN or infinite samples")):
         allan_of_log(nan_log)
-    with pytest.raises(AllanLogError, match="no such file"):
+    with pytest.raises(AllanLogError, match="no such file") as missing:
         allan_of_log(tmp_path / "missing.mcap")
+    # One of gyroemu's log errors, naming the file.
+    assert isinstance(missing.value, LogError) and missing.value.file == str(tmp_path / "missing.mcap")
 
 
 def test_a_log_of_two_devices_raises_what_read_mcap_raises(tmp_path):
