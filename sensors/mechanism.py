@@ -117,7 +117,8 @@ class GyroTruth:
 class GyroResponse:
     """A mechanism's answer on the inner grid of its :class:`GyroTruth`.
 
-    Exactly one of ``angle`` and ``rate`` is set.
+    At least one of ``angle`` and ``rate`` is set; where both are, the IMU integrates ``angle`` (a rate
+    kind that integrates its own output exactly, like the MEMS baseband model, gives both).
 
     Attributes
     ----------
@@ -135,8 +136,8 @@ class GyroResponse:
     raw: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        if (self.angle is None) == (self.rate is None):
-            raise ValueError("a GyroResponse has exactly one of angle and rate")
+        if self.angle is None and self.rate is None:
+            raise ValueError("a GyroResponse has an angle, a rate or both")
 
 
 class GyroMechanism(Section):

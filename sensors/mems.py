@@ -85,10 +85,17 @@ at p and p̄ (for φ_e = 0):
 
 flat at low frequency, peaking at the mode split (+3 dB at f ≈ 0.54 Δf): the classic open-loop
 mode-split bandwidth (Acar & Shkel, "MEMS Vibratory Gyroscopes", Springer 2009, §2). Equation (5)
-and the demodulator filter form one complex linear system, discretised exactly for F linear between
-inner samples (first-order hold), the Brownian force again by its exact discrete covariance (less the
-directions that carry under 10⁻⁵ of it, two of five with the 4th-order filter, which are not drawn),
-so the inner step is free of the carrier: it needs only to resolve the output band.
+and the demodulator filter form one complex linear system, discretised exactly over each step of
+the grid for F the cubic Hermite interpolant of its samples and slopes (:func:`hermite_hold`; the
+slopes of the Coriolis and centrifugal terms come from α, the specific-force leak and the Euler force
+x₀ α are held linear), together with the step's mean output, so the indicated angle is the exact
+integral of the indicated rate; the Brownian force enters by the exact discrete covariance of the
+state and that mean (less the directions that carry under 10⁻⁵ of it, which are not drawn). Nothing
+in the step is then approximated but the forcing between samples, so the grid runs at the output rate
+(or at the truth's own rate where that is finer): a Coriolis force cubic in time (a rate quadratic in
+time) is followed exactly whatever the step. gyroemu 0.1.0 ran the same system with F linear
+between samples of a grid at four times the output band (2 kHz at 100 Hz output), its rate
+integrated by the trapezoid rule: 20 steps per sample where one now suffices.
 
 Temperature in the baseband model: the pole stays at its reference value and each force is scaled by
 H_T/H₀ (exact in steady state). The pole moves by (α_s f_s − α_d f_d) ΔT, about 0.09 Hz/°C for the
@@ -129,7 +136,7 @@ Raw observables (``GyroResponse.raw``): ``sense_in_phase_v`` and ``sense_quadrat
 demodulated rate and quadrature channels after the demodulator filter, volts.
 
 Randomness: the power-up draw (the stationary thermal state) and then, time-major, a fixed number of
-normal draws per inner step (baseband) or carrier step (carrier) and axis, so runs split into chunks
+normal draws per grid step (baseband) or carrier step (carrier) and axis, so runs split into chunks
 draw the same numbers.
 """
 
@@ -373,12 +380,19 @@ class MemsGyro(GyroMechanism):
         return scipy.signal.freqs(b, a, w)[1]
 
     def inner_rate_hz(self, output_rate_hz: float) -> float:
-        """An integer multiple of the output rate, at least 4× it and 4× the output's band.
+        """The output rate for the baseband model; for the carrier model an integer multiple of it, at
+        least 4× it and 4× the output's band.
 
-        The band is the demodulator filter's cut-off, or the envelope pole's frequency |p|/2π (≈ |Δf|)
-        without a filter. Both models are discretised exactly, so nothing else binds: the carrier
-        model integrates on its own phase-locked grid of 24 steps per drive cycle between the samples.
+        The baseband model is discretised exactly over each step, for the noise and for the forcing's
+        cubic Hermite interpolant (from Ω and α at the step's ends), and it gives the exact integral of
+        its rate: a finer grid would only resolve the motion, which the truth's own samples bound
+        (the IMU's grid is never coarser than those). The carrier model holds its forcing linear
+        between grid samples and the IMU integrates its rate by the trapezoid rule, so its grid resolves
+        the band: the demodulator filter's cut-off, or the envelope pole's frequency |p|/2π (≈ |Δf|)
+        without a filter.
         """
+        if self.model == "baseband":
+            return output_rate_hz
         band = abs(self.envelope_pole()) / (2 * np.pi)
         if self.demodulator_bandwidth_hz is not None:
             band = min(band, self.demodulator_bandwidth_hz)
@@ -512,24 +526,34 @@ class MemsGyro(GyroMechanism):
         return 2 * K_BOLTZMANN * (temp + ZERO_CELSIUS_K) * w_s / (self.proof_mass_kg * self.sense_quality_factor)
 
     def _respond_baseband(self, truth: GyroTruth, rng, state: dict) -> GyroResponse:
-        """The envelope system on the inner grid; ``state["envelope_state"]`` (3, S) carries it, and
-        ``state["discretisation"]`` keeps its step matrices for the next chunk of the same step."""
+        """The envelope system over the grid's steps, each exact for the forcing's cubic Hermite
+        interpolant (see :func:`hermite_hold`); ``state["envelope_state"]`` (3, S) carries it, and
+        ``state["discretisation"]`` keeps the step matrices for the next chunk of the same step.
+
+        The rate is given at the grid's samples, and the angle as the exact integral of the indicated
+        rate over each step (cumulative from 0 at ``t[0]``): what the IMU integrates.
+        """
+        h = truth.dt
         temperature = np.asarray(truth.temperature_degC, float)
         w_d, w_s = self.frequencies(temperature)
         ratio = self.sense_response(temperature) / self.sense_response()  # H_T/H₀: temperature, exact in steady state
         forcing = ratio[:, None] * self._forcing_on_grid(truth.omega, truth.alpha, truth.specific_force, w_d, w_s)
+        smooth, slope = self._smooth_forcing(truth.omega, truth.alpha, w_d, h)
+        smooth *= ratio[:, None]
+        slope *= ratio[:, None]
         # The complex force n_c + i n_s has two-sided PSD 4 × (the real force's), scaled to the temperature.
         noise_scale = np.abs(ratio) * np.sqrt(self._thermal_psd(temperature) / self._thermal_psd())
         a, b, c = self.baseband_system()
         psd = 4 * self._thermal_psd()
         held = state.get("discretisation")
-        if held is None or held[0] != truth.dt:  # the same grid step chunk after chunk: computed once
-            phi, gamma0, gamma1 = first_order_hold(a, b, truth.dt)
-            # Every state is an envelope in metres, so the covariance's small directions can be dropped:
-            # with the 4th-order filter two of five carry 10⁻⁶ of the variance (and would cost 40 % of the time).
-            noise = covariance_factor(discrete_noise_covariance(a, b, psd, truth.dt), drop=_NOISE_DROP)
-            held = state["discretisation"] = (truth.dt, phi, gamma0, gamma1, noise)
-        _, phi, gamma0, gamma1, noise = held
+        if held is None or held[0] != h:  # the same grid step chunk after chunk: computed once
+            phi, g_state, r_mean, g_mean = hermite_hold(a, b, c, h)
+            # The step's noise on the state and on the step's mean envelope together (all in metres,
+            # so the covariance's small directions can be dropped, see covariance_factor).
+            a_mean, b_mean = mean_augmented(a, b, c, h)
+            noise = covariance_factor(discrete_noise_covariance(a_mean, b_mean, psd, h), drop=_NOISE_DROP)
+            held = state["discretisation"] = (h, phi, g_state, r_mean, g_mean, noise)
+        _, phi, g_state, r_mean, g_mean, noise = held
         z = state.get("envelope_state")
         if z is None:  # power-up: settled on the first input, thermal motion from its stationary law
             z = np.outer(forcing[0], np.linalg.solve(a, -b))
@@ -541,13 +565,17 @@ class MemsGyro(GyroMechanism):
         gain = self.pickoff_gain_v_per_m
         in_phase = np.empty(forcing.shape)
         quadrature = np.empty(forcing.shape)
-        _baseband_run(
+        mean_in_phase = np.zeros(forcing.shape)
+        _hermite_run(
             phi,
-            gamma0,
-            gamma1,
+            g_state,
+            r_mean,
+            g_mean,
             noise,
             c,
             np.ascontiguousarray(forcing),
+            smooth,
+            slope,
             noise_scale,
             z,
             rng,
@@ -555,9 +583,30 @@ class MemsGyro(GyroMechanism):
             gain * math.sin(phase),
             in_phase,
             quadrature,
+            mean_in_phase,
         )
         state["envelope_state"] = z
-        return self._calibrated(in_phase, quadrature)
+        response = self._calibrated(in_phase, quadrature)
+        # ∫ rate dt over step k is h × its mean in-phase over SF₀ (the last row is no step's).
+        steps = mean_in_phase[:-1] * (h / self.scale_factor_v_per_rad_per_s())
+        angle = np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
+        return GyroResponse(angle=angle, rate=response.rate, raw=response.raw)
+
+    def _smooth_forcing(self, omega, alpha, w_d, h: float):
+        """The part P of the forcing whose time derivative the truth gives, and h·Ṗ, (M, 3) complex.
+
+        P = c(ω_d) Ω_k + i x₀ (k_q/m + Ω_d Ω_s), so Ṗ = c(ω_d) α_k + i x₀ (α_d Ω_s + Ω_d α_s), with ω_d
+        frozen at each sample (it moves with the temperature only). The rest of F (the specific-force
+        leak and the Euler force x₀ α_k) is held linear over each step (:func:`_hermite_run`).
+        """
+        drive, sense = element_axes()
+        x0 = self.drive_amplitude_m
+        coriolis = self._coriolis_amplitude(np.asarray(w_d, float))[:, None]
+        quad = self.quadrature_stiffness_n_per_m / self.proof_mass_kg
+        smooth = coriolis * omega + 1j * (x0 * (quad + omega[:, drive] * omega[:, sense]))
+        turning = alpha[:, drive] * omega[:, sense] + omega[:, drive] * alpha[:, sense]
+        slope = h * (coriolis * alpha + 1j * (x0 * turning))
+        return np.ascontiguousarray(smooth), np.ascontiguousarray(slope)
 
     def _respond_carrier(self, truth: GyroTruth, rng, state: dict) -> GyroResponse:
         """The sense oscillators on the phase-locked carrier grid, from power-up (``state["carrier"]``
@@ -692,6 +741,47 @@ def first_order_hold(a: np.ndarray, b: np.ndarray, h: float):
     return e[:s, :s], e[:s, s] - e[:s, s + 1], e[:s, s + 1]
 
 
+def hermite_hold(a: np.ndarray, b: np.ndarray, c: np.ndarray, h: float):
+    """(Φ, G (S, 4), r (S,), g (4,)): one step h of ż = A z + b u, and the step's mean of y = c·z,
+    exact for u the cubic Hermite interpolant of (u₀, u₁) with slopes (u̇₀, u̇₁):
+
+        z₁ = Φ z₀ + G (u₀, u₁, h u̇₀, h u̇₁),     (1/h) ∫₀ʰ y dτ = r·z₀ + g·(u₀, u₁, h u̇₀, h u̇₁).
+
+    In the step's own time σ = τ/h, u = Σ a_m σ^m with a₀ = u₀, a₁ = h u̇₀,
+    a₂ = 3(u₁ − u₀) − 2h u̇₀ − h u̇₁, a₃ = 2(u₀ − u₁) + h u̇₀ + h u̇₁: the output of a chain of four
+    integrators (the exosystem) started at (a₀, a₁, 2a₂, 6a₃). The system, the running mean
+    μ' = c·z (in σ) and the chain form one linear system, whose matrix exponential over σ ∈ [0, 1]
+    gives every map at once (the method of :func:`first_order_hold`, one order of hold higher).
+    ``a`` (S, S), ``b``, ``c`` (S,), complex.
+    """
+    s = a.shape[0]
+    n = s + 1 + 4  # (z, μ, the chain)
+    m = np.zeros((n, n), complex)
+    m[:s, :s] = a * h
+    m[s, :s] = c
+    m[:s, s + 1] = b * h
+    for k in range(3):
+        m[s + 1 + k, s + 2 + k] = 1.0
+    import scipy.linalg
+
+    e = scipy.linalg.expm(m)
+    # The chain's start (a₀, a₁, 2a₂, 6a₃) from (u₀, u₁, h u̇₀, h u̇₁).
+    start = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [-6.0, 6.0, -4.0, -2.0], [12.0, -12.0, 6.0, 6.0]])
+    response = e[: s + 1, s + 1 :] @ start
+    return e[:s, :s], response[:s], e[s, :s], response[s]
+
+
+def mean_augmented(a: np.ndarray, b: np.ndarray, c: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """(A', b') of ż = A z + b u extended by the running mean of y = c·z over a step h, μ̇ = c·z/h:
+    the system whose discrete noise covariance over h (:func:`discrete_noise_covariance`) is that of
+    the state and the step's mean together."""
+    s = a.shape[0]
+    a_mean = np.zeros((s + 1, s + 1), complex)
+    a_mean[:s, :s] = a
+    a_mean[s, :s] = c / h
+    return a_mean, np.concatenate([b, [0.0]]).astype(complex)
+
+
 def carrier_hold(a: np.ndarray, b: np.ndarray, w: float, h: float):
     """(G₀, G₁), complex (S,): the response over one step of ẋ = A x + b Re{e^{iθ_k} (F_k + ΔF τ/h) e^{iwτ}}
     from x = 0 is Re{e^{iθ_k} (G₀ F_k + G₁ ΔF)}.
@@ -716,18 +806,27 @@ def carrier_hold(a: np.ndarray, b: np.ndarray, w: float, h: float):
 def discrete_noise_covariance(a: np.ndarray, b: np.ndarray, psd: float, h: float) -> np.ndarray:
     """Q = ∫₀ʰ e^{Aσ} b S b* e^{A*σ} dσ: the covariance one step of white input (two-sided PSD S) adds.
 
-    Van Loan's method: exp([[−A, b S b*], [0, A*]] h) = [[·, Φ⁻¹Q], [0, Φ*]].
+    Van Loan's method: exp([[−A, b S b*], [0, A*]] h) = [[·, Φ⁻¹Q], [0, Φ*]]. Its e^{−Ah} grows as
+    e^{σh}, σ the fastest decay rate of A, and swamps Q's digits when a step spans many of that pole's
+    time constants; so where σh > 1 it is taken over h/2^k, σh/2^k ≤ 1, and doubled k times,
+    Q(2τ) = Q(τ) + Φ(τ) Q(τ) Φ(τ)*: a sum of positive terms.
     """
     s = a.shape[0]
+    decay = float(np.max(-np.linalg.eigvals(a).real, initial=0.0)) * h
+    halvings = max(0, math.ceil(math.log2(decay))) if decay > 1 else 0
+    tau = h / 2**halvings
     m = np.zeros((2 * s, 2 * s), dtype=np.result_type(a, b))
     m[:s, :s] = -a
     m[:s, s:] = psd * np.outer(b, np.conj(b))
     m[s:, s:] = np.conj(a).T
     import scipy.linalg
 
-    e = scipy.linalg.expm(m * h)
+    e = scipy.linalg.expm(m * tau)
     phi = np.conj(e[s:, s:]).T
     q = phi @ e[:s, s:]
+    for _ in range(halvings):
+        q = q + phi @ q @ np.conj(phi).T
+        phi = phi @ phi
     return 0.5 * (q + np.conj(q).T)
 
 
@@ -788,21 +887,42 @@ def _forcing_run(omega, alpha, force, w_d, w_s, drive, sense, x0, leak_scale, q_
 
 
 @njit
-def _baseband_run(phi, gamma0, gamma1, noise, c, forcing, noise_scale, z, rng, dem_cos, dem_sin, in_phase, quadrature):
-    """z_{k+1} = Φ z_k + Γ₀ F_k + Γ₁ F_{k+1} + s_k L w_k on each axis; y_k = c·z_k demodulated:
-    in_phase[k] = cos·Re y + sin·Im y, quadrature[k] = cos·(−Im y) + sin·Re y (:meth:`MemsGyro._demodulate`'s
-    arithmetic, ``dem_cos``, ``dem_sin`` its G_p cos φ_ref and G_p sin φ_ref).
+def _hermite_run(
+    phi,
+    g_state,
+    r_mean,
+    g_mean,
+    noise,
+    c,
+    forcing,
+    smooth,
+    slope,
+    noise_scale,
+    z,
+    rng,
+    dem_cos,
+    dem_sin,
+    in_phase,
+    quadrature,
+    mean_in_phase,
+):
+    """Over each step k → k+1 and axis: u = (F_k, F_{k+1}, D_k, D_{k+1}) with the slopes
+    D = h Ṗ + ΔF − ΔP (the smooth part P's own slope; the rest of F is held linear, since a Hermite
+    interpolant whose slopes are the secant is the straight line), then z_{k+1} = Φ z_k + G u + s_k L_z w_k
+    and the step's mean envelope μ_k = r·z_k + g·u + s_k L_μ w_k, demodulated like y.
 
-    ``phi`` (S, S), ``noise`` L (S, R); ``gamma0``, ``gamma1``, ``c`` (S,); ``forcing`` (M, A);
-    ``noise_scale`` s (M,), real; ``z`` (A, S): the state at sample 0 on entry, at sample M−1 on exit;
-    ``in_phase``, ``quadrature`` (M, A), real. w_k: R circular normals (E|w|² = 1) per axis, real then
-    imaginary part, drawn sample by sample, axis by axis.
+    ``phi`` (S, S), ``g_state`` (S, 4), ``r_mean`` (S,), ``g_mean`` (4,), ``noise`` L (S + 1, R), ``c``
+    (S,); ``forcing`` F, ``smooth`` P, ``slope`` h Ṗ (M, A) complex; ``noise_scale`` s (M,); ``z``
+    (A, S) in/out; ``in_phase``, ``quadrature`` (M, A) at the samples; ``mean_in_phase`` (M, A): step
+    k's mean in-phase in row k (row M − 1 untouched). w_k: R circular normals per axis, real then
+    imaginary part, drawn step by step, axis by axis.
     """
     n, n_axes = forcing.shape
     size = phi.shape[0]
     rank = noise.shape[1]
     w = np.empty(rank, np.complex128)
     now = np.empty(size, np.complex128)
+    u = np.empty(4, np.complex128)
     half = 1.0 / np.sqrt(2.0)
     for k in range(n):
         sk = noise_scale[k] * half
@@ -819,10 +939,23 @@ def _baseband_run(phi, gamma0, gamma1, noise, c, forcing, noise_scale, z, rng, d
                 re = rng.standard_normal()
                 im = rng.standard_normal()
                 w[j] = complex(re * sk, im * sk)
-            f0 = forcing[k, a]
-            f1 = forcing[k + 1, a]
+            secant = (forcing[k + 1, a] - forcing[k, a]) - (smooth[k + 1, a] - smooth[k, a])
+            u[0] = forcing[k, a]
+            u[1] = forcing[k + 1, a]
+            u[2] = slope[k, a] + secant
+            u[3] = slope[k + 1, a] + secant
+            mean = 0j
             for i in range(size):
-                acc = gamma0[i] * f0 + gamma1[i] * f1
+                mean += r_mean[i] * now[i]
+            for m in range(4):
+                mean += g_mean[m] * u[m]
+            for j in range(rank):
+                mean += noise[size, j] * w[j]
+            mean_in_phase[k, a] = dem_cos * mean.real + dem_sin * mean.imag
+            for i in range(size):
+                acc = 0j
+                for m in range(4):
+                    acc += g_state[i, m] * u[m]
                 for j in range(size):
                     acc += phi[i, j] * now[j]
                 for j in range(rank):

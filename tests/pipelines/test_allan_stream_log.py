@@ -51,7 +51,19 @@ def assert_reports_agree(streamed, reference, gyro, t, dt):
                 bound += q + q * q / 2
             assert abs(a.adev[i] / b.adev[i] - 1) <= bound, (axis, m, a.adev[i] / b.adev[i] - 1, bound)
     assert streamed.spec == reference.spec
-    assert streamed.table() == reference.table()
+    assert_tables_agree(streamed.table(), reference.table())
+
+
+def assert_tables_agree(ours: str, reference: str) -> None:
+    """The same text, but that a printed number may differ by one unit in its last digit: values equal
+    to round-off can straddle a rounding boundary (0.16549… and 0.16550… print as 0.165 and 0.166)."""
+    number = r"[-+]?\d+\.?\d*(?:e[-+]?\d+)?"
+    assert re.sub(number, "#", ours) == re.sub(number, "#", reference)
+    for a, b in zip(re.findall(number, ours), re.findall(number, reference)):
+        if a != b:
+            decimals = len(b.split(".")[1].split("e")[0]) if "." in b else 0
+            exponent = float("1e" + b.split("e")[1]) if "e" in b else 1.0
+            assert abs(float(a) - float(b)) <= 1.000001 * 10.0**-decimals * exponent, (a, b)
 
 
 @pytest.fixture(scope="module")

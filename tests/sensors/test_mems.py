@@ -17,7 +17,13 @@ from gyroemu.dynamics.config import ConfigError, validate
 from gyroemu.sensors import device_from_dict
 from gyroemu.sensors.allan import allan_deviation
 from gyroemu.sensors.mechanism import GyroTruth
-from gyroemu.sensors.mems import CARRIER_STEPS_PER_CYCLE, K_BOLTZMANN, MemsGyro
+from gyroemu.sensors.mems import (
+    CARRIER_STEPS_PER_CYCLE,
+    K_BOLTZMANN,
+    MemsGyro,
+    discrete_noise_covariance,
+    stationary_covariance,
+)
 
 DEG = np.pi / 180
 G0 = 9.80665  # m/s² per g
@@ -111,6 +117,68 @@ def fit_gain(t, y, f):
     x = np.column_stack([np.cos(2 * np.pi * f * t), -np.sin(2 * np.pi * f * t)])
     c = np.linalg.lstsq(x, y, rcond=None)[0]
     return c[0] + 1j * c[1]
+
+
+ALIASES = range(-3, 4)
+"""The sampled output at f also holds the input's images at f + n·hz, which the hold passes a little
+(up to 10⁻⁵ of the signal at n = ±1 for the Hermite hold with zero slopes); three on each side leave
+under 10⁻⁸."""
+
+
+def linear_hold(nu, hz):
+    """Gain at ν of an input held linear between samples at ``hz``: the triangle kernel's transform."""
+    return np.sinc(nu / hz) ** 2
+
+
+def hermite_hold(nu, hz, f=None):
+    """Gain at ν of the cubic Hermite interpolant, between samples at ``hz``, of e^{2πi f t}: its values
+    with zero slopes (``f`` None), or its values and exact slopes. ∫ H₀(x) e^{−iνhx} dx + i ω h ∫ H₁(x)
+    e^{−iνhx} dx over x ∈ [−1, 1] (ν, ω in rad/s), H₀ = 1 − 3x² + 2|x|³ and H₁ = x (1 − |x|)² the value
+    and slope kernels."""
+    from scipy.integrate import quad
+
+    vh = 2 * np.pi * nu / hz
+    value = 2 * quad(lambda x: (1 - 3 * x * x + 2 * x**3) * math.cos(vh * x), 0, 1, epsabs=1e-15, limit=200)[0]
+    if f is None:
+        return value
+    wh = 2 * np.pi * f / hz
+    return value + 2 * wh * quad(lambda x: x * (1 - x) ** 2 * math.sin(vh * x), 0, 1, epsabs=1e-15, limit=200)[0]
+
+
+def baseband_gain_parts(g, nu, f=None):
+    """(Coriolis, Euler) shares of the baseband rate response at ν, written out from the poles p, p̄
+    (module notes (6)), the demodulation phase error and the Butterworth filter: the Coriolis force
+    c Ω puts c Ω/2 on each sideband, the Euler force i x₀ Ω̇ adds ±ε of it, ε = f/2f_d with f the
+    rate's own frequency (``f``, default ν)."""
+    import scipy.signal
+
+    f = nu if f is None else f
+    w = 2 * np.pi * nu
+    p = g.envelope_pole()
+    upper, lower = -p / (1j * w - p), -p / (-1j * w - p)
+    eps = 2 * np.pi * f / (2 * frequencies(g)[0])
+    phase = np.exp(-1j * g.demodulation_phase_error_rad)
+    scale = 2 * math.cos(g.demodulation_phase_error_rad)
+    coriolis = (upper * phase + np.conj(lower * phase)) / scale
+    euler = eps * (upper * phase - np.conj(lower * phase)) / scale
+    if g.demodulator_bandwidth_hz is not None:
+        b, a = scipy.signal.butter(g.demodulator_filter_order, 2 * np.pi * g.demodulator_bandwidth_hz, analog=True)
+        filt = scipy.signal.freqs(b, a, [w])[1][0]
+        coriolis, euler = coriolis * filt, euler * filt
+    return coriolis, euler
+
+
+def baseband_sampled_gain(g, f, hz, slopes=True):
+    """The baseband model's gain at f on samples at ``hz`` of Ω = cos 2πft (with Ω̇ given, ``slopes``, or
+    zero): its Coriolis force is the Hermite interpolant of the samples, its Euler force (x₀ Ω̇) held
+    linear; summed over the images ν = f + n·hz (:data:`ALIASES`)."""
+    total = 0j
+    for n in ALIASES:
+        nu = f + n * hz
+        coriolis, euler = baseband_gain_parts(g, nu, f)
+        total += coriolis * hermite_hold(nu, hz, f if slopes else None)
+        total += euler * linear_hold(nu, hz) if slopes else 0.0
+    return total
 
 
 def carrier_rate_gain(g, f, t):
@@ -247,16 +315,19 @@ def test_rate_response_has_the_envelope_poles():
         # The Coriolis force alone (α = 0): equation (6) of the module notes, written out.
         rate, _, _ = noiseless(g, make_truth(t, omega=omega))
         s = 1j * w
-        expected = (abs(p) ** 2 - s * p.real) / ((s - p) * (s - np.conj(p)))
-        # The input is linear between samples: its fundamental passes as sinc²(f h).
-        expected *= np.sinc(f / hz) ** 2
+        continuous = (abs(p) ** 2 - s * p.real) / ((s - p) * (s - np.conj(p)))
+        assert abs(baseband_gain_parts(g, f)[0] - continuous) < 1e-12 * abs(continuous)
+        # The input is the Hermite interpolant of the samples, here with zero slopes (α = 0).
+        expected = baseband_sampled_gain(g, f, hz, slopes=False)
         assert abs(fit_gain(t[settled], rate[settled, 2], f) - expected) < 1e-5 * abs(expected)
-        # With the angular acceleration's Euler force: the module's rate_response.
+        # With the angular acceleration: the slopes of the Coriolis force, and the Euler force.
         alpha = np.zeros((len(t), 3))
         alpha[:, 2] = -w * np.sin(w * t)
         rate, _, _ = noiseless(g, make_truth(t, omega=omega, alpha=alpha))
-        expected = g.rate_response(f) * np.sinc(f / hz) ** 2
+        expected = baseband_sampled_gain(g, f, hz)
         assert abs(fit_gain(t[settled], rate[settled, 2], f) - expected) < 1e-5 * abs(expected)
+        # The parts add up to the module's rate_response.
+        assert abs(sum(baseband_gain_parts(g, f)) - g.rate_response(f)) < 1e-12 * abs(g.rate_response(f))
     # Mode-split bandwidth: the response peaks at Δf and passes +3 dB at Δf √(1 − 1/√2) ≈ 0.54 Δf,
     # up to the damping (σ/Δω)² and the Euler term f/(2f_d) ≈ 2 %.
     g = MemsGyro(demodulator_bandwidth_hz=None)
@@ -274,8 +345,9 @@ def test_demodulator_filter_shapes_the_rate_response():
         omega, alpha = np.zeros((len(t), 3)), np.zeros((len(t), 3))
         omega[:, 0], alpha[:, 0] = np.cos(w * t), -w * np.sin(w * t)
         rate, _, _ = noiseless(g, make_truth(t, omega=omega, alpha=alpha))
-        expected = g.rate_response(f) * np.sinc(f / hz) ** 2
+        expected = baseband_sampled_gain(g, f, hz)
         assert abs(fit_gain(t[settled], rate[settled, 0], f) - expected) < 1e-5 * abs(expected)
+        assert abs(sum(baseband_gain_parts(g, f)) - g.rate_response(f)) < 1e-12 * abs(g.rate_response(f))
     assert abs(g.rate_response(500.0) / g.rate_response(500.0, exact=True) - 1) < 500 / g.drive_frequency_hz
 
 
@@ -293,13 +365,17 @@ def test_carrier_rate_response_matches_the_baseband_to_second_order():
         for model in MODELS:
             rate, _, _ = noiseless(base.model_copy(update={"model": model}), make_truth(t, omega=omega, alpha=alpha))
             gains[model] = fit_gain(t[settled], rate[settled, 1], f)
+        # Each as for a continuous input: the carrier model holds its input linear between samples,
+        # the baseband model takes the Hermite interpolant of the Coriolis force.
+        gains["carrier"] /= linear_hold(f, hz)  # (its images pass under 2·10⁻⁶ of it)
+        gains["baseband"] *= base.rate_response(f) / baseband_sampled_gain(base, f, hz)
         ratio = gains["carrier"] / gains["baseband"]
         # The carrier's one-cycle average and hold pass sinc²(f T_d) and delay by about T_d; the
         # first-order terms in f/f_d cancel (the averaged model is what a cycle-averaging demodulator
         # sees), so they agree to second order.
         assert abs(abs(ratio) / np.sinc(f * period) ** 2 - 1) < (f * period) ** 2
-        # Exactly, the ratio is carrier_rate_gain / rate_response (both see the same piecewise-linear
-        # input, whose sinc²(f/hz) cancels). To first order in ε = f/2f_d that is sinc²(fT_d) e^{−iωT_d}
+        # Exactly, the ratio is carrier_rate_gain / rate_response (each model's hold of its input
+        # divided out above). To first order in ε = f/2f_d that is sinc²(fT_d) e^{−iωT_d}
         # (1 + 2iγε), γ = arg H₀ (the 2ω_d leak of the cycle average turns with the sense phase; its
         # discrete −πε/12 cancels the cycle sum's half-step advance ωh/2). Neglected: the carrier steps
         # interpolate the piecewise-linear input once more, cutting each truth knot's corner, on average
@@ -331,6 +407,11 @@ def test_brownian_floor_is_the_thermal_force_on_the_sense_mode(model, duration, 
     assert 4 * stat < 0.10
     expected = brownian_floor(g) / math.cos(g.demodulation_phase_error_rad)
     assert abs(measured / expected - 1) < 0.10
+    if model == "baseband":  # the exact integral the IMU reads: its step means have the same floor
+        mean_rate = np.diff(g.respond(make_truth(grid(duration, hz)), np.random.default_rng(7), {}).angle, axis=0) * hz
+        allan = [allan_deviation(mean_rate[:, k], 1 / hz, taus=np.array([tau])) for k in range(3)]
+        measured = math.sqrt(np.mean([a.adev[0] ** 2 for a in allan]) * tau)
+        assert abs(measured / expected - 1) < 0.10
 
 
 def test_brownian_floor_follows_temperature():
@@ -453,12 +534,43 @@ def test_same_seed_is_bit_identical_and_seeds_differ(model):
 
 
 def test_inner_rate_resolves_the_output_band():
-    for kwargs in ({}, {"demodulator_bandwidth_hz": None}, CARRIER):
+    """The carrier model's grid resolves the band (its input is held linear, its rate integrated by the
+    trapezoid rule); the baseband model is exact over any step and runs at the output rate."""
+    for kwargs in (CARRIER, {"model": "carrier", "demodulator_bandwidth_hz": None}):
         g = MemsGyro(**kwargs)
         band = g.demodulator_bandwidth_hz or abs(g.envelope_pole()) / (2 * np.pi)
         for output in (100.0, 1000.0, 8000.0):
             inner = g.inner_rate_hz(output)
             assert inner / output == round(inner / output) and inner >= 4 * output and inner >= 4 * band
+    for output in (100.0, 1000.0, 8000.0):
+        assert MemsGyro().inner_rate_hz(output) == output
+
+
+def test_baseband_steps_are_exact_for_a_quadratic_rate():
+    """A rate quadratic in time (α linear) is what the baseband step holds exactly: its Coriolis force
+    is its own Hermite interpolant, its Euler force its own linear interpolant. So the angle at 100 Hz
+    equals the angle on a grid 40 times finer, at the shared samples, to round-off; and both equal the
+    steady-state closed form's integral once the transient has died, to the envelope's lag."""
+    g = MemsGyro()
+    coarse, fine = grid(0.2, 100), grid(0.2, 4000)
+
+    def quadratic(t):
+        omega = np.column_stack([0.3 + 2.0 * t - 4.0 * t**2, -0.5 + 0 * t, 1.5 * t * t])
+        alpha = np.column_stack([2.0 - 8.0 * t, 0 * t, 3.0 * t])
+        return make_truth(t, omega, alpha)
+
+    def angle(t):  # the noiseless angle: the same seed with and without motion (the model is linear)
+        truth = quadratic(t)
+        moving = g.respond(truth, np.random.default_rng(5), {}).angle
+        still = g.respond(make_truth(t), np.random.default_rng(5), {}).angle
+        return moving - still
+
+    a, b = angle(coarse), angle(fine)[::40]
+    # Round-off: each of the 20 coarse steps adds a mean of 15 products (states, inputs, draws) of the
+    # size of the quadrature's envelope, 1.1 rad/s of rate equivalent (≈ 1.1 × 0.2 rad over the run),
+    # each good to ε. (A cubic rate, whose Euler force is then not linear, misses by 1.4·10⁻¹³.)
+    scale = 1.1 * 0.2
+    assert np.abs(a - b).max() < 20 * 15 * np.finfo(float).eps * scale
 
 
 @pytest.mark.parametrize(
@@ -525,3 +637,24 @@ def test_baseband_system_passes_the_sense_response_at_dc(order):
     assert a.shape == (order + 1, order + 1) and b.shape == c.shape == (order + 1,)
     dc = c @ np.linalg.solve(a, -b)
     assert abs(dc / gyro.sense_response() - 1) < 50 * np.finfo(float).eps
+
+
+@pytest.mark.parametrize("step_s", [5e-4, 0.05, 1.0])
+def test_step_noise_covariance_holds_for_steps_of_many_time_constants(step_s):
+    """For a stable system the noise one step adds is Q(h) = P − Φ P Φ*, P the stationary covariance;
+    at 20 Hz output the baseband step spans 145 time constants of the filter's fastest pole, where
+    Van Loan's exponential alone loses every digit."""
+    import scipy.linalg
+
+    g = MemsGyro(sense_quality_factor=5000)
+    a, b, _ = g.baseband_system()
+    p = stationary_covariance(a, b, 1.0)
+    phi = scipy.linalg.expm(a * step_s)
+    expected = p - phi @ p @ np.conj(phi).T
+    q = discrete_noise_covariance(a, b, 1.0, step_s)
+    # Round-off: P and each product, sums of S² = 25 terms, good to 25 ε of |P|; Q over a long step
+    # comes from k = ⌈log₂ σh⌉ squarings of Φ, whose relative error doubles with each (the error of
+    # Φⁿ is n times Φ's), 2^k ε.
+    sigma = np.max(-np.linalg.eigvals(a).real)
+    k = max(0, math.ceil(math.log2(sigma * step_s)))
+    assert np.abs(q - expected).max() < 4 * (25 + 2**k) * np.finfo(float).eps * np.abs(p).max()
