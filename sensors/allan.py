@@ -52,7 +52,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import nnls
 
 from gyroemu.sensors.allan_stream import OverlappingAllanAccumulator
 
@@ -289,6 +288,8 @@ def fit_allan(allan: AllanDeviation, terms=TERMS, iterations: int = 5) -> AllanF
     basis = _basis(allan.tau) * used  # (M, 5): a term left out has a zero column
     avar = allan.adev**2
     relative_sd = np.sqrt(2 / allan.edf)  # sd of an Allan variance estimate, per unit variance
+
+    from scipy.optimize import nnls  # about 0.3 s to import: only when a curve is fitted
 
     model = avar  # weights from the data first, then from the model
     for _ in range(iterations):

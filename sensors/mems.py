@@ -369,15 +369,16 @@ class MemsGyro(GyroMechanism):
         return gain * self._filter_response(w)
 
     def _filter_response(self, w):
-        """The demodulator filter's gain at angular frequency ``w`` (1 when there is none)."""
+        """The demodulator filter's gain at angular frequency ``w`` (1 when there is none): the product
+        of its sections −p_k/(jw − p_k) over the Butterworth poles p_k."""
+        w = np.asarray(w, dtype=float)
         if self.demodulator_bandwidth_hz is None:
             return np.ones_like(w, dtype=complex)
-        import scipy.signal  # here, not at the top: it costs 0.5 s to import
-
-        b, a = scipy.signal.butter(
-            self.demodulator_filter_order, 2 * np.pi * self.demodulator_bandwidth_hz, analog=True
-        )
-        return scipy.signal.freqs(b, a, w)[1]
+        poles = butterworth_poles(self.demodulator_filter_order) * 2 * np.pi * self.demodulator_bandwidth_hz
+        gain = np.ones_like(w, dtype=complex)
+        for p in poles:
+            gain = gain * (-p / (1j * w - p))
+        return gain
 
     def inner_rate_hz(self, output_rate_hz: float) -> float:
         """The output rate for the baseband model; for the carrier model an integer multiple of it, at
@@ -462,9 +463,7 @@ class MemsGyro(GyroMechanism):
         """
         if self.demodulator_bandwidth_hz is None:
             return None
-        import scipy.signal  # here, not at the top: it costs 0.5 s to import
-
-        poles = scipy.signal.buttap(self.demodulator_filter_order)[1] * 2 * np.pi * self.demodulator_bandwidth_hz
+        poles = butterworth_poles(self.demodulator_filter_order) * 2 * np.pi * self.demodulator_bandwidth_hz
         n = len(poles)
         a = np.diag(poles).astype(complex)
         a[np.arange(1, n), np.arange(n - 1)] = -poles[1:]
@@ -721,6 +720,14 @@ class MemsGyro(GyroMechanism):
 # --------------------------------------------------------------------------------------------------
 # Exact discretisation
 # --------------------------------------------------------------------------------------------------
+
+
+def butterworth_poles(order: int) -> np.ndarray:
+    """The analogue Butterworth prototype's poles (cut-off 1 rad/s), −exp(iπ m/2n) for
+    m = −n+1, −n+3, …, n−1 (``scipy.signal.buttap``'s expression, so the same numbers; written here so
+    that a device need not import scipy.signal, 0.5 s)."""
+    m = np.arange(-order + 1, order, 2, dtype=np.float64)
+    return -np.exp(1j * np.pi * m / (2 * order))
 
 
 def first_order_hold(a: np.ndarray, b: np.ndarray, h: float):
