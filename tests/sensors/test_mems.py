@@ -21,6 +21,7 @@ from gyroemu.sensors.mems import (
     CARRIER_STEPS_PER_CYCLE,
     K_BOLTZMANN,
     MemsGyro,
+    butterworth_poles,
     discrete_noise_covariance,
     stationary_covariance,
 )
@@ -658,3 +659,19 @@ def test_step_noise_covariance_holds_for_steps_of_many_time_constants(step_s):
     sigma = np.max(-np.linalg.eigvals(a).real)
     k = max(0, math.ceil(math.log2(sigma * step_s)))
     assert np.abs(q - expected).max() < 4 * (25 + 2**k) * np.finfo(float).eps * np.abs(p).max()
+
+
+@pytest.mark.parametrize("order", [1, 2, 3, 4, 5, 8])
+def test_butterworth_poles_are_scipys(order):
+    """Written out so that a device needs no scipy.signal: the same numbers as scipy's prototype, and
+    the filter's response equals scipy's analogue Butterworth to round-off."""
+    import scipy.signal
+
+    assert np.array_equal(butterworth_poles(order), scipy.signal.buttap(order)[1])
+    g = MemsGyro(demodulator_filter_order=min(order, 4), demodulator_bandwidth_hz=300.0)
+    w = 2 * np.pi * np.array([0.0, 10.0, 300.0, 2000.0])
+    b, a = scipy.signal.butter(g.demodulator_filter_order, 2 * np.pi * 300.0, analog=True)
+    expected = scipy.signal.freqs(b, a, w)[1]
+    # Two evaluations of a degree-4 rational function: a few tens of ε apart.
+    ours = g.rate_response(w / (2 * np.pi)) / MemsGyro(demodulator_bandwidth_hz=None).rate_response(w / (2 * np.pi))
+    np.testing.assert_allclose(ours, expected, rtol=64 * np.finfo(float).eps, atol=0)
