@@ -34,6 +34,9 @@ lock once per compiled signature to load it, which costs microseconds. The compi
 :func:`njit` are cached beside the lock (``…/<version>/numba/``, :func:`cache_path`), through numba's
 public cache classes given to each dispatcher (numba's own locators, its class and its config are
 untouched); where that folder cannot be written, numba's own cache beside the sources is used.
+numba checks a cached function against its own source file only, so a compiled callee edited in
+another file would be loaded stale inside its caller; gyroemu's cache entries are stamped with the
+content of every file of their compiled callees as well (:func:`callee_files`).
 """
 
 from __future__ import annotations
@@ -41,6 +44,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import functools
+import hashlib
 import os
 import threading
 import types
@@ -48,7 +52,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["Deferred", "cache_path", "compile_lock", "lock_path", "njit"]
+__all__ = ["Deferred", "cache_path", "callee_files", "compile_lock", "lock_path", "njit"]
 
 _thread_lock = threading.RLock()
 _depth = 0
@@ -86,6 +90,12 @@ def _user_cache(py_func: Callable[..., Any]) -> Any:
         def __init__(self, py_func: Callable[..., Any], py_file: str) -> None:
             super().__init__(py_func, py_file)
             self._cache_path = os.path.join(str(cache_path()), self.get_suitable_cache_subpath(py_file))
+            self._callee_files = sorted(callee_files(py_func) - {os.path.abspath(py_file)})
+
+        def get_source_stamp(self) -> Any:
+            # numba stamps a function's own file only: a compiled callee in another file that changed
+            # would be loaded stale, inlined into its caller's cached code. The callees' files count too.
+            return (super().get_source_stamp(), tuple(_file_stamp(path) for path in self._callee_files))
 
     class Impl(CompileResultCacheImpl):
         _locator_classes = [Locator]
@@ -97,6 +107,48 @@ def _user_cache(py_func: Callable[..., Any]) -> Any:
         return Cache(py_func)
     except RuntimeError:  # no locator: a function without a source file
         return None
+
+
+def callee_files(py_func: Callable[..., Any]) -> set[str]:
+    """The source files of the compiled functions ``py_func`` calls, directly or through others (the
+    names its code uses, in its module's globals or as attributes of a module it uses, that are
+    :class:`Deferred` or numba dispatchers), its own included."""
+    files: set[str] = set()
+    seen: set[int] = set()
+    todo = [py_func]
+    while todo:
+        function = todo.pop()
+        if id(function) in seen:
+            continue
+        seen.add(id(function))
+        files.add(os.path.abspath(function.__code__.co_filename))
+        namespace = function.__globals__
+        names = _names_used(function.__code__)
+        for name in names:
+            value = namespace.get(name)
+            members = [value]
+            if isinstance(value, types.ModuleType):
+                members = [getattr(value, attribute, None) for attribute in names]
+            for member in members:
+                callee = getattr(member, "py_func", None)
+                if isinstance(callee, types.FunctionType):
+                    todo.append(callee)
+    return files
+
+
+@functools.lru_cache(maxsize=256)
+def _content_stamp(path: str, mtime_ns: int, size: int) -> str:
+    with open(path, "rb") as handle:
+        return hashlib.sha256(handle.read()).hexdigest()
+
+
+def _file_stamp(path: str) -> str:
+    """A file's content hash (read again only when its time or size changed); "" when it is gone."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return ""
+    return _content_stamp(path, st.st_mtime_ns, st.st_size)
 
 
 def _relocate_cache(holder: Any, attribute: str, py_func: Callable[..., Any]) -> None:

@@ -194,3 +194,33 @@ print(cache_path()); print(lock_path())
     assert again.returncode == 0, again.stderr
     # Loaded, not compiled again: the second process wrote nothing into the cache.
     assert {p: p.stat().st_mtime_ns for p in cache.rglob("*.nb*")} == written
+
+
+def test_a_changed_compiled_callee_in_another_file_is_compiled_again(tmp_path):
+    """numba checks a cached function against its own file only; gyroemu's cache stamps the files of
+    its compiled callees too, so a caller whose callee (in another module) changed is not loaded stale,
+    and an unchanged one is still loaded from the cache."""
+    package = tmp_path / "pkg"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    callee = package / "callee.py"
+    callee.write_text("from gyroemu.dynamics.jit import njit\n\n\n@njit\ndef step(x):\n    return x + 1.0\n")
+    (package / "caller.py").write_text(
+        "from gyroemu.dynamics.jit import njit\n\nfrom . import callee\n\n\n"
+        "@njit\ndef twice(x):\n    return callee.step(callee.step(x))\n"
+    )
+    code = "from pkg.caller import twice; print(twice(0.0))"
+    env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache"), "PYTHONPATH": str(tmp_path)}
+
+    def run() -> str:
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env)
+        assert done.returncode == 0, done.stderr
+        return done.stdout.strip()
+
+    assert run() == "2.0"
+    cache = tmp_path / "cache"
+    written = {p: p.stat().st_mtime_ns for p in cache.rglob("*.nb*")}
+    assert run() == "2.0"
+    assert {p: p.stat().st_mtime_ns for p in cache.rglob("*.nb*")} == written  # loaded, not compiled
+    callee.write_text(callee.read_text().replace("x + 1.0", "x + 5.0"))
+    assert run() == "10.0"
