@@ -66,6 +66,7 @@ __all__ = [
     "POSE_ROLE",
     "BODY_FRAME",
     "WORLD_FRAME",
+    "ESTIMATE_FRAME",
     "RESERVED_DEVICE_NAMES",
     "raw_role",
     "raw_kind",
@@ -110,6 +111,10 @@ BODY_FRAME = "base_link"
 
 WORLD_FRAME = "map"
 """``frame_id`` of world-frame channels (``/truth/pose``): the ENU world, REP-105's ``map``."""
+
+ESTIMATE_FRAME = "body_estimate"
+"""The tf frame a filter's estimated attitude places (``map`` -> ``body_estimate`` on ``/tf``, from
+``/estimate/imu``): in logs (:mod:`gyroemu.pipelines.formats.frames`) and in the Foxglove view."""
 
 RESERVED_DEVICE_NAMES = frozenset({"truth", "estimate", "raw", "imu", "mag"})
 """Names that cannot prefix topics: ``/imu/imu`` or ``/raw/imu`` would read as another device's role."""
@@ -298,14 +303,24 @@ def pose_from_batch(batch: DecodedBatch) -> PoseSeries:
     )
 
 
-def measured_fields(samples: ImuSamples) -> dict:
-    """Imu message fields of a device's samples (``/imu``): rate and specific force, no orientation."""
-    return {
+def measured_fields(
+    samples: ImuSamples, gyro_variance: np.ndarray | None = None, accel_variance: np.ndarray | None = None
+) -> dict:
+    """Imu message fields of a device's samples (``/imu``): rate and specific force, no orientation
+    (``orientation_covariance[0] = -1``). ``gyro_variance``, ``accel_variance`` (3,): the per-sample
+    variances of the device's noise (:mod:`gyroemu.pipelines.formats.imu_covariance`), written on the
+    covariances' diagonals; None leaves that covariance zero ("unknown", REP 145)."""
+    fields: dict = {
         "orientation": (0.0, 0.0, 0.0, 1.0),
         "orientation_covariance": _NO_ESTIMATE,
         "angular_velocity": samples.gyro,
         "linear_acceleration": samples.accel,
     }
+    if gyro_variance is not None:
+        fields["angular_velocity_covariance"] = np.diag(np.asarray(gyro_variance, dtype=float)).reshape(9)
+    if accel_variance is not None:
+        fields["linear_acceleration_covariance"] = np.diag(np.asarray(accel_variance, dtype=float)).reshape(9)
+    return fields
 
 
 def series_fields(series: ImuSeries) -> dict:
@@ -348,9 +363,15 @@ def series_from_batch(batch: DecodedBatch) -> ImuSeries:
     return ImuSeries(t=ns_to_stamps(batch.stamp_ns), **out)
 
 
-def encode_measured(stamp_ns: np.ndarray, frame_id: str, samples: ImuSamples) -> np.ndarray:
-    """``/imu`` rows ``(N, size)`` of a device's samples at ``stamp_ns``."""
-    return IMU.encode(stamp_ns, frame_id, measured_fields(samples))
+def encode_measured(
+    stamp_ns: np.ndarray,
+    frame_id: str,
+    samples: ImuSamples,
+    gyro_variance: np.ndarray | None = None,
+    accel_variance: np.ndarray | None = None,
+) -> np.ndarray:
+    """``/imu`` rows ``(N, size)`` of a device's samples at ``stamp_ns`` (variances: :func:`measured_fields`)."""
+    return IMU.encode(stamp_ns, frame_id, measured_fields(samples, gyro_variance, accel_variance))
 
 
 def encode_mag(stamp_ns: np.ndarray, frame_id: str, samples: ImuSamples) -> np.ndarray:

@@ -19,16 +19,23 @@ topic              type                                 holds
 ``/estimate/imu``  ``sensor_msgs/msg/Imu``              estimated ``q_wb`` (+ covariance), rate, ...
 ``/raw/<kind>``    ``gyroemu_msgs/msg/<Kind>Raw``       the gyro kind's physical observables
 ``/movement``      ``gyroemu_msgs/msg/Flag``            an imported dataset's mask of the samples that count
+``/tf``            ``tf2_msgs/msg/TFMessage``           ``map`` -> ``base_link`` (truth), ``map`` -> ``body_estimate``
+``/tf_static``     ``tf2_msgs/msg/TFMessage``           ``base_link`` -> the IMU's frame (the device's mounting)
 =================  ===================================  =========================================
+
+``/tf`` and ``/tf_static`` are the file's, not a device's (no prefix): :mod:`gyroemu.pipelines.formats.frames`
+says which samples go on ``/tf`` (100 Hz at most, and the last) and why; :func:`read_tf` reads them.
+Stamps are absolute (ns since the Unix epoch): the writer adds ``start_ns`` to float times. ``/imu``
+carries the device's per-sample noise variances (:mod:`gyroemu.pipelines.formats.imu_covariance`).
 
 With several devices the topics are prefixed: ``/<device>/imu``. Every message's ``log_time`` and
 ``publish_time`` are its header stamp (ns), ``sequence`` counts from 0 per channel, and messages are
-in time order across channels (same stamp: the order of the table). Frame ids: the device name for
-what the sensor measures (``/imu``, ``/mag``, ``/raw/...``), ``base_link`` for body-frame truth and
-estimates. Each device has a metadata record ``gyroemu`` with ``version``, ``seed``, ``scenario``
-(TOML), ``device`` (TOML), ``device_name`` and ``topic_prefix`` (:func:`device_metadata`), plus any
-keys the recording adds (an imported file: ``source``, ``source_format``, ``citation``, ...;
-:mod:`gyroemu.pipelines.formats.importers`).
+in time order across channels (same stamp: the order of the table). Frame ids: the device name (or
+``Recording.frame_id``) for what the sensor measures (``/imu``, ``/mag``, ``/raw/...``), ``base_link``
+for body-frame truth and estimates. Each device has a metadata record ``gyroemu`` with ``version``,
+``seed``, ``scenario`` (TOML), ``device`` (TOML), ``device_name`` and ``topic_prefix``
+(:func:`device_metadata`), plus any keys the recording adds (an imported file: ``source``,
+``source_format``, ``citation``, ...; :mod:`gyroemu.pipelines.formats.importers`).
 
 Writing
 -------
@@ -54,16 +61,17 @@ from __future__ import annotations
 import os
 import secrets
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol, TypeVar
 
 import numpy as np
 
 import gyroemu
 from gyroemu.pipelines.formats.channels import (
+    BODY_FRAME,
     ESTIMATE_ROLE,
     IMU_ROLE,
     MAG_ROLE,
@@ -71,6 +79,7 @@ from gyroemu.pipelines.formats.channels import (
     POSE_ROLE,
     RESERVED_DEVICE_NAMES,
     TRUTH_ROLE,
+    WORLD_FRAME,
     ImuSeries,
     PoseSeries,
     encode_mag,
@@ -89,8 +98,24 @@ from gyroemu.pipelines.formats.channels import (
     series_from_batch,
     split_topic,
 )
-from gyroemu.pipelines.formats.mcap_records import DecodedChannel, LogError, McapFileWriter, McapScan
-from gyroemu.pipelines.formats.messages import IMU, ns_to_stamps, raw_observables, stamps_to_ns
+from gyroemu.pipelines.formats.frames import (
+    ESTIMATE_FRAME,
+    TF_LOG_RATE_HZ,
+    TF_STATIC_TOPIC,
+    TF_TOPIC,
+    TfThinning,
+    mounting_of,
+)
+from gyroemu.pipelines.formats.imu_covariance import measurement_variances
+from gyroemu.pipelines.formats.mcap_records import (
+    OFFERED_QOS_PROFILES,
+    LogError,
+    McapFileWriter,
+    McapScan,
+    iter_mcap_batches,
+)
+from gyroemu.pipelines.formats.messages import IMU, MessageType, ns_to_stamps, raw_observables, stamps_to_ns
+from gyroemu.pipelines.formats.tf_messages import TF_MESSAGE_TYPE, Transforms, decode_tf, encode_tf, tf_schema
 from gyroemu.sensors.samples import ImuSamples
 
 if TYPE_CHECKING:
@@ -111,6 +136,12 @@ __all__ = [
     "no_imu_error",
     "truth_series",
     "truth_pose",
+    "read_tf",
+    "TF_STATIC_QOS_PROFILES",
+    "TypedChannel",
+    "group_devices",
+    "device_name",
+    "announce_scan",
 ]
 
 
@@ -192,6 +223,13 @@ class Recording:
         Further keys of the device's ``gyroemu`` metadata record (e.g. an import's ``source``); they
         may not replace the writer's own keys (``version``, ``seed``, ``scenario``, ``device``,
         ``device_name``, ``topic_prefix``).
+    frame_id : str, optional
+        The IMU's frame (``frame_id`` of ``/imu``, ``/mag``, ``/raw/...``, child of ``base_link`` on
+        ``/tf_static``); default the device's name. Taken from the device's first block.
+    gyro_variance, accel_variance : ndarray (3,), optional
+        Per-sample variances written on ``/imu``'s covariance diagonals; default, when ``device`` is a
+        ``Device``, :func:`~gyroemu.pipelines.formats.imu_covariance.measurement_variances`, else
+        zero covariances ("unknown"). Taken from the device's first block.
     """
 
     samples: ImuSamples
@@ -203,6 +241,9 @@ class Recording:
     metadata: dict | None = None
     stamp_ns: np.ndarray | None = None
     pose: PoseSeries | None = None
+    frame_id: str | None = None
+    gyro_variance: np.ndarray | None = None
+    accel_variance: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -228,6 +269,10 @@ class DeviceLog:
         flag at their stamp); None when the device has no ``/movement`` topic.
     pose : PoseSeries or None
         ``/truth/pose``, at its own stamps; None when the device has none.
+    frame_id : str
+        ``/imu``'s frame id (its first message's).
+    gyro_variance, accel_variance : ndarray (3,) or None
+        The diagonals of ``/imu``'s first message's covariances; None where they are zero ("unknown").
     """
 
     name: str
@@ -239,6 +284,9 @@ class DeviceLog:
     metadata: dict | None = None
     movement: np.ndarray | None = None
     pose: PoseSeries | None = None
+    frame_id: str = ""
+    gyro_variance: np.ndarray | None = None
+    accel_variance: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -315,6 +363,11 @@ def device_metadata(
     }
 
 
+TF_STATIC_QOS_PROFILES = OFFERED_QOS_PROFILES.replace("durability: 2", "durability: 1")
+"""``/tf_static``'s channel metadata: transient local (durability 1), as tf2's static broadcaster offers
+it, so ``ros2 bag play`` latches the mounting for late subscribers."""
+
+
 @dataclass
 class _DeviceChannels:
     name: str
@@ -322,6 +375,18 @@ class _DeviceChannels:
     channels: dict  # role -> channel id
     frame_id: str
     warned: set = field(default_factory=set)
+    variances: tuple = (None, None)
+    mounting: tuple | None = None
+    static_written: bool = False
+
+
+@dataclass
+class _TfSeries:
+    """One /tf edge (``map`` -> ``child``) fed from one device's series: its thinning and last sample."""
+
+    child: str
+    thinning: TfThinning
+    last: tuple | None = None  # (stamp_ns, translation (3,), rotation xyzw (4,))
 
 
 def _toml(value) -> str:
@@ -347,6 +412,15 @@ class McapLogWriter:
         Uncompressed bytes per chunk (default 1 MiB, as the ``mcap`` library).
     compression_level : int
         zstd level (default 3, zstd's default).
+    start_ns : int
+        Added to every stamp given as float seconds (``samples.t``, ``truth.t``, ...; not to
+        :attr:`Recording.stamp_ns`, which is absolute): the run's start time, ns since the Unix epoch.
+    tf_rate_hz : float or None
+        ``/tf`` messages per second at most (:mod:`gyroemu.pipelines.formats.frames`): ``map`` ->
+        ``base_link`` from the truth (``/truth/pose``, else ``/truth/imu``) and ``map`` ->
+        ``body_estimate`` from ``/estimate/imu``, each of the first device that has them; None: no
+        ``/tf``. ``/tf_static`` (``base_link`` -> the IMU's frame) is written for every device whose
+        mounting is known (``Recording.device``).
 
     Use as a context manager: on an exception inside the block the temporary file is removed and
     nothing appears at ``path``::
@@ -363,6 +437,8 @@ class McapLogWriter:
         prefix_topics: bool | None = None,
         chunk_size: int = 1 << 20,
         compression_level: int = 3,
+        start_ns: int = 0,
+        tf_rate_hz: float | None = TF_LOG_RATE_HZ,
     ) -> None:
         self.path = Path(path)
         if not self.path.parent.is_dir():
@@ -381,6 +457,10 @@ class McapLogWriter:
         self._devices: dict[str, _DeviceChannels] = {}
         self._last_time = -1
         self._closed = False
+        self._start_ns = int(start_ns)
+        self._tf_rate_hz = tf_rate_hz
+        self._tf: dict[str, tuple[str, _TfSeries]] = {}  # child frame -> (device name, series)
+        self._tf_channels: dict[str, int] = {}
 
     def __enter__(self) -> McapLogWriter:
         return self
@@ -417,9 +497,20 @@ class McapLogWriter:
                 f"device name {name!r} cannot prefix topics: use letters, digits and '_', "
                 f"starting with a letter, and none of {', '.join(sorted(RESERVED_DEVICE_NAMES))}"
             )
-        entry = _DeviceChannels(name=name, prefix=f"/{name}" if self._prefix else "", channels={}, frame_id=name)
-        self._devices[name] = entry
         device = recording.device
+        variances = measurement_variances(device)
+        entry = _DeviceChannels(
+            name=name,
+            prefix=f"/{name}" if self._prefix else "",
+            channels={},
+            frame_id=recording.frame_id or name,
+            variances=(
+                recording.gyro_variance if recording.gyro_variance is not None else (variances or (None, None))[0],
+                recording.accel_variance if recording.accel_variance is not None else (variances or (None, None))[1],
+            ),
+            mounting=mounting_of(device),
+        )
+        self._devices[name] = entry
         seed = recording.seed if recording.seed is not None else getattr(device, "seed", None)
         record = device_metadata(
             name,
@@ -462,18 +553,97 @@ class McapLogWriter:
             self._mcap.add_messages(batches)
             self._last_time = max(self._last_time, max(int(stamps.max()) for stamps in times))
 
+    def _tf_channel(self, topic: str) -> int:
+        if topic not in self._tf_channels:
+            schema_id = self._mcap.register_schema(TF_MESSAGE_TYPE, "ros2msg", tf_schema().encode())
+            qos = TF_STATIC_QOS_PROFILES if topic == TF_STATIC_TOPIC else OFFERED_QOS_PROFILES
+            self._tf_channels[topic] = self._mcap.register_channel(
+                topic, "cdr", schema_id, {"offered_qos_profiles": qos}
+            )
+        return self._tf_channels[topic]
+
+    def _tf_rows(
+        self, device: str, child: str, stamp_ns: np.ndarray, pos: np.ndarray | None, q_wb: np.ndarray
+    ) -> tuple[int, np.ndarray, np.ndarray] | None:
+        """``/tf`` batch ``map`` -> ``child`` of one block of a series (thinned), or None."""
+        if self._tf_rate_hz is None:
+            return None
+        owner = self._tf.get(child)
+        if owner is None:
+            owner = self._tf[child] = (device, _TfSeries(child, TfThinning(self._tf_rate_hz)))
+        if owner[0] != device:
+            return None
+        series = owner[1]
+        valid = np.all(np.isfinite(q_wb), axis=1)
+        stamp_ns, q_wb = stamp_ns[valid], q_wb[valid]
+        pos = np.zeros((len(stamp_ns), 3)) if pos is None else pos[valid]
+        if not len(stamp_ns):
+            return None
+        index = series.thinning.keep(stamp_ns)
+        xyzw = q_wb[:, [1, 2, 3, 0]]
+        series.last = (int(stamp_ns[-1]), pos[-1].copy(), xyzw[-1].copy())
+        if not len(index):
+            return None
+        rows = encode_tf(stamp_ns[index], [(WORLD_FRAME, child)], pos[index, None, :], xyzw[index, None, :])
+        return (self._tf_channel(TF_TOPIC), stamp_ns[index], rows)
+
+    def _encode_tf(self, device: _DeviceChannels, recording: Recording, stamp_ns: np.ndarray) -> list[tuple]:
+        """``/tf_static`` (once per device) and ``/tf`` batches of a recording's block."""
+        batches = []
+        if device.mounting is not None and not device.static_written and len(stamp_ns):
+            q_bs, lever = device.mounting
+            static_rows = encode_tf(
+                stamp_ns[:1], [(BODY_FRAME, device.frame_id)], lever[None, None], q_bs[None, None, [1, 2, 3, 0]]
+            )
+            batches.append((self._tf_channel(TF_STATIC_TOPIC), stamp_ns[:1], static_rows))
+            device.static_written = True
+        pose, truth, estimate = recording.pose, recording.truth, recording.estimate
+        position = None
+        if pose is not None:
+            pose_ns = self._series_stamps(recording, pose.t, "pose.t", stamp_ns)
+            rows = self._tf_rows(
+                device.name, BODY_FRAME, pose_ns, np.asarray(pose.pos_w, float), np.asarray(pose.q_wb, float)
+            )
+            position = (pose_ns, np.asarray(pose.pos_w, float))
+        elif truth is not None and truth.q_wb is not None:
+            truth_ns = self._series_stamps(recording, truth.t, "truth.t", stamp_ns)
+            rows = self._tf_rows(device.name, BODY_FRAME, truth_ns, None, np.asarray(truth.q_wb, float))
+        else:
+            rows = None
+        if rows is not None:
+            batches.append(rows)
+        if estimate is not None and estimate.q_wb is not None:
+            est_ns = self._series_stamps(recording, estimate.t, "estimate.t", stamp_ns)
+            pos = None
+            if position is not None and len(position[0]) == len(est_ns) and np.array_equal(position[0], est_ns):
+                pos = position[1]
+            rows = self._tf_rows(device.name, ESTIMATE_FRAME, est_ns, pos, np.asarray(estimate.q_wb, float))
+            if rows is not None:
+                batches.append(rows)
+        return batches
+
+    def _series_stamps(self, recording: Recording, t: np.ndarray, what: str, stamp_ns: np.ndarray) -> np.ndarray:
+        """A truth, estimate or pose series' stamps, ns: the samples' exact stamps where they are the same."""
+        series_ns = _log_stamps(t, what) + self._start_ns
+        if (
+            recording.stamp_ns is not None
+            and len(series_ns) == len(stamp_ns)
+            and np.abs(series_ns - stamp_ns).max(initial=0) <= 1000
+        ):
+            return stamp_ns
+        return series_ns
+
     def _encode(self, device: _DeviceChannels, recording: Recording) -> list[tuple]:
         """``(channel_id, stamp_ns, payloads)`` of every channel of a recording."""
         samples = recording.samples
-        stamp_ns = _log_stamps(samples.t, "samples.t")
+        stamp_ns = _log_stamps(samples.t, "samples.t") + self._start_ns
         if recording.stamp_ns is not None:
             exact = np.asarray(recording.stamp_ns, dtype=np.int64)
             if exact.shape != stamp_ns.shape or np.abs(exact - stamp_ns).max(initial=0) > 1000:
                 raise ValueError("stamp_ns must be the samples' stamps (samples.t) in ns")
             stamp_ns = exact
-        n = len(stamp_ns)
         batches = []
-        rows = encode_measured(stamp_ns, device.frame_id, samples)
+        rows = encode_measured(stamp_ns, device.frame_id, samples, *device.variances)
         batches.append((self._channel(device, IMU_ROLE), stamp_ns, rows))
         if samples.has_mag or MAG_ROLE in device.channels:
             rows = encode_mag(stamp_ns, device.frame_id, samples)
@@ -483,23 +653,11 @@ class McapLogWriter:
             (ESTIMATE_ROLE, "estimate", recording.estimate),
         ):
             if series is not None:
-                series_ns = _log_stamps(series.t, f"{what}.t")
-                if (
-                    recording.stamp_ns is not None
-                    and len(series_ns) == n
-                    and np.abs(series_ns - stamp_ns).max(initial=0) <= 1000
-                ):
-                    series_ns = stamp_ns
+                series_ns = self._series_stamps(recording, series.t, f"{what}.t", stamp_ns)
                 rows = encode_series(series_ns, series)
                 batches.append((self._channel(device, role), series_ns, rows))
         if recording.pose is not None:
-            pose_ns = _log_stamps(recording.pose.t, "pose.t")
-            if (
-                recording.stamp_ns is not None
-                and len(pose_ns) == n
-                and np.abs(pose_ns - stamp_ns).max(initial=0) <= 1000
-            ):
-                pose_ns = stamp_ns
+            pose_ns = self._series_stamps(recording, recording.pose.t, "pose.t", stamp_ns)
             batches.append((self._channel(device, POSE_ROLE), pose_ns, encode_pose(pose_ns, recording.pose)))
         for kind, observables in samples.raw.items():
             role = raw_role(kind)
@@ -524,13 +682,23 @@ class McapLogWriter:
         if recording.movement is not None:
             rows = encode_movement(stamp_ns, device.frame_id, recording.movement)
             batches.append((self._channel(device, MOVEMENT_ROLE), stamp_ns, rows))
-        return batches
+        return batches + self._encode_tf(device, recording, stamp_ns)
+
+    def _finish_tf(self) -> None:
+        """The last sample of every /tf series, where thinning left it out: tf2 cannot extrapolate, so
+        the tree then reaches the last IMU stamp."""
+        for _, series in self._tf.values():
+            if series.last is not None and series.thinning.last():
+                stamp, pos, xyzw = series.last
+                rows = encode_tf([stamp], [(WORLD_FRAME, series.child)], pos[None, None], xyzw[None, None])
+                self._mcap.add_messages([(self._tf_channel(TF_TOPIC), np.array([stamp], np.int64), rows)])
 
     def close(self) -> None:
         """Finish the file (summary, footer), flush it to disk and move it to :attr:`path`."""
         if self._closed:
             return
         try:
+            self._finish_tf()
             self._mcap.finish()
             self._file.flush()
             os.fsync(self._file.fileno())
@@ -633,18 +801,7 @@ def read_mcap(path: str | os.PathLike[str]) -> McapLog:
     """
     path = Path(path)
     scan = McapScan(path).run()
-    skipped = dict(scan.skipped)
-
-    if scan.truncated_at is not None:
-        warnings.warn(
-            f"{path}: truncated at byte {scan.truncated_at} (no MCAP footer): recovered "
-            f"{scan.message_count} messages from {scan.chunks} complete chunks",
-            LogWarning,
-            stacklevel=2,
-        )
-    for topic, reason in skipped.items():
-        warnings.warn(f"{path}: skipping topic {topic}: {reason}", LogWarning, stacklevel=2)
-
+    skipped = announce_scan(path, scan)
     decoded = scan.decode()
     metadata = [dict(m.metadata) for m in scan.metadata if m.name == "gyroemu"]
     devices = _devices(path, decoded, metadata, skipped)
@@ -662,19 +819,65 @@ def read_mcap(path: str | os.PathLike[str]) -> McapLog:
     )
 
 
-def _devices(path: Path, decoded: dict, metadata: list, skipped: dict) -> dict:
-    """Group decoded channels into devices."""
-    groups: dict[str, dict[str, DecodedChannel]] = {}
-    for d in decoded.values():
-        prefix, role = split_topic(d.topic)
-        if role and not role_accepts(role, d.mtype):
+def announce_scan(path: Path, scan: McapScan) -> dict[str, str]:
+    """Warn (:class:`LogWarning`) of a truncated file and of each topic the scan skipped, as
+    :func:`read_mcap` does; returns the skipped topics and reasons (the tf tree, which
+    :func:`read_tf` reads, is not skipped)."""
+    skipped = dict(scan.skipped)
+    if scan.truncated_at is not None:
+        warnings.warn(
+            f"{path}: truncated at byte {scan.truncated_at} (no MCAP footer): recovered "
+            f"{scan.message_count} messages from {scan.chunks} complete chunks",
+            LogWarning,
+            stacklevel=3,
+        )
+    for topic in {c.topic for c in scan.channels.values() if _is_tf(c.topic, scan, c)}:
+        skipped.pop(topic, None)
+    for topic, reason in skipped.items():
+        warnings.warn(f"{path}: skipping topic {topic}: {reason}", LogWarning, stacklevel=3)
+    return skipped
+
+
+def _is_tf(topic: str, scan: McapScan, channel) -> bool:
+    schema = scan.schemas.get(channel.schema_id)
+    return topic in (TF_TOPIC, TF_STATIC_TOPIC) and schema is not None and schema.name == TF_MESSAGE_TYPE
+
+
+def read_tf(path: str | os.PathLike[str], static: bool | None = None) -> Transforms:
+    """Every transform on ``/tf`` and ``/tf_static`` (``static`` True or False: only that topic) of a log,
+    in file order; empty for a log without them (logs written before gyroemu wrote a tf tree).
+    ``LogError`` for a file that is not MCAP or is corrupt; ``ValueError`` for a malformed TFMessage."""
+    topics = [TF_TOPIC, TF_STATIC_TOPIC] if static is None else [TF_STATIC_TOPIC if static else TF_TOPIC]
+    payloads = [m.data for batch in iter_mcap_batches(path, topics) for m in batch if m.schema == TF_MESSAGE_TYPE]
+    return decode_tf(payloads)
+
+
+class TypedChannel(Protocol):
+    """A channel known by its topic and the message type gyroemu decodes it as."""
+
+    topic: str
+    mtype: MessageType
+
+
+ChannelT = TypeVar("ChannelT", bound=TypedChannel)
+
+
+def group_devices(path: Path, channels: Iterable[ChannelT], skipped: dict) -> dict[str, dict[str, ChannelT]]:
+    """Topic prefix → role → channel: the channels (anything with ``topic`` and ``mtype``, of a type
+    gyroemu decodes) grouped into devices as :func:`read_mcap` groups them. Topics that belong to no
+    device go into ``skipped`` with the reason (and a :class:`LogWarning`)."""
+    groups: dict[str, dict[str, ChannelT]] = {}
+    for d in channels:
+        topic, mtype = d.topic, d.mtype
+        prefix, role = split_topic(topic)
+        if role and not role_accepts(role, mtype):
             role = ""  # e.g. a /raw/x topic of a standard type: take it as a plain topic
         if not role:
-            if d.mtype is IMU:
-                groups.setdefault(d.topic, {})[IMU_ROLE] = d
+            if mtype is IMU:
+                groups.setdefault(topic, {})[IMU_ROLE] = d
             else:
-                skipped[d.topic] = f"a {d.mtype.name} topic that belongs to no IMU topic"
-                warnings.warn(f"{path}: skipping topic {d.topic}: {skipped[d.topic]}", LogWarning, stacklevel=3)
+                skipped[topic] = f"a {mtype.name} topic that belongs to no IMU topic"
+                warnings.warn(f"{path}: skipping topic {topic}: {skipped[topic]}", LogWarning, stacklevel=3)
             continue
         groups.setdefault(prefix, {})[role] = d
     # Truth or estimate without a measured IMU: a device of its own (it holds Imu messages).
@@ -685,18 +888,28 @@ def _devices(path: Path, decoded: dict, metadata: list, skipped: dict) -> dict:
                 if role in group:
                     groups[role_topic(role, prefix)] = {IMU_ROLE: group.pop(role)}
             for d in group.values():
-                skipped[d.topic] = "no IMU topic of the same device"
-                warnings.warn(f"{path}: skipping topic {d.topic}: {skipped[d.topic]}", LogWarning, stacklevel=3)
+                topic = d.topic
+                skipped[topic] = "no IMU topic of the same device"
+                warnings.warn(f"{path}: skipping topic {topic}: {skipped[topic]}", LogWarning, stacklevel=3)
             del groups[prefix]
+    return groups
+
+
+def device_name(prefix: str, metadata: list[dict]) -> tuple[str, dict | None]:
+    """A device's name and its ``gyroemu`` metadata record (None without one), from its topic prefix."""
     records = {m.get("topic_prefix", ""): m for m in metadata}
+    meta = records.get(prefix) or (metadata[0] if prefix == "" and len(metadata) == 1 else None)
+    return (meta or {}).get("device_name") or (prefix.strip("/") or "imu0"), meta
+
+
+def _devices(path: Path, decoded: dict, metadata: list, skipped: dict) -> dict:
+    """Group decoded channels into devices."""
     devices = {}
-    for prefix, group in groups.items():
+    for prefix, group in group_devices(path, decoded.values(), skipped).items():
         if not len(group[IMU_ROLE].batch):
             continue
-        meta = records.get(prefix) or (metadata[0] if prefix == "" and len(metadata) == 1 else None)
-        name = (meta or {}).get("device_name") or (prefix.strip("/") or "imu0")
-        device = _device_log(path, name, group, meta)
-        devices[name] = device
+        name, meta = device_name(prefix, metadata)
+        devices[name] = _device_log(path, name, group, meta)
     return devices
 
 
@@ -737,6 +950,10 @@ def _device_log(path: Path, name: str, group: dict, meta: dict | None) -> Device
                 stacklevel=4,
             )
     batch = imu.batch
+    variances = []
+    for cov_field in ("angular_velocity_covariance", "linear_acceleration_covariance"):
+        first = batch[cov_field][0].reshape(3, 3) if len(batch) else np.zeros((3, 3))
+        variances.append(np.diag(first).copy() if first[0, 0] > 0 else None)
     samples = ImuSamples(
         t=ns_to_stamps(stamp_ns[keep]),
         gyro=batch["angular_velocity"][keep],
@@ -755,4 +972,7 @@ def _device_log(path: Path, name: str, group: dict, meta: dict | None) -> Device
         metadata=meta,
         movement=movement,
         pose=pose_from_batch(group[POSE_ROLE].batch) if POSE_ROLE in group else None,
+        frame_id=str(batch.frame_id[0]) if len(batch) else "",
+        gyro_variance=variances[0],
+        accel_variance=variances[1],
     )

@@ -80,6 +80,7 @@ __all__ = [
     "McapFileWriter",
     "McapScan",
     "ChannelData",
+    "decoded_type",
     "DecodedChannel",
     "McapMessage",
     "iter_mcap_batches",
@@ -110,6 +111,9 @@ records it, so ``ros2 bag play`` replays gyroemu files with matching QoS."""
 _MESSAGE_HEAD = 1 + 8 + 2 + 4 + 8 + 8
 """Bytes of a Message record before its data: opcode, record length, channel id, sequence, log and
 publish time."""
+
+_SEQUENCE_AT = 1 + 8 + 2
+"""Offset of a Message record's ``sequence`` (u32): after its opcode, record length and channel id."""
 
 _MESSAGE_FIELDS = np.dtype(
     {
@@ -161,45 +165,95 @@ def _no_messages():
     return np.empty(0, np.uint8), np.empty(0, np.uint16), np.empty(0, np.uint64), np.empty(0, np.int64)
 
 
+def _same_stamps(streams: Sequence[_Stream]):
+    """Records of streams that share their log times: row k of every stream, in stream order, is sample
+    k's group. Returns ``(rows (N, total size) uint8, channel (K,), sizes (K,), log_time (N,))``."""
+    first = streams[0].log_time
+    data = np.concatenate([s.records for s in streams], axis=1) if len(streams) > 1 else streams[0].records
+    channel = np.array([s.channel_id for s in streams], dtype=np.uint16)
+    sizes = np.array([s.records.shape[1] for s in streams], dtype=np.int64)
+    return data, channel, sizes, first
+
+
 def _interleave(streams: Sequence[_Stream]):
-    """Records of several channels in time order (ties: the order of ``streams``).
+    """Records of several channels in time order (ties: the order of ``streams``, where streams of the
+    same log times are taken together at the place of the first of them).
 
     Returns ``(data, channel_id, log_time, offset)``: the concatenated records (uint8) and, per message,
     its channel, log time and offset in ``data``.
+
+    Streams with the same log times form groups whose row k (every stream's message k, in order) is one
+    contiguous unit. One group is laid out at once; several (e.g. every sample's channels and a thinned
+    /tf) are merged by sorting their units by time and copying runs of consecutive units with slices,
+    or, when the runs are short (channels of unrelated stamps), by a byte gather. The bytes are the same
+    either way.
     """
     streams = [s for s in streams if len(s.log_time)]
     if not streams:
         return _no_messages()
-    sizes = np.array([s.records.shape[1] for s in streams], dtype=np.int64)
-    first = streams[0].log_time
-    if all(len(s.log_time) == len(first) and np.array_equal(s.log_time, first) for s in streams[1:]):
-        # Same stamps on every channel: row k of every stream, in stream order, is sample k's group.
-        n, k = len(first), len(streams)
-        data = np.concatenate([s.records for s in streams], axis=1) if k > 1 else streams[0].records
-        data = data.reshape(-1)
-        channel = np.tile(np.array([s.channel_id for s in streams], dtype=np.uint16), n)
+    grouped: list[list[_Stream]] = []
+    for s in streams:
+        for group in grouped:
+            if len(group[0].log_time) == len(s.log_time) and np.array_equal(group[0].log_time, s.log_time):
+                group.append(s)
+                break
+        else:
+            grouped.append([s])
+    groups = [_same_stamps(group) for group in grouped]
+    if len(groups) == 1:
+        rows, channel_ids, sizes, first = groups[0]
+        n, k = len(first), len(channel_ids)
+        channel = np.tile(channel_ids, n)
         log_time = np.repeat(first, k)
         offset = np.concatenate([[0], np.cumsum(np.tile(sizes, n))[:-1]]).astype(np.int64)
+        return rows.reshape(-1), channel, log_time, offset
+    # Units (one per group row) in time order; ties keep the group order.
+    unit_time = np.concatenate([g[3] for g in groups])
+    unit_group = np.repeat(np.arange(len(groups)), [len(g[3]) for g in groups])
+    unit_row = np.concatenate([np.arange(len(g[3])) for g in groups])
+    order = np.argsort(unit_time, kind="stable")
+    unit_size = np.array([g[0].shape[1] for g in groups], dtype=np.int64)[unit_group[order]]
+    unit_count = np.array([len(g[1]) for g in groups], dtype=np.int64)[unit_group[order]]
+    unit_offset = np.concatenate([[0], np.cumsum(unit_size)[:-1]]).astype(np.int64)
+    unit_message = np.concatenate([[0], np.cumsum(unit_count)[:-1]]).astype(np.int64)
+    total_messages = int(unit_count.sum())
+    data = np.empty(int(unit_size.sum()), dtype=np.uint8)
+    channel = np.empty(total_messages, dtype=np.uint16)
+    log_time = np.empty(total_messages, dtype=np.uint64)
+    offset = np.empty(total_messages, dtype=np.int64)
+    position = np.empty(len(order), dtype=np.int64)
+    position[order] = np.arange(len(order))  # where each unit lands
+    start = 0
+    for _, channel_ids, sizes, first in groups:
+        at = position[start : start + len(first)]
+        start += len(first)
+        inner = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        index = unit_message[at][:, None] + np.arange(len(channel_ids))
+        channel[index] = channel_ids
+        log_time[index] = first[:, None]
+        offset[index] = unit_offset[at][:, None] + inner
+    # Runs of consecutive rows of one group land contiguously: copy each run as one slice.
+    g_sorted, r_sorted = unit_group[order], unit_row[order]
+    breaks = np.flatnonzero((np.diff(g_sorted) != 0) | (np.diff(r_sorted) != 1)) + 1
+    run_start = np.concatenate([[0], breaks])
+    run_end = np.concatenate([breaks, [len(order)]])
+    if len(run_start) * 512 <= len(data):  # runs of 512 bytes on average: a slice each beats a byte gather
+        flat = [np.ascontiguousarray(g[0]).reshape(-1) for g in groups]
+        lo = unit_offset[run_start]
+        hi = unit_offset[run_end - 1] + unit_size[run_end - 1]
+        src = r_sorted[run_start] * unit_size[run_start]
+        for group, a, b, c in zip(g_sorted[run_start].tolist(), lo.tolist(), hi.tolist(), src.tolist()):
+            data[a:b] = flat[group][c : c + b - a]
         return data, channel, log_time, offset
-    # General case: a stable sort of every message by time, then a byte gather in pieces.
-    log_time = np.concatenate([s.log_time for s in streams])
-    which = np.repeat(np.arange(len(streams)), [len(s.log_time) for s in streams])
-    row = np.concatenate([np.arange(len(s.log_time)) for s in streams])
-    order = np.argsort(log_time, kind="stable")
-    log_time, which, row = log_time[order], which[order], row[order]
-    size = sizes[which]
-    offset = np.concatenate([[0], np.cumsum(size)[:-1]]).astype(np.int64)
-    source = np.concatenate([s.records.reshape(-1) for s in streams])
-    base = np.concatenate([[0], np.cumsum([s.records.size for s in streams])[:-1]]).astype(np.int64)
-    start = base[which] + row * size
-    data = np.empty(int(size.sum()), dtype=np.uint8)
-    piece = 1 << 16  # messages per gather: bounds the index array
+    source = np.concatenate([g[0].reshape(-1) for g in groups])
+    base = np.concatenate([[0], np.cumsum([g[0].size for g in groups])[:-1]]).astype(np.int64)
+    src = (base[g_sorted] + r_sorted * unit_size).astype(np.int64)
+    piece = 1 << 16  # units per gather: bounds the index array
     for a in range(0, len(order), piece):
         b = min(a + piece, len(order))
-        lo, hi = offset[a], offset[b - 1] + size[b - 1]
-        index = np.repeat(start[a:b] - offset[a:b], size[a:b]) + np.arange(lo, hi)
+        lo, hi = unit_offset[a], unit_offset[b - 1] + unit_size[b - 1]
+        index = np.repeat(src[a:b] - unit_offset[a:b], unit_size[a:b]) + np.arange(lo, hi)
         data[lo:hi] = source[index]
-    channel = np.array([s.channel_id for s in streams], dtype=np.uint16)[which]
     return data, channel, log_time, offset
 
 
@@ -309,7 +363,7 @@ class McapFileWriter:
             Per channel: ``log_time_ns`` (N,) non-negative integers, also written as publish time, and
             ``payloads`` (N, size) uint8, one serialised message per row (e.g. from
             :meth:`MessageType.encode`, or received bytes stacked with ``np.frombuffer``). Messages with
-            equal times keep the order of ``batches``; sequence numbers continue per channel from 0.
+            equal times keep the order of ``batches``; sequence numbers continue per channel from 0, in file order.
         """
         if self._finished:
             raise ValueError("the MCAP file is finished")
@@ -337,6 +391,12 @@ class McapFileWriter:
         data, channel, log_time, offset = _interleave(streams)
         if not len(log_time):
             return
+        shared = [c for c in {c for c, _, _ in checked} if sum(c == d for d, _, _ in checked) > 1]
+        for channel_id in shared:  # several batches of one channel: number its messages in file order
+            at = offset[channel == channel_id]
+            first = self._channel_counts[channel_id] - len(at)
+            sequence = (np.arange(first, first + len(at), dtype=np.int64) % (1 << 32)).astype("<u4")
+            data[at[:, None] + _SEQUENCE_AT + np.arange(4)] = sequence.view(np.uint8).reshape(-1, 4)
         self._append(data, channel, log_time, offset)
 
     def add_raw_messages(
@@ -566,6 +626,18 @@ class DecodedChannel:
     batch: DecodedBatch
 
 
+def decoded_type(channel: Channel, schema: Schema | None) -> tuple[MessageType | None, str]:
+    """The message type gyroemu decodes ``channel`` as, or None and the reason it is skipped."""
+    mtype = message_type(schema.name) if schema is not None else None
+    if schema is None:
+        return None, "no schema"
+    if channel.message_encoding != "cdr":
+        return None, f"message encoding {channel.message_encoding!r}, not cdr"
+    if mtype is None:
+        return None, f"type {schema.name} is not one gyroemu decodes"
+    return mtype, ""
+
+
 class McapScan:
     """A pass over an MCAP file: schemas, channels, metadata and the messages of the channels gyroemu
     decodes (see the module's notes). :meth:`run` reads the whole file, :meth:`walk` a record at a time.
@@ -707,19 +779,10 @@ class McapScan:
         if channel.id in self.channels:
             return
         self.channels[channel.id] = channel
-        schema = self.schemas.get(channel.schema_id)
-        mtype = message_type(schema.name) if schema is not None else None
-        if schema is None:
-            reason = "no schema"
-        elif channel.message_encoding != "cdr":
-            reason = f"message encoding {channel.message_encoding!r}, not cdr"
-        elif mtype is None:
-            reason = f"type {schema.name} is not one gyroemu decodes"
-        else:
-            reason = ""
+        mtype, reason = decoded_type(channel, self.schemas.get(channel.schema_id))
         if reason:
             self.skipped[channel.topic] = reason
-        self.data[channel.id] = ChannelData(channel, mtype=None if reason else mtype)
+        self.data[channel.id] = ChannelData(channel, mtype=mtype)
 
     def _loose_fields(self, content: bytes) -> tuple[np.ndarray, int]:
         """The fixed fields (``(1,)`` :data:`_MESSAGE_FIELDS`) and channel id of a Message record outside chunks."""

@@ -106,6 +106,10 @@ __all__ = [
     "Ros2Keys",
     "node_name",
     "DataKey",
+    "GLOBAL_TOPICS",
+    "TF_QOS",
+    "TF_STATIC_QOS",
+    "topic_qos",
 ]
 
 ADMIN_SPACE = "@ros2_lv"
@@ -317,9 +321,17 @@ def ros_type_name(dds_name: str) -> str:
     return f"{m.group(1)}/{m.group(2)}/{m.group(3)}"
 
 
+GLOBAL_TOPICS = ("/tf", "/tf_static")
+"""Topics that are the ROS 2 graph's, not a device's: tf2 listens on ``/tf`` and ``/tf_static`` only, so a
+gyroemu device's tree goes there (``gyroemu/<device>/tf`` on gyroemu's own keys)."""
+
+
 def ros_topic(device: str, topic: str) -> str:
     """The ROS 2 topic of gyroemu ``topic`` of ``device``: ``("imu0", "/raw/rate-gyro")`` ->
-    ``/imu0/raw/rate_gyro`` (``-`` -> ``_``); :class:`Ros2Error` when a token is still not a ROS name."""
+    ``/imu0/raw/rate_gyro`` (``-`` -> ``_``); a topic of :data:`GLOBAL_TOPICS` stays itself
+    (``("imu0", "/tf")`` -> ``/tf``); :class:`Ros2Error` when a token is still not a ROS name."""
+    if topic in GLOBAL_TOPICS:
+        return topic
     name = "/" + device + topic
     tokens = name.strip("/").split("/")
     tokens = [t.replace("-", "_") for t in tokens]
@@ -334,7 +346,10 @@ def ros_topic(device: str, topic: str) -> str:
 
 def gyroemu_topic(topic: str, type_name: str | None = None) -> tuple[str, str]:
     """``(device, topic)`` of ROS 2 topic ``/<device>/<rest>``; a gyroemu raw type restores its kind's
-    topic (``/imu0/raw/rate_gyro`` of ``gyroemu_msgs/msg/RateGyroRaw`` -> ``("imu0", "/raw/rate-gyro")``)."""
+    topic (``/imu0/raw/rate_gyro`` of ``gyroemu_msgs/msg/RateGyroRaw`` -> ``("imu0", "/raw/rate-gyro")``);
+    a topic of :data:`GLOBAL_TOPICS` has no device: ``("", "/tf")``."""
+    if topic in GLOBAL_TOPICS:
+        return "", topic
     tokens = topic.strip("/").split("/")
     if len(tokens) < 2 or not all(tokens):
         raise Ros2Error(f"ROS 2 topic {topic!r} is not /<device>/<topic>")
@@ -415,6 +430,18 @@ def qos_keyexpr(
     )
 
 
+TF_QOS = qos_keyexpr(history=KEEP_LAST, depth=100)
+"""``/tf``'s QoS chunk: tf2's ``DynamicBroadcasterQoS`` (reliable, volatile, keep-last 100)."""
+TF_STATIC_QOS = qos_keyexpr(durability=TRANSIENT_LOCAL, history=KEEP_LAST, depth=1)
+"""``/tf_static``'s QoS chunk: tf2's ``StaticBroadcasterQoS`` (reliable, transient local, keep-last 1)."""
+
+
+def topic_qos(ros_topic: str) -> str:
+    """The QoS chunk gyroemu advertises for ``ros_topic``: tf2's for ``/tf`` and ``/tf_static``
+    (:data:`TF_QOS`, :data:`TF_STATIC_QOS`), else reliable keep-all (:func:`qos_keyexpr`'s default)."""
+    return {"/tf": TF_QOS, "/tf_static": TF_STATIC_QOS}.get(ros_topic, qos_keyexpr())
+
+
 def _mangle(name: str) -> str:
     return name.replace("/", "%")
 
@@ -471,7 +498,7 @@ class Ros2Node:
         self._tokens.append(self.session.liveliness().declare_token(key))
         self.keys.append(key)
 
-    def _entity(self, kind: str, topic: str, type_name: str, hash_: str) -> str:
+    def _entity(self, kind: str, topic: str, type_name: str, hash_: str, qos: str | None = None) -> str:
         key = entity_token(
             kind,
             self.domain,
@@ -482,19 +509,21 @@ class Ros2Node:
             topic,
             type_name,
             hash_,
+            qos,
             namespace=self.namespace,
         )
         self._next_id += 1
         self._declare(key)
         return key
 
-    def publisher(self, topic: str, type_name: str, hash_: str) -> str:
-        """Declare a publisher of ``type_name`` on ``topic``; returns its token's key expression."""
-        return self._entity("MP", topic, type_name, hash_)
+    def publisher(self, topic: str, type_name: str, hash_: str, qos: str | None = None) -> str:
+        """Declare a publisher of ``type_name`` on ``topic`` (``qos``: its QoS chunk; None: the topic's,
+        :func:`topic_qos`); returns its token's key expression."""
+        return self._entity("MP", topic, type_name, hash_, topic_qos(topic) if qos is None else qos)
 
     def subscription(self, topic: str, type_name: str, hash_: str) -> str:
-        """Declare a subscription; returns its token's key expression."""
-        return self._entity("MS", topic, type_name, hash_)
+        """Declare a subscription (the topic's QoS, :func:`topic_qos`); returns its token's key expression."""
+        return self._entity("MS", topic, type_name, hash_, topic_qos(topic))
 
     def close(self) -> None:
         for token in self._tokens:

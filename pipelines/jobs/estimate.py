@@ -116,6 +116,10 @@ class _Target:
     frame_id: str | None  # None: the IMU message's
     channel_out: int = 0
     sequence: int = 0
+    tf_keep: np.ndarray | None = None  # (N,) bool: rows whose estimate also goes on /tf (map -> body_estimate)
+    tf_pos: np.ndarray | None = None  # (N, 3): the true position there (zeros without /truth/pose)
+    tf_channel_out: int = 0
+    tf_sequence: int = 0
 
 
 def _topic_name(topic: str) -> str:
@@ -231,8 +235,38 @@ def estimate_log(
             )
         )
         done.append((dev.name, len(samples), getattr(flt, "name", filter_name), nine))
+    _add_estimate_tf(targets, chosen)
     _copy_with_estimates(path, out, log.profile, targets)
     return EstimateSummary(path=out, devices=done, topics=[(t.topic, t.topic_out, t.sequence) for t in targets])
+
+
+def _add_estimate_tf(targets: list[_Target], chosen: list[tuple[DeviceLog, str]]) -> None:
+    """Mark the rows of the first target of a gyroemu device (one with a ``gyroemu`` metadata record;
+    another program's tree names its own frames) whose ``map -> body_estimate`` goes on /tf:
+    thinned to :data:`~gyroemu.pipelines.formats.frames.TF_LOG_RATE_HZ` with the last row kept
+    (:mod:`gyroemu.pipelines.formats.frames`), placed at the true position where the log has a
+    ``/truth/pose`` at the same stamps."""
+    from gyroemu.pipelines.formats.frames import TF_LOG_RATE_HZ, tf_indices
+    from gyroemu.pipelines.formats.messages import stamps_to_ns
+
+    for target, (dev, _) in zip(targets, chosen):
+        if dev.metadata is None:  # another program's log: its tree names its own frames
+            continue
+        orientation = target.fields.get("orientation")
+        if orientation is None or np.ndim(orientation) != 2:
+            continue
+        valid = np.all(np.isfinite(orientation), axis=1)
+        keep = np.zeros(len(valid), dtype=bool)
+        index = np.flatnonzero(valid)
+        keep[index[tf_indices(target.stamp_ns[index], TF_LOG_RATE_HZ)]] = True
+        pos = np.zeros((len(valid), 3))
+        pose = dev.pose
+        if pose is not None and len(pose) == len(valid):
+            pose_ns = stamps_to_ns(pose.t)
+            if np.abs(pose_ns - target.stamp_ns).max(initial=0) <= 1000:
+                pos = np.asarray(pose.pos_w, dtype=float)
+        target.tf_keep, target.tf_pos = keep, pos
+        return
 
 
 def _copy_with_estimates(path: Path, out: Path, profile: str, targets: list[_Target]) -> None:
@@ -247,6 +281,7 @@ def _copy_with_estimates(path: Path, out: Path, profile: str, targets: list[_Tar
     try:
         with os.fdopen(fd, "wb", buffering=1 << 20) as f:
             writer = McapFileWriter(f, profile=profile or "ros2")
+            _register_estimate_tf(writer, targets)
             walk = McapRecordWalk(path)
             schema_ids: dict[int, int] = {}
             channel_ids = np.full(1 << 16, -1, dtype=np.int64)  # input channel id -> output id, -1: dropped
@@ -257,7 +292,7 @@ def _copy_with_estimates(path: Path, out: Path, profile: str, targets: list[_Tar
             def register(channel_id: int) -> None:
                 seen.add(channel_id)
                 c = walk.channels[channel_id]
-                if c.topic in replaced:
+                if c.topic in replaced or c.metadata.get("gyroemu") == _ESTIMATE_TF:
                     return
                 schema = walk.schemas.get(c.schema_id)
                 if schema is not None and c.schema_id not in schema_ids:
@@ -293,6 +328,35 @@ def _copy_with_estimates(path: Path, out: Path, profile: str, targets: list[_Tar
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+_ESTIMATE_TF = "estimate_tf"
+"""Channel metadata ``gyroemu`` of the /tf channel that holds ``map -> body_estimate``: a second /tf
+channel (MCAP lets channels share a topic; players publish both on /tf), dropped when the output is
+estimated again."""
+
+
+def _register_estimate_tf(writer: McapFileWriter, targets: list[_Target]) -> None:
+    """The /tf channel of the estimate's transforms, when a target has them."""
+    from gyroemu.pipelines.formats.frames import TF_TOPIC
+    from gyroemu.pipelines.formats.tf_messages import TF_MESSAGE_TYPE, tf_schema
+
+    for target in targets:
+        if target.tf_keep is not None:
+            schema_id = writer.register_schema(TF_MESSAGE_TYPE, "ros2msg", tf_schema().encode())
+            metadata = {"offered_qos_profiles": OFFERED_QOS_PROFILES, "gyroemu": _ESTIMATE_TF}
+            target.tf_channel_out = writer.register_channel(TF_TOPIC, "cdr", schema_id, metadata)
+
+
+def _estimate_tf_rows(target: _Target, row: np.ndarray, stamps: np.ndarray) -> np.ndarray:
+    """``map -> body_estimate`` TFMessages at ``stamps`` (the target's rows ``row``)."""
+    from gyroemu.pipelines.formats.channels import WORLD_FRAME
+    from gyroemu.pipelines.formats.frames import ESTIMATE_FRAME
+    from gyroemu.pipelines.formats.tf_messages import encode_tf
+
+    assert target.tf_pos is not None
+    xyzw = np.asarray(target.fields["orientation"])[row]
+    return encode_tf(stamps, [(WORLD_FRAME, ESTIMATE_FRAME)], target.tf_pos[row][:, None], xyzw[:, None])
 
 
 def _with_estimates(batch: RawMessages, channel_ids: np.ndarray, follows: dict[int, _Target]) -> tuple:
@@ -337,6 +401,26 @@ def _with_estimates(batch: RawMessages, channel_ids: np.ndarray, follows: dict[i
             position.append(k * 2 + 1)
             target.sequence += m
             base += rows.size
+        if target.tf_keep is not None:
+            sel = np.flatnonzero(target.tf_keep[row])
+            if len(sel):
+                rows = _estimate_tf_rows(target, row[sel], stamps[sel])
+                m, size = rows.shape
+                buffers.append(rows.reshape(-1))
+                k = mine[sel]
+                parts.append(
+                    (
+                        np.full(m, target.tf_channel_out, dtype=np.int64),
+                        (target.tf_sequence + np.arange(m)) % (1 << 32),
+                        batch.log_time[k],
+                        batch.publish_time[k],
+                        base + np.arange(m, dtype=np.int64) * size,
+                        np.full(m, size, dtype=np.int64),
+                    )
+                )
+                position.append(k * 2 + 1)
+                target.tf_sequence += m
+                base += rows.size
     order = np.argsort(np.concatenate(position), kind="stable")
     columns = [np.concatenate(column)[order] for column in zip(*parts)]
     keep = columns[0] >= 0

@@ -26,6 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
+from gyroemu.pipelines.formats.channels import IMU_ROLE
+from gyroemu.pipelines.formats.messages import MessageType
+
 __all__ = ["GAP_FACTOR", "TopicStats", "DeviceInfo", "LogInfo", "topic_stats", "log_info"]
 
 GAP_FACTOR = 1.5
@@ -115,10 +118,19 @@ class TopicStats:
             return f"{self.topic:<28} no messages"
         gaps = "no gaps" if not self.gaps else f"{self.gaps} gaps (longest {self.longest_gap_s:.6g} s)"
         order = f", {self.out_of_order} chunks out of order" if self.out_of_order else ""
-        return (
-            f"{self.topic:<28} {self.count} messages, {self.first_ns * 1e-9:.6g} to {self.last_ns * 1e-9:.6g} s "
-            f"({self.rate_hz:.6g} Hz), {gaps}{order}"
-        )
+        if self.first_ns >= _ABSOLUTE_NS:  # a date: ISO 8601 and the span
+            from gyroemu.pipelines.formats.frames import format_stamp
+
+            stamps = f"from {format_stamp(self.first_ns)} for {(self.last_ns - self.first_ns) * 1e-9:.6g} s"
+        else:
+            stamps = f"{self.first_ns * 1e-9:.6g} to {self.last_ns * 1e-9:.6g} s"
+        rate = f" ({self.rate_hz:.6g} Hz)" if self.count > 1 else ""
+        return f"{self.topic:<28} {self.count} messages, {stamps}{rate}, {gaps}{order}"
+
+
+_ABSOLUTE_NS = 365 * 86_400 * 1_000_000_000
+"""Log times from a year after the Unix epoch on are dates (absolute stamps), printed as ISO 8601;
+earlier ones are times since a start (logs written before stamps were absolute)."""
 
 
 class _Intervals:
@@ -212,26 +224,100 @@ def topic_stats(path: str | os.PathLike[str]) -> list[TopicStats]:
     LogError
         The file is not MCAP or is corrupt.
     """
-    from gyroemu.pipelines.formats.mcap_records import McapRecordWalk
+    return _LogWalk(Path(path), imu_channels=False).run().topic_stats()
 
-    walk = McapRecordWalk(path)
-    intervals: dict[int, _Intervals] = {}
-    for batch in walk.batches():
-        channel = batch.channel_id.astype(np.int64)
-        times = batch.log_time.astype(np.uint64)
-        if len(channel) and np.all(channel == channel[0]):
-            intervals.setdefault(int(channel[0]), _Intervals()).add(times)
-            continue
-        order = np.argsort(channel, kind="stable")
-        channel, times = channel[order], times[order]
-        cuts = np.flatnonzero(np.diff(channel)) + 1
-        for ids, group in zip(np.split(channel, cuts), np.split(times, cuts)):
-            intervals.setdefault(int(ids[0]), _Intervals()).add(group)
-    out = []
-    for channel_id, record in walk.channels.items():
-        schema = walk.schemas.get(record.schema_id)
-        out.append(intervals.get(channel_id, _Intervals()).stats(record.topic, schema.name if schema else ""))
-    return out
+
+class _HeaderStamps:
+    """A channel's message count and the header stamps of its earliest and latest message by log time."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.first: tuple[int, int] | None = None  # (log time, stamp), ns
+        self.last: tuple[int, int] | None = None
+
+    def add(self, log_time: np.ndarray, stamp_ns: np.ndarray) -> None:
+        self.count += len(log_time)
+        if not len(log_time):
+            return
+        lo, hi = int(np.argmin(log_time)), int(np.argmax(log_time[::-1]))
+        hi = len(log_time) - 1 - hi  # the last of the latest (file order breaks ties, as a stable sort)
+        low = (int(log_time[lo]), int(stamp_ns[lo]))
+        high = (int(log_time[hi]), int(stamp_ns[hi]))
+        if self.first is None or low[0] < self.first[0]:
+            self.first = low
+        if self.last is None or high[0] >= self.last[0]:
+            self.last = high
+
+
+@dataclass
+class _ChannelSummary:
+    """What :func:`~gyroemu.pipelines.formats.mcap_log.group_devices` needs of a channel, and its stamps."""
+
+    topic: str
+    mtype: MessageType
+    stamps: _HeaderStamps
+
+
+class _LogWalk:
+    """One pass over an MCAP file's records: the log times of every channel (:func:`topic_stats`) and,
+    with ``imu_channels``, the header stamps of the ``sensor_msgs/msg/Imu`` channels' messages, read
+    from the payloads without decoding them (CDR: a 4-byte encapsulation header, then the message's
+    ``std_msgs/Header``, whose stamp is an int32 of seconds and a uint32 of nanoseconds)."""
+
+    def __init__(self, path: Path, imu_channels: bool = True) -> None:
+        from gyroemu.pipelines.formats.mcap_records import McapRecordWalk
+
+        self.path = path
+        self.walk = McapRecordWalk(path)
+        self.imu_channels = imu_channels
+        self.intervals: dict[int, _Intervals] = {}
+        self.stamps: dict[int, _HeaderStamps] = {}
+
+    def run(self) -> _LogWalk:
+        for batch in self.walk.batches():
+            channel = batch.channel_id.astype(np.int64)
+            times = batch.log_time.astype(np.uint64)
+            if self.imu_channels:
+                self._imu_stamps(batch, channel)
+            if len(channel) and np.all(channel == channel[0]):
+                self.intervals.setdefault(int(channel[0]), _Intervals()).add(times)
+                continue
+            order = np.argsort(channel, kind="stable")
+            channel, times = channel[order], times[order]
+            cuts = np.flatnonzero(np.diff(channel)) + 1
+            for ids, group in zip(np.split(channel, cuts), np.split(times, cuts)):
+                self.intervals.setdefault(int(ids[0]), _Intervals()).add(group)
+        return self
+
+    def _imu_stamps(self, batch, channel: np.ndarray) -> None:
+        from gyroemu.pipelines.formats.mcap_records import decoded_type
+        from gyroemu.pipelines.formats.messages import IMU
+
+        for channel_id in np.unique(channel):
+            record = self.walk.channels[int(channel_id)]
+            mtype, _ = decoded_type(record, self.walk.schemas.get(record.schema_id))
+            if mtype is not IMU:
+                continue
+            mine = channel == channel_id
+            start, size = batch.start[mine], batch.size[mine]
+            if np.any(size < 12):
+                raise self.walk.error(f"a message on {record.topic} is too short for its header")
+            head = batch.buffer[start[:, None] + np.arange(12)]
+            little = head[:, 1] == 1  # encapsulation CDR_LE (0x0001) or CDR_BE (0x0000)
+            words = np.ascontiguousarray(head[:, 4:12])
+            sec = np.where(little, words[:, :4].view("<i4")[:, 0], words[:, :4].view(">i4")[:, 0]).astype(np.int64)
+            nsec = np.where(little, words[:, 4:].view("<u4")[:, 0], words[:, 4:].view(">u4")[:, 0]).astype(np.int64)
+            self.stamps.setdefault(int(channel_id), _HeaderStamps()).add(
+                batch.log_time[mine].astype(np.int64), sec * 1_000_000_000 + nsec
+            )
+
+    def topic_stats(self) -> list[TopicStats]:
+        out = []
+        for channel_id, record in self.walk.channels.items():
+            schema = self.walk.schemas.get(record.schema_id)
+            stats = self.intervals.get(channel_id, _Intervals())
+            out.append(stats.stats(record.topic, schema.name if schema else ""))
+        return out
 
 
 @dataclass
@@ -374,7 +460,12 @@ class LogInfo:
 
 
 def log_info(path: str | os.PathLike[str]) -> LogInfo:
-    """Devices and per-topic figures of an MCAP log.
+    """Devices and per-topic figures of an MCAP log, in one pass over its records in bounded memory.
+
+    The devices are grouped as :func:`~gyroemu.pipelines.formats.mcap_log.read_mcap` groups them, from
+    the channels alone; a device's samples are its measured Imu topic's messages and its span that of
+    their header stamps (read from the payloads, nothing else decoded). Unlike :func:`read_mcap`, no
+    sample is dropped for lacking a raw observable at its stamp.
 
     Parameters
     ----------
@@ -393,25 +484,45 @@ def log_info(path: str | os.PathLike[str]) -> LogInfo:
     Warns
     -----
     LogWarning
-        From :func:`~gyroemu.pipelines.formats.mcap_log.read_mcap`: a truncated file, skipped topics.
+        As :func:`read_mcap`: a truncated file, skipped topics.
     """
-    from gyroemu.pipelines.formats.mcap_log import read_mcap
+    from gyroemu.pipelines.formats.mcap_log import announce_scan, device_name, group_devices, no_imu_error
+    from gyroemu.pipelines.formats.mcap_records import decoded_type
+    from gyroemu.pipelines.formats.messages import IMU, ns_to_stamps
 
     path = Path(path)
-    log = read_mcap(path)
-    devices = []
-    for name, dev in log.devices.items():
-        t = dev.samples.t
-        span = float(t[-1] - t[0]) if len(t) > 1 else 0.0
-        rate = (len(t) - 1) / span if span > 0 else float("nan")
-        devices.append(DeviceInfo(name, len(t), span, rate, dict(dev.topics), dev.metadata))
+    walked = _LogWalk(path).run()
+    scan = walked.walk
+    channels = []
+    for channel_id, record in scan.channels.items():
+        mtype, reason = decoded_type(record, scan.schemas.get(record.schema_id))
+        if reason:
+            scan.skipped[record.topic] = reason
+        elif channel_id in walked.intervals:  # a channel with messages, as read_mcap decodes them
+            assert mtype is not None  # decoded_type gives a type where it gives no reason
+            channels.append(_ChannelSummary(record.topic, mtype, walked.stamps.get(channel_id, _HeaderStamps())))
+    skipped = announce_scan(path, scan)
+    metadata = [dict(m.metadata) for m in scan.metadata if m.name == "gyroemu"]
+    devices: dict[str, DeviceInfo] = {}
+    for prefix, group in group_devices(path, channels, skipped).items():
+        measured = group[IMU_ROLE]
+        stamps = measured.stamps
+        if measured.mtype is not IMU or not stamps.count or stamps.first is None or stamps.last is None:
+            continue
+        name, meta = device_name(prefix, metadata)
+        first, last = ns_to_stamps(np.array([stamps.first[1], stamps.last[1]], dtype=np.int64))
+        span = float(last - first) if stamps.count > 1 else 0.0
+        rate = (stamps.count - 1) / span if span > 0 else float("nan")
+        devices[name] = DeviceInfo(name, stamps.count, span, rate, {r: c.topic for r, c in group.items()}, meta)
+    if not devices:
+        raise no_imu_error(scan, path)
     return LogInfo(
         path=path,
         size_bytes=path.stat().st_size,
-        profile=log.profile,
-        message_count=log.message_count,
-        truncated=log.truncated,
-        devices=devices,
-        topics=topic_stats(path),
-        skipped=dict(log.skipped),
+        profile=scan.profile,
+        message_count=scan.message_count,
+        truncated=scan.truncated_at is not None,
+        devices=list(devices.values()),
+        topics=walked.topic_stats(),
+        skipped=dict(skipped),
     )

@@ -42,6 +42,7 @@ __all__ = [
     "MAX_DURATION_S",
     "MAX_RATE_HZ",
     "check_options",
+    "start_ns",
     "run_simulate",
     "npz_arrays",
     "write_npz_atomic",
@@ -78,6 +79,14 @@ class SimulateOptions:
         Show the phases as a bar on stderr; None: when stderr is a terminal.
     force : bool
         Overwrite ``out`` if it exists (otherwise :class:`SimulateError`).
+    start_time : str, float or None
+        The stamp of scenario time 0 in an .mcap log: ISO 8601 or Unix epoch seconds
+        (:func:`~gyroemu.pipelines.formats.frames.parse_start_time`); None: the fixed
+        :data:`~gyroemu.pipelines.formats.frames.SIMULATE_EPOCH_NS` (2025-01-01T00:00:00Z), so a seed
+        gives the same bytes.
+    frame_id : str or None
+        The IMU's frame in an .mcap log (``/imu``'s ``frame_id``, child of ``base_link`` on
+        ``/tf_static``); None: the device's name.
     """
 
     scenario: str
@@ -88,6 +97,8 @@ class SimulateOptions:
     seed: int = 0
     progress: bool | None = None
     force: bool = False
+    start_time: str | float | None = None
+    frame_id: str | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "out", Path(self.out))
@@ -263,6 +274,14 @@ def check_options(options: SimulateOptions, scenario: Scenario | None = None, de
     """
     _check_number(options.duration, "--duration", "s", MAX_DURATION_S)
     _check_number(options.rate, "--rate", "Hz", MAX_RATE_HZ)
+    start_ns(options)
+    if options.frame_id is not None:
+        from gyroemu.pipelines.formats.frames import check_frame_id
+
+        try:
+            check_frame_id(options.frame_id)
+        except ValueError as e:
+            raise SimulateError(f"argument --frame-id: {e}") from None
     seed = options.seed
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < _SEED_LIMIT:
         raise SimulateError(f"argument --seed: must be an integer from 0 to 2**128 - 1, got {seed!r}")
@@ -282,6 +301,19 @@ def check_options(options: SimulateOptions, scenario: Scenario | None = None, de
         )
     if scenario is not None:
         _check_size(options, scenario, device)
+
+
+def start_ns(options: SimulateOptions) -> int:
+    """The stamp of scenario time 0, ns since the Unix epoch (:attr:`SimulateOptions.start_time`);
+    :class:`SimulateError` naming ``--start-time`` for a bad one."""
+    from gyroemu.pipelines.formats.frames import SIMULATE_EPOCH_NS, parse_start_time
+
+    if options.start_time is None:
+        return SIMULATE_EPOCH_NS
+    try:
+        return parse_start_time(options.start_time)
+    except ValueError as e:
+        raise SimulateError(str(e)) from None
 
 
 def run_simulate(options: SimulateOptions) -> SimulateSummary:
@@ -344,14 +376,17 @@ def _simulate_mcap(
     run = device.run(source)
     made = 0
     with CountProgress(run.count, label="simulate", enabled=options.progress) as progress:
-        with McapLogWriter(options.out, scenario=scenario) as log, BackgroundWriter(log.write) as writer:
+        with (
+            McapLogWriter(options.out, scenario=scenario, start_ns=start_ns(options)) as log,
+            BackgroundWriter(log.write) as writer,
+        ):
             for block in run:
                 body = block.interpolants  # the device's own: the splines are built once per block
                 instants = block.samples.t_true if block.samples.t_true is not None else block.samples.t
                 q_wb = body.attitude_world(instants)  # the attitude's Slerp, evaluated once for both
                 truth = truth_series(block.truth, block.samples, body, q_wb)
                 pose = truth_pose(block.truth, block.samples, body, q_wb)
-                writer.put(Recording(block.samples, truth=truth, pose=pose, device=device))
+                writer.put(Recording(block.samples, truth=truth, pose=pose, device=device, frame_id=options.frame_id))
                 made += len(block.samples)
                 progress.advance(len(block.samples))
     assert source.n_samples is not None and source.t_end is not None  # a bounded run

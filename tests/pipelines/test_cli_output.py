@@ -83,7 +83,11 @@ def test_info_json_counts_and_rates(capsys, log):
     text = capsys.readouterr().out
     assert "device 'consumer_mems': 5000 samples over 4.999 s (1000 Hz)" in text
     assert "complete (summary and indexes)" in text and "topics (log times):" in text
-    assert "/imu                         5000 messages, 0.001 to 5 s (1000 Hz), no gaps" in text
+    # simulate's stamps start at its fixed epoch, 2025-01-01T00:00:00Z; the first sample is 1 ms after it.
+    assert (
+        "/imu                         5000 messages, from 2025-01-01T00:00:00.001000Z for 4.999 s (1000 Hz), no gaps"
+        in text
+    )
 
 
 def test_info_reports_a_gap(tmp_path, capsys):

@@ -9,50 +9,7 @@ from mcap.reader import make_reader
 from gyroemu.pipelines.cli import main
 from gyroemu.pipelines.formats.messages import IMU
 
-N = 60
-
-
-def _write_bag(folder):
-    """A rosbag2 MCAP bag (rosbags' writer): /imu_a (a_link) and /imu_b (b_link) at 100 Hz with log times
-    1 ms after their stamps, and a /tf every 5th sample. Returns the file."""
-    from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.typesys import Stores, get_typestore
-
-    store = get_typestore(Stores.ROS2_HUMBLE)
-    t = store.types
-    rng = np.random.default_rng(3)
-    stamps = 1_700_000_000 * 10**9 + np.arange(N) * 10_000_000
-    with Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP) as bag:
-        conns = {
-            name: bag.add_connection(name, "sensor_msgs/msg/Imu", typestore=store) for name in ("/imu_a", "/imu_b")
-        }
-        tf = bag.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=store)
-        for k in range(N):
-            sec, nanosec = divmod(int(stamps[k]), 10**9)
-            stamp = t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
-            for name, frame in (("/imu_a", "a_link"), ("/imu_b", "b_link")):
-                msg = t["sensor_msgs/msg/Imu"](
-                    header=t["std_msgs/msg/Header"](stamp=stamp, frame_id=frame),
-                    orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
-                    orientation_covariance=np.zeros(9),
-                    angular_velocity=t["geometry_msgs/msg/Vector3"](*rng.normal(0, 0.01, 3)),
-                    angular_velocity_covariance=np.zeros(9),
-                    linear_acceleration=t["geometry_msgs/msg/Vector3"](*(rng.normal(0, 0.05, 3) + [0, 0, 9.81])),
-                    linear_acceleration_covariance=np.zeros(9),
-                )
-                bag.write(conns[name], int(stamps[k]) + 1_000_000, store.serialize_cdr(msg, "sensor_msgs/msg/Imu"))
-            if k % 5 == 0:
-                transform = t["geometry_msgs/msg/TransformStamped"](
-                    header=t["std_msgs/msg/Header"](stamp=stamp, frame_id="odom"),
-                    child_frame_id="base_link",
-                    transform=t["geometry_msgs/msg/Transform"](
-                        translation=t["geometry_msgs/msg/Vector3"](x=0.1 * k, y=0.0, z=0.0),
-                        rotation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
-                    ),
-                )
-                msg = t["tf2_msgs/msg/TFMessage"](transforms=[transform])
-                bag.write(tf, int(stamps[k]) + 2_000_000, store.serialize_cdr(msg, "tf2_msgs/msg/TFMessage"))
-    return next(folder.glob("*.mcap"))
+from ..foreign_bags import N, write_foreign_bag
 
 
 def _read(path):
@@ -67,7 +24,7 @@ def _read(path):
 
 @pytest.fixture(scope="module")
 def bag(tmp_path_factory):
-    return _write_bag(tmp_path_factory.mktemp("bag") / "bag")
+    return write_foreign_bag(tmp_path_factory.mktemp("bag") / "bag")
 
 
 def test_estimate_keeps_every_message_of_a_foreign_bag(bag, tmp_path, capsys):
@@ -126,7 +83,7 @@ def _samples(name, n=200, seed=0):
 
 def test_estimate_of_a_gyroemu_log_of_two_devices(tmp_path):
     """Every device filtered, each estimate on /<device>/estimate/imu in base_link; the rest unchanged."""
-    from gyroemu.pipelines.formats.mcap_log import McapLogWriter, read_mcap
+    from gyroemu.pipelines.formats.mcap_log import McapLogWriter, read_mcap, read_tf
     from gyroemu.pipelines.jobs.estimate import estimate_log
 
     source = tmp_path / "two.mcap"
@@ -136,7 +93,8 @@ def test_estimate_of_a_gyroemu_log_of_two_devices(tmp_path):
     assert summary.topics == [("/left/imu", "/left/estimate/imu", 200), ("/right/imu", "/right/estimate/imu", 200)]
     before, _ = _read(source)
     after, _ = _read(tmp_path / "out.mcap")
-    assert {t: m for t, m in after.items() if "estimate" not in t} == before
+    assert {t: m for t, m in after.items() if "estimate" not in t and t != "/tf"} == before
+    assert set(read_tf(tmp_path / "out.mcap").child_frame_id.tolist()) == {"body_estimate"}  # the first device's
     log = read_mcap(tmp_path / "out.mcap")
     for name in ("left", "right"):
         device = log.devices[name]

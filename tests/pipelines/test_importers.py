@@ -26,7 +26,7 @@ from mcap_ros2.decoder import DecoderFactory
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from gyroemu.pipelines.formats.importers import BROAD_CITATION, ImportInputError, import_broad, read_broad
-from gyroemu.pipelines.formats.mcap_log import LogWarning, Recording, read_mcap, write_mcap
+from gyroemu.pipelines.formats.mcap_log import LogWarning, Recording, read_mcap, read_tf, write_mcap
 from gyroemu.pipelines.formats.mcap_records import McapFileWriter
 from gyroemu.pipelines.formats.messages import FLAG, IMU, schema_text
 from gyroemu.sensors.samples import ImuSamples
@@ -87,7 +87,7 @@ def test_real_trial_reads_back_exactly(imported):
         "truth/pose": "/truth/pose",
         "movement": "/movement",
     }
-    assert log.message_count == 5 * n
+    assert log.message_count == 5 * n + len(read_tf(out))  # and the tf tree of the optical truth
     s = d.samples
     assert len(s) == n
     assert s.gyro.dtype == h5["imu_gyr"].dtype and s.gyro.tobytes() == h5["imu_gyr"].tobytes()

@@ -145,7 +145,8 @@ def test_bare_samples_and_several_blocks(tmp_path, runs):
         sequences = {}
         for _, channel, message in reader.iter_messages(log_time_order=False):
             sequences.setdefault(channel.topic, []).append(message.sequence)
-    assert all(seq == list(range(len(samples))) for seq in sequences.values())
+    assert all(seq == list(range(len(seq))) for seq in sequences.values())
+    assert all(len(seq) == len(samples) for topic, seq in sequences.items() if topic != "/tf")  # /tf is thinned
     bare = read_quietly(write_mcap(tmp_path / "bare.mcap", samples))
     assert_samples_equal(bare.samples, samples)
     assert bare.truth is None and bare.device.metadata["seed"] == "" and bare.device.metadata["device"] == ""
@@ -283,8 +284,9 @@ def _check_contract(path):
     times = [m.log_time for _, _, m in messages]
     assert times == sorted(times)
     counts = {}
-    for _, channel, message in messages:
-        sec, nanosec = struct.unpack_from("<iI", message.data, 4)
+    for schema, channel, message in messages:
+        # A TFMessage starts with its transforms' count; the first transform's header follows.
+        sec, nanosec = struct.unpack_from("<iI", message.data, 8 if schema.name == "tf2_msgs/msg/TFMessage" else 4)
         assert message.log_time == message.publish_time == sec * 10**9 + nanosec
         assert message.sequence == counts.get(channel.id, 0)
         counts[channel.id] = message.sequence + 1
@@ -325,12 +327,20 @@ def test_contract_structure(tmp_path, runs, scenario):
         "/mag": "sensor_msgs/msg/MagneticField",
         "/truth/imu": "sensor_msgs/msg/Imu",
         "/raw/mems": "gyroemu_msgs/msg/MemsRaw",
+        "/tf": "tf2_msgs/msg/TFMessage",
+        "/tf_static": "tf2_msgs/msg/TFMessage",
     }
     assert summary.schemas[1].data.decode() == schema_text(summary.schemas[1].name)
-    # Same stamp: /imu, /mag, /truth/imu, /raw/mems in that order, sample after sample.
+    # Same stamp: /imu, /mag, /truth/imu, /raw/mems in that order, sample after sample; the tf tree
+    # (the mounting once, the thinned truth) after them at its stamps.
     with open(path, "rb") as f:
-        first = [c.topic for _, c, _ in list(make_reader(f).iter_messages(log_time_order=False))[:8]]
-    assert first == ["/imu", "/mag", "/truth/imu", "/raw/mems"] * 2
+        first = [c.topic for _, c, _ in list(make_reader(f).iter_messages(log_time_order=False))[:10]]
+    assert first == ["/imu", "/mag", "/truth/imu", "/raw/mems", "/tf_static", "/tf"] + [
+        "/imu",
+        "/mag",
+        "/truth/imu",
+        "/raw/mems",
+    ]
 
 
 def test_independent_readers_agree(tmp_path, runs):
@@ -343,6 +353,8 @@ def test_independent_readers_agree(tmp_path, runs):
     with open(path, "rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         for schema, channel, message, ros in reader.iter_decoded_messages():
+            if channel.topic in ("/tf", "/tf_static"):  # the tf tree: tests/pipelines/test_ros2_conventions.py
+                continue
             other = store.deserialize_cdr(message.data, schema.name)
             rows.setdefault(channel.topic, []).append((ros, other))
     assert [len(v) for v in rows.values()] == [len(samples)] * 4
@@ -443,7 +455,7 @@ def test_messages_identical_to_mcap_ros2_writer(tmp_path, runs):
                 for _, c, m in make_reader(f).iter_messages(log_time_order=False)
             ]
 
-    assert messages(ours) == messages(theirs)
+    assert [m for m in messages(ours) if m[0] != "/tf"] == messages(theirs)  # /tf: test_ros2_conventions.py
     # and our reader reads their file to the same numbers
     assert_samples_equal(read_quietly(theirs).samples, samples)
 
@@ -661,17 +673,20 @@ def test_rosbags_anyreader_reads_our_log(tmp_path, runs):
             "/imu": "sensor_msgs/msg/Imu",
             "/truth/imu": "sensor_msgs/msg/Imu",
             "/raw/rlg": "gyroemu_msgs/msg/RlgRaw",
+            "/tf": "tf2_msgs/msg/TFMessage",
         }
         counts = {}
         for connection, log_time, data in reader.messages():
             msg = reader.deserialize(data, connection.msgtype)
             k = counts.get(connection.topic, 0)
             counts[connection.topic] = k + 1
-            assert log_time == msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+            header = msg.transforms[0].header if connection.topic == "/tf" else msg.header
+            assert log_time == header.stamp.sec * 10**9 + header.stamp.nanosec
             if connection.topic == "/raw/rlg":
                 assert np.array_equal(msg.fringe_count, samples.raw["rlg"]["fringe_count"][k])
             elif connection.topic == "/imu":
                 assert [msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z] == list(samples.gyro[k])
+    assert 0 < counts.pop("/tf") < len(samples)  # thinned to the /tf rate: test_ros2_conventions.py
     assert counts == {"/imu": len(samples), "/truth/imu": len(samples), "/raw/rlg": len(samples)}
 
 

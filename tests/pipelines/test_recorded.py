@@ -135,6 +135,7 @@ def test_formats_agree_and_world_rotation_applies(tmp_path):
 
 
 def test_simulate_writes_truth_pose_and_reads_back_as_recorded(tmp_path):
+    from gyroemu.pipelines.formats.frames import SIMULATE_EPOCH_NS
     from gyroemu.pipelines.formats.mcap_log import read_mcap
 
     out = tmp_path / "run.mcap"
@@ -144,8 +145,10 @@ def test_simulate_writes_truth_pose_and_reads_back_as_recorded(tmp_path):
     ref = load_scenario("smooth_manoeuvre").simulate(duration=10.0, rate_hz=1000.0)
     assert device.pose is not None and np.array_equal(device.pose.t, device.truth.t)
     assert np.array_equal(device.pose.q_wb, device.truth.q_wb)
-    k = np.rint(device.pose.t * 1000).astype(int)  # the ideal device stamps its true instants k T
-    on_grid = (np.abs(device.pose.t - k / 1000) < 1e-9) & (k < len(ref))
+    assert np.array_equal(device.pose.t, device.samples.t)  # the pose at the IMU's stamps
+    t = (device.stamp_ns - SIMULATE_EPOCH_NS) * 1e-9  # stamps count from simulate's fixed epoch
+    k = np.rint(t * 1000).astype(int)  # the ideal device stamps its true instants k T
+    on_grid = (np.abs(t - k / 1000) < 1e-9) & (k < len(ref))
     assert on_grid.sum() > 10
     assert np.allclose(device.pose.pos_w[on_grid], ref.pos_w[k[on_grid]], rtol=0, atol=1e-9)
     recorded = load_scenario(write_scenario(tmp_path, "run.mcap", "mcap"))

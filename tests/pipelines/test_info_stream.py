@@ -1,0 +1,79 @@
+"""``gyroemu info`` reads a log in one pass in bounded memory, and finds what ``read_mcap`` finds."""
+
+from __future__ import annotations
+
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from gyroemu.pipelines.formats import mcap_log
+from gyroemu.pipelines.formats.mcap_log import read_mcap
+from gyroemu.pipelines.jobs.info import log_info
+from gyroemu.pipelines.jobs.simulate import SimulateOptions, run_simulate
+
+from ..foreign_bags import N, write_foreign_bag
+
+
+def simulated(folder, seconds: float, device: str = "consumer_mems"):
+    out = folder / f"{device}_{seconds:g}s.mcap"
+    run_simulate(SimulateOptions(scenario="bench_static", out=out, device=device, duration=seconds, progress=False))
+    return out
+
+
+def read_mcap_devices(path):
+    """(name, samples, span, rate, topics, metadata) per device, as read_mcap gives them."""
+    out = []
+    for name, dev in read_mcap(path).devices.items():
+        t = dev.samples.t
+        span = float(t[-1] - t[0]) if len(t) > 1 else 0.0
+        out.append(
+            (name, len(t), span, (len(t) - 1) / span if span > 0 else float("nan"), dict(dev.topics), dev.metadata)
+        )
+    return out
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("info")
+    return {
+        "short": simulated(folder, 5.0),
+        "long": simulated(folder, 20.0),
+        "foreign": write_foreign_bag(folder / "bag"),
+    }
+
+
+@pytest.mark.parametrize("which", ["short", "foreign"])
+def test_info_finds_the_devices_read_mcap_finds_without_decoding(logs, which, monkeypatch):
+    """The same devices, counts, spans (of the header stamps: the foreign bag's log times are 1 ms
+    later, so a span from log times would differ at its ends only, and a rate from them alike), topics
+    and metadata; and read_mcap is not called."""
+    expected = read_mcap_devices(logs[which])
+    monkeypatch.setattr(mcap_log, "read_mcap", lambda *a, **k: pytest.fail("info decoded the log"))
+    got = [(d.name, d.samples, d.span_s, d.rate_hz, d.topics, d.metadata) for d in log_info(logs[which]).devices]
+    assert [g[0] for g in got] == [e[0] for e in expected]
+    for g, e in zip(got, expected):
+        assert g[1] == e[1] and g[2] == e[2] and g[4] == e[4] and g[5] == e[5]
+        assert g[3] == e[3] or (np.isnan(g[3]) and np.isnan(e[3]))
+    if which == "foreign":
+        assert [d.samples for d in log_info(logs[which]).devices] == [N, N]
+
+
+def test_info_memory_does_not_grow_with_the_log(logs):
+    """Four times the messages, the same peak: one chunk at a time and fixed-size summaries (read_mcap
+    holds every message; its peak grows with the log)."""
+
+    def peak(path) -> int:
+        tracemalloc.start()
+        try:
+            log_info(path)
+            return tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+
+    short, long = peak(logs["short"]), peak(logs["long"])
+    size_ratio = logs["long"].stat().st_size / logs["short"].stat().st_size
+    assert size_ratio > 3.5
+    # Bounded: the longer log's peak within 25 % of the shorter's (a peak in proportion to the data
+    # would be 3.5 times it or more).
+    assert long < 1.25 * short, (short, long)
