@@ -33,6 +33,15 @@ comes, or after :attr:`Recorder.config_grace_s` (1 s) with name and prefix only 
 gyroemu stream); a config coming later still writes a complete record, which supersedes the first
 (readers take a device's last record). The report says which devices got their config.
 
+The tf tree (``/tf`` and ``/tf_static``: ``gyroemu/<device>/tf`` and ``.../tf_static`` from ``gyroemu
+stream``, the global ROS 2 topics in ROS 2 mode) is the file's, not a device's: it goes to the
+unprefixed ``tf2_msgs/msg/TFMessage`` channels ``/tf`` and ``/tf_static`` as ``gyroemu simulate`` writes
+them (``/tf_static`` with the transient-local QoS metadata,
+:data:`~gyroemu.pipelines.formats.mcap_log.TF_STATIC_QOS_PROFILES`), each message's time the stamp of
+its first transform, so :func:`~gyroemu.pipelines.formats.mcap_log.read_tf` reads the tree back. A
+``/tf_static`` message that repeats one already recorded, byte for byte (a stream re-publishes its
+mounting every second for late joiners), is counted but not stored again.
+
 From each message's attachment (sequence number, publisher id) the recorder counts, per publisher,
 messages received, sequence gaps (the exact missing numbers), duplicates and late (out-of-order)
 arrivals, and prints the report at the end (``--report FILE.json`` also writes it as JSON).
@@ -67,7 +76,9 @@ from typing import TYPE_CHECKING, Any, TextIO
 import numpy as np
 
 from gyroemu.pipelines.formats.channels import topic_message_type
+from gyroemu.pipelines.formats.frames import TF_STATIC_TOPIC, TF_TOPIC
 from gyroemu.pipelines.formats.messages import MESSAGE_TYPES
+from gyroemu.pipelines.formats.tf_messages import TF_MESSAGE_TYPE, tf_stamp_ns
 from gyroemu.pipelines.transport.zenoh_io import (
     CONFIG_TOPIC,
     SessionOptions,
@@ -97,6 +108,10 @@ __all__ = [
     "run_record",
     "run_router",
 ]
+
+
+_TF_TOPICS = (TF_TOPIC, TF_STATIC_TOPIC)
+_TF_TYPE = TF_MESSAGE_TYPE
 
 
 def _ranges(numbers: Iterable[int]) -> list[list[int]]:
@@ -211,6 +226,8 @@ class Recorder:
         self._parse_key = parse_key
         self._on_new_topic = on_new_topic
         self._keys: dict[str, tuple[KeyInfo, int] | None] = {}  # key expression -> (info, channel) or None
+        self._static: set[bytes] = set()  # /tf_static payloads recorded
+        self.repeated = 0  # /tf_static messages not stored again
         self.messages = 0
         self.skipped = 0
         self.without_attachment = 0
@@ -224,7 +241,31 @@ class Recorder:
             self._mcap = McapFileWriter(self._file, chunk_size=self._chunk_size)
         return self._mcap
 
+    def _tf_channel(self, info: KeyInfo) -> int:
+        """The file's ``/tf`` or ``/tf_static`` channel (no device prefix), as ``simulate`` writes it."""
+        from gyroemu.pipelines.formats.mcap_log import TF_STATIC_QOS_PROFILES
+        from gyroemu.pipelines.formats.mcap_records import OFFERED_QOS_PROFILES
+        from gyroemu.pipelines.formats.tf_messages import tf_schema
+
+        key = ("", info.topic)
+        if key not in self._channels:
+            mcap = self._writer()
+            schema_id = mcap.register_schema(TF_MESSAGE_TYPE, "ros2msg", tf_schema().encode())
+            qos = TF_STATIC_QOS_PROFILES if info.topic == TF_STATIC_TOPIC else OFFERED_QOS_PROFILES
+            metadata = {"offered_qos_profiles": qos}
+            if info.type_hash:
+                metadata["topic_type_hash"] = info.type_hash
+            self._channels[key] = mcap.register_channel(info.topic, "cdr", schema_id, metadata)
+            if self._on_new_topic is not None:
+                try:
+                    self._on_new_topic(info)
+                except Exception:  # a graph token is advisory: never lose data over it
+                    pass
+        return self._channels[key]
+
     def _channel(self, info: KeyInfo) -> int:
+        if info.topic in _TF_TOPICS and info.type_name in (None, _TF_TYPE):
+            return self._tf_channel(info)
         key = (info.device, info.topic)
         if key not in self._channels:
             self._writer()
@@ -309,9 +350,10 @@ class Recorder:
             self.skipped += 1
             return
         info, channel = found
+        tf = info.topic in _TF_TOPICS and info.type_name in (None, _TF_TYPE)
         try:
             payload = sample.payload.to_bytes()
-            stamp = header_stamp_ns(payload)
+            stamp = tf_stamp_ns(payload) if tf else header_stamp_ns(payload)
         except Exception:
             self.skipped += 1
             return
@@ -330,6 +372,11 @@ class Recorder:
                 self.without_attachment += 1
         else:
             self.without_attachment += 1
+        if tf and info.topic == _TF_TOPICS[1]:
+            if payload in self._static:
+                self.repeated += 1
+                return
+            self._static.add(payload)
         stamps, payloads = self._pending.setdefault((channel, len(payload)), ([], []))
         stamps.append(stamp)
         payloads.append(payload)
@@ -401,6 +448,7 @@ class Recorder:
             "messages": self.messages,
             "skipped": self.skipped,
             "without_attachment": self.without_attachment,
+            "tf_static_repeats": self.repeated,
             "publishers": {gid.hex(): t.report() for gid, t in self.trackers.items()},
         }
 

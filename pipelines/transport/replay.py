@@ -11,6 +11,9 @@ unchanged, on the key expression of its topic (``interface.md``, "Live streams: 
   The device is the topic's prefix when the file's ``gyroemu`` metadata names that prefix
   (``/<device>/imu`` of a several-device file), else the ``device_name`` of the file's ``gyroemu``
   metadata for unprefixed topics, else ``--device-name`` (default ``imu0``).
+- the tf tree (``/tf``, ``/tf_static``: the file's, unprefixed) goes to ``gyroemu/<device>/tf`` and
+  ``gyroemu/<device>/tf_static``, the device of the file's unprefixed topics (as ``gyroemu stream``
+  publishes it), else ``--device-name``.
 - any other topic ``/a/b`` (someone else's file) goes to ``gyroemu/<device-name>/a/b``.
 
 The attachment is the publisher's (:class:`gyroemu.pipelines.transport.zenoh_io.PacedPublisher`): a sequence per key
@@ -19,7 +22,11 @@ from 0 (continuing across ``--loop`` passes), the send time, a random publisher 
 ROS 2 mode (``--ros2``, ``--domain``): the topic that would go to ``gyroemu/<device>/<topic>`` goes to
 ROS 2 topic ``/<device>/<topic>`` on rmw_zenoh's key ``<domain>/<device>/<topic>/<type>/<hash>``
 (:mod:`gyroemu.pipelines.formats.ros2_keys`), with the liveliness tokens of a node ``gyroemu_replay_<pid>`` and its
-publishers. The type is the channel's schema name; the hash is the channel's ``topic_type_hash``
+publishers. ``/tf`` and ``/tf_static`` are the ROS 2 graph's own topics, not a device's
+(:data:`~gyroemu.pipelines.formats.ros2_keys.GLOBAL_TOPICS`): they go to ``/tf`` and ``/tf_static``,
+their publishers advertising tf2's QoS (``/tf_static`` transient local;
+:func:`~gyroemu.pipelines.formats.ros2_keys.topic_qos`), so tf2 listeners on rmw_zenoh get the tree.
+The type is the channel's schema name; the hash is the channel's ``topic_type_hash``
 metadata (rosbag2 records it since Iron) or else computed by REP-2011 from the channel's ``ros2msg``
 schema. A channel with neither (no schema, an IDL schema and no recorded hash) is skipped with a
 message, as is a topic that is not a valid ROS 2 name.
@@ -78,9 +85,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 from gyroemu.pipelines.formats.channels import is_device_prefix, is_stream_role, role_topic, split_topic
+from gyroemu.pipelines.formats.frames import TF_STATIC_TOPIC, TF_TOPIC
 from gyroemu.pipelines.formats.mcap_log import LogWarning, read_mcap
 from gyroemu.pipelines.formats.mcap_records import iter_mcap_batches
 from gyroemu.pipelines.formats.messages import CLOCK_TYPE, encode_clock, shift_header_stamp, starts_with_header
+from gyroemu.pipelines.formats.tf_messages import TF_MESSAGE_TYPE, shift_tf_stamps
 from gyroemu.pipelines.transport.read_ahead import BATCH, READ_AHEAD, Batch, ReadAheadThread
 from gyroemu.pipelines.transport.zenoh_io import (
     PacingOptions,
@@ -94,6 +103,7 @@ from gyroemu.pipelines.transport.zenoh_io import (
 if TYPE_CHECKING:
     from gyroemu.pipelines.formats.mcap_records import ChannelInfo
     from gyroemu.pipelines.formats.ros2_keys import Ros2Keys
+    from gyroemu.pipelines.transport.foxglove_view import FoxgloveView, ViewOptions
 
 __all__ = [
     "ReplayOptions",
@@ -137,6 +147,9 @@ class ReplayOptions:
         Waiting for subscribers, how deadlines are waited for, lingering at the end.
     clock : bool
         Also publish ``rosgraph_msgs/msg/Clock`` on ``/clock`` (see the module's notes).
+    foxglove : ViewOptions or None
+        Also serve a live 3D view on a Foxglove WebSocket (``--foxglove``,
+        :mod:`gyroemu.pipelines.transport.foxglove_view`): the replayed channels, ``/tf`` and ``/scene``.
     """
 
     path: Path
@@ -147,6 +160,7 @@ class ReplayOptions:
     session: SessionOptions = field(default_factory=SessionOptions)
     pacing: PacingOptions = field(default_factory=PacingOptions)
     clock: bool = False
+    foxglove: ViewOptions | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "path", Path(self.path))
@@ -168,6 +182,8 @@ def topic_keys(
         prefix, role = split_topic(name)
         if is_stream_role(role) and is_device_prefix(prefix) and prefix in by_prefix:
             device, rest = by_prefix[prefix] or prefix.strip("/") or device_name, role_topic(role)
+        elif name in (TF_TOPIC, TF_STATIC_TOPIC):
+            device = by_prefix.get("") or device_name
         try:
             if any(c in rest for c in "*$?#"):
                 raise ValueError(f"topic {topic!r}: '*', '$', '?' and '#' cannot go in a key expression")
@@ -267,6 +283,8 @@ class ReadAhead(ReadAheadThread):
                         distinct += 1
                         previous = m.log_time
                     data = shift_header_stamp(m.data, offset) if offset and m.topic in stamped else m.data
+                    if offset and m.schema == TF_MESSAGE_TYPE:  # every transform's header stamp
+                        data = shift_tf_stamps(m.data, offset)
                     deadline = round((m.log_time + shift) / rate)
                     if clock_key is not None and (clock_next is None or m.log_time + offset >= clock_next):
                         items.append((deadline, clock_key, encode_clock(m.log_time + offset)))
@@ -292,6 +310,10 @@ def _channels_to_publish(options: ReplayOptions, out: TextIO) -> tuple[dict[str,
     path, topics = options.path, options.topics
     if not options.rate > 0:
         raise ReplayError(f"argument --rate: must be positive, got {options.rate}")
+    if options.foxglove is not None:
+        from gyroemu.pipelines.transport.foxglove_view import check_view_options
+
+        check_view_options(options.foxglove)
     ros = None
     if options.session.ros2:
         from gyroemu.pipelines.formats.ros2_keys import Ros2Keys
@@ -355,6 +377,22 @@ def _clock_key(options: ReplayOptions, keys: dict[str, str], ros: Ros2Keys | Non
     return key
 
 
+def _start_view(options: ReplayOptions, keys: dict[str, str], stamped: frozenset[str]) -> FoxgloveView:
+    """The Foxglove view of the replayed channels (their recorded schemas), its server listening."""
+    from gyroemu.pipelines.formats.mcap_records import mcap_channel_info
+    from gyroemu.pipelines.transport.foxglove_view import FoxgloveView, log_channel_specs, log_mounting
+
+    assert options.foxglove is not None
+    specs = log_channel_specs(mcap_channel_info(options.path), keys, stamped)
+    return FoxgloveView(
+        options.foxglove,
+        specs,
+        {key: topic for topic, key in keys.items()},
+        name=f"gyroemu replay {options.path.name}",
+        mounting=log_mounting(options.path),
+    )
+
+
 def run_replay(options: ReplayOptions, *, out: TextIO = sys.stdout) -> int:
     """Replay ``options.path`` (see the module's notes); progress goes to ``out``. Returns the exit
     status: 0 when done (or, with ``loop``, when stopped by SIGINT/SIGTERM), 130 when a single pass
@@ -370,6 +408,9 @@ def run_replay(options: ReplayOptions, *, out: TextIO = sys.stdout) -> int:
         print(f"  {topic} -> {key}", file=out)
     if clock_key is not None:
         print(f"  /clock -> {clock_key} ({CLOCK_TYPE}, the log time, {CLOCK_HZ:g} Hz at most)", file=out)
+    view = _start_view(options, keys, stamped) if options.foxglove is not None else None
+    if view is not None:
+        print(f"replay: Foxglove view on {view.url} ({view.options.rate_hz:g} Hz)", file=out, flush=True)
     session = open_session(config)
     reader = None
     with live_session(session) as live:
@@ -390,12 +431,15 @@ def run_replay(options: ReplayOptions, *, out: TextIO = sys.stdout) -> int:
             while not reader.ready.wait(0.1) and not stop() and time.monotonic() < end:
                 pass
             print("replay: publishing", file=out, flush=True)
-            report = publisher.run_schedule(reader.batches(stop), stop=stop)
+            batches = reader.batches(stop)
+            report = publisher.run_schedule(batches if view is None else view.tap(batches), stop=stop)
             print(f"replay: sent {report.messages} messages ({reader.passes} complete passes)", file=out)
             print(f"replay: {report.summary('t_start + (log_time - log_time_0) / rate')}", file=out)
             time.sleep(pacing.linger_s)  # let queued messages drain before the session closes
         finally:
             if reader is not None:
                 reader.stopping.set()
+            if view is not None:
+                view.close()
     out.flush()
     return 130 if live.stopped() and not loop else 0

@@ -76,7 +76,13 @@ def test_gyroemu_file_recorded_back_complete_and_byte_exact(procs, tmp_path, gyr
     print("\n" + procs.log("replay") + procs.log("rec"))
     report = json.loads((tmp_path / "r.json").read_text())
     by_topic = {r["topic"]: r for r in report["publishers"].values()}
-    assert sorted(by_topic) == sorted(f"{DEVICE}{t}" for t in TOPICS)  # the metadata's device_name
+    # the metadata's device_name, for the device's topics and the file's tf tree
+    assert sorted(by_topic) == sorted(f"{DEVICE}{t}" for t in (*TOPICS, "/tf", "/tf_static"))
+    for tf in ("/tf", "/tf_static"):  # the tree recorded back as the file's, every message, bytes unchanged
+        r = by_topic.pop(f"{DEVICE}{tf}")
+        want = mcap_messages(gyroemu_mcap, tf)
+        assert (r["received"], r["missing"], r["duplicates"]) == (len(want), 0, 0), r
+        assert [g[2] for g in mcap_messages(tmp_path / "r.mcap", tf)] == [w[2] for w in want]
     for r in by_topic.values():
         assert (r["received"], r["first"], r["last"], r["missing"], r["duplicates"], r["late"]) == (
             N,
@@ -106,8 +112,9 @@ def test_rate_4_takes_a_quarter_of_the_time(procs, listener, gyroemu_mcap):
     assert procs.wait("replay", 60) == 0, procs.log("replay")
     time.sleep(0.3)
     samples = listener.drain()
-    assert len(samples) == N * len(TOPICS)
     log = mcap_messages(gyroemu_mcap)
+    assert len(samples) == len(log)  # every message: the device's topics and the thinned tf tree
+    assert sum(s[0].split("/", 2)[2] == "imu" for s in samples) == N  # gyroemu/<device>/imu
     duration_s = (log[-1][1] - log[0][1]) * 1e-9
     stamps = np.array([s[3] for s in samples])
     span_s = (stamps.max() - stamps.min()) * 1e-9

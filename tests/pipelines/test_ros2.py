@@ -261,6 +261,8 @@ def test_stream_router_record_in_ros2_mode(procs, tmp_path):
             endpoint,
             "--mode",
             "client",
+            "--start-time",
+            "0",  # stamps from 0 s, as encode_run's below
         )
         assert procs.wait("stream", 120) == 0, procs.log("stream")
         time.sleep(1.0)
@@ -282,32 +284,45 @@ def test_stream_router_record_in_ros2_mode(procs, tmp_path):
         f"{domain}/{name}/mag/sensor_msgs::msg::dds_::MagneticField_/{PUBLISHED['sensor_msgs/msg/MagneticField']}",
         f"{domain}/{name}/raw/mems/gyroemu_msgs::msg::dds_::MemsRaw_/{type_hash('gyroemu_msgs/msg/MemsRaw')}",
     }
-    assert set(keys) == expected_keys
-    assert all(seqs == list(range(n)) for seqs in keys.values())  # the plain client saw every message in order
+    from gyroemu.pipelines.formats.tf_messages import TF_DEFINITIONS
+
+    tf_hash = type_hash("tf2_msgs/msg/TFMessage", TF_DEFINITIONS)
+    tf_keys = {f"{domain}/{topic}/tf2_msgs::msg::dds_::TFMessage_/{tf_hash}" for topic in ("tf", "tf_static")}
+    assert set(keys) == expected_keys | tf_keys  # the tf tree on the global ROS 2 topics /tf, /tf_static
+    assert all(keys[k] == list(range(n)) for k in expected_keys)  # the plain client saw every message in order
+    assert all(keys[k] == list(range(len(keys[k]))) for k in tf_keys)
 
     stream_tokens = [k for kind, k in events if kind == "PUT" and "/gyroemu_stream_" in k]
     gone = {k for kind, k in events if kind == "DELETE"}
     nodes = [k for k in stream_tokens if k.split("/")[5] == "NN"]
     pubs = [k for k in stream_tokens if k.split("/")[5] == "MP"]
-    assert len(nodes) == 1 and len(pubs) == 4, events
+    assert len(nodes) == 1 and len(pubs) == 6, events
     zid = nodes[0].split("/")[2]
     assert all(k.split("/")[2] == zid for k in pubs)
     for k in pubs:  # the token's topic, type and hash are those of a data key
         parts = k.split("/")
-        assert f"{domain}/{parts[9].replace('%', '/').strip('/')}/{parts[10]}/{parts[11]}" in expected_keys
+        assert f"{domain}/{parts[9].replace('%', '/').strip('/')}/{parts[10]}/{parts[11]}" in expected_keys | tf_keys
+        if parts[9] == "%tf_static":  # tf2's StaticBroadcasterQoS: transient local, keep-last 1
+            assert parts[12] == ":1:,1:,:,:,,"
     assert set(stream_tokens) <= gone  # withdrawn when the stream ended
     record_tokens = [k for kind, k in events if kind == "PUT" and "/gyroemu_record_" in k]
-    assert sum(k.split("/")[5] == "MS" for k in record_tokens) == 4  # one subscription per recorded topic
+    assert sum(k.split("/")[5] == "MS" for k in record_tokens) == 6  # one subscription per recorded topic
 
     report = json.loads((tmp_path / "r.json").read_text())
     rows = {r["topic"]: r for r in report["publishers"].values()}
-    assert sorted(rows) == sorted(f"{name}{t}" for t in ("/imu", "/mag", "/truth/imu", "/raw/mems"))
+    assert sorted(rows) == sorted(
+        [*(f"{name}{t}" for t in ("/imu", "/mag", "/truth/imu", "/raw/mems")), "/tf", "/tf_static"]
+    )
+    for tf in ("/tf", "/tf_static"):  # the file's tree, no device
+        r = rows.pop(tf)
+        assert (r["first"], r["missing"], r["duplicates"]) == (0, 0, 0), r
     assert all(
         (r["received"], r["first"], r["last"], r["missing"], r["duplicates"]) == (n, 0, n - 1, 0, 0)
         for r in rows.values()
     ), rows
 
     from gyroemu.dynamics import load_scenario
+    from gyroemu.pipelines.formats.imu_covariance import measurement_variances
     from gyroemu.pipelines.formats.mcap_log import read_mcap, truth_series
     from gyroemu.pipelines.formats.mcap_records import mcap_channel_info
     from gyroemu.pipelines.transport.stream import encode_run
@@ -315,14 +330,15 @@ def test_stream_router_record_in_ros2_mode(procs, tmp_path):
 
     traj = load_scenario("heavy_top").simulate(duration=duration)
     samples = load_device("consumer_mems", seed=seed).measure(traj)
-    encoded = encode_run(samples, truth_series(traj, samples))
+    variances = measurement_variances(load_device("consumer_mems"))
+    encoded = encode_run(samples, truth_series(traj, samples), variances=variances)
     from mcap.reader import make_reader
 
     with open(tmp_path / "r.mcap", "rb") as f:
         got: dict[str, list[bytes]] = {}
         for _, channel, message in make_reader(f).iter_messages(log_time_order=True):
             got.setdefault(channel.topic, []).append(message.data)
-    assert sorted(got) == sorted(encoded)
+    assert sorted(got) == sorted([*encoded, "/tf", "/tf_static"])
     for topic, rows_ in encoded.items():
         assert got[topic] == [bytes(r) for r in rows_], f"{topic}: payload bytes differ"
     hashes = {c.topic: c.metadata.get("topic_type_hash") for c in mcap_channel_info(tmp_path / "r.mcap")}

@@ -241,7 +241,10 @@ def test_endless_stream_publishes_at_once_and_stops_on_signal(procs, tmp_path, s
     assert "stream: sent" in procs.log("stream")
     report = json.loads((tmp_path / "e.json").read_text())
     by_topic = {r["topic"]: r for r in report["publishers"].values()}
-    assert sorted(by_topic) == sorted(f"endless{t}" for t in TOPICS)
+    assert sorted(by_topic) == sorted(f"endless{t}" for t in (*TOPICS, "/tf", "/tf_static"))
+    for tf in ("endless/tf", "endless/tf_static"):  # the sparse tf tree: nothing lost either
+        r = by_topic.pop(tf)
+        assert (r["first"], r["last"], r["missing"], r["duplicates"]) == (0, r["received"] - 1, 0, 0), r
     received = {r["received"] for r in by_topic.values()}
     assert len(received) == 1, by_topic  # stopped between samples: every topic the same count
     n = received.pop()
@@ -249,17 +252,24 @@ def test_endless_stream_publishes_at_once_and_stops_on_signal(procs, tmp_path, s
     for r in by_topic.values():
         assert (r["first"], r["last"], r["missing"], r["duplicates"]) == (0, n - 1, 0, 0), r
     log = read_mcap(tmp_path / "e.mcap")
-    scen = load_scenario("smooth_manoeuvre")
-    run = load_device(DEVICE, seed=9).run(ScenarioTruth(scen, None))
-    want = []
-    for block in run:
-        want += split_payloads(encode_block(block)["/imu"])
-        if len(want) >= n:
-            break
     from mcap.reader import make_reader
+
+    from gyroemu.pipelines.formats.imu_covariance import measurement_variances
+    from gyroemu.pipelines.formats.messages import stamps_to_ns
+    from gyroemu.pipelines.transport.zenoh_io import header_stamp_ns
 
     with open(tmp_path / "e.mcap", "rb") as f:
         got = [m.data for _, _, m in make_reader(f).iter_messages(topics=["/imu"], log_time_order=True)]
+    scen = load_scenario("smooth_manoeuvre")
+    device = load_device(DEVICE, seed=9)
+    run = device.run(ScenarioTruth(scen, None))
+    want, start_ns = [], None
+    for block in run:
+        if start_ns is None:  # the stream's clock: the wall clock at its start
+            start_ns = header_stamp_ns(got[0]) - int(stamps_to_ns(block.samples.t[:1])[0])
+        want += split_payloads(encode_block(block, start_ns=start_ns, variances=measurement_variances(device))["/imu"])
+        if len(want) >= n:
+            break
     assert not log.truncated and got == want[:n]
 
 

@@ -23,12 +23,19 @@ TOPICS = ("/imu", "/mag", "/truth/imu", "/raw/mems")
 
 
 def check_report(report: dict, device: str, n: int):
-    """Every topic of ``device``: n messages, sequences 0..n-1, nothing missing or duplicated."""
+    """Every topic of ``device``: n messages, sequences 0..n-1, nothing missing or duplicated; the tf tree
+    (``stream``'s sparse topics): /tf at 30 Hz of the sample clock and the last sample, /tf_static every
+    second of it (stored once), nothing missing or duplicated either."""
     by_topic = {r["topic"]: r for r in report["publishers"].values()}
-    assert sorted(by_topic) == sorted(f"{device}{t}" for t in TOPICS), by_topic.keys()
-    for r in by_topic.values():
+    assert sorted(by_topic) == sorted(f"{device}{t}" for t in (*TOPICS, "/tf", "/tf_static")), by_topic.keys()
+    for t in TOPICS:
+        r = by_topic[f"{device}{t}"]
         assert (r["received"], r["first"], r["last"], r["missing"], r["duplicates"]) == (n, 0, n - 1, 0, 0), r
-    assert report["messages"] == n * len(TOPICS)
+    tf, static = by_topic[f"{device}/tf"], by_topic[f"{device}/tf_static"]
+    assert n / RATE * 30 <= tf["received"] <= n / RATE * 30 + 2 and static["received"] == -(-n // int(RATE))
+    for r in (tf, static):
+        assert (r["first"], r["last"], r["missing"], r["duplicates"]) == (0, r["received"] - 1, 0, 0), r
+    assert report["messages"] == n * len(TOPICS) + tf["received"] + 1
 
 
 def mcap_payloads(path, topic) -> list:
@@ -44,7 +51,8 @@ def test_default_session_both_start_orders_lossless_and_byte_exact(procs, tmp_pa
     20 s at 1 kHz each, both at once; no message lost or duplicated; the recorded /imu bytes are what
     the same scenario, device and seed encode in-process."""
     duration, seeds = 20.0, {"ta": 7, "tb": 8}
-    stream_args = ["--scenario", SCENARIO, "--device", DEVICE, "--duration", str(duration)]
+    # stamps from 0 s, as the reference written below (a stream's default is the wall clock)
+    stream_args = ["--scenario", SCENARIO, "--device", DEVICE, "--duration", str(duration), "--start-time", "0"]
     procs.start(
         "rec_a",
         "record",
@@ -104,7 +112,8 @@ def test_default_session_both_start_orders_lossless_and_byte_exact(procs, tmp_pa
     for name, letter in (("ta", "a"), ("tb", "b")):
         check_report(json.loads((tmp_path / f"{letter}.json").read_text()), name, n)
         log = read_mcap(tmp_path / f"{letter}.mcap")
-        assert not log.truncated and log.message_count == n * len(TOPICS)
+        tf = sum(1 for topic in ("/tf", "/tf_static") for _ in mcap_payloads(tmp_path / f"{letter}.mcap", topic))
+        assert not log.truncated and log.message_count == n * len(TOPICS) + tf  # + the stream's tf tree
         device = load_device(DEVICE, seed=seeds[name])
         samples = device.measure(traj)
         reference = tmp_path / f"{letter}_ref.mcap"
