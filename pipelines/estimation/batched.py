@@ -4,6 +4,10 @@ The per-sample strapdown and the measurement models are the very functions :clas
 calls (:mod:`.mekf_kernels`); only the Kalman algebra, which ``Mekf`` takes from filterpy, is written
 here (:func:`kalman_predict`, :func:`kalman_update`: the same equations, Joseph form), so that a whole
 run stays in compiled code. ``tests/pipelines/test_mekf.py`` checks that both give the same attitude.
+
+numba's on-disk cache is keyed on this file's content only: a change to :mod:`.mekf_kernels` reaches
+the cached ``_run`` only when this file changes too (kernel layout as of ``P_SIZE = 32``, ``X_SIZE = 17``,
+``P_ACC_GM_TAU`` the last).
 """
 
 from __future__ import annotations
@@ -49,7 +53,7 @@ def _window(q, b, slow, win, phi, P, x, earth, params, use_mag):
         kalman_update(x, P, z, H, R)
     if kern.rest_due(win, slow, params):
         z3, H3, R3 = np.empty(3), np.empty((3, kern.X_SIZE)), np.empty((3, 3))
-        kern.rest_measurement(win, q, b, earth, params, z3, H3, R3)
+        kern.rest_measurement(win, q, b, earth, params, z3, H3, R3, P)
         kalman_update(x, P, z3, H3, R3)
     if use_mag:
         kern.heading_update(x, P, q, win, slow, params)

@@ -26,7 +26,11 @@ Measurements, made at the end of each window
   lagging rotation, the idea of VQF's inertial-frame low-pass filter). With ``u = ā_w/|ā_w|``, at rest
   ``u = e_z + e_z × δθ``: ``(u_x, u_y) = (−δθ_y, δθ_x)``, whatever the heading. The low-passes hold
   forces turned with past attitudes, so they see the error as it was: ``δθ + D (δb, δM)``, ``D`` the
-  drift since, weighted by the low-pass (2τ R for a steady drift), tracked per sample.
+  drift since, weighted by the low-pass (2τ R for a steady drift), tracked per sample. What the
+  low-passes keep of a non-gravitational acceleration slower than they are adds ``a/g``: the error state
+  carries it as ``δa`` (world x, y; a first-order Gauss–Markov process, off by default), and whatever
+  acceleration the innovations show beyond the model goes into the measurement's noise
+  (:func:`gravity_gate`, innovation-based adaptive estimation).
 * Heading: the magnetic field turned into the world frame and averaged, ``m̄_w``; its azimuth from
   north is ``ψ = atan2(m_x, m_y) = D + δθ_z + tan(dip) (n · δθ)`` (``D`` the declination, ``n`` the
   field's horizontal direction).
@@ -71,14 +75,18 @@ S_GRAV_LP2 = 19  # 19:22 and twice: the gravity measurement, m/s²
 S_LAG1 = 22  # 22:58 D₁ (3×12, row-major): the first low-pass's sensitivity to δb and δM
 S_LAG2 = 58  # 58:94 D₂: the second's (the measurement's); see strapdown and gravity_measurement
 S_SCALE = 94  # 94:103 M̂ (3×3, row-major): the gyro's scale-factor and misalignment errors
-S_SIZE = 103
+S_ACC_MS = 103  # mean square of the gravity innovation per horizontal axis, low-passed over accel_tau_s, rad²
+S_ACC_CORR = 104  # the current gravity measurement's correlation factor 4τ/T (gravity_measurement)
+S_ACC_EST = 105  # 105:107 â: the low-passed horizontal non-gravitational acceleration over g, world x and y, rad
+S_SIZE = 107
 
 # Error state layout.
 X_THETA = 0  # 0:3 δθ, rad, world axes
 X_BIAS = 3  # 3:6 δb, rad/s, body axes
 X_SCALE = 6  # 6:15 δM (3×3, row-major), dimensionless
-X_SIZE = 15
-N_DRIFT = X_SIZE - X_BIAS  # the error states that drive the attitude error: δb and δM
+X_ACC = 15  # 15:17 δa: error of â (S_ACC_EST), the low-passed horizontal acceleration over g, rad
+X_SIZE = 17
+N_DRIFT = X_ACC - X_BIAS  # the error states that drive the attitude error: δb and δM
 
 
 @njit
@@ -143,7 +151,7 @@ def strapdown(q, b, slow, win, phi, t, gyro, delta_angle, accel, mag, earth_rate
     turn_noise2 = params[P_TURN_NOISE] ** 2
     hold_rate = params[P_HOLD_RATE]
     alpha_tau = params[P_REST_TAU]
-    rest_g, rest_a = params[P_REST_GYRO], params[P_REST_ACCEL]
+    rest_g, rest_a, rest_w = params[P_REST_GYRO], params[P_REST_ACCEL], params[P_REST_RATE]
     use_mag = params[P_USE_MAG] > 0.5
     k = start
     while k < n:
@@ -204,7 +212,7 @@ def strapdown(q, b, slow, win, phi, t, gyro, delta_angle, accel, mag, earth_rate
                 dev_a += (accel[k, i] - slow[S_LP_A + i]) ** 2
             else:
                 still = False
-        still = still and dev_g < rest_g * rest_g and lp_rate < rest_g * rest_g and dev_a < rest_a * rest_a
+        still = still and dev_g < rest_g * rest_g and lp_rate < rest_w * rest_w and dev_a < rest_a * rest_a
         if still:
             slow[S_REST_T] += dt
             for i in range(3):
@@ -287,7 +295,12 @@ P_ACC_TAU = 24
 P_MAG_WINDOW = 25
 P_HEADING_CORR = 26
 P_TURN_NOISE = 27
-P_SIZE = 28
+P_HEADING_MOTION = 28
+P_ACC_ADAPT = 29
+P_ACC_GM_SIGMA = 30
+P_ACC_GM_TAU = 31
+P_REST_RATE = 32
+P_SIZE = 33
 
 
 @njit
@@ -305,7 +318,15 @@ def transition(win, phi, earth_rate_w, params, F, Q):
     F[1, 2] += earth_rate_w[0] * T
     F[2, 0] += earth_rate_w[1] * T
     F[2, 1] -= earth_rate_w[0] * T
-    F[0:3, X_BIAS:X_SIZE] = phi
+    F[0:3, X_BIAS : X_BIAS + N_DRIFT] = phi
+    # The low-passed horizontal acceleration (over g) as a first-order Gauss–Markov process of σ_a and τ_a
+    # (Gelb, Applied Optimal Estimation, 1974, §4.4: coloured measurement noise as a state):
+    # δa_k+1 = e^(−T/τ_a) δa_k + w, var w = σ_a² (1 − e^(−2T/τ_a)).
+    decay = math.exp(-T / params[P_ACC_GM_TAU])
+    q_acc = params[P_ACC_GM_SIGMA] ** 2 * (1.0 - decay * decay)
+    for i in range(2):
+        F[X_ACC + i, X_ACC + i] = decay
+        Q[X_ACC + i, X_ACC + i] = q_acc
     q_att = params[P_GYRO_NOISE] ** 2 * T + win[W_EXTRA]
     q_bias = params[P_BIAS_RW] ** 2 * T
     q_scale = params[P_SCALE_RW] ** 2 * T
@@ -330,6 +351,9 @@ def gravity_measurement(win, slow, params, z, H, R):
     in every direction), weighted by ``motion_gain``. All over g², in rad². The output is
     correlated over about ``4τ`` (``1 / (2 · bandwidth)``), so a measurement every window of T
     carries the information of ``T / 4τ`` independent ones: ``R`` is scaled by ``4τ / T``."""
+    decay = math.exp(-win[W_T] / params[P_ACC_GM_TAU])  # â's expected value decays as the process does
+    slow[S_ACC_EST] *= decay
+    slow[S_ACC_EST + 1] *= decay
     n = win[W_ACC_N]
     win[W_ACC_N] = 0.0
     if n < 1.0:
@@ -339,9 +363,12 @@ def gravity_measurement(win, slow, params, z, H, R):
     if not norm > 0.0:
         return False
     g = slow[S_GRAVITY]
-    z[0] = ax / norm
-    z[1] = ay / norm
+    # the horizontal acceleration the low-passes hold adds a/g to the direction: u = (−y_y, y_x) + a/g
+    z[0] = ax / norm - slow[S_ACC_EST]
+    z[1] = ay / norm - slow[S_ACC_EST + 1]
     H[:, :] = 0.0
+    H[0, X_ACC] = 1.0
+    H[1, X_ACC + 1] = 1.0
     # u_x = −y_y, u_y = y_x with y = δθ + D₂ (δb, δM) (strapdown): the tilt as the low-pass saw it
     H[0, 1] = -1.0
     H[1, 0] = 1.0
@@ -352,7 +379,9 @@ def gravity_measurement(win, slow, params, z, H, R):
     var = (
         (params[P_ACC_NOISE] ** 2 + params[P_MOTION] ** 2) / (8.0 * tau) + params[P_MOTION_GAIN] * (norm - g) ** 2
     ) / (g * g)
-    var *= 4.0 * tau / max(win[W_T], 1e-9)
+    corr = 4.0 * tau / max(win[W_T], 1e-9)
+    slow[S_ACC_CORR] = corr
+    var *= corr
     R[:, :] = 0.0
     R[0, 0] = var
     R[1, 1] = var
@@ -395,6 +424,8 @@ def heading_measurement(win, slow, params):
     r = params[P_HEADING_SIGMA] ** 2 * max(params[P_HEADING_CORR] / T, 1.0) + params[P_MAG_NOISE] ** 2 / T / (
         horizontal * horizontal
     )
+    if slow[S_REST_T] < T:  # moved during the window: the field where the body moves may differ from at rest
+        r *= params[P_HEADING_MOTION]
     tan_dip = -mz / horizontal
     return True, y, r, tan_dip * mx / horizontal, tan_dip * my / horizontal
 
@@ -419,7 +450,7 @@ def heading_gain(P, h, r, q, K):
     v0, v1, v2 = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
     along = K[X_BIAS] * v0 + K[X_BIAS + 1] * v1 + K[X_BIAS + 2] * v2
     K[X_BIAS], K[X_BIAS + 1], K[X_BIAS + 2] = along * v0, along * v1, along * v2
-    K[X_SCALE:] = 0.0
+    K[X_SCALE:] = 0.0  # nor δM, nor the acceleration (a gravity-channel state, like the tilt)
     return S
 
 
@@ -432,10 +463,13 @@ def joseph_update(P, K, h, r):
 
 
 @njit
-def rest_measurement(win, q, b, earth_rate_w, params, z, H, R):
+def rest_measurement(win, q, b, earth_rate_w, params, z, H, R, P):
     """The rest measurement: ``z = ω̄_m − Rᵀ Ω_ie − b`` (3,), ``H = [Rᵀ [Ω_ie×], I, 0]`` (3, X_SIZE),
     ``R`` (3, 3): white noise over the window's rest samples plus the residual-rate floor (at rest
-    the scale and misalignment errors turn nothing, δM ω ≈ 0)."""
+    the scale and misalignment errors turn nothing, δM ω ≈ 0), plus what the linear ``H`` leaves out
+    of the Earth rate's turn: ``Rᵀ (I + [δθ×] + ½[δθ×]²) Ω``, whose second-order term is up to
+    ``½ |δθ|² |Ω|``, with ``E|δθ|² = tr P_θθ`` (``P`` the prior covariance; a heading known to tens of
+    degrees only, as after a short gyrocompass, would otherwise be read as tilt)."""
     n = win[W_REST_N]
     r = np.empty((3, 3))
     quat_to_matrix(q, r)
@@ -450,6 +484,8 @@ def rest_measurement(win, q, b, earth_rate_w, params, z, H, R):
         H[i, X_BIAS + i] = 1.0
     dt_mean = win[W_T] / max(win[W_N], 1.0)
     var = params[P_GYRO_NOISE] ** 2 / (n * dt_mean) + params[P_REST_SIGMA] ** 2
+    omega = math.sqrt(ex * ex + ey * ey + ez * ez)
+    var += (0.5 * (P[0, 0] + P[1, 1] + P[2, 2]) * omega) ** 2
     R[:, :] = 0.0
     for i in range(3):
         R[i, i] = var
@@ -459,12 +495,39 @@ def rest_measurement(win, q, b, earth_rate_w, params, z, H, R):
 def gravity_gate(P, z, H, R, slow, params):
     """Decide on the gravity measurement (``x = 0``, as it is the first after the prediction).
 
+    First ``R`` is matched to what the innovations show (``R`` is modified in place). The low-passed
+    force keeps whatever non-gravitational acceleration lasts longer than the low-pass (a car speeding
+    up for seconds, a slow sway): an error the filter does not estimate, coloured, and far larger than
+    the white density allows for while it lasts. Innovation-based adaptive estimation (Mehra 1970;
+    Mohamed & Schwarz 1999, J. Geodesy 73: ``R̂ = Ĉ − H P Hᵀ``, ``Ĉ`` the innovations' sample
+    covariance; Suh 2010, IEEE TIM 59(12), for an orientation filter under external acceleration):
+    ``Ĉ`` per horizontal axis is the mean of ``|z|²/2`` low-passed over ``accel_tau_s`` (``x = 0``, so
+    ``z`` is the innovation), and what it holds beyond the single measurement's expected variance
+    ``tr(H P Hᵀ)/2 + R T/(4τ)`` is the unmodelled acceleration's variance (over g²), added to ``R`` with the
+    same correlation factor ``4τ/T``, once it is significant: ``2 Ĉ`` beyond the gravity gate (a χ²(2)
+    quantile) times the expected variance (Suh's threshold; a lower one, the 95 % quantile, took the
+    smooth manoeuvre's sway for acceleration and doubled its 6D inclination error). Weight ``accel_adapt`` (0: off).
+
     Accepted when its Mahalanobis distance ``zᵀ S⁻¹ z`` is within the gate (a χ² quantile). A
     rejected measurement is a disturbance (a tap, a push); after ``accel_timeout_s`` of rejections the
     filter must be wrong rather than the world: its tilt variance is widened by ``|z|²/gate`` (which
     puts the measurement inside the gate) and the measurement is accepted, so that the tilt, not the
     bias, takes the correction. Modifies ``P`` in place in that case."""
-    S = H @ P @ H.T + R
+    HPH = H @ P @ H.T
+    adapt = params[P_ACC_ADAPT]
+    if adapt > 0.0:
+        corr = slow[S_ACC_CORR]  # 4τ/T
+        beta = 1.0 - math.exp(-4.0 / corr)  # 1 − e^(−T/τ): the mean square low-passed over τ
+        slow[S_ACC_MS] += beta * (0.5 * (z[0] * z[0] + z[1] * z[1]) - slow[S_ACC_MS])
+        expected = 0.5 * (HPH[0, 0] + HPH[1, 1]) + 0.5 * (R[0, 0] + R[1, 1]) / corr
+        # Suh's threshold: only a significant excess counts (the mean square holds about one independent
+        # innovation, so below the χ² gate it is noise and max(·, 0) would bias R upwards)
+        excess = 0.0
+        if 2.0 * slow[S_ACC_MS] > params[P_ACC_GATE] * expected:
+            excess = adapt * (slow[S_ACC_MS] - expected) * corr
+        R[0, 0] += excess
+        R[1, 1] += excess
+    S = HPH + R
     d2 = z @ np.linalg.solve(S, z)
     if d2 <= params[P_ACC_GATE]:
         slow[S_ACC_REJ_T] = 0.0
@@ -538,6 +601,14 @@ def inject(x, q, b, slow, win, phi):
         b[i] += x[X_BIAS + i]
     for e in range(9):
         slow[S_SCALE + e] += x[X_SCALE + e]
+    slow[S_ACC_EST] += x[X_ACC]
+    slow[S_ACC_EST + 1] += x[X_ACC + 1]
+    # â is a world-frame vector held in the estimated axes: a heading correction turns it as it turns the force
+    turn[0], turn[1], turn[2], turn[3] = _half_turn(x[0], x[1], x[2])
+    quat_to_matrix(turn, c)
+    v0, v1 = slow[S_ACC_EST], slow[S_ACC_EST + 1]
+    slow[S_ACC_EST] = c[0, 0] * v0 + c[0, 1] * v1
+    slow[S_ACC_EST + 1] = c[1, 0] * v0 + c[1, 1] * v1
     x[:] = 0.0
     for i in (W_T, W_N, W_EXTRA, W_REST_G, W_REST_G + 1, W_REST_G + 2, W_REST_N):
         win[i] = 0.0

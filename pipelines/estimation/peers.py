@@ -86,7 +86,7 @@ from gyroemu.dynamics.rotation import quat_conjugate, quat_from_matrix, quat_fro
 from .ahrs_kernels import ekf_block, madgwick_block, mahony_block
 from .protocol import Estimate, FilterSetup
 
-__all__ = ["AhrsEkf", "Madgwick", "Mahony", "Vqf", "VqfUnavailable", "import_vqf", "initial_attitude"]
+__all__ = ["AhrsEkf", "Madgwick", "Mahony", "OfflineVqf", "Vqf", "VqfUnavailable", "import_vqf", "initial_attitude"]
 
 _SQRT_HALF = math.sqrt(0.5)
 _Q_NWU_TO_ENU = np.array([_SQRT_HALF, 0.0, 0.0, _SQRT_HALF])  # q_z(+90°): NWU coordinates to ENU
@@ -384,3 +384,45 @@ class Vqf:
         if n and np.isfinite(q[-1, 0]):
             self._last = (q[-1].copy(), b[-1].copy())
         return Estimate(q_wb=quat_multiply(self._out_rot, q), gyro_bias=b)
+
+
+class OfflineVqf:
+    """offlineVQF (Laidig & Seel 2023), :func:`vqf.offlineVQF` with its default parameters: acausal, it
+    filters the whole log forward and backward, so it takes the log in one ``process`` call (an
+    offline estimator, to be compared with offline ones such as ``mekf-smooth``).
+
+    offlineVQF has no notion of a missing sample: a non-finite accelerometer or magnetometer sample
+    becomes zeros (which VQF skips), a non-finite gyro sample holds the last finite one (zero rate
+    before the first). It runs at the fixed ``1/rate_hz``.
+    """
+
+    name = "offline-vqf"
+    offline = True
+
+    def __init__(self, setup: FilterSetup):
+        import_vqf()
+        from vqf import offlineVQF
+
+        self.setup = setup
+        self._run = offlineVQF
+        self._out_rot = quat_from_rotvec([0.0, 0.0, -setup.declination_rad]) if setup.use_mag else _Q_IDENTITY
+        self._done = False
+
+    def process(self, t, gyro, accel, mag=None) -> Estimate:
+        if self._done:
+            raise ValueError("offline-vqf is offline: it takes the whole log in one process() call")
+        self._done = True
+        t, gyro, accel, mag = _as_inputs(t, gyro, accel, mag, self.setup.use_mag)
+        n = len(t)
+        if n == 0:
+            return Estimate(q_wb=np.empty((0, 4)), gyro_bias=np.empty((0, 3)))
+        accel = np.where(np.isfinite(accel).all(axis=1, keepdims=True), accel, 0.0)
+        if mag is not None:
+            mag = np.ascontiguousarray(np.where(np.isfinite(mag).all(axis=1, keepdims=True), mag, 0.0))
+        finite_g = np.isfinite(gyro).all(axis=1)
+        if not finite_g.all():  # hold the last finite sample (index of the last finite row up to each k)
+            last = np.maximum.accumulate(np.where(finite_g, np.arange(n), -1))
+            gyro = np.where((last >= 0)[:, None], gyro[np.maximum(last, 0)], 0.0)
+        out = self._run(np.ascontiguousarray(gyro), np.ascontiguousarray(accel), mag, 1.0 / float(self.setup.rate_hz))
+        q = out["quat9D"] if mag is not None else out["quat6D"]
+        return Estimate(q_wb=quat_multiply(self._out_rot, q), gyro_bias=np.asarray(out["bias"], dtype=float))

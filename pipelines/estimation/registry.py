@@ -8,7 +8,14 @@ name              filter                                                       n
 ``mahony``        Mahony's explicit complementary filter (``ahrs``)             —
 ``ahrs-ekf``      the quaternion EKF of ``ahrs``                                —
 ``vqf``           VQF, Laidig & Seel (2023)                                     the ``vqf`` extra
+``mekf-smooth``   offline: the MEKF forward, then an RTS smoother backward      —
+``offline-vqf``   offline: ``vqf.offlineVQF`` (forward and backward)             the ``vqf`` extra
 ================  ===========================================================  ===================
+
+The two offline filters see the whole log (their ``process`` takes it in one call, a second call is
+an error) and are marked ``offline = True``, so a comparison keeps them apart from the online ones
+(:func:`is_offline`); they are left out of the default set (:func:`available_filters`) and run when
+named.
 
 Anything else is a user's filter: ``package.module:Class`` (imported; the current folder is tried
 too) or ``path/to/file.py:Class``. The class is called with the :class:`FilterSetup` and the object
@@ -33,6 +40,7 @@ __all__ = [
     "FilterSpec",
     "available_filters",
     "filter_class",
+    "is_offline",
     "make_filter",
     "unavailable_filters",
 ]
@@ -50,6 +58,7 @@ class FilterSpec:
     target: str
     description: str
     extra: str | None = None  # the optional extra that installs what it needs
+    offline: bool = False  # sees the whole log (acausal): compared with offline filters only
 
     def load(self) -> type:
         """The filter's class; :class:`FilterError` (with the reason) when it cannot be imported."""
@@ -59,13 +68,13 @@ class FilterSpec:
         except ImportError as exc:
             hint = f" (pip install 'gyroemu[{self.extra}]')" if self.extra else ""
             raise FilterError(f"filter '{self.name}' is not available: {exc}{hint}") from exc
-        if self.name == "vqf":  # the adapter imports vqf when made: check now, so the registry can tell
+        if self.extra == "vqf":  # the adapter imports vqf when made: check now, so the registry can tell
             from .peers import import_vqf
 
             try:
                 import_vqf()
             except ImportError as exc:
-                raise FilterError(f"filter 'vqf' is not available: {exc}") from exc
+                raise FilterError(f"filter '{self.name}' is not available: {exc}") from exc
         return cls
 
 
@@ -81,14 +90,41 @@ FILTERS: dict[str, FilterSpec] = {
         FilterSpec(
             "vqf", "gyroemu.pipelines.estimation.peers:Vqf", "VQF (vqf package), default parameters", extra="vqf"
         ),
+        FilterSpec(
+            "mekf-smooth",
+            "gyroemu.pipelines.estimation.mekf_smoother:MekfSmoother",
+            "offline: the MEKF forward, a Rauch-Tung-Striebel smoother backward",
+            offline=True,
+        ),
+        FilterSpec(
+            "offline-vqf",
+            "gyroemu.pipelines.estimation.peers:OfflineVqf",
+            "offline: vqf.offlineVQF, default parameters",
+            extra="vqf",
+            offline=True,
+        ),
     )
 }
 
 
-def unavailable_filters() -> dict[str, str]:
-    """Built-in filters that cannot run here, with the reason (e.g. VQF without its package)."""
+def is_offline(name_or_spec: str) -> bool:
+    """Whether the filter sees the whole log at once (a built-in marked offline, or a class with
+    ``offline = True``); a filter that cannot be loaded counts as online."""
+    if name_or_spec in FILTERS:
+        return FILTERS[name_or_spec].offline
+    try:
+        return bool(getattr(_user_class(name_or_spec), "offline", False))
+    except FilterError:
+        return False
+
+
+def unavailable_filters(*, offline: bool = False) -> dict[str, str]:
+    """Built-in filters that cannot run here, with the reason (e.g. VQF without its package): the
+    online ones, and the offline ones too with ``offline``."""
     missing = {}
     for name, spec in FILTERS.items():
+        if spec.offline and not offline:
+            continue
         try:
             spec.load()
         except FilterError as exc:
@@ -96,10 +132,11 @@ def unavailable_filters() -> dict[str, str]:
     return missing
 
 
-def available_filters() -> list[str]:
-    """Names of the built-in filters that can run here, in the table's order."""
-    missing = unavailable_filters()
-    return [name for name in FILTERS if name not in missing]
+def available_filters(*, offline: bool = False) -> list[str]:
+    """Names of the built-in online filters that can run here, in the table's order (the default set
+    of a comparison); with ``offline``, the offline ones too."""
+    missing = unavailable_filters(offline=offline)
+    return [name for name in FILTERS if name not in missing and (offline or not FILTERS[name].offline)]
 
 
 def _user_class(spec: str) -> type:

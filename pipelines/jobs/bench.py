@@ -16,6 +16,15 @@ A case is 9D when the device has a magnetometer (a log: any finite ``/mag`` samp
 with ``six_d``. Each filter is made from the case's :class:`FilterSetup` for each run and given the
 whole run in one ``process()`` call.
 
+Online and offline
+------------------
+A filter is online (causal: each estimate from the samples up to it, as a live filter must be) or
+offline (it sees the whole log: ``mekf-smooth``, ``offline-vqf``, or a class with ``offline = True``;
+:func:`gyroemu.pipelines.estimation.registry.is_offline`). The offline ones run when named, and the
+report keeps the two groups apart: ``bench.md`` has a table for each group (one table, as before, when
+only online filters ran) and ``bench.json`` marks each filter entry ``"offline"``. An offline
+estimator is compared with offline ones, an online filter with online ones.
+
 What is reported, per (case, filter), as mean ± standard deviation over the runs that did not diverge
 ----------------------------------------------------------------------------------------------------
 - **total, heading, inclination RMSE**, degrees, with BROAD's definitions (:mod:`.metrics`); a 6D row
@@ -65,6 +74,7 @@ from gyroemu.pipelines.estimation.registry import (
     FilterError,
     available_filters,
     filter_class,
+    is_offline,
     make_filter,
     unavailable_filters,
 )
@@ -175,6 +185,7 @@ class FilterResult:
     curve_total_deg: np.ndarray | None = None
     curve_inclination_deg: np.ndarray | None = None
     note: str = ""
+    offline: bool = False  # sees the whole log (acausal): its own group in the report
 
     @property
     def label(self) -> str:
@@ -241,15 +252,26 @@ class BenchReport:
             parts.append(f"{len(self.cases) - sims} log(s)")
         lines.append("; ".join(parts + [f"convergence threshold {s['threshold_deg']:g}°."]))
         lines.append("")
-        lines.append(
-            "| case | filter | mode | total RMSE ° | heading RMSE ° | inclination RMSE ° | "
-            "converged after s | gyro-bias error °/s | throughput samples/s | status |"
-        )
-        lines.append("|---|---|---|---|---|---|---|---|---|---|")
-        for case in self.cases:
-            for fr in case.filters:
+        offline_ran = any(fr.offline for case in self.cases for fr in case.filters)
+        for offline in (False, True) if offline_ran else (False,):
+            rows = [(case, fr) for case in self.cases for fr in case.filters if fr.offline == offline]
+            if offline_ran:
+                if not rows:
+                    continue
+                lines.append(
+                    "## Offline estimators (each sees the whole log)"
+                    if offline
+                    else "## Online filters (causal: each estimate from the samples up to it)"
+                )
+                lines.append("")
+            lines.append(
+                "| case | filter | mode | total RMSE ° | heading RMSE ° | inclination RMSE ° | "
+                "converged after s | gyro-bias error °/s | throughput samples/s | status |"
+            )
+            lines.append("|---|---|---|---|---|---|---|---|---|---|")
+            for case, fr in rows:
                 lines.append("| " + " | ".join(self._row(case, fr)) + " |")
-        lines.append("")
+            lines.append("")
         lines.append(
             "Mean ± standard deviation over the runs that did not diverge. Errors with BROAD's "
             "definitions: q_err = q_est ⊗ conj(q_true); total 2·acos|w|, heading 2·atan|z/w|, "
@@ -355,6 +377,7 @@ class BenchReport:
                             "filter": fr.filter,
                             "name": fr.name,
                             "batched": fr.batched,
+                            "offline": fr.offline,
                             "note": fr.note,
                             "diverged_runs": fr.diverged_runs,
                             "status": "ok"
@@ -892,7 +915,9 @@ def _bench_sim(case: SimCase, item, filters, runs, seed, threshold_deg, batch_fn
             res, errors, fname = _run_filter(spec, setup, run, six_d=six_d, threshold_deg=threshold_deg)
             fr = results[spec]
             if fr is None:
-                fr = results[spec] = FilterResult(filter=spec, name=fname, batched=False, runs=[])
+                fr = results[spec] = FilterResult(
+                    filter=spec, name=fname, batched=False, runs=[], offline=is_offline(spec)
+                )
                 _curve(fr, run.t, errors)
             fr.runs.append(res)
             bar.step()
@@ -991,7 +1016,7 @@ def _bench_log(item, filters, threshold_deg, bar) -> CaseResult:
         bar.describe(f"{name}: {spec}")
         _warm_up(spec, setup, run, mode == "6D")
         res, errors, fname = _run_filter(spec, setup, run, six_d=mode == "6D", threshold_deg=threshold_deg)
-        fr = FilterResult(filter=spec, name=fname, batched=False, runs=[res])
+        fr = FilterResult(filter=spec, name=fname, batched=False, runs=[res], offline=is_offline(spec))
         _curve(fr, run.t, errors)
         results.append(fr)
         bar.step()

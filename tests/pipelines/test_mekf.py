@@ -18,6 +18,8 @@ from gyroemu.pipelines.formats.mcap_log import truth_series
 from gyroemu.sensors import load_device
 from gyroemu.sensors.gyrocompass import heading_uncertainty
 
+EPS = np.finfo(float).eps
+
 
 @pytest.fixture(scope="module")
 def manoeuvre():
@@ -221,7 +223,7 @@ def test_injection_turns_the_low_passed_force_with_the_estimate():
     rng = np.random.default_rng(2)
     x = np.zeros(kern.X_SIZE)
     x[:3] = rng.normal(0.0, 0.05, 3)
-    x[kern.X_BIAS :] = rng.normal(0.0, 0.01, kern.N_DRIFT)
+    x[kern.X_BIAS :] = rng.normal(0.0, 0.01, kern.X_SIZE - kern.X_BIAS)  # δb, δM and δa
     q, b = np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3)
     slow = np.zeros(kern.S_SIZE)
     force = rng.normal(0.0, 1.0, (2, 3)) + [0.0, 0.0, 9.81]
@@ -230,12 +232,16 @@ def test_injection_turns_the_low_passed_force_with_the_estimate():
     slow[kern.S_LAG1 : kern.S_LAG1 + lag[0].size], slow[kern.S_LAG2 : kern.S_LAG2 + lag[1].size] = lag.reshape(2, -1)
     kern.inject(x.copy(), q, b, slow, np.zeros(kern.W_SIZE), np.zeros((3, kern.N_DRIFT)))
     # each low-pass holds the tilt as it was, δθ + D (δb, δM): it turns by that stage's correction
-    turned = [Rotation.from_rotvec(x[:3] + lag[i] @ x[kern.X_BIAS :]).apply(force[i]) for i in range(2)]
+    drift = x[kern.X_BIAS : kern.X_BIAS + kern.N_DRIFT]
+    turned = [Rotation.from_rotvec(x[:3] + lag[i] @ drift).apply(force[i]) for i in range(2)]
     assert np.allclose(slow[kern.S_GRAV_LP : kern.S_GRAV_LP + 3], turned[0], atol=1e-12)
     assert np.allclose(slow[kern.S_GRAV_LP2 : kern.S_GRAV_LP2 + 3], turned[1], atol=1e-12)
     assert np.allclose(q, np.roll(Rotation.from_rotvec(x[:3]).as_quat(), 1), atol=1e-12)
     assert np.array_equal(b, x[kern.X_BIAS : kern.X_BIAS + 3])
-    assert np.array_equal(slow[kern.S_SCALE : kern.S_SCALE + 9], x[kern.X_SCALE :])
+    assert np.array_equal(slow[kern.S_SCALE : kern.S_SCALE + 9], x[kern.X_SCALE : kern.X_SCALE + 9])
+    # the acceleration estimate takes its correction, then turns with the attitude's (a world-frame vector)
+    acc = Rotation.from_rotvec(x[:3]).apply([x[kern.X_ACC], x[kern.X_ACC + 1], 0.0])
+    assert np.allclose(slow[kern.S_ACC_EST : kern.S_ACC_EST + 2], acc[:2], atol=1e-12)
 
 
 def test_low_pass_lag_of_a_steady_drift_is_the_group_delay():
@@ -335,3 +341,49 @@ def test_simulated_field_heading_error_is_the_sensors_iron():
     assert np.isclose(setup.field_heading_sigma, 2.0 / np.hypot(east, north))
     assert Mekf(setup).params.heading_sigma == setup.field_heading_sigma
     assert FilterSetup(rate_hz=100.0).field_heading_sigma is None
+
+
+def test_gravity_noise_takes_what_a_sustained_acceleration_shows():
+    """Innovation-based adaptive estimation (``gravity_gate``): a gravity innovation held at 14° (a car
+    speeding up at 2.5 m/s²) drives the mean square of the innovation per axis to |z|²/2 (a low-pass
+    over τ: after n windows of T it is within e^(−nT/τ) of it, to round-off), and R then carries what exceeds the
+    expected variance tr(H P Hᵀ)/2 + R₀ T/(4τ), with the correlation factor 4τ/T: closed form. An
+    innovation within the expected spread adds nothing (below the χ² gate)."""
+    setup = FilterSetup(rate_hz=100.0, use_mag=False)
+    params = MekfParams()
+    p = params.vector(setup)
+    tau, T = params.accel_tau_s, params.window_s
+    corr = 4.0 * tau / T
+    H = np.zeros((2, kern.X_SIZE))
+    H[0, 1], H[1, 0], H[0, kern.X_ACC], H[1, kern.X_ACC + 1] = -1.0, 1.0, 1.0, 1.0
+    P = np.diag(np.full(kern.X_SIZE, 1e-6))
+    r0 = 1e-4 * corr  # a single window's base variance of 1e-4 rad², scaled as gravity_measurement does
+    hph = 0.5 * np.trace(H @ P @ H.T)
+    for tilt, adds in ((np.radians(14.0), True), (0.5 * np.sqrt(hph + 1e-4), False)):
+        slow = np.zeros(kern.S_SIZE)
+        z = np.array([tilt, 0.0])
+        n = 2000  # 40 s of windows: e^(−40) of the start is left
+        for _ in range(n):
+            slow[kern.S_ACC_CORR] = corr
+            R = np.eye(2) * r0
+            kern.gravity_gate(P, z, H, R, slow, p)
+        ms = 0.5 * tilt**2
+        # round-off: ε·ms per step, summed by the low-pass with gain 1/β (β = 1 − e^(−T/τ)), twice over
+        beta = 1.0 - np.exp(-T / tau)
+        assert abs(slow[kern.S_ACC_MS] - ms) <= ms * np.exp(-n * T / tau) + 2 * EPS * ms / beta
+        want = r0 + ((ms - hph - r0 / corr) * corr if adds else 0.0)
+        assert np.allclose(np.diag(R), want, rtol=1e-12, atol=0)
+        assert R[0, 1] == R[1, 0] == 0.0
+
+
+def test_rest_rate_threshold_comes_from_the_gyro():
+    """A known gyro's rest-rate threshold is five times what its noise through the rest low-pass and its
+    bias leave in the low-passed rate, 5 √(N²/(2τ) + σ_b²), at most the default (2 °/s)."""
+    for name in ("tactical_mems", "consumer_mems"):
+        device = load_device(name)
+        setup = setup_for(device, load_scenario("car_drive"))
+        params = MekfParams.for_setup(setup)
+        n, sb = setup.noise.gyro_noise_density, setup.noise.gyro_bias_sigma
+        want = min(np.radians(2.0), 5 * np.sqrt(n**2 / (2 * params.rest_tau_s) + sb**2))
+        assert params.rest_rate == pytest.approx(want, rel=1e-12)
+    assert MekfParams.for_setup(FilterSetup(rate_hz=100.0)).rest_rate == np.radians(2.0)

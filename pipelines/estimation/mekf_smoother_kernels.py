@@ -1,0 +1,190 @@
+"""The compiled parts of the MEKF smoother (:mod:`.mekf_smoother`): a forward pass that stores what the
+Rauch–Tung–Striebel recursion needs, the backward recursion, and the per-sample output.
+
+Forward (:func:`forward_pass`): the very filter of :mod:`.batched` (the same kernels of
+:mod:`.mekf_kernels` and the same Joseph-form algebra), which at the end of each window ``j`` also
+stores
+
+* ``F_top[j]`` (5, X_SIZE): the rows of the window's error-state transition that are not the identity's:
+  the attitude's three and the acceleration's two (``δb``, ``δM`` are random walks, ``δa`` Gauss–Markov,
+  :func:`.mekf_kernels.transition`);
+* ``P_prior[j]``: the error covariance before the window's updates (after the gravity gate, whose
+  widening of the tilt variance after a long rejection acts as process noise);
+* ``P_post[j]``: after the updates; and ``x_upd[j]``, the update itself (what was injected into the
+  nominal state: the error of the prior nominal state as the filter saw it).
+
+(numba caches this file's functions by its content alone: a change to :mod:`.mekf_kernels` needs
+a change here, such as the layout noted here: ``P_SIZE = 32``, ``P_ACC_GM_TAU`` the last; ``X_SIZE = 17``.)
+
+Index 0 is the initial state (``P_post[0] = P₀``, no update). Float64: 5.4 kB a window, 163 MB for a
+10-minute log at 1 kHz with 20 ms windows (30 000 windows; per-sample storage would be 50× that).
+
+Backward (:func:`rts_backward`), the RTS smoother on the error state (Rauch, Tung & Striebel, AIAA J.
+3(8), 1965; the multiplicative form as in Markley & Crassidis, *Fundamentals of Spacecraft Attitude
+Determination and Control*, §6.2.5 and Crassidis & Junkins, *Optimal Estimation of Dynamic Systems*,
+2nd ed., §5.3, with the reset handled as in Solà, *Quaternion kinematics for the error-state Kalman
+filter*, 2017, §7). The forward posterior error is zero (it has been injected) and so is the next
+prior's; the smoothed error ``e_j`` is relative to the posterior nominal state of window ``j``, so
+relative to the prior nominal state of window ``j+1`` the smoothed error is ``e_{j+1} + x_upd[j+1]``:
+
+    C_j  = P_post[j] F_{j+1}ᵀ P_prior[j+1]⁻¹
+    e_j  = C_j (e_{j+1} + x_upd[j+1])
+    P_s[j] = P_post[j] + C_j (P_s[j+1] − P_prior[j+1]) C_jᵀ
+
+starting from ``e_W = 0``, ``P_s[W] = P_post[W]``. The smoothed state is the forward posterior
+nominal state with ``e_j`` injected (``q ← exp(δθ) ⊗ q``, ``b ← b + δb``, ``M̂ ← M̂ + δM``).
+
+Between window ends (:func:`per_sample`) the sample's nominal attitude is the strapdown from the
+previous posterior; its error runs from ``e_j`` at the window's start to ``e_{j+1} + x_upd[j+1]`` at
+its end, taken linear in time over the window (20 ms), and so is the covariance.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gyroemu.dynamics.jit import njit
+
+from . import mekf_kernels as kern
+from .batched import kalman_predict, kalman_update
+
+X = kern.X_SIZE
+
+
+@njit
+def _store_window(q, b, slow, win, phi, P, x, earth, params, use_mag, F_top, P_prior, P_post, x_upd, j):
+    """One window of :func:`.batched._window` (prediction, gravity, rest, heading, injection), storing
+    its transition's top rows, the covariance before and after the updates and the update, at ``j``."""
+    F = np.empty((X, X))
+    Q = np.empty((X, X))
+    kern.transition(win, phi, earth, params, F, Q)
+    kalman_predict(P, F, Q)
+    z, H, R = np.empty(2), np.empty((2, X)), np.empty((2, 2))
+    gravity = kern.gravity_measurement(win, slow, params, z, H, R)
+    accept = gravity and kern.gravity_gate(P, z, H, R, slow, params)  # may widen P: part of the prior
+    F_top[j, 0:3] = F[0:3, :]
+    F_top[j, 3:] = F[kern.X_ACC :, :]
+    P_prior[j] = P
+    if accept:
+        kalman_update(x, P, z, H, R)
+    if kern.rest_due(win, slow, params):
+        z3, H3, R3 = np.empty(3), np.empty((3, X)), np.empty((3, 3))
+        kern.rest_measurement(win, q, b, earth, params, z3, H3, R3, P)
+        kalman_update(x, P, z3, H3, R3)
+    if use_mag:
+        kern.heading_update(x, P, q, win, slow, params)
+    x_upd[j] = x
+    P_post[j] = P
+    kern.inject(x, q, b, slow, win, phi)
+
+
+@njit
+def forward_pass(
+    q, b, slow, P, win, phi, t, gyro, delta, accel, mag, earth, params, use_mag, start, q_out, b_out, cov_out,
+    end_index, M_post, F_top, P_prior, P_post, x_upd, j0,
+):  # fmt: skip
+    """Run the filter from sample ``start`` until the samples end or the window storage (``F_top`` …,
+    length ``cap``) fills. ``q``, ``b``, ``slow``, ``P``, ``win``, ``phi`` carry the filter's state.
+    Writes ``q_out``, ``b_out`` (n, 3) and ``cov_out`` (n, 3, 3: the forward attitude covariance);
+    window ``j`` ends at sample ``end_index[j]`` (the last sample it holds), with ``M̂`` ``M_post[j]``
+    after its injection. Returns ``(next sample, windows stored)``, windows numbered from ``j0``."""
+    n = len(t)
+    x = np.zeros(X)
+    k = start
+    j = j0
+    cap = F_top.shape[0]
+    while k < n and j < cap:
+        end = kern.strapdown(q, b, slow, win, phi, t, gyro, delta, accel, mag, earth, params, k, q_out)
+        for i in range(k, end):
+            b_out[i, :] = b
+        if kern.window_due(win, params):
+            _store_window(q, b, slow, win, phi, P, x, earth, params, use_mag, F_top, P_prior, P_post, x_upd, j)
+            q_out[end - 1, :] = q
+            b_out[end - 1, :] = b
+            end_index[j] = end - 1
+            for e in range(9):
+                M_post[j, e] = slow[kern.S_SCALE + e]
+            j += 1
+        for i in range(k, end):
+            cov_out[i] = P[0:3, 0:3]
+        k = end
+    return k, j
+
+
+@njit
+def rts_backward(F_top, P_prior, P_post, x_upd, e_s, P_s):
+    """The RTS recursion of the module's notes over windows ``0 … W−1`` (0: the initial state):
+    ``e_s`` (W, X_SIZE) the smoothed errors, ``P_s`` (W, X_SIZE, X_SIZE) their covariances.
+    ``F P_post`` differs from ``P_post`` in the attitude's and acceleration's rows only (``F_top``; the
+    other rows of ``F`` are the identity's). A singular ``P_prior`` (the ideal device has no process noise) takes its
+    pseudo-inverse."""
+    W = F_top.shape[0]
+    FP = np.empty((X, X))
+    e_s[W - 1] = 0.0
+    P_s[W - 1] = P_post[W - 1]
+    for j in range(W - 2, -1, -1):
+        FP[:, :] = P_post[j]
+        FP[0:3, :] = F_top[j + 1, 0:3] @ P_post[j]
+        FP[kern.X_ACC :, :] = F_top[j + 1, 3:] @ P_post[j]
+        # C = P_post Fᵀ P_prior⁻¹  ⇔  Cᵀ = P_prior⁻¹ F P_post (both covariances symmetric)
+        try:
+            Ct = np.linalg.solve(P_prior[j + 1], FP)
+        except Exception:  # noqa: BLE001 - a singular prior (a noiseless gyro: no process noise)
+            Ct = np.linalg.pinv(P_prior[j + 1]) @ FP  # the pseudo-inverse's gain: the states it can see
+        C = np.ascontiguousarray(Ct.T)
+        e_s[j] = C @ (e_s[j + 1] + x_upd[j + 1])
+        Pj = P_post[j] + C @ (P_s[j + 1] - P_prior[j + 1]) @ Ct
+        P_s[j] = 0.5 * (Pj + Pj.T)
+
+
+@njit
+def _turn(q, dx, dy, dz, out):
+    """out ← exp(δθ/2) ⊗ q for a world-frame rotation vector δθ (rad), renormalised."""
+    a = math.sqrt(dx * dx + dy * dy + dz * dz)
+    s = math.sin(0.5 * a) / a if a > 1e-12 else 0.5 - a * a / 48.0
+    cw, cx, cy, cz = math.cos(0.5 * a), dx * s, dy * s, dz * s
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    out[0] = cw * w - cx * x - cy * y - cz * z
+    out[1] = cw * x + cx * w + cy * z - cz * y
+    out[2] = cw * y - cx * z + cy * w + cz * x
+    out[3] = cw * z + cx * y - cy * x + cz * w
+    norm = math.sqrt(out[0] ** 2 + out[1] ** 2 + out[2] ** 2 + out[3] ** 2)
+    for i in range(4):
+        out[i] /= norm
+
+
+@njit
+def per_sample(t, q_fwd, b_fwd, end_index, e_s, P_s, x_upd, q_out, b_out, cov_out):
+    """The smoothed attitude, bias and attitude covariance of every sample (module's notes). Window
+    ``j ≥ 1`` holds the samples ``end_index[j−1]+1 … end_index[j]`` (``end_index[0] = −1``: the
+    initial state before the first sample); samples after the last window end keep its smoothed error."""
+    n = len(t)
+    W = e_s.shape[0]
+    e = np.empty(X)
+    for j in range(1, W + 1):
+        lo = end_index[j - 1] + 1
+        hi = end_index[j] if j < W else n - 1
+        t0 = t[lo - 1] if lo > 0 else t[0] - (t[min(1, n - 1)] - t[0])
+        t1 = t[hi]
+        span = t1 - t0 if t1 > t0 else 1.0
+        for k in range(lo, hi + 1):
+            if j == W:
+                e[:] = e_s[W - 1]
+                P3 = P_s[W - 1, 0:3, 0:3]
+                f = 0.0
+            elif k == hi:
+                e[:] = e_s[j]
+                f = 1.0
+                P3 = P_s[j, 0:3, 0:3]
+            else:
+                f = (t[k] - t0) / span
+                e[:] = (1.0 - f) * e_s[j - 1] + f * (e_s[j] + x_upd[j])
+                P3 = (1.0 - f) * P_s[j - 1, 0:3, 0:3] + f * P_s[j, 0:3, 0:3]
+            _turn(q_fwd[k], e[0], e[1], e[2], q_out[k])
+            for i in range(3):
+                b_out[k, i] = b_fwd[k, i] + e[kern.X_BIAS + i]
+            for a in range(3):
+                for c in range(3):
+                    cov_out[k, a, c] = 0.5 * (P3[a, c] + P3[c, a])
