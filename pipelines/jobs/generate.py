@@ -1,0 +1,187 @@
+"""``gyroemu generate SPEC.toml --out-dir D``: a dataset of MCAP logs over a campaign's grid, on Dask.
+
+The campaign file is the bench's (:mod:`gyroemu.pipelines.campaign.spec`); ``generate`` uses its
+``scenarios``, ``devices``, ``durations_s`` and seeds (``filters``, ``modes``, ``threshold_deg``,
+``batched`` are the bench's and ignored here). Each (scenario, device, duration, seed) is one task and
+one log, ``<scenario>__<device>__<duration>s__seed<seed>.mcap``, written by
+:func:`gyroemu.pipelines.jobs.simulate.run_simulate`: the log carries its scenario and device configs
+and its seed in its ``gyroemu`` metadata, and ``gyroemu simulate`` with the arguments of its index row
+(``simulate_command``) writes the same bytes.
+
+Workers write the logs straight into ``out_dir`` (on a cluster: a folder every worker sees at the same
+path); each log appears whole (a temporary file and a rename). Each finished log's index row is stored
+as a Parquet part in ``out_dir/.index/``; at the end ``index.parquet`` and ``index.csv`` list every log
+of the campaign with its parameters, config hashes, sample count, size and SHA-256. Started again, the
+job makes only the logs that are missing.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from gyroemu.pipelines.campaign import Campaign, LogTask, TaskFailure
+
+__all__ = ["GenerateOptions", "GenerateSummary", "INDEX_COLUMNS", "index_schema", "log_tasks", "run_generate"]
+
+INDEX_COLUMNS: dict[str, str] = {
+    "file": "string",
+    "campaign": "string",
+    "scenario": "string",
+    "scenario_hash": "string",
+    "device": "string",
+    "device_hash": "string",
+    "duration_s": "float64",
+    "seed": "int64",
+    "samples": "int64",
+    "truth_samples": "int64",
+    "bytes": "int64",
+    "sha256": "string",
+    "simulate_command": "string",
+    "gyroemu_version": "string",
+}
+"""The columns of ``index.parquet`` / ``index.csv`` and their Arrow types."""
+
+
+@dataclass(frozen=True)
+class GenerateOptions:
+    """What ``gyroemu generate`` writes, where, and on which cluster.
+
+    Attributes
+    ----------
+    spec : Path
+        The campaign file (TOML).
+    out_dir : Path
+        Folder of the logs and the index (made if missing).
+    scheduler : str or None
+        A Dask scheduler's address; None: a local cluster.
+    workers : int or None
+        Worker processes of the local cluster (default: one per core).
+    processes : bool
+        Local workers as processes (default); False: threads of this process (tests).
+    progress : bool or None
+        A bar on stderr (logs done, total, rate, time left); None: when stderr is a terminal.
+    """
+
+    spec: Path
+    out_dir: Path
+    scheduler: str | None = None
+    workers: int | None = None
+    processes: bool = True
+    progress: bool | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "spec", Path(self.spec))
+        object.__setattr__(self, "out_dir", Path(self.out_dir))
+
+
+@dataclass
+class GenerateSummary:
+    """What a generate run did."""
+
+    campaign: Campaign
+    logs: int
+    resumed: int
+    made: int
+    failures: list[TaskFailure]
+    index: Path
+    elapsed_s: float
+
+
+def _stem(entry: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in Path(entry).stem)
+
+
+def log_tasks(campaign: Campaign, out_dir: Path) -> list[LogTask]:
+    """One :class:`~gyroemu.pipelines.campaign.LogTask` per (scenario, device, duration, seed), in the
+    grid's order; :class:`~gyroemu.errors.ConfigError` when two entries would share a file name."""
+    from gyroemu.errors import ConfigError
+    from gyroemu.pipelines.campaign import LogTask
+
+    out_dir = out_dir.resolve()
+    tasks: dict[str, LogTask] = {}
+    seen = dict.fromkeys((c.scenario, c.device, c.duration_s, c.scenario_hash, c.device_hash) for c in campaign.cells)
+    for scenario, device, duration, sc_hash, dev_hash in seen:
+        for seed in campaign.seeds:
+            name = f"{_stem(scenario)}__{_stem(device)}__{duration:g}s__seed{seed}.mcap"
+            if name in tasks:
+                raise ConfigError(
+                    f"two entries make the same log name {name}: give scenario and device files distinct names",
+                    file=campaign.path,
+                )
+            tasks[name] = LogTask(
+                campaign.name, scenario, device, duration, seed, sc_hash, dev_hash, str(out_dir / name)
+            )
+    return list(tasks.values())
+
+
+def index_schema() -> Any:
+    """:data:`INDEX_COLUMNS` as a ``pyarrow.Schema``."""
+    import pyarrow as pa
+
+    return pa.schema([(name, getattr(pa, kind)()) for name, kind in INDEX_COLUMNS.items()])
+
+
+def run_generate(options: GenerateOptions) -> GenerateSummary:
+    """Write the campaign's logs and their index (see the module's notes).
+
+    Raises
+    ------
+    gyroemu.errors.ConfigError
+        A bad campaign file (names the file and key) or ``out_dir`` not a folder, before any work.
+    gyroemu.pipelines.campaign.SchedulerLostError
+        The scheduler unreachable or lost; the finished logs and their index parts are kept, and a new
+        run makes the missing logs and writes the index.
+    """
+    import pyarrow.csv as pacsv
+    import pyarrow.parquet as pq
+
+    from gyroemu.errors import ConfigError
+    from gyroemu.pipelines.campaign import PartStore, load_campaign, make_log, readable, run_tasks
+    from gyroemu.pipelines.campaign.progress import RunsProgress
+    from gyroemu.pipelines.formats.atomic import write_atomic
+
+    campaign = load_campaign(options.spec)
+    out = options.out_dir
+    if out.exists() and not out.is_dir():
+        raise ConfigError("is not a folder", file=out)
+    tasks = log_tasks(campaign, out)
+    out.mkdir(parents=True, exist_ok=True)
+    store = PartStore(out / ".index", index_schema())
+    todo = [t for t in tasks if not (store.has(t.key) and Path(t.out).is_file())]
+    resumed = len(tasks) - len(todo)
+    made = 0
+    started = time.perf_counter()
+    with RunsProgress(len(tasks), resumed, label="generate", unit="logs", enabled=options.progress) as bar:
+
+        def stored(task: LogTask, rows: list[dict]) -> None:
+            nonlocal made
+            store.write(task.key, rows)
+            made += 1
+            bar.advance(1)
+
+        failures = run_tasks(
+            todo,
+            make_log,
+            stored,
+            scheduler=options.scheduler,
+            workers=options.workers,
+            processes=options.processes,
+            label=lambda t: t.key,
+        )
+    table = store.read(t.key for t in tasks)
+    index = out / "index.parquet"
+    readable(write_atomic(index, lambda f: pq.write_table(table, f)))
+    readable(write_atomic(out / "index.csv", lambda f: pacsv.write_csv(table, f)))
+    return GenerateSummary(
+        campaign=campaign,
+        logs=len(tasks),
+        resumed=resumed,
+        made=made,
+        failures=failures,
+        index=index,
+        elapsed_s=time.perf_counter() - started,
+    )

@@ -1,0 +1,257 @@
+"""Campaigns (gyroemu.pipelines.campaign, jobs.campaign): the campaign file, the Parquet store and its
+resume, and a tiny campaign on an in-process Dask cluster (threads, no worker processes).
+
+What is held, and why it could be false
+---------------------------------------
+- A bad campaign file fails before any work, naming the file and the key (exit status 2, no output).
+- The store's rows are exactly the bench's: each (seed, filter) row of a task equals what
+  :func:`run_bench` gives for the same cell and seed, to the bit (both are the same deterministic
+  computation on the same seeded draws; only timings differ).
+- Resume: a part removed is the only task run again; the rows after are the rows before (same keys,
+  same numbers), one per (cell, seed, filter).
+- A task that raises is reported with its error and the others' rows are stored.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from gyroemu.errors import ConfigError
+from gyroemu.pipelines import cli
+from gyroemu.pipelines.campaign import PartStore, consecutive, load_campaign, row_schema, run_tasks
+
+pa = pytest.importorskip("pyarrow")
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+TINY = """
+name = "tiny"
+scenarios = ["smooth_manoeuvre"]
+devices = ["consumer_mems", "tactical_mems"]
+durations_s = [0.5]
+seed_range = { start = 7, count = 3 }
+filters = ["madgwick", "mahony"]
+modes = ["9D", "6D"]
+seeds_per_task = 2
+"""
+
+
+# --- the campaign file --------------------------------------------------------------------------------
+
+
+def test_grid_and_tasks(tmp_path):
+    c = load_campaign(_write(tmp_path / "c.toml", TINY))
+    # consumer_mems has a magnetometer: 9D and 6D; tactical_mems has none: one 6D cell, not two alike.
+    assert [(Path(x.device).stem, x.mode) for x in c.cells] == [
+        ("consumer_mems", "9D"),
+        ("consumer_mems", "6D"),
+        ("tactical_mems", "6D"),
+    ]
+    assert c.seeds == (7, 8, 9)
+    assert [t.seeds for t in c.tasks[:2]] == [(7, 8), (9,)]
+    assert len(c.tasks) == 6 and c.runs == 3 * 3 * 2
+    assert len({t.key for t in c.tasks}) == 6
+    assert c.tasks[0].key == load_campaign(tmp_path / "c.toml").tasks[0].key  # stable across loads
+    assert consecutive((1, 2, 3, 7, 9, 10)) == [(1, 3), (7, 1), (9, 2)]
+
+
+def test_task_key_follows_the_config_content(tmp_path):
+    from gyroemu.dynamics.config import config_dir
+
+    scenario = tmp_path / "sc.toml"
+    text = (config_dir() / "scenarios" / "smooth_manoeuvre.toml").read_text()
+    scenario.write_text(text)
+    spec = _write(tmp_path / "c.toml", TINY.replace('["smooth_manoeuvre"]', '["sc.toml"]'))
+    before = load_campaign(spec)
+    assert before.cells[0].scenario == str(scenario.resolve())  # relative to the campaign file
+    scenario.write_text(text + "\n# a comment changes no value\n")
+    assert load_campaign(spec).tasks[0].key == before.tasks[0].key  # hashed as resolved, not as text
+    assert "\nseed = 0\n" in text
+    scenario.write_text(text.replace("\nseed = 0\n", "\nseed = 1\n"))  # another manoeuvre: other rows
+    assert load_campaign(spec).tasks[0].key != before.tasks[0].key
+
+
+@pytest.mark.parametrize(
+    "edit, key",
+    [
+        ("\nseed_rnage = { start = 0, count = 2 }\n", "seed_rnage"),
+        ("\nthreshold_deg = -1.0\n", "threshold_deg"),
+        ("\nseeds = [1, 2]\n", None),  # with seed_range: one or the other
+    ],
+)
+def test_bad_keys_name_the_file_and_key(tmp_path, edit, key):
+    spec = _write(tmp_path / "c.toml", TINY + edit)
+    with pytest.raises(ConfigError) as info:
+        load_campaign(spec)
+    assert info.value.file == str(spec)
+    if key is not None:
+        assert info.value.key == key
+
+
+@pytest.mark.parametrize(
+    "old, new, key",
+    [
+        ('"smooth_manoeuvre"', '"smooth_manouevre"', "scenarios[0]"),
+        ('"tactical_mems"', '"tactical_mem"', "devices[1]"),
+        ('"mahony"', '"mahoney"', "filters[1]"),
+    ],
+)
+def test_unknown_names_are_named_before_any_work(tmp_path, old, new, key):
+    spec = _write(tmp_path / "c.toml", TINY.replace(old, new))
+    with pytest.raises(ConfigError) as info:
+        load_campaign(spec)
+    assert (info.value.file, info.value.key) == (str(spec), key)
+    assert new.strip('"') in str(info.value)
+
+
+def test_cli_bad_campaign_exits_2_before_any_work(tmp_path, capsys):
+    spec = _write(tmp_path / "c.toml", TINY + "\nbogus = 1\n")
+    out = tmp_path / "out"
+    assert cli.main(["bench", "--campaign", str(spec), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert str(spec) in err and "bogus" in err
+    assert not out.exists()
+    good = _write(tmp_path / "g.toml", TINY)
+    with pytest.raises(SystemExit) as info:  # the grid is the file's
+        cli.main(["bench", "--campaign", str(good), "--filter", "mekf", "--out", str(out)])
+    assert info.value.code == 2
+    # --scheduler with today's flags: checked as a campaign would be, before connecting to anything.
+    for flags, named in ((["--scenario", "smooth_manouevre"], "--scenario"), (["--runs", "0"], "--runs")):
+        with pytest.raises(SystemExit) as info:
+            cli.main(["bench", "--scheduler", "tcp://127.0.0.1:1", *flags, "--out", str(out)])
+        assert info.value.code == 2
+        assert f"argument {named}" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_bench_flags_make_the_same_tasks_as_a_file(tmp_path):
+    from gyroemu.pipelines.campaign import campaign_from_spec
+    from gyroemu.pipelines.jobs.campaign import spec_from_bench_flags
+
+    flags = spec_from_bench_flags(
+        ["smooth_manoeuvre"],
+        ["consumer_mems"],
+        duration=0.5,
+        runs=3,
+        seed=7,
+        filters=["madgwick", "mahony"],
+        six_d=True,
+        batched=True,
+    )
+    text = TINY.replace(', "tactical_mems"', "").replace('["9D", "6D"]', '["6D"]').replace("= 2\n", "= 25\n")
+    from_file = load_campaign(_write(tmp_path / "c.toml", text))
+    assert [t.key for t in campaign_from_spec(flags).tasks] == [t.key for t in from_file.tasks]
+    assert len(from_file.tasks) == 1  # the store of one resumes the other
+
+
+# --- the store and the engine -------------------------------------------------------------------------
+
+
+def test_store_parts_are_whole_and_keyed(tmp_path):
+    schema = pa.schema([("k", pa.string()), ("x", pa.float64())])
+    store = PartStore(tmp_path / "runs", schema)
+    assert store.keys() == set() and store.read().num_rows == 0
+    store.write("a", [{"k": "a", "x": 1.0}, {"k": "a", "x": 2.0}])
+    store.write("b", [{"k": "b", "x": 3.0}])
+    (tmp_path / "runs" / ".part-c.parquet.x1y2.tmp").write_bytes(b"half a file")  # a write cut short
+    assert store.keys() == {"a", "b"}
+    assert store.read(["b", "missing"]).to_pylist() == [{"k": "b", "x": 3.0}]
+    import pyarrow.dataset as ds
+
+    assert sorted(ds.dataset(tmp_path / "runs").to_table()["x"].to_pylist()) == [1.0, 2.0, 3.0]
+
+
+def _square_or_fail(task: int) -> list[dict]:
+    if task == 3:
+        raise ValueError("cell 3 is bad")
+    return [{"task": task, "value": float(task * task)}]
+
+
+def test_engine_reports_a_failing_task_and_stores_the_rest(tmp_path):
+    store = PartStore(tmp_path, pa.schema([("task", pa.int64()), ("value", pa.float64())]))
+    seen = []
+
+    def stored(task, rows):
+        seen.append(task)
+        store.write(str(task), rows)
+
+    failures = run_tasks(list(range(6)), _square_or_fail, stored, workers=2, processes=False)
+    assert [(f.task, f.error) for f in failures] == [(3, "ValueError: cell 3 is bad")]
+    assert sorted(seen) == [0, 1, 2, 4, 5]
+    assert sorted(store.read()["value"].to_pylist()) == [0.0, 1.0, 4.0, 16.0, 25.0]
+
+
+# --- a tiny campaign, in-process ----------------------------------------------------------------------
+
+
+def test_tiny_campaign_rows_resume_and_report(tmp_path):
+    import json
+
+    from gyroemu.pipelines.jobs.bench import SimCase, run_bench
+    from gyroemu.pipelines.jobs.campaign import CampaignOptions, run_campaign
+
+    spec = _write(tmp_path / "c.toml", TINY)
+    options = CampaignOptions(spec=spec, out=tmp_path / "out", workers=2, processes=False, plots=False)
+    first = run_campaign(options)
+    assert (first.ran, first.resumed, first.failures, first.rows) == (6, 0, [], 18)
+    drawn = first.report  # the report is drawn from the store
+    rows = PartStore(tmp_path / "out" / "runs", row_schema()).read().to_pylist()
+    ident = [(r["task"], r["seed"], r["filter"]) for r in rows]
+    assert len(ident) == len(set(ident)) == 18
+    assert {(r["device"], r["mode"]) for r in rows} == {
+        ("consumer_mems", "9D"),
+        ("consumer_mems", "6D"),
+        ("tactical_mems", "6D"),
+    }
+
+    # Each row is the bench's number for its cell and seed, to the bit.
+    ref = run_bench([SimCase(device="tactical_mems", duration=0.5, six_d=True)], ["madgwick", "mahony"], 1, 9)
+    got = {r["filter"]: r for r in rows if r["device"] == "tactical_mems" and r["seed"] == 9}
+    for fr in ref.cases[0].filters:
+        assert got[fr.filter]["inclination_deg"] == fr.runs[0].inclination_deg
+        assert got[fr.filter]["total_deg"] is None  # 6D: no heading, no total
+
+    report = json.loads((tmp_path / "out" / "bench.json").read_text())
+    assert report["settings"]["campaign"]["rows_stored"] == 18
+    assert sum(len(fr["runs"]) for case in report["cases"] for fr in case["filters"]) == 18
+    assert len(drawn.cases) == 3
+
+    # Resume: remove one part; only that task runs again, and the rows are the same.
+    victim = next((tmp_path / "out" / "runs").glob("part-*.parquet"))
+    victim.unlink()
+    again = run_campaign(options)
+    assert (again.ran, again.resumed, again.rows) == (1, 5, 18)
+    after = PartStore(tmp_path / "out" / "runs", row_schema()).read().to_pylist()
+
+    def numbers(rs):
+        keep = ("task", "seed", "filter", "total_deg", "heading_deg", "inclination_deg", "convergence_s")
+        return sorted(
+            tuple(-1.0 if r[k] is None or (isinstance(r[k], float) and math.isnan(r[k])) else r[k] for k in keep)
+            for r in rs
+        )
+
+    assert numbers(after) == numbers(rows)
+
+
+def test_progress_counts_stored_runs_as_done_and_hides_off_a_terminal():
+    import io
+
+    from gyroemu.pipelines.campaign import RunsProgress
+
+    stream = io.StringIO()
+    with RunsProgress(24, 20, label="campaign x", stream=stream, enabled=True) as bar:
+        bar.advance(4)
+        bar.bar.refresh()
+    assert "20/24" in stream.getvalue() and "24/24" in stream.getvalue() and "runs/s" in stream.getvalue()
+    quiet = io.StringIO()  # not a terminal: no bar at all
+    with RunsProgress(24, stream=quiet) as bar:
+        assert bar.bar is None
+        bar.advance(24)
+    assert quiet.getvalue() == ""
