@@ -22,6 +22,7 @@ from gyroemu.errors import GyroemuError
 
 if TYPE_CHECKING:  # the job modules are imported where used: they pull in numpy, zenoh, ...
     from gyroemu.pipelines.jobs.simulate import SimulateOptions
+    from gyroemu.pipelines.transport.foxglove_view import ViewOptions
     from gyroemu.pipelines.transport.record import RecordOptions
     from gyroemu.pipelines.transport.replay import ReplayOptions
     from gyroemu.pipelines.transport.stream import StreamOptions
@@ -60,6 +61,8 @@ def _simulate_options(args: argparse.Namespace) -> SimulateOptions:
         rate=args.rate,
         seed=args.seed,
         force=args.force,
+        start_time=args.start_time,
+        frame_id=args.frame_id,
     )
 
 
@@ -84,6 +87,11 @@ def _cmd_info(args) -> int:
 
     info = log_info(Path(args.log))
     print(json.dumps(info.to_dict(configs=args.configs), indent=2) if args.json else info.text(configs=args.configs))
+    if args.plot:
+        from gyroemu.pipelines.jobs.plots import plot_info
+
+        picture = plot_info(Path(args.log))
+        print(f"drew {picture}", file=sys.stderr if args.json else sys.stdout)
     return 0
 
 
@@ -114,6 +122,10 @@ def _cmd_estimate(args) -> int:
     from gyroemu.pipelines.estimation.registry import FilterError, filter_class
     from gyroemu.pipelines.jobs.estimate import EstimateError, check_options, estimate_log
 
+    if args.smooth:
+        if args.filter not in ("mekf", "mekf-smooth"):
+            raise UsageError(f"argument --smooth: smooths the mekf, not --filter {args.filter}")
+        args.filter = "mekf-smooth"
     try:
         filter_class(args.filter)
     except FilterError as e:
@@ -138,10 +150,16 @@ def _cmd_estimate(args) -> int:
     except ValueError as e:  # a filter refusing the data (e.g. stamps): name the file
         raise UsageError(f"{source}: {e}") from None
     elapsed = time.perf_counter() - started
+    picture = None
+    if args.plot:
+        from gyroemu.pipelines.jobs.plots import plot_estimate
+
+        picture = plot_estimate(out)
     if args.json:
         document = {
             "input": str(source),
             "out": str(out),
+            **({"plot": str(picture)} if picture is not None else {}),
             "elapsed_s": elapsed,
             "devices": [
                 {"name": name, "samples": n, "filter": flt, "mode": "9D" if nine else "6D"}
@@ -160,6 +178,8 @@ def _cmd_estimate(args) -> int:
     for topic, topic_out, count in summary.topics:
         print(f"{topic} -> {topic_out}: {count} estimates")
     print(f"input copied with its estimate in {elapsed:.2f} s -> {out}")
+    if picture is not None:
+        print(f"drew {picture}")
     return 0
 
 
@@ -272,8 +292,89 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_campaign(args) -> int:
+    from gyroemu.pipelines.campaign import CampaignSpec, SchedulerLostError, campaign_from_spec
+    from gyroemu.pipelines.jobs.campaign import CampaignOptions, run_campaign, spec_from_bench_flags
+
+    spec: Path | CampaignSpec
+    if args.campaign is not None:
+        given = [f for f, v in (("--scenario", args.scenario), ("--device", args.device), ("--log", args.log)) if v]
+        given += [f for f, v in (("--filter", args.filter), ("--6d", args.six_d), ("--batched", args.batched)) if v]
+        if given:
+            raise UsageError(f"argument --campaign: the campaign file sets the grid; drop {', '.join(given)}")
+        spec = Path(args.campaign)
+    else:  # --scheduler with today's flags: the grid they describe, as a campaign
+        if args.log:
+            raise UsageError("argument --scheduler: --log cases run in one process; drop --scheduler")
+        flags = {"scenarios": "--scenario", "devices": "--device", "filters": "--filter", "seed_range": "--seed"}
+        try:
+            spec = spec_from_bench_flags(
+                args.scenario,
+                args.device,
+                duration=args.duration,
+                runs=args.runs,
+                seed=args.seed,
+                filters=args.filter,
+                six_d=args.six_d,
+                threshold_deg=args.threshold_deg,
+                batched=args.batched,
+            )
+            campaign_from_spec(spec)  # names checked before any work
+        except GyroemuError as e:
+            if e.file is not None:
+                raise  # a bad scenario or device file: names the file and key
+            key = str(getattr(e, "key", "") or "")
+            flag = "--runs" if key == "seed_range.count" else flags.get(key.split("[")[0].split(".")[0], "--scheduler")
+            raise UsageError(f"argument {flag}: {e.reason}") from None
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"argument --out: {out} is not a folder")
+    options = CampaignOptions(spec=spec, out=out, scheduler=args.scheduler, workers=args.workers)
+    try:
+        summary = run_campaign(options)
+    except SchedulerLostError as e:
+        stored = out / "runs"
+        hint = f"; the finished tasks are in {stored}: run again to resume" if stored.is_dir() else ""
+        print(f"gyroemu bench: error: {e}{hint}", file=sys.stderr)
+        return 1
+    print(summary.paths["markdown"].read_text(encoding="utf-8"))
+    print(
+        f"campaign {summary.campaign.name}: {summary.ran} task(s) run, {summary.resumed} found in the store, "
+        f"{len(summary.failures)} failed; {summary.rows} rows -> {summary.store}"
+    )
+    print(f"report -> {summary.paths['markdown']}, {summary.paths['json']}")
+    for failure in summary.failures:
+        print(f"gyroemu bench: error: {failure.task.cell.label}: {failure.error}", file=sys.stderr)
+    return 1 if summary.failures else 0
+
+
+def _cmd_generate(args) -> int:
+    from gyroemu.pipelines.campaign import SchedulerLostError
+    from gyroemu.pipelines.jobs.generate import GenerateOptions, run_generate
+
+    out = Path(args.out_dir)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"argument --out-dir: {out} is not a folder")
+    options = GenerateOptions(spec=Path(args.spec), out_dir=out, scheduler=args.scheduler, workers=args.workers)
+    try:
+        summary = run_generate(options)
+    except SchedulerLostError as e:
+        print(f"gyroemu generate: error: {e}; the finished logs are in {out}: run again to resume", file=sys.stderr)
+        return 1
+    print(
+        f"{summary.logs} log(s): {summary.made} made, {summary.resumed} there before, "
+        f"{len(summary.failures)} failed, in {summary.elapsed_s:.1f} s -> {summary.index}"
+    )
+    for failure in summary.failures:
+        print(f"gyroemu generate: error: {failure.task.key}: {failure.error}", file=sys.stderr)
+    return 1 if summary.failures else 0
+
+
 def _cmd_bench(args) -> int:
     import warnings
+
+    if args.campaign is not None or args.scheduler is not None:
+        return _cmd_campaign(args)
 
     from gyroemu.dynamics import ConfigError, load_scenario
     from gyroemu.pipelines.estimation.registry import FilterError, filter_class
@@ -426,6 +527,19 @@ def _pacing_options(args: argparse.Namespace) -> PacingOptions:
     return PacingOptions(wait_s=args.wait)
 
 
+def _foxglove_options(args: argparse.Namespace) -> ViewOptions | None:
+    """``--foxglove`` with ``--foxglove-port`` and ``--foxglove-rate`` (which need it); checked by the job."""
+    from gyroemu.pipelines.transport.foxglove_view import DEFAULT_PORT, DEFAULT_RATE_HZ, ViewOptions
+
+    if not args.foxglove:
+        for name in ("foxglove_port", "foxglove_rate"):
+            if getattr(args, name) is not None:
+                raise UsageError(f"argument --{name.replace('_', '-')}: only with --foxglove")
+        return None
+    port = DEFAULT_PORT if args.foxglove_port is None else args.foxglove_port
+    return ViewOptions(port=port, rate_hz=DEFAULT_RATE_HZ if args.foxglove_rate is None else args.foxglove_rate)
+
+
 def _stream_options(args: argparse.Namespace) -> StreamOptions:
     from gyroemu.pipelines.transport.stream import StreamOptions
 
@@ -437,8 +551,12 @@ def _stream_options(args: argparse.Namespace) -> StreamOptions:
         device_name=args.device_name,
         estimate=args.estimate,
         as_fast_as_possible=args.as_fast_as_possible,
+        start_time=args.start_time,
         session=_session_options(args),
         pacing=_pacing_options(args),
+        foxglove=_foxglove_options(args),
+        frame_id=args.frame_id,
+        **({} if args.tf_rate is None else {"tf_rate_hz": args.tf_rate}),
     )
 
 
@@ -491,6 +609,7 @@ def _replay_options(args: argparse.Namespace) -> ReplayOptions:
         session=_session_options(args),
         pacing=_pacing_options(args),
         clock=args.clock,
+        foxglove=_foxglove_options(args),
     )
 
 
@@ -501,6 +620,22 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         return run_replay(_replay_options(args))
     except ValueError as e:
         raise _argument_error(e, "--connect/--listen") from None
+
+
+def _cmd_view(args: argparse.Namespace) -> int:
+    from gyroemu.pipelines.jobs.view import ViewLogOptions, run_view
+    from gyroemu.pipelines.transport.foxglove_view import ViewOptions
+
+    options = ViewLogOptions(
+        path=Path(args.log),
+        view=ViewOptions(port=args.port, rate_hz=args.rate, host=args.host),
+        speed=args.speed,
+        playing=not args.paused,
+    )
+    try:
+        return run_view(options)
+    except ValueError as e:
+        raise _argument_error(e, "--port") from None
 
 
 def _cmd_router(args: argparse.Namespace) -> int:
@@ -539,6 +674,19 @@ def _add_zenoh_arguments(p, modes=True) -> None:
     p.add_argument("--config", default=None, metavar="FILE.json5", help="a zenoh JSON5 config file")
 
 
+def _add_foxglove_arguments(p) -> None:
+    p.add_argument(
+        "--foxglove",
+        action="store_true",
+        help="also serve a live 3D view on a Foxglove WebSocket (open ws://localhost:PORT in the Foxglove app; "
+        "layout: configs/foxglove/gyroemu.json)",
+    )
+    p.add_argument("--foxglove-port", type=int, default=None, metavar="PORT", help="its TCP port (default: 8765)")
+    p.add_argument(
+        "--foxglove-rate", type=_positive, default=None, metavar="HZ", help="its /tf and /scene rate (default: 30)"
+    )
+
+
 def _add_ros2_arguments(p, what: str) -> None:
     p.add_argument(
         "--ros2",
@@ -549,6 +697,26 @@ def _add_ros2_arguments(p, what: str) -> None:
     p.add_argument(
         "--domain", type=int, default=None, metavar="N", help="ROS 2 domain of --ros2 (default: $ROS_DOMAIN_ID, else 0)"
     )
+
+
+def _add_dask_arguments(p) -> None:
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="tcp://HOST:8786",
+        help="a Dask scheduler to run on (default: a local cluster of one worker process per core)",
+    )
+    p.add_argument("--workers", type=_count, default=None, metavar="N", help="worker processes of the local cluster")
+
+
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
 
 
 def _positive(text: str) -> float:
@@ -637,6 +805,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seed of every random draw, 0 to 2**128 - 1 (default: 0)")
     p.add_argument("--out", required=True, help="output file: .mcap (ROS 2 log) or .npz (arrays)")
     p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    p.add_argument(
+        "--start-time",
+        default=None,
+        help="stamp of scenario time 0 in an .mcap log: ISO 8601 (2025-06-01T12:00:00Z) or Unix epoch seconds "
+        "(default: 2025-01-01T00:00:00Z, fixed so a seed gives the same bytes)",
+    )
+    p.add_argument(
+        "--frame-id",
+        default=None,
+        help="the IMU's tf frame in an .mcap log (/imu's frame_id; default: the device name)",
+    )
     p.set_defaults(func=_cmd_simulate)
 
     p = sub.add_parser(
@@ -648,6 +827,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("log", metavar="LOG", help="an MCAP file")
     p.add_argument("--configs", action="store_true", help="also print the embedded scenario and device configs")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument("--plot", action="store_true", help="draw each IMU topic's series into LOG.info.png")
     p.set_defaults(func=_cmd_info)
 
     p = sub.add_parser(
@@ -674,7 +854,8 @@ def build_parser() -> argparse.ArgumentParser:
         "60 s, 3 runs, every available filter.",
         epilog="Filters: mekf, madgwick, mahony, ahrs-ekf, vqf (needs the vqf package), or your own class as "
         "module:Class or path/to/file.py:Class, made with the FilterSetup and obeying "
-        "pipelines/estimation/protocol.py.",
+        "pipelines/estimation/protocol.py. Offline estimators, run when named and reported in their own "
+        "table: mekf-smooth (MEKF + RTS smoother), offline-vqf (vqf.offlineVQF).",
     )
     p.add_argument(
         "--scenario",
@@ -706,7 +887,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         default=None,
         metavar="NAME",
-        help="a filter to run (repeatable; default: every available built-in)",
+        help="a filter to run (repeatable; default: every available online built-in)",
     )
     p.add_argument("--6d", dest="six_d", action="store_true", help="ignore magnetometers (6D: inclination only)")
     p.add_argument(
@@ -716,7 +897,27 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--threshold-deg", type=_positive, default=2.0, help="convergence threshold, degrees (default: 2)")
     p.add_argument("--out", default="bench", help="folder for the report (default: ./bench)")
+    p.add_argument(
+        "--campaign",
+        default=None,
+        metavar="SPEC.toml",
+        help="run a campaign file's grid (scenarios x devices x durations x modes x seeds, filters) on Dask; "
+        "rows in OUT/runs/*.parquet, resumed when run again",
+    )
+    _add_dask_arguments(p)
     p.set_defaults(func=_cmd_bench)
+
+    p = sub.add_parser(
+        "generate",
+        help="write a dataset of MCAP logs over a campaign file's grid, in parallel on Dask",
+        description="Write one MCAP log per scenario x device x duration x seed of a campaign file (as "
+        "'gyroemu simulate' writes it, byte for byte) and index.parquet / index.csv listing them; "
+        "logs already there are kept.",
+    )
+    p.add_argument("spec", metavar="SPEC.toml", help="the campaign file")
+    p.add_argument("--out-dir", required=True, help="folder of the logs and the index (made if missing)")
+    _add_dask_arguments(p)
+    p.set_defaults(func=_cmd_generate)
 
     p = sub.add_parser(
         "twin",
@@ -765,7 +966,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--filter",
         default="mekf",
         metavar="NAME",
-        help="mekf (default), madgwick, mahony, ahrs-ekf, vqf, or module:Class",
+        help="mekf (default), madgwick, mahony, ahrs-ekf, vqf, mekf-smooth, offline-vqf, or module:Class",
+    )
+    p.add_argument(
+        "--smooth",
+        action="store_true",
+        help="offline: the MEKF forward, then a Rauch-Tung-Striebel smoother backward over the whole log "
+        "(the filter mekf-smooth; orientation_covariance is the smoothed one)",
     )
     p.add_argument("--6d", dest="six_d", action="store_true", help="ignore the magnetometer")
     p.add_argument(
@@ -773,6 +980,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--topic-out", default=None, metavar="TOPIC", help="topic of the estimate (default: /estimate/imu)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON (the closing note on stderr)")
+    p.add_argument(
+        "--plot",
+        action="store_true",
+        help="draw roll, pitch, yaw against the truth, the attitude error and the bias estimates into OUT.estimate.png",
+    )
     p.set_defaults(func=_cmd_estimate)
 
     p = sub.add_parser("presets", help="list the built-in devices as a table")
@@ -828,6 +1040,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenario", required=True, help="built-in name or TOML path")
     p.add_argument("--device", required=True, help="built-in device name or TOML path")
     p.add_argument(
+        "--start-time",
+        default=None,
+        help="stamp of the run's time 0: ISO 8601 (2025-06-01T12:00:00Z) or Unix epoch seconds "
+        "(default: the wall clock when the stream starts)",
+    )
+    p.add_argument(
+        "--frame-id",
+        default=None,
+        help="the IMU's tf frame (/imu's frame_id, child of base_link on /tf_static; default: the device name)",
+    )
+    p.add_argument(
+        "--tf-rate",
+        type=float,
+        default=None,
+        help="/tf (map -> base_link, the truth) messages per second, at most (default: 30, a display's rate)",
+    )
+    p.add_argument(
         "--duration",
         type=_duration,
         default=None,
@@ -854,6 +1083,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_zenoh_arguments(p)
     _add_ros2_arguments(p, "publish on")
+    _add_foxglove_arguments(p)
     p.set_defaults(func=_cmd_stream)
 
     p = sub.add_parser("record", help="record gyroemu zenoh streams into an MCAP file", epilog=zenoh_note)
@@ -901,7 +1131,22 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_zenoh_arguments(p)
     _add_ros2_arguments(p, "publish on")
+    _add_foxglove_arguments(p)
     p.set_defaults(func=_cmd_replay)
+
+    p = sub.add_parser(
+        "view",
+        help="serve a log to the Foxglove app (3D view, plots) with play, pause and seek",
+        epilog="Open ws://localhost:PORT in the Foxglove app (layout: configs/foxglove/gyroemu.json). "
+        "Runs until SIGINT/SIGTERM.",
+    )
+    p.add_argument("log", metavar="LOG", help="a gyroemu MCAP log")
+    p.add_argument("--port", type=int, default=8765, help="TCP port of the Foxglove WebSocket (default: 8765)")
+    p.add_argument("--rate", type=_positive, default=30.0, metavar="HZ", help="/tf and /scene rate (default: 30)")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1)")
+    p.add_argument("--speed", type=_positive, default=1.0, help="initial playback speed (default: 1)")
+    p.add_argument("--paused", action="store_true", help="start paused (press play in the app)")
+    p.set_defaults(func=_cmd_view)
 
     p = sub.add_parser("router", help="run a zenoh router (until SIGINT/SIGTERM)")
     p.add_argument(
