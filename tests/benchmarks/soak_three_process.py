@@ -44,6 +44,7 @@ sys.path.insert(0, str(ROOT))
 
 SCENARIO, DEVICE, NAME = "heavy_top", "consumer_mems", "soak"
 TOPICS = ("/imu", "/mag", "/truth/imu", "/raw/mems")
+TF_TOPICS = ("/tf", "/tf_static")  # the stream publishes its tf tree too (display rate; the mounting once)
 _TICK = os.sysconf("SC_CLK_TCK")
 
 
@@ -105,13 +106,16 @@ class Process:
 def expected_payloads(duration: float, seed: int) -> dict[str, np.ndarray]:
     """Topic -> (N, size) rows: what the stream encodes and publishes for this scenario, device and seed."""
     from gyroemu.dynamics import load_scenario
+    from gyroemu.pipelines.formats.imu_covariance import measurement_variances
     from gyroemu.pipelines.mcap_io import truth_series
     from gyroemu.pipelines.transport.stream import encode_run
     from gyroemu.sensors import load_device
 
     traj = load_scenario(SCENARIO).simulate(duration=duration)
-    samples = load_device(DEVICE, seed=seed).measure(traj)
-    return encode_run(samples, truth_series(traj, samples))
+    device = load_device(DEVICE, seed=seed)
+    samples = device.measure(traj)
+    variances = measurement_variances(device) or (None, None)
+    return encode_run(samples, truth_series(traj, samples), variances=variances)
 
 
 def check(folder: Path, duration: float, seed: int) -> tuple[bool, list[str]]:
@@ -146,16 +150,21 @@ def check(folder: Path, duration: float, seed: int) -> tuple[bool, list[str]]:
             )
             + ("" if good else "  <-- FAIL")
         )
-    ok &= len(by_topic) == len(TOPICS)
+    ok &= len(by_topic) == len(TOPICS) + len(TF_TOPICS)  # and the stream's tf tree
 
     recorded: dict[str, list[bytes]] = {t: [] for t in expected}
     other = 0
+    tree = dict.fromkeys(TF_TOPICS, 0)
     for batch in iter_mcap_batches(folder / "soak.mcap"):
         for m in batch:
             if m.topic in recorded:
                 recorded[m.topic].append(m.data)
+            elif m.topic in tree:
+                tree[m.topic] += 1
             else:
                 other += 1
+    lines.append("  the tf tree: " + ", ".join(f"{count} on {topic}" for topic, count in tree.items()))
+    ok &= all(tree.values())
     lines.append(
         f"  the file ({(folder / 'soak.mcap').stat().st_size / 1e6:.1f} MB), per topic against the "
         f"library's encoding of the same run:"
@@ -227,6 +236,8 @@ def run(duration: float, seed: int, folder: Path, out=sys.stdout) -> bool:
             "client",
             "--wait",
             "60",
+            "--start-time",
+            "0",  # stamps from 0, as the reference below is encoded
         )
         procs.append(stream)
         stream.wait_for("publishing", 600)
