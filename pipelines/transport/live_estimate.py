@@ -7,6 +7,10 @@ Messages queue in FIFO channels; the worker drains them, pairs each ``/imu`` sam
 sample of the same stamp (when the filter is 9D; a field that has not arrived when a later sample's
 has is taken as missing), feeds the block to the filter (whose state carries over between blocks) and
 publishes one ``/estimate/imu`` message per sample, BLOCK congestion control, rmw_zenoh attachment.
+With a ``tf_rate_hz`` it also puts ``map`` → ``body_estimate`` (the estimated attitude, at the world's
+origin: a live filter knows no position) on the device's ``/tf`` key, thinned to that rate as the
+stream thins its own ``/tf`` (:class:`~gyroemu.pipelines.formats.frames.TfThinning`), so a tf listener
+sees the estimate beside the truth's ``map`` → ``base_link``.
 Topics and the encoding of the estimate are the channel vocabulary's (:mod:`gyroemu.pipelines.formats.channels`),
 so the live estimate holds the bytes ``gyroemu estimate`` writes into a file.
 """
@@ -19,8 +23,18 @@ import time
 import numpy as np
 
 from gyroemu.pipelines.estimation.series import estimate_series
-from gyroemu.pipelines.formats.channels import ESTIMATE_ROLE, IMU_ROLE, MAG_ROLE, encode_series, role_topic
+from gyroemu.pipelines.formats.channels import (
+    ESTIMATE_FRAME,
+    ESTIMATE_ROLE,
+    IMU_ROLE,
+    MAG_ROLE,
+    WORLD_FRAME,
+    encode_series,
+    role_topic,
+)
+from gyroemu.pipelines.formats.frames import TF_TOPIC, TfThinning
 from gyroemu.pipelines.formats.messages import IMU, MAGNETIC_FIELD
+from gyroemu.pipelines.formats.tf_messages import encode_tf
 from gyroemu.pipelines.transport.zenoh_io import PacedPublisher, drain, subscribe, topic_to_key
 
 __all__ = ["LiveEstimator"]
@@ -38,6 +52,8 @@ class LiveEstimator:
         Made for the stream's rate; ``flt.setup.use_mag`` (when present) says 9D.
     use_mag : bool
         Pair ``/mag`` samples with ``/imu`` samples (9D).
+    tf_rate_hz : float or None
+        Also put ``map`` → ``body_estimate`` on ``/tf`` at this rate (None: not).
 
     Attributes
     ----------
@@ -45,14 +61,17 @@ class LiveEstimator:
         Estimates sent so far.
     """
 
-    def __init__(self, session, device: str, flt, use_mag: bool):
+    def __init__(self, session, device: str, flt, use_mag: bool, tf_rate_hz: float | None = None):
         self.flt = flt
         self.use_mag = use_mag
         self.published = 0
         self._imu = subscribe(session, topic_to_key(device, role_topic(IMU_ROLE)))
         self._mag = subscribe(session, topic_to_key(device, role_topic(MAG_ROLE))) if use_mag else None
         self.key = topic_to_key(device, role_topic(ESTIMATE_ROLE))
-        self._out = PacedPublisher(session, [self.key])
+        self.tf_key = topic_to_key(device, TF_TOPIC) if tf_rate_hz is not None else None
+        self._thinning = TfThinning(tf_rate_hz) if tf_rate_hz is not None else None
+        self._last_tf: np.ndarray | None = None
+        self._out = PacedPublisher(session, [self.key] if self.tf_key is None else [self.key, self.tf_key])
         self._pending: list[tuple[int, np.ndarray, np.ndarray]] = []  # (stamp ns, gyro, accel)
         self._fields: dict[int, np.ndarray] = {}
         self._t0_ns: int | None = None
@@ -73,12 +92,19 @@ class LiveEstimator:
         end = time.monotonic() + drain_s
         while time.monotonic() < end and self._step(final=True):
             pass
+        if self._thinning is not None and self._thinning.last() and self._last_tf is not None:
+            self._out.put(str(self.tf_key), self._last_tf.tobytes())  # the run's last sample, as /tf ends
         self._stop.set()
         self._thread.join(timeout=5)
         self._out.close()
         for sub in (self._imu, self._mag):
             if sub is not None:
                 sub.undeclare()
+
+    @staticmethod
+    def _tf_rows(stamp_ns: np.ndarray, q_wb: np.ndarray) -> np.ndarray:
+        """``map`` -> ``body_estimate`` TFMessages at ``stamp_ns`` (N,): rotations ``q_wb`` (N, 4), w first."""
+        return encode_tf(stamp_ns, [(WORLD_FRAME, ESTIMATE_FRAME)], np.zeros(3), q_wb[:, None, [1, 2, 3, 0]])
 
     def _loop(self) -> None:
         while not self._stop.is_set():
@@ -120,8 +146,16 @@ class LiveEstimator:
             self._t0_ns = int(stamp_ns[0])
         t_rel = (stamp_ns - self._t0_ns) * 1e-9
         estimate = self.flt.process(t_rel, gyro, accel, field)
-        rows = encode_series(stamp_ns, estimate_series(stamp_ns * 1e-9, estimate, gyro))
-        for row in rows:
+        series = estimate_series(stamp_ns * 1e-9, estimate, gyro)
+        rows = encode_series(stamp_ns, series)
+        tf_at = {}
+        if self._thinning is not None:
+            keep = self._thinning.keep(stamp_ns)
+            tf_at = dict(zip(keep.tolist(), self._tf_rows(stamp_ns[keep], series.q_wb[keep])))
+            self._last_tf = self._tf_rows(stamp_ns[-1:], series.q_wb[-1:])[0]
+        for i, row in enumerate(rows):
             self._out.put(self.key, row.tobytes())
+            if i in tf_at:
+                self._out.put(str(self.tf_key), tf_at[i].tobytes())
         self.published += len(rows)
         return True

@@ -298,6 +298,7 @@ def _start_estimator(options: StreamOptions, dev: Device, scen: Scenario, sample
         options.device_name,
         make_filter(options.estimate, setup),
         setup.use_mag,
+        tf_rate_hz=options.tf_rate_hz,  # map -> body_estimate beside the stream's map -> base_link
     ).start()
 
 

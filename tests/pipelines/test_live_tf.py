@@ -153,6 +153,33 @@ def test_recorded_stream_tree_resolves_world_body_imu_at_every_imu_stamp(procs, 
     assert error_q[at].max() <= 16 * EPS
 
 
+@pytest.mark.slow
+def test_the_live_estimate_goes_on_tf_beside_the_truth(procs, tmp_path):  # noqa: F811
+    """``stream --estimate`` -> ``record``: the log's /tf also holds map -> body_estimate at the display
+    rate (the live filter's /estimate/imu thinned as /tf is), its rotation the estimate's at the same
+    stamps (the same doubles, reordered), at the world's origin."""
+    from gyroemu.pipelines.formats.mcap_log import read_tf
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    out = tmp_path / "rec.mcap"
+    procs.start("rec", "record", "--out", str(out), "--listen", endpoint, "--mode", "peer")
+    procs.wait_for("rec", "subscribed")
+    procs.start(
+        "stream", "stream", "--scenario", SCENARIO, "--device", DEVICE, "--duration", "3", "--seed", "4",
+        "--estimate", "mekf", "--connect", endpoint, "--mode", "peer",
+    )  # fmt: skip
+    assert procs.wait("stream", 90) == 0, procs.log("stream")
+    time.sleep(1.0)
+    assert procs.stop("rec") == 0, procs.log("rec")
+    estimates = IMU.decode([m.data for m in _rows(out, "/estimate/imu")])
+    assert len(estimates) == 3000
+    tree = read_tf(out, static=False).select("map", "body_estimate")
+    keep = tf_indices(estimates.stamp_ns, 30.0)
+    np.testing.assert_array_equal(tree.stamp_ns, estimates.stamp_ns[keep])
+    np.testing.assert_array_equal(tree.q, estimates["orientation"][keep][:, [3, 0, 1, 2]])
+    assert not np.any(tree.translation)
+
+
 class _Bytes:
     def __init__(self, data: bytes) -> None:
         self.data = data
