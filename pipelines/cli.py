@@ -183,6 +183,13 @@ def _cmd_estimate(args) -> int:
     return 0
 
 
+def _cmd_precompile(args) -> int:
+    from gyroemu.pipelines.jobs.precompile import run_precompile
+
+    run_precompile(out=sys.stderr)
+    return 0
+
+
 def _cmd_presets(args) -> int:
     import numpy as np
 
@@ -990,6 +997,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("presets", help="list the built-in devices as a table")
     p.add_argument("--json", action="store_true", help="print the list as JSON")
     p.set_defaults(func=_cmd_presets)
+
+    p = sub.add_parser(
+        "precompile",
+        help="compile every numba kernel into the user's cache now (about 1.5 min once per install), "
+        "so that the first runs do not pay the compiler",
+    )
+    p.set_defaults(func=_cmd_precompile)
 
     p = sub.add_parser("allan", help="fit the noise terms of a static IMU log and draw its Allan plot")
     p.add_argument("log", metavar="LOG", help="a static gyro log (.mcap, or .npz from 'gyroemu simulate')")

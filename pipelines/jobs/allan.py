@@ -670,7 +670,7 @@ def _mcap_series(log: Path) -> tuple[_GyroSeries, float, str | None, _TruthStats
     a whole-file sort would order it) is refused.
     """
     from gyroemu.pipelines.formats.channels import ESTIMATE_ROLE, IMU_ROLE, TRUTH_ROLE, role_accepts, split_topic
-    from gyroemu.pipelines.formats.mcap_log import LogWarning, no_imu_error
+    from gyroemu.pipelines.formats.mcap_log import announce_scan, no_imu_error
     from gyroemu.pipelines.formats.mcap_records import LogError, McapScan
     from gyroemu.pipelines.formats.messages import IMU
 
@@ -744,15 +744,7 @@ def _mcap_series(log: Path) -> tuple[_GyroSeries, float, str | None, _TruthStats
             if data.payload or data.loose:
                 gather(channel_id)
 
-    if scan.truncated_at is not None:
-        warnings.warn(
-            f"{log}: truncated at byte {scan.truncated_at} (no MCAP footer): recovered "
-            f"{scan.message_count} messages from {scan.chunks} complete chunks",
-            LogWarning,
-            stacklevel=3,
-        )
-    for topic, reason in scan.skipped.items():
-        warnings.warn(f"{log}: skipping topic {topic}: {reason}", LogWarning, stacklevel=3)
+    announce_scan(log, scan)  # a truncated file, skipped topics (not the tf tree), as read_mcap warns
     devices = {c: s for c, s in series.items() if s.n and candidate(c)}
     metadata = [dict(m.metadata) for m in scan.metadata if m.name == "gyroemu"]
     records = {m.get("topic_prefix", ""): m for m in metadata}
