@@ -4,13 +4,14 @@ the time left at that rate. Piped or redirected stderr, CI logs and the tests se
 
 from __future__ import annotations
 
-import sys
 from typing import Any
+
+from gyroemu.pipelines.jobs.progress import CountProgress
 
 __all__ = ["RunsProgress"]
 
 
-class RunsProgress:
+class RunsProgress(CountProgress):
     """``total`` runs, ``done`` of them already stored; :meth:`advance` as tasks finish. ``enabled``
     forces the bar on or off (default: whether ``stream``, stderr by default, is a terminal)."""
 
@@ -24,37 +25,7 @@ class RunsProgress:
         stream: Any = None,
         enabled: bool | None = None,
     ) -> None:
-        self.stream = sys.stderr if stream is None else stream
-        if enabled is None:
-            isatty = getattr(self.stream, "isatty", None)
-            enabled = bool(isatty and isatty())
-        self.bar = None
-        if enabled:
-            from tqdm import tqdm
-
-            self.bar = tqdm(
-                total=total,
-                initial=done,
-                desc=label or None,
-                unit=f" {unit}",
-                file=self.stream,
-                leave=False,
-                dynamic_ncols=True,
-                mininterval=0.5,
-            )
-
-    def advance(self, count: int) -> None:
-        """Count ``count`` more runs done."""
-        if self.bar is not None:
-            self.bar.update(count)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-            self.bar = None
+        super().__init__(total, label=label, unit=unit, stream=stream, enabled=enabled, initial=done, unit_scale=False)
 
     def __enter__(self) -> RunsProgress:
         return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

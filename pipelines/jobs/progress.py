@@ -95,11 +95,20 @@ class CountProgress:
     """A run's progress in samples as a tqdm bar on ``stream`` (default stderr), on a terminal only.
 
     ``total`` None: a run without end (the bar counts up). Call :meth:`advance` as samples are made;
-    use the object as a context manager (or call :meth:`close`). ``enabled`` as :class:`PhaseProgress`.
+    use the object as a context manager (or call :meth:`close`). ``enabled`` as :class:`PhaseProgress`;
+    ``initial``: the count done before the bar starts; ``unit_scale``: counts as 1.2M rather than 1200000.
     """
 
     def __init__(
-        self, total: int | None, *, label: str = "", unit: str = "samples", stream=None, enabled: bool | None = None
+        self,
+        total: int | None,
+        *,
+        label: str = "",
+        unit: str = "samples",
+        stream=None,
+        enabled: bool | None = None,
+        initial: int = 0,
+        unit_scale: bool = True,
     ):
         self.stream = sys.stderr if stream is None else stream
         enabled = _shown(self.stream, enabled)
@@ -109,9 +118,10 @@ class CountProgress:
 
             self.bar = tqdm(
                 total=total,
+                initial=initial,
                 desc=label or None,
                 unit=f" {unit}",
-                unit_scale=True,
+                unit_scale=unit_scale,
                 file=self.stream,
                 leave=False,
                 dynamic_ncols=True,

@@ -256,12 +256,16 @@ class Recorder:
             if info.type_hash:
                 metadata["topic_type_hash"] = info.type_hash
             self._channels[key] = mcap.register_channel(info.topic, "cdr", schema_id, metadata)
-            if self._on_new_topic is not None:
-                try:
-                    self._on_new_topic(info)
-                except Exception:  # a graph token is advisory: never lose data over it
-                    pass
+            self._announce_topic(info)
         return self._channels[key]
+
+    def _announce_topic(self, info: KeyInfo) -> None:
+        """Tell ``on_new_topic`` of a new channel (a ROS 2 graph token: advisory, never lose data over it)."""
+        if self._on_new_topic is not None:
+            try:
+                self._on_new_topic(info)
+            except Exception:
+                pass
 
     def _channel(self, info: KeyInfo) -> int:
         if info.topic in _TF_TOPICS and info.type_name in (None, _TF_TYPE):
@@ -285,11 +289,7 @@ class Recorder:
             # the type hash as rosbag2 (Iron and later) records it
             metadata = {"topic_type_hash": info.type_hash} if info.type_hash else None
             self._channels[key] = self._mcap.register_ros2_channel(self._devices[device] + topic, mtype, metadata)
-            if self._on_new_topic is not None:
-                try:
-                    self._on_new_topic(info)
-                except Exception:  # a graph token is advisory: never lose data over it
-                    pass
+            self._announce_topic(info)
         return self._channels[key]
 
     def _describe(self, device: str) -> None:
