@@ -149,7 +149,7 @@ class LiveEstimator:
         series = estimate_series(stamp_ns * 1e-9, estimate, gyro)
         rows = encode_series(stamp_ns, series)
         tf_at = {}
-        if self._thinning is not None:
+        if self._thinning is not None and series.q_wb is not None:  # an attitude filter gives q_wb
             keep = self._thinning.keep(stamp_ns)
             tf_at = dict(zip(keep.tolist(), self._tf_rows(stamp_ns[keep], series.q_wb[keep])))
             self._last_tf = self._tf_rows(stamp_ns[-1:], series.q_wb[-1:])[0]
