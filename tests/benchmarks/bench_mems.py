@@ -4,8 +4,9 @@
 
 A script, not a test (pytest does not collect it). Both models run a three-axis triad through
 :meth:`MemsGyro.respond` on the inner grid the mechanism asks for at the output rate
-(:meth:`MemsGyro.inner_rate_hz`, 4 kHz at 1 kHz output for the defaults), in chunks of
-``gyroemu.sensors.imu.CHUNK_INNER_SAMPLES`` carrying their state, as the IMU feeds them. The truth is a
+(:meth:`MemsGyro.inner_rate_hz`: the output rate for the baseband model, whose steps are exact for
+the forcing's cubic Hermite interpolant; 4 kHz at 1 kHz output for the carrier model), in chunks of
+``gyroemu.sensors.device_run.BLOCK_INNER_SAMPLES`` carrying their state, as the IMU feeds them. The truth is a
 tumbling, vibrating, warming sensor; making it is not timed, only ``respond``. Each figure is the best
 of ``--repeats`` runs after a warm-up that loads the numba kernels. Printed: simulated seconds per
 wall-clock second ("× real time") for each model, and their ratio.
@@ -31,7 +32,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from gyroemu.sensors.imu import CHUNK_INNER_SAMPLES  # noqa: E402
+from gyroemu.sensors.device_run import BLOCK_INNER_SAMPLES  # noqa: E402
 from gyroemu.sensors.mechanism import GyroTruth  # noqa: E402
 from gyroemu.sensors.mems import CARRIER_STEPS_PER_CYCLE, MemsGyro  # noqa: E402
 
@@ -61,8 +62,8 @@ def run(gyro: MemsGyro, seconds: float, inner_hz: float) -> float:
     dt = 1.0 / inner_hz
     total = int(round(seconds * inner_hz))
     rng, state, elapsed = np.random.default_rng(0), {}, 0.0
-    for first in range(0, total, CHUNK_INNER_SAMPLES):
-        last = min(first + CHUNK_INNER_SAMPLES, total)
+    for first in range(0, total, BLOCK_INNER_SAMPLES):
+        last = min(first + BLOCK_INNER_SAMPLES, total)
         truth = truth_chunk(np.arange(first, last + 1) * dt, dt)  # shares its first sample with the last chunk
         start = time.perf_counter()
         gyro.respond(truth, rng, state)

@@ -7,7 +7,7 @@ measured in the same run.
 A script, not a test (pytest does not collect it). Each mechanism runs a three-axis triad through
 ``respond`` on the inner grid it asks for at its output rate (:meth:`inner_rate_hz`: the output rate
 itself for the FOG, the 32 kHz ``simulation_rate_hz`` for the dithered RLG, which must resolve its
-dither and lock-in crossings), in chunks of ``gyroemu.sensors.imu.CHUNK_INNER_SAMPLES`` carrying their state,
+dither and lock-in crossings), in chunks of ``gyroemu.sensors.device_run.BLOCK_INNER_SAMPLES`` carrying their state,
 as the IMU feeds them. The truth is a manoeuvring vehicle (rates up to ~0.5 rad/s); making it is not
 timed. Each figure is the best of ``--repeats`` runs after a warm-up that loads the numba kernels;
 "× real time" is simulated seconds per wall-clock second. Target: 100× for every mechanism case.
@@ -46,8 +46,8 @@ from scipy.integrate import solve_ivp  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
+from gyroemu.sensors.device_run import BLOCK_INNER_SAMPLES  # noqa: E402
 from gyroemu.sensors.fog import ELEMENTARY_CHARGE, FiberOpticGyro  # noqa: E402
-from gyroemu.sensors.imu import CHUNK_INNER_SAMPLES  # noqa: E402
 from gyroemu.sensors.mechanism import GyroTruth  # noqa: E402
 from gyroemu.sensors.rlg import RingLaserGyro  # noqa: E402
 
@@ -80,8 +80,8 @@ def run_mechanism(gyro, seconds: float, inner_hz: float) -> tuple[float, float]:
     dt = 1.0 / inner_hz
     total = int(round(seconds * inner_hz))
     chunks = [
-        truth_chunk(np.arange(first, min(first + CHUNK_INNER_SAMPLES, total) + 1) * dt, dt)
-        for first in range(0, total, CHUNK_INNER_SAMPLES)
+        truth_chunk(np.arange(first, min(first + BLOCK_INNER_SAMPLES, total) + 1) * dt, dt)
+        for first in range(0, total, BLOCK_INNER_SAMPLES)
     ]  # made before the clock starts
     rng, state = np.random.default_rng(0), {}
     start, cpu = time.perf_counter(), time.process_time()

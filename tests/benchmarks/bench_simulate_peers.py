@@ -46,7 +46,7 @@ MODELS = {
     "ahrs.Sensors": "models: gyro from quaternion finite differences, gravity and a fixed field rotated into "
     "the body, white noise, a constant uniform gyro bias; leaves out: linear acceleration, bias drift, "
     "random walks, scale factor, misalignment, quantisation, range, filters, the mechanism, MCAP output",
-    "gyroemu API": "models: the MEMS proof-mass mechanism on its inner grid (Coriolis, quadrature, "
+    "gyroemu API": "models: the MEMS proof-mass mechanism stepped exactly per output interval (Coriolis, quadrature, "
     "g-sensitivity, Brownian noise, demodulator filter), every IEEE error term (white noise, bias "
     "instability, rate random walk, turn-on bias, scale factor, misalignment, range, quantisation), "
     "accelerometer with linear acceleration, magnetometer; leaves out: nothing of the device file",
@@ -100,6 +100,7 @@ def bench_rate(rate: float, samples: int, repeats: int, folder: Path) -> dict[st
         f"{rate:g}",
         "--out",
         str(out),
+        "--force",  # each repeat writes the same file again
     ]
 
     def api() -> None:
