@@ -368,6 +368,27 @@ def _with_estimates(batch: RawMessages, channel_ids: np.ndarray, follows: dict[i
     parts = [(channel_ids[channel], batch.sequence, batch.log_time, batch.publish_time, batch.start, batch.size)]
     buffers = [batch.buffer]
     base = len(batch.buffer)
+
+    def add(rows: np.ndarray, channel_out: int, first_sequence: int, k: np.ndarray) -> int:
+        """Put encoded ``rows`` (m, size) on ``channel_out`` right after the input messages ``k`` (m,),
+        with their log and publish times; returns m."""
+        nonlocal base
+        m, size = rows.shape
+        buffers.append(rows.reshape(-1))
+        parts.append(
+            (
+                np.full(m, channel_out, dtype=np.int64),
+                (first_sequence + np.arange(m)) % (1 << 32),
+                batch.log_time[k],
+                batch.publish_time[k],
+                base + np.arange(m, dtype=np.int64) * size,
+                np.full(m, size, dtype=np.int64),
+            )
+        )
+        position.append(k * 2 + 1)
+        base += rows.size
+        return m
+
     for channel_id, target in follows.items():
         mine = np.flatnonzero(channel == channel_id)
         if not len(mine):
@@ -386,41 +407,12 @@ def _with_estimates(batch: RawMessages, channel_ids: np.ndarray, follows: dict[i
                 name: value[row[group]] if value.ndim > 1 else value for name, value in target.fields.items()
             }
             rows = IMU.encode(stamps[group], frame_id, fields)
-            m, size = rows.shape
-            buffers.append(rows.reshape(-1))
-            parts.append(
-                (
-                    np.full(m, target.channel_out, dtype=np.int64),
-                    (target.sequence + np.arange(m)) % (1 << 32),
-                    batch.log_time[k],
-                    batch.publish_time[k],
-                    base + np.arange(m, dtype=np.int64) * size,
-                    np.full(m, size, dtype=np.int64),
-                )
-            )
-            position.append(k * 2 + 1)
-            target.sequence += m
-            base += rows.size
+            target.sequence += add(rows, target.channel_out, target.sequence, k)
         if target.tf_keep is not None:
             sel = np.flatnonzero(target.tf_keep[row])
             if len(sel):
                 rows = _estimate_tf_rows(target, row[sel], stamps[sel])
-                m, size = rows.shape
-                buffers.append(rows.reshape(-1))
-                k = mine[sel]
-                parts.append(
-                    (
-                        np.full(m, target.tf_channel_out, dtype=np.int64),
-                        (target.tf_sequence + np.arange(m)) % (1 << 32),
-                        batch.log_time[k],
-                        batch.publish_time[k],
-                        base + np.arange(m, dtype=np.int64) * size,
-                        np.full(m, size, dtype=np.int64),
-                    )
-                )
-                position.append(k * 2 + 1)
-                target.tf_sequence += m
-                base += rows.size
+                target.tf_sequence += add(rows, target.tf_channel_out, target.tf_sequence, mine[sel])
     order = np.argsort(np.concatenate(position), kind="stable")
     columns = [np.concatenate(column)[order] for column in zip(*parts)]
     keep = columns[0] >= 0
