@@ -17,7 +17,14 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["PartStore", "readable"]
+__all__ = ["PartStore", "arrow_schema", "readable"]
+
+
+def arrow_schema(columns: dict[str, str]) -> Any:
+    """A ``pyarrow.Schema`` of ``{column: pyarrow type name}`` (``"float64"``, ``"string"``, ``"bool_"``, ...)."""
+    import pyarrow as pa
+
+    return pa.schema([(name, getattr(pa, kind)()) for name, kind in columns.items()])
 
 
 def readable(path: Path) -> Path:

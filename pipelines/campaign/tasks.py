@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from .spec import CellTask
+from .store import arrow_schema
 
 __all__ = ["LogTask", "ROW_COLUMNS", "consecutive", "make_log", "row_schema", "run_cell"]
 
@@ -59,9 +60,7 @@ ROW_COLUMNS: dict[str, str] = {
 
 def row_schema() -> Any:
     """:data:`ROW_COLUMNS` as a ``pyarrow.Schema``."""
-    import pyarrow as pa
-
-    return pa.schema([(name, getattr(pa, kind)()) for name, kind in ROW_COLUMNS.items()])
+    return arrow_schema(ROW_COLUMNS)
 
 
 def consecutive(seeds: tuple[int, ...]) -> list[tuple[int, int]]:

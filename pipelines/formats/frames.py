@@ -42,7 +42,6 @@ import numpy as np
 from gyroemu.pipelines.formats.channels import BODY_FRAME, ESTIMATE_FRAME, WORLD_FRAME
 
 __all__ = [
-    "ESTIMATE_FRAME",
     "TF_LOG_RATE_HZ",
     "TF_STREAM_RATE_HZ",
     "TF_STATIC_REPEAT_S",

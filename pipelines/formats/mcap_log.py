@@ -61,7 +61,7 @@ from __future__ import annotations
 import os
 import secrets
 import warnings
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
@@ -72,6 +72,7 @@ import numpy as np
 import gyroemu
 from gyroemu.pipelines.formats.channels import (
     BODY_FRAME,
+    ESTIMATE_FRAME,
     ESTIMATE_ROLE,
     IMU_ROLE,
     MAG_ROLE,
@@ -99,7 +100,6 @@ from gyroemu.pipelines.formats.channels import (
     split_topic,
 )
 from gyroemu.pipelines.formats.frames import (
-    ESTIMATE_FRAME,
     TF_LOG_RATE_HZ,
     TF_STATIC_TOPIC,
     TF_TOPIC,
@@ -142,6 +142,7 @@ __all__ = [
     "group_devices",
     "device_name",
     "announce_scan",
+    "read_mcap_noting",
 ]
 
 
@@ -836,6 +837,18 @@ def announce_scan(path: Path, scan: McapScan) -> dict[str, str]:
     for topic, reason in skipped.items():
         warnings.warn(f"{path}: skipping topic {topic}: {reason}", LogWarning, stacklevel=3)
     return skipped
+
+
+def read_mcap_noting(path: str | os.PathLike[str], note: Callable[[str], None]) -> McapLog:
+    """:func:`read_mcap`, handing each of its warnings but the skipped topics to ``note`` (one line each):
+    for a command that serves every topic of a log, so that a topic it does not decode is no news."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", LogWarning)
+        log = read_mcap(path)
+    for w in caught:
+        if issubclass(w.category, LogWarning) and "skipping topic" not in str(w.message):
+            note(str(w.message))
+    return log
 
 
 def _is_tf(topic: str, scan: McapScan, channel) -> bool:

@@ -350,8 +350,7 @@ def _register_estimate_tf(writer: McapFileWriter, targets: list[_Target]) -> Non
 
 def _estimate_tf_rows(target: _Target, row: np.ndarray, stamps: np.ndarray) -> np.ndarray:
     """``map -> body_estimate`` TFMessages at ``stamps`` (the target's rows ``row``)."""
-    from gyroemu.pipelines.formats.channels import WORLD_FRAME
-    from gyroemu.pipelines.formats.frames import ESTIMATE_FRAME
+    from gyroemu.pipelines.formats.channels import ESTIMATE_FRAME, WORLD_FRAME
     from gyroemu.pipelines.formats.tf_messages import encode_tf
 
     assert target.tf_pos is not None

@@ -120,9 +120,9 @@ def log_tasks(campaign: Campaign, out_dir: Path) -> list[LogTask]:
 
 def index_schema() -> Any:
     """:data:`INDEX_COLUMNS` as a ``pyarrow.Schema``."""
-    import pyarrow as pa
+    from gyroemu.pipelines.campaign.store import arrow_schema
 
-    return pa.schema([(name, getattr(pa, kind)()) for name, kind in INDEX_COLUMNS.items()])
+    return arrow_schema(INDEX_COLUMNS)
 
 
 def run_generate(options: GenerateOptions) -> GenerateSummary:

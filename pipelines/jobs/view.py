@@ -26,14 +26,13 @@ from __future__ import annotations
 import sys
 import threading
 import time
-import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
 from gyroemu.errors import LogError
-from gyroemu.pipelines.formats.mcap_log import LogWarning, read_mcap
+from gyroemu.pipelines.formats.mcap_log import read_mcap_noting
 from gyroemu.pipelines.formats.mcap_records import McapMessage, iter_mcap_batches
 from gyroemu.pipelines.formats.messages import starts_with_header
 from gyroemu.pipelines.transport.foxglove_view import (
@@ -252,12 +251,8 @@ def run_view(
     if not options.speed > 0:
         raise ValueError(f"argument --speed: must be positive, got {options.speed}")
     check_view_options(options.view, "--port", "--rate")
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", LogWarning)
-        log = read_mcap(path)  # validation: LogError naming the file
-    for w in caught:
-        if issubclass(w.category, LogWarning) and "skipping topic" not in str(w.message):
-            print(f"view: warning: {w.message}", file=out)
+    # validation: LogError naming the file
+    log = read_mcap_noting(path, lambda message: print(f"view: warning: {message}", file=out))
     channels = [c for c in log.channels if c.message_encoding == "cdr" and c.topic not in VIEW_TOPICS]
     topics = [c.topic for c in channels]
     stamped = [
