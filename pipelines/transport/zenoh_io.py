@@ -771,12 +771,13 @@ class PacedPublisher:
         ``batches`` yields lists (or tuples) of messages ``(offset_ns, key, payload)``, offsets
         non-decreasing across the whole run, keys among the publisher's (replay's read-ahead hands
         over one list per MCAP chunk; an endless generator is fine). Messages sharing a deadline go
-        out back to back. ``stop()`` is polled between batches, every 64 messages and at least every
-        0.1 s while waiting; True ends the run. The report keeps the lateness of at most
+        out back to back. ``stop()`` is polled between batches, at the first new deadline after every
+        64 messages and at least every 0.1 s while waiting; True ends the run, never inside one
+        deadline's group (a stopped stream's sample has all its topics or none). The report keeps the lateness of at most
         ``max_samples`` deadlines (beyond that, every other one is dropped and the stride doubles)."""
         lateness: list[float] = []
         stride, skip = 1, 0
-        sent = 0
+        sent = polled = 0
         last_deadline = None
         spin_ns = round(self.timing.spin_s * 1e9)
         topics = self._topics
@@ -789,6 +790,10 @@ class PacedPublisher:
                 for offset_ns, key, payload in batch:
                     deadline = t0 + offset_ns
                     if deadline != last_deadline:
+                        if stop is not None and sent >= polled + 64:
+                            polled = sent
+                            if stop():
+                                return PacingReport(np.array(lateness), sent, (time.monotonic_ns() - t0) * 1e-9)
                         last_deadline = deadline
                         now = _wait_until(deadline, spin_ns, stop)
                         if now is None:
@@ -803,8 +808,6 @@ class PacedPublisher:
                     topic.publisher.put(payload, attachment=pack(topic.sequence, time_ns(), 16, topic.gid))
                     topic.sequence += 1
                     sent += 1
-                    if stop is not None and sent % 64 == 0 and stop():
-                        return PacingReport(np.array(lateness), sent, (time.monotonic_ns() - t0) * 1e-9)
             elapsed = (time.monotonic_ns() - t0) * 1e-9
         return PacingReport(lateness_s=np.array(lateness), messages=sent, elapsed_s=elapsed)
 

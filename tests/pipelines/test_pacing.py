@@ -85,3 +85,23 @@ def test_run_schedule_sends_every_batch_in_order():
         publisher.close()
     finally:
         session.close()
+
+
+def test_run_schedule_stops_between_deadlines_never_inside_one():
+    """A stop asked mid-run ends it after a whole group of messages that share a deadline (a stream's
+    sample goes out with all its topics or none), at the first deadline after 64 messages."""
+    config = zenoh.Config()
+    config.insert_json5("mode", '"peer"')
+    config.insert_json5("listen/endpoints", "[]")
+    config.insert_json5("scouting/multicast/enabled", "false")
+    session = zenoh.open(config)
+    try:
+        keys = ["pace/a", "pace/b", "pace/c"]  # 3 per deadline: 64 messages end inside a group
+        publisher = PacedPublisher(session, keys)
+        batch = [(k, key, b"x") for k in range(100) for key in keys]  # 1 ns apart: always behind, no waits
+        polls = []
+        report = publisher.run_schedule(iter([batch]), stop=lambda: polls.append(1) or len(polls) > 1)  # go, then stop
+        assert report.messages == 66  # the first whole group after 64 messages
+        publisher.close()
+    finally:
+        session.close()
