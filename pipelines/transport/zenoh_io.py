@@ -773,8 +773,9 @@ class PacedPublisher:
         over one list per MCAP chunk; an endless generator is fine). Messages sharing a deadline go
         out back to back. ``stop()`` is polled between batches, at the first new deadline after every
         64 messages and at least every 0.1 s while waiting; True ends the run, never inside one
-        deadline's group (a stopped stream's sample has all its topics or none). The report keeps the lateness of at most
-        ``max_samples`` deadlines (beyond that, every other one is dropped and the stride doubles)."""
+        deadline's group (a stopped stream's sample has all its topics or none). The report keeps the
+        lateness of at most ``max_samples`` deadlines (beyond that, every other one is dropped and the
+        stride doubles)."""
         lateness: list[float] = []
         stride, skip = 1, 0
         sent = polled = 0
