@@ -40,6 +40,7 @@ __all__ = [
     "quat_from_rotvec",
     "quat_to_rotvec",
     "quat_slerp",
+    "quat_interpolate",
     "quat_rotate",
     "quat_to_matrix",
     "quat_from_matrix",
@@ -162,6 +163,86 @@ def quat_slerp(q0, q1, s) -> np.ndarray:
     q0, q1 = _q(q0), _q(q1)
     d = quat_log(quat_multiply(quat_conjugate(q0), q1))
     return quat_multiply(q0, quat_exp(np.asarray(s, dtype=float)[..., None] * d))
+
+
+@njit
+def _interpolate_rows(t, q, t_query, out):  # pragma: no cover - compiled
+    n = t.shape[0]
+    for i in range(t_query.shape[0]):
+        tq = t_query[i]
+        # Interval k with t[k] < tq <= t[k + 1] (t[0] itself: interval 0), as scipy's Slerp picks it.
+        lo, hi = 0, n - 1
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if t[mid] < tq:
+                lo = mid
+            else:
+                hi = mid
+        k = lo
+        aw, ax, ay, az = q[k, 0], q[k, 1], q[k, 2], q[k, 3]
+        bw, bx, by, bz = q[k + 1, 0], q[k + 1, 1], q[k + 1, 2], q[k + 1, 3]
+        # d = q_k* ⊗ q_{k+1}, taken along the shorter arc (w >= 0)
+        dw = aw * bw + ax * bx + ay * by + az * bz
+        sign = 1.0
+        if dw < 0.0:
+            sign = -1.0
+        if tq == t[k + 1]:  # a sample instant: the sample itself, on the side of the shorter arc
+            out[i, 0], out[i, 1], out[i, 2], out[i, 3] = sign * bw, sign * bx, sign * by, sign * bz
+            continue
+        s = (tq - t[k]) / (t[k + 1] - t[k])
+        if s == 0.0:
+            out[i, 0], out[i, 1], out[i, 2], out[i, 3] = aw, ax, ay, az
+            continue
+        dx = sign * (aw * bx - ax * bw - ay * bz + az * by)
+        dy = sign * (aw * by + ax * bz - ay * bw - az * bx)
+        dz = sign * (aw * bz - ax * by + ay * bx - az * bw)
+        dw = sign * dw
+        v = np.sqrt(dx * dx + dy * dy + dz * dz)
+        half = np.arctan2(v, dw)  # half the angle of d
+        # d^s = (cos(s·half), sin(s·half) d_v/|d_v|); sin(s·half)/|d_v| by its series where |d_v| is tiny
+        if v < 1e-8:
+            k_v = s * (1.0 + (1.0 - s * s) * half * half / 6.0)
+        else:
+            k_v = np.sin(s * half) / v
+        ew, ex, ey, ez = np.cos(s * half), k_v * dx, k_v * dy, k_v * dz
+        out[i, 0] = aw * ew - ax * ex - ay * ey - az * ez  # q_k ⊗ d^s
+        out[i, 1] = aw * ex + ax * ew + ay * ez - az * ey
+        out[i, 2] = aw * ey - ax * ez + ay * ew + az * ex
+        out[i, 3] = aw * ez + ax * ey - ay * ex + az * ew
+
+
+def quat_interpolate(t, q, t_query) -> np.ndarray:
+    """Attitude of a sampled rotation at other instants, by spherical linear interpolation.
+
+    Between samples k and k + 1, ``q_k ⊗ (q_k* ⊗ q_{k+1})^s`` along the shorter arc, with
+    ``s = (t_query − t_k) / (t_{k+1} − t_k)``: scipy's ``Slerp`` (same interval choice, same shorter
+    arc), compiled, and without building a ``Rotation`` per interval. At a sample instant the result is
+    the sample itself (negated where the arc from the previous sample turns it over, as ``Slerp`` does),
+    not a product that rounds it.
+
+    Parameters
+    ----------
+    t : array_like (N,)
+        Sample instants, strictly increasing, N >= 2.
+    q : array_like (N, 4)
+        Unit quaternions at ``t``.
+    t_query : array_like (M,)
+        Instants within ``[t[0], t[-1]]``.
+
+    Returns
+    -------
+    ndarray (M, 4)
+    """
+    t = np.ascontiguousarray(t, dtype=float)
+    q = np.ascontiguousarray(_q(q))
+    t_query = np.ascontiguousarray(t_query, dtype=float).reshape(-1)
+    if t.ndim != 1 or len(t) < 2 or q.shape != (len(t), 4):
+        raise ValueError(f"need N >= 2 instants and (N, 4) quaternions, got shapes {t.shape} and {q.shape}")
+    if len(t_query) and (t_query.min() < t[0] or t_query.max() > t[-1]):
+        raise ValueError(f"instants {t_query.min():g}..{t_query.max():g} leave the samples' span {t[0]:g}..{t[-1]:g}")
+    out = np.empty((len(t_query), 4))
+    _interpolate_rows(t, q, t_query, out)
+    return out
 
 
 @njit

@@ -7,7 +7,8 @@ own instants (an inner rate for the physics, the output instants of a clock that
 * ``ω_b`` by the cubic Hermite spline through the samples of ``ω_b`` with slopes ``α_b``, so
   ``ω`` and ``α`` are continuous and exact at the samples;
 * ``f_b`` and ``m_b`` by cubic splines;
-* ``q_wb`` by spherical linear interpolation (scipy ``Slerp``).
+* ``q_wb`` by spherical linear interpolation (:func:`~gyroemu.dynamics.rotation.quat_interpolate`,
+  scipy's ``Slerp`` compiled: a sample instant gives the sample itself).
 
 It then applies the mounting: the sensor frame ``s`` is turned by ``q_bs`` from the body axes and its
 origin sits at the lever arm ``r`` (body axes) from the body's reference point::
@@ -25,7 +26,14 @@ import numpy as np
 
 from gyroemu.dynamics import Trajectory
 from gyroemu.dynamics.rigid_body import point_acceleration
-from gyroemu.dynamics.rotation import quat_conjugate, quat_from_rotvec, quat_multiply, quat_normalize, quat_rotate
+from gyroemu.dynamics.rotation import (
+    quat_conjugate,
+    quat_from_rotvec,
+    quat_interpolate,
+    quat_multiply,
+    quat_normalize,
+    quat_rotate,
+)
 
 __all__ = ["SensorTruth"]
 
@@ -60,9 +68,8 @@ class SensorTruth:
         env = trajectory.environment
         self._earth_rate_w = np.zeros(3) if env is None else np.asarray(env.earth_rate_w, dtype=float)
 
-    # Built on first use: most devices read neither the attitude (only a free gyro and the truth
-    # channels do) nor the field (only a magnetometer), and the attitude's Slerp costs as much as all
-    # the other splines together.
+    # Built on first use: most devices read neither the angle (only a rate-integrating gyro) nor the
+    # field (only a magnetometer).
 
     @cached_property
     def _angle(self):
@@ -74,11 +81,8 @@ class SensorTruth:
 
         return CubicSpline(self._trajectory.t, self._trajectory.mag_b, axis=0)
 
-    @cached_property
-    def _attitude(self):
-        from scipy.spatial.transform import Rotation, Slerp
-
-        return Slerp(self._trajectory.t, Rotation.from_quat(self._trajectory.q_wb, scalar_first=True))
+    def _attitude(self, t: np.ndarray) -> np.ndarray:
+        return quat_interpolate(self._trajectory.t, self._trajectory.q_wb, t)
 
     def _check(self, t):
         t = np.asarray(t, dtype=float)
@@ -116,18 +120,18 @@ class SensorTruth:
         """``q_is``: the sensor's attitude relative to the inertial frame that is the world frame at
         ``t = 0``, (M, 4)."""
         t = self._check(t)
-        q_wb = self._attitude(t).as_quat(scalar_first=True)
+        q_wb = self._attitude(t)
         q_iw = quat_from_rotvec(t[:, None] * self._earth_rate_w)
         return quat_multiply(quat_multiply(q_iw, q_wb), self.q_bs)
 
     def attitude_world(self, t):
         """``q_wb`` of the body (not the sensor) at ``t``, (M, 4): what ``/truth/imu`` reports."""
-        return self._attitude(self._check(t)).as_quat(scalar_first=True)
+        return self._attitude(self._check(t))
 
     def body_truth(self, t):
         """Body-frame truth at ``t`` as ``(q_wb, omega_b, specific_force_b)``, for truth channels."""
         t = self._check(t)
-        return self._attitude(t).as_quat(scalar_first=True), self._omega(t), self._force(t)
+        return self._attitude(t), self._omega(t), self._force(t)
 
     def body_rates(self, t):
         """Body-frame ``(omega_b, specific_force_b)`` at ``t``: :meth:`body_truth` without the attitude

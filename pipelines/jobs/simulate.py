@@ -383,7 +383,7 @@ def _simulate_mcap(
             for block in run:
                 body = block.interpolants  # the device's own: the splines are built once per block
                 instants = block.samples.t_true if block.samples.t_true is not None else block.samples.t
-                q_wb = body.attitude_world(instants)  # the attitude's Slerp, evaluated once for both
+                q_wb = body.attitude_world(instants)  # evaluated once for both truth channels
                 truth = truth_series(block.truth, block.samples, body, q_wb)
                 pose = truth_pose(block.truth, block.samples, body, q_wb)
                 writer.put(Recording(block.samples, truth=truth, pose=pose, device=device, frame_id=options.frame_id))

@@ -133,3 +133,39 @@ def test_quat_exp_of_a_vector_too_small_for_its_norm_is_one_plus_the_vector():
         q = quat_exp(np.array(v))
         assert q[0] == 1.0
         np.testing.assert_allclose(q[1:], v, rtol=2 * EPS, atol=0)
+
+
+def test_interpolate_follows_a_constant_rate_rotation_exactly():
+    """Slerp is exact for a rotation about a fixed axis at a constant rate: q(t) = exp(ω t / 2)."""
+    from gyroemu.dynamics.rotation import quat_exp, quat_interpolate
+
+    omega = np.array([0.3, -1.1, 0.7])  # rad/s; 0.1 s samples turn 0.136 rad each
+    t = np.linspace(0.0, 5.0, 51)
+    t_query = np.random.default_rng(3).uniform(0.0, 5.0, 1000)
+    got = quat_interpolate(t, quat_exp(0.5 * t[:, None] * omega), t_query)
+    want = quat_exp(0.5 * t_query[:, None] * omega)
+    assert np.abs(got - want).max() <= 64 * np.finfo(float).eps  # round-off of ~50 chained operations
+
+
+def test_interpolate_is_scipys_slerp_and_gives_the_samples_themselves():
+    from scipy.spatial.transform import Rotation, Slerp
+
+    from gyroemu.dynamics.rotation import quat_interpolate
+
+    rng = np.random.default_rng(7)
+    t = np.cumsum(rng.uniform(0.5e-3, 1.5e-3, 2000))
+    q = Rotation.from_rotvec(np.cumsum(rng.normal(scale=0.05, size=(2000, 3)), axis=0)).as_quat(scalar_first=True)
+    q[::5] *= -1.0  # the same rotations, some written with the other sign
+    t_query = np.sort(np.concatenate([rng.uniform(t[0], t[-1], 5000), t[::3], t[-1:]]))
+    got = quat_interpolate(t, q, t_query)
+    want = Slerp(t, Rotation.from_quat(q, scalar_first=True))(t_query).as_quat(scalar_first=True)
+    # the same formula in another order: each output within a few ulps of a unit quaternion's parts
+    assert np.abs(got - want).max() <= 8 * np.finfo(float).eps
+    k = np.searchsorted(t, t_query)
+    on = t[k] == t_query
+    assert on.sum() == len(t[::3]) + 1
+    # the sample itself, with the sign scipy gives it (that of the shorter arc from the sample before)
+    assert np.array_equal(np.abs(got[on]), np.abs(q[k[on]]))
+    assert np.all(np.einsum("ij,ij->i", got[on], want[on]) > 0)
+    with pytest.raises(ValueError, match="leave the samples' span"):
+        quat_interpolate(t, q, [t[-1] + 1e-3])
