@@ -108,6 +108,7 @@ from gyroemu.pipelines.formats.frames import (
 )
 from gyroemu.pipelines.formats.imu_covariance import measurement_variances
 from gyroemu.pipelines.formats.mcap_records import (
+    COMPRESSION_LEVEL,
     OFFERED_QOS_PROFILES,
     LogError,
     McapFileWriter,
@@ -412,7 +413,7 @@ class McapLogWriter:
     chunk_size : int
         Uncompressed bytes per chunk (default 1 MiB, as the ``mcap`` library).
     compression_level : int
-        zstd level (default 3, zstd's default).
+        zstd level (default :data:`~gyroemu.pipelines.formats.mcap_records.COMPRESSION_LEVEL`, 1).
     start_ns : int
         Added to every stamp given as float seconds (``samples.t``, ``truth.t``, ...; not to
         :attr:`Recording.stamp_ns`, which is absolute): the run's start time, ns since the Unix epoch.
@@ -437,7 +438,7 @@ class McapLogWriter:
         scenario: Scenario | str | None = None,
         prefix_topics: bool | None = None,
         chunk_size: int = 1 << 20,
-        compression_level: int = 3,
+        compression_level: int = COMPRESSION_LEVEL,
         start_ns: int = 0,
         tf_rate_hz: float | None = TF_LOG_RATE_HZ,
     ) -> None:
@@ -733,7 +734,7 @@ def write_mcap(
     scenario: Scenario | str | None = None,
     prefix_topics: bool | None = None,
     chunk_size: int = 1 << 20,
-    compression_level: int = 3,
+    compression_level: int = COMPRESSION_LEVEL,
 ) -> Path:
     """Write a whole log at once: ``recordings`` is an :class:`ImuSamples`, a :class:`Recording`, or a
     list of them (one per device). Returns the path written. See :class:`McapLogWriter`."""
