@@ -36,7 +36,12 @@ public cache classes given to each dispatcher (numba's own locators, its class a
 untouched); where that folder cannot be written, numba's own cache beside the sources is used.
 numba checks a cached function against its own source file only, so a compiled callee edited in
 another file would be loaded stale inside its caller; gyroemu's cache entries are stamped with the
-content of every file of their compiled callees as well (:func:`callee_files`).
+content of every file of their compiled callees as well (:func:`callee_files`), and with the options
+they were compiled with (numba's index leaves out flags such as ``nogil``).
+
+**Compiled functions release the GIL** (``nogil=True`` unless a function says otherwise): while a
+device's kernel loops on one thread, ``simulate``'s writer thread encodes and compresses the previous
+block on another. gyroemu's kernels touch only the arrays (and generators) they are given.
 """
 
 from __future__ import annotations
@@ -77,10 +82,12 @@ def cache_path() -> Path:
     return _user_folder() / "numba"
 
 
-def _user_cache(py_func: Callable[..., Any]) -> Any:
-    """A numba ``FunctionCache`` of ``py_func`` kept under :func:`cache_path` (mirroring the source
-    tree below it, as numba's user-wide cache does), or None where numba lacks the public classes this
-    needs (then numba's own cache, beside the sources, is used)."""
+def _user_cache(py_func: Callable[..., Any], options: dict[str, Any]) -> Any:
+    """A numba ``FunctionCache`` of ``py_func`` compiled with numba's ``options``, kept under
+    :func:`cache_path` (mirroring the source tree below it, as numba's user-wide cache does), or None
+    where numba lacks the public classes this needs (then numba's own cache, beside the sources, is
+    used)."""
+    flags = repr(sorted(options.items()))
     try:
         from numba.core.caching import CompileResultCacheImpl, FunctionCache, UserWideCacheLocator
     except ImportError:
@@ -94,8 +101,9 @@ def _user_cache(py_func: Callable[..., Any]) -> Any:
 
         def get_source_stamp(self) -> Any:
             # numba stamps a function's own file only: a compiled callee in another file that changed
-            # would be loaded stale, inlined into its caller's cached code. The callees' files count too.
-            return (super().get_source_stamp(), tuple(_file_stamp(path) for path in self._callee_files))
+            # would be loaded stale, inlined into its caller's cached code. The callees' files count too,
+            # and so do the options (numba's index key leaves out flags such as nogil).
+            return (super().get_source_stamp(), tuple(_file_stamp(path) for path in self._callee_files), flags)
 
     class Impl(CompileResultCacheImpl):
         _locator_classes = [Locator]
@@ -151,7 +159,7 @@ def _file_stamp(path: str) -> str:
     return _content_stamp(path, st.st_mtime_ns, st.st_size)
 
 
-def _relocate_cache(holder: Any, attribute: str, py_func: Callable[..., Any]) -> None:
+def _relocate_cache(holder: Any, attribute: str, py_func: Callable[..., Any], options: dict[str, Any]) -> None:
     """Put :func:`_user_cache` in place of the numba ``FunctionCache`` at ``holder.attribute`` (a
     dispatcher's); where numba keeps its cache elsewhere, leave numba's own."""
     try:
@@ -159,7 +167,7 @@ def _relocate_cache(holder: Any, attribute: str, py_func: Callable[..., Any]) ->
     except ImportError:
         return
     if isinstance(getattr(holder, attribute, None), FunctionCache):
-        cache = _user_cache(py_func)
+        cache = _user_cache(py_func, options)
         if cache is not None:
             setattr(holder, attribute, cache)
 
@@ -244,19 +252,21 @@ class Deferred:
 
 
 def njit(function: Callable[..., Any] | None = None, **options: Any) -> Any:
-    """``numba.njit(cache=True, **options)``, deferred to first use, compiling under :func:`compile_lock`.
+    """``numba.njit(cache=True, nogil=True, **options)``, deferred to first use, compiling under
+    :func:`compile_lock`.
 
     Used bare (``@njit``) or with numba's options (``@njit(parallel=True)``). Only the dispatcher made
     here is locked: its ``compile`` is replaced on the instance, not on numba's class.
     """
     options.setdefault("cache", True)
+    options.setdefault("nogil", True)  # a compiled loop lets the writer's thread run meanwhile
 
     def build(fn: Callable[..., Any]) -> Any:
         import numba
 
         dispatcher = numba.njit(**options)(fn)
         if options.get("cache"):
-            _relocate_cache(dispatcher, "_cache", fn)  # this dispatcher only: numba's class and config stay
+            _relocate_cache(dispatcher, "_cache", fn, options)  # this dispatcher only: numba's class and config stay
         unlocked = dispatcher.compile
 
         def compile(sig: Any) -> Any:

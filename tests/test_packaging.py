@@ -224,3 +224,26 @@ def test_a_changed_compiled_callee_in_another_file_is_compiled_again(tmp_path):
     assert {p: p.stat().st_mtime_ns for p in cache.rglob("*.nb*")} == written  # loaded, not compiled
     callee.write_text(callee.read_text().replace("x + 1.0", "x + 5.0"))
     assert run() == "10.0"
+
+
+def test_compiled_options_are_part_of_the_cache_entry(tmp_path):
+    """numba's cache index leaves out flags such as ``nogil``; gyroemu's entries carry the options, so a
+    function whose options changed (its file unchanged) is compiled again instead of loaded with the old
+    ones (a loop compiled to hold the GIL would keep holding it)."""
+    (tmp_path / "kernels.py").write_text(
+        "import os\n\nfrom gyroemu.dynamics.jit import njit\n\n\n"
+        '@njit(nogil=os.environ["KERNEL_NOGIL"] == "1")\ndef f(x):\n    return x * 2.0\n'
+    )
+    code = "from kernels import f; f(1.0); print(sum(f.stats.cache_hits.values()), sum(f.stats.cache_misses.values()))"
+
+    def run(nogil: str) -> str:
+        env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache"), "PYTHONPATH": str(tmp_path)}
+        env["KERNEL_NOGIL"] = nogil
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env)
+        assert done.returncode == 0, done.stderr
+        return done.stdout.strip()
+
+    assert run("1") == "0 1"  # compiled and cached
+    assert run("1") == "1 0"  # loaded
+    assert run("0") == "0 1"  # the same file, other options: compiled again
+    assert run("0") == "1 0"
