@@ -306,6 +306,7 @@ class McapFileWriter:
         self._position = 0
         self._chunk_size = int(chunk_size)
         self._compressor = zstandard.ZstdCompressor(level=compression_level)
+        self._parallel = zstandard.backend == "cext"  # the cffi backend has no multi_compress_to_buffer
         self._schemas: dict[int, Schema] = {}
         self._schema_ids: dict[tuple, int] = {}
         self._channels: dict[int, Channel] = {}
@@ -532,7 +533,7 @@ class McapFileWriter:
             memoryview(np.ascontiguousarray(records))  # type: ignore[arg-type]  # numpy stubs: __buffer__ 3.12+ only
             for records, _, _, _ in pieces
         ]
-        if len(raws) > 1:
+        if len(raws) > 1 and self._parallel:
             with ThreadPoolExecutor(1, thread_name_prefix="mcap-crc") as summer:
                 crcs = summer.submit(lambda: [zlib.crc32(raw) for raw in raws])
                 frames = self._compressor.multi_compress_to_buffer(raws, threads=-1)

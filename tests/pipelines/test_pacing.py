@@ -54,12 +54,17 @@ def test_wait_until_never_returns_before_the_deadline():
     assert zenoh_io._wait_until(time.monotonic_ns() + 10**9, 0, stop=lambda: True) is None
 
 
-def test_run_schedule_sends_every_batch_in_order():
+def _lone_session():
+    """A peer session that neither listens nor scouts: it reaches only its own subscribers."""
     config = zenoh.Config()
     config.insert_json5("mode", '"peer"')
     config.insert_json5("listen/endpoints", "[]")
     config.insert_json5("scouting/multicast/enabled", "false")
-    session = zenoh.open(config)
+    return zenoh.open(config)
+
+
+def test_run_schedule_sends_every_batch_in_order():
+    session = _lone_session()
     try:
         sub = session.declare_subscriber("pace/**", zenoh.handlers.FifoChannel(1 << 12))
         publisher = PacedPublisher(session, ["pace/a", "pace/b"])
@@ -90,11 +95,7 @@ def test_run_schedule_sends_every_batch_in_order():
 def test_run_schedule_stops_between_deadlines_never_inside_one():
     """A stop asked mid-run ends it after a whole group of messages that share a deadline (a stream's
     sample goes out with all its topics or none), at the first deadline after 64 messages."""
-    config = zenoh.Config()
-    config.insert_json5("mode", '"peer"')
-    config.insert_json5("listen/endpoints", "[]")
-    config.insert_json5("scouting/multicast/enabled", "false")
-    session = zenoh.open(config)
+    session = _lone_session()
     try:
         keys = ["pace/a", "pace/b", "pace/c"]  # 3 per deadline: 64 messages end inside a group
         publisher = PacedPublisher(session, keys)
