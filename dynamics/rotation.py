@@ -199,9 +199,10 @@ def _interpolate_rows(t, q, t_query, out):  # pragma: no cover - compiled
         dw = sign * dw
         v = np.sqrt(dx * dx + dy * dy + dz * dz)
         half = np.arctan2(v, dw)  # half the angle of d
-        # d^s = (cos(s·half), sin(s·half) d_v/|d_v|); sin(s·half)/|d_v| by its series where |d_v| is tiny
+        # d^s = (cos(s·half), sin(s·half) d_v/|d_v|), |d_v| = sin(half). Where |d_v| is tiny (0 when the
+        # samples are equal), sin(s·half)/sin(half) = s (1 + (1 − s²) half²/6 + …) = s to round-off.
         if v < 1e-8:
-            k_v = s * (1.0 + (1.0 - s * s) * half * half / 6.0)
+            k_v = s
         else:
             k_v = np.sin(s * half) / v
         ew, ex, ey, ez = np.cos(s * half), k_v * dx, k_v * dy, k_v * dz

@@ -145,6 +145,14 @@ def test_interpolate_follows_a_constant_rate_rotation_exactly():
     got = quat_interpolate(t, quat_exp(0.5 * t[:, None] * omega), t_query)
     want = quat_exp(0.5 * t_query[:, None] * omega)
     assert np.abs(got - want).max() <= 64 * np.finfo(float).eps  # round-off of ~50 chained operations
+    # Turns of 1e-9 rad per sample take the series for sin(s·θ/2)/|d_v|: the fraction s of each turn, to
+    # round-off (the rotation vector is 1e-9 of the quaternion's unit scalar part).
+    slow = np.array([2e-9, -1e-9, 3e-9])
+    got = quat_interpolate(t, quat_exp(0.5 * t[:, None] * slow), t_query)
+    assert np.allclose(got[:, 1:] / (0.5 * t_query[:, None] * slow), 1.0, rtol=0.0, atol=1e-6)
+    assert np.abs(got - quat_exp(0.5 * t_query[:, None] * slow)).max() <= 4 * np.finfo(float).eps
+    still = np.tile(quat_exp([0.1, 0.2, -0.3]), (len(t), 1))  # no turn at all: |d_v| = 0
+    assert np.array_equal(quat_interpolate(t, still, t_query), np.tile(still[0], (len(t_query), 1)))
 
 
 def test_interpolate_is_scipys_slerp_and_gives_the_samples_themselves():

@@ -890,3 +890,137 @@ def test_messages_of_equal_log_time_keep_their_file_order(tmp_path):
     log = read_quietly(path)
     assert np.array_equal(log.samples.gyro, np.arange(150.0).reshape(50, 3))
     assert np.array_equal(log.device.stamp_ns, np.arange(1, 51) * 10**7)
+
+
+def _plain_imu_file(path: Path, rows: np.ndarray, chunked: bool, log_time=None) -> None:
+    """``rows`` (N, size) as /imu messages of the mcap library's writer, chunked or not."""
+    with open(path, "wb") as f:
+        writer = PlainMcapWriter(f, use_chunking=chunked, chunk_size=4096, compression=CompressionType.NONE)
+        writer.start("ros2", "test")
+        schema = writer.register_schema("sensor_msgs/msg/Imu", "ros2msg", IMU.schema.encode())
+        channel = writer.register_channel("/imu", "cdr", schema)
+        for k, row in enumerate(rows):
+            t = (k + 1) * 10**7 if log_time is None else log_time
+            writer.add_message(channel, log_time=t, data=row.tobytes(), publish_time=7 * k, sequence=3 * k)
+        writer.finish()
+
+
+def test_equal_log_times_keep_file_order_across_payload_sizes(tmp_path):
+    """Frame ids of two lengths make payloads of two sizes, decoded a size at a time: with every log
+    time equal, only the messages' file order puts them back in sequence."""
+    path = tmp_path / "two_sizes.mcap"
+    n = 40
+    rows = [IMU.encode([k + 1], ["imu", "imu_link"][k % 2], {"angular_velocity": [[k, 0.0, 0.0]]})[0] for k in range(n)]
+    _plain_imu_file(path, np.array(rows, dtype=object), chunked=True, log_time=10**9)
+    log = read_quietly(path)
+    assert np.array_equal(log.samples.gyro[:, 0], np.arange(n))
+
+
+def test_record_walk_hands_out_every_message_unchanged(tmp_path):
+    """:class:`McapRecordWalk` gives each Message record's fields and payload as written, from chunks
+    and from records outside chunks alike."""
+    from gyroemu.pipelines.formats.mcap_records import McapRecordWalk
+
+    rows = IMU.encode(np.arange(1, 31) * 10**7, "imu", {"angular_velocity": np.arange(90.0).reshape(30, 3)})
+    for chunked in (True, False):
+        path = tmp_path / f"walk_{chunked}.mcap"
+        _plain_imu_file(path, rows, chunked)
+        batches = list(McapRecordWalk(path).batches())
+        assert (len(batches) < 30) if chunked else (len(batches) == 30)  # a batch per chunk, or per loose record
+        payloads = [b.payload(k) for b in batches for k in range(len(b.size))]
+        assert payloads == [row.tobytes() for row in rows]
+        assert np.all(np.concatenate([b.size for b in batches]) == rows.shape[1])  # not just slices cut short
+        assert np.array_equal(np.concatenate([b.sequence for b in batches]), 3 * np.arange(30))
+        assert np.array_equal(np.concatenate([b.publish_time for b in batches]), 7 * np.arange(30))
+        assert np.array_equal(np.concatenate([b.log_time for b in batches]), np.arange(1, 31) * 10**7)
+
+
+def test_raw_messages_are_copied_from_anywhere_in_a_buffer(tmp_path):
+    """``add_raw_messages`` takes payloads of several sizes at any offsets of a buffer (gaps between them,
+    out of order) with their own sequence numbers and publish times, and writes them as given, into
+    a file that already holds messages."""
+    from gyroemu.pipelines.formats.mcap_records import McapFileWriter
+
+    rng = np.random.default_rng(5)
+    sizes = np.array([5, 40, 1, 17, 64, 3])
+    start = np.array([100, 7, 300, 60, 200, 290])  # gaps, and not in buffer order
+    buffer = rng.integers(0, 256, 400, dtype=np.uint8)
+    path = tmp_path / "raw.mcap"
+    with open(path, "wb") as f:
+        writer = McapFileWriter(f, chunk_size=64)
+        channel = writer.register_ros2_channel("/imu", IMU)
+        other = writer.register_ros2_channel("/other", IMU)
+        writer.add_messages([(channel, [1, 2], IMU.encode([1, 2], "imu"))])
+        writer.add_raw_messages(
+            np.array([channel, other, channel, other, channel, other]),
+            np.array([9, 8, 7, 6, 5, 4]),
+            np.arange(3, 9),
+            np.arange(100, 106),
+            buffer,
+            start,
+            sizes,
+        )
+        writer.finish()
+    with open(path, "rb") as f:
+        messages = [
+            (c.topic, m.sequence, m.log_time, m.publish_time, m.data) for _, c, m in make_reader(f).iter_messages()
+        ]
+    assert messages[2:] == [
+        (["/imu", "/other"][k % 2], 9 - k, 3 + k, 100 + k, buffer[start[k] : start[k] + sizes[k]].tobytes())
+        for k in range(6)
+    ]
+
+
+def test_several_batches_of_one_channel_continue_its_sequence_numbers(tmp_path):
+    """Two batches of one channel in one call, after an earlier call: the channel's messages are numbered
+    in file order, continuing from the earlier call's."""
+    from gyroemu.pipelines.formats.mcap_records import McapFileWriter
+
+    path = tmp_path / "seq.mcap"
+    with open(path, "wb") as f:
+        writer = McapFileWriter(f)
+        channel = writer.register_ros2_channel("/imu", IMU)
+        writer.add_messages([(channel, [0, 1, 2, 3, 4], IMU.encode(np.arange(5), "imu"))])
+        writer.add_messages(
+            [(channel, [10, 12, 14], IMU.encode([10, 12, 14], "imu")), (channel, [11, 13], IMU.encode([11, 13], "imu"))]
+        )
+        writer.finish()
+    with open(path, "rb") as f:
+        got = [(m.log_time, m.sequence) for _, _, m in make_reader(f).iter_messages()]
+    assert got == [(t, k) for k, t in enumerate([0, 1, 2, 3, 4, 10, 11, 12, 13, 14])]
+
+
+def test_chunk_indexes_span_their_message_indexes(tmp_path, runs):
+    """Each Chunk Index gives the bytes of the Message Index records that follow its chunk: the next
+    chunk starts right after them."""
+    path = tmp_path / "index.mcap"
+    _, samples, _ = runs["consumer_mems"]
+    write_mcap(path, samples, chunk_size=4096)
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    assert len(chunks) > 3
+    for this, following in zip(chunks, chunks[1:]):
+        assert this.chunk_start_offset + this.chunk_length + this.message_index_length == following.chunk_start_offset
+
+
+def test_message_batches_carry_the_payloads_written(tmp_path):
+    """``iter_mcap_batches`` hands out each message's payload bytes as written."""
+    from gyroemu.pipelines.formats.mcap_records import iter_mcap_batches
+
+    rows = IMU.encode(np.arange(1, 21) * 10**7, "imu_frame", {"angular_velocity": np.arange(60.0).reshape(20, 3)})
+    path = tmp_path / "batches.mcap"
+    _plain_imu_file(path, rows, chunked=True)
+    got = [m.data for batch in iter_mcap_batches(path) for m in batch]
+    assert got == [row.tobytes() for row in rows]
+
+
+def test_a_record_cut_inside_its_head_is_refused():
+    """Records are walked by their 9-byte heads (opcode, length): fewer than 9 bytes left after the last
+    whole record is a partial record, refused by name."""
+    from gyroemu.pipelines.formats.mcap_records import _record_positions
+
+    record = struct.pack("<BQ", 0x05, 4) + b"abcd"
+    data = record * 3 + record[:5]
+    with pytest.raises(ValueError, match="a partial record at its end"):
+        _record_positions(data, np.frombuffer(data, np.uint8))
