@@ -2,13 +2,16 @@
 
 One module per idea: :mod:`.rest` (rest phases), :mod:`.noise` (Allan noise terms from them),
 :mod:`.truth` (kinematics of the truth track), :mod:`.timing` (latencies), :mod:`.calibration`
-(gyro, accelerometer, magnetometer errors), :mod:`.magnetic_environment`, :mod:`.dipole` (a magnet
-beside the path), :mod:`.trial` (one
+(gyro, accelerometer, magnetometer errors), :mod:`.handling` (the accelerometer carried against at
+rest), :mod:`.lever_arm` (the accelerometer's offset from the truth's reference point),
+:mod:`.magnetic_environment`, :mod:`.dipole` (a magnet beside the path), :mod:`.trial` (one
 recording) and :mod:`.result` (pooling, device and site TOML). Every fit takes plain arrays.
 """
 
 from .calibration import AccelCalibration, GyroCalibration, MagCalibration, fit_accel, fit_gyro, fit_mag
 from .dipole import DipoleFit, fit_dipole
+from .handling import HandlingOffset, handling_offset, pool_handling_offsets
+from .lever_arm import LeverArmFit, fit_lever_arm
 from .magnetic_environment import MagneticEnvironment, magnetic_environment, pool_heading_offsets, world_field
 from .noise import AxisNoise, NoiseTerm, SensorNoise, pooled_allan, sensor_noise
 from .rest import RestPhase, find_rest_phases, phases_from_intervals
@@ -22,8 +25,10 @@ __all__ = [
     "AxisNoise",
     "DipoleFit",
     "GyroCalibration",
+    "HandlingOffset",
     "Identification",
     "LatencyEstimate",
+    "LeverArmFit",
     "MagCalibration",
     "MagneticEnvironment",
     "NoiseTerm",
@@ -39,14 +44,17 @@ __all__ = [
     "fit_dipole",
     "fit_accel",
     "fit_gyro",
+    "fit_lever_arm",
     "fit_mag",
     "gyro_latency",
+    "handling_offset",
     "identify",
     "identify_trial",
     "mag_latency",
     "magnetic_environment",
     "phases_from_intervals",
     "pool_estimates",
+    "pool_handling_offsets",
     "pool_heading_offsets",
     "pooled_allan",
     "sensor_noise",

@@ -15,7 +15,9 @@ gyro's and accelerometer's with a Gauss–Markov term where it is significant (w
 The device TOML uses the device keys of :class:`gyroemu.sensors.imu.DeviceSpec` plus the per-sensor
 ``latency_s``; the uncertainties, what was not observable and the provenance are written as comments.
 The site snippet holds ``[site] magnetic_field_enu_uT`` (the rest field, in the truth's world frame,
-as strong as the calibrated magnetometer measures it) and ``[site.magnetic_environment]``.
+as strong as the calibrated magnetometer measures it) and ``[site.magnetic_environment]``, and
+``[handling]``: the accelerometer's offset in the movement against at rest (:mod:`.handling`), as the
+mean and the standard deviation across the recordings (each handling of the device is one draw).
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ import numpy as np
 from gyroemu.dynamics.rotation import quat_from_matrix
 
 from .calibration import polar_decomposition
+from .handling import pool_handling_offsets
 from .magnetic_environment import MagneticEnvironment, magnetic_environment, pool_heading_offsets, world_field
 from .noise import SensorNoise, sensor_noise
 from .timing import LatencyEstimate
@@ -92,6 +95,8 @@ class Identification:
     mag_noise: SensorNoise | None
     environments: list[MagneticEnvironment | None]
     notes: list[str]
+    handling: tuple[np.ndarray, np.ndarray] | None = None  # (3,) mean, (3,) std across trials, m/s²
+    lever_arm: Pooled | None = None  # (3,) m, body axes: the accelerometer's lever arm from the truth's origin
 
     # ----------------------------------------------------------------------------------------------
     def device_dict(self) -> dict:
@@ -134,7 +139,8 @@ class Identification:
         out: dict = {
             "description": f"Identified by gyroemu identify from {names}",
             "rate_hz": round(float(self.rate_hz), 6),
-            "mounting": {"q_bs": _list(q_bs, 9)},
+            "mounting": {"q_bs": _list(q_bs, 9)}
+            | ({} if self.lever_arm is None else {"lever_arm_m": _list(self.lever_arm.value, 4)}),
             "gyro": {"latency_s": round(float(self.latency["gyro"].value) - half, 6), "errors": gyro_errors},
             "accelerometer": {
                 "latency_s": round(float(self.latency["accelerometer"].value) - half, 6),
@@ -186,6 +192,18 @@ class Identification:
                 + (" (latency_s = delay − T/2: the interval mean adds T/2)" if sensor != "magnetometer" else "")
             )
         lines.append(f"gyro.errors.bias_deg_per_h sigma {_list(self.gyro_bias.sigma * _DEG * 3600)}")
+        arms = [(t.name, t.lever_arm) for t in self.trials if t.lever_arm is not None]
+        if self.lever_arm is not None:
+            lines.append(
+                f"mounting.lever_arm_m sigma {_list(self.lever_arm.sigma, 3)} ({self.lever_arm.trials} trials; the "
+                "accelerometer from the truth's origin, f = ... + alpha x r + w x (w x r)); per trial, mm:"
+            )
+            for name, arm in arms:
+                lines.append(
+                    f"  {name}: {_list(arm.lever_arm_b * 1e3, 3)} +- {_list(arm.lever_arm_sigma * 1e3, 2)}; "
+                    f"residual rms {_list(arm.rms_before, 3)} -> {_list(arm.residual_rms, 3)} m/s^2 over "
+                    f"{arm.windows} windows"
+                )
         if self.gyro_scale is not None and self.gyro_misalignment is not None:
             lines.append(
                 f"gyro.errors.scale_factor_ppm sigma {_list(self.gyro_scale.sigma * 1e6)} "
@@ -265,11 +283,15 @@ class Identification:
 
     # ----------------------------------------------------------------------------------------------
     def site_dict(self) -> dict | None:
-        """``[site]`` with ``magnetic_field_enu_uT`` and ``[site.magnetic_environment]``; None without a
-        magnetometer environment."""
+        """``[site]`` with ``magnetic_field_enu_uT`` and ``[site.magnetic_environment]`` (with a magnetometer
+        environment) and ``[handling]`` (with a handling offset); None with neither."""
+        out: dict = {}
+        if self.handling is not None:
+            offset, spread = self.handling
+            out["handling"] = {"accel_offset_m_s2": _list(offset, 4), "accel_offset_sigma_m_s2": _list(spread, 4)}
         envs = [e for e in self.environments if e is not None]
         if not envs:
-            return None
+            return out or None
         mean, sigma = pool_heading_offsets(envs)
         field = np.mean([e.rest_field_w for e in envs], axis=0)
         env: dict = {
@@ -281,7 +303,7 @@ class Identification:
         finite = [x for x in lengths if np.isfinite(x)]
         if finite:
             env["correlation_length_m"] = round(float(np.mean(finite)), 4)
-        return {"site": {"magnetic_field_enu_uT": _list(field * 1e6, 4), "magnetic_environment": env}}
+        return {"site": {"magnetic_field_enu_uT": _list(field * 1e6, 4), "magnetic_environment": env}} | out
 
     def site_toml(self) -> str | None:
         """The site snippet as TOML text with per-trial comments; None without a magnetometer."""
@@ -312,14 +334,29 @@ class Identification:
                 f"correlation time {e.correlation_time_s:.3g} s; {e.samples} movement samples"
             )
         n = sum(e is not None for e in self.environments)
-        lines.append(
-            "heading_offset_sigma_deg: "
-            + (
-                "standard deviation across the trials"
-                if n > 1
-                else "within the one trial (give several logs for a spread across trials)"
+        if n:
+            lines.append(
+                "heading_offset_sigma_deg: "
+                + (
+                    "standard deviation across the trials"
+                    if n > 1
+                    else "within the one trial (give several logs for a spread across trials)"
+                )
             )
-        )
+        if self.handling is not None:
+            lines.append(
+                "[handling]: the accelerometer's offset against the truth in the movement minus at rest, sensor axes "
+                "(slow windows, |w| < 0.5 rad/s); mean and standard deviation across the trials:"
+            )
+            for t in self.trials:
+                h = t.handling
+                if h is None:
+                    continue
+                lines.append(
+                    f"  {t.name}: {_list(h.offset, 3)} +- {_list(h.offset_sigma, 2)} m/s^2 "
+                    f"(a tilt of {_list(h.tilt_deg, 3)} deg about x, y); {h.rest_windows} rest and "
+                    f"{h.movement_windows} movement windows"
+                )
         return "".join(f"# {line}\n" for line in lines) + "\n" + tomli_w.dumps(data)
 
 
@@ -387,6 +424,8 @@ def identify(trials: Sequence[TrialData], settings: TrialSettings | None = None)
     else:
         notes.append("no rest phase in any recording: noise terms not identified")
 
+    offsets = [r.handling for r in results if r.handling is not None]
+    arms = [r.lever_arm for r in results if r.lever_arm is not None]
     environments: list[MagneticEnvironment | None] = []
     for d, r in zip(trials, results):
         cal = r.mag if (r.mag is not None and r.mag.observable) else (mag_fits[0] if mag_fits else None)
@@ -435,4 +474,6 @@ def identify(trials: Sequence[TrialData], settings: TrialSettings | None = None)
         mag_noise=mag_noise,
         environments=environments,
         notes=notes,
+        handling=pool_handling_offsets(offsets) if offsets else None,
+        lever_arm=pool_estimates([a.lever_arm_b for a in arms], [a.lever_arm_sigma for a in arms]) if arms else None,
     )

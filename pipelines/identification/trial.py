@@ -3,7 +3,9 @@
 :class:`TrialData` is what every fit needs (a log reader adapts its file to it); :func:`identify_trial`
 runs, in order: rest phases (found, or the user's), each sensor's latency against the truth
 (:mod:`.timing`), the gyro's calibration, the accelerometer's with the gyro's mounting, the
-magnetometer's, and each sensor's noise over the rest phases (:mod:`.noise`).
+magnetometer's, each sensor's noise over the rest phases (:mod:`.noise`), and the accelerometer's
+offset in the movement against at rest (:mod:`.handling`) and its lever arm from the truth's reference
+point (:mod:`.lever_arm`, with a position track).
 """
 
 from __future__ import annotations
@@ -14,6 +16,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .calibration import AccelCalibration, GyroCalibration, MagCalibration, fit_accel, fit_gyro, fit_mag
+from .handling import HandlingOffset, handling_offset
+from .lever_arm import LeverArmFit, fit_lever_arm
 from .noise import SensorNoise, sensor_noise
 from .rest import RestPhase, find_rest_phases, phases_from_intervals
 from .timing import LatencyEstimate, accel_latency, gyro_latency, mag_latency
@@ -88,6 +92,8 @@ class TrialIdentification:
     accel_noise: SensorNoise | None
     mag_noise: SensorNoise | None
     notes: list[str] = field(default_factory=list)
+    handling: HandlingOffset | None = None  # None: no rest phase, or too few slow movement windows
+    lever_arm: LeverArmFit | None = None  # None: no position track, or too few movement windows
 
 
 def identify_trial(data: TrialData, settings: TrialSettings | None = None) -> TrialIdentification:
@@ -145,6 +151,49 @@ def identify_trial(data: TrialData, settings: TrialSettings | None = None) -> Tr
             mask=data.valid,
         )
     segments = [slice(p.start, p.stop) for p in rest]
+    at_rest = np.zeros(len(data.t), dtype=bool)
+    for seg in segments:
+        at_rest[seg] = True
+    valid = np.ones(len(data.t), dtype=bool) if data.valid is None else np.asarray(data.valid, dtype=bool)
+    moving = np.ones(len(data.t), dtype=bool) if data.movement is None else np.asarray(data.movement, dtype=bool)
+    moving = moving & ~at_rest & valid
+    handling = None
+    if rest:
+        try:
+            handling = handling_offset(
+                data.t,
+                data.accel,
+                data.truth_t,
+                data.q_wb,
+                lat_a.latency_s,
+                at_rest & valid,
+                moving,
+                pos_w=data.pos_w,
+                gravity_m_s2=settings.gravity_m_s2,
+                c_sb=gyro.c_sb,
+                window_s=settings.window_s,
+            )
+        except ValueError as e:
+            notes.append(f"handling offset not measured: {e}")
+    lever_arm = None
+    if data.pos_w is not None:
+        try:
+            lever_arm = fit_lever_arm(
+                data.t,
+                data.accel,
+                data.gyro,
+                data.truth_t,
+                data.q_wb,
+                data.pos_w,
+                lat_a.latency_s,
+                moving,
+                gyro_bias=gyro.bias,
+                c_sb=gyro.c_sb,
+                gravity_m_s2=settings.gravity_m_s2,
+                window_s=settings.window_s,
+            )
+        except ValueError as e:
+            notes.append(f"lever arm not fitted: {e}")
     gyro_noise = sensor_noise([data.gyro[s] for s in segments], data.dt) if rest else None
     accel_noise = sensor_noise([data.accel[s] for s in segments], data.dt) if rest else None
     mag_noise = None
@@ -166,4 +215,6 @@ def identify_trial(data: TrialData, settings: TrialSettings | None = None) -> Tr
         accel_noise=accel_noise,
         mag_noise=mag_noise,
         notes=notes,
+        handling=handling,
+        lever_arm=lever_arm,
     )

@@ -1,4 +1,5 @@
-"""``gyroemu identify``: fit a device config (and a site's magnetic environment) to recordings.
+"""``gyroemu identify``: fit a device config (and a site's magnetic environment and handling offset) to
+recordings.
 
 Each log is adapted to :class:`gyroemu.pipelines.identification.TrialData` (plain arrays):
 
@@ -45,7 +46,7 @@ class IdentifyOptions:
     ----------
     logs : the recordings (.mcap with a /truth/imu attitude, or BROAD .hdf5), one device, pooled.
     out : the device TOML to write.
-    site_out : the site TOML snippet to write (magnetic environment), or None.
+    site_out : the site TOML snippet to write (magnetic environment, handling offset), or None.
     force : overwrite existing outputs.
     rest_intervals : [(t_start, t_stop), …] s of every log, or None to find the rest phases.
     gravity_m_s2 : local gravity.

@@ -14,6 +14,14 @@ less the first truth stamp). A twin sample taken at true instant ``t`` correspon
 ``t + t0``; the real trial's movement mask and rest phase are carried over to the twin by the nearest
 real sample.
 
+Handling. The site file's optional ``[handling]`` table (``accel_offset_m_s2``,
+``accel_offset_sigma_m_s2``; written by ``gyroemu identify --site-out``,
+:mod:`gyroemu.pipelines.identification.handling`) is the accelerometer's offset against the truth while
+the device is carried, relative to at rest. Each twin draws one offset, mean + sd · N(0, 1) per axis
+from its own generator (``[seed, HANDLING_STREAM]``, so the device's draws are the same with or without
+it), and adds it to its accelerometer over the recording's movement mask; a recording without a
+movement mask gets none.
+
 Filters. Each filter runs 9D (with the magnetometer, when both the recording and the device have one)
 and 6D, with the **same** :class:`FilterSetup` on the real log and on its twins: what ``gyroemu bench``
 uses for the real log (``setup_from_metadata`` of an MCAP log; the defaults at the file's rate for a
@@ -89,6 +97,7 @@ VQF's rest detection from seeing the rests (its twins' 9D errors triple on trial
 position's is 10 Hz: the real accelerometer's movement power reaches 7–20 Hz (99 %), and at 3 Hz the
 twins lose the linear acceleration that the accelerometer-led filters suffer (their 6D inclination
 ratios 0.58–0.73 on the fast trials). README, "The twin", lists the settings tried."""
+HANDLING_STREAM = 0x68616E64  # the handling offset's generator: [seed, this] ("hand")
 
 
 def default_site_file() -> Path:
@@ -110,7 +119,8 @@ class TwinOptions:
     filters : filter names (default: every available built-in).
     out : folder for ``twin.md``, ``twin.json`` and the plots.
     force : write into an existing non-empty folder.
-    site : TOML file whose ``[site]`` table is the twins' site.
+    site : TOML file whose ``[site]`` table is the twins' site (and whose optional ``[handling]`` table
+        is the accelerometer's offset while carried, module notes).
     workers : processes for the runs (1: in this process).
     smoothing : the recorded scenario's ``[smoothing]`` table (default :data:`TWIN_SMOOTHING`).
     """
@@ -225,6 +235,51 @@ def _read_site(path: Path) -> dict:
     except Exception as e:  # noqa: BLE001 - pydantic's ValidationError, named
         raise TwinError(f"argument --site: {path}: {e}") from None
     return site
+
+
+@dataclass(frozen=True)
+class _Handling:
+    """``[handling]`` of the site file: the accelerometer's offset while the device is carried (the
+    recording's movement) against at rest, m/s² in sensor axes; each twin draws one (module notes)."""
+
+    accel_offset: np.ndarray  # (3,) mean
+    accel_offset_sigma: np.ndarray  # (3,) standard deviation between handlings
+
+    def draw(self, seed: int) -> np.ndarray:
+        """(3,) m/s², twin ``seed``'s offset: its own generator, so the device's draws are untouched."""
+        rng = np.random.default_rng([seed, HANDLING_STREAM])
+        return self.accel_offset + self.accel_offset_sigma * rng.standard_normal(3)
+
+
+def _read_handling(path: Path) -> _Handling | None:
+    """The site file's optional ``[handling]`` table (errors name the file and the key)."""
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+        raise TwinError(f"argument --site: {path}: {e}") from None
+    table = data.get("handling")
+    if table is None:
+        return None
+    if not isinstance(table, dict):
+        raise TwinError(f"argument --site: {path}: [handling] is not a table")
+    unknown = set(table) - {"accel_offset_m_s2", "accel_offset_sigma_m_s2"}
+    if unknown:
+        raise TwinError(f"argument --site: {path}: [handling] has unknown keys {sorted(unknown)}")
+    values = []
+    for key in ("accel_offset_m_s2", "accel_offset_sigma_m_s2"):
+        v = table.get(key, [0.0, 0.0, 0.0])
+        numbers = isinstance(v, list) and all(isinstance(x, int | float) and not isinstance(x, bool) for x in v)
+        ok = numbers and len(v) == 3
+        arr = np.asarray(v, dtype=float) if ok else np.full(3, np.nan)
+        if not ok or not np.isfinite(arr).all() or (key.endswith("sigma_m_s2") and (arr < 0).any()):
+            what = "three non-negative numbers" if key.endswith("sigma_m_s2") else "three finite numbers"
+            raise TwinError(f"argument --site: {path}: [handling] {key} must be {what}, got {v!r}")
+        values.append(arr)
+    return _Handling(values[0], values[1])
+
+
+def _fmt3(v: np.ndarray) -> str:
+    return "(" + ", ".join(f"{x:.4g}" for x in v) + ")"
 
 
 def _site_with_seed(site: dict, seed: int) -> dict:
@@ -437,7 +492,9 @@ def _run_real(real: _Real, filters, setup9, setup6, rests: list[slice]) -> dict:
     return {"errors": errors, "residuals": res, "timings": timings}
 
 
-def _run_twin(real: _Real, site: dict, smoothing, device_name: str, seed: int, filters, setup9, setup6, rest_t) -> dict:
+def _run_twin(
+    real: _Real, site: dict, smoothing, device_name: str, seed: int, filters, setup9, setup6, rest_t, handling=None
+) -> dict:
     from gyroemu.pipelines.formats.mcap_log import truth_series
     from gyroemu.sensors import load_device
     from gyroemu.sensors.sampling import SensorTruth
@@ -466,6 +523,14 @@ def _run_twin(real: _Real, site: dict, smoothing, device_name: str, seed: int, f
     inside = (real_time >= real.t[0] - 0.5 / real.rate_hz) & (real_time <= real.t[-1] + 0.5 / real.rate_hz)
     mask = real.mask[k] & inside
     t = np.asarray(samples.t, float)
+    # Carried, the accelerometer reads against the truth otherwise than at rest ([handling] of the site
+    # file, identified between the rest phases and the movement): the offset applies over the recording's
+    # movement mask (a recording without one does not say when the device was carried: none).
+    accel = np.asarray(samples.accel, float)
+    offset = None
+    if handling is not None and real.counted == "movement mask":
+        offset = handling.draw(seed)
+        accel = accel + np.where(mask[:, None], offset, 0.0)
     mag: np.ndarray | None = np.asarray(samples.mag, float) if samples.mag is not None else None
     if mag is not None and not np.isfinite(mag).all(axis=1).any():
         mag = None
@@ -476,7 +541,7 @@ def _run_twin(real: _Real, site: dict, smoothing, device_name: str, seed: int, f
         setup6,
         t,
         samples.gyro,
-        samples.accel,
+        accel,
         mag,
         truth.q_wb,
         mask,
@@ -504,6 +569,7 @@ def _run_twin(real: _Real, site: dict, smoothing, device_name: str, seed: int, f
         "t0": t0,
         "samples": len(t),
         "counted": int(mask.sum()),
+        "handling_offset": None if offset is None else [float(x) for x in offset],
     }
 
 
@@ -893,6 +959,12 @@ def _trial_result(real: _Real, real_run: dict, twins: list[dict], filters, mode,
         f"real: {int(real.mask.sum())} samples counted ({real.counted}); twins: "
         + ", ".join(str(t["counted"]) for t in twins)
     ]
+    drawn = [t.get("handling_offset") for t in twins]
+    if any(d is not None for d in drawn):
+        notes.append(
+            "handling offsets over the movement, m/s² (x, y, z) per seed: "
+            + "; ".join("none" if d is None else _fmt3(np.asarray(d)) for d in drawn)
+        )
     for row in rows:
         for e in row["errors"]:
             notes.append(f"{row['filter']} failed: {e}")
@@ -952,6 +1024,7 @@ def run_twin(options: TwinOptions) -> TwinReport:
 
     started = time.perf_counter()
     filters, unavailable, site, device = check_options(options)
+    handling = _read_handling(options.site)
     reals: list[_Real] = []
     for path in options.trials:
         try:
@@ -989,7 +1062,7 @@ def run_twin(options: TwinOptions) -> TwinReport:
                 (
                     (i, seed),
                     _run_twin,
-                    (real, site, options.smoothing, options.device, seed, filters, setup9, setup6, rest_t),
+                    (real, site, options.smoothing, options.device, seed, filters, setup9, setup6, rest_t, handling),
                 )
             )
     results: dict[tuple, dict] = {}
@@ -1034,6 +1107,12 @@ def run_twin(options: TwinOptions) -> TwinReport:
         "filter setup: the same for the real log and its twins (the log's gyroemu metadata, else the "
         "filters' defaults at the recording's rate, as gyroemu bench does)"
     )
+    if handling is not None:
+        notes.append(
+            "handling: over each recording's movement mask every twin's accelerometer reads an offset drawn "
+            f"from N({_fmt3(handling.accel_offset)}, sd {_fmt3(handling.accel_offset_sigma)}) m/s² "
+            "(the site file's [handling], seeded by the twin's seed; a recording without a movement mask: none)"
+        )
     timings = {k: round(v, 3) for k, v in timings.items()}
     pooled = _pooled_residuals(
         [results[(i, None)] for i in range(len(reals))],

@@ -34,7 +34,9 @@ from gyroemu.pipelines.identification import (
     TrialData,
     TrialSettings,
     find_rest_phases,
+    fit_lever_arm,
     gyro_latency,
+    handling_offset,
     identify,
     sensor_noise,
 )
@@ -100,7 +102,13 @@ def _with_rest(traj: Trajectory, rest_s: float) -> Trajectory:
 
 
 @pytest.fixture(scope="module")
-def synthetic():
+def synthetic(synthetic_data):
+    data, settings, traj = synthetic_data
+    return identify([data], settings), traj
+
+
+@pytest.fixture(scope="module")
+def synthetic_data():
     scenario = load_scenario("smooth_manoeuvre")
     traj = _with_rest(scenario.simulate(duration=90.0, rate_hz=RATE), REST_S)
     samples = device_from_dict(DEVICE, seed=7).measure(traj)
@@ -120,7 +128,7 @@ def synthetic():
     )
     g = float(-traj.environment.gravity_w[2])
     settings = TrialSettings(gravity_m_s2=g, earth_rate_w=tuple(traj.environment.earth_rate_w))
-    return identify([data], settings), traj
+    return data, settings, traj
 
 
 def _within(value, truth, sigma, what: str) -> None:
@@ -207,6 +215,78 @@ def test_device_toml_loads(synthetic, tmp_path: Path):
     site = tomllib.loads(result.site_toml())
     env = site["site"]["magnetic_environment"]
     assert env["spatial_sigma_uT"] >= 0 and len(site["site"]["magnetic_field_enu_uT"]) == 3
+
+
+def test_handling_offset_is_zero_where_the_device_has_none(synthetic):
+    """The synthetic device reads alike at rest and in the manoeuvre: the offset is 0 within K_SIGMA of
+    its standard uncertainty, and the site snippet writes it (one trial: no spread)."""
+    result, _ = synthetic
+    h = result.trials[0].handling
+    assert h is not None and h.rest_windows >= 20 and h.movement_windows >= 20
+    _within(h.offset, np.zeros(3), h.offset_sigma, "handling offset m/s^2")
+    site = tomllib.loads(result.site_toml())
+    assert site["handling"]["accel_offset_m_s2"] == pytest.approx(h.offset, abs=1e-4)
+    assert site["handling"]["accel_offset_sigma_m_s2"] == [0.0, 0.0, 0.0]
+
+
+def test_handling_offset_is_recovered(synthetic, synthetic_data):
+    """An offset added to the accelerometer after the rest is measured within K_SIGMA of its
+    uncertainty, and its tilt is the small-angle one (Δy / g about x, −Δx / g about y)."""
+    result, _ = synthetic
+    data, settings, _ = synthetic_data
+    trial = result.trials[0]
+    offset = np.array([0.03, -0.05, 0.02])  # m/s², of BROAD's size
+    accel = data.accel + np.where((data.t > REST_S)[:, None], offset, 0.0)
+    rest = np.zeros(len(data.t), dtype=bool)
+    for p in trial.rest:
+        rest[p.start : p.stop] = True
+    h = handling_offset(
+        data.t,
+        accel,
+        data.truth_t,
+        data.q_wb,
+        trial.accel_latency.latency_s,
+        rest & data.valid,
+        ~rest & data.valid,
+        pos_w=data.pos_w,
+        gravity_m_s2=settings.gravity_m_s2,
+        c_sb=trial.gyro.c_sb,
+    )
+    _within(h.offset, offset, h.offset_sigma, "handling offset m/s^2")
+    assert h.tilt_deg == pytest.approx(np.degrees([h.offset[1], -h.offset[0]]) / 9.80665)
+    with pytest.raises(ValueError, match="movement windows"):
+        handling_offset(data.t, accel, data.truth_t, data.q_wb, 0.0, rest, np.zeros(len(data.t), dtype=bool))
+
+
+def test_lever_arm_is_recovered(synthetic, synthetic_data):
+    """The synthetic device sits at the truth's origin: its fitted lever arm is 0 within K_SIGMA of its
+    uncertainty. The same device 1–3 cm away (``[mounting] lever_arm_m``) measuring the same motion:
+    the fit recovers that lever arm, and the pooled device file writes it."""
+    result, traj = synthetic
+    data, settings, _ = synthetic_data
+    trial = result.trials[0]
+    none = trial.lever_arm
+    assert none is not None and none.windows >= 50
+    _within(none.lever_arm_b, np.zeros(3), none.lever_arm_sigma, "lever arm m (none)")
+    arm = np.array([0.01, -0.02, 0.03])
+    device = dict(DEVICE, mounting={"lever_arm_m": arm.tolist()})
+    samples = device_from_dict(device, seed=7).measure(traj)
+    fit = fit_lever_arm(
+        samples.t,
+        samples.accel,
+        samples.gyro,
+        data.truth_t,
+        data.q_wb,
+        data.pos_w,
+        trial.accel_latency.latency_s,
+        data.valid & (samples.t > REST_S),
+        gyro_bias=trial.gyro.bias,
+        c_sb=trial.gyro.c_sb,
+        gravity_m_s2=settings.gravity_m_s2,
+    )
+    _within(fit.lever_arm_b, arm, fit.lever_arm_sigma, "lever arm m")
+    assert np.all(fit.residual_rms < fit.rms_before)
+    assert tomllib.loads(result.device_toml())["mounting"]["lever_arm_m"] == pytest.approx(none.lever_arm_b, abs=1e-4)
 
 
 def test_options_are_checked_before_work(tmp_path: Path):
