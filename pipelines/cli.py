@@ -1032,7 +1032,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("log", nargs="+", metavar="LOG", help="an .mcap log with /truth/imu, or a BROAD .hdf5 trial")
     p.add_argument("--out", required=True, help="device TOML to write")
-    p.add_argument("--site-out", default=None, help="also write the magnetic environment as a [site] TOML snippet")
+    p.add_argument(
+        "--site-out",
+        default=None,
+        help="also write the site: the magnetic environment ([site]) and the handling offset ([handling]), TOML",
+    )
     p.add_argument(
         "--rest",
         action="append",
