@@ -27,14 +27,16 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
+import statistics
 import subprocess
 import sys
 import tempfile
+import time
 import tomllib
 from pathlib import Path
 
 import numpy as np
-from timing import median_time  # (tests/benchmarks is the script folder)
 
 from gyroemu.dynamics import load_scenario
 from gyroemu.sensors import Device, device_from_dict
@@ -72,8 +74,8 @@ def toml_text(data: dict) -> str:
     return tomli_w.dumps(data)
 
 
-def bench_rate(rate: float, samples: int, repeats: int, folder: Path) -> dict[str, float]:
-    """Seconds per row for ``samples`` samples at ``rate``."""
+def bench_rate(rate: float, samples: int, repeats: int, folder: Path) -> dict[str, tuple[float, float]]:
+    """Wall and CPU seconds per row for ``samples`` samples at ``rate``."""
     import ahrs
 
     duration = samples / rate
@@ -110,11 +112,28 @@ def bench_rate(rate: float, samples: int, repeats: int, folder: Path) -> dict[st
         subprocess.run(command, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
     return {
-        "numpy": median_time(lambda: rng.standard_normal((samples, 9)), repeats),
-        "ahrs.Sensors": median_time(lambda: ahrs.Sensors(quaternions=truth.q_wb, freq=rate, rng=rng), repeats),
-        "gyroemu API": median_time(api, repeats),
-        "gyroemu simulate": median_time(cli, repeats),
+        "numpy": median_wall_cpu(lambda: rng.standard_normal((samples, 9)), repeats),
+        "ahrs.Sensors": median_wall_cpu(lambda: ahrs.Sensors(quaternions=truth.q_wb, freq=rate, rng=rng), repeats),
+        "gyroemu API": median_wall_cpu(api, repeats),
+        "gyroemu simulate": median_wall_cpu(cli, repeats),
     }
+
+
+def median_wall_cpu(run, repeats: int) -> tuple[float, float]:
+    """Median wall and CPU seconds of ``repeats`` calls of ``run()`` after a warm-up call. CPU counts
+    every thread of this process and of the children it waited for (user + system): on a loaded
+    machine a run on two threads loses wall time that its CPU time still shows."""
+    run()
+    walls, cpus = [], []
+    for _ in range(repeats):
+        children = resource.getrusage(resource.RUSAGE_CHILDREN)
+        start, cpu = time.perf_counter(), time.process_time()
+        run()
+        walls.append(time.perf_counter() - start)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        child = (after.ru_utime - children.ru_utime) + (after.ru_stime - children.ru_stime)
+        cpus.append(time.process_time() - cpu + child)
+    return statistics.median(walls), statistics.median(cpus)
 
 
 def main() -> None:
@@ -125,14 +144,17 @@ def main() -> None:
     args = parser.parse_args()
     os.environ.setdefault("PYTHONWARNINGS", "ignore")
     print(f"{args.samples} samples of consumer_mems on smooth_manoeuvre, median of {args.repeats}")
-    print(f"{'rate':>7s}  {'row':18s} {'seconds':>8s} {'M samples/s':>12s} {'vs ahrs':>8s} {'vs numpy':>9s}")
+    print(
+        f"{'rate':>7s}  {'row':18s} {'seconds':>8s} {'M samples/s':>12s} {'vs ahrs':>8s} {'vs numpy':>9s} {'cpu s':>7s}"
+    )
     with tempfile.TemporaryDirectory() as folder:
         for rate in args.rates:
             seconds = bench_rate(rate, args.samples, args.repeats, Path(folder))
-            for row, s in seconds.items():
+            ahrs_s, numpy_s = seconds["ahrs.Sensors"][0], seconds["numpy"][0]
+            for row, (s, cpu) in seconds.items():
                 print(
                     f"{rate:5g}Hz  {row:18s} {s:8.3f} {args.samples / s / 1e6:12.3f} "
-                    f"{seconds['ahrs.Sensors'] / s:7.2f}x {seconds['numpy'] / s:8.3f}x"
+                    f"{ahrs_s / s:7.2f}x {numpy_s / s:8.3f}x {cpu:7.2f}"
                 )
     print("gyroemu API: the truth's simulation is inside the timing; ahrs.Sensors: only its construction.")
     for row, text in MODELS.items():
