@@ -143,7 +143,8 @@ __all__ = [
     "group_devices",
     "device_name",
     "announce_scan",
-    "read_mcap_noting",
+    "LogCheck",
+    "check_mcap_noting",
 ]
 
 
@@ -840,16 +841,56 @@ def announce_scan(path: Path, scan: McapScan) -> dict[str, str]:
     return skipped
 
 
-def read_mcap_noting(path: str | os.PathLike[str], note: Callable[[str], None]) -> McapLog:
-    """:func:`read_mcap`, handing each of its warnings but the skipped topics to ``note`` (one line each):
-    for a command that serves every topic of a log, so that a topic it does not decode is no news."""
+@dataclass(frozen=True)
+class LogCheck:
+    """What :func:`check_mcap_noting` found in a log that it validated.
+
+    Attributes
+    ----------
+    path : Path
+    channels : tuple of ChannelInfo
+        Every channel of the file (decoded or not) with its schema, in file order.
+    metadata : list of dict
+        Every ``gyroemu`` metadata record.
+    message_count : int
+        Messages read (every channel, decoded or not).
+    truncated : bool
+        The file ends before its footer: only complete chunks were read.
+    """
+
+    path: Path
+    channels: tuple
+    metadata: list
+    message_count: int
+    truncated: bool
+
+
+def check_mcap_noting(path: str | os.PathLike[str], note: Callable[[str], None]) -> LogCheck:
+    """Validate a log as :func:`read_mcap` reads it, in one pass of bounded memory (a chunk at a time:
+    every message of a type gyroemu decodes is decoded and dropped), for a command that serves the log's
+    messages as recorded (replay, view). Its warnings but the skipped topics go to ``note`` (one line
+    each): a topic such a command does not decode is no news.
+
+    Raises :class:`LogError` where :func:`read_mcap` would for the file itself (not MCAP, corrupt, a
+    message its type cannot decode, no IMU messages)."""
+    path = Path(path)
+    scan = McapScan(path)
+    counts = scan.check()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", LogWarning)
-        log = read_mcap(path)
+        announce_scan(path, scan)
     for w in caught:
         if issubclass(w.category, LogWarning) and "skipping topic" not in str(w.message):
             note(str(w.message))
-    return log
+    if not any(counts.get(i) and scan.data[i].mtype is IMU for i in scan.data):
+        raise no_imu_error(scan, path)
+    return LogCheck(
+        path=path,
+        channels=tuple(scan.channel_info()),
+        metadata=[dict(m.metadata) for m in scan.metadata if m.name == "gyroemu"],
+        message_count=scan.message_count,
+        truncated=scan.truncated_at is not None,
+    )
 
 
 def _is_tf(topic: str, scan: McapScan, channel) -> bool:

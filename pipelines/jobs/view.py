@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from gyroemu.errors import LogError
-from gyroemu.pipelines.formats.mcap_log import read_mcap_noting
+from gyroemu.pipelines.formats.mcap_log import check_mcap_noting
 from gyroemu.pipelines.formats.mcap_records import McapMessage, iter_mcap_batches
 from gyroemu.pipelines.formats.messages import starts_with_header
 from gyroemu.pipelines.transport.foxglove_view import (
@@ -252,7 +252,7 @@ def run_view(
         raise ValueError(f"argument --speed: must be positive, got {options.speed}")
     check_view_options(options.view, "--port", "--rate")
     # validation: LogError naming the file
-    log = read_mcap_noting(path, lambda message: print(f"view: warning: {message}", file=out))
+    log = check_mcap_noting(path, lambda message: print(f"view: warning: {message}", file=out))
     channels = [c for c in log.channels if c.message_encoding == "cdr" and c.topic not in VIEW_TOPICS]
     topics = [c.topic for c in channels]
     stamped = [

@@ -85,7 +85,7 @@ from typing import TYPE_CHECKING, TextIO
 
 from gyroemu.pipelines.formats.channels import is_device_prefix, is_stream_role, role_topic, split_topic
 from gyroemu.pipelines.formats.frames import TF_STATIC_TOPIC, TF_TOPIC
-from gyroemu.pipelines.formats.mcap_log import read_mcap_noting
+from gyroemu.pipelines.formats.mcap_log import check_mcap_noting
 from gyroemu.pipelines.formats.mcap_records import iter_mcap_batches
 from gyroemu.pipelines.formats.messages import CLOCK_TYPE, encode_clock, shift_header_stamp, starts_with_header
 from gyroemu.pipelines.formats.tf_messages import TF_MESSAGE_TYPE, shift_tf_stamps
@@ -323,7 +323,7 @@ def _channels_to_publish(options: ReplayOptions, out: TextIO) -> tuple[dict[str,
     except ValueError as e:
         raise ReplayError(f"argument --device-name: {e}") from None
     # validation: LogError naming the file
-    log = read_mcap_noting(path, lambda message: print(f"replay: warning: {message}", file=out))
+    log = check_mcap_noting(path, lambda message: print(f"replay: warning: {message}", file=out))
     channels = log.channels  # the pass that validated the file found them
     cdr = [c.topic for c in channels if c.message_encoding == "cdr"]
     if topics:

@@ -77,3 +77,54 @@ def test_info_memory_does_not_grow_with_the_log(logs):
     # Bounded: the longer log's peak within 25 % of the shorter's (a peak in proportion to the data
     # would be 3.5 times it or more).
     assert long < 1.25 * short, (short, long)
+
+
+def test_replay_and_view_validate_a_log_in_bounded_memory(logs):
+    """``check_mcap_noting`` (replay's and view's validation) decodes every message a chunk at a time:
+    four times the messages, the same peak, and the channels and metadata read_mcap finds."""
+    from gyroemu.pipelines.formats.mcap_log import check_mcap_noting
+
+    def peak(path) -> int:
+        tracemalloc.start()
+        try:
+            check_mcap_noting(path, print)
+            return tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+
+    short, long = peak(logs["short"]), peak(logs["long"])
+    assert long < 1.25 * short, (short, long)  # in proportion to the data it would be 3.5 times or more
+    for which in ("short", "foreign"):
+        checked, read = check_mcap_noting(logs[which], print), read_mcap(logs[which])
+        assert checked.channels == read.channels and checked.metadata == read.metadata
+        assert checked.message_count == read.message_count
+
+
+def test_a_corrupt_message_fails_validation_as_read_mcap_fails(tmp_path):
+    """A message its type cannot decode (a frame id running past the payload) is refused by name before
+    anything is served, as read_mcap refuses it; so is a log without IMU messages."""
+    from gyroemu.errors import LogError
+    from gyroemu.pipelines.formats.mcap_log import check_mcap_noting
+    from gyroemu.pipelines.formats.mcap_records import McapFileWriter
+    from gyroemu.pipelines.formats.messages import IMU, MAGNETIC_FIELD
+
+    rows = IMU.encode(np.arange(1, 6) * 10**7, "imu")
+    rows[3, 12] = 200  # frame_id length far past the message's end
+    path = tmp_path / "corrupt.mcap"
+    with open(path, "wb") as f:
+        writer = McapFileWriter(f)
+        writer.add_messages([(writer.register_ros2_channel("/imu", IMU), np.arange(1, 6) * 10**7, rows)])
+        writer.finish()
+    with pytest.raises(LogError, match="corrupt sensor_msgs/msg/Imu message") as checked:
+        check_mcap_noting(path, print)
+    with pytest.raises(LogError) as read:
+        read_mcap(path)
+    assert str(checked.value) == str(read.value)
+    empty = tmp_path / "mag_only.mcap"
+    with open(empty, "wb") as f:
+        writer = McapFileWriter(f)
+        mag = writer.register_ros2_channel("/mag", MAGNETIC_FIELD)
+        writer.add_messages([(mag, [1], MAGNETIC_FIELD.encode([1], "imu"))])
+        writer.finish()
+    with pytest.raises(LogError, match="holds no sensor_msgs/msg/Imu messages"):
+        check_mcap_noting(empty, print)
