@@ -1019,7 +1019,9 @@ def _record_positions(data: bytes, buffer: np.ndarray) -> tuple[np.ndarray, np.n
     starts, opcodes, lengths = [], [], []
     p = 0
     while p < size:
-        walked_p, walked_op, walked_len = [], [], []
+        walked_p: list[int] = []
+        walked_op: list[int] = []
+        walked_len: list[int] = []
         while len(walked_p) < _WALK and p < size:
             if size - p < 9:
                 raise ValueError("a partial record at its end")
