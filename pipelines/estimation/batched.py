@@ -6,8 +6,8 @@ here (:func:`kalman_predict`, :func:`kalman_update`: the same equations, Joseph 
 run stays in compiled code. ``tests/pipelines/test_mekf.py`` checks that both give the same attitude.
 
 numba's on-disk cache is keyed on this file's content only: a change to :mod:`.mekf_kernels` reaches
-the cached ``_run`` only when this file changes too (kernel layout as of ``P_SIZE = 32``, ``X_SIZE = 17``,
-``P_ACC_GM_TAU`` the last).
+the cached ``_run`` only when this file changes too (kernel layout as of ``P_SIZE = 35``, ``X_SIZE = 17``,
+``S_SIZE = 111``, ``P_ACC_RISE`` the last; the gravity update ``mekf_kernels.gravity_update``).
 """
 
 from __future__ import annotations
@@ -50,11 +50,12 @@ def _window(q, b, slow, win, phi, P, x, earth, params, use_mag):
     kalman_predict(P, F, Q)
     z, H, R = np.empty(2), np.empty((2, kern.X_SIZE)), np.empty((2, 2))
     if kern.gravity_measurement(win, slow, params, z, H, R) and kern.gravity_gate(P, z, H, R, slow, params):
-        kalman_update(x, P, z, H, R)
+        kern.gravity_update(x, P, z, H, R)
     if kern.rest_due(win, slow, params):
         z3, H3, R3 = np.empty(3), np.empty((3, kern.X_SIZE)), np.empty((3, 3))
         kern.rest_measurement(win, q, b, earth, params, z3, H3, R3, P)
-        kalman_update(x, P, z3, H3, R3)
+        if kern.rest_gate(win, slow, params):
+            kalman_update(x, P, z3, H3, R3)
     if use_mag:
         kern.heading_update(x, P, q, win, slow, params)
     kern.inject(x, q, b, slow, win, phi)

@@ -28,7 +28,8 @@ Measurements, made at the end of each window
   forces turned with past attitudes, so they see the error as it was: ``δθ + D (δb, δM)``, ``D`` the
   drift since, weighted by the low-pass (2τ R for a steady drift), tracked per sample. What the
   low-passes keep of a non-gravitational acceleration slower than they are adds ``a/g``: the error state
-  carries it as ``δa`` (world x, y; a first-order Gauss–Markov process, off by default), and whatever
+  carries it as ``δa`` (world x, y; a first-order Gauss–Markov process, a consider state:
+  :func:`gravity_update`), and whatever
   acceleration the innovations show beyond the model goes into the measurement's noise
   (:func:`gravity_gate`, innovation-based adaptive estimation).
 * Heading: the magnetic field turned into the world frame and averaged, ``m̄_w``; its azimuth from
@@ -78,7 +79,9 @@ S_SCALE = 94  # 94:103 M̂ (3×3, row-major): the gyro's scale-factor and misali
 S_ACC_MS = 103  # mean square of the gravity innovation per horizontal axis, low-passed over accel_tau_s, rad²
 S_ACC_CORR = 104  # the current gravity measurement's correlation factor 4τ/T (gravity_measurement)
 S_ACC_EST = 105  # 105:107 â: the low-passed horizontal non-gravitational acceleration over g, world x and y, rad
-S_SIZE = 107
+S_REST_N = 107  # gyro samples in the accepted rest windows of the current stretch at rest
+S_REST_SUM = 108  # 108:111 their sum of ω_m, rad/s
+S_SIZE = 111
 
 # Error state layout.
 X_THETA = 0  # 0:3 δθ, rad, world axes
@@ -220,6 +223,7 @@ def strapdown(q, b, slow, win, phi, t, gyro, delta_angle, accel, mag, earth_rate
             win[W_REST_N] += 1.0
         else:
             slow[S_REST_T] = 0.0
+            slow[S_REST_N : S_REST_SUM + 3] = 0.0
             win[W_REST_G : W_REST_N + 1] = 0.0
 
         # Gravity and field in the world frame, summed over the window.
@@ -300,7 +304,9 @@ P_ACC_ADAPT = 29
 P_ACC_GM_SIGMA = 30
 P_ACC_GM_TAU = 31
 P_REST_RATE = 32
-P_SIZE = 33
+P_REST_GATE = 33
+P_ACC_RISE = 34
+P_SIZE = 35
 
 
 @njit
@@ -505,8 +511,10 @@ def gravity_gate(P, z, H, R, slow, params):
     ``z`` is the innovation), and what it holds beyond the single measurement's expected variance
     ``tr(H P Hᵀ)/2 + R T/(4τ)`` is the unmodelled acceleration's variance (over g²), added to ``R`` with the
     same correlation factor ``4τ/T``, once it is significant: ``2 Ĉ`` beyond the gravity gate (a χ²(2)
-    quantile) times the expected variance (Suh's threshold; a lower one, the 95 % quantile, took the
-    smooth manoeuvre's sway for acceleration and doubled its 6D inclination error). Weight ``accel_adapt`` (0: off).
+    quantile) times the expected variance without the slow acceleration ``δa`` (Suh's threshold; a lower
+    one, the 95 % quantile, took the smooth manoeuvre's sway for acceleration and doubled its 6D
+    inclination error). ``Ĉ`` rises over ``accel_adapt_rise_s`` and falls over ``4τ``. Weight
+    ``accel_adapt`` (0: off).
 
     Accepted when its Mahalanobis distance ``zᵀ S⁻¹ z`` is within the gate (a χ² quantile). A
     rejected measurement is a disturbance (a tap, a push); after ``accel_timeout_s`` of rejections the
@@ -517,14 +525,27 @@ def gravity_gate(P, z, H, R, slow, params):
     adapt = params[P_ACC_ADAPT]
     if adapt > 0.0:
         corr = slow[S_ACC_CORR]  # 4τ/T
-        beta = 1.0 - math.exp(-4.0 / corr)  # 1 − e^(−T/τ): the mean square low-passed over τ
-        slow[S_ACC_MS] += beta * (0.5 * (z[0] * z[0] + z[1] * z[1]) - slow[S_ACC_MS])
+        window = params[P_ACC_TAU] * 4.0 / corr  # T, s
+        # The mean square follows a rise over accel_adapt_rise_s (faster than the filter's tilt takes an
+        # acceleration in) and a fall over 4τ: an acceleration that ends leaves the cascade's output as
+        # t e^(−t/τ), which takes about 4τ to vanish.
+        square = 0.5 * (z[0] * z[0] + z[1] * z[1])
+        rise = square > slow[S_ACC_MS]
+        beta = 1.0 - math.exp(-window / (params[P_ACC_RISE] if rise else 4.0 * params[P_ACC_TAU]))
+        slow[S_ACC_MS] += beta * (square - slow[S_ACC_MS])
         expected = 0.5 * (HPH[0, 0] + HPH[1, 1]) + 0.5 * (R[0, 0] + R[1, 1]) / corr
         # Suh's threshold: only a significant excess counts (the mean square holds about one independent
-        # innovation, so below the χ² gate it is noise and max(·, 0) would bias R upwards)
+        # innovation, so below the χ² gate it is noise and max(·, 0) would bias R upwards). The threshold
+        # scales with the spread of that estimate, the innovation's fast part: without the slow acceleration
+        # δa, whose variance stays the same over the mean square's time (notes of issue #17: with δa in it,
+        # the attitude NEES of the car × tactical MEMS left its band on other seeds).
+        Hw = H.copy()
+        Hw[:, X_ACC:] = 0.0
+        HPHw = Hw @ P @ Hw.T
+        fast = 0.5 * (HPHw[0, 0] + HPHw[1, 1]) + 0.5 * (R[0, 0] + R[1, 1]) / corr
         excess = 0.0
-        if 2.0 * slow[S_ACC_MS] > params[P_ACC_GATE] * expected:
-            excess = adapt * (slow[S_ACC_MS] - expected) * corr
+        if 2.0 * slow[S_ACC_MS] > params[P_ACC_GATE] * fast:
+            excess = adapt * max(slow[S_ACC_MS] - expected, 0.0) * corr
         R[0, 0] += excess
         R[1, 1] += excess
     S = HPH + R
@@ -539,6 +560,53 @@ def gravity_gate(P, z, H, R, slow, params):
         slow[S_ACC_REJ_T] = 0.0
         return True
     return False
+
+
+@njit
+def gravity_update(x, P, z, H, R):
+    """The gravity measurement's Kalman update, ``x`` (X_SIZE,) and ``P`` in place, with the acceleration
+    ``δa`` a *consider* state (the Schmidt–Kalman filter: Schmidt, "Application of state-space methods to
+    navigation problems", Advances in Control Systems 3, 1966): its rows of the gain are zero, so the
+    filter never estimates the acceleration (an estimate would outlast an acceleration that has ended by
+    ``accel_gm_tau_s``: on the car drive it doubled the tilt error), but the covariance carries its
+    correlation with the tilt, Joseph form (valid for any gain)."""
+    PHT = P @ H.T
+    S = H @ PHT + R
+    K = PHT @ np.linalg.inv(S)
+    K[X_ACC:, :] = 0.0
+    x += K @ (z - H @ x)
+    A = np.eye(X_SIZE) - K @ H
+    P[:, :] = A @ P @ A.T + K @ R @ K.T
+
+
+@njit
+def rest_gate(win, slow, params):
+    """Whether the window's mean rate at rest is the stretch's (then it joins the stretch's mean).
+
+    The detector calls rest whatever turns more slowly than its thresholds: a car cruising straight is at
+    rest for the gyro (correctly: it reads its bias and Earth's rate), but so is the first second of a
+    turn, whose rate ramps up through the thresholds; taken as bias, it turned the heading by 0.5° in a
+    second. At rest the rate is stationary: a window whose mean rate ``ω̄_w`` leaves the mean of the
+    stretch's accepted windows ``ω̄_s`` by more than white noise allows, ``|ω̄_w − ω̄_s|² / (N²/(n_w Δt) +
+    N²/(n_s Δt))`` beyond the gate ``rest_gate`` (``MekfParams.rest_gate``), is rotation and rejected. The test does not
+    use the filter's bias, so a bias the filter has wrong is still learnt (a gate on the innovation
+    ``z − H x`` kept only the windows that agreed with it). The first window of a stretch is accepted."""
+    n = win[W_REST_N]
+    dt_mean = win[W_T] / max(win[W_N], 1.0)
+    n_s = slow[S_REST_N]
+    ok = True
+    if n_s > 0.0:
+        d2 = 0.0
+        for i in range(3):
+            d = win[W_REST_G + i] / n - slow[S_REST_SUM + i] / n_s
+            d2 += d * d
+        var = params[P_GYRO_NOISE] ** 2 / dt_mean * (1.0 / n + 1.0 / n_s)
+        ok = d2 <= params[P_REST_GATE] * var
+    if ok:
+        slow[S_REST_N] += n
+        for i in range(3):
+            slow[S_REST_SUM + i] += win[W_REST_G + i]
+    return ok
 
 
 @njit

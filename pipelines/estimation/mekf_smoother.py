@@ -36,9 +36,6 @@ SMOOTHER_DEFAULTS: dict[str, float] = {
     # Misalignment prior of an unknown gyro (the online filter's 1 % lets heading disturbances leak
     # into the cross-axis states, which the backward pass then carries over the whole log).
     "misalignment_sigma": 0.003,
-    # Non-gravitational acceleration allowed for, m/s²/√Hz: the backward pass sees the tilt from both
-    # sides of a manoeuvre, so less weight on the low-passed force in motion pays.
-    "motion_accel_density": 0.5,
 }
 """The smoother's own defaults, where they differ from the online filter's (:class:`MekfParams`):
 one global set, chosen on the eight BROAD trials in shared (README); a device's known figures win."""

@@ -14,7 +14,8 @@ stores
   nominal state: the error of the prior nominal state as the filter saw it).
 
 (numba caches this file's functions by its content alone: a change to :mod:`.mekf_kernels` needs
-a change here, such as the layout noted here: ``P_SIZE = 32``, ``P_ACC_GM_TAU`` the last; ``X_SIZE = 17``.)
+a change here, such as the layout noted here: ``P_SIZE = 35``, ``P_ACC_RISE`` the last; ``X_SIZE = 17``,
+``S_SIZE = 111``.)
 
 Index 0 is the initial state (``P_post[0] = P₀``, no update). Float64: 5.4 kB a window, 163 MB for a
 10-minute log at 1 kHz with 20 ms windows (30 000 windows; per-sample storage would be 50× that).
@@ -68,11 +69,12 @@ def _store_window(q, b, slow, win, phi, P, x, earth, params, use_mag, F_top, P_p
     F_top[j, 3:] = F[kern.X_ACC :, :]
     P_prior[j] = P
     if accept:
-        kalman_update(x, P, z, H, R)
+        kern.gravity_update(x, P, z, H, R)
     if kern.rest_due(win, slow, params):
         z3, H3, R3 = np.empty(3), np.empty((3, X)), np.empty((3, 3))
         kern.rest_measurement(win, q, b, earth, params, z3, H3, R3, P)
-        kalman_update(x, P, z3, H3, R3)
+        if kern.rest_gate(win, slow, params):
+            kalman_update(x, P, z3, H3, R3)
     if use_mag:
         kern.heading_update(x, P, q, win, slow, params)
     x_upd[j] = x

@@ -2,7 +2,11 @@
 gyroemu's MEKF online and smoothed (``mekf-smooth``) against VQF online and offlineVQF, side by side in
 the same run, one global parameter set each (their defaults).
 
-    python tests/benchmarks/bench_smoother_broad.py [--trials 02 07 ...]
+    python tests/benchmarks/bench_smoother_broad.py [--trials 02 07 ...] [--online-param KEY=VALUE ...]
+        [--smooth-param KEY=VALUE ...]
+
+``--online-param`` and ``--smooth-param`` replace one of :class:`MekfParams`' defaults in the online filter or
+the smoother (e.g. ``motion_accel_density=0.4``), to see whether the defaults sit on a plateau.
 
 Per trial: 9D total RMSE and 6D inclination RMSE, degrees, over the ``movement`` samples, with BROAD's
 definitions (:mod:`gyroemu.pipelines.estimation.metrics`); the means over the trials, and the issue's
@@ -23,8 +27,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from gyroemu.pipelines.estimation.mekf import Mekf  # noqa: E402
-from gyroemu.pipelines.estimation.mekf_smoother import MekfSmoother  # noqa: E402
+from gyroemu.pipelines.estimation.mekf import Mekf, MekfParams  # noqa: E402
+from gyroemu.pipelines.estimation.mekf_smoother import MekfSmoother, smoother_params  # noqa: E402
 from gyroemu.pipelines.estimation.metrics import attitude_errors, rmse_deg  # noqa: E402
 from gyroemu.pipelines.estimation.protocol import FilterSetup  # noqa: E402
 from gyroemu.pipelines.formats.importers import read_broad  # noqa: E402
@@ -35,8 +39,11 @@ BROAD_DIR = Path(
 COLUMNS = ("MEKF online", "MEKF smoothed", "VQF online", "offlineVQF")
 
 
-def trial_errors(trial) -> dict[str, tuple[float, float, float]]:
-    """Per estimator: (9D total RMSE °, 6D inclination RMSE °, wall s of the 9D run)."""
+def trial_errors(
+    trial, online: dict[str, float] | None = None, smooth: dict[str, float] | None = None
+) -> dict[str, tuple[float, float, float]]:
+    """Per estimator: (9D total RMSE °, 6D inclination RMSE °, wall s of the 9D run); ``online`` and
+    ``smooth`` override the MEKF's and the smoother's parameters."""
     from vqf import VQF, offlineVQF
 
     fs, ref, movement = trial.rate_hz, trial.opt_quat, trial.movement
@@ -49,15 +56,16 @@ def trial_errors(trial) -> dict[str, tuple[float, float, float]]:
         for nine in (True, False):
             mag = mag_ut if nine else None
             started = time.perf_counter()
+            setup = FilterSetup(rate_hz=fs, use_mag=nine)
             if name == "MEKF online":
                 q[nine] = (
-                    Mekf(FilterSetup(rate_hz=fs, use_mag=nine))
+                    Mekf(setup, MekfParams.for_setup(setup, **(online or {})))
                     .process(t, gyro, accel, None if mag is None else mag * 1e-6)
                     .q_wb
                 )
             elif name == "MEKF smoothed":
                 q[nine] = (
-                    MekfSmoother(FilterSetup(rate_hz=fs, use_mag=nine))
+                    MekfSmoother(setup, smoother_params(setup, **(smooth or {})))
                     .process(t, gyro, accel, None if mag is None else mag * 1e-6)
                     .q_wb
                 )
@@ -80,7 +88,21 @@ def trial_errors(trial) -> dict[str, tuple[float, float, float]]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", nargs="+", default=None, help="trial numbers, e.g. 02 07 (default: all)")
+    parser.add_argument("--online-param", action="append", default=[], metavar="KEY=VALUE")
+    parser.add_argument("--smooth-param", action="append", default=[], metavar="KEY=VALUE")
     args = parser.parse_args()
+    try:
+        online, smooth = (
+            {k: float(v) for k, v in (a.split("=", 1) for a in given)}
+            for given in (args.online_param, args.smooth_param)
+        )
+    except ValueError:
+        print("--online-param / --smooth-param take KEY=VALUE with a number", file=sys.stderr)
+        return 2
+    unknown = sorted((set(online) | set(smooth)) - set(MekfParams.__dataclass_fields__))
+    if unknown:
+        print(f"unknown MekfParams: {', '.join(unknown)}", file=sys.stderr)
+        return 2
     files = sorted(BROAD_DIR.glob("*.hdf5"))
     if args.trials:
         files = [f for f in files if f.name.split("_")[0] in args.trials]
@@ -92,7 +114,7 @@ def main() -> int:
     )  # compile
     rows = {}
     for path in files:
-        rows[path.stem[:2]] = trial_errors(read_broad(path))
+        rows[path.stem[:2]] = trial_errors(read_broad(path), online, smooth)
         print(f"trial {path.stem} done", file=sys.stderr, flush=True)
     for k, title in ((0, "9D total RMSE, °"), (1, "6D inclination RMSE, °")):
         print(f"\n{title}\n")

@@ -346,7 +346,8 @@ def test_simulated_field_heading_error_is_the_sensors_iron():
 def test_gravity_noise_takes_what_a_sustained_acceleration_shows():
     """Innovation-based adaptive estimation (``gravity_gate``): a gravity innovation held at 14° (a car
     speeding up at 2.5 m/s²) drives the mean square of the innovation per axis to |z|²/2 (a low-pass
-    over τ: after n windows of T it is within e^(−nT/τ) of it, to round-off), and R then carries what exceeds the
+    rising over τ_r = ``accel_adapt_rise_s``: after n windows of T it is within e^(−nT/τ_r) of it, to
+    round-off), and R then carries what exceeds the
     expected variance tr(H P Hᵀ)/2 + R₀ T/(4τ), with the correlation factor 4τ/T: closed form. An
     innovation within the expected spread adds nothing (below the χ² gate)."""
     setup = FilterSetup(rate_hz=100.0, use_mag=False)
@@ -368,9 +369,10 @@ def test_gravity_noise_takes_what_a_sustained_acceleration_shows():
             R = np.eye(2) * r0
             kern.gravity_gate(P, z, H, R, slow, p)
         ms = 0.5 * tilt**2
-        # round-off: ε·ms per step, summed by the low-pass with gain 1/β (β = 1 − e^(−T/τ)), twice over
-        beta = 1.0 - np.exp(-T / tau)
-        assert abs(slow[kern.S_ACC_MS] - ms) <= ms * np.exp(-n * T / tau) + 2 * EPS * ms / beta
+        # round-off: ε·ms per step, summed by the low-pass with gain 1/β (β = 1 − e^(−T/τ_r)), twice over
+        tau_r = params.accel_adapt_rise_s
+        beta = 1.0 - np.exp(-T / tau_r)
+        assert abs(slow[kern.S_ACC_MS] - ms) <= ms * np.exp(-n * T / tau_r) + 2 * EPS * ms / beta
         want = r0 + ((ms - hph - r0 / corr) * corr if adds else 0.0)
         assert np.allclose(np.diag(R), want, rtol=1e-12, atol=0)
         assert R[0, 1] == R[1, 0] == 0.0
@@ -387,3 +389,72 @@ def test_rest_rate_threshold_comes_from_the_gyro():
         want = min(np.radians(2.0), 5 * np.sqrt(n**2 / (2 * params.rest_tau_s) + sb**2))
         assert params.rest_rate == pytest.approx(want, rel=1e-12)
     assert MekfParams.for_setup(FilterSetup(rate_hz=100.0)).rest_rate == np.radians(2.0)
+
+
+def test_rest_gate_rejects_a_rate_that_leaves_its_stretch():
+    """``rest_gate``: the first window of a stretch at rest is accepted and starts the stretch's mean; a
+    window whose mean rate differs from that mean by d is accepted when |d|² is within ``rest_gate`` times
+    the white noise's variance N²/Δt (1/n_w + 1/n_s), and then joins the mean (sums exact); beyond it,
+    rejected, and the mean is left alone (a turn is not learnt as bias). A rate the filter's bias
+    estimate would call wrong, but which stays put, is accepted: the test does not use the bias."""
+    setup = FilterSetup(rate_hz=100.0, use_mag=False)
+    params = MekfParams(gyro_noise_density=1e-3)
+    p = params.vector(setup)
+    n_w, dt = 2.0, 0.01
+    sigma2 = params.gyro_noise_density**2 / dt  # a sample's white-noise variance, (rad/s)²
+
+    def window(rate):
+        win = np.zeros(kern.W_SIZE)
+        win[kern.W_T], win[kern.W_N], win[kern.W_REST_N] = n_w * dt, n_w, n_w
+        win[kern.W_REST_G : kern.W_REST_G + 3] = n_w * np.asarray(rate)
+        return win
+
+    slow = np.zeros(kern.S_SIZE)
+    offset = np.array([0.3, -0.2, 0.1])  # 17 °/s: far from any bias the filter holds, but stationary
+    assert kern.rest_gate(window(offset), slow, p)
+    assert slow[kern.S_REST_N] == n_w and np.array_equal(slow[kern.S_REST_SUM : kern.S_REST_SUM + 3], n_w * offset)
+    var = sigma2 * (1.0 / n_w + 1.0 / n_w)
+    inside = offset + np.array([0.0, 0.0, 0.9 * np.sqrt(params.rest_gate * var)])
+    assert kern.rest_gate(window(inside), slow, p)
+    assert slow[kern.S_REST_N] == 2 * n_w
+    mean = slow[kern.S_REST_SUM : kern.S_REST_SUM + 3] / slow[kern.S_REST_N]
+    var = sigma2 * (1.0 / n_w + 1.0 / (2 * n_w))
+    before = slow.copy()
+    outside = mean + np.array([1.1 * np.sqrt(params.rest_gate * var), 0.0, 0.0])
+    assert not kern.rest_gate(window(outside), slow, p)
+    assert np.array_equal(slow, before)
+
+
+def test_gravity_update_considers_the_acceleration_without_estimating_it():
+    """``gravity_update`` is the Schmidt (consider) update: the gain's δa rows are zero, so δa keeps its
+    value, the other states take the optimal gain, and P is the Joseph form of that gain (an independent
+    computation here, to round-off). Without the δa columns in H and without cross-covariance it is the
+    ordinary Kalman update."""
+    rng = np.random.default_rng(7)
+    n = kern.X_SIZE
+    A = rng.standard_normal((n, n)) * 1e-2
+    P0 = A @ A.T + np.eye(n) * 1e-6
+    H = np.zeros((2, n))
+    H[0, 1], H[1, 0], H[0, kern.X_ACC], H[1, kern.X_ACC + 1] = -1.0, 1.0, 1.0, 1.0
+    H[:, kern.X_BIAS : kern.X_BIAS + 3] = rng.standard_normal((2, 3)) * 0.1
+    R = np.eye(2) * 1e-4
+    z = np.array([3e-3, -2e-3])
+    x0 = rng.standard_normal(n) * 1e-3
+    x, P = x0.copy(), P0.copy()
+    kern.gravity_update(x, P, z, H, R)
+    K = P0 @ H.T @ np.linalg.inv(H @ P0 @ H.T + R)
+    K[kern.X_ACC :] = 0.0
+    assert np.array_equal(x[kern.X_ACC :], x0[kern.X_ACC :])
+    assert np.allclose(x, x0 + K @ (z - H @ x0), rtol=0, atol=100 * EPS * np.abs(x0).max())
+    IKH = np.eye(n) - K @ H
+    want = IKH @ P0 @ IKH.T + K @ R @ K.T
+    assert np.allclose(P, want, rtol=0, atol=100 * n * EPS * np.abs(P0).max())
+    # no δa in H, no cross-covariance: the ordinary update, P_post = P − K S Kᵀ
+    H[:, kern.X_ACC :] = 0.0
+    P0[kern.X_ACC :, : kern.X_ACC] = 0.0
+    P0[: kern.X_ACC, kern.X_ACC :] = 0.0
+    x, P = x0.copy(), P0.copy()
+    kern.gravity_update(x, P, z, H, R)
+    S = H @ P0 @ H.T + R
+    K = P0 @ H.T @ np.linalg.inv(S)
+    assert np.allclose(P, P0 - K @ S @ K.T, rtol=0, atol=100 * n * EPS * np.abs(P0).max())

@@ -3,7 +3,7 @@
 Fast: the backward recursion against filterpy's ``rts_smoother`` on a linear system; on a short
 simulated run the forward pass is the online filter, the smoother beats it and its covariance is never
 larger; ``gyroemu estimate --smooth`` writes the smoothed estimate; the bench keeps offline estimators
-apart. Slow: the BROAD targets. (The attitude NEES of item 3, not met, is measured by
+apart. Slow: the BROAD targets. (The attitude NEES of item 3: ``test_mekf_nees.py``, and
 ``tests/benchmarks/nees_check.py``.)
 """
 

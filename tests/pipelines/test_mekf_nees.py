@@ -1,0 +1,76 @@
+"""Issue #17, item 3: the MEKF's attitude covariance tells the truth (slow tier).
+
+On simulated runs with exact truth (the smooth random manoeuvre and the car drive, consumer and tactical
+MEMS; 20 runs of 30 s each), the normalised estimation error squared eᵀ P⁻¹ e of the attitude, averaged
+over the runs at 20 instants after 15 s, lies inside the two-sided 95 % band of χ²(dof·N)/N at 16 or
+more of the 20 instants (dof 3 in 9D, 2 in 6D, whose heading is not observed), for the online filter
+and for the smoother. Run k flies the random manoeuvre of seed 1000 + k with the device of seed k (the
+band needs N independent draws of everything the filter models as random; the car drive has no random
+part). The same protocol and the forward pass's figures: ``python tests/benchmarks/nees_check.py``.
+
+Held here for the consumer MEMS, whose two cases are inside their band on seeds 0–19 and on the
+seeds 20–59 that no parameter was chosen on. The tactical MEMS is not held: its cases pass or fail by
+the seed set (the smooth manoeuvre's per-run NEES is heavy-tailed: mean 1.91, median 0.79 over 60 runs;
+the car's smoothed pass 10, 13 and 9 of 20 instants), which README reports as missed.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from gyroemu.dynamics import load_scenario, scenario_from_dict
+from gyroemu.dynamics.rotation import quat_conjugate, quat_multiply, quat_to_rotvec
+from gyroemu.pipelines.estimation.mekf import MekfParams
+from gyroemu.pipelines.estimation.mekf_smoother import smooth_log, smoother_params
+from gyroemu.pipelines.estimation.setup import setup_for
+from gyroemu.sensors import load_device
+from gyroemu.sensors.sampling import SensorTruth
+
+SCENARIOS = Path(__file__).resolve().parents[2] / "configs" / "scenarios"
+RUNS, DURATION, SKIP, POINTS = 20, 30.0, 15.0, 20
+
+
+def _nees(scenario: str, device: str) -> tuple[dict[str, np.ndarray], int]:
+    """Per pass ('online', 'smoothed'): the attitude NEES (RUNS, POINTS); and its degrees of freedom."""
+    data = tomllib.loads((SCENARIOS / f"{scenario}.toml").read_text())
+    random = data.get("kind") == "random-manoeuvre"
+    shared = None if random else load_scenario(scenario)
+    shared_traj = None if shared is None else shared.simulate(duration=DURATION)
+    out: dict[str, list[np.ndarray]] = {"online": [], "smoothed": []}
+    dof = 3
+    for run in range(RUNS):
+        scen = scenario_from_dict(data | {"seed": 1000 + run}) if random else shared
+        traj = scen.simulate(duration=DURATION) if random else shared_traj
+        dev = load_device(device, seed=run)
+        samples = dev.measure(traj)
+        q_true = SensorTruth(traj).body_truth(samples.t_true if samples.t_true is not None else samples.t)[0]
+        setup = setup_for(dev, scen)
+        mag = samples.mag if setup.use_mag else None
+        t = np.asarray(samples.t, float) - samples.t[0]
+        online = smooth_log(setup, t, samples.gyro, samples.accel, mag, params=MekfParams.for_setup(setup)).forward
+        smoothed = smooth_log(setup, t, samples.gyro, samples.accel, mag, params=smoother_params(setup)).smoothed
+        idx = np.linspace(np.searchsorted(t, SKIP), len(t) - 1, POINTS).astype(int)
+        dof = 3 if setup.use_mag else 2
+        for key, est in (("online", online), ("smoothed", smoothed)):
+            e = quat_to_rotvec(quat_multiply(q_true[idx], quat_conjugate(est.q_wb[idx])))[:, :dof]
+            cov = est.q_wb_covariance[idx][:, :dof, :dof]
+            out[key].append(np.einsum("ki,ki->k", e, np.linalg.solve(cov, e[:, :, None])[:, :, 0]))
+    return {k: np.array(v) for k, v in out.items()}, dof
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario", ["smooth_manoeuvre", "car_drive"])
+def test_attitude_nees_lies_in_its_chi2_band(scenario):
+    """The issue's bar: the mean NEES over the runs inside its 95 % χ² band at 16 or more of 20 instants
+    (the instants are correlated in time, so no tighter count follows from the band alone)."""
+    nees, dof = _nees(scenario, "consumer_mems")
+    lo, hi = chi2.ppf([0.025, 0.975], dof * RUNS) / RUNS
+    for key, values in nees.items():
+        mean = values.mean(axis=0)
+        inside = int(np.sum((mean > lo) & (mean < hi)))
+        assert inside >= 16, f"{key}: mean NEES {np.round(mean, 2).tolist()} against [{lo:.2f}, {hi:.2f}]"
