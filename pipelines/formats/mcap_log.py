@@ -533,8 +533,23 @@ class McapLogWriter:
         """Append a block: one :class:`Recording` (or bare :class:`ImuSamples`) per device.
 
         All channels of all devices in one call are interleaved in time order; successive calls must
-        follow each other in time (``ValueError`` otherwise).
+        follow each other in time (``ValueError`` otherwise). The same as :meth:`write_prepared` of
+        :meth:`prepare`.
         """
+        self.write_prepared(self.prepare(*recordings))
+
+    def write_prepared(self, encoded: EncodedBlock | None) -> None:
+        """Append a block that :meth:`prepare` encoded: its channels' messages interleaved in time order
+        into records, chunked, compressed and written. One thread may prepare the next block (encoding,
+        registering its channels) while another writes this one; blocks are written in the order
+        prepared."""
+        if self._closed:
+            raise ValueError(f"{self.path}: the log is closed")
+        self._mcap.add_messages(encoded or [])
+
+    def prepare(self, *recordings: Recording | ImuSamples) -> EncodedBlock | None:
+        """Encode a block (see :meth:`write`): its channels registered, each channel's messages
+        serialised; None when it holds no message. :meth:`write_prepared` writes it."""
         if self._closed:
             raise ValueError(f"{self.path}: the log is closed")
         block = [r if isinstance(r, Recording) else Recording(samples=r) for r in recordings]
@@ -553,8 +568,9 @@ class McapLogWriter:
                     f"this block starts at {first * 1e-9:.9f} s, before the end of the previous "
                     f"block ({self._last_time * 1e-9:.9f} s): write blocks in time order"
                 )
-            self._mcap.add_messages(batches)
             self._last_time = max(self._last_time, max(int(stamps.max()) for stamps in times))
+            return EncodedBlock(batches)
+        return None
 
     def _tf_channel(self, topic: str) -> int:
         if topic not in self._tf_channels:
@@ -839,6 +855,11 @@ def announce_scan(path: Path, scan: McapScan) -> dict[str, str]:
     for topic, reason in skipped.items():
         warnings.warn(f"{path}: skipping topic {topic}: {reason}", LogWarning, stacklevel=3)
     return skipped
+
+
+class EncodedBlock(list):
+    """A block's messages as :meth:`McapLogWriter.prepare` serialised them: ``(channel_id, stamp_ns (N,),
+    payloads (N, size) uint8)`` per channel, for :meth:`McapLogWriter.write_prepared`."""
 
 
 @dataclass(frozen=True)

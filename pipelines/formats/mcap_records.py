@@ -44,6 +44,7 @@ import bisect
 import operator
 import os
 import struct
+import threading
 import zlib
 from collections.abc import Iterable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -80,6 +81,7 @@ __all__ = [
     "OFFERED_QOS_PROFILES",
     "LogError",
     "McapFileWriter",
+    "PreparedMessages",
     "McapScan",
     "ChannelData",
     "decoded_type",
@@ -270,6 +272,17 @@ def _interleave(groups: Sequence[_Group]):
     return data, channel, log_time, offset
 
 
+class PreparedMessages(NamedTuple):
+    """Message records laid out by :meth:`McapFileWriter.prepare_messages`, for
+    :meth:`McapFileWriter.append_prepared`: the records end to end and, per message, its channel, log
+    time and offset in ``data``."""
+
+    data: np.ndarray  # uint8
+    channel: np.ndarray  # (M,) uint16
+    log_time: np.ndarray  # (M,) uint64
+    offset: np.ndarray  # (M,) int64
+
+
 COMPRESSION_LEVEL = 1
 """zstd level of the chunks gyroemu writes. Level 1 against zstd's default 3, on 1 MiB chunks of a
 simulated log (IMU, field, truth and raw channels: noisy floats): 874 against 536 MB/s, for 1.7 %
@@ -317,6 +330,8 @@ class McapFileWriter:
         self._time_range: list[int] | None = None
         self._metadata_count = 0
         self._pending = _no_messages()
+        self._held: list[tuple[object, str | None]] = []  # registered records not yet written (_hold)
+        self._held_lock = threading.Lock()
         self._finished = False
         self._write(MAGIC)
         self._write_record(Header(profile=profile, library=library or f"gyroemu/{gyroemu.__version__}"))
@@ -336,14 +351,29 @@ class McapFileWriter:
         self._write(data)
         return offset
 
+    def _hold(self, record, metadata_name: str | None = None) -> None:
+        """Queue a Schema, Channel or Metadata record: written, in order, before the next messages (or at
+        :meth:`finish`), so that a thread preparing messages may register channels while another writes."""
+        with self._held_lock:
+            self._held.append((record, metadata_name))
+
+    def _write_held(self) -> None:
+        """Write the queued records (a Metadata record also gets its index in the summary)."""
+        with self._held_lock:
+            held, self._held = self._held, []
+        for record, name in held:
+            offset = self._write_record(record)
+            if name is not None:
+                self._metadata_indexes.append(MetadataIndex(offset=offset, length=self._position - offset, name=name))
+
     def register_schema(self, name: str, encoding: str, data: bytes) -> int:
-        """Schema id of ``name`` (written once)."""
+        """Schema id of ``name`` (written once, before any message of its channels)."""
         key = (name, encoding, bytes(data))
         if key not in self._schema_ids:
             schema = Schema(id=len(self._schemas) + 1, name=name, encoding=encoding, data=bytes(data))
             self._schemas[schema.id] = schema
             self._schema_ids[key] = schema.id
-            self._write_record(schema)
+            self._hold(schema)
         return self._schema_ids[key]
 
     def register_channel(self, topic: str, message_encoding: str, schema_id: int, metadata: dict | None = None) -> int:
@@ -357,7 +387,7 @@ class McapFileWriter:
         )
         self._channels[channel.id] = channel
         self._channel_counts[channel.id] = 0
-        self._write_record(channel)
+        self._hold(channel)
         return channel.id
 
     def register_ros2_channel(self, topic: str, mtype: MessageType | None, metadata: dict | None = None) -> int:
@@ -369,13 +399,27 @@ class McapFileWriter:
         )
 
     def add_metadata(self, name: str, data: dict) -> None:
-        """A Metadata record (and its index in the summary)."""
-        offset = self._write_record(Metadata(name=name, metadata={str(k): str(v) for k, v in data.items()}))
-        self._metadata_indexes.append(MetadataIndex(offset=offset, length=self._position - offset, name=name))
+        """A Metadata record (and its index in the summary), written before the next messages."""
+        self._hold(Metadata(name=name, metadata={str(k): str(v) for k, v in data.items()}), name)
         self._metadata_count += 1
 
     def add_messages(self, batches: Iterable[tuple[int, np.ndarray, np.ndarray]]) -> None:
-        """Append messages of several channels, interleaved in time order.
+        """Append messages of several channels, interleaved in time order: :meth:`append_prepared` of
+        :meth:`prepare_messages` (see there)."""
+        self.append_prepared(self.prepare_messages(batches))
+
+    def append_prepared(self, prepared: PreparedMessages | None) -> None:
+        """Write what :meth:`prepare_messages` laid out (None: nothing), after the records registered
+        before it, in the order prepared. One thread may prepare while another appends."""
+        if self._finished:
+            raise ValueError("the MCAP file is finished")
+        self._write_held()
+        if prepared is not None:
+            self._append(*prepared)
+
+    def prepare_messages(self, batches: Iterable[tuple[int, np.ndarray, np.ndarray]]) -> PreparedMessages | None:
+        """Lay out the Message records of several channels, interleaved in time order, and number them;
+        :meth:`append_prepared` writes them (None: no message).
 
         Parameters
         ----------
@@ -409,14 +453,14 @@ class McapFileWriter:
             members.append(_Member(channel_id, sequence, log_time.astype(np.uint64), payloads))
         data, channel, log_time, offset = _interleave(_groups(members))
         if not len(log_time):
-            return
+            return None
         shared = [c for c in {c for c, _, _ in checked} if sum(c == d for d, _, _ in checked) > 1]
         for channel_id in shared:  # several batches of one channel: number its messages in file order
             at = offset[channel == channel_id]
             first = self._channel_counts[channel_id] - len(at)
             sequence = (np.arange(first, first + len(at), dtype=np.int64) % (1 << 32)).astype("<u4")
             data[at[:, None] + _SEQUENCE_AT + np.arange(4)] = sequence.view(np.uint8).reshape(-1, 4)
-        self._append(data, channel, log_time, offset)
+        return PreparedMessages(data, channel, log_time, offset)
 
     def add_raw_messages(
         self,
@@ -485,6 +529,7 @@ class McapFileWriter:
         ids, counts = np.unique(channel, return_counts=True)
         for c, k in zip(ids.tolist(), counts.tolist()):
             self._channel_counts[c] += k
+        self._write_held()
         self._append(data, channel, log_time, offset)
 
     def _append(self, data: np.ndarray, channel: np.ndarray, log_time: np.ndarray, offset: np.ndarray) -> None:
@@ -599,6 +644,7 @@ class McapFileWriter:
         """Close the last chunk; write Data End, the summary section, its offsets, Footer and magic."""
         if self._finished:
             return
+        self._write_held()
         data, channel, log_time, offset = self._pending
         if len(channel):
             self._write_chunks([(data, channel, log_time, offset)])

@@ -6,9 +6,11 @@ Two outputs, by the file's suffix:
   (:class:`~gyroemu.pipelines.formats.mcap_log.McapLogWriter`); it needs a device. The run goes a block
   at a time (:class:`gyroemu.sensors.device_run.DeviceRun`): the truth is read a window at a time
   (evaluated window by window where the scenario's kind is pointwise,
-  :mod:`gyroemu.dynamics.truth_source`), and each block is written on a thread of its own while the
-  next is computed (:class:`~gyroemu.pipelines.formats.background_writer.BackgroundWriter`), so memory
-  does not grow with the duration. The bytes are those of a run made whole in memory.
+  :mod:`gyroemu.dynamics.truth_source`), and each block is encoded into its records
+  (:meth:`~gyroemu.pipelines.formats.mcap_log.McapLogWriter.prepare`) and written and compressed on a
+  thread of its own while the next is computed
+  (:class:`~gyroemu.pipelines.formats.background_writer.BackgroundWriter`), so memory does not grow
+  with the duration. The bytes are those of a run made whole in memory.
 - ``.npz``: NumPy arrays (:func:`npz_arrays`): ``truth/<field>`` and ``truth/extras/<name>`` of the
   trajectory and ``scenario_toml``; with a device also ``imu/<field>``, ``raw/<kind>/<observable>``,
   ``device_toml`` and ``seed``. Made in memory and written through a temporary file
@@ -378,7 +380,7 @@ def _simulate_mcap(
     with CountProgress(run.count, label="simulate", enabled=options.progress) as progress:
         with (
             McapLogWriter(options.out, scenario=scenario, start_ns=start_ns(options)) as log,
-            BackgroundWriter(log.write) as writer,
+            BackgroundWriter(log.write_prepared) as writer,
         ):
             for block in run:
                 body = block.interpolants  # the device's own: the splines are built once per block
@@ -386,7 +388,12 @@ def _simulate_mcap(
                 q_wb = body.attitude_world(instants)  # evaluated once for both truth channels
                 truth = truth_series(block.truth, block.samples, body, q_wb)
                 pose = truth_pose(block.truth, block.samples, body, q_wb)
-                writer.put(Recording(block.samples, truth=truth, pose=pose, device=device, frame_id=options.frame_id))
+                # encoded here, written and compressed on the writer's thread: the two take about as long
+                writer.put(
+                    log.prepare(
+                        Recording(block.samples, truth=truth, pose=pose, device=device, frame_id=options.frame_id)
+                    )
+                )
                 made += len(block.samples)
                 progress.advance(len(block.samples))
     assert source.n_samples is not None and source.t_end is not None  # a bounded run
