@@ -18,7 +18,6 @@ smoother are printed too.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
@@ -27,15 +26,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
+from broad_data import BROAD_DIR, trial_files  # noqa: E402  (tests/benchmarks is the script folder)
+
 from gyroemu.pipelines.estimation.mekf import Mekf, MekfParams  # noqa: E402
 from gyroemu.pipelines.estimation.mekf_smoother import MekfSmoother, smoother_params  # noqa: E402
 from gyroemu.pipelines.estimation.metrics import attitude_errors, rmse_deg  # noqa: E402
 from gyroemu.pipelines.estimation.protocol import FilterSetup  # noqa: E402
 from gyroemu.pipelines.formats.importers import read_broad  # noqa: E402
 
-BROAD_DIR = Path(
-    os.environ.get("GYROEMU_BROAD_DIR", Path(__file__).resolve().parents[3] / "shared" / "datasets" / "broad")
-)
 COLUMNS = ("MEKF online", "MEKF smoothed", "VQF online", "offlineVQF")
 
 
@@ -103,9 +101,7 @@ def main() -> int:
     if unknown:
         print(f"unknown MekfParams: {', '.join(unknown)}", file=sys.stderr)
         return 2
-    files = sorted(BROAD_DIR.glob("*.hdf5"))
-    if args.trials:
-        files = [f for f in files if f.name.split("_")[0] in args.trials]
+    files = trial_files(args.trials)
     if not files:
         print(f"no BROAD trials in {BROAD_DIR}", file=sys.stderr)
         return 2

@@ -20,7 +20,6 @@ the ``mekf`` rows (how the defaults' plateau in README was measured).
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from dataclasses import fields
 from pathlib import Path
@@ -29,15 +28,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
+from broad_data import BROAD_DIR, trial_files  # noqa: E402  (tests/benchmarks is the script folder)
+
 from gyroemu.pipelines.estimation.mekf import Mekf, MekfParams  # noqa: E402
 from gyroemu.pipelines.estimation.metrics import attitude_errors, rmse_deg  # noqa: E402
 from gyroemu.pipelines.estimation.protocol import FilterSetup  # noqa: E402
 from gyroemu.pipelines.estimation.registry import available_filters, make_filter, unavailable_filters  # noqa: E402
 from gyroemu.pipelines.formats.importers import read_broad  # noqa: E402
-
-BROAD_DIR = Path(
-    os.environ.get("GYROEMU_BROAD_DIR", Path(__file__).resolve().parents[3] / "shared" / "datasets" / "broad")
-)
 
 
 def main() -> int:
@@ -59,9 +56,7 @@ def main() -> int:
         if key not in {f.name for f in fields(MekfParams)} or not value:
             parser.error(f"--mekf-param {item!r}: expected NAME=VALUE with NAME a MekfParams field")
         overrides[key] = float(value)
-    files = sorted(BROAD_DIR.glob("*.hdf5"))
-    if args.trials:
-        files = [f for f in files if f.name.split("_")[0] in args.trials]
+    files = trial_files(args.trials)
     if not files:
         print(f"no BROAD trials in {BROAD_DIR}", file=sys.stderr)
         return 2
