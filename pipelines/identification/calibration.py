@@ -44,6 +44,7 @@ __all__ = [
     "window_means",
     "paired_windows",
     "truth_specific_force_world",
+    "truth_specific_force_body",
 ]
 
 
@@ -95,6 +96,23 @@ def truth_specific_force_world(
     acc = np.full((n, 3), np.nan)
     acc[h:-h] = (p[2 * h :] - 2 * p[h:-h] + p[: -2 * h]) / (h * dt) ** 2
     return force + acc
+
+
+def truth_specific_force_body(
+    t: np.ndarray,
+    truth_t: np.ndarray,
+    q_wb: np.ndarray,
+    latency_s: float = 0.0,
+    pos_w: np.ndarray | None = None,
+    gravity_m_s2: float = 9.81,
+) -> np.ndarray:
+    """(N, 3) the truth's specific force R_bw (a_w + g e_z) in body axes, m/s², at the instants
+    ``t`` (N,) s less ``latency_s`` (what an accelerometer with that delay senses at its origin), from
+    ``q_wb`` (M, 4) and ``pos_w`` (M, 3) m at ``truth_t`` (:func:`truth_specific_force_world`)."""
+    times = np.asarray(t, dtype=float) - latency_s
+    q = interpolate_attitude(truth_t, q_wb, times)
+    force_w = interpolate_vectors(truth_t, truth_specific_force_world(truth_t, pos_w, gravity_m_s2), times)
+    return np.einsum("nij,nj->ni", rotation_bw(q), force_w)
 
 
 def _row_cov(cov: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -275,9 +293,7 @@ def fit_accel(
     ``q_wb`` (M, 4) and optional ``pos_w`` (M, 3) m at ``truth_t``; ``c_sb`` (3, 3) the gyro's mounting
     (body → sensor; None: identity); ``mask`` (N,) bool: samples to use."""
     times = np.asarray(t, dtype=float) - latency_s
-    q = interpolate_attitude(truth_t, q_wb, times)
-    force_w = interpolate_vectors(truth_t, truth_specific_force_world(truth_t, pos_w, gravity_m_s2), times)
-    force_b = np.einsum("nij,nj->ni", rotation_bw(q), force_w)
+    force_b = truth_specific_force_body(t, truth_t, q_wb, latency_s, pos_w, gravity_m_s2)
     w_true, w_meas, length = paired_windows(t, force_b, accel, mask, window_s)
     ok = np.all(np.isfinite(w_true), axis=1) & np.all(np.isfinite(w_meas), axis=1)
     # Slow windows only: turning makes centripetal and tangential forces at the sensor's lever arm from

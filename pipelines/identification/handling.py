@@ -28,8 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .calibration import paired_windows, truth_specific_force_world, window_means
-from .truth import interpolate_attitude, interpolate_vectors, rotation_bw, truth_angular_velocity
+from .calibration import paired_windows, truth_specific_force_body, window_means
+from .truth import interpolate_vectors, truth_angular_velocity
 
 __all__ = ["HandlingOffset", "handling_offset", "pool_handling_offsets"]
 
@@ -91,10 +91,9 @@ def handling_offset(
     ``pos_w`` (M, 3) m at ``truth_t``; ``rest`` and ``movement`` (N,) bool; ``c_sb`` (3, 3) body →
     sensor (None: identity). Raises ``ValueError`` when a side has fewer than ``min_windows`` windows."""
     times = np.asarray(t, dtype=float) - latency_s
-    q = interpolate_attitude(truth_t, q_wb, times)
-    force_w = interpolate_vectors(truth_t, truth_specific_force_world(truth_t, pos_w, gravity_m_s2), times)
     c = np.eye(3) if c_sb is None else np.asarray(c_sb, dtype=float)
-    force_s = np.einsum("ij,nj->ni", c, np.einsum("nij,nj->ni", rotation_bw(q), force_w))
+    force_b = truth_specific_force_body(t, truth_t, q_wb, latency_s, pos_w, gravity_m_s2)
+    force_s = np.einsum("ij,nj->ni", c, force_b)
     omega = interpolate_vectors(truth_t, truth_angular_velocity(truth_t, q_wb), times)
     sides = []
     for name, mask in (("rest", rest), ("movement", movement)):

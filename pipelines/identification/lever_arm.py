@@ -24,9 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .calibration import truth_specific_force_world, window_means
+from .calibration import truth_specific_force_body, window_means
 from .lsq import linear_fit
-from .truth import interpolate_attitude, interpolate_vectors, rotation_bw
 
 __all__ = ["LeverArmFit", "fit_lever_arm"]
 
@@ -79,10 +78,8 @@ def fit_lever_arm(
     body → sensor. Raises ``ValueError`` with fewer than ``min_windows`` usable windows."""
     t = np.asarray(t, dtype=float)
     c = np.eye(3) if c_sb is None else np.asarray(c_sb, dtype=float)
-    times = t - latency_s
-    q = interpolate_attitude(truth_t, q_wb, times)
-    force_w = interpolate_vectors(truth_t, truth_specific_force_world(truth_t, pos_w, gravity_m_s2), times)
-    d = np.asarray(accel, dtype=float) - np.einsum("ij,nj->ni", c, np.einsum("nij,nj->ni", rotation_bw(q), force_w))
+    force_b = truth_specific_force_body(t, truth_t, q_wb, latency_s, pos_w, gravity_m_s2)
+    d = np.asarray(accel, dtype=float) - np.einsum("ij,nj->ni", c, force_b)
     omega = np.asarray(gyro, dtype=float) - (np.zeros(3) if gyro_bias is None else np.asarray(gyro_bias, dtype=float))
     alpha = np.gradient(omega, t, axis=0)
     w = _skew(omega)
