@@ -4,8 +4,8 @@
 function on one worker thread, in order, through a queue of ``depth`` items: the producer blocks when
 the writer falls ``depth`` items behind, so memory stays that of a few blocks. An exception in
 ``write`` stops the worker and is raised again in the producer, at its next ``put`` or at
-:meth:`~BackgroundWriter.close`. Encoding (numpy) and compression (zstd) release the GIL for much of
-their time, which is where the overlap comes from.
+:meth:`~BackgroundWriter.close`. The overlap comes from what releases the GIL: numpy's copies and
+zstd's compression on the writer's side, gyroemu's compiled kernels (``nogil``) on the producer's.
 """
 
 from __future__ import annotations

@@ -119,6 +119,10 @@ from gyroemu.pipelines.formats.messages import IMU, MessageType, ns_to_stamps, r
 from gyroemu.pipelines.formats.tf_messages import TF_MESSAGE_TYPE, Transforms, decode_tf, encode_tf, tf_schema
 from gyroemu.sensors.samples import ImuSamples
 
+EncodedBlock = list[tuple[int, np.ndarray, np.ndarray]]
+"""A block's messages as :meth:`McapLogWriter.prepare` serialised them: ``(channel_id, stamp_ns (N,),
+payloads (N, size) uint8)`` per channel, for :meth:`McapLogWriter.write_prepared`."""
+
 if TYPE_CHECKING:
     from gyroemu.dynamics import Scenario, Trajectory
     from gyroemu.sensors.sampling import SensorTruth
@@ -143,6 +147,7 @@ __all__ = [
     "group_devices",
     "device_name",
     "announce_scan",
+    "EncodedBlock",
     "LogCheck",
     "check_mcap_noting",
 ]
@@ -569,7 +574,7 @@ class McapLogWriter:
                     f"block ({self._last_time * 1e-9:.9f} s): write blocks in time order"
                 )
             self._last_time = max(self._last_time, max(int(stamps.max()) for stamps in times))
-            return EncodedBlock(batches)
+            return batches
         return None
 
     def _tf_channel(self, topic: str) -> int:
@@ -855,11 +860,6 @@ def announce_scan(path: Path, scan: McapScan) -> dict[str, str]:
     for topic, reason in skipped.items():
         warnings.warn(f"{path}: skipping topic {topic}: {reason}", LogWarning, stacklevel=3)
     return skipped
-
-
-class EncodedBlock(list):
-    """A block's messages as :meth:`McapLogWriter.prepare` serialised them: ``(channel_id, stamp_ns (N,),
-    payloads (N, size) uint8)`` per channel, for :meth:`McapLogWriter.write_prepared`."""
 
 
 @dataclass(frozen=True)
