@@ -18,9 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gyroemu.dynamics.rotation import quat_conjugate, quat_multiply
+from gyroemu.dynamics.rotation import quat_conjugate, quat_multiply, quat_to_rotvec
 
-__all__ = ["AttitudeErrors", "attitude_errors", "convergence_time", "rmse_deg"]
+__all__ = ["AttitudeErrors", "attitude_errors", "attitude_nees", "convergence_time", "rmse_deg"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,3 +70,16 @@ def convergence_time(t: np.ndarray, error_rad: np.ndarray, threshold_rad: float)
     if not len(valid_after):
         return float("inf")
     return float(t[last + 1 + valid_after[0]] - t[0])
+
+
+def attitude_nees(q_ref: np.ndarray, q_est: np.ndarray, covariance: np.ndarray, dof: int = 3) -> np.ndarray:
+    """Normalised estimation error squared eᵀ P⁻¹ e of attitudes, (N,).
+
+    ``e`` is the rotation vector of ``q_ref ⊗ q_est*`` (world axes, rad), the error that the filters'
+    ``q_wb_covariance`` (N, 3, 3) describes; its first ``dof`` components are used (2: the tilt alone,
+    for a 6D filter whose heading is not observed). ``q_ref``, ``q_est`` (N, 4). A consistent filter's
+    NEES is χ²(dof)-distributed.
+    """
+    e = quat_to_rotvec(quat_multiply(q_ref, quat_conjugate(q_est)))[:, :dof]
+    cov = np.asarray(covariance, dtype=float)[:, :dof, :dof]
+    return np.einsum("ki,ki->k", e, np.linalg.solve(cov, e[:, :, None])[:, :, 0])

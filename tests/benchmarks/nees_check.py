@@ -30,9 +30,9 @@ import numpy as np
 from scipy.stats import chi2
 
 from gyroemu.dynamics import load_scenario, scenario_from_dict
-from gyroemu.dynamics.rotation import quat_conjugate, quat_multiply, quat_to_rotvec
 from gyroemu.pipelines.estimation.mekf import MekfParams
 from gyroemu.pipelines.estimation.mekf_smoother import smooth_log, smoother_params
+from gyroemu.pipelines.estimation.metrics import attitude_nees
 from gyroemu.pipelines.estimation.setup import setup_for
 from gyroemu.sensors import load_device
 from gyroemu.sensors.sampling import SensorTruth
@@ -92,9 +92,7 @@ def nees_runs(
         idx = np.linspace(np.searchsorted(t, skip_s), len(t) - 1, points).astype(int)
         dof = 3 if setup.use_mag else 2
         for key, est in (("online", on), ("forward", res.forward), ("smoothed", res.smoothed)):
-            e = quat_to_rotvec(quat_multiply(q_true[idx], quat_conjugate(est.q_wb[idx])))[:, :dof]
-            cov = est.q_wb_covariance[idx][:, :dof, :dof]
-            out[key].append(np.einsum("ki,ki->k", e, np.linalg.solve(cov, e[:, :, None])[:, :, 0]))
+            out[key].append(attitude_nees(q_true[idx], est.q_wb[idx], est.q_wb_covariance[idx], dof))
     return {k: np.array(v) for k, v in out.items()}, dof
 
 

@@ -24,9 +24,9 @@ import pytest
 from scipy.stats import chi2
 
 from gyroemu.dynamics import load_scenario, scenario_from_dict
-from gyroemu.dynamics.rotation import quat_conjugate, quat_multiply, quat_to_rotvec
 from gyroemu.pipelines.estimation.mekf import MekfParams
 from gyroemu.pipelines.estimation.mekf_smoother import smooth_log, smoother_params
+from gyroemu.pipelines.estimation.metrics import attitude_nees
 from gyroemu.pipelines.estimation.setup import setup_for
 from gyroemu.sensors import load_device
 from gyroemu.sensors.sampling import SensorTruth
@@ -57,9 +57,7 @@ def _nees(scenario: str, device: str) -> tuple[dict[str, np.ndarray], int]:
         idx = np.linspace(np.searchsorted(t, SKIP), len(t) - 1, POINTS).astype(int)
         dof = 3 if setup.use_mag else 2
         for key, est in (("online", online), ("smoothed", smoothed)):
-            e = quat_to_rotvec(quat_multiply(q_true[idx], quat_conjugate(est.q_wb[idx])))[:, :dof]
-            cov = est.q_wb_covariance[idx][:, :dof, :dof]
-            out[key].append(np.einsum("ki,ki->k", e, np.linalg.solve(cov, e[:, :, None])[:, :, 0]))
+            out[key].append(attitude_nees(q_true[idx], est.q_wb[idx], est.q_wb_covariance[idx], dof))
     return {k: np.array(v) for k, v in out.items()}, dof
 
 
