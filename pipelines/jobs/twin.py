@@ -169,9 +169,9 @@ class _Real:
     force_true: np.ndarray | None = None  # (N, 3) m/s², a log's /truth/imu specific force
 
 
-def check_options(options: TwinOptions) -> tuple[list[str], dict, dict, Any]:
-    """:class:`TwinError` for any bad option. Returns the filters, those left out, the site table and the
-    device (seed 0)."""
+def check_options(options: TwinOptions) -> tuple[list[str], dict, dict, _Handling | None, Any]:
+    """:class:`TwinError` for any bad option. Returns the filters, those left out, the site table, the
+    site's handling offset (None without a ``[handling]`` table) and the device (seed 0)."""
     from gyroemu.pipelines.estimation.registry import FilterError, available_filters, filter_class, unavailable_filters
     from gyroemu.sensors import load_device
 
@@ -203,7 +203,7 @@ def check_options(options: TwinOptions) -> tuple[list[str], dict, dict, Any]:
         device = load_device(options.device, seed=0)
     except ConfigError as e:
         raise TwinError(f"argument --device: {e}") from None
-    site = _read_site(options.site)
+    site, handling = _read_site(options.site)
     out = options.out
     if out.exists():
         if not out.is_dir():
@@ -212,10 +212,11 @@ def check_options(options: TwinOptions) -> tuple[list[str], dict, dict, Any]:
             raise TwinError(f"argument --out: {out} is not empty (use --force to write into it)")
     elif not out.parent.is_dir() and out.parent != Path(""):
         raise TwinError(f"argument --out: {out.parent} is not a folder")
-    return filters, unavailable, site, device
+    return filters, unavailable, site, handling, device
 
 
-def _read_site(path: Path) -> dict:
+def _read_site(path: Path) -> tuple[dict, _Handling | None]:
+    """The site file's ``[site]`` table and its optional ``[handling]`` (errors name the file and key)."""
     from gyroemu.dynamics.earth import Site
 
     if not path.is_file():
@@ -234,7 +235,7 @@ def _read_site(path: Path) -> dict:
         Site.model_validate(_site_with_seed(site, 0))
     except Exception as e:  # noqa: BLE001 - pydantic's ValidationError, named
         raise TwinError(f"argument --site: {path}: {e}") from None
-    return site
+    return site, _read_handling(data.get("handling"), path)
 
 
 @dataclass(frozen=True)
@@ -251,13 +252,8 @@ class _Handling:
         return self.accel_offset + self.accel_offset_sigma * rng.standard_normal(3)
 
 
-def _read_handling(path: Path) -> _Handling | None:
-    """The site file's optional ``[handling]`` table (errors name the file and the key)."""
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
-        raise TwinError(f"argument --site: {path}: {e}") from None
-    table = data.get("handling")
+def _read_handling(table: object, path: Path) -> _Handling | None:
+    """The site file's optional ``[handling]`` table ``table`` (errors name the file and the key)."""
     if table is None:
         return None
     if not isinstance(table, dict):
@@ -1023,8 +1019,7 @@ def run_twin(options: TwinOptions) -> TwinReport:
     from gyroemu.pipelines.estimation.setup import setup_from_metadata
 
     started = time.perf_counter()
-    filters, unavailable, site, device = check_options(options)
-    handling = _read_handling(options.site)
+    filters, unavailable, site, handling, device = check_options(options)
     reals: list[_Real] = []
     for path in options.trials:
         try:
