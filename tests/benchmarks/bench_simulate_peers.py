@@ -27,16 +27,14 @@ from __future__ import annotations
 
 import argparse
 import os
-import resource
-import statistics
 import subprocess
 import sys
 import tempfile
-import time
 import tomllib
 from pathlib import Path
 
 import numpy as np
+from timing import median_wall_cpu  # (tests/benchmarks is the script folder)
 
 from gyroemu.dynamics import load_scenario
 from gyroemu.sensors import Device, device_from_dict
@@ -117,23 +115,6 @@ def bench_rate(rate: float, samples: int, repeats: int, folder: Path) -> dict[st
         "gyroemu API": median_wall_cpu(api, repeats),
         "gyroemu simulate": median_wall_cpu(cli, repeats),
     }
-
-
-def median_wall_cpu(run, repeats: int) -> tuple[float, float]:
-    """Median wall and CPU seconds of ``repeats`` calls of ``run()`` after a warm-up call. CPU counts
-    every thread of this process and of the children it waited for (user + system): on a loaded
-    machine a run on two threads loses wall time that its CPU time still shows."""
-    run()
-    walls, cpus = [], []
-    for _ in range(repeats):
-        children = resource.getrusage(resource.RUSAGE_CHILDREN)
-        start, cpu = time.perf_counter(), time.process_time()
-        run()
-        walls.append(time.perf_counter() - start)
-        after = resource.getrusage(resource.RUSAGE_CHILDREN)
-        child = (after.ru_utime - children.ru_utime) + (after.ru_stime - children.ru_stime)
-        cpus.append(time.process_time() - cpu + child)
-    return statistics.median(walls), statistics.median(cpus)
 
 
 def main() -> None:
