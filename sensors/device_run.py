@@ -19,8 +19,10 @@ magnetometer, latencies).
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -48,6 +50,20 @@ BLOCK_INNER_SAMPLES = 1 << 18
 
 BLOCK_MAX_SAMPLES = 1 << 14
 """Output samples per block, at most."""
+
+
+@dataclass(frozen=True)
+class _MotionBlock:
+    """What one block of samples measures, read from the truth alone (:meth:`DeviceRun._motion`)."""
+
+    k: np.ndarray  # (n,) sample indices
+    instants: np.ndarray  # (n + 1,) true interval bounds τ_{k−1} … τ_k, s
+    window: Trajectory  # the truth samples read
+    truth: SensorTruth  # their interpolants
+    temperature: np.ndarray  # (n,) °C at τ_k
+    gyro_truth: GyroTruth  # the mechanism's inner grid
+    force_mean: np.ndarray  # (n, 3) mean specific force over each interval, m/s²
+    field: np.ndarray | None  # (n, 3) field at the magnetometer's instants, T; None without one
 
 
 @dataclass(frozen=True)
@@ -134,35 +150,27 @@ class DeviceRun:
         gyro_errors = SensorErrors(device.gyro_errors, self.true_period, rng_gyro)
         accel_errors = SensorErrors(device.accel_errors, self.true_period, rng_accel)
         mechanism_state: dict = {}
-        latency_gyro, latency_accel, latency_mag = device.latencies
         increment = spec.output == "increment"
-        done = 0
-        while self.count is None or done < self.count:
-            n = self.block_samples if self.count is None else min(self.block_samples, self.count - done)
-            k = np.arange(self.first + done, self.first + done + n)
-            instants = self.t0 + np.arange(k[0] - 1, k[-1] + 1) * self.true_period  # τ_{k−1} … τ_k
-            window = self.source.window(float(instants[0]) - self._lag, float(instants[-1]) - self._lead)
-            truth = SensorTruth(window, spec.mounting.q_bs, spec.mounting.lever_arm_m)
-            stamps = k * self.period + spec.clock.offset_s
+        for block in self._motion_blocks():
+            n = len(block.k)
+            stamps = block.k * self.period + spec.clock.offset_s
             if spec.clock.jitter_s > 0:
                 stamps = stamps + spec.clock.jitter_s * rng_clock.standard_normal(n)
-            temperature = spec.temperature.at(instants[1:] - self.t0)
-
-            increments, raw = self._gyro_increments(truth, done, n, rng_mech, mechanism_state, latency_gyro)
-            force_instants = instants if latency_accel == 0.0 else instants - latency_accel
-            force_mean = mean_specific_force(truth, force_instants, substeps=self.substeps + self.substeps % 2)
+            increments, raw = self._gyro_increments(block.gyro_truth, n, rng_mech, mechanism_state)
             gyro = gyro_errors.apply(
                 increments / self.period,
-                instants[1:],
-                temperature_degC=temperature,
-                specific_force=force_mean if device.gyro_errors.g_sensitivity is not None else None,
+                block.instants[1:],
+                temperature_degC=block.temperature,
+                specific_force=block.force_mean if device.gyro_errors.g_sensitivity is not None else None,
             )
             accel = accel_errors.apply(
-                force_mean * (self.true_period / self.period), instants[1:], temperature_degC=temperature
+                block.force_mean * (self.true_period / self.period),
+                block.instants[1:],
+                temperature_degC=block.temperature,
             )
             if spec.magnetometer is not None:
-                field_instants = instants[1:] if latency_mag == 0.0 else instants[1:] - latency_mag
-                mag = spec.magnetometer.measure(truth.magnetic_field(field_instants), self.period, rng_mag)
+                assert block.field is not None  # read with the magnetometer (_motion)
+                mag = spec.magnetometer.measure(block.field, self.period, rng_mag)
             else:
                 mag = np.full((n, 3), np.nan)
             samples = ImuSamples(
@@ -173,34 +181,79 @@ class DeviceRun:
                 raw={device.kind: raw} if raw else {},
                 delta_angle=gyro * self.period if increment else None,
                 delta_velocity=accel * self.period if increment else None,
-                t_true=instants[1:],
-                temperature_degC=temperature,
+                t_true=block.instants[1:],
+                temperature_degC=block.temperature,
                 device=device.name,
             )
-            yield MeasuredBlock(samples, window, truth)
-            done += n
+            yield MeasuredBlock(samples, block.window, block.truth)
+
+    def _motion_blocks(self) -> Iterator[_MotionBlock]:
+        """Each block's motion (:meth:`_motion`), in order; with more than one block, each is read on a
+        worker thread while the caller measures the one before (the motion holds no random draw or
+        carried state, so the bytes are those of reading it in line)."""
+        starts: Iterator[int] = itertools.count(0, self.block_samples)
+        if self.count is not None:
+            starts = iter(range(0, self.count, self.block_samples))
+        first = next(starts, None)
+        if first is None:
+            return
+        if self.count is not None and self.count <= self.block_samples:  # one block: nothing to overlap
+            yield self._motion(first)
+            return
+        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="gyroemu-motion") as pool:
+            pending = pool.submit(self._motion, first)
+            try:
+                for done in starts:
+                    block = pending.result()
+                    pending = pool.submit(self._motion, done)
+                    yield block
+                yield pending.result()
+            finally:
+                pending.cancel()  # a consumer that stops early: the block in hand is dropped
+
+    def _motion(self, done: int) -> _MotionBlock:
+        """The motion the block of samples ``done …`` measures: its instants, truth window and
+        interpolants, temperature, the gyro mechanism's truth on its inner grid, the accelerometer's
+        mean specific force and the magnetometer's field, each at its sensor's latency."""
+        spec = self.device.spec
+        n = self.block_samples if self.count is None else min(self.block_samples, self.count - done)
+        k = np.arange(self.first + done, self.first + done + n)
+        instants = self.t0 + np.arange(k[0] - 1, k[-1] + 1) * self.true_period  # τ_{k−1} … τ_k
+        window = self.source.window(float(instants[0]) - self._lag, float(instants[-1]) - self._lead)
+        truth = SensorTruth(window, spec.mounting.q_bs, spec.mounting.lever_arm_m)
+        latency_gyro, latency_accel, latency_mag = self.device.latencies
+        force_instants = instants if latency_accel == 0.0 else instants - latency_accel
+        field = None
+        if spec.magnetometer is not None:
+            field_instants = instants[1:] if latency_mag == 0.0 else instants[1:] - latency_mag
+            field = truth.magnetic_field(field_instants)
+        return _MotionBlock(
+            k=k,
+            instants=instants,
+            window=window,
+            truth=truth,
+            temperature=spec.temperature.at(instants[1:] - self.t0),
+            gyro_truth=self._gyro_truth(truth, done, n, latency_gyro),
+            force_mean=mean_specific_force(truth, force_instants, substeps=self.substeps + self.substeps % 2),
+            field=field,
+        )
 
     def samples(self) -> Iterator[ImuSamples]:
         """The blocks' samples, in time order."""
         for block in self:
             yield block.samples
 
-    def _gyro_increments(
-        self, truth: SensorTruth, done: int, n: int, rng: np.random.Generator, state: dict, latency: float
-    ) -> tuple[np.ndarray, dict]:
-        """Indicated angle increments (n, 3) over the block's intervals, and its raw observables.
-
-        The mechanism runs on the device's instants (its clock, temperature, dither), on the inner
-        grid ``τ_{K₁−1} + j h`` for the block's ``j``, its first point the previous block's last; with a
-        ``latency`` ``L`` it reads the motion at ``t − L``.
-        """
+    def _gyro_truth(self, truth: SensorTruth, done: int, n: int, latency: float) -> GyroTruth:
+        """The gyro mechanism's truth for the block of samples ``done … done + n``: its inner grid
+        ``τ_{K₁−1} + j h`` for the block's ``j`` (the first point the previous block's last), on the
+        device's instants (clock, temperature); with a ``latency`` ``L``, the motion at ``t − L``."""
         device, m, h = self.device, self.inner_steps, self.inner_step_s
         j = np.arange(done * m, (done + n) * m + 1)
         t = self.t0 + (self.first - 1) * self.true_period + j * h
         seen = t if latency == 0.0 else t - latency  # the motion's instants
         omega, alpha = truth.omega_alpha(seen)
         reads = device.mechanism.reads
-        chunk = GyroTruth(
+        return GyroTruth(
             t=t,
             dt=h,
             omega=omega,
@@ -209,7 +262,14 @@ class DeviceRun:
             q_is=truth.attitude_inertial(seen) if "q_is" in reads else None,
             temperature_degC=device.spec.temperature.at(t - self.t0) if "temperature_degC" in reads else None,
         )
-        response = device.mechanism.respond(chunk, rng, state)
+
+    def _gyro_increments(
+        self, chunk: GyroTruth, n: int, rng: np.random.Generator, state: dict
+    ) -> tuple[np.ndarray, dict]:
+        """Indicated angle increments (n, 3) over the block's intervals, and its raw observables: the
+        mechanism's response to ``chunk`` (:meth:`_gyro_truth`), carrying ``state``."""
+        m, h = self.inner_steps, self.inner_step_s
+        response = self.device.mechanism.respond(chunk, rng, state)
         if response.angle is not None:
             angle = response.angle - response.angle[0]
             increments = np.diff(angle[::m], axis=0)  # inner index 0, m, 2m, … are the block's τ_{k−1} … τ_k
