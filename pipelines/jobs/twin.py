@@ -2,7 +2,10 @@
 
 A **twin** of a recording is its own recorded motion (the truth of the recording, smoothed by the
 ``recorded`` scenario kind, :mod:`gyroemu.pipelines.recorded_scenario`) sensed by an emulated device in
-the modelled field of a site. Twin ``i`` uses device seed ``i`` and magnetic-environment seed ``i``.
+the modelled field of a site. Twin ``i`` of a recording draws its device, its magnetic environment and
+its handling offset from :func:`twin_seed` of ``i`` and the recording's file name, so that the twins
+of different recordings draw independently (with seed ``i`` alone, twin ``i`` of every recording had
+the same noise at the same time from power-up, and pooling their rests pooled one draw).
 
 Inputs: a BROAD trial (``.hdf5``: IMU, magnetometer in µT, optical attitude and position, ``movement``
 mask) or a gyroemu MCAP log (one device with ``/imu``, ``/truth/imu`` and usually ``/truth/pose``; its
@@ -18,7 +21,7 @@ Handling. The site file's optional ``[handling]`` table (``accel_offset_m_s2``,
 ``accel_offset_sigma_m_s2``; written by ``gyroemu identify --site-out``,
 :mod:`gyroemu.pipelines.identification.handling`) is the accelerometer's offset against the truth while
 the device is carried, relative to at rest. Each twin draws one offset, mean + sd · N(0, 1) per axis
-from its own generator (``[seed, HANDLING_STREAM]``, so the device's draws are the same with or without
+from its own generator (``[twin seed, HANDLING_STREAM]``, so the device's draws are the same with or without
 it), and adds it to its accelerometer over the recording's movement mask; a recording without a
 movement mask gets none.
 
@@ -32,13 +35,14 @@ movement samples with a finite reference.
 Residuals. Measured minus truth, over the rest phases of the real recording
 (:func:`gyroemu.pipelines.identification.find_rest_phases`, each trimmed to the reference; else the
 samples before the first movement sample), pooled: real gyro and accelerometer minus the log's truth
-rate and specific force when it has them (an MCAP log), else minus 0 and ``R_bw (0, 0, g)`` (BROAD);
+rate and specific force when it has them (an MCAP log), else minus 0 and the still body's ``R_bw (0, 0, g)`` (BROAD);
 twin gyro and accelerometer minus the trajectory's truth at the instants they measured (the sample's
 instant minus the sensor's latency). Their Allan deviations per axis at τ from
 0.01 to 10 s (those a phase holds twice; the phases' Allan variances weighted by their clusters), the
 twin's (RMS over seeds) over the real's per τ, and Welch spectra (averaged over the phases). (At rest
-the real truth is taken as ω = 0 and ``R_bw (0, 0, g)``: the differentiated optical attitude is
-dominated by its noise there, several °/s at BROAD's rate.)
+the real body is still: its truth is taken as ω = 0 and the phase's mean of ``R_bw (0, 0, g)``; the
+optical attitude sample by sample is dominated by its noise there: several °/s differentiated, and
+an Allan bump near τ = 1 s seen through gravity.)
 
 Outputs in ``--out``: ``twin.md``, ``twin.json`` and ``<trial>.png`` (Allan deviations and spectra, real
 against twin), each written through a temporary file. An existing non-empty folder is refused without
@@ -55,6 +59,7 @@ import os
 import time
 import tomllib
 import warnings
+import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -71,6 +76,7 @@ __all__ = [
     "TwinOptions",
     "TwinReport",
     "check_options",
+    "twin_seed",
     "default_site_file",
     "run_twin",
 ]
@@ -278,6 +284,13 @@ def _fmt3(v: np.ndarray) -> str:
     return "(" + ", ".join(f"{x:.4g}" for x in v) + ")"
 
 
+def twin_seed(seed: int, recording: str) -> int:
+    """The seed of twin ``seed`` of the recording whose file is named ``recording``: the first word of
+    ``SeedSequence([seed, crc32(recording)])``, the device's, the magnetic environment's and the handling
+    offset's seed (each draws from its own streams of it)."""
+    return int(np.random.SeedSequence([seed, zlib.crc32(recording.encode())]).generate_state(1, np.uint64)[0])
+
+
 def _site_with_seed(site: dict, seed: int) -> dict:
     out = dict(site)
     env = dict(out.get("magnetic_environment") or {})
@@ -469,18 +482,20 @@ def _run_real(real: _Real, filters, setup9, setup6, rests: list[slice]) -> dict:
         filters, setup9, setup6, real.t, real.gyro, real.accel, real.mag, real.q_true, real.mask, timings
     )
     started = time.perf_counter()
-    # At rest the truth is ω = 0 (Earth's rate, ≤ 0.0042 °/s, is constant: no Allan or spectral
-    # content) and f = R_bw (0, 0, g): the differentiated optical attitude would be its noise (°/s).
-    # A log's own truth rate and specific force are used when it has them.
+    # At rest the body is still: the truth is ω = 0 (Earth's rate, ≤ 0.0042 °/s, is constant: no Allan
+    # or spectral content) and a constant f, R_bw (0, 0, g) averaged over the phase. The optical
+    # attitude sample by sample would be its noise: differentiated, several °/s; seen through gravity,
+    # 2.9·10⁻³ m/s² at τ ≈ 1 s on y, an Allan bump the raw accelerometer does not have (README, "The
+    # twin"). A log's own truth rate and specific force are used when it has them.
     gyro_res, accel_res = [], []
     for rest in rests:
         q = real.q_true[rest]
         omega = np.zeros((len(q), 3)) if real.omega_true is None else real.omega_true[rest]
-        force = (
-            np.einsum("nij,j->ni", rotation_bw(q), np.array([0.0, 0.0, GRAVITY_M_S2]))
-            if real.force_true is None
-            else real.force_true[rest]
-        )
+        if real.force_true is None:
+            gravity_b = np.einsum("nij,j->ni", rotation_bw(q), np.array([0.0, 0.0, GRAVITY_M_S2]))
+            force = np.broadcast_to(np.nanmean(gravity_b, axis=0), gravity_b.shape)
+        else:
+            force = real.force_true[rest]
         gyro_res.append(real.gyro[rest] - omega)
         accel_res.append(real.accel[rest] - force)
     res = _residuals(gyro_res, accel_res, real.rate_hz)
@@ -497,6 +512,7 @@ def _run_twin(
 
     timings: dict[str, float] = {}
     started = time.perf_counter()
+    seed = twin_seed(seed, real.name)
     scenario = _scenario(real, site, seed, smoothing)
     device = load_device(device_name, seed=seed)
     t0 = float(scenario.spec.motion().t0)
@@ -673,8 +689,9 @@ class TwinReport:
         lines = [
             "# gyroemu twin",
             "",
-            f"Device `{s['device']}`, {s['seeds']} twin(s) per recording (device and magnetic-environment "
-            f"seeds 0…{s['seeds'] - 1}), site `{s['site']}`. Twin: mean ± standard deviation over the seeds; "
+            f"Device `{s['device']}`, {s['seeds']} twin(s) per recording (twin i's device, magnetic environment "
+            f"and handling seeded by twin_seed(i, file name), i = 0…{s['seeds'] - 1}), site `{s['site']}`. "
+            "Twin: mean ± standard deviation over the seeds; "
             "ratio: twin mean / real. RMSE in degrees (BROAD's definitions) over the movement samples.",
             "",
         ]
@@ -966,7 +983,12 @@ def _trial_result(real: _Real, real_run: dict, twins: list[dict], filters, mode,
             notes.append(f"{row['filter']} failed: {e}")
     return TrialResult(
         name=real.name,
-        source={"path": str(real.path), "format": real.format, "seeds": list(range(seeds))},
+        source={
+            "path": str(real.path),
+            "format": real.format,
+            "seeds": list(range(seeds)),
+            "twin_seeds": [twin_seed(i, real.name) for i in range(seeds)],
+        },
         mode=mode,
         rate_hz=real.rate_hz,
         twin_rate_hz=twin_rate,
