@@ -2,7 +2,8 @@
 
 A :class:`~gyroemu.dynamics.Trajectory` is sampled at the scenario's rate; sensors need their truth at their
 own instants (an inner rate for the physics, the output instants of a clock that runs fast or slow).
-:class:`SensorTruth` interpolates splines (scipy), each built once, when first needed:
+:class:`SensorTruth` interpolates splines (scipy's, compiled bit for bit by
+:mod:`gyroemu.dynamics.cubic`), each built once, when first needed:
 
 * ``ω_b`` by the cubic Hermite spline through the samples of ``ω_b`` with slopes ``α_b``, so
   ``ω`` and ``α`` are continuous and exact at the samples;
@@ -25,6 +26,7 @@ from functools import cached_property
 import numpy as np
 
 from gyroemu.dynamics import Trajectory
+from gyroemu.dynamics.cubic import HermiteCubic, not_a_knot
 from gyroemu.dynamics.rigid_body import point_acceleration
 from gyroemu.dynamics.rotation import (
     quat_conjugate,
@@ -60,11 +62,9 @@ class SensorTruth:
         self.q_bs = quat_normalize(np.asarray(q_bs, dtype=float))
         self.q_sb = quat_conjugate(self.q_bs)
         self.lever_arm_b = np.asarray(lever_arm_b, dtype=float)
-        from scipy.interpolate import CubicHermiteSpline, CubicSpline  # scipy where used: the CLI's listings skip it
-
-        self._omega = CubicHermiteSpline(t, trajectory.omega_b, trajectory.alpha_b, axis=0)
+        self._omega = HermiteCubic(t, trajectory.omega_b, trajectory.alpha_b)
         self._alpha = self._omega.derivative()
-        self._force = CubicSpline(t, trajectory.specific_force_b, axis=0)
+        self._force = not_a_knot(t, trajectory.specific_force_b)
         env = trajectory.environment
         self._earth_rate_w = np.zeros(3) if env is None else np.asarray(env.earth_rate_w, dtype=float)
 
@@ -73,13 +73,14 @@ class SensorTruth:
 
     @cached_property
     def _angle(self):
-        return self._omega.antiderivative()
+        from scipy.interpolate import CubicHermiteSpline  # scipy where used: the CLI's listings skip it
+
+        trajectory = self._trajectory
+        return CubicHermiteSpline(trajectory.t, trajectory.omega_b, trajectory.alpha_b, axis=0).antiderivative()
 
     @cached_property
     def _mag(self):
-        from scipy.interpolate import CubicSpline
-
-        return CubicSpline(self._trajectory.t, self._trajectory.mag_b, axis=0)
+        return not_a_knot(self._trajectory.t, self._trajectory.mag_b)
 
     def _attitude(self, t: np.ndarray) -> np.ndarray:
         return quat_interpolate(self._trajectory.t, self._trajectory.q_wb, t)
