@@ -53,17 +53,27 @@ BLOCK_MAX_SAMPLES = 1 << 14
 
 
 @dataclass(frozen=True)
-class _MotionBlock:
-    """What one block of samples measures, read from the truth alone (:meth:`DeviceRun._motion`)."""
+class _OtherSensors:
+    """What the sensors read on the worker thread carry from block to block (:meth:`DeviceRun._read`)."""
 
-    k: np.ndarray  # (n,) sample indices
+    rng_clock: np.random.Generator  # the clock's jitter
+    accel_errors: SensorErrors  # the accelerometer's error terms, with their states and generator
+    rng_mag: np.random.Generator  # the magnetometer's noise
+
+
+@dataclass(frozen=True)
+class _BlockReading:
+    """One block's samples but for the gyro's, and what the gyro reads (:meth:`DeviceRun._read`)."""
+
+    stamps: np.ndarray  # (n,) sample stamps, device clock, s
     instants: np.ndarray  # (n + 1,) true interval bounds τ_{k−1} … τ_k, s
     window: Trajectory  # the truth samples read
     truth: SensorTruth  # their interpolants
     temperature: np.ndarray  # (n,) °C at τ_k
-    gyro_truth: GyroTruth  # the mechanism's inner grid
+    gyro_truth: GyroTruth  # the gyro mechanism's inner grid
     force_mean: np.ndarray  # (n, 3) mean specific force over each interval, m/s²
-    field: np.ndarray | None  # (n, 3) field at the magnetometer's instants, T; None without one
+    accel: np.ndarray  # (n, 3) the accelerometer's samples, m/s²
+    mag: np.ndarray  # (n, 3) the magnetometer's samples, T (NaN without one)
 
 
 @dataclass(frozen=True)
@@ -144,53 +154,41 @@ class DeviceRun:
         self.block_samples = max(1, min(BLOCK_MAX_SAMPLES, BLOCK_INNER_SAMPLES // self.inner_steps))
 
     def __iter__(self) -> Iterator[MeasuredBlock]:
-        device, spec = self.device, self.device.spec
+        device = self.device
         streams = [np.random.default_rng(s) for s in np.random.SeedSequence(device.seed).spawn(5)]
         rng_clock, rng_mech, rng_gyro, rng_accel, rng_mag = streams
         gyro_errors = SensorErrors(device.gyro_errors, self.true_period, rng_gyro)
-        accel_errors = SensorErrors(device.accel_errors, self.true_period, rng_accel)
+        others = _OtherSensors(rng_clock, SensorErrors(device.accel_errors, self.true_period, rng_accel), rng_mag)
         mechanism_state: dict = {}
-        increment = spec.output == "increment"
-        for block in self._motion_blocks():
-            n = len(block.k)
-            stamps = block.k * self.period + spec.clock.offset_s
-            if spec.clock.jitter_s > 0:
-                stamps = stamps + spec.clock.jitter_s * rng_clock.standard_normal(n)
-            increments, raw = self._gyro_increments(block.gyro_truth, n, rng_mech, mechanism_state)
+        increment = device.spec.output == "increment"
+        for block in self._blocks_ahead(others):
+            increments, raw = self._gyro_increments(block.gyro_truth, len(block.stamps), rng_mech, mechanism_state)
             gyro = gyro_errors.apply(
                 increments / self.period,
                 block.instants[1:],
                 temperature_degC=block.temperature,
                 specific_force=block.force_mean if device.gyro_errors.g_sensitivity is not None else None,
             )
-            accel = accel_errors.apply(
-                block.force_mean * (self.true_period / self.period),
-                block.instants[1:],
-                temperature_degC=block.temperature,
-            )
-            if spec.magnetometer is not None:
-                assert block.field is not None  # read with the magnetometer (_motion)
-                mag = spec.magnetometer.measure(block.field, self.period, rng_mag)
-            else:
-                mag = np.full((n, 3), np.nan)
             samples = ImuSamples(
-                t=stamps,
+                t=block.stamps,
                 gyro=gyro,
-                accel=accel,
-                mag=mag,
+                accel=block.accel,
+                mag=block.mag,
                 raw={device.kind: raw} if raw else {},
                 delta_angle=gyro * self.period if increment else None,
-                delta_velocity=accel * self.period if increment else None,
+                delta_velocity=block.accel * self.period if increment else None,
                 t_true=block.instants[1:],
                 temperature_degC=block.temperature,
                 device=device.name,
             )
             yield MeasuredBlock(samples, block.window, block.truth)
 
-    def _motion_blocks(self) -> Iterator[_MotionBlock]:
-        """Each block's motion (:meth:`_motion`), in order; with more than one block, each is read on a
-        worker thread while the caller measures the one before (the motion holds no random draw or
-        carried state, so the bytes are those of reading it in line)."""
+    def _blocks_ahead(self, others: _OtherSensors) -> Iterator[_BlockReading]:
+        """Each block's :meth:`_read`, in order; with more than one block, each is read on a worker
+        thread while the caller runs the gyro's mechanism over the one before. The worker reads the
+        blocks one after another, and the clock's, accelerometer's and magnetometer's states and
+        generators are used there only, so they carry from block to block as they would in line: the
+        same bytes."""
         starts: Iterator[int] = itertools.count(0, self.block_samples)
         if self.count is not None:
             starts = iter(range(0, self.count, self.block_samples))
@@ -198,44 +196,55 @@ class DeviceRun:
         if first is None:
             return
         if self.count is not None and self.count <= self.block_samples:  # one block: nothing to overlap
-            yield self._motion(first)
+            yield self._read(others, first)
             return
-        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="gyroemu-motion") as pool:
-            pending = pool.submit(self._motion, first)
+        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="gyroemu-block") as pool:
+            pending = pool.submit(self._read, others, first)
             try:
                 for done in starts:
                     block = pending.result()
-                    pending = pool.submit(self._motion, done)
+                    pending = pool.submit(self._read, others, done)
                     yield block
                 yield pending.result()
             finally:
                 pending.cancel()  # a consumer that stops early: the block in hand is dropped
 
-    def _motion(self, done: int) -> _MotionBlock:
-        """The motion the block of samples ``done …`` measures: its instants, truth window and
-        interpolants, temperature, the gyro mechanism's truth on its inner grid, the accelerometer's
-        mean specific force and the magnetometer's field, each at its sensor's latency."""
+    def _read(self, others: _OtherSensors, done: int) -> _BlockReading:
+        """The block of samples ``done …`` but for its gyro: its instants, truth window and
+        interpolants, temperature, the gyro mechanism's truth on its inner grid; the stamps (clock),
+        the accelerometer's samples (and the mean specific force they measure) and the
+        magnetometer's, each sensor at its latency."""
         spec = self.device.spec
         n = self.block_samples if self.count is None else min(self.block_samples, self.count - done)
         k = np.arange(self.first + done, self.first + done + n)
         instants = self.t0 + np.arange(k[0] - 1, k[-1] + 1) * self.true_period  # τ_{k−1} … τ_k
         window = self.source.window(float(instants[0]) - self._lag, float(instants[-1]) - self._lead)
         truth = SensorTruth(window, spec.mounting.q_bs, spec.mounting.lever_arm_m)
+        temperature = spec.temperature.at(instants[1:] - self.t0)
         latency_gyro, latency_accel, latency_mag = self.device.latencies
+        stamps = k * self.period + spec.clock.offset_s
+        if spec.clock.jitter_s > 0:
+            stamps = stamps + spec.clock.jitter_s * others.rng_clock.standard_normal(n)
         force_instants = instants if latency_accel == 0.0 else instants - latency_accel
-        field = None
+        force_mean = mean_specific_force(truth, force_instants, substeps=self.substeps + self.substeps % 2)
+        accel = others.accel_errors.apply(
+            force_mean * (self.true_period / self.period), instants[1:], temperature_degC=temperature
+        )
         if spec.magnetometer is not None:
             field_instants = instants[1:] if latency_mag == 0.0 else instants[1:] - latency_mag
-            field = truth.magnetic_field(field_instants)
-        return _MotionBlock(
-            k=k,
+            mag = spec.magnetometer.measure(truth.magnetic_field(field_instants), self.period, others.rng_mag)
+        else:
+            mag = np.full((n, 3), np.nan)
+        return _BlockReading(
+            stamps=stamps,
             instants=instants,
             window=window,
             truth=truth,
-            temperature=spec.temperature.at(instants[1:] - self.t0),
+            temperature=temperature,
             gyro_truth=self._gyro_truth(truth, done, n, latency_gyro),
-            force_mean=mean_specific_force(truth, force_instants, substeps=self.substeps + self.substeps % 2),
-            field=field,
+            force_mean=force_mean,
+            accel=accel,
+            mag=mag,
         )
 
     def samples(self) -> Iterator[ImuSamples]:
