@@ -365,3 +365,36 @@ def test_latency_of_a_second_or_more_is_refused(table):
     with pytest.raises(ConfigError) as err:
         device_from_dict({"description": "x", "rate_hz": 100, table: {"latency_s": 1.0}})
     assert f"{table}.latency_s" in str(err.value)
+
+
+class _Forces:
+    """A stand-in truth whose specific force at the instants asked for is drawn at random."""
+
+    def __init__(self, seed: int):
+        self.rng = np.random.default_rng(seed)
+
+    def specific_force(self, t):
+        return 10.0 ** self.rng.uniform(-3, 2) * self.rng.standard_normal((len(t), 3))
+
+
+@pytest.mark.parametrize("substeps", [2, 4, 6, 10, 20, 40])
+def test_mean_specific_force_is_scipys_composite_simpson_bit_for_bit(substeps):
+    """mean_specific_force sums scipy's Simpson panels without gathering each interval's points: the
+    same bits as ``simpson(f[idx], dx=1/substeps, axis=1)`` (any difference is a wrong line)."""
+    from scipy.integrate import simpson
+
+    from gyroemu.sensors.accelerometer import mean_specific_force
+
+    instants = 2.5 + np.arange(301) * 0.01
+    ours = mean_specific_force(_Forces(substeps), instants, substeps)
+    k = len(instants) - 1
+    f = _Forces(substeps).specific_force(np.empty(k * substeps + 1))  # the same draws
+    idx = np.arange(k)[:, None] * substeps + np.arange(substeps + 1)[None, :]
+    assert ours.tobytes() == simpson(f[idx], dx=1.0 / substeps, axis=1).tobytes()
+
+
+def test_mean_specific_force_refuses_an_odd_count_of_sub_intervals():
+    from gyroemu.sensors.accelerometer import mean_specific_force
+
+    with pytest.raises(ValueError, match="even number"):
+        mean_specific_force(_Forces(0), np.arange(5.0), 3)
