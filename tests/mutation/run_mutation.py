@@ -57,6 +57,7 @@ MODULES: dict[str, list[str]] = {
     "dynamics/rigid_body.py": ["tests/dynamics/test_rigid_body.py", "tests/dynamics/test_impact.py"],
     "dynamics/body_kernels.py": ["tests/dynamics/test_rigid_body.py", "tests/dynamics/test_impact.py"],
     "dynamics/rotation.py": ["tests/dynamics/test_rotation.py"],
+    "dynamics/cubic.py": ["tests/dynamics/test_cubic.py"],
     "dynamics/trajectory.py": [
         "tests/dynamics/test_earth.py",
         "tests/dynamics/test_motions.py",
