@@ -24,7 +24,6 @@ the coefficients are formed per point from the samples, never stored.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -81,14 +80,15 @@ def not_a_knot_slopes(x: ArrayLike, y: ArrayLike) -> NDArray[np.float64]:
     return slopes
 
 
-def not_a_knot(x: ArrayLike, y: ArrayLike) -> Any:
+def not_a_knot(x: ArrayLike, y: ArrayLike) -> Callable[[ArrayLike], NDArray[np.float64]]:
     """``CubicSpline(x, y)`` as a callable of ``t``: a :class:`HermiteCubic` through the not-a-knot
     slopes from 4 knots on, scipy's own spline below (its special cases for 2 and 3 knots)."""
     x = np.ascontiguousarray(x, dtype=float)
     if len(x) < 4:
         from scipy.interpolate import CubicSpline
 
-        return CubicSpline(x, y, axis=0)
+        spline: Callable[[ArrayLike], NDArray[np.float64]] = CubicSpline(x, y, axis=0)
+        return spline
     return HermiteCubic(x, y, not_a_knot_slopes(x, y))
 
 
