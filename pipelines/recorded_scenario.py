@@ -27,6 +27,7 @@ work); the splines are fitted on the first :meth:`RecordedSpec.trajectory`
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import Any, ClassVar, Literal
@@ -131,6 +132,21 @@ class RecordedSpec(ScenarioSpec):
                 file=file,
                 key="duration_s",
             )
+
+    def replace_attitude(self, q_wb: np.ndarray) -> None:
+        """Take ``q_wb`` (N, 4), one row per recorded sample (NaN where missing), as the recording's
+        attitude before the motion is fitted: e.g. the reference refined by the recording's own gyro
+        (:func:`gyroemu.dynamics.attitude_fusion.complementary_attitude`). :class:`ValueError` once the
+        motion is fitted or for another shape."""
+        self.load()
+        assert self._samples is not None
+        if self._motion is not None:
+            raise ValueError("the motion is fitted already: replace the attitude before the first trajectory")
+        q = np.asarray(q_wb, dtype=float)
+        if q.shape != self._samples.q_wb.shape:
+            raise ValueError(f"q_wb must be {self._samples.q_wb.shape}, one row per recorded sample; got {q.shape}")
+        self._samples = dataclasses.replace(self._samples, q_wb=q)
+        self._samples.check()
 
     def motion(self) -> RecordedMotion:
         """The smoothed motion (fitted on first use)."""

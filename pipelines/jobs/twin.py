@@ -1,11 +1,14 @@
 """``gyroemu twin``: a recording with truth beside its emulated twins, through the attitude filters.
 
-A **twin** of a recording is its own recorded motion (the truth of the recording, smoothed by the
-``recorded`` scenario kind, :mod:`gyroemu.pipelines.recorded_scenario`) sensed by an emulated device in
-the modelled field of a site. Twin ``i`` of a recording draws its device, its magnetic environment and
-its handling offset from :func:`twin_seed` of ``i`` and the recording's file name, so that the twins
-of different recordings draw independently (with seed ``i`` alone, twin ``i`` of every recording had
-the same noise at the same time from power-up, and pooling their rests pooled one draw).
+A **twin** of a recording is its own recorded motion sensed by an emulated device in the modelled
+field of a site. The motion is the recording's truth as the ``recorded`` scenario kind smooths it
+(:mod:`gyroemu.pipelines.recorded_scenario`), its attitude first refined by the recording's own gyro
+above :data:`TWIN_GYRO_CROSSOVER_HZ` and held still in the rest phases (:func:`twin_attitude`); the
+twins are scored against the recording's truth, as the recording is. Twin ``i`` of a recording draws
+its device, its magnetic environment and its handling offset from :func:`twin_seed` of ``i`` and the
+recording's file name, so that the twins of different recordings draw independently (with seed ``i``
+alone, twin ``i`` of every recording had the same noise at the same time from power-up, and pooling
+their rests pooled one draw).
 
 Inputs: a BROAD trial (``.hdf5``: IMU, magnetometer in µT, optical attitude and position, ``movement``
 mask) or a gyroemu MCAP log (one device with ``/imu``, ``/truth/imu`` and usually ``/truth/pose``; its
@@ -76,6 +79,7 @@ __all__ = [
     "TwinOptions",
     "TwinReport",
     "check_options",
+    "twin_attitude",
     "twin_seed",
     "default_site_file",
     "run_twin",
@@ -92,17 +96,20 @@ class TwinError(ConfigError):
     """Bad options of ``gyroemu twin``, found before any work (the message names the argument)."""
 
 
-TWIN_SMOOTHING = {"orientation_cutoff_hz": 5.0, "position_cutoff_hz": 10.0}
-"""The twins' smoothing of the recorded reference, one setting for every trial. An optical reference
-resampled to the IMU's rate has noise that is not white at that rate, so GCV leaves it almost
-unsmoothed (cut-offs of 54 Hz and 143 Hz on BROAD's trial 07) and the twin's device senses the
-reference's noise as motion: 1–15 °/s and 0.5–9 m/s² at rest where the real sensor reads 0.1 °/s and
-0.05 m/s². The attitude's cut-off is 5 Hz: the real gyro puts 90 % of its movement power below
-2.4–8.5 Hz on the undisturbed trials, and at 10 Hz the reference's noise, sensed as rotation, keeps
-VQF's rest detection from seeing the rests (its twins' 9D errors triple on trials 11 and 16). The
-position's is 10 Hz: the real accelerometer's movement power reaches 7–20 Hz (99 %), and at 3 Hz the
-twins lose the linear acceleration that the accelerometer-led filters suffer (their 6D inclination
-ratios 0.58–0.73 on the fast trials). README, "The twin", lists the settings tried."""
+TWIN_SMOOTHING = {"orientation_cutoff_hz": 20.0, "position_cutoff_hz": 10.0}
+"""The twins' smoothing of the recorded motion, one setting for every trial. The attitude the twins
+sense is the reference refined by the recording's own gyro above :data:`TWIN_GYRO_CROSSOVER_HZ`
+(:func:`twin_attitude`), whose noise is far below the reference's, so its cut-off can sit at 20 Hz:
+the real gyro sees the motion's 5–15 Hz content (on trial 02, 20.7 °/s RMS in movement). The
+position's is 10 Hz: an optical reference resampled to the IMU's rate has noise that is not white at
+that rate, so GCV leaves it almost unsmoothed (143 Hz on BROAD's trial 07) and the twins' accelerometer
+would sense the noise as motion (0.5–9 m/s²); the real accelerometer's movement power reaches 7–20 Hz
+(99 %), and at 3 Hz the twins lose the linear acceleration that the accelerometer-led filters suffer.
+README, "The twin", lists the settings tried."""
+TWIN_GYRO_CROSSOVER_HZ = 1.0
+"""Below it the twins' attitude follows the optical reference, above it the recording's gyro
+(:func:`gyroemu.dynamics.attitude_fusion.complementary_attitude`); the figures sit on a plateau from
+0.5 to 2 Hz (README, "The twin")."""
 HANDLING_STREAM = 0x68616E64  # the handling offset's generator: [seed, this] ("hand")
 
 
@@ -289,6 +296,30 @@ def twin_seed(seed: int, recording: str) -> int:
     ``SeedSequence([seed, crc32(recording)])``, the device's, the magnetic environment's and the handling
     offset's seed (each draws from its own streams of it)."""
     return int(np.random.SeedSequence([seed, zlib.crc32(recording.encode())]).generate_state(1, np.uint64)[0])
+
+
+def twin_attitude(real_t, q_ref, gyro, rests, delay_s: float, q_bs, crossover_hz: float = TWIN_GYRO_CROSSOVER_HZ):
+    """The attitude the twins of a recording sense, (N, 4) at the recording's samples (NaN before its
+    reference starts): the reference ``q_ref`` below ``crossover_hz`` and the recording's own ``gyro``
+    (sensor axes, rad/s, lagging the reference by ``delay_s``: the device's latency plus half a sample,
+    what its interval means add; turned into body axes by the mounting ``q_bs``) above it, each where it
+    is the better measurement (:func:`gyroemu.dynamics.attitude_fusion.complementary_attitude`). In the
+    ``rests`` (``(start, stop)`` stretches of ``real_t``) the body is still: held at the stretch's mean, so
+    that neither the reference's noise nor the gyro's is sensed as motion there."""
+    from gyroemu.dynamics.attitude_fusion import complementary_attitude
+    from gyroemu.dynamics.rotation import quat_normalize, quat_rotate
+
+    t = np.asarray(real_t, float)
+    omega_s = np.stack([np.interp(t + delay_s, t, np.asarray(gyro, float)[:, c]) for c in range(3)], axis=1)
+    q = complementary_attitude(t, q_ref, quat_rotate(np.asarray(q_bs, float), omega_s), crossover_hz)
+    valid = np.isfinite(np.asarray(q_ref, float)).all(axis=1)
+    q[~valid] = np.nan  # where the recording has no reference, neither has its motion
+    for start, stop in rests:
+        inside = (t >= start) & (t <= stop) & valid
+        if inside.any():
+            held = q[inside] * np.sign(q[inside] @ q[inside][0])[:, None]  # one hemisphere
+            q[inside] = quat_normalize(held.mean(axis=0))
+    return q
 
 
 def _site_with_seed(site: dict, seed: int) -> dict:
@@ -504,9 +535,18 @@ def _run_real(real: _Real, filters, setup9, setup6, rests: list[slice]) -> dict:
 
 
 def _run_twin(
-    real: _Real, site: dict, smoothing, device_name: str, seed: int, filters, setup9, setup6, rest_t, handling=None
+    real: _Real,
+    site: dict,
+    smoothing,
+    device_name: str,
+    seed: int,
+    filters,
+    setup9,
+    setup6,
+    rest_t,
+    still_t=(),
+    handling=None,
 ) -> dict:
-    from gyroemu.pipelines.formats.mcap_log import truth_series
     from gyroemu.sensors import load_device
     from gyroemu.sensors.sampling import SensorTruth
 
@@ -515,6 +555,10 @@ def _run_twin(
     seed = twin_seed(seed, real.name)
     scenario = _scenario(real, site, seed, smoothing)
     device = load_device(device_name, seed=seed)
+    delay = device.latencies[0] + 0.5 / device.spec.rate_hz  # an interval mean lags by half a sample
+    scenario.spec.replace_attitude(
+        twin_attitude(real.t, real.q_true, real.gyro, still_t, delay, device.spec.mounting.q_bs)
+    )
     t0 = float(scenario.spec.motion().t0)
     timings["scenario (load, fit)"] = time.perf_counter() - started
     started = time.perf_counter()
@@ -525,7 +569,6 @@ def _run_twin(
     timings["measure"] = time.perf_counter() - started
     started = time.perf_counter()
     body = SensorTruth(traj)  # the trajectory's interpolants, for the truth at τ and at τ − latency
-    truth = truth_series(traj, samples, body)
     instants = np.asarray(samples.t_true if samples.t_true is not None else samples.t, float)
     timings["truth"] = time.perf_counter() - started
     # The real trial's mask, by the nearest real sample to each twin instant (real time = t + t0).
@@ -546,7 +589,9 @@ def _run_twin(
     mag: np.ndarray | None = np.asarray(samples.mag, float) if samples.mag is not None else None
     if mag is not None and not np.isfinite(mag).all(axis=1).any():
         mag = None
-    assert truth.q_wb is not None
+    # Scored as the real log is, against the recording's reference (the nearest sample): its noise is in
+    # the real errors, so it is in the twins' (their motion is the reference refined by the gyro).
+    reference = np.where(inside[:, None], real.q_true[k], np.nan)
     errors = _filter_errors(
         filters,
         setup9 if mag is not None else None,
@@ -555,14 +600,13 @@ def _run_twin(
         samples.gyro,
         accel,
         mag,
-        truth.q_wb,
+        reference,
         mask,
         timings,
     )
     started = time.perf_counter()
     # The sensor's error: measured minus the truth at the instant each sensor measured, τ − latency (at
-    # rest the real truth is still, so its latency adds nothing there; the twin's truth carries what is
-    # left of the reference's noise after smoothing, which a latency would turn into a residual).
+    # rest the real truth is still, and so is the twins' motion, held at its mean there).
     lat_gyro, lat_accel, _ = device.latencies
     span = (float(traj.t[0]), float(traj.t[-1]))
     omega_at = body.body_truth(np.clip(instants - lat_gyro, *span))[1]
@@ -1004,7 +1048,9 @@ def _trial_result(real: _Real, real_run: dict, twins: list[dict], filters, mode,
 
 def _rest_phases(real: _Real) -> tuple[list[slice], dict]:
     """The rest phases of the real recording with a reference (each trimmed to it, at least 64 samples):
-    (their samples, a description)."""
+    (their samples, a description). Without any, the samples before the first movement sample stand in
+    for the residuals (``intervals_s``), but only phases found still are held still in the twins
+    (``still_s``)."""
     from gyroemu.pipelines.identification import find_rest_phases
 
     valid = np.isfinite(real.q_true).all(axis=1)
@@ -1014,10 +1060,8 @@ def _rest_phases(real: _Real) -> tuple[list[slice], dict]:
         if len(ok) >= 64:
             rests.append(slice(p.start + int(ok[0]), p.start + int(ok[-1]) + 1))
     if rests:
-        return rests, {
-            "source": f"{len(rests)} rest phase(s)",
-            "intervals_s": [(float(real.t[r.start]), float(real.t[r.stop - 1])) for r in rests],
-        }
+        intervals = [(float(real.t[r.start]), float(real.t[r.stop - 1])) for r in rests]
+        return rests, {"source": f"{len(rests)} rest phase(s)", "intervals_s": intervals, "still_s": intervals}
     first = np.flatnonzero(real.mask)
     stop = int(first[0]) if len(first) and first[0] > 0 else len(real.t)
     idx = np.flatnonzero(valid[:stop])
@@ -1025,6 +1069,7 @@ def _rest_phases(real: _Real) -> tuple[list[slice], dict]:
     return [slice(start, stop)], {
         "source": "samples before the first movement sample",
         "intervals_s": [(float(real.t[start]), float(real.t[max(start, stop - 1)]))],
+        "still_s": [],  # not found still: the twins' motion is not held there
     }
 
 
@@ -1079,7 +1124,19 @@ def run_twin(options: TwinOptions) -> TwinReport:
                 (
                     (i, seed),
                     _run_twin,
-                    (real, site, options.smoothing, options.device, seed, filters, setup9, setup6, rest_t, handling),
+                    (
+                        real,
+                        site,
+                        options.smoothing,
+                        options.device,
+                        seed,
+                        filters,
+                        setup9,
+                        setup6,
+                        rest_t,
+                        rest_info["still_s"],
+                        handling,
+                    ),
                 )
             )
     results: dict[tuple, dict] = {}
