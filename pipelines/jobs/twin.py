@@ -298,7 +298,15 @@ def twin_seed(seed: int, recording: str) -> int:
     return int(np.random.SeedSequence([seed, zlib.crc32(recording.encode())]).generate_state(1, np.uint64)[0])
 
 
-def twin_attitude(real_t, q_ref, gyro, rests, delay_s: float, q_bs, crossover_hz: float = TWIN_GYRO_CROSSOVER_HZ):
+def twin_attitude(
+    real_t: np.ndarray,
+    q_ref: np.ndarray,
+    gyro: np.ndarray,
+    rests: Sequence[tuple[float, float]],
+    delay_s: float,
+    q_bs: Sequence[float] | np.ndarray,
+    crossover_hz: float = TWIN_GYRO_CROSSOVER_HZ,
+) -> np.ndarray:
     """The attitude the twins of a recording sense, (N, 4) at the recording's samples (NaN before its
     reference starts): the reference ``q_ref`` below ``crossover_hz`` and the recording's own ``gyro``
     (sensor axes, rad/s, lagging the reference by ``delay_s``: the device's latency plus half a sample,
