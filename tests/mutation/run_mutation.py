@@ -58,6 +58,7 @@ MODULES: dict[str, list[str]] = {
     "dynamics/body_kernels.py": ["tests/dynamics/test_rigid_body.py", "tests/dynamics/test_impact.py"],
     "dynamics/rotation.py": ["tests/dynamics/test_rotation.py"],
     "dynamics/cubic.py": ["tests/dynamics/test_cubic.py"],
+    "dynamics/attitude_fusion.py": ["tests/dynamics/test_attitude_fusion.py"],
     "dynamics/trajectory.py": [
         "tests/dynamics/test_earth.py",
         "tests/dynamics/test_motions.py",
