@@ -133,19 +133,32 @@ class RecordedSpec(ScenarioSpec):
                 key="duration_s",
             )
 
-    def replace_attitude(self, q_wb: np.ndarray) -> None:
-        """Take ``q_wb`` (N, 4), one row per recorded sample (NaN where missing), as the recording's
-        attitude before the motion is fitted: e.g. the reference refined by the recording's own gyro
-        (:func:`gyroemu.dynamics.attitude_fusion.complementary_attitude`). :class:`ValueError` once the
-        motion is fitted or for another shape."""
+    def replace_attitude(self, t: np.ndarray, q_wb: np.ndarray) -> None:
+        """Take the attitude ``q_wb`` (M, 4) at stamps ``t`` (M,, the recording's clock; NaN rows where
+        missing) as the recording's before the motion is fitted: e.g. the reference refined by the
+        recording's own gyro (:func:`gyroemu.dynamics.attitude_fusion.complementary_attitude`). It is
+        interpolated (Slerp; a stamp of ``t`` gives its own row) onto the recording's samples that have an
+        attitude and lie within ``t``'s valid span; the others lose theirs. :class:`ValueError` once the
+        motion is fitted, or for shapes that do not match."""
+        from gyroemu.dynamics.rotation import quat_interpolate
+
         self.load()
         assert self._samples is not None
         if self._motion is not None:
             raise ValueError("the motion is fitted already: replace the attitude before the first trajectory")
+        t = np.asarray(t, dtype=float)
         q = np.asarray(q_wb, dtype=float)
-        if q.shape != self._samples.q_wb.shape:
-            raise ValueError(f"q_wb must be {self._samples.q_wb.shape}, one row per recorded sample; got {q.shape}")
-        self._samples = dataclasses.replace(self._samples, q_wb=q)
+        if t.ndim != 1 or q.shape != (len(t), 4):
+            raise ValueError(f"t (M,) and q_wb (M, 4) are needed, got {t.shape} and {q.shape}")
+        ok = np.isfinite(t) & np.isfinite(q).all(axis=1)
+        if ok.sum() < 2:
+            raise ValueError("q_wb needs at least two valid rows")
+        stamps = self._samples.t
+        had = np.isfinite(self._samples.q_wb).all(axis=1)
+        inside = had & (stamps >= t[ok][0]) & (stamps <= t[ok][-1])
+        replaced = np.full(self._samples.q_wb.shape, np.nan)
+        replaced[inside] = quat_interpolate(t[ok], q[ok], stamps[inside])
+        self._samples = dataclasses.replace(self._samples, q_wb=replaced)
         self._samples.check()
 
     def motion(self) -> RecordedMotion:

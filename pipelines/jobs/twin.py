@@ -565,7 +565,7 @@ def _run_twin(
     device = load_device(device_name, seed=seed)
     delay = device.latencies[0] + 0.5 / device.spec.rate_hz  # an interval mean lags by half a sample
     scenario.spec.replace_attitude(
-        twin_attitude(real.t, real.q_true, real.gyro, still_t, delay, device.spec.mounting.q_bs)
+        real.t, twin_attitude(real.t, real.q_true, real.gyro, still_t, delay, device.spec.mounting.q_bs)
     )
     t0 = float(scenario.spec.motion().t0)
     timings["scenario (load, fit)"] = time.perf_counter() - started

@@ -279,3 +279,29 @@ def test_stated_cutoffs_set_the_smoothing(tmp_path):
     bad = load_scenario(write_scenario(tmp_path, "m.tum", "tum", "[smoothing]\norientation_cutoff_hz = 80.0\n"))
     with pytest.raises(ConfigError, match="Nyquist"):
         bad.spec.motion()
+
+
+def test_replaced_attitude_is_taken_at_the_recordings_own_stamps(tmp_path):
+    """replace_attitude: an attitude given at other stamps (here 4× denser, a quarter turn about z from
+    the recording's) is Slerped onto the recording's samples, a shared stamp giving its own row; with
+    λ = 0 the spline interpolates them, so the fitted motion at the recording's stamps is the given
+    attitude to round-off. Samples outside its span lose their attitude; after the fit, refused."""
+    truth = load_scenario("smooth_manoeuvre").simulate(duration=10.0, rate_hz=RATE)
+    write_tum(tmp_path / "m.tum", truth.t, truth.q_wb, truth.pos_w)
+    exact = "[smoothing]\norientation_lambda_s3 = 0.0\n"
+    scenario = load_scenario(write_scenario(tmp_path, "m.tum", "tum", exact))
+    dense = load_scenario("smooth_manoeuvre").simulate(duration=10.0, rate_hz=4 * RATE)  # j/480 = k/120 at j = 4k
+    turn = quat_from_rotvec([0.0, 0.0, math.pi / 2])
+    given = quat_multiply(turn, dense.q_wb)
+    given[-4 * 60 :] = np.nan  # the last half second has no given attitude
+    scenario.spec.replace_attitude(dense.t, given)
+    motion = scenario.spec.motion()
+    kept = truth.t <= dense.t[-4 * 60 - 1]
+    q_fit, _, _ = motion.attitude(truth.t[kept] - truth.t[0])
+    dots = np.abs(np.einsum("ij,ij->i", q_fit, quat_multiply(turn, truth.q_wb[kept])))
+    assert np.min(dots) > 1.0 - 1e3 * np.finfo(float).eps  # |q·q'| = cos(angle/2): angles below 1.3e-6 rad
+    assert motion.duration == pytest.approx(truth.t[kept][-1] - truth.t[0], abs=1e-12)
+    with pytest.raises(ValueError, match="fitted already"):
+        scenario.spec.replace_attitude(dense.t, given)
+    with pytest.raises(ValueError, match=r"\(M, 4\)"):
+        load_scenario(write_scenario(tmp_path, "m.tum", "tum")).spec.replace_attitude(dense.t, given[:, :3])
