@@ -318,7 +318,9 @@ def twin_attitude(
     from gyroemu.dynamics.rotation import quat_normalize, quat_rotate
 
     t = np.asarray(real_t, float)
-    omega_s = np.stack([np.interp(t + delay_s, t, np.asarray(gyro, float)[:, c]) for c in range(3)], axis=1)
+    gyro = np.asarray(gyro, float)
+    read = np.isfinite(gyro).all(axis=1)  # a missing gyro sample is bridged, not integrated as NaN
+    omega_s = np.stack([np.interp(t + delay_s, t[read], gyro[read, c]) for c in range(3)], axis=1)
     q = complementary_attitude(t, q_ref, quat_rotate(np.asarray(q_bs, float), omega_s), crossover_hz)
     valid = np.isfinite(np.asarray(q_ref, float)).all(axis=1)
     q[~valid] = np.nan  # where the recording has no reference, neither has its motion
