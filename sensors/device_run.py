@@ -4,9 +4,10 @@
 truth a window at a time from a :class:`~gyroemu.dynamics.truth_source.TruthSource` and yields the
 device's samples in blocks, carrying every state from one block to the next: the gyro mechanism's
 (:mod:`gyroemu.sensors.mechanism`), the error terms' (:class:`gyroemu.sensors.errors.SensorErrors`:
-noise recurrences, filter, pulse counter), the clock's and the random streams'. Memory is that of a
-block, whatever the run's length; a run without end (a source whose ``t_end`` is None) yields blocks
-until its consumer stops.
+noise recurrences, filter, pulse counter), the clock's and the random streams'. Memory is that of two
+blocks (one measured while the next is read on a worker thread, :meth:`DeviceRun._blocks_ahead`),
+whatever the run's length; a run without end (a source whose ``t_end`` is None) yields blocks until its
+consumer stops.
 
 Blocks start at fixed sample counts from power-up (every :attr:`DeviceRun.block_samples`, a property of
 the device, not of the run), and every computation is made a block at a time, so a run's samples do
