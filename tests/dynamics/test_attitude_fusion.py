@@ -86,3 +86,24 @@ def test_bad_arguments_are_refused(kwargs, match):
     args = {"t": t, "q_ref": q, "omega_b": w, "crossover_hz": 1.0} | kwargs
     with pytest.raises(ValueError, match=match):
         complementary_attitude(**args)
+
+
+def test_a_bias_under_fast_rocking_is_taken_out_in_world_axes():
+    """Rocking about x at f = 3 Hz (±30°, faster than the crossover) with a bias along z: in world axes
+    R_wb b = |b| (0, −sin θ, cos θ) integrates into a ramp (the mean of cos θ) and harmonics of f of
+    amplitude at most |b| / (2π f) each (sin θ and cos θ are bounded by 1, and their harmonics' sum too),
+    which the 1-Hz low-pass removes: the error stays below 2 |b| / (2π f) plus the end transients. Taken
+    in body axes instead, the ramp would be modulated at f and removed with it: tenths of a radian."""
+    f, amplitude = 3.0, np.radians(30.0)
+    t = np.arange(int(60.0 * FS) + 1) / FS
+    theta = amplitude * np.sin(2 * np.pi * f * t)
+    q = quat_from_rotvec(theta[:, None] * np.array([1.0, 0.0, 0.0]))
+    w = (amplitude * 2 * np.pi * f * np.cos(2 * np.pi * f * t))[:, None] * np.array([1.0, 0.0, 0.0])
+    b = np.radians(0.4)
+    fused = complementary_attitude(t, q, w + np.array([0.0, 0.0, b]), 1.0)
+    interior = slice(int(3 * FS), -int(3 * FS))
+    ends = b * t[-1] * np.exp(-2 * np.pi * 3.0 / np.sqrt(2))
+    # the midpoint rule's own error on the rocking: |θ'''| h² / 12 per unit time, over 60 s
+    integration = amplitude * (2 * np.pi * f) ** 3 / (FS**2 * 12) * t[-1]
+    bound = 2 * b / (2 * np.pi * f) + ends + integration
+    assert np.max(quat_angle(fused, q)[interior]) < bound, (np.max(quat_angle(fused, q)[interior]), bound)
