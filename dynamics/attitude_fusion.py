@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .jit import njit
-from .rotation import quat_conjugate, quat_from_rotvec, quat_multiply, quat_to_rotvec
+from .rotation import quat_conjugate, quat_from_rotvec, quat_multiply, quat_to_rotvec, rotate_body
 
 __all__ = ["complementary_attitude"]
 
@@ -94,20 +94,10 @@ def _integrate(t, omega, first, q):
     """q_{k+1} = q_k ⊗ exp(φ_k / 2) with φ_k = (ω_k + ω_{k+1}) (t_{k+1} − t_k) / 2, from row ``first``."""
     for k in range(first, len(t) - 1):
         h = t[k + 1] - t[k]
-        px = 0.5 * (omega[k, 0] + omega[k + 1, 0]) * h
-        py = 0.5 * (omega[k, 1] + omega[k + 1, 1]) * h
-        pz = 0.5 * (omega[k, 2] + omega[k + 1, 2]) * h
-        angle = np.sqrt(px * px + py * py + pz * pz)
-        c = np.cos(0.5 * angle)
-        s = 0.5 - angle * angle / 48.0 if angle < 1e-4 else np.sin(0.5 * angle) / angle  # sin(θ/2)/θ
-        dw, dx, dy, dz = c, s * px, s * py, s * pz
-        w, x, y, z = q[k, 0], q[k, 1], q[k, 2], q[k, 3]
-        nw = w * dw - x * dx - y * dy - z * dz
-        nx = w * dx + x * dw + y * dz - z * dy
-        ny = w * dy - x * dz + y * dw + z * dx
-        nz = w * dz + x * dy - y * dx + z * dw
-        norm = np.sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
-        q[k + 1, 0] = nw / norm
-        q[k + 1, 1] = nx / norm
-        q[k + 1, 2] = ny / norm
-        q[k + 1, 3] = nz / norm
+        q[k + 1, :] = q[k, :]
+        rotate_body(
+            q[k + 1],
+            0.5 * (omega[k, 0] + omega[k + 1, 0]) * h,
+            0.5 * (omega[k, 1] + omega[k + 1, 1]) * h,
+            0.5 * (omega[k, 2] + omega[k + 1, 2]) * h,
+        )

@@ -20,6 +20,7 @@ Euler angles
 
 from __future__ import annotations
 
+import math
 import warnings
 from typing import TYPE_CHECKING
 
@@ -53,6 +54,9 @@ __all__ = [
     "body_rate_from_quat_derivative",
     "body_rate_from_euler_zxz",
     "body_rate_from_euler_zyx",
+    "half_turn",
+    "set_product",
+    "rotate_body",
 ]
 
 
@@ -68,6 +72,36 @@ def _v(v) -> np.ndarray:
     if v.shape[-1] != 3:
         raise ValueError(f"vectors need a last axis of length 3, got shape {v.shape}")
     return v
+
+
+# Scalar steps for compiled loops (a strapdown integration, a filter's error injection): one quaternion
+# at a time, renormalised, so that a long loop of them stays on the unit sphere.
+
+
+@njit
+def half_turn(phi_x, phi_y, phi_z):  # pragma: no cover - compiled
+    """exp(φ/2) = (cos |φ|/2, sin(|φ|/2) φ/|φ|) of a rotation vector φ (rad), as (w, x, y, z)."""
+    angle = math.sqrt(phi_x * phi_x + phi_y * phi_y + phi_z * phi_z)
+    s = math.sin(0.5 * angle) / angle if angle > 1e-12 else 0.5 - angle * angle / 48.0
+    return math.cos(0.5 * angle), phi_x * s, phi_y * s, phi_z * s
+
+
+@njit
+def set_product(q, aw, ax, ay, az, bw, bx, by, bz):  # pragma: no cover - compiled
+    """q ← a ⊗ b (Hamilton), renormalised; ``q`` (4,) in place (it may hold a or b)."""
+    w = aw * bw - ax * bx - ay * by - az * bz
+    x = aw * bx + ax * bw + ay * bz - az * by
+    y = aw * by - ax * bz + ay * bw + az * bx
+    z = aw * bz + ax * by - ay * bx + az * bw
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    q[0], q[1], q[2], q[3] = w / n, x / n, y / n, z / n
+
+
+@njit
+def rotate_body(q, phi_x, phi_y, phi_z):  # pragma: no cover - compiled
+    """q ← q ⊗ exp(φ/2) for a body-frame rotation vector φ (rad): the strapdown step."""
+    c, dx, dy, dz = half_turn(phi_x, phi_y, phi_z)
+    set_product(q, q[0], q[1], q[2], q[3], c, dx, dy, dz)
 
 
 @njit

@@ -47,6 +47,7 @@ import math
 import numpy as np
 
 from gyroemu.dynamics.jit import njit
+from gyroemu.dynamics.rotation import half_turn, rotate_body, set_product
 
 # Window accumulator layout (one float64 vector per filter).
 W_ACC_N = 0  # valid accelerometer samples in the window
@@ -105,32 +106,6 @@ def quat_to_matrix(q, r):
     r[2, 0] = 2 * (x * z - w * y)
     r[2, 1] = 2 * (y * z + w * x)
     r[2, 2] = 1 - 2 * (x * x + y * y)
-
-
-@njit
-def _half_turn(phi_x, phi_y, phi_z):
-    """exp(φ/2) = (cos |φ|/2, sin(|φ|/2) φ/|φ|) of a rotation vector φ (rad), as (w, x, y, z)."""
-    angle = math.sqrt(phi_x * phi_x + phi_y * phi_y + phi_z * phi_z)
-    s = math.sin(0.5 * angle) / angle if angle > 1e-12 else 0.5 - angle * angle / 48.0
-    return math.cos(0.5 * angle), phi_x * s, phi_y * s, phi_z * s
-
-
-@njit
-def _set_product(q, aw, ax, ay, az, bw, bx, by, bz):
-    """q ← a ⊗ b (Hamilton), renormalised."""
-    w = aw * bw - ax * bx - ay * by - az * bz
-    x = aw * bx + ax * bw + ay * bz - az * by
-    y = aw * by - ax * bz + ay * bw + az * bx
-    z = aw * bz + ax * by - ay * bx + az * bw
-    n = math.sqrt(w * w + x * x + y * y + z * z)
-    q[0], q[1], q[2], q[3] = w / n, x / n, y / n, z / n
-
-
-@njit
-def rotate_body(q, phi_x, phi_y, phi_z):
-    """q ← q ⊗ exp(φ/2) for a body-frame rotation vector φ (rad): the strapdown step."""
-    c, dx, dy, dz = _half_turn(phi_x, phi_y, phi_z)
-    _set_product(q, q[0], q[1], q[2], q[3], c, dx, dy, dz)
 
 
 @njit
@@ -648,8 +623,8 @@ def inject(x, q, b, slow, win, phi):
     """Fold the error estimate into the nominal state (``q ← exp(δθ) ⊗ q``, ``b ← b + δb``,
     ``M̂ ← M̂ + δM``), zero it, and open a new window."""
     turn = np.empty(4)
-    turn[0], turn[1], turn[2], turn[3] = _half_turn(x[0], x[1], x[2])  # exp(δθ/2), world axes
-    _set_product(q, turn[0], turn[1], turn[2], turn[3], q[0], q[1], q[2], q[3])
+    turn[0], turn[1], turn[2], turn[3] = half_turn(x[0], x[1], x[2])  # exp(δθ/2), world axes
+    set_product(q, turn[0], turn[1], turn[2], turn[3], q[0], q[1], q[2], q[3])
     # The low-passed specific force was turned into the world frame with past estimates: turn it by
     # the correction those would have had, δθ + D (δb, δM) (strapdown), so that the measurement does
     # not see the error it already gave.
@@ -660,7 +635,7 @@ def inject(x, q, b, slow, win, phi):
             past[i] = x[X_THETA + i]
             for j in range(N_DRIFT):
                 past[i] += slow[d0 + N_DRIFT * i + j] * x[X_BIAS + j]
-        turn[0], turn[1], turn[2], turn[3] = _half_turn(past[0], past[1], past[2])
+        turn[0], turn[1], turn[2], turn[3] = half_turn(past[0], past[1], past[2])
         quat_to_matrix(turn, c)
         v0, v1, v2 = slow[s0], slow[s0 + 1], slow[s0 + 2]
         for i in range(3):
@@ -672,7 +647,7 @@ def inject(x, q, b, slow, win, phi):
     slow[S_ACC_EST] += x[X_ACC]
     slow[S_ACC_EST + 1] += x[X_ACC + 1]
     # â is a world-frame vector held in the estimated axes: a heading correction turns it as it turns the force
-    turn[0], turn[1], turn[2], turn[3] = _half_turn(x[0], x[1], x[2])
+    turn[0], turn[1], turn[2], turn[3] = half_turn(x[0], x[1], x[2])
     quat_to_matrix(turn, c)
     v0, v1 = slow[S_ACC_EST], slow[S_ACC_EST + 1]
     slow[S_ACC_EST] = c[0, 0] * v0 + c[0, 1] * v1

@@ -42,11 +42,10 @@ its end, taken linear in time over the window (20 ms), and so is the covariance.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from gyroemu.dynamics.jit import njit
+from gyroemu.dynamics.rotation import half_turn, set_product
 
 from . import mekf_kernels as kern
 from .batched import kalman_predict, kalman_update
@@ -142,22 +141,6 @@ def rts_backward(F_top, P_prior, P_post, x_upd, e_s, P_s):
 
 
 @njit
-def _turn(q, dx, dy, dz, out):
-    """out ← exp(δθ/2) ⊗ q for a world-frame rotation vector δθ (rad), renormalised."""
-    a = math.sqrt(dx * dx + dy * dy + dz * dz)
-    s = math.sin(0.5 * a) / a if a > 1e-12 else 0.5 - a * a / 48.0
-    cw, cx, cy, cz = math.cos(0.5 * a), dx * s, dy * s, dz * s
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    out[0] = cw * w - cx * x - cy * y - cz * z
-    out[1] = cw * x + cx * w + cy * z - cz * y
-    out[2] = cw * y - cx * z + cy * w + cz * x
-    out[3] = cw * z + cx * y - cy * x + cz * w
-    norm = math.sqrt(out[0] ** 2 + out[1] ** 2 + out[2] ** 2 + out[3] ** 2)
-    for i in range(4):
-        out[i] /= norm
-
-
-@njit
 def per_sample(t, q_fwd, b_fwd, end_index, e_s, P_s, x_upd, q_out, b_out, cov_out):
     """The smoothed attitude, bias and attitude covariance of every sample (module's notes). Window
     ``j ≥ 1`` holds the samples ``end_index[j−1]+1 … end_index[j]`` (``end_index[0] = −1``: the
@@ -184,7 +167,9 @@ def per_sample(t, q_fwd, b_fwd, end_index, e_s, P_s, x_upd, q_out, b_out, cov_ou
                 f = (t[k] - t0) / span
                 e[:] = (1.0 - f) * e_s[j - 1] + f * (e_s[j] + x_upd[j])
                 P3 = (1.0 - f) * P_s[j - 1, 0:3, 0:3] + f * P_s[j, 0:3, 0:3]
-            _turn(q_fwd[k], e[0], e[1], e[2], q_out[k])
+            q = q_fwd[k]
+            cw, cx, cy, cz = half_turn(e[0], e[1], e[2])  # q_out ← exp(δθ/2) ⊗ q, world axes
+            set_product(q_out[k], cw, cx, cy, cz, q[0], q[1], q[2], q[3])
             for i in range(3):
                 b_out[k, i] = b_fwd[k, i] + e[kern.X_BIAS + i]
             for a in range(3):
