@@ -253,6 +253,9 @@ class Identification:
                     else:
                         parts.append(f"{axis} < {c.high * f:.4g} (not observable: written 0)")
                 lines.append(f"  {term} {u}: " + "; ".join(parts))
+            if any(a.model_scatter > 0 for a in noise.axes):
+                scatter = "; ".join(f"{axis} {100 * a.model_scatter:.2g} %" for axis, a in zip("xyz", noise.axes))
+                lines.append(f"  scatter about the model beyond sampling (in the fit's weights): {scatter}")
             if any(a.markov is not None for a in noise.axes):
                 lines.append(f"  gauss_markov sigma {unit[1]}, tau_c s (kept if F > F_0.99(2, M-6)):")
                 for axis, a in zip("xyz", noise.axes):
