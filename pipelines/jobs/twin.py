@@ -75,6 +75,7 @@ from gyroemu.errors import ConfigError
 __all__ = [
     "METRICS",
     "RANKED_FILTERS",
+    "TAUS_S",
     "TwinError",
     "TwinOptions",
     "TwinReport",
@@ -83,6 +84,7 @@ __all__ = [
     "twin_seed",
     "default_site_file",
     "run_twin",
+    "residual_allan",
 ]
 
 METRICS = ("total_9d", "heading_9d", "inclination_9d", "inclination_6d")
@@ -458,7 +460,7 @@ def _filter_errors(filters, setup9, setup6, t, gyro, accel, mag, q_true, mask, t
     return out
 
 
-def _adev_at(segments: list[np.ndarray], dt: float) -> tuple[np.ndarray, np.ndarray]:
+def residual_allan(segments: list[np.ndarray], dt: float) -> tuple[np.ndarray, np.ndarray]:
     """(len(TAUS_S), 3) Allan deviation per axis at TAUS_S, pooled over the segments (each (n_i, 3)): the
     Allan variances weighted by their clusters, as :func:`gyroemu.pipelines.identification.pooled_allan`
     does (NaN where every segment is shorter than 2 τ); and the clusters behind each value."""
@@ -505,7 +507,7 @@ def _residuals(gyro_res: list[np.ndarray], accel_res: list[np.ndarray], fs: floa
             acs.append(a[ok])
     out: dict[str, Any] = {"samples": int(sum(len(x) for x in gs))}
     for key, xs in (("gyro", gs), ("accel", acs)):
-        out[f"{key}_adev"], out[f"{key}_clusters"] = _adev_at(xs, 1.0 / fs)
+        out[f"{key}_adev"], out[f"{key}_clusters"] = residual_allan(xs, 1.0 / fs)
         if xs:
             out[f"{key}_psd_f"], out[f"{key}_psd"] = _spectrum(xs, fs)
             out[f"{key}_std"] = np.std(np.concatenate([x - x.mean(axis=0) for x in xs]), axis=0)
