@@ -7,7 +7,8 @@ IEEE Std 952-1997 (fibre-optic gyros; its Annex C gives the Allan-variance terms
 (ring-laser gyros) and IEEE Std 1431-2004 (Coriolis vibratory gyros); accelerometers take the same
 terms in their own units (IEEE Std 1293-2018). For each axis i, with ΔT = T − T_ref:
 
-    u_i = Σ_j (δ_ij + s_i + M_ij) x_j        scale factor s (ppm) and misalignment / cross-axis M
+    u_i = Σ_j (δ_ij + s_i + M_ij) x_j        scale factor s (ppm; s + s_on, s_on random per power-up)
+                                             and misalignment / cross-axis M
         + k_i x_i²                           quadratic scale-factor nonlinearity
         + s_T,i ΔT x_i + b_T,i ΔT            temperature sensitivity of scale factor and bias
         + Σ_j G_ij f_j                        g-sensitivity (gyro only; f = specific force, m/s²)
@@ -36,7 +37,8 @@ z). ``g`` in a key name is the unit g₀ = 9.80665 m/s², not local gravity. :cl
 
 Randomness: every draw comes from the Generator passed in (and from generators spawned from it for the
 slow flicker levels, :class:`gyroemu.sensors.noise.SensorNoise`), in a fixed order: at power-up the
-turn-on bias, the noise's stationary starts and the pulse counter's initial fraction, then the noise
+turn-on bias, the turn-on scale factor, the noise's stationary starts and the pulse counter's initial
+fraction, then the noise
 sample by sample; a term that is off draws nothing. :func:`apply_errors` is one power-up over all its
 samples; :class:`SensorErrors` is one power-up applied chunk after chunk, any division of the run
 giving the same numbers (the IMU layer's blocks, :mod:`gyroemu.sensors.device_run`).
@@ -120,6 +122,7 @@ class _CommonErrors(Section):
     """Keys without a unit that depends on the sensor, and the checks that relate keys."""
 
     scale_factor_ppm: PerAxis = _ZERO
+    turn_on_scale_factor_ppm: PerAxisNonNegative = _ZERO
     scale_factor_temperature_ppm_per_degC: PerAxis = _ZERO
     reference_temperature_degC: Real = 25.0
     misalignment_mrad: Angles6 | None = None
@@ -277,6 +280,7 @@ class GyroErrors(_CommonErrors):
             turn_on_bias=np.array(self.turn_on_bias_deg_per_h) * deg_per_h,
             bias_temperature=np.array(self.bias_temperature_deg_per_h_per_degC) * deg_per_h,
             scale_factor=np.array(self.scale_factor_ppm) * _PPM,
+            turn_on_scale_factor=np.array(self.turn_on_scale_factor_ppm) * _PPM,
             scale_factor_temperature=np.array(self.scale_factor_temperature_ppm_per_degC) * _PPM,
             reference_temperature_degC=self.reference_temperature_degC,
             nonlinearity=_quadratic(self.scale_factor_nonlinearity_ppm, full_scale),
@@ -351,6 +355,7 @@ class AccelErrors(_CommonErrors):
             turn_on_bias=np.array(self.turn_on_bias_ug) * _UG,
             bias_temperature=np.array(self.bias_temperature_ug_per_degC) * _UG,
             scale_factor=np.array(self.scale_factor_ppm) * _PPM,
+            turn_on_scale_factor=np.array(self.turn_on_scale_factor_ppm) * _PPM,
             scale_factor_temperature=np.array(self.scale_factor_temperature_ppm_per_degC) * _PPM,
             reference_temperature_degC=self.reference_temperature_degC,
             nonlinearity=_quadratic(self.scale_factor_nonlinearity_ppm, full_scale),
@@ -392,6 +397,9 @@ class ErrorModel:
         Fixed bias b, and the standard deviation of the bias drawn once per power-up.
     bias_temperature : (3,) unit per K
     scale_factor, scale_factor_temperature : (3,) dimensionless, and per K
+    turn_on_scale_factor : (3,) dimensionless
+        Standard deviation of the scale factor drawn once per power-up (repeatability), added to
+        ``scale_factor``; 0 (the default) draws nothing.
     reference_temperature_degC : float
         Temperature at which the temperature terms vanish, °C.
     nonlinearity : (3,) 1/unit
@@ -438,6 +446,7 @@ class ErrorModel:
     filter_order: int
     markov_sigma: np.ndarray = field(default_factory=lambda: np.zeros(3))
     markov_tau_s: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    turn_on_scale_factor: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 def apply_errors(
@@ -487,8 +496,9 @@ def apply_errors(
 class SensorErrors:
     """The error terms of one sensor triad over one power-up, applied chunk after chunk.
 
-    Construction is the power-up: it draws the turn-on bias, the noise's stationary starts and the
-    pulse counter's initial fraction, in that order. Each :meth:`apply` then continues the run with
+    Construction is the power-up: it draws the turn-on bias, the turn-on scale factor, the noise's
+    stationary starts and the pulse counter's initial fraction, in that order (a term that is off
+    draws nothing). Each :meth:`apply` then continues the run with
     the next samples: the noise recurrences (:class:`gyroemu.sensors.noise.SensorNoise`), the
     low-pass filter's state and the pulse counter's angle carry from one call to the next.
 
@@ -511,8 +521,11 @@ class SensorErrors:
             )
         self.model = m
         self.dt = float(dt)
-        self._gain = np.eye(3) + np.diag(m.scale_factor) + m.cross_axis
         self._bias = m.bias + (m.turn_on_bias * rng.standard_normal(3) if np.any(m.turn_on_bias) else 0.0)
+        scale = m.scale_factor + (
+            m.turn_on_scale_factor * rng.standard_normal(3) if np.any(m.turn_on_scale_factor) else 0.0
+        )
+        self._gain = np.eye(3) + np.diag(scale) + m.cross_axis
         flicker = None
         if np.any(m.bias_instability):
             flicker = noise.flicker_bank(m.bias_instability, m.bias_instability_tau_range, dt, n_axes=3)

@@ -15,7 +15,7 @@ from .lever_arm import LeverArmFit, fit_lever_arm
 from .magnetic_environment import MagneticEnvironment, magnetic_environment, pool_heading_offsets, world_field
 from .noise import AxisNoise, NoiseTerm, SensorNoise, pooled_allan, sensor_noise
 from .rest import RestPhase, find_rest_phases, phases_from_intervals
-from .result import Identification, Pooled, identify, pool_estimates
+from .result import Identification, Pooled, identify, pool_estimates, pool_random_effects
 from .timing import LatencyEstimate, accel_latency, estimate_latency, gyro_latency, mag_latency
 from .trial import TrialData, TrialIdentification, TrialSettings, identify_trial
 from .truth import truth_angular_velocity
@@ -54,6 +54,7 @@ __all__ = [
     "magnetic_environment",
     "phases_from_intervals",
     "pool_estimates",
+    "pool_random_effects",
     "pool_handling_offsets",
     "pool_heading_offsets",
     "pooled_allan",

@@ -242,6 +242,36 @@ def test_turn_on_bias_differs_per_power_up_with_the_configured_sigma():
     assert np.all(one == one[0])
 
 
+def test_turn_on_scale_factor_differs_per_power_up_with_the_configured_sigma():
+    """The scale factor drawn per power-up (repeatability): on a constant rate ω the output is
+    (1 + s + s_on) ω with s_on ~ N(0, σ²) per axis, constant within a power-up; over 4000 power-ups its
+    standard deviation and mean lie within SIGMAS standard errors of σ and 0 (√(2n) and √n); with the
+    turn-on bias on as well, the bias is drawn first (the same bias as without the scale term) and the
+    draws that follow are the scale's."""
+    sigma = np.array([500.0, 1000.0, 2000.0])  # ppm
+    omega = np.array([1.0, -2.0, 0.5])  # rad/s
+    spec = GyroErrors(scale_factor_ppm=[100.0, 0.0, -50.0], turn_on_scale_factor_ppm=sigma.tolist())
+    t, rate = np.array([0.0, 0.01]), np.tile(omega, (2, 1))
+    powerups = 4000
+    out = np.array([apply_errors(rate, t, spec, np.random.default_rng(seed)) for seed in range(powerups)])
+    assert np.all(out[:, 0] == out[:, 1])  # constant within a power-up
+    s_on = out[:, 0] / omega - 1 - np.array([100.0, 0.0, -50.0]) * 1e-6
+    np.testing.assert_array_less(np.abs(s_on.std(axis=0) / (sigma * 1e-6) - 1), SIGMAS / np.sqrt(2 * powerups))
+    np.testing.assert_array_less(np.abs(s_on.mean(axis=0)) / (sigma * 1e-6), SIGMAS / np.sqrt(powerups))
+    both = GyroErrors(turn_on_bias_deg_per_h=10.0, turn_on_scale_factor_ppm=sigma.tolist())
+    bias_only = GyroErrors(turn_on_bias_deg_per_h=10.0)
+    zero = np.zeros((2, 3))
+    np.testing.assert_array_equal(
+        apply_errors(zero, t, both, np.random.default_rng(3)),
+        apply_errors(zero, t, bias_only, np.random.default_rng(3)),
+    )
+    rng = np.random.default_rng(3)
+    b_on = 10.0 * DEG_PER_H * rng.standard_normal(3)  # first the bias, then the scale factor
+    s_on = sigma * 1e-6 * rng.standard_normal(3)
+    got = apply_errors(rate, t, both, np.random.default_rng(3))[0]
+    np.testing.assert_allclose(got, (1 + s_on) * omega + b_on, rtol=0, atol=8 * np.finfo(float).eps * 2.0)
+
+
 def test_error_model_is_accepted_directly(motion):
     model = GyroErrors(bias_deg_per_h=3.0).to_si()
     assert isinstance(model, ErrorModel)
