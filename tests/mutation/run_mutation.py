@@ -48,6 +48,7 @@ ROOT = Path(__file__).resolve().parents[2]
 # module (path in the checkout) -> the tests that hold it
 MODULES: dict[str, list[str]] = {
     "sensors/mechanism.py": ["tests/sensors/test_imu.py"],
+    "sensors/errors.py": ["tests/sensors/test_errors.py", "tests/sensors/test_noise_density_convention.py"],
     "sensors/rate_gyro.py": ["tests/sensors/test_rate_gyro.py"],
     "sensors/rate_integrating.py": ["tests/sensors/test_rate_integrating.py"],
     "sensors/free_gyro.py": ["tests/sensors/test_free_gyro.py"],
@@ -66,6 +67,8 @@ MODULES: dict[str, list[str]] = {
     ],
     "dynamics/earth.py": ["tests/dynamics/test_earth.py"],
     "pipelines/estimation/mekf_kernels.py": ["tests/pipelines/test_mekf.py"],
+    "pipelines/identification/noise.py": ["tests/pipelines/test_identify.py"],
+    "pipelines/identification/result.py": ["tests/pipelines/test_identify.py"],
     "pipelines/formats/messages.py": ["tests/pipelines/test_messages.py"],
     "pipelines/formats/channels.py": ["tests/pipelines/test_mcap_io.py"],
     "pipelines/formats/mcap_records.py": ["tests/pipelines/test_mcap_io.py"],

@@ -520,7 +520,7 @@ def test_random_effects_pool_with_equal_uncertainties_is_the_sample_mean_and_exc
     all to a few ε of their size (result.py, module notes)."""
     from gyroemu.pipelines.identification.result import pool_random_effects
 
-    x = np.array([[-2047.0, 3.0], [2265.0, 5.0], [761.0, 4.0], [2837.0, 6.0]])
+    x = np.array([[-2047.3, 3.0], [2265.0, 5.0], [761.0, 4.0], [2837.0, 6.0]])  # mean not an integer
     sigma = np.array([300.0, 2.0])
     pooled, tau = pool_random_effects(list(x), [sigma] * 4)
     eps = np.finfo(float).eps
@@ -547,3 +547,132 @@ def test_random_effects_pool_recovers_the_spread_between_power_ups():
     assert abs(pooled.value[0] - mu) <= K_SIGMA * pooled.sigma[0]
     se_tau = np.sqrt((tau**2 + np.mean(sig**2)) ** 2 * 2 / k) / (2 * tau)
     assert abs(tau_hat[0] - tau) <= K_SIGMA * se_tau
+
+
+def test_device_file_round_trips_every_identified_value_in_si(synthetic):
+    """Every value identify writes into the device file, read back by the device loader in SI, equals
+    the identification's own SI value to the digits the file keeps (six significant digits: relative
+    1e-5): the gyro's and the accelerometer's bias, the gyro's turn-on bias, scale factor, turn-on scale
+    factor and cross-axis, the magnetometer's hard iron (and soft iron, five decimals), each sensor's
+    latency (the interval mean's T/2 taken off the gyro's and the accelerometer's), and the noise
+    density, bias instability and random walk of both (four significant digits: 5e-4). Two trials are
+    stood in by the same one twice, with spreads set by hand, to write the per-power-up terms; noise
+    terms are set so none is 0."""
+    from gyroemu.pipelines.identification import Pooled
+    from gyroemu.pipelines.identification.noise import AxisNoise, NoiseTerm, SensorNoise
+
+    result, _ = synthetic
+
+    def noise(values: np.ndarray) -> SensorNoise:
+        axes = []
+        for n, b, k in values:
+            fit = result.gyro_noise.axes[0].fit
+
+            def term(v: float) -> NoiseTerm:
+                return NoiseTerm(v, 0.9 * v, 1.1 * v, "fitted")
+
+            axes.append(AxisNoise(term(n), term(b), term(k), fit))
+        return SensorNoise(axes=tuple(axes), tau_max_s=7.0, rest_s=100.0, phases=2)
+
+    gyro_noise = noise(np.array([[1.1e-4, 3.0e-5, 2.0e-6], [0.9e-4, 2.0e-5, 3.0e-6], [1.2e-4, 1.0e-5, 4.0e-6]]))
+    accel_noise = noise(np.array([[2.5e-3, 1.2e-3, 6.0e-4], [2.7e-3, 1.1e-3, 1.2e-3], [4.1e-3, 0.9e-3, 0.8e-3]]))
+    res = dataclasses.replace(
+        result,
+        trials=[result.trials[0], result.trials[0]],
+        gyro_bias_spread=np.array([2.1e-4, 3.3e-4, 1.7e-4]),
+        gyro_scale=Pooled(np.array([3.7e-5, -8.2e-4, 1.13e-3]), np.full(3, 1e-4), 2),
+        gyro_scale_spread=np.array([3.4e-3, 1.3e-3, 1.1e-3]),
+        gyro_noise=gyro_noise,
+        accel_noise=accel_noise,
+    )
+    data = res.device_dict()
+    device = device_from_dict(data)
+    gyro = device.spec.gyro.errors.to_si()
+    accel = device.spec.accelerometer.errors.to_si()
+
+    def same(got, want, what: str) -> None:
+        np.testing.assert_allclose(np.asarray(got, float), np.asarray(want, float), rtol=1e-5, atol=0, err_msg=what)
+
+    same(gyro.bias, res.gyro_bias.value, "gyro bias")
+    same(gyro.turn_on_bias, res.gyro_bias_spread, "gyro turn-on bias")
+    same(gyro.scale_factor, res.gyro_scale.value, "gyro scale factor")
+    same(gyro.turn_on_scale_factor, res.gyro_scale_spread, "gyro turn-on scale factor")
+    assert res.gyro_misalignment is not None
+    same(gyro.cross_axis[~np.eye(3, dtype=bool)], res.gyro_misalignment.value[~np.eye(3, dtype=bool)], "cross-axis")
+    for model, n in ((gyro, gyro_noise), (accel, accel_noise)):  # written to four significant digits
+        for term in ("noise_density", "bias_instability", "random_walk"):
+            np.testing.assert_allclose(getattr(model, term), n.values(term), rtol=5e-4, atol=0, err_msg=term)
+    same(accel.bias, res.accel_bias.value, "accelerometer bias")
+    mag = device.spec.magnetometer
+    assert res.hard_iron is not None
+    same(np.array(mag.hard_iron_uT) * 1e-6, res.hard_iron.value, "hard iron")
+    assert res.soft_iron is not None  # five significant digits
+    np.testing.assert_allclose(np.array(mag.soft_iron), res.soft_iron.value, rtol=0, atol=5e-5 * 1.1)
+    half = 0.5 / res.rate_hz
+    assert data["gyro"]["latency_s"] == pytest.approx(res.latency["gyro"].value - half, abs=1e-6)
+    assert data["accelerometer"]["latency_s"] == pytest.approx(res.latency["accelerometer"].value - half, abs=1e-6)
+    assert data["magnetometer"]["latency_s"] == pytest.approx(res.latency["magnetometer"].value, abs=1e-6)
+
+
+def test_pooling_algebra_with_si_sized_uncertainties():
+    """pool_estimates and pool_random_effects on values and σ of SI size (rad/s, ≪ 1): two trials
+    1e-5 ± 1e-6 and 3e-5 ± 2e-6 give the inverse-variance mean (1e-5·4 + 3e-5)/5 = 1.4e-5, its σ
+    2e-6/√5 inflated by the Birge ratio √(χ²/(n − 1)) with χ² = (0.4e-5/1e-6)² + (1.6e-5/2e-6)² = 80;
+    the random-effects τ² = (χ² − 1)/(Σw − Σw²/Σw), and its mean weighs each by 1/(σ_i² + τ²), all to
+    a few ε of their size. An element without any σ is the plain mean with σ 0."""
+    from gyroemu.pipelines.identification import pool_estimates, pool_random_effects
+
+    x = [np.array([1e-5, 5.0]), np.array([3e-5, 6.0])]
+    s = [np.array([1e-6, 0.0]), np.array([2e-6, 0.0])]
+    eps = 8 * np.finfo(float).eps
+    fixed = pool_estimates(x, s)
+    assert abs(fixed.value[0] - 1.4e-5) <= eps * 1.4e-5
+    assert abs(fixed.sigma[0] - 2e-6 / np.sqrt(5) * np.sqrt(80.0)) <= eps * fixed.sigma[0]
+    assert fixed.value[1] == 5.5 and fixed.sigma[1] == 0.0
+    w = np.array([1e12, 0.25e12])
+    tau2 = (80.0 - 1) / (w.sum() - (w**2).sum() / w.sum())
+    wr = 1 / (np.array([1e-6, 2e-6]) ** 2 + tau2)
+    pooled, tau = pool_random_effects(x, s)
+    assert abs(tau[0] ** 2 - tau2) <= eps * tau2
+    assert abs(pooled.value[0] - (wr @ np.array([1e-5, 3e-5])) / wr.sum()) <= eps * 2e-5
+    assert abs(pooled.sigma[0] - 1 / np.sqrt(wr.sum())) <= eps * pooled.sigma[0]
+    assert pooled.value[1] == 5.5 and pooled.sigma[1] == 0.0 and tau[1] == 0.0
+
+
+def test_unobservable_terms_are_bounded_as_documented():
+    """White noise alone (BROAD's rest layout): where the floor or the random walk is reported not
+    observable (on most axes; at least one of each here), its bound is the module notes' one,
+    (2 ln2/π) B² ≤ σ²_high(τ) and K² τ/3 ≤ σ²_high(τ) at every τ (σ_high the curve's 68 % upper limit),
+    B_max = min √(σ²_high π/(2 ln2)), K_max = min √(3 σ²_high/τ), or the fit's own 68 % upper limit
+    where that is lower, never above these, to round-off."""
+    dt = 1 / 285.714286
+    noise = sensor_noise(_rest_segments(4, None), dt)
+    floor = 2 * np.log(2) / np.pi
+    bounded = {"b": 0, "k": 0}
+    for axis in noise.axes:
+        allan = axis.fit.allan
+        b_max = np.sqrt(np.min(allan.high**2 / floor))
+        k_max = np.sqrt(np.min(3 * allan.high**2 / allan.tau))
+        for key, c, limit, fit in (
+            ("b", axis.bias_instability, b_max, axis.fit.bias_instability),
+            ("k", axis.random_walk, k_max, axis.fit.rrw),
+        ):
+            if c.status == "upper_bound":
+                bounded[key] += 1
+                assert c.value == 0.0
+                expected = min(limit, fit.high) if fit.high > 0 else limit
+                assert abs(c.high - expected) <= 1e-12 * expected, (c, limit, fit)
+    assert bounded["b"] >= 1 and bounded["k"] >= 1, bounded
+
+
+def test_pooled_allan_starts_at_tau_min():
+    """``tau_min_s`` (the magnetometer's, logged faster than it samples): no τ below it, and every
+    octave from the first at or above it up to a third of the longest phase."""
+    from gyroemu.pipelines.identification.noise import pooled_allan
+
+    dt = 1 / 285.714286
+    segments = [s[:, 0] for s in _rest_segments(4, None)[:3]]
+    allan = pooled_allan(segments, dt, tau_min_s=0.1)
+    octaves = dt * 2.0 ** np.arange(20)
+    expected = octaves[(octaves >= 0.1) & (octaves <= max(len(s) for s in segments) * dt / 3)]
+    np.testing.assert_allclose(allan.tau, expected, rtol=1e-12)

@@ -429,3 +429,28 @@ def test_gauss_markov_keys_come_in_pairs(model, data, key, words):
         validate(model, data, file="device.toml", prefix="accelerometer")
     assert error.value.key == key
     assert words in str(error.value)
+
+
+def test_power_up_bias_is_the_fixed_plus_the_turn_on_draw():
+    """``SensorErrors.bias``: b + σ_on·z with z the generator's first three normal draws; on one sample
+    and on none the output is still (n, 3); a specific force of the wrong shape is refused."""
+    from gyroemu.sensors.errors import SensorErrors
+
+    spec = GyroErrors(
+        bias_deg_per_h=[1.0, 2.0, 3.0], turn_on_bias_deg_per_h=10.0, g_sensitivity_deg_per_h_per_g=np.eye(3).tolist()
+    )
+    errors = SensorErrors(spec, 0.01, np.random.default_rng(4))
+    z = np.random.default_rng(4).standard_normal(3)
+    scale = (np.array([1.0, 2.0, 3.0]) + 10.0 * np.abs(z)) * DEG_PER_H  # the sum's terms: round-off on them
+    np.testing.assert_allclose(
+        errors.bias,
+        (np.array([1.0, 2.0, 3.0]) + 10.0 * z) * DEG_PER_H,
+        rtol=0,
+        atol=4 * np.finfo(float).eps * scale.max(),
+    )
+    assert errors.bias.shape == (3,)
+    one = errors.apply(np.zeros((1, 3)), np.zeros(1), specific_force=np.zeros((1, 3)))
+    assert one.shape == (1, 3) and np.all(np.isfinite(one))
+    assert errors.apply(np.zeros((0, 3)), np.zeros(0), specific_force=np.zeros((0, 3))).shape == (0, 3)
+    with pytest.raises(ValueError, match="specific_force"):
+        errors.apply(np.zeros((2, 3)), np.array([0.0, 0.01]), specific_force=np.zeros((3, 3)))
