@@ -497,13 +497,19 @@ def test_a_resonance_at_rest_is_scatter_not_a_floor():
     within K_SIGMA half-widths of the band's fitted B, or, where the band's fit reports B not
     observable, below its upper bound (the price of the scatter: the fit no longer claims what it
     cannot pin)."""
+    from gyroemu.pipelines.identification.noise import model_scatter, pooled_allan
+
     dt = 1 / 285.714286
     for seed in (11, 12):
         plain, banded = _resonant_rest(seed)
         noise = sensor_noise(banded, dt, markov=False)
         reference = sensor_noise(plain, dt, markov=False)
-        for axis, ref in zip(noise.axes, reference.axes):
+        for i, (axis, ref) in enumerate(zip(noise.axes, reference.axes)):
             assert axis.model_scatter > ref.model_scatter
+            raw = pooled_allan([seg[:, i] for seg in banded], dt)
+            tau = raw.tau  # the four IEEE 952 terms' Allan variances per unit coefficient²
+            basis = np.column_stack([3 / tau**2, 1 / tau, np.full_like(tau, 2 * np.log(2) / np.pi), tau / 3])
+            assert axis.model_scatter == model_scatter(raw, basis)
             c = axis.noise_density
             assert abs(c.value - RESONANT_WHITE) <= K_SIGMA * (c.high - c.low) / 2, c
             b, b0 = axis.bias_instability, ref.bias_instability
@@ -608,6 +614,14 @@ def test_device_file_round_trips_every_identified_value_in_si(synthetic):
     same(np.array(mag.hard_iron_uT) * 1e-6, res.hard_iron.value, "hard iron")
     assert res.soft_iron is not None  # five significant digits
     np.testing.assert_allclose(np.array(mag.soft_iron), res.soft_iron.value, rtol=0, atol=5e-5 * 1.1)
+    comments = "\n".join(res.device_comments())
+    for sensor, key, unit in (
+        ("gyro", "noise_density_deg_per_s_per_sqrt_hz", "deg/s/sqrt(Hz)"),
+        ("accelerometer", "noise_density_ug_per_sqrt_hz", "ug/sqrt(Hz)"),
+    ):  # the comment line "noise_density <unit>: x <value> [..]; y ..." states the key's numbers
+        line = next(x for x in comments.splitlines() if x.strip().startswith(f"noise_density {unit}:"))
+        stated = [float(part.split()[1]) for part in line.split(":", 1)[1].split(";")]
+        np.testing.assert_allclose(stated, data[sensor]["errors"][key], rtol=5e-4, err_msg=line)
     half = 0.5 / res.rate_hz
     assert data["gyro"]["latency_s"] == pytest.approx(res.latency["gyro"].value - half, abs=1e-6)
     assert data["accelerometer"]["latency_s"] == pytest.approx(res.latency["accelerometer"].value - half, abs=1e-6)
@@ -629,6 +643,8 @@ def test_pooling_algebra_with_si_sized_uncertainties():
     assert abs(fixed.value[0] - 1.4e-5) <= eps * 1.4e-5
     assert abs(fixed.sigma[0] - 2e-6 / np.sqrt(5) * np.sqrt(80.0)) <= eps * fixed.sigma[0]
     assert fixed.value[1] == 5.5 and fixed.sigma[1] == 0.0
+    agree = pool_estimates([np.array([1e-5]), np.array([1.1e-5])], [np.array([1e-6]), np.array([1e-6])])
+    assert abs(agree.sigma[0] - 1e-6 / np.sqrt(2)) <= eps * agree.sigma[0]  # χ² = 0.005 < 1: not inflated
     w = np.array([1e12, 0.25e12])
     tau2 = (80.0 - 1) / (w.sum() - (w**2).sum() / w.sum())
     wr = 1 / (np.array([1e-6, 2e-6]) ** 2 + tau2)
