@@ -692,3 +692,28 @@ def test_pooled_allan_starts_at_tau_min():
     octaves = dt * 2.0 ** np.arange(20)
     expected = octaves[(octaves >= 0.1) & (octaves <= max(len(s) for s in segments) * dt / 3)]
     np.testing.assert_allclose(allan.tau, expected, rtol=1e-12)
+
+
+def test_two_power_ups_give_the_turn_on_bias_and_the_comments_state_the_latencies(synthetic_data):
+    """Two recordings whose gyro differs by a constant Δ (two power-ups of the same device): the fitted
+    biases differ by Δ (a constant on ω_m moves only b in ω_m = M ω + b), so the device's bias is
+    their mean and its turn-on bias their standard deviation |Δ|/√2 (ddof 1), to 1e-9 rad/s (the
+    latency fits move by round-off); and the file's comments state each trial's latencies in ms as
+    estimated, to the four digits they print."""
+    data, settings, _ = synthetic_data
+    delta = np.array([1e-3, -2e-3, 5e-4])
+    shifted = dataclasses.replace(data, name="shifted", gyro=data.gyro + delta)
+    res = identify([data, shifted], settings)
+    b0, b1 = (t.gyro.bias for t in res.trials)
+    np.testing.assert_allclose(b1 - b0, delta, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(res.gyro_bias_spread, np.abs(delta) / np.sqrt(2), rtol=0, atol=1e-9)
+    written = device_from_dict(res.device_dict()).spec.gyro.errors.to_si()
+    np.testing.assert_allclose(written.turn_on_bias, np.abs(delta) / np.sqrt(2), rtol=1e-5)
+    comments = res.device_comments()
+    for t in res.trials:
+        line = next(x for x in comments if x.startswith(f"trial {t.name}:"))
+        latency = comments[comments.index(line) + 1]
+        for sensor, estimate in (("gyro", t.gyro_latency), ("accel", t.accel_latency), ("mag", t.mag_latency)):
+            stated = latency.split(f"{sensor} ", 1)[1].split(",")[0].split(" +- ")
+            assert float(stated[0]) == pytest.approx(estimate.latency_s * 1e3, rel=5e-4)
+            assert float(stated[1]) == pytest.approx(estimate.sigma_s * 1e3, rel=5e-2)

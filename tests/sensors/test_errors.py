@@ -93,6 +93,20 @@ def test_temperature_sensitivity_of_bias_and_scale_factor(motion):
     close(measure(spec, motion), omega)
 
 
+def test_accelerometer_temperature_sensitivity(motion):
+    """The accelerometer's keys in its own units: bias µg/°C and scale factor ppm/°C, as the gyro's."""
+    _, _, force, temperature = motion
+    spec = AccelErrors(
+        bias_temperature_ug_per_degC=[5.0, -10.0, 20.0],
+        scale_factor_temperature_ppm_per_degC=[10, 20, -30],
+        reference_temperature_degC=20,
+    )
+    dT = (temperature - 20)[:, None]
+    ug = 1e-6 * STANDARD_GRAVITY
+    expected = force + np.array([5.0, -10.0, 20.0]) * ug * dT + np.array([10, 20, -30]) * 1e-6 * dT * force
+    close(apply_errors(force, motion[0], spec, np.random.default_rng(0), temperature_degC=temperature), expected)
+
+
 def test_g_sensitivity(motion):
     _, omega, force, _ = motion
     g = [[1.0, 2.0, 0.0], [0.0, -1.0, 0.5], [0.3, 0.0, 4.0]]  # deg/h per g
