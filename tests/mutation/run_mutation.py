@@ -22,7 +22,9 @@ keys its on-disk cache on the source file's time stamp: a mutated file is recomp
 source edits reach the compiled code. The report counts the mutants that sit inside ``@njit`` /
 ``@guvectorize`` functions, and how many of them were killed, to show it.
 
-Sampling. ``--per-module K`` keeps a seeded random sample of K mutants per module (``--seed``) and
+Sampling. ``--per-module K`` keeps a seeded random sample of K mutants per module (``--seed``), drawn
+from the mutants ordered by what they are (place in the source, operator, occurrence; before
+2026-11-26 by cosmic-ray's job ids, random UUIDs, so a seed did not name the same sample twice), and
 marks the others skipped; ``--full`` runs them all. The report (stdout, and ``report.json`` in the
 work folder) gives per module the mutant count, those run, killed, survived, and the score
 killed / (killed + survived), with each survivor's diff for triage.
@@ -168,9 +170,17 @@ def run_module(module: str, folder: Path, per_module: int | None, seed: int) -> 
         ]
         equivalent = WorkResult(output="in an annotation (never evaluated)", worker_outcome=WorkerOutcome.SKIPPED)
         db.set_multiple_results(in_annotation, equivalent)
-        ids = [item.job_id for item in db.pending_work_items]
+        items = list(db.pending_work_items)
+        ids = [item.job_id for item in items]
         if per_module is not None and per_module < len(ids):
-            keep = set(random.Random(f"{seed}:{module}").sample(sorted(ids), per_module))
+            # Job ids are random UUIDs, new at every init: sample by what each mutant is (its place in
+            # the source, its operator and occurrence), so that a seed names the same mutants every run.
+            def identity(item) -> tuple:
+                m = item.mutations[0]
+                return (tuple(m.start_pos), tuple(m.end_pos), m.operator_name, m.occurrence)
+
+            ordered = [item.job_id for item in sorted(items, key=identity)]
+            keep = set(random.Random(f"{seed}:{module}").sample(ordered, per_module))
             skipped = WorkResult(output="not in the sample", worker_outcome=WorkerOutcome.SKIPPED)
             db.set_multiple_results([i for i in ids if i not in keep], skipped)
     subprocess.run([*cosmic, "exec", str(config), str(session)], cwd=repo, env=env, check=True)
