@@ -558,8 +558,8 @@ def test_random_effects_pool_recovers_the_spread_between_power_ups():
 def test_device_file_round_trips_every_identified_value_in_si(synthetic):
     """Every value identify writes into the device file, read back by the device loader in SI, equals
     the identification's own SI value to the digits the file keeps (six significant digits: relative
-    1e-5): the gyro's and the accelerometer's bias, the gyro's turn-on bias, scale factor, turn-on scale
-    factor and cross-axis, the magnetometer's hard iron (and soft iron, five decimals), each sensor's
+    1e-5): the gyro's and the accelerometer's bias, scale factor and cross-axis, the gyro's turn-on bias
+    and turn-on scale factor, the magnetometer's hard iron (and soft iron, five decimals), each sensor's
     latency (the interval mean's T/2 taken off the gyro's and the accelerometer's), and the noise
     density, bias instability and random walk of both (four significant digits: 5e-4). Two trials are
     stood in by the same one twice, with spreads set by hand, to write the per-power-up terms; noise
@@ -590,6 +590,10 @@ def test_device_file_round_trips_every_identified_value_in_si(synthetic):
         gyro_scale_spread=np.array([3.4e-3, 1.3e-3, 1.1e-3]),
         gyro_noise=gyro_noise,
         accel_noise=accel_noise,
+        accel_scale=Pooled(np.array([1.2e-3, -4.5e-4, 2.5e-4]), np.full(3, 1e-4), 2),
+        accel_cross_axis=Pooled(
+            np.array([[0, 1e-3, -2e-3], [1e-3, 0, 5e-4], [-2e-3, 5e-4, 0]]), np.full((3, 3), 1e-4), 2
+        ),
     )
     data = res.device_dict()
     device = device_from_dict(data)
@@ -609,6 +613,9 @@ def test_device_file_round_trips_every_identified_value_in_si(synthetic):
         for term in ("noise_density", "bias_instability", "random_walk"):
             np.testing.assert_allclose(getattr(model, term), n.values(term), rtol=5e-4, atol=0, err_msg=term)
     same(accel.bias, res.accel_bias.value, "accelerometer bias")
+    same(accel.scale_factor, res.accel_scale.value, "accelerometer scale factor")
+    off = ~np.eye(3, dtype=bool)
+    same(accel.cross_axis[off], res.accel_cross_axis.value[off], "accelerometer cross-axis")
     mag = device.spec.magnetometer
     assert res.hard_iron is not None
     same(np.array(mag.hard_iron_uT) * 1e-6, res.hard_iron.value, "hard iron")

@@ -189,6 +189,7 @@ def test_bandwidth_must_be_below_nyquist(motion):
     with pytest.raises(ConfigError, match="Nyquist") as error:
         measure(GyroErrors(bandwidth_hz=60), motion)
     assert error.value.key == "bandwidth_hz"
+    assert "Nyquist frequency 50 Hz of the 100 Hz sample rate" in str(error.value)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -372,6 +373,7 @@ def test_bias_instability_has_the_flat_allan_floor_0664_b_and_is_absent_at_b_zer
         ),
         (GyroErrors, {"scale_factor_nonlinearity_ppm": 100}, "gyro.scale_factor_nonlinearity_ppm", "range_deg_per_s"),
         (GyroErrors, {"cross_axis_matrix": [[1, 0, 0], [0, 0, 0], [0, 0, 0]]}, "gyro.cross_axis_matrix", "diagonal"),
+        (GyroErrors, {"cross_axis_matrix": [[0, 0, 0], [0, 0, 0], [0, 0, 1e-3]]}, "gyro.cross_axis_matrix", "diagonal"),
         (GyroErrors, {"bias_instability_tau_range_s": [100, 10]}, "gyro.bias_instability_tau_range_s", "min < max"),
         (GyroErrors, {"range_deg_per_s": 0}, "gyro.range_deg_per_s", "greater than 0"),
         (AccelErrors, {"bias_instability_deg_per_h": 1}, "gyro.bias_instability_deg_per_h", "bias_instability_ug"),
