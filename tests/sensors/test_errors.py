@@ -79,32 +79,27 @@ def test_saturation_clips_at_the_range(motion):
     assert np.any(np.abs(10 * omega) > limit)
 
 
-def test_temperature_sensitivity_of_bias_and_scale_factor(motion):
-    _, omega, _, temperature = motion
-    spec = GyroErrors(
-        bias_temperature_deg_per_h_per_degC=[0.5, -1.0, 2.0],
+@pytest.mark.parametrize(
+    ("model", "bias_key", "unit", "signal"),
+    [
+        (GyroErrors, "bias_temperature_deg_per_h_per_degC", DEG_PER_H, 1),  # input ω, rad/s
+        (AccelErrors, "bias_temperature_ug_per_degC", 1e-6 * STANDARD_GRAVITY, 2),  # input f, m/s²
+    ],
+)
+def test_temperature_sensitivity_of_bias_and_scale_factor(motion, model, bias_key, unit, signal):
+    """Bias per °C in the sensor's datasheet unit and scale factor in ppm/°C, on either sensor."""
+    t, _, _, temperature = motion
+    x = motion[signal]
+    spec = model(
+        **{bias_key: [0.5, -1.0, 2.0]},
         scale_factor_temperature_ppm_per_degC=[10, 20, -30],
         reference_temperature_degC=20,
     )
     dT = (temperature - 20)[:, None]
-    expected = omega + np.array([0.5, -1.0, 2.0]) * DEG_PER_H * dT + np.array([10, 20, -30]) * 1e-6 * dT * omega
-    close(measure(spec, motion, temperature_degC=temperature), expected)
+    expected = x + np.array([0.5, -1.0, 2.0]) * unit * dT + np.array([10, 20, -30]) * 1e-6 * dT * x
+    close(apply_errors(x, t, spec, np.random.default_rng(0), temperature_degC=temperature), expected)
     # Without a temperature input the sensor sits at the reference temperature.
-    close(measure(spec, motion), omega)
-
-
-def test_accelerometer_temperature_sensitivity(motion):
-    """The accelerometer's keys in its own units: bias µg/°C and scale factor ppm/°C, as the gyro's."""
-    _, _, force, temperature = motion
-    spec = AccelErrors(
-        bias_temperature_ug_per_degC=[5.0, -10.0, 20.0],
-        scale_factor_temperature_ppm_per_degC=[10, 20, -30],
-        reference_temperature_degC=20,
-    )
-    dT = (temperature - 20)[:, None]
-    ug = 1e-6 * STANDARD_GRAVITY
-    expected = force + np.array([5.0, -10.0, 20.0]) * ug * dT + np.array([10, 20, -30]) * 1e-6 * dT * force
-    close(apply_errors(force, motion[0], spec, np.random.default_rng(0), temperature_degC=temperature), expected)
+    close(apply_errors(x, t, spec, np.random.default_rng(0)), x)
 
 
 def test_g_sensitivity(motion):
