@@ -38,10 +38,9 @@ z). ``g`` in a key name is the unit g₀ = 9.80665 m/s², not local gravity. :cl
 Randomness: every draw comes from the Generator passed in (and from generators spawned from it for the
 slow flicker levels, :class:`gyroemu.sensors.noise.SensorNoise`), in a fixed order: at power-up the
 turn-on bias, the turn-on scale factor, the noise's stationary starts and the pulse counter's initial
-fraction, then the noise
-sample by sample; a term that is off draws nothing. :func:`apply_errors` is one power-up over all its
-samples; :class:`SensorErrors` is one power-up applied chunk after chunk, any division of the run
-giving the same numbers (the IMU layer's blocks, :mod:`gyroemu.sensors.device_run`).
+fraction, then the noise sample by sample; a term that is off draws nothing. :func:`apply_errors` is
+one power-up over all its samples; :class:`SensorErrors` is one power-up applied chunk after chunk,
+any division of the run giving the same numbers (the IMU layer's blocks, :mod:`gyroemu.sensors.device_run`).
 
 Implementation: numpy prepares, and three small numba kernels make one pass each over the samples
 (the deterministic response, the noise recurrences, the filter; the quantiser is a fourth), so the

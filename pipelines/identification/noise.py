@@ -253,8 +253,10 @@ def model_scatter(allan: AllanDeviation, basis: np.ndarray) -> float:
 
     if excess(0.0) <= 0:
         return 0.0
-    high = 1.0
-    while excess(high) > 0:  # χ² falls as ε grows; ε = 1 is already a 100 % scatter
+    high = 1.0  # ε = 1 is already a 100 % scatter; χ² falls towards 0 as ε grows
+    while excess(high) > 0:
+        if high >= 1e3:  # a model that cannot meet the curve at any weight (a zero column): give up
+            return float(high)
         high *= 2
     return float(brentq(excess, 0.0, high, xtol=1e-6))
 
