@@ -448,6 +448,12 @@ class ErrorModel:
     turn_on_scale_factor: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
+def _turn_on(sigma: np.ndarray, rng: np.random.Generator) -> np.ndarray | float:
+    """A power-up's draw of a term with standard deviation ``sigma`` (3,): σ·z, z three normal draws;
+    0.0, drawing nothing, when the term is off."""
+    return sigma * rng.standard_normal(3) if np.any(sigma) else 0.0
+
+
 def apply_errors(
     truth: np.ndarray,
     t: np.ndarray,
@@ -520,11 +526,8 @@ class SensorErrors:
             )
         self.model = m
         self.dt = float(dt)
-        self._bias = m.bias + (m.turn_on_bias * rng.standard_normal(3) if np.any(m.turn_on_bias) else 0.0)
-        scale = m.scale_factor + (
-            m.turn_on_scale_factor * rng.standard_normal(3) if np.any(m.turn_on_scale_factor) else 0.0
-        )
-        self._gain = np.eye(3) + np.diag(scale) + m.cross_axis
+        self._bias = m.bias + _turn_on(m.turn_on_bias, rng)
+        self._gain = np.eye(3) + np.diag(m.scale_factor + _turn_on(m.turn_on_scale_factor, rng)) + m.cross_axis
         flicker = None
         if np.any(m.bias_instability):
             flicker = noise.flicker_bank(m.bias_instability, m.bias_instability_tau_range, dt, n_axes=3)

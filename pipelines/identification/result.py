@@ -21,7 +21,7 @@ the trials, the spread between power-ups
 (:func:`pool_random_effects`); ``scale_factor_ppm`` is x̄ and ``turn_on_scale_factor_ppm`` τ, drawn
 once per power-up by the device. The fixed-effects mean would be the best-determined trial's (the
 fast rotation's +2265 ppm on z, then given to every twin); its twin of the stationary-magnet trial put
-VQF's 9D error at 2.9 times the real one, 1.6 times with the scale drawn per twin. Noise terms come from the
+VQF's 9D error at 2.9 times the real one, 1.9 times with the scale drawn per twin. Noise terms come from the
 rest phases of every trial pooled (:func:`gyroemu.pipelines.identification.noise.sensor_noise`), the
 gyro's and accelerometer's with a Gauss–Markov term where it is significant (written as
 ``markov_sigma_*`` and ``markov_tau_s``, 0 on axes without it).
@@ -67,8 +67,11 @@ class Pooled:
     trials: int
 
 
-def pool_estimates(values: Sequence[np.ndarray], sigmas: Sequence[np.ndarray]) -> Pooled:
-    """Inverse-variance mean with Birge inflation (module notes), element by element."""
+def _inverse_variance(
+    values: Sequence[np.ndarray], sigmas: Sequence[np.ndarray]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The inputs as arrays (k, ...), which σ are known (finite, > 0), their weights 1/σ² (0 where
+    unknown), which elements have any weight, and the weights' sum (1 where none: safe to divide)."""
     x = np.asarray(values, dtype=float)
     s = np.asarray(sigmas, dtype=float)
     if not len(x):
@@ -77,7 +80,12 @@ def pool_estimates(values: Sequence[np.ndarray], sigmas: Sequence[np.ndarray]) -
     w = np.where(known, 1.0 / np.where(known, s, 1.0) ** 2, 0.0)
     total = np.sum(w, axis=0)
     weighted = total > 0  # elements without any uncertainty (fixed zeros): plain mean, σ 0
-    safe = np.where(weighted, total, 1.0)
+    return x, s, known, w, weighted, np.where(weighted, total, 1.0)
+
+
+def pool_estimates(values: Sequence[np.ndarray], sigmas: Sequence[np.ndarray]) -> Pooled:
+    """Inverse-variance mean with Birge inflation (module notes), element by element."""
+    x, _, _, w, weighted, safe = _inverse_variance(values, sigmas)
     mean = np.where(weighted, np.sum(w * x, axis=0) / safe, x.mean(axis=0))
     sigma = np.where(weighted, 1.0 / np.sqrt(safe), 0.0)
     if len(x) > 1:
@@ -91,16 +99,8 @@ def pool_random_effects(values: Sequence[np.ndarray], sigmas: Sequence[np.ndarra
     element by element (module notes, DerSimonian and Laird): the pooled estimate and τ, the standard
     deviation of the true values between trials (0 where the trials agree within their σ_i). Elements
     without a finite positive σ in any trial: the plain mean, σ and τ 0."""
-    x = np.asarray(values, dtype=float)
-    s = np.asarray(sigmas, dtype=float)
-    if not len(x):
-        raise ValueError("nothing to pool")
-    known = np.isfinite(s) & (s > 0)
+    x, s, known, w, weighted, safe = _inverse_variance(values, sigmas)
     s2 = np.where(known, s, 1.0) ** 2
-    w = np.where(known, 1.0 / s2, 0.0)
-    total = np.sum(w, axis=0)
-    weighted = total > 0
-    safe = np.where(weighted, total, 1.0)
     fixed = np.sum(w * x, axis=0) / safe
     q = np.sum(w * (x - fixed) ** 2, axis=0)
     dof = np.sum(known, axis=0) - 1
