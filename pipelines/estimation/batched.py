@@ -46,7 +46,7 @@ def _window(q, b, slow, win, phi, P, x, earth, params, use_mag):
     """One window's prediction and updates, then the injection: :meth:`Mekf._window`, compiled."""
     F = np.empty((kern.X_SIZE, kern.X_SIZE))
     Q = np.empty((kern.X_SIZE, kern.X_SIZE))
-    kern.transition(win, phi, earth, params, F, Q)
+    kern.transition(win, phi, q, earth, params, F, Q)
     kalman_predict(P, F, Q)
     z, H, R = np.empty(2), np.empty((2, kern.X_SIZE)), np.empty((2, 2))
     if kern.gravity_measurement(win, slow, params, z, H, R) and kern.gravity_gate(P, z, H, R, slow, params):

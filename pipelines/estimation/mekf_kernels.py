@@ -281,12 +281,14 @@ P_ACC_GM_TAU = 31
 P_REST_RATE = 32
 P_REST_GATE = 33
 P_ACC_RISE = 34
-P_SIZE = 35
+P_BIAS_RW_VERTICAL = 35
+P_SIZE = 36
 
 
 @njit
-def transition(win, phi, earth_rate_w, params, F, Q):
-    """The window's transition ``F`` and process noise ``Q`` (X_SIZE, X_SIZE), written in place."""
+def transition(win, phi, q, earth_rate_w, params, F, Q):
+    """The window's transition ``F`` and process noise ``Q`` (X_SIZE, X_SIZE), written in place; ``q`` the
+    attitude (w, x, y, z) at the window's end, whose body vertical splits the bias's random walk."""
     T = win[W_T]
     F[:, :] = 0.0
     Q[:, :] = 0.0
@@ -311,9 +313,18 @@ def transition(win, phi, earth_rate_w, params, F, Q):
     q_att = params[P_GYRO_NOISE] ** 2 * T + win[W_EXTRA]
     q_bias = params[P_BIAS_RW] ** 2 * T
     q_scale = params[P_SCALE_RW] ** 2 * T
+    # The bias's random walk split along the body vertical v = Rᵀ e_z: q_h (I − v vᵀ) + q_v v vᵀ
+    # (MekfParams.gyro_bias_random_walk_vertical: only the field and rests see the vertical bias).
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    v0, v1, v2 = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+    q_vertical = params[P_BIAS_RW_VERTICAL] ** 2 * T - q_bias
     for i in range(3):
         Q[X_THETA + i, X_THETA + i] = q_att
         Q[X_BIAS + i, X_BIAS + i] = q_bias
+    vertical = (v0, v1, v2)
+    for i in range(3):
+        for j in range(3):
+            Q[X_BIAS + i, X_BIAS + j] += q_vertical * vertical[i] * vertical[j]
     for i in range(X_SCALE, X_SIZE):
         Q[i, i] = q_scale
 

@@ -59,7 +59,7 @@ def _store_window(q, b, slow, win, phi, P, x, earth, params, use_mag, F_top, P_p
     its transition's top rows, the covariance before and after the updates and the update, at ``j``."""
     F = np.empty((X, X))
     Q = np.empty((X, X))
-    kern.transition(win, phi, earth, params, F, Q)
+    kern.transition(win, phi, q, earth, params, F, Q)
     kalman_predict(P, F, Q)
     z, H, R = np.empty(2), np.empty((2, X)), np.empty((2, 2))
     gravity = kern.gravity_measurement(win, slow, params, z, H, R)
