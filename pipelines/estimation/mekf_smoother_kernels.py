@@ -14,7 +14,7 @@ stores
   nominal state: the error of the prior nominal state as the filter saw it).
 
 (numba caches this file's functions by its content alone: a change to :mod:`.mekf_kernels` needs
-a change here, such as the layout noted here: ``P_SIZE = 35``, ``P_ACC_RISE`` the last; ``X_SIZE = 17``,
+a change here, such as the layout noted here: ``P_SIZE = 36``, ``P_BIAS_RW_VERTICAL`` the last; ``X_SIZE = 17``,
 ``S_SIZE = 111``.)
 
 Index 0 is the initial state (``P_post[0] = P₀``, no update). Float64: 5.4 kB a window, 163 MB for a
