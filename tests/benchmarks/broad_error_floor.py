@@ -1,6 +1,8 @@
 """How much of the BROAD trials' 6D inclination error any estimator that integrates this gyro must keep.
 
-    python tests/benchmarks/broad_error_floor.py [--trials 02 07 ...] [--cutoff-hz 0.3]
+    python tests/benchmarks/broad_error_floor.py [--trials 02 07 ...] [--cutoff-hz 0.3] [--online]
+
+The offline pair by default (the MEKF's smoother and offlineVQF); ``--online``: the online MEKF and VQF.
 
 The attitude error of an estimator against the optical reference, as BROAD measures it
 (``q_err = q_est ⊗ conj(q_ref)``, world axes), has a tilt part ``e = 2 (q_err_x, q_err_y)`` (rad, to
@@ -23,8 +25,9 @@ the dataset's calibration leaves at 0.1–0.3°, and a constant error in the bod
 the world frame).
 
 Then the floor: the mean over the trials of the fast part alone (an estimator with no slow error at
-all), against the bar of issue #17 (0.9 × offlineVQF's mean), and the slow error the bar leaves room for
-when the fast part is what it is (the same fraction of offlineVQF's slow error on every trial).
+all), against the bar of issue #17 (0.9 × the peer's mean: offlineVQF's, or online VQF's), and the slow
+error the bar leaves room for when the fast part is what it is (the same fraction of the peer's slow
+error on every trial).
 
 Per-trial RMS, degrees, over BROAD's movement samples; NaN reference samples are bridged for the
 filtering and left out of every RMS. The RMS of the split (``√(slow² + fast²)``, the two parts nearly
@@ -51,6 +54,7 @@ from gyroemu.dynamics.rotation import (  # noqa: E402
     quat_interpolate,
     quat_multiply,
 )
+from gyroemu.pipelines.estimation.mekf import Mekf  # noqa: E402
 from gyroemu.pipelines.estimation.mekf_smoother import MekfSmoother  # noqa: E402
 from gyroemu.pipelines.estimation.metrics import attitude_errors, rmse_deg  # noqa: E402
 from gyroemu.pipelines.estimation.protocol import FilterSetup  # noqa: E402
@@ -104,8 +108,11 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", nargs="+", default=None, help="trial numbers, e.g. 02 07 (default: all)")
     parser.add_argument("--cutoff-hz", type=float, default=0.3, help="slow/fast boundary, Hz (default 0.3)")
+    parser.add_argument("--online", action="store_true", help="the online MEKF and VQF (default: the offline pair)")
     args = parser.parse_args()
-    from vqf import offlineVQF
+    from vqf import VQF, offlineVQF
+
+    ours, peer = ("MEKF", "VQF") if args.online else ("smoother", "offlineVQF")
 
     files = trial_files(args.trials)
     if not files:
@@ -113,8 +120,8 @@ def main() -> int:
         return 2
     print(f"cut-off {args.cutoff_hz} Hz; RMS over the movement samples, °\n")
     print(
-        "| trial | smoother: BROAD / split | slow | fast | offlineVQF: BROAD / split | slow | fast "
-        "| fast, reference at the gyro's delay | offlineVQF, mounting fitted (diagnosis) |"
+        f"| trial | {ours}: BROAD / split | slow | fast | {peer}: BROAD / split | slow | fast "
+        f"| fast, reference at the gyro's delay | {peer}, mounting fitted (diagnosis) |"
     )
     print("|---|---|---|---|---|---|---|---|---|")
     rows = []
@@ -122,10 +129,17 @@ def main() -> int:
         trial = read_broad(path)
         fs, ref, movement = trial.rate_hz, trial.opt_quat, trial.movement
         t = np.arange(len(trial)) / fs
-        estimates = {
-            "smoother": MekfSmoother(FilterSetup(rate_hz=fs, use_mag=False)).process(t, trial.gyro, trial.accel).q_wb,
-            "offlineVQF": offlineVQF(trial.gyro, trial.accel, None, 1.0 / fs)["quat6D"],
-        }
+        six = FilterSetup(rate_hz=fs, use_mag=False)
+        if args.online:
+            estimates = {
+                ours: Mekf(six).process(t, trial.gyro, trial.accel).q_wb,
+                peer: VQF(1.0 / fs).updateBatch(trial.gyro, trial.accel)["quat6D"],
+            }
+        else:
+            estimates = {
+                ours: MekfSmoother(six).process(t, trial.gyro, trial.accel).q_wb,
+                peer: offlineVQF(trial.gyro, trial.accel, None, 1.0 / fs)["quat6D"],
+            }
         # the reference where the IMU sees it: at t − delay (the samples lag the optical stamps)
         finite = np.all(np.isfinite(ref), axis=1)
         t_ref = t[finite]
@@ -138,9 +152,9 @@ def main() -> int:
             slow, fast = split(e, fs, args.cutoff_hz)
             mask = movement & valid
             row += [broad, rms_deg(e, mask), rms_deg(slow, mask), rms_deg(fast, mask)]
-        e, valid = tilt_error(estimates["offlineVQF"], ref_delayed)
+        e, valid = tilt_error(estimates[peer], ref_delayed)
         row.append(rms_deg(split(e, fs, args.cutoff_hz)[1], movement & valid))
-        mounted, phi = without_mounting(estimates["offlineVQF"], ref, movement)
+        mounted, phi = without_mounting(estimates[peer], ref, movement)
         row.append(mounted)
         rows.append(row)
         print(
@@ -157,15 +171,15 @@ def main() -> int:
     bar = 0.9 * mean[4]
     fast = r[:, 7]
     vqf_slow = r[:, 6]
-    # the fraction f of offlineVQF's slow error, the same on every trial, that meets the bar
+    # the fraction f of the peer's slow error, the same on every trial, that meets the bar
     room = brentq(lambda f: float(np.mean(np.hypot(f * vqf_slow, fast))) - bar, 0.0, 1.0)
-    print(f"\nThe bar (0.9 × offlineVQF's mean BROAD inclination): {bar:.3f}°")
+    print(f"\nThe bar (0.9 × {peer}'s mean BROAD inclination): {bar:.3f}°")
     print(f"An estimator with no slow error at all (the fast part alone): {np.mean(fast):.3f}°")
     print(f"The fast part with the reference at the gyro's delay: {np.mean(r[:, 8]):.3f}°")
-    print(f"offlineVQF with each trial's mounting rotation fitted (diagnosis): {np.mean(r[:, 9]):.3f}°")
+    print(f"{peer} with each trial's mounting rotation fitted (diagnosis): {np.mean(r[:, 9]):.3f}°")
     print(
-        f"To meet the bar, the slow error must be {room:.2f} × offlineVQF's on every trial "
-        f"(offlineVQF's slow part: mean {np.mean(vqf_slow):.3f}°; the smoother's: {mean[2]:.3f}°)"
+        f"To meet the bar, the slow error must be {room:.2f} × {peer}'s on every trial "
+        f"({peer}'s slow part: mean {np.mean(vqf_slow):.3f}°; the {ours}'s: {mean[2]:.3f}°)"
     )
     return 0
 
