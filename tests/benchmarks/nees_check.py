@@ -1,7 +1,7 @@
 """Does the MEKF's attitude covariance tell the truth? Issue #17, item 3, measured (a script, not a test).
 
     python tests/benchmarks/nees_check.py [--seeds 20] [--duration 30] [--skip 15] [--points 20]
-        [--online-param KEY=VALUE ...] [--smooth-param KEY=VALUE ...] [--split]
+        [--online-param KEY=VALUE ...] [--smooth-param KEY=VALUE ...] [--split] [--drawn-car {all,course}]
 
 On simulated runs with exact truth (``smooth_manoeuvre`` and ``car_drive`` × ``consumer_mems`` and
 ``tactical_mems``), each seed's attitude error e at ``--points`` instants after ``--skip`` seconds gives the
@@ -18,6 +18,11 @@ Seeds. The χ² band needs N independent draws of everything the filter models a
 manoeuvre is a random process (its ``seed``): run k flies the manoeuvre of seed 1000 + k with the
 device of seed k (``--fixed-manoeuvre``: one manoeuvre for all, the error it causes then repeats in
 every run and the band does not apply). The car drive has no random part: its 20 runs share it.
+
+``--drawn-car`` draws the car drive anew for each run from its seed (:func:`drawn_car_drive`: the
+first legs' speeds and holds, the acceleration and braking, the first turn within the scenario's own
+4.9 m/s² of lateral acceleration, the first bump's time, and with ``all`` the heading it sets off
+in), so that its runs, too, are independent draws.
 
 ``--split`` shows how much of each instant's mean NEES the runs share: with ``e_r`` run r's attitude
 error and ``P̄`` the runs' mean covariance, ``mean_r e_rᵀ P̄⁻¹ e_r = dᵀ P̄⁻¹ d + mean_r (e_r − d)ᵀ P̄⁻¹ (e_r − d)``,
@@ -56,9 +61,45 @@ CASES = [
 SCENARIOS = Path(__file__).resolve().parents[2] / "configs" / "scenarios"
 
 
-def scenario_run(scenario: str, run: int, fixed: bool):
-    """The scenario of run ``run``: a random manoeuvre with its own seed (1000 + run) unless ``fixed``."""
+def drawn_car_drive(data: dict, seed: int, heading: bool = True) -> dict:
+    """The car drive ``data`` (its TOML table) with its first part drawn from ``seed``: the first two
+    legs (hold 2–4 s at rest, then 10–16 m/s), acceleration 2–3 m/s² and braking 3–5 m/s², the first
+    turn (150–300 m from the start, 150–250 m long, left or right by up to the angle that keeps its
+    peak lateral acceleration, (16/5) angle v² / length, within the scenario's 4.9 m/s²), the first
+    bump (at 8–28 s, 1–3 cm, 0.3–1°), and with ``heading`` the initial heading (0–360°)."""
+    rng = np.random.default_rng(seed)
+    drive = dict(data["drive"], accel_m_s2=float(rng.uniform(2.0, 3.0)), brake_m_s2=float(rng.uniform(3.0, 5.0)))
+    yaw = float(rng.uniform(0.0, 360.0))
+    if heading:
+        drive["initial_yaw_deg"] = yaw
+    speed = float(rng.uniform(10.0, 16.0))
+    legs = [dict(speed_m_s=0.0, hold_s=float(rng.uniform(2.0, 4.0))), dict(data["legs"][1], speed_m_s=speed)]
+    length = float(rng.uniform(150.0, 250.0))
+    angle_max = min(90.0, float(np.degrees(4.9 * length / (3.2 * speed * speed))))
+    turn = dict(
+        start_m=float(rng.uniform(150.0, 300.0)),
+        length_m=length,
+        angle_deg=float(rng.choice([-1.0, 1.0]) * rng.uniform(0.5, 1.0) * angle_max),
+    )
+    bump = dict(
+        at_s=float(rng.uniform(8.0, 28.0)),
+        heave_m=float(rng.uniform(0.01, 0.03)),
+        nose_up_deg=float(rng.uniform(0.3, 1.0)),
+    )
+    return data | {
+        "drive": drive,
+        "legs": legs + data["legs"][2:],
+        "turns": [turn] + data["turns"][1:],
+        "bumps": [bump] + data["bumps"][1:],
+    }
+
+
+def scenario_run(scenario: str, run: int, fixed: bool, drawn_car: str | None = None):
+    """The scenario of run ``run``: a random manoeuvre with its own seed (1000 + run) unless ``fixed``; with
+    ``drawn_car`` (``"all"`` or ``"course"``: all but the initial heading) a car drive drawn from 1000 + run."""
     data = tomllib.loads((SCENARIOS / f"{scenario}.toml").read_text())
+    if data.get("kind") == "car" and drawn_car is not None:
+        return scenario_from_dict(drawn_car_drive(data, 1000 + run, heading=drawn_car == "all"))
     if data.get("kind") != "random-manoeuvre" or fixed:
         return load_scenario(scenario)
     return scenario_from_dict(data | {"seed": 1000 + run})
@@ -76,6 +117,7 @@ def nees_runs(
     smooth: dict[str, float] | None = None,
     first_seed: int = 0,
     errors: dict[str, list[tuple[np.ndarray, np.ndarray]]] | None = None,
+    drawn_car: str | None = None,
 ):
     """Per estimator ('online', 'forward', 'smoothed'): the attitude NEES (seeds, points), and the degrees of
     freedom. ``online`` and ``smooth`` override the online filter's and the smoother's parameters.
@@ -85,7 +127,7 @@ def nees_runs(
     dof = 3
     trajectories: dict[str, tuple] = {}
     for seed in range(first_seed, first_seed + seeds):
-        scen = scenario_run(scenario, seed, fixed)
+        scen = scenario_run(scenario, seed, fixed, drawn_car)
         key = scen.spec.model_dump_json() if hasattr(scen.spec, "model_dump_json") else repr(scen.spec)
         if key not in trajectories:  # a scenario without a random part is simulated once
             trajectories = {key: (scen, scen.simulate(duration=duration))}
@@ -122,6 +164,9 @@ def main() -> None:
     parser.add_argument("--first-seed", type=int, default=0, help="seeds first … first + seeds − 1 (a hold-out set)")
     parser.add_argument("--cases", nargs="+", type=int, default=None, help="indices into CASES (default: all)")
     parser.add_argument("--split", action="store_true", help="the shared and the per-run part of each mean NEES")
+    parser.add_argument(
+        "--drawn-car", choices=("all", "course"), default=None, help="a car drive per run (course: not its heading)"
+    )
     args = parser.parse_args()
     online, smooth = (
         {k: float(v) for k, v in (a.split("=", 1) for a in given)} for given in (args.online_param, args.smooth_param)
@@ -141,6 +186,7 @@ def main() -> None:
             smooth,
             args.first_seed,
             errors,
+            args.drawn_car,
         )
         lo, hi = chi2.ppf([0.025, 0.975], dof * args.seeds) / args.seeds
         for key, values in nees.items():
