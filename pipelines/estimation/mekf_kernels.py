@@ -240,6 +240,13 @@ def strapdown(q, b, slow, win, phi, t, gyro, delta_angle, accel, mag, earth_rate
 
 
 @njit
+def body_vertical(q):
+    """The world's vertical in body axes, ``Rᵀ e_z`` (the third row of R), of the unit quaternion q = (w, x, y, z)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+
+
+@njit
 def window_due(win, params):
     """Whether the window has run its time or its sample count."""
     return win[W_T] >= params[P_WINDOW] or win[W_N] >= params[P_WINDOW_N]
@@ -315,13 +322,11 @@ def transition(win, phi, q, earth_rate_w, params, F, Q):
     q_scale = params[P_SCALE_RW] ** 2 * T
     # The bias's random walk split along the body vertical v = Rᵀ e_z: q_h (I − v vᵀ) + q_v v vᵀ
     # (MekfParams.gyro_bias_random_walk_vertical: only the field and rests see the vertical bias).
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    v0, v1, v2 = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+    vertical = body_vertical(q)
     q_vertical = params[P_BIAS_RW_VERTICAL] ** 2 * T - q_bias
     for i in range(3):
         Q[X_THETA + i, X_THETA + i] = q_att
         Q[X_BIAS + i, X_BIAS + i] = q_bias
-    vertical = (v0, v1, v2)
     for i in range(3):
         for j in range(3):
             Q[X_BIAS + i, X_BIAS + j] += q_vertical * vertical[i] * vertical[j]
@@ -437,9 +442,7 @@ def heading_gain(P, h, r, q, K):
         K[i] = Ph[i] / S
     K[0] = 0.0
     K[1] = 0.0
-    # vertical in body axes: third row of R
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    v0, v1, v2 = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+    v0, v1, v2 = body_vertical(q)
     along = K[X_BIAS] * v0 + K[X_BIAS + 1] * v1 + K[X_BIAS + 2] * v2
     K[X_BIAS], K[X_BIAS + 1], K[X_BIAS + 2] = along * v0, along * v1, along * v2
     K[X_SCALE:] = 0.0  # nor δM, nor the acceleration (a gravity-channel state, like the tilt)
