@@ -59,10 +59,15 @@ from gyroemu.pipelines.estimation.mekf_smoother import MekfSmoother  # noqa: E40
 from gyroemu.pipelines.estimation.metrics import attitude_errors, rmse_deg  # noqa: E402
 from gyroemu.pipelines.estimation.protocol import FilterSetup  # noqa: E402
 from gyroemu.pipelines.formats.importers import read_broad  # noqa: E402
+from gyroemu.sensors import load_device  # noqa: E402
 
-GYRO_DELAY_S = 0.004174
-"""The gyro's delay behind BROAD's optical stamps, s: ``aktos_t_broad``'s identified figure (the device
-file's "measured delay", four undisturbed trials), not fitted here."""
+
+def gyro_delay_s() -> float:
+    """The gyro's delay behind BROAD's optical stamps, s, as ``aktos_t_broad`` holds it (identified on four
+    undisturbed trials, not fitted here): its ``latency_s`` plus half a sample, which its interval-mean
+    samples add (README, "The twin": latency_s = d − T/2)."""
+    spec = load_device("aktos_t_broad").spec
+    return float(spec.gyro.latency_s) + 0.5 / float(spec.rate_hz)
 
 
 def tilt_error(q_est: np.ndarray, q_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -115,6 +120,7 @@ def main() -> int:
     ours, peer = ("MEKF", "VQF") if args.online else ("smoother", "offlineVQF")
 
     files = trial_files(args.trials)
+    delay = gyro_delay_s()
     if not files:
         print(f"no BROAD trials in {BROAD_DIR}", file=sys.stderr)
         return 2
@@ -143,7 +149,7 @@ def main() -> int:
         # the reference where the IMU sees it: at t − delay (the samples lag the optical stamps)
         finite = np.all(np.isfinite(ref), axis=1)
         t_ref = t[finite]
-        ref_delayed = quat_interpolate(t_ref, ref[finite], np.clip(t - GYRO_DELAY_S, t_ref[0], t_ref[-1]))
+        ref_delayed = quat_interpolate(t_ref, ref[finite], np.clip(t - delay, t_ref[0], t_ref[-1]))
         ref_delayed[~finite] = np.nan
         row = []
         for q in estimates.values():
