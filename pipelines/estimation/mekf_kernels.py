@@ -330,6 +330,9 @@ def transition(win, phi, q, earth_rate_w, params, F, Q):
     for i in range(3):
         for j in range(3):
             Q[X_BIAS + i, X_BIAS + j] += q_vertical * vertical[i] * vertical[j]
+    # Known defect (README, "Covariance"): this loop runs to X_SIZE and so also overwrites δa's q_acc set
+    # above with q_scale; δa is then a prior that decays over accel_gm_tau_s, not a stationary process.
+    # The NEES figures were measured with it so; mending it needs σ_a chosen anew (README).
     for i in range(X_SCALE, X_SIZE):
         Q[i, i] = q_scale
 
