@@ -8,7 +8,7 @@ run stays in compiled code. ``tests/pipelines/test_mekf.py`` checks that both gi
 numba's on-disk cache is keyed on this file's content only: a change to :mod:`.mekf_kernels` reaches
 the cached ``_run`` only when this file changes too (kernel layout as of ``P_SIZE = 36``, ``X_SIZE = 17``,
 ``S_SIZE = 111``, ``P_BIAS_RW_VERTICAL`` the last; the gravity update ``mekf_kernels.gravity_update``;
-``mekf_kernels.body_vertical`` shared by the transition and the heading gain).
+``mekf_kernels.body_vertical`` shared by the transition and the heading gain; ``P_ACC_GM_PROCESS``).
 """
 
 from __future__ import annotations

@@ -94,15 +94,18 @@ class MekfParams:
         tells the truth; BROAD's online figures move by 0.02° (README).
     motion_gain : float
         Weight of the window's squared deviation of ``|a|`` from gravity in the gravity noise.
-    accel_gm_sigma, accel_gm_tau_s : float
-        The low-passed horizontal non-gravitational acceleration as a first-order Gauss–Markov process: its
-        standard deviation, m/s², and correlation time, s (motion slower than the low-passes, which they
-        keep: a sway, a walk, a vehicle's slow manoeuvres). It is a *consider* state
-        (:func:`mekf_kernels.gravity_update`): never estimated, but its correlation over ``accel_gm_tau_s``
-        is in the covariance, so the filter no longer counts each window's gravity measurement as fresh
-        information about the tilt where the motion repeats its error for seconds. 0.15 m/s² with the
-        white 0.4 m/s²/√Hz puts the attitude NEES of the simulated runs in their χ² band
-        (``tests/benchmarks/nees_check.py``); σ 0 turns it off (a 1e-9 rad floor keeps P regular).
+    accel_gm_sigma, accel_gm_process_sigma, accel_gm_tau_s : float
+        The low-passed horizontal non-gravitational acceleration as a first-order Gauss–Markov process of
+        correlation time ``accel_gm_tau_s``, s: its prior standard deviation, m/s² (the acceleration the
+        first samples took in, which the initial tilt holds: a prior correlated with it), and its
+        stationary level, m/s² (motion slower than the low-passes, which they keep: a sway, a walk). It is
+        a *consider* state (:func:`mekf_kernels.gravity_update`): never estimated, but its correlation over
+        ``accel_gm_tau_s`` is in the covariance. The prior, 0.15 m/s² decaying over 10 s, with the white
+        0.4 m/s²/√Hz puts the attitude NEES of the simulated runs in their χ² band
+        (``tests/benchmarks/nees_check.py``); the stationary level is a floor, 2·10⁻⁴ m/s², that keeps P
+        regular for the smoother: measured, 0.02–0.1 m/s² there leaves the consumer car or the tactical
+        manoeuvre outside their bands on some seed sets (README, "Covariance"). Until 2026-11-26 a loop in
+        the transition overwrote this process noise with the scale states' (10⁻¹⁰ T, about this floor).
     accel_adapt : float
         Weight of the gravity innovations' mean square beyond what the filter expects, added to the gravity
         noise (innovation-based adaptive estimation; :func:`mekf_kernels.gravity_gate`); 0: off.
@@ -169,6 +172,7 @@ class MekfParams:
     accel_adapt: float = 1.0
     accel_adapt_rise_s: float = 0.5
     accel_gm_sigma: float = 0.15
+    accel_gm_process_sigma: float = 2e-4
     accel_gm_tau_s: float = 10.0
     accel_gate: float = 13.8
     accel_timeout_s: float = 2.0
@@ -241,7 +245,7 @@ class MekfParams:
         p[kern.P_ACC_ADAPT] = self.accel_adapt
         p[kern.P_ACC_RISE] = self.accel_adapt_rise_s
         # a floor of 1e-9 rad (1e-8 m/s²) keeps P regular (the smoother inverts it) when the state is off
-        p[kern.P_ACC_GM_SIGMA] = max(self.accel_gm_sigma / 9.80665, 1e-9)
+        p[kern.P_ACC_GM_PROCESS] = max(self.accel_gm_process_sigma / 9.80665, 1e-9)
         p[kern.P_ACC_GM_TAU] = self.accel_gm_tau_s
         p[kern.P_ACC_GATE] = self.accel_gate
         p[kern.P_ACC_TIMEOUT] = self.accel_timeout_s

@@ -283,7 +283,7 @@ P_HEADING_CORR = 26
 P_TURN_NOISE = 27
 P_HEADING_MOTION = 28
 P_ACC_ADAPT = 29
-P_ACC_GM_SIGMA = 30
+P_ACC_GM_PROCESS = 30
 P_ACC_GM_TAU = 31
 P_REST_RATE = 32
 P_REST_GATE = 33
@@ -309,11 +309,12 @@ def transition(win, phi, q, earth_rate_w, params, F, Q):
     F[2, 0] += earth_rate_w[1] * T
     F[2, 1] -= earth_rate_w[0] * T
     F[0:3, X_BIAS : X_BIAS + N_DRIFT] = phi
-    # The low-passed horizontal acceleration (over g) as a first-order Gauss–Markov process of σ_a and τ_a
+    # The low-passed horizontal acceleration (over g) as a first-order Gauss–Markov process of τ_a
     # (Gelb, Applied Optimal Estimation, 1974, §4.4: coloured measurement noise as a state):
-    # δa_k+1 = e^(−T/τ_a) δa_k + w, var w = σ_a² (1 − e^(−2T/τ_a)).
+    # δa_k+1 = e^(−T/τ_a) δa_k + w, var w = σ_p² (1 − e^(−2T/τ_a)), σ_p its stationary level
+    # (MekfParams.accel_gm_process_sigma; its prior, what the first samples took in, is set apart).
     decay = math.exp(-T / params[P_ACC_GM_TAU])
-    q_acc = params[P_ACC_GM_SIGMA] ** 2 * (1.0 - decay * decay)
+    q_acc = params[P_ACC_GM_PROCESS] ** 2 * (1.0 - decay * decay)
     for i in range(2):
         F[X_ACC + i, X_ACC + i] = decay
         Q[X_ACC + i, X_ACC + i] = q_acc
@@ -330,10 +331,7 @@ def transition(win, phi, q, earth_rate_w, params, F, Q):
     for i in range(3):
         for j in range(3):
             Q[X_BIAS + i, X_BIAS + j] += q_vertical * vertical[i] * vertical[j]
-    # Known defect (README, "Covariance"): this loop runs to X_SIZE and so also overwrites δa's q_acc set
-    # above with q_scale; δa is then a prior that decays over accel_gm_tau_s, not a stationary process.
-    # The NEES figures were measured with it so; mending it needs σ_a chosen anew (README).
-    for i in range(X_SCALE, X_SIZE):
+    for i in range(X_SCALE, X_SCALE + 9):  # δM only: δa's noise is q_acc (until 2026-11-26 overwritten)
         Q[i, i] = q_scale
 
 

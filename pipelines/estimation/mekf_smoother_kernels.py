@@ -15,7 +15,8 @@ stores
 
 (numba caches this file's functions by its content alone: a change to :mod:`.mekf_kernels` needs
 a change here, such as the layout noted here: ``P_SIZE = 36``, ``P_BIAS_RW_VERTICAL`` the last; ``X_SIZE = 17``,
-``S_SIZE = 111``; ``body_vertical`` in the transition and the heading gain.)
+``S_SIZE = 111``; ``body_vertical`` in the transition and the heading gain; ``P_ACC_GM_PROCESS``, δa's
+own process noise.)
 
 Index 0 is the initial state (``P_post[0] = P₀``, no update). Float64: 5.4 kB a window, 163 MB for a
 10-minute log at 1 kHz with 20 ms windows (30 000 windows; per-sample storage would be 50× that).

@@ -423,6 +423,35 @@ def test_bias_random_walk_splits_along_the_body_vertical():
     assert np.array_equal(block, known.gyro_bias_random_walk**2 * T * np.eye(3))
 
 
+def test_process_noise_of_each_state_is_its_own():
+    """The window's process noise, state by state, is what each model says (closed forms, round-off): the
+    attitude N² T, the scale and misalignment states σ_M² T, and the acceleration δa, Gauss–Markov,
+    σ_p² (1 − e^(−2T/τ_a)) with the decay e^(−T/τ_a) on its diagonal of F; nothing off the diagonal but
+    the bias block (its vertical split). Until 2026-11-26 the scale states' loop ran on over δa and
+    overwrote its noise with theirs."""
+    T = 0.02
+    win = np.zeros(kern.W_SIZE)
+    win[kern.W_T] = T
+    phi = np.zeros((3, kern.N_DRIFT))
+    F, Q = np.empty((kern.X_SIZE, kern.X_SIZE)), np.empty((kern.X_SIZE, kern.X_SIZE))
+    setup = FilterSetup(rate_hz=100.0)
+    params = MekfParams.for_setup(setup, accel_gm_process_sigma=0.05)  # far from any other state's noise
+    kern.transition(win, phi, np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3), params.vector(setup), F, Q)
+    eps = 16 * np.finfo(float).eps
+    g = 9.80665
+    decay = np.exp(-T / params.accel_gm_tau_s)
+    q_acc = (params.accel_gm_process_sigma / g) ** 2 * (1 - decay**2)
+    acc = slice(kern.X_ACC, kern.X_ACC + 2)
+    assert np.allclose(np.diag(Q)[acc], q_acc, rtol=eps, atol=0)
+    assert np.allclose(np.diag(F)[acc], decay, rtol=eps, atol=0)
+    scale = slice(kern.X_SCALE, kern.X_SCALE + 9)
+    assert np.allclose(np.diag(Q)[scale], params.scale_factor_random_walk**2 * T, rtol=eps, atol=0)
+    assert np.allclose(np.diag(Q)[0:3], params.gyro_noise_density**2 * T, rtol=eps, atol=0)
+    off = Q - np.diag(np.diag(Q))
+    off[kern.X_BIAS : kern.X_BIAS + 3, kern.X_BIAS : kern.X_BIAS + 3] = 0.0
+    assert not off.any()
+
+
 def test_rest_gate_rejects_a_rate_that_leaves_its_stretch():
     """``rest_gate``: the first window of a stretch at rest is accepted and starts the stretch's mean; a
     window whose mean rate differs from that mean by d is accepted when |d|² is within ``rest_gate`` times
