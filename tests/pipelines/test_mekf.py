@@ -393,23 +393,32 @@ def test_rest_rate_threshold_comes_from_the_gyro():
     assert MekfParams.for_setup(FilterSetup(rate_hz=100.0)).rest_rate == np.radians(2.0)
 
 
+WINDOW_S = 0.02
+"""The window of the transition tests, s."""
+
+
+def _transition(params: MekfParams, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(F, Q)`` of one window of :data:`WINDOW_S` at attitude ``q``, no drift accumulated, no Earth rate."""
+    win = np.zeros(kern.W_SIZE)
+    win[kern.W_T] = WINDOW_S
+    F, Q = np.empty((kern.X_SIZE, kern.X_SIZE)), np.empty((kern.X_SIZE, kern.X_SIZE))
+    vector = params.vector(FilterSetup(rate_hz=1.0 / WINDOW_S))
+    kern.transition(win, np.zeros((3, kern.N_DRIFT)), q, np.zeros(3), vector, F, Q)
+    return F, Q
+
+
 def test_bias_random_walk_splits_along_the_body_vertical():
     """The window's bias process noise is q_h (I − v vᵀ) + q_v v vᵀ, v = Rᵀ e_z the body vertical (round-off
     of the closed form); a known gyro's random walk is the same along every axis, and then the block is
     q I to the bit (the split adds an exact zero), as it was before the split existed."""
     rng = np.random.default_rng(5)
-    T = 0.02
-    win = np.zeros(kern.W_SIZE)
-    win[kern.W_T] = T
-    phi = np.zeros((3, kern.N_DRIFT))
-    F, Q = np.empty((kern.X_SIZE, kern.X_SIZE)), np.empty((kern.X_SIZE, kern.X_SIZE))
-    setup = FilterSetup(rate_hz=100.0)
-    params = MekfParams.for_setup(setup)
+    T = WINDOW_S
+    params = MekfParams.for_setup(FilterSetup(rate_hz=100.0))
     assert params.gyro_bias_random_walk > params.gyro_bias_random_walk_vertical  # an unknown gyro's split
     for _ in range(20):
         q = rng.normal(size=4)
         q /= np.linalg.norm(q)
-        kern.transition(win, phi, q, np.zeros(3), params.vector(setup), F, Q)
+        _, Q = _transition(params, q)
         v = Rotation.from_quat(q[[1, 2, 3, 0]]).as_matrix()[2]  # third row of R: e_z in body axes
         qh, qv = params.gyro_bias_random_walk**2 * T, params.gyro_bias_random_walk_vertical**2 * T
         want = qh * (np.eye(3) - np.outer(v, v)) + qv * np.outer(v, v)
@@ -418,7 +427,7 @@ def test_bias_random_walk_splits_along_the_body_vertical():
         assert v @ block @ v == pytest.approx(qv, rel=1e-12, abs=16 * np.finfo(float).eps * qh)
     known = MekfParams.for_setup(setup_for(load_device("consumer_mems"), load_scenario("car_drive")))
     assert known.gyro_bias_random_walk_vertical == known.gyro_bias_random_walk
-    kern.transition(win, phi, q, np.zeros(3), known.vector(setup), F, Q)
+    _, Q = _transition(known, q)
     block = Q[kern.X_BIAS : kern.X_BIAS + 3, kern.X_BIAS : kern.X_BIAS + 3]
     assert np.array_equal(block, known.gyro_bias_random_walk**2 * T * np.eye(3))
 
@@ -429,14 +438,9 @@ def test_process_noise_of_each_state_is_its_own():
     σ_p² (1 − e^(−2T/τ_a)) with the decay e^(−T/τ_a) on its diagonal of F; nothing off the diagonal but
     the bias block (its vertical split). Until 2026-11-26 the scale states' loop ran on over δa and
     overwrote its noise with theirs."""
-    T = 0.02
-    win = np.zeros(kern.W_SIZE)
-    win[kern.W_T] = T
-    phi = np.zeros((3, kern.N_DRIFT))
-    F, Q = np.empty((kern.X_SIZE, kern.X_SIZE)), np.empty((kern.X_SIZE, kern.X_SIZE))
-    setup = FilterSetup(rate_hz=100.0)
-    params = MekfParams.for_setup(setup, accel_gm_process_sigma=0.05)  # far from any other state's noise
-    kern.transition(win, phi, np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3), params.vector(setup), F, Q)
+    T = WINDOW_S
+    params = MekfParams.for_setup(FilterSetup(rate_hz=100.0), accel_gm_process_sigma=0.05)  # unlike any other
+    F, Q = _transition(params, np.array([1.0, 0.0, 0.0, 0.0]))
     eps = 16 * np.finfo(float).eps
     g = 9.80665
     decay = np.exp(-T / params.accel_gm_tau_s)
