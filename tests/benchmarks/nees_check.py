@@ -19,7 +19,7 @@ manoeuvre is a random process (its ``seed``): run k flies the manoeuvre of seed 
 device of seed k (``--fixed-manoeuvre``: one manoeuvre for all, the error it causes then repeats in
 every run and the band does not apply). The car drive has no random part: its 20 runs share it.
 
-``--drawn-car`` draws the car drive anew for each run from its seed (:func:`drawn_car_drive`: the
+``--drawn-car`` draws the car drive anew for each run from its seed (``tests/car_drives.py``: the
 first legs' speeds and holds, the acceleration and braking, the first turn within the scenario's own
 4.9 m/s² of lateral acceleration, the first bump's time, and with ``all`` the heading it sets off
 in), so that its runs, too, are independent draws.
@@ -35,11 +35,16 @@ distribution. Printed at every fourth instant, with the RMS of ``|d|``, of the r
 from __future__ import annotations
 
 import argparse
+import sys
 import tomllib
 from pathlib import Path
 
 import numpy as np
 from scipy.stats import chi2
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests/: the shared car drives
+
+from car_drives import drawn_car_drive  # noqa: E402
 
 from gyroemu.dynamics import load_scenario, scenario_from_dict
 from gyroemu.dynamics.rotation import quat_conjugate, quat_multiply, quat_to_rotvec
@@ -59,39 +64,6 @@ CASES = [
 
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "configs" / "scenarios"
-
-
-def drawn_car_drive(data: dict, seed: int, heading: bool = True) -> dict:
-    """The car drive ``data`` (its TOML table) with its first part drawn from ``seed``: the first two
-    legs (hold 2–4 s at rest, then 10–16 m/s), acceleration 2–3 m/s² and braking 3–5 m/s², the first
-    turn (150–300 m from the start, 150–250 m long, left or right by up to the angle that keeps its
-    peak lateral acceleration, (16/5) angle v² / length, within the scenario's 4.9 m/s²), the first
-    bump (at 8–28 s, 1–3 cm, 0.3–1°), and with ``heading`` the initial heading (0–360°)."""
-    rng = np.random.default_rng(seed)
-    drive = dict(data["drive"], accel_m_s2=float(rng.uniform(2.0, 3.0)), brake_m_s2=float(rng.uniform(3.0, 5.0)))
-    yaw = float(rng.uniform(0.0, 360.0))
-    if heading:
-        drive["initial_yaw_deg"] = yaw
-    speed = float(rng.uniform(10.0, 16.0))
-    legs = [dict(speed_m_s=0.0, hold_s=float(rng.uniform(2.0, 4.0))), dict(data["legs"][1], speed_m_s=speed)]
-    length = float(rng.uniform(150.0, 250.0))
-    angle_max = min(90.0, float(np.degrees(4.9 * length / (3.2 * speed * speed))))
-    turn = dict(
-        start_m=float(rng.uniform(150.0, 300.0)),
-        length_m=length,
-        angle_deg=float(rng.choice([-1.0, 1.0]) * rng.uniform(0.5, 1.0) * angle_max),
-    )
-    bump = dict(
-        at_s=float(rng.uniform(8.0, 28.0)),
-        heave_m=float(rng.uniform(0.01, 0.03)),
-        nose_up_deg=float(rng.uniform(0.3, 1.0)),
-    )
-    return data | {
-        "drive": drive,
-        "legs": legs + data["legs"][2:],
-        "turns": [turn] + data["turns"][1:],
-        "bumps": [bump] + data["bumps"][1:],
-    }
 
 
 def scenario_run(scenario: str, run: int, fixed: bool, drawn_car: str | None = None):
