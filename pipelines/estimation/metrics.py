@@ -20,7 +20,14 @@ import numpy as np
 
 from gyroemu.dynamics.rotation import quat_conjugate, quat_multiply, quat_to_rotvec
 
-__all__ = ["AttitudeErrors", "attitude_errors", "attitude_nees", "convergence_time", "rmse_deg"]
+__all__ = [
+    "AttitudeErrors",
+    "attitude_error_vector",
+    "attitude_errors",
+    "attitude_nees",
+    "convergence_time",
+    "rmse_deg",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,6 +79,12 @@ def convergence_time(t: np.ndarray, error_rad: np.ndarray, threshold_rad: float)
     return float(t[last + 1 + valid_after[0]] - t[0])
 
 
+def attitude_error_vector(q_ref: np.ndarray, q_est: np.ndarray) -> np.ndarray:
+    """The attitude error as a rotation vector in world axes, (N, 3) rad: ``q_ref ⊗ q_est*``, the error
+    that the filters' ``q_wb_covariance`` describes. ``q_ref``, ``q_est`` (N, 4), scalar first."""
+    return quat_to_rotvec(quat_multiply(q_ref, quat_conjugate(q_est)))
+
+
 def attitude_nees(q_ref: np.ndarray, q_est: np.ndarray, covariance: np.ndarray, dof: int = 3) -> np.ndarray:
     """Normalised estimation error squared eᵀ P⁻¹ e of attitudes, (N,).
 
@@ -80,6 +93,6 @@ def attitude_nees(q_ref: np.ndarray, q_est: np.ndarray, covariance: np.ndarray, 
     for a 6D filter whose heading is not observed). ``q_ref``, ``q_est`` (N, 4). A consistent filter's
     NEES is χ²(dof)-distributed.
     """
-    e = quat_to_rotvec(quat_multiply(q_ref, quat_conjugate(q_est)))[:, :dof]
+    e = attitude_error_vector(q_ref, q_est)[:, :dof]
     cov = np.asarray(covariance, dtype=float)[:, :dof, :dof]
     return np.einsum("ki,ki->k", e, np.linalg.solve(cov, e[:, :, None])[:, :, 0])

@@ -90,11 +90,6 @@ def split(e: np.ndarray, fs: float, cutoff_hz: float) -> tuple[np.ndarray, np.nd
     return slow, e - slow
 
 
-def rms_deg(e: np.ndarray, mask: np.ndarray) -> float:
-    """RMS of the rows' norms over ``mask``, degrees."""
-    return float(np.degrees(np.sqrt(np.mean(np.sum(e[mask] ** 2, axis=1)))))
-
-
 def without_mounting(q_est: np.ndarray, q_ref: np.ndarray, mask: np.ndarray) -> tuple[float, np.ndarray]:
     """BROAD's inclination RMSE (°) of ``q_est ⊗ C`` over ``mask``, ``C`` the constant body-frame rotation that
     minimises it (least squares on every fifth sample), and ``C``'s rotation vector, rad."""
@@ -157,9 +152,9 @@ def main() -> int:
             e, valid = tilt_error(q, ref)
             slow, fast = split(e, fs, args.cutoff_hz)
             mask = movement & valid
-            row += [broad, rms_deg(e, mask), rms_deg(slow, mask), rms_deg(fast, mask)]
+            row += [broad, *(rmse_deg(np.linalg.norm(part, axis=1), mask) for part in (e, slow, fast))]
         e, valid = tilt_error(estimates[peer], ref_delayed)
-        row.append(rms_deg(split(e, fs, args.cutoff_hz)[1], movement & valid))
+        row.append(rmse_deg(np.linalg.norm(split(e, fs, args.cutoff_hz)[1], axis=1), movement & valid))
         mounted, phi = without_mounting(estimates[peer], ref, movement)
         row.append(mounted)
         rows.append(row)

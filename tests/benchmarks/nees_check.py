@@ -47,10 +47,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests/: the shar
 from car_drives import drawn_car_drive  # noqa: E402
 
 from gyroemu.dynamics import load_scenario, scenario_from_dict
-from gyroemu.dynamics.rotation import quat_conjugate, quat_multiply, quat_to_rotvec
 from gyroemu.pipelines.estimation.mekf import MekfParams
 from gyroemu.pipelines.estimation.mekf_smoother import smooth_log, smoother_params
-from gyroemu.pipelines.estimation.metrics import attitude_nees
+from gyroemu.pipelines.estimation.metrics import attitude_error_vector, attitude_nees
 from gyroemu.pipelines.estimation.setup import setup_for
 from gyroemu.sensors import load_device
 from gyroemu.sensors.sampling import SensorTruth
@@ -119,7 +118,7 @@ def nees_runs(
         for key, est in (("online", on), ("forward", res.forward), ("smoothed", res.smoothed)):
             out[key].append(attitude_nees(q_true[idx], est.q_wb[idx], est.q_wb_covariance[idx], dof))
             if errors is not None:
-                e = quat_to_rotvec(quat_multiply(q_true[idx], quat_conjugate(est.q_wb[idx])))[:, :dof]
+                e = attitude_error_vector(q_true[idx], est.q_wb[idx])[:, :dof]
                 errors.setdefault(key, []).append((e, est.q_wb_covariance[idx, :dof, :dof]))
     return {k: np.array(v) for k, v in out.items()}, dof
 
