@@ -144,6 +144,7 @@ def _cmd_estimate(args) -> int:
             force=args.force,
             topic=args.topic,
             topic_out=args.topic_out,
+            gyro_latency_s=args.gyro_latency,
         )
     except EstimateError as e:  # names its argument
         raise UsageError(str(e)) from None
@@ -748,6 +749,18 @@ def _duration(text: str) -> float:
     return value
 
 
+def _latency_ms(text: str) -> float:
+    """A sensor's latency given in milliseconds, returned in seconds: finite, under a second either way
+    (the devices' ``latency_s`` bound)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of milliseconds, got {text!r}") from None
+    if not (math.isfinite(value) and abs(value) < 1000.0):
+        raise argparse.ArgumentTypeError(f"must be a finite number of milliseconds under 1000 either way, got {text}")
+    return value * 1e-3
+
+
 def _seed(text: str) -> int:
     """A seed of numpy's generators: an integer 0 <= seed < 2**128."""
     try:
@@ -982,6 +995,14 @@ def build_parser() -> argparse.ArgumentParser:
         "(the filter mekf-smooth; orientation_covariance is the smoothed one)",
     )
     p.add_argument("--6d", dest="six_d", action="store_true", help="ignore the magnetometer")
+    p.add_argument(
+        "--gyro-latency",
+        type=_latency_ms,
+        default=None,
+        metavar="MS",
+        help="how long the gyro lags the motion, ms: the attitudes are turned on to their stamps "
+        "(default: a gyroemu log's device's latency_s, else 0)",
+    )
     p.add_argument(
         "--topic", default=None, metavar="TOPIC", help="the sensor_msgs/msg/Imu topic to filter (needed when several)"
     )

@@ -85,6 +85,10 @@ class FilterSetup:
         Heading error of the measured field's direction, rad, when known: on a simulated site, where the
         field is the model's, what the magnetometer's uncompensated hard and soft iron make of it. None:
         unknown (a real site's anomalies, a moving sensor's surroundings).
+    gyro_latency_s : float
+        How long the gyro's samples lag the motion, s (a device's ``[gyro] latency_s``): the sample
+        stamped t measures the motion at t − L. Non-zero, :func:`~.registry.make_filter` turns every
+        filter's attitudes on to their stamps (:mod:`.latency`). 0: the stamps are the motion's.
     """
 
     rate_hz: float
@@ -93,6 +97,7 @@ class FilterSetup:
     latitude_rad: float | None = None
     declination_rad: float = 0.0
     field_heading_sigma: float | None = None
+    gyro_latency_s: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)

@@ -17,6 +17,9 @@ an error) and are marked ``offline = True``, so a comparison keeps them apart fr
 (:func:`is_offline`); they are left out of the default set (:func:`available_filters`) and run when
 named.
 
+A setup whose gyro lags the motion (``FilterSetup.gyro_latency_s``) gets every filter, ours, the peers'
+and a user's alike, wrapped in :class:`~.latency.LatencyCompensated`: the attitudes at their stamps.
+
 Anything else is a user's filter: ``package.module:Class`` (imported; the current folder is tried
 too) or ``path/to/file.py:Class``. The class is called with the :class:`FilterSetup` and the object
 must have a ``name`` and a ``process(t, gyro, accel, mag=None)`` method (the protocol of
@@ -32,6 +35,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from .latency import LatencyCompensated
 from .protocol import FilterSetup
 
 __all__ = [
@@ -223,4 +227,6 @@ def make_filter(name_or_spec: str, setup: FilterSetup):
         )
     if not isinstance(filt.name, str) or not filt.name:
         raise FilterError(f"filter '{name_or_spec}': its 'name' must be a non-empty string, got {filt.name!r}")
+    if setup.gyro_latency_s != 0.0:  # every filter's attitudes at their stamps, by the same rule
+        return LatencyCompensated(filt, setup.gyro_latency_s)
     return filt

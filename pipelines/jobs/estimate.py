@@ -26,7 +26,7 @@ from __future__ import annotations
 import os
 import secrets
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -168,6 +168,7 @@ def estimate_log(
     topic: str | None = None,
     topic_out: str | None = None,
     force: bool = False,
+    gyro_latency_s: float | None = None,
 ) -> EstimateSummary:
     """Filter the IMU topic(s) of the log ``path`` and write ``out``: the input with the estimate added.
 
@@ -186,6 +187,10 @@ def estimate_log(
         a several-device gyroemu log).
     force : bool
         Overwrite ``out`` when it exists.
+    gyro_latency_s : float or None
+        How long the gyro lags the motion, s: every attitude is turned on to its stamp
+        (:mod:`gyroemu.pipelines.estimation.latency`). None: a gyroemu log's device's ``latency_s``,
+        0 for any other log.
 
     Raises
     ------
@@ -221,6 +226,8 @@ def estimate_log(
             warnings.warn(f"{path}: {note}", UserWarning, stacklevel=2)
         nine = samples.has_mag if use_mag is None else (use_mag and samples.has_mag)
         setup = setup_from_metadata(dev.metadata, rate_of(samples.t), use_mag=nine)
+        if gyro_latency_s is not None:
+            setup = replace(setup, gyro_latency_s=gyro_latency_s)
         flt = make_filter(filter_name, setup)
         t_rel = samples.t - samples.t[0]  # relative times keep float64's resolution for the filter
         est = flt.process(t_rel, samples.gyro, samples.accel, samples.mag if nine else None)

@@ -15,9 +15,10 @@ integral from the reference (the sensor's delay behind the optical stamps in fas
 own noise). The script shows it twice:
 
 - the fast part of the smoother and of offlineVQF side by side (equal if the claim holds);
-- the fast part once more with the reference taken where the IMU sees it, the sensor's identified delay
-  earlier (``aktos_t_broad``: the gyro lags the optical stamps by 4.17 ms, identified on four trials;
-  README, "The twin"), to show how much of it is that delay.
+- the fast part once more with the reference taken where the gyro's integral is, the gyro's identified
+  latency earlier (``aktos_t_broad``'s ``[gyro] latency_s``, 2.42 ms, identified on four trials; README,
+  "The twin"), to show how much of it is that latency (``gyroemu estimate --gyro-latency`` takes it out
+  of any filter's attitudes).
 
 And once more offlineVQF's BROAD inclination with a constant rotation between the IMU's axes and the
 optical body frame fitted per trial (a diagnosis, not an estimator: no estimator sees that rotation, which
@@ -63,11 +64,11 @@ from gyroemu.sensors import load_device  # noqa: E402
 
 
 def gyro_delay_s() -> float:
-    """The gyro's delay behind BROAD's optical stamps, s, as ``aktos_t_broad`` holds it (identified on four
-    undisturbed trials, not fitted here): its ``latency_s`` plus half a sample, which its interval-mean
-    samples add (README, "The twin": latency_s = d − T/2)."""
-    spec = load_device("aktos_t_broad").spec
-    return float(spec.gyro.latency_s) + 0.5 / float(spec.rate_hz)
+    """How far the gyro's integral trails BROAD's optical stamps, s: ``aktos_t_broad``'s ``[gyro]
+    latency_s`` L (identified on four undisturbed trials, not fitted here). The sample stamped τ_k is the
+    mean rate over [τ_{k−1} − L, τ_k − L], so the attitude integrated to it is the body's at τ_k − L
+    (the sample's own delay as a point value, L + T/2, is half a sample more)."""
+    return float(load_device("aktos_t_broad").spec.gyro.latency_s)
 
 
 def tilt_error(q_est: np.ndarray, q_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

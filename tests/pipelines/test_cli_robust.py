@@ -70,6 +70,22 @@ def test_stream_and_bench_refuse_bad_numbers(tmp_path, command, options, named):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize(
+    "value, named",
+    [
+        ("nan", "argument --gyro-latency: must be a finite number of milliseconds under 1000 either way"),
+        ("1000", "argument --gyro-latency: must be a finite number of milliseconds under 1000 either way"),
+        ("4 ms", "argument --gyro-latency: expected a number of milliseconds, got '4 ms'"),
+    ],
+)
+def test_estimate_refuses_a_bad_latency(tmp_path, value, named):
+    source = tmp_path / "in.mcap"
+    source.write_bytes(b"an input")
+    code, _, stderr = run_cli(["estimate", str(source), "--out", str(tmp_path / "o.mcap"), "--gyro-latency", value])
+    assert code == 2 and named in stderr, stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.mcap"]
+
+
 def test_record_refuses_a_bad_duration(tmp_path):
     code, _, stderr = run_cli(["record", "--out", str(tmp_path / "r.mcap"), "--duration", "nan"])
     assert code == 2 and "argument --duration: must be a finite number" in stderr, stderr

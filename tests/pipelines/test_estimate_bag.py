@@ -105,3 +105,20 @@ def test_estimate_of_a_gyroemu_log_of_two_devices(tmp_path):
     estimate_log(tmp_path / "out.mcap", tmp_path / "again.mcap", filter_name="madgwick")
     again, _ = _read(tmp_path / "again.mcap")
     assert set(again) == set(after) and len(again["/left/estimate/imu"]) == 200
+
+
+def test_estimate_gyro_latency_turns_each_attitude_by_its_rate(bag, tmp_path):
+    """``--gyro-latency 4``: each written attitude is the one without, turned on by its sample's rate over
+    4 ms (madgwick keeps no bias): the angle between the two is ‖ω‖ L, to round-off."""
+    plain, late = tmp_path / "plain.mcap", tmp_path / "late.mcap"
+    base = ["estimate", str(bag), "--topic", "/imu_b", "--filter", "madgwick", "--out"]
+    assert main([*base, str(plain)]) == 0
+    assert main([*base, str(late), "--gyro-latency", "4"]) == 0
+    got, want = (IMU.decode([m[0] for m in _read(p)[0]["/estimate/imu"]]) for p in (late, plain))
+    rate = IMU.decode([m[0] for m in _read(bag)[0]["/imu_b"]])["angular_velocity"]
+    cos_half = np.abs(np.sum(got["orientation"] * want["orientation"], axis=1))
+    angle = 2 * np.arccos(np.minimum(cos_half, 1.0))
+    turn = np.linalg.norm(rate, axis=1) * 0.004
+    tol = 4 * np.sqrt(np.finfo(float).eps)  # arccos near 1 loses half the digits: |δangle| ≲ √(2 · 8 ε)
+    assert turn.min() > 100 * tol  # every sample turns: the check can fail
+    assert np.allclose(angle, turn, rtol=0, atol=tol)
