@@ -130,6 +130,11 @@ def _cmd_estimate(args) -> int:
         filter_class(args.filter)
     except FilterError as e:
         raise UsageError(f"argument --filter: {e}") from None
+    latencies: dict[str, float] = {}
+    for sensor, seconds in args.latency:
+        if sensor in latencies:
+            raise UsageError(f"argument --latency: {sensor} given twice")
+        latencies[sensor] = seconds
     source, out = Path(args.file), _mcap_out(args.out)
     if out.resolve() == source.resolve():
         raise UsageError(f"argument --out: {out} is the input: the input is never modified")
@@ -144,7 +149,7 @@ def _cmd_estimate(args) -> int:
             force=args.force,
             topic=args.topic,
             topic_out=args.topic_out,
-            gyro_latency_s=args.gyro_latency,
+            latency_s=latencies,
         )
     except EstimateError as e:  # names its argument
         raise UsageError(str(e)) from None
@@ -749,16 +754,27 @@ def _duration(text: str) -> float:
     return value
 
 
-def _latency_ms(text: str) -> float:
-    """A sensor's latency given in milliseconds, returned in seconds: finite, under a second either way
-    (the devices' ``latency_s`` bound)."""
+LATENCY_SENSORS = ("gyro", "mag")
+
+
+def _latency(text: str) -> tuple[str, float]:
+    """``SENSOR=MS``: a sensor (gyro, mag) and its latency in milliseconds, returned in seconds:
+    finite, under a second either way (the devices' ``latency_s`` bound)."""
+    sensor, sep, value_text = text.partition("=")
+    sensor = sensor.strip()
+    if not sep or sensor not in LATENCY_SENSORS:
+        raise argparse.ArgumentTypeError(
+            f"expected SENSOR=MS with SENSOR one of {', '.join(LATENCY_SENSORS)}, got {text!r}"
+        )
     try:
-        value = float(text)
+        value = float(value_text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of milliseconds, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"{sensor}: expected a number of milliseconds, got {value_text!r}") from None
     if not (math.isfinite(value) and abs(value) < 1000.0):
-        raise argparse.ArgumentTypeError(f"must be a finite number of milliseconds under 1000 either way, got {text}")
-    return value * 1e-3
+        raise argparse.ArgumentTypeError(
+            f"{sensor}: must be a finite number of milliseconds under 1000 either way, got {value_text}"
+        )
+    return sensor, value * 1e-3
 
 
 def _seed(text: str) -> int:
@@ -996,12 +1012,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--6d", dest="six_d", action="store_true", help="ignore the magnetometer")
     p.add_argument(
-        "--gyro-latency",
-        type=_latency_ms,
-        default=None,
-        metavar="MS",
-        help="how long the gyro lags the motion, ms: the attitudes are turned on to their stamps "
-        "(default: a gyroemu log's device's latency_s, else 0)",
+        "--latency",
+        type=_latency,
+        action="append",
+        default=[],
+        metavar="SENSOR=MS",
+        help="how long the gyro or the magnetometer lags the motion, ms; repeatable: the field is moved to "
+        "the gyro's instant and the attitudes to their stamps (default: a gyroemu log's device's latency_s, else 0)",
     )
     p.add_argument(
         "--topic", default=None, metavar="TOPIC", help="the sensor_msgs/msg/Imu topic to filter (needed when several)"

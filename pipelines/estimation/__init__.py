@@ -4,12 +4,12 @@
   and returns (:class:`Estimate`);
 - :mod:`.mekf` (+ :mod:`.mekf_kernels`): the multiplicative Kalman filter on filterpy;
 - :mod:`.batched`: the same filter over many Monte Carlo runs at once;
-- :mod:`.latency`: any filter's attitudes at their stamps when the gyro lags the motion;
+- :mod:`.latency`: any filter's field and attitudes in time when the sensors lag the motion;
 - :mod:`.peers`, :mod:`.registry`: Madgwick, Mahony, EKF (``ahrs``), VQF, and filters by name;
 - :mod:`.metrics`: BROAD's error definitions; :mod:`.setup`: a setup from a device or a log.
 """
 
-from .latency import LatencyCompensated, advance_attitude
+from .latency import LatencyCompensated, advance_attitude, turn_back
 from .mekf import Mekf, MekfParams
 from .metrics import AttitudeErrors, attitude_errors, convergence_time, rmse_deg
 from .protocol import AttitudeFilter, DeviceNoise, Estimate, FilterSetup
@@ -31,4 +31,5 @@ __all__ = [
     "rmse_deg",
     "setup_for",
     "setup_from_metadata",
+    "turn_back",
 ]

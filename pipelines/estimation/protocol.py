@@ -85,10 +85,11 @@ class FilterSetup:
         Heading error of the measured field's direction, rad, when known: on a simulated site, where the
         field is the model's, what the magnetometer's uncompensated hard and soft iron make of it. None:
         unknown (a real site's anomalies, a moving sensor's surroundings).
-    gyro_latency_s : float
-        How long the gyro's samples lag the motion, s (a device's ``[gyro] latency_s``): the sample
-        stamped t measures the motion at t − L. Non-zero, :func:`~.registry.make_filter` turns every
-        filter's attitudes on to their stamps (:mod:`.latency`). 0: the stamps are the motion's.
+    gyro_latency_s, mag_latency_s : float
+        How long the gyro's and the magnetometer's samples lag the motion, s (a device's ``latency_s``):
+        the sample stamped t measures the motion at t − L. Either non-zero, :func:`~.registry.make_filter`
+        feeds every filter the field at the gyro's instant and turns its attitudes on to their stamps
+        (:mod:`.latency`; the accelerometer is not moved, as it says why). 0: the stamps are the motion's.
     """
 
     rate_hz: float
@@ -98,6 +99,7 @@ class FilterSetup:
     declination_rad: float = 0.0
     field_heading_sigma: float | None = None
     gyro_latency_s: float = 0.0
+    mag_latency_s: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)

@@ -17,8 +17,9 @@ an error) and are marked ``offline = True``, so a comparison keeps them apart fr
 (:func:`is_offline`); they are left out of the default set (:func:`available_filters`) and run when
 named.
 
-A setup whose gyro lags the motion (``FilterSetup.gyro_latency_s``) gets every filter, ours, the peers'
-and a user's alike, wrapped in :class:`~.latency.LatencyCompensated`: the attitudes at their stamps.
+A setup whose sensors lag the motion (``FilterSetup.gyro_latency_s``, ``mag_latency_s``) gets every
+filter, ours, the peers' and a user's alike, wrapped in :class:`~.latency.LatencyCompensated`: the
+field at the gyro's instant, the attitudes at their stamps.
 
 Anything else is a user's filter: ``package.module:Class`` (imported; the current folder is tried
 too) or ``path/to/file.py:Class``. The class is called with the :class:`FilterSetup` and the object
@@ -227,6 +228,6 @@ def make_filter(name_or_spec: str, setup: FilterSetup):
         )
     if not isinstance(filt.name, str) or not filt.name:
         raise FilterError(f"filter '{name_or_spec}': its 'name' must be a non-empty string, got {filt.name!r}")
-    if setup.gyro_latency_s != 0.0:  # every filter's attitudes at their stamps, by the same rule
-        return LatencyCompensated(filt, setup.gyro_latency_s)
+    if setup.gyro_latency_s or setup.mag_latency_s:  # every filter moved in time by the same rules
+        return LatencyCompensated(filt, setup.gyro_latency_s, setup.mag_latency_s)
     return filt

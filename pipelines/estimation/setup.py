@@ -80,6 +80,7 @@ def setup_for(device: Device, scenario: Scenario | None = None, *, use_mag: bool
         declination_rad=declination or 0.0,
         field_heading_sigma=heading_sigma,
         gyro_latency_s=device.latencies[0],
+        mag_latency_s=device.latencies[2],
     )
 
 

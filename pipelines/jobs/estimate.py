@@ -26,6 +26,7 @@ from __future__ import annotations
 import os
 import secrets
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -168,7 +169,7 @@ def estimate_log(
     topic: str | None = None,
     topic_out: str | None = None,
     force: bool = False,
-    gyro_latency_s: float | None = None,
+    latency_s: Mapping[str, float] | None = None,
 ) -> EstimateSummary:
     """Filter the IMU topic(s) of the log ``path`` and write ``out``: the input with the estimate added.
 
@@ -187,23 +188,27 @@ def estimate_log(
         a several-device gyroemu log).
     force : bool
         Overwrite ``out`` when it exists.
-    gyro_latency_s : float or None
-        How long the gyro lags the motion, s: every attitude is turned on to its stamp
-        (:mod:`gyroemu.pipelines.estimation.latency`). None: a gyroemu log's device's ``latency_s``,
-        0 for any other log.
+    latency_s : mapping, optional
+        How long each named sensor (``gyro``, ``mag``) lags the motion, s: the field is moved to the
+        gyro's instant and the attitudes to their stamps
+        (:mod:`gyroemu.pipelines.estimation.latency`). A sensor not named keeps a gyroemu log's
+        device's ``latency_s``, 0 for any other log.
 
     Raises
     ------
     LogError
         A log the filter cannot use (see :func:`check_samples`).
     EstimateError
-        ``out`` cannot be written (:func:`check_options`).
+        ``out`` cannot be written (:func:`check_options`), or ``latency_s`` names another sensor.
     EstimateTopicError
         No IMU topic can be chosen, or ``topic_out`` cannot be written.
     FilterError
         An unknown filter.
     """
     path, out = Path(path), Path(out)
+    unknown = sorted(set(latency_s or {}) - {"gyro", "mag"})
+    if unknown:
+        raise EstimateError(f"argument --latency: no sensor {', '.join(unknown)} (gyro or mag)")
     check_options(path, out, force=force)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", LogWarning)
@@ -226,8 +231,12 @@ def estimate_log(
             warnings.warn(f"{path}: {note}", UserWarning, stacklevel=2)
         nine = samples.has_mag if use_mag is None else (use_mag and samples.has_mag)
         setup = setup_from_metadata(dev.metadata, rate_of(samples.t), use_mag=nine)
-        if gyro_latency_s is not None:
-            setup = replace(setup, gyro_latency_s=gyro_latency_s)
+        if latency_s:
+            setup = replace(
+                setup,
+                gyro_latency_s=float(latency_s.get("gyro", setup.gyro_latency_s)),
+                mag_latency_s=float(latency_s.get("mag", setup.mag_latency_s)),
+            )
         flt = make_filter(filter_name, setup)
         t_rel = samples.t - samples.t[0]  # relative times keep float64's resolution for the filter
         est = flt.process(t_rel, samples.gyro, samples.accel, samples.mag if nine else None)

@@ -71,17 +71,23 @@ def test_stream_and_bench_refuse_bad_numbers(tmp_path, command, options, named):
 
 
 @pytest.mark.parametrize(
-    "value, named",
+    "values, named",
     [
-        ("nan", "argument --gyro-latency: must be a finite number of milliseconds under 1000 either way"),
-        ("1000", "argument --gyro-latency: must be a finite number of milliseconds under 1000 either way"),
-        ("4 ms", "argument --gyro-latency: expected a number of milliseconds, got '4 ms'"),
+        (["gyro=nan"], "argument --latency: gyro: must be a finite number of milliseconds under 1000 either way"),
+        (["mag=1000"], "argument --latency: mag: must be a finite number of milliseconds under 1000 either way"),
+        (["gyro=4 ms"], "argument --latency: gyro: expected a number of milliseconds, got '4 ms'"),
+        (["4"], "argument --latency: expected SENSOR=MS with SENSOR one of gyro, mag, got '4'"),
+        (["gps=4"], "argument --latency: expected SENSOR=MS with SENSOR one of gyro, mag, got 'gps=4'"),
+        (["gyro=2", "gyro=3"], "argument --latency: gyro given twice"),
     ],
 )
-def test_estimate_refuses_a_bad_latency(tmp_path, value, named):
+def test_estimate_refuses_a_bad_latency(tmp_path, values, named):
     source = tmp_path / "in.mcap"
     source.write_bytes(b"an input")
-    code, _, stderr = run_cli(["estimate", str(source), "--out", str(tmp_path / "o.mcap"), "--gyro-latency", value])
+    argv = ["estimate", str(source), "--out", str(tmp_path / "o.mcap")]
+    for value in values:
+        argv += ["--latency", value]
+    code, _, stderr = run_cli(argv)
     assert code == 2 and named in stderr, stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.mcap"]
 

@@ -107,13 +107,14 @@ def test_estimate_of_a_gyroemu_log_of_two_devices(tmp_path):
     assert set(again) == set(after) and len(again["/left/estimate/imu"]) == 200
 
 
-def test_estimate_gyro_latency_turns_each_attitude_by_its_rate(bag, tmp_path):
-    """``--gyro-latency 4``: each written attitude is the one without, turned on by its sample's rate over
-    4 ms (madgwick keeps no bias): the angle between the two is ‖ω‖ L, to round-off."""
+def test_estimate_latency_turns_each_attitude_by_its_rate(bag, tmp_path):
+    """The gyro and the magnetometer 4 ms late (``--latency gyro=4 --latency mag=4``: the field is not
+    moved): each written attitude is the one without, turned on by its sample's rate over 4 ms
+    (madgwick keeps no bias): the angle between the two is ‖ω‖ L, to round-off."""
     plain, late = tmp_path / "plain.mcap", tmp_path / "late.mcap"
     base = ["estimate", str(bag), "--topic", "/imu_b", "--filter", "madgwick", "--out"]
     assert main([*base, str(plain)]) == 0
-    assert main([*base, str(late), "--gyro-latency", "4"]) == 0
+    assert main([*base, str(late), "--latency", "gyro=4", "--latency", "mag=4"]) == 0
     got, want = (IMU.decode([m[0] for m in _read(p)[0]["/estimate/imu"]]) for p in (late, plain))
     rate = IMU.decode([m[0] for m in _read(bag)[0]["/imu_b"]])["angular_velocity"]
     cos_half = np.abs(np.sum(got["orientation"] * want["orientation"], axis=1))
@@ -122,3 +123,11 @@ def test_estimate_gyro_latency_turns_each_attitude_by_its_rate(bag, tmp_path):
     tol = 4 * np.sqrt(np.finfo(float).eps)  # arccos near 1 loses half the digits: |δangle| ≲ √(2 · 8 ε)
     assert turn.min() > 100 * tol  # every sample turns: the check can fail
     assert np.allclose(angle, turn, rtol=0, atol=tol)
+
+
+def test_estimate_log_refuses_a_latency_of_another_sensor(bag, tmp_path):
+    from gyroemu.pipelines.jobs.estimate import EstimateError, estimate_log
+
+    with pytest.raises(EstimateError, match="argument --latency: no sensor accel"):
+        estimate_log(bag, tmp_path / "out.mcap", latency_s={"accel": 1e-3})
+    assert list(tmp_path.iterdir()) == []

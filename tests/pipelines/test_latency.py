@@ -1,4 +1,4 @@
-"""The gyro's latency taken out of every filter's attitudes (pipelines/estimation/latency.py)."""
+"""The sensors' latencies taken out of every filter (pipelines/estimation/latency.py)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,15 @@ import pytest
 
 from gyroemu.dynamics import load_scenario
 from gyroemu.dynamics.config import config_dir, read_toml
-from gyroemu.dynamics.rotation import quat_angle, quat_exp, quat_from_rotvec, quat_multiply, quat_rotate
+from gyroemu.dynamics.earth import EARTH_RATE
+from gyroemu.dynamics.rotation import (
+    quat_angle,
+    quat_conjugate,
+    quat_exp,
+    quat_from_rotvec,
+    quat_multiply,
+    quat_rotate,
+)
 from gyroemu.pipelines.estimation import (
     Estimate,
     FilterSetup,
@@ -19,6 +27,7 @@ from gyroemu.pipelines.estimation import (
     attitude_errors,
     rmse_deg,
     setup_for,
+    turn_back,
 )
 from gyroemu.pipelines.estimation.registry import make_filter
 from gyroemu.pipelines.formats.mcap_log import truth_series
@@ -104,9 +113,10 @@ def test_a_lagging_device_estimated_at_its_stamps(name):
         samples = device.measure(traj)
         truth = truth_series(traj, samples)
         setup = setup_for(device, scenario, use_mag=False)
-        assert setup.gyro_latency_s == device.latencies[0]
+        assert (setup.gyro_latency_s, setup.mag_latency_s) == device.latencies[::2]
         for comp in (True, False):
-            filt = make_filter(name, setup if comp else replace(setup, gyro_latency_s=0.0))
+            plain = replace(setup, gyro_latency_s=0.0, mag_latency_s=0.0)
+            filt = make_filter(name, setup if comp else plain)
             assert isinstance(filt, LatencyCompensated) == (comp and key == "late")
             est = filt.process(samples.t - samples.t[0], samples.gyro, samples.accel)
             runs[key, comp] = rmse_deg(attitude_errors(est.q_wb, truth.q_wb).inclination)
@@ -120,3 +130,55 @@ def test_a_lagging_device_estimated_at_its_stamps(name):
     assert abs(runs["late", False] - turn) <= e0
     assert turn > 5 * e0  # the latency's error is what the check sees
     assert runs["late", True] <= e0 + rule
+
+
+def test_turn_back_puts_a_vector_in_the_gyros_axes():
+    """A body turning at a constant ω (body axes) from a random attitude, a fixed world vector m_w read
+    at t − L_s: turned back by Δ = L_s − L_g, it is m_w in the axes of the attitude at t − L_g, to
+    round-off; turned the other way it is not."""
+    rng = np.random.default_rng(4)
+    q0 = quat_from_rotvec(rng.normal(size=3))
+    omega = np.array([-1.2, 0.4, 2.5])
+    t = np.linspace(0.0, 3.0, 40)
+    L_g, L_s = 0.002, 0.015
+    m_w = np.array([0.2, 0.35, -0.45])
+
+    def attitude(at):
+        return quat_multiply(q0, quat_exp(np.outer(at, omega) / 2))
+
+    read = quat_rotate(quat_conjugate(attitude(t - L_s)), np.broadcast_to(m_w, (40, 3)))
+    turned = quat_rotate(attitude(t - L_g), turn_back(read, np.broadcast_to(omega, (40, 3)), L_s - L_g))
+    assert np.abs(turned - m_w).max() < 64 * EPS * np.linalg.norm(m_w) * (1 + np.linalg.norm(omega) * t.max())
+    wrong = quat_rotate(attitude(t - L_g), turn_back(read, np.broadcast_to(omega, (40, 3)), L_g - L_s))
+    assert np.abs(wrong - m_w).max() > 1e-3
+
+
+def test_a_late_magnetometer_read_at_the_gyros_instant():
+    """An ideal IMU on the rate table (10 °/s about the vertical), its magnetometer 50 ms late, 9D MEKF.
+    The field it reads lags the body by ω Δ, and with a perfect gyro nothing contradicts it: the heading
+    settles ω Δ behind, to within the filter's own error e₀ (the same IMU without latency). Told the
+    latency, the error is e₀ plus what the rule leaves: it turns by the gyro's rate, which holds Earth's
+    rate beside the table's, Ω_ie Δ, leaked into the heading up to (1 + tan dip) times."""
+    scenario = load_scenario("rate_table_constant")
+    traj = scenario.simulate(duration=60.0)
+    spec = copy.deepcopy(read_toml(config_dir() / "devices" / "ideal.toml"))
+    errors = {}
+    for L_m in (0.0, 0.05):
+        spec["magnetometer"]["latency_s"] = L_m
+        device = device_from_dict(spec, name="imu0")
+        samples = device.measure(traj)
+        truth = truth_series(traj, samples)
+        setup = setup_for(device, scenario)
+        settled = samples.t - samples.t[0] > 20.0
+        for comp in (True, False):
+            filt = make_filter("mekf", setup if comp else replace(setup, mag_latency_s=0.0))
+            est = filt.process(samples.t - samples.t[0], samples.gyro, samples.accel, samples.mag)
+            errors[L_m, comp] = rmse_deg(attitude_errors(est.q_wb, truth.q_wb).heading[settled])
+    e0, delta = errors[0.0, True], 0.05
+    lag = 10.0 * delta  # ω Δ, degrees
+    east, north, up = scenario.spec.site.magnetic_field_enu_uT
+    tan_dip = abs(up) / np.hypot(east, north)
+    earth = np.degrees(EARTH_RATE) * delta * (1 + tan_dip)
+    assert abs(errors[0.05, False] - lag) <= e0 + earth
+    assert errors[0.05, True] <= e0 + earth
+    assert lag > 100 * (e0 + earth)  # the latency's error is what the check sees
