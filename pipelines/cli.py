@@ -130,11 +130,7 @@ def _cmd_estimate(args) -> int:
         filter_class(args.filter)
     except FilterError as e:
         raise UsageError(f"argument --filter: {e}") from None
-    latencies: dict[str, float] = {}
-    for sensor, seconds in args.latency:
-        if sensor in latencies:
-            raise UsageError(f"argument --latency: {sensor} given twice")
-        latencies[sensor] = seconds
+    latencies = _latencies(args)
     source, out = Path(args.file), _mcap_out(args.out)
     if out.resolve() == source.resolve():
         raise UsageError(f"argument --out: {out} is the input: the input is never modified")
@@ -313,12 +309,15 @@ def _cmd_campaign(args) -> int:
     if args.campaign is not None:
         given = [f for f, v in (("--scenario", args.scenario), ("--device", args.device), ("--log", args.log)) if v]
         given += [f for f, v in (("--filter", args.filter), ("--6d", args.six_d), ("--batched", args.batched)) if v]
+        given += ["--latency"] if args.latency else []
         if given:
             raise UsageError(f"argument --campaign: the campaign file sets the grid; drop {', '.join(given)}")
         spec = Path(args.campaign)
     else:  # --scheduler with today's flags: the grid they describe, as a campaign
         if args.log:
             raise UsageError("argument --scheduler: --log cases run in one process; drop --scheduler")
+        if args.latency:
+            raise UsageError("argument --latency: times a --log, which runs in one process; drop --scheduler")
         flags = {"scenarios": "--scenario", "devices": "--device", "filters": "--filter", "seed_range": "--seed"}
         try:
             spec = spec_from_bench_flags(
@@ -424,10 +423,13 @@ def _cmd_bench(args) -> int:
         if simulated
         else []
     )
+    latencies = _latencies(args)
+    if latencies and not args.log:
+        raise UsageError("argument --latency: times a --log; a simulated device has its own latency_s")
     for log in args.log or ():
         if not Path(log).is_file():
             raise UsageError(f"argument --log: {log}: no such file")
-        cases.append(LogCase(path=log, six_d=args.six_d))
+        cases.append(LogCase(path=log, six_d=args.six_d, latency_s=latencies or None))
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UsageError(f"argument --out: {out} is not a folder")
@@ -754,12 +756,21 @@ def _duration(text: str) -> float:
     return value
 
 
-LATENCY_SENSORS = ("gyro", "mag")
+def _latencies(args) -> dict[str, float]:
+    """``--latency``'s sensors and seconds; a sensor given twice is a usage error."""
+    latencies: dict[str, float] = {}
+    for sensor, seconds in args.latency:
+        if sensor in latencies:
+            raise UsageError(f"argument --latency: {sensor} given twice")
+        latencies[sensor] = seconds
+    return latencies
 
 
 def _latency(text: str) -> tuple[str, float]:
     """``SENSOR=MS``: a sensor (gyro, mag) and its latency in milliseconds, returned in seconds:
     finite, under a second either way (the devices' ``latency_s`` bound)."""
+    from gyroemu.pipelines.estimation.setup import LATENCY_SENSORS
+
     sensor, sep, value_text = text.partition("=")
     sensor = sensor.strip()
     if not sep or sensor not in LATENCY_SENSORS:
@@ -917,6 +928,15 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="FILE.mcap",
         help="an MCAP log with /imu and /truth/imu (repeatable); its /movement mask, if any, "
         "selects the samples that count",
+    )
+    p.add_argument(
+        "--latency",
+        type=_latency,
+        action="append",
+        default=[],
+        metavar="SENSOR=MS",
+        help="how long the --log's gyro or magnetometer lags the motion, ms (repeatable): every filter is fed the "
+        "field at the gyro's instant and its attitudes are moved to their stamps (default: a gyroemu log's device's)",
     )
     p.add_argument(
         "--filter",

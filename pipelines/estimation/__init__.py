@@ -13,9 +13,10 @@ from .latency import LatencyCompensated, advance_attitude, turn_back
 from .mekf import Mekf, MekfParams
 from .metrics import AttitudeErrors, attitude_errors, convergence_time, rmse_deg
 from .protocol import AttitudeFilter, DeviceNoise, Estimate, FilterSetup
-from .setup import noise_from_device, setup_for, setup_from_metadata
+from .setup import LATENCY_SENSORS, noise_from_device, setup_for, setup_from_metadata, with_latencies
 
 __all__ = [
+    "LATENCY_SENSORS",
     "AttitudeErrors",
     "AttitudeFilter",
     "DeviceNoise",
@@ -32,4 +33,5 @@ __all__ = [
     "setup_for",
     "setup_from_metadata",
     "turn_back",
+    "with_latencies",
 ]

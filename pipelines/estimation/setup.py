@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import tomllib
 import warnings
+from collections.abc import Mapping
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
@@ -20,7 +21,10 @@ if TYPE_CHECKING:
     from gyroemu.dynamics import Scenario
     from gyroemu.sensors import Device
 
-__all__ = ["noise_from_device", "setup_for", "setup_from_metadata"]
+__all__ = ["LATENCY_SENSORS", "noise_from_device", "setup_for", "setup_from_metadata", "with_latencies"]
+
+LATENCY_SENSORS = ("gyro", "mag")
+"""The sensors whose latency a setup holds (:mod:`.latency` says why not the accelerometer's)."""
 
 
 def noise_from_device(device: Device) -> DeviceNoise:
@@ -104,3 +108,22 @@ def setup_from_metadata(metadata: dict | None, rate_hz: float, *, use_mag: bool)
         else:
             return replace(setup_for(device, scenario, use_mag=use_mag), rate_hz=rate_hz)
     return FilterSetup(rate_hz=rate_hz, use_mag=use_mag)
+
+
+def with_latencies(setup: FilterSetup, latency_s: Mapping[str, float]) -> FilterSetup:
+    """``setup`` with the latencies of the sensors named in ``latency_s`` (``gyro``, ``mag``: s), the
+    others as they were.
+
+    Raises
+    ------
+    ValueError
+        A sensor not in :data:`LATENCY_SENSORS`; the message names it.
+    """
+    unknown = sorted(set(latency_s) - set(LATENCY_SENSORS))
+    if unknown:
+        raise ValueError(f"no sensor {', '.join(unknown)} ({' or '.join(LATENCY_SENSORS)})")
+    return replace(
+        setup,
+        gyro_latency_s=float(latency_s.get("gyro", setup.gyro_latency_s)),
+        mag_latency_s=float(latency_s.get("mag", setup.mag_latency_s)),
+    )

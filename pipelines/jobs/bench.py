@@ -126,11 +126,14 @@ class SimCase:
 
 @dataclass(frozen=True)
 class LogCase:
-    """An MCAP log with a truth channel; ``device`` picks one device (default: each with truth)."""
+    """An MCAP log with a truth channel; ``device`` picks one device (default: each with truth);
+    ``latency_s`` the gyro's and the magnetometer's latencies, s (``{"gyro": …, "mag": …}``; default: a
+    gyroemu log's device's, else 0; :func:`gyroemu.pipelines.estimation.setup.with_latencies`)."""
 
     path: str | Path
     device: str | None = None
     six_d: bool = False
+    latency_s: dict[str, float] | None = None
 
 
 @dataclass
@@ -708,10 +711,14 @@ def _sim_run(traj, device, seed) -> _Run:
 def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, list[str]]]:
     """The devices of a log to bench: (name, mode, setup, run, source, notes) each."""
     from gyroemu.pipelines.estimation.series import check_samples
-    from gyroemu.pipelines.estimation.setup import setup_from_metadata
+    from gyroemu.pipelines.estimation.setup import setup_from_metadata, with_latencies
     from gyroemu.pipelines.formats.mcap_log import read_mcap
 
     path = Path(case.path)
+    try:
+        with_latencies(FilterSetup(rate_hz=1.0), case.latency_s or {})  # the names, before any work
+    except ValueError as e:
+        raise BenchError(f"latency: {e}", file=path, key="latency_s") from None
     if not path.is_file():
         raise BenchError("no such file", file=path, key=None)
     log = read_mcap(path)  # LogError (a ConfigError naming the file) when unreadable or without IMU messages
@@ -785,6 +792,13 @@ def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, li
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # an embedded config that no longer validates: defaults
             setup = setup_from_metadata(dev.metadata, 1.0 / dt_nominal, use_mag=mode == "9D")
+        if case.latency_s:
+            setup = with_latencies(setup, case.latency_s)
+        if setup.gyro_latency_s or setup.mag_latency_s:
+            notes.append(
+                f"latencies: gyro {setup.gyro_latency_s * 1e3:g} ms, magnetometer {setup.mag_latency_s * 1e3:g} ms "
+                "(every filter fed the field at the gyro's instant, its attitudes moved to their stamps)"
+            )
         run = _Run(
             t=t,
             gyro=np.asarray(s.gyro, float),

@@ -27,14 +27,15 @@ import os
 import secrets
 import warnings
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from gyroemu.pipelines.estimation.protocol import FilterSetup
 from gyroemu.pipelines.estimation.registry import make_filter
 from gyroemu.pipelines.estimation.series import check_samples, estimate_series, rate_of
-from gyroemu.pipelines.estimation.setup import setup_from_metadata
+from gyroemu.pipelines.estimation.setup import setup_from_metadata, with_latencies
 from gyroemu.pipelines.formats.channels import (
     BODY_FRAME,
     ESTIMATE_ROLE,
@@ -206,9 +207,10 @@ def estimate_log(
         An unknown filter.
     """
     path, out = Path(path), Path(out)
-    unknown = sorted(set(latency_s or {}) - {"gyro", "mag"})
-    if unknown:
-        raise EstimateError(f"argument --latency: no sensor {', '.join(unknown)} (gyro or mag)")
+    try:
+        with_latencies(FilterSetup(rate_hz=1.0), latency_s or {})  # the names, before any work
+    except ValueError as e:
+        raise EstimateError(f"argument --latency: {e}") from None
     check_options(path, out, force=force)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", LogWarning)
@@ -232,11 +234,7 @@ def estimate_log(
         nine = samples.has_mag if use_mag is None else (use_mag and samples.has_mag)
         setup = setup_from_metadata(dev.metadata, rate_of(samples.t), use_mag=nine)
         if latency_s:
-            setup = replace(
-                setup,
-                gyro_latency_s=float(latency_s.get("gyro", setup.gyro_latency_s)),
-                mag_latency_s=float(latency_s.get("mag", setup.mag_latency_s)),
-            )
+            setup = with_latencies(setup, latency_s)
         flt = make_filter(filter_name, setup)
         t_rel = samples.t - samples.t[0]  # relative times keep float64's resolution for the filter
         est = flt.process(t_rel, samples.gyro, samples.accel, samples.mag if nine else None)

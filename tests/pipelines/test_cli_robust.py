@@ -306,3 +306,9 @@ def test_simulate_interrupted_leaves_nothing(tmp_path, sig, status):
     assert "Traceback" not in stderr, stderr
     assert list(tmp_path.iterdir()) == []  # no .tmp left, no output
     assert str(out) not in stdout
+
+
+def test_bench_latency_needs_a_log(tmp_path):
+    code, _, stderr = run_cli(["bench", "--latency", "gyro=2", "--out", str(tmp_path / "b")])
+    assert code == 2 and "argument --latency: times a --log; a simulated device has its own latency_s" in stderr, stderr
+    assert list(tmp_path.iterdir()) == []

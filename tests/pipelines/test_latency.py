@@ -30,7 +30,8 @@ from gyroemu.pipelines.estimation import (
     turn_back,
 )
 from gyroemu.pipelines.estimation.registry import make_filter
-from gyroemu.pipelines.formats.mcap_log import truth_series
+from gyroemu.pipelines.formats.mcap_log import Recording, truth_series, write_mcap
+from gyroemu.pipelines.jobs.bench import BenchError, LogCase, run_bench
 from gyroemu.sensors import device_from_dict
 
 EPS = np.finfo(float).eps
@@ -182,3 +183,34 @@ def test_a_late_magnetometer_read_at_the_gyros_instant():
     assert abs(errors[0.05, False] - lag) <= e0 + earth
     assert errors[0.05, True] <= e0 + earth
     assert lag > 100 * (e0 + earth)  # the latency's error is what the check sees
+
+
+def test_bench_times_a_log_by_its_device_or_as_told(tmp_path):
+    """``gyroemu bench`` on logs of an ideal IMU on the 2 Hz oscillation, with and without a 5 ms
+    latency: the lagging log's own device times every filter (the bound of
+    ``test_a_lagging_device_estimated_at_its_stamps``, e₀ the log without latency), and told a latency
+    of 0 (``LogCase.latency_s``) the error is the turn over L again."""
+    scenario = load_scenario("oscillation")
+    traj = scenario.simulate(duration=10.0)
+    L = 0.005
+    logs = {}
+    for key, device in (("none", _ideal(0.0)), ("late", _ideal(L))):
+        samples = device.measure(traj)
+        truth = truth_series(traj, samples)
+        logs[key] = write_mcap(
+            tmp_path / f"{key}.mcap", Recording(samples, truth=truth, device=device), scenario=scenario
+        )
+    cases = [LogCase(logs["none"]), LogCase(logs["late"]), LogCase(logs["late"], latency_s={"gyro": 0.0})]
+    report = run_bench(cases, filters=["mekf"], progress=False)
+    e0, timed, untimed = (c.filters[0].runs[0].inclination_deg for c in report.cases)
+    omega_w = quat_rotate(truth.q_wb, truth.omega_b)
+    turn = np.degrees(np.sqrt(np.mean(np.sum(omega_w[:, :2] ** 2, axis=1)))) * L
+    spin_up = np.gradient(truth.omega_b, truth.t, axis=0)
+    T = float(np.median(np.diff(samples.t)))
+    rule = np.degrees(np.sqrt(np.mean(np.sum(spin_up**2, axis=1)))) * (L + T) * L / 2
+    assert timed <= e0 + rule
+    assert abs(untimed - turn) <= e0 and turn > 5 * e0
+    assert any("latencies: gyro 5 ms" in note for note in report.cases[1].notes)
+    assert not any("latencies" in note for note in report.cases[2].notes)
+    with pytest.raises(BenchError, match="latency: no sensor accel"):
+        run_bench([LogCase(logs["late"], latency_s={"accel": 0.001})], filters=["mekf"], progress=False)
