@@ -100,6 +100,17 @@ def _ideal(latency_s: float):
     return device_from_dict(spec, name="imu0")
 
 
+def _lag_bounds(truth, samples, L: float) -> tuple[float, float]:
+    """For a 6D run lagging by L: the RMS inclination turn over L, ‖(R ω)_horizontal‖ L, and the RMS of
+    what the rule leaves, ω̇ (L + T) L / 2 (T the device's sample period), both degrees."""
+    omega_w = quat_rotate(truth.q_wb, truth.omega_b)
+    turn = np.degrees(np.sqrt(np.mean(np.sum(omega_w[:, :2] ** 2, axis=1)))) * L
+    spin_up = np.gradient(truth.omega_b, truth.t, axis=0)
+    T = float(np.median(np.diff(samples.t)))
+    rule = np.degrees(np.sqrt(np.mean(np.sum(spin_up**2, axis=1)))) * (L + T) * L / 2
+    return float(turn), float(rule)
+
+
 @pytest.mark.parametrize("name", ["mekf", "madgwick"])
 def test_a_lagging_device_estimated_at_its_stamps(name):
     """An ideal IMU lagging by L = 5 ms on a 2 Hz, 5° oscillation, 6D. Uncompensated, the inclination
@@ -121,11 +132,7 @@ def test_a_lagging_device_estimated_at_its_stamps(name):
             assert isinstance(filt, LatencyCompensated) == (comp and key == "late")
             est = filt.process(samples.t - samples.t[0], samples.gyro, samples.accel)
             runs[key, comp] = rmse_deg(attitude_errors(est.q_wb, truth.q_wb).inclination)
-    omega_w = quat_rotate(truth.q_wb, truth.omega_b)
-    turn = np.degrees(np.sqrt(np.mean(np.sum(omega_w[:, :2] ** 2, axis=1)))) * L
-    spin_up = np.gradient(truth.omega_b, truth.t, axis=0)
-    T = float(np.median(np.diff(samples.t)))  # the device's sample period
-    rule = np.degrees(np.sqrt(np.mean(np.sum(spin_up**2, axis=1)))) * (L + T) * L / 2
+    turn, rule = _lag_bounds(truth, samples, L)
     e0 = runs["none", True]
     assert runs["none", False] == e0  # no latency, no wrapper: the same filter
     assert abs(runs["late", False] - turn) <= e0
@@ -203,11 +210,7 @@ def test_bench_times_a_log_by_its_device_or_as_told(tmp_path):
     cases = [LogCase(logs["none"]), LogCase(logs["late"]), LogCase(logs["late"], latency_s={"gyro": 0.0})]
     report = run_bench(cases, filters=["mekf"], progress=False)
     e0, timed, untimed = (c.filters[0].runs[0].inclination_deg for c in report.cases)
-    omega_w = quat_rotate(truth.q_wb, truth.omega_b)
-    turn = np.degrees(np.sqrt(np.mean(np.sum(omega_w[:, :2] ** 2, axis=1)))) * L
-    spin_up = np.gradient(truth.omega_b, truth.t, axis=0)
-    T = float(np.median(np.diff(samples.t)))
-    rule = np.degrees(np.sqrt(np.mean(np.sum(spin_up**2, axis=1)))) * (L + T) * L / 2
+    turn, rule = _lag_bounds(truth, samples, L)
     assert timed <= e0 + rule
     assert abs(untimed - turn) <= e0 and turn > 5 * e0
     assert any("latencies: gyro 5 ms" in note for note in report.cases[1].notes)
