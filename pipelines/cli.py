@@ -756,6 +756,20 @@ def _duration(text: str) -> float:
     return value
 
 
+def _add_latency_option(p: argparse.ArgumentParser, whose: str) -> None:
+    """``--latency SENSOR=MS`` (repeatable), read by :func:`_latencies`."""
+    p.add_argument(
+        "--latency",
+        type=_latency,
+        action="append",
+        default=[],
+        metavar="SENSOR=MS",
+        help=f"how long {whose} gyro or magnetometer lags the motion, ms (repeatable): every filter is fed the field "
+        "at the gyro's instant and its attitudes are moved to their stamps (default: a gyroemu log's device's "
+        "latency_s, else 0)",
+    )
+
+
 def _latencies(args) -> dict[str, float]:
     """``--latency``'s sensors and seconds; a sensor given twice is a usage error."""
     latencies: dict[str, float] = {}
@@ -929,15 +943,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="an MCAP log with /imu and /truth/imu (repeatable); its /movement mask, if any, "
         "selects the samples that count",
     )
-    p.add_argument(
-        "--latency",
-        type=_latency,
-        action="append",
-        default=[],
-        metavar="SENSOR=MS",
-        help="how long the --log's gyro or magnetometer lags the motion, ms (repeatable): every filter is fed the "
-        "field at the gyro's instant and its attitudes are moved to their stamps (default: a gyroemu log's device's)",
-    )
+    _add_latency_option(p, "the --log's")
     p.add_argument(
         "--filter",
         action="append",
@@ -1031,15 +1037,7 @@ def build_parser() -> argparse.ArgumentParser:
         "(the filter mekf-smooth; orientation_covariance is the smoothed one)",
     )
     p.add_argument("--6d", dest="six_d", action="store_true", help="ignore the magnetometer")
-    p.add_argument(
-        "--latency",
-        type=_latency,
-        action="append",
-        default=[],
-        metavar="SENSOR=MS",
-        help="how long the gyro or the magnetometer lags the motion, ms; repeatable: the field is moved to "
-        "the gyro's instant and the attitudes to their stamps (default: a gyroemu log's device's latency_s, else 0)",
-    )
+    _add_latency_option(p, "the log's")
     p.add_argument(
         "--topic", default=None, metavar="TOPIC", help="the sensor_msgs/msg/Imu topic to filter (needed when several)"
     )

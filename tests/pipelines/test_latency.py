@@ -100,6 +100,18 @@ def _ideal(latency_s: float):
     return device_from_dict(spec, name="imu0")
 
 
+def _oscillation(L: float):
+    """The 2 Hz, 5° oscillation (10 s) measured by the ideal IMU without latency and lagging by ``L``:
+    the scenario and ``[(key, device, samples, truth)]``, keys ``none`` and ``late``."""
+    scenario = load_scenario("oscillation")
+    traj = scenario.simulate(duration=10.0)
+    measured = []
+    for key, device in (("none", _ideal(0.0)), ("late", _ideal(L))):
+        samples = device.measure(traj)
+        measured.append((key, device, samples, truth_series(traj, samples)))
+    return scenario, measured
+
+
 def _lag_bounds(truth, samples, L: float) -> tuple[float, float]:
     """For a 6D run lagging by L: the RMS inclination turn over L, ‖(R ω)_horizontal‖ L, and the RMS of
     what the rule leaves, ω̇ (L + T) L / 2 (T the device's sample period), both degrees."""
@@ -117,13 +129,10 @@ def test_a_lagging_device_estimated_at_its_stamps(name):
     error is the turn over L, ‖(R ω)_horizontal‖ L, to within the filter's own error on a device without
     latency e₀ (triangle inequality on the RMS). Compensated (the setup from the device), it is e₀ plus
     what the rule leaves, ω̇ (L + T) L / 2 (the module's notes)."""
-    scenario = load_scenario("oscillation")
-    traj = scenario.simulate(duration=10.0)
     L = 0.005
+    scenario, measured = _oscillation(L)
     runs = {}
-    for key, device in (("none", _ideal(0.0)), ("late", _ideal(L))):
-        samples = device.measure(traj)
-        truth = truth_series(traj, samples)
+    for key, device, samples, truth in measured:
         setup = setup_for(device, scenario, use_mag=False)
         assert (setup.gyro_latency_s, setup.mag_latency_s) == device.latencies[::2]
         for comp in (True, False):
@@ -197,13 +206,10 @@ def test_bench_times_a_log_by_its_device_or_as_told(tmp_path):
     latency: the lagging log's own device times every filter (the bound of
     ``test_a_lagging_device_estimated_at_its_stamps``, e₀ the log without latency), and told a latency
     of 0 (``LogCase.latency_s``) the error is the turn over L again."""
-    scenario = load_scenario("oscillation")
-    traj = scenario.simulate(duration=10.0)
     L = 0.005
+    scenario, measured = _oscillation(L)
     logs = {}
-    for key, device in (("none", _ideal(0.0)), ("late", _ideal(L))):
-        samples = device.measure(traj)
-        truth = truth_series(traj, samples)
+    for key, device, samples, truth in measured:
         logs[key] = write_mcap(
             tmp_path / f"{key}.mcap", Recording(samples, truth=truth, device=device), scenario=scenario
         )
