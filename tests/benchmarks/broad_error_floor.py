@@ -11,7 +11,7 @@ forward and backward) into a *slow* part, below ``--cutoff-hz``, and a *fast* pa
 low-pass filters that estimate the tilt (the MEKF's gravity measurement, VQF's inertial-frame low-pass)
 work below 0.1 Hz; above 0.3 Hz the attitude is the gyro's integral, so the fast part is the same for
 every estimator that integrates this gyro, and none can lower it: it is what separates the gyro's
-integral from the reference (the sensor's delay behind the optical stamps in fast turns, the reference's
+integral from the reference (the sensor's latency behind the optical stamps in fast turns, the reference's
 own noise). The script shows it twice:
 
 - the fast part of the smoother and of offlineVQF side by side (equal if the claim holds);
@@ -63,7 +63,7 @@ from gyroemu.pipelines.formats.importers import read_broad  # noqa: E402
 from gyroemu.sensors import load_device  # noqa: E402
 
 
-def gyro_delay_s() -> float:
+def gyro_latency_s() -> float:
     """How far the gyro's integral trails BROAD's optical stamps, s: ``aktos_t_broad``'s ``[gyro]
     latency_s`` L (identified on four undisturbed trials, not fitted here). The sample stamped τ_k is the
     mean rate over [τ_{k−1} − L, τ_k − L], so the attitude integrated to it is the body's at τ_k − L
@@ -116,14 +116,14 @@ def main() -> int:
     ours, peer = ("MEKF", "VQF") if args.online else ("smoother", "offlineVQF")
 
     files = trial_files(args.trials)
-    delay = gyro_delay_s()
+    latency = gyro_latency_s()
     if not files:
         print(f"no BROAD trials in {BROAD_DIR}", file=sys.stderr)
         return 2
     print(f"cut-off {args.cutoff_hz} Hz; RMS over the movement samples, °\n")
     print(
         f"| trial | {ours}: BROAD / split | slow | fast | {peer}: BROAD / split | slow | fast "
-        f"| fast, reference at the gyro's delay | {peer}, mounting fitted (diagnosis) |"
+        f"| fast, reference at the gyro's latency | {peer}, mounting fitted (diagnosis) |"
     )
     print("|---|---|---|---|---|---|---|---|---|")
     rows = []
@@ -142,10 +142,10 @@ def main() -> int:
                 ours: MekfSmoother(six).process(t, trial.gyro, trial.accel).q_wb,
                 peer: offlineVQF(trial.gyro, trial.accel, None, 1.0 / fs)["quat6D"],
             }
-        # the reference where the IMU sees it: at t − delay (the samples lag the optical stamps)
+        # the reference where the gyro's integral is: at t − latency (the samples lag the optical stamps)
         finite = np.all(np.isfinite(ref), axis=1)
         t_ref = t[finite]
-        ref_delayed = quat_interpolate(t_ref, ref[finite], np.clip(t - delay, t_ref[0], t_ref[-1]))
+        ref_delayed = quat_interpolate(t_ref, ref[finite], np.clip(t - latency, t_ref[0], t_ref[-1]))
         ref_delayed[~finite] = np.nan
         row = []
         for q in estimates.values():
@@ -177,7 +177,7 @@ def main() -> int:
     room = brentq(lambda f: float(np.mean(np.hypot(f * vqf_slow, fast))) - bar, 0.0, 1.0)
     print(f"\nThe bar (0.9 × {peer}'s mean BROAD inclination): {bar:.3f}°")
     print(f"An estimator with no slow error at all (the fast part alone): {np.mean(fast):.3f}°")
-    print(f"The fast part with the reference at the gyro's delay: {np.mean(r[:, 8]):.3f}°")
+    print(f"The fast part with the reference at the gyro's latency: {np.mean(r[:, 8]):.3f}°")
     print(f"{peer} with each trial's mounting rotation fitted (diagnosis): {np.mean(r[:, 9]):.3f}°")
     print(
         f"To meet the bar, the slow error must be {room:.2f} × {peer}'s on every trial "
