@@ -10,9 +10,10 @@ second order the inclination error). It is split by a zero-phase low-pass (Butte
 forward and backward) into a *slow* part, below ``--cutoff-hz``, and a *fast* part, the rest. The
 low-pass filters that estimate the tilt (the MEKF's gravity measurement, VQF's inertial-frame low-pass)
 work below 0.1 Hz; above 0.3 Hz the attitude is the gyro's integral, so the fast part is the same for
-every estimator that integrates this gyro, and none can lower it: it is what separates the gyro's
-integral from the reference (the sensor's latency behind the optical stamps in fast turns, the reference's
-own noise). The script shows it twice:
+every estimator that integrates this gyro, and no estimator lowers it by estimating better: it is what
+separates the gyro's integral from the reference (mostly the gyro's latency behind the optical stamps in
+fast turns, which only timing takes out: ``gyroemu estimate --latency``; the reference's own noise).
+The script shows it twice:
 
 - the fast part of the smoother and of offlineVQF side by side (equal if the claim holds);
 - the fast part once more with the reference taken where the gyro's integral is, the gyro's identified
