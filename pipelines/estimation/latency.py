@@ -56,11 +56,11 @@ __all__ = ["LatencyCompensated", "advance_attitude", "turn_back"]
 
 
 def _turns(gyro: np.ndarray, gyro_bias: np.ndarray | None, seconds: float) -> np.ndarray:
-    """``exp((ω_k − b_k) seconds)`` (N, 4); a non-finite rate turns nothing."""
+    """``exp((ω_k − b_k) seconds)`` (..., 4); a non-finite rate turns nothing."""
     rate = np.asarray(gyro, dtype=float)
     if gyro_bias is not None:
         rate = rate - np.asarray(gyro_bias, dtype=float)
-    return quat_from_rotvec(np.where(np.isfinite(rate).all(axis=1, keepdims=True), rate * seconds, 0.0))
+    return quat_from_rotvec(np.where(np.isfinite(rate).all(axis=-1, keepdims=True), rate * seconds, 0.0))
 
 
 def advance_attitude(q_wb: np.ndarray, gyro: np.ndarray, gyro_bias: np.ndarray | None, latency_s: float) -> np.ndarray:
@@ -68,18 +68,19 @@ def advance_attitude(q_wb: np.ndarray, gyro: np.ndarray, gyro_bias: np.ndarray |
 
     Parameters
     ----------
-    q_wb : ndarray (N, 4)
-        Estimated attitudes, unit quaternions (w, x, y, z), body to world, one per sample.
-    gyro : ndarray (N, 3)
+    q_wb : ndarray (..., N, 4)
+        Estimated attitudes, unit quaternions (w, x, y, z), body to world, one per sample (leading axes:
+        runs).
+    gyro : ndarray (..., N, 3)
         The samples' rates, rad/s, body axes. A non-finite row turns nothing (its attitude is kept).
-    gyro_bias : ndarray (N, 3) or None
+    gyro_bias : ndarray (..., N, 3) or None
         The filter's bias estimate, rad/s, taken off the rate (None: none).
     latency_s : float
         How long the gyro lags the motion, s.
 
     Returns
     -------
-    ndarray (N, 4)
+    ndarray (..., N, 4)
         ``q_wb[k] ⊗ exp((gyro[k] − gyro_bias[k]) latency_s)``.
     """
     return quat_multiply(np.asarray(q_wb, dtype=float), _turns(gyro, gyro_bias, latency_s))
@@ -90,16 +91,16 @@ def turn_back(vectors: np.ndarray, gyro: np.ndarray, delay_s: float) -> np.ndarr
 
     Parameters
     ----------
-    vectors : ndarray (N, 3)
+    vectors : ndarray (..., N, 3)
         A sensor's samples (specific force, field), body axes; NaN rows stay NaN.
-    gyro : ndarray (N, 3)
+    gyro : ndarray (..., N, 3)
         The samples' rates, rad/s, body axes. A non-finite row turns nothing.
     delay_s : float
         How much longer the sensor lags the motion than the gyro, ``L_s − L_g``, s.
 
     Returns
     -------
-    ndarray (N, 3)
+    ndarray (..., N, 3)
         ``exp(−gyro[k] delay_s) vectors[k]``.
     """
     return quat_rotate(_turns(gyro, None, -delay_s), np.asarray(vectors, dtype=float))

@@ -89,7 +89,9 @@ class FilterSetup:
         How long the gyro's and the magnetometer's samples lag the motion, s (a device's ``latency_s``):
         the sample stamped t measures the motion at t − L. Either non-zero, :func:`~.registry.make_filter`
         feeds every filter the field at the gyro's instant and turns its attitudes on to their stamps
-        (:mod:`.latency`; the accelerometer is not moved, as it says why). 0: the stamps are the motion's.
+        (:mod:`.latency`; the accelerometer is not moved, as it says why), and so does
+        :func:`~.batched.mekf_batch`; a filter class made directly takes the samples as they are. 0: the
+        stamps are the motion's.
     """
 
     rate_hz: float

@@ -1,6 +1,7 @@
 """gyroemu's MEKF: the filterpy form against its compiled batched twin, what it must recover on
 simulated data, its handling of bad samples, and the constraint of its heading update."""
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ from gyroemu.dynamics.rotation import quat_conjugate, quat_rotate
 from gyroemu.pipelines.estimation import FilterSetup, Mekf, MekfParams, attitude_errors, rmse_deg, setup_for
 from gyroemu.pipelines.estimation import mekf_kernels as kern
 from gyroemu.pipelines.estimation.batched import mekf_batch
+from gyroemu.pipelines.estimation.registry import make_filter
 from gyroemu.pipelines.formats.mcap_log import truth_series
 from gyroemu.sensors import load_device
 from gyroemu.sensors.gyrocompass import heading_uncertainty
@@ -27,12 +29,15 @@ def manoeuvre():
     return scenario, scenario.simulate(duration=120.0)
 
 
-def test_batched_mode_is_the_filterpy_filter(manoeuvre):
-    """Same kernels, Kalman algebra from filterpy or compiled: the same attitudes to round-off."""
+@pytest.mark.parametrize("latency_s", [(0.0, 0.0), (0.004, 0.015)])
+def test_batched_mode_is_the_filterpy_filter(manoeuvre, latency_s):
+    """Same kernels, Kalman algebra from filterpy or compiled: the same attitudes to round-off; with the
+    sensors' latencies too (``mekf_batch`` times the runs as ``make_filter``'s wrapper does)."""
     scenario, traj = manoeuvre
     short = traj[:2001]
     runs = [load_device("consumer_mems", seed=s).measure(short) for s in (0, 1)]
     setup = setup_for(load_device("consumer_mems"), scenario)
+    setup = replace(setup, gyro_latency_s=latency_s[0], mag_latency_s=latency_s[1])
     batch = mekf_batch(
         setup,
         runs[0].t,
@@ -41,7 +46,7 @@ def test_batched_mode_is_the_filterpy_filter(manoeuvre):
         np.stack([r.mag for r in runs]),
     )
     for i, r in enumerate(runs):
-        single = Mekf(setup).process(r.t, r.gyro, r.accel, r.mag)
+        single = make_filter("mekf", setup).process(r.t, r.gyro, r.accel, r.mag)
         assert np.abs(single.q_wb - batch.q_wb[i]).max() < 1e-9
         assert np.abs(single.gyro_bias - batch.gyro_bias[i]).max() < 1e-12
 
