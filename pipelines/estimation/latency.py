@@ -112,7 +112,8 @@ class LatencyCompensated:
     The magnetometer's samples are turned back by its latency beyond the gyro's (:func:`turn_back`),
     the estimate's attitudes on by the gyro's (:func:`advance_attitude`). It
     obeys the filter protocol of :mod:`.protocol` as the filter it wraps does: same ``name``, same
-    ``offline``, blocks in time order; every other attribute is the wrapped filter's.
+    ``offline``, blocks in time order; every other attribute is the wrapped filter's, but for
+    ``process_increments`` (it would go untimed: a timed filter takes rates).
 
     Parameters
     ----------
@@ -139,6 +140,8 @@ class LatencyCompensated:
         return replace(est, q_wb=advance_attitude(est.q_wb, gyro, est.gyro_bias, gyro_l))
 
     def __getattr__(self, name: str):
-        if name == "inner":  # not set yet (a copy being made): no recursion
+        # "inner" before it is set (a copy being made): no recursion; "process_increments" would feed the
+        # wrapped filter untimed, so a timed filter takes rates only
+        if name in ("inner", "process_increments"):
             raise AttributeError(name)
         return getattr(self.inner, name)

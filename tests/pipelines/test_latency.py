@@ -83,6 +83,8 @@ def test_the_wrapper_turns_the_attitude_and_keeps_the_rest():
     inner = _Fixed(FilterSetup(rate_hz=100.0))
     wrapped = LatencyCompensated(inner, 0.003)
     assert (wrapped.name, wrapped.offline, wrapped.extra) == ("fixed", True, "kept")
+    inner.process_increments = inner.process
+    assert not hasattr(wrapped, "process_increments")  # it would go untimed
     t = np.arange(20) / 100.0
     gyro = np.random.default_rng(2).normal(size=(20, 3))
     plain = inner.process(t, gyro, np.zeros((20, 3)))
