@@ -9,11 +9,18 @@
 - :mod:`.metrics`: BROAD's error definitions; :mod:`.setup`: a setup from a device or a log.
 """
 
-from .latency import LatencyCompensated, advance_attitude, turn_back
+from .latency import LatencyCompensated, advance_attitude, attitude_at_stamps, field_at_gyro_instant, turn_back
 from .mekf import Mekf, MekfParams
 from .metrics import AttitudeErrors, attitude_errors, convergence_time, rmse_deg
 from .protocol import AttitudeFilter, DeviceNoise, Estimate, FilterSetup
-from .setup import LATENCY_SENSORS, noise_from_device, setup_for, setup_from_metadata, with_latencies
+from .setup import (
+    LATENCY_SENSORS,
+    check_latency_sensors,
+    noise_from_device,
+    setup_for,
+    setup_from_metadata,
+    with_latencies,
+)
 
 __all__ = [
     "LATENCY_SENSORS",
@@ -26,8 +33,11 @@ __all__ = [
     "Mekf",
     "MekfParams",
     "advance_attitude",
+    "attitude_at_stamps",
     "attitude_errors",
+    "check_latency_sensors",
     "convergence_time",
+    "field_at_gyro_instant",
     "noise_from_device",
     "rmse_deg",
     "setup_for",

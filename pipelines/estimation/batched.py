@@ -19,7 +19,7 @@ import numpy as np
 from gyroemu.dynamics.jit import njit
 
 from . import mekf_kernels as kern
-from .latency import advance_attitude, turn_back
+from .latency import attitude_at_stamps, field_at_gyro_instant
 from .mekf import MekfParams, earth_rate_enu, initial_state
 from .protocol import Estimate, FilterSetup
 
@@ -124,8 +124,8 @@ def mekf_batch(
         raise ValueError(f"sample {bad}: stamp {t[bad]!r} s does not increase")
     use_mag = bool(setup.use_mag and mag is not None)
     mag = np.ascontiguousarray(mag, dtype=float) if use_mag else np.full((runs, n, 3), np.nan)
-    if use_mag and setup.mag_latency_s != setup.gyro_latency_s:  # as make_filter's LatencyCompensated does
-        mag = np.ascontiguousarray(turn_back(mag, gyro, setup.mag_latency_s - setup.gyro_latency_s))
+    if use_mag:  # timed as make_filter's LatencyCompensated times every filter
+        mag = np.ascontiguousarray(field_at_gyro_instant(mag, gyro, setup.gyro_latency_s, setup.mag_latency_s))
     q = np.empty((runs, 4))
     b = np.empty((runs, 3))
     slow = np.empty((runs, kern.S_SIZE))
@@ -136,6 +136,4 @@ def mekf_batch(
     q_out = np.empty((runs, n, 4))
     b_out = np.empty((runs, n, 3))
     _run(q, b, slow, P, t, gyro, delta, accel, mag, earth_rate_enu(setup), params.vector(setup), use_mag, q_out, b_out)
-    if setup.gyro_latency_s:
-        q_out = advance_attitude(q_out, gyro, b_out, setup.gyro_latency_s)
-    return Estimate(q_wb=q_out, gyro_bias=b_out)
+    return Estimate(q_wb=attitude_at_stamps(q_out, gyro, b_out, setup.gyro_latency_s), gyro_bias=b_out)

@@ -52,7 +52,7 @@ from gyroemu.dynamics.rotation import quat_from_rotvec, quat_multiply, quat_rota
 
 from .protocol import AttitudeFilter, Estimate
 
-__all__ = ["LatencyCompensated", "advance_attitude", "turn_back"]
+__all__ = ["LatencyCompensated", "advance_attitude", "attitude_at_stamps", "field_at_gyro_instant", "turn_back"]
 
 
 def _turns(gyro: np.ndarray, gyro_bias: np.ndarray | None, seconds: float) -> np.ndarray:
@@ -106,11 +106,29 @@ def turn_back(vectors: np.ndarray, gyro: np.ndarray, delay_s: float) -> np.ndarr
     return quat_rotate(_turns(gyro, None, -delay_s), np.asarray(vectors, dtype=float))
 
 
+def field_at_gyro_instant(
+    mag: np.ndarray | None, gyro: np.ndarray, gyro_latency_s: float, mag_latency_s: float
+) -> np.ndarray | None:
+    """The field samples ``mag`` (..., N, 3) turned back to the gyro's instant (:func:`turn_back` by
+    ``mag_latency_s − gyro_latency_s``); as they are when the latencies are equal or there is no field."""
+    if mag is None or mag_latency_s == gyro_latency_s:
+        return mag
+    return turn_back(mag, gyro, mag_latency_s - gyro_latency_s)
+
+
+def attitude_at_stamps(
+    q_wb: np.ndarray, gyro: np.ndarray, gyro_bias: np.ndarray | None, gyro_latency_s: float
+) -> np.ndarray:
+    """A filter's attitudes (..., N, 4) turned on to their stamps (:func:`advance_attitude`); as they are
+    when the gyro has no latency."""
+    return q_wb if gyro_latency_s == 0.0 else advance_attitude(q_wb, gyro, gyro_bias, gyro_latency_s)
+
+
 class LatencyCompensated:
     """A filter fed the field at the gyro's instant and whose attitudes are turned on to their stamps.
 
-    The magnetometer's samples are turned back by its latency beyond the gyro's (:func:`turn_back`),
-    the estimate's attitudes on by the gyro's (:func:`advance_attitude`). It
+    The magnetometer's samples are turned back by its latency beyond the gyro's
+    (:func:`field_at_gyro_instant`), the estimate's attitudes on by the gyro's (:func:`attitude_at_stamps`). It
     obeys the filter protocol of :mod:`.protocol` as the filter it wraps does: same ``name``, same
     ``offline``, blocks in time order; every other attribute is the wrapped filter's, but for
     ``process_increments`` (it would go untimed: a timed filter takes rates).
@@ -132,12 +150,8 @@ class LatencyCompensated:
     def process(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None) -> Estimate:
         """The wrapped filter's estimate of the block, its inputs and outputs moved as the class says."""
         gyro_l, mag_l = self.latencies
-        if mag is not None and mag_l != gyro_l:
-            mag = turn_back(mag, gyro, mag_l - gyro_l)
-        est = self.inner.process(t, gyro, accel, mag)
-        if gyro_l == 0.0:
-            return est
-        return replace(est, q_wb=advance_attitude(est.q_wb, gyro, est.gyro_bias, gyro_l))
+        est = self.inner.process(t, gyro, accel, field_at_gyro_instant(mag, gyro, gyro_l, mag_l))
+        return replace(est, q_wb=attitude_at_stamps(est.q_wb, gyro, est.gyro_bias, gyro_l))
 
     def __getattr__(self, name: str):
         # "inner" before it is set (a copy being made): no recursion; "process_increments" would feed the

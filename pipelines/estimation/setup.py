@@ -21,7 +21,14 @@ if TYPE_CHECKING:
     from gyroemu.dynamics import Scenario
     from gyroemu.sensors import Device
 
-__all__ = ["LATENCY_SENSORS", "noise_from_device", "setup_for", "setup_from_metadata", "with_latencies"]
+__all__ = [
+    "LATENCY_SENSORS",
+    "check_latency_sensors",
+    "noise_from_device",
+    "setup_for",
+    "setup_from_metadata",
+    "with_latencies",
+]
 
 LATENCY_SENSORS = ("gyro", "mag")
 """The sensors whose latency a setup holds (:mod:`.latency` says why not the accelerometer's)."""
@@ -110,6 +117,14 @@ def setup_from_metadata(metadata: dict | None, rate_hz: float, *, use_mag: bool)
     return FilterSetup(rate_hz=rate_hz, use_mag=use_mag)
 
 
+def check_latency_sensors(latency_s: Mapping[str, float]) -> None:
+    """Raise ``ValueError`` naming any sensor of ``latency_s`` not in :data:`LATENCY_SENSORS` (a job
+    checks its options with it before any work)."""
+    unknown = sorted(set(latency_s) - set(LATENCY_SENSORS))
+    if unknown:
+        raise ValueError(f"no sensor {', '.join(unknown)} ({' or '.join(LATENCY_SENSORS)})")
+
+
 def with_latencies(setup: FilterSetup, latency_s: Mapping[str, float]) -> FilterSetup:
     """``setup`` with the latencies of the sensors named in ``latency_s`` (``gyro``, ``mag``: s), the
     others as they were.
@@ -119,9 +134,7 @@ def with_latencies(setup: FilterSetup, latency_s: Mapping[str, float]) -> Filter
     ValueError
         A sensor not in :data:`LATENCY_SENSORS`; the message names it.
     """
-    unknown = sorted(set(latency_s) - set(LATENCY_SENSORS))
-    if unknown:
-        raise ValueError(f"no sensor {', '.join(unknown)} ({' or '.join(LATENCY_SENSORS)})")
+    check_latency_sensors(latency_s)
     return replace(
         setup,
         gyro_latency_s=float(latency_s.get("gyro", setup.gyro_latency_s)),

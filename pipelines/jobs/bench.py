@@ -711,12 +711,12 @@ def _sim_run(traj, device, seed) -> _Run:
 def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, list[str]]]:
     """The devices of a log to bench: (name, mode, setup, run, source, notes) each."""
     from gyroemu.pipelines.estimation.series import check_samples
-    from gyroemu.pipelines.estimation.setup import setup_from_metadata, with_latencies
+    from gyroemu.pipelines.estimation.setup import check_latency_sensors, setup_from_metadata, with_latencies
     from gyroemu.pipelines.formats.mcap_log import read_mcap
 
     path = Path(case.path)
     try:
-        with_latencies(FilterSetup(rate_hz=1.0), case.latency_s or {})  # the names, before any work
+        check_latency_sensors(case.latency_s or {})
     except ValueError as e:
         raise BenchError(f"latency: {e}", file=path, key="latency_s") from None
     if not path.is_file():

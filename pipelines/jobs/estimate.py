@@ -32,10 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
-from gyroemu.pipelines.estimation.protocol import FilterSetup
 from gyroemu.pipelines.estimation.registry import make_filter
 from gyroemu.pipelines.estimation.series import check_samples, estimate_series, rate_of
-from gyroemu.pipelines.estimation.setup import setup_from_metadata, with_latencies
+from gyroemu.pipelines.estimation.setup import check_latency_sensors, setup_from_metadata, with_latencies
 from gyroemu.pipelines.formats.channels import (
     BODY_FRAME,
     ESTIMATE_ROLE,
@@ -208,7 +207,7 @@ def estimate_log(
     """
     path, out = Path(path), Path(out)
     try:
-        with_latencies(FilterSetup(rate_hz=1.0), latency_s or {})  # the names, before any work
+        check_latency_sensors(latency_s or {})
     except ValueError as e:
         raise EstimateError(f"argument --latency: {e}") from None
     check_options(path, out, force=force)

@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from broad_data import BROAD_DIR, trial_files  # noqa: E402  (tests/benchmarks is the script folder)
 
-from gyroemu.pipelines.estimation.latency import advance_attitude, turn_back  # noqa: E402
+from gyroemu.pipelines.estimation.latency import attitude_at_stamps, field_at_gyro_instant  # noqa: E402
 from gyroemu.pipelines.estimation.mekf import Mekf, MekfParams  # noqa: E402
 from gyroemu.pipelines.estimation.mekf_smoother import MekfSmoother, smoother_params  # noqa: E402
 from gyroemu.pipelines.estimation.metrics import attitude_errors, rmse_deg  # noqa: E402
@@ -86,14 +86,14 @@ def trial_errors(
         return v["quat9D"] if nine else v["quat6D"]
 
     gyro_l, mag_l = latencies
-    # the same rules as gyroemu.pipelines.estimation.latency.LatencyCompensated, for the peers called here directly
-    timed_mag = np.ascontiguousarray(turn_back(trial.mag_ut, gyro, mag_l - gyro_l))
+    # LatencyCompensated's rules, for the peers called here directly (the raw rate: no filter's bias)
+    timed_mag = np.ascontiguousarray(field_at_gyro_instant(trial.mag_ut, gyro, gyro_l, mag_l))
     out = {}
     for name in COLUMNS:
         started = time.perf_counter()
         q = {nine: run(name, nine, trial.accel, np.ascontiguousarray(trial.mag_ut)) for nine in (True, False)}
         wall = time.perf_counter() - started
-        timed = {nine: advance_attitude(run(name, nine, trial.accel, timed_mag), gyro, None, gyro_l) for nine in q}
+        timed = {nine: attitude_at_stamps(run(name, nine, trial.accel, timed_mag), gyro, None, gyro_l) for nine in q}
         out[name] = (
             rmse_deg(attitude_errors(q[True], ref).total, movement),
             rmse_deg(attitude_errors(q[False], ref).inclination, movement),
