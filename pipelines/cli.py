@@ -171,12 +171,24 @@ def _cmd_estimate(args) -> int:
                 {"topic": topic, "topic_out": topic_out, "estimates": count}
                 for topic, topic_out, count in summary.topics
             ],
+            "field_lags": [
+                {
+                    "name": name,
+                    "lag_ms": lag.lag_s * 1e3,
+                    "standard_error_ms": lag.standard_error_s * 1e3 if math.isfinite(lag.standard_error_s) else None,
+                    "applied": lag.observable,
+                    "mag_latency_ms": mag_latency * 1e3,
+                }
+                for name, lag, mag_latency in summary.field_lags
+            ],
         }
         print(json.dumps(document, indent=2))
         print(f"input copied with its estimate in {elapsed:.2f} s -> {out}", file=sys.stderr)
         return 0
     for name, n, flt, nine in summary.devices:
         print(f"{name}: {n} samples, {flt} ({'9D' if nine else '6D'})")
+    for name, lag, _ in summary.field_lags:
+        print(f"{name}: {lag.describe()}")
     for topic, topic_out, count in summary.topics:
         print(f"{topic} -> {topic_out}: {count} estimates")
     print(f"input copied with its estimate in {elapsed:.2f} s -> {out}")
@@ -766,13 +778,13 @@ def _add_latency_option(p: argparse.ArgumentParser, whose: str) -> None:
         metavar="SENSOR=MS",
         help=f"how long {whose} gyro or magnetometer lags the motion, ms (repeatable): every filter is fed the field "
         "at the gyro's instant and its attitudes are moved to their stamps (default: a gyroemu log's device's "
-        "latency_s, else 0)",
+        "latency_s, else 0); mag=auto: the gyro's plus the field's lag behind it, read from the log",
     )
 
 
-def _latencies(args) -> dict[str, float]:
-    """``--latency``'s sensors and seconds; a sensor given twice is a usage error."""
-    latencies: dict[str, float] = {}
+def _latencies(args) -> dict[str, float | str]:
+    """``--latency``'s sensors and seconds (or ``"auto"``); a sensor given twice is a usage error."""
+    latencies: dict[str, float | str] = {}
     for sensor, seconds in args.latency:
         if sensor in latencies:
             raise UsageError(f"argument --latency: {sensor} given twice")
@@ -780,10 +792,10 @@ def _latencies(args) -> dict[str, float]:
     return latencies
 
 
-def _latency(text: str) -> tuple[str, float]:
+def _latency(text: str) -> tuple[str, float | str]:
     """``SENSOR=MS``: a sensor (gyro, mag) and its latency in milliseconds, returned in seconds:
-    finite, under a second either way (the devices' ``latency_s`` bound)."""
-    from gyroemu.pipelines.estimation.setup import LATENCY_SENSORS
+    finite, under a second either way (the devices' ``latency_s`` bound); or ``mag=auto``."""
+    from gyroemu.pipelines.estimation.setup import FIELD_LAG_FROM_LOG, LATENCY_SENSORS, check_latency_sensors
 
     sensor, sep, value_text = text.partition("=")
     sensor = sensor.strip()
@@ -791,6 +803,12 @@ def _latency(text: str) -> tuple[str, float]:
         raise argparse.ArgumentTypeError(
             f"expected SENSOR=MS with SENSOR one of {', '.join(LATENCY_SENSORS)}, got {text!r}"
         )
+    if value_text.strip() == FIELD_LAG_FROM_LOG:
+        try:
+            check_latency_sensors({sensor: FIELD_LAG_FROM_LOG})
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+        return sensor, FIELD_LAG_FROM_LOG
     try:
         value = float(value_text)
     except ValueError:

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .field_lag import FieldLag, estimate_field_lag
 from .protocol import DeviceNoise, FilterSetup
 
 if TYPE_CHECKING:
@@ -22,8 +23,10 @@ if TYPE_CHECKING:
     from gyroemu.sensors import Device
 
 __all__ = [
+    "FIELD_LAG_FROM_LOG",
     "LATENCY_SENSORS",
     "check_latency_sensors",
+    "latencies_for_log",
     "noise_from_device",
     "setup_for",
     "setup_from_metadata",
@@ -32,6 +35,10 @@ __all__ = [
 
 LATENCY_SENSORS = ("gyro", "mag")
 """The sensors whose latency a setup holds (:mod:`.latency` says why not the accelerometer's)."""
+
+FIELD_LAG_FROM_LOG = "auto"
+"""The magnetometer's latency given as this: the gyro's plus the field's lag read from the log
+(:func:`latencies_for_log`)."""
 
 
 def noise_from_device(device: Device) -> DeviceNoise:
@@ -117,12 +124,21 @@ def setup_from_metadata(metadata: dict | None, rate_hz: float, *, use_mag: bool)
     return FilterSetup(rate_hz=rate_hz, use_mag=use_mag)
 
 
-def check_latency_sensors(latency_s: Mapping[str, float]) -> None:
-    """Raise ``ValueError`` naming any sensor of ``latency_s`` not in :data:`LATENCY_SENSORS` (a job
-    checks its options with it before any work)."""
+def check_latency_sensors(latency_s: Mapping[str, float | str]) -> None:
+    """Raise ``ValueError`` naming any sensor of ``latency_s`` not in :data:`LATENCY_SENSORS`, or a
+    value that is neither a number of seconds nor, for the magnetometer, :data:`FIELD_LAG_FROM_LOG` (a
+    job checks its options with it before any work)."""
     unknown = sorted(set(latency_s) - set(LATENCY_SENSORS))
     if unknown:
         raise ValueError(f"no sensor {', '.join(unknown)} ({' or '.join(LATENCY_SENSORS)})")
+    for sensor, value in latency_s.items():
+        if value == FIELD_LAG_FROM_LOG and sensor != "mag":
+            raise ValueError(
+                f"{sensor}={FIELD_LAG_FROM_LOG}: only the magnetometer's lag behind the gyro can be read from a "
+                "log; how long the gyro lags the motion needs a truth: give it in milliseconds"
+            )
+        if not isinstance(value, (int, float)) and value != FIELD_LAG_FROM_LOG:
+            raise ValueError(f"{sensor}: expected seconds or {FIELD_LAG_FROM_LOG!r}, got {value!r}")
 
 
 def with_latencies(setup: FilterSetup, latency_s: Mapping[str, float]) -> FilterSetup:
@@ -140,3 +156,40 @@ def with_latencies(setup: FilterSetup, latency_s: Mapping[str, float]) -> Filter
         gyro_latency_s=float(latency_s.get("gyro", setup.gyro_latency_s)),
         mag_latency_s=float(latency_s.get("mag", setup.mag_latency_s)),
     )
+
+
+def latencies_for_log(
+    setup: FilterSetup,
+    latency_s: Mapping[str, float | str],
+    t: np.ndarray,
+    gyro: np.ndarray,
+    mag: np.ndarray | None,
+) -> tuple[FilterSetup, FieldLag | None]:
+    """:func:`with_latencies` for one device of a log, where the magnetometer's may be
+    :data:`FIELD_LAG_FROM_LOG`: then it is the gyro's latency plus the field's lag behind the gyro read
+    from the samples (:func:`~.field_lag.estimate_field_lag`) where that lag is observable, else the
+    setup's own.
+
+    Parameters
+    ----------
+    setup : FilterSetup
+        The device's setup (``use_mag`` says whether the field is used).
+    latency_s : mapping
+        ``gyro``, ``mag``: seconds, or ``mag``: ``"auto"``.
+    t, gyro, mag : ndarray
+        The device's samples: (N,) s, (N, 3) rad/s, (N, 3) any unit (NaN rows: no field) or None.
+
+    Returns
+    -------
+    (FilterSetup, FieldLag or None)
+        The setup, and the fit when the field's lag was read from the log (None when it was not asked for,
+        or the setup uses no field).
+    """
+    check_latency_sensors(latency_s)
+    setup = with_latencies(setup, {k: float(v) for k, v in latency_s.items() if v != FIELD_LAG_FROM_LOG})
+    if latency_s.get("mag") != FIELD_LAG_FROM_LOG or not setup.use_mag or mag is None:
+        return setup, None
+    lag = estimate_field_lag(t, gyro, mag)
+    if lag.observable:
+        setup = replace(setup, mag_latency_s=setup.gyro_latency_s + lag.lag_s)
+    return setup, lag

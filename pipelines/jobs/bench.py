@@ -127,13 +127,14 @@ class SimCase:
 @dataclass(frozen=True)
 class LogCase:
     """An MCAP log with a truth channel; ``device`` picks one device (default: each with truth);
-    ``latency_s`` the gyro's and the magnetometer's latencies, s (``{"gyro": …, "mag": …}``; default: a
-    gyroemu log's device's, else 0; :func:`gyroemu.pipelines.estimation.setup.with_latencies`)."""
+    ``latency_s`` the gyro's and the magnetometer's latencies, s (``{"gyro": …, "mag": …}``, ``"mag":
+    "auto"`` to read the field's lag from the log; default: a gyroemu log's device's, else 0;
+    :func:`gyroemu.pipelines.estimation.setup.latencies_for_log`)."""
 
     path: str | Path
     device: str | None = None
     six_d: bool = False
-    latency_s: dict[str, float] | None = None
+    latency_s: dict[str, float | str] | None = None
 
 
 @dataclass
@@ -711,7 +712,7 @@ def _sim_run(traj, device, seed) -> _Run:
 def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, list[str]]]:
     """The devices of a log to bench: (name, mode, setup, run, source, notes) each."""
     from gyroemu.pipelines.estimation.series import check_samples
-    from gyroemu.pipelines.estimation.setup import check_latency_sensors, setup_from_metadata, with_latencies
+    from gyroemu.pipelines.estimation.setup import check_latency_sensors, latencies_for_log, setup_from_metadata
     from gyroemu.pipelines.formats.mcap_log import read_mcap
 
     path = Path(case.path)
@@ -793,7 +794,10 @@ def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, li
             warnings.simplefilter("ignore")  # an embedded config that no longer validates: defaults
             setup = setup_from_metadata(dev.metadata, 1.0 / dt_nominal, use_mag=mode == "9D")
         if case.latency_s:
-            setup = with_latencies(setup, case.latency_s)
+            mag = np.asarray(s.mag, float) if mode == "9D" else None
+            setup, lag = latencies_for_log(setup, case.latency_s, t - t[0], np.asarray(s.gyro, float), mag)
+            if lag is not None:
+                notes.append(lag.describe())
         if setup.gyro_latency_s or setup.mag_latency_s:
             notes.append(
                 f"latencies: gyro {setup.gyro_latency_s * 1e3:g} ms, magnetometer {setup.mag_latency_s * 1e3:g} ms "

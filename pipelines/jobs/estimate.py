@@ -34,7 +34,7 @@ import numpy as np
 
 from gyroemu.pipelines.estimation.registry import make_filter
 from gyroemu.pipelines.estimation.series import check_samples, estimate_series, rate_of
-from gyroemu.pipelines.estimation.setup import check_latency_sensors, setup_from_metadata, with_latencies
+from gyroemu.pipelines.estimation.setup import check_latency_sensors, latencies_for_log, setup_from_metadata
 from gyroemu.pipelines.formats.channels import (
     BODY_FRAME,
     ESTIMATE_ROLE,
@@ -99,11 +99,15 @@ class EstimateSummary:
         Per filtered device ``(name, samples, filter name, 9D?)``.
     topics : list of tuple
         Per filtered device ``(IMU topic, estimate topic, estimate messages written)``.
+    field_lags : list of tuple
+        Per device whose field's lag was read from the log (``latency_s={"mag": "auto"}``)
+        ``(name, FieldLag, the magnetometer's latency used, s)``.
     """
 
     path: Path
     devices: list
     topics: list = field(default_factory=list)
+    field_lags: list = field(default_factory=list)
 
 
 @dataclass
@@ -169,7 +173,7 @@ def estimate_log(
     topic: str | None = None,
     topic_out: str | None = None,
     force: bool = False,
-    latency_s: Mapping[str, float] | None = None,
+    latency_s: Mapping[str, float | str] | None = None,
 ) -> EstimateSummary:
     """Filter the IMU topic(s) of the log ``path`` and write ``out``: the input with the estimate added.
 
@@ -192,7 +196,9 @@ def estimate_log(
         How long each named sensor (``gyro``, ``mag``) lags the motion, s: the field is moved to the
         gyro's instant and the attitudes to their stamps
         (:mod:`gyroemu.pipelines.estimation.latency`). A sensor not named keeps a gyroemu log's
-        device's ``latency_s``, 0 for any other log.
+        device's ``latency_s``, 0 for any other log. ``"mag": "auto"``: the gyro's latency plus the
+        field's lag behind the gyro read from each device's samples where it is observable
+        (:func:`~gyroemu.pipelines.estimation.setup.latencies_for_log`; ``EstimateSummary.field_lags``).
 
     Raises
     ------
@@ -224,7 +230,7 @@ def estimate_log(
             raise EstimateTopicError(
                 f"argument --topic-out: {path} has {name} of type {types[name]}: name another topic"
             )
-    targets, done = [], []
+    targets, done, field_lags = [], [], []
     for dev, name in chosen:
         samples = dev.samples
         note = check_samples(path, dev.name, samples.t, samples.gyro, samples.accel)
@@ -232,10 +238,12 @@ def estimate_log(
             warnings.warn(f"{path}: {note}", UserWarning, stacklevel=2)
         nine = samples.has_mag if use_mag is None else (use_mag and samples.has_mag)
         setup = setup_from_metadata(dev.metadata, rate_of(samples.t), use_mag=nine)
-        if latency_s:
-            setup = with_latencies(setup, latency_s)
-        flt = make_filter(filter_name, setup)
         t_rel = samples.t - samples.t[0]  # relative times keep float64's resolution for the filter
+        if latency_s:
+            setup, lag = latencies_for_log(setup, latency_s, t_rel, samples.gyro, samples.mag if nine else None)
+            if lag is not None:
+                field_lags.append((dev.name, lag, setup.mag_latency_s))
+        flt = make_filter(filter_name, setup)
         est = flt.process(t_rel, samples.gyro, samples.accel, samples.mag if nine else None)
         fields = series_fields(estimate_series(samples.t, est, samples.gyro))
         targets.append(
@@ -250,7 +258,8 @@ def estimate_log(
         done.append((dev.name, len(samples), getattr(flt, "name", filter_name), nine))
     _add_estimate_tf(targets, chosen)
     _copy_with_estimates(path, out, log.profile, targets)
-    return EstimateSummary(path=out, devices=done, topics=[(t.topic, t.topic_out, t.sequence) for t in targets])
+    topics = [(t.topic, t.topic_out, t.sequence) for t in targets]
+    return EstimateSummary(path=out, devices=done, topics=topics, field_lags=field_lags)
 
 
 def _add_estimate_tf(targets: list[_Target], chosen: list[tuple[DeviceLog, str]]) -> None:

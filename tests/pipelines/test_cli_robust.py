@@ -79,6 +79,8 @@ def test_stream_and_bench_refuse_bad_numbers(tmp_path, command, options, named):
         (["4"], "argument --latency: expected SENSOR=MS with SENSOR one of gyro, mag, got '4'"),
         (["gps=4"], "argument --latency: expected SENSOR=MS with SENSOR one of gyro, mag, got 'gps=4'"),
         (["gyro=2", "gyro=3"], "argument --latency: gyro given twice"),
+        (["mag=auto", "mag=3"], "argument --latency: mag given twice"),
+        (["gyro=auto"], "argument --latency: gyro=auto: only the magnetometer's lag behind the gyro can be read"),
     ],
 )
 def test_estimate_refuses_a_bad_latency(tmp_path, values, named):
