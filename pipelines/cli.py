@@ -120,6 +120,7 @@ def _cmd_import(args) -> int:
 
 def _cmd_estimate(args) -> int:
     from gyroemu.pipelines.estimation.registry import FilterError, filter_class
+    from gyroemu.pipelines.estimation.setup import FIELD_LAG_FROM_LOG
     from gyroemu.pipelines.jobs.estimate import EstimateError, check_options, estimate_log
 
     if args.smooth:
@@ -189,6 +190,10 @@ def _cmd_estimate(args) -> int:
         print(f"{name}: {n} samples, {flt} ({'9D' if nine else '6D'})")
     for name, lag, _ in summary.field_lags:
         print(f"{name}: {lag.describe()}")
+    read = {name for name, _, _ in summary.field_lags}
+    for name, _, _, nine in summary.devices:
+        if latencies.get("mag") == FIELD_LAG_FROM_LOG and name not in read and not nine:
+            print(f"{name}: --latency mag=auto: 6D, no field used: nothing read")
     for topic, topic_out, count in summary.topics:
         print(f"{topic} -> {topic_out}: {count} estimates")
     print(f"input copied with its estimate in {elapsed:.2f} s -> {out}")

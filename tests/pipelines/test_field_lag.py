@@ -142,7 +142,8 @@ def test_broad_the_lag_lies_within_what_the_latencies_allow():
 def test_estimate_latency_mag_auto_on_the_command_line(tmp_path):
     """``gyroemu estimate --latency mag=auto --json`` on a log of a lagging ideal IMU reports the fit (the
     bound of ``test_the_fit_finds_the_fields_lag_behind_the_gyro``) and the magnetometer latency it used:
-    the gyro's, from the log's device, plus the fit. (A bad ``--latency`` exits 2: ``test_cli_robust``.)"""
+    the gyro's, from the log's device, plus the fit; in 6D it says nothing was read. (A bad ``--latency``
+    exits 2: ``test_cli_robust``.)"""
     scenario = load_scenario("smooth_manoeuvre")
     traj = scenario.simulate(duration=30.0)
     device = _lagging_ideal_imu(0.002, 0.02)
@@ -157,3 +158,8 @@ def test_estimate_latency_mag_auto_on_the_command_line(tmp_path):
     assert lag["applied"] and lag["mag_latency_ms"] == pytest.approx(2.0 + lag["lag_ms"], rel=4 * EPS)
     bound = _lag_bound(truth, samples, 0.018) * 1e3 + 4 * lag["standard_error_ms"]
     assert abs(lag["lag_ms"] - 18.0) <= bound < 18.0 / 4, lag
+    six_d = subprocess.run(
+        [sys.executable, "-m", "gyroemu", *argv[:-1], "--force", "--6d"], capture_output=True, text=True
+    )
+    assert six_d.returncode == 0, six_d.stderr
+    assert "imu0: --latency mag=auto: 6D, no field used: nothing read" in six_d.stdout, six_d.stdout
