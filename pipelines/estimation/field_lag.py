@@ -29,7 +29,7 @@ import numpy as np
 
 from gyroemu.dynamics.rotation import quat_from_rotvec, quat_multiply, quat_rotate
 
-__all__ = ["FieldLag", "estimate_field_lag", "strapdown"]
+__all__ = ["FieldLag", "estimate_field_lag", "integrate_rates"]
 
 
 @dataclass(frozen=True)
@@ -65,7 +65,7 @@ class FieldLag:
         )
 
 
-def strapdown(t: np.ndarray, gyro: np.ndarray) -> np.ndarray:
+def integrate_rates(t: np.ndarray, gyro: np.ndarray) -> np.ndarray:
     """The attitudes (N, 4) of the raw rates integrated from the identity, ``q_k = q_{k−1} ⊗ exp(ω_k dt_k)``.
 
     Parameters
@@ -131,7 +131,7 @@ def estimate_field_lag(
     t = np.asarray(t, dtype=float)
     gyro = np.asarray(gyro, dtype=float)
     mag = np.asarray(mag, dtype=float)
-    r_wb = strapdown(t, gyro)
+    r_wb = integrate_rates(t, gyro)
     usable = np.isfinite(mag).all(axis=1) & np.isfinite(gyro).all(axis=1)
     usable &= np.linalg.norm(np.where(np.isfinite(gyro), gyro, 0.0), axis=1) >= min_rate
     index = np.flatnonzero(usable)
@@ -150,21 +150,25 @@ def estimate_field_lag(
         means = np.stack([np.bincount(window, v[:, i]) for i in range(3)], axis=1) / count[:, None]
         return v - means[window]
 
-    group = np.minimum(window * max(groups, 2) // len(windows), max(groups, 2) - 1)
+    stretches = max(groups, 2)
+    group = np.minimum(window * stretches // len(windows), stretches - 1)
     lag = 0.0
     for _ in range(3):
         turned = quat_rotate(quat_from_rotvec(-w * lag), m)
         y = centred(quat_rotate(q, turned))
         jac = centred(quat_rotate(q, np.cross(w, turned)))
-        num = np.bincount(group, np.einsum("ij,ij->i", y, jac), minlength=max(groups, 2))
-        den = np.bincount(group, np.einsum("ij,ij->i", jac, jac), minlength=max(groups, 2))
+        num = np.bincount(group, np.einsum("ij,ij->i", y, jac), minlength=stretches)
+        den = np.bincount(group, np.einsum("ij,ij->i", jac, jac), minlength=stretches)
         if not den.sum() > 0.0:
             return FieldLag(0.0, float("inf"), False, len(windows))
         lag += num.sum() / den.sum()
-    # the jackknife of the last step's ratio (the earlier steps only moved the point it is taken at)
-    left_out = (num.sum() - num) / np.where(den.sum() - den > 0.0, den.sum() - den, np.nan)
+    # the jackknife of the last step's ratio (the earlier steps only moved the point it is taken at), over
+    # the stretches that hold a window; fewer than three leave no error to speak of
+    num, den = num[den > 0.0], den[den > 0.0]
     k = len(num)
-    error = float(np.sqrt((k - 1) / k * np.sum((left_out - np.mean(left_out)) ** 2)))
-    if not np.isfinite(error):
-        error = float("inf")
-    return FieldLag(float(lag), error, bool(abs(lag) <= max_lag_s and error <= max_standard_error_s), len(windows))
+    error = float("inf")
+    if k >= 3:
+        left_out = (num.sum() - num) / (den.sum() - den)
+        error = float(np.sqrt((k - 1) / k * np.sum((left_out - np.mean(left_out)) ** 2)))
+    observable = abs(lag) <= max_lag_s and error <= max_standard_error_s
+    return FieldLag(float(lag), error, bool(observable), len(windows))

@@ -18,8 +18,8 @@ from gyroemu.dynamics.rotation import quat_angle, quat_from_rotvec, quat_multipl
 from gyroemu.pipelines.estimation import (
     FilterSetup,
     estimate_field_lag,
+    integrate_rates,
     latencies_for_log,
-    strapdown,
 )
 from gyroemu.pipelines.formats.importers import read_broad
 from gyroemu.pipelines.formats.mcap_log import Recording, truth_series, write_mcap
@@ -30,7 +30,7 @@ TRIAL_02 = BROAD_DIR / "02_undisturbed_slow_rotation_B.hdf5"
 TRIAL_33 = BROAD_DIR / "33_disturbed_attached_magnet_2cm.hdf5"
 
 
-def test_strapdown_is_the_ordered_product_of_the_sample_turns():
+def test_integrate_rates_is_the_ordered_product_of_the_sample_turns():
     """The parallel prefix is ``exp(ω₀ dt) ⊗ exp(ω₁ dt) ⊗ …`` in that order: against the product taken
     one sample after another, and for a constant rate against ``exp(ω t)``, to round-off (N products of
     a few ε each); the product in the other order differs at first order (the rates do not commute)."""
@@ -39,7 +39,7 @@ def test_strapdown_is_the_ordered_product_of_the_sample_turns():
     t = np.arange(n) * 0.01
     gyro = rng.normal(scale=2.0, size=(n, 3))
     gyro[17] = np.nan  # a missing sample turns nothing
-    got = strapdown(t, gyro)
+    got = integrate_rates(t, gyro)
     steps = quat_from_rotvec(np.where(np.isfinite(gyro), gyro, 0.0) * 0.01)
     one_by_one = np.empty_like(steps)
     one_by_one[0] = steps[0]
@@ -53,7 +53,7 @@ def test_strapdown_is_the_ordered_product_of_the_sample_turns():
     assert quat_angle(reversed_order, one_by_one).max() > 1e-3
 
     omega = np.array([0.3, -1.1, 0.7])
-    constant = strapdown(t, np.tile(omega, (n, 1)))
+    constant = integrate_rates(t, np.tile(omega, (n, 1)))
     exact = quat_from_rotvec(np.outer(t + 0.01, omega))  # the first sample's interval is the median period
     assert quat_angle(constant, exact).max() < 8 * n * EPS * (1 + np.linalg.norm(omega) * t[-1])
 
