@@ -23,7 +23,7 @@ accelerometer is not moved, as the module says why), which is what ``gyroemu est
 gyro=2.424 --latency mag=15.38`` does for any filter. What is left is what the estimators differ by.
 
 Last, the 9D table with each trial's field turned back by its lag behind the gyro read from the trial
-itself (:func:`gyroemu.pipelines.estimation.field_lag.estimate_field_lag`, no truth, no device file; not
+itself (:func:`gyroemu.pipelines.estimation.setup.latencies_for_log`, no truth, no device file; not
 applied where it is not observable), the attitudes as the estimators give them: what ``gyroemu estimate
 --latency mag=auto`` and ``gyroemu bench --latency mag=auto`` do for a log of unknown latencies.
 """
@@ -41,12 +41,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from broad_data import BROAD_DIR, trial_files  # noqa: E402  (tests/benchmarks is the script folder)
 
-from gyroemu.pipelines.estimation.field_lag import estimate_field_lag  # noqa: E402
 from gyroemu.pipelines.estimation.latency import attitude_at_stamps, field_at_gyro_instant  # noqa: E402
 from gyroemu.pipelines.estimation.mekf import Mekf, MekfParams  # noqa: E402
 from gyroemu.pipelines.estimation.mekf_smoother import MekfSmoother, smoother_params  # noqa: E402
 from gyroemu.pipelines.estimation.metrics import attitude_errors, rmse_deg  # noqa: E402
 from gyroemu.pipelines.estimation.protocol import FilterSetup  # noqa: E402
+from gyroemu.pipelines.estimation.setup import FIELD_LAG_FROM_LOG, latencies_for_log  # noqa: E402
 from gyroemu.pipelines.formats.importers import read_broad  # noqa: E402
 from gyroemu.sensors import load_device  # noqa: E402
 
@@ -96,10 +96,9 @@ def trial_errors(
     gyro_l, mag_l = latencies
     # LatencyCompensated's rules, for the peers called here directly (the raw rate: no filter's bias)
     timed_mag = np.ascontiguousarray(field_at_gyro_instant(trial.mag_ut, gyro, gyro_l, mag_l))
-    fit = estimate_field_lag(t, gyro, trial.mag_ut)
-    read_mag = np.ascontiguousarray(
-        field_at_gyro_instant(trial.mag_ut, gyro, 0.0, fit.lag_s if fit.observable else 0.0)
-    )
+    # what --latency mag=auto does: the setup's latencies with the field's lag read from the trial
+    read, fit = latencies_for_log(FilterSetup(rate_hz=fs), {"mag": FIELD_LAG_FROM_LOG}, t, gyro, trial.mag_ut)
+    read_mag = np.ascontiguousarray(field_at_gyro_instant(trial.mag_ut, gyro, read.gyro_latency_s, read.mag_latency_s))
     out: dict = {"field lag": fit}
     for name in COLUMNS:
         started = time.perf_counter()

@@ -23,6 +23,7 @@ from gyroemu.pipelines.estimation import (
 )
 from gyroemu.pipelines.formats.importers import read_broad
 from gyroemu.pipelines.formats.mcap_log import Recording, truth_series, write_mcap
+from gyroemu.pipelines.jobs.bench import LogCase, run_bench
 from gyroemu.sensors import device_from_dict
 
 EPS = np.finfo(float).eps
@@ -163,3 +164,22 @@ def test_estimate_latency_mag_auto_on_the_command_line(tmp_path):
     )
     assert six_d.returncode == 0, six_d.stderr
     assert "imu0: --latency mag=auto: 6D, no field used: nothing read" in six_d.stdout, six_d.stdout
+
+
+def test_bench_reads_the_lag_for_every_filter(tmp_path):
+    """``gyroemu bench --log LOG --latency mag=auto`` (``LogCase.latency_s``) on a log of an ideal IMU whose
+    magnetometer lags its gyro by 20 ms: the report notes the fit, and the magnetometer's latency every
+    filter is timed by is the fit (the gyro's is 0)."""
+    scenario = load_scenario("smooth_manoeuvre")
+    traj = scenario.simulate(duration=30.0)
+    device = _lagging_ideal_imu(0.0, 0.02)
+    samples = device.measure(traj)
+    truth = truth_series(traj, samples)
+    log = write_mcap(tmp_path / "late.mcap", Recording(samples, truth=truth, device=device), scenario=scenario)
+    fit = estimate_field_lag(samples.t - samples.t[0], samples.gyro, samples.mag)
+    assert fit.observable
+    report = run_bench([LogCase(log, latency_s={"mag": "auto"})], filters=["mekf", "madgwick"], progress=False)
+    (case,) = report.cases
+    assert fit.describe() in case.notes
+    assert any(f"magnetometer {fit.lag_s * 1e3:g} ms" in note for note in case.notes), case.notes
+    assert [f.filter for f in case.filters] == ["mekf", "madgwick"]
