@@ -8,6 +8,7 @@ SIGINT ends a command with status 130, SIGTERM with 143, after its clean-up (a p
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import json
 import math
 import os
@@ -1310,6 +1311,10 @@ def main(argv: list[str] | None = None) -> int:
     """
     from gyroemu.pipelines.log_setup import cli_logging, verbosity_level
 
+    # a crash in native code (numba's kernels, zstd, zenoh) prints every thread's Python stack on stderr
+    # rather than nothing (a rare SIGSEGV after SIGINT in CI, 2026-11-26, left no trace to follow)
+    if not faulthandler.is_enabled():
+        faulthandler.enable()
     parser = build_parser()
     args = parser.parse_args(argv)
     # SIGTERM's default action ends the process without any clean-up: for the command it raises
