@@ -140,17 +140,24 @@ def test_broad_the_lag_lies_within_what_the_latencies_allow():
     assert 0.0 < fit.lag_s < 0.01538, fit
 
 
+def _lagging_log(tmp_path, gyro_l: float, mag_l: float):
+    """A gyroemu log of 30 s of the smooth manoeuvre through :func:`_lagging_ideal_imu`: its path, the
+    samples and their truth."""
+    scenario = load_scenario("smooth_manoeuvre")
+    traj = scenario.simulate(duration=30.0)
+    device = _lagging_ideal_imu(gyro_l, mag_l)
+    samples = device.measure(traj)
+    truth = truth_series(traj, samples)
+    log = write_mcap(tmp_path / "late.mcap", Recording(samples, truth=truth, device=device), scenario=scenario)
+    return log, samples, truth
+
+
 def test_estimate_latency_mag_auto_on_the_command_line(tmp_path):
     """``gyroemu estimate --latency mag=auto --json`` on a log of a lagging ideal IMU reports the fit (the
     bound of ``test_the_fit_finds_the_fields_lag_behind_the_gyro``) and the magnetometer latency it used:
     the gyro's, from the log's device, plus the fit; in 6D it says nothing was read. (A bad ``--latency``
     exits 2: ``test_cli_robust``.)"""
-    scenario = load_scenario("smooth_manoeuvre")
-    traj = scenario.simulate(duration=30.0)
-    device = _lagging_ideal_imu(0.002, 0.02)
-    samples = device.measure(traj)
-    truth = truth_series(traj, samples)
-    log = write_mcap(tmp_path / "late.mcap", Recording(samples, truth=truth, device=device), scenario=scenario)
+    log, samples, truth = _lagging_log(tmp_path, 0.002, 0.02)
     out = tmp_path / "est.mcap"
     argv = ["estimate", str(log), "--out", str(out), "--latency", "mag=auto", "--json"]
     result = subprocess.run([sys.executable, "-m", "gyroemu", *argv], capture_output=True, text=True)
@@ -170,12 +177,7 @@ def test_bench_reads_the_lag_for_every_filter(tmp_path):
     """``gyroemu bench --log LOG --latency mag=auto`` (``LogCase.latency_s``) on a log of an ideal IMU whose
     magnetometer lags its gyro by 20 ms: the report notes the fit, and the magnetometer's latency every
     filter is timed by is the fit (the gyro's is 0)."""
-    scenario = load_scenario("smooth_manoeuvre")
-    traj = scenario.simulate(duration=30.0)
-    device = _lagging_ideal_imu(0.0, 0.02)
-    samples = device.measure(traj)
-    truth = truth_series(traj, samples)
-    log = write_mcap(tmp_path / "late.mcap", Recording(samples, truth=truth, device=device), scenario=scenario)
+    log, samples, truth = _lagging_log(tmp_path, 0.0, 0.02)
     fit = estimate_field_lag(samples.t - samples.t[0], samples.gyro, samples.mag)
     assert fit.observable
     report = run_bench([LogCase(log, latency_s={"mag": "auto"})], filters=["mekf", "madgwick"], progress=False)
