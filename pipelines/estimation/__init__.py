@@ -10,7 +10,7 @@
 - :mod:`.metrics`: BROAD's error definitions; :mod:`.setup`: a setup from a device or a log.
 """
 
-from .field_lag import FieldLag, estimate_field_lag, integrate_rates
+from .field_lag import FieldLag, estimate_field_lag
 from .latency import LatencyCompensated, advance_attitude, attitude_at_stamps, field_at_gyro_instant, turn_back
 from .mekf import Mekf, MekfParams
 from .metrics import AttitudeErrors, attitude_errors, convergence_time, rmse_deg
@@ -45,7 +45,6 @@ __all__ = [
     "convergence_time",
     "estimate_field_lag",
     "field_at_gyro_instant",
-    "integrate_rates",
     "latencies_for_log",
     "noise_from_device",
     "rmse_deg",

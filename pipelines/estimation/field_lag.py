@@ -27,9 +27,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gyroemu.dynamics.rotation import quat_from_rotvec, quat_multiply, quat_rotate
+from gyroemu.dynamics.rotation import quat_from_rotvec, quat_rotate
 
-__all__ = ["FieldLag", "estimate_field_lag", "integrate_rates"]
+from .mekf_kernels import rotations_since_first
+
+__all__ = ["FieldLag", "estimate_field_lag"]
 
 
 @dataclass(frozen=True)
@@ -63,35 +65,6 @@ class FieldLag:
             f"the field's lag behind the gyro cannot be read from the log ({fit}: a field that turns with the "
             "body, or too little turning): not applied"
         )
-
-
-def integrate_rates(t: np.ndarray, gyro: np.ndarray) -> np.ndarray:
-    """The attitudes (N, 4) of the raw rates integrated from the identity, ``q_k = q_{k−1} ⊗ exp(ω_k dt_k)``.
-
-    Parameters
-    ----------
-    t : ndarray (N,)
-        Sample times, s, increasing; the first sample's interval is taken as the median period.
-    gyro : ndarray (N, 3)
-        Each sample's mean rate over its interval, rad/s, body axes; a non-finite row turns nothing.
-
-    Returns
-    -------
-    ndarray (N, 4)
-        Body to strapdown frame, unit quaternions (w, x, y, z), after each sample.
-
-    The product is a parallel prefix (Hillis & Steele 1986): ⌈log₂ N⌉ vectorised quaternion products.
-    """
-    t = np.asarray(t, dtype=float)
-    rate = np.asarray(gyro, dtype=float)
-    dt = np.diff(t, prepend=t[0] - (np.median(np.diff(t)) if len(t) > 1 else 0.0))
-    step = np.where(np.isfinite(rate).all(axis=1, keepdims=True), rate * dt[:, None], 0.0)
-    q = quat_from_rotvec(step)
-    shift = 1
-    while shift < len(q):
-        q[shift:] = quat_multiply(q[:-shift], q[shift:])  # the right-hand side is read before it is written
-        shift *= 2
-    return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
 def estimate_field_lag(
@@ -131,20 +104,20 @@ def estimate_field_lag(
     t = np.asarray(t, dtype=float)
     gyro = np.asarray(gyro, dtype=float)
     mag = np.asarray(mag, dtype=float)
-    r_wb = integrate_rates(t, gyro)
+    # the raw rates' strapdown, the initial state's (sample k's axes to sample 0's; a fixed turn of the
+    # frame leaves the fit as it is)
+    to_first = rotations_since_first(t, np.ascontiguousarray(gyro))
     usable = np.isfinite(mag).all(axis=1) & np.isfinite(gyro).all(axis=1)
     usable &= np.linalg.norm(np.where(np.isfinite(gyro), gyro, 0.0), axis=1) >= min_rate
     index = np.flatnonzero(usable)
     window = np.floor((t[index] - t[0]) / window_s).astype(np.int64)
-    windows, window = np.unique(window, return_inverse=True)
-    count = np.bincount(window, minlength=len(windows)).astype(float)
-    keep = count[window] >= 2  # a window of one sample has no spread
-    index, window = index[keep], window[keep]
+    _, inverse, sizes = np.unique(window, return_inverse=True, return_counts=True)
+    index, window = index[sizes[inverse] >= 2], window[sizes[inverse] >= 2]  # one sample has no spread
     if len(index) == 0:
         return FieldLag(0.0, float("inf"), False, 0)
     windows, window = np.unique(window, return_inverse=True)
     count = np.bincount(window).astype(float)
-    q, w, m = r_wb[index], gyro[index], mag[index]
+    r, w, m = to_first[index], gyro[index], mag[index]
 
     def centred(v: np.ndarray) -> np.ndarray:
         means = np.stack([np.bincount(window, v[:, i]) for i in range(3)], axis=1) / count[:, None]
@@ -155,8 +128,8 @@ def estimate_field_lag(
     lag = 0.0
     for _ in range(3):
         turned = quat_rotate(quat_from_rotvec(-w * lag), m)
-        y = centred(quat_rotate(q, turned))
-        jac = centred(quat_rotate(q, np.cross(w, turned)))
+        y = centred(np.einsum("kij,kj->ki", r, turned))
+        jac = centred(np.einsum("kij,kj->ki", r, np.cross(w, turned)))
         num = np.bincount(group, np.einsum("ij,ij->i", y, jac), minlength=stretches)
         den = np.bincount(group, np.einsum("ij,ij->i", jac, jac), minlength=stretches)
         if not den.sum() > 0.0:
