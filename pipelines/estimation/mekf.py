@@ -460,12 +460,14 @@ class Mekf:
             except ValueError:
                 bad = k + int(np.argmax(np.diff(np.concatenate([[self._slow[kern.S_T]], t[k:]])) <= 0))
                 raise ValueError(f"sample {bad}: stamp {t[bad]!r} s does not increase") from None
+            # each sample with the state it was propagated with; a window's end with the window's update
             b_out[k:end] = self.b
+            cov_out[k:end] = kf.P[:3, :3]
             if kern.window_due(self._win, p):
                 self._window()
                 q_out[end - 1] = self.q
                 b_out[end - 1] = self.b
-            cov_out[k:end] = kf.P[:3, :3]
+                cov_out[end - 1] = kf.P[:3, :3]
             k = end
         return Estimate(q_wb=q_out, gyro_bias=b_out, q_wb_covariance=cov_out)
 

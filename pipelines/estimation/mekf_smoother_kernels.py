@@ -99,18 +99,18 @@ def forward_pass(
     cap = F_top.shape[0]
     while k < n and j < cap:
         end = kern.strapdown(q, b, slow, win, phi, t, gyro, delta, accel, mag, earth, params, k, q_out)
-        for i in range(k, end):
+        for i in range(k, end):  # as Mekf: each sample with the state it was propagated with
             b_out[i, :] = b
+            cov_out[i] = P[0:3, 0:3]
         if kern.window_due(win, params):
             _store_window(q, b, slow, win, phi, P, x, earth, params, use_mag, F_top, P_prior, P_post, x_upd, j)
             q_out[end - 1, :] = q
             b_out[end - 1, :] = b
+            cov_out[end - 1] = P[0:3, 0:3]
             end_index[j] = end - 1
             for e in range(9):
                 M_post[j, e] = slow[kern.S_SCALE + e]
             j += 1
-        for i in range(k, end):
-            cov_out[i] = P[0:3, 0:3]
         k = end
     return k, j
 
