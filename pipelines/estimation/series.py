@@ -2,6 +2,7 @@
 bench) and the live filter.
 
 - :func:`check_samples`: refuse samples no filter can run on, naming the file (:class:`LogError`);
+  :func:`check_counts` the same for samples counted as they went by;
 - :func:`rate_of`: the nominal rate of stamps;
 - :func:`estimate_series`: the ``/estimate/imu`` content of an :class:`Estimate`.
 """
@@ -15,7 +16,7 @@ from gyroemu.pipelines.formats.channels import ImuSeries
 
 from .protocol import Estimate
 
-__all__ = ["check_samples", "estimate_series", "rate_of"]
+__all__ = ["check_counts", "check_samples", "estimate_series", "rate_of"]
 
 
 def check_samples(path, name: str, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray) -> str | None:
@@ -23,9 +24,7 @@ def check_samples(path, name: str, t: np.ndarray, gyro: np.ndarray, accel: np.nd
     stamps that do not increase, or NaN everywhere. Some NaN samples are usable (the filters skip
     them): returns a note saying how many, None when there are none."""
     t = np.asarray(t, dtype=float)
-    if len(t) < 2:
-        raise LogError(f"device '{name}' has {len(t)} IMU sample(s): too few to run a filter", file=path)
-    bad = np.flatnonzero(~(np.diff(t) > 0))
+    bad = np.flatnonzero(~(np.diff(t) > 0)) if len(t) > 1 else np.empty(0, np.int64)
     if len(bad):
         k = int(bad[0]) + 1
         raise LogError(
@@ -34,12 +33,20 @@ def check_samples(path, name: str, t: np.ndarray, gyro: np.ndarray, accel: np.nd
             file=path,
         )
     finite = np.isfinite(gyro).all(axis=1) & np.isfinite(accel).all(axis=1)
-    if not finite.any():
+    return check_counts(path, name, len(t), int(finite.sum()))
+
+
+def check_counts(path, name: str, count: int, finite: int) -> str | None:
+    """:func:`check_samples` for samples counted as they went by (their stamps increasing): ``count``
+    samples, ``finite`` of them with finite gyro and accelerometer rows."""
+    if count < 2:
+        raise LogError(f"device '{name}' has {count} IMU sample(s): too few to run a filter", file=path)
+    if not finite:
         raise LogError(f"every IMU sample of device '{name}' holds NaN", file=path)
-    if finite.all():
+    if finite == count:
         return None
     return (
-        f"{int((~finite).sum())} of {len(t)} IMU samples of device '{name}' hold NaN; they are passed to the "
+        f"{count - finite} of {count} IMU samples of device '{name}' hold NaN; they are passed to the "
         "filters as they are (the built-in filters hold their estimate over them)"
     )
 

@@ -150,6 +150,8 @@ __all__ = [
     "EncodedBlock",
     "LogCheck",
     "check_mcap_noting",
+    "dropped_samples",
+    "unflagged_samples",
 ]
 
 
@@ -989,6 +991,19 @@ def _devices(path: Path, decoded: dict, metadata: list, skipped: dict) -> dict:
     return devices
 
 
+def dropped_samples(path: Path, count: int, imu_topic: str, topic: str) -> str:
+    """The warning for ``count`` samples of ``imu_topic`` dropped for want of a message on the raw ``topic``."""
+    return f"{path}: {count} samples of {imu_topic} have no message on {topic} at their stamp; dropped"
+
+
+def unflagged_samples(path: Path, count: int, imu_topic: str, topic: str) -> str:
+    """The warning for ``count`` samples of ``imu_topic`` without a ``/movement`` message on ``topic``."""
+    return (
+        f"{path}: {count} samples of {imu_topic} have no message on {topic} at their stamp; "
+        "their movement flag is False"
+    )
+
+
 def _device_log(path: Path, name: str, group: dict, meta: dict | None) -> DeviceLog:
     imu = group[IMU_ROLE]
     stamp_ns = imu.batch.stamp_ns
@@ -998,12 +1013,7 @@ def _device_log(path: Path, name: str, group: dict, meta: dict | None) -> Device
         if raw_kind(role) is not None:
             i, j = _match(stamp_ns[keep], d.batch.stamp_ns)
             if len(i) < len(keep):
-                warnings.warn(
-                    f"{path}: {len(keep) - len(i)} samples of {imu.topic} have no message on {d.topic} "
-                    "at their stamp; dropped",
-                    LogWarning,
-                    stacklevel=4,
-                )
+                warnings.warn(dropped_samples(path, len(keep) - len(i), imu.topic, d.topic), LogWarning, stacklevel=4)
                 keep = keep[i]
                 raw = {k: {n: v[i] for n, v in obs.items()} for k, obs in raw.items()}
             raw[d.mtype.kind] = {n: v[j] for n, v in raw_observables(d.mtype, d.batch).items()}
@@ -1019,12 +1029,7 @@ def _device_log(path: Path, name: str, group: dict, meta: dict | None) -> Device
         movement = np.zeros(len(keep), dtype=bool)
         movement[i] = d.batch["data"][j]
         if len(i) < len(keep):
-            warnings.warn(
-                f"{path}: {len(keep) - len(i)} samples of {imu.topic} have no message on {d.topic} "
-                "at their stamp; their movement flag is False",
-                LogWarning,
-                stacklevel=4,
-            )
+            warnings.warn(unflagged_samples(path, len(keep) - len(i), imu.topic, d.topic), LogWarning, stacklevel=4)
     batch = imu.batch
     variances = []
     for cov_field in ("angular_velocity_covariance", "linear_acceleration_covariance"):

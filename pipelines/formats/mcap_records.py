@@ -1277,6 +1277,14 @@ class RawMessages(NamedTuple):
         """Message k's payload bytes."""
         return self.buffer[int(self.start[k]) : int(self.start[k] + self.size[k])].tobytes()
 
+    def payloads(self, index: np.ndarray) -> np.ndarray | list[bytes]:
+        """The payloads of messages ``index`` (m,), as :meth:`MessageType.decode` takes them: one (m, size)
+        uint8 array when they are all of one size (a copy), else a list of bytes."""
+        size = self.size[index]
+        if len(size) and np.all(size == size[0]):
+            return self.buffer[self.start[index][:, None] + np.arange(int(size[0]))]
+        return [self.payload(int(k)) for k in index]
+
     @classmethod
     def from_headers(cls, headers: np.ndarray, buffer: np.ndarray, start: np.ndarray, size: np.ndarray) -> RawMessages:
         """The messages whose 22-byte headers are ``headers`` (fields ``channel_id``, ``sequence``,

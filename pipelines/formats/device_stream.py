@@ -1,0 +1,352 @@
+"""A device's samples read from a log a block at a time, as :func:`~gyroemu.pipelines.formats.mcap_log.read_mcap`
+has them whole: for commands that filter a log of any length in bounded memory (``gyroemu estimate``).
+
+:func:`read_mcap` pairs a device's topics by header stamp over the whole file: a sample is kept where
+every ``/raw/<kind>`` topic has a message at its stamp (the others are dropped, with a warning per
+topic), takes the ``/mag`` message at its stamp (NaN without one) and the ``/movement`` flag (False,
+with a warning, without one); ``/truth/pose`` pairs with the samples by index. :class:`DeviceStream`
+does the same as the file's chunks go by (:meth:`feed` a :class:`RawMessages` batch, :meth:`take` the
+samples that are complete), which a single pass can do when, in log-time order,
+
+- each topic's messages come in log-time order from chunk to chunk (chunks that do not overlap in
+  time, as writers that log as they go produce: gyroemu's, rosbags', ros2 bag's), and
+- the IMU's and every paired topic's header stamps increase,
+
+so that a sample is complete once every paired topic has gone past its stamp. A log that breaks either
+raises :class:`NotStreamable` (the caller reads it whole, with the same result), as does a paired
+topic that falls more than :data:`MAX_PENDING` samples behind (it would have to be held in memory).
+:class:`DeviceCensus` is the first pass of a command that needs the whole log's figures before it
+starts (how many samples, their rate, whether any has a field): the same warnings as :func:`read_mcap`.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gyroemu.pipelines.formats.channels import IMU_ROLE, MAG_ROLE, MOVEMENT_ROLE, POSE_ROLE, raw_kind
+from gyroemu.pipelines.formats.mcap_log import LogWarning, dropped_samples, unflagged_samples
+from gyroemu.pipelines.formats.mcap_records import RawMessages
+from gyroemu.pipelines.formats.messages import MessageType, ns_to_stamps, stamps_to_ns
+
+__all__ = [
+    "MAX_PENDING",
+    "POSE_MATCH_NS",
+    "DeviceBlock",
+    "DeviceCensus",
+    "DeviceStream",
+    "NotStreamable",
+    "RateCounter",
+    "warn_drops",
+]
+
+MAX_PENDING = 1 << 20
+"""Samples a stream may hold while a paired topic catches up, before it gives up (:class:`NotStreamable`)."""
+
+POSE_MATCH_NS = 1000
+"""How far a ``/truth/pose`` stamp may lie from its sample's for the pose to be the sample's, ns."""
+
+
+class NotStreamable(Exception):
+    """A log whose messages a single pass cannot pair as :func:`read_mcap` does (the module's notes)."""
+
+
+@dataclass(frozen=True)
+class DeviceBlock:
+    """A device's next complete samples, as :func:`read_mcap`'s :class:`DeviceLog` has them.
+
+    Attributes
+    ----------
+    stamp_ns : ndarray (n,) int64
+        Header stamps.
+    gyro, accel : ndarray (n, 3)
+        rad/s and m/s².
+    mag : ndarray (n, 3)
+        The field at the same stamp, T; NaN rows where ``/mag`` has none (and without a ``/mag``).
+    pose_ns, pose_pos : ndarray (m,) int64 and (m, 3), m ≤ n
+        ``/truth/pose`` stamps (as :func:`pose_from_batch` has them, through seconds) and positions, m,
+        paired by index with the first m samples (empty unless the stream pairs poses).
+    through_ns : int or None
+        Every IMU message up to this stamp is decided: a sample of this block or an earlier one, or
+        dropped (None: the block took no message).
+    """
+
+    stamp_ns: np.ndarray
+    gyro: np.ndarray
+    accel: np.ndarray
+    mag: np.ndarray
+    pose_ns: np.ndarray
+    pose_pos: np.ndarray
+    through_ns: int | None
+
+    def __len__(self) -> int:
+        return len(self.stamp_ns)
+
+
+@dataclass
+class _Pending:
+    """One topic's decoded messages not yet paired."""
+
+    channel_id: int
+    mtype: MessageType
+    stamp_ns: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64))
+    values: dict[str, np.ndarray] = field(default_factory=dict)
+    last_log_time: int = -1
+    seen: int = -(1 << 62)  # the largest stamp read so far
+
+    def append(self, batch: RawMessages, names: tuple[str, ...], increasing: bool) -> None:
+        index = np.flatnonzero(batch.channel_id == self.channel_id)
+        if not len(index):
+            return
+        index = index[np.argsort(batch.log_time[index], kind="stable")]  # as read_mcap: log time, then file order
+        log_time = batch.log_time[index]
+        if int(log_time[0]) < self.last_log_time:
+            raise NotStreamable("a topic's messages go back in log time from one chunk to the next")
+        self.last_log_time = int(log_time[-1])
+        decoded = self.mtype.decode(batch.payloads(index))
+        stamps = np.concatenate(([self.seen], decoded.stamp_ns))
+        if increasing and np.any(np.diff(stamps) <= 0):
+            raise NotStreamable("header stamps that do not increase")
+        self.seen = max(self.seen, int(decoded.stamp_ns.max()))
+        self.stamp_ns = np.concatenate((self.stamp_ns, decoded.stamp_ns))
+        for name in names:
+            old = self.values.get(name)
+            self.values[name] = decoded[name] if old is None else np.concatenate((old, decoded[name]))
+        if len(self.stamp_ns) > MAX_PENDING:
+            raise NotStreamable(f"more than {MAX_PENDING} messages held while the device's topics catch up")
+
+    def drop(self, upto: int | None, everything: bool) -> None:
+        """Forget the messages at or before stamp ``upto`` (all of them when ``everything``)."""
+        count = (
+            len(self.stamp_ns)
+            if everything
+            else (0 if upto is None else int(np.searchsorted(self.stamp_ns, upto, side="right")))
+        )
+        self.pop(count)
+
+    def pop(self, count: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        out = self.stamp_ns[:count], {k: v[:count] for k, v in self.values.items()}
+        self.stamp_ns = self.stamp_ns[count:]
+        self.values = {k: v[count:] for k, v in self.values.items()}
+        return out
+
+
+class DeviceStream:
+    """A device's samples a block at a time (the module's notes).
+
+    Parameters
+    ----------
+    channels : mapping
+        Role (``imu``, ``mag``, ``movement``, ``truth/pose``, ``raw/<kind>``; others are ignored) to
+        ``(channel id, message type)``, in the order :func:`read_mcap` groups them (the raw topics drop
+        samples in that order, which their warnings count).
+    pair_pose : bool
+        Pair ``/truth/pose`` with the samples by index: a sample is then complete once its pose has been
+        read too (a pose topic with fewer messages than the samples stalls the stream until
+        :class:`NotStreamable`). False: the pose topic is not read.
+
+    Attributes
+    ----------
+    raw_dropped : dict
+        Raw role to the samples it dropped so far (no message at their stamp).
+    movement_missing : int
+        Samples without a ``/movement`` message at their stamp so far.
+    """
+
+    def __init__(self, channels: Mapping[str, tuple[int, MessageType]], pair_pose: bool = False) -> None:
+        roles = dict(channels)
+        self._imu = _Pending(*roles[IMU_ROLE])
+        self._mag = _Pending(*roles[MAG_ROLE]) if MAG_ROLE in roles else None
+        self._movement = _Pending(*roles[MOVEMENT_ROLE]) if MOVEMENT_ROLE in roles else None
+        self._pose = _Pending(*roles[POSE_ROLE]) if pair_pose and POSE_ROLE in roles else None
+        self._raw = {role: _Pending(*roles[role]) for role in roles if raw_kind(role) is not None}
+        self.raw_dropped = dict.fromkeys(self._raw, 0)
+        self.movement_missing = 0
+
+    def feed(self, batch: RawMessages) -> int | None:
+        """Take in the device's messages of one chunk (in file order, as the walk hands them out).
+        Returns the largest IMU stamp among them (None: the chunk holds none)."""
+        before = self._imu.seen
+        self._imu.append(batch, ("angular_velocity", "linear_acceleration"), increasing=True)
+        for pending in self._raw.values():
+            pending.append(batch, (), increasing=True)
+        if self._mag is not None:
+            self._mag.append(batch, ("magnetic_field",), increasing=True)
+        if self._movement is not None:
+            self._movement.append(batch, ("data",), increasing=True)
+        if self._pose is not None:
+            self._pose.append(batch, ("position",), increasing=False)
+        return None if self._imu.seen == before else self._imu.seen
+
+    def take(self, final: bool = False) -> DeviceBlock:
+        """The samples every paired topic has gone past (all that are left when ``final``: the file has
+        ended), taken out of the stream."""
+        paired = [*self._raw.values(), *(p for p in (self._mag, self._movement) if p is not None)]
+        stamps = self._imu.stamp_ns
+        n = len(stamps)
+        if not final and paired:
+            n = int(np.searchsorted(stamps, min(p.seen for p in paired), side="right"))
+        if self._pose is not None and not final:
+            keep = _kept(stamps[:n], self._raw.values())
+            if len(keep) > len(self._pose.stamp_ns):  # up to the first kept sample whose pose is not read yet
+                n = int(keep[len(self._pose.stamp_ns)])
+        stamp_ns, values = self._imu.pop(n)
+        last = int(stamp_ns[-1]) if n else None
+        keep = np.arange(n)
+        for role, pending in self._raw.items():  # read_mcap's order: each raw topic drops from what is left
+            hit = _hits(stamp_ns[keep], pending.stamp_ns)[0]
+            self.raw_dropped[role] += len(keep) - len(hit)
+            keep = keep[hit]
+            pending.drop(last, final)
+        stamp_ns = stamp_ns[keep]
+        mag = np.full((len(keep), 3), np.nan)
+        if self._mag is not None:
+            i, j = _hits(stamp_ns, self._mag.stamp_ns)
+            if len(i):
+                mag[i] = self._mag.values["magnetic_field"][j]
+            self._mag.drop(last, final)
+        if self._movement is not None:
+            i, _ = _hits(stamp_ns, self._movement.stamp_ns)
+            self.movement_missing += len(keep) - len(i)
+            self._movement.drop(last, final)
+        pose_ns, pose_pos = np.empty(0, np.int64), np.empty((0, 3))
+        if self._pose is not None:
+            pose_stamps, pose_values = self._pose.pop(min(len(keep), len(self._pose.stamp_ns)))
+            if len(pose_stamps):
+                pose_ns, pose_pos = stamps_to_ns(ns_to_stamps(pose_stamps)), pose_values["position"]
+        return DeviceBlock(
+            stamp_ns=stamp_ns,
+            gyro=values["angular_velocity"][keep],
+            accel=values["linear_acceleration"][keep],
+            mag=mag,
+            pose_ns=pose_ns,
+            pose_pos=pose_pos,
+            through_ns=last,
+        )
+
+    def pose_left(self) -> int:
+        """``/truth/pose`` messages read and not yet paired with a sample."""
+        return 0 if self._pose is None else len(self._pose.stamp_ns)
+
+
+def _hits(stamp_ns: np.ndarray, stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Indices ``(i, j)`` with ``stamp_ns[i] == stamps[j]``, both increasing."""
+    if not len(stamps) or not len(stamp_ns):
+        return np.empty(0, np.int64), np.empty(0, np.int64)
+    position = np.minimum(np.searchsorted(stamps, stamp_ns), len(stamps) - 1)
+    i = np.flatnonzero(stamps[position] == stamp_ns)
+    return i, position[i]
+
+
+def _kept(stamp_ns: np.ndarray, raw) -> np.ndarray:
+    """Indices of the samples every raw topic has a message at."""
+    keep = np.arange(len(stamp_ns))
+    for pending in raw:
+        keep = keep[_hits(stamp_ns[keep], pending.stamp_ns)[0]]
+    return keep
+
+
+class RateCounter:
+    """The median interval of a series of stamps fed a block at a time, as
+    :func:`~gyroemu.pipelines.estimation.series.rate_of` finds it over the whole series (the same
+    float): the distinct intervals are counted, so the memory is that of how many distinct intervals
+    the series has (a handful for a clocked log), not of its length."""
+
+    def __init__(self) -> None:
+        self._last: float | None = None
+        self._values = np.empty(0)
+        self._counts = np.empty(0, np.int64)
+
+    def add(self, t: np.ndarray) -> None:
+        """The next stamps, s (float64, as ``ns_to_stamps`` gives them)."""
+        if not len(t):
+            return
+        steps = np.diff(t) if self._last is None else np.diff(np.concatenate(([self._last], t)))
+        self._last = float(t[-1])
+        merged = np.concatenate((self._values, steps))
+        weights = np.concatenate((self._counts, np.ones(len(steps), np.int64)))
+        values, inverse = np.unique(merged, return_inverse=True)
+        counts = np.bincount(inverse, weights=weights).astype(np.int64)
+        self._values, self._counts = values, counts
+
+    def median(self) -> float:
+        """The median interval (NumPy's: the mean of the two middle ones for an even count), s."""
+        total = int(self._counts.sum())
+        if total == 0:
+            raise ValueError("no intervals")
+        cumulative = np.cumsum(self._counts)
+        lower = self._values[int(np.searchsorted(cumulative, (total - 1) // 2, side="right"))]
+        upper = self._values[int(np.searchsorted(cumulative, total // 2, side="right"))]
+        return float(np.mean(np.array([lower, upper]))) if total % 2 == 0 else float(lower)
+
+    def rate(self) -> float:
+        """``1 / median``, Hz; 1.0 for fewer than two stamps (as ``rate_of``)."""
+        return 1.0 / self.median() if int(self._counts.sum()) else 1.0
+
+
+@dataclass
+class DeviceCensus:
+    """What a first pass learns of a device's samples (:meth:`add` each block of :meth:`DeviceStream.take`).
+
+    Attributes
+    ----------
+    count, finite : int
+        Samples, and those whose gyro and accelerometer rows are finite.
+    has_mag : bool
+        Whether any sample has a field value that is not NaN (``ImuSamples.has_mag``).
+    first_ns, last_ns : int or None
+        The first and last sample's stamps.
+    pose_matches : bool
+        Whether ``/truth/pose`` pairs with the samples by index within :data:`POSE_MATCH_NS` so far
+        (:meth:`pose_pairs` once the stream has ended).
+    rate : RateCounter
+    """
+
+    count: int = 0
+    finite: int = 0
+    has_mag: bool = False
+    first_ns: int | None = None
+    last_ns: int | None = None
+    pose_matches: bool = True
+    pose_count: int = 0
+    rate: RateCounter = field(default_factory=RateCounter)
+
+    def add(self, block: DeviceBlock) -> None:
+        """Count one block."""
+        n = len(block)
+        if not n:
+            return
+        if self.first_ns is None:
+            self.first_ns = int(block.stamp_ns[0])
+        self.last_ns = int(block.stamp_ns[-1])
+        self.count += n
+        self.finite += int((np.isfinite(block.gyro).all(axis=1) & np.isfinite(block.accel).all(axis=1)).sum())
+        self.has_mag = self.has_mag or not np.all(np.isnan(block.mag))
+        self.rate.add(ns_to_stamps(block.stamp_ns))
+        m = len(block.pose_ns)
+        self.pose_count += m
+        if m < n or np.abs(block.pose_ns - block.stamp_ns[:m]).max(initial=0) > POSE_MATCH_NS:
+            self.pose_matches = False
+
+    def pose_pairs(self, stream: DeviceStream) -> bool:
+        """Whether ``/truth/pose`` gives every sample its position (``read_mcap``'s pose of as many
+        messages as samples, each within :data:`POSE_MATCH_NS` of its sample's stamp)."""
+        return self.pose_matches and self.pose_count == self.count and stream.pose_left() == 0
+
+
+def warn_drops(path: Path, stream: DeviceStream, topics: Mapping[str, str]) -> None:
+    """The warnings :func:`read_mcap` gives for the samples a device's paired topics dropped or left
+    unflagged (``topics``: role to topic), once the stream has ended."""
+    for role, dropped in stream.raw_dropped.items():
+        if dropped:
+            warnings.warn(dropped_samples(path, dropped, topics[IMU_ROLE], topics[role]), LogWarning, stacklevel=2)
+    if stream.movement_missing:
+        warnings.warn(
+            unflagged_samples(path, stream.movement_missing, topics[IMU_ROLE], topics[MOVEMENT_ROLE]),
+            LogWarning,
+            stacklevel=2,
+        )

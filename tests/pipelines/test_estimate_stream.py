@@ -1,0 +1,265 @@
+"""``gyroemu estimate`` a block at a time: the device's samples as ``read_mcap`` pairs them whole
+(:class:`DeviceStream`), and the written file byte for byte the one of a log read whole, in memory that
+does not grow with the log."""
+
+from __future__ import annotations
+
+import hashlib
+import tracemalloc
+import warnings
+
+import numpy as np
+import pytest
+
+from gyroemu.pipelines.estimation.series import check_samples, rate_of
+from gyroemu.pipelines.formats.channels import role_message_type
+from gyroemu.pipelines.formats.device_stream import DeviceCensus, DeviceStream, RateCounter
+from gyroemu.pipelines.formats.mcap_log import LogWarning, Recording, read_mcap, truth_pose, truth_series, write_mcap
+from gyroemu.pipelines.formats.mcap_records import McapFileWriter, McapRecordWalk, RawMessages
+from gyroemu.pipelines.formats.messages import FLAG, IMU, MAGNETIC_FIELD, POSE_STAMPED
+from gyroemu.pipelines.jobs.estimate import FIRST_BLOCK_S, estimate_log
+
+from ..foreign_bags import write_foreign_bag
+
+T0_NS = 1_700_000_000 * 10**9
+
+
+def crafted_log(path, n=3000, chunk_size=2048, *, drop_raw=(), drop_mag=(), drop_flag=(), nan=(), pose=True):
+    """A device's topics written message by message: /imu at 100 Hz (rows ``nan`` NaN), /raw/mems,
+    /mag, /movement and /truth/pose at the same stamps but where dropped, in small chunks (a chunk
+    ends between an /imu message and its /mag)."""
+    rng = np.random.default_rng(11)
+    stamps = T0_NS + np.arange(n, dtype=np.int64) * 10_000_000
+    gyro = rng.normal(0, 0.02, (n, 3))
+    accel = rng.normal(0, 0.1, (n, 3)) + [0.3, -0.2, 9.8]
+    gyro[list(nan)] = np.nan
+    field = np.tile([2e-5, 1e-6, -4e-5], (n, 1)) + rng.normal(0, 1e-7, (n, 3))
+    keep = lambda dropped: np.setdiff1d(np.arange(n), np.asarray(dropped, dtype=int))  # noqa: E731
+    raw_type = role_message_type("raw/mems")
+    with open(path, "wb") as f:
+        w = McapFileWriter(f, chunk_size=chunk_size)
+        imu = w.register_ros2_channel("/imu", IMU)
+        mag = w.register_ros2_channel("/mag", MAGNETIC_FIELD)
+        raw = w.register_ros2_channel("/raw/mems", raw_type)
+        flag = w.register_ros2_channel("/movement", FLAG)
+        k_raw, k_mag, k_flag = keep(drop_raw), keep(drop_mag), keep(drop_flag)
+        channels = [
+            (imu, stamps, IMU.encode(stamps, "imu", {"angular_velocity": gyro, "linear_acceleration": accel})),
+            (raw, stamps[k_raw], raw_type.encode(stamps[k_raw], "imu")),
+            (mag, stamps[k_mag], MAGNETIC_FIELD.encode(stamps[k_mag], "imu", {"magnetic_field": field[k_mag]})),
+            (flag, stamps[k_flag], FLAG.encode(stamps[k_flag], "imu", {"data": np.ones(len(k_flag), bool)})),
+        ]
+        if pose:
+            p = w.register_ros2_channel("/truth/pose", POSE_STAMPED)
+            position = np.cumsum(rng.normal(0, 1e-3, (n, 3)), axis=0)
+            channels.append((p, stamps, POSE_STAMPED.encode(stamps, "map", {"position": position})))
+        w.add_messages(channels)
+        w.finish()
+    return path
+
+
+def split(batch: RawMessages, rng: np.random.Generator) -> list[RawMessages]:
+    """A chunk's messages cut at random places (a single message among the pieces)."""
+    n = len(batch.size)
+    cuts = np.unique(np.concatenate(([0, n], rng.integers(0, n + 1, 3))))
+    return [
+        RawMessages(
+            batch.channel_id[i:j],
+            batch.sequence[i:j],
+            batch.log_time[i:j],
+            batch.publish_time[i:j],
+            batch.buffer,
+            batch.start[i:j],
+            batch.size[i:j],
+        )  # fmt: skip
+        for i, j in zip(cuts[:-1], cuts[1:])
+    ]
+
+
+def streamed(path, pair_pose=True, seed=0):
+    """The log's one device read a block at a time, the blocks joined, and the stream and its census."""
+    log = read_mcap(path)
+    (dev,) = log.devices.values()
+    ids = {c.topic: i for i, c in McapRecordWalk(path).channels.items()}
+    walk = McapRecordWalk(path)
+    rng = np.random.default_rng(seed)
+    stream, census, blocks = None, DeviceCensus(), []
+    for whole in walk.batches():
+        if stream is None:
+            ids = {c.topic: i for i, c in walk.channels.items()}
+            roles = {role: (ids[topic], role_message_type(role)) for role, topic in dev.topics.items()}
+            stream = DeviceStream(roles, pair_pose=pair_pose)
+        for batch in split(whole, rng):
+            stream.feed(batch)
+            blocks.append(stream.take())
+            census.add(blocks[-1])
+    blocks.append(stream.take(final=True))
+    census.add(blocks[-1])
+    return dev, stream, census, blocks
+
+
+@pytest.mark.parametrize(
+    "damage",
+    [
+        {},
+        {"drop_raw": [5, 6, 999, 2999], "drop_mag": [0, 40, 41, 1500], "drop_flag": [7, 2000], "nan": [3, 300]},
+        {"drop_mag": list(range(100, 3000))},  # the field ends early
+    ],
+    ids=["whole", "gaps", "field-ends"],
+)
+def test_stream_pairs_the_topics_as_read_mcap(tmp_path, damage):
+    path = crafted_log(tmp_path / "log.mcap", **damage)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", LogWarning)
+        dev, stream, census, blocks = streamed(path)
+    want = dev.samples
+    got = np.concatenate([b.stamp_ns for b in blocks])
+    pieces = max(len(b) for b in blocks) < len(want.t) / 10  # read a little at a time
+    # a field that ends early holds every later sample until the file ends: the field might yet come
+    assert pieces == (len(damage.get("drop_mag", [])) < 100) and len(blocks) > 50
+    assert np.array_equal(got, dev.stamp_ns)
+    for name in ("gyro", "accel", "mag"):
+        assert np.concatenate([getattr(b, name) for b in blocks]).tobytes() == getattr(want, name).tobytes(), name
+    assert stream.raw_dropped == {"raw/mems": len(damage.get("drop_raw", []))}
+    assert stream.movement_missing == len(set(damage.get("drop_flag", [])) - set(damage.get("drop_raw", [])))
+    assert census.count == len(want.t) and census.has_mag == want.has_mag
+    assert census.finite == int(np.isfinite(want.gyro).all(axis=1).sum())
+    assert census.rate.rate() == rate_of(want.t)  # the same float
+    assert census.pose_pairs(stream) == (len(damage.get("drop_raw", [])) == 0)  # a pose per sample kept
+    read_warnings = [str(w.message) for w in caught if "have no message" in str(w.message)]
+    assert len(read_warnings) == bool(damage.get("drop_raw")) + bool(damage.get("drop_flag"))
+
+
+def test_rate_counter_is_numpys_median():
+    """The counted median interval is ``1 / median(diff(t))`` to the bit, blocks or not, for clocked
+    stamps (few distinct intervals), jittered ones (every interval its own) and an even or odd count."""
+    rng = np.random.default_rng(2)
+    for n in (2, 3, 1000, 1001):
+        for t in (
+            1e9 / 1e9 + np.arange(n) * 0.005,
+            np.cumsum(rng.uniform(0.004, 0.006, n)) + 1.7e9,
+            np.round(np.cumsum(rng.choice([0.01, 0.01, 0.011], n)), 6),
+        ):
+            counter = RateCounter()
+            for piece in np.array_split(t, rng.integers(1, 6)):
+                counter.add(piece)
+            assert counter.rate() == rate_of(t)
+
+
+def test_check_samples_counts_as_before():
+    """check_samples is check_counts on what it counts (the same errors and note)."""
+    t = np.arange(5) * 0.01
+    g, a = np.zeros((5, 3)), np.zeros((5, 3))
+    g[1] = np.nan
+    assert "1 of 5 IMU samples of device 'd' hold NaN" in check_samples("f", "d", t, g, a)
+    with pytest.raises(Exception, match="has 1 IMU sample"):
+        check_samples("f", "d", t[:1], g[:1], a[:1])
+    with pytest.raises(Exception, match="not increasing: sample 2"):
+        check_samples("f", "d", t[[0, 1, 1, 3, 4]], g, a)
+
+
+def digest(path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def both(tmp_path, log, **options):
+    """The estimate written a block at a time and read whole: their sha256 and the warnings of each."""
+    out = {}
+    for whole in (False, True):
+        target = tmp_path / f"{log.stem}_out_{whole}.mcap"
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            summary = estimate_log(log, target, read_whole=whole, **options)
+        notes = sorted(str(w.message) for w in caught if issubclass(w.category, UserWarning))
+        out[whole] = (digest(target), notes, summary.devices, summary.topics)
+    return out
+
+
+@pytest.mark.parametrize(
+    "scenario_name, device_name, options",
+    [
+        ("smooth_manoeuvre", "consumer_mems", {}),
+        ("smooth_manoeuvre", "consumer_mems", {"use_mag": False}),
+        ("smooth_manoeuvre", "consumer_mems", {"filter_name": "vqf"}),
+        ("smooth_manoeuvre", "consumer_mems", {"latency_s": {"gyro": 0.004, "mag": 0.012}}),
+        ("bench_static", "navigation_fog", {}),  # north from Earth's rate over the first block's 10 s
+    ],
+    ids=["9D", "6D", "vqf", "timed", "gyrocompass"],
+)
+def test_streamed_estimate_is_the_whole_reads_bytes_on_a_gyroemu_log(tmp_path, scenario_name, device_name, options):
+    """A simulated log of two minutes (longer than the first block) as ``gyroemu simulate`` writes it
+    (truth, pose, raw observables), in small chunks: the estimate, its /tf at the poses and every copied
+    record, byte for byte."""
+    from gyroemu.dynamics import load_scenario
+    from gyroemu.sensors import load_device
+
+    scenario = load_scenario(scenario_name)
+    device = load_device(device_name, seed=4)
+    traj = scenario.simulate(duration=1.25 * FIRST_BLOCK_S)
+    samples = device.measure(traj)
+    log = write_mcap(
+        tmp_path / "sim.mcap",
+        Recording(samples, truth=truth_series(traj, samples), pose=truth_pose(traj, samples), device=device),
+        scenario=scenario,
+        chunk_size=1 << 16,
+    )
+    assert set(read_mcap(log).device.topics) >= {"imu", "truth/pose"}
+    if options.get("filter_name") == "vqf":
+        pytest.importorskip("vqf")
+    out = both(tmp_path, log, **options)
+    assert out[False] == out[True]
+
+
+def test_streamed_estimate_on_damaged_and_foreign_logs(tmp_path):
+    """Dropped raw, field and flag messages, NaN samples, and a /truth/pose that pairs; then someone
+    else's bag (rosbags) with two IMU topics: the same bytes and warnings both ways."""
+    log = crafted_log(tmp_path / "gaps.mcap", n=9000, drop_raw=[5, 8000], drop_mag=[0, 4000], drop_flag=[7], nan=[30])
+    out = both(tmp_path, log)
+    assert out[False] == out[True]
+    assert any("hold NaN" in n for n in out[False][1]) and any("dropped" in n for n in out[False][1])
+    bag = write_foreign_bag(tmp_path / "bag")
+    out = both(tmp_path, bag, topic="/imu_b", filter_name="madgwick")
+    assert out[False] == out[True]
+
+
+def test_a_log_one_pass_cannot_pair_is_read_whole(tmp_path):
+    """Chunks that go back in time (the field of the first seconds written last): estimated as a whole
+    read does it, not refused."""
+    n = 3000
+    stamps = T0_NS + np.arange(n, dtype=np.int64) * 10_000_000
+    rng = np.random.default_rng(1)
+    path = tmp_path / "late.mcap"
+    with open(path, "wb") as f:
+        w = McapFileWriter(f, chunk_size=4096)
+        imu, mag = w.register_ros2_channel("/imu", IMU), w.register_ros2_channel("/mag", MAGNETIC_FIELD)
+        accel = rng.normal(0, 0.1, (n, 3)) + [0, 0, 9.8]
+        w.add_messages([(imu, stamps, IMU.encode(stamps, "imu", {"linear_acceleration": accel}))])
+        field = MAGNETIC_FIELD.encode(stamps, "imu", {"magnetic_field": np.tile([2e-5, 0, -4e-5], (n, 1))})
+        w.add_messages([(mag, stamps[n // 2 :], field[n // 2 :])])
+        w.add_messages([(mag, stamps[: n // 2], field[: n // 2])])  # earlier log times, later in the file
+        w.finish()
+    out = both(tmp_path, path)
+    assert out[False] == out[True]
+
+
+@pytest.mark.slow
+def test_memory_does_not_grow_with_the_log(tmp_path):
+    """Python's peak allocation (tracemalloc sees NumPy's buffers) for a log 4× longer: the same within
+    the chunk and first-block buffers when streamed; read whole, it grows with the samples."""
+    from gyroemu.dynamics import load_scenario
+    from gyroemu.sensors import load_device
+
+    scenario = load_scenario("smooth_manoeuvre")
+    peaks = {}
+    for minutes in (2, 8):
+        device = load_device("consumer_mems", seed=1)
+        log = tmp_path / f"m{minutes}.mcap"
+        write_mcap(log, Recording(samples=device.measure(scenario.simulate(duration=60.0 * minutes)), device=device))
+        for whole in (False, True):
+            tracemalloc.start()
+            estimate_log(log, tmp_path / f"e{minutes}{whole}.mcap", read_whole=whole)
+            peaks[minutes, whole] = tracemalloc.get_traced_memory()[1]
+            tracemalloc.stop()
+    assert peaks[8, True] > 3.0 * peaks[2, True]  # the whole read holds every sample (4×, less its floor)
+    assert peaks[8, False] < 1.15 * peaks[2, False]  # a block at a time: nothing of the extra six minutes
+    assert peaks[8, False] < peaks[8, True] / 3
