@@ -17,6 +17,7 @@ raises :class:`NotStreamable` (the caller reads it whole, with the same result),
 topic that falls more than :data:`MAX_PENDING` samples behind (it would have to be held in memory).
 :class:`DeviceCensus` is the first pass of a command that needs the whole log's figures before it
 starts (how many samples, their rate, whether any has a field): the same warnings as :func:`read_mcap`.
+:func:`scan_devices` finds the devices and :func:`count_samples` makes their census, each in one pass.
 """
 
 from __future__ import annotations
@@ -29,8 +30,16 @@ from pathlib import Path
 import numpy as np
 
 from gyroemu.pipelines.formats.channels import IMU_ROLE, MAG_ROLE, MOVEMENT_ROLE, POSE_ROLE, raw_kind
-from gyroemu.pipelines.formats.mcap_log import LogWarning, dropped_samples, unflagged_samples
-from gyroemu.pipelines.formats.mcap_records import RawMessages
+from gyroemu.pipelines.formats.mcap_log import (
+    LogWarning,
+    announce_scan,
+    device_name,
+    dropped_samples,
+    group_devices,
+    no_imu_error,
+    unflagged_samples,
+)
+from gyroemu.pipelines.formats.mcap_records import McapRecordWalk, McapScan, RawMessages
 from gyroemu.pipelines.formats.messages import MessageType, ns_to_stamps, stamps_to_ns
 
 __all__ = [
@@ -41,6 +50,9 @@ __all__ = [
     "DeviceStream",
     "NotStreamable",
     "RateCounter",
+    "StreamDevice",
+    "count_samples",
+    "scan_devices",
     "warn_drops",
 ]
 
@@ -350,3 +362,87 @@ def warn_drops(path: Path, stream: DeviceStream, topics: Mapping[str, str]) -> N
             LogWarning,
             stacklevel=2,
         )
+
+
+@dataclass
+class _Channel:
+    """A channel of a type gyroemu decodes, with messages (what :func:`group_devices` groups)."""
+
+    channel_id: int
+    topic: str
+    mtype: MessageType
+
+
+@dataclass(frozen=True)
+class StreamDevice:
+    """A device of a log found without reading its samples: :class:`DeviceLog`'s header, and its
+    channels for :class:`DeviceStream`.
+
+    Attributes
+    ----------
+    name : str
+    topics : dict
+        Role to topic.
+    metadata : dict or None
+        The device's ``gyroemu`` metadata record.
+    channels : dict
+        Role to ``(channel id, message type)``, in :func:`read_mcap`'s order.
+    """
+
+    name: str
+    topics: dict[str, str]
+    metadata: dict | None
+    channels: dict[str, tuple[int, MessageType]]
+
+
+def scan_devices(path: Path) -> tuple[dict[str, StreamDevice], McapScan]:
+    """The log's devices as :func:`read_mcap` finds them (name to device) and the scan, from one pass of
+    bounded memory that decodes every message and drops it: the same :class:`LogError` for a corrupt
+    file, the same warnings. :class:`NotStreamable` when a device's topic has several channels."""
+    scan = McapScan(path)
+    counts = scan.check()
+    skipped = announce_scan(path, scan)
+    typed = [
+        _Channel(channel_id, data.channel.topic, data.mtype)
+        for channel_id, data in scan.data.items()
+        if data.mtype is not None and counts.get(channel_id)
+    ]
+    metadata = [dict(m.metadata) for m in scan.metadata if m.name == "gyroemu"]
+    devices = {}
+    for prefix, group in group_devices(path, typed, skipped).items():
+        name, meta = device_name(prefix, metadata)
+        devices[name] = StreamDevice(
+            name=name,
+            topics={role: c.topic for role, c in group.items()},
+            metadata=meta,
+            channels={role: (c.channel_id, c.mtype) for role, c in group.items()},
+        )
+    if not devices:
+        raise no_imu_error(scan, path)
+    topics = [c.topic for c in scan.channels.values()]
+    if any(topics.count(t) > 1 for d in devices.values() for t in d.topics.values()):
+        raise NotStreamable("a device's topic on several channels")
+    return devices, scan
+
+
+def count_samples(
+    path: Path, devices: dict[str, StreamDevice], pose_of: str | None
+) -> dict[str, tuple[DeviceCensus, bool]]:
+    """Per device, the figures of its samples and whether ``/truth/pose`` gives each of them its position
+    (asked for the device ``pose_of`` only), from one pass over the log; the warnings :func:`read_mcap`
+    gives for samples dropped or unflagged."""
+    streams = {
+        name: DeviceStream(d.channels, pair_pose=name == pose_of and POSE_ROLE in d.channels)
+        for name, d in devices.items()
+    }
+    census = {name: DeviceCensus() for name in devices}
+    for batch in McapRecordWalk(path).batches():
+        for name, stream in streams.items():
+            stream.feed(batch)
+            census[name].add(stream.take())
+    out = {}
+    for name, stream in streams.items():
+        census[name].add(stream.take(final=True))
+        warn_drops(path, stream, devices[name].topics)
+        out[name] = (census[name], pose_of == name and census[name].pose_pairs(stream))
+    return out

@@ -17,7 +17,8 @@ from gyroemu.pipelines.formats.device_stream import DeviceCensus, DeviceStream, 
 from gyroemu.pipelines.formats.mcap_log import LogWarning, Recording, read_mcap, truth_pose, truth_series, write_mcap
 from gyroemu.pipelines.formats.mcap_records import McapFileWriter, McapRecordWalk, RawMessages
 from gyroemu.pipelines.formats.messages import FLAG, IMU, MAGNETIC_FIELD, POSE_STAMPED
-from gyroemu.pipelines.jobs.estimate import FIRST_BLOCK_S, estimate_log
+from gyroemu.pipelines.jobs.estimate import estimate_log
+from gyroemu.pipelines.jobs.estimate_copy import FIRST_BLOCK_S
 
 from ..foreign_bags import write_foreign_bag
 
