@@ -15,9 +15,12 @@ samples that are complete), which a single pass can do when, in log-time order,
 so that a sample is complete once every paired topic has gone past its stamp. A log that breaks either
 raises :class:`NotStreamable` (the caller reads it whole, with the same result), as does a paired
 topic that falls more than :data:`MAX_PENDING` samples behind (it would have to be held in memory).
-:class:`DeviceCensus` is the first pass of a command that needs the whole log's figures before it
-starts (how many samples, their rate, whether any has a field): the same warnings as :func:`read_mcap`.
-:func:`scan_devices` finds the devices and :func:`count_samples` makes their census, each in one pass.
+
+A command that needs the whole log's figures before it starts reads the log three times, in bounded
+memory each: :func:`scan_devices` validates every message and finds the devices (the same errors and
+warnings as :func:`read_mcap`); :func:`count_samples` makes each device's :class:`DeviceCensus` (how
+many samples, their rate, whether any has a field, whether the pose pairs; the warnings of the samples
+dropped) and keeps its first samples; the third pass is the command's own, with a :class:`DeviceStream`.
 """
 
 from __future__ import annotations
@@ -50,6 +53,7 @@ __all__ = [
     "DeviceStream",
     "NotStreamable",
     "RateCounter",
+    "Counted",
     "StreamDevice",
     "count_samples",
     "scan_devices",
@@ -97,6 +101,34 @@ class DeviceBlock:
 
     def __len__(self) -> int:
         return len(self.stamp_ns)
+
+    @staticmethod
+    def concatenate(blocks: list[DeviceBlock]) -> DeviceBlock:
+        """Consecutive blocks of one stream joined."""
+        through = [b.through_ns for b in blocks if b.through_ns is not None]
+        return DeviceBlock(
+            **{
+                name: np.concatenate([getattr(b, name) for b in blocks])
+                for name in ("stamp_ns", "gyro", "accel", "mag", "pose_ns", "pose_pos")
+            },
+            through_ns=through[-1] if through else None,
+        )
+
+    def after(self, stamp_ns: int | None) -> DeviceBlock:
+        """The samples later than ``stamp_ns`` (all when None), their poses with them."""
+        k = 0 if stamp_ns is None else int(np.searchsorted(self.stamp_ns, stamp_ns, side="right"))
+        if k == 0:
+            return self
+        m = max(0, len(self.pose_ns) - k) if len(self.pose_ns) == len(self) else 0
+        return DeviceBlock(
+            stamp_ns=self.stamp_ns[k:],
+            gyro=self.gyro[k:],
+            accel=self.accel[k:],
+            mag=self.mag[k:],
+            pose_ns=self.pose_ns[len(self.pose_ns) - m :],
+            pose_pos=self.pose_pos[len(self.pose_pos) - m :],
+            through_ns=self.through_ns,
+        )
 
 
 @dataclass
@@ -425,24 +457,59 @@ def scan_devices(path: Path) -> tuple[dict[str, StreamDevice], McapScan]:
     return devices, scan
 
 
+@dataclass(frozen=True)
+class Counted:
+    """What :func:`count_samples` found of a device.
+
+    Attributes
+    ----------
+    census : DeviceCensus
+    pose_pairs : bool
+        ``/truth/pose`` gives each sample its position (asked for one device only).
+    first : DeviceBlock or None
+        The device's first samples, from its first one to at least ``first_s`` later (all of them for a
+        shorter log), where they were asked for.
+    """
+
+    census: DeviceCensus
+    pose_pairs: bool
+    first: DeviceBlock | None
+
+
 def count_samples(
-    path: Path, devices: dict[str, StreamDevice], pose_of: str | None
-) -> dict[str, tuple[DeviceCensus, bool]]:
-    """Per device, the figures of its samples and whether ``/truth/pose`` gives each of them its position
-    (asked for the device ``pose_of`` only), from one pass over the log; the warnings :func:`read_mcap`
-    gives for samples dropped or unflagged."""
+    path: Path, devices: dict[str, StreamDevice], pose_of: str | None, first_of: set[str], first_s: float
+) -> dict[str, Counted]:
+    """Per device, the figures of its samples, whether ``/truth/pose`` gives each of them its position
+    (asked for the device ``pose_of`` only) and, for the devices ``first_of``, its first ``first_s``
+    seconds of samples, from one pass over the log; the warnings :func:`read_mcap` gives for samples
+    dropped or unflagged."""
     streams = {
         name: DeviceStream(d.channels, pair_pose=name == pose_of and POSE_ROLE in d.channels)
         for name, d in devices.items()
     }
     census = {name: DeviceCensus() for name in devices}
+    first: dict[str, list[DeviceBlock]] = {name: [] for name in first_of}
+    filling = set(first_of)
+
+    def add(name: str, block: DeviceBlock) -> None:
+        census[name].add(block)
+        if name in filling:
+            first[name].append(block)
+            stamps = [b.stamp_ns for b in first[name] if len(b)]
+            if stamps and stamps[-1][-1] - stamps[0][0] >= first_s * 1e9:
+                filling.discard(name)
+
     for batch in McapRecordWalk(path).batches():
         for name, stream in streams.items():
             stream.feed(batch)
-            census[name].add(stream.take())
+            add(name, stream.take())
     out = {}
     for name, stream in streams.items():
-        census[name].add(stream.take(final=True))
+        add(name, stream.take(final=True))
         warn_drops(path, stream, devices[name].topics)
-        out[name] = (census[name], pose_of == name and census[name].pose_pairs(stream))
+        out[name] = Counted(
+            census=census[name],
+            pose_pairs=pose_of == name and census[name].pose_pairs(stream),
+            first=DeviceBlock.concatenate(first[name]) if name in first else None,
+        )
     return out

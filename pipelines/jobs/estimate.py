@@ -53,6 +53,7 @@ from gyroemu.pipelines.formats.frames import TF_LOG_RATE_HZ, TfThinning
 from gyroemu.pipelines.formats.mcap_log import LogWarning, read_mcap
 from gyroemu.pipelines.formats.messages import ns_to_stamps
 from gyroemu.pipelines.jobs.estimate_copy import (
+    FIRST_BLOCK_S,
     BlockRun,
     EstimateTarget,
     StreamFeed,
@@ -279,10 +280,10 @@ def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latenc
         chosen = _choose(devices.values(), path, topic, topic_out)
         _check_topics_out(path, chosen, scan.channel_info())
         tf_device = next((d.name for d, _ in chosen if d.metadata is not None), None)
-        census = count_samples(path, devices, tf_device)
+        found = count_samples(path, devices, tf_device, {d.name for d, _ in chosen}, FIRST_BLOCK_S)
         runs, done = [], []
         for dev, name in chosen:
-            counted, pose = census[dev.name]
+            counted, pose, first = found[dev.name].census, found[dev.name].pose_pairs, found[dev.name].first
             note = check_counts(path, dev.name, counted.count, counted.finite)
             if note:
                 warnings.warn(f"{path}: {note}", UserWarning, stacklevel=2)
@@ -300,19 +301,19 @@ def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latenc
             )
             if dev.name == tf_device:
                 target.tf_keep, target.tf_pos = np.zeros(0, dtype=bool), np.zeros((0, 3))
-            assert counted.first_ns is not None  # check_counts: at least two samples
-            runs.append(
-                BlockRun(
-                    target=target,
-                    stream=DeviceStream(dev.channels, pair_pose=pose),
-                    flt=flt,
-                    nine=nine,
-                    t0=float(ns_to_stamps(np.array([counted.first_ns]))[0]),
-                    count=counted.count,
-                    pose=pose,
-                    thinning=TfThinning(TF_LOG_RATE_HZ) if dev.name == tf_device else None,
-                )
+            assert counted.first_ns is not None and first is not None  # check_counts: at least two samples
+            run = BlockRun(
+                target=target,
+                stream=DeviceStream(dev.channels, pair_pose=pose),
+                flt=flt,
+                nine=nine,
+                t0=float(ns_to_stamps(np.array([counted.first_ns]))[0]),
+                count=counted.count,
+                pose=pose,
+                thinning=TfThinning(TF_LOG_RATE_HZ) if dev.name == tf_device else None,
             )
+            run.start(first)
+            runs.append(run)
             done.append((dev.name, counted.count, getattr(flt, "name", filter_name), nine))
         copy_with_estimates(path, out, scan.profile, [r.target for r in runs], StreamFeed(runs))
     for w in caught:  # every topic is copied: "skipping topic" is not news here

@@ -21,14 +21,14 @@ from __future__ import annotations
 import os
 import secrets
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from gyroemu.pipelines.estimation.series import estimate_series
 from gyroemu.pipelines.formats.channels import series_fields
-from gyroemu.pipelines.formats.device_stream import DeviceBlock, DeviceStream, NotStreamable
+from gyroemu.pipelines.formats.device_stream import POSE_MATCH_NS, DeviceBlock, DeviceStream, NotStreamable
 from gyroemu.pipelines.formats.frames import TF_LOG_RATE_HZ, TfThinning, tf_indices
 from gyroemu.pipelines.formats.mcap_log import DeviceLog
 from gyroemu.pipelines.formats.mcap_records import (
@@ -61,13 +61,16 @@ class EstimateTarget:
 
 FIRST_BLOCK_S = 60.0
 """A filter initialises from its first block (the MEKF reads at most its first 10 s, to find north from
-Earth's rate): a log read a block at a time gives the filter its first minute at once."""
+Earth's rate): a log read a block at a time gives the filter its first minute at once, read in the pass
+that counts the samples (:func:`~gyroemu.pipelines.formats.device_stream.count_samples`), so that the
+copy need not hold a minute of the log back."""
 
 
 @dataclass
 class BlockRun:
     """One device filtered a block at a time as the copy reads the log, its estimates in ``target``'s
-    rows from the first not yet written on."""
+    rows from the first not yet written on. :meth:`start` with the first block, then :meth:`add` the
+    stream's blocks (the first block's samples among them are passed over)."""
 
     target: EstimateTarget
     stream: DeviceStream
@@ -79,20 +82,20 @@ class BlockRun:
     thinning: TfThinning | None  # the device whose estimate also goes on /tf
     done: int = 0
     ready_ns: int | None = None  # every IMU message up to this stamp has its estimate (or was dropped)
-    waiting: list[DeviceBlock] = field(default_factory=list)
+    _started_ns: int | None = None  # the first block's IMU messages end here
 
-    def add(self, block: DeviceBlock, final: bool = False) -> None:
-        """The stream's next samples: filtered, or held until the first block is long enough."""
-        if self.done == 0 and (self.waiting or len(block)):
-            self.waiting.append(block)
-            stamps = [b.stamp_ns for b in self.waiting if len(b)]
-            if not final and (not stamps or stamps[-1][-1] - stamps[0][0] < FIRST_BLOCK_S * 1e9):
-                return
-            block, self.waiting = _joined(self.waiting), []
+    def start(self, first: DeviceBlock) -> None:
+        """Filter the first block, read before the copy."""
+        self._started_ns = first.through_ns
+        self.add(first)
+
+    def add(self, block: DeviceBlock) -> None:
+        """Filter the stream's next samples (those after the first block)."""
+        block = block.after(self._started_ns) if self.done else block
         if len(block):
             self._filter(block)
         if block.through_ns is not None:
-            self.ready_ns = block.through_ns
+            self.ready_ns = max(block.through_ns, self.ready_ns or block.through_ns)
 
     def _filter(self, block: DeviceBlock) -> None:
         t = ns_to_stamps(block.stamp_ns)
@@ -131,17 +134,6 @@ class BlockRun:
             target.tf_keep, target.tf_pos = target.tf_keep[k:], target.tf_pos[k:]
 
 
-def _joined(blocks: list[DeviceBlock]) -> DeviceBlock:
-    through = [b.through_ns for b in blocks if b.through_ns is not None]
-    return DeviceBlock(
-        **{
-            name: np.concatenate([getattr(b, name) for b in blocks])
-            for name in ("stamp_ns", "gyro", "accel", "mag", "pose_ns", "pose_pos")
-        },
-        through_ns=through[-1] if through else None,
-    )
-
-
 @dataclass
 class StreamFeed:
     """The targets' estimates made as :func:`copy_with_estimates` reads the log."""
@@ -168,7 +160,7 @@ class StreamFeed:
     def finish(self) -> None:
         """The file has ended: every sample left is complete."""
         for run in self.runs:
-            run.add(run.stream.take(final=True), final=True)
+            run.add(run.stream.take(final=True))
 
 
 def add_estimate_tf(targets: list[EstimateTarget], chosen: list[tuple[DeviceLog, str]]) -> None:
@@ -193,7 +185,7 @@ def add_estimate_tf(targets: list[EstimateTarget], chosen: list[tuple[DeviceLog,
         pose = dev.pose
         if pose is not None and len(pose) == len(valid):
             pose_ns = stamps_to_ns(pose.t)
-            if np.abs(pose_ns - target.stamp_ns).max(initial=0) <= 1000:
+            if np.abs(pose_ns - target.stamp_ns).max(initial=0) <= POSE_MATCH_NS:
                 pos = np.asarray(pose.pos_w, dtype=float)
         target.tf_keep, target.tf_pos = keep, pos
         return
