@@ -21,11 +21,12 @@ from __future__ import annotations
 import os
 import secrets
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from gyroemu.pipelines.estimation.protocol import AttitudeFilter
 from gyroemu.pipelines.estimation.series import estimate_series
 from gyroemu.pipelines.formats.channels import series_fields
 from gyroemu.pipelines.formats.device_stream import POSE_MATCH_NS, DeviceBlock, DeviceStream, NotStreamable
@@ -74,7 +75,7 @@ class BlockRun:
 
     target: EstimateTarget
     stream: DeviceStream
-    flt: object
+    flt: AttitudeFilter
     nine: bool
     t0: float  # the first sample's stamp, s: the filter runs on stamps relative to it
     count: int  # the device's samples (the census)
@@ -82,7 +83,7 @@ class BlockRun:
     thinning: TfThinning | None  # the device whose estimate also goes on /tf
     done: int = 0
     ready_ns: int | None = None  # every IMU message up to this stamp has its estimate (or was dropped)
-    _started_ns: int | None = None  # the first block's IMU messages end here
+    _started_ns: int | None = field(default=None, init=False)  # the first block's IMU messages end here
 
     def start(self, first: DeviceBlock) -> None:
         """Filter the first block, read before the copy."""
@@ -99,7 +100,7 @@ class BlockRun:
 
     def _filter(self, block: DeviceBlock) -> None:
         t = ns_to_stamps(block.stamp_ns)
-        est = self.flt.process(t - self.t0, block.gyro, block.accel, block.mag if self.nine else None)  # type: ignore[attr-defined]
+        est = self.flt.process(t - self.t0, block.gyro, block.accel, block.mag if self.nine else None)
         fields = {k: np.asarray(v) for k, v in series_fields(estimate_series(t, est, block.gyro)).items()}
         n, target = len(block), self.target
         self.done += n
@@ -153,6 +154,7 @@ class StreamFeed:
         return all(s is None or (r.ready_ns is not None and s <= r.ready_ns) for r, s in zip(self.runs, last))
 
     def written(self, last: list[int | None]) -> None:
+        """A chunk whose IMU messages end at ``last`` (per run) is written: its rows are not needed."""
         for run, s in zip(self.runs, last):
             if s is not None:
                 run.written(s)

@@ -13,7 +13,14 @@ import pytest
 
 from gyroemu.pipelines.estimation.series import check_samples, rate_of
 from gyroemu.pipelines.formats.channels import role_message_type
-from gyroemu.pipelines.formats.device_stream import DeviceCensus, DeviceStream, RateCounter
+from gyroemu.pipelines.formats.device_stream import (
+    DeviceCensus,
+    DeviceStream,
+    NotStreamable,
+    RateCounter,
+    count_samples,
+    scan_devices,
+)
 from gyroemu.pipelines.formats.mcap_log import LogWarning, Recording, read_mcap, truth_pose, truth_series, write_mcap
 from gyroemu.pipelines.formats.mcap_records import McapFileWriter, McapRecordWalk, RawMessages
 from gyroemu.pipelines.formats.messages import FLAG, IMU, MAGNETIC_FIELD, POSE_STAMPED
@@ -239,6 +246,9 @@ def test_a_log_one_pass_cannot_pair_is_read_whole(tmp_path):
         w.add_messages([(mag, stamps[n // 2 :], field[n // 2 :])])
         w.add_messages([(mag, stamps[: n // 2], field[: n // 2])])  # earlier log times, later in the file
         w.finish()
+    devices, _ = scan_devices(path)
+    with pytest.raises(NotStreamable, match="back in log time"):
+        count_samples(path, devices, None, set(devices), FIRST_BLOCK_S)
     out = both(tmp_path, path)
     assert out[False] == out[True]
 
