@@ -24,6 +24,7 @@ when complete.
 
 from __future__ import annotations
 
+import math
 import os
 import warnings
 from collections.abc import Mapping
@@ -171,10 +172,11 @@ def estimate_log(
 ) -> EstimateSummary:
     """Filter the IMU topic(s) of the log ``path`` and write ``out``: the input with the estimate added.
 
-    An online filter runs as the log is read, a block at a time, in memory that does not grow with the
-    log's length (:mod:`~gyroemu.pipelines.formats.device_stream`); an offline filter, a field lag read
-    from the samples (``latency_s={"mag": "auto"}``) and a log whose topics one pass cannot pair read
-    the log whole into memory first. Both give the same bytes.
+    The log is read a block at a time (:mod:`~gyroemu.pipelines.formats.device_stream`): an online filter
+    runs as it is read, in memory that does not grow with the log's length; an offline filter and a
+    field lag read from the samples (``latency_s={"mag": "auto"}``) get the filtered devices' samples
+    at once (their rows of gyro, accelerometer and field only, not the log). A log whose topics one
+    pass cannot pair is read whole into memory first (:func:`read_mcap`). All give the same bytes.
 
     Parameters
     ----------
@@ -218,7 +220,7 @@ def estimate_log(
     except ValueError as e:
         raise EstimateError(f"argument --latency: {e}") from None
     check_options(path, out, force=force)
-    if not read_whole and not is_offline(filter_name) and FIELD_LAG_FROM_LOG not in (latency_s or {}).values():
+    if not read_whole:
         try:
             return _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latency_s or {})
         except NotStreamable:
@@ -227,8 +229,8 @@ def estimate_log(
 
 
 def _estimate_whole(path, out, filter_name, use_mag, topic, topic_out, latency_s) -> EstimateSummary:
-    """:func:`estimate_log` with the log read into memory (an offline filter, a field lag read from the
-    samples, a log whose topics :mod:`~gyroemu.pipelines.formats.device_stream` cannot pair in one pass)."""
+    """:func:`estimate_log` with the log read into memory (a log whose topics
+    :mod:`~gyroemu.pipelines.formats.device_stream` cannot pair in one pass, or ``read_whole``)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", LogWarning)
         log = read_mcap(path)
@@ -271,17 +273,21 @@ def _estimate_whole(path, out, filter_name, use_mag, topic, topic_out, latency_s
 
 def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latency_s) -> EstimateSummary:
     """:func:`estimate_log` a block at a time: three passes over the log (validate it and find its devices;
-    count their samples; copy it while filtering), in memory that does not grow with its length. The
-    same bytes as :func:`_estimate_whole` (``tests/pipelines/test_estimate_stream.py``). Raises
-    :class:`NotStreamable` for a log a single pass cannot pair, before ``out`` is written."""
+    count their samples, keeping the first minute, or all of them for an offline filter or a field lag
+    read from the samples; copy it while filtering), in memory that does not grow with its length for
+    an online filter. The same bytes as :func:`_estimate_whole` (``tests/pipelines/test_estimate_stream.py``).
+    Raises :class:`NotStreamable` for a log a single pass cannot pair (at the latest while the temporary
+    output is written, which is then removed)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", LogWarning)
         devices, scan = scan_devices(path)
         chosen = _choose(devices.values(), path, topic, topic_out)
         _check_topics_out(path, chosen, scan.channel_info())
         tf_device = next((d.name for d, _ in chosen if d.metadata is not None), None)
-        found = count_samples(path, devices, tf_device, {d.name for d, _ in chosen}, FIRST_BLOCK_S)
-        runs, done = [], []
+        # an offline filter, and the field's lag read from the samples, need every sample at once
+        first_s = math.inf if is_offline(filter_name) or FIELD_LAG_FROM_LOG in latency_s.values() else FIRST_BLOCK_S
+        found = count_samples(path, devices, tf_device, {d.name for d, _ in chosen}, first_s)
+        runs, done, field_lags = [], [], []
         for dev, name in chosen:
             counted, pose, first = found[dev.name].census, found[dev.name].pose_pairs, found[dev.name].first
             note = check_counts(path, dev.name, counted.count, counted.finite)
@@ -289,8 +295,13 @@ def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latenc
                 warnings.warn(f"{path}: {note}", UserWarning, stacklevel=2)
             nine = counted.has_mag if use_mag is None else (use_mag and counted.has_mag)
             setup = setup_from_metadata(dev.metadata, counted.rate.rate(), use_mag=nine)
-            if latency_s:
-                setup, _ = latencies_for_log(setup, latency_s, np.empty(0), np.empty((0, 3)), None)
+            assert counted.first_ns is not None and first is not None  # check_counts: at least two samples
+            t0 = float(ns_to_stamps(np.array([counted.first_ns]))[0])
+            if latency_s:  # with "auto", ``first`` is every sample
+                t_rel = ns_to_stamps(first.stamp_ns) - t0
+                setup, lag = latencies_for_log(setup, latency_s, t_rel, first.gyro, first.mag if nine else None)
+                if lag is not None:
+                    field_lags.append((dev.name, lag, setup.mag_latency_s))
             flt = make_filter(filter_name, setup)
             target = EstimateTarget(
                 topic=dev.topics[IMU_ROLE],
@@ -301,13 +312,12 @@ def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latenc
             )
             if dev.name == tf_device:
                 target.tf_keep, target.tf_pos = np.zeros(0, dtype=bool), np.zeros((0, 3))
-            assert counted.first_ns is not None and first is not None  # check_counts: at least two samples
             run = BlockRun(
                 target=target,
                 stream=DeviceStream(dev.channels, pair_pose=pose),
                 flt=flt,
                 nine=nine,
-                t0=float(ns_to_stamps(np.array([counted.first_ns]))[0]),
+                t0=t0,
                 count=counted.count,
                 pose=pose,
                 thinning=TfThinning(TF_LOG_RATE_HZ) if dev.name == tf_device else None,
@@ -320,7 +330,7 @@ def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latenc
         if not (issubclass(w.category, LogWarning) and "skipping topic" in str(w.message)):
             warnings.warn(w.message, w.category, stacklevel=3)
     topics = [(r.target.topic, r.target.topic_out, r.target.sequence) for r in runs]
-    return EstimateSummary(path=out, devices=done, topics=topics)
+    return EstimateSummary(path=out, devices=done, topics=topics, field_lags=field_lags)
 
 
 def _check_topics_out(path: Path, chosen: list, channels) -> None:

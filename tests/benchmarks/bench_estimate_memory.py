@@ -7,7 +7,10 @@ For each duration, ``gyroemu simulate`` writes a ``consumer_mems`` log on ``smoo
 way of reading runs in a process of its own (``wait4``'s ``ru_maxrss``) and the two outputs are compared
 byte for byte. The floor: a process that imports the estimate job and opens nothing.
 
-    python tests/benchmarks/bench_estimate_memory.py [--durations 600 1800 7200] [--folder DIR]
+    python tests/benchmarks/bench_estimate_memory.py [--durations 600 1800 7200] [--smooth] [--folder DIR]
+
+``--smooth``: the smoother (``gyroemu estimate --smooth``), which is given the device's samples at once
+instead of the log: its memory grows with the log, by less.
 
 The logs go to a temporary folder (``--folder`` to choose it) and are deleted after each duration; an
 hour at 1 kHz is about 1.1 GB of log and as much again of output.
@@ -38,6 +41,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--durations", type=float, nargs="+", default=[600.0, 1800.0])
     parser.add_argument("--folder", type=Path, default=None)
+    parser.add_argument("--smooth", action="store_true", help="the smoother (an offline filter)")
     args = parser.parse_args()
     gyroemu = [sys.executable, "-m", "gyroemu"]
     floor = measure([sys.executable, "-c", "import gyroemu.pipelines.jobs.estimate"])[1]
@@ -52,10 +56,12 @@ def main() -> None:
                 [*gyroemu, "simulate", "--scenario", "smooth_manoeuvre", "--device", "consumer_mems"]
                 + ["--duration", str(duration), "--rate", "1000", "--out", str(log)]
             )
-            s_time, s_rss = measure([*gyroemu, "estimate", str(log), "--out", str(streamed)])
+            smooth = ["--smooth"] if args.smooth else []
+            s_time, s_rss = measure([*gyroemu, "estimate", str(log), "--out", str(streamed), *smooth])
+            name = "mekf-smooth" if args.smooth else "mekf"
             code = (
                 "from gyroemu.pipelines.jobs.estimate import estimate_log\n"
-                f"estimate_log({str(log)!r}, {str(whole)!r}, read_whole=True)\n"
+                f"estimate_log({str(log)!r}, {str(whole)!r}, filter_name={name!r}, read_whole=True)\n"
             )
             w_time, w_rss = measure([sys.executable, "-c", code])
             same = digest(streamed) == digest(whole)

@@ -179,7 +179,7 @@ def both(tmp_path, log, **options):
             warnings.simplefilter("always")
             summary = estimate_log(log, target, read_whole=whole, **options)
         notes = sorted(str(w.message) for w in caught if issubclass(w.category, UserWarning))
-        out[whole] = (digest(target), notes, summary.devices, summary.topics)
+        out[whole] = (digest(target), notes, summary.devices, summary.topics, summary.field_lags)
     return out
 
 
@@ -191,8 +191,10 @@ def both(tmp_path, log, **options):
         ("smooth_manoeuvre", "consumer_mems", {"filter_name": "vqf"}),
         ("smooth_manoeuvre", "consumer_mems", {"latency_s": {"gyro": 0.004, "mag": 0.012}}),
         ("bench_static", "navigation_fog", {}),  # north from Earth's rate over the first block's 10 s
+        ("smooth_manoeuvre", "consumer_mems", {"filter_name": "mekf-smooth"}),  # every sample at once
+        ("smooth_manoeuvre", "consumer_mems", {"latency_s": {"mag": "auto"}}),  # the field's lag: all samples
     ],
-    ids=["9D", "6D", "vqf", "timed", "gyrocompass"],
+    ids=["9D", "6D", "vqf", "timed", "gyrocompass", "smoother", "field-lag"],
 )
 def test_streamed_estimate_is_the_whole_reads_bytes_on_a_gyroemu_log(tmp_path, scenario_name, device_name, options):
     """A simulated log of two minutes (longer than the first block) as ``gyroemu simulate`` writes it
