@@ -183,23 +183,9 @@ def both(tmp_path, log, **options):
     return out
 
 
-@pytest.mark.parametrize(
-    "scenario_name, device_name, options",
-    [
-        ("smooth_manoeuvre", "consumer_mems", {}),
-        ("smooth_manoeuvre", "consumer_mems", {"use_mag": False}),
-        ("smooth_manoeuvre", "consumer_mems", {"filter_name": "vqf"}),
-        ("smooth_manoeuvre", "consumer_mems", {"latency_s": {"gyro": 0.004, "mag": 0.012}}),
-        ("bench_static", "navigation_fog", {}),  # north from Earth's rate over the first block's 10 s
-        ("smooth_manoeuvre", "consumer_mems", {"filter_name": "mekf-smooth"}),  # every sample at once
-        ("smooth_manoeuvre", "consumer_mems", {"latency_s": {"mag": "auto"}}),  # the field's lag: all samples
-    ],
-    ids=["9D", "6D", "vqf", "timed", "gyrocompass", "smoother", "field-lag"],
-)
-def test_streamed_estimate_is_the_whole_reads_bytes_on_a_gyroemu_log(tmp_path, scenario_name, device_name, options):
-    """A simulated log of two minutes (longer than the first block) as ``gyroemu simulate`` writes it
-    (truth, pose, raw observables), in small chunks: the estimate, its /tf at the poses and every copied
-    record, byte for byte."""
+def simulated_log(folder, scenario_name: str, device_name: str):
+    """A log of 75 s (longer than the first block) as ``gyroemu simulate`` writes it (truth, pose, raw
+    observables), in 64 kB chunks."""
     from gyroemu.dynamics import load_scenario
     from gyroemu.sensors import load_device
 
@@ -207,16 +193,40 @@ def test_streamed_estimate_is_the_whole_reads_bytes_on_a_gyroemu_log(tmp_path, s
     device = load_device(device_name, seed=4)
     traj = scenario.simulate(duration=1.25 * FIRST_BLOCK_S)
     samples = device.measure(traj)
-    log = write_mcap(
-        tmp_path / "sim.mcap",
-        Recording(samples, truth=truth_series(traj, samples), pose=truth_pose(traj, samples), device=device),
-        scenario=scenario,
-        chunk_size=1 << 16,
-    )
+    recording = Recording(samples, truth=truth_series(traj, samples), pose=truth_pose(traj, samples), device=device)
+    log = write_mcap(folder / f"{device_name}.mcap", recording, scenario=scenario, chunk_size=1 << 16)
     assert set(read_mcap(log).device.topics) >= {"imu", "truth/pose"}
+    return log
+
+
+@pytest.fixture(scope="module")
+def manoeuvre_log(tmp_path_factory):
+    return simulated_log(tmp_path_factory.mktemp("sim"), "smooth_manoeuvre", "aktos_t_broad")  # 286 Hz, timed
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        {},
+        {"use_mag": False},
+        {"filter_name": "vqf"},
+        {"latency_s": {"gyro": 0.004, "mag": 0.012}},
+        {"filter_name": "mekf-smooth"},  # every sample at once
+        {"latency_s": {"mag": "auto"}},  # the field's lag read from every sample
+    ],
+    ids=["9D", "6D", "vqf", "timed", "smoother", "field-lag"],
+)
+def test_streamed_estimate_is_the_whole_reads_bytes_on_a_gyroemu_log(manoeuvre_log, tmp_path, options):
+    """The estimate, its /tf at the poses and every copied record, byte for byte."""
     if options.get("filter_name") == "vqf":
         pytest.importorskip("vqf")
-    out = both(tmp_path, log, **options)
+    out = both(tmp_path, manoeuvre_log, **options)
+    assert out[False] == out[True]
+
+
+def test_streamed_estimate_of_a_gyrocompass(tmp_path):
+    """A navigation FOG at rest finds north from Earth's rate over the first 10 s of its first block."""
+    out = both(tmp_path, simulated_log(tmp_path, "bench_static", "navigation_fog"))
     assert out[False] == out[True]
 
 
@@ -230,6 +240,26 @@ def test_streamed_estimate_on_damaged_and_foreign_logs(tmp_path):
     bag = write_foreign_bag(tmp_path / "bag")
     out = both(tmp_path, bag, topic="/imu_b", filter_name="madgwick")
     assert out[False] == out[True]
+
+
+def test_streamed_estimate_of_two_devices_at_two_rates(tmp_path):
+    """A gyroemu log of two devices sampling at 286 and 200 Hz in small chunks, each filtered into its
+    own topic (the first one's estimate on /tf): every chunk waits for both, the same bytes."""
+    from gyroemu.dynamics import load_scenario
+    from gyroemu.sensors import load_device
+
+    scenario = load_scenario("smooth_manoeuvre")
+    traj = scenario.simulate(duration=1.25 * FIRST_BLOCK_S)
+    recordings = []
+    for name in ("aktos_t_broad", "classic_rate_gyro"):
+        device = load_device(name, seed=2)
+        samples = device.measure(traj)
+        recordings.append(Recording(samples, pose=truth_pose(traj, samples), device=device))
+    log = write_mcap(tmp_path / "two.mcap", recordings, scenario=scenario, chunk_size=1 << 15)
+    assert sorted(read_mcap(log).devices) == ["aktos_t_broad", "classic_rate_gyro"]
+    out = both(tmp_path, log)
+    assert out[False] == out[True]
+    assert [t[1] for t in out[False][3]] == ["/aktos_t_broad/estimate/imu", "/classic_rate_gyro/estimate/imu"]
 
 
 def test_a_log_one_pass_cannot_pair_is_read_whole(tmp_path):
