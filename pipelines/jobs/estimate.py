@@ -234,9 +234,7 @@ def _estimate_whole(path, out, filter_name, use_mag, topic, topic_out, latency_s
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", LogWarning)
         log = read_mcap(path)
-    for w in caught:  # every topic is copied: "skipping topic" is not news here
-        if not (issubclass(w.category, LogWarning) and "skipping topic" in str(w.message)):
-            warnings.warn(w.message, w.category, stacklevel=2)
+    _pass_on(caught)
     chosen = _choose(log.devices.values(), path, topic, topic_out)
     _check_topics_out(path, chosen, log.channels)
     targets, done, field_lags = [], [], []
@@ -245,24 +243,15 @@ def _estimate_whole(path, out, filter_name, use_mag, topic, topic_out, latency_s
         note = check_samples(path, dev.name, samples.t, samples.gyro, samples.accel)
         if note:
             warnings.warn(f"{path}: {note}", UserWarning, stacklevel=2)
-        nine = samples.has_mag if use_mag is None else (use_mag and samples.has_mag)
-        setup = setup_from_metadata(dev.metadata, rate_of(samples.t), use_mag=nine)
         t_rel = samples.t - samples.t[0]  # relative times keep float64's resolution for the filter
-        if latency_s:
-            setup, lag = latencies_for_log(setup, latency_s, t_rel, samples.gyro, samples.mag if nine else None)
-            if lag is not None:
-                field_lags.append((dev.name, lag, setup.mag_latency_s))
-        flt = make_filter(filter_name, setup)
+        nine, flt, lag = _device_filter(
+            dev, rate_of(samples.t), samples.has_mag, use_mag, filter_name, latency_s, t_rel, samples.gyro, samples.mag
+        )
+        field_lags += lag
         est = flt.process(t_rel, samples.gyro, samples.accel, samples.mag if nine else None)
         fields = series_fields(estimate_series(samples.t, est, samples.gyro))
         targets.append(
-            EstimateTarget(
-                topic=dev.topics[IMU_ROLE],
-                topic_out=name,
-                stamp_ns=np.asarray(dev.stamp_ns, dtype=np.int64),
-                fields={k: np.asarray(v) for k, v in fields.items()},
-                frame_id=BODY_FRAME if dev.metadata is not None else None,
-            )
+            _target(dev, name, np.asarray(dev.stamp_ns, dtype=np.int64), {k: np.asarray(v) for k, v in fields.items()})
         )
         done.append((dev.name, len(samples), getattr(flt, "name", filter_name), nine))
     add_estimate_tf(targets, chosen)
@@ -276,8 +265,9 @@ def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latenc
     count their samples, keeping the first minute, or all of them for an offline filter or a field lag
     read from the samples; copy it while filtering), in memory that does not grow with its length for
     an online filter. The same bytes as :func:`_estimate_whole` (``tests/pipelines/test_estimate_stream.py``).
-    Raises :class:`NotStreamable` for a log a single pass cannot pair (at the latest while the temporary
-    output is written, which is then removed)."""
+    Raises :class:`NotStreamable` for a log a single pass cannot pair, before it warns or writes; or,
+    should a filter's last valid attitude lie in a chunk already written, while the temporary output is
+    written (which is then removed)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", LogWarning)
         devices, scan = scan_devices(path)
@@ -287,50 +277,65 @@ def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latenc
         # an offline filter, and the field's lag read from the samples, need every sample at once
         first_s = math.inf if is_offline(filter_name) or FIELD_LAG_FROM_LOG in latency_s.values() else FIRST_BLOCK_S
         found = count_samples(path, devices, tf_device, {d.name for d, _ in chosen}, first_s)
-        runs, done, field_lags = [], [], []
-        for dev, name in chosen:
-            counted, pose, first = found[dev.name].census, found[dev.name].pose_pairs, found[dev.name].first
-            note = check_counts(path, dev.name, counted.count, counted.finite)
-            if note:
-                warnings.warn(f"{path}: {note}", UserWarning, stacklevel=2)
-            nine = counted.has_mag if use_mag is None else (use_mag and counted.has_mag)
-            setup = setup_from_metadata(dev.metadata, counted.rate.rate(), use_mag=nine)
-            assert counted.first_ns is not None and first is not None  # check_counts: at least two samples
-            t0 = float(ns_to_stamps(np.array([counted.first_ns]))[0])
-            if latency_s:  # with "auto", ``first`` is every sample
-                t_rel = ns_to_stamps(first.stamp_ns) - t0
-                setup, lag = latencies_for_log(setup, latency_s, t_rel, first.gyro, first.mag if nine else None)
-                if lag is not None:
-                    field_lags.append((dev.name, lag, setup.mag_latency_s))
-            flt = make_filter(filter_name, setup)
-            target = EstimateTarget(
-                topic=dev.topics[IMU_ROLE],
-                topic_out=name,
-                stamp_ns=np.empty(0, np.int64),
-                fields={},
-                frame_id=BODY_FRAME if dev.metadata is not None else None,
-            )
-            if dev.name == tf_device:
-                target.tf_keep, target.tf_pos = np.zeros(0, dtype=bool), np.zeros((0, 3))
-            run = BlockRun(
-                target=target,
-                stream=DeviceStream(dev.channels, pair_pose=pose),
-                flt=flt,
-                nine=nine,
-                t0=t0,
-                count=counted.count,
-                pose=pose,
-                thinning=TfThinning(TF_LOG_RATE_HZ) if dev.name == tf_device else None,
-            )
-            run.start(first)
-            runs.append(run)
-            done.append((dev.name, counted.count, getattr(flt, "name", filter_name), nine))
-        copy_with_estimates(path, out, scan.profile, [r.target for r in runs], StreamFeed(runs))
-    for w in caught:  # every topic is copied: "skipping topic" is not news here
-        if not (issubclass(w.category, LogWarning) and "skipping topic" in str(w.message)):
-            warnings.warn(w.message, w.category, stacklevel=3)
+    # past the passes that may find the log unpairable (and fall back to the whole read, which warns anew)
+    _pass_on(caught)
+    runs, done, field_lags = [], [], []
+    for dev, name in chosen:
+        counted, pose, first = found[dev.name].census, found[dev.name].pose_pairs, found[dev.name].first
+        note = check_counts(path, dev.name, counted.count, counted.finite)
+        if note:
+            warnings.warn(f"{path}: {note}", UserWarning, stacklevel=2)
+        assert counted.first_ns is not None and first is not None  # check_counts: at least two samples
+        t0 = float(ns_to_stamps(np.array([counted.first_ns]))[0])
+        t_rel = ns_to_stamps(first.stamp_ns) - t0  # with "auto", ``first`` is every sample
+        nine, flt, lag = _device_filter(
+            dev, counted.rate.rate(), counted.has_mag, use_mag, filter_name, latency_s, t_rel, first.gyro, first.mag
+        )
+        field_lags += lag
+        target = _target(dev, name, np.empty(0, np.int64), {})
+        if dev.name == tf_device:
+            target.tf_keep, target.tf_pos = np.zeros(0, dtype=bool), np.zeros((0, 3))
+        run = BlockRun(
+            target=target,
+            stream=DeviceStream(dev.channels, pair_pose=pose),
+            flt=flt,
+            nine=nine,
+            t0=t0,
+            count=counted.count,
+            pose=pose,
+            thinning=TfThinning(TF_LOG_RATE_HZ) if dev.name == tf_device else None,
+        )
+        run.start(first)
+        runs.append(run)
+        done.append((dev.name, counted.count, getattr(flt, "name", filter_name), nine))
+    copy_with_estimates(path, out, scan.profile, [r.target for r in runs], StreamFeed(runs))
     topics = [(r.target.topic, r.target.topic_out, r.target.sequence) for r in runs]
     return EstimateSummary(path=out, devices=done, topics=topics, field_lags=field_lags)
+
+
+def _pass_on(caught: list[warnings.WarningMessage]) -> None:
+    """Warn again what reading the log warned, but the topics skipped: every topic is copied."""
+    for w in caught:
+        if not (issubclass(w.category, LogWarning) and "skipping topic" in str(w.message)):
+            warnings.warn(w.message, w.category, stacklevel=3)
+
+
+def _device_filter(dev, rate_hz, has_mag, use_mag, filter_name, latency_s, t_rel, gyro, mag) -> tuple:
+    """``(9D?, the filter, [(device, FieldLag, the magnetometer's latency)] or [])`` for device ``dev``
+    (anything with ``name`` and ``metadata``) of samples at ``rate_hz``; ``t_rel``, ``gyro``, ``mag`` the
+    samples the field's lag is read from when ``latency_s`` asks for it (every sample of the device)."""
+    nine = has_mag if use_mag is None else (use_mag and has_mag)
+    setup = setup_from_metadata(dev.metadata, rate_hz, use_mag=nine)
+    lag = None
+    if latency_s:
+        setup, lag = latencies_for_log(setup, latency_s, t_rel, gyro, mag if nine else None)
+    return nine, make_filter(filter_name, setup), [] if lag is None else [(dev.name, lag, setup.mag_latency_s)]
+
+
+def _target(dev, topic_out: str, stamp_ns: np.ndarray, fields: dict) -> EstimateTarget:
+    """The estimate of device ``dev`` (a gyroemu device's in ``base_link``, another's in its IMU's frame)."""
+    frame_id = BODY_FRAME if dev.metadata is not None else None
+    return EstimateTarget(dev.topics[IMU_ROLE], topic_out, stamp_ns, fields, frame_id)
 
 
 def _check_topics_out(path: Path, chosen: list, channels) -> None:
