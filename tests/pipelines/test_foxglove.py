@@ -11,6 +11,7 @@ import signal
 import struct
 import threading
 import time
+from contextlib import ExitStack
 
 import numpy as np
 import pytest
@@ -37,7 +38,10 @@ class FoxgloveClient:
     """A minimal Foxglove WebSocket client: channels advertised, subscriptions, decoded messages."""
 
     def __init__(self, port: int, timeout: float = 10.0):
-        self.ws = websockets_sync.connect(f"ws://127.0.0.1:{port}", subprotocols=SUBPROTOCOLS, open_timeout=timeout)
+        self._exit = ExitStack()  # entered as a context manager: websockets ≥ 15 deprecates a bare connect()
+        self.ws = self._exit.enter_context(
+            websockets_sync.connect(f"ws://127.0.0.1:{port}", subprotocols=SUBPROTOCOLS, open_timeout=timeout)
+        )
         assert self.ws.subprotocol in SUBPROTOCOLS
         self.channels: dict[int, dict] = {}
         self.server_info: dict = {}
@@ -48,7 +52,7 @@ class FoxgloveClient:
         self._decoders: dict[int, object] = {}
 
     def close(self):
-        self.ws.close()
+        self._exit.close()
 
     def _handle(self, frame) -> None:
         if isinstance(frame, str):

@@ -11,6 +11,7 @@ tests that need them skip when the folder is absent. Error cases use small synth
 from __future__ import annotations
 
 import hashlib
+import inspect
 import subprocess
 import sys
 import warnings
@@ -121,6 +122,14 @@ def test_real_trial_reads_back_exactly(imported):
     assert meta["seed"] == "" and meta["device"] == "" and meta["scenario"] == "" and meta["version"]
 
 
+def log_time_range(reader, start_ns: int, end_ns: int) -> dict:
+    """``iter_decoded_messages``' arguments for log times in ``[start_ns, end_ns)``: mcap ≥ 1.6 names them
+    ``starting_at``/``ending_before`` and deprecates ``start_time``/``end_time`` (the floor is 1.1)."""
+    if "starting_at" in inspect.signature(reader.iter_decoded_messages).parameters:
+        return {"starting_at": start_ns, "ending_before": end_ns}
+    return {"start_time": start_ns, "end_time": end_ns}
+
+
 @needs_broad
 def test_real_trial_independent_decoders(imported):
     """mcap_ros2 and rosbags decode /imu, /movement and /truth/imu to the HDF5 values: every message in
@@ -144,7 +153,7 @@ def test_real_trial_independent_decoders(imported):
         for centre in centres:
             first, last = max(0, centre - 40), min(n - 1, centre + 40)
             for schema, channel, message, ros in reader.iter_decoded_messages(
-                topics=list(seen), start_time=round(first * step), end_time=round(last * step) + 1
+                topics=list(seen), **log_time_range(reader, round(first * step), round(last * step) + 1)
             ):
                 k = int(round(message.log_time / step))
                 assert message.log_time == message.publish_time
