@@ -39,6 +39,7 @@ from gyroemu.pipelines.formats.mcap_log import (
     device_name,
     dropped_samples,
     group_devices,
+    match_stamps,
     no_imu_error,
     unflagged_samples,
 )
@@ -242,19 +243,19 @@ class DeviceStream:
         last = int(stamp_ns[-1]) if n else None
         keep = np.arange(n)
         for role, pending in self._raw.items():  # read_mcap's order: each raw topic drops from what is left
-            hit = _hits(stamp_ns[keep], pending.stamp_ns)[0]
+            hit = match_stamps(stamp_ns[keep], pending.stamp_ns)[0]
             self.raw_dropped[role] += len(keep) - len(hit)
             keep = keep[hit]
             pending.drop(last, final)
         stamp_ns = stamp_ns[keep]
         mag = np.full((len(keep), 3), np.nan)
         if self._mag is not None:
-            i, j = _hits(stamp_ns, self._mag.stamp_ns)
+            i, j = match_stamps(stamp_ns, self._mag.stamp_ns)
             if len(i):
                 mag[i] = self._mag.values["magnetic_field"][j]
             self._mag.drop(last, final)
         if self._movement is not None:
-            i, _ = _hits(stamp_ns, self._movement.stamp_ns)
+            i, _ = match_stamps(stamp_ns, self._movement.stamp_ns)
             self.movement_missing += len(keep) - len(i)
             self._movement.drop(last, final)
         pose_ns, pose_pos = np.empty(0, np.int64), np.empty((0, 3))
@@ -277,20 +278,11 @@ class DeviceStream:
         return 0 if self._pose is None else len(self._pose.stamp_ns)
 
 
-def _hits(stamp_ns: np.ndarray, stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Indices ``(i, j)`` with ``stamp_ns[i] == stamps[j]``, both increasing."""
-    if not len(stamps) or not len(stamp_ns):
-        return np.empty(0, np.int64), np.empty(0, np.int64)
-    position = np.minimum(np.searchsorted(stamps, stamp_ns), len(stamps) - 1)
-    i = np.flatnonzero(stamps[position] == stamp_ns)
-    return i, position[i]
-
-
 def _kept(stamp_ns: np.ndarray, raw) -> np.ndarray:
     """Indices of the samples every raw topic has a message at."""
     keep = np.arange(len(stamp_ns))
     for pending in raw:
-        keep = keep[_hits(stamp_ns[keep], pending.stamp_ns)[0]]
+        keep = keep[match_stamps(stamp_ns[keep], pending.stamp_ns)[0]]
     return keep
 
 

@@ -151,6 +151,7 @@ __all__ = [
     "LogCheck",
     "check_mcap_noting",
     "dropped_samples",
+    "match_stamps",
     "unflagged_samples",
 ]
 
@@ -775,8 +776,9 @@ def write_mcap(
 # Reading: from channels to devices.
 
 
-def _match(reference_ns: np.ndarray, stamp_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Indices ``(i, j)`` with ``reference_ns[i] == stamp_ns[j]`` (first match of each, in order)."""
+def match_stamps(reference_ns: np.ndarray, stamp_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Indices ``(i, j)`` with ``reference_ns[i] == stamp_ns[j]`` (first match of each, in order): how a
+    device's samples find their messages on its other topics."""
     if len(reference_ns) == len(stamp_ns) and np.array_equal(reference_ns, stamp_ns):
         index = np.arange(len(stamp_ns))
         return index, index
@@ -1011,7 +1013,7 @@ def _device_log(path: Path, name: str, group: dict, meta: dict | None) -> Device
     raw: dict[str, dict[str, np.ndarray]] = {}
     for role, d in group.items():
         if raw_kind(role) is not None:
-            i, j = _match(stamp_ns[keep], d.batch.stamp_ns)
+            i, j = match_stamps(stamp_ns[keep], d.batch.stamp_ns)
             if len(i) < len(keep):
                 warnings.warn(dropped_samples(path, len(keep) - len(i), imu.topic, d.topic), LogWarning, stacklevel=4)
                 keep = keep[i]
@@ -1020,12 +1022,12 @@ def _device_log(path: Path, name: str, group: dict, meta: dict | None) -> Device
     mag = np.full((len(keep), 3), np.nan)
     if MAG_ROLE in group:
         d = group[MAG_ROLE]
-        i, j = _match(stamp_ns[keep], d.batch.stamp_ns)
+        i, j = match_stamps(stamp_ns[keep], d.batch.stamp_ns)
         mag[i] = d.batch["magnetic_field"][j]
     movement = None
     if MOVEMENT_ROLE in group:
         d = group[MOVEMENT_ROLE]
-        i, j = _match(stamp_ns[keep], d.batch.stamp_ns)
+        i, j = match_stamps(stamp_ns[keep], d.batch.stamp_ns)
         movement = np.zeros(len(keep), dtype=bool)
         movement[i] = d.batch["data"][j]
         if len(i) < len(keep):

@@ -761,11 +761,11 @@ def test_imu_series_compares_by_identity_and_is_hashable():
 
 
 def test_stamps_match_nothing_on_an_empty_channel():
-    from gyroemu.pipelines.formats.mcap_log import _match
+    from gyroemu.pipelines.formats.mcap_log import match_stamps
 
-    i, j = _match(np.array([5, 7, 9], np.int64), np.empty(0, np.int64))
+    i, j = match_stamps(np.array([5, 7, 9], np.int64), np.empty(0, np.int64))
     assert i.shape == j.shape == (0,) and i.dtype == j.dtype == np.int64
-    i, j = _match(np.array([5, 7, 9], np.int64), np.array([9, 5], np.int64))
+    i, j = match_stamps(np.array([5, 7, 9], np.int64), np.array([9, 5], np.int64))
     assert list(i) == [0, 2] and list(j) == [1, 0]
 
 
