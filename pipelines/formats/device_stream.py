@@ -290,12 +290,16 @@ class RateCounter:
     """The median interval of a series of stamps fed a block at a time, as
     :func:`~gyroemu.pipelines.estimation.series.rate_of` finds it over the whole series (the same
     float): the distinct intervals are counted, so the memory is that of how many distinct intervals
-    the series has (a handful for a clocked log), not of its length."""
+    the series has (a handful for a clocked log), not of its length. A block's intervals wait until
+    they outnumber the distinct ones counted, then are merged in: each interval is sorted O(log N)
+    times in all, however many distinct values a jittered clock gives."""
 
     def __init__(self) -> None:
         self._last: float | None = None
         self._values = np.empty(0)
         self._counts = np.empty(0, np.int64)
+        self._waiting: list[np.ndarray] = []
+        self._waiting_n = 0
 
     def add(self, t: np.ndarray) -> None:
         """The next stamps, s (float64, as ``ns_to_stamps`` gives them)."""
@@ -303,14 +307,23 @@ class RateCounter:
             return
         steps = np.diff(t) if self._last is None else np.diff(np.concatenate(([self._last], t)))
         self._last = float(t[-1])
-        merged = np.concatenate((self._values, steps))
-        weights = np.concatenate((self._counts, np.ones(len(steps), np.int64)))
-        values, inverse = np.unique(merged, return_inverse=True)
-        counts = np.bincount(inverse, weights=weights).astype(np.int64)
-        self._values, self._counts = values, counts
+        self._waiting.append(steps)
+        self._waiting_n += len(steps)
+        if self._waiting_n > max(len(self._values), 1 << 16):
+            self._merge()
+
+    def _merge(self) -> None:
+        if not self._waiting:
+            return
+        merged = np.concatenate((self._values, *self._waiting))
+        weights = np.concatenate((self._counts, np.ones(self._waiting_n, np.int64)))
+        self._values, inverse = np.unique(merged, return_inverse=True)
+        self._counts = np.bincount(inverse, weights=weights).astype(np.int64)
+        self._waiting, self._waiting_n = [], 0
 
     def median(self) -> float:
         """The median interval (NumPy's: the mean of the two middle ones for an even count), s."""
+        self._merge()
         total = int(self._counts.sum())
         if total == 0:
             raise ValueError("no intervals")
@@ -321,6 +334,7 @@ class RateCounter:
 
     def rate(self) -> float:
         """``1 / median``, Hz; 1.0 for fewer than two stamps (as ``rate_of``)."""
+        self._merge()
         return 1.0 / self.median() if int(self._counts.sum()) else 1.0
 
 
@@ -334,8 +348,8 @@ class DeviceCensus:
         Samples, and those whose gyro and accelerometer rows are finite.
     has_mag : bool
         Whether any sample has a field value that is not NaN (``ImuSamples.has_mag``).
-    first_ns, last_ns : int or None
-        The first and last sample's stamps.
+    first_ns : int or None
+        The first sample's stamp.
     pose_matches : bool
         Whether ``/truth/pose`` pairs with the samples by index within :data:`POSE_MATCH_NS` so far
         (:meth:`pose_pairs` once the stream has ended).
@@ -346,7 +360,6 @@ class DeviceCensus:
     finite: int = 0
     has_mag: bool = False
     first_ns: int | None = None
-    last_ns: int | None = None
     pose_matches: bool = True
     pose_count: int = 0
     rate: RateCounter = field(default_factory=RateCounter)
@@ -358,7 +371,6 @@ class DeviceCensus:
             return
         if self.first_ns is None:
             self.first_ns = int(block.stamp_ns[0])
-        self.last_ns = int(block.stamp_ns[-1])
         self.count += n
         self.finite += int((np.isfinite(block.gyro).all(axis=1) & np.isfinite(block.accel).all(axis=1)).sum())
         self.has_mag = self.has_mag or not np.all(np.isnan(block.mag))
@@ -484,11 +496,11 @@ def count_samples(
     filling = set(first_of)
 
     def add(name: str, block: DeviceBlock) -> None:
-        census[name].add(block)
+        counted = census[name]
+        counted.add(block)
         if name in filling:
             first[name].append(block)
-            stamps = [b.stamp_ns for b in first[name] if len(b)]
-            if stamps and stamps[-1][-1] - stamps[0][0] >= first_s * 1e9:
+            if len(block) and counted.first_ns is not None and block.stamp_ns[-1] - counted.first_ns >= first_s * 1e9:
                 filling.discard(name)
 
     for batch in McapRecordWalk(path).batches():

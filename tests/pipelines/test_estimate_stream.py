@@ -140,7 +140,8 @@ def test_stream_pairs_the_topics_as_read_mcap(tmp_path, damage):
 
 def test_rate_counter_is_numpys_median():
     """The counted median interval is ``1 / median(diff(t))`` to the bit, blocks or not, for clocked
-    stamps (few distinct intervals), jittered ones (every interval its own) and an even or odd count."""
+    stamps (few distinct intervals), jittered ones (every interval its own) and an even or odd count,
+    and for more intervals than it holds before merging a block's in."""
     rng = np.random.default_rng(2)
     for n in (2, 3, 1000, 1001):
         for t in (
@@ -152,6 +153,12 @@ def test_rate_counter_is_numpys_median():
             for piece in np.array_split(t, rng.integers(1, 6)):
                 counter.add(piece)
             assert counter.rate() == rate_of(t)
+    # a jittered clock from 0: every interval its own, merged in several times along the way
+    t = np.cumsum(rng.uniform(0.0009, 0.0011, 300_001))
+    counter = RateCounter()
+    for piece in np.array_split(t, 300):
+        counter.add(piece)
+    assert counter.rate() == rate_of(t)
 
 
 def test_check_samples_counts_as_before():
