@@ -45,12 +45,13 @@ gyro gyroemu models, and is not added).
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import cast
 
 import numpy as np
 
 from gyroemu.dynamics.rotation import quat_from_rotvec, quat_multiply, quat_rotate
 
-from .protocol import AttitudeFilter, Estimate
+from .protocol import AttitudeFilter, BlockLearner, Estimate
 
 __all__ = ["LatencyCompensated", "advance_attitude", "attitude_at_stamps", "field_at_gyro_instant", "turn_back"]
 
@@ -152,6 +153,13 @@ class LatencyCompensated:
         gyro_l, mag_l = self.latencies
         est = self.inner.process(t, gyro, accel, field_at_gyro_instant(mag, gyro, gyro_l, mag_l))
         return replace(est, q_wb=attitude_at_stamps(est.q_wb, gyro, est.gyro_bias, gyro_l))
+
+    def learn(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None) -> None:
+        """Feed an offline filter that learns a log a block at a time (``learns_in_blocks``) the block,
+        its field moved as :meth:`process` moves it."""
+        gyro_l, mag_l = self.latencies
+        learner = cast(BlockLearner, self.inner)  # an AttributeError for one that does not learn
+        learner.learn(t, gyro, accel, field_at_gyro_instant(mag, gyro, gyro_l, mag_l))
 
     def __getattr__(self, name: str):
         # "inner" before it is set (a copy being made): no recursion; "process_increments" would feed the

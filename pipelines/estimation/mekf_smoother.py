@@ -12,6 +12,8 @@ one (``P_s = P_post + C (P_s⁺ − P_prior⁺) Cᵀ`` and ``P_s⁺ ≤ P_prior�
 
 Memory: float64 storage of 5.4 kB a window (17 error states), about 163 MB for a 10-minute log at 1 kHz (20 ms
 windows), plus the per-sample outputs (about 100 bytes a sample for the forward and smoothed states).
+:class:`MekfSmoother`'s ``learn`` runs the same passes a block at a time with the storage on disk, in
+memory that does not grow with the log (:mod:`.mekf_smoother_spool`).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import numpy as np
 from . import mekf_kernels as kern
 from . import mekf_smoother_kernels as skern
 from .mekf import MekfParams, earth_rate_enu, initial_state
+from .mekf_smoother_spool import SmootherSpool
 from .protocol import Estimate, FilterSetup
 
 __all__ = ["SMOOTHER_DEFAULTS", "MekfSmoother", "SmootherResult", "smoother_params", "smooth_log"]
@@ -154,6 +157,7 @@ def smooth_log(
     W = len(end_index)
     e_s = np.empty((W, kern.X_SIZE))
     P_s = np.empty((W, kern.X_SIZE, kern.X_SIZE))
+    e_s[W - 1], P_s[W - 1] = 0.0, P_post[W - 1]  # the last window's smoothed state is its forward one
     skern.rts_backward(F_top, P_prior, P_post, x_upd, e_s, P_s)
     q_s, b_s, cov_s = np.empty((n, 4)), np.empty((n, 3)), np.empty((n, 3, 3))
     skern.per_sample(t, q_f, b_f, end_index, e_s, P_s, x_upd, q_s, b_s, cov_s)
@@ -171,25 +175,43 @@ def smooth_log(
 class MekfSmoother:
     """The offline filter ``mekf-smooth``: :func:`smooth_log` behind the filter protocol.
 
-    Offline: ``process`` takes the whole log in one call (a second call is an error: the backward pass
-    needs the end). ``process_increments`` takes delta angles.
+    Offline. Either ``process`` takes the whole log in one call (a second call is an error: the
+    backward pass needs the end; ``process_increments`` takes delta angles), or, for a log too long to
+    hold, :meth:`learn` takes it a block at a time and ``process`` then gives the same blocks' smoothed
+    estimates one after another (:class:`~.mekf_smoother_spool.SmootherSpool`: the same bytes, in memory
+    that does not grow with the log, the storage in temporary files in ``spool_folder`` or the system's
+    temporary folder). ``learns_in_blocks`` says a filter can do the second.
     """
 
     name = "mekf-smooth"
     offline = True
+    learns_in_blocks = True
 
     def __init__(self, setup: FilterSetup, params: MekfParams | None = None):
         self.setup = setup
         self.params = params if params is not None else smoother_params(setup)
         self.result: SmootherResult | None = None
+        self.spool: SmootherSpool | None = None
+        self.spool_folder: str | None = None
 
     def _check_once(self) -> None:
         if self.result is not None:
             raise ValueError("mekf-smooth is offline: it takes the whole log in one process() call")
 
+    def learn(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None) -> None:
+        """Take the log's next block into the forward pass (:meth:`SmootherSpool.learn`); arguments as
+        :meth:`process`'s."""
+        self._check_once()
+        if self.spool is None:
+            self.spool = SmootherSpool(self.setup, self.params, folder=self.spool_folder)
+        self.spool.learn(t, gyro, accel, mag)
+
     def process(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None) -> Estimate:
         """Smooth the whole log: ``t`` (N,) s, ``gyro`` (N, 3) rad/s, ``accel`` (N, 3) m/s², ``mag``
-        (N, 3) T or None. Returns the smoothed attitude, bias and attitude covariance of each sample."""
+        (N, 3) T or None. Returns the smoothed attitude, bias and attitude covariance of each sample.
+        After :meth:`learn`: the smoothed estimate of the next ``len(t)`` samples learned."""
+        if self.spool is not None:
+            return self.spool.process(t, gyro, accel, mag)
         self._check_once()
         self.result = smooth_log(self.setup, t, gyro, accel, mag, params=self.params)
         return self.result.smoothed
@@ -197,7 +219,15 @@ class MekfSmoother:
     def process_increments(
         self, t: np.ndarray, delta_angle: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None
     ) -> Estimate:
-        """As :meth:`process`, with the gyro's angle increments over ``[t_{k−1}, t_k]`` (N, 3), rad."""
+        """As :meth:`process`, with the gyro's angle increments over ``[t_{k−1}, t_k]`` (N, 3), rad (a
+        whole log only)."""
+        if self.spool is not None:
+            raise ValueError("mekf-smooth has learned its log a block at a time: process() gives the estimates")
         self._check_once()
         self.result = smooth_log(self.setup, t, None, accel, mag, delta_angle=delta_angle, params=self.params)
         return self.result.smoothed
+
+    def close(self) -> None:
+        """Remove the temporary files of a log learned a block at a time."""
+        if self.spool is not None:
+            self.spool.close()

@@ -117,15 +117,14 @@ def forward_pass(
 
 @njit
 def rts_backward(F_top, P_prior, P_post, x_upd, e_s, P_s):
-    """The RTS recursion of the module's notes over windows ``0 … W−1`` (0: the initial state):
-    ``e_s`` (W, X_SIZE) the smoothed errors, ``P_s`` (W, X_SIZE, X_SIZE) their covariances.
-    ``F P_post`` differs from ``P_post`` in the attitude's and acceleration's rows only (``F_top``; the
-    other rows of ``F`` are the identity's). A singular ``P_prior`` (the ideal device has no process noise) takes its
-    pseudo-inverse."""
+    """The RTS recursion of the module's notes over windows ``0 … W−1``: ``e_s`` (W, X_SIZE) the
+    smoothed errors, ``P_s`` (W, X_SIZE, X_SIZE) their covariances, from ``e_s[W−1]`` and ``P_s[W−1]``
+    as given (at the log's last window 0 and ``P_post[W−1]``; a stretch of windows ends with the next
+    stretch's first). ``F P_post`` differs from ``P_post`` in the attitude's and acceleration's rows only
+    (``F_top``; the other rows of ``F`` are the identity's). A singular ``P_prior`` (the ideal device has
+    no process noise) takes its pseudo-inverse."""
     W = F_top.shape[0]
     FP = np.empty((X, X))
-    e_s[W - 1] = 0.0
-    P_s[W - 1] = P_post[W - 1]
     for j in range(W - 2, -1, -1):
         FP[:, :] = P_post[j]
         FP[0:3, :] = F_top[j + 1, 0:3] @ P_post[j]

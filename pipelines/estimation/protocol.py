@@ -17,6 +17,9 @@ serves a whole log at once (``gyroemu estimate``, ``gyroemu bench``) and a live 
             ...
 
 and is named on the command line as ``module:Class`` (``gyroemu bench --filter mypkg.filters:MyFilter``).
+An offline filter (``offline = True``) takes the whole log in one ``process`` call; one that can also
+take a log too long to hold (:class:`BlockLearner`: ``learns_in_blocks = True``) is given every block
+by ``learn`` first, then asked by ``process`` for the same blocks' estimates in the same order.
 Frames and units follow ``interface.md``: ``q_wb`` turns body vectors into the ENU world frame.
 """
 
@@ -27,7 +30,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["AttitudeFilter", "DeviceNoise", "Estimate", "FilterSetup"]
+__all__ = ["AttitudeFilter", "BlockLearner", "DeviceNoise", "Estimate", "FilterSetup"]
 
 
 @dataclass(frozen=True)
@@ -145,3 +148,16 @@ class AttitudeFilter(Protocol):
     def process(
         self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None
     ) -> Estimate: ...
+
+
+@runtime_checkable
+class BlockLearner(AttitudeFilter, Protocol):
+    """An offline filter that takes a log a block at a time (see the module's docstring): ``learn``
+    every block in time order, then ``process`` the same blocks in the same order; ``close`` frees what
+    it kept (:class:`~.mekf_smoother.MekfSmoother`: temporary files)."""
+
+    learns_in_blocks: bool
+
+    def learn(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None) -> None: ...
+
+    def close(self) -> None: ...

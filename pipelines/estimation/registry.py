@@ -46,6 +46,7 @@ __all__ = [
     "available_filters",
     "filter_class",
     "is_offline",
+    "learns_in_blocks",
     "make_filter",
     "unavailable_filters",
 ]
@@ -119,6 +120,16 @@ def is_offline(name_or_spec: str) -> bool:
         return FILTERS[name_or_spec].offline
     try:
         return bool(getattr(_user_class(name_or_spec), "offline", False))
+    except FilterError:
+        return False
+
+
+def learns_in_blocks(name_or_spec: str) -> bool:
+    """Whether an offline filter can take a log a block at a time (``learns_in_blocks = True``: its
+    ``learn`` takes every block, then ``process`` gives the same blocks' estimates, as
+    :class:`~.mekf_smoother.MekfSmoother` does); a filter that cannot be loaded cannot."""
+    try:
+        return bool(getattr(filter_class(name_or_spec), "learns_in_blocks", False))
     except FilterError:
         return False
 

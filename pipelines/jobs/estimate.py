@@ -5,7 +5,9 @@ or anyone's: ``/tf``, cameras, ...) is copied record for record, with its schema
 bytes, sequence numbers and log and publish times, and so are the file's metadata records
 (:mod:`gyroemu.pipelines.jobs.estimate_copy`). Attachments are not copied. An online filter runs as
 the copy reads the log, a block at a time, in memory that does not grow with the log
-(:mod:`gyroemu.pipelines.formats.device_stream`); an offline one sees the log read whole first.
+(:mod:`gyroemu.pipelines.formats.device_stream`); the smoother (``mekf-smooth``, a
+:class:`~gyroemu.pipelines.estimation.protocol.BlockLearner`) learns the log a block at a time in one
+more pass first, its storage on disk; another offline filter is given the device's samples at once.
 
 The estimate (``sensor_msgs/msg/Imu``: the estimated ``q_wb`` with its covariance when the filter has
 one, and the bias-corrected rate) goes to ``topic_out`` (default ``/estimate/imu``): one message per
@@ -30,10 +32,12 @@ import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
-from gyroemu.pipelines.estimation.registry import is_offline, make_filter
+from gyroemu.pipelines.estimation.protocol import AttitudeFilter, BlockLearner
+from gyroemu.pipelines.estimation.registry import is_offline, learns_in_blocks, make_filter
 from gyroemu.pipelines.estimation.series import check_counts, check_samples, estimate_series, rate_of
 from gyroemu.pipelines.estimation.setup import (
     FIELD_LAG_FROM_LOG,
@@ -49,9 +53,17 @@ from gyroemu.pipelines.formats.channels import (
     series_fields,
     split_topic,
 )
-from gyroemu.pipelines.formats.device_stream import DeviceStream, NotStreamable, count_samples, scan_devices
+from gyroemu.pipelines.formats.device_stream import (
+    DeviceBlock,
+    DeviceStream,
+    NotStreamable,
+    StreamDevice,
+    count_samples,
+    scan_devices,
+)
 from gyroemu.pipelines.formats.frames import TF_LOG_RATE_HZ, TfThinning
 from gyroemu.pipelines.formats.mcap_log import LogWarning, read_mcap
+from gyroemu.pipelines.formats.mcap_records import McapRecordWalk
 from gyroemu.pipelines.formats.messages import ns_to_stamps
 from gyroemu.pipelines.jobs.estimate_copy import (
     FIRST_BLOCK_S,
@@ -173,9 +185,11 @@ def estimate_log(
     """Filter the IMU topic(s) of the log ``path`` and write ``out``: the input with the estimate added.
 
     The log is read a block at a time (:mod:`~gyroemu.pipelines.formats.device_stream`): an online filter
-    runs as it is read, in memory that does not grow with the log's length; an offline filter and a
-    field lag read from the samples (``latency_s={"mag": "auto"}``) get the filtered devices' samples
-    at once (their rows of gyro, accelerometer and field only, not the log). A log whose topics one
+    runs as it is read, in memory that does not grow with the log's length, and so does the smoother
+    (``mekf-smooth``: it learns the log a block at a time in one more pass, its storage in temporary
+    files beside ``out``); another offline filter and a field lag read from the samples
+    (``latency_s={"mag": "auto"}``) get the filtered devices' samples at once (their rows of gyro,
+    accelerometer and field only, not the log). A log whose topics one
     pass cannot pair is read whole into memory first (:func:`read_mcap`). All give the same bytes.
 
     Parameters
@@ -274,14 +288,16 @@ def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latenc
         chosen = _choose(devices.values(), path, topic, topic_out)
         _check_topics_out(path, chosen, scan.channel_info())
         tf_device = next((d.name for d, _ in chosen if d.metadata is not None), None)
-        # an offline filter, and the field's lag read from the samples, need every sample at once
-        first_s = math.inf if is_offline(filter_name) or FIELD_LAG_FROM_LOG in latency_s.values() else FIRST_BLOCK_S
+        # an offline filter that cannot learn a block at a time, and the field's lag read from the
+        # samples, need every sample at once
+        whole = is_offline(filter_name) and not learns_in_blocks(filter_name)
+        first_s = math.inf if whole or FIELD_LAG_FROM_LOG in latency_s.values() else FIRST_BLOCK_S
         found = count_samples(path, devices, tf_device, {d.name for d, _ in chosen}, first_s)
     # past the passes that may find the log unpairable (and fall back to the whole read, which warns anew)
     _pass_on(caught)
-    runs, done, field_lags = [], [], []
-    for dev, name in chosen:
-        counted, pose, first = found[dev.name].census, found[dev.name].pose_pairs, found[dev.name].first
+    runs, done, field_lags, filters = [], [], [], []
+    for dev, _ in chosen:
+        counted, first = found[dev.name].census, found[dev.name].first
         note = check_counts(path, dev.name, counted.count, counted.finite)
         if note:
             warnings.warn(f"{path}: {note}", UserWarning, stacklevel=2)
@@ -291,26 +307,76 @@ def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latenc
         nine, flt, lag = _device_filter(
             dev, counted.rate.rate(), counted.has_mag, use_mag, filter_name, latency_s, t_rel, first.gyro, first.mag
         )
+        if getattr(flt, "learns_in_blocks", False):
+            flt.spool_folder = str(out.parent)  # beside the output, whose size it is of (not a small /tmp)
         field_lags += lag
-        target = _target(dev, name, np.empty(0, np.int64), {})
-        if dev.name == tf_device:
-            target.tf_keep, target.tf_pos = np.zeros(0, dtype=bool), np.zeros((0, 3))
-        run = BlockRun(
-            target=target,
-            stream=DeviceStream(dev.channels, pair_pose=pose),
-            flt=flt,
-            nine=nine,
-            t0=t0,
-            count=counted.count,
-            pose=pose,
-            thinning=TfThinning(TF_LOG_RATE_HZ) if dev.name == tf_device else None,
-        )
-        run.start(first)
-        runs.append(run)
-        done.append((dev.name, counted.count, getattr(flt, "name", filter_name), nine))
-    copy_with_estimates(path, out, scan.profile, [r.target for r in runs], StreamFeed(runs))
+        filters.append(_DeviceFilter(dev, flt, nine, t0, first))
+    try:
+        _learn(path, [f for f in filters if getattr(f.flt, "learns_in_blocks", False)])
+        for (dev, name), f in zip(chosen, filters):
+            runs.append(_block_run(dev, name, f, found[dev.name], tf_device))
+            done.append((dev.name, found[dev.name].census.count, getattr(f.flt, "name", filter_name), f.nine))
+        copy_with_estimates(path, out, scan.profile, [r.target for r in runs], StreamFeed(runs))
+    finally:
+        for f in filters:
+            if isinstance(f.flt, BlockLearner):
+                f.flt.close()
     topics = [(r.target.topic, r.target.topic_out, r.target.sequence) for r in runs]
     return EstimateSummary(path=out, devices=done, topics=topics, field_lags=field_lags)
+
+
+@dataclass(frozen=True, eq=False)
+class _DeviceFilter:
+    """A device's filter in the streamed path, with what it runs on."""
+
+    dev: StreamDevice
+    flt: AttitudeFilter
+    nine: bool
+    t0: float  # the device's first stamp, s: the filter runs on stamps relative to it
+    first: DeviceBlock  # its first block of samples (:data:`FIRST_BLOCK_S`), or all of them
+
+    def feed(self, block: DeviceBlock, rest: bool) -> None:
+        """``learn`` the block; with ``rest``, only its samples after the first block (given first)."""
+        block = block.after(self.first.through_ns) if rest else block
+        if len(block):
+            t = ns_to_stamps(block.stamp_ns) - self.t0
+            learner = cast(BlockLearner, self.flt)
+            learner.learn(t, block.gyro, block.accel, block.mag if self.nine else None)
+
+
+def _learn(path: Path, filters: list[_DeviceFilter]) -> None:
+    """Give each offline filter that learns a log a block at a time its device's samples in time order,
+    from one more pass over the log: its first block, then the rest as the log goes by."""
+    if not filters:
+        return
+    streams = [DeviceStream(f.dev.channels) for f in filters]
+    for f in filters:
+        f.feed(f.first, rest=False)
+    for batch in McapRecordWalk(path).batches():
+        for f, stream in zip(filters, streams):
+            stream.feed(batch)
+            f.feed(stream.take(), rest=True)
+    for f, stream in zip(filters, streams):
+        f.feed(stream.take(final=True), rest=True)
+
+
+def _block_run(dev, name: str, f: _DeviceFilter, counted, tf_device: str | None) -> BlockRun:
+    """The :class:`BlockRun` of device ``dev``'s filter ``f`` (its census ``counted``), started."""
+    target = _target(dev, name, np.empty(0, np.int64), {})
+    if dev.name == tf_device:
+        target.tf_keep, target.tf_pos = np.zeros(0, dtype=bool), np.zeros((0, 3))
+    run = BlockRun(
+        target=target,
+        stream=DeviceStream(dev.channels, pair_pose=counted.pose_pairs),
+        flt=f.flt,
+        nine=f.nine,
+        t0=f.t0,
+        count=counted.census.count,
+        pose=counted.pose_pairs,
+        thinning=TfThinning(TF_LOG_RATE_HZ) if dev.name == tf_device else None,
+    )
+    run.start(f.first)
+    return run
 
 
 def _pass_on(caught: list[warnings.WarningMessage]) -> None:

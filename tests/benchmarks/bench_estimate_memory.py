@@ -9,8 +9,9 @@ byte for byte. The floor: a process that imports the estimate job and opens noth
 
     python tests/benchmarks/bench_estimate_memory.py [--durations 600 1800 7200] [--smooth] [--folder DIR]
 
-``--smooth``: the smoother (``gyroemu estimate --smooth``), which is given the device's samples at once
-instead of the log: its memory grows with the log, by less.
+``--smooth``: the smoother (``gyroemu estimate --smooth``), which learns the log a block at a time in one
+more pass, its storage in temporary files (``mekf_smoother_spool``); read whole, it also holds its
+forward pass, window storage and output in memory.
 
 The logs go to a temporary folder (``--folder`` to choose it) and are deleted after each duration; an
 hour at 1 kHz is about 1.1 GB of log and as much again of output.

@@ -218,10 +218,11 @@ def manoeuvre_log(tmp_path_factory):
         {"use_mag": False},
         {"filter_name": "vqf"},
         {"latency_s": {"gyro": 0.004, "mag": 0.012}},
-        {"filter_name": "mekf-smooth"},  # every sample at once
+        {"filter_name": "mekf-smooth"},  # learned a block at a time, its storage on disk
+        {"filter_name": "mekf-smooth", "latency_s": {"gyro": 0.004, "mag": 0.012}},
         {"latency_s": {"mag": "auto"}},  # the field's lag read from every sample
     ],
-    ids=["9D", "6D", "vqf", "timed", "smoother", "field-lag"],
+    ids=["9D", "6D", "vqf", "timed", "smoother", "timed-smoother", "field-lag"],
 )
 def test_streamed_estimate_is_the_whole_reads_bytes_on_a_gyroemu_log(manoeuvre_log, tmp_path, options):
     """The estimate, its /tf at the poses and every copied record, byte for byte."""
@@ -293,9 +294,11 @@ def test_a_log_one_pass_cannot_pair_is_read_whole(tmp_path):
 
 
 @pytest.mark.slow
-def test_memory_does_not_grow_with_the_log(tmp_path):
+@pytest.mark.parametrize("filter_name", ["mekf", "mekf-smooth"])
+def test_memory_does_not_grow_with_the_log(tmp_path, filter_name):
     """Python's peak allocation (tracemalloc sees NumPy's buffers) for a log 4× longer: the same within
-    the chunk and first-block buffers when streamed; read whole, it grows with the samples."""
+    the chunk and first-block buffers when streamed (the smoother: and a stretch of its windows, its
+    storage on disk); read whole, it grows with the samples."""
     from gyroemu.dynamics import load_scenario
     from gyroemu.sensors import load_device
 
@@ -307,7 +310,7 @@ def test_memory_does_not_grow_with_the_log(tmp_path):
         write_mcap(log, Recording(samples=device.measure(scenario.simulate(duration=60.0 * minutes)), device=device))
         for whole in (False, True):
             tracemalloc.start()
-            estimate_log(log, tmp_path / f"e{minutes}{whole}.mcap", read_whole=whole)
+            estimate_log(log, tmp_path / f"e{minutes}{whole}.mcap", read_whole=whole, filter_name=filter_name)
             peaks[minutes, whole] = tracemalloc.get_traced_memory()[1]
             tracemalloc.stop()
     assert peaks[8, True] > 3.0 * peaks[2, True]  # the whole read holds every sample (4×, less its floor)

@@ -81,6 +81,7 @@ def test_rts_backward_matches_filterpy_on_a_linear_system():
     want_x, want_P, _, _ = rts_smoother(means[:, :, None], covs, Fs_kf[1:] + [np.eye(X)], [Q] * n)
     e_s = np.empty((n, X))
     P_s = np.empty((n, X, X))
+    e_s[-1], P_s[-1] = 0.0, covs[-1]  # the last window's smoothed state is its forward one
     F_top = np.ascontiguousarray(np.concatenate([Fs[:, 0:3, :], Fs[:, kern.X_ACC :, :]], axis=1))
     skern.rts_backward(F_top, covs_p, covs, means - means_p, e_s, P_s)
     got_x = means + e_s  # e_s is relative to each posterior; the linear "injection" is a sum

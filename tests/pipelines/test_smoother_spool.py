@@ -1,0 +1,101 @@
+"""The smoother over a log learned a block at a time, its storage on disk
+(:mod:`gyroemu.pipelines.estimation.mekf_smoother_spool`): the same bytes as :func:`smooth_log` over the
+whole log, however the log is cut and however short the stretches of the backward pass; and the
+mistakes of a caller refused. (``gyroemu estimate --smooth`` through it, byte for byte the whole read's,
+and its memory: ``test_estimate_stream.py``.)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gyroemu.dynamics import load_scenario
+from gyroemu.pipelines.estimation.latency import LatencyCompensated
+from gyroemu.pipelines.estimation.mekf_smoother import MekfSmoother, smooth_log, smoother_params
+from gyroemu.pipelines.estimation.mekf_smoother_spool import SmootherSpool
+from gyroemu.pipelines.estimation.setup import setup_for
+from gyroemu.sensors import load_device
+
+
+@pytest.fixture(scope="module")
+def run():
+    """20 s of the smooth manoeuvre with the consumer MEMS (its field too), stamps from 0."""
+    scenario = load_scenario("smooth_manoeuvre")
+    device = load_device("consumer_mems", seed=5)
+    samples = device.measure(scenario.simulate(duration=20.0))
+    t = np.asarray(samples.t, float) - samples.t[0]
+    return setup_for(device, scenario), t, samples
+
+
+def cuts(rng: np.random.Generator, n: int, first: int, count: int) -> np.ndarray:
+    """Block edges ``0 … n``: a first block of ``first`` samples, then ``count`` random cuts (single
+    samples among them)."""
+    inner = rng.choice(np.arange(first + 1, n), count, replace=False)
+    return np.unique(np.concatenate([[0, first, first + 1, n - 1, n], inner]))
+
+
+@pytest.mark.parametrize("nine", [True, False], ids=["9D", "6D"])
+@pytest.mark.parametrize("segment", [2, 3, 97, None], ids=["2", "3", "97", "default"])
+def test_the_spool_is_smooth_log_to_the_bit(run, nine, segment):
+    """Attitude, bias and covariance of every sample equal :func:`smooth_log`'s, learned in ~60 blocks
+    and given out in ~80 others (cut elsewhere), with stretches of 2, 3, 97 windows and the default
+    (longer than the log: one stretch)."""
+    setup, t, samples = run
+    setup = setup if nine else setup.__class__(**{**setup.__dict__, "use_mag": False})
+    mag = samples.mag if nine else None
+    whole = smooth_log(setup, t, samples.gyro, samples.accel, mag).smoothed
+    rng = np.random.default_rng(11)
+    n = len(t)
+    first = int(np.searchsorted(t, 10.5))  # the filter starts from its first 10 s
+    options = {} if segment is None else {"segment_windows": segment}
+    with SmootherSpool(setup, smoother_params(setup), **options) as spool:
+        edges = cuts(rng, n, first, 60)
+        for a, b in zip(edges[:-1], edges[1:]):
+            spool.learn(t[a:b], samples.gyro[a:b], samples.accel[a:b], None if mag is None else mag[a:b])
+        edges = np.unique(np.concatenate([[0, 1, n], rng.choice(np.arange(2, n), 80, replace=False)]))
+        parts = [spool.process(t[a:b], samples.gyro[a:b], samples.accel[a:b]) for a, b in zip(edges[:-1], edges[1:])]
+        assert spool.samples == n and spool.windows > 2 * (segment or 0)  # several stretches where cut
+    for name in ("q_wb", "gyro_bias", "q_wb_covariance"):
+        assert np.array_equal(np.concatenate([getattr(p, name) for p in parts]), getattr(whole, name)), name
+
+
+def test_a_timed_smoother_learns_its_field_moved(run):
+    """Wrapped for the sensors' latencies, :class:`MekfSmoother` learned in blocks gives the wrapped
+    whole log's estimate (the field turned back to the gyro's instant before it is learned)."""
+    setup, t, samples = run
+    setup = setup.__class__(**{**setup.__dict__, "gyro_latency_s": 0.004, "mag_latency_s": 0.015})
+    args = (samples.gyro, samples.accel, samples.mag)
+    whole = LatencyCompensated(MekfSmoother(setup), 0.004, 0.015).process(t, *args)
+    timed = LatencyCompensated(MekfSmoother(setup), 0.004, 0.015)
+    half = int(np.searchsorted(t, 12.0))
+    timed.learn(t[:half], *(a[:half] for a in args))
+    timed.learn(t[half:], *(a[half:] for a in args))
+    out = [timed.process(t[s], *(a[s] for a in args)) for s in (slice(0, 7), slice(7, None))]
+    timed.close()
+    assert np.array_equal(np.concatenate([o.q_wb for o in out]), whole.q_wb)
+    assert np.array_equal(np.concatenate([o.q_wb_covariance for o in out]), whole.q_wb_covariance)
+
+
+def test_a_callers_mistakes_are_refused(run):
+    setup, t, samples = run
+    g, a = samples.gyro, samples.accel
+    with SmootherSpool(setup, smoother_params(setup)) as spool:
+        with pytest.raises(ValueError, match="learned no samples"):
+            spool.process(t[:5], g[:5], a[:5])
+        spool.learn(t[:3000], g[:3000], a[:3000], samples.mag[:3000])
+        with pytest.raises(ValueError, match="does not follow"):
+            spool.learn(t[2999:3100], g[2999:3100], a[2999:3100], samples.mag[2999:3100])
+        with pytest.raises(ValueError, match="shape"):
+            spool.learn(t[3000:3100], g[3000:3099], a[3000:3100], samples.mag[3000:3100])
+        with pytest.raises(ValueError, match="not those learned"):
+            spool.process(t[1:5], g[1:5], a[1:5])
+        with pytest.raises(ValueError, match="3001 samples asked for, 3000 learned"):
+            spool.process(t[:3001], g[:3001], a[:3001])
+        with pytest.raises(ValueError, match="learns no more"):
+            spool.learn(t[3000:3100], g[3000:3100], a[3000:3100], samples.mag[3000:3100])
+    smoother = MekfSmoother(setup)
+    smoother.learn(t[:3000], g[:3000], a[:3000], samples.mag[:3000])
+    with pytest.raises(ValueError, match="block at a time"):
+        smoother.process_increments(t[:5], g[:5] * 0.01, a[:5])
+    smoother.close()
