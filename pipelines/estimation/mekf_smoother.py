@@ -18,6 +18,7 @@ memory that does not grow with the log (:mod:`.mekf_smoother_spool`).
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, replace
 
@@ -179,8 +180,8 @@ class MekfSmoother:
     backward pass needs the end; ``process_increments`` takes delta angles), or, for a log too long to
     hold, :meth:`learn` takes it a block at a time and ``process`` then gives the same blocks' smoothed
     estimates one after another (:class:`~.mekf_smoother_spool.SmootherSpool`: the same bytes, in memory
-    that does not grow with the log, the storage in temporary files in ``spool_folder`` or the system's
-    temporary folder). ``learns_in_blocks`` says a filter can do the second.
+    that does not grow with the log, the storage in temporary files in the folder given to
+    :meth:`spool_in` or the system's). ``learns_in_blocks`` says a filter can do the second.
     """
 
     name = "mekf-smooth"
@@ -192,7 +193,11 @@ class MekfSmoother:
         self.params = params if params is not None else smoother_params(setup)
         self.result: SmootherResult | None = None
         self.spool: SmootherSpool | None = None
-        self.spool_folder: str | None = None
+        self._spool_folder: str | os.PathLike[str] | None = None
+
+    def spool_in(self, folder: str | os.PathLike[str] | None) -> None:
+        """Where :meth:`learn` keeps its temporary files (None: the system's temporary folder)."""
+        self._spool_folder = folder
 
     def _check_once(self) -> None:
         if self.result is not None:
@@ -203,7 +208,7 @@ class MekfSmoother:
         :meth:`process`'s."""
         self._check_once()
         if self.spool is None:
-            self.spool = SmootherSpool(self.setup, self.params, folder=self.spool_folder)
+            self.spool = SmootherSpool(self.setup, self.params, folder=self._spool_folder)
         self.spool.learn(t, gyro, accel, mag)
 
     def process(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None) -> Estimate:

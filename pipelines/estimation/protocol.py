@@ -25,6 +25,7 @@ Frames and units follow ``interface.md``: ``q_wb`` turns body vectors into the E
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
@@ -153,11 +154,14 @@ class AttitudeFilter(Protocol):
 @runtime_checkable
 class BlockLearner(AttitudeFilter, Protocol):
     """An offline filter that takes a log a block at a time (see the module's docstring): ``learn``
-    every block in time order, then ``process`` the same blocks in the same order; ``close`` frees what
-    it kept (:class:`~.mekf_smoother.MekfSmoother`: temporary files)."""
+    every block in time order, then ``process`` the same blocks in the same order; ``spool_in`` names
+    the folder for what it keeps (:class:`~.mekf_smoother.MekfSmoother`: temporary files), ``close``
+    frees it."""
 
     learns_in_blocks: bool
 
     def learn(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None) -> None: ...
+
+    def spool_in(self, folder: str | os.PathLike[str] | None) -> None: ...
 
     def close(self) -> None: ...

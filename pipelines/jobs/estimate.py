@@ -32,7 +32,7 @@ import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import cast
+from typing import TypeGuard
 
 import numpy as np
 
@@ -307,19 +307,19 @@ def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latenc
         nine, flt, lag = _device_filter(
             dev, counted.rate.rate(), counted.has_mag, use_mag, filter_name, latency_s, t_rel, first.gyro, first.mag
         )
-        if getattr(flt, "learns_in_blocks", False):
-            flt.spool_folder = str(out.parent)  # beside the output, whose size it is of (not a small /tmp)
+        if _learns(flt):
+            flt.spool_in(out.parent)  # beside the output, whose size it is of (not in a small /tmp)
         field_lags += lag
         filters.append(_DeviceFilter(dev, flt, nine, t0, first))
     try:
-        _learn(path, [f for f in filters if getattr(f.flt, "learns_in_blocks", False)])
+        _learn(path, [f for f in filters if _learns(f.flt)])
         for (dev, name), f in zip(chosen, filters):
             runs.append(_block_run(dev, name, f, found[dev.name], tf_device))
             done.append((dev.name, found[dev.name].census.count, getattr(f.flt, "name", filter_name), f.nine))
         copy_with_estimates(path, out, scan.profile, [r.target for r in runs], StreamFeed(runs))
     finally:
         for f in filters:
-            if isinstance(f.flt, BlockLearner):
+            if _learns(f.flt):
                 f.flt.close()
     topics = [(r.target.topic, r.target.topic_out, r.target.sequence) for r in runs]
     return EstimateSummary(path=out, devices=done, topics=topics, field_lags=field_lags)
@@ -340,8 +340,13 @@ class _DeviceFilter:
         block = block.after(self.first.through_ns) if rest else block
         if len(block):
             t = ns_to_stamps(block.stamp_ns) - self.t0
-            learner = cast(BlockLearner, self.flt)
-            learner.learn(t, block.gyro, block.accel, block.mag if self.nine else None)
+            assert _learns(self.flt)
+            self.flt.learn(t, block.gyro, block.accel, block.mag if self.nine else None)
+
+
+def _learns(flt: AttitudeFilter) -> TypeGuard[BlockLearner]:
+    """Whether ``flt`` learns a log a block at a time (a :class:`BlockLearner` that says so)."""
+    return isinstance(flt, BlockLearner) and bool(flt.learns_in_blocks)
 
 
 def _learn(path: Path, filters: list[_DeviceFilter]) -> None:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import tracemalloc
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -316,3 +317,24 @@ def test_memory_does_not_grow_with_the_log(tmp_path, filter_name):
     assert peaks[8, True] > 3.0 * peaks[2, True]  # the whole read holds every sample (4×, less its floor)
     assert peaks[8, False] < 1.15 * peaks[2, False]  # a block at a time: nothing of the extra six minutes
     assert peaks[8, False] < peaks[8, True] / 3
+
+
+def test_the_smoother_spools_beside_the_output(manoeuvre_log, tmp_path, monkeypatch):
+    """``--smooth`` keeps its storage in nameless temporary files in the output's folder (a small /tmp
+    could not hold hours of it), timed or not, and leaves nothing there but the output."""
+    import tempfile
+
+    from gyroemu.pipelines.estimation import mekf_smoother_spool
+
+    folders, original = [], tempfile.TemporaryFile
+
+    def temporary_file(dir=None):  # noqa: A002 - tempfile's own keyword
+        folders.append(dir)
+        return original(dir=dir)
+
+    monkeypatch.setattr(mekf_smoother_spool.tempfile, "TemporaryFile", temporary_file)
+    out = tmp_path / "out" / "smoothed.mcap"
+    out.parent.mkdir()
+    estimate_log(manoeuvre_log, out, filter_name="mekf-smooth", latency_s={"gyro": 0.004})
+    assert folders and all(Path(f) == out.parent for f in folders)
+    assert sorted(p.name for p in out.parent.iterdir()) == ["smoothed.mcap"]
