@@ -15,7 +15,11 @@ the motion (the mean acceleration over seconds is nil). The script runs the reci
 - offlineVQF's own bias: it reproduces offlineVQF (the check of this reimplementation);
 - the smoother's bias, and the smoother's bias with its scale and misalignment ``(I − M̂)(ω − b̂)``: what
   the smoother's gyro states would give with offlineVQF's tilt;
-- ``--tau``: the low-pass's τ besides offlineVQF's 3 s, to show where the recipe is best.
+- ``--tau``: the low-pass's τ besides offlineVQF's 3 s, to show where the recipe is best;
+- offlineVQF's bias with the body's true acceleration taken out of the force first (an oracle: the
+  optical reference point's acceleration, its positions low-passed at 5 Hz and differentiated twice,
+  turned into ``q₃``'s frame by the reference attitude): what any model of the motion could at best
+  gain on the recipe's bounded-velocity model.
 
 Per trial, 6D inclination RMSE over BROAD's movement samples, degrees; the means last.
 """
@@ -59,6 +63,20 @@ def zero_phase_tilt(t: np.ndarray, rate: np.ndarray, accel: np.ndarray, tau_s: f
     return quat_multiply(turn, quat_from_matrix(R))
 
 
+def true_acceleration(trial) -> np.ndarray:
+    """The optical reference point's acceleration (N, 3), m/s², body axes: positions (NaN rows filled
+    from the nearest valid one) low-passed at 5 Hz (zero-phase), differentiated twice, turned into the
+    body by the reference attitude."""
+    from gyroemu.dynamics.rotation import quat_to_matrix
+
+    n, fs = len(trial), trial.rate_hz
+    valid = np.flatnonzero(np.all(np.isfinite(trial.opt_quat), axis=1) & np.all(np.isfinite(trial.opt_pos), axis=1))
+    nearest = valid[np.clip(np.searchsorted(valid, np.arange(n)), 0, len(valid) - 1)]
+    position = filtfilt(*butter(2, 5.0, fs=fs), trial.opt_pos[nearest], axis=0)
+    a_world = np.gradient(np.gradient(position, 1.0 / fs, axis=0), 1.0 / fs, axis=0)
+    return np.einsum("nji,nj->ni", quat_to_matrix(trial.opt_quat[nearest]), a_world)
+
+
 def main() -> int:
     from vqf import offlineVQF
 
@@ -73,6 +91,7 @@ def main() -> int:
     latency = float(load_device("aktos_t_broad").spec.gyro.latency_s)
     columns = ["offlineVQF", "smoother", "recipe, its bias", "recipe, smoother's bias", "recipe, smoother's b̂, M̂"]
     columns += [f"recipe, smoother's b̂, M̂, τ {tau:g} s" for tau in args.tau]
+    columns += ["recipe, its bias, the true acceleration taken out (oracle)"]
     rows = {}
     for path in files:
         trial = read_broad(path)
@@ -90,6 +109,7 @@ def main() -> int:
             zero_phase_tilt(t, u, accel, 3.0),
             zero_phase_tilt(t, corrected, accel, 3.0),
         ] + [zero_phase_tilt(t, corrected, accel, tau) for tau in args.tau]
+        estimates.append(zero_phase_tilt(t, gyro - ovqf["bias"], accel - true_acceleration(trial), 3.0))
         rows[path.stem[:2]] = [
             rmse_deg(
                 attitude_errors(advance_attitude(q, gyro, None, latency), trial.opt_quat).inclination, trial.movement
