@@ -1,7 +1,12 @@
 """Pictures of logs: ``gyroemu estimate --plot`` and ``gyroemu info --plot``.
 
-Both read the log they draw (:func:`~gyroemu.pipelines.formats.mcap_log.read_mcap`), so a picture shows
-what the file holds, and write one PNG beside it (matplotlib, Agg backend, imported when drawing).
+Both read the log they draw, so a picture shows what the file holds, and write one PNG beside it
+(matplotlib, Agg backend, imported when drawing). They read it a chunk at a time, in memory that does
+not grow with the log: each series goes into a :class:`~gyroemu.pipelines.jobs.plot_envelope.Envelope`,
+every sample of a short log, the min–max envelope of columns of time of a long one (``buckets``
+columns); the error's RMS is summed as it goes. A log whose devices one pass cannot find
+(:class:`~gyroemu.pipelines.formats.device_stream.NotStreamable`) is read whole
+(:func:`~gyroemu.pipelines.formats.mcap_log.read_mcap`) into the same envelopes.
 
 - :func:`plot_estimate`: per device with an ``/estimate/imu``, the estimated roll, pitch and yaw against
   the truth's (``/truth/imu``; Tait–Bryan z-y'-x'' angles of ``q_wb``, REP 103), the attitude error over
@@ -10,17 +15,29 @@ what the file holds, and write one PNG beside it (matplotlib, Agg backend, impor
 - :func:`plot_info`: per device, each IMU topic's series: ``/imu`` rate and specific force, and
   ``/mag`` where there is one.
 
+The estimate's error and bias are drawn where the estimate has a truth, or a measurement, at the same
+stamp (matched by stamp as the log goes by).
+
 Time axes are seconds from the device's first stamp.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["plot_estimate", "plot_info", "euler_zyx_deg", "attitude_error_deg"]
+from gyroemu.pipelines.formats.messages import DecodedBatch
+from gyroemu.pipelines.jobs.plot_envelope import Envelope
+
+__all__ = ["BUCKETS", "EstimateCurves", "InfoCurves", "attitude_error_deg", "estimate_curves", "euler_zyx_deg"]
+__all__ += ["info_curves", "plot_estimate", "plot_info"]
+
+BUCKETS = 2000
+"""Columns of time of a long log's curves (a figure 7 inches wide at 110 dpi has 770 pixels)."""
 
 
 def euler_zyx_deg(q_wb: np.ndarray) -> np.ndarray:
@@ -56,60 +73,242 @@ def _pyplot():
     return plt
 
 
-def _quietly_read(path: Path):
+@dataclass
+class EstimateCurves:
+    """What :func:`plot_estimate` draws of a device (times in s, absolute; ``t0`` the first sample's).
+
+    ``angles`` and ``true_angles``: roll, pitch, yaw, °; ``error``: the attitude error, °, where the
+    truth has the estimate's stamp, with its ``rms`` and ``final`` (None: no such stamp); ``bias``: the
+    gyro bias the estimate implies, °/h (``/imu`` rate less ``/estimate/imu``'s bias-corrected rate at
+    the same stamp; empty where the estimate has no rate)."""
+
+    name: str
+    t0: float | None = None
+    angles: Envelope = field(default_factory=lambda: Envelope(3))
+    true_angles: Envelope = field(default_factory=lambda: Envelope(3))
+    error: Envelope = field(default_factory=lambda: Envelope(1))
+    bias: Envelope = field(default_factory=lambda: Envelope(3))
+    sum_squares: float = 0.0
+    finite: int = 0
+    final: float | None = None
+
+    @property
+    def rms(self) -> float | None:
+        """The error's RMS over its finite values, ° (None: no error)."""
+        return float(np.sqrt(self.sum_squares / self.finite)) if self.finite else None
+
+    def add_error(self, t: np.ndarray, error: np.ndarray) -> None:
+        self.error.add(t, error[:, None])
+        ok = np.isfinite(error)
+        self.sum_squares += float(np.sum(error[ok] ** 2))
+        self.finite += int(ok.sum())
+        if len(error):
+            self.final = float(error[-1])
+
+
+@dataclass
+class InfoCurves:
+    """What :func:`plot_info` draws of a device: its ``/imu`` rate (°/s) and specific force (m/s²), its
+    ``/mag`` field (µT; empty without one), times in s, absolute; ``t0`` the first sample's."""
+
+    name: str
+    topics: dict[str, str]
+    t0: float | None = None
+    rate: Envelope = field(default_factory=lambda: Envelope(3))
+    force: Envelope = field(default_factory=lambda: Envelope(3))
+    field: Envelope = field(default_factory=lambda: Envelope(3))
+
+
+class _StampMatch:
+    """Rows of two topics with equal stamps, as a log goes by (each topic's stamps increasing): a row
+    waits while the other topic has not yet gone past its stamp."""
+
+    def __init__(self) -> None:
+        self.waiting: list[tuple[np.ndarray, np.ndarray] | None] = [None, None]
+
+    def add(self, side: int, stamp_ns: np.ndarray, values: np.ndarray) -> None:
+        held = self.waiting[side]
+        if held is not None:
+            stamp_ns, values = np.concatenate((held[0], stamp_ns)), np.concatenate((held[1], values))
+        self.waiting[side] = (stamp_ns, values)
+
+    def take(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(stamps, values of the first topic, of the second)`` matched since the last call."""
+        a, b = self.waiting
+        if a is None or b is None or not len(a[0]) or not len(b[0]):
+            return np.empty(0, np.int64), np.empty((0,)), np.empty((0,))
+        common, ia, ib = np.intersect1d(a[0], b[0], assume_unique=True, return_indices=True)
+        for side, (rows, matched, other) in enumerate(((a, ia, b), (b, ib, a))):
+            keep = np.ones(len(rows[0]), dtype=bool)
+            keep[matched] = False
+            keep &= rows[0] > other[0][-1]  # a row the other topic has gone past never matches
+            self.waiting[side] = (rows[0][keep], rows[1][keep])
+        return common, a[1][ia], b[1][ib]
+
+
+def _quietly(function, *args):
     import warnings
 
-    from gyroemu.pipelines.formats.mcap_log import LogWarning, read_mcap
+    from gyroemu.pipelines.formats.mcap_log import LogWarning
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LogWarning)
-        return read_mcap(path)
+        return function(*args)
 
 
-def plot_estimate(path: str | os.PathLike[str], out: str | os.PathLike[str] | None = None) -> Path:
+def _device_rows(path: Path, devices: dict, roles: tuple[str, ...]) -> Iterator[dict[tuple[str, str], DecodedBatch]]:
+    """Per chunk of the log, the decoded messages of each device's topics of ``roles``:
+    ``{(device, role): DecodedBatch}``."""
+    from gyroemu.pipelines.formats.mcap_records import McapRecordWalk
+
+    wanted = {
+        channel_id: (name, role, mtype)
+        for name, dev in devices.items()
+        for role, (channel_id, mtype) in dev.channels.items()
+        if role in roles
+    }
+    for batch in McapRecordWalk(path).batches():
+        rows = {}
+        for channel_id in np.unique(batch.channel_id).tolist():
+            if channel_id in wanted:
+                name, role, mtype = wanted[channel_id]
+                rows[name, role] = mtype.decode(batch.payloads(np.flatnonzero(batch.channel_id == channel_id)))
+        yield rows
+
+
+def _nan_if_none(values, n: int, width: int) -> np.ndarray:
+    return np.full((n, width), np.nan) if values is None else np.asarray(values, dtype=float)
+
+
+def estimate_curves(
+    path: str | os.PathLike[str], buckets: int = BUCKETS, *, read_whole: bool = False
+) -> list[EstimateCurves]:
+    """The curves :func:`plot_estimate` draws, per device with an ``/estimate/imu`` that holds an
+    attitude, from one pass over the log after the one that finds its devices (module's notes);
+    ``read_whole``: from the log read whole (the same curves)."""
+    from gyroemu.pipelines.formats.channels import ESTIMATE_ROLE, IMU_ROLE, TRUTH_ROLE, series_from_batch
+    from gyroemu.pipelines.formats.device_stream import NotStreamable, scan_devices
+
+    path = Path(path)
+    try:
+        if read_whole:
+            raise NotStreamable("asked to read whole")
+        devices, _ = _quietly(scan_devices, path)
+    except NotStreamable:
+        return _estimate_curves_whole(path, buckets)
+    devices = {name: d for name, d in devices.items() if ESTIMATE_ROLE in d.channels}
+    curves = {name: _new_estimate_curves(name, buckets) for name in devices}
+    errors = {name: _StampMatch() for name in devices}
+    biases = {name: _StampMatch() for name in devices}
+    for rows in _device_rows(path, devices, (IMU_ROLE, TRUTH_ROLE, ESTIMATE_ROLE)):
+        for (name, role), decoded in rows.items():
+            series, c = series_from_batch(decoded), curves[name]
+            n = len(series.t)
+            if role == IMU_ROLE:
+                c.t0 = float(series.t[0]) if c.t0 is None and n else c.t0
+                biases[name].add(1, decoded.stamp_ns, _nan_if_none(series.omega_b, n, 3))
+            elif role == TRUTH_ROLE and series.q_wb is not None:
+                c.true_angles.add(series.t, euler_zyx_deg(series.q_wb))
+                errors[name].add(1, decoded.stamp_ns, series.q_wb)
+            elif role == ESTIMATE_ROLE:
+                q = _nan_if_none(series.q_wb, n, 4)
+                c.angles.add(series.t, euler_zyx_deg(q))
+                errors[name].add(0, decoded.stamp_ns, q)
+                if series.omega_b is not None:
+                    biases[name].add(0, decoded.stamp_ns, series.omega_b)
+        for name in {name for name, _ in rows}:
+            _add_matches(curves[name], errors[name], biases[name])
+    return [c for c in curves.values() if np.isfinite(c.angles.columns()[1]).any()]
+
+
+def _new_estimate_curves(name: str, buckets: int) -> EstimateCurves:
+    return EstimateCurves(
+        name, None, Envelope(3, buckets), Envelope(3, buckets), Envelope(1, buckets), Envelope(3, buckets)
+    )
+
+
+def _add_matches(c: EstimateCurves, errors: _StampMatch, biases: _StampMatch) -> None:
+    """The error and bias of the estimate's rows matched so far."""
+    from gyroemu.pipelines.formats.messages import ns_to_stamps
+
+    stamps, q_est, q_true = errors.take()
+    if len(stamps):
+        c.add_error(ns_to_stamps(stamps), attitude_error_deg(q_true, q_est))
+    stamps, omega, gyro = biases.take()
+    if len(stamps):
+        c.bias.add(ns_to_stamps(stamps), np.degrees(gyro - omega) * 3600.0)
+
+
+def _estimate_curves_whole(path: Path, buckets: int) -> list[EstimateCurves]:
+    """:func:`estimate_curves` of a log read whole (:func:`read_mcap`)."""
+    from gyroemu.pipelines.formats.mcap_log import read_mcap
+    from gyroemu.pipelines.formats.messages import stamps_to_ns
+
+    log = _quietly(read_mcap, path)
+    out = []
+    for dev in log.devices.values():
+        est = dev.estimate
+        if est is None or est.q_wb is None:
+            continue
+        c = _new_estimate_curves(dev.name, buckets)
+        c.t0 = float(dev.samples.t[0])
+        c.angles.add(est.t, euler_zyx_deg(est.q_wb))
+        errors, biases = _StampMatch(), _StampMatch()
+        est_ns = stamps_to_ns(est.t)
+        errors.add(0, est_ns, est.q_wb)
+        if dev.truth is not None and dev.truth.q_wb is not None:
+            c.true_angles.add(dev.truth.t, euler_zyx_deg(dev.truth.q_wb))
+            errors.add(1, stamps_to_ns(dev.truth.t), dev.truth.q_wb)
+        if est.omega_b is not None:
+            biases.add(0, est_ns, est.omega_b)
+            biases.add(1, stamps_to_ns(dev.samples.t), dev.samples.gyro)
+        _add_matches(c, errors, biases)
+        out.append(c)
+    return out
+
+
+def plot_estimate(
+    path: str | os.PathLike[str],
+    out: str | os.PathLike[str] | None = None,
+    *,
+    buckets: int = BUCKETS,
+    read_whole: bool = False,
+) -> Path:
     """Draw the estimate of the log ``path`` against its truth into ``out`` (default: ``path`` with
     ``.estimate.png``); returns the file written. ``ValueError`` when no device of the log has an
-    ``/estimate/imu``."""
+    ``/estimate/imu``. ``buckets``, ``read_whole``: :func:`estimate_curves`'."""
     path = Path(path)
     out = Path(out) if out is not None else path.with_suffix(".estimate.png")
-    log = _quietly_read(path)
-    devices = [d for d in log.devices.values() if d.estimate is not None and d.estimate.q_wb is not None]
+    devices = estimate_curves(path, buckets, read_whole=read_whole)
     if not devices:
         raise ValueError(f"{path}: no /estimate/imu to draw")
     plt = _pyplot()
     rows = 5
     fig, axes = plt.subplots(rows, len(devices), figsize=(7 * len(devices), 12), sharex="col", squeeze=False)
-    for column, dev in enumerate(devices):
-        est = dev.estimate
-        t0 = float(dev.samples.t[0])
-        t = est.t - t0
-        angles = euler_zyx_deg(est.q_wb)
-        truth = dev.truth if dev.truth is not None and dev.truth.q_wb is not None else None
-        true_angles = euler_zyx_deg(truth.q_wb) if truth is not None else None
+    for column, c in enumerate(devices):
+        t0 = c.t0 if c.t0 is not None else (c.angles.t0 or 0.0)
         for k, name in enumerate(("roll", "pitch", "yaw")):
             ax = axes[k, column]
-            if truth is not None and true_angles is not None:
-                ax.plot(truth.t - t0, true_angles[:, k], color="0.3", lw=1.2, label="truth")
-            ax.plot(t, angles[:, k], color="C0", lw=0.9, label="estimate")
+            if len(c.true_angles):
+                c.true_angles.draw(ax, channels=[k], labels=["truth"], colors=["0.3"], t_offset=t0, lw=1.2)
+            c.angles.draw(ax, channels=[k], labels=["estimate"], colors=["C0"], t_offset=t0, lw=0.9)
             ax.set_ylabel(f"{name}, °")
             ax.grid(alpha=0.3)
-        axes[0, column].set_title(f"{dev.name}: estimate against the truth")
+        axes[0, column].set_title(f"{c.name}: estimate against the truth")
         axes[0, column].legend(loc="upper right", fontsize=8)
         ax = axes[3, column]
-        if truth is not None and len(truth) == len(est) and np.allclose(truth.t, est.t, rtol=0, atol=1e-6):
-            error = attitude_error_deg(truth.q_wb, est.q_wb)
-            ax.plot(t, error, color="C3", lw=0.9)
-            rms = float(np.sqrt(np.nanmean(error**2)))
-            ax.set_title(f"attitude error: RMS {rms:.3g}°, final {error[-1]:.3g}°", fontsize=9)
+        if len(c.error):
+            c.error.draw(ax, colors=["C3"], t_offset=t0, lw=0.9)
+            final = c.final if c.final is not None else float("nan")
+            rms = c.rms if c.rms is not None else float("nan")
+            ax.set_title(f"attitude error: RMS {rms:.3g}°, final {final:.3g}°", fontsize=9)
         else:
             ax.text(0.5, 0.5, "no truth at the estimate's stamps", ha="center", va="center", transform=ax.transAxes)
         ax.set_ylabel("error, °")
         ax.grid(alpha=0.3)
         ax = axes[4, column]
-        if est.omega_b is not None and len(est) == len(dev.samples):
-            bias = np.degrees(dev.samples.gyro - est.omega_b) * 3600.0
-            for k, axis in enumerate("xyz"):
-                ax.plot(t, bias[:, k], lw=0.9, label=f"b{axis}")
+        if len(c.bias):
+            c.bias.draw(ax, labels=["bx", "by", "bz"], t_offset=t0, lw=0.9)
             ax.legend(loc="upper right", fontsize=8)
         else:
             ax.text(0.5, 0.5, "the filter gives no bias", ha="center", va="center", transform=ax.transAxes)
@@ -122,33 +321,89 @@ def plot_estimate(path: str | os.PathLike[str], out: str | os.PathLike[str] | No
     return out
 
 
-def plot_info(path: str | os.PathLike[str], out: str | os.PathLike[str] | None = None) -> Path:
+def info_curves(path: str | os.PathLike[str], buckets: int = BUCKETS, *, read_whole: bool = False) -> list[InfoCurves]:
+    """The curves :func:`plot_info` draws, per device, from one pass over the log after the one that
+    finds its devices (module's notes); ``read_whole``: from the log read whole (the same curves)."""
+    from gyroemu.pipelines.formats.channels import IMU_ROLE, MAG_ROLE, series_from_batch
+    from gyroemu.pipelines.formats.device_stream import NotStreamable, scan_devices
+
+    path = Path(path)
+    try:
+        if read_whole:
+            raise NotStreamable("asked to read whole")
+        devices, _ = _quietly(scan_devices, path)
+    except NotStreamable:
+        return _info_curves_whole(path, buckets)
+    curves = {name: _new_info_curves(name, dict(d.topics), buckets) for name, d in devices.items()}
+    for rows in _device_rows(path, devices, (IMU_ROLE, MAG_ROLE)):
+        for (name, role), decoded in rows.items():
+            c = curves[name]
+            if role == IMU_ROLE:
+                series = series_from_batch(decoded)
+                n = len(series.t)
+                c.t0 = float(series.t[0]) if c.t0 is None and n else c.t0
+                c.rate.add(series.t, np.degrees(_nan_if_none(series.omega_b, n, 3)))
+                c.force.add(series.t, _nan_if_none(series.specific_force_b, n, 3))
+            else:
+                from gyroemu.pipelines.formats.messages import ns_to_stamps
+
+                c.field.add(ns_to_stamps(decoded.stamp_ns), np.asarray(decoded["magnetic_field"]) * 1e6)
+    return list(curves.values())
+
+
+def _new_info_curves(name: str, topics: dict[str, str], buckets: int) -> InfoCurves:
+    return InfoCurves(name, topics, None, Envelope(3, buckets), Envelope(3, buckets), Envelope(3, buckets))
+
+
+def _info_curves_whole(path: Path, buckets: int) -> list[InfoCurves]:
+    """:func:`info_curves` of a log read whole (:func:`read_mcap`)."""
+    from gyroemu.pipelines.formats.mcap_log import read_mcap
+
+    log = _quietly(read_mcap, path)
+    out = []
+    for dev in log.devices.values():
+        s = dev.samples
+        c = _new_info_curves(dev.name, dict(dev.topics), buckets)
+        c.t0 = float(s.t[0])
+        c.rate.add(s.t, np.degrees(s.gyro))
+        c.force.add(s.t, s.accel)
+        if s.has_mag:
+            c.field.add(s.t, s.mag * 1e6)
+        out.append(c)
+    return out
+
+
+def plot_info(
+    path: str | os.PathLike[str],
+    out: str | os.PathLike[str] | None = None,
+    *,
+    buckets: int = BUCKETS,
+    read_whole: bool = False,
+) -> Path:
     """Draw each IMU topic's series of the log ``path`` (per device: rate, specific force, field) into
-    ``out`` (default: ``path`` with ``.info.png``); returns the file written."""
+    ``out`` (default: ``path`` with ``.info.png``); returns the file written. ``buckets``,
+    ``read_whole``: :func:`info_curves`'."""
     path = Path(path)
     out = Path(out) if out is not None else path.with_suffix(".info.png")
-    log = _quietly_read(path)
-    devices = list(log.devices.values())
+    devices = info_curves(path, buckets, read_whole=read_whole)
     plt = _pyplot()
     fig, axes = plt.subplots(3, len(devices), figsize=(7 * len(devices), 9), sharex="col", squeeze=False)
-    for column, dev in enumerate(devices):
-        s = dev.samples
-        t = s.t - s.t[0]
+    for column, c in enumerate(devices):
+        t0 = c.t0 if c.t0 is not None else 0.0
         panels = (
-            (np.degrees(s.gyro), "rate, °/s", dev.topics.get("imu", "/imu")),
-            (s.accel, "specific force, m/s²", dev.topics.get("imu", "/imu")),
-            (s.mag * 1e6 if s.has_mag else None, "field, µT", dev.topics.get("mag", "/mag")),
+            (c.rate, "rate, °/s", c.topics.get("imu", "/imu")),
+            (c.force, "specific force, m/s²", c.topics.get("imu", "/imu")),
+            (c.field if len(c.field) else None, "field, µT", c.topics.get("mag", "/mag")),
         )
         for row, (values, label, topic) in enumerate(panels):
             ax = axes[row, column]
             if values is None:
                 ax.text(0.5, 0.5, "no magnetometer", ha="center", va="center", transform=ax.transAxes)
             else:
-                for k, axis in enumerate("xyz"):
-                    ax.plot(t, values[:, k], lw=0.7, label=axis)
+                values.draw(ax, labels=list("xyz"), t_offset=t0, lw=0.7)
                 ax.legend(loc="upper right", fontsize=8)
             ax.set_ylabel(label)
-            ax.set_title(f"{dev.name}: {topic}", fontsize=9)
+            ax.set_title(f"{c.name}: {topic}", fontsize=9)
             ax.grid(alpha=0.3)
         axes[-1, column].set_xlabel("time, s")
     fig.tight_layout()

@@ -59,3 +59,132 @@ def test_estimate_and_info_draw_their_pictures(tmp_path, capsys):
     assert _png_size(tmp_path / "est.estimate.png") == (770, 1320)  # 7 x 12 in at 110 dpi
     assert main(["info", str(log), "--plot"]) == 0
     assert _png_size(tmp_path / "run.info.png") == (770, 990)  # 7 x 9 in
+
+
+def _direct_columns(t, values, t0, width, buckets):
+    """Each column's least, greatest and mean value computed from all the samples at once."""
+    index = np.maximum(np.floor((t - t0) / width), 0).astype(int)
+    assert index.max() < buckets
+    rows = []
+    for j in np.unique(index):
+        v = values[index == j]
+        with np.errstate(all="ignore"):
+            rows.append((t0 + (j + 0.5) * width, np.nanmin(v, axis=0), np.nanmax(v, axis=0), np.nanmean(v, axis=0)))
+    return [np.array(c) for c in zip(*rows)]
+
+
+@pytest.mark.parametrize("n", [15, 16, 17, 5000])
+def test_an_envelope_holds_each_columns_extremes_however_the_series_is_cut(n):
+    """Up to 2 · buckets samples (16 here): the samples themselves. Beyond: per column, the least and the
+    greatest of its samples exactly and their mean to round-off, NaN ignored (a channel NaN in a whole
+    column gives NaN), the same for two different cuts of the series into blocks."""
+    from gyroemu.pipelines.jobs.plot_envelope import Envelope
+
+    rng = np.random.default_rng(n)
+    t = 100.0 + np.cumsum(rng.uniform(0.001, 0.01, n))
+    values = rng.standard_normal((n, 2)) * [1.0, 1e6]
+    values[rng.random(n) < 0.1, 0] = np.nan
+    values[n // 2 : n // 2 + n // 8, 1] = np.nan  # a stretch where channel 1 has nothing
+    results = []
+    for seed in (1, 2):
+        envelope = Envelope(2, buckets=8)
+        cuts = np.unique(np.concatenate([[0, n], np.random.default_rng(seed).integers(0, n, 10)]))
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            envelope.add(t[a:b], values[a:b])
+        results.append(envelope)
+        assert len(envelope) == n
+    for envelope in results:
+        middle, lo, hi, mean = envelope.columns()
+        if n <= 16:
+            assert not envelope.decimated
+            assert np.array_equal(middle, t) and np.array_equal(lo, values, equal_nan=True)
+            continue
+        assert envelope.decimated and len(middle) <= 8
+        want = _direct_columns(t, values, envelope.t0, envelope.width, 8)
+        assert np.array_equal(middle, want[0])
+        assert np.array_equal(lo, want[1], equal_nan=True) and np.array_equal(hi, want[2], equal_nan=True)
+        scale = np.nanmax(np.abs(values), axis=0)
+        assert np.allclose(mean, want[3], rtol=0, atol=n * np.finfo(float).eps * scale, equal_nan=True)
+    assert results[0].width == results[1].width  # the columns do not depend on the cut
+
+
+@pytest.fixture(scope="module")
+def estimated_log(tmp_path_factory):
+    """8 s of the smooth manoeuvre with the consumer MEMS (a magnetometer), its truth, estimated (9D), in
+    small chunks."""
+    from gyroemu.dynamics import load_scenario
+    from gyroemu.pipelines.formats.mcap_log import Recording, write_mcap
+    from gyroemu.pipelines.jobs.estimate import estimate_log
+    from gyroemu.sensors import load_device
+
+    folder = tmp_path_factory.mktemp("plot")
+    scenario = load_scenario("smooth_manoeuvre")
+    device = load_device("consumer_mems", seed=3)
+    traj = scenario.simulate(duration=8.0)
+    from gyroemu.pipelines.formats.mcap_log import truth_series
+
+    samples = device.measure(traj)
+    log = write_mcap(
+        folder / "run.mcap", Recording(samples, truth=truth_series(traj, samples), device=device), chunk_size=1 << 14
+    )
+    out = folder / "est.mcap"
+    estimate_log(log, out)
+    return log, out
+
+
+@pytest.mark.parametrize("buckets", [16, 100_000], ids=["columns", "samples"])
+def test_the_curves_read_a_chunk_at_a_time_are_the_whole_reads(estimated_log, buckets):
+    """What the plots draw, read a chunk at a time, equals what the log read whole gives (its extremes
+    exactly; means and the error's RMS to round-off): angles, truth, error and bias of the estimate;
+    rate, force and field of the measurements."""
+    from gyroemu.pipelines.jobs import plots
+
+    log, out = estimated_log
+    eps = np.finfo(float).eps
+    (a,), (b,) = plots.estimate_curves(out, buckets), plots.estimate_curves(out, buckets, read_whole=True)
+    assert a.t0 == b.t0 and a.final == b.final and abs(a.rms - b.rms) <= 1e4 * eps * b.rms
+    for name in ("angles", "true_angles", "error", "bias"):
+        x, y = getattr(a, name).columns(), getattr(b, name).columns()
+        assert len(getattr(a, name)) == len(getattr(b, name)) > 0
+        assert all(np.array_equal(u, v, equal_nan=True) for u, v in zip(x[:3], y[:3])), name
+        assert np.allclose(x[3], y[3], rtol=1e-12, atol=1e-9, equal_nan=True), name
+    (a,), (b,) = plots.info_curves(log, buckets), plots.info_curves(log, buckets, read_whole=True)
+    for name in ("rate", "force", "field"):
+        x, y = getattr(a, name).columns(), getattr(b, name).columns()
+        assert len(getattr(a, name)) == len(getattr(b, name)) > 0
+        assert all(np.array_equal(u, v, equal_nan=True) for u, v in zip(x[:3], y[:3])), name
+
+
+@pytest.mark.slow
+def test_the_curves_memory_does_not_grow_with_the_log(tmp_path):
+    """Python's peak allocation (tracemalloc sees NumPy's buffers) while reading the curves of a log 4×
+    longer: the same within the chunks in flight and the columns when read a chunk at a time; read
+    whole, it grows with the samples."""
+    import tracemalloc
+
+    from gyroemu.dynamics import load_scenario
+    from gyroemu.pipelines.formats.mcap_log import Recording, truth_series, write_mcap
+    from gyroemu.pipelines.jobs import plots
+    from gyroemu.pipelines.jobs.estimate import estimate_log
+    from gyroemu.sensors import load_device
+
+    scenario = load_scenario("smooth_manoeuvre")
+    peaks = {}
+    for minutes in (1, 4):  # 1 kHz: 60,000 samples and more, past the 4,000 a plot keeps whole
+        device = load_device("consumer_mems", seed=1)
+        traj = scenario.simulate(duration=60.0 * minutes)
+        samples = device.measure(traj)
+        log = write_mcap(
+            tmp_path / f"m{minutes}.mcap", Recording(samples, truth=truth_series(traj, samples), device=device)
+        )
+        est = tmp_path / f"e{minutes}.mcap"
+        estimate_log(log, est)
+        for whole in (False, True):
+            tracemalloc.start()
+            plots.estimate_curves(est, read_whole=whole)
+            plots.info_curves(log, read_whole=whole)
+            peaks[minutes, whole] = tracemalloc.get_traced_memory()[1]
+            tracemalloc.stop()
+    assert peaks[4, True] > 3.0 * peaks[1, True]  # the whole read holds every sample
+    assert peaks[4, False] < 1.15 * peaks[1, False]  # a chunk at a time: nothing of the extra three minutes
+    assert peaks[4, False] < peaks[4, True] / 3
