@@ -133,15 +133,7 @@ def smooth_log(
     first = True
     while k < n:
         cap = expected if first else max(64, (n - k) // max(1, int(p[kern.P_WINDOW_N])) + 64)
-        X = kern.X_SIZE
-        store = (
-            np.full(cap, -1, dtype=np.int64),
-            np.zeros((cap, 9)),
-            np.zeros((cap, 5, X)),
-            np.zeros((cap, X, X)),
-            np.zeros((cap, X, X)),
-            np.zeros((cap, X)),
-        )
+        store = skern.window_store(cap)
         if first:
             store[1][0] = slow[kern.S_SCALE : kern.S_SCALE + 9]
             store[4][0] = P

@@ -82,6 +82,20 @@ def _store_window(q, b, slow, win, phi, P, x, earth, params, use_mag, F_top, P_p
     kern.inject(x, q, b, slow, win, phi)
 
 
+def window_store(cap: int) -> tuple[np.ndarray, ...]:
+    """Empty storage for ``cap`` windows of :func:`forward_pass`, in the order it takes them:
+    ``end_index`` (cap,) int64 (−1), ``M_post`` (cap, 9), ``F_top`` (cap, 5, X_SIZE), ``P_prior`` and
+    ``P_post`` (cap, X_SIZE, X_SIZE), ``x_upd`` (cap, X_SIZE)."""
+    return (
+        np.full(cap, -1, dtype=np.int64),
+        np.zeros((cap, 9)),
+        np.zeros((cap, 5, X)),
+        np.zeros((cap, X, X)),
+        np.zeros((cap, X, X)),
+        np.zeros((cap, X)),
+    )
+
+
 @njit
 def forward_pass(
     q, b, slow, P, win, phi, t, gyro, delta, accel, mag, earth, params, use_mag, start, q_out, b_out, cov_out,

@@ -111,7 +111,7 @@ class SmootherSpool:
         self._files = [tempfile.TemporaryFile(dir=folder) for _ in range(3)]
         self._windows, self._samples, self._smoothed = self._files
         self._state: tuple | None = None  # q, b, slow, P, win, phi of the forward pass
-        self._store = self._new_store()
+        self._store = skern.window_store(self.segment)
         self._stored = 0  # windows in the store
         self.windows = 0  # windows filed
         self.samples = 0  # samples learned
@@ -119,19 +119,9 @@ class SmootherSpool:
         self._backward_done = False
         self._served = 0  # samples given out by process
         self._next_window = 1  # the first window whose samples are not yet made
-        self._made: list[tuple] = []  # (t, q, b, cov) of samples made and not yet given out
-        self._made_count = 0
-
-    def _new_store(self) -> tuple:
-        cap = self.segment
-        return (
-            np.full(cap, -1, dtype=np.int64),
-            np.zeros((cap, 9)),
-            np.zeros((cap, 5, X)),
-            np.zeros((cap, X, X)),
-            np.zeros((cap, X, X)),
-            np.zeros((cap, X)),
-        )
+        # samples made: stamps, attitudes, biases, covariances; those from ``_at`` on not yet given out
+        self._made: tuple = (np.empty(0), np.empty((0, 4)), np.empty((0, 3)), np.empty((0, 3, 3)))
+        self._at = 0
 
     def close(self) -> None:
         """Remove the temporary files."""
@@ -242,19 +232,20 @@ class SmootherSpool:
         n = len(t)
         if self._served + n > self.samples:
             raise ValueError(f"{self._served + n} samples asked for, {self.samples} learned")
-        while self._made_count < n:
-            self._make_stretch()
-        stamps, q, b, cov = (np.concatenate(parts) for parts in zip(*self._made))
-        if not np.array_equal(stamps[:n], t):
+        while len(self._made[0]) - self._at < n:  # a stretch at a time: each sample copied once more
+            made = self._make_stretch()
+            self._made = tuple(np.concatenate((old[self._at :], new)) for old, new in zip(self._made, made))
+            self._at = 0
+        stamps, q, b, cov = (a[self._at : self._at + n].copy() for a in self._made)
+        if not np.array_equal(stamps, t):
             raise ValueError(f"the stamps of samples {self._served}… are not those learned")
-        self._made = [(stamps[n:], q[n:], b[n:], cov[n:])]
-        self._made_count -= n
+        self._at += n
         self._served += n
-        return Estimate(q[:n], b[:n], cov[:n])
+        return Estimate(q, b, cov)
 
-    def _make_stretch(self) -> None:
+    def _make_stretch(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The smoothed samples of the next stretch of windows (:func:`.mekf_smoother_kernels.per_sample`
-        over it, the window before it as its window 0)."""
+        over it, the window before it as its window 0): stamps, attitudes, biases, covariances."""
         W = self.windows
         j1 = min(W, self._next_window + self.segment - 1)  # windows j0 … j1 − 1, and the tail after the last
         j0 = self._next_window - 1
@@ -273,6 +264,5 @@ class SmootherSpool:
             np.ascontiguousarray(rec["x_upd"]), q_s, b_s, cov_s,
         )  # fmt: skip
         skip = 1 if first >= 0 else 0  # the sample before the stretch: the stretch before made it
-        self._made.append((samples["t"][skip:], q_s[skip:], b_s[skip:], cov_s[skip:]))
-        self._made_count += m - skip
         self._next_window = j1
+        return samples["t"][skip:], q_s[skip:], b_s[skip:], cov_s[skip:]

@@ -156,6 +156,19 @@ def _quietly(function, *args):
         return function(*args)
 
 
+def _stream_devices(path: Path, read_whole: bool) -> dict | None:
+    """The log's devices for reading it a chunk at a time (:func:`scan_devices`), or None: asked to
+    read it whole, or a log one pass cannot pair (:class:`NotStreamable`)."""
+    from gyroemu.pipelines.formats.device_stream import NotStreamable, scan_devices
+
+    if read_whole:
+        return None
+    try:
+        return _quietly(scan_devices, path)[0]
+    except NotStreamable:
+        return None
+
+
 def _device_rows(path: Path, devices: dict, roles: tuple[str, ...]) -> Iterator[dict[tuple[str, str], DecodedBatch]]:
     """Per chunk of the log, the decoded messages of each device's topics of ``roles``:
     ``{(device, role): DecodedBatch}``."""
@@ -187,14 +200,10 @@ def estimate_curves(
     attitude, from one pass over the log after the one that finds its devices (module's notes);
     ``read_whole``: from the log read whole (the same curves)."""
     from gyroemu.pipelines.formats.channels import ESTIMATE_ROLE, IMU_ROLE, TRUTH_ROLE, series_from_batch
-    from gyroemu.pipelines.formats.device_stream import NotStreamable, scan_devices
 
     path = Path(path)
-    try:
-        if read_whole:
-            raise NotStreamable("asked to read whole")
-        devices, _ = _quietly(scan_devices, path)
-    except NotStreamable:
+    devices = _stream_devices(path, read_whole)
+    if devices is None:
         return _estimate_curves_whole(path, buckets)
     devices = {name: d for name, d in devices.items() if ESTIMATE_ROLE in d.channels}
     curves = {name: _new_estimate_curves(name, buckets) for name in devices}
@@ -325,14 +334,10 @@ def info_curves(path: str | os.PathLike[str], buckets: int = BUCKETS, *, read_wh
     """The curves :func:`plot_info` draws, per device, from one pass over the log after the one that
     finds its devices (module's notes); ``read_whole``: from the log read whole (the same curves)."""
     from gyroemu.pipelines.formats.channels import IMU_ROLE, MAG_ROLE, series_from_batch
-    from gyroemu.pipelines.formats.device_stream import NotStreamable, scan_devices
 
     path = Path(path)
-    try:
-        if read_whole:
-            raise NotStreamable("asked to read whole")
-        devices, _ = _quietly(scan_devices, path)
-    except NotStreamable:
+    devices = _stream_devices(path, read_whole)
+    if devices is None:
         return _info_curves_whole(path, buckets)
     curves = {name: _new_info_curves(name, dict(d.topics), buckets) for name, d in devices.items()}
     for rows in _device_rows(path, devices, (IMU_ROLE, MAG_ROLE)):
