@@ -251,9 +251,11 @@ def test_streamed_estimate_on_damaged_and_foreign_logs(tmp_path):
     assert out[False] == out[True]
 
 
-def test_streamed_estimate_of_two_devices_at_two_rates(tmp_path):
+@pytest.mark.parametrize("filter_name", ["mekf", "mekf-smooth"])
+def test_streamed_estimate_of_two_devices_at_two_rates(tmp_path, filter_name):
     """A gyroemu log of two devices sampling at 286 and 200 Hz in small chunks, each filtered into its
-    own topic (the first one's estimate on /tf): every chunk waits for both, the same bytes."""
+    own topic (the first one's estimate on /tf): every chunk waits for both, the same bytes; the
+    smoother learns both devices in one pass."""
     from gyroemu.dynamics import load_scenario
     from gyroemu.sensors import load_device
 
@@ -266,7 +268,7 @@ def test_streamed_estimate_of_two_devices_at_two_rates(tmp_path):
         recordings.append(Recording(samples, pose=truth_pose(traj, samples), device=device))
     log = write_mcap(tmp_path / "two.mcap", recordings, scenario=scenario, chunk_size=1 << 15)
     assert sorted(read_mcap(log).devices) == ["aktos_t_broad", "classic_rate_gyro"]
-    out = both(tmp_path, log)
+    out = both(tmp_path, log, filter_name=filter_name)
     assert out[False] == out[True]
     assert [t[1] for t in out[False][3]] == ["/aktos_t_broad/estimate/imu", "/classic_rate_gyro/estimate/imu"]
 
