@@ -33,8 +33,8 @@ import numpy as np
 from gyroemu.pipelines.formats.messages import DecodedBatch
 from gyroemu.pipelines.jobs.plot_envelope import Envelope
 
-__all__ = ["BUCKETS", "EstimateCurves", "InfoCurves", "attitude_error_deg", "estimate_curves", "euler_zyx_deg"]
-__all__ += ["info_curves", "plot_estimate", "plot_info"]
+__all__ = ["BUCKETS", "EstimateCurves", "InfoCurves", "StampMatch", "attitude_error_deg", "estimate_curves"]
+__all__ += ["euler_zyx_deg", "info_curves", "plot_estimate", "plot_info"]
 
 BUCKETS = 2000
 """Columns of time of a long log's curves (a figure 7 inches wide at 110 dpi has 770 pixels)."""
@@ -119,31 +119,42 @@ class InfoCurves:
     field: Envelope = field(default_factory=lambda: Envelope(3))
 
 
-class _StampMatch:
+class StampMatch:
     """Rows of two topics with equal stamps, as a log goes by (each topic's stamps increasing): a row
-    waits while the other topic has not yet gone past its stamp."""
+    waits while the other topic has not yet gone past its stamp, and is dropped once it has. A side may
+    be told only its stamps (``values`` None: messages without the quantity), which moves it on."""
+
+    _NONE = np.iinfo(np.int64).min
 
     def __init__(self) -> None:
         self.waiting: list[tuple[np.ndarray, np.ndarray] | None] = [None, None]
+        self.last = [self._NONE, self._NONE]  # the last stamp each side has shown, ns
 
-    def add(self, side: int, stamp_ns: np.ndarray, values: np.ndarray) -> None:
+    def add(self, side: int, stamp_ns: np.ndarray, values: np.ndarray | None) -> None:
+        """Side ``side`` (0 or 1)'s next rows: ``stamp_ns`` (n,) int64, increasing; ``values`` (n, ...)."""
+        if len(stamp_ns):
+            self.last[side] = max(self.last[side], int(stamp_ns[-1]))
+        if values is None:
+            return
         held = self.waiting[side]
         if held is not None:
             stamp_ns, values = np.concatenate((held[0], stamp_ns)), np.concatenate((held[1], values))
         self.waiting[side] = (stamp_ns, values)
 
     def take(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(stamps, values of the first topic, of the second)`` matched since the last call."""
+        """``(stamps, values of side 0, of side 1)`` matched since the last call; the rows the other side
+        has gone past without a match are dropped."""
         a, b = self.waiting
-        if a is None or b is None or not len(a[0]) or not len(b[0]):
-            return np.empty(0, np.int64), np.empty((0,)), np.empty((0,))
-        common, ia, ib = np.intersect1d(a[0], b[0], assume_unique=True, return_indices=True)
-        for side, (rows, matched, other) in enumerate(((a, ia, b), (b, ib, a))):
-            keep = np.ones(len(rows[0]), dtype=bool)
-            keep[matched] = False
-            keep &= rows[0] > other[0][-1]  # a row the other topic has gone past never matches
-            self.waiting[side] = (rows[0][keep], rows[1][keep])
-        return common, a[1][ia], b[1][ib]
+        common, ia, ib = np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0, np.int64)
+        if a is not None and b is not None:
+            common, ia, ib = np.intersect1d(a[0], b[0], assume_unique=True, return_indices=True)
+        matched = (a[1][ia] if a is not None else np.empty(0), b[1][ib] if b is not None else np.empty(0))
+        for side, (rows, used) in enumerate(((a, ia), (b, ib))):
+            if rows is not None:
+                keep = rows[0] > self.last[1 - side]  # a row the other side has gone past never matches
+                keep[used] = False
+                self.waiting[side] = (rows[0][keep], rows[1][keep])
+        return common, matched[0], matched[1]
 
 
 def _quietly(function, *args):
@@ -207,8 +218,9 @@ def estimate_curves(
         return _estimate_curves_whole(path, buckets)
     devices = {name: d for name, d in devices.items() if ESTIMATE_ROLE in d.channels}
     curves = {name: _new_estimate_curves(name, buckets) for name in devices}
-    errors = {name: _StampMatch() for name in devices}
-    biases = {name: _StampMatch() for name in devices}
+    # the estimate's error where the truth, its bias where the /imu rate, has its stamp
+    errors = {name: StampMatch() for name, d in devices.items() if TRUTH_ROLE in d.channels}
+    biases = {name: StampMatch() for name, d in devices.items() if IMU_ROLE in d.channels}
     for rows in _device_rows(path, devices, (IMU_ROLE, TRUTH_ROLE, ESTIMATE_ROLE)):
         for (name, role), decoded in rows.items():
             series, c = series_from_batch(decoded), curves[name]
@@ -216,17 +228,19 @@ def estimate_curves(
             if role == IMU_ROLE:
                 c.t0 = float(series.t[0]) if c.t0 is None and n else c.t0
                 biases[name].add(1, decoded.stamp_ns, _nan_if_none(series.omega_b, n, 3))
-            elif role == TRUTH_ROLE and series.q_wb is not None:
-                c.true_angles.add(series.t, euler_zyx_deg(series.q_wb))
+            elif role == TRUTH_ROLE:
+                if series.q_wb is not None:
+                    c.true_angles.add(series.t, euler_zyx_deg(series.q_wb))
                 errors[name].add(1, decoded.stamp_ns, series.q_wb)
             elif role == ESTIMATE_ROLE:
                 q = _nan_if_none(series.q_wb, n, 4)
                 c.angles.add(series.t, euler_zyx_deg(q))
-                errors[name].add(0, decoded.stamp_ns, q)
-                if series.omega_b is not None:
+                if name in errors:
+                    errors[name].add(0, decoded.stamp_ns, q)
+                if name in biases:
                     biases[name].add(0, decoded.stamp_ns, series.omega_b)
         for name in {name for name, _ in rows}:
-            _add_matches(curves[name], errors[name], biases[name])
+            _add_matches(curves[name], errors.get(name), biases.get(name))
     return [c for c in curves.values() if np.isfinite(c.angles.columns()[1]).any()]
 
 
@@ -236,16 +250,18 @@ def _new_estimate_curves(name: str, buckets: int) -> EstimateCurves:
     )
 
 
-def _add_matches(c: EstimateCurves, errors: _StampMatch, biases: _StampMatch) -> None:
-    """The error and bias of the estimate's rows matched so far."""
+def _add_matches(c: EstimateCurves, errors: StampMatch | None, biases: StampMatch | None) -> None:
+    """The error and bias of the estimate's rows matched so far (None: no truth, no /imu)."""
     from gyroemu.pipelines.formats.messages import ns_to_stamps
 
-    stamps, q_est, q_true = errors.take()
-    if len(stamps):
-        c.add_error(ns_to_stamps(stamps), attitude_error_deg(q_true, q_est))
-    stamps, omega, gyro = biases.take()
-    if len(stamps):
-        c.bias.add(ns_to_stamps(stamps), np.degrees(gyro - omega) * 3600.0)
+    if errors is not None:
+        stamps, q_est, q_true = errors.take()
+        if len(stamps):
+            c.add_error(ns_to_stamps(stamps), attitude_error_deg(q_true, q_est))
+    if biases is not None:
+        stamps, omega, gyro = biases.take()
+        if len(stamps):
+            c.bias.add(ns_to_stamps(stamps), np.degrees(gyro - omega) * 3600.0)
 
 
 def _estimate_curves_whole(path: Path, buckets: int) -> list[EstimateCurves]:
@@ -262,7 +278,7 @@ def _estimate_curves_whole(path: Path, buckets: int) -> list[EstimateCurves]:
         c = _new_estimate_curves(dev.name, buckets)
         c.t0 = float(dev.samples.t[0])
         c.angles.add(est.t, euler_zyx_deg(est.q_wb))
-        errors, biases = _StampMatch(), _StampMatch()
+        errors, biases = StampMatch(), StampMatch()
         est_ns = stamps_to_ns(est.t)
         errors.add(0, est_ns, est.q_wb)
         if dev.truth is not None and dev.truth.q_wb is not None:

@@ -188,3 +188,52 @@ def test_the_curves_memory_does_not_grow_with_the_log(tmp_path):
     assert peaks[4, True] > 3.0 * peaks[1, True]  # the whole read holds every sample
     assert peaks[4, False] < 1.15 * peaks[1, False]  # a chunk at a time: nothing of the extra three minutes
     assert peaks[4, False] < peaks[4, True] / 3
+
+
+def test_stamps_are_matched_as_the_log_goes_by_and_the_unmatched_dropped():
+    """Rows of two topics meet at equal stamps whatever the blocks; a row the other side has gone past
+    is dropped, also when the other side shows only stamps (messages without the quantity), so nothing
+    waits without end (an estimate without a rate beside an /imu of hours)."""
+    from gyroemu.pipelines.jobs.plots import StampMatch
+
+    match = StampMatch()
+    a = np.arange(0, 100, 2, dtype=np.int64)  # every even stamp
+    b = np.arange(0, 100, 3, dtype=np.int64)  # every third
+    got = []
+    for (lo, hi), (lo_b, hi_b) in zip(((0, 10), (10, 37), (37, 100)), ((0, 15), (15, 42), (42, 100))):
+        sa, sb = a[(a >= lo) & (a < hi)], b[(b >= lo_b) & (b < hi_b)]  # b runs a little ahead
+        match.add(0, sa, sa[:, None] * 1.0)
+        match.add(1, sb, -sb[:, None] * 1.0)
+        stamps, va, vb = match.take()
+        assert np.array_equal(va[:, 0], stamps) and np.array_equal(vb[:, 0], -stamps)
+        got.append(stamps)
+    both = np.concatenate(got)
+    assert np.array_equal(both, np.intersect1d(a, b))
+    waiting = [len(w[0]) for w in match.waiting if w is not None]
+    assert max(waiting) <= 3  # only rows past the other side's last stamp wait
+
+    only_stamps = StampMatch()
+    for k in range(100):
+        block = np.arange(k * 10, k * 10 + 10, dtype=np.int64)
+        only_stamps.add(1, block, np.zeros((10, 3)))
+        only_stamps.add(0, block, None)  # the estimate has no rate
+        assert len(only_stamps.take()[0]) == 0
+        assert only_stamps.waiting[1] is not None and len(only_stamps.waiting[1][0]) == 0
+
+
+def test_a_log_without_truth_draws_its_estimate_and_bias(tmp_path):
+    """A recording with no /truth/imu (a real sensor's): the estimate's angles and bias, no error, the
+    same read a chunk at a time as whole."""
+    from gyroemu.dynamics import load_scenario
+    from gyroemu.pipelines.formats.mcap_log import Recording, write_mcap
+    from gyroemu.pipelines.jobs import plots
+    from gyroemu.pipelines.jobs.estimate import estimate_log
+    from gyroemu.sensors import load_device
+
+    device = load_device("consumer_mems", seed=2)
+    samples = device.measure(load_scenario("smooth_manoeuvre").simulate(duration=3.0))
+    log = write_mcap(tmp_path / "real.mcap", Recording(samples, device=device), chunk_size=1 << 13)
+    estimate_log(log, tmp_path / "est.mcap")
+    for whole in (False, True):
+        (c,) = plots.estimate_curves(tmp_path / "est.mcap", 16, read_whole=whole)
+        assert len(c.angles) == len(c.bias) == len(samples.t) and len(c.error) == 0 and c.rms is None
