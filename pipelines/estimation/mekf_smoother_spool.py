@@ -12,13 +12,14 @@ with the log.
 2. the first :meth:`SmootherSpool.process`: the Rauch–Tung–Striebel recursion backward over the window
    file, a stretch of :data:`SEGMENT_WINDOWS` windows at a time (the recursion carries one window's
    smoothed error and covariance from a stretch to the one before it), each window's smoothed error
-   and attitude covariance written to a third file;
+   and attitude covariance, with its last sample and update, written to a third file (0.3 kB a window);
 3. :meth:`SmootherSpool.process`, a block at a time in the learned order: each sample's smoothed
-   attitude, bias and covariance, made a stretch of windows at a time from the three files.
+   attitude, bias and covariance, made a stretch of windows at a time from the sample and smoothed
+   files.
 
 Each step does what :func:`~.mekf_smoother.smooth_log` does, in the same order, so the results are the
 same to the bit (``tests/pipelines/test_smoother_spool.py``). Memory: a stretch of windows (22 MB) and
-the caller's blocks. Disk: 5.5 kB a window and 64 bytes a sample, 1.2 GB an hour at 1 kHz with 20 ms
+the caller's blocks. Disk: 5.8 kB a window and 64 bytes a sample, 1.3 GB an hour at 1 kHz with 20 ms
 windows, in nameless temporary files (:func:`tempfile.TemporaryFile`, in ``folder`` or the system's
 temporary folder: ``$TMPDIR``), gone when the spool is closed or the process ends.
 """
@@ -46,21 +47,23 @@ SEGMENT_WINDOWS = 4096
 WINDOW_RECORD = np.dtype(
     [
         ("end", "<i8"),  # the window's last sample, counted from the log's first
-        ("M", "<f8", (9,)),  # M̂ after the window's injection
         ("F_top", "<f8", (5, X)),
         ("P_prior", "<f8", (X, X)),
         ("P_post", "<f8", (X, X)),
         ("x_upd", "<f8", (X,)),
     ]
 )
-"""One window of the forward pass's storage (:func:`.mekf_smoother_kernels.forward_pass`), as filed."""
-WINDOW_NAMES = ("end", "M", "F_top", "P_prior", "P_post", "x_upd")  # the order forward_pass takes them in
+"""One window of the forward pass's storage (:func:`.mekf_smoother_kernels.forward_pass`), as the
+backward pass reads it (``M_post``, which only :func:`~.mekf_smoother.smooth_log` reports, is not filed)."""
+FILED = {"end": 0, "F_top": 2, "P_prior": 3, "P_post": 4, "x_upd": 5}
+"""Each filed field's place in :func:`.mekf_smoother_kernels.window_store`'s tuple."""
 
 SAMPLE_RECORD = np.dtype([("t", "<f8"), ("q", "<f8", (4,)), ("b", "<f8", (3,))])
 """One sample of the forward pass: its stamp (s, the filter's), attitude and bias."""
 
-SMOOTHED_RECORD = np.dtype([("e", "<f8", (X,)), ("P3", "<f8", (3, 3))])
-"""One window's smoothed error state and smoothed attitude covariance."""
+SMOOTHED_RECORD = np.dtype([("end", "<i8"), ("x_upd", "<f8", (X,)), ("e", "<f8", (X,)), ("P3", "<f8", (3, 3))])
+"""What the per-sample output needs of a window: its last sample and update (as filed), its smoothed
+error state and smoothed attitude covariance."""
 
 
 def _read(f: BinaryIO, dtype: np.dtype, first: int, count: int) -> np.ndarray:
@@ -185,8 +188,8 @@ class SmootherSpool:
         """Append the stored windows to the window file."""
         j = self._stored
         records = np.empty(j, WINDOW_RECORD)
-        for name, column in zip(WINDOW_NAMES, self._store):
-            records[name] = column[:j]
+        for name, column in FILED.items():
+            records[name] = self._store[column][:j]
         _write(self._windows, records, self.windows)
         self.windows += j
         self._stored = 0
@@ -211,7 +214,7 @@ class SmootherSpool:
                 np.ascontiguousarray(rec["x_upd"]), e_s, P_s,
             )  # fmt: skip
             out = np.empty(len(rec), SMOOTHED_RECORD)
-            out["e"], out["P3"] = e_s, P_s[:, 0:3, 0:3]
+            out["end"], out["x_upd"], out["e"], out["P3"] = rec["end"], rec["x_upd"], e_s, P_s[:, 0:3, 0:3]
             _write(self._smoothed, out, lo)
             if lo == 0:
                 break
@@ -249,9 +252,8 @@ class SmootherSpool:
         W = self.windows
         j1 = min(W, self._next_window + self.segment - 1)  # windows j0 … j1 − 1, and the tail after the last
         j0 = self._next_window - 1
-        rec = _read(self._windows, WINDOW_RECORD, j0, j1 - j0)
         smoothed = _read(self._smoothed, SMOOTHED_RECORD, j0, j1 - j0)
-        end = rec["end"].copy()
+        end = smoothed["end"]
         first = int(end[0])  # the sample before the stretch (−1: none); row 0 of the arrays below
         last = self.samples - 1 if j1 == W else int(end[-1])
         lo = max(first, 0)
@@ -261,7 +263,7 @@ class SmootherSpool:
         skern.per_sample(
             np.ascontiguousarray(samples["t"]), np.ascontiguousarray(samples["q"]), np.ascontiguousarray(samples["b"]),
             end - lo, np.ascontiguousarray(smoothed["e"]), np.ascontiguousarray(smoothed["P3"]),
-            np.ascontiguousarray(rec["x_upd"]), q_s, b_s, cov_s,
+            np.ascontiguousarray(smoothed["x_upd"]), q_s, b_s, cov_s,
         )  # fmt: skip
         skip = 1 if first >= 0 else 0  # the sample before the stretch: the stretch before made it
         self._next_window = j1

@@ -27,11 +27,11 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from typing import Protocol, TypeGuard, runtime_checkable
 
 import numpy as np
 
-__all__ = ["AttitudeFilter", "BlockLearner", "DeviceNoise", "Estimate", "FilterSetup"]
+__all__ = ["AttitudeFilter", "BlockLearner", "DeviceNoise", "Estimate", "FilterSetup", "learns_in_blocks"]
 
 
 @dataclass(frozen=True)
@@ -165,3 +165,12 @@ class BlockLearner(AttitudeFilter, Protocol):
     def spool_in(self, folder: str | os.PathLike[str] | None) -> None: ...
 
     def close(self) -> None: ...
+
+
+def learns_in_blocks(filter_or_class: object) -> TypeGuard[BlockLearner]:
+    """Whether a filter, or a filter class, learns a log a block at a time: it says so
+    (``learns_in_blocks = True``) and has :class:`BlockLearner`'s methods."""
+    methods = ("process", "learn", "spool_in", "close")
+    return bool(getattr(filter_or_class, "learns_in_blocks", False)) and all(
+        callable(getattr(filter_or_class, m, None)) for m in methods
+    )

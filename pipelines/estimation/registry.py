@@ -36,6 +36,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from . import protocol
 from .latency import LatencyCompensated
 from .protocol import FilterSetup
 
@@ -125,11 +126,11 @@ def is_offline(name_or_spec: str) -> bool:
 
 
 def learns_in_blocks(name_or_spec: str) -> bool:
-    """Whether an offline filter can take a log a block at a time (``learns_in_blocks = True``: its
-    ``learn`` takes every block, then ``process`` gives the same blocks' estimates, as
+    """Whether the filter named can take a log a block at a time (:func:`.protocol.learns_in_blocks` of
+    its class: ``learn`` takes every block, then ``process`` gives the same blocks' estimates, as
     :class:`~.mekf_smoother.MekfSmoother` does); a filter that cannot be loaded cannot."""
     try:
-        return bool(getattr(filter_class(name_or_spec), "learns_in_blocks", False))
+        return protocol.learns_in_blocks(filter_class(name_or_spec))
     except FilterError:
         return False
 

@@ -32,12 +32,12 @@ import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TypeGuard
 
 import numpy as np
 
-from gyroemu.pipelines.estimation.protocol import AttitudeFilter, BlockLearner
-from gyroemu.pipelines.estimation.registry import is_offline, learns_in_blocks, make_filter
+from gyroemu.pipelines.estimation import registry
+from gyroemu.pipelines.estimation.protocol import AttitudeFilter, learns_in_blocks
+from gyroemu.pipelines.estimation.registry import is_offline, make_filter
 from gyroemu.pipelines.estimation.series import check_counts, check_samples, estimate_series, rate_of
 from gyroemu.pipelines.estimation.setup import (
     FIELD_LAG_FROM_LOG,
@@ -290,7 +290,7 @@ def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latenc
         tf_device = next((d.name for d, _ in chosen if d.metadata is not None), None)
         # an offline filter that cannot learn a block at a time, and the field's lag read from the
         # samples, need every sample at once
-        whole = is_offline(filter_name) and not learns_in_blocks(filter_name)
+        whole = is_offline(filter_name) and not registry.learns_in_blocks(filter_name)
         first_s = math.inf if whole or FIELD_LAG_FROM_LOG in latency_s.values() else FIRST_BLOCK_S
         found = count_samples(path, devices, tf_device, {d.name for d, _ in chosen}, first_s)
     # past the passes that may find the log unpairable (and fall back to the whole read, which warns anew)
@@ -307,19 +307,19 @@ def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latenc
         nine, flt, lag = _device_filter(
             dev, counted.rate.rate(), counted.has_mag, use_mag, filter_name, latency_s, t_rel, first.gyro, first.mag
         )
-        if _learns(flt):
+        if learns_in_blocks(flt):
             flt.spool_in(out.parent)  # beside the output, whose size it is of (not in a small /tmp)
         field_lags += lag
         filters.append(_DeviceFilter(dev, flt, nine, t0, first))
     try:
-        _learn(path, [f for f in filters if _learns(f.flt)])
+        _learn(path, [f for f in filters if learns_in_blocks(f.flt)])
         for (dev, name), f in zip(chosen, filters):
             runs.append(_block_run(dev, name, f, found[dev.name], tf_device))
             done.append((dev.name, found[dev.name].census.count, getattr(f.flt, "name", filter_name), f.nine))
         copy_with_estimates(path, out, scan.profile, [r.target for r in runs], StreamFeed(runs))
     finally:
         for f in filters:
-            if _learns(f.flt):
+            if learns_in_blocks(f.flt):
                 f.flt.close()
     topics = [(r.target.topic, r.target.topic_out, r.target.sequence) for r in runs]
     return EstimateSummary(path=out, devices=done, topics=topics, field_lags=field_lags)
@@ -340,13 +340,8 @@ class _DeviceFilter:
         block = block.after(self.first.through_ns) if rest else block
         if len(block):
             t = ns_to_stamps(block.stamp_ns) - self.t0
-            assert _learns(self.flt)
+            assert learns_in_blocks(self.flt)
             self.flt.learn(t, block.gyro, block.accel, block.mag if self.nine else None)
-
-
-def _learns(flt: AttitudeFilter) -> TypeGuard[BlockLearner]:
-    """Whether ``flt`` learns a log a block at a time (a :class:`BlockLearner` that says so)."""
-    return isinstance(flt, BlockLearner) and bool(flt.learns_in_blocks)
 
 
 def _learn(path: Path, filters: list[_DeviceFilter]) -> None:

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterator
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -73,52 +72,6 @@ def _pyplot():
     return plt
 
 
-@dataclass
-class EstimateCurves:
-    """What :func:`plot_estimate` draws of a device (times in s, absolute; ``t0`` the first sample's).
-
-    ``angles`` and ``true_angles``: roll, pitch, yaw, °; ``error``: the attitude error, °, where the
-    truth has the estimate's stamp, with its ``rms`` and ``final`` (None: no such stamp); ``bias``: the
-    gyro bias the estimate implies, °/h (``/imu`` rate less ``/estimate/imu``'s bias-corrected rate at
-    the same stamp; empty where the estimate has no rate)."""
-
-    name: str
-    t0: float | None = None
-    angles: Envelope = field(default_factory=lambda: Envelope(3))
-    true_angles: Envelope = field(default_factory=lambda: Envelope(3))
-    error: Envelope = field(default_factory=lambda: Envelope(1))
-    bias: Envelope = field(default_factory=lambda: Envelope(3))
-    sum_squares: float = 0.0
-    finite: int = 0
-    final: float | None = None
-
-    @property
-    def rms(self) -> float | None:
-        """The error's RMS over its finite values, ° (None: no error)."""
-        return float(np.sqrt(self.sum_squares / self.finite)) if self.finite else None
-
-    def add_error(self, t: np.ndarray, error: np.ndarray) -> None:
-        self.error.add(t, error[:, None])
-        ok = np.isfinite(error)
-        self.sum_squares += float(np.sum(error[ok] ** 2))
-        self.finite += int(ok.sum())
-        if len(error):
-            self.final = float(error[-1])
-
-
-@dataclass
-class InfoCurves:
-    """What :func:`plot_info` draws of a device: its ``/imu`` rate (°/s) and specific force (m/s²), its
-    ``/mag`` field (µT; empty without one), times in s, absolute; ``t0`` the first sample's."""
-
-    name: str
-    topics: dict[str, str]
-    t0: float | None = None
-    rate: Envelope = field(default_factory=lambda: Envelope(3))
-    force: Envelope = field(default_factory=lambda: Envelope(3))
-    field: Envelope = field(default_factory=lambda: Envelope(3))
-
-
 class StampMatch:
     """Rows of two topics with equal stamps, as a log goes by (each topic's stamps increasing): a row
     waits while the other topic has not yet gone past its stamp, and is dropped once it has. A side may
@@ -155,6 +108,97 @@ class StampMatch:
                 keep[used] = False
                 self.waiting[side] = (rows[0][keep], rows[1][keep])
         return common, matched[0], matched[1]
+
+
+class EstimateCurves:
+    """What :func:`plot_estimate` draws of a device (times in s, absolute; ``t0`` the first sample's),
+    fed a block of one of its topics at a time by :meth:`add`.
+
+    ``angles`` and ``true_angles``: roll, pitch, yaw, °; ``error``: the attitude error, °, where the
+    truth has the estimate's stamp, with its ``rms`` and ``final`` (None: no such stamp); ``bias``: the
+    gyro bias the estimate implies, °/h (``/imu`` rate less ``/estimate/imu``'s bias-corrected rate at
+    the same stamp; empty where the estimate has no rate). ``has_truth``, ``has_imu``: whether the log
+    has those topics (without one, nothing waits for it)."""
+
+    def __init__(self, name: str, buckets: int = BUCKETS, *, has_truth: bool = True, has_imu: bool = True):
+        self.name = name
+        self.t0: float | None = None
+        self.angles, self.true_angles = Envelope(3, buckets), Envelope(3, buckets)
+        self.error, self.bias = Envelope(1, buckets), Envelope(3, buckets)
+        self.sum_squares, self.finite = 0.0, 0
+        self.final: float | None = None
+        self._errors = StampMatch() if has_truth else None  # estimate (0) against truth (1)
+        self._biases = StampMatch() if has_imu else None  # estimate (0) against /imu (1)
+
+    @property
+    def rms(self) -> float | None:
+        """The error's RMS over its finite values, ° (None: no error)."""
+        return float(np.sqrt(self.sum_squares / self.finite)) if self.finite else None
+
+    def add(self, role: str, stamp_ns: np.ndarray, q_wb: np.ndarray | None, omega_b: np.ndarray | None) -> None:
+        """The next block of the device's topic ``role`` (``imu``, ``truth/imu``, ``estimate/imu``):
+        stamps (n,) int64 ns, increasing; attitudes (n, 4) and rates (n, 3), rad/s, or None."""
+        from gyroemu.pipelines.formats.channels import ESTIMATE_ROLE, IMU_ROLE, TRUTH_ROLE
+        from gyroemu.pipelines.formats.messages import ns_to_stamps
+
+        n, t = len(stamp_ns), ns_to_stamps(stamp_ns)
+        if role == IMU_ROLE:
+            self.t0 = float(t[0]) if self.t0 is None and n else self.t0
+            if self._biases is not None:
+                self._biases.add(1, stamp_ns, _nan_if_none(omega_b, n, 3))
+        elif role == TRUTH_ROLE:
+            if q_wb is not None:
+                self.true_angles.add(t, euler_zyx_deg(q_wb))
+            if self._errors is not None:
+                self._errors.add(1, stamp_ns, q_wb)
+        elif role == ESTIMATE_ROLE:
+            q = _nan_if_none(q_wb, n, 4)
+            self.angles.add(t, euler_zyx_deg(q))
+            if self._errors is not None:
+                self._errors.add(0, stamp_ns, q)
+            if self._biases is not None:
+                self._biases.add(0, stamp_ns, omega_b)
+        if self._errors is not None:
+            stamps, q_est, q_true = self._errors.take()
+            if len(stamps):
+                self._add_error(ns_to_stamps(stamps), attitude_error_deg(q_true, q_est))
+        if self._biases is not None:
+            stamps, omega, gyro = self._biases.take()
+            if len(stamps):
+                self.bias.add(ns_to_stamps(stamps), np.degrees(gyro - omega) * 3600.0)
+
+    def _add_error(self, t: np.ndarray, error: np.ndarray) -> None:
+        self.error.add(t, error[:, None])
+        ok = np.isfinite(error)
+        self.sum_squares += float(np.sum(error[ok] ** 2))
+        self.finite += int(ok.sum())
+        if len(error):
+            self.final = float(error[-1])
+
+
+class InfoCurves:
+    """What :func:`plot_info` draws of a device: its ``/imu`` rate (°/s) and specific force (m/s²), its
+    ``/mag`` field (µT; empty without one), times in s, absolute; ``t0`` the first sample's."""
+
+    def __init__(self, name: str, topics: dict[str, str], buckets: int = BUCKETS):
+        self.name, self.topics = name, topics
+        self.t0: float | None = None
+        self.rate, self.force, self.field = Envelope(3, buckets), Envelope(3, buckets), Envelope(3, buckets)
+
+    def add_imu(self, t: np.ndarray, gyro: np.ndarray | None, accel: np.ndarray | None) -> None:
+        """The next ``/imu`` samples: stamps (n,) s, rates (n, 3) rad/s and forces (n, 3) m/s² (None: NaN)."""
+        n = len(t)
+        self.t0 = float(t[0]) if self.t0 is None and n else self.t0
+        self.rate.add(t, np.degrees(_nan_if_none(gyro, n, 3)))
+        self.force.add(t, _nan_if_none(accel, n, 3))
+
+    def add_field(self, t: np.ndarray, magnetic_field: np.ndarray) -> None:
+        """The next ``/mag`` samples: stamps (n,) s, field (n, 3) T."""
+        self.field.add(t, np.asarray(magnetic_field) * 1e6)
+
+
+def _nan_if_none(values, n: int, width: int) -> np.ndarray:
+    return np.full((n, width), np.nan) if values is None else np.asarray(values, dtype=float)
 
 
 def _quietly(function, *args):
@@ -200,10 +244,6 @@ def _device_rows(path: Path, devices: dict, roles: tuple[str, ...]) -> Iterator[
         yield rows
 
 
-def _nan_if_none(values, n: int, width: int) -> np.ndarray:
-    return np.full((n, width), np.nan) if values is None else np.asarray(values, dtype=float)
-
-
 def estimate_curves(
     path: str | os.PathLike[str], buckets: int = BUCKETS, *, read_whole: bool = False
 ) -> list[EstimateCurves]:
@@ -217,77 +257,34 @@ def estimate_curves(
     if devices is None:
         return _estimate_curves_whole(path, buckets)
     devices = {name: d for name, d in devices.items() if ESTIMATE_ROLE in d.channels}
-    curves = {name: _new_estimate_curves(name, buckets) for name in devices}
-    # the estimate's error where the truth, its bias where the /imu rate, has its stamp
-    errors = {name: StampMatch() for name, d in devices.items() if TRUTH_ROLE in d.channels}
-    biases = {name: StampMatch() for name, d in devices.items() if IMU_ROLE in d.channels}
+    curves = {
+        name: EstimateCurves(name, buckets, has_truth=TRUTH_ROLE in d.channels, has_imu=IMU_ROLE in d.channels)
+        for name, d in devices.items()
+    }
     for rows in _device_rows(path, devices, (IMU_ROLE, TRUTH_ROLE, ESTIMATE_ROLE)):
         for (name, role), decoded in rows.items():
-            series, c = series_from_batch(decoded), curves[name]
-            n = len(series.t)
-            if role == IMU_ROLE:
-                c.t0 = float(series.t[0]) if c.t0 is None and n else c.t0
-                biases[name].add(1, decoded.stamp_ns, _nan_if_none(series.omega_b, n, 3))
-            elif role == TRUTH_ROLE:
-                if series.q_wb is not None:
-                    c.true_angles.add(series.t, euler_zyx_deg(series.q_wb))
-                errors[name].add(1, decoded.stamp_ns, series.q_wb)
-            elif role == ESTIMATE_ROLE:
-                q = _nan_if_none(series.q_wb, n, 4)
-                c.angles.add(series.t, euler_zyx_deg(q))
-                if name in errors:
-                    errors[name].add(0, decoded.stamp_ns, q)
-                if name in biases:
-                    biases[name].add(0, decoded.stamp_ns, series.omega_b)
-        for name in {name for name, _ in rows}:
-            _add_matches(curves[name], errors.get(name), biases.get(name))
+            series = series_from_batch(decoded)
+            curves[name].add(role, decoded.stamp_ns, series.q_wb, series.omega_b)
     return [c for c in curves.values() if np.isfinite(c.angles.columns()[1]).any()]
 
 
-def _new_estimate_curves(name: str, buckets: int) -> EstimateCurves:
-    return EstimateCurves(
-        name, None, Envelope(3, buckets), Envelope(3, buckets), Envelope(1, buckets), Envelope(3, buckets)
-    )
-
-
-def _add_matches(c: EstimateCurves, errors: StampMatch | None, biases: StampMatch | None) -> None:
-    """The error and bias of the estimate's rows matched so far (None: no truth, no /imu)."""
-    from gyroemu.pipelines.formats.messages import ns_to_stamps
-
-    if errors is not None:
-        stamps, q_est, q_true = errors.take()
-        if len(stamps):
-            c.add_error(ns_to_stamps(stamps), attitude_error_deg(q_true, q_est))
-    if biases is not None:
-        stamps, omega, gyro = biases.take()
-        if len(stamps):
-            c.bias.add(ns_to_stamps(stamps), np.degrees(gyro - omega) * 3600.0)
-
-
 def _estimate_curves_whole(path: Path, buckets: int) -> list[EstimateCurves]:
-    """:func:`estimate_curves` of a log read whole (:func:`read_mcap`)."""
+    """:func:`estimate_curves` of a log read whole (:func:`read_mcap`): each series as one block."""
+    from gyroemu.pipelines.formats.channels import ESTIMATE_ROLE, IMU_ROLE, TRUTH_ROLE
     from gyroemu.pipelines.formats.mcap_log import read_mcap
     from gyroemu.pipelines.formats.messages import stamps_to_ns
 
     log = _quietly(read_mcap, path)
     out = []
     for dev in log.devices.values():
-        est = dev.estimate
+        est, truth, s = dev.estimate, dev.truth, dev.samples
         if est is None or est.q_wb is None:
             continue
-        c = _new_estimate_curves(dev.name, buckets)
-        c.t0 = float(dev.samples.t[0])
-        c.angles.add(est.t, euler_zyx_deg(est.q_wb))
-        errors, biases = StampMatch(), StampMatch()
-        est_ns = stamps_to_ns(est.t)
-        errors.add(0, est_ns, est.q_wb)
-        if dev.truth is not None and dev.truth.q_wb is not None:
-            c.true_angles.add(dev.truth.t, euler_zyx_deg(dev.truth.q_wb))
-            errors.add(1, stamps_to_ns(dev.truth.t), dev.truth.q_wb)
-        if est.omega_b is not None:
-            biases.add(0, est_ns, est.omega_b)
-            biases.add(1, stamps_to_ns(dev.samples.t), dev.samples.gyro)
-        _add_matches(c, errors, biases)
+        c = EstimateCurves(dev.name, buckets, has_truth=truth is not None)
+        c.add(IMU_ROLE, stamps_to_ns(s.t), None, s.gyro)
+        c.add(ESTIMATE_ROLE, stamps_to_ns(est.t), est.q_wb, est.omega_b)
+        if truth is not None:
+            c.add(TRUTH_ROLE, stamps_to_ns(truth.t), truth.q_wb, None)
         out.append(c)
     return out
 
@@ -350,46 +347,35 @@ def info_curves(path: str | os.PathLike[str], buckets: int = BUCKETS, *, read_wh
     """The curves :func:`plot_info` draws, per device, from one pass over the log after the one that
     finds its devices (module's notes); ``read_whole``: from the log read whole (the same curves)."""
     from gyroemu.pipelines.formats.channels import IMU_ROLE, MAG_ROLE, series_from_batch
+    from gyroemu.pipelines.formats.messages import ns_to_stamps
 
     path = Path(path)
     devices = _stream_devices(path, read_whole)
     if devices is None:
         return _info_curves_whole(path, buckets)
-    curves = {name: _new_info_curves(name, dict(d.topics), buckets) for name, d in devices.items()}
+    curves = {name: InfoCurves(name, dict(d.topics), buckets) for name, d in devices.items()}
     for rows in _device_rows(path, devices, (IMU_ROLE, MAG_ROLE)):
         for (name, role), decoded in rows.items():
-            c = curves[name]
             if role == IMU_ROLE:
                 series = series_from_batch(decoded)
-                n = len(series.t)
-                c.t0 = float(series.t[0]) if c.t0 is None and n else c.t0
-                c.rate.add(series.t, np.degrees(_nan_if_none(series.omega_b, n, 3)))
-                c.force.add(series.t, _nan_if_none(series.specific_force_b, n, 3))
+                curves[name].add_imu(series.t, series.omega_b, series.specific_force_b)
             else:
-                from gyroemu.pipelines.formats.messages import ns_to_stamps
-
-                c.field.add(ns_to_stamps(decoded.stamp_ns), np.asarray(decoded["magnetic_field"]) * 1e6)
+                curves[name].add_field(ns_to_stamps(decoded.stamp_ns), decoded["magnetic_field"])
     return list(curves.values())
 
 
-def _new_info_curves(name: str, topics: dict[str, str], buckets: int) -> InfoCurves:
-    return InfoCurves(name, topics, None, Envelope(3, buckets), Envelope(3, buckets), Envelope(3, buckets))
-
-
 def _info_curves_whole(path: Path, buckets: int) -> list[InfoCurves]:
-    """:func:`info_curves` of a log read whole (:func:`read_mcap`)."""
+    """:func:`info_curves` of a log read whole (:func:`read_mcap`): each series as one block."""
     from gyroemu.pipelines.formats.mcap_log import read_mcap
 
     log = _quietly(read_mcap, path)
     out = []
     for dev in log.devices.values():
         s = dev.samples
-        c = _new_info_curves(dev.name, dict(dev.topics), buckets)
-        c.t0 = float(s.t[0])
-        c.rate.add(s.t, np.degrees(s.gyro))
-        c.force.add(s.t, s.accel)
+        c = InfoCurves(dev.name, dict(dev.topics), buckets)
+        c.add_imu(s.t, s.gyro, s.accel)
         if s.has_mag:
-            c.field.add(s.t, s.mag * 1e6)
+            c.add_field(s.t, s.mag)
         out.append(c)
     return out
 

@@ -31,7 +31,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_long_runs import measure  # noqa: E402  (tests/benchmarks is the script folder)
+from bench_long_runs import measure, simulate_argv  # noqa: E402  (tests/benchmarks is the script folder)
 
 
 def digest(path: Path) -> str:
@@ -60,10 +60,7 @@ def main() -> None:
         folder = Path(tmp)
         for duration in args.durations:
             log, streamed, whole = (folder / f"{name}.mcap" for name in ("log", "streamed", "whole"))
-            measure(
-                [*gyroemu, "simulate", "--scenario", "smooth_manoeuvre", "--device", "consumer_mems"]
-                + ["--duration", str(duration), "--rate", "1000", "--out", str(log)]
-            )
+            measure(simulate_argv("consumer_mems", "smooth_manoeuvre", duration, log) + ["--rate", "1000"])
             smooth = ["--smooth"] if args.smooth else []
             s_time, s_rss = measure([*gyroemu, "estimate", str(log), "--out", str(streamed), *smooth])
             name = "mekf-smooth" if args.smooth else "mekf"

@@ -20,7 +20,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_long_runs import measure  # noqa: E402  (tests/benchmarks is the script folder)
+from bench_long_runs import measure, simulate_argv  # noqa: E402  (tests/benchmarks is the script folder)
 
 
 def main() -> None:
@@ -37,10 +37,7 @@ def main() -> None:
         folder = Path(tmp)
         for duration in args.durations:
             log, est = folder / "log.mcap", folder / "est.mcap"
-            measure(
-                [*gyroemu, "simulate", "--scenario", "smooth_manoeuvre", "--device", "consumer_mems"]
-                + ["--duration", str(duration), "--rate", "1000", "--out", str(log)]
-            )
+            measure(simulate_argv("consumer_mems", "smooth_manoeuvre", duration, log) + ["--rate", "1000"])
             measure([*gyroemu, "estimate", str(log), "--out", str(est)])
             for plot, source in (("plot_estimate", est), ("plot_info", log)):
                 figures = []

@@ -99,3 +99,26 @@ def test_a_callers_mistakes_are_refused(run):
     with pytest.raises(ValueError, match="block at a time"):
         smoother.process_increments(t[:5], g[:5] * 0.01, a[:5])
     smoother.close()
+
+
+def test_only_a_filter_with_the_learners_methods_is_fed_in_blocks(run):
+    """The job's two questions, by name before the filter is made (``registry.learns_in_blocks``) and of
+    the filter made (``protocol.learns_in_blocks``), get one answer: the smoother, wrapped for latency or
+    not, learns in blocks; a class that says so but lacks ``spool_in`` does not, nor does an online one."""
+    from gyroemu.pipelines.estimation import protocol, registry
+    from gyroemu.pipelines.estimation.mekf import Mekf
+
+    setup = run[0]
+
+    class Claims:
+        name, offline, learns_in_blocks = "claims", True, True
+
+        def process(self, t, gyro, accel, mag=None): ...
+
+        def learn(self, t, gyro, accel, mag=None): ...
+
+    assert registry.learns_in_blocks("mekf-smooth") and protocol.learns_in_blocks(MekfSmoother(setup))
+    assert protocol.learns_in_blocks(LatencyCompensated(MekfSmoother(setup), 0.004, 0.015))
+    assert not protocol.learns_in_blocks(Claims) and not protocol.learns_in_blocks(Claims())
+    assert not registry.learns_in_blocks("mekf") and not protocol.learns_in_blocks(Mekf(setup))
+    assert not protocol.learns_in_blocks(LatencyCompensated(Mekf(setup), 0.004))
