@@ -131,11 +131,14 @@ def test_endless_run_is_the_bounded_run_continued():
 def test_first_messages_long_before_the_whole_run():
     """An hour at 1 kHz: the first batch is queued after one block's computation, in far less time
     than simulating and measuring only a tenth of the run takes, and the producer holds a few blocks.
-    Both timed warm: a short stream's first batch first, untimed, loads what a process loads once (the
-    compiled kernels from numba's cache, lazy imports: 0.5 s alone, none when the worker ran an earlier
-    stream), which the tenth, timed after, would otherwise not pay."""
+    Both timed warm: the first batch of the same stream first, untimed, loads or compiles what a
+    process does once (numba's kernels, lazy imports: 0.5 s alone, none when the worker ran an earlier
+    stream), which the tenth, timed after, would otherwise not pay. A shorter stream would not do: a
+    run shorter than a block takes other paths (on an empty numba cache a 60 s stream's first batch
+    still compiled for 0.2 s after a 1 s stream's, and so failed on a clean clone's CI, 0.37 s against
+    0.25 s)."""
     scen = load_scenario("smooth_manoeuvre")
-    warm = BlockProducer(load_device(DEVICE, seed=3).run(truth_source(scen, 1.0)), KEYS, RATE, depth=4)
+    warm = BlockProducer(load_device(DEVICE, seed=3).run(truth_source(scen, 3600.0)), KEYS, RATE, depth=4)
     warm.start()
     try:
         next(warm.batches())
