@@ -1289,6 +1289,20 @@ def _forget_unhandled_interrupt() -> None:
     exec("None")
 
 
+def _disk_full_message(error: OSError, args: argparse.Namespace) -> str:
+    """What a command stopped by a full disk says: where it was writing (the file the error names, or
+    the command's output), that what it wrote through a temporary file is gone, and what to do."""
+    where = error.filename or next(
+        (getattr(args, name) for name in ("out", "out_dir", "kalibr") if getattr(args, name, None)), None
+    )
+    place = f" writing {where}" if where is not None else ""
+    return (
+        f"{error.strerror or error}{place}: stopped; an output written through a temporary file is removed, "
+        "a recording keeps what it wrote (its complete chunks read back). Free some space, or write to "
+        "another folder"
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the ``gyroemu`` command ``argv`` (default: ``sys.argv[1:]``) and return its exit status.
 
@@ -1301,7 +1315,9 @@ def main(argv: list[str] | None = None) -> int:
     -------
     int
         0 on success; 2 for bad usage or bad input (the message names the file, key or argument);
-        130 when stopped by SIGINT, 143 by SIGTERM (the partial output removed, no traceback).
+        1 when a disk fills (or a quota runs out) while the command writes: one line on stderr, no
+        traceback, the partial output removed; 130 when stopped by SIGINT, 143 by SIGTERM (the partial
+        output removed, no traceback).
 
     Notes
     -----
@@ -1340,6 +1356,13 @@ def main(argv: list[str] | None = None) -> int:
     except GyroemuError as e:  # bad input (a config, a log): the message names the file and key
         print(f"gyroemu {args.command}: error: {e}", file=sys.stderr)
         return 2
+    except OSError as e:
+        from gyroemu.pipelines.jobs.disk_space import is_disk_full
+
+        if not is_disk_full(e):
+            raise
+        print(f"gyroemu {args.command}: error: {_disk_full_message(e, args)}", file=sys.stderr)
+        return 1
     finally:
         if handling:
             signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)

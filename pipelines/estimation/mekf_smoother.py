@@ -27,7 +27,7 @@ import numpy as np
 from . import mekf_kernels as kern
 from . import mekf_smoother_kernels as skern
 from .mekf import MekfParams, earth_rate_enu, initial_state
-from .mekf_smoother_spool import SmootherSpool
+from .mekf_smoother_spool import SmootherSpool, spool_bytes
 from .protocol import Estimate, FilterSetup
 
 __all__ = ["SMOOTHER_DEFAULTS", "MekfSmoother", "SmootherResult", "smoother_params", "smooth_log"]
@@ -190,6 +190,11 @@ class MekfSmoother:
     def spool_in(self, folder: str | os.PathLike[str] | None) -> None:
         """Where :meth:`learn` keeps its temporary files (None: the system's temporary folder)."""
         self._spool_folder = folder
+
+    def spool_bytes(self, samples: int, duration_s: float) -> int:
+        """About how many bytes :meth:`learn` keeps in temporary files for a log of ``samples`` samples
+        over ``duration_s`` s (:func:`~.mekf_smoother_spool.spool_bytes`)."""
+        return spool_bytes(samples, duration_s, self.params.window_s)
 
     def _check_once(self) -> None:
         if self.result is not None:

@@ -26,6 +26,7 @@ temporary folder: ``$TMPDIR``), gone when the spool is closed or the process end
 
 from __future__ import annotations
 
+import math
 import os
 import tempfile
 from typing import BinaryIO
@@ -37,7 +38,7 @@ from . import mekf_smoother_kernels as skern
 from .mekf import MekfParams, earth_rate_enu, initial_state
 from .protocol import Estimate, FilterSetup
 
-__all__ = ["SEGMENT_WINDOWS", "SmootherSpool"]
+__all__ = ["SEGMENT_WINDOWS", "SmootherSpool", "spool_bytes"]
 
 X = kern.X_SIZE
 
@@ -76,9 +77,20 @@ def _read(f: BinaryIO, dtype: np.dtype, first: int, count: int) -> np.ndarray:
 
 
 def _write(f: BinaryIO, records: np.ndarray, first: int) -> None:
-    """``records`` at record ``first`` of ``f``."""
+    """``records`` at record ``first`` of ``f`` (a full disk raises OSError ENOSPC; numpy's ``tofile``
+    would say only how much it wrote)."""
     f.seek(first * records.dtype.itemsize)
-    records.tofile(f)
+    f.write(np.ascontiguousarray(records).data)
+
+
+def spool_bytes(samples: int, duration_s: float, window_s: float) -> int:
+    """How many bytes of temporary files a :class:`SmootherSpool` keeps for a log of ``samples`` samples
+    over ``duration_s`` s with windows of ``window_s`` s: each sample's record, and each window's storage
+    and smoothed record. A window ends once its samples span ``window_s`` or count one more than that span
+    holds (:func:`.mekf_kernels.window_due`), so at a steady rate each spans at least ``window_s``: at
+    most a window every ``window_s``, and window 0 (the initial state). A gap in the stamps adds one."""
+    windows = min(samples, math.ceil(duration_s / window_s) + 1)
+    return samples * SAMPLE_RECORD.itemsize + windows * (WINDOW_RECORD.itemsize + SMOOTHED_RECORD.itemsize)
 
 
 class SmootherSpool:
@@ -125,6 +137,11 @@ class SmootherSpool:
         # samples made: stamps, attitudes, biases, covariances; those from ``_at`` on not yet given out
         self._made: tuple = (np.empty(0), np.empty((0, 4)), np.empty((0, 3)), np.empty((0, 3, 3)))
         self._at = 0
+
+    @property
+    def disk_bytes(self) -> int:
+        """Bytes in its temporary files now (:func:`spool_bytes` says about how many a log will take)."""
+        return sum(os.fstat(f.fileno()).st_size for f in self._files)
 
     def close(self) -> None:
         """Remove the temporary files."""

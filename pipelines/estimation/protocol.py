@@ -155,8 +155,9 @@ class AttitudeFilter(Protocol):
 class BlockLearner(AttitudeFilter, Protocol):
     """An offline filter that takes a log a block at a time (see the module's docstring): ``learn``
     every block in time order, then ``process`` the same blocks in the same order; ``spool_in`` names
-    the folder for what it keeps (:class:`~.mekf_smoother.MekfSmoother`: temporary files), ``close``
-    frees it."""
+    the folder for what it keeps (:class:`~.mekf_smoother.MekfSmoother`: temporary files), and
+    ``spool_bytes`` says about how much that is for a log of ``samples`` samples over ``duration_s``
+    seconds (checked against the folder's free space before the work); ``close`` frees it."""
 
     learns_in_blocks: bool
 
@@ -164,13 +165,15 @@ class BlockLearner(AttitudeFilter, Protocol):
 
     def spool_in(self, folder: str | os.PathLike[str] | None) -> None: ...
 
+    def spool_bytes(self, samples: int, duration_s: float) -> int: ...
+
     def close(self) -> None: ...
 
 
 def learns_in_blocks(filter_or_class: object) -> TypeGuard[BlockLearner]:
     """Whether a filter, or a filter class, learns a log a block at a time: it says so
     (``learns_in_blocks = True``) and has :class:`BlockLearner`'s methods."""
-    methods = ("process", "learn", "spool_in", "close")
+    methods = ("process", "learn", "spool_in", "spool_bytes", "close")
     return bool(getattr(filter_or_class, "learns_in_blocks", False)) and all(
         callable(getattr(filter_or_class, m, None)) for m in methods
     )

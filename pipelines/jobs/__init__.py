@@ -10,5 +10,5 @@
 - :mod:`.identify`, :mod:`.twin`: a device fitted to recordings, and its twins held against them;
 - :mod:`.info`: what a log holds, per device and per topic (``gyroemu info``);
 - :mod:`.view`: a log served to the Foxglove app with play, pause and seek (``gyroemu view``);
-- :mod:`.progress`: progress bars, by phase or by samples.
+- :mod:`.progress`: progress bars, by phase or by samples; :mod:`.disk_space`: the disk an output needs.
 """

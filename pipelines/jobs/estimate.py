@@ -55,6 +55,7 @@ from gyroemu.pipelines.formats.channels import (
 )
 from gyroemu.pipelines.formats.device_stream import (
     DeviceBlock,
+    DeviceCensus,
     DeviceStream,
     NotStreamable,
     StreamDevice,
@@ -64,7 +65,8 @@ from gyroemu.pipelines.formats.device_stream import (
 from gyroemu.pipelines.formats.frames import TF_LOG_RATE_HZ, TfThinning
 from gyroemu.pipelines.formats.mcap_log import LogWarning, read_mcap
 from gyroemu.pipelines.formats.mcap_records import McapRecordWalk
-from gyroemu.pipelines.formats.messages import ns_to_stamps
+from gyroemu.pipelines.formats.messages import IMU, ns_to_stamps
+from gyroemu.pipelines.jobs.disk_space import MCAP_RECORD_OVERHEAD, free_bytes, human_size
 from gyroemu.pipelines.jobs.estimate_copy import (
     FIRST_BLOCK_S,
     BlockRun,
@@ -79,6 +81,7 @@ __all__ = [
     "EstimateError",
     "EstimateSummary",
     "EstimateTopicError",
+    "check_disk",
     "check_options",
     "estimate_log",
 ]
@@ -251,6 +254,7 @@ def _estimate_whole(path, out, filter_name, use_mag, topic, topic_out, latency_s
     _pass_on(caught)
     chosen = _choose(log.devices.values(), path, topic, topic_out)
     _check_topics_out(path, chosen, log.channels)
+    check_disk(path, out, [(_size_frame(dev), len(dev.samples), 0) for dev, _ in chosen])
     targets, done, field_lags = [], [], []
     for dev, name in chosen:
         samples = dev.samples
@@ -311,6 +315,7 @@ def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latenc
             flt.spool_in(out.parent)  # beside the output, whose size it is of (not in a small /tmp)
         field_lags += lag
         filters.append(_DeviceFilter(dev, flt, nine, t0, first))
+    check_disk(path, out, [(_size_frame(f.dev), *_spooled(f.flt, found[f.dev.name].census)) for f in filters])
     try:
         _learn(path, [f for f in filters if learns_in_blocks(f.flt)])
         for (dev, name), f in zip(chosen, filters):
@@ -323,6 +328,44 @@ def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latenc
                 f.flt.close()
     topics = [(r.target.topic, r.target.topic_out, r.target.sequence) for r in runs]
     return EstimateSummary(path=out, devices=done, topics=topics, field_lags=field_lags)
+
+
+def _size_frame(dev) -> str:
+    """A frame id as long as the estimate's of ``dev`` (:func:`_target`: ``base_link``, or its IMU's,
+    whose name is about the device's)."""
+    return BODY_FRAME if dev.metadata is not None else dev.name
+
+
+def _spooled(flt: AttitudeFilter, counted: DeviceCensus) -> tuple[int, int]:
+    """A device's sample count, and the bytes its filter keeps in temporary files over them."""
+    if not learns_in_blocks(flt):
+        return counted.count, 0
+    return counted.count, flt.spool_bytes(counted.count, counted.count / counted.rate.rate())
+
+
+def check_disk(path: Path, out: Path, devices: list[tuple[str, int, int]]) -> None:
+    """Refuse an estimate whose output and temporary files need more disk than ``out``'s folder has
+    free, before the work: :class:`EstimateError` naming ``--out``.
+
+    ``devices``: each filtered device's estimate ``frame_id``, sample count, and the bytes its filter
+    keeps in temporary files there (a smoother learning in blocks,
+    :meth:`~gyroemu.pipelines.estimation.protocol.BlockLearner.spool_bytes`). The output is the log's
+    copy (its size: the copy keeps its records and compression) and an estimate message a sample (before
+    compression: at most what they add)."""
+    need = copy = path.stat().st_size
+    estimates = spooled = 0
+    for frame_id, count, spool in devices:
+        estimates += count * (IMU.message_size(frame_id) + MCAP_RECORD_OVERHEAD)
+        spooled += spool
+    need += estimates + spooled
+    free = free_bytes(out.parent)
+    if need > free:
+        what = f"the log's copy {human_size(copy)}, the estimates {human_size(estimates)} before compression"
+        what += f", the smoother's temporary files {human_size(spooled)}" if spooled else ""
+        raise EstimateError(
+            f"argument --out: the estimate needs about {human_size(need)} of disk ({what}), but {out.parent} has "
+            f"{human_size(free)} free: write to another folder (--out)"
+        )
 
 
 @dataclass(frozen=True, eq=False)

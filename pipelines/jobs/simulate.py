@@ -31,6 +31,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gyroemu.pipelines.jobs.disk_space import MCAP_RECORD_OVERHEAD, free_bytes, human_size
+
 if TYPE_CHECKING:
     from gyroemu.dynamics import Scenario
     from gyroemu.dynamics.trajectory import Trajectory
@@ -151,17 +153,8 @@ MAX_RATE_HZ = 1e6
 
 _SEED_LIMIT = 2**128  # numpy's SeedSequence takes integers 0 <= seed < 2**128 here
 
-_MCAP_RECORD_OVERHEAD = 31 + 16  # a message record's header, plus its entry in the chunk's message index
 _TRUTH_NPZ_BYTES = 8 * 23  # float64 t, q_wb (4), omega_b, alpha_b, specific_force_b, pos_w, vel_w, mag_b (3 each)
 _IMU_NPZ_BYTES = 8 * 18  # float64 t, t_true, gyro, accel, mag, temperature, delta_angle, delta_velocity
-
-
-def _size(n_bytes: float) -> str:
-    """``n_bytes`` for people: ``12.3 GB``."""
-    for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
-        if n_bytes >= scale:
-            return f"{n_bytes / scale:.3g} {unit}"
-    return f"{n_bytes:.0f} bytes"
 
 
 def _check_number(value: float | None, argument: str, unit: str, limit: float) -> None:
@@ -197,7 +190,7 @@ def _mcap_bytes_per_sample(device: Device) -> int:
     for role in roles:
         mtype = role_message_type(role)
         if mtype is not None:
-            total += mtype.message_size(device.name) + _MCAP_RECORD_OVERHEAD
+            total += mtype.message_size(device.name) + MCAP_RECORD_OVERHEAD
     return total
 
 
@@ -212,13 +205,11 @@ def _raw_npz_bytes(device: Device) -> int:
 def _check_size(options: SimulateOptions, scenario: Scenario, device: Device | None) -> None:
     """Refuse a run whose output needs more disk than is free in ``--out``'s folder or, for an .npz
     (made in memory), more memory than the machine has."""
-    import shutil
-
     span = float(scenario.duration_s if options.duration is None else options.duration)
     device_rate = None if device is None else float(device.spec.rate_hz)
     truth_rate = options.rate or getattr(scenario.spec, "rate_hz", None) or device_rate
     folder = options.out.parent
-    free = shutil.disk_usage(folder).free
+    free = free_bytes(folder)
     if options.out.suffix == ".mcap":
         assert device is not None and device_rate is not None  # an .mcap needs a device: checked before
         samples = span * device_rate + 1
@@ -242,14 +233,14 @@ def _check_size(options: SimulateOptions, scenario: Scenario, device: Device | N
             memory = None
         if memory is not None and memory > 0 and need > memory:
             raise SimulateError(
-                f"argument --duration: {span:g} s needs about {_size(need)} of memory ({what}; an .npz is made "
-                f"in memory), more than this machine's {_size(memory)}: {change}, or write an .mcap log "
+                f"argument --duration: {span:g} s needs about {human_size(need)} of memory ({what}; an .npz is made "
+                f"in memory), more than this machine's {human_size(memory)}: {change}, or write an .mcap log "
                 "(--out run.mcap, made block by block)"
             )
     if need > free:
         raise SimulateError(
-            f"argument --duration: {span:g} s needs about {_size(need)} of disk ({what}, before compression), "
-            f"but {folder} has {_size(free)} free: {change}, or write to another folder (--out)"
+            f"argument --duration: {span:g} s needs about {human_size(need)} of disk ({what}, before compression), "
+            f"but {folder} has {human_size(free)} free: {change}, or write to another folder (--out)"
         )
 
 

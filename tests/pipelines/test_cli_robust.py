@@ -5,6 +5,7 @@ The contract: exit 2 on bad usage or bad input, before any work, with a message 
 command overwrites an existing file without ``--force``.
 """
 
+import errno
 import os
 import shutil
 import signal
@@ -12,6 +13,7 @@ import subprocess
 import sys
 import threading
 import time
+import types
 
 import pytest
 from cli_runs import run_cli
@@ -166,6 +168,112 @@ def test_simulate_npz_larger_than_the_memory_is_refused(tmp_path, monkeypatch):
     assert code == 2, stderr
     assert "argument --duration: 60 s needs about" in stderr and "of memory" in stderr
     assert f"this machine's {memory / 1e6:.3g} MB" in stderr and "lower --rate" in stderr and ".mcap" in stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def _estimate_need(log, smooth: bool) -> int:
+    """What ``check_disk`` counts for a gyroemu log of one device: the log's size, an ``/estimate/imu``
+    message (in ``base_link``) and its record per sample, and with ``smooth`` the smoother's files."""
+    from gyroemu.pipelines.estimation.mekf import MekfParams
+    from gyroemu.pipelines.estimation.mekf_smoother_spool import spool_bytes
+    from gyroemu.pipelines.formats.channels import BODY_FRAME
+    from gyroemu.pipelines.formats.mcap_log import read_mcap
+    from gyroemu.pipelines.formats.messages import IMU
+    from gyroemu.pipelines.jobs.disk_space import MCAP_RECORD_OVERHEAD
+
+    samples = next(iter(read_mcap(log).devices.values())).samples
+    n, duration = len(samples), len(samples) / 1000.0  # consumer_mems at 1 kHz
+    need = log.stat().st_size + n * (IMU.message_size(BODY_FRAME) + MCAP_RECORD_OVERHEAD)
+    return need + (spool_bytes(n, duration, MekfParams().window_s) if smooth else 0)
+
+
+@pytest.fixture(scope="module")
+def small_log(tmp_path_factory):
+    """Two seconds of the consumer MEMS at 1 kHz."""
+    log = tmp_path_factory.mktemp("small") / "in.mcap"
+    argv = ["--scenario", "smooth_manoeuvre", "--device", "consumer_mems", "--duration", "2", "--out", str(log)]
+    code, _, stderr = run_cli(["simulate", *argv])
+    assert code == 0, stderr
+    return log
+
+
+@pytest.mark.parametrize("smooth", [False, True])
+def test_estimate_larger_than_the_free_disk_is_refused(tmp_path, monkeypatch, small_log, smooth):
+    """``estimate`` counts its output (the log's copy, an estimate a sample) and the smoother's files
+    and refuses, before any work and naming ``--out``, a folder with a byte less free; with exactly that
+    it runs, and what it wrote is no more than it counted (the estimates counted before compression)."""
+    need = _estimate_need(small_log, smooth)
+    usage = shutil.disk_usage(tmp_path)
+    out = tmp_path / "out.mcap"
+    argv = ["estimate", str(small_log), "--out", str(out)] + (["--smooth"] if smooth else [])
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: usage._replace(free=need - 1))
+    code, _, stderr = run_cli(argv)
+    assert code == 2, stderr
+    assert f"argument --out: the estimate needs about {need / 1e6:.3g} MB of disk" in stderr, stderr
+    assert ("the smoother's temporary files" in stderr) == smooth and "write to another folder" in stderr
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: usage._replace(free=need))
+    code, _, stderr = run_cli(argv)
+    assert code == 0, stderr
+    assert [p.name for p in tmp_path.iterdir()] == ["out.mcap"] and out.stat().st_size <= need
+
+
+class _FillsUp:
+    """A binary file that takes ``room`` bytes, then refuses as a full disk does (ENOSPC)."""
+
+    def __init__(self, f, room: int) -> None:
+        self.f, self.room = f, room
+
+    def write(self, data) -> int:
+        n = memoryview(data).nbytes
+        if n > self.room:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        self.room -= n
+        return self.f.write(data)
+
+    def __getattr__(self, name):
+        return getattr(self.f, name)
+
+
+@pytest.mark.parametrize("where", ["output", "smoother files"])
+def test_a_disk_that_fills_while_estimate_writes_ends_it_in_one_line(tmp_path, monkeypatch, small_log, where):
+    """A disk that fills all the same (another writer, a size under-estimated): exit 1, one line naming
+    the output, no traceback, nothing left in the folder. The output's writer (or the smoother's
+    temporary files) given a file that fills after 100 kB."""
+    import tempfile
+
+    from gyroemu.pipelines.estimation import mekf_smoother_spool
+    from gyroemu.pipelines.jobs import estimate_copy
+
+    if where == "output":
+        writer = estimate_copy.McapFileWriter
+        monkeypatch.setattr(estimate_copy, "McapFileWriter", lambda f, **kw: writer(_FillsUp(f, 100_000), **kw))
+    else:
+        spool_tempfile = types.SimpleNamespace(
+            TemporaryFile=lambda **kw: _FillsUp(tempfile.TemporaryFile(**kw), 100_000)
+        )
+        monkeypatch.setattr(mekf_smoother_spool, "tempfile", spool_tempfile)
+    out = tmp_path / "out.mcap"
+    code, stdout, stderr = run_cli(["estimate", str(small_log), "--out", str(out), "--smooth"])
+    assert code == 1, stderr
+    assert stderr == (
+        f"gyroemu estimate: error: {os.strerror(errno.ENOSPC)} writing {out}: stopped; an output written through "
+        "a temporary file is removed, a recording keeps what it wrote (its complete chunks read back). Free "
+        "some space, or write to another folder\n"
+    )
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_another_os_error_is_not_taken_for_a_full_disk(monkeypatch, small_log, tmp_path):
+    """Only ENOSPC and EDQUOT are a full disk: any other OSError still raises (a bug shows its traceback)."""
+    from gyroemu.pipelines.jobs import estimate_copy
+
+    def refuse(*args, **kwargs):
+        raise OSError(errno.EIO, os.strerror(errno.EIO))
+
+    monkeypatch.setattr(estimate_copy, "McapFileWriter", refuse)
+    with pytest.raises(OSError, match=os.strerror(errno.EIO)):
+        run_cli(["estimate", str(small_log), "--out", str(tmp_path / "out.mcap")])
     assert list(tmp_path.iterdir()) == []
 
 

@@ -13,7 +13,13 @@ import pytest
 from gyroemu.dynamics import load_scenario
 from gyroemu.pipelines.estimation.latency import LatencyCompensated
 from gyroemu.pipelines.estimation.mekf_smoother import MekfSmoother, smooth_log, smoother_params
-from gyroemu.pipelines.estimation.mekf_smoother_spool import SmootherSpool
+from gyroemu.pipelines.estimation.mekf_smoother_spool import (
+    SAMPLE_RECORD,
+    SMOOTHED_RECORD,
+    WINDOW_RECORD,
+    SmootherSpool,
+    spool_bytes,
+)
 from gyroemu.pipelines.estimation.setup import setup_for
 from gyroemu.sensors import load_device
 
@@ -99,6 +105,26 @@ def test_a_callers_mistakes_are_refused(run):
     with pytest.raises(ValueError, match="block at a time"):
         smoother.process_increments(t[:5], g[:5] * 0.01, a[:5])
     smoother.close()
+
+
+def test_spool_bytes_counts_the_files_a_log_takes(run):
+    """What ``gyroemu estimate`` checks against the free disk is at least what the files hold once the
+    log is learned and smoothed: a record per sample, and per window its storage and smoothed record.
+    A window ends when its samples span 20 ms or count 21 (``window_due``), so at 1 kHz it holds 20 or
+    21 samples (20 steps of 1 ms may round below 20 ms): between n/21 and n/20 windows, and window 0
+    (the initial state); ``spool_bytes`` counts one every 20 ms."""
+    setup, t, samples = run
+    params = smoother_params(setup)
+    with SmootherSpool(setup, params) as spool:
+        spool.learn(t, samples.gyro, samples.accel, samples.mag)
+        spool.process(t, samples.gyro, samples.accel)
+        held = spool.disk_bytes
+    n = len(t)
+    counted = spool_bytes(n, n / 1000.0, params.window_s)  # the census's duration: samples over the rate
+    window = WINDOW_RECORD.itemsize + SMOOTHED_RECORD.itemsize
+    assert n * SAMPLE_RECORD.itemsize + (n // 21 + 1) * window <= held <= counted
+    assert counted == n * SAMPLE_RECORD.itemsize + (-(-n // 20) + 1) * window
+    assert MekfSmoother(setup).spool_bytes(n, n / 1000.0) == counted
 
 
 def test_only_a_filter_with_the_learners_methods_is_fed_in_blocks(run):

@@ -1,0 +1,38 @@
+"""Disk space for a job's output: how much there is, said for people, and the error of a disk that fills.
+
+A job that knows its output's size checks it against its folder's free space before any work
+(``simulate``: samples × bytes per sample; ``estimate``: the log's copy, the estimates and the smoother's
+temporary files) and refuses with a message that names the argument. A disk that fills all the same
+(another process writing, a size under-estimated) raises :class:`OSError` with ``errno`` ENOSPC or EDQUOT
+from wherever the write was; :func:`is_disk_full` tells the command line such an error from the others.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import shutil
+
+__all__ = ["MCAP_RECORD_OVERHEAD", "free_bytes", "human_size", "is_disk_full"]
+
+MCAP_RECORD_OVERHEAD = 31 + 16
+"""Bytes an MCAP message record adds to its message: its header, and its entry in the chunk's message index."""
+
+
+def human_size(n_bytes: float) -> str:
+    """``n_bytes`` for people: ``12.3 GB`` (powers of 1000)."""
+    for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n_bytes >= scale:
+            return f"{n_bytes / scale:.3g} {unit}"
+    return f"{n_bytes:.0f} bytes"
+
+
+def free_bytes(folder: str | os.PathLike[str]) -> int:
+    """Bytes free for an unprivileged writer in ``folder``'s file system."""
+    return shutil.disk_usage(folder).free
+
+
+def is_disk_full(error: BaseException) -> bool:
+    """Whether ``error`` is a write refused for want of space: no space left on the device (ENOSPC) or
+    the user's quota used up (EDQUOT)."""
+    return isinstance(error, OSError) and error.errno in (errno.ENOSPC, errno.EDQUOT)
