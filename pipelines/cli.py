@@ -108,12 +108,15 @@ def _mcap_out(text: str) -> Path:
 
 def _cmd_import(args) -> int:
     from gyroemu.pipelines.formats.importers import IMPORTERS
+    from gyroemu.pipelines.jobs.disk_space import is_disk_full
 
     source, out = Path(args.file), _mcap_out(args.out)
     started = time.perf_counter()
     try:
         summary = IMPORTERS[args.format](source, out, force=args.force)
     except OSError as e:  # reading errors are ImportInputError (a ConfigError); this is the output
+        if is_disk_full(e):
+            raise  # not the argument's fault: main says so, status 1
         raise UsageError(f"argument --out: {out}: {e.strerror or e}") from None
     print(f"{summary} in {time.perf_counter() - started:.2f} s")
     return 0

@@ -264,6 +264,23 @@ def test_a_disk_that_fills_while_estimate_writes_ends_it_in_one_line(tmp_path, m
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("code, status", [(errno.ENOSPC, 1), (errno.EDQUOT, 1), (errno.EACCES, 2)])
+def test_import_full_disk_is_not_the_arguments_fault(tmp_path, monkeypatch, code, status):
+    """``import`` names ``--out`` (status 2) for an output it may not write, but a full disk or quota is
+    not the argument's fault: status 1, as for every command."""
+    from gyroemu.pipelines.formats import importers
+
+    def write_fails(source, out, force=False):
+        raise OSError(code, os.strerror(code), str(out))
+
+    monkeypatch.setitem(importers.IMPORTERS, "broad", write_fails)
+    out = tmp_path / "out.mcap"
+    got, _, stderr = run_cli(["import", "broad", str(tmp_path / "in.hdf5"), "--out", str(out)])
+    assert got == status, stderr
+    said = f"argument --out: {out}: " if status == 2 else "stopped; an output written through a temporary file"
+    assert said in stderr and os.strerror(code) in stderr and "Traceback" not in stderr
+
+
 def test_another_os_error_is_not_taken_for_a_full_disk(monkeypatch, small_log, tmp_path):
     """Only ENOSPC and EDQUOT are a full disk: any other OSError still raises (a bug shows its traceback)."""
     from gyroemu.pipelines.jobs import estimate_copy
