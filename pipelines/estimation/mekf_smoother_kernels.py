@@ -145,9 +145,9 @@ def rts_backward(F_top, P_prior, P_post, x_upd, e_s, P_s):
         FP[kern.X_ACC :, :] = F_top[j + 1, 3:] @ P_post[j]
         # C = P_post Fᵀ P_prior⁻¹  ⇔  Cᵀ = P_prior⁻¹ F P_post (both covariances symmetric)
         try:
-            Ct = np.linalg.solve(P_prior[j + 1], FP)
+            Ct = np.ascontiguousarray(np.linalg.solve(P_prior[j + 1], FP))
         except Exception:  # noqa: BLE001 - a singular prior (a noiseless gyro: no process noise)
-            Ct = np.linalg.pinv(P_prior[j + 1]) @ FP  # the pseudo-inverse's gain: the states it can see
+            Ct = np.ascontiguousarray(np.linalg.pinv(P_prior[j + 1]) @ FP)  # the pseudo-inverse's gain
         C = np.ascontiguousarray(Ct.T)
         e_s[j] = C @ (e_s[j + 1] + x_upd[j + 1])
         Pj = P_post[j] + C @ (P_s[j + 1] - P_prior[j + 1]) @ Ct
