@@ -68,7 +68,6 @@ from typing import Any, cast
 import numpy as np
 
 from gyroemu.dynamics import ConfigError
-from gyroemu.pipelines.estimation.metrics import attitude_errors, convergence_time, rmse_deg
 from gyroemu.pipelines.estimation.protocol import Estimate, FilterSetup
 from gyroemu.pipelines.estimation.registry import (
     FilterError,
@@ -80,6 +79,14 @@ from gyroemu.pipelines.estimation.registry import (
 )
 from gyroemu.pipelines.formats.atomic import write_figure_atomic, write_text_atomic
 from gyroemu.pipelines.formats.file_names import unique_stems
+from gyroemu.pipelines.jobs.bench_metrics import (
+    BIAS_WINDOW_S,
+    DIVERGED_FINAL_FRACTION,
+    DIVERGED_INCLINATION_DEG,
+    RunMetrics,
+    RunResult,
+    json_number,
+)
 
 __all__ = [
     "BenchError",
@@ -95,9 +102,6 @@ __all__ = [
     "run_bench",
 ]
 
-DIVERGED_FINAL_FRACTION = 0.10
-DIVERGED_INCLINATION_DEG = 30.0
-BIAS_WINDOW_S = 1.0
 _PLOT_POINTS = 4000
 
 
@@ -153,28 +157,6 @@ class _Run:
 
 # ==================================================================================================
 # Results
-
-
-@dataclass
-class RunResult:
-    """One filter on one run. Angles in degrees; None where not defined (a 6D heading, no bias)."""
-
-    seed: int | None
-    samples: int
-    total_deg: float | None
-    heading_deg: float | None
-    inclination_deg: float | None
-    convergence_s: float | None  # inf: never converged
-    bias_error_deg_s: float | None
-    throughput: float  # samples/s (batched: updates/s across runs)
-    wall_s: float
-    diverged: bool
-    reason: str = ""
-
-    def to_json(self) -> dict:
-        d = {k: _json_number(v) for k, v in self.__dict__.items()}
-        d["converged"] = self.convergence_s is not None and math.isfinite(self.convergence_s)
-        return d
 
 
 @dataclass
@@ -387,7 +369,7 @@ class BenchReport:
                             "status": "ok"
                             if not fr.diverged_runs
                             else f"diverged in {fr.diverged_runs} of {len(fr.runs)} runs",
-                            "summary": {m: {k: _json_number(v) for k, v in fr.summary(m).items()} for m in _METRICS},
+                            "summary": {m: {k: json_number(v) for k, v in fr.summary(m).items()} for m in _METRICS},
                             "runs": [r.to_json() for r in fr.runs],
                         }
                         for fr in c.filters
@@ -448,16 +430,6 @@ class BenchReport:
         return paths
 
 
-def _json_number(v):
-    if isinstance(v, (float, np.floating)):
-        return float(v) if math.isfinite(v) else None
-    if isinstance(v, np.integer):
-        return int(v)
-    if isinstance(v, np.bool_):
-        return bool(v)
-    return v
-
-
 def _si(x: float) -> str:
     for scale, suffix in ((1e9, " G"), (1e6, " M"), (1e3, " k")):
         if abs(x) >= scale:
@@ -481,19 +453,6 @@ def _cell(summary: dict, digits: int, metric: str) -> str:
 # Evaluation of one run
 
 
-def _moving_mean(x: np.ndarray, window: int) -> np.ndarray:
-    """Centred moving mean over ``window`` samples along axis 0; NaN where the window does not fit."""
-    n = len(x)
-    out = np.full(x.shape, np.nan)
-    if window < 1 or n < window:
-        return out
-    c = np.cumsum(np.concatenate([np.zeros((1,) + x.shape[1:]), x]), axis=0)
-    means = (c[window:] - c[:-window]) / window
-    start = window // 2
-    out[start : start + len(means)] = means
-    return out
-
-
 def evaluate_run(
     t,
     q_est,
@@ -512,70 +471,26 @@ def evaluate_run(
     reason="",
 ) -> tuple[RunResult, dict]:
     """The metrics of one filter run (see the module's docstring) and the per-sample errors (degrees,
-    NaN outside the counted samples) as ``{"total": ..., "inclination": ...}``."""
+    NaN outside the counted samples) as ``{"total": ..., "inclination": ...}``: :class:`RunMetrics`
+    given the run as one block (a log read a block at a time gives the same to the bit)."""
     t = np.asarray(t, dtype=float)
     n = len(t)
     q_est = np.asarray(q_est, dtype=float)
     q_true = np.asarray(q_true, dtype=float)
     mask = np.ones(n, bool) if mask is None else np.asarray(mask, dtype=bool)
-    finite_est = np.isfinite(q_est).all(axis=1) & (np.linalg.norm(q_est, axis=1) > 0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        err = attitude_errors(np.where(finite_est[:, None], q_est, np.nan), q_true)
-    counted = mask & np.isfinite(q_true).all(axis=1)
-    total = np.where(counted, err.total, np.nan)
-    heading = np.where(counted, err.heading, np.nan)
-    inclination = np.where(counted, err.inclination, np.nan)
-
-    diverged = not finite_est.all()
-    why = reason or ("non-finite quaternions in the output" if diverged else "")
-    idx = np.flatnonzero(counted)
-    if len(idx):
-        tail = idx[len(idx) - max(1, int(math.ceil(DIVERGED_FINAL_FRACTION * len(idx)))) :]
-        tail_rms = rmse_deg(err.inclination[tail])
-        if tail_rms > DIVERGED_INCLINATION_DEG or (math.isnan(tail_rms) and not diverged):
-            diverged = True
-            why = why or (
-                f"inclination error RMS {tail_rms:.1f}° over the last {DIVERGED_FINAL_FRACTION:.0%}"
-                if not math.isnan(tail_rms)
-                else "no finite output over the last samples"
-            )
-    if reason:
-        diverged = True
-
-    conv_err = inclination if six_d else total
-    conv = convergence_time(t, conv_err, math.radians(threshold_deg)) if np.isfinite(conv_err).any() else float("nan")
-
-    bias_error = None
-    if bias_est is not None and omega_true is not None and gyro is not None and rate_hz:
-        window = max(1, int(round(BIAS_WINDOW_S * rate_hz)))
-        omega = np.asarray(omega_true, dtype=float)
-        # Sample k is the mean rate over [t_{k-1}, t_k] (the strapdown convention): compare it with the
-        # true rate's mean over the same interval (trapezoid), not with the rate at t_k, which would
-        # leave (T/2)·dω/dt in b_true (0.25 °/s at 200 Hz on a brisk manoeuvre).
-        omega_mean = omega.copy()
-        omega_mean[1:] = 0.5 * (omega[1:] + omega[:-1])
-        b_true = _moving_mean(np.asarray(gyro, dtype=float) - omega_mean, window)
-        b_est = np.asarray(bias_est, dtype=float)
-        half = t >= t[0] + 0.5 * (t[-1] - t[0])
-        diff = np.linalg.norm(b_est - b_true, axis=1)
-        ok = half & np.isfinite(diff)
-        if ok.any():
-            bias_error = float(np.degrees(np.sqrt(np.mean(diff[ok] ** 2))))
-
-    result = RunResult(
-        seed=seed,
+    with_bias = bias_est is not None and omega_true is not None and gyro is not None and bool(rate_hz)
+    metrics = RunMetrics(
         samples=n,
-        total_deg=None if six_d else rmse_deg(total),
-        heading_deg=None if six_d else rmse_deg(heading),
-        inclination_deg=rmse_deg(inclination),
-        convergence_s=conv,
-        bias_error_deg_s=bias_error,
-        throughput=float(throughput) if throughput is not None else (n / wall_s if wall_s > 0 else float("nan")),
-        wall_s=float(wall_s),
-        diverged=bool(diverged),
-        reason=why if diverged else "",
+        counted=int((mask & np.isfinite(q_true).all(axis=1)).sum()),
+        t_first=float(t[0]) if n else math.nan,
+        t_last=float(t[-1]) if n else math.nan,
+        six_d=six_d,
+        threshold_deg=threshold_deg,
+        bias_window=max(1, int(round(BIAS_WINDOW_S * rate_hz))) if with_bias else None,
     )
-    return result, {"total": np.degrees(total), "inclination": np.degrees(inclination)}
+    errors = metrics.add(t, q_est, q_true, mask, bias_est, omega_true, gyro)
+    metrics.wall_s = float(wall_s)
+    return metrics.result(seed=seed, reason=reason, throughput=throughput), errors
 
 
 # ==================================================================================================
