@@ -325,6 +325,7 @@ def test_the_smoother_spools_beside_the_output(manoeuvre_log, tmp_path, monkeypa
     """``--smooth`` keeps its storage in nameless temporary files in the output's folder (a small /tmp
     could not hold hours of it), timed or not, and leaves nothing there but the output."""
     import tempfile
+    import types
 
     from gyroemu.pipelines.estimation import mekf_smoother_spool
 
@@ -334,7 +335,8 @@ def test_the_smoother_spools_beside_the_output(manoeuvre_log, tmp_path, monkeypa
         folders.append(dir)
         return original(dir=dir)
 
-    monkeypatch.setattr(mekf_smoother_spool.tempfile, "TemporaryFile", temporary_file)
+    # the spool's own name for the module, not tempfile's attribute (numba's cache writes use it too)
+    monkeypatch.setattr(mekf_smoother_spool, "tempfile", types.SimpleNamespace(TemporaryFile=temporary_file))
     out = tmp_path / "out" / "smoothed.mcap"
     out.parent.mkdir()
     estimate_log(manoeuvre_log, out, filter_name="mekf-smooth", latency_s={"gyro": 0.004})
