@@ -67,7 +67,6 @@ from typing import Any, cast
 
 import numpy as np
 
-from gyroemu.dynamics import ConfigError
 from gyroemu.pipelines.estimation.protocol import Estimate, FilterSetup
 from gyroemu.pipelines.estimation.registry import (
     FilterError,
@@ -79,6 +78,8 @@ from gyroemu.pipelines.estimation.registry import (
 )
 from gyroemu.pipelines.formats.atomic import write_figure_atomic, write_text_atomic
 from gyroemu.pipelines.formats.file_names import unique_stems
+from gyroemu.pipelines.jobs.bench_cases import PLOT_POINTS, BenchError, BenchWarning, LogCase, SimCase
+from gyroemu.pipelines.jobs.bench_filters import WARM_UP_SAMPLES, check_estimate, warm_up
 from gyroemu.pipelines.jobs.bench_metrics import (
     BIAS_WINDOW_S,
     DIVERGED_FINAL_FRACTION,
@@ -102,43 +103,8 @@ __all__ = [
     "run_bench",
 ]
 
-_PLOT_POINTS = 4000
-
-
-class BenchError(ConfigError):
-    """A case or option the bench cannot run (a log without IMU or truth, bad stamps, ...); names the file
-    or argument (a :class:`gyroemu.dynamics.ConfigError`, so the command line exits with status 2)."""
-
-
-class BenchWarning(UserWarning):
-    """Data the bench can still use, with a caveat (NaN samples, a log without a movement mask's hits)."""
-
-
 # ==================================================================================================
-# Cases
-
-
-@dataclass(frozen=True)
-class SimCase:
-    """A simulated case: ``scenario`` (built-in name or TOML path) measured by ``device``."""
-
-    scenario: str = "smooth_manoeuvre"
-    device: str = "consumer_mems"
-    duration: float | None = 60.0
-    six_d: bool = False
-
-
-@dataclass(frozen=True)
-class LogCase:
-    """An MCAP log with a truth channel; ``device`` picks one device (default: each with truth);
-    ``latency_s`` the gyro's and the magnetometer's latencies, s (``{"gyro": …, "mag": …}``, ``"mag":
-    "auto"`` to read the field's lag from the log; default: a gyroemu log's device's, else 0;
-    :func:`gyroemu.pipelines.estimation.setup.latencies_for_log`)."""
-
-    path: str | Path
-    device: str | None = None
-    six_d: bool = False
-    latency_s: dict[str, float | str] | None = None
+# A run's data
 
 
 @dataclass
@@ -497,35 +463,6 @@ def evaluate_run(
 # Running
 
 
-def _check_estimate(est, n: int, label: str) -> tuple[np.ndarray, np.ndarray | None]:
-    if not isinstance(est, Estimate) and not hasattr(est, "q_wb"):
-        raise TypeError(f"{label}.process() returned {type(est).__name__}, not an Estimate")
-    q = np.asarray(est.q_wb, dtype=float)
-    if q.shape != (n, 4):
-        raise ValueError(f"{label}.process() returned q_wb of shape {q.shape}, expected {(n, 4)}")
-    b = getattr(est, "gyro_bias", None)
-    if b is not None:
-        b = np.asarray(b, dtype=float)
-        if b.shape != (n, 3):
-            b = None
-    return q, b
-
-
-_WARM_UP_SAMPLES = 200
-
-
-def _warm_up(spec: str, setup: FilterSetup, run: _Run, six_d: bool) -> None:
-    """A short untimed call first, so that the timed ones measure the filter, not its first-call costs
-    (numba compiling or loading its cache, lazy imports)."""
-    k = min(len(run.t), _WARM_UP_SAMPLES)
-    try:
-        make_filter(spec, setup).process(
-            run.t[:k], run.gyro[:k], run.accel[:k], None if six_d or run.mag is None else run.mag[:k]
-        )
-    except Exception:  # noqa: BLE001 - the timed run reports it
-        pass
-
-
 def _run_filter(spec: str, setup: FilterSetup, run: _Run, *, six_d: bool, threshold_deg: float):
     """One filter on one run: (RunResult, errors, name)."""
     filt = make_filter(spec, setup)
@@ -535,7 +472,7 @@ def _run_filter(spec: str, setup: FilterSetup, run: _Run, *, six_d: bool, thresh
     try:
         est = filt.process(run.t, run.gyro, run.accel, None if six_d else run.mag)
         wall = time.perf_counter() - started
-        q, b = _check_estimate(est, n, name)
+        q, b = check_estimate(est, n, name)
         reason = ""
     except Exception as exc:  # noqa: BLE001 - a filter that fails is reported, not fatal
         wall = time.perf_counter() - started
@@ -559,7 +496,7 @@ def _run_filter(spec: str, setup: FilterSetup, run: _Run, *, six_d: bool, thresh
 
 
 def _curve(fr: FilterResult, t: np.ndarray, errors: dict) -> None:
-    step = max(1, len(t) // _PLOT_POINTS)
+    step = max(1, len(t) // PLOT_POINTS)
     fr.curve_t = (t - t[0])[::step]
     fr.curve_total_deg = errors["total"][::step]
     fr.curve_inclination_deg = errors["inclination"][::step]
@@ -844,7 +781,7 @@ def _bench_sim(case: SimCase, item, filters, runs, seed, threshold_deg, batch_fn
         for spec in per_run:
             bar.describe(f"{name}: {spec} run {r + 1}/{runs}")
             if r == 0:
-                _warm_up(spec, setup, run, six_d)
+                warm_up(spec, setup, run.t, run.gyro, run.accel, None if six_d else run.mag)
             res, errors, fname = _run_filter(spec, setup, run, six_d=six_d, threshold_deg=threshold_deg)
             fr = results[spec]
             if fr is None:
@@ -890,7 +827,7 @@ def _bench_batched(batch_fn, setup, runs: list[_Run], six_d, threshold_deg) -> F
             "the runs' stamps differ (clock jitter), so each run went through mekf_batch on its own; "
             "throughput is per run"
         )
-    k = min(len(runs[0].t), _WARM_UP_SAMPLES)
+    k = min(len(runs[0].t), WARM_UP_SAMPLES)
     try:  # untimed first call (compiling or loading the kernels)
         batch_fn(
             setup,
@@ -947,7 +884,7 @@ def _bench_log(item, filters, threshold_deg, bar) -> CaseResult:
     results = []
     for spec in filters:
         bar.describe(f"{name}: {spec}")
-        _warm_up(spec, setup, run, mode == "6D")
+        warm_up(spec, setup, run.t, run.gyro, run.accel, None if mode == "6D" else run.mag)
         res, errors, fname = _run_filter(spec, setup, run, six_d=mode == "6D", threshold_deg=threshold_deg)
         fr = FilterResult(filter=spec, name=fname, batched=False, runs=[res], offline=is_offline(spec))
         _curve(fr, run.t, errors)
