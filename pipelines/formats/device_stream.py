@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gyroemu.pipelines.formats.channels import IMU_ROLE, MAG_ROLE, MOVEMENT_ROLE, POSE_ROLE, raw_kind
+from gyroemu.pipelines.formats.channels import IMU_ROLE, MAG_ROLE, MOVEMENT_ROLE, POSE_ROLE, TRUTH_ROLE, raw_kind
 from gyroemu.pipelines.formats.mcap_log import (
     LogWarning,
     announce_scan,
@@ -49,15 +49,19 @@ from gyroemu.pipelines.formats.messages import MessageType, ns_to_stamps, stamps
 __all__ = [
     "MAX_PENDING",
     "POSE_MATCH_NS",
+    "TRUTH_FIELDS",
     "DeviceBlock",
     "DeviceCensus",
     "DeviceStream",
+    "NearestTruth",
     "NotStreamable",
     "RateCounter",
     "Counted",
     "StreamDevice",
     "count_samples",
+    "nearest",
     "scan_devices",
+    "truth_values",
     "warn_drops",
 ]
 
@@ -90,6 +94,11 @@ class DeviceBlock:
     through_ns : int or None
         Every IMU message up to this stamp is decided: a sample of this block or an earlier one, or
         dropped (None: the block took no message).
+    movement : ndarray (n,) bool or None
+        The ``/movement`` flags at the samples' stamps (False where a sample has none), as
+        :attr:`DeviceLog.movement`; None without a ``/movement`` topic.
+    truth : NearestTruth or None
+        The ``/truth/imu`` message nearest each sample's stamp (None unless the stream pairs it).
     """
 
     stamp_ns: np.ndarray
@@ -99,6 +108,8 @@ class DeviceBlock:
     pose_ns: np.ndarray
     pose_pos: np.ndarray
     through_ns: int | None
+    movement: np.ndarray | None = None
+    truth: NearestTruth | None = None
 
     def __len__(self) -> int:
         return len(self.stamp_ns)
@@ -107,12 +118,16 @@ class DeviceBlock:
     def concatenate(blocks: list[DeviceBlock]) -> DeviceBlock:
         """Consecutive blocks of one stream joined."""
         through = [b.through_ns for b in blocks if b.through_ns is not None]
+        movement = [b.movement for b in blocks if b.movement is not None]
+        truths = [b.truth for b in blocks]
         return DeviceBlock(
             **{
                 name: np.concatenate([getattr(b, name) for b in blocks])
                 for name in ("stamp_ns", "gyro", "accel", "mag", "pose_ns", "pose_pos")
             },
             through_ns=through[-1] if through else None,
+            movement=np.concatenate(movement) if movement else None,
+            truth=None if not blocks or truths[0] is None else NearestTruth.concatenate(truths),
         )
 
     def after(self, stamp_ns: int | None) -> DeviceBlock:
@@ -129,7 +144,63 @@ class DeviceBlock:
             pose_ns=self.pose_ns[len(self.pose_ns) - m :],
             pose_pos=self.pose_pos[len(self.pose_pos) - m :],
             through_ns=self.through_ns,
+            movement=None if self.movement is None else self.movement[k:],
+            truth=None if self.truth is None else self.truth.rows(slice(k, None)),
         )
+
+
+@dataclass(frozen=True)
+class NearestTruth:
+    """Each sample's nearest ``/truth/imu`` message (by header stamp; of two as near, the earlier), as
+    ``gyroemu bench`` pairs a log's truth with its samples over the whole log.
+
+    Attributes
+    ----------
+    q_wb : ndarray (n, 4)
+        Its attitude, scalar first; NaN where the message has none (covariance −1) or there is no truth.
+    omega_b : ndarray (n, 3)
+        Its body rate, rad/s; NaN likewise.
+    gap_s : ndarray (n,)
+        ``|t_truth − t|`` in seconds (both as ``ns_to_stamps`` has them); inf where there is no truth.
+    """
+
+    q_wb: np.ndarray
+    omega_b: np.ndarray
+    gap_s: np.ndarray
+
+    def rows(self, index: slice | np.ndarray) -> NearestTruth:
+        """The samples ``index``."""
+        return NearestTruth(self.q_wb[index], self.omega_b[index], self.gap_s[index])
+
+    @staticmethod
+    def concatenate(parts: list[NearestTruth | None]) -> NearestTruth:
+        """Consecutive samples' truths joined."""
+        given = [p for p in parts if p is not None]
+        return NearestTruth(*(np.concatenate([getattr(p, n) for p in given]) for n in ("q_wb", "omega_b", "gap_s")))
+
+
+TRUTH_FIELDS = ("orientation", "orientation_covariance", "angular_velocity", "angular_velocity_covariance")
+"""The ``/truth/imu`` fields :class:`DeviceStream` reads to pair the truth."""
+
+
+def truth_values(values: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Attitudes (m, 4), scalar first, and body rates (m, 3) of decoded ``/truth/imu`` messages, NaN where
+    a message says it has none (its covariance's first element −1), as :func:`series_from_batch` reads
+    them."""
+    q = values["orientation"][:, [3, 0, 1, 2]]
+    q[values["orientation_covariance"][:, 0] == -1.0] = np.nan
+    omega = values["angular_velocity"].copy()
+    omega[values["angular_velocity_covariance"][:, 0] == -1.0] = np.nan
+    return q, omega
+
+
+def nearest(t: np.ndarray, tt: np.ndarray) -> np.ndarray:
+    """Index into ``tt`` (sorted, not empty) of the stamp nearest each of ``t``, the earlier of two as
+    near (``gyroemu bench``'s rule: both neighbours' distances computed in float64 seconds)."""
+    if len(tt) < 2:
+        return np.zeros(len(t), dtype=np.int64)
+    j = np.clip(np.searchsorted(tt, t), 1, len(tt) - 1)
+    return np.where(np.abs(tt[j - 1] - t) <= np.abs(tt[j] - t), j - 1, j)
 
 
 @dataclass
@@ -193,6 +264,10 @@ class DeviceStream:
         Pair ``/truth/pose`` with the samples by index: a sample is then complete once its pose has been
         read too (a pose topic with fewer messages than the samples stalls the stream until
         :class:`NotStreamable`). False: the pose topic is not read.
+    pair_truth : bool
+        Give each sample its nearest ``/truth/imu`` message (:class:`NearestTruth`): a sample is then
+        complete once the truth has gone past its stamp (its header stamps must increase). False: the
+        truth topic is not read.
 
     Attributes
     ----------
@@ -200,14 +275,22 @@ class DeviceStream:
         Raw role to the samples it dropped so far (no message at their stamp).
     movement_missing : int
         Samples without a ``/movement`` message at their stamp so far.
+    truth_attitudes, truth_rates : int
+        ``/truth/imu`` messages read so far with an attitude, and with a finite rate (``pair_truth``).
     """
 
-    def __init__(self, channels: Mapping[str, tuple[int, MessageType]], pair_pose: bool = False) -> None:
+    def __init__(
+        self, channels: Mapping[str, tuple[int, MessageType]], pair_pose: bool = False, pair_truth: bool = False
+    ) -> None:
         roles = dict(channels)
         self._imu = _Pending(*roles[IMU_ROLE])
         self._mag = _Pending(*roles[MAG_ROLE]) if MAG_ROLE in roles else None
         self._movement = _Pending(*roles[MOVEMENT_ROLE]) if MOVEMENT_ROLE in roles else None
         self._pose = _Pending(*roles[POSE_ROLE]) if pair_pose and POSE_ROLE in roles else None
+        self._pair_truth = pair_truth
+        self._truth = _Pending(*roles[TRUTH_ROLE]) if pair_truth and TRUTH_ROLE in roles else None
+        self.truth_attitudes = 0
+        self.truth_rates = 0
         self._raw = {role: _Pending(*roles[role]) for role in roles if raw_kind(role) is not None}
         self.raw_dropped = dict.fromkeys(self._raw, 0)
         self.movement_missing = 0
@@ -225,12 +308,18 @@ class DeviceStream:
             self._movement.append(batch, ("data",), increasing=True)
         if self._pose is not None:
             self._pose.append(batch, ("position",), increasing=False)
+        if self._truth is not None:
+            read = len(self._truth.stamp_ns)
+            self._truth.append(batch, TRUTH_FIELDS, increasing=True)
+            new = {k: v[read:] for k, v in self._truth.values.items()}
+            self.truth_attitudes += int((new["orientation_covariance"][:, 0] != -1.0).sum())
+            self.truth_rates += int(np.isfinite(truth_values(new)[1]).any(axis=1).sum())
         return None if self._imu.seen == before else self._imu.seen
 
     def take(self, final: bool = False) -> DeviceBlock:
         """The samples every paired topic has gone past (all that are left when ``final``: the file has
         ended), taken out of the stream."""
-        paired = [*self._raw.values(), *(p for p in (self._mag, self._movement) if p is not None)]
+        paired = [*self._raw.values(), *(p for p in (self._mag, self._movement, self._truth) if p is not None)]
         stamps = self._imu.stamp_ns
         n = len(stamps)
         if not final and paired:
@@ -254,10 +343,14 @@ class DeviceStream:
             if len(i):
                 mag[i] = self._mag.values["magnetic_field"][j]
             self._mag.drop(last, final)
+        movement = None
         if self._movement is not None:
-            i, _ = match_stamps(stamp_ns, self._movement.stamp_ns)
+            i, j = match_stamps(stamp_ns, self._movement.stamp_ns)
+            movement = np.zeros(len(keep), dtype=bool)
+            movement[i] = self._movement.values["data"][j]
             self.movement_missing += len(keep) - len(i)
             self._movement.drop(last, final)
+        truth = self._nearest_truth(stamp_ns, last) if self._pair_truth else None
         pose_ns, pose_pos = np.empty(0, np.int64), np.empty((0, 3))
         if self._pose is not None:
             pose_stamps, pose_values = self._pose.pop(min(len(keep), len(self._pose.stamp_ns)))
@@ -271,7 +364,27 @@ class DeviceStream:
             pose_ns=pose_ns,
             pose_pos=pose_pos,
             through_ns=last,
+            movement=movement,
+            truth=truth,
         )
+
+    def _nearest_truth(self, stamp_ns: np.ndarray, last: int | None) -> NearestTruth:
+        """The samples' nearest truth messages (every truth stamp later than each sample's has been read, or
+        the file has ended); the truth before ``last`` is then forgotten but its last message, the earlier
+        neighbour of the samples to come."""
+        n = len(stamp_ns)
+        q, omega, gap = np.full((n, 4), np.nan), np.full((n, 3), np.nan), np.full(n, np.inf)
+        pending = self._truth
+        if pending is None or not len(pending.stamp_ns):
+            return NearestTruth(q, omega, gap)
+        if n:
+            t, tt = ns_to_stamps(stamp_ns), ns_to_stamps(pending.stamp_ns)
+            j = nearest(t, tt)
+            q_all, omega_all = truth_values(pending.values)
+            q, omega, gap = q_all[j], omega_all[j], np.abs(tt[j] - t)
+        if last is not None:
+            pending.pop(max(0, int(np.searchsorted(pending.stamp_ns, last, side="right")) - 1))
+        return NearestTruth(q, omega, gap)
 
     def pose_left(self) -> int:
         """``/truth/pose`` messages read and not yet paired with a sample."""

@@ -13,8 +13,12 @@ Cases
   filters' defaults for a foreign log.
 
 A case is 9D when the device has a magnetometer (a log: any finite ``/mag`` sample), 6D otherwise or
-with ``six_d``. Each filter is made from the case's :class:`FilterSetup` for each run and given the
-whole run in one ``process()`` call.
+with ``six_d``. Each filter is made from the case's :class:`FilterSetup` for each run and given a
+simulated run in one ``process()`` call; a log's samples come a block at a time, in time order, as the
+filter protocol has them (:mod:`.bench_log`: the log is read in passes of bounded memory, the smoother
+learns it in blocks, another offline filter is given the device's samples at once), with the same
+results as the log read whole (``LogCase(read_whole=True)``, and the fallback for a log one pass cannot
+pair). The metrics of a run are accumulated a block at a time (:mod:`.bench_metrics`).
 
 Online and offline
 ------------------
@@ -80,6 +84,19 @@ from gyroemu.pipelines.formats.atomic import write_figure_atomic, write_text_ato
 from gyroemu.pipelines.formats.file_names import unique_stems
 from gyroemu.pipelines.jobs.bench_cases import PLOT_POINTS, BenchError, BenchWarning, LogCase, SimCase
 from gyroemu.pipelines.jobs.bench_filters import WARM_UP_SAMPLES, check_estimate, warm_up
+from gyroemu.pipelines.jobs.bench_log import (
+    TRUTH_MATCH,
+    LogDevice,
+    bench_log_device,
+    check_log_case,
+    choose_devices,
+    log_label,
+    log_setup,
+    mask_notes,
+    no_reference_error,
+    stream_log_devices,
+    uses_whole_samples,
+)
 from gyroemu.pipelines.jobs.bench_metrics import (
     BIAS_WINDOW_S,
     DIVERGED_FINAL_FRACTION,
@@ -562,99 +579,44 @@ def _sim_run(traj, device, seed) -> _Run:
 
 
 def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, list[str]]]:
-    """The devices of a log to bench: (name, mode, setup, run, source, notes) each."""
+    """The devices of a log to bench, the log read whole: (name, mode, setup, run, source, notes) each."""
     from gyroemu.pipelines.estimation.series import check_samples
-    from gyroemu.pipelines.estimation.setup import check_latency_sensors, latencies_for_log, setup_from_metadata
+    from gyroemu.pipelines.formats.device_stream import nearest
     from gyroemu.pipelines.formats.mcap_log import read_mcap
 
-    path = Path(case.path)
-    try:
-        check_latency_sensors(case.latency_s or {})
-    except ValueError as e:
-        raise BenchError(f"latency: {e}", file=path, key="latency_s") from None
-    if not path.is_file():
-        raise BenchError("no such file", file=path, key=None)
+    path = check_log_case(case)
     log = read_mcap(path)  # LogError (a ConfigError naming the file) when unreadable or without IMU messages
-    imu_devices = {
-        n: d
-        for n, d in log.devices.items()
-        if not str(d.topics.get("imu", "")).rstrip("/").endswith(("truth/imu", "estimate/imu"))
-    }
-    if not imu_devices:
-        raise BenchError(
-            "holds no IMU channel (/imu with sensor_msgs/msg/Imu measurements): only "
-            + ", ".join(d.topics.get("imu", "?") for d in log.devices.values()),
-            file=path,
-        )
-    if case.device is not None:
-        if case.device not in imu_devices:
-            raise BenchError(f"no device '{case.device}' (devices: {', '.join(imu_devices)})", file=path)
-        imu_devices = {case.device: imu_devices[case.device]}
-    with_truth = {n: d for n, d in imu_devices.items() if d.truth is not None and d.truth.q_wb is not None}
-    if not with_truth:
-        raise BenchError(
-            "has no truth channel (/truth/imu with the true attitude): the bench compares estimates with the truth",
-            file=path,
-        )
+    chosen = choose_devices(path, log.devices, case, lambda n, d: d.truth is not None and d.truth.q_wb is not None)
     out = []
-    for name, dev in with_truth.items():
-        notes = []
+    for name, dev in chosen.items():
         s = dev.samples
         t = np.asarray(s.t, dtype=float)
-        label = path.name if len(log.devices) == 1 else f"{path.name}:{name}"
         note = check_samples(path, name, t, s.gyro, s.accel)  # LogError: too few, stamps, all NaN
         if note:
             warnings.warn(f"{path}: {note}", BenchWarning, stacklevel=3)
-            notes.append(note)
-        steps = np.diff(t)
         has_mag = bool(np.isfinite(s.mag).all(axis=1).any())
         mode = "9D" if has_mag and not case.six_d else "6D"
-        # Truth at the samples' stamps (nearest within a quarter of a sample interval).
+        # Truth at the samples' stamps: the nearest within a quarter of a sample interval
         tt = np.asarray(dev.truth.t, dtype=float)
-        dt_nominal = float(np.median(steps))
+        dt_nominal = float(np.median(np.diff(t)))
         q_true = np.full((len(t), 4), np.nan)
         omega = None
         if len(tt):
-            j = np.clip(np.searchsorted(tt, t), 1, max(1, len(tt) - 1)) if len(tt) > 1 else np.zeros(len(t), int)
-            if len(tt) > 1:
-                j = np.where(np.abs(tt[j - 1] - t) <= np.abs(tt[j] - t), j - 1, j)
-            hit = np.abs(tt[j] - t) <= 0.25 * dt_nominal
+            j = nearest(t, tt)
+            hit = np.abs(tt[j] - t) <= TRUTH_MATCH * dt_nominal
             q_true[hit] = dev.truth.q_wb[j[hit]]
             if dev.truth.omega_b is not None and np.isfinite(dev.truth.omega_b).any():
                 omega = np.full((len(t), 3), np.nan)
                 omega[hit] = dev.truth.omega_b[j[hit]]
         if not np.isfinite(q_true).all(axis=1).any():
-            raise BenchError(
-                f"the truth channel of device '{name}' has no finite attitude at the IMU's stamps", file=path
-            )
+            raise no_reference_error(path, name)
         movement = getattr(dev, "movement", None)
-        if movement is not None and np.asarray(movement, bool).any():
-            mask = np.asarray(movement, dtype=bool)
-            counted = f"the {int(mask.sum())} samples of its movement mask"
-        else:
-            if movement is not None:
-                msg = f"{path}: the movement mask of device '{name}' marks no sample; every sample counts"
-                warnings.warn(msg, BenchWarning, stacklevel=3)
-                notes.append(msg.split(": ", 1)[1])
-            mask = np.ones(len(t), bool)
-            counted = "every sample"
+        flags = None if movement is None else bool(np.asarray(movement, bool).any())
+        mask = np.asarray(movement, dtype=bool) if flags else np.ones(len(t), bool)
         no_ref = int((~np.isfinite(q_true).all(axis=1) & mask).sum())
-        notes.insert(
-            0, f"{counted} counted" + (f", {no_ref} of them without a finite reference (ignored)" if no_ref else "")
-        )
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # an embedded config that no longer validates: defaults
-            setup = setup_from_metadata(dev.metadata, 1.0 / dt_nominal, use_mag=mode == "9D")
-        if case.latency_s:
-            mag = np.asarray(s.mag, float) if mode == "9D" else None
-            setup, lag = latencies_for_log(setup, case.latency_s, t - t[0], np.asarray(s.gyro, float), mag)
-            if lag is not None:
-                notes.append(lag.describe())
-        if setup.gyro_latency_s or setup.mag_latency_s:
-            notes.append(
-                f"latencies: gyro {setup.gyro_latency_s * 1e3:g} ms, magnetometer {setup.mag_latency_s * 1e3:g} ms "
-                "(every filter fed the field at the gyro's instant, its attitudes moved to their stamps)"
-            )
+        notes = mask_notes(path, name, flags, int(mask.sum()), no_ref, [note] if note else [])
+        samples = (t - t[0], np.asarray(s.gyro, float), np.asarray(s.mag, float) if mode == "9D" else None)
+        setup = log_setup(dev.metadata, dt_nominal, mode, case, samples, notes)
         run = _Run(
             t=t,
             gyro=np.asarray(s.gyro, float),
@@ -665,7 +627,7 @@ def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, li
             mask=mask,
         )
         source = {"log": str(path), "device": name}
-        out.append((label + (" (6D)" if case.six_d and has_mag else ""), mode, setup, run, source, notes))
+        out.append((log_label(path, name, len(log.devices), case, has_mag), mode, setup, run, source, notes))
     return out
 
 
@@ -731,8 +693,7 @@ def run_bench(
         if isinstance(case, SimCase):
             prepared.append(("sim", case, _sim_case(case, runs, seed)))
         elif isinstance(case, LogCase):
-            for item in _log_runs(case):
-                prepared.append(("log", case, item))
+            prepared += [("log", case, item) for item in _log_items(case, filters)]
         else:
             raise TypeError(f"a case is a SimCase or a LogCase, got {type(case).__name__}")
 
@@ -744,6 +705,9 @@ def run_bench(
             if kind == "sim":
                 assert isinstance(case, SimCase)  # "sim" items are made from SimCases above
                 results.append(_bench_sim(case, item, filters, runs, seed, threshold_deg, batch_fn, bar))
+            elif isinstance(item, LogDevice):
+                assert isinstance(case, LogCase)
+                results.append(_bench_log_stream(Path(case.path), item, filters, threshold_deg, bar))
             else:
                 results.append(_bench_log(item, filters, threshold_deg, bar))
     finally:
@@ -877,6 +841,42 @@ def _bench_batched(batch_fn, setup, runs: list[_Run], six_d, threshold_deg) -> F
                 _curve(fr, run.t, errors)
             fr.runs.append(res)
     return fr
+
+
+def _log_items(case: LogCase, filters: list[str]) -> list:
+    """A log case's devices: read a block at a time (:class:`LogDevice`), or whole where one pass cannot
+    pair the log or the case asks for it (the tuples of :func:`_log_runs`)."""
+    from gyroemu.pipelines.formats.device_stream import NotStreamable
+
+    if not case.read_whole:
+        try:
+            return stream_log_devices(case, whole_samples=uses_whole_samples(filters))
+        except NotStreamable:
+            pass  # read whole, with the same results
+    return _log_runs(case)
+
+
+def _bench_log_stream(path: Path, dev: LogDevice, filters, threshold_deg, bar) -> CaseResult:
+    """A log device read a block at a time (:func:`.bench_log.bench_log_device`)."""
+    runs = bench_log_device(path, dev, filters, threshold_deg, bar.describe)
+    results = []
+    for r in runs:
+        fr = FilterResult(filter=r.spec, name=r.name, batched=False, runs=[r.result], offline=is_offline(r.spec))
+        fr.curve_t, fr.curve_total_deg, fr.curve_inclination_deg = r.curve_t, r.curve_total, r.curve_inclination
+        results.append(fr)
+        bar.step()
+    return CaseResult(
+        name=dev.label,
+        kind="log",
+        mode=dev.mode,
+        rate_hz=dev.setup.rate_hz,
+        samples=dev.samples,
+        duration_s=float(dev.t_last - dev.t_first),
+        runs=1,
+        source=dev.source,
+        filters=results,
+        notes=dev.notes,
+    )
 
 
 def _bench_log(item, filters, threshold_deg, bar) -> CaseResult:

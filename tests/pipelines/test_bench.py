@@ -488,8 +488,10 @@ def test_log_case_counts_the_movement_mask(tmp_path, configs, user_filters):
     module.write_text(
         "import numpy as np\nfrom gyroemu.pipelines.estimation.protocol import Estimate\n"
         f"Q = np.load({str(tmp_path / 'q.npy')!r})\n"
-        "class Masked:\n    name = 'masked'\n    def __init__(self, setup):\n        self.setup = setup\n"
-        "    def process(self, t, gyro, accel, mag=None):\n        return Estimate(q_wb=Q[:len(t)])\n"
+        "class Masked:  # blocks in time order, as the filter protocol has them\n    name = 'masked'\n"
+        "    def __init__(self, setup):\n        self.setup, self.k = setup, 0\n"
+        "    def process(self, t, gyro, accel, mag=None):\n        self.k += len(t)\n"
+        "        return Estimate(q_wb=Q[self.k - len(t) : self.k])\n"
     )
     np.save(tmp_path / "q.npy", wrong)
     report = run_bench([LogCase(log)], filters=[f"{module}:Masked", "vqf"])

@@ -1,0 +1,510 @@
+"""``gyroemu bench --log``: a log's devices benched a block at a time, in memory that does not grow with it.
+
+A log case used to be read whole (:func:`~gyroemu.pipelines.formats.mcap_log.read_mcap`: 2.6 kB a sample,
+every channel decoded) and each filter given the whole run in one call. Here the log is read with
+:class:`~gyroemu.pipelines.formats.device_stream.DeviceStream` in passes of bounded memory, each a walk
+over the file's chunks:
+
+1. :func:`~gyroemu.pipelines.formats.device_stream.scan_devices`: every message decoded and checked (the
+   errors and warnings of ``read_mcap``), the devices found;
+2. the census: per device, how many samples, their stamps (increasing), their rate, whether any has a
+   whole field and any a movement flag, whether the truth has attitudes and rates; the first samples
+   (every sample's gyro, accelerometer and field where a filter or ``latency_s={"mag": "auto"}`` needs
+   them at once);
+3. the reference: each sample's nearest ``/truth/imu`` message within a quarter of the sample interval
+   (the interval is the census's median), to count the samples that count before any filter runs;
+4. (the smoother only) its forward pass, a block at a time (``learn``);
+5. every filter of the device on each block in turn, and each run's :class:`~.bench_metrics.RunMetrics`.
+
+The filters see the samples a log read whole would give them, in blocks (the filter protocol's blocks
+in time order; every built-in gives the same bytes whole or in blocks, ``tests/pipelines/
+test_filter_blocks.py``), and the metrics do not depend on the cut, so the report is the whole read's
+but for the wall times (``tests/pipelines/test_bench_log.py``). A log one pass cannot pair
+(:class:`~gyroemu.pipelines.formats.device_stream.NotStreamable`: topics out of time order, the truth's
+stamps not increasing, ...) is read whole instead, with the same results.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol, TypeVar
+
+import numpy as np
+
+from gyroemu.errors import LogError
+from gyroemu.pipelines.estimation import registry
+from gyroemu.pipelines.estimation.protocol import FilterSetup, learns_in_blocks
+from gyroemu.pipelines.estimation.registry import is_offline, make_filter
+from gyroemu.pipelines.estimation.series import check_counts
+from gyroemu.pipelines.formats.channels import MOVEMENT_ROLE
+from gyroemu.pipelines.formats.device_stream import (
+    DeviceBlock,
+    DeviceStream,
+    RateCounter,
+    StreamDevice,
+    scan_devices,
+)
+from gyroemu.pipelines.formats.mcap_log import LogWarning
+from gyroemu.pipelines.formats.mcap_records import McapRecordWalk
+from gyroemu.pipelines.formats.messages import ns_to_stamps
+from gyroemu.pipelines.jobs.bench_cases import PLOT_POINTS, BenchError, BenchWarning, LogCase
+from gyroemu.pipelines.jobs.bench_filters import check_estimate, warm_up
+from gyroemu.pipelines.jobs.bench_metrics import BIAS_WINDOW_S, RunMetrics, RunResult
+
+__all__ = [
+    "TRUTH_MATCH",
+    "FilterRun",
+    "LogDevice",
+    "bench_log_device",
+    "check_log_case",
+    "choose_devices",
+    "log_label",
+    "log_setup",
+    "mask_notes",
+    "no_reference_error",
+    "stream_log_devices",
+    "uses_whole_samples",
+]
+
+TRUTH_MATCH = 0.25
+"""How far, in sample intervals, a truth message may lie from a sample's stamp to be its reference."""
+
+
+class _Named(Protocol):
+    @property
+    def topics(self) -> Mapping[str, str]: ...
+
+
+DeviceT = TypeVar("DeviceT", bound=_Named)
+
+
+def check_log_case(case: LogCase) -> Path:
+    """The log's path, once the case's latencies name known sensors and the file exists (:class:`BenchError`)."""
+    from gyroemu.pipelines.estimation.setup import check_latency_sensors
+
+    path = Path(case.path)
+    try:
+        check_latency_sensors(case.latency_s or {})
+    except ValueError as e:
+        raise BenchError(f"latency: {e}", file=path, key="latency_s") from None
+    if not path.is_file():
+        raise BenchError("no such file", file=path, key=None)
+    return path
+
+
+def choose_devices(
+    path: Path, devices: Mapping[str, DeviceT], case: LogCase, has_truth: Callable[[str, DeviceT], bool]
+) -> dict[str, DeviceT]:
+    """The devices of a log to bench: those with an IMU topic (not a lone truth or estimate), the one
+    ``case.device`` names, with an attitude in their truth (``has_truth``); :class:`BenchError` naming
+    the file when none is left."""
+    lone = ("truth/imu", "estimate/imu")
+    imu = {n: d for n, d in devices.items() if not str(d.topics.get("imu", "")).rstrip("/").endswith(lone)}
+    if not imu:
+        raise BenchError(
+            "holds no IMU channel (/imu with sensor_msgs/msg/Imu measurements): only "
+            + ", ".join(d.topics.get("imu", "?") for d in devices.values()),
+            file=path,
+        )
+    if case.device is not None:
+        if case.device not in imu:
+            raise BenchError(f"no device '{case.device}' (devices: {', '.join(imu)})", file=path)
+        imu = {case.device: imu[case.device]}
+    with_truth = {n: d for n, d in imu.items() if has_truth(n, d)}
+    if not with_truth:
+        raise BenchError(
+            "has no truth channel (/truth/imu with the true attitude): the bench compares estimates with the truth",
+            file=path,
+        )
+    return with_truth
+
+
+def log_label(path: Path, name: str, devices: int, case: LogCase, has_mag: bool) -> str:
+    """A device's case name in the report: the file's (with the device's when the log has several)."""
+    label = path.name if devices == 1 else f"{path.name}:{name}"
+    return label + (" (6D)" if case.six_d and has_mag else "")
+
+
+def no_reference_error(path: Path, name: str) -> BenchError:
+    """The error for a device none of whose samples has a finite reference attitude."""
+    return BenchError(f"the truth channel of device '{name}' has no finite attitude at the IMU's stamps", file=path)
+
+
+def mask_notes(path: Path, name: str, flags: bool | None, mask_count: int, no_ref: int, others: list[str]) -> list[str]:
+    """The notes on which samples count, first, then ``others``, then (with a warning) a movement mask
+    that marks no sample. ``flags``: whether the movement flags mark a sample (None: no movement topic)."""
+    notes = list(others)
+    if flags is False:
+        msg = f"{path}: the movement mask of device '{name}' marks no sample; every sample counts"
+        warnings.warn(msg, BenchWarning, stacklevel=4)
+        notes.append(msg.split(": ", 1)[1])
+    counted = f"the {mask_count} samples of its movement mask" if flags else "every sample"
+    without = f", {no_ref} of them without a finite reference (ignored)" if no_ref else ""
+    return [f"{counted} counted{without}", *notes]
+
+
+def log_setup(
+    metadata: dict | None,
+    dt_nominal: float,
+    mode: str,
+    case: LogCase,
+    samples: tuple[np.ndarray, np.ndarray, np.ndarray | None],
+    notes: list[str],
+) -> FilterSetup:
+    """The device's filter setup (from its ``gyroemu`` metadata, or the defaults), with the case's
+    latencies; ``samples`` is ``(t − t₀, gyro, mag or None)``, of every sample where the field's lag is
+    to be read from the log. Appends what it decided to ``notes``."""
+    from gyroemu.pipelines.estimation.setup import latencies_for_log, setup_from_metadata
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # an embedded config that no longer validates: defaults
+        setup = setup_from_metadata(metadata, 1.0 / dt_nominal, use_mag=mode == "9D")
+    if case.latency_s:
+        t_rel, gyro, mag = samples
+        setup, lag = latencies_for_log(setup, case.latency_s, t_rel, gyro, mag)
+        if lag is not None:
+            notes.append(lag.describe())
+    if setup.gyro_latency_s or setup.mag_latency_s:
+        notes.append(
+            f"latencies: gyro {setup.gyro_latency_s * 1e3:g} ms, magnetometer {setup.mag_latency_s * 1e3:g} ms "
+            "(every filter fed the field at the gyro's instant, its attitudes moved to their stamps)"
+        )
+    return setup
+
+
+@dataclass(frozen=True)
+class LogDevice:
+    """A device of a log to bench, found and counted without holding its samples (passes 1–3)."""
+
+    label: str
+    mode: str  # "9D" or "6D"
+    setup: FilterSetup
+    source: dict
+    notes: list[str]
+    device: StreamDevice
+    samples: int
+    counted: int  # samples in the mask with a finite reference
+    t_first: float
+    t_last: float
+    dt_nominal: float
+    flags: bool  # the movement flags are the mask
+    rates: bool  # the truth has rates: the bias error
+    first: DeviceBlock  # the first samples, for the warm-up (every sample when ``whole``)
+    whole: bool
+
+
+@dataclass
+class _Census:
+    """Pass 2's figures of a device's samples."""
+
+    count: int = 0
+    finite: int = 0
+    has_mag: bool = False
+    flagged: bool = False
+    t_first: float = math.nan
+    t_last: float = math.nan
+    rate: RateCounter = field(default_factory=RateCounter)
+    blocks: list[DeviceBlock] = field(default_factory=list)
+    kept: int = 0  # samples in ``blocks``
+
+    def add(self, path: Path, name: str, block: DeviceBlock, keep: int) -> None:
+        if not len(block):
+            return
+        t = ns_to_stamps(block.stamp_ns)
+        steps = np.diff(t) if self.count == 0 else np.diff(np.concatenate(([self.t_last], t)))
+        bad = np.flatnonzero(~(steps > 0))
+        if len(bad):  # header stamps increase in ns, but two may round to one float (check_samples's error)
+            k = int(bad[0]) + (1 if self.count == 0 else 0)
+            at = self.count + k
+            before = t[k - 1] if k else self.t_last
+            raise LogError(
+                f"IMU stamps of device '{name}' are not increasing: sample {at} at {t[k]:.9f} s follows "
+                f"{before:.9f} s ({len(bad)} such steps)",
+                file=path,
+            )
+        if self.count == 0:
+            self.t_first = float(t[0])
+        self.t_last = float(t[-1])
+        self.count += len(block)
+        self.finite += int((np.isfinite(block.gyro).all(axis=1) & np.isfinite(block.accel).all(axis=1)).sum())
+        self.has_mag = self.has_mag or bool(np.isfinite(block.mag).all(axis=1).any())
+        self.flagged = self.flagged or bool(block.movement is not None and block.movement.any())
+        self.rate.add(t)
+        if self.kept < keep:
+            self.blocks.append(_bare(block))
+            self.kept += len(block)
+
+
+def _bare(block: DeviceBlock) -> DeviceBlock:
+    """A block without its truth and poses (what pass 2 keeps of the first or every sample)."""
+    return DeviceBlock(
+        stamp_ns=block.stamp_ns,
+        gyro=block.gyro,
+        accel=block.accel,
+        mag=block.mag,
+        pose_ns=block.pose_ns[:0],
+        pose_pos=block.pose_pos[:0],
+        through_ns=block.through_ns,
+        movement=block.movement,
+    )
+
+
+def _walk(path: Path, devices: Mapping[str, StreamDevice]) -> Iterator[tuple[str, DeviceBlock]]:
+    """Each device's blocks, paired with their nearest truth, in one pass over the log (the last block
+    of each once the file has ended). The warnings of a pass after the first are the first's: dropped."""
+    streams = {name: DeviceStream(d.channels, pair_truth=True) for name, d in devices.items()}
+    for batch in McapRecordWalk(path).batches():
+        for name, stream in streams.items():
+            stream.feed(batch)
+            yield name, stream.take()
+    for name, stream in streams.items():
+        yield name, stream.take(final=True)
+
+
+def _reference(block: DeviceBlock, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """The block's reference attitudes (n, 4) and rates (n, 3): its nearest truth within
+    :data:`TRUTH_MATCH` sample intervals, NaN elsewhere."""
+    assert block.truth is not None  # the walk pairs the truth
+    hit = block.truth.gap_s <= TRUTH_MATCH * dt
+    return np.where(hit[:, None], block.truth.q_wb, np.nan), np.where(hit[:, None], block.truth.omega_b, np.nan)
+
+
+def _mask(block: DeviceBlock, flags: bool) -> np.ndarray:
+    return block.movement if flags and block.movement is not None else np.ones(len(block), bool)
+
+
+def stream_log_devices(case: LogCase, whole_samples: bool = False) -> list[LogDevice]:
+    """The devices of the case's log to bench, from passes 1–3 (the module's notes): the same
+    :class:`BenchError`, :class:`LogError` and warnings as the log read whole, before any filter runs.
+    ``whole_samples``: keep every sample's gyro, accelerometer and field (a filter needs them at once).
+    Raises :class:`~gyroemu.pipelines.formats.device_stream.NotStreamable` for a log one pass cannot
+    pair (before it warns)."""
+    path = check_log_case(case)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", LogWarning)
+        found, _ = scan_devices(path)  # LogError for an unreadable log, NotStreamable
+        streams = {name: DeviceStream(d.channels, pair_truth=True) for name, d in found.items()}
+        census = {name: _Census() for name in found}
+        whole = whole_samples or any(v == "auto" for v in (case.latency_s or {}).values())
+        keep = math.inf if whole else 200
+        for batch in McapRecordWalk(path).batches():
+            for name, stream in streams.items():
+                stream.feed(batch)
+                census[name].add(path, name, stream.take(), keep)  # type: ignore[arg-type]
+        for name, stream in streams.items():
+            census[name].add(path, name, stream.take(final=True), keep)  # type: ignore[arg-type]
+    for w in caught:  # past the passes that may find the log unpairable (the whole read warns anew)
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    from gyroemu.pipelines.formats.device_stream import warn_drops
+
+    for name, stream in streams.items():
+        warn_drops(path, stream, found[name].topics)
+    chosen = choose_devices(path, found, case, lambda n, d: streams[n].truth_attitudes > 0)
+    # pass 3: the reference, now that the sample interval is known
+    figures: dict[str, dict[str, Any]] = {}
+    for name in chosen:
+        c = census[name]
+        note = check_counts(path, name, c.count, c.finite)  # LogError: too few, all NaN
+        figures[name] = {"note": note, "dt": c.rate.median(), "counted": 0, "no_ref": 0, "mask": 0, "any": False}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", LogWarning)
+        for name, block in _walk(path, chosen):
+            f = figures[name]
+            q_true, _ = _reference(block, f["dt"])
+            mask = _mask(block, census[name].flagged)
+            finite = np.isfinite(q_true).all(axis=1)
+            f["counted"] += int((mask & finite).sum())
+            f["no_ref"] += int((mask & ~finite).sum())
+            f["mask"] += int(mask.sum())
+            f["any"] = f["any"] or bool(finite.any())
+    out = []
+    for name, dev in chosen.items():
+        c, f = census[name], figures[name]
+        if f["note"]:
+            warnings.warn(f"{path}: {f['note']}", BenchWarning, stacklevel=2)
+        if not f["any"]:
+            raise no_reference_error(path, name)
+        flags = c.flagged if MOVEMENT_ROLE in dev.channels else None
+        notes = mask_notes(path, name, flags, f["mask"], f["no_ref"], [f["note"]] if f["note"] else [])
+        mode = "9D" if c.has_mag and not case.six_d else "6D"
+        first = DeviceBlock.concatenate(c.blocks)
+        t = ns_to_stamps(first.stamp_ns)
+        samples = (t - t[0], np.asarray(first.gyro, float), np.asarray(first.mag, float) if mode == "9D" else None)
+        setup = log_setup(dev.metadata, f["dt"], mode, case, samples, notes)
+        out.append(
+            LogDevice(
+                label=log_label(path, name, len(found), case, c.has_mag),
+                mode=mode,
+                setup=setup,
+                source={"log": str(path), "device": name},
+                notes=notes,
+                device=dev,
+                samples=c.count,
+                counted=f["counted"],
+                t_first=c.t_first,
+                t_last=c.t_last,
+                dt_nominal=f["dt"],
+                flags=bool(c.flagged),
+                rates=streams[name].truth_rates > 0,
+                first=first,
+                whole=whole,
+            )
+        )
+    return out
+
+
+@dataclass
+class FilterRun:
+    """One filter over one log device: its result and its error curve (every ``step``-th sample)."""
+
+    spec: str
+    name: str
+    result: RunResult
+    curve_t: np.ndarray
+    curve_total: np.ndarray
+    curve_inclination: np.ndarray
+
+
+@dataclass
+class _Running:
+    """A filter under way over a log: its metrics, its curve, its time, and why it stopped."""
+
+    spec: str
+    flt: Any
+    metrics: RunMetrics
+    curve: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)  # total, inclination, deg
+    reason: str = ""
+    given: tuple[np.ndarray, np.ndarray | None] | None = None  # a whole-log filter's output, given out in blocks
+    at: int = 0
+
+    def timed(self, call: Callable[..., Any], *args: Any) -> Any:
+        """``call(*args)``, its time added to the run's."""
+        started = time.perf_counter()
+        try:
+            return call(*args)
+        finally:
+            self.metrics.wall_s += time.perf_counter() - started
+
+
+def bench_log_device(
+    path: Path, dev: LogDevice, filters: list[str], threshold_deg: float, describe: Callable[[str], None]
+) -> list[FilterRun]:
+    """Every filter of ``filters`` over the device's samples, a block at a time (passes 4 and 5); a filter
+    that raises is stopped and reported as diverged (its exception the reason)."""
+    six_d = dev.mode == "6D"
+    first_t = ns_to_stamps(dev.first.stamp_ns)
+    first_mag = None if six_d else dev.first.mag
+    step = max(1, dev.samples // PLOT_POINTS)
+    window = max(1, int(round(BIAS_WINDOW_S * dev.setup.rate_hz))) if dev.rates and dev.setup.rate_hz else None
+    running = []
+    for spec in filters:
+        describe(f"{dev.label}: {spec}")
+        warm_up(spec, dev.setup, first_t, dev.first.gyro, dev.first.accel, first_mag)
+        metrics = RunMetrics(
+            samples=dev.samples,
+            counted=dev.counted,
+            t_first=dev.t_first,
+            t_last=dev.t_last,
+            six_d=six_d,
+            threshold_deg=threshold_deg,
+            bias_window=window,
+        )
+        r = _Running(spec, make_filter(spec, dev.setup), metrics)
+        if is_offline(spec) and not learns_in_blocks(r.flt):  # the whole log at once: every sample was kept
+            t = ns_to_stamps(dev.first.stamp_ns)
+            try:
+                est = r.timed(r.flt.process, t, dev.first.gyro, dev.first.accel, first_mag)
+                r.given = check_estimate(est, dev.samples, str(r.flt.name))
+            except Exception as exc:  # noqa: BLE001 - a filter that fails is reported, not fatal
+                r.reason = f"process() raised {type(exc).__name__}: {exc}"
+        running.append(r)
+    learners = [r for r in running if learns_in_blocks(r.flt) and not r.reason]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", LogWarning)
+        if learners:
+            for _, block in _walk(path, {dev.device.name: dev.device}):
+                if len(block):
+                    t, mag = ns_to_stamps(block.stamp_ns), None if six_d else block.mag
+                    for r in learners:
+                        if not r.reason:
+                            _step(r, r.flt.learn, t, block.gyro, block.accel, mag)
+        offset, curve_t = 0, []
+        for _, block in _walk(path, {dev.device.name: dev.device}):
+            n = len(block)
+            if not n:
+                continue
+            t = ns_to_stamps(block.stamp_ns)
+            q_true, omega = _reference(block, dev.dt_nominal)
+            mask = _mask(block, dev.flags)
+            mag = None if six_d else block.mag
+            picked = np.flatnonzero((offset + np.arange(n)) % step == 0)
+            curve_t.append(t[picked] - dev.t_first)
+            for r in running:
+                if r.reason:
+                    continue
+                if r.given is not None:
+                    q, b = r.given[0][r.at : r.at + n], None if r.given[1] is None else r.given[1][r.at : r.at + n]
+                    r.at += n
+                else:
+                    out = _step(r, r.flt.process, t, block.gyro, block.accel, mag)
+                    if r.reason:
+                        continue
+                    q, b = _checked(r, out, n)
+                    if r.reason:
+                        continue
+                errors = r.metrics.add(t, q, q_true, mask, b, omega if window else None, block.gyro)
+                r.curve.append((errors["total"][picked], errors["inclination"][picked]))
+            offset += n
+    for r in running:
+        if learns_in_blocks(r.flt):
+            r.flt.close()
+    t = np.concatenate(curve_t) if curve_t else np.empty(0)
+    return [_finished(r, dev, threshold_deg, t) for r in running]
+
+
+def _step(r: _Running, call: Callable[..., Any], *args: Any) -> Any:
+    """``call(*args)`` timed; an exception stops the filter with it as the reason."""
+    try:
+        return r.timed(call, *args)
+    except Exception as exc:  # noqa: BLE001 - a filter that fails is reported, not fatal
+        r.reason = f"process() raised {type(exc).__name__}: {exc}"
+        return None
+
+
+def _checked(r: _Running, est: Any, n: int) -> tuple[np.ndarray, np.ndarray | None]:
+    try:
+        return check_estimate(est, n, str(r.flt.name))
+    except Exception as exc:  # noqa: BLE001
+        r.reason = f"process() raised {type(exc).__name__}: {exc}"
+        return np.empty((0, 4)), None
+
+
+def _finished(r: _Running, dev: LogDevice, threshold_deg: float, curve_t: np.ndarray) -> FilterRun:
+    """The filter's result and curve: its metrics, or, for one that failed, those of a run without an
+    estimate (as a log read whole reports it: every error NaN, diverged, the exception the reason)."""
+    name = str(r.flt.name)
+    if r.reason:
+        failed = RunMetrics(
+            samples=dev.samples,
+            counted=dev.counted,
+            t_first=dev.t_first,
+            t_last=dev.t_last,
+            six_d=dev.mode == "6D",
+            threshold_deg=threshold_deg,
+            bias_window=None,
+        )
+        failed.wall_s = r.metrics.wall_s
+        nan = np.full(len(curve_t), np.nan)
+        return FilterRun(r.spec, name, failed.result(reason=r.reason), curve_t, nan, nan.copy())
+    total, inclination = (np.concatenate([c[i] for c in r.curve]) if r.curve else np.empty(0) for i in range(2))
+    return FilterRun(r.spec, name, r.metrics.result(), curve_t, total, inclination)
+
+
+def uses_whole_samples(filters: list[str]) -> bool:
+    """Whether one of ``filters`` takes a log at once (offline, and not learning it in blocks)."""
+    return any(is_offline(f) and not registry.learns_in_blocks(f) for f in filters)

@@ -1,0 +1,184 @@
+"""``gyroemu bench --log`` a block at a time (:mod:`gyroemu.pipelines.jobs.bench_log`): the report of the log read
+whole, but for the wall times, for every kind of log case; the same errors; logs one pass cannot pair
+read whole; and memory that does not grow with the log.
+
+Equal means equal: every metric of every run to the bit (the metrics do not depend on how the samples are
+cut, ``test_bench_metrics.py``; the built-in filters give the same bytes in blocks, ``test_filter_blocks.py``),
+the notes, the warnings and the error curves.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import tracemalloc
+import warnings
+
+import numpy as np
+import pytest
+
+from gyroemu.dynamics import load_scenario
+from gyroemu.pipelines.formats.channels import ImuSeries
+from gyroemu.pipelines.formats.device_stream import NotStreamable
+from gyroemu.pipelines.formats.mcap_log import Recording, truth_series, write_mcap
+from gyroemu.pipelines.jobs import bench_log
+from gyroemu.pipelines.jobs.bench import BenchError, LogCase, run_bench
+from gyroemu.sensors import load_device
+
+RAISES = """\
+class Raises:
+    name = "raises"
+
+    def __init__(self, setup):
+        pass
+
+    def process(self, t, gyro, accel, mag=None):
+        raise RuntimeError("no estimate here")
+"""
+
+
+def recording(seconds: float, seed: int, device: str = "consumer_mems", **changes) -> Recording:
+    """The smooth manoeuvre measured by ``device``, its truth at the samples (``changes`` replace the
+    recording's fields: a truth of another rate, a movement mask)."""
+    scenario = load_scenario("smooth_manoeuvre")
+    dev = load_device(device, seed=seed)
+    traj = scenario.simulate(duration=seconds)
+    samples = dev.measure(traj)
+    rec = Recording(samples, truth=truth_series(traj, samples), device=dev)
+    return dataclasses.replace(rec, **changes)
+
+
+def bench_both(case: LogCase, filters: list[str]) -> tuple:
+    """The bench of the log a block at a time and read whole: (reports, warnings) of each."""
+    out = []
+    for whole in (False, True):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            report = run_bench([dataclasses.replace(case, read_whole=whole)], filters=filters)
+        out.append((report, [str(w.message) for w in caught]))
+    return tuple(out)
+
+
+def assert_same_report(streamed, whole) -> None:
+    """Every figure but the wall times and settings, the notes and the error curves equal."""
+
+    def figures(report) -> dict:
+        data = json.loads(report.to_json())
+        data.pop("settings")
+        for case in data["cases"]:
+            for f in case["filters"]:
+                f["summary"].pop("throughput", None)
+                for run in f["runs"]:
+                    del run["wall_s"], run["throughput"]
+        return data
+
+    assert figures(streamed) == figures(whole)
+    for a, b in zip(streamed.cases, whole.cases, strict=True):
+        for fa, fb in zip(a.filters, b.filters, strict=True):
+            for name in ("curve_t", "curve_total_deg", "curve_inclination_deg"):
+                np.testing.assert_array_equal(getattr(fa, name), getattr(fb, name), err_msg=f"{fa.filter} {name}")
+
+
+@pytest.fixture(scope="module")
+def raises(tmp_path_factory):
+    path = tmp_path_factory.mktemp("filters") / "raising.py"
+    path.write_text(RAISES)
+    return f"{path}:Raises"
+
+
+def test_a_log_benched_in_blocks_is_the_whole_read(tmp_path, raises):
+    """9D, the online built-ins and a filter that raises (diverged, its exception the reason, both ways)."""
+    log = write_mcap(tmp_path / "run.mcap", recording(12.0, seed=1))
+    (streamed, warned), (whole, warned_whole) = bench_both(LogCase(log), ["mekf", "madgwick", "vqf", raises])
+    assert_same_report(streamed, whole)
+    assert warned == warned_whole
+    (case,) = streamed.cases
+    assert case.mode == "9D" and case.samples == 12000 and case.notes == ["every sample counted"]
+    failed = case.filters[-1].runs[0]
+    assert failed.diverged and failed.reason == "process() raised RuntimeError: no estimate here"
+    assert case.filters[0].runs[0].bias_error_deg_s is not None  # the truth's rate: the bias error
+
+
+def test_a_sparse_truth_a_mask_and_the_offline_filters(tmp_path):
+    """The truth every third sample, 0.1 ms off the samples' stamps (within a quarter interval), lost for
+    a second; a movement mask over part of the run; 6D; the smoother (learning in blocks) and offline VQF
+    (given every sample at once); the field's lag read from the log."""
+    rec = recording(12.0, seed=2)
+    t = rec.truth.t
+    keep = (np.arange(len(t)) % 3 == 0) & ~((t > t[0] + 5.0) & (t < t[0] + 6.0))
+    truth = ImuSeries(t=t[keep] + 1e-4, q_wb=rec.truth.q_wb[keep], omega_b=rec.truth.omega_b[keep])
+    movement = np.zeros(len(rec.samples.t), bool)
+    movement[2000:9000] = True
+    log = write_mcap(tmp_path / "sparse.mcap", dataclasses.replace(rec, truth=truth, movement=movement))
+    for case in (LogCase(log, six_d=True), LogCase(log, latency_s={"mag": "auto"})):
+        (streamed, warned), (whole, warned_whole) = bench_both(case, ["mekf", "mekf-smooth", "offline-vqf"])
+        assert_same_report(streamed, whole)
+        assert warned == warned_whole
+    note = streamed.cases[0].notes[0]
+    assert note.startswith("the 7000 samples of its movement mask counted, ") and "without a finite reference" in note
+
+
+def test_two_devices_each_a_case(tmp_path):
+    """A log of two devices: each its own case, named file:device, both equal to the whole read's."""
+    recs = [recording(6.0, seed=3), dataclasses.replace(recording(6.0, seed=4, device="tactical_mems"))]
+    recs[1] = dataclasses.replace(recs[1], samples=dataclasses.replace(recs[1].samples, device="second"))
+    log = write_mcap(tmp_path / "two.mcap", recs, prefix_topics=True)
+    (streamed, _), (whole, _) = bench_both(LogCase(log), ["mekf", "madgwick"])
+    assert_same_report(streamed, whole)
+    assert [c.name for c in streamed.cases] == ["two.mcap:consumer_mems", "two.mcap:second"]
+
+
+def test_a_log_one_pass_cannot_pair_is_read_whole(tmp_path, monkeypatch):
+    """A truth with a stamp twice (a reference that re-stamped itself): one pass cannot pair it, so the log
+    is read whole, with the report of ``read_whole``; a block-at-a-time read refuses it as such."""
+    rec = recording(4.0, seed=5)
+    t = rec.truth.t.copy()
+    t[2001] = t[2000]
+    log = write_mcap(tmp_path / "back.mcap", dataclasses.replace(rec, truth=dataclasses.replace(rec.truth, t=t)))
+    with pytest.raises(NotStreamable):
+        bench_log.stream_log_devices(LogCase(log))
+    (streamed, warned), (whole, warned_whole) = bench_both(LogCase(log), ["mekf"])
+    assert_same_report(streamed, whole)
+    assert warned == warned_whole
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"truth": None}, "has no truth channel (/truth/imu with the true attitude)"),
+        ("far", "the truth channel of device 'consumer_mems' has no finite attitude at the IMU's stamps"),
+        ({"device": "other"}, "no device 'other' (devices: consumer_mems)"),
+    ],
+)
+def test_the_same_errors_before_any_filter_runs(tmp_path, change, message):
+    """No truth, a truth nowhere near the samples' stamps (half an interval off), a device not in the log:
+    the whole read's errors, naming the file, from the passes before the filters."""
+    rec = recording(2.0, seed=6)
+    case = LogCase(tmp_path / "bad.mcap")
+    if change == "far":
+        rec = dataclasses.replace(rec, truth=dataclasses.replace(rec.truth, t=rec.truth.t + 5e-4))
+    elif "truth" in change:
+        rec = dataclasses.replace(rec, **change)
+    else:
+        case = LogCase(tmp_path / "bad.mcap", **change)
+    write_mcap(case.path, rec)
+    for whole in (False, True):
+        with pytest.raises(BenchError, match=message.replace("(", r"\(").replace(")", r"\)")):
+            run_bench([dataclasses.replace(case, read_whole=whole)], filters=["mekf"])
+
+
+@pytest.mark.slow
+def test_memory_does_not_grow_with_the_log(tmp_path):
+    """Python's peak allocation (tracemalloc sees NumPy's buffers) for a log 4× longer: the same within the
+    chunks' and blocks' buffers a block at a time; read whole, it grows with the samples."""
+    peaks = {}
+    for minutes in (2, 8):
+        log = write_mcap(tmp_path / f"m{minutes}.mcap", recording(60.0 * minutes, seed=7))
+        for whole in (False, True):
+            tracemalloc.start()
+            run_bench([LogCase(log, read_whole=whole)], filters=["mekf", "madgwick"])
+            peaks[minutes, whole] = tracemalloc.get_traced_memory()[1]
+            tracemalloc.stop()
+    assert peaks[8, True] > 3.0 * peaks[2, True]  # the whole read holds every sample (4×, less its floor)
+    assert peaks[8, False] < 1.15 * peaks[2, False]  # a block at a time: nothing of the extra six minutes
+    assert peaks[8, False] < peaks[8, True] / 3
