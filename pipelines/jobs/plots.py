@@ -26,6 +26,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -74,10 +75,12 @@ def _pyplot():
 
 class StampMatch:
     """Rows of two topics with equal stamps, as a log goes by (each topic's stamps increasing): a row
-    waits while the other topic has not yet gone past its stamp, and is dropped once it has. A side may
-    be told only its stamps (``values`` None: messages without the quantity), which moves it on."""
+    waits while the other topic has not yet gone past its stamp, and is dropped once it has, or once
+    the other topic has ended (:meth:`end`). A side may be told only its stamps (``values`` None:
+    messages without the quantity), which moves it on. Of rows with the same stamp, the first matches."""
 
     _NONE = np.iinfo(np.int64).min
+    _ENDED = np.iinfo(np.int64).max
 
     def __init__(self) -> None:
         self.waiting: list[tuple[np.ndarray, np.ndarray] | None] = [None, None]
@@ -94,13 +97,17 @@ class StampMatch:
             stamp_ns, values = np.concatenate((held[0], stamp_ns)), np.concatenate((held[1], values))
         self.waiting[side] = (stamp_ns, values)
 
+    def end(self, side: int) -> None:
+        """Side ``side`` has shown every row: nothing of the other side waits for it any more."""
+        self.last[side] = self._ENDED
+
     def take(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(stamps, values of side 0, of side 1)`` matched since the last call; the rows the other side
         has gone past without a match are dropped."""
         a, b = self.waiting
         common, ia, ib = np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0, np.int64)
-        if a is not None and b is not None:
-            common, ia, ib = np.intersect1d(a[0], b[0], assume_unique=True, return_indices=True)
+        if a is not None and b is not None:  # a stamp twice on a side: its first row (intersect1d's indices)
+            common, ia, ib = np.intersect1d(a[0], b[0], return_indices=True)
         matched = (a[1][ia] if a is not None else np.empty(0), b[1][ib] if b is not None else np.empty(0))
         for side, (rows, used) in enumerate(((a, ia), (b, ib))):
             if rows is not None:
@@ -145,19 +152,37 @@ class EstimateCurves:
         if role == IMU_ROLE:
             self.t0 = float(t[0]) if self.t0 is None and n else self.t0
             if self._biases is not None:
-                self._biases.add(1, stamp_ns, _nan_if_none(omega_b, n, 3))
+                _add_finite(self._biases, 1, stamp_ns, omega_b)
         elif role == TRUTH_ROLE:
             if q_wb is not None:
                 self.true_angles.add(t, euler_zyx_deg(q_wb))
             if self._errors is not None:
-                self._errors.add(1, stamp_ns, q_wb)
+                _add_finite(self._errors, 1, stamp_ns, q_wb)
         elif role == ESTIMATE_ROLE:
-            q = _nan_if_none(q_wb, n, 4)
-            self.angles.add(t, euler_zyx_deg(q))
+            self.angles.add(t, euler_zyx_deg(_nan_if_none(q_wb, n, 4)))
             if self._errors is not None:
-                self._errors.add(0, stamp_ns, q)
+                _add_finite(self._errors, 0, stamp_ns, q_wb)
             if self._biases is not None:
-                self._biases.add(0, stamp_ns, omega_b)
+                _add_finite(self._biases, 0, stamp_ns, omega_b)
+        self._take()
+
+    def end(self, role: str) -> None:
+        """The device's topic ``role`` has given every message: nothing waits for it any more."""
+        from gyroemu.pipelines.formats.channels import ESTIMATE_ROLE, IMU_ROLE, TRUTH_ROLE
+
+        ends: dict[str, list[tuple[StampMatch | None, int]]] = {
+            TRUTH_ROLE: [(self._errors, 1)],
+            IMU_ROLE: [(self._biases, 1)],
+            ESTIMATE_ROLE: [(self._errors, 0), (self._biases, 0)],
+        }
+        for match, side in ends.get(role, []):
+            if match is not None:
+                match.end(side)
+        self._take()
+
+    def _take(self) -> None:
+        from gyroemu.pipelines.formats.messages import ns_to_stamps
+
         if self._errors is not None:
             stamps, q_est, q_true = self._errors.take()
             if len(stamps):
@@ -193,12 +218,23 @@ class InfoCurves:
         self.force.add(t, _nan_if_none(accel, n, 3))
 
     def add_field(self, t: np.ndarray, magnetic_field: np.ndarray) -> None:
-        """The next ``/mag`` samples: stamps (n,) s, field (n, 3) T."""
-        self.field.add(t, np.asarray(magnetic_field) * 1e6)
+        """The field at the next samples, as the filters see it (``/mag`` at the ``/imu`` stamps, NaN where
+        it has no message there): stamps (n,) s, field (n, 3) T; the rows with a field are drawn."""
+        ok = np.isfinite(magnetic_field).all(axis=1)
+        self.field.add(t[ok], np.asarray(magnetic_field)[ok] * 1e6)
 
 
 def _nan_if_none(values, n: int, width: int) -> np.ndarray:
     return np.full((n, width), np.nan) if values is None else np.asarray(values, dtype=float)
+
+
+def _add_finite(match: StampMatch, side: int, stamp_ns: np.ndarray, values: np.ndarray | None) -> None:
+    """A side's stamps, and its rows whose values are finite: a row without the quantity matches nothing,
+    whether its message says so for the whole topic, for a chunk or for itself."""
+    match.add(side, stamp_ns, None)
+    if values is not None:
+        ok = np.isfinite(values).all(axis=1)
+        match.add(side, stamp_ns[ok], np.asarray(values, dtype=float)[ok])
 
 
 def _quietly(function, *args):
@@ -224,24 +260,68 @@ def _stream_devices(path: Path, read_whole: bool) -> dict | None:
         return None
 
 
-def _device_rows(path: Path, devices: dict, roles: tuple[str, ...]) -> Iterator[dict[tuple[str, str], DecodedBatch]]:
-    """Per chunk of the log, the decoded messages of each device's topics of ``roles``:
-    ``{(device, role): DecodedBatch}``."""
+def _float_ns(stamp_ns: np.ndarray) -> np.ndarray:
+    """Stamps as the log read whole has them: through float seconds (two stamps closer than a float's
+    resolution, 0.24 µs at today's epoch, become one), so that both reads match the same rows."""
+    from gyroemu.pipelines.formats.messages import ns_to_stamps, stamps_to_ns
+
+    return stamps_to_ns(ns_to_stamps(stamp_ns))
+
+
+class _Topic:
+    """A topic of a device read a chunk at a time in :func:`read_mcap`'s order, its stamps increasing
+    (:class:`NotStreamable` otherwise: the whole read pairs it), its end known from the scan's count."""
+
+    def __init__(self, channel: tuple[int, Any], count: int) -> None:
+        self.channel_id, self.mtype = channel
+        self.count, self.read = count, 0
+        self.log_time, self.stamp = -1, -(1 << 62)  # below any stamp, and no overflow in a difference
+
+    def rows(self, batch: Any) -> DecodedBatch | None:
+        from gyroemu.pipelines.formats.device_stream import NotStreamable, read_topic
+
+        got = read_topic(batch, self.channel_id, self.mtype, self.log_time)
+        if got is None:
+            return None
+        decoded, self.log_time = got
+        if np.any(np.diff(np.concatenate(([self.stamp], decoded.stamp_ns))) <= 0):
+            raise NotStreamable("header stamps that do not increase")
+        self.stamp = int(decoded.stamp_ns[-1])
+        self.read += len(decoded.stamp_ns)
+        return decoded
+
+    @property
+    def ended(self) -> bool:
+        return self.read == self.count
+
+
+def _walk_devices(path: Path, devices: dict, roles: tuple[str, ...]) -> Iterator[tuple[str, str, Any]]:
+    """Per device name, its samples a block at a time as :func:`read_mcap` pairs them (``"samples"``: the
+    raw topics' drops, the field at each sample's stamp) and its topics of ``roles`` a chunk at a time
+    (a ``DecodedBatch``), each followed by None once it has ended."""
+    from gyroemu.pipelines.formats.device_stream import DeviceStream
     from gyroemu.pipelines.formats.mcap_records import McapRecordWalk
 
-    wanted = {
-        channel_id: (name, role, mtype)
-        for name, dev in devices.items()
-        for role, (channel_id, mtype) in dev.channels.items()
-        if role in roles
+    streams = {name: DeviceStream(d.channels, messages=d.messages) for name, d in devices.items()}
+    topics = {
+        (name, role): _Topic(d.channels[role], d.messages.get(role, 0))
+        for name, d in devices.items()
+        for role in roles
+        if role in d.channels
     }
     for batch in McapRecordWalk(path).batches():
-        rows = {}
-        for channel_id in np.unique(batch.channel_id).tolist():
-            if channel_id in wanted:
-                name, role, mtype = wanted[channel_id]
-                rows[name, role] = mtype.decode(batch.payloads(np.flatnonzero(batch.channel_id == channel_id)))
-        yield rows
+        for (name, role), topic in topics.items():
+            decoded = topic.rows(batch)
+            if decoded is not None:
+                yield name, role, decoded
+                if topic.ended:
+                    yield name, role, None
+        for name, stream in streams.items():
+            stream.feed(batch)
+            yield name, "samples", stream.take()
+    for name, stream in streams.items():
+        yield name, "samples", stream.take(final=True)
+        yield name, "samples", None
 
 
 def estimate_curves(
@@ -251,20 +331,27 @@ def estimate_curves(
     attitude, from one pass over the log after the one that finds its devices (module's notes);
     ``read_whole``: from the log read whole (the same curves)."""
     from gyroemu.pipelines.formats.channels import ESTIMATE_ROLE, IMU_ROLE, TRUTH_ROLE, series_from_batch
+    from gyroemu.pipelines.formats.device_stream import NotStreamable
 
     path = Path(path)
     devices = _stream_devices(path, read_whole)
     if devices is None:
         return _estimate_curves_whole(path, buckets)
     devices = {name: d for name, d in devices.items() if ESTIMATE_ROLE in d.channels}
-    curves = {
-        name: EstimateCurves(name, buckets, has_truth=TRUTH_ROLE in d.channels, has_imu=IMU_ROLE in d.channels)
-        for name, d in devices.items()
-    }
-    for rows in _device_rows(path, devices, (IMU_ROLE, TRUTH_ROLE, ESTIMATE_ROLE)):
-        for (name, role), decoded in rows.items():
-            series = series_from_batch(decoded)
-            curves[name].add(role, decoded.stamp_ns, series.q_wb, series.omega_b)
+    curves = {name: EstimateCurves(name, buckets, has_truth=TRUTH_ROLE in d.channels) for name, d in devices.items()}
+    try:
+        for name, role, rows in _walk_devices(path, devices, (TRUTH_ROLE, ESTIMATE_ROLE)):
+            c = curves[name]
+            if rows is None:
+                c.end(IMU_ROLE if role == "samples" else role)
+            elif role == "samples":
+                if len(rows):
+                    c.add(IMU_ROLE, _float_ns(rows.stamp_ns), None, rows.gyro)
+            else:
+                series = series_from_batch(rows)
+                c.add(role, _float_ns(rows.stamp_ns), series.q_wb, series.omega_b)
+    except NotStreamable:
+        return _estimate_curves_whole(path, buckets)
     return [c for c in curves.values() if np.isfinite(c.angles.columns()[1]).any()]
 
 
@@ -345,8 +432,9 @@ def plot_estimate(
 
 def info_curves(path: str | os.PathLike[str], buckets: int = BUCKETS, *, read_whole: bool = False) -> list[InfoCurves]:
     """The curves :func:`plot_info` draws, per device, from one pass over the log after the one that
-    finds its devices (module's notes); ``read_whole``: from the log read whole (the same curves)."""
-    from gyroemu.pipelines.formats.channels import IMU_ROLE, MAG_ROLE, series_from_batch
+    finds its devices (module's notes): its samples as :func:`read_mcap` pairs them; ``read_whole``: from
+    the log read whole (the same curves)."""
+    from gyroemu.pipelines.formats.device_stream import NotStreamable
     from gyroemu.pipelines.formats.messages import ns_to_stamps
 
     path = Path(path)
@@ -354,13 +442,14 @@ def info_curves(path: str | os.PathLike[str], buckets: int = BUCKETS, *, read_wh
     if devices is None:
         return _info_curves_whole(path, buckets)
     curves = {name: InfoCurves(name, dict(d.topics), buckets) for name, d in devices.items()}
-    for rows in _device_rows(path, devices, (IMU_ROLE, MAG_ROLE)):
-        for (name, role), decoded in rows.items():
-            if role == IMU_ROLE:
-                series = series_from_batch(decoded)
-                curves[name].add_imu(series.t, series.omega_b, series.specific_force_b)
-            else:
-                curves[name].add_field(ns_to_stamps(decoded.stamp_ns), decoded["magnetic_field"])
+    try:
+        for name, _, block in _walk_devices(path, devices, ()):
+            if block is not None and len(block):
+                t = ns_to_stamps(block.stamp_ns)
+                curves[name].add_imu(t, block.gyro, block.accel)
+                curves[name].add_field(t, block.mag)
+    except NotStreamable:
+        return _info_curves_whole(path, buckets)
     return list(curves.values())
 
 
@@ -374,8 +463,7 @@ def _info_curves_whole(path: Path, buckets: int) -> list[InfoCurves]:
         s = dev.samples
         c = InfoCurves(dev.name, dict(dev.topics), buckets)
         c.add_imu(s.t, s.gyro, s.accel)
-        if s.has_mag:
-            c.add_field(s.t, s.mag)
+        c.add_field(s.t, s.mag)
         out.append(c)
     return out
 

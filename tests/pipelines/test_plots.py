@@ -133,22 +133,30 @@ def estimated_log(tmp_path_factory):
 
 
 @pytest.mark.parametrize("buckets", [16, 100_000], ids=["columns", "samples"])
-def test_the_curves_read_a_chunk_at_a_time_are_the_whole_reads(estimated_log, buckets):
+def test_the_curves_read_a_chunk_at_a_time_are_the_whole_reads(estimated_log, buckets, monkeypatch):
     """What the plots draw, read a chunk at a time, equals what the log read whole gives (its extremes
     exactly; means and the error's RMS to round-off): angles, truth, error and bias of the estimate;
-    rate, force and field of the measurements."""
+    rate, force and field of the measurements. The chunked read must not fall back on the whole read
+    (``read_mcap`` made to fail while it runs)."""
+    from gyroemu.pipelines.formats import mcap_log
     from gyroemu.pipelines.jobs import plots
 
     log, out = estimated_log
     eps = np.finfo(float).eps
-    (a,), (b,) = plots.estimate_curves(out, buckets), plots.estimate_curves(out, buckets, read_whole=True)
+
+    def chunked(curves, path):
+        with monkeypatch.context() as m:
+            m.setattr(mcap_log, "read_mcap", lambda *a, **k: pytest.fail("the chunked read read the log whole"))
+            return curves(path, buckets)
+
+    (a,), (b,) = chunked(plots.estimate_curves, out), plots.estimate_curves(out, buckets, read_whole=True)
     assert a.t0 == b.t0 and a.final == b.final and abs(a.rms - b.rms) <= 1e4 * eps * b.rms
     for name in ("angles", "true_angles", "error", "bias"):
         x, y = getattr(a, name).columns(), getattr(b, name).columns()
         assert len(getattr(a, name)) == len(getattr(b, name)) > 0
         assert all(np.array_equal(u, v, equal_nan=True) for u, v in zip(x[:3], y[:3])), name
         assert np.allclose(x[3], y[3], rtol=1e-12, atol=1e-9, equal_nan=True), name
-    (a,), (b,) = plots.info_curves(log, buckets), plots.info_curves(log, buckets, read_whole=True)
+    (a,), (b,) = chunked(plots.info_curves, log), plots.info_curves(log, buckets, read_whole=True)
     for name in ("rate", "force", "field"):
         x, y = getattr(a, name).columns(), getattr(b, name).columns()
         assert len(getattr(a, name)) == len(getattr(b, name)) > 0
