@@ -201,8 +201,8 @@ class MekfSmoother:
             raise ValueError("mekf-smooth is offline: it takes the whole log in one process() call")
 
     def learn(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None) -> None:
-        """Take the log's next block into the forward pass (:meth:`SmootherSpool.learn`); arguments as
-        :meth:`process`'s."""
+        """Take the log's next block into the forward pass (:meth:`SmootherSpool.learn`: the first block
+        starts the filter, so give it the filter's start-up seconds); arguments as :meth:`process`'s."""
         self._check_once()
         if self.spool is None:
             self.spool = SmootherSpool(self.setup, self.params, folder=self._spool_folder)

@@ -159,7 +159,9 @@ class SmootherSpool:
     def learn(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None) -> None:
         """Run the forward pass over the log's next block: ``t`` (n,) s, increasing across blocks;
         ``gyro`` (n, 3) rad/s; ``accel`` (n, 3) m/s²; ``mag`` (n, 3) T or None. The first block starts the
-        filter (:func:`~.mekf.initial_state` reads its first ``init_s`` seconds: give at least those)."""
+        filter (:func:`~.mekf.initial_state` reads its first ``init_s`` seconds, and ``gyrocompass_s`` at
+        rest where a 6D filter finds north from Earth's rate): the result is :func:`~.mekf_smoother.smooth_log`'s
+        when the first block holds those (``gyroemu estimate`` and ``bench`` give the first minute)."""
         if self._backward_done:
             raise ValueError("the smoother has been asked for its estimates: it learns no more")
         t = np.ascontiguousarray(t, dtype=float)

@@ -16,7 +16,7 @@ from gyroemu.pipelines.formats.channels import ImuSeries
 
 from .protocol import Estimate
 
-__all__ = ["check_counts", "check_samples", "estimate_series", "rate_of"]
+__all__ = ["check_counts", "check_samples", "estimate_series", "not_increasing_error", "rate_of"]
 
 
 def check_samples(path, name: str, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray) -> str | None:
@@ -27,13 +27,20 @@ def check_samples(path, name: str, t: np.ndarray, gyro: np.ndarray, accel: np.nd
     bad = np.flatnonzero(~(np.diff(t) > 0)) if len(t) > 1 else np.empty(0, np.int64)
     if len(bad):
         k = int(bad[0]) + 1
-        raise LogError(
-            f"IMU stamps of device '{name}' are not increasing: sample {k} at {t[k]:.9f} s follows "
-            f"{t[k - 1]:.9f} s ({len(bad)} such steps)",
-            file=path,
-        )
+        raise not_increasing_error(path, name, (k, float(t[k]), float(t[k - 1]), len(bad)))
     finite = np.isfinite(gyro).all(axis=1) & np.isfinite(accel).all(axis=1)
     return check_counts(path, name, len(t), int(finite.sum()))
+
+
+def not_increasing_error(path, name: str, first: tuple[int, float, float, int]) -> LogError:
+    """The error for IMU stamps that do not increase: ``first`` is the first such sample's index, its stamp
+    and the one before it (s), and how many such steps there are."""
+    k, t, before, count = first
+    return LogError(
+        f"IMU stamps of device '{name}' are not increasing: sample {k} at {t:.9f} s follows "
+        f"{before:.9f} s ({count} such steps)",
+        file=path,
+    )
 
 
 def check_counts(path, name: str, count: int, finite: int) -> str | None:

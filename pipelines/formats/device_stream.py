@@ -44,7 +44,7 @@ from gyroemu.pipelines.formats.mcap_log import (
     unflagged_samples,
 )
 from gyroemu.pipelines.formats.mcap_records import McapRecordWalk, McapScan, RawMessages
-from gyroemu.pipelines.formats.messages import MessageType, ns_to_stamps, stamps_to_ns
+from gyroemu.pipelines.formats.messages import DecodedBatch, MessageType, ns_to_stamps, stamps_to_ns
 
 __all__ = [
     "MAX_PENDING",
@@ -60,6 +60,7 @@ __all__ = [
     "StreamDevice",
     "count_samples",
     "nearest",
+    "read_topic",
     "scan_devices",
     "truth_values",
     "warn_drops",
@@ -203,6 +204,22 @@ def nearest(t: np.ndarray, tt: np.ndarray) -> np.ndarray:
     return np.where(np.abs(tt[j - 1] - t) <= np.abs(tt[j] - t), j - 1, j)
 
 
+def read_topic(
+    batch: RawMessages, channel_id: int, mtype: MessageType, after_log_time: int
+) -> tuple[DecodedBatch, int] | None:
+    """A topic's messages in one chunk, decoded in :func:`read_mcap`'s order (log time, then file order),
+    and the last one's log time; None when the chunk has none. :class:`NotStreamable` when they go back
+    in log time from ``after_log_time``, the previous chunk's last (the whole read would sort them)."""
+    index = np.flatnonzero(batch.channel_id == channel_id)
+    if not len(index):
+        return None
+    index = index[np.argsort(batch.log_time[index], kind="stable")]
+    log_time = batch.log_time[index]
+    if int(log_time[0]) < after_log_time:
+        raise NotStreamable("a topic's messages go back in log time from one chunk to the next")
+    return mtype.decode(batch.payloads(index)), int(log_time[-1])
+
+
 @dataclass
 class _Pending:
     """One topic's decoded messages not yet paired."""
@@ -213,17 +230,21 @@ class _Pending:
     values: dict[str, np.ndarray] = field(default_factory=dict)
     last_log_time: int = -1
     seen: int = -(1 << 62)  # the largest stamp read so far
+    count: int | None = None  # the topic's messages in the log (None: not known)
+    read: int = 0  # messages read so far
+
+    @property
+    def through(self) -> int:
+        """The stamp up to which the topic has shown all it will: the largest read, or beyond any once
+        every message of the topic has been read (a topic that ends early holds nothing back)."""
+        return (1 << 62) if self.count is not None and self.read >= self.count else self.seen
 
     def append(self, batch: RawMessages, names: tuple[str, ...], increasing: bool) -> None:
-        index = np.flatnonzero(batch.channel_id == self.channel_id)
-        if not len(index):
+        got = read_topic(batch, self.channel_id, self.mtype, self.last_log_time)
+        if got is None:
             return
-        index = index[np.argsort(batch.log_time[index], kind="stable")]  # as read_mcap: log time, then file order
-        log_time = batch.log_time[index]
-        if int(log_time[0]) < self.last_log_time:
-            raise NotStreamable("a topic's messages go back in log time from one chunk to the next")
-        self.last_log_time = int(log_time[-1])
-        decoded = self.mtype.decode(batch.payloads(index))
+        decoded, self.last_log_time = got
+        self.read += len(decoded.stamp_ns)
         stamps = np.concatenate(([self.seen], decoded.stamp_ns))
         if increasing and np.any(np.diff(stamps) <= 0):
             raise NotStreamable("header stamps that do not increase")
@@ -268,6 +289,10 @@ class DeviceStream:
         Give each sample its nearest ``/truth/imu`` message (:class:`NearestTruth`): a sample is then
         complete once the truth has gone past its stamp (its header stamps must increase). False: the
         truth topic is not read.
+    messages : mapping, optional
+        Role to the number of the topic's messages in the log (:attr:`StreamDevice.messages`): a paired
+        topic that has given them all holds no sample back (without it, a topic that ends early, a
+        field that stops, would hold every later sample, and the chunks with them, to the file's end).
 
     Attributes
     ----------
@@ -280,18 +305,28 @@ class DeviceStream:
     """
 
     def __init__(
-        self, channels: Mapping[str, tuple[int, MessageType]], pair_pose: bool = False, pair_truth: bool = False
+        self,
+        channels: Mapping[str, tuple[int, MessageType]],
+        pair_pose: bool = False,
+        pair_truth: bool = False,
+        messages: Mapping[str, int] | None = None,
     ) -> None:
         roles = dict(channels)
-        self._imu = _Pending(*roles[IMU_ROLE])
-        self._mag = _Pending(*roles[MAG_ROLE]) if MAG_ROLE in roles else None
-        self._movement = _Pending(*roles[MOVEMENT_ROLE]) if MOVEMENT_ROLE in roles else None
-        self._pose = _Pending(*roles[POSE_ROLE]) if pair_pose and POSE_ROLE in roles else None
+        counts = dict(messages or {})
+
+        def pending(role: str) -> _Pending:
+            return _Pending(*roles[role], count=counts.get(role))
+
+        self._imu = pending(IMU_ROLE)
+        self._imu.values = {name: np.empty((0, 3)) for name in ("angular_velocity", "linear_acceleration")}
+        self._mag = pending(MAG_ROLE) if MAG_ROLE in roles else None
+        self._movement = pending(MOVEMENT_ROLE) if MOVEMENT_ROLE in roles else None
+        self._pose = pending(POSE_ROLE) if pair_pose and POSE_ROLE in roles else None
         self._pair_truth = pair_truth
-        self._truth = _Pending(*roles[TRUTH_ROLE]) if pair_truth and TRUTH_ROLE in roles else None
+        self._truth = pending(TRUTH_ROLE) if pair_truth and TRUTH_ROLE in roles else None
         self.truth_attitudes = 0
         self.truth_rates = 0
-        self._raw = {role: _Pending(*roles[role]) for role in roles if raw_kind(role) is not None}
+        self._raw = {role: pending(role) for role in roles if raw_kind(role) is not None}
         self.raw_dropped = dict.fromkeys(self._raw, 0)
         self.movement_missing = 0
 
@@ -323,7 +358,7 @@ class DeviceStream:
         stamps = self._imu.stamp_ns
         n = len(stamps)
         if not final and paired:
-            n = int(np.searchsorted(stamps, min(p.seen for p in paired), side="right"))
+            n = int(np.searchsorted(stamps, min(p.through for p in paired), side="right"))
         if self._pose is not None and not final:
             keep = _kept(stamps[:n], self._raw.values())
             if len(keep) > len(self._pose.stamp_ns):  # up to the first kept sample whose pose is not read yet
@@ -347,7 +382,8 @@ class DeviceStream:
         if self._movement is not None:
             i, j = match_stamps(stamp_ns, self._movement.stamp_ns)
             movement = np.zeros(len(keep), dtype=bool)
-            movement[i] = self._movement.values["data"][j]
+            if len(i):
+                movement[i] = self._movement.values["data"][j]
             self.movement_missing += len(keep) - len(i)
             self._movement.drop(last, final)
         truth = self._nearest_truth(stamp_ns, last) if self._pair_truth else None
@@ -461,8 +497,16 @@ class DeviceCensus:
         Samples, and those whose gyro and accelerometer rows are finite.
     has_mag : bool
         Whether any sample has a field value that is not NaN (``ImuSamples.has_mag``).
-    first_ns : int or None
-        The first sample's stamp.
+    first_ns, last_ns : int or None
+        The first and the last sample's stamps.
+    field_rows : bool
+        Whether any sample has a whole field (three finite components).
+    flagged : bool
+        Whether any sample's ``/movement`` flag is set.
+    not_increasing : tuple or None
+        The first sample whose stamp, in float seconds (as the filters take them), does not follow the one
+        before it (two stamps a nanosecond apart at today's epoch are one float): ``(index, t, t_before,
+        how many such steps)``; :func:`~gyroemu.pipelines.estimation.series.not_increasing_error` says it.
     pose_matches : bool
         Whether ``/truth/pose`` pairs with the samples by index within :data:`POSE_MATCH_NS` so far
         (:meth:`pose_pairs` once the stream has ended).
@@ -472,7 +516,11 @@ class DeviceCensus:
     count: int = 0
     finite: int = 0
     has_mag: bool = False
+    field_rows: bool = False
+    flagged: bool = False
     first_ns: int | None = None
+    last_ns: int | None = None
+    not_increasing: tuple[int, float, float, int] | None = None
     pose_matches: bool = True
     pose_count: int = 0
     rate: RateCounter = field(default_factory=RateCounter)
@@ -482,12 +530,24 @@ class DeviceCensus:
         n = len(block)
         if not n:
             return
+        t = ns_to_stamps(block.stamp_ns)
+        # each sample's stamp against the one before it (the previous block's last for the first)
+        skip = 0 if self.last_ns is not None else 1
+        before = t[:-1] if skip else np.concatenate((ns_to_stamps(np.array([self.last_ns])), t[:-1]))
+        bad = np.flatnonzero(~(t[skip:] > before))
+        if len(bad):
+            i = int(bad[0])
+            first = self.not_increasing or (self.count + i + skip, float(t[i + skip]), float(before[i]), 0)
+            self.not_increasing = (first[0], first[1], first[2], first[3] + len(bad))
         if self.first_ns is None:
             self.first_ns = int(block.stamp_ns[0])
+        self.last_ns = int(block.stamp_ns[-1])
         self.count += n
         self.finite += int((np.isfinite(block.gyro).all(axis=1) & np.isfinite(block.accel).all(axis=1)).sum())
         self.has_mag = self.has_mag or not np.all(np.isnan(block.mag))
-        self.rate.add(ns_to_stamps(block.stamp_ns))
+        self.field_rows = self.field_rows or bool(np.isfinite(block.mag).all(axis=1).any())
+        self.flagged = self.flagged or bool(block.movement is not None and block.movement.any())
+        self.rate.add(t)
         m = len(block.pose_ns)
         self.pose_count += m
         if m < n or np.abs(block.pose_ns - block.stamp_ns[:m]).max(initial=0) > POSE_MATCH_NS:
@@ -536,12 +596,15 @@ class StreamDevice:
         The device's ``gyroemu`` metadata record.
     channels : dict
         Role to ``(channel id, message type)``, in :func:`read_mcap`'s order.
+    messages : dict
+        Role to the number of its messages in the log.
     """
 
     name: str
     topics: dict[str, str]
     metadata: dict | None
     channels: dict[str, tuple[int, MessageType]]
+    messages: dict[str, int] = field(default_factory=dict)
 
 
 def scan_devices(path: Path) -> tuple[dict[str, StreamDevice], McapScan]:
@@ -565,6 +628,7 @@ def scan_devices(path: Path) -> tuple[dict[str, StreamDevice], McapScan]:
             topics={role: c.topic for role, c in group.items()},
             metadata=meta,
             channels={role: (c.channel_id, c.mtype) for role, c in group.items()},
+            messages={role: counts[c.channel_id] for role, c in group.items()},
         )
     if not devices:
         raise no_imu_error(scan, path)
@@ -586,22 +650,34 @@ class Counted:
     first : DeviceBlock or None
         The device's first samples, from its first one to at least ``first_s`` later (all of them for a
         shorter log), where they were asked for.
+    truth_attitudes, truth_rates : int
+        Its ``/truth/imu`` messages with an attitude, and with a finite rate (when asked for).
     """
 
     census: DeviceCensus
     pose_pairs: bool
     first: DeviceBlock | None
+    truth_attitudes: int = 0
+    truth_rates: int = 0
 
 
 def count_samples(
-    path: Path, devices: dict[str, StreamDevice], pose_of: str | None, first_of: set[str], first_s: float
+    path: Path,
+    devices: dict[str, StreamDevice],
+    pose_of: str | None,
+    first_of: set[str],
+    first_s: float,
+    truth: bool = False,
 ) -> dict[str, Counted]:
     """Per device, the figures of its samples, whether ``/truth/pose`` gives each of them its position
     (asked for the device ``pose_of`` only) and, for the devices ``first_of``, its first ``first_s``
     seconds of samples, from one pass over the log; the warnings :func:`read_mcap` gives for samples
-    dropped or unflagged."""
+    dropped or unflagged. ``truth``: pair each sample with its nearest ``/truth/imu`` message too (the
+    first samples have it) and count the truth's attitudes and rates."""
     streams = {
-        name: DeviceStream(d.channels, pair_pose=name == pose_of and POSE_ROLE in d.channels)
+        name: DeviceStream(
+            d.channels, pair_pose=name == pose_of and POSE_ROLE in d.channels, pair_truth=truth, messages=d.messages
+        )
         for name, d in devices.items()
     }
     census = {name: DeviceCensus() for name in devices}
@@ -628,5 +704,7 @@ def count_samples(
             census=census[name],
             pose_pairs=pose_of == name and census[name].pose_pairs(stream),
             first=DeviceBlock.concatenate(first[name]) if name in first else None,
+            truth_attitudes=stream.truth_attitudes,
+            truth_rates=stream.truth_rates,
         )
     return out

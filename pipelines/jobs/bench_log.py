@@ -36,17 +36,16 @@ from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
-from gyroemu.errors import LogError
 from gyroemu.pipelines.estimation import registry
 from gyroemu.pipelines.estimation.protocol import FilterSetup, learns_in_blocks
 from gyroemu.pipelines.estimation.registry import is_offline, make_filter
-from gyroemu.pipelines.estimation.series import check_counts
+from gyroemu.pipelines.estimation.series import check_counts, not_increasing_error
 from gyroemu.pipelines.formats.channels import MOVEMENT_ROLE
 from gyroemu.pipelines.formats.device_stream import (
     DeviceBlock,
     DeviceStream,
-    RateCounter,
     StreamDevice,
+    count_samples,
     scan_devices,
 )
 from gyroemu.pipelines.formats.mcap_log import LogWarning
@@ -73,6 +72,9 @@ __all__ = [
 
 TRUTH_MATCH = 0.25
 """How far, in sample intervals, a truth message may lie from a sample's stamp to be its reference."""
+
+FIRST_BLOCK_S = 60.0
+"""Seconds of a device's first samples kept from the census: the filters' first block and warm-up."""
 
 
 class _Named(Protocol):
@@ -198,72 +200,33 @@ class LogDevice:
     whole: bool
 
 
-@dataclass
-class _Census:
-    """Pass 2's figures of a device's samples."""
-
-    count: int = 0
-    finite: int = 0
-    has_mag: bool = False
-    flagged: bool = False
-    t_first: float = math.nan
-    t_last: float = math.nan
-    rate: RateCounter = field(default_factory=RateCounter)
-    blocks: list[DeviceBlock] = field(default_factory=list)
-    kept: int = 0  # samples in ``blocks``
-
-    def add(self, path: Path, name: str, block: DeviceBlock, keep: int) -> None:
-        if not len(block):
-            return
-        t = ns_to_stamps(block.stamp_ns)
-        steps = np.diff(t) if self.count == 0 else np.diff(np.concatenate(([self.t_last], t)))
-        bad = np.flatnonzero(~(steps > 0))
-        if len(bad):  # header stamps increase in ns, but two may round to one float (check_samples's error)
-            k = int(bad[0]) + (1 if self.count == 0 else 0)
-            at = self.count + k
-            before = t[k - 1] if k else self.t_last
-            raise LogError(
-                f"IMU stamps of device '{name}' are not increasing: sample {at} at {t[k]:.9f} s follows "
-                f"{before:.9f} s ({len(bad)} such steps)",
-                file=path,
-            )
-        if self.count == 0:
-            self.t_first = float(t[0])
-        self.t_last = float(t[-1])
-        self.count += len(block)
-        self.finite += int((np.isfinite(block.gyro).all(axis=1) & np.isfinite(block.accel).all(axis=1)).sum())
-        self.has_mag = self.has_mag or bool(np.isfinite(block.mag).all(axis=1).any())
-        self.flagged = self.flagged or bool(block.movement is not None and block.movement.any())
-        self.rate.add(t)
-        if self.kept < keep:
-            self.blocks.append(_bare(block))
-            self.kept += len(block)
-
-
-def _bare(block: DeviceBlock) -> DeviceBlock:
-    """A block without its truth and poses (what pass 2 keeps of the first or every sample)."""
-    return DeviceBlock(
-        stamp_ns=block.stamp_ns,
-        gyro=block.gyro,
-        accel=block.accel,
-        mag=block.mag,
-        pose_ns=block.pose_ns[:0],
-        pose_pos=block.pose_pos[:0],
-        through_ns=block.through_ns,
-        movement=block.movement,
-    )
-
-
 def _walk(path: Path, devices: Mapping[str, StreamDevice]) -> Iterator[tuple[str, DeviceBlock]]:
     """Each device's blocks, paired with their nearest truth, in one pass over the log (the last block
-    of each once the file has ended). The warnings of a pass after the first are the first's: dropped."""
-    streams = {name: DeviceStream(d.channels, pair_truth=True) for name, d in devices.items()}
+    of each once the file has ended)."""
+    streams = {name: DeviceStream(d.channels, pair_truth=True, messages=d.messages) for name, d in devices.items()}
     for batch in McapRecordWalk(path).batches():
         for name, stream in streams.items():
             stream.feed(batch)
             yield name, stream.take()
     for name, stream in streams.items():
         yield name, stream.take(final=True)
+
+
+def _blocks(path: Path, dev: LogDevice) -> Iterator[DeviceBlock]:
+    """The device's samples for its filters, in time order: the census's first block (at least
+    :data:`FIRST_BLOCK_S`: the MEKF starts from its first seconds, so every filter is given the same first
+    block whatever the file's chunks), then the rest a block at a time as the log goes by."""
+    first, last = dev.first, int(dev.first.stamp_ns[-1])
+    yield first
+    if len(first) == dev.samples:  # the census kept every sample
+        return
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", LogWarning)  # the census gave them
+        for _, block in _walk(path, {dev.device.name: dev.device}):
+            if block.through_ns is not None and block.through_ns > last:
+                rest = block.after(last)
+                if len(rest):
+                    yield rest
 
 
 def _reference(block: DeviceBlock, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -285,38 +248,28 @@ def stream_log_devices(case: LogCase, whole_samples: bool = False) -> list[LogDe
     Raises :class:`~gyroemu.pipelines.formats.device_stream.NotStreamable` for a log one pass cannot
     pair (before it warns)."""
     path = check_log_case(case)
+    whole = whole_samples or any(v == "auto" for v in (case.latency_s or {}).values())
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", LogWarning)
         found, _ = scan_devices(path)  # LogError for an unreadable log, NotStreamable
-        streams = {name: DeviceStream(d.channels, pair_truth=True) for name, d in found.items()}
-        census = {name: _Census() for name in found}
-        whole = whole_samples or any(v == "auto" for v in (case.latency_s or {}).values())
-        keep = math.inf if whole else 200
-        for batch in McapRecordWalk(path).batches():
-            for name, stream in streams.items():
-                stream.feed(batch)
-                census[name].add(path, name, stream.take(), keep)  # type: ignore[arg-type]
-        for name, stream in streams.items():
-            census[name].add(path, name, stream.take(final=True), keep)  # type: ignore[arg-type]
+        counted = count_samples(path, found, None, set(found), math.inf if whole else FIRST_BLOCK_S, truth=True)
     for w in caught:  # past the passes that may find the log unpairable (the whole read warns anew)
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    from gyroemu.pipelines.formats.device_stream import warn_drops
-
-    for name, stream in streams.items():
-        warn_drops(path, stream, found[name].topics)
-    chosen = choose_devices(path, found, case, lambda n, d: streams[n].truth_attitudes > 0)
-    # pass 3: the reference, now that the sample interval is known
+    chosen = choose_devices(path, found, case, lambda n, d: counted[n].truth_attitudes > 0)
     figures: dict[str, dict[str, Any]] = {}
     for name in chosen:
-        c = census[name]
+        c = counted[name].census
+        if c.not_increasing is not None:  # as the whole read's check_samples, in its order
+            raise not_increasing_error(path, name, c.not_increasing)
         note = check_counts(path, name, c.count, c.finite)  # LogError: too few, all NaN
         figures[name] = {"note": note, "dt": c.rate.median(), "counted": 0, "no_ref": 0, "mask": 0, "any": False}
+    # pass 3: the reference, now that the sample interval is known
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LogWarning)
         for name, block in _walk(path, chosen):
             f = figures[name]
             q_true, _ = _reference(block, f["dt"])
-            mask = _mask(block, census[name].flagged)
+            mask = _mask(block, counted[name].census.flagged)
             finite = np.isfinite(q_true).all(axis=1)
             f["counted"] += int((mask & finite).sum())
             f["no_ref"] += int((mask & ~finite).sum())
@@ -324,21 +277,23 @@ def stream_log_devices(case: LogCase, whole_samples: bool = False) -> list[LogDe
             f["any"] = f["any"] or bool(finite.any())
     out = []
     for name, dev in chosen.items():
-        c, f = census[name], figures[name]
+        c, f = counted[name].census, figures[name]
         if f["note"]:
             warnings.warn(f"{path}: {f['note']}", BenchWarning, stacklevel=2)
         if not f["any"]:
             raise no_reference_error(path, name)
         flags = c.flagged if MOVEMENT_ROLE in dev.channels else None
         notes = mask_notes(path, name, flags, f["mask"], f["no_ref"], [f["note"]] if f["note"] else [])
-        mode = "9D" if c.has_mag and not case.six_d else "6D"
-        first = DeviceBlock.concatenate(c.blocks)
+        mode = "9D" if c.field_rows and not case.six_d else "6D"
+        first = counted[name].first
+        assert first is not None and c.first_ns is not None and c.last_ns is not None  # check_counts: 2 or more
         t = ns_to_stamps(first.stamp_ns)
         samples = (t - t[0], np.asarray(first.gyro, float), np.asarray(first.mag, float) if mode == "9D" else None)
         setup = log_setup(dev.metadata, f["dt"], mode, case, samples, notes)
+        t_first, t_last = ns_to_stamps(np.array([c.first_ns, c.last_ns]))
         out.append(
             LogDevice(
-                label=log_label(path, name, len(found), case, c.has_mag),
+                label=log_label(path, name, len(found), case, c.field_rows),
                 mode=mode,
                 setup=setup,
                 source={"log": str(path), "device": name},
@@ -346,11 +301,11 @@ def stream_log_devices(case: LogCase, whole_samples: bool = False) -> list[LogDe
                 device=dev,
                 samples=c.count,
                 counted=f["counted"],
-                t_first=c.t_first,
-                t_last=c.t_last,
+                t_first=float(t_first),
+                t_last=float(t_last),
                 dt_nominal=f["dt"],
                 flags=bool(c.flagged),
-                rates=streams[name].truth_rates > 0,
+                rates=counted[name].truth_rates > 0,
                 first=first,
                 whole=whole,
             )
@@ -424,42 +379,37 @@ def bench_log_device(
                 r.reason = f"process() raised {type(exc).__name__}: {exc}"
         running.append(r)
     learners = [r for r in running if learns_in_blocks(r.flt) and not r.reason]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", LogWarning)
-        if learners:
-            for _, block in _walk(path, {dev.device.name: dev.device}):
-                if len(block):
-                    t, mag = ns_to_stamps(block.stamp_ns), None if six_d else block.mag
-                    for r in learners:
-                        if not r.reason:
-                            _step(r, r.flt.learn, t, block.gyro, block.accel, mag)
-        offset, curve_t = 0, []
-        for _, block in _walk(path, {dev.device.name: dev.device}):
-            n = len(block)
-            if not n:
+    if learners:
+        for block in _blocks(path, dev):
+            t, mag = ns_to_stamps(block.stamp_ns), None if six_d else block.mag
+            for r in learners:
+                if not r.reason:
+                    _step(r, r.flt.learn, t, block.gyro, block.accel, mag)
+    offset, curve_t = 0, []
+    for block in _blocks(path, dev):
+        n = len(block)
+        t = ns_to_stamps(block.stamp_ns)
+        q_true, omega = _reference(block, dev.dt_nominal)
+        mask = _mask(block, dev.flags)
+        mag = None if six_d else block.mag
+        picked = np.flatnonzero((offset + np.arange(n)) % step == 0)
+        curve_t.append(t[picked] - dev.t_first)
+        for r in running:
+            if r.reason:
                 continue
-            t = ns_to_stamps(block.stamp_ns)
-            q_true, omega = _reference(block, dev.dt_nominal)
-            mask = _mask(block, dev.flags)
-            mag = None if six_d else block.mag
-            picked = np.flatnonzero((offset + np.arange(n)) % step == 0)
-            curve_t.append(t[picked] - dev.t_first)
-            for r in running:
+            if r.given is not None:
+                q, b = r.given[0][r.at : r.at + n], None if r.given[1] is None else r.given[1][r.at : r.at + n]
+                r.at += n
+            else:
+                out = _step(r, r.flt.process, t, block.gyro, block.accel, mag)
                 if r.reason:
                     continue
-                if r.given is not None:
-                    q, b = r.given[0][r.at : r.at + n], None if r.given[1] is None else r.given[1][r.at : r.at + n]
-                    r.at += n
-                else:
-                    out = _step(r, r.flt.process, t, block.gyro, block.accel, mag)
-                    if r.reason:
-                        continue
-                    q, b = _checked(r, out, n)
-                    if r.reason:
-                        continue
-                errors = r.metrics.add(t, q, q_true, mask, b, omega if window else None, block.gyro)
-                r.curve.append((errors["total"][picked], errors["inclination"][picked]))
-            offset += n
+                q, b = _checked(r, out, n)
+                if r.reason:
+                    continue
+            errors = r.metrics.add(t, q, q_true, mask, b, omega if window else None, block.gyro)
+            r.curve.append((errors["total"][picked], errors["inclination"][picked]))
+        offset += n
     for r in running:
         if learns_in_blocks(r.flt):
             r.flt.close()

@@ -38,7 +38,13 @@ import numpy as np
 from gyroemu.pipelines.estimation import registry
 from gyroemu.pipelines.estimation.protocol import AttitudeFilter, learns_in_blocks
 from gyroemu.pipelines.estimation.registry import is_offline, make_filter
-from gyroemu.pipelines.estimation.series import check_counts, check_samples, estimate_series, rate_of
+from gyroemu.pipelines.estimation.series import (
+    check_counts,
+    check_samples,
+    estimate_series,
+    not_increasing_error,
+    rate_of,
+)
 from gyroemu.pipelines.estimation.setup import (
     FIELD_LAG_FROM_LOG,
     check_latency_sensors,
@@ -302,6 +308,8 @@ def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latenc
     runs, done, field_lags, filters = [], [], [], []
     for dev, _ in chosen:
         counted, first = found[dev.name].census, found[dev.name].first
+        if counted.not_increasing is not None:  # as the whole read's check_samples
+            raise not_increasing_error(path, dev.name, counted.not_increasing)
         note = check_counts(path, dev.name, counted.count, counted.finite)
         if note:
             warnings.warn(f"{path}: {note}", UserWarning, stacklevel=2)
@@ -340,7 +348,9 @@ def _spooled(flt: AttitudeFilter, counted: DeviceCensus) -> tuple[int, int]:
     """A device's sample count, and the bytes its filter keeps in temporary files over them."""
     if not learns_in_blocks(flt):
         return counted.count, 0
-    return counted.count, flt.spool_bytes(counted.count, counted.count / counted.rate.rate())
+    assert counted.first_ns is not None and counted.last_ns is not None  # check_counts: two samples at least
+    span = (counted.last_ns - counted.first_ns) * 1e-9  # the stamps' span: a gap's time has windows too
+    return counted.count, flt.spool_bytes(counted.count, span)
 
 
 def check_disk(path: Path, out: Path, devices: list[tuple[str, int, int]]) -> None:
@@ -392,7 +402,7 @@ def _learn(path: Path, filters: list[_DeviceFilter]) -> None:
     from one more pass over the log: its first block, then the rest as the log goes by."""
     if not filters:
         return
-    streams = [DeviceStream(f.dev.channels) for f in filters]
+    streams = [DeviceStream(f.dev.channels, messages=f.dev.messages) for f in filters]
     for f in filters:
         f.feed(f.first, rest=False)
     for batch in McapRecordWalk(path).batches():
@@ -410,7 +420,7 @@ def _block_run(dev, name: str, f: _DeviceFilter, counted, tf_device: str | None)
         target.tf_keep, target.tf_pos = np.zeros(0, dtype=bool), np.zeros((0, 3))
     run = BlockRun(
         target=target,
-        stream=DeviceStream(dev.channels, pair_pose=counted.pose_pairs),
+        stream=DeviceStream(dev.channels, pair_pose=counted.pose_pairs, messages=dev.messages),
         flt=f.flt,
         nine=f.nine,
         t0=f.t0,

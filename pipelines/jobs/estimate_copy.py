@@ -335,7 +335,7 @@ def _with_estimates(batch: RawMessages, channel_ids: np.ndarray, follows: dict[i
 
     for channel_id, target in follows.items():
         mine = np.flatnonzero(channel == channel_id)
-        if not len(mine):
+        if not len(mine) or not len(target.stamp_ns):  # none here, or every estimate of it already written
             continue
         decoded = IMU.decode(batch.payloads(mine))
         row = np.minimum(np.searchsorted(target.stamp_ns, decoded.stamp_ns), len(target.stamp_ns) - 1)

@@ -118,6 +118,16 @@ def test_a_sparse_truth_a_mask_and_the_offline_filters(tmp_path):
     assert note.startswith("the 7000 samples of its movement mask counted, ") and "without a finite reference" in note
 
 
+@pytest.mark.parametrize("device, six_d", [("consumer_mems", False), ("navigation_fog", True)])
+def test_small_chunks_the_filters_start_alike(tmp_path, device, six_d):
+    """Chunks of 4 kB (a few samples each): every filter still starts from the same first block as the
+    whole read (the MEKF reads its first 0.5 s, and 10 s at rest to find north from Earth's rate in 6D
+    with a navigation gyro), so the reports are equal."""
+    log = write_mcap(tmp_path / "small.mcap", recording(14.0, seed=8, device=device), chunk_size=1 << 12)
+    (streamed, _), (whole, _) = bench_both(LogCase(log, six_d=six_d), ["mekf", "mekf-smooth", "vqf"])
+    assert_same_report(streamed, whole)
+
+
 def test_two_devices_each_a_case(tmp_path):
     """A log of two devices: each its own case, named file:device, both equal to the whole read's."""
     recs = [recording(6.0, seed=3), dataclasses.replace(recording(6.0, seed=4, device="tactical_mems"))]

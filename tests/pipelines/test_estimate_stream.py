@@ -296,6 +296,92 @@ def test_a_log_one_pass_cannot_pair_is_read_whole(tmp_path):
     assert out[False] == out[True]
 
 
+def late_and_ending_log(path, n=3000):
+    """/status (a topic of no device) at 100 Hz from a second before the IMU's first message, /imu at 100 Hz; /mag
+    for the first third of the samples, /raw/mems for the first two thirds (the whole read drops the
+    samples after: no raw message at their stamp); 1 kB chunks."""
+    stamps = T0_NS + np.arange(n, dtype=np.int64) * 10_000_000
+    status = T0_NS - 10**9 + np.arange(100, dtype=np.int64) * 10**7  # chunks of it alone before the IMU's
+    rng = np.random.default_rng(4)
+    accel = rng.normal(0, 0.1, (n, 3)) + [0.3, -0.2, 9.8]
+    field = np.tile([2e-5, 1e-6, -4e-5], (n, 1)) + rng.normal(0, 1e-7, (n, 3))
+    raw_type, raw = role_message_type("raw/mems"), 2 * n // 3
+    with open(path, "wb") as f:
+        w = McapFileWriter(f, chunk_size=1024)
+        channels = [
+            (
+                w.register_ros2_channel("/status", FLAG),
+                status,
+                FLAG.encode(status, "imu", {"data": np.ones(100, bool)}),
+            ),
+            (w.register_ros2_channel("/imu", IMU), stamps, IMU.encode(stamps, "imu", {"linear_acceleration": accel})),
+            (w.register_ros2_channel("/raw/mems", raw_type), stamps[:raw], raw_type.encode(stamps[:raw], "imu")),
+            (
+                w.register_ros2_channel("/mag", MAGNETIC_FIELD),
+                stamps[: n // 3],
+                MAGNETIC_FIELD.encode(stamps[: n // 3], "imu", {"magnetic_field": field[: n // 3]}),
+            ),
+        ]
+        w.add_messages(channels)
+        w.finish()
+    return path
+
+
+def test_a_late_imu_and_topics_that_end_early(tmp_path, monkeypatch):
+    """Chunks with no IMU message first (the stream took from an IMU topic with nothing read, and failed);
+    a field that stops and a raw topic that ends early (the IMU messages after the raw topic's end all
+    dropped: the copy looked up an estimate it had already written, and failed): the whole read's
+    bytes and warnings, without reading the log whole. And once a paired topic has given every message
+    the scan counted, it holds no sample back: every block is decided up to the last IMU message read
+    (before, every sample after the field's end waited, and every chunk with it, to the file's end)."""
+    from gyroemu.pipelines.formats import mcap_log
+
+    log = late_and_ending_log(tmp_path / "late.mcap")
+    with monkeypatch.context() as m, warnings.catch_warnings(record=True) as caught:
+        m.setattr(mcap_log, "read_mcap", lambda *a, **k: pytest.fail("the log was read whole"))
+        warnings.simplefilter("always")
+        summary = estimate_log(log, tmp_path / "streamed.mcap")
+    notes = sorted(str(w.message) for w in caught if issubclass(w.category, UserWarning))
+    streamed = (digest(tmp_path / "streamed.mcap"), notes, summary.devices)
+    out = both(tmp_path, log)
+    assert streamed == out[True][:3]
+    assert any("dropped" in note for note in streamed[1])
+    (device,) = scan_devices(log)[0].values()
+    stream = DeviceStream(device.channels, messages=device.messages)
+    for batch in McapRecordWalk(log).batches():
+        fed = stream.feed(batch)
+        block = stream.take()
+        if fed is not None and fed > T0_NS + 2 * 3000 // 3 * 10_000_000:  # the raw topic and the field have ended
+            assert block.through_ns == fed
+
+
+def test_stamps_a_nanosecond_apart_are_refused_both_ways(tmp_path):
+    """Two IMU stamps 1 ns apart at today's epoch are one float second (the filters' time): the whole read
+    refuses the log naming the sample, and so does the streamed one (it wrote an output before, or
+    failed with the filter's own error)."""
+    from gyroemu.errors import LogError
+
+    n = 500
+    stamps = T0_NS + np.arange(n, dtype=np.int64) * 10_000_000
+    seconds = stamps / 1e9  # as ns_to_stamps has them
+    k = 1 + next(j for j in range(200, n) if (stamps[j] + 1) / 1e9 == seconds[j])  # not at a rounding midpoint
+    stamps[k] = stamps[k - 1] + 1
+    path = tmp_path / "ns.mcap"
+    with open(path, "wb") as f:
+        w = McapFileWriter(f, chunk_size=4096)
+        accel = np.tile([0.0, 0.0, 9.8], (n, 1))
+        w.add_messages(
+            [(w.register_ros2_channel("/imu", IMU), stamps, IMU.encode(stamps, "imu", {"linear_acceleration": accel}))]
+        )
+        w.finish()
+    errors = []
+    for whole in (False, True):
+        with pytest.raises(LogError, match=f"IMU stamps of device 'imu0' are not increasing: sample {k} at") as e:
+            estimate_log(path, tmp_path / f"out{whole}.mcap", read_whole=whole, filter_name="madgwick")
+        errors.append(str(e.value))
+    assert errors[0] == errors[1] and not list(tmp_path.glob("out*"))
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("filter_name", ["mekf", "mekf-smooth"])
 def test_memory_does_not_grow_with_the_log(tmp_path, filter_name):

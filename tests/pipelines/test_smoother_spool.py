@@ -127,6 +127,22 @@ def test_spool_bytes_counts_the_files_a_log_takes(run):
     assert MekfSmoother(setup).spool_bytes(n, n / 1000.0) == counted
 
 
+def test_spool_bytes_over_the_span_bounds_a_log_with_gaps(run):
+    """Windows end on elapsed time, so a log with gaps (10 samples kept of every 40) has windows over its
+    span, not over its samples' count at the rate: counted over the stamps' span (what ``gyroemu
+    estimate`` gives it), at least what the files hold; over samples / rate, less."""
+    setup, t, samples = run
+    keep = np.arange(len(t)) % 40 < 10
+    params = smoother_params(setup)
+    with SmootherSpool(setup, params) as spool:
+        spool.learn(t[keep], samples.gyro[keep], samples.accel[keep], samples.mag[keep])
+        spool.process(t[keep], samples.gyro[keep], samples.accel[keep])
+        held = spool.disk_bytes
+    n = int(keep.sum())
+    assert spool_bytes(n, float(t[keep][-1] - t[keep][0]), params.window_s) >= held
+    assert spool_bytes(n, n / 1000.0, params.window_s) < held
+
+
 def test_only_a_filter_with_the_learners_methods_is_fed_in_blocks(run):
     """The job's two questions, by name before the filter is made (``registry.learns_in_blocks``) and of
     the filter made (``protocol.learns_in_blocks``), get one answer: the smoother, wrapped for latency or
