@@ -117,6 +117,7 @@ __all__ = [
     "RunResult",
     "SimCase",
     "evaluate_run",
+    "report_figures",
     "run_bench",
 ]
 
@@ -365,6 +366,10 @@ class BenchReport:
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=1, ensure_ascii=False, allow_nan=False)
 
+    def figures(self) -> dict:
+        """:func:`report_figures` of this report."""
+        return report_figures(self.to_dict())
+
     # --- Plots ------------------------------------------------------------------------------------
     def save_plots(self, directory) -> list[Path]:
         """One PNG per case, ``<case>.png`` in ``directory``: each filter's error against time (first run;
@@ -411,6 +416,21 @@ class BenchReport:
         write_text_atomic(paths["markdown"], self.to_markdown())
         paths["plots"] = self.save_plots(directory)
         return paths
+
+
+def report_figures(data: dict) -> dict:
+    """A report's content (``BenchReport.to_dict()`` or ``bench.json`` read) without what differs from
+    one run to the next of the same bench: the settings (the date) and every wall time and throughput.
+    Two benches of the same cases give equal figures (a log read a block at a time and whole do)."""
+    data = json.loads(json.dumps(data, allow_nan=False))
+    data.pop("settings", None)
+    for case in data.get("cases", []):
+        for f in case.get("filters", []):
+            f.get("summary", {}).pop("throughput", None)
+            for run in f.get("runs", []):
+                run.pop("wall_s", None)
+                run.pop("throughput", None)
+    return data
 
 
 def _si(x: float) -> str:

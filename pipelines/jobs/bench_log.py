@@ -360,16 +360,7 @@ def bench_log_device(
     for spec in filters:
         describe(f"{dev.label}: {spec}")
         warm_up(spec, dev.setup, first_t, dev.first.gyro, dev.first.accel, first_mag)
-        metrics = RunMetrics(
-            samples=dev.samples,
-            counted=dev.counted,
-            t_first=dev.t_first,
-            t_last=dev.t_last,
-            six_d=six_d,
-            threshold_deg=threshold_deg,
-            bias_window=window,
-        )
-        r = _Running(spec, make_filter(spec, dev.setup), metrics)
+        r = _Running(spec, make_filter(spec, dev.setup), _metrics(dev, threshold_deg, window))
         if is_offline(spec) and not learns_in_blocks(r.flt):  # the whole log at once: every sample was kept
             t = ns_to_stamps(dev.first.stamp_ns)
             try:
@@ -417,6 +408,19 @@ def bench_log_device(
     return [_finished(r, dev, threshold_deg, t) for r in running]
 
 
+def _metrics(dev: LogDevice, threshold_deg: float, bias_window: int | None) -> RunMetrics:
+    """A filter's metrics over the device's run."""
+    return RunMetrics(
+        samples=dev.samples,
+        counted=dev.counted,
+        t_first=dev.t_first,
+        t_last=dev.t_last,
+        six_d=dev.mode == "6D",
+        threshold_deg=threshold_deg,
+        bias_window=bias_window,
+    )
+
+
 def _step(r: _Running, call: Callable[..., Any], *args: Any) -> Any:
     """``call(*args)`` timed; an exception stops the filter with it as the reason."""
     try:
@@ -439,15 +443,7 @@ def _finished(r: _Running, dev: LogDevice, threshold_deg: float, curve_t: np.nda
     estimate (as a log read whole reports it: every error NaN, diverged, the exception the reason)."""
     name = str(r.flt.name)
     if r.reason:
-        failed = RunMetrics(
-            samples=dev.samples,
-            counted=dev.counted,
-            t_first=dev.t_first,
-            t_last=dev.t_last,
-            six_d=dev.mode == "6D",
-            threshold_deg=threshold_deg,
-            bias_window=None,
-        )
+        failed = _metrics(dev, threshold_deg, None)
         failed.wall_s = r.metrics.wall_s
         nan = np.full(len(curve_t), np.nan)
         return FilterRun(r.spec, name, failed.result(reason=r.reason), curve_t, nan, nan.copy())

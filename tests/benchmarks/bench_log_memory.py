@@ -23,17 +23,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_long_runs import measure, simulate_argv  # noqa: E402  (tests/benchmarks is the script folder)
 
+from gyroemu.pipelines.jobs.bench import report_figures  # noqa: E402
+
 
 def figures(report_json: Path) -> dict:
-    """A bench.json's figures without its wall times and settings."""
-    data = json.loads(report_json.read_text())
-    data.pop("settings")
-    for case in data["cases"]:
-        for f in case["filters"]:
-            f["summary"].pop("throughput", None)
-            for run in f["runs"]:
-                del run["wall_s"], run["throughput"]
-    return data
+    """A bench.json's figures (:func:`report_figures`)."""
+    return report_figures(json.loads(report_json.read_text()))
 
 
 def main() -> None:
@@ -65,7 +60,7 @@ def main() -> None:
             )
             if duration <= args.whole_up_to:
                 w_time, w_rss = measure([sys.executable, "-c", code])
-                same = figures(streamed / "bench.json") == figures(whole / "bench.json")
+                same = figures(streamed / "bench.json") == figures(whole / "bench.json")  # not the wall times
                 baseline, same_text = f"{w_rss:.2f} GB, {w_time:.1f} s", "yes" if same else "NO"
             else:
                 baseline, same_text = "not run (`--whole-up-to`)", "—"
