@@ -283,8 +283,9 @@ class DeviceStream:
         samples in that order, which their warnings count).
     pair_pose : bool
         Pair ``/truth/pose`` with the samples by index: a sample is then complete once its pose has been
-        read too (a pose topic with fewer messages than the samples stalls the stream until
-        :class:`NotStreamable`). False: the pose topic is not read.
+        read too, until the pose topic has given every message ``messages`` counts (without the counts, a
+        pose topic with fewer messages than the samples stalls the stream until :class:`NotStreamable`).
+        False: the pose topic is not read.
     pair_truth : bool
         Give each sample its nearest ``/truth/imu`` message (:class:`NearestTruth`): a sample is then
         complete once the truth has gone past its stamp (its header stamps must increase). False: the
@@ -359,7 +360,7 @@ class DeviceStream:
         n = len(stamps)
         if not final and paired:
             n = int(np.searchsorted(stamps, min(p.through for p in paired), side="right"))
-        if self._pose is not None and not final:
+        if self._pose is not None and not final and self._pose.through < (1 << 62):  # poses still to come
             keep = _kept(stamps[:n], self._raw.values())
             if len(keep) > len(self._pose.stamp_ns):  # up to the first kept sample whose pose is not read yet
                 n = int(keep[len(self._pose.stamp_ns)])

@@ -33,10 +33,12 @@ from ..foreign_bags import write_foreign_bag
 T0_NS = 1_700_000_000 * 10**9
 
 
-def crafted_log(path, n=3000, chunk_size=2048, *, drop_raw=(), drop_mag=(), drop_flag=(), nan=(), pose=True):
+def crafted_log(
+    path, n=3000, chunk_size=2048, *, drop_raw=(), drop_mag=(), drop_flag=(), nan=(), pose=True, poses=None
+):
     """A device's topics written message by message: /imu at 100 Hz (rows ``nan`` NaN), /raw/mems,
-    /mag, /movement and /truth/pose at the same stamps but where dropped, in small chunks (a chunk
-    ends between an /imu message and its /mag)."""
+    /mag, /movement and /truth/pose at the same stamps but where dropped (the first ``poses`` poses only:
+    all when None), in small chunks (a chunk ends between an /imu message and its /mag)."""
     rng = np.random.default_rng(11)
     stamps = T0_NS + np.arange(n, dtype=np.int64) * 10_000_000
     gyro = rng.normal(0, 0.02, (n, 3))
@@ -60,8 +62,8 @@ def crafted_log(path, n=3000, chunk_size=2048, *, drop_raw=(), drop_mag=(), drop
         ]
         if pose:
             p = w.register_ros2_channel("/truth/pose", POSE_STAMPED)
-            position = np.cumsum(rng.normal(0, 1e-3, (n, 3)), axis=0)
-            channels.append((p, stamps, POSE_STAMPED.encode(stamps, "map", {"position": position})))
+            position = np.cumsum(rng.normal(0, 1e-3, (n, 3)), axis=0)[:poses]
+            channels.append((p, stamps[:poses], POSE_STAMPED.encode(stamps[:poses], "map", {"position": position})))
         w.add_messages(channels)
         w.finish()
     return path
@@ -353,6 +355,26 @@ def test_a_late_imu_and_topics_that_end_early(tmp_path, monkeypatch):
         block = stream.take()
         if fed is not None and fed > T0_NS + 2 * 3000 // 3 * 10_000_000:  # the raw topic and the field have ended
             assert block.through_ns == fed
+
+
+def test_a_pose_topic_that_ends_early_holds_nothing_back(tmp_path):
+    """/truth/pose for the first half of the samples only: once its last message is read, the samples
+    after it need none, and every block is decided up to the last IMU message read but one (whose /mag the
+    next chunk holds; before, every later sample waited for a pose that never came, to the file's end);
+    the estimate is the whole read's."""
+    log = crafted_log(tmp_path / "poses.mcap", n=9000, poses=4500)
+    (device,) = scan_devices(log)[0].values()
+    stream = DeviceStream(device.channels, pair_pose=True, messages=device.messages)
+    decided = 0
+    for batch in McapRecordWalk(log).batches():
+        fed = stream.feed(batch)
+        block = stream.take()
+        if fed is not None and fed > T0_NS + 4600 * 10_000_000:  # the poses have ended
+            assert block.through_ns is not None and block.through_ns >= fed - 10_000_000  # its /mag: next chunk
+            decided += 1
+    assert decided > 10
+    out = both(tmp_path, log)
+    assert out[False] == out[True]
 
 
 def test_stamps_a_nanosecond_apart_are_refused_both_ways(tmp_path):
