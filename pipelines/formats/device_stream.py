@@ -347,9 +347,10 @@ class DeviceStream:
         if self._truth is not None:
             read = len(self._truth.stamp_ns)
             self._truth.append(batch, TRUTH_FIELDS, increasing=True)
-            new = {k: v[read:] for k, v in self._truth.values.items()}
-            self.truth_attitudes += int((new["orientation_covariance"][:, 0] != -1.0).sum())
-            self.truth_rates += int(np.isfinite(truth_values(new)[1]).any(axis=1).sum())
+            if len(self._truth.stamp_ns) > read:  # the chunk held truth messages
+                new = {k: v[read:] for k, v in self._truth.values.items()}
+                self.truth_attitudes += int((new["orientation_covariance"][:, 0] != -1.0).sum())
+                self.truth_rates += int(np.isfinite(truth_values(new)[1]).any(axis=1).sum())
         return None if self._imu.seen == before else self._imu.seen
 
     def take(self, final: bool = False) -> DeviceBlock:

@@ -116,6 +116,19 @@ def test_small_chunks_the_filters_start_alike(tmp_path, device, six_d):
     assert_same_report(streamed, whole)
 
 
+def test_a_truth_that_starts_late(tmp_path):
+    """The reference acquired 1 s in: the first chunks hold no truth message (the census read the truth's
+    columns before any had come, and failed); the samples before it count without a reference."""
+    rec = recording(3.0, seed=10)
+    late = slice(1000, None)
+    truth = ImuSeries(t=rec.truth.t[late], q_wb=rec.truth.q_wb[late], omega_b=rec.truth.omega_b[late])
+    log = write_mcap(tmp_path / "late.mcap", dataclasses.replace(rec, truth=truth), chunk_size=1 << 14)
+    (streamed, warned), (whole, warned_whole) = bench_both(LogCase(log), ["mekf"])
+    assert_same_report(streamed, whole)
+    assert warned == warned_whole
+    assert streamed.cases[0].notes == ["every sample counted, 1000 of them without a finite reference (ignored)"]
+
+
 def test_two_devices_each_a_case(tmp_path):
     """A log of two devices: each its own case, named file:device, both equal to the whole read's."""
     recs = [recording(6.0, seed=3), dataclasses.replace(recording(6.0, seed=4, device="tactical_mems"))]
