@@ -44,6 +44,7 @@ from gyroemu.pipelines.formats.channels import MOVEMENT_ROLE
 from gyroemu.pipelines.formats.device_stream import (
     DeviceBlock,
     DeviceStream,
+    NotStreamable,
     StreamDevice,
     count_samples,
     scan_devices,
@@ -249,20 +250,26 @@ def stream_log_devices(case: LogCase, whole_samples: bool = False) -> list[LogDe
     pair (before it warns)."""
     path = check_log_case(case)
     whole = whole_samples or any(v == "auto" for v in (case.latency_s or {}).values())
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", LogWarning)
-        found, _ = scan_devices(path)  # LogError for an unreadable log, NotStreamable
-        counted = count_samples(path, found, None, set(found), math.inf if whole else FIRST_BLOCK_S, truth=True)
-    for w in caught:  # past the passes that may find the log unpairable (the whole read warns anew)
-        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    caught: list[warnings.WarningMessage] = []
+    unpairable = False
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", LogWarning)
+            found, _ = scan_devices(path)  # LogError for an unreadable log, NotStreamable
+            first_s = math.inf if whole else FIRST_BLOCK_S
+            counted = count_samples(path, found, None, set(found), first_s, truth=True)
+    except NotStreamable:
+        unpairable = True  # the whole read gives the warnings anew
+        raise
+    finally:  # the passes' warnings, also before their error (a log refused warns first, as read whole)
+        for w in [] if unpairable else caught:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     chosen = choose_devices(path, found, case, lambda n, d: counted[n].truth_attitudes > 0)
     figures: dict[str, dict[str, Any]] = {}
     for name in chosen:
         c = counted[name].census
-        if c.not_increasing is not None:  # as the whole read's check_samples, in its order
-            raise not_increasing_error(path, name, c.not_increasing)
-        note = check_counts(path, name, c.count, c.finite)  # LogError: too few, all NaN
-        figures[name] = {"note": note, "dt": c.rate.median(), "counted": 0, "no_ref": 0, "mask": 0, "any": False}
+        dt = c.rate.median() if c.count > 1 else math.nan  # too few samples: refused below, in order
+        figures[name] = {"dt": dt, "counted": 0, "no_ref": 0, "mask": 0, "any": False}
     # pass 3: the reference, now that the sample interval is known
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LogWarning)
@@ -276,14 +283,17 @@ def stream_log_devices(case: LogCase, whole_samples: bool = False) -> list[LogDe
             f["mask"] += int(mask.sum())
             f["any"] = f["any"] or bool(finite.any())
     out = []
-    for name, dev in chosen.items():
+    for name, dev in chosen.items():  # device by device, as the whole read checks and warns
         c, f = counted[name].census, figures[name]
-        if f["note"]:
-            warnings.warn(f"{path}: {f['note']}", BenchWarning, stacklevel=2)
+        if c.not_increasing is not None:
+            raise not_increasing_error(path, name, c.not_increasing)
+        note = check_counts(path, name, c.count, c.finite)  # LogError: too few, all NaN
+        if note:
+            warnings.warn(f"{path}: {note}", BenchWarning, stacklevel=2)
         if not f["any"]:
             raise no_reference_error(path, name)
         flags = c.flagged if MOVEMENT_ROLE in dev.channels else None
-        notes = mask_notes(path, name, flags, f["mask"], f["no_ref"], [f["note"]] if f["note"] else [])
+        notes = mask_notes(path, name, flags, f["mask"], f["no_ref"], [note] if note else [])
         mode = "9D" if c.field_rows and not case.six_d else "6D"
         first = counted[name].first
         assert first is not None and c.first_ns is not None and c.last_ns is not None  # check_counts: 2 or more

@@ -25,6 +25,10 @@ from gyroemu.pipelines.jobs.bench import BenchError, LogCase, run_bench
 from gyroemu.sensors import load_device
 
 RAISES = """\
+import numpy as np
+from gyroemu.pipelines.estimation.protocol import Estimate
+
+
 class Raises:
     name = "raises"
 
@@ -33,6 +37,16 @@ class Raises:
 
     def process(self, t, gyro, accel, mag=None):
         raise RuntimeError("no estimate here")
+
+
+class ShortByOne:
+    name = "short"
+
+    def __init__(self, setup):
+        pass
+
+    def process(self, t, gyro, accel, mag=None):
+        return Estimate(q_wb=np.tile([1.0, 0.0, 0.0, 0.0], (len(t) - 1, 1)))
 """
 
 
@@ -68,10 +82,15 @@ def assert_same_report(streamed, whole) -> None:
 
 
 @pytest.fixture(scope="module")
-def raises(tmp_path_factory):
-    path = tmp_path_factory.mktemp("filters") / "raising.py"
+def user_filters(tmp_path_factory):
+    path = tmp_path_factory.mktemp("filters") / "failing.py"
     path.write_text(RAISES)
-    return f"{path}:Raises"
+    return path
+
+
+@pytest.fixture(scope="module")
+def raises(user_filters):
+    return f"{user_filters}:Raises"
 
 
 def test_a_log_benched_in_blocks_is_the_whole_read(tmp_path, raises):
@@ -127,6 +146,65 @@ def test_a_truth_that_starts_late(tmp_path):
     assert_same_report(streamed, whole)
     assert warned == warned_whole
     assert streamed.cases[0].notes == ["every sample counted, 1000 of them without a finite reference (ignored)"]
+
+
+def test_a_filter_short_by_one_is_said_alike(tmp_path, user_filters):
+    """A user's filter returning one attitude fewer than it was given, on a log longer than the first
+    block: diverged with the same reason both ways (it named the block's length, not the log's)."""
+    log = write_mcap(tmp_path / "short.mcap", recording(62.0, seed=12))
+    (streamed, _), (whole, _) = bench_both(LogCase(log), [f"{user_filters}:ShortByOne"])
+    assert_same_report(streamed, whole)
+    assert streamed.cases[0].filters[0].runs[0].reason == (
+        "process() raised ValueError: short.process() returned 1 attitude fewer than the samples it was given"
+    )
+
+
+def test_two_bad_devices_refused_in_the_whole_reads_order(tmp_path):
+    """Two devices, the first with some NaN samples or no reference at its stamps, the second's gyro all
+    NaN: the same first error, after the same warnings, as the log read whole (device by device)."""
+    rng = np.random.default_rng(13)
+
+    def gyro_nan(rec, rows):
+        gyro = rec.samples.gyro.copy()
+        gyro[rows] = np.nan
+        return dataclasses.replace(rec, samples=dataclasses.replace(rec.samples, gyro=gyro))
+
+    second = gyro_nan(recording(2.0, seed=14, device="tactical_mems"), slice(None))
+    second = dataclasses.replace(second, samples=dataclasses.replace(second.samples, device="second"))
+    first = recording(2.0, seed=15)
+    far = dataclasses.replace(first, truth=dataclasses.replace(first.truth, t=first.truth.t + 5e-4))
+    for rec in (gyro_nan(first, rng.choice(2000, 5, replace=False)), far):
+        log = write_mcap(tmp_path / "two.mcap", [rec, second], prefix_topics=True)
+        said = []
+        for whole in (False, True):
+            with warnings.catch_warnings(record=True) as caught, pytest.raises(Exception) as e:  # noqa: PT011
+                warnings.simplefilter("always")
+                run_bench([LogCase(log, read_whole=whole)], filters=["mekf"])
+            said.append((type(e.value), str(e.value), [str(w.message) for w in caught]))
+        assert said[0] == said[1]
+
+
+def test_a_log_refused_warns_first_both_ways(tmp_path):
+    """A log with no IMU topic, only a string topic: the same warning (its topic skipped), then the same
+    error, both ways (the streamed read dropped the warnings its passes had recorded)."""
+    from gyroemu.errors import LogError
+    from gyroemu.pipelines.formats.mcap_records import McapFileWriter
+
+    path = tmp_path / "noimu.mcap"
+    with open(path, "wb") as f:
+        w = McapFileWriter(f)
+        schema = w.register_schema("std_msgs/msg/String", "ros2msg", b"string data")
+        channel = w.register_channel("/chatter", "cdr", schema, {})
+        payload = np.frombuffer(bytes([0, 1, 0, 0, 3, 0, 0, 0, 104, 105, 0, 0]), np.uint8)
+        w.add_messages([(channel, np.arange(5) * 10**6, np.tile(payload, (5, 1)))])
+        w.finish()
+    said = []
+    for whole in (False, True):
+        with warnings.catch_warnings(record=True) as caught, pytest.raises(LogError) as e:
+            warnings.simplefilter("always")
+            run_bench([LogCase(path, read_whole=whole)], filters=["mekf"])
+        said.append((str(e.value), [str(w.message) for w in caught]))
+    assert said[0] == said[1] and "skipping topic /chatter" in said[0][1][0]
 
 
 def test_two_devices_each_a_case(tmp_path):
