@@ -371,7 +371,8 @@ def bench_log_device(
         describe(f"{dev.label}: {spec}")
         warm_up(spec, dev.setup, first_t, dev.first.gyro, dev.first.accel, first_mag)
         r = _Running(spec, make_filter(spec, dev.setup), _metrics(dev, threshold_deg, window))
-        if is_offline(spec) and not learns_in_blocks(r.flt):  # the whole log at once: every sample was kept
+        if is_offline(spec) and not learns_in_blocks(r.flt):  # the whole log at once
+            assert dev.whole, "stream_log_devices(whole_samples=True) keeps every sample for such a filter"
             t = ns_to_stamps(dev.first.stamp_ns)
             try:
                 est = r.timed(r.flt.process, t, dev.first.gyro, dev.first.accel, first_mag)
