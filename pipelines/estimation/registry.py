@@ -49,6 +49,7 @@ __all__ = [
     "is_offline",
     "learns_in_blocks",
     "make_filter",
+    "takes_whole_log",
     "unavailable_filters",
 ]
 
@@ -133,6 +134,12 @@ def learns_in_blocks(name_or_spec: str) -> bool:
         return protocol.learns_in_blocks(filter_class(name_or_spec))
     except FilterError:
         return False
+
+
+def takes_whole_log(name_or_spec: str) -> bool:
+    """Whether the filter named must be given a log's samples at once: offline (:func:`is_offline`) and
+    not learning it a block at a time (:func:`learns_in_blocks`), as ``offline-vqf``."""
+    return is_offline(name_or_spec) and not learns_in_blocks(name_or_spec)
 
 
 def unavailable_filters(*, offline: bool = False) -> dict[str, str]:

@@ -120,7 +120,7 @@ class DeviceBlock:
         """Consecutive blocks of one stream joined."""
         through = [b.through_ns for b in blocks if b.through_ns is not None]
         movement = [b.movement for b in blocks if b.movement is not None]
-        truths = [b.truth for b in blocks]
+        truths = [b.truth for b in blocks if b.truth is not None]  # a stream pairs the truth in every block or none
         return DeviceBlock(
             **{
                 name: np.concatenate([getattr(b, name) for b in blocks])
@@ -128,7 +128,7 @@ class DeviceBlock:
             },
             through_ns=through[-1] if through else None,
             movement=np.concatenate(movement) if movement else None,
-            truth=None if not blocks or truths[0] is None else NearestTruth.concatenate(truths),
+            truth=NearestTruth.concatenate(truths) if truths else None,
         )
 
     def after(self, stamp_ns: int | None) -> DeviceBlock:
@@ -174,10 +174,9 @@ class NearestTruth:
         return NearestTruth(self.q_wb[index], self.omega_b[index], self.gap_s[index])
 
     @staticmethod
-    def concatenate(parts: list[NearestTruth | None]) -> NearestTruth:
+    def concatenate(parts: list[NearestTruth]) -> NearestTruth:
         """Consecutive samples' truths joined."""
-        given = [p for p in parts if p is not None]
-        return NearestTruth(*(np.concatenate([getattr(p, n) for p in given]) for n in ("q_wb", "omega_b", "gap_s")))
+        return NearestTruth(*(np.concatenate([getattr(p, n) for p in parts]) for n in ("q_wb", "omega_b", "gap_s")))
 
 
 TRUTH_FIELDS = ("orientation", "orientation_covariance", "angular_velocity", "angular_velocity_covariance")
@@ -205,11 +204,13 @@ def nearest(t: np.ndarray, tt: np.ndarray) -> np.ndarray:
 
 
 def read_topic(
-    batch: RawMessages, channel_id: int, mtype: MessageType, after_log_time: int
+    batch: RawMessages, channel_id: int, mtype: MessageType, after_log_time: int, after_stamp: int | None = None
 ) -> tuple[DecodedBatch, int] | None:
     """A topic's messages in one chunk, decoded in :func:`read_mcap`'s order (log time, then file order),
     and the last one's log time; None when the chunk has none. :class:`NotStreamable` when they go back
-    in log time from ``after_log_time``, the previous chunk's last (the whole read would sort them)."""
+    in log time from ``after_log_time``, the previous chunk's last (the whole read would sort them), or,
+    given ``after_stamp`` (the previous chunk's last header stamp, ns), when their header stamps do not
+    increase from it."""
     index = np.flatnonzero(batch.channel_id == channel_id)
     if not len(index):
         return None
@@ -217,7 +218,10 @@ def read_topic(
     log_time = batch.log_time[index]
     if int(log_time[0]) < after_log_time:
         raise NotStreamable("a topic's messages go back in log time from one chunk to the next")
-    return mtype.decode(batch.payloads(index)), int(log_time[-1])
+    decoded = mtype.decode(batch.payloads(index))
+    if after_stamp is not None and np.any(np.diff(np.concatenate(([after_stamp], decoded.stamp_ns))) <= 0):
+        raise NotStreamable("header stamps that do not increase")
+    return decoded, int(log_time[-1])
 
 
 @dataclass
@@ -240,14 +244,11 @@ class _Pending:
         return (1 << 62) if self.count is not None and self.read >= self.count else self.seen
 
     def append(self, batch: RawMessages, names: tuple[str, ...], increasing: bool) -> None:
-        got = read_topic(batch, self.channel_id, self.mtype, self.last_log_time)
+        got = read_topic(batch, self.channel_id, self.mtype, self.last_log_time, self.seen if increasing else None)
         if got is None:
             return
         decoded, self.last_log_time = got
         self.read += len(decoded.stamp_ns)
-        stamps = np.concatenate(([self.seen], decoded.stamp_ns))
-        if increasing and np.any(np.diff(stamps) <= 0):
-            raise NotStreamable("header stamps that do not increase")
         self.seen = max(self.seen, int(decoded.stamp_ns.max()))
         self.stamp_ns = np.concatenate((self.stamp_ns, decoded.stamp_ns))
         for name in names:

@@ -78,6 +78,7 @@ from gyroemu.pipelines.estimation.registry import (
     filter_class,
     is_offline,
     make_filter,
+    takes_whole_log,
     unavailable_filters,
 )
 from gyroemu.pipelines.formats.atomic import write_figure_atomic, write_text_atomic
@@ -95,7 +96,6 @@ from gyroemu.pipelines.jobs.bench_log import (
     mask_notes,
     no_reference_error,
     stream_log_devices,
-    uses_whole_samples,
 )
 from gyroemu.pipelines.jobs.bench_metrics import (
     BIAS_WINDOW_S,
@@ -870,7 +870,7 @@ def _log_items(case: LogCase, filters: list[str]) -> list:
 
     if not case.read_whole:
         try:
-            return stream_log_devices(case, whole_samples=uses_whole_samples(filters))
+            return stream_log_devices(case, whole_samples=any(takes_whole_log(f) for f in filters))
         except NotStreamable:
             pass  # read whole, with the same results
     return _log_runs(case)
@@ -885,17 +885,23 @@ def _bench_log_stream(path: Path, dev: LogDevice, filters, threshold_deg, bar) -
         fr.curve_t, fr.curve_total_deg, fr.curve_inclination_deg = r.curve_t, r.curve_total, r.curve_inclination
         results.append(fr)
         bar.step()
+    duration = float(dev.t_last - dev.t_first)
+    return _log_case(dev.label, dev.mode, dev.setup, dev.samples, duration, dev.source, results, dev.notes)
+
+
+def _log_case(name, mode, setup: FilterSetup, samples: int, duration_s: float, source, filters, notes) -> CaseResult:
+    """A log device's case in the report, read whole or a block at a time."""
     return CaseResult(
-        name=dev.label,
+        name=name,
         kind="log",
-        mode=dev.mode,
-        rate_hz=dev.setup.rate_hz,
-        samples=dev.samples,
-        duration_s=float(dev.t_last - dev.t_first),
+        mode=mode,
+        rate_hz=setup.rate_hz,
+        samples=samples,
+        duration_s=duration_s,
         runs=1,
-        source=dev.source,
-        filters=results,
-        notes=dev.notes,
+        source=source,
+        filters=filters,
+        notes=notes,
     )
 
 
@@ -910,15 +916,4 @@ def _bench_log(item, filters, threshold_deg, bar) -> CaseResult:
         _curve(fr, run.t, errors)
         results.append(fr)
         bar.step()
-    return CaseResult(
-        name=name,
-        kind="log",
-        mode=mode,
-        rate_hz=setup.rate_hz,
-        samples=len(run.t),
-        duration_s=float(run.t[-1] - run.t[0]),
-        runs=1,
-        source=source,
-        filters=results,
-        notes=notes,
-    )
+    return _log_case(name, mode, setup, len(run.t), float(run.t[-1] - run.t[0]), source, results, notes)

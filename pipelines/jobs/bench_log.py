@@ -38,7 +38,7 @@ import numpy as np
 
 from gyroemu.pipelines.estimation import registry
 from gyroemu.pipelines.estimation.protocol import FilterSetup, learns_in_blocks
-from gyroemu.pipelines.estimation.registry import is_offline, make_filter
+from gyroemu.pipelines.estimation.registry import make_filter
 from gyroemu.pipelines.estimation.series import check_counts, not_increasing_error
 from gyroemu.pipelines.formats.channels import MOVEMENT_ROLE
 from gyroemu.pipelines.formats.device_stream import (
@@ -68,7 +68,6 @@ __all__ = [
     "mask_notes",
     "no_reference_error",
     "stream_log_devices",
-    "uses_whole_samples",
 ]
 
 TRUTH_MATCH = 0.25
@@ -371,7 +370,7 @@ def bench_log_device(
         describe(f"{dev.label}: {spec}")
         warm_up(spec, dev.setup, first_t, dev.first.gyro, dev.first.accel, first_mag)
         r = _Running(spec, make_filter(spec, dev.setup), _metrics(dev, threshold_deg, window))
-        if is_offline(spec) and not learns_in_blocks(r.flt):  # the whole log at once
+        if registry.takes_whole_log(spec):  # the whole log at once
             assert dev.whole, "stream_log_devices(whole_samples=True) keeps every sample for such a filter"
             t = ns_to_stamps(dev.first.stamp_ns)
             try:
@@ -460,8 +459,3 @@ def _finished(r: _Running, dev: LogDevice, threshold_deg: float, curve_t: np.nda
         return FilterRun(r.spec, name, failed.result(reason=r.reason), curve_t, nan, nan.copy())
     total, inclination = (np.concatenate([c[i] for c in r.curve]) if r.curve else np.empty(0) for i in range(2))
     return FilterRun(r.spec, name, r.metrics.result(), curve_t, total, inclination)
-
-
-def uses_whole_samples(filters: list[str]) -> bool:
-    """Whether one of ``filters`` takes a log at once (offline, and not learning it in blocks)."""
-    return any(is_offline(f) and not registry.learns_in_blocks(f) for f in filters)

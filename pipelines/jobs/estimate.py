@@ -37,7 +37,7 @@ import numpy as np
 
 from gyroemu.pipelines.estimation import registry
 from gyroemu.pipelines.estimation.protocol import AttitudeFilter, learns_in_blocks
-from gyroemu.pipelines.estimation.registry import is_offline, make_filter
+from gyroemu.pipelines.estimation.registry import make_filter
 from gyroemu.pipelines.estimation.series import (
     check_counts,
     check_samples,
@@ -300,7 +300,7 @@ def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latenc
         tf_device = next((d.name for d, _ in chosen if d.metadata is not None), None)
         # an offline filter that cannot learn a block at a time, and the field's lag read from the
         # samples, need every sample at once
-        whole = is_offline(filter_name) and not registry.learns_in_blocks(filter_name)
+        whole = registry.takes_whole_log(filter_name)
         first_s = math.inf if whole or FIELD_LAG_FROM_LOG in latency_s.values() else FIRST_BLOCK_S
         found = count_samples(path, devices, tf_device, {d.name for d, _ in chosen}, first_s)
     # past the passes that may find the log unpairable (and fall back to the whole read, which warns anew)

@@ -278,14 +278,12 @@ class _Topic:
         self.log_time, self.stamp = -1, -(1 << 62)  # below any stamp, and no overflow in a difference
 
     def rows(self, batch: Any) -> DecodedBatch | None:
-        from gyroemu.pipelines.formats.device_stream import NotStreamable, read_topic
+        from gyroemu.pipelines.formats.device_stream import read_topic
 
-        got = read_topic(batch, self.channel_id, self.mtype, self.log_time)
+        got = read_topic(batch, self.channel_id, self.mtype, self.log_time, self.stamp)
         if got is None:
             return None
         decoded, self.log_time = got
-        if np.any(np.diff(np.concatenate(([self.stamp], decoded.stamp_ns))) <= 0):
-            raise NotStreamable("header stamps that do not increase")
         self.stamp = int(decoded.stamp_ns[-1])
         self.read += len(decoded.stamp_ns)
         return decoded
