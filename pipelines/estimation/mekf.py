@@ -29,7 +29,8 @@ otherwise: one parameter set for every log.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+import math
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
@@ -195,6 +196,17 @@ class MekfParams:
     tilt_sigma0: float = 2 * _DEG
     heading_sigma0: float = 10 * _DEG
     gyrocompass_s: float = 10.0
+
+    def __post_init__(self) -> None:
+        # every parameter is a standard deviation, a density, a duration, a gate or a tolerance
+        for f in fields(self):
+            value = getattr(self, f.name)
+            try:
+                number = float(value)
+            except (TypeError, ValueError):
+                number = math.nan
+            if not (math.isfinite(number) and number >= 0):
+                raise ValueError(f"MekfParams.{f.name} = {value!r}: must be a finite number, 0 or more")
 
     @classmethod
     def for_setup(cls, setup: FilterSetup, **overrides: float) -> MekfParams:

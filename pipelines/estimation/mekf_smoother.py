@@ -7,10 +7,13 @@ rows, the covariance before and after the window's updates, and the update it in
 pass is the RTS smoother on the error state (Rauch, Tung & Striebel 1965; for the multiplicative
 error state and its reset see :mod:`.mekf_smoother_kernels`): its smoothed correction is applied to the
 forward posterior quaternion, bias and scale/misalignment of each window, and interpolated over the
-window's samples. The output carries the smoothed attitude covariance, never larger than the forward
-one (``P_s = P_post + C (P_s⁺ − P_prior⁺) Cᵀ`` and ``P_s⁺ ≤ P_prior⁺``).
+window's samples. The output carries the smoothed attitude covariance, at the updates no larger than
+the forward one where every update is a Kalman update (``P_s = P_post + C (P_s⁺ − P_prior⁺) Cᵀ`` and
+``P_s⁺ ≤ P_prior⁺`` by induction); the heading's gain, which never corrects the tilt, and the gravity
+update's, which never corrects the considered acceleration, are not, and may raise it along some
+direction; between window ends it is interpolated towards the next window's.
 
-Memory: float64 storage of 5.4 kB a window (17 error states), about 163 MB for a 10-minute log at 1 kHz (20 ms
+Memory: float64 storage of 5.5 kB a window (17 error states), about 166 MB for a 10-minute log at 1 kHz (20 ms
 windows), plus the per-sample outputs (about 100 bytes a sample for the forward and smoothed states).
 :class:`MekfSmoother`'s ``learn`` runs the same passes a block at a time with the storage on disk, in
 memory that does not grow with the log (:mod:`.mekf_smoother_spool`).
@@ -126,8 +129,11 @@ def smooth_log(
     phi = np.zeros((3, kern.N_DRIFT))
     earth = earth_rate_enu(setup)
     q_f, b_f, cov_f = np.empty((n, 4)), np.empty((n, 3)), np.empty((n, 3, 3))
-    # windows: index 0 is the initial state; capacity for the expected count, grown if stamps need more
+    # windows: index 0 is the initial state; capacity for the expected count, grown if stamps need more,
+    # and never more than the n + 1 a log can close (a window holds a sample at least: a pause in the
+    # stamps closes one window, however long it is)
     expected = int((t[-1] - t[0]) / params.window_s) + n // max(1, int(p[kern.P_WINDOW_N])) // 8 + 64
+    expected = min(expected, n + 1)
     chunks = []
     k, j0 = 0, 1
     first = True
