@@ -69,6 +69,22 @@ MODULES: dict[str, list[str]] = {
     ],
     "dynamics/earth.py": ["tests/dynamics/test_earth.py"],
     "pipelines/estimation/mekf_kernels.py": ["tests/pipelines/test_mekf.py"],
+    "pipelines/estimation/mekf_smoother_kernels.py": [
+        "tests/pipelines/test_mekf_smoother.py",
+        "tests/pipelines/test_smoother_spool.py",
+    ],
+    "pipelines/estimation/mekf_smoother.py": [
+        "tests/pipelines/test_mekf_smoother.py",
+        "tests/pipelines/test_smoother_spool.py",
+    ],
+    "pipelines/estimation/mekf_smoother_spool.py": ["tests/pipelines/test_smoother_spool.py"],
+    "pipelines/estimation/latency.py": ["tests/pipelines/test_latency.py"],
+    "pipelines/estimation/field_lag.py": ["tests/pipelines/test_field_lag.py"],
+    "pipelines/formats/device_stream.py": [
+        "tests/pipelines/test_estimate_stream.py",
+        "tests/pipelines/test_bench_log.py",
+    ],
+    "pipelines/jobs/bench_metrics.py": ["tests/pipelines/test_bench_metrics.py"],
     "pipelines/identification/noise.py": ["tests/pipelines/test_identify.py"],
     "pipelines/identification/result.py": ["tests/pipelines/test_identify.py"],
     "pipelines/formats/messages.py": ["tests/pipelines/test_messages.py"],

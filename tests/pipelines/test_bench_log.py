@@ -125,6 +125,17 @@ def test_a_sparse_truth_a_mask_and_the_offline_filters(tmp_path):
     assert note.startswith("the 7000 samples of its movement mask counted, ") and "without a finite reference" in note
 
 
+def test_a_truth_without_rates(tmp_path):
+    """A truth of attitudes only (as BROAD's optical one: its rates written "no estimate", the covariance's
+    first element −1 over zero values): no bias error either way, the same report."""
+    rec = recording(6.0, seed=3)
+    truth = ImuSeries(t=rec.truth.t, q_wb=rec.truth.q_wb)
+    log = write_mcap(tmp_path / "no_rates.mcap", dataclasses.replace(rec, truth=truth))
+    (streamed, _), (whole, _) = bench_both(LogCase(log), ["mekf"])
+    assert_same_report(streamed, whole)
+    assert streamed.cases[0].filters[0].runs[0].bias_error_deg_s is None
+
+
 @pytest.mark.parametrize("device, six_d", [("consumer_mems", False), ("navigation_fog", True)])
 def test_small_chunks_the_filters_start_alike(tmp_path, device, six_d):
     """Chunks of 4 kB (a few samples each): every filter still starts from the same first block as the

@@ -96,6 +96,61 @@ def test_the_fit_finds_the_fields_lag_behind_the_gyro(gyro_l, mag_l):
     assert bound < abs(delta) / 4
 
 
+@pytest.fixture(scope="module")
+def noisy_lagging_field():
+    """An ideal IMU on the smooth manoeuvre (60 s), its magnetometer 20 ms late and 0.2 µT noisy."""
+    traj = load_scenario("smooth_manoeuvre").simulate(duration=60.0)
+    samples = _lagging_ideal_imu(0.0, 0.02).measure(traj)
+    mag = samples.mag + 2e-7 * np.random.default_rng(1).normal(size=samples.mag.shape)
+    return samples.t - samples.t[0], samples.gyro, mag
+
+
+def _used_windows(t, gyro, mag, window_s=2.0, min_rate=0.2):
+    """The fit's windows (indices of 2-s windows from t[0] holding two usable samples or more) and each
+    sample's window index."""
+    usable = np.isfinite(mag).all(axis=1) & (np.linalg.norm(gyro, axis=1) >= min_rate)
+    window = np.floor(t / window_s).astype(int)
+    used, counts = np.unique(window[usable], return_counts=True)
+    return used[counts >= 2], window
+
+
+def test_the_standard_error_is_the_jackknife_over_eight_stretches(noisy_lagging_field):
+    """The standard error is the delete-one-group jackknife over eight contiguous stretches of the fit's
+    windows: refitting with each stretch's field left out gives Δ_g, and √((k−1)/k Σ (Δ_g − Δ̄)²) is the
+    fit's standard error. The fit takes each Δ_g as one Gauss–Newton step, which is the refit to first
+    order in the step; the residual's nonlinearity over a lag Δ is of relative size ω Δ (the turn back,
+    ``exp(−ω Δ) m``), so the two agree within RMS ω · Δ of each other."""
+    t, gyro, mag = noisy_lagging_field
+    fit = estimate_field_lag(t, gyro, mag)
+    used, window = _used_windows(t, gyro, mag)
+    stretch = np.arange(len(used)) * 8 // len(used)
+    lags = []
+    for g in range(8):
+        left_out = mag.copy()
+        left_out[np.isin(window, used[stretch == g])] = np.nan
+        lags.append(estimate_field_lag(t, gyro, left_out).lag_s)
+    jackknife = np.sqrt(7 / 8 * np.sum((np.array(lags) - np.mean(lags)) ** 2))
+    nonlinearity = np.sqrt(np.mean(np.sum(gyro**2, axis=1))) * abs(fit.lag_s)
+    assert fit.windows == len(used)
+    assert abs(fit.standard_error_s / jackknife - 1) <= nonlinearity, (fit.standard_error_s, jackknife)
+
+
+def test_a_window_with_one_usable_sample_is_left_out(noisy_lagging_field):
+    """A window's mean is taken off its samples, so a window with a single usable sample carries nothing
+    of Δ: the fit is the same, to the bit, as with that sample's field missing too."""
+    t, gyro, mag = noisy_lagging_field
+    used, window = _used_windows(t, gyro, mag)
+    usable = np.linalg.norm(gyro, axis=1) >= 0.2
+    in_window = np.flatnonzero(window == used[5])
+    kept = in_window[usable[in_window]][0]
+    lone = mag.copy()
+    lone[in_window[in_window != kept]] = np.nan  # window 5 keeps one usable sample
+    none = lone.copy()
+    none[kept] = np.nan
+    assert estimate_field_lag(t, gyro, lone) == estimate_field_lag(t, gyro, none)
+    assert estimate_field_lag(t, gyro, none).windows == len(used) - 1
+
+
 def test_no_turning_no_lag():
     """At rest the field carries nothing of Δ: not observable, and a setup keeps its latency."""
     traj = load_scenario("bench_static").simulate(duration=20.0)
