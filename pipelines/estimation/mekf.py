@@ -483,6 +483,12 @@ class Mekf:
             k = end
         return Estimate(q_wb=q_out, gyro_bias=b_out, q_wb_covariance=cov_out)
 
+    @property
+    def scale_misalignment(self) -> np.ndarray:
+        """The gyro's scale-factor and misalignment errors ``M`` (3, 3) as estimated so far (the rate is
+        taken as ``(I − M)(ω_m − b)``); zeros before the first sample."""
+        return self._slow[kern.S_SCALE : kern.S_SCALE + 9].reshape(3, 3).copy()
+
     def _window(self) -> None:
         """The window's prediction and updates, then the injection into the nominal state."""
         kf, p, win, slow = self.kf, self._p, self._win, self._slow

@@ -208,7 +208,8 @@ def test_forward_pass_is_the_online_filter_and_the_smoother_beats_it(short_run):
     setup, t, samples, mag, q_true = short_run
     params = smoother_params(setup)
     res = smooth_log(setup, t, samples.gyro, samples.accel, mag, params=params)
-    online = Mekf(setup, params).process(t, samples.gyro, samples.accel, mag)
+    mekf = Mekf(setup, params)
+    online = mekf.process(t, samples.gyro, samples.accel, mag)
     assert np.abs(res.forward.q_wb - online.q_wb).max() < 1e-9
     ends = res.window_end
     assert np.allclose(res.forward.q_wb_covariance[ends], online.q_wb_covariance[ends], rtol=1e-9, atol=0)
@@ -225,6 +226,9 @@ def test_forward_pass_is_the_online_filter_and_the_smoother_beats_it(short_run):
     # the last window's smoothed state is the forward posterior (nothing after it)
     assert np.allclose(res.smoothed.q_wb[ends[-1]], res.forward.q_wb[ends[-1]], rtol=0, atol=1e-12)
     assert res.scale_misalignment.shape == (len(ends), 3, 3)
+    # ... and so are its scale and misalignment (the online filter's after the log, which learnt them)
+    assert np.abs(mekf.scale_misalignment).max() > 1e-6
+    assert np.allclose(res.scale_misalignment[-1], mekf.scale_misalignment, rtol=1e-9, atol=1e-15)
 
 
 def test_a_heading_found_in_one_window_turns_the_smoothed_tilt_with_it():
