@@ -1013,7 +1013,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="compare attitude filters on a recording with truth and on its emulated twins",
         description="Run attitude filters over a recording with truth (a BROAD .hdf5 trial or a gyroemu .mcap "
         "log) and over --seeds twins of it (the recorded motion sensed by --device in the site's modelled "
-        "field; twin i: device and magnetic-environment seed i), and write twin.md, twin.json and one plot "
+        "field; twin i of a recording: device and magnetic-environment seeds drawn from i and the recording's "
+        "file name), and write twin.md, twin.json and one plot "
         "per recording (residual Allan deviations and spectra at rest, real vs twin) into --out.",
     )
     p.add_argument("trial", nargs="+", metavar="TRIAL", help="a BROAD .hdf5 trial or a .mcap log with /truth/imu")
@@ -1029,7 +1030,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="KEY=VALUE",
         help="a [smoothing] key of the recorded scenario, e.g. orientation_cutoff_hz=8 (repeatable; default "
-        "orientation_cutoff_hz=5 and position_cutoff_hz=10; any key given replaces both defaults)",
+        "orientation_cutoff_hz=20 and position_cutoff_hz=10; any key given replaces both defaults)",
     )
     p.add_argument("--workers", type=int, default=2, help="processes for the runs (default: 2)")
     p.add_argument("--out", default="twin", help="folder for the report (default: ./twin)")

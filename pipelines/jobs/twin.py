@@ -64,7 +64,7 @@ import tomllib
 import warnings
 import zlib
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -228,6 +228,29 @@ def check_options(options: TwinOptions) -> tuple[list[str], dict, dict, _Handlin
     elif not out.parent.is_dir() and out.parent != Path(""):
         raise TwinError(f"argument --out: {out.parent} is not a folder")
     return filters, unavailable, site, handling, device
+
+
+def _check_smoothing(smoothing: dict | None, real: _Real) -> None:
+    """:class:`TwinError` naming ``--smoothing`` for a key the recorded scenario's ``[smoothing]`` does not
+    take, a bad value, or a cut-off at or above the recording's Nyquist frequency (found otherwise only
+    when the first twin fits its motion, after the real run)."""
+    from pydantic import ValidationError
+
+    from gyroemu.pipelines.recorded_scenario import SmoothingSpec
+
+    try:
+        spec = SmoothingSpec(**(smoothing or {}))
+    except ValidationError as e:
+        problems = "; ".join(f"{'.'.join(map(str, err['loc']))}: {err['msg']}" for err in e.errors())
+        raise TwinError(f"argument --smoothing: {problems}") from None
+    nyquist = 0.5 * real.rate_hz
+    for key in ("position_cutoff_hz", "orientation_cutoff_hz"):
+        value = getattr(spec, key)
+        if value is not None and not value < nyquist:
+            raise TwinError(
+                f"argument --smoothing: {key} = {value:g} Hz is not below {real.path.name}'s Nyquist "
+                f"frequency, {nyquist:g} Hz"
+            )
 
 
 def _read_site(path: Path) -> tuple[dict, _Handling | None]:
@@ -898,7 +921,7 @@ def _summary(values: list) -> dict:
     finite = [float(v) for v in values if v is not None and math.isfinite(v)]
     return {
         "mean": float(np.mean(finite)) if finite else None,
-        "std": (float(np.std(finite, ddof=1)) if len(finite) > 1 else 0.0) if finite else None,
+        "std": float(np.std(finite, ddof=1)) if len(finite) > 1 else None,  # ddof 1: none for one value
         "n": len(finite),
         "values": [_finite(v) for v in values],
     }
@@ -993,7 +1016,7 @@ def _trial_result(real: _Real, real_run: dict, twins: list[dict], filters, mode,
         f_twin = twins[0]["residuals"][f"{key}_psd_f"]
         p_twin = np.mean(np.stack(twin_p), axis=0) if twin_p and all(len(p) == len(twin_p[0]) for p in twin_p) else None
         if len(f_real) and p_twin is not None:
-            band = (f_real >= 1.0) & (f_real <= real.rate_hz / 4)
+            band = (f_real >= 1.0) & (f_real <= min(real.rate_hz, twin_rate) / 4)  # within both Nyquists
             if band.any():
                 interp = np.stack([np.interp(f_real[band], f_twin, p_twin[:, a]) for a in range(3)], axis=1)
                 with np.errstate(invalid="ignore", divide="ignore"):
@@ -1058,29 +1081,53 @@ def _trial_result(real: _Real, real_run: dict, twins: list[dict], filters, mode,
 
 def _rest_phases(real: _Real) -> tuple[list[slice], dict]:
     """The rest phases of the real recording with a reference (each trimmed to it, at least 64 samples):
-    (their samples, a description). Without any, the samples before the first movement sample stand in
-    for the residuals (``intervals_s``), but only phases found still are held still in the twins
-    (``still_s``)."""
+    (their samples, a description). The rest detector's threshold is relative to the recording's
+    quietest stretch, so in a recording with a movement mask a phase is also trimmed to its longest run
+    outside the mask (a recording that moves throughout has quiet motion, not rest). Without any, the
+    samples before the first movement sample stand in for the residuals (``intervals_s``), but only
+    phases found still are held still in the twins (``still_s``). A recording that moves from its first
+    sample has none: its residuals are then taken over the whole recording if it has its own truth rate
+    and specific force (a simulated log: the sensor's output less the truth, in motion as at rest), and
+    not at all otherwise (rest's truth, ω = 0 and constant gravity, would be the motion itself)."""
     from gyroemu.pipelines.identification import find_rest_phases
 
     valid = np.isfinite(real.q_true).all(axis=1)
+    if real.counted == "movement mask":
+        valid &= ~real.mask
     rests = []
     for p in find_rest_phases(real.t, real.gyro, real.accel):
-        ok = np.flatnonzero(valid[p.start : p.stop])  # the phase's span with a reference
-        if len(ok) >= 64:
-            rests.append(slice(p.start + int(ok[0]), p.start + int(ok[-1]) + 1))
+        run = _longest_run(valid[p.start : p.stop])  # the phase's span with a reference (and still)
+        if run is not None and run[1] - run[0] >= 64:
+            rests.append(slice(p.start + run[0], p.start + run[1]))
     if rests:
         intervals = [(float(real.t[r.start]), float(real.t[r.stop - 1])) for r in rests]
         return rests, {"source": f"{len(rests)} rest phase(s)", "intervals_s": intervals, "still_s": intervals}
     first = np.flatnonzero(real.mask)
-    stop = int(first[0]) if len(first) and first[0] > 0 else len(real.t)
-    idx = np.flatnonzero(valid[:stop])
-    start = int(idx[0]) if len(idx) else 0
+    stop = int(first[0]) if len(first) else len(real.t)
+    source = "samples before the first movement sample"
+    if stop == 0:
+        if real.omega_true is None or real.force_true is None:
+            return [], {"source": "none: the recording moves from its first sample", "intervals_s": [], "still_s": []}
+        stop, source = len(real.t), "the whole recording, less its own truth (it moves from its first sample)"
+    idx = np.flatnonzero(np.isfinite(real.q_true).all(axis=1)[:stop])
+    if not len(idx):
+        return [], {"source": "none: no reference before the first movement sample", "intervals_s": [], "still_s": []}
+    start = int(idx[0])
     return [slice(start, stop)], {
-        "source": "samples before the first movement sample",
-        "intervals_s": [(float(real.t[start]), float(real.t[max(start, stop - 1)]))],
+        "source": source,
+        "intervals_s": [(float(real.t[start]), float(real.t[stop - 1]))],
         "still_s": [],  # not found still: the twins' motion is not held there
     }
+
+
+def _longest_run(flags: np.ndarray) -> tuple[int, int] | None:
+    """(start, stop) of the longest run of True in ``flags`` (the first of equal ones); None without any."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], flags.astype(np.int8), [0]))))
+    if not len(edges):
+        return None
+    starts, stops = edges[0::2], edges[1::2]
+    k = int(np.argmax(stops - starts))
+    return int(starts[k]), int(stops[k])
 
 
 def run_twin(options: TwinOptions) -> TwinReport:
@@ -1101,6 +1148,7 @@ def run_twin(options: TwinOptions) -> TwinReport:
     for path in options.trials:
         try:
             real = _load_real(path)
+            _check_smoothing(options.smoothing, real)
             _scenario(real, site, 0, options.smoothing)  # the recorded motion reads and checks
         except TwinError:
             raise
@@ -1125,16 +1173,19 @@ def run_twin(options: TwinOptions) -> TwinReport:
                 setup9, setup6 = FilterSetup(rate_hz=real.rate_hz, use_mag=True), FilterSetup(rate_hz=real.rate_hz)
         if mode == "6D":
             setup9 = None
+        # the twins are sampled at the device's rate: their filters are told it (the same setup otherwise)
+        twin9 = None if setup9 is None else replace(setup9, rate_hz=float(device.spec.rate_hz))
+        twin6 = replace(setup6, rate_hz=float(device.spec.rate_hz))
         rests, rest_info = _rest_phases(real)
         plans.append((mode, rest_info))
         tasks.append(((i, None), _run_real, (real, filters, setup9, setup6, rests)))
         rest_t = rest_info["intervals_s"]
-        started = time.perf_counter()
+        attitude_started = time.perf_counter()
         delay = device.latencies[0] + 0.5 / device.spec.rate_hz  # an interval mean lags by half a sample
         attitude = twin_attitude(
             real.t, real.q_true, real.gyro, rest_info["still_s"], delay, device.spec.mounting.q_bs
         )  # one device, one attitude: the seeds draw only the device's errors and the site
-        timings["twin attitude"] = timings.get("twin attitude", 0.0) + time.perf_counter() - started
+        timings["twin attitude"] = timings.get("twin attitude", 0.0) + time.perf_counter() - attitude_started
         for seed in range(options.seeds):
             tasks.append(
                 (
@@ -1147,8 +1198,8 @@ def run_twin(options: TwinOptions) -> TwinReport:
                         options.device,
                         seed,
                         filters,
-                        setup9,
-                        setup6,
+                        twin9,
+                        twin6,
                         rest_t,
                         attitude,
                         handling,

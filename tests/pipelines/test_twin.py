@@ -129,9 +129,18 @@ def test_existing_out_refused_without_force(synthetic, report, capsys):
         (["--device", "no_such_device"], "--device"),
         (["--site", "/nonexistent/site.toml"], "--site"),
         (["--workers", "0"], "--workers"),
+        (["--smoothing", "position_cutoff_hz=600"], "--smoothing"),  # above the log's Nyquist, 500 Hz
+        (["--smoothing", "orientation_cutoff_hz=-1"], "--smoothing"),
+        (["--smoothing", "no_such_key=1"], "--smoothing"),
     ],
 )
-def test_argument_errors_exit_2_before_work(synthetic, tmp_path, capsys, extra, named):
+def test_argument_errors_exit_2_before_work(synthetic, tmp_path, capsys, monkeypatch, extra, named):
+    from gyroemu.pipelines.jobs import twin
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("the real log's filters ran before the arguments were checked")
+
+    monkeypatch.setattr(twin, "_run_real", no_work)
     out = tmp_path / "o"
     with pytest.raises(SystemExit) as e:
         cli.main(["twin", str(synthetic), "--out", str(out), *extra])
@@ -158,6 +167,59 @@ def test_bad_handling_table_exits_2_naming_the_key(synthetic, tmp_path, capsys, 
     err = capsys.readouterr().err
     assert e.value.code == 2 and "--site" in err and "[handling]" in err and named in err, err
     assert not out.exists()
+
+
+def test_the_twins_filters_are_told_the_twins_rate(synthetic, tmp_path, monkeypatch):
+    """The twins are sampled at the device's rate (here 285.7 Hz against the log's 1 kHz): their filters,
+    which step at 1 / rate, are set up with it, and the real log's with its own (they were given the
+    log's: VQF's twin error was 44° against 9°)."""
+    from gyroemu.pipelines.jobs import twin
+    from gyroemu.sensors import load_device
+
+    rates = {}
+    real_run, twin_run = twin._run_real, twin._run_twin
+
+    def spy_real(real, filters, setup9, setup6, rests):
+        rates["real"] = setup6.rate_hz
+        return real_run(real, filters, setup9, setup6, rests)
+
+    def spy_twin(real, site, smoothing, device_name, seed, filters, setup9, setup6, *rest):
+        rates["twin"] = setup6.rate_hz
+        return twin_run(real, site, smoothing, device_name, seed, filters, setup9, setup6, *rest)
+
+    monkeypatch.setattr(twin, "_run_real", spy_real)
+    monkeypatch.setattr(twin, "_run_twin", spy_twin)
+    options = TwinOptions(
+        trials=[synthetic], device="aktos_t_broad", seeds=1, filters=["vqf"], workers=1, out=tmp_path / "o"
+    )
+    run_twin(options)
+    assert rates["real"] == pytest.approx(1000.0, rel=1e-3)  # the log's own, from its stamps
+    assert rates["twin"] == float(load_device("aktos_t_broad", seed=0).spec.rate_hz)
+
+
+@needs_trial("02_undisturbed_slow_rotation_B.hdf5")
+def test_a_recording_that_moves_throughout_has_no_rest(tmp_path):
+    """BROAD's trial 02 cut to its movement (45–145 s): the rest detector, relative to the quietest
+    stretch, finds quiet motion; a phase inside the movement mask is not rest, so the twins hold no
+    motion still and no samples stand in for rest: before the first movement sample there are none, and
+    a BROAD trial has no truth rate to take the sensor's residual in motion (the whole recording stood in,
+    its motion read as the sensor's error)."""
+    import h5py
+
+    src = BROAD_DIR / "02_undisturbed_slow_rotation_B.hdf5"
+    cut = tmp_path / "moving_02.hdf5"
+    with h5py.File(src, "r") as f, h5py.File(cut, "w") as g:
+        fs = float(f.attrs["sampling_rate"])
+        part = slice(int(45 * fs), int(145 * fs))
+        for key in f:
+            g[key] = f[key][part]
+        for key, value in f.attrs.items():
+            g.attrs[key] = value
+        assert g["movement"][:].all()
+    report = run_twin(TwinOptions(trials=[cut], seeds=1, filters=["mekf"], workers=1, out=tmp_path / "o"))
+    rest = report.trials[0].rest
+    assert rest["intervals_s"] == [] and rest["still_s"] == [], rest
+    assert rest["source"].startswith("none")
 
 
 def test_missing_trial_named(tmp_path):
