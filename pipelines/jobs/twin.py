@@ -1005,7 +1005,7 @@ def _trial_result(real: _Real, real_run: dict, twins: list[dict], filters, mode,
     rr = real_run["residuals"]
     for key in ("gyro", "accel"):
         real_adev = rr[f"{key}_adev"]
-        twin_adev = np.sqrt(np.nanmean(np.stack([t["residuals"][f"{key}_adev"] ** 2 for t in twins]), axis=0))
+        twin_adev = _rms_over_seeds([t["residuals"][f"{key}_adev"] for t in twins])
         with np.errstate(invalid="ignore", divide="ignore"):
             ratio = twin_adev / real_adev
         ok = np.isfinite(ratio)
@@ -1275,6 +1275,16 @@ def _pool_adev(runs: list[dict], key: str) -> tuple[np.ndarray, np.ndarray]:
         return np.where(clusters > 0, np.sqrt(avar / np.maximum(clusters, 1)), np.nan), clusters
 
 
+def _rms_over_seeds(values: list[np.ndarray]) -> np.ndarray:
+    """The RMS over the seeds (the list) of the finite values, element by element; NaN where no seed has
+    one (a recording without rest: no residuals), as ``nanmean`` but without its warning."""
+    squares = np.stack(values) ** 2
+    finite = np.isfinite(squares)
+    count = finite.sum(axis=0)
+    mean = np.where(finite, squares, 0.0).sum(axis=0) / np.maximum(count, 1)
+    return np.where(count > 0, np.sqrt(mean), np.nan)
+
+
 def _pooled_residuals(real_runs: list[dict], twin_runs_by_seed: list[list[dict]]) -> dict:
     """The residual Allan deviations at rest pooled over every recording's rest phases, real and twin
     (RMS over seeds), their ratio per τ and axis, and the real clusters behind each τ."""
@@ -1282,7 +1292,7 @@ def _pooled_residuals(real_runs: list[dict], twin_runs_by_seed: list[list[dict]]
     for key in ("gyro", "accel"):
         real, clusters = _pool_adev(real_runs, key)
         twins = [_pool_adev(runs, key)[0] for runs in twin_runs_by_seed]
-        twin = np.sqrt(np.nanmean(np.stack([t**2 for t in twins]), axis=0)) if twins else np.full_like(real, np.nan)
+        twin = _rms_over_seeds(twins) if twins else np.full_like(real, np.nan)
         with np.errstate(invalid="ignore", divide="ignore"):
             ratio = twin / real
         out[key] = {"real_adev": real, "twin_adev": twin, "ratio": ratio, "real_clusters": clusters}
