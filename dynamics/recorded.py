@@ -40,6 +40,7 @@ last valid sample only shorten the span.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -73,7 +74,12 @@ _UNIT_TOLERANCE = 1e-3
 
 
 class RecordedMotionError(ValueError):
-    """A recorded motion that cannot become a truth; the message names the source and the time or row."""
+    """A recorded motion that cannot become a truth; the message names the source and the time or row,
+    and ``key`` the smoothing option at fault, when one is (``max_gap_s``, a cut-off)."""
+
+    def __init__(self, message: str, *, key: str | None = None) -> None:
+        super().__init__(message)
+        self.key = key
 
 
 @dataclass(frozen=True, eq=False)
@@ -258,7 +264,8 @@ class RecordedMotion:
             if length > options.max_gap_s:
                 raise RecordedMotionError(
                     f"{samples.source}: a gap of {length:.4g} s without valid samples after t = {start:.6g} s "
-                    f"(stamp {float(start + self.t0)!r} s) is longer than max_gap_s = {options.max_gap_s:g} s"
+                    f"(stamp {float(start + self.t0)!r} s) is longer than max_gap_s = {options.max_gap_s:g} s",
+                    key="max_gap_s",
                 )
         self.duration = float(tm[-1])
         self.rate_hz = 1.0 / median
@@ -269,8 +276,17 @@ class RecordedMotion:
         # q and −q are one attitude: choose signs so that neighbours lie on the same side.
         flips = np.cumsum(np.einsum("ij,ij->i", q[1:], q[:-1]) < 0) % 2
         q[1:][flips == 1] *= -1.0
+        # A small turn δ (rad, per axis: variance σ² about each of three axes) moves the quaternion by
+        # ½ δ within the three directions at right angles to q: 3σ²/4 in all, spread over its four
+        # components, which the unbiased risk counts alike: σ √3 / 4 each.
         self.orientation_lambda = self._lambda(
-            tm, q, options.orientation_lambda, options.orientation_cutoff_hz, options.orientation_noise_rad, scale=0.5
+            tm,
+            q,
+            options.orientation_lambda,
+            options.orientation_cutoff_hz,
+            options.orientation_noise_rad,
+            "orientation_cutoff_hz",
+            scale=math.sqrt(3.0) / 4.0,
         )
         self._q: SmoothingSpline = smoothing_spline(tm, q, self.orientation_lambda)
         self.has_position = samples.pos_w is not None
@@ -279,12 +295,24 @@ class RecordedMotion:
         if samples.pos_w is not None:
             p = np.asarray(samples.pos_w[rows], dtype=float)
             self.position_lambda = self._lambda(
-                tm, p, options.position_lambda, options.position_cutoff_hz, options.position_noise_m
+                tm,
+                p,
+                options.position_lambda,
+                options.position_cutoff_hz,
+                options.position_noise_m,
+                "position_cutoff_hz",
             )
             self._p = smoothing_spline(tm, p, self.position_lambda)
 
     def _lambda(
-        self, t: np.ndarray, y: np.ndarray, lam: float | None, cutoff: float | None, noise: float | None, scale=1.0
+        self,
+        t: np.ndarray,
+        y: np.ndarray,
+        lam: float | None,
+        cutoff: float | None,
+        noise: float | None,
+        cutoff_key: str,
+        scale: float = 1.0,
     ) -> float:
         if lam is not None:
             return float(lam)
@@ -292,8 +320,7 @@ class RecordedMotion:
             try:
                 return lambda_for_cutoff(cutoff, self.gaps.median_step_s)
             except ValueError as e:
-                raise RecordedMotionError(f"{self.source}: {e}") from None
-        # A small turn δ (rad, per axis) moves the quaternion's components by δ/2: scale 0.5.
+                raise RecordedMotionError(f"{self.source}: {e}", key=cutoff_key) from None
         return choose_lambda(t, y, None if noise is None else noise * scale)
 
     @property

@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Any, ClassVar, Literal
 
 import numpy as np
-from pydantic import PrivateAttr
+from pydantic import PrivateAttr, field_validator
 
 from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Quat, Section
 from gyroemu.dynamics.earth import Site
@@ -86,6 +86,14 @@ class RecordedSpec(ScenarioSpec):
 
     _samples: MotionSamples | None = PrivateAttr(default=None)
     _motion: RecordedMotion | None = PrivateAttr(default=None)
+    _file: str | Path | None = PrivateAttr(default=None)
+
+    @field_validator("world_to_enu_quat")
+    @classmethod
+    def _a_rotation(cls, q: tuple[float, float, float, float] | None) -> tuple[float, float, float, float] | None:
+        if q is not None and not math.sqrt(sum(c * c for c in q)) > 1e-9:
+            raise ValueError("a rotation's quaternion is not zero (w, x, y, z; normalised when read)")
+        return q
 
     def __eq__(self, other: object) -> bool:
         """Equal configs (the loaded recording, a cache, does not count)."""
@@ -109,6 +117,7 @@ class RecordedSpec(ScenarioSpec):
 
         if self._samples is not None:
             return
+        self._file = file
         source = Path(self.path)
         if not source.is_file():
             reason = f"{source}: no such file" if not source.exists() else f"{source}: not a file"
@@ -168,8 +177,9 @@ class RecordedSpec(ScenarioSpec):
             assert self._samples is not None
             try:
                 self._motion = RecordedMotion(self._samples, self.smoothing.options())
-            except RecordedMotionError as e:
-                raise ConfigError(str(e), key="smoothing") from None  # a gap or a cut-off: the message says which
+            except RecordedMotionError as e:  # a gap or a cut-off: the key at fault
+                key = f"smoothing.{e.key}" if e.key else "smoothing"
+                raise ConfigError(str(e), file=self._file, key=key) from None
         return self._motion
 
     def max_span_s(self) -> float:

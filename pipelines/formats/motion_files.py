@@ -170,7 +170,12 @@ def read_mcap_motion(path: str | os.PathLike[str]) -> MotionSamples:
         if len(pose) != len(truth) or not np.array_equal(pose.t, truth.t):
             raise MotionFileError("its /truth/pose and /truth/imu stamps differ", file=path)
         pos = pose.pos_w
-    return MotionSamples(t=truth.t - truth.t[0], q_wb=q_wb, pos_w=pos, source=str(path))
+    t = truth.t - truth.t[0]
+    if np.array_equal(truth.t, device.samples.t):
+        # the truth at the samples' stamps (as gyroemu writes it): their exact ns stamps, not float
+        # seconds, which resolve 0.24 µs at Unix-epoch times; the smoothing would read that as jitter
+        t = (device.stamp_ns - device.stamp_ns[0]) * 1e-9
+    return MotionSamples(t=t, q_wb=q_wb, pos_w=pos, source=str(path))
 
 
 MOTION_FORMATS: dict[str, Callable[[str | os.PathLike[str]], MotionSamples]] = {

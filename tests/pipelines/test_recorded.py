@@ -256,8 +256,9 @@ def test_long_gap_and_short_span_are_refused(tmp_path):
     q = np.tile([1.0, 0, 0, 0], (len(t), 1))
     write_tum(tmp_path / "m.tum", t, q, np.zeros((len(t), 3)))
     scenario = load_scenario(write_scenario(tmp_path, "m.tum", "tum"))
-    with pytest.raises(ConfigError, match=r"gap of 0\.8.* s .*after t = 0\.825"):
+    with pytest.raises(ConfigError, match=r"gap of 0\.8.* s .*after t = 0\.825") as e:
         scenario.simulate()
+    assert e.value.key == "smoothing.max_gap_s" and Path(e.value.file).name == "motion.toml"  # the key at fault
     allowed = load_scenario(write_scenario(tmp_path, "m.tum", "tum", "[smoothing]\nmax_gap_s = 1.0\n"))
     assert len(allowed.spec.motion().gaps.gaps) == 1
     # Longer than the recording, and shorter than two of the device's samples.
@@ -277,8 +278,50 @@ def test_stated_cutoffs_set_the_smoothing(tmp_path):
     assert motion.orientation_cutoff_hz == pytest.approx(5.0, rel=1e-6)
     assert motion.position_cutoff_hz == pytest.approx(3.0, rel=1e-6)
     bad = load_scenario(write_scenario(tmp_path, "m.tum", "tum", "[smoothing]\norientation_cutoff_hz = 80.0\n"))
-    with pytest.raises(ConfigError, match="Nyquist"):
+    with pytest.raises(ConfigError, match="Nyquist") as e:
         bad.spec.motion()
+    assert e.value.key == "smoothing.orientation_cutoff_hz" and Path(e.value.file).name == "motion.toml"
+    with pytest.raises(ConfigError, match="world_to_enu_quat"):  # a zero quaternion is no rotation
+        load_scenario(write_scenario(tmp_path, "m.tum", "tum", "world_to_enu_quat = [0.0, 0.0, 0.0, 0.0]\n"))
+
+
+def test_a_gyroemu_logs_truth_is_read_at_its_exact_stamps(tmp_path):
+    """A gyroemu log's stamps count from an epoch (``simulate``'s, 2026), where float64 seconds resolve
+    0.24 µs: the truth at the samples' stamps is read at their exact nanoseconds, so the steps of a 1 kHz
+    log are 1 ms to round-off (they were 1 ms ± 0.3 µs, which the smoothing read as jitter: a rate error
+    of 10⁻⁴ rad/s on a noise-free log)."""
+    from gyroemu.pipelines.formats.motion_files import read_motion
+
+    out = tmp_path / "run.mcap"
+    run = [sys.executable, "-m", "gyroemu", "simulate", "--scenario", "smooth_manoeuvre", "--device", "ideal"]
+    subprocess.run([*run, "--duration", "2", "--out", str(out)], check=True, capture_output=True)
+    t = read_motion(out, "mcap").t
+    assert np.abs(np.diff(t) - 1e-3).max() <= 8 * np.finfo(float).eps * t[-1]
+
+
+def test_a_stated_orientation_noise_is_the_attitudes_own(tmp_path):
+    """``orientation_noise_deg`` is σ per axis: a turn of σ about each of three axes moves the unit
+    quaternion by ½ σ along three directions at right angles to it, 3σ²/4 in all over its four
+    components. Measured on turns drawn so (60,000 of them), the quaternion's total noise variance is
+    3σ²/4 within its sampling error (5 standard errors of a variance from n draws: 5 √(2/n)), not the
+    σ² that σ/2 per component makes; so the unbiased risk is given σ √3 / 4 per component (it was given
+    σ/2, and smoothed the attitude too much: a cut-off 10 % low)."""
+    from gyroemu.dynamics.smoothing_spline import choose_lambda
+
+    rng = np.random.default_rng(11)
+    n, sigma = 60_000, math.radians(0.05)
+    q0 = quat_from_rotvec(rng.normal(size=(n, 3)))
+    q = quat_multiply(q0, quat_from_rotvec(sigma * rng.standard_normal((n, 3))))
+    q *= np.sign(np.einsum("ij,ij->i", q, q0))[:, None]
+    total = np.mean(np.sum((q - q0) ** 2, axis=1))
+    assert abs(total / (0.75 * sigma**2) - 1) <= 5 * math.sqrt(2 / n)
+    assert abs(total / sigma**2 - 1) > 5 * math.sqrt(2 / n)  # σ/2 per component: far outside
+    truth = load_scenario("smooth_manoeuvre").simulate(duration=20.0, rate_hz=RATE)
+    noisy, _ = noisy_copy(truth, 3)
+    motion = RecordedMotion(MotionSamples(t=truth.t, q_wb=noisy), SmoothingOptions(orientation_noise_rad=sigma))
+    assert truth.t[0] == 0.0 and np.all(np.einsum("ij,ij->i", noisy[1:], noisy[:-1]) > 0)  # no time shift, no flip
+    unit = noisy / np.linalg.norm(noisy, axis=1, keepdims=True)  # as the fit takes them
+    assert motion.orientation_lambda == choose_lambda(truth.t, unit, sigma * math.sqrt(3.0) / 4.0)
 
 
 def test_replaced_attitude_is_taken_at_the_recordings_own_stamps(tmp_path):
