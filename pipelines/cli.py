@@ -308,6 +308,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         force=args.force,
         rest_intervals=rest or None,
         gravity_m_s2=args.gravity,
+        latitude_deg=args.latitude,
     )
     try:
         summary = run_identify(options)
@@ -1126,9 +1127,17 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         default=None,
         metavar="START:STOP",
-        help="a rest interval in seconds of every log (repeatable; default: found from the data)",
+        help="a rest interval in seconds from every log's first sample (repeatable; default: found from the data)",
     )
     p.add_argument("--gravity", type=_positive, default=9.81, help="local gravity, m/s^2 (default: 9.81)")
+    p.add_argument(
+        "--latitude",
+        type=float,
+        default=None,
+        metavar="DEG",
+        help="the site's latitude, for the Earth's rate the gyro measures (default: a gyroemu log's site; "
+        "else unknown, and the gyro bias holds the Earth's rate)",
+    )
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     p.set_defaults(func=_cmd_identify)
 

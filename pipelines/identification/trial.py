@@ -36,6 +36,7 @@ class TrialData:
     truth_t : (M,) s; q_wb : (M, 4) w, x, y, z, NaN rows where unknown; pos_w : (M, 3) m or None.
     movement : (N,) bool, the working-volume samples, or None (then: every sample not at rest).
     valid : (N,) bool, the samples the calibrations and latencies may use, or None (all).
+    latitude_rad : the site's latitude, rad, when the recording says it (a gyroemu log's site), or None.
     """
 
     name: str
@@ -48,6 +49,7 @@ class TrialData:
     pos_w: np.ndarray | None = None
     movement: np.ndarray | None = None
     valid: np.ndarray | None = None
+    latitude_rad: float | None = None
 
     @property
     def dt(self) -> float:

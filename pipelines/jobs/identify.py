@@ -48,8 +48,12 @@ class IdentifyOptions:
     out : the device TOML to write.
     site_out : the site TOML snippet to write (magnetic environment, handling offset), or None.
     force : overwrite existing outputs.
-    rest_intervals : [(t_start, t_stop), …] s of every log, or None to find the rest phases.
+    rest_intervals : [(t_start, t_stop), …] s of every log (from its first sample), or None to find the
+        rest phases.
     gravity_m_s2 : local gravity.
+    latitude_deg : the site's latitude, for the Earth's rate the gyro measures with the motion, or None:
+        a gyroemu log's site's, else unknown (the gyro bias then holds the Earth's rate, 15 °/h at most,
+        and a note says so).
     """
 
     logs: Sequence[Path]
@@ -58,6 +62,7 @@ class IdentifyOptions:
     force: bool = False
     rest_intervals: Sequence[tuple[float, float]] | None = None
     gravity_m_s2: float = 9.81
+    latitude_deg: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "logs", tuple(Path(p) for p in self.logs))
@@ -96,7 +101,7 @@ def check_options(options: IdentifyOptions) -> None:
         raise IdentifyError("argument LOG: give at least one log")
     for log in options.logs:
         if not log.is_file():
-            raise IdentifyError(f"argument LOG: {log}: no such file")
+            raise IdentifyError(f"argument LOG: {log}: {'not a file' if log.exists() else 'no such file'}")
         if log.suffix not in _SUFFIXES:
             raise IdentifyError(f"argument LOG: {log}: expected an .mcap log or a BROAD .hdf5 trial")
     _check_out(options.out, "--out", options.force)
@@ -109,6 +114,8 @@ def check_options(options: IdentifyOptions) -> None:
             raise IdentifyError(f"argument --rest: {a:g}:{b:g}: start must be before stop")
     if not options.gravity_m_s2 > 0:
         raise IdentifyError(f"argument --gravity: must be positive, got {options.gravity_m_s2:g}")
+    if options.latitude_deg is not None and not -90.0 <= options.latitude_deg <= 90.0:
+        raise IdentifyError(f"argument --latitude: must lie in [-90, 90] degrees, got {options.latitude_deg:g}")
 
 
 def read_trial(path: Path) -> TrialData:
@@ -143,21 +150,31 @@ def read_trial(path: Path) -> TrialData:
 
     try:
         log = read_mcap(path).device
-    except ValueError as e:
-        raise LogError(str(e), file=path) from None
+    except ValueError as e:  # its message may name the file already
+        reason = str(e).removeprefix(f"{path}: ")
+        raise LogError(reason, file=path) from None
     truth = log.truth
     if truth is None or truth.q_wb is None:
         raise LogError("has no /truth/imu attitude to identify against", file=path)
     s = log.samples
     mag = s.mag if s.mag is not None and np.isfinite(s.mag).any() else None
-    pos, truth_t, q = None, truth.t, truth.q_wb
+    # Seconds from the log's first sample: the samples' exactly (float seconds since the epoch resolve
+    # 0.24 µs, which would skew the rate written), the truth's and pose's to 0.24 µs.
+    t = (log.stamp_ns - log.stamp_ns[0]) * 1e-9
+    origin = float(s.t[0])
+    pos, truth_t, q = None, truth.t - origin, truth.q_wb
     if log.pose is not None:  # /truth/pose, at its own stamps
         from gyroemu.pipelines.identification.truth import interpolate_vectors
 
-        pos = interpolate_vectors(log.pose.t, log.pose.pos_w, truth_t)
+        pos = interpolate_vectors(log.pose.t - origin, log.pose.pos_w, truth_t)
+    latitude = None
+    if log.metadata:
+        from gyroemu.pipelines.estimation.setup import setup_from_metadata
+
+        latitude = setup_from_metadata(log.metadata, 1.0 / float(np.median(np.diff(t))), use_mag=False).latitude_rad
     return TrialData(
         name=path.name,
-        t=s.t,
+        t=t,
         gyro=s.gyro,
         accel=s.accel,
         mag=mag,
@@ -165,21 +182,37 @@ def read_trial(path: Path) -> TrialData:
         q_wb=q,
         pos_w=pos,
         movement=log.movement,
+        latitude_rad=latitude,
     )
 
 
 def identify_logs(options: IdentifyOptions) -> Identification:
     """Read and identify the logs of ``options`` (no files written)."""
+    import math
+
+    from gyroemu.dynamics.earth import EARTH_RATE
     from gyroemu.pipelines.identification import TrialSettings, identify
 
     trials = [read_trial(p) for p in options.logs]
-    settings = TrialSettings(rest_intervals=options.rest_intervals, gravity_m_s2=options.gravity_m_s2)
+    latitudes = {d.latitude_rad for d in trials}
+    latitude = math.radians(options.latitude_deg) if options.latitude_deg is not None else None
+    if latitude is None and len(latitudes) == 1:
+        latitude = latitudes.pop()  # every log's site says the same (a gyroemu log), or none does
+    earth = None if latitude is None else (0.0, EARTH_RATE * math.cos(latitude), EARTH_RATE * math.sin(latitude))
+    settings = TrialSettings(
+        rest_intervals=options.rest_intervals, gravity_m_s2=options.gravity_m_s2, earth_rate_w=earth
+    )
     try:
-        return identify(trials, settings)
+        result = identify(trials, settings)
     except ValueError as e:
         if isinstance(e, ConfigError):
             raise
         raise ConfigError(f"cannot identify: {e}", file=", ".join(str(p) for p in options.logs)) from None
+    if earth is None:
+        result.notes.append(
+            "the site's latitude is not known (give --latitude): the gyro bias holds the Earth's rate, up to 15 °/h"
+        )
+    return result
 
 
 def run_identify(options: IdentifyOptions) -> IdentifySummary:

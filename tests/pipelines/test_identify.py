@@ -289,12 +289,45 @@ def test_lever_arm_is_recovered(synthetic, synthetic_data):
     assert tomllib.loads(result.device_toml())["mounting"]["lever_arm_m"] == pytest.approx(none.lever_arm_b, abs=1e-4)
 
 
+def test_a_gyroemu_log_gives_its_sites_earth_rate_and_exact_stamps(tmp_path: Path):
+    """From a gyroemu log (``simulate`` of the test device, 60 s): the site's latitude comes from the log's
+    metadata, so the gyro bias is the device's and not the device's plus the Earth's rate (up to 15 °/h
+    along a body axis, several of the bias's σ; it was 8σ off on z), and the stamps count from the first
+    sample exactly, so the rate written is the device's (the float seconds since the epoch gave 200.005
+    Hz). ``--latitude`` outside ±90° is refused before any work."""
+    import tomli_w
+
+    from gyroemu.pipelines.jobs.identify import identify_logs
+
+    device = tmp_path / "device.toml"
+    device.write_text(tomli_w.dumps(DEVICE))
+    log = tmp_path / "run.mcap"
+    args = ["simulate", "--scenario", "smooth_manoeuvre", "--device", str(device), "--duration", "60"]
+    assert cli.main([*args, "--seed", "7", "--out", str(log)]) in (0, None)
+    result = identify_logs(IdentifyOptions(logs=[log], out=tmp_path / "fitted.toml"))
+    gyro = result.trials[0].gyro
+    assert gyro.observable, gyro.note
+    _within(np.degrees(gyro.bias) * 3600, GYRO_BIAS_DPH, np.degrees(gyro.bias_sigma) * 3600, "gyro bias deg/h")
+    assert result.rate_hz == pytest.approx(RATE, rel=1e-9)
+    assert not any("latitude" in note for note in result.notes)
+    with pytest.raises(IdentifyError, match="--latitude"):
+        check_options(IdentifyOptions(logs=[log], out=tmp_path / "x.toml", latitude_deg=91.0))
+
+
 def test_options_are_checked_before_work(tmp_path: Path):
     log = tmp_path / "a.mcap"
     log.write_bytes(b"")
     out = tmp_path / "dev.toml"
-    with pytest.raises(IdentifyError, match="argument LOG"):
+    with pytest.raises(IdentifyError, match="missing.mcap: no such file"):
         check_options(IdentifyOptions(logs=[tmp_path / "missing.mcap"], out=out))
+    (tmp_path / "folder.mcap").mkdir()
+    with pytest.raises(IdentifyError, match="folder.mcap: not a file"):
+        check_options(IdentifyOptions(logs=[tmp_path / "folder.mcap"], out=out))
+    from gyroemu.pipelines.jobs.identify import read_trial
+
+    with pytest.raises(ValueError) as e:  # a log that is no MCAP: named once
+        read_trial(log)
+    assert str(e.value).count("a.mcap") == 1, str(e.value)
     with pytest.raises(IdentifyError, match="--out"):
         check_options(IdentifyOptions(logs=[log], out=tmp_path / "nofolder" / "x.toml"))
     out.write_text("keep")
