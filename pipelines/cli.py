@@ -314,8 +314,9 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         summary = run_identify(options)
     except IdentifyError as e:
         raise UsageError(e.reason) from None
+    gyro = "not found" if summary.gyro_latency_ms is None else f"{summary.gyro_latency_ms:.2f} ms"
     mag = "" if summary.mag_latency_ms is None else f", mag {summary.mag_latency_ms:.2f} ms"
-    print(f"{len(summary.logs)} log(s): gyro latency {summary.gyro_latency_ms:.2f} ms{mag} -> {summary.out}")
+    print(f"{len(summary.logs)} log(s): gyro latency {gyro}{mag} -> {summary.out}")
     if summary.site_out is not None:
         print(f"magnetic environment -> {summary.site_out}")
     for note in summary.notes:

@@ -143,6 +143,7 @@ class Identification:
     handling: tuple[np.ndarray, np.ndarray] | None = None  # (3,) mean, (3,) std across trials, m/s²
     lever_arm: Pooled | None = None  # (3,) m, body axes: the accelerometer's lever arm from the truth's origin
     gyro_scale_spread: np.ndarray | None = None  # (3,) τ, the scale factor's spread between power-ups
+    latency_bounds: frozenset = frozenset()  # sensors whose latency no trial resolved: not written
 
     # ----------------------------------------------------------------------------------------------
     def device_dict(self) -> dict:
@@ -189,14 +190,11 @@ class Identification:
             "rate_hz": round(float(self.rate_hz), 6),
             "mounting": {"q_bs": _list(q_bs, 9)}
             | ({} if self.lever_arm is None else {"lever_arm_m": _list(self.lever_arm.value, 4)}),
-            "gyro": {"latency_s": round(float(self.latency["gyro"].value) - half, 6), "errors": gyro_errors},
-            "accelerometer": {
-                "latency_s": round(float(self.latency["accelerometer"].value) - half, 6),
-                "errors": accel_errors,
-            },
+            "gyro": self._latency_key("gyro", half) | {"errors": gyro_errors},
+            "accelerometer": self._latency_key("accelerometer", half) | {"errors": accel_errors},
         }
         if "magnetometer" in self.latency:
-            mag: dict = {"latency_s": round(float(self.latency["magnetometer"].value), 6)}
+            mag: dict = self._latency_key("magnetometer", 0.0)
             if self.mag_noise is not None:
                 mag["noise_density_uT_per_sqrt_hz"] = round(
                     float(np.mean(self.mag_noise.values("noise_density"))) * 1e6, 5
@@ -235,6 +233,12 @@ class Identification:
                     lines.append(f"  {what}: {note}")
             lines.extend(f"  {n}" for n in t.notes)
         for sensor, p in self.latency.items():
+            if sensor in self.latency_bounds:
+                lines.append(
+                    f"{sensor}: delay not resolved in any trial ({_pm(p.value, p.sigma)} s: at the edge of the "
+                    "search, or uncertain beyond it): a bound, not a fit, so no latency_s is written"
+                )
+                continue
             lines.append(
                 f"{sensor}: measured delay {_pm(p.value, p.sigma)} s over {p.trials} trials"
                 + (" (latency_s = delay − T/2: the interval mean adds T/2)" if sensor != "magnetometer" else "")
@@ -328,6 +332,12 @@ class Identification:
                         )
         lines.extend(self.notes)
         return lines
+
+    def _latency_key(self, sensor: str, half: float) -> dict:
+        """``{"latency_s": delay − half}`` for a fitted delay; nothing for a bound (:attr:`latency_bounds`)."""
+        if sensor in self.latency_bounds:
+            return {}
+        return {"latency_s": round(float(self.latency[sensor].value) - half, 6)}
 
     def device_toml(self) -> str:
         """The device config as TOML text, comments first."""
@@ -443,13 +453,20 @@ def identify(trials: Sequence[TrialData], settings: TrialSettings | None = None)
     settings = settings if settings is not None else TrialSettings()
     results = [identify_trial(d, settings) for d in trials]
     notes: list[str] = []
-    latency = {
-        "gyro": _pool_latency([r.gyro_latency for r in results]),
-        "accelerometer": _pool_latency([r.accel_latency for r in results]),
-    }
-    mag_latencies = [r.mag_latency for r in results if r.mag_latency is not None]
-    if mag_latencies:
-        latency["magnetometer"] = _pool_latency(mag_latencies)
+    # A latency at the edge of its search is a bound, not a fit, and one uncertain beyond the search
+    # is not resolved: pooled only where no trial resolved one, and then not written into the device
+    # (:meth:`Identification.device_toml`).
+    latency, latency_bounds = {}, set()
+    for sensor, estimates in (
+        ("gyro", [r.gyro_latency for r in results]),
+        ("accelerometer", [r.accel_latency for r in results]),
+        ("magnetometer", [r.mag_latency for r in results if r.mag_latency is not None]),
+    ):
+        fitted = [e for e in estimates if not e.at_edge and e.sigma_s < settings.search_s]
+        if fitted or estimates:
+            latency[sensor] = _pool_latency(fitted or estimates)
+        if estimates and not fitted:
+            latency_bounds.add(sensor)
 
     gyros = [r.gyro for r in results if r.gyro.observable]
     biases = np.array([r.gyro.bias for r in results])
@@ -514,6 +531,7 @@ def identify(trials: Sequence[TrialData], settings: TrialSettings | None = None)
         trials=results,
         rate_hz=1.0 / dt,
         latency=latency,
+        latency_bounds=frozenset(latency_bounds),
         gyro_bias=gyro_bias,
         gyro_bias_spread=spread,
         gyro_scale=scale[0] if scale is not None else None,

@@ -78,8 +78,8 @@ class IdentifySummary:
     out: Path
     site_out: Path | None
     logs: tuple[str, ...]
-    gyro_latency_ms: float
-    mag_latency_ms: float | None
+    gyro_latency_ms: float | None  # None: at the search's edge in every log (a bound, not written)
+    mag_latency_ms: float | None  # None: no field, or at the search's edge
     gyro_noise_density_deg_per_s_per_sqrt_hz: tuple[float, ...] | None
     elapsed_s: float
     notes: list[str] = field(default_factory=list)
@@ -229,13 +229,13 @@ def run_identify(options: IdentifyOptions) -> IdentifySummary:
             notes.append("no magnetometer environment: --site-out not written")
         else:
             write_text_atomic(options.site_out, site)
-    mag = result.latency.get("magnetometer")
+    gyro, mag = (None if s in result.latency_bounds else result.latency.get(s) for s in ("gyro", "magnetometer"))
     noise = result.gyro_noise
     return IdentifySummary(
         out=options.out,
         site_out=options.site_out if site is not None else None,
         logs=tuple(str(p) for p in options.logs),
-        gyro_latency_ms=float(result.latency["gyro"].value) * 1e3,
+        gyro_latency_ms=None if gyro is None else float(gyro.value) * 1e3,
         mag_latency_ms=None if mag is None else float(mag.value) * 1e3,
         gyro_noise_density_deg_per_s_per_sqrt_hz=None
         if noise is None

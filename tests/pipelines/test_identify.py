@@ -314,6 +314,26 @@ def test_a_gyroemu_log_gives_its_sites_earth_rate_and_exact_stamps(tmp_path: Pat
         check_options(IdentifyOptions(logs=[log], out=tmp_path / "x.toml", latitude_deg=91.0))
 
 
+def test_a_latency_the_log_cannot_show_is_not_written(tmp_path: Path, capsys):
+    """A log that never turns (``bench_static``) shows no latency: each delay lies at the edge of the
+    search or is uncertain beyond it, a bound and not a fit, so the device file writes no ``latency_s``
+    (it wrote the bound as if measured, with σ 0, and the accelerometer's 56 ms ± 22 s) and says why;
+    the file loads, its latencies the default 0; ``--rest`` in seconds from the log's first sample."""
+    import tomllib
+
+    from gyroemu.sensors import load_device
+
+    log, out = tmp_path / "still.mcap", tmp_path / "still.toml"
+    args = ["simulate", "--scenario", "bench_static", "--device", "consumer_mems", "--duration", "30"]
+    assert cli.main([*args, "--out", str(log)]) in (0, None)
+    assert cli.main(["identify", str(log), "--out", str(out), "--rest", "0:29"]) == 0
+    assert "gyro latency not found" in capsys.readouterr().out
+    data = tomllib.loads(out.read_text())
+    assert all("latency_s" not in data[s] for s in ("gyro", "accelerometer", "magnetometer"))
+    assert out.read_text().count("a bound, not a fit, so no latency_s is written") == 3
+    assert load_device(out, seed=0).latencies == (0.0, 0.0, 0.0)
+
+
 def test_options_are_checked_before_work(tmp_path: Path):
     log = tmp_path / "a.mcap"
     log.write_bytes(b"")
