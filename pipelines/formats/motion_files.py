@@ -171,10 +171,8 @@ def read_mcap_motion(path: str | os.PathLike[str]) -> MotionSamples:
             raise MotionFileError("its /truth/pose and /truth/imu stamps differ", file=path)
         pos = pose.pos_w
     t = truth.t - truth.t[0]
-    if np.array_equal(truth.t, device.samples.t):
-        # the truth at the samples' stamps (as gyroemu writes it): their exact ns stamps, not float
-        # seconds, which resolve 0.24 µs at Unix-epoch times; the smoothing would read that as jitter
-        t = (device.stamp_ns - device.stamp_ns[0]) * 1e-9
+    if np.array_equal(truth.t, device.samples.t):  # the truth at the samples' stamps, as gyroemu writes it:
+        t = device.seconds_from_first()  # exactly (the smoothing would read float seconds' steps as jitter)
     return MotionSamples(t=t, q_wb=q_wb, pos_w=pos, source=str(path))
 
 

@@ -160,7 +160,7 @@ def read_trial(path: Path) -> TrialData:
     mag = s.mag if s.mag is not None and np.isfinite(s.mag).any() else None
     # Seconds from the log's first sample: the samples' exactly (float seconds since the epoch resolve
     # 0.24 µs, which would skew the rate written), the truth's and pose's to 0.24 µs.
-    t = (log.stamp_ns - log.stamp_ns[0]) * 1e-9
+    t = log.seconds_from_first()
     origin = float(s.t[0])
     pos, truth_t, q = None, truth.t - origin, truth.q_wb
     if log.pose is not None:  # /truth/pose, at its own stamps
