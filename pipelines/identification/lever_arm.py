@@ -68,7 +68,6 @@ def fit_lever_arm(
     *,
     gyro_bias: np.ndarray | None = None,
     c_sb: np.ndarray | None = None,
-    sensor_matrix: np.ndarray | None = None,
     gravity_m_s2: float = 9.81,
     window_s: float = 0.1,
     min_windows: int = 50,
@@ -76,14 +75,9 @@ def fit_lever_arm(
     """The lever arm of the module notes. ``accel`` (N, 3) m/s² and ``gyro`` (N, 3) rad/s at ``t`` (N,) s;
     truth ``q_wb`` (M, 4) and ``pos_w`` (M, 3) m at ``truth_t``; ``latency_s`` the accelerometer's;
     ``mask`` (N,) bool, the samples to use (the movement); ``gyro_bias`` (3,) rad/s; ``c_sb`` (3, 3)
-    body → sensor; ``sensor_matrix`` (3, 3) the accelerometer's ``I + S + N`` (scale and cross-axis, in
-    the sensor's axes, :class:`~.calibration.AccelCalibration`; None: I), which turns the force it reads:
-    left in the residual, ``S C f`` follows the motion as the lever arm's terms do and biases them.
-    Raises ``ValueError`` with fewer than ``min_windows`` usable windows."""
+    body → sensor. Raises ``ValueError`` with fewer than ``min_windows`` usable windows."""
     t = np.asarray(t, dtype=float)
     c = np.eye(3) if c_sb is None else np.asarray(c_sb, dtype=float)
-    if sensor_matrix is not None:
-        c = np.asarray(sensor_matrix, dtype=float) @ c
     force_b = truth_specific_force_body(t, truth_t, q_wb, latency_s, pos_w, gravity_m_s2)
     d = np.asarray(accel, dtype=float) - np.einsum("ij,nj->ni", c, force_b)
     omega = np.asarray(gyro, dtype=float) - (np.zeros(3) if gyro_bias is None else np.asarray(gyro_bias, dtype=float))

@@ -289,44 +289,6 @@ def test_lever_arm_is_recovered(synthetic, synthetic_data):
     assert tomllib.loads(result.device_toml())["mounting"]["lever_arm_m"] == pytest.approx(none.lever_arm_b, abs=1e-4)
 
 
-def test_the_lever_arm_takes_a_known_accelerometer_scale_out():
-    """An accelerometer with scale factors of −2000, 1500 and 1000 ppm, 2 cm from the truth's origin, on
-    the rate table's tumble (gravity through every axis): the scale turns the force it reads by S C f,
-    which follows the motion as the lever arm's terms do. Given the accelerometer's matrix I + S
-    (``sensor_matrix``), the fit recovers the lever arm within K_SIGMA of its uncertainty; left in the
-    residual, the scale pulls it further than that (the guard: the case can tell)."""
-    scale_ppm = np.array([-2000.0, 1500.0, 1000.0])
-    arm = np.array([0.02, -0.01, 0.015])
-    rate = 100.0  # the scenario's
-    traj = load_scenario("rate_table_tumble").simulate(rate_hz=rate)  # moves about x and y: every axis seen
-    device = {
-        "description": "an accelerometer with scale errors, off the origin",
-        "rate_hz": rate,
-        "mounting": {"lever_arm_m": arm.tolist()},
-        "gyro": {"errors": {"noise_density_deg_per_s_per_sqrt_hz": GYRO_NOISE}},
-        "accelerometer": {"errors": {"scale_factor_ppm": scale_ppm.tolist(), "noise_density_ug_per_sqrt_hz": 50.0}},
-    }
-    samples = device_from_dict(device, seed=3).measure(traj)
-    g = float(-traj.environment.gravity_w[2])
-    fits = [
-        fit_lever_arm(
-            samples.t,
-            samples.accel,
-            samples.gyro,
-            traj.t,
-            traj.q_wb,
-            traj.pos_w,
-            0.5 / rate,
-            np.ones(len(samples.t), bool),
-            sensor_matrix=matrix,
-            gravity_m_s2=g,
-        )
-        for matrix in (np.eye(3) + np.diag(scale_ppm * 1e-6), None)
-    ]
-    _within(fits[0].lever_arm_b, arm, fits[0].lever_arm_sigma, "lever arm m, the scale taken out")
-    assert np.any(np.abs(fits[1].lever_arm_b - arm) > K_SIGMA * fits[1].lever_arm_sigma), fits[1].lever_arm_b
-
-
 def test_a_gyroemu_log_gives_its_sites_earth_rate_and_exact_stamps(tmp_path: Path):
     """From a gyroemu log (``simulate`` of the test device, 60 s): the site's latitude comes from the log's
     metadata, so the gyro bias is the device's and not the device's plus the Earth's rate (up to 15 °/h
