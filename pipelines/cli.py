@@ -1136,8 +1136,8 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=None,
         metavar="DEG",
-        help="the site's latitude, for the Earth's rate the gyro measures (default: a gyroemu log's site; "
-        "else unknown, and the gyro bias holds the Earth's rate)",
+        help="the site's latitude of every log, for the Earth's rate the gyro measures (default: each log's "
+        "own site, a gyroemu log's; else unknown, and that log's gyro bias holds the Earth's rate)",
     )
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     p.set_defaults(func=_cmd_identify)

@@ -47,6 +47,10 @@ __all__ = ["Mekf", "MekfParams", "initial_state"]
 _DEG = np.pi / 180
 
 
+_DIVIDING = frozenset({"window_s", "accel_tau_s", "accel_gm_tau_s", "mag_window_s", "rest_tau_s"})
+""":class:`MekfParams` whose value divides (windows and time constants): more than 0."""
+
+
 @dataclass(frozen=True)
 class MekfParams:
     """The filter's parameters, SI. The defaults serve any log; the noise figures of a known device
@@ -198,7 +202,8 @@ class MekfParams:
     gyrocompass_s: float = 10.0
 
     def __post_init__(self) -> None:
-        # every parameter is a standard deviation, a density, a duration, a gate or a tolerance
+        # every parameter is a standard deviation, a density, a duration, a gate or a tolerance; the
+        # durations that divide (a window, a time constant) must be more than 0
         for f in fields(self):
             value = getattr(self, f.name)
             try:
@@ -207,6 +212,8 @@ class MekfParams:
                 number = math.nan
             if not (math.isfinite(number) and number >= 0):
                 raise ValueError(f"MekfParams.{f.name} = {value!r}: must be a finite number, 0 or more")
+            if f.name in _DIVIDING and not number > 0:
+                raise ValueError(f"MekfParams.{f.name} = {value!r}: must be more than 0")
 
     @classmethod
     def for_setup(cls, setup: FilterSetup, **overrides: float) -> MekfParams:

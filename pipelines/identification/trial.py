@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gyroemu.dynamics.earth import EARTH_RATE
+
 from .calibration import AccelCalibration, GyroCalibration, MagCalibration, fit_accel, fit_gyro, fit_mag
 from .handling import HandlingOffset, handling_offset
 from .lever_arm import LeverArmFit, fit_lever_arm
@@ -63,7 +65,8 @@ class TrialSettings:
 
     rest_intervals : [(t_start, t_stop), …] s, or None to find the rest phases.
     gravity_m_s2 : local gravity (a scale-factor error and a gravity error are one thing to the fit).
-    earth_rate_w : (3,) rad/s in world axes, or None (Earth's rate ignored: 15 °/h at most).
+    earth_rate_w : (3,) rad/s in world axes for every recording, or None: each recording's own from its
+        ``latitude_rad``, and where it has none Earth's rate is ignored (15 °/h at most, a note says so).
     window_s : averaging window of the calibrations, s.
     mag_tau_min_s : shortest τ of the magnetometer's Allan fit (module notes of :mod:`.noise`).
     """
@@ -117,6 +120,10 @@ def identify_trial(data: TrialData, settings: TrialSettings | None = None) -> Tr
         if lat is not None and lat.at_edge:
             notes.append(f"{what} latency at the edge of the ±{settings.search_s:g} s search: a bound, not a fit")
     earth = None if settings.earth_rate_w is None else np.asarray(settings.earth_rate_w)
+    if earth is None and data.latitude_rad is not None:  # the recording's own site
+        earth = EARTH_RATE * np.array([0.0, np.cos(data.latitude_rad), np.sin(data.latitude_rad)])
+    if earth is None:
+        notes.append("the site's latitude is not known (give it): the gyro bias holds the Earth's rate, up to 15 °/h")
     gyro = fit_gyro(
         data.t,
         data.gyro,

@@ -51,9 +51,9 @@ class IdentifyOptions:
     rest_intervals : [(t_start, t_stop), …] s of every log (from its first sample), or None to find the
         rest phases.
     gravity_m_s2 : local gravity.
-    latitude_deg : the site's latitude, for the Earth's rate the gyro measures with the motion, or None:
-        a gyroemu log's site's, else unknown (the gyro bias then holds the Earth's rate, 15 °/h at most,
-        and a note says so).
+    latitude_deg : the site's latitude of every log, for the Earth's rate the gyro measures with the
+        motion, or None: each log's own site's (a gyroemu log's), else unknown (that log's gyro bias then
+        holds the Earth's rate, 15 °/h at most, and a note says so).
     """
 
     logs: Sequence[Path]
@@ -194,10 +194,8 @@ def identify_logs(options: IdentifyOptions) -> Identification:
     from gyroemu.pipelines.identification import TrialSettings, identify
 
     trials = [read_trial(p) for p in options.logs]
-    latitudes = {d.latitude_rad for d in trials}
+    # --latitude for every log; without it each log's own site's (a gyroemu log), or none (identify_trial)
     latitude = math.radians(options.latitude_deg) if options.latitude_deg is not None else None
-    if latitude is None and len(latitudes) == 1:
-        latitude = latitudes.pop()  # every log's site says the same (a gyroemu log), or none does
     earth = None if latitude is None else (0.0, EARTH_RATE * math.cos(latitude), EARTH_RATE * math.sin(latitude))
     settings = TrialSettings(
         rest_intervals=options.rest_intervals, gravity_m_s2=options.gravity_m_s2, earth_rate_w=earth
@@ -208,10 +206,6 @@ def identify_logs(options: IdentifyOptions) -> Identification:
         if isinstance(e, ConfigError):
             raise
         raise ConfigError(f"cannot identify: {e}", file=", ".join(str(p) for p in options.logs)) from None
-    if earth is None:
-        result.notes.append(
-            "the site's latitude is not known (give --latitude): the gyro bias holds the Earth's rate, up to 15 °/h"
-        )
     return result
 
 

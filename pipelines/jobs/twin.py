@@ -232,8 +232,8 @@ def check_options(options: TwinOptions) -> tuple[list[str], dict, dict, _Handlin
 
 def _check_smoothing(smoothing: dict | None, real: _Real) -> None:
     """:class:`TwinError` naming ``--smoothing`` for a key the recorded scenario's ``[smoothing]`` does not
-    take, a bad value, or a cut-off at or above the recording's Nyquist frequency (found otherwise only
-    when the first twin fits its motion, after the real run)."""
+    take, a bad value, or a cut-off at or above the Nyquist frequency of the truth's stamps (the motion
+    is fitted there; found otherwise only when the first twin fits its motion, after the real run)."""
     from pydantic import ValidationError
 
     from gyroemu.pipelines.recorded_scenario import SmoothingSpec
@@ -243,7 +243,9 @@ def _check_smoothing(smoothing: dict | None, real: _Real) -> None:
     except ValidationError as e:
         problems = "; ".join(f"{'.'.join(map(str, err['loc']))}: {err['msg']}" for err in e.errors())
         raise TwinError(f"argument --smoothing: {problems}") from None
-    nyquist = 0.5 * real.rate_hz
+    # the recorded motion is fitted at the truth's stamps, which may be sparser than the samples'
+    truth_t = real.t[np.isfinite(real.q_true).all(axis=1)]
+    nyquist = 0.5 / float(np.median(np.diff(truth_t))) if len(truth_t) > 1 else 0.5 * real.rate_hz
     for key in ("position_cutoff_hz", "orientation_cutoff_hz"):
         value = getattr(spec, key)
         if value is not None and not value < nyquist:
@@ -1090,8 +1092,9 @@ def _rest_phases(real: _Real) -> tuple[list[slice], dict]:
     samples before the first movement sample stand in for the residuals (``intervals_s``), but only
     phases found still are held still in the twins (``still_s``). A recording that moves from its first
     sample has none: its residuals are then taken over the whole recording if it has its own truth rate
-    and specific force (a simulated log: the sensor's output less the truth, in motion as at rest), and
-    not at all otherwise (rest's truth, ω = 0 and constant gravity, would be the motion itself)."""
+    and specific force (a simulated log: the sensor's output less the truth, in motion as at rest, the
+    real side at the stamp, so a latency L adds ω̇ L there), and not at all otherwise (rest's truth,
+    ω = 0 and constant gravity, would be the motion itself)."""
     from gyroemu.pipelines.identification import find_rest_phases
 
     valid = np.isfinite(real.q_true).all(axis=1)

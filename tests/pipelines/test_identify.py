@@ -297,7 +297,7 @@ def test_a_gyroemu_log_gives_its_sites_earth_rate_and_exact_stamps(tmp_path: Pat
     Hz). ``--latitude`` outside ±90° is refused before any work."""
     import tomli_w
 
-    from gyroemu.pipelines.jobs.identify import identify_logs
+    from gyroemu.pipelines.jobs.identify import identify_logs, read_trial
 
     device = tmp_path / "device.toml"
     device.write_text(tomli_w.dumps(DEVICE))
@@ -309,7 +309,12 @@ def test_a_gyroemu_log_gives_its_sites_earth_rate_and_exact_stamps(tmp_path: Pat
     assert gyro.observable, gyro.note
     _within(np.degrees(gyro.bias) * 3600, GYRO_BIAS_DPH, np.degrees(gyro.bias_sigma) * 3600, "gyro bias deg/h")
     assert result.rate_hz == pytest.approx(RATE, rel=1e-9)
-    assert not any("latitude" in note for note in result.notes)
+    assert not any("latitude" in note for note in result.trials[0].notes)
+    # each log its own site: with a log that knows none beside it, the first keeps its Earth's rate
+    unknown = dataclasses.replace(read_trial(log), latitude_rad=None, name="unknown")
+    mixed = identify([read_trial(log), unknown], TrialSettings())
+    assert np.array_equal(mixed.trials[0].gyro.bias, result.trials[0].gyro.bias)
+    assert any("latitude is not known" in note for note in mixed.trials[1].notes)
     with pytest.raises(IdentifyError, match="--latitude"):
         check_options(IdentifyOptions(logs=[log], out=tmp_path / "x.toml", latitude_deg=91.0))
 

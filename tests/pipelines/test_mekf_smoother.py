@@ -295,6 +295,9 @@ def test_filter_parameters_are_checked_and_the_offline_flags_agree():
             MekfParams(misalignment_sigma=bad)
         with pytest.raises(ValueError, match="accel_tau_s"):
             smoother_params(FilterSetup(rate_hz=100.0), accel_tau_s=bad)
+    for name in ("window_s", "accel_tau_s", "accel_gm_tau_s", "mag_window_s", "rest_tau_s"):  # they divide
+        with pytest.raises(ValueError, match=f"{name} = 0.0: must be more than 0"):
+            MekfParams(**{name: 0.0})
     assert smoother_params(FilterSetup(rate_hz=100.0)).misalignment_sigma > 0
     for name in sorted(set(FILTERS) - set(unavailable_filters())):
         assert FILTERS[name].offline == bool(getattr(filter_class(name), "offline", False)), name

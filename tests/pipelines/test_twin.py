@@ -129,7 +129,7 @@ def test_existing_out_refused_without_force(synthetic, report, capsys):
         (["--device", "no_such_device"], "--device"),
         (["--site", "/nonexistent/site.toml"], "--site"),
         (["--workers", "0"], "--workers"),
-        (["--smoothing", "position_cutoff_hz=600"], "--smoothing"),  # above the log's Nyquist, 500 Hz
+        (["--smoothing", "position_cutoff_hz=600"], "--smoothing"),  # above the truth's Nyquist, 500 Hz
         (["--smoothing", "orientation_cutoff_hz=-1"], "--smoothing"),
         (["--smoothing", "no_such_key=1"], "--smoothing"),
     ],
