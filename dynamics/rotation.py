@@ -55,6 +55,7 @@ __all__ = [
     "body_rate_from_euler_zxz",
     "body_rate_from_euler_zyx",
     "half_turn",
+    "hamilton_product",
     "set_product",
     "rotate_body",
 ]
@@ -87,12 +88,19 @@ def half_turn(phi_x, phi_y, phi_z):  # pragma: no cover - compiled
 
 
 @njit
-def set_product(q, aw, ax, ay, az, bw, bx, by, bz):  # pragma: no cover - compiled
-    """q ← a ⊗ b (Hamilton), renormalised; ``q`` (4,) in place (it may hold a or b)."""
+def hamilton_product(aw, ax, ay, az, bw, bx, by, bz):  # pragma: no cover - compiled
+    """a ⊗ b (Hamilton) of two quaternions given by their components, as (w, x, y, z); not renormalised."""
     w = aw * bw - ax * bx - ay * by - az * bz
     x = aw * bx + ax * bw + ay * bz - az * by
     y = aw * by - ax * bz + ay * bw + az * bx
     z = aw * bz + ax * by - ay * bx + az * bw
+    return w, x, y, z
+
+
+@njit
+def set_product(q, aw, ax, ay, az, bw, bx, by, bz):  # pragma: no cover - compiled
+    """q ← a ⊗ b (Hamilton), renormalised; ``q`` (4,) in place (it may hold a or b)."""
+    w, x, y, z = hamilton_product(aw, ax, ay, az, bw, bx, by, bz)
     n = math.sqrt(w * w + x * x + y * y + z * z)
     q[0], q[1], q[2], q[3] = w / n, x / n, y / n, z / n
 

@@ -58,7 +58,7 @@ import math
 import numpy as np
 
 from gyroemu.dynamics.jit import njit
-from gyroemu.dynamics.rotation import half_turn, set_product
+from gyroemu.dynamics.rotation import half_turn, hamilton_product, set_product
 
 from . import mekf_kernels as kern
 from .batched import kalman_predict, kalman_update
@@ -156,21 +156,18 @@ def reset_composition(e, u, out):
     for i in range(len(e)):
         out[i] = e[i] + u[i]
     aw, ax, ay, az = half_turn(e[0], e[1], e[2])
-    bw, bx, by, bz = half_turn(u[0], u[1], u[2])
-    w = aw * bw - ax * bx - ay * by - az * bz
-    x = aw * bx + ax * bw + ay * bz - az * by
-    y = aw * by - ax * bz + ay * bw + az * bx
-    z = aw * bz + ax * by - ay * bx + az * bw
+    turn = np.empty(4)
+    turn[0], turn[1], turn[2], turn[3] = half_turn(u[0], u[1], u[2])
+    w, x, y, z = hamilton_product(aw, ax, ay, az, turn[0], turn[1], turn[2], turn[3])
     if w < 0.0:  # the shorter of the two rotation vectors
         w, x, y, z = -w, -x, -y, -z
     sine = math.sqrt(x * x + y * y + z * z)
     scale = 2.0 * math.atan2(sine, w) / sine if sine > 1e-300 else 2.0 / w
     out[0], out[1], out[2] = x * scale, y * scale, z * scale
     # T⁻¹, T the horizontal block of R(exp(u)), as inject turns â
-    t00 = 1.0 - 2.0 * (by * by + bz * bz)
-    t01 = 2.0 * (bx * by - bw * bz)
-    t10 = 2.0 * (bx * by + bw * bz)
-    t11 = 1.0 - 2.0 * (bx * bx + bz * bz)
+    r = np.empty((3, 3))
+    kern.quat_to_matrix(turn, r)
+    t00, t01, t10, t11 = r[0, 0], r[0, 1], r[1, 0], r[1, 1]
     det = t00 * t11 - t01 * t10
     i0, i1 = kern.X_ACC, kern.X_ACC + 1
     out[i0] = u[i0] + (t11 * e[i0] - t01 * e[i1]) / det

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gyroemu.dynamics.earth import EARTH_RATE
+from gyroemu.dynamics.earth import earth_rate_enu
 
 from .calibration import AccelCalibration, GyroCalibration, MagCalibration, fit_accel, fit_gyro, fit_mag
 from .handling import HandlingOffset, handling_offset
@@ -121,7 +121,7 @@ def identify_trial(data: TrialData, settings: TrialSettings | None = None) -> Tr
             notes.append(f"{what} latency at the edge of the ±{settings.search_s:g} s search: a bound, not a fit")
     earth = None if settings.earth_rate_w is None else np.asarray(settings.earth_rate_w)
     if earth is None and data.latitude_rad is not None:  # the recording's own site
-        earth = EARTH_RATE * np.array([0.0, np.cos(data.latitude_rad), np.sin(data.latitude_rad)])
+        earth = earth_rate_enu(data.latitude_rad)
     if earth is None:
         notes.append("the site's latitude is not known (give it): the gyro bias holds the Earth's rate, up to 15 °/h")
     gyro = fit_gyro(

@@ -190,23 +190,21 @@ def identify_logs(options: IdentifyOptions) -> Identification:
     """Read and identify the logs of ``options`` (no files written)."""
     import math
 
-    from gyroemu.dynamics.earth import EARTH_RATE
+    from gyroemu.dynamics.earth import earth_rate_enu
     from gyroemu.pipelines.identification import TrialSettings, identify
 
     trials = [read_trial(p) for p in options.logs]
     # --latitude for every log; without it each log's own site's (a gyroemu log), or none (identify_trial)
-    latitude = math.radians(options.latitude_deg) if options.latitude_deg is not None else None
-    earth = None if latitude is None else (0.0, EARTH_RATE * math.cos(latitude), EARTH_RATE * math.sin(latitude))
+    earth = None if options.latitude_deg is None else tuple(earth_rate_enu(math.radians(options.latitude_deg)))
     settings = TrialSettings(
         rest_intervals=options.rest_intervals, gravity_m_s2=options.gravity_m_s2, earth_rate_w=earth
     )
     try:
-        result = identify(trials, settings)
+        return identify(trials, settings)
     except ValueError as e:
         if isinstance(e, ConfigError):
             raise
         raise ConfigError(f"cannot identify: {e}", file=", ".join(str(p) for p in options.logs)) from None
-    return result
 
 
 def run_identify(options: IdentifyOptions) -> IdentifySummary:

@@ -243,16 +243,19 @@ def _check_smoothing(smoothing: dict | None, real: _Real) -> None:
     except ValidationError as e:
         problems = "; ".join(f"{'.'.join(map(str, err['loc']))}: {err['msg']}" for err in e.errors())
         raise TwinError(f"argument --smoothing: {problems}") from None
-    # the recorded motion is fitted at the truth's stamps, which may be sparser than the samples'
+    from gyroemu.dynamics.smoothing_spline import lambda_for_cutoff
+
+    # the recorded motion is fitted at the truth's stamps, which may be sparser than the samples': the
+    # cut-off is checked as the fit will check it, against their median step
     truth_t = real.t[np.isfinite(real.q_true).all(axis=1)]
-    nyquist = 0.5 / float(np.median(np.diff(truth_t))) if len(truth_t) > 1 else 0.5 * real.rate_hz
+    step = float(np.median(np.diff(truth_t))) if len(truth_t) > 1 else 1.0 / real.rate_hz
     for key in ("position_cutoff_hz", "orientation_cutoff_hz"):
         value = getattr(spec, key)
-        if value is not None and not value < nyquist:
-            raise TwinError(
-                f"argument --smoothing: {key} = {value:g} Hz is not below {real.path.name}'s Nyquist "
-                f"frequency, {nyquist:g} Hz"
-            )
+        if value is not None:
+            try:
+                lambda_for_cutoff(value, step)
+            except ValueError as e:
+                raise TwinError(f"argument --smoothing: {key}: {real.path.name}: {e}") from None
 
 
 def _read_site(path: Path) -> tuple[dict, _Handling | None]:

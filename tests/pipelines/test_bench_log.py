@@ -10,11 +10,11 @@ the notes, the warnings and the error curves.
 from __future__ import annotations
 
 import dataclasses
-import tracemalloc
 import warnings
 
 import numpy as np
 import pytest
+from memory_growth import assert_flat_when_streamed
 
 from gyroemu.dynamics import load_scenario
 from gyroemu.pipelines.formats.channels import ImuSeries
@@ -271,14 +271,7 @@ def test_the_same_errors_before_any_filter_runs(tmp_path, change, message):
 def test_memory_does_not_grow_with_the_log(tmp_path):
     """Python's peak allocation (tracemalloc sees NumPy's buffers) for a log 4× longer: the same within the
     chunks' and blocks' buffers a block at a time; read whole, it grows with the samples."""
-    peaks = {}
-    for minutes in (2, 8):
-        log = write_mcap(tmp_path / f"m{minutes}.mcap", recording(60.0 * minutes, seed=7))
-        for whole in (False, True):
-            tracemalloc.start()
-            run_bench([LogCase(log, read_whole=whole)], filters=["mekf", "madgwick"])
-            peaks[minutes, whole] = tracemalloc.get_traced_memory()[1]
-            tracemalloc.stop()
-    assert peaks[8, True] > 3.0 * peaks[2, True]  # the whole read holds every sample (4×, less its floor)
-    assert peaks[8, False] < 1.15 * peaks[2, False]  # a block at a time: nothing of the extra six minutes
-    assert peaks[8, False] < peaks[8, True] / 3
+    logs = {m: write_mcap(tmp_path / f"m{m}.mcap", recording(60.0 * m, seed=7)) for m in (2, 8)}
+    assert_flat_when_streamed(
+        lambda minutes, whole: run_bench([LogCase(logs[minutes], read_whole=whole)], filters=["mekf", "madgwick"])
+    )
