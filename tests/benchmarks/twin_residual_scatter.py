@@ -6,7 +6,7 @@ noise over about 260 s of rest; this script measures what a *perfect* twin would
 It draws the device (default ``aktos_t_broad``) at rest on ``bench_static``, each draw with its own
 seed, cuts each draw into the real recordings' rest layout (the phases ``gyroemu twin`` finds in the
 given BROAD trials, same lengths), and reads each draw as the twin reads its residuals
-(:func:`gyroemu.pipelines.jobs.twin.residual_allan`). Then, over random pairings, one draw stands
+(:func:`gyroemu.pipelines.twin.residuals.residual_allan`). Then, over random pairings, one draw stands
 for the real recording and the RMS of ``--seeds`` others for the twins, exactly the ratio the twin
 reports. Printed: per τ and axis the relative standard deviation of one draw; the mean of all draws
 against the device's long run (the estimator is unbiased, so they agree within the draws' scatter);
@@ -27,7 +27,7 @@ import numpy as np
 from gyroemu.dynamics import load_scenario
 from gyroemu.pipelines.identification import find_rest_phases
 from gyroemu.pipelines.jobs.identify import read_trial
-from gyroemu.pipelines.jobs.twin import TAUS_S, residual_allan
+from gyroemu.pipelines.twin import TAUS_S, residual_allan
 from gyroemu.sensors import load_device
 from gyroemu.sensors.allan import allan_deviation
 

@@ -140,7 +140,7 @@ def test_argument_errors_exit_2_before_work(synthetic, tmp_path, capsys, monkeyp
     def no_work(*args, **kwargs):
         raise AssertionError("the real log's filters ran before the arguments were checked")
 
-    monkeypatch.setattr(twin, "_run_real", no_work)
+    monkeypatch.setattr(twin, "run_real", no_work)
     out = tmp_path / "o"
     with pytest.raises(SystemExit) as e:
         cli.main(["twin", str(synthetic), "--out", str(out), *extra])
@@ -177,7 +177,7 @@ def test_the_twins_filters_are_told_the_twins_rate(synthetic, tmp_path, monkeypa
     from gyroemu.sensors import load_device
 
     rates = {}
-    real_run, twin_run = twin._run_real, twin._run_twin
+    real_run, twin_run = twin.run_real, twin.run_one_twin
 
     def spy_real(real, filters, setup9, setup6, rests):
         rates["real"] = setup6.rate_hz
@@ -187,8 +187,8 @@ def test_the_twins_filters_are_told_the_twins_rate(synthetic, tmp_path, monkeypa
         rates["twin"] = setup6.rate_hz
         return twin_run(real, site, smoothing, device_name, seed, filters, setup9, setup6, *rest)
 
-    monkeypatch.setattr(twin, "_run_real", spy_real)
-    monkeypatch.setattr(twin, "_run_twin", spy_twin)
+    monkeypatch.setattr(twin, "run_real", spy_real)
+    monkeypatch.setattr(twin, "run_one_twin", spy_twin)
     options = TwinOptions(
         trials=[synthetic], device="aktos_t_broad", seeds=1, filters=["vqf"], workers=1, out=tmp_path / "o"
     )
