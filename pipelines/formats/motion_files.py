@@ -21,17 +21,20 @@ Four formats (the ``format`` key of a ``recorded`` scenario):
     Comma-separated values with a header row naming the columns: ``t_s, qw, qx, qy, qz`` and,
     optionally, ``px_m, py_m, pz_m`` (position, m), in any order; world ENU (or ``world_to_enu_quat``),
     ``q`` body to world, scalar first as everywhere in gyroemu. Blank lines and lines starting with
-    ``#`` are skipped.
+    ``#`` are skipped. An empty cell of the attitude or the position (an occluded frame, as Vicon and
+    OptiTrack exports write it: ``1.25,,,,,,,``) reads as NaN, as a ``nan`` cell does: the row is
+    invalid and the recorded motion bridges it as a gap, refused when longer than
+    ``smoothing.max_gap_s`` (:mod:`gyroemu.dynamics.recorded`). An empty stamp is an error.
 
-Every reader raises :class:`MotionFileError` (a ``ConfigError``) naming the file and the line, dataset
-or topic at fault. :func:`write_tum` and :func:`write_csv` write the text formats (through a temporary
+Every reader raises :class:`MotionFileError` (a ``ConfigError``) naming the file and the line (and
+column), dataset or topic at fault. :func:`write_tum` and :func:`write_csv` write the text formats (through a temporary
 file renamed at the end).
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -74,21 +77,41 @@ def _text_lines(path: Path) -> list[str]:
         raise MotionFileError(f"cannot read: {e.strerror or e}", file=path) from None
 
 
-def _numbers(path: Path, rows: list[tuple[int, list[str]]], width: int, layout: str) -> np.ndarray:
-    """The rows' fields as an (N, width) float array; errors name the line."""
+def _numbers(
+    path: Path, rows: list[tuple[int, list[str]]], columns: Sequence[str], layout: str, stamp: int | None = None
+) -> np.ndarray:
+    """The rows' fields as an (N, len(columns)) float array; errors name the line and the column.
+
+    With ``stamp`` (the stamp's column), an empty field elsewhere reads as NaN: a frame in which the
+    tracking lost the body, as motion-capture exports write it, which the recorded motion bridges as a
+    gap (up to ``smoothing.max_gap_s``); an empty stamp is an error."""
+    width = len(columns)
     for line, fields in rows:
         if len(fields) != width:
             raise MotionFileError(f"line {line}: {len(fields)} fields, expected {width} ({layout})", file=path)
     try:
         return np.array([fields for _, fields in rows], dtype=float).reshape(len(rows), width)
     except ValueError:
-        for line, fields in rows:
-            for value in fields:
-                try:
-                    float(value)
-                except ValueError:
-                    raise MotionFileError(f"line {line}: {value!r} is not a number ({layout})", file=path) from None
-        raise
+        pass
+    data = np.empty((len(rows), width))
+    for i, (line, fields) in enumerate(rows):
+        for j, value in enumerate(fields):
+            if stamp is not None and not value:
+                if j == stamp:
+                    raise MotionFileError(
+                        f"line {line}: column {columns[j]!r} is empty: every row needs its stamp (an empty "
+                        "attitude or position cell is a gap, bridged up to smoothing.max_gap_s)",
+                        file=path,
+                    )
+                data[i, j] = np.nan
+                continue
+            try:
+                data[i, j] = float(value)
+            except ValueError:
+                raise MotionFileError(
+                    f"line {line}: column {columns[j]!r}: {value!r} is not a number ({layout})", file=path
+                ) from None
+    return data
 
 
 def read_tum(path: str | os.PathLike[str]) -> MotionSamples:
@@ -101,7 +124,8 @@ def read_tum(path: str | os.PathLike[str]) -> MotionSamples:
     ]
     if not rows:
         raise MotionFileError("holds no poses (lines 'timestamp tx ty tz qx qy qz qw')", file=path)
-    data = _numbers(path, rows, 8, "timestamp tx ty tz qx qy qz qw")
+    layout = "timestamp tx ty tz qx qy qz qw"
+    data = _numbers(path, rows, layout.split(), layout)
     return _samples(path, data[:, 0], data[:, [7, 4, 5, 6]], data[:, 1:4], [line for line, _ in rows])
 
 
@@ -131,7 +155,7 @@ def read_csv(path: str | os.PathLike[str]) -> MotionSamples:
     rows = [(line, [f.strip() for f in text.split(",")]) for line, text in lines[1:]]
     if not rows:
         raise MotionFileError("holds a header and no rows", file=path)
-    data = _numbers(path, rows, len(names), ", ".join(names))
+    data = _numbers(path, rows, names, ", ".join(names), stamp=names.index("t_s"))
     col = {name: data[:, names.index(name)] for name in names}
     q = np.column_stack([col["qw"], col["qx"], col["qy"], col["qz"]])
     pos = np.column_stack([col["px_m"], col["py_m"], col["pz_m"]]) if position else None

@@ -26,6 +26,12 @@ From m_w over the samples:
 - the **heading offset** between the field at rest (the first rest phase) and in the working volume
   (movement samples): circular mean of ψ(t) − ψ_rest. :func:`pool_heading_offsets` turns several
   trials' offsets into a mean and a standard deviation.
+
+Without motion there is no path: when the movement samples never leave one position (or, without a
+position track, never change attitude), as in a static log, the spread would be the sensor's noise
+and the correlation 0/0, so the environment is not identified (a ValueError saying so, which
+``identify`` turns into a note). A field that is the same all along a real path has spread 0 and
+never decorrelates: its correlation length and time are ``inf``.
 """
 
 from __future__ import annotations
@@ -128,6 +134,21 @@ def _first_below(x: np.ndarray, rho: np.ndarray, level: float) -> float:
     return float(x[j - 1] + (x[j] - x[j - 1]) * (rho[j - 1] - level) / (rho[j - 1] - rho[j]))
 
 
+def _require_motion(samples: int, pos: np.ndarray | None, r_bw: np.ndarray | None) -> None:
+    """ValueError when the movement samples show no path (module notes): a position track that never
+    leaves one point, or without one an attitude that never changes."""
+    if pos is not None and not np.ptp(pos, axis=0).any():
+        raise ValueError(
+            f"no motion: the {samples} movement samples never leave one position (a static log?), so the "
+            "field's variation along a path is not observable"
+        )
+    if pos is None and r_bw is not None and not np.ptp(r_bw.reshape(len(r_bw), 9), axis=0).any():
+        raise ValueError(
+            f"no motion: the {samples} movement samples keep one attitude and there is no position track "
+            "(a static log?), so the field's variation along a path is not observable"
+        )
+
+
 def magnetic_environment(
     t: np.ndarray,
     field_w: np.ndarray,
@@ -156,6 +177,11 @@ def magnetic_environment(
     m = field_w[movement]
     if len(m) < 10:
         raise ValueError(f"only {len(m)} movement samples with a known field")
+    _require_motion(
+        len(m),
+        None if pos_w is None else np.asarray(pos_w, dtype=float)[movement],
+        None if r_bw is None else np.asarray(r_bw, dtype=float)[movement],
+    )
     horizontal = np.hypot(rest_field[0], rest_field[1])
     delta = m - m.mean(axis=0)
     raw_sigma = delta.std(axis=0)
@@ -164,18 +190,22 @@ def magnetic_environment(
         delta, axis_sigma = _spatial_part(delta, np.asarray(pos_w)[movement], np.asarray(r_bw)[movement])
     offsets = np.angle(np.exp(1j * (_heading(m) - _heading(rest_field))))
     mean_vec = np.mean(np.exp(1j * offsets))
-    circ_sigma = float(np.sqrt(-2.0 * np.log(min(abs(mean_vec), 1.0))))
+    circ_sigma = float(np.sqrt(max(0.0, -2.0 * np.log(min(abs(mean_vec), 1.0)))))  # 0, not −0, for none
 
     idx = np.linspace(0, len(m) - 1, min(_PAIR_POINTS, len(m))).astype(int)  # evenly along the path
     d = delta[idx]
     var = float(np.mean(np.sum(d * d, axis=1)))
-    products = d @ d.T / var
     length = None
-    if pos_w is not None:
-        x = np.asarray(pos_w, dtype=float)[movement][idx]
-        length = _e_folding_separation(np.linalg.norm(x[:, None, :] - x[None, :, :], axis=-1), products, bins)
     lag_t = np.asarray(t, dtype=float)[movement][idx]
-    corr_time = _e_folding_separation(np.abs(lag_t[:, None] - lag_t[None, :]), products, bins)
+    if var > 0:
+        products = d @ d.T / var
+        if pos_w is not None:
+            x = np.asarray(pos_w, dtype=float)[movement][idx]
+            length = _e_folding_separation(np.linalg.norm(x[:, None, :] - x[None, :, :], axis=-1), products, bins)
+        corr_time = _e_folding_separation(np.abs(lag_t[:, None] - lag_t[None, :]), products, bins)
+    else:  # the field is the same all along the path: nothing decorrelates (and its spread is 0)
+        length = None if pos_w is None else float("inf")
+        corr_time = float("inf")
     return MagneticEnvironment(
         rest_field_w=rest_field,
         norm=float(np.linalg.norm(rest_field)),

@@ -57,6 +57,15 @@ them. On BROAD's gyro z, ε = 9.3 %: the floor is not observable (below 16.5 °/
 the curve within 1.5 % from 0.9 s to 7.2 s. The price: with such a scatter a floor that is there may
 be reported as an upper bound only (tests/pipelines/test_identify.py).
 
+An axis without noise. An axis that reads an exact constant at rest (a simulated device whose noise
+terms on it are all 0; a reading whose noise stays below one step of its quantiser) has σ(τ) = 0 at
+every τ, and the fits' weights σ²·√(2/ν) would all be 0. Its terms are then 0, and that is measured, not
+merely unobservable: a zero estimate's chi-squared interval is [0, 0], and as every term adds variance
+each is bounded by it (above), while any white noise of continuous amplitude makes σ(τ) > 0 with
+probability 1. N = 0 is written (the device it describes reads the same constant), B and K 0 with the
+bound 0, no Gauss–Markov term; the device file's comments say the axis read a constant, as for a
+quantised sensor that is "no noise measurable at its resolution", not a proof of none.
+
 With BROAD's rest layout (eight phases of about 33 s at 286 Hz, M = 12 octaves up to 7.2 s) and white
 noise of 2.7·10⁻³ m/s²·√s, simulated: without a Gauss–Markov term, 1 axis in 45 kept one (the test's
 nominal 1 %, on the side of caution for a scanned τ_c); with σ = 5·10⁻³ m/s² at τ_c = 0.8 s, 10 in 15
@@ -151,6 +160,11 @@ class AxisNoise:
     fit: AllanFit
     markov: MarkovTerm | None = None
     model_scatter: float = 0.0
+
+    @property
+    def noiseless(self) -> bool:
+        """Whether the axis read a constant at rest: its Allan variance is 0 at every τ (module notes)."""
+        return not np.any(self.fit.allan.adev**2 > 0)
 
 
 @dataclass(frozen=True)
@@ -328,7 +342,18 @@ def fit_markov(allan: AllanDeviation, dt: float) -> tuple[MarkovTerm, np.ndarray
     return MarkovTerm(sigma, tau_c, float(f_ratio), f_critical, chi2_without, chi2_with, points), None, None
 
 
+def _noiseless_axis(allan: AllanDeviation) -> AxisNoise:
+    """The noise of an axis whose pooled Allan variance is 0 at every τ (module notes, "An axis without
+    noise"): every term 0, its 68 % interval [0, 0], no Gauss–Markov term and no scatter."""
+    zero = Coefficient(0.0, 0.0, 0.0, 0.0)
+    fit = AllanFit(quantisation=zero, arw=zero, bias_instability=zero, rrw=zero, rate_ramp=zero, allan=allan)
+    none = NoiseTerm(0.0, 0.0, 0.0, "upper_bound")
+    return AxisNoise(NoiseTerm(0.0, 0.0, 0.0, "fitted"), none, none, fit)
+
+
 def _axis_noise(allan: AllanDeviation, dt: float, markov: bool) -> AxisNoise:
+    if not np.any(allan.adev**2 > 0):  # a constant: the fits' weights σ²·√(2/ν) would all be 0
+        return _noiseless_axis(allan)
     four = _four_basis(allan.tau)
     gm, c5, model = None, None, None
     if markov and len(allan.tau) > len(_TERMS) + 2:  # the F-test needs a point beyond the parameters

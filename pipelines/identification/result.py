@@ -304,7 +304,9 @@ class Identification:
                 parts = []
                 for axis, a in zip("xyz", noise.axes):
                     c = getattr(a, term)
-                    if c.status == "fitted":
+                    if a.noiseless:
+                        parts.append(f"{axis} 0 (read a constant at rest: no noise measurable)")
+                    elif c.status == "fitted":
                         parts.append(f"{axis} {c.value * f:.4g} [{c.low * f:.4g}, {c.high * f:.4g}]")
                     else:
                         parts.append(f"{axis} < {c.high * f:.4g} (not observable: written 0)")

@@ -782,3 +782,117 @@ def test_two_power_ups_give_the_turn_on_bias_and_the_comments_state_the_latencie
             stated = latency.split(f"{sensor} ", 1)[1].split(",")[0].split(" +- ")
             assert float(stated[0]) == pytest.approx(estimate.latency_s * 1e3, rel=5e-4)
             assert float(stated[1]) == pytest.approx(estimate.sigma_s * 1e3, rel=5e-2)
+
+
+def _finite_numbers(value, where: str = "") -> None:
+    """Every number in a loaded TOML table is finite (NaN and inf are written as nan and inf)."""
+    if isinstance(value, dict):
+        for key, item in value.items():
+            _finite_numbers(item, f"{where}.{key}")
+    elif isinstance(value, list):
+        for item in value:
+            _finite_numbers(item, where)
+    elif isinstance(value, float):
+        assert np.isfinite(value), f"{where} = {value}"
+
+
+def test_an_axis_without_noise_gets_zero_noise_terms():
+    """An axis that reads an exact constant at rest (z here; a simulated device without noise on it) has
+    σ(τ) = 0 at every τ. Its terms are 0 with the interval [0, 0] (a zero estimate's chi-squared
+    interval; every term adds variance, so each is bounded by it), no Gauss–Markov term, no warning;
+    the fit divided by the weights σ²·√(2/ν) = 0 (a ValueError from NaN, with numpy's warnings). The
+    other axes are fitted as if the axis were noisy: the axes are independent, bit for bit."""
+    import warnings
+
+    dt = 1 / RATE
+    rng = np.random.default_rng(3)
+    noisy = [rng.standard_normal((n, 3)) * 1e-3 for n in (3000, 2400)]
+    still = [np.column_stack([s[:, :2], np.full(len(s), 0.1234)]) for s in noisy]  # z: a constant
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        noise = sensor_noise(still, dt)
+    z = noise.axes[2]
+    assert z.noiseless and not any(a.noiseless for a in noise.axes[:2])
+    for term in (z.noise_density, z.bias_instability, z.random_walk):
+        assert (term.value, term.low, term.high) == (0.0, 0.0, 0.0), term
+    assert z.markov is None and z.model_scatter == 0.0
+    reference = sensor_noise(noisy, dt)
+    for term in ("noise_density", "bias_instability", "random_walk"):
+        assert np.array_equal(noise.values(term)[:2], reference.values(term)[:2]), term
+
+
+def test_identify_writes_zero_noise_for_a_noiseless_device(tmp_path: Path):
+    """``identify`` of a log of an ideal device at rest (``bench_static``): its accelerometer and
+    magnetometer, and the gyro's axes that see none of the Earth's rate, read exact constants. The run
+    succeeds (it exited 2, "array must not contain infs or NaNs"), every number written is finite, the
+    constant axes' noise densities are 0 and the comments say why; the file loads."""
+    from gyroemu.pipelines.jobs.identify import read_trial
+    from gyroemu.sensors import load_device
+
+    device, log, out = tmp_path / "quiet.toml", tmp_path / "still.mcap", tmp_path / "fitted.toml"
+    device.write_text('description = "noiseless"\nrate_hz = 200\n[gyro.mechanism]\nkind = "ideal"\n[magnetometer]\n')
+    args = ["simulate", "--scenario", "bench_static", "--device", str(device), "--duration", "12"]
+    assert cli.main([*args, "--out", str(log)]) in (0, None)
+    assert cli.main(["identify", str(log), "--out", str(out), "--rest", "0:11"]) == 0
+    data = tomllib.loads(out.read_text())
+    _finite_numbers(data)
+    trial = read_trial(log)
+    rest = trial.t < 11.0
+    for sensor, samples in (("gyro", trial.gyro), ("accelerometer", trial.accel)):
+        constant = np.ptp(samples[rest], axis=0) == 0
+        key = "noise_density_deg_per_s_per_sqrt_hz" if sensor == "gyro" else "noise_density_ug_per_sqrt_hz"
+        written = np.array(data[sensor]["errors"][key])
+        assert constant.any() and np.all(written[constant] == 0.0), (sensor, constant, written)
+    assert data["magnetometer"]["noise_density_uT_per_sqrt_hz"] == 0.0
+    assert "read a constant at rest: no noise measurable" in out.read_text()
+    assert load_device(out, seed=0) is not None
+
+
+def test_without_motion_there_is_no_magnetic_environment():
+    """Movement samples that never leave one position (a static log: those outside its rest phase) show
+    no path: the environment is not identified (a ValueError that ``identify`` notes), without a
+    warning; it divided 0 by 0 (the position-explained part of a point is 0) and reported a spread of
+    0. Without a position track, an attitude that never changes is no motion either. A field that is
+    the same all along a real path has spread 0 and never decorrelates (inf), without 0/0."""
+    import warnings
+
+    from gyroemu.pipelines.identification import magnetic_environment
+
+    n = 500
+    t = np.arange(n) / RATE
+    field = np.tile([2e-6, 20e-6, -45e-6], (n, 1)) + 1e-7 * np.random.default_rng(0).standard_normal((n, 3))
+    movement = t >= 1.0
+    r_bw = np.repeat(np.eye(3)[None], n, axis=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match="no motion: .* never leave one position"):
+            magnetic_environment(t, field, slice(0, 200), movement, np.zeros((n, 3)), r_bw=r_bw)
+        with pytest.raises(ValueError, match="no motion: .* keep one attitude"):
+            magnetic_environment(t, field, slice(0, 200), movement, None, r_bw=r_bw)
+        path = np.column_stack([t, np.zeros(n), np.zeros(n)])  # 1 m/s along east through a uniform field
+        uniform = magnetic_environment(t, np.zeros((n, 3)), slice(0, 200), movement, path)  # 0: exact when averaged
+    assert uniform.spatial_sigma == 0.0 and uniform.heading_offset_sigma == 0.0
+    assert uniform.correlation_length_m == np.inf and uniform.correlation_time_s == np.inf
+
+
+@pytest.mark.slow
+def test_a_static_log_beside_a_moving_one_has_no_magnetic_environment(synthetic, synthetic_data):
+    """A static log (``bench_static``) identified beside a moving one, whose magnetometer calibration
+    it borrows: its environment is not identified, a note says why, and no warning. It pooled the
+    static log's "spatial spread" of 0 into the site's (0.0145 µT for the moving log's 0.0291) and its
+    sensor noise as heading offsets; the site is now the moving log's alone, exactly."""
+    import warnings
+
+    moving, _ = synthetic
+    data, settings, _ = synthetic_data
+    still = load_scenario("bench_static").simulate(duration=20.0, rate_hz=RATE)
+    s = device_from_dict(DEVICE, seed=8).measure(still)
+    static = TrialData(
+        name="still", t=s.t, gyro=s.gyro, accel=s.accel, mag=s.mag, truth_t=still.t, q_wb=still.q_wb, pos_w=still.pos_w
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        both = identify([data, static], settings)
+    assert both.environments[0] is not None and both.environments[1] is None
+    assert any(n.startswith("still: magnetic environment: no motion") for n in both.notes), both.notes
+    assert both.site_dict()["site"] == moving.site_dict()["site"]

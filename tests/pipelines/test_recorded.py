@@ -238,6 +238,7 @@ def tum_lines(n=40, rate=RATE):
             "11",
         ),
         ("t_s, qw, qx, qy, qz, speed\n0, 1, 0, 0, 0, 3", "csv", "speed"),
+        ("t_s, qw, qx, qy, qz\n0, 1, 0, 0, 0\n, 1, 0, 0, 0", "csv", "line 3: column 't_s' is empty"),
     ],
 )
 def test_bad_recordings_exit_2_before_any_work(tmp_path, body, fmt, needle):
@@ -348,3 +349,44 @@ def test_replaced_attitude_is_taken_at_the_recordings_own_stamps(tmp_path):
         scenario.spec.replace_attitude(dense.t, given)
     with pytest.raises(ValueError, match=r"\(M, 4\)"):
         load_scenario(write_scenario(tmp_path, "m.tum", "tum")).spec.replace_attitude(dense.t, given[:, :3])
+
+
+def test_empty_cells_of_an_occluded_frame_are_a_gap(tmp_path):
+    """A motion-capture export writes an occluded frame as empty cells (``1.25,,,,,,,``): they read as NaN,
+    as ``nan`` cells do, so the rows are a gap, bridged up to ``smoothing.max_gap_s`` and refused beyond
+    it naming the key and the time (they were refused as "'' is not a number", whatever their length).
+    k frames lost between valid samples h apart make a gap of (k + 1) h. An empty stamp, and a cell that
+    is no number, are errors naming the file, the line and the column."""
+    from gyroemu.pipelines.formats.motion_files import MotionFileError
+
+    truth = load_scenario("smooth_manoeuvre").simulate(duration=5.0, rate_hz=RATE)
+    write_csv(tmp_path / "m.csv", truth.t, truth.q_wb, truth.pos_w)
+    lines = (tmp_path / "m.csv").read_text().splitlines()  # the header, then row i on line i + 2
+
+    def blank(rows: range, cell: str, name: str, stamp: bool = False) -> Path:
+        out = list(lines)
+        for i in rows:
+            t = "" if stamp else out[i + 1].split(",")[0]
+            out[i + 1] = ",".join([t] + [cell] * 7)
+        (tmp_path / name).write_text("\n".join(out) + "\n")
+        return tmp_path / name
+
+    lost = range(240, 252)  # 12 frames: (12 + 1) / 120 Hz = 0.108 s
+    empty, nan = read_csv(blank(lost, "", "e.csv")), read_csv(blank(lost, " nan", "n.csv"))
+    assert np.array_equal(empty.q_wb, nan.q_wb, equal_nan=True)
+    assert np.array_equal(empty.pos_w, nan.pos_w, equal_nan=True)
+    assert np.array_equal(np.flatnonzero(~empty.valid()), np.array(lost))
+    gaps = load_scenario(write_scenario(tmp_path, "e.csv", "csv")).spec.motion().gaps
+    assert gaps.invalid_rows == len(lost) and len(gaps.gaps) == 1
+    start, length = gaps.gaps[0]
+    assert start == pytest.approx(truth.t[lost.start - 1], abs=1e-12) and length == pytest.approx(13 / RATE, rel=1e-9)
+
+    long = blank(range(240, 300), "", "long.csv")  # 61 / 120 Hz = 0.51 s > max_gap_s = 0.25 s
+    with pytest.raises(ConfigError, match=r"gap of 0\.508.* s .*after t = 1\.99") as e:
+        load_scenario(write_scenario(tmp_path, long.name, "csv")).simulate()
+    assert e.value.key == "smoothing.max_gap_s"
+
+    with pytest.raises(MotionFileError, match=r"s\.csv: line 12: column 't_s' is empty"):
+        read_csv(blank(range(10, 11), "", "s.csv", stamp=True))
+    with pytest.raises(MotionFileError, match=r"x\.csv: line 12: column 'px_m': 'occluded' is not a number"):
+        read_csv(blank(range(10, 11), "occluded", "x.csv"))
