@@ -12,7 +12,14 @@ from .calibration import AccelCalibration, GyroCalibration, MagCalibration, fit_
 from .dipole import DipoleFit, fit_dipole
 from .handling import HandlingOffset, handling_offset, pool_handling_offsets
 from .lever_arm import LeverArmFit, fit_lever_arm
-from .magnetic_environment import MagneticEnvironment, magnetic_environment, pool_heading_offsets, world_field
+from .magnetic_environment import (
+    DiscordantField,
+    MagneticEnvironment,
+    discordant_fields,
+    magnetic_environment,
+    pool_heading_offsets,
+    world_field,
+)
 from .noise import AxisNoise, NoiseTerm, SensorNoise, pooled_allan, sensor_noise
 from .rest import RestPhase, find_rest_phases, phases_from_intervals
 from .result import Identification, Pooled, identify, pool_estimates, pool_random_effects
@@ -24,6 +31,7 @@ __all__ = [
     "AccelCalibration",
     "AxisNoise",
     "DipoleFit",
+    "DiscordantField",
     "GyroCalibration",
     "HandlingOffset",
     "Identification",
@@ -41,6 +49,7 @@ __all__ = [
     "accel_latency",
     "estimate_latency",
     "find_rest_phases",
+    "discordant_fields",
     "fit_dipole",
     "fit_accel",
     "fit_gyro",

@@ -25,7 +25,14 @@ From m_w over the samples:
   gives a correlation time instead;
 - the **heading offset** between the field at rest (the first rest phase) and in the working volume
   (movement samples): circular mean of ψ(t) − ψ_rest. :func:`pool_heading_offsets` turns several
-  trials' offsets into a mean and a standard deviation.
+  trials' offsets into a mean and a standard deviation;
+- the **recordings that disagree**: one site has one field, so several recordings' fields at rest agree
+  within what the field does along a path (the spread, ``raw_sigma``: the site's variation and the
+  magnetometer's calibration residual). :func:`discordant_fields` names a recording whose rest field
+  lies more than three of those spreads from the median of the others' (``FIELD_AGREEMENT``), with
+  three recordings or more (of two, neither is the odd one): recorded elsewhere, or with iron near
+  its rest. On BROAD's undisturbed trials 02, 07 and 11 lie 0.8–1.1 µT from the others (spreads
+  0.8–1.0 µT); 16 lies 7.0 µT from them (spread 1.6 µT: 37.9 µT against 43.3–43.9 µT).
 
 Without motion there is no path: when the movement samples never leave one position (or, without a
 position track, never change attitude), as in a static log, the spread would be the sensor's noise
@@ -43,9 +50,19 @@ import numpy as np
 
 from .truth import interpolate_attitude, moving_average, rotation_bw
 
-__all__ = ["MagneticEnvironment", "world_field", "magnetic_environment", "pool_heading_offsets"]
+__all__ = [
+    "FIELD_AGREEMENT",
+    "DiscordantField",
+    "MagneticEnvironment",
+    "world_field",
+    "magnetic_environment",
+    "pool_heading_offsets",
+    "discordant_fields",
+]
 
 _PAIR_POINTS = 2000  # points of the correlation's pair sums (N² pairs)
+FIELD_AGREEMENT = 3.0
+"""How many of its spreads along the path a recording's rest field may lie from the others' (module notes)."""
 
 
 def world_field(
@@ -231,3 +248,37 @@ def pool_heading_offsets(environments: Sequence[MagneticEnvironment]) -> tuple[f
         return mean, float(environments[0].heading_offset_sigma)
     wrapped = np.angle(np.exp(1j * (offsets - mean)))
     return mean, float(np.std(wrapped, ddof=1))
+
+
+@dataclass(frozen=True)
+class DiscordantField:
+    """A recording whose field at rest disagrees with the others' (:func:`discordant_fields`).
+
+    index : its place in the sequence given; distance : |its rest field − the others' median|, T;
+    allowed : :data:`FIELD_AGREEMENT` times the larger of its spread and the others' median spread, T.
+    """
+
+    index: int
+    distance: float
+    allowed: float
+
+
+def discordant_fields(environments: Sequence[MagneticEnvironment]) -> list[DiscordantField]:
+    """The recordings whose rest field lies further from the median (per axis) of the others' than
+    :data:`FIELD_AGREEMENT` times the field's spread along the paths, |``raw_sigma``| (``axis_sigma``
+    where it is not known), the larger of the recording's own and the others' median (module notes);
+    none for fewer than three recordings."""
+    if len(environments) < 3:
+        return []
+    fields = np.array([e.rest_field_w for e in environments])
+    spreads = np.array(
+        [float(np.linalg.norm(e.raw_sigma if e.raw_sigma is not None else e.axis_sigma)) for e in environments]
+    )
+    out = []
+    for i in range(len(environments)):
+        others = np.delete(np.arange(len(environments)), i)
+        distance = float(np.linalg.norm(fields[i] - np.median(fields[others], axis=0)))
+        allowed = FIELD_AGREEMENT * max(spreads[i], float(np.median(spreads[others])))
+        if distance > allowed:
+            out.append(DiscordantField(i, distance, allowed))
+    return out

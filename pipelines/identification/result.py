@@ -45,7 +45,14 @@ from gyroemu.dynamics.rotation import quat_from_matrix
 
 from .calibration import polar_decomposition
 from .handling import pool_handling_offsets
-from .magnetic_environment import MagneticEnvironment, magnetic_environment, pool_heading_offsets, world_field
+from .magnetic_environment import (
+    FIELD_AGREEMENT,
+    MagneticEnvironment,
+    discordant_fields,
+    magnetic_environment,
+    pool_heading_offsets,
+    world_field,
+)
 from .noise import SensorNoise, sensor_noise
 from .timing import LatencyEstimate
 from .trial import TrialData, TrialIdentification, TrialSettings, identify_trial
@@ -401,6 +408,13 @@ class Identification:
                 f"correlation time {e.correlation_time_s:.3g} s; {e.samples} movement samples"
             )
         n = sum(e is not None for e in self.environments)
+        known = [(t, e) for t, e in zip(self.trials, self.environments) if e is not None]
+        for odd in discordant_fields([e for _, e in known]):
+            lines.append(
+                f"{known[odd.index][0].name}: its field at rest lies {odd.distance * 1e6:.1f} uT from the others' "
+                f"median, beyond {FIELD_AGREEMENT:g} times the field's spread along the paths "
+                f"({odd.allowed * 1e6:.1f} uT); magnetic_field_enu_uT below is the mean with it"
+            )
         if n:
             lines.append(
                 "heading_offset_sigma_deg: "
@@ -528,6 +542,15 @@ def identify(trials: Sequence[TrialData], settings: TrialSettings | None = None)
             notes.append(f"{d.name}: magnetic environment: {e}")
             environments.append(None)
 
+    known = [(d, e) for d, e in zip(trials, environments) if e is not None]
+    for odd in discordant_fields([e for _, e in known]):
+        d, e = known[odd.index]
+        notes.append(
+            f"{d.name}: its field at rest ({e.norm * 1e6:.1f} uT, dip {np.degrees(e.dip):.1f} deg) lies "
+            f"{odd.distance * 1e6:.1f} uT from the other recordings' median, beyond {FIELD_AGREEMENT:g} times the "
+            f"field's spread along the paths ({odd.allowed * 1e6:.1f} uT): recorded elsewhere, or iron near its "
+            "rest? The site's field pools it with the others; identify it alone, or leave it out"
+        )
     scale = pool_random_effects([g.scale for g in gyros], [g.scale_sigma for g in gyros]) if gyros else None
     return Identification(
         trials=results,

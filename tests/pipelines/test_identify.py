@@ -896,3 +896,67 @@ def test_a_static_log_beside_a_moving_one_has_no_magnetic_environment(synthetic,
     assert both.environments[0] is not None and both.environments[1] is None
     assert any(n.startswith("still: magnetic environment: no motion") for n in both.notes), both.notes
     assert both.site_dict()["site"] == moving.site_dict()["site"]
+
+
+def _environment(field_ut, spread_ut: float):
+    """A magnetic environment with the rest field ``field_ut`` (E, N, U) µT and a spread along its path of
+    ``spread_ut`` µT in all (equal per axis)."""
+    from gyroemu.pipelines.identification import MagneticEnvironment
+
+    field = np.asarray(field_ut, dtype=float) * 1e-6
+    sigma = np.full(3, spread_ut * 1e-6 / np.sqrt(3))
+    return MagneticEnvironment(
+        rest_field_w=field,
+        norm=float(np.linalg.norm(field)),
+        dip=float(np.arctan2(-field[2], np.hypot(field[0], field[1]))),
+        heading=0.0,
+        axis_sigma=sigma / 2,
+        spatial_sigma=float(np.linalg.norm(sigma / 2)),
+        heading_offset=0.0,
+        heading_offset_sigma=0.0,
+        correlation_length_m=None,
+        correlation_time_s=1.0,
+        samples=100,
+        raw_sigma=sigma,
+    )
+
+
+def test_a_recording_whose_field_disagrees_is_named():
+    """One site, one field: a recording whose rest field lies more than FIELD_AGREEMENT spreads from the
+    others' median is named, one just inside is not, and of two recordings neither is the odd one."""
+    from gyroemu.pipelines.identification import discordant_fields
+    from gyroemu.pipelines.identification.magnetic_environment import FIELD_AGREEMENT
+
+    base = np.array([0.3, 15.5, -40.9])
+    agree = [_environment(base + d, 1.0) for d in ([0.2, -0.3, 0.1], [-0.4, 0.1, 0.2], [0.1, 0.2, -0.3])]
+    assert discordant_fields(agree) == []
+    direction = np.array([0.0, 0.6, 0.8])  # a unit vector, µT per µT
+    median = np.median([e.rest_field_w for e in agree], axis=0) * 1e6
+    for factor, named in ((0.98, False), (1.02, True)):
+        odd = _environment(median + factor * FIELD_AGREEMENT * 1.0 * direction, 1.0)
+        found = discordant_fields([*agree, odd])
+        assert [f.index for f in found] == ([3] if named else []), (factor, found)
+    found = discordant_fields([*agree, _environment(median + 7.0 * direction, 2.0)])
+    assert [f.index for f in found] == [3]
+    assert found[0].distance == pytest.approx(7.0e-6, rel=1e-12)
+    assert found[0].allowed == pytest.approx(FIELD_AGREEMENT * 2.0e-6, rel=1e-12)  # its own spread, the larger
+    assert discordant_fields([agree[0], _environment(base + 50.0, 1.0)]) == []  # of two, neither
+
+
+@pytest.mark.slow
+@needs_trial(UNDISTURBED[3])
+def test_broad_trial_16_field_is_named_and_no_other(tmp_path: Path):
+    """BROAD's undisturbed trials: 16 reads 37.9 µT at rest against 43.3–43.9 µT (README), and the
+    identification says so in its notes and the site file; 02, 07 and 11 agree."""
+    for name in UNDISTURBED:
+        require_trial(name)
+    options = IdentifyOptions(
+        logs=[BROAD_DIR / n for n in UNDISTURBED], out=tmp_path / "d.toml", site_out=tmp_path / "s.toml"
+    )
+    from gyroemu.pipelines.jobs.identify import identify_logs
+
+    result = identify_logs(options)
+    named = [n for n in result.notes if "its field at rest" in n]
+    assert len(named) == 1 and named[0].startswith(UNDISTURBED[3]), result.notes
+    site = result.site_toml()
+    assert site is not None and f"{UNDISTURBED[3]}: its field at rest lies" in site
