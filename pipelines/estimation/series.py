@@ -3,7 +3,7 @@ bench) and the live filter.
 
 - :func:`check_samples`: refuse samples no filter can run on, naming the file (:class:`LogError`);
   :func:`check_counts` the same for samples counted as they went by;
-- :func:`rate_of`: the nominal rate of stamps;
+- :func:`median_step_ns`, :func:`rate_of`: the median interval and the nominal rate of integer stamps;
 - :func:`estimate_series`: the ``/estimate/imu`` content of an :class:`Estimate`.
 """
 
@@ -16,7 +16,7 @@ from gyroemu.pipelines.formats.channels import ImuSeries
 
 from .protocol import Estimate
 
-__all__ = ["check_counts", "check_samples", "estimate_series", "not_increasing_error", "rate_of"]
+__all__ = ["check_counts", "check_samples", "estimate_series", "median_step_ns", "not_increasing_error", "rate_of"]
 
 
 def check_samples(path, name: str, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray) -> str | None:
@@ -58,9 +58,41 @@ def check_counts(path, name: str, count: int, finite: int) -> str | None:
     )
 
 
-def rate_of(t: np.ndarray) -> float:
-    """The nominal sample rate of stamps ``t``: the inverse of the median interval, Hz."""
-    return 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+def median_step_ns(stamp_ns: np.ndarray) -> float:
+    """The median interval of integer stamps ``stamp_ns`` (N ≥ 2, ns), ns: NumPy's median of the integer
+    steps (the mean of the two middle ones for an even count, an integer or a half, exact for steps below
+    2**52 ns). From the nanoseconds, not float seconds since the epoch, which resolve 0.24 µs today and
+    put a 1 kHz log's median step 72 ppm off. :class:`~gyroemu.pipelines.formats.device_stream.RateCounter`
+    finds the same float a block at a time.
+
+    Raises
+    ------
+    TypeError
+        Stamps that are not integers (float seconds, say).
+    ValueError
+        Fewer than two stamps.
+    """
+    steps = np.diff(_integer_ns(stamp_ns))
+    if not len(steps):
+        raise ValueError("no intervals")
+    lower, upper = (len(steps) - 1) // 2, len(steps) // 2
+    middle = np.partition(steps, (lower, upper))
+    return (int(middle[lower]) + int(middle[upper])) / 2
+
+
+def rate_of(stamp_ns: np.ndarray) -> float:
+    """The nominal sample rate of integer stamps ``stamp_ns`` (ns): ``1e9 / median_step_ns``, Hz (1000.0
+    for steps of 1,000,000 ns); 1.0 for fewer than two stamps. TypeError for stamps that are not integers."""
+    stamp_ns = _integer_ns(stamp_ns)
+    return 1e9 / median_step_ns(stamp_ns) if len(stamp_ns) > 1 else 1.0
+
+
+def _integer_ns(stamp_ns: np.ndarray) -> np.ndarray:
+    """``stamp_ns`` as int64 ns; TypeError for stamps that are not integers (float seconds, say)."""
+    stamp_ns = np.asarray(stamp_ns)
+    if not np.issubdtype(stamp_ns.dtype, np.integer):
+        raise TypeError(f"stamps must be integer nanoseconds, got {stamp_ns.dtype}")
+    return stamp_ns.astype(np.int64, copy=False)
 
 
 def estimate_series(t, estimate: Estimate, gyro) -> ImuSeries:

@@ -600,7 +600,7 @@ def _sim_run(traj, device, seed) -> _Run:
 
 def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, list[str]]]:
     """The devices of a log to bench, the log read whole: (name, mode, setup, run, source, notes) each."""
-    from gyroemu.pipelines.estimation.series import check_samples
+    from gyroemu.pipelines.estimation.series import check_samples, median_step_ns, rate_of
     from gyroemu.pipelines.formats.device_stream import nearest
     from gyroemu.pipelines.formats.mcap_log import read_mcap
 
@@ -618,7 +618,7 @@ def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, li
         mode = "9D" if has_mag and not case.six_d else "6D"
         # Truth at the samples' stamps: the nearest within a quarter of a sample interval
         tt = np.asarray(dev.truth.t, dtype=float)
-        dt_nominal = float(np.median(np.diff(t)))
+        dt_nominal = median_step_ns(dev.stamp_ns) / 1e9  # from the integer stamps, as the census has it
         q_true = np.full((len(t), 4), np.nan)
         omega = None
         if len(tt):
@@ -636,7 +636,7 @@ def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, li
         no_ref = int((~np.isfinite(q_true).all(axis=1) & mask).sum())
         notes = mask_notes(path, name, flags, int(mask.sum()), no_ref, [note] if note else [])
         samples = (t - t[0], np.asarray(s.gyro, float), np.asarray(s.mag, float) if mode == "9D" else None)
-        setup = log_setup(dev.metadata, dt_nominal, mode, case, samples, notes)
+        setup = log_setup(dev.metadata, rate_of(dev.stamp_ns), mode, case, samples, notes)
         run = _Run(
             t=t,
             gyro=np.asarray(s.gyro, float),

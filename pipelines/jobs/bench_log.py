@@ -152,20 +152,21 @@ def mask_notes(path: Path, name: str, flags: bool | None, mask_count: int, no_re
 
 def log_setup(
     metadata: dict | None,
-    dt_nominal: float,
+    rate_hz: float,
     mode: str,
     case: LogCase,
     samples: tuple[np.ndarray, np.ndarray, np.ndarray | None],
     notes: list[str],
 ) -> FilterSetup:
-    """The device's filter setup (from its ``gyroemu`` metadata, or the defaults), with the case's
-    latencies; ``samples`` is ``(t − t₀, gyro, mag or None)``, of every sample where the field's lag is
-    to be read from the log. Appends what it decided to ``notes``."""
+    """The device's filter setup at ``rate_hz`` (Hz, the samples' nominal rate: ``rate_of`` their integer
+    stamps), from its ``gyroemu`` metadata or the defaults, with the case's latencies; ``samples`` is
+    ``(t − t₀, gyro, mag or None)``, of every sample where the field's lag is to be read from the log.
+    Appends what it decided to ``notes``."""
     from gyroemu.pipelines.estimation.setup import latencies_for_log, setup_from_metadata
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # an embedded config that no longer validates: defaults
-        setup = setup_from_metadata(metadata, 1.0 / dt_nominal, use_mag=mode == "9D")
+        setup = setup_from_metadata(metadata, rate_hz, use_mag=mode == "9D")
     if case.latency_s:
         t_rel, gyro, mag = samples
         setup, lag = latencies_for_log(setup, case.latency_s, t_rel, gyro, mag)
@@ -298,7 +299,7 @@ def stream_log_devices(case: LogCase, whole_samples: bool = False) -> list[LogDe
         assert first is not None and c.first_ns is not None and c.last_ns is not None  # check_counts: 2 or more
         t = ns_to_stamps(first.stamp_ns)
         samples = (t - t[0], np.asarray(first.gyro, float), np.asarray(first.mag, float) if mode == "9D" else None)
-        setup = log_setup(dev.metadata, f["dt"], mode, case, samples, notes)
+        setup = log_setup(dev.metadata, c.rate.rate(), mode, case, samples, notes)
         t_first, t_last = ns_to_stamps(np.array([c.first_ns, c.last_ns]))
         out.append(
             LogDevice(

@@ -268,8 +268,9 @@ def _estimate_whole(path, out, filter_name, use_mag, topic, topic_out, latency_s
         if note:
             warnings.warn(f"{path}: {note}", UserWarning, stacklevel=2)
         t_rel = samples.t - samples.t[0]  # relative times keep float64's resolution for the filter
+        rate_hz = rate_of(dev.stamp_ns)  # from the integer stamps, as the streamed census has it
         nine, flt, lag = _device_filter(
-            dev, rate_of(samples.t), samples.has_mag, use_mag, filter_name, latency_s, t_rel, samples.gyro, samples.mag
+            dev, rate_hz, samples.has_mag, use_mag, filter_name, latency_s, t_rel, samples.gyro, samples.mag
         )
         field_lags += lag
         est = flt.process(t_rel, samples.gyro, samples.accel, samples.mag if nine else None)

@@ -135,33 +135,33 @@ def test_stream_pairs_the_topics_as_read_mcap(tmp_path, damage):
     assert stream.movement_missing == len(set(damage.get("drop_flag", [])) - set(damage.get("drop_raw", [])))
     assert census.count == len(want.t) and census.has_mag == want.has_mag
     assert census.finite == int(np.isfinite(want.gyro).all(axis=1).sum())
-    assert census.rate.rate() == rate_of(want.t)  # the same float
+    assert census.rate.rate() == rate_of(dev.stamp_ns)  # the same float
     assert census.pose_pairs(stream) == (len(damage.get("drop_raw", [])) == 0)  # a pose per sample kept
     read_warnings = [str(w.message) for w in caught if "have no message" in str(w.message)]
     assert len(read_warnings) == bool(damage.get("drop_raw")) + bool(damage.get("drop_flag"))
 
 
 def test_rate_counter_is_numpys_median():
-    """The counted median interval is ``1 / median(diff(t))`` to the bit, blocks or not, for clocked
+    """The counted rate is ``1e9 / median(diff(stamp_ns))`` to the bit, blocks or not, for clocked
     stamps (few distinct intervals), jittered ones (every interval its own) and an even or odd count,
-    and for more intervals than it holds before merging a block's in."""
+    and for more intervals than it holds before merging a block's in (``test_log_rate.py``: any cut)."""
     rng = np.random.default_rng(2)
     for n in (2, 3, 1000, 1001):
-        for t in (
-            1e9 / 1e9 + np.arange(n) * 0.005,
-            np.cumsum(rng.uniform(0.004, 0.006, n)) + 1.7e9,
-            np.round(np.cumsum(rng.choice([0.01, 0.01, 0.011], n)), 6),
+        for stamps in (
+            10**9 + np.arange(n, dtype=np.int64) * 5_000_000,
+            T0_NS + np.cumsum(rng.integers(4_000_000, 6_000_000, n)),
+            np.cumsum(rng.choice([10_000_000, 10_000_000, 11_000_000], n)),
         ):
             counter = RateCounter()
-            for piece in np.array_split(t, rng.integers(1, 6)):
+            for piece in np.array_split(stamps, rng.integers(1, 6)):
                 counter.add(piece)
-            assert counter.rate() == rate_of(t)
-    # a jittered clock from 0: every interval its own, merged in several times along the way
-    t = np.cumsum(rng.uniform(0.0009, 0.0011, 300_001))
+            assert counter.rate() == rate_of(stamps) == 1e9 / float(np.median(np.diff(stamps)))
+    # a jittered clock: every interval its own, merged in several times along the way
+    stamps = T0_NS + np.cumsum(rng.integers(900_000, 1_100_000, 300_001))
     counter = RateCounter()
-    for piece in np.array_split(t, 300):
+    for piece in np.array_split(stamps, 300):
         counter.add(piece)
-    assert counter.rate() == rate_of(t)
+    assert counter.rate() == rate_of(stamps)
 
 
 def test_check_samples_counts_as_before():

@@ -342,7 +342,7 @@ def test_estimate_smooth_writes_the_smoothed_estimate(tmp_path):
     n = len(dev.samples.t)
     est = dev.estimate
     assert est is not None and len(est.t) == n
-    setup = setup_from_metadata(dev.metadata, rate_of(dev.samples.t), use_mag=True)  # as estimate does
+    setup = setup_from_metadata(dev.metadata, rate_of(dev.stamp_ns), use_mag=True)  # as estimate does
     want = MekfSmoother(setup).process(
         dev.samples.t - dev.samples.t[0], dev.samples.gyro, dev.samples.accel, dev.samples.mag
     )
