@@ -115,7 +115,14 @@ from gyroemu.pipelines.formats.mcap_records import (
     McapScan,
     iter_mcap_batches,
 )
-from gyroemu.pipelines.formats.messages import IMU, MessageType, ns_to_stamps, raw_observables, stamps_to_ns
+from gyroemu.pipelines.formats.messages import (
+    IMU,
+    MessageType,
+    ns_to_stamps,
+    raw_observables,
+    seconds_since,
+    stamps_to_ns,
+)
 from gyroemu.pipelines.formats.tf_messages import TF_MESSAGE_TYPE, Transforms, decode_tf, encode_tf, tf_schema
 from gyroemu.sensors.samples import ImuSamples
 
@@ -302,8 +309,8 @@ class DeviceLog:
     def seconds_from_first(self) -> np.ndarray:
         """The samples' stamps in seconds from the first, exactly from their nanoseconds (N,): the float
         seconds of ``samples.t`` resolve 0.24 µs at Unix-epoch times, which differences would read as
-        jitter."""
-        return (self.stamp_ns - self.stamp_ns[0]) * 1e-9
+        jitter (:func:`~gyroemu.pipelines.formats.messages.seconds_since`)."""
+        return seconds_since(self.stamp_ns, self.stamp_ns[0])
 
 
 @dataclass(frozen=True, eq=False)

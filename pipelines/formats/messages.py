@@ -75,6 +75,7 @@ __all__ = [
     "schema_text",
     "stamps_to_ns",
     "ns_to_stamps",
+    "seconds_since",
     "split_payloads",
     "raw_fields",
     "raw_observables",
@@ -345,6 +346,14 @@ def stamps_to_ns(t: np.ndarray) -> np.ndarray:
 def ns_to_stamps(ns: np.ndarray) -> np.ndarray:
     """Integer nanoseconds to seconds, float64 (correctly rounded: ``ns / 10^9``)."""
     return np.asarray(ns, dtype=np.int64) / 1e9
+
+
+def seconds_since(ns: np.ndarray, first_ns: int) -> np.ndarray:
+    """Integer nanosecond stamps ``ns`` as seconds from the stamp ``first_ns``, float64: the clock the
+    filters run on. The difference is taken in integers, so a step of 1,000,000 ns is 0.001 s to float64's
+    resolution at the span, where float seconds since the epoch resolve 0.24 µs today (a 1 kHz log's steps
+    read 0.99993, 1.00017 or 1.0004 ms)."""
+    return (np.asarray(ns, dtype=np.int64) - np.int64(first_ns)) * 1e-9
 
 
 def _split_ns(ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -635,10 +635,11 @@ def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, li
         mask = np.asarray(movement, dtype=bool) if flags else np.ones(len(t), bool)
         no_ref = int((~np.isfinite(q_true).all(axis=1) & mask).sum())
         notes = mask_notes(path, name, flags, int(mask.sum()), no_ref, [note] if note else [])
-        samples = (t - t[0], np.asarray(s.gyro, float), np.asarray(s.mag, float) if mode == "9D" else None)
+        t_rel = dev.seconds_from_first()  # the filters' clock, exact from the nanoseconds (as the streamed read's)
+        samples = (t_rel, np.asarray(s.gyro, float), np.asarray(s.mag, float) if mode == "9D" else None)
         setup = log_setup(dev.metadata, rate_of(dev.stamp_ns), mode, case, samples, notes)
         run = _Run(
-            t=t,
+            t=t_rel,
             gyro=np.asarray(s.gyro, float),
             accel=np.asarray(s.accel, float),
             mag=np.asarray(s.mag, float) if has_mag else None,

@@ -51,7 +51,7 @@ from gyroemu.pipelines.formats.device_stream import (
 )
 from gyroemu.pipelines.formats.mcap_log import LogWarning
 from gyroemu.pipelines.formats.mcap_records import McapRecordWalk
-from gyroemu.pipelines.formats.messages import ns_to_stamps
+from gyroemu.pipelines.formats.messages import seconds_since
 from gyroemu.pipelines.jobs.bench_cases import PLOT_POINTS, BenchError, BenchWarning, LogCase
 from gyroemu.pipelines.jobs.bench_filters import check_estimate, warm_up
 from gyroemu.pipelines.jobs.bench_metrics import BIAS_WINDOW_S, RunMetrics, RunResult
@@ -192,7 +192,8 @@ class LogDevice:
     device: StreamDevice
     samples: int
     counted: int  # samples in the mask with a finite reference
-    t_first: float
+    first_ns: int  # the first sample's stamp: the filters run on seconds since it (``seconds_since``)
+    t_first: float  # the first and the last sample on that clock, s (0 and the span)
     t_last: float
     dt_nominal: float
     flags: bool  # the movement flags are the mask
@@ -297,10 +298,10 @@ def stream_log_devices(case: LogCase, whole_samples: bool = False) -> list[LogDe
         mode = "9D" if c.field_rows and not case.six_d else "6D"
         first = counted[name].first
         assert first is not None and c.first_ns is not None and c.last_ns is not None  # check_counts: 2 or more
-        t = ns_to_stamps(first.stamp_ns)
-        samples = (t - t[0], np.asarray(first.gyro, float), np.asarray(first.mag, float) if mode == "9D" else None)
+        t = seconds_since(first.stamp_ns, c.first_ns)
+        samples = (t, np.asarray(first.gyro, float), np.asarray(first.mag, float) if mode == "9D" else None)
         setup = log_setup(dev.metadata, c.rate.rate(), mode, case, samples, notes)
-        t_first, t_last = ns_to_stamps(np.array([c.first_ns, c.last_ns]))
+        t_first, t_last = seconds_since(np.array([c.first_ns, c.last_ns]), c.first_ns)
         out.append(
             LogDevice(
                 label=log_label(path, name, len(found), case, c.field_rows),
@@ -311,6 +312,7 @@ def stream_log_devices(case: LogCase, whole_samples: bool = False) -> list[LogDe
                 device=dev,
                 samples=c.count,
                 counted=f["counted"],
+                first_ns=c.first_ns,
                 t_first=float(t_first),
                 t_last=float(t_last),
                 dt_nominal=f["dt"],
@@ -362,7 +364,7 @@ def bench_log_device(
     """Every filter of ``filters`` over the device's samples, a block at a time (passes 4 and 5); a filter
     that raises is stopped and reported as diverged (its exception the reason)."""
     six_d = dev.mode == "6D"
-    first_t = ns_to_stamps(dev.first.stamp_ns)
+    first_t = seconds_since(dev.first.stamp_ns, dev.first_ns)
     first_mag = None if six_d else dev.first.mag
     step = max(1, dev.samples // PLOT_POINTS)
     window = max(1, int(round(BIAS_WINDOW_S * dev.setup.rate_hz))) if dev.rates and dev.setup.rate_hz else None
@@ -373,7 +375,7 @@ def bench_log_device(
         r = _Running(spec, make_filter(spec, dev.setup), _metrics(dev, threshold_deg, window))
         if registry.takes_whole_log(spec):  # the whole log at once
             assert dev.whole, "stream_log_devices(whole_samples=True) keeps every sample for such a filter"
-            t = ns_to_stamps(dev.first.stamp_ns)
+            t = first_t
             try:
                 est = r.timed(r.flt.process, t, dev.first.gyro, dev.first.accel, first_mag)
                 r.given = check_estimate(est, dev.samples, str(r.flt.name))
@@ -383,14 +385,14 @@ def bench_log_device(
     learners = [r for r in running if learns_in_blocks(r.flt) and not r.reason]
     if learners:
         for block in _blocks(path, dev):
-            t, mag = ns_to_stamps(block.stamp_ns), None if six_d else block.mag
+            t, mag = seconds_since(block.stamp_ns, dev.first_ns), None if six_d else block.mag
             for r in learners:
                 if not r.reason:
                     _step(r, r.flt.learn, t, block.gyro, block.accel, mag)
     offset, curve_t = 0, []
     for block in _blocks(path, dev):
         n = len(block)
-        t = ns_to_stamps(block.stamp_ns)
+        t = seconds_since(block.stamp_ns, dev.first_ns)
         q_true, omega = _reference(block, dev.dt_nominal)
         mask = _mask(block, dev.flags)
         mag = None if six_d else block.mag

@@ -71,7 +71,7 @@ from gyroemu.pipelines.formats.device_stream import (
 from gyroemu.pipelines.formats.frames import TF_LOG_RATE_HZ, TfThinning
 from gyroemu.pipelines.formats.mcap_log import LogWarning, read_mcap
 from gyroemu.pipelines.formats.mcap_records import McapRecordWalk
-from gyroemu.pipelines.formats.messages import IMU, ns_to_stamps
+from gyroemu.pipelines.formats.messages import IMU, seconds_since
 from gyroemu.pipelines.jobs.disk_space import MCAP_RECORD_OVERHEAD, free_bytes, human_size
 from gyroemu.pipelines.jobs.estimate_copy import (
     FIRST_BLOCK_S,
@@ -267,7 +267,7 @@ def _estimate_whole(path, out, filter_name, use_mag, topic, topic_out, latency_s
         note = check_samples(path, dev.name, samples.t, samples.gyro, samples.accel)
         if note:
             warnings.warn(f"{path}: {note}", UserWarning, stacklevel=2)
-        t_rel = samples.t - samples.t[0]  # relative times keep float64's resolution for the filter
+        t_rel = dev.seconds_from_first()  # exact from the nanoseconds, as the streamed path has them
         rate_hz = rate_of(dev.stamp_ns)  # from the integer stamps, as the streamed census has it
         nine, flt, lag = _device_filter(
             dev, rate_hz, samples.has_mag, use_mag, filter_name, latency_s, t_rel, samples.gyro, samples.mag
@@ -315,15 +315,14 @@ def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latenc
         if note:
             warnings.warn(f"{path}: {note}", UserWarning, stacklevel=2)
         assert counted.first_ns is not None and first is not None  # check_counts: at least two samples
-        t0 = float(ns_to_stamps(np.array([counted.first_ns]))[0])
-        t_rel = ns_to_stamps(first.stamp_ns) - t0  # with "auto", ``first`` is every sample
+        t_rel = seconds_since(first.stamp_ns, counted.first_ns)  # with "auto", ``first`` is every sample
         nine, flt, lag = _device_filter(
             dev, counted.rate.rate(), counted.has_mag, use_mag, filter_name, latency_s, t_rel, first.gyro, first.mag
         )
         if learns_in_blocks(flt):
             flt.spool_in(out.parent)  # beside the output, whose size it is of (not in a small /tmp)
         field_lags += lag
-        filters.append(_DeviceFilter(dev, flt, nine, t0, first))
+        filters.append(_DeviceFilter(dev, flt, nine, counted.first_ns, first))
     check_disk(path, out, [(_size_frame(f.dev), *_spooled(f.flt, found[f.dev.name].census)) for f in filters])
     try:
         _learn(path, [f for f in filters if learns_in_blocks(f.flt)])
@@ -386,14 +385,14 @@ class _DeviceFilter:
     dev: StreamDevice
     flt: AttitudeFilter
     nine: bool
-    t0: float  # the device's first stamp, s: the filter runs on stamps relative to it
+    first_ns: int  # the device's first stamp: the filter runs on seconds since it (``seconds_since``)
     first: DeviceBlock  # its first block of samples (:data:`FIRST_BLOCK_S`), or all of them
 
     def feed(self, block: DeviceBlock, rest: bool) -> None:
         """``learn`` the block; with ``rest``, only its samples after the first block (given first)."""
         block = block.after(self.first.through_ns) if rest else block
         if len(block):
-            t = ns_to_stamps(block.stamp_ns) - self.t0
+            t = seconds_since(block.stamp_ns, self.first_ns)
             assert learns_in_blocks(self.flt)
             self.flt.learn(t, block.gyro, block.accel, block.mag if self.nine else None)
 
@@ -424,7 +423,7 @@ def _block_run(dev, name: str, f: _DeviceFilter, counted, tf_device: str | None)
         stream=DeviceStream(dev.channels, pair_pose=counted.pose_pairs, messages=dev.messages),
         flt=f.flt,
         nine=f.nine,
-        t0=f.t0,
+        first_ns=f.first_ns,
         count=counted.census.count,
         pose=counted.pose_pairs,
         thinning=TfThinning(TF_LOG_RATE_HZ) if dev.name == tf_device else None,

@@ -38,7 +38,7 @@ from gyroemu.pipelines.formats.mcap_records import (
     McapRecordWalk,
     RawMessages,
 )
-from gyroemu.pipelines.formats.messages import IMU, ns_to_stamps
+from gyroemu.pipelines.formats.messages import IMU, ns_to_stamps, seconds_since
 
 __all__ = ["FIRST_BLOCK_S", "BlockRun", "EstimateTarget", "StreamFeed", "add_estimate_tf", "copy_with_estimates"]
 
@@ -77,7 +77,7 @@ class BlockRun:
     stream: DeviceStream
     flt: AttitudeFilter
     nine: bool
-    t0: float  # the first sample's stamp, s: the filter runs on stamps relative to it
+    first_ns: int  # the first sample's stamp: the filter runs on seconds since it (``seconds_since``)
     count: int  # the device's samples (the census)
     pose: bool  # /tf positions from /truth/pose (else the origin)
     thinning: TfThinning | None  # the device whose estimate also goes on /tf
@@ -100,7 +100,8 @@ class BlockRun:
 
     def _filter(self, block: DeviceBlock) -> None:
         t = ns_to_stamps(block.stamp_ns)
-        est = self.flt.process(t - self.t0, block.gyro, block.accel, block.mag if self.nine else None)
+        t_rel = seconds_since(block.stamp_ns, self.first_ns)
+        est = self.flt.process(t_rel, block.gyro, block.accel, block.mag if self.nine else None)
         fields = {k: np.asarray(v) for k, v in series_fields(estimate_series(t, est, block.gyro)).items()}
         n, target = len(block), self.target
         self.done += n
