@@ -181,3 +181,48 @@ def test_estimate_and_bench_give_a_1khz_log_1000_hz_both_ways(tmp_path, monkeypa
     (streamed,) = bench_log.stream_log_devices(case)
     ((*_, setup, _, _, _),) = bench._log_runs(dataclasses.replace(case, read_whole=True))
     assert streamed.setup.rate_hz == setup.rate_hz == 1000.0 and streamed.dt_nominal == 1e-3
+
+
+def test_the_filters_run_on_exact_seconds_since_the_first_stamp(tmp_path, monkeypatch):
+    """``gyroemu estimate`` and ``gyroemu bench --log``, each read whole and a block at a time, give the
+    filters seconds since the device's first stamp from the integer nanoseconds: the same floats
+    ``(stamp_ns − first_ns) · 1e-9`` on every path, whose steps are 1 ms within round-off at the span
+    (float seconds since the epoch, less the first, step by 0.99993–1.0004 ms: 2.4·10⁻⁷ s off)."""
+    from gyroemu.pipelines.formats.mcap_log import read_mcap
+
+    path = tmp_path / "run.mcap"
+    _log_at_2026(path)
+    stamp_ns = read_mcap(path).device.stamp_ns
+    exact = (stamp_ns - stamp_ns[0]) * 1e-9
+    assert np.max(np.abs(np.diff(exact) - 1e-3)) <= 8 * np.finfo(float).eps * exact[-1]
+    seen: list[np.ndarray] = []
+
+    def recording(module):
+        make_filter = module.make_filter
+
+        def make(name, setup):
+            flt = make_filter(name, setup)
+            process = flt.process
+
+            def spy(t, *args, **kwargs):
+                seen.append(np.array(t, dtype=float))
+                return process(t, *args, **kwargs)
+
+            flt.process = spy
+            return flt
+
+        monkeypatch.setattr(module, "make_filter", make)
+
+    for module in (estimate, bench, bench_log):
+        recording(module)
+    runs = {}
+    for whole in (False, True):
+        seen.clear()
+        estimate.estimate_log(path, tmp_path / f"out{whole}.mcap", read_whole=whole, filter_name="madgwick")
+        runs[f"estimate whole={whole}"] = np.concatenate(seen)
+    for whole in (False, True):
+        seen.clear()
+        bench.run_bench([LogCase(path, read_whole=whole)], filters=["madgwick"])
+        runs[f"bench whole={whole}"] = np.concatenate(seen)  # the warm-up's filters are not recorded
+    for what, t in runs.items():
+        assert np.array_equal(t, exact), what
