@@ -91,6 +91,12 @@ MODULES: dict[str, list[str]] = {
     "pipelines/formats/channels.py": ["tests/pipelines/test_mcap_io.py"],
     "pipelines/formats/mcap_records.py": ["tests/pipelines/test_mcap_io.py"],
     "pipelines/formats/mcap_log.py": ["tests/pipelines/test_mcap_io.py"],
+    "pipelines/twin/motion.py": ["tests/pipelines/test_twin.py", "tests/dynamics/test_attitude_fusion.py"],
+    "pipelines/twin/recording.py": ["tests/pipelines/test_twin.py"],
+    "pipelines/twin/residuals.py": ["tests/pipelines/test_twin.py"],
+    "pipelines/twin/runs.py": ["tests/pipelines/test_twin.py"],
+    "pipelines/twin/report.py": ["tests/pipelines/test_twin.py"],
+    "pipelines/twin/site.py": ["tests/pipelines/test_twin.py"],
 }
 
 
