@@ -542,11 +542,11 @@ def identify(trials: Sequence[TrialData], settings: TrialSettings | None = None)
             notes.append(f"{d.name}: magnetic environment: {e}")
             environments.append(None)
 
-    known = [(d, e) for d, e in zip(trials, environments) if e is not None]
-    for odd in discordant_fields([e for _, e in known]):
-        d, e = known[odd.index]
+    known = [(trial, env) for trial, env in zip(trials, environments) if env is not None]
+    for odd in discordant_fields([env for _, env in known]):
+        trial, env = known[odd.index]
         notes.append(
-            f"{d.name}: its field at rest ({e.norm * 1e6:.1f} uT, dip {np.degrees(e.dip):.1f} deg) lies "
+            f"{trial.name}: its field at rest ({env.norm * 1e6:.1f} uT, dip {np.degrees(env.dip):.1f} deg) lies "
             f"{odd.distance * 1e6:.1f} uT from the other recordings' median, beyond {FIELD_AGREEMENT:g} times the "
             f"field's spread along the paths ({odd.allowed * 1e6:.1f} uT): recorded elsewhere, or iron near its "
             "rest? The site's field pools it with the others; identify it alone, or leave it out"

@@ -324,7 +324,7 @@ def trial_result(
     :func:`~.runs.run_one_twin` (seeds 0 … ``seeds`` − 1) summarised per filter, the rankings, the
     residuals' ratios, and the notes; ``mode`` "9D" or "6D", ``rest`` :func:`~.recording.rest_phases`'s
     description, ``twin_rate`` the device's rate, Hz."""
-    rows = []
+    rows: list[dict[str, Any]] = []
     for spec in filters:
         r = real_run["errors"][spec]
         tw = {m: _summary([tr["errors"][spec][m] for tr in twins]) for m in METRICS}
