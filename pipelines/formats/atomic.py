@@ -2,7 +2,11 @@
 
 A reader (or a crash) never sees a half-written file at ``path``: the data go to
 ``.<name>.<random>.tmp`` beside it, which :func:`os.replace` moves to ``path`` once it is complete; on any
-error the temporary file is removed and ``path`` is untouched.
+error the temporary file is removed and ``path`` is untouched. The file gets the mode a plain ``open``
+would give it (``0o666`` less the process's umask; the temporary file's own is ``0o600``).
+
+:func:`folder_problem` says, before any work, why a folder cannot take an output (missing, not a
+folder, read-only or not writable), so that a job refuses it up front naming its argument.
 """
 
 from __future__ import annotations
@@ -13,7 +17,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["write_atomic", "write_text_atomic", "write_figure_atomic"]
+__all__ = ["folder_problem", "write_atomic", "write_text_atomic", "write_figure_atomic"]
 
 
 def write_atomic(path: str | os.PathLike[str], write: Callable[[IO[Any]], object], *, binary: bool = True) -> Path:
@@ -24,6 +28,7 @@ def write_atomic(path: str | os.PathLike[str], write: Callable[[IO[Any]], object
     try:
         with os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8") as f:
             write(f)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp's 0o600 is for the temporary file, not the output
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -44,3 +49,39 @@ def write_figure_atomic(fig: Any, path: str | os.PathLike[str], dpi: int) -> Pat
         return write_atomic(path, lambda f: fig.savefig(f, dpi=dpi, format="png"))
     finally:
         plt.close(fig)
+
+
+def folder_problem(folder: str | os.PathLike[str]) -> str | None:
+    """Why ``folder`` cannot take a new file (``"no such folder"``, ``"not a folder"``, ``"read-only file
+    system"``, ``"not writable"``), or None when it can: checked with :func:`os.access`, which also
+    refuses a read-only mount to root."""
+    import errno
+
+    folder = Path(folder) if str(folder) else Path(".")
+    if not folder.exists():
+        return "no such folder"
+    if not folder.is_dir():
+        return "not a folder"
+    if os.access(folder, os.W_OK | os.X_OK):
+        return None
+    try:  # os.access does not say why; statvfs knows a read-only mount
+        if os.statvfs(folder).f_flag & os.ST_RDONLY:
+            return os.strerror(errno.EROFS).lower()
+    except OSError:
+        pass
+    return "not writable"
+
+
+def _umask() -> int:
+    """The process's umask: from ``/proc/self/status`` where Linux gives it (no change to the process),
+    else set and put back at once."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
