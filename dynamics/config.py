@@ -31,6 +31,7 @@ __all__ = [
     "Section",
     "Real",
     "as_number",
+    "at_most",
     "PositiveReal",
     "NonNegativeReal",
     "Vec3",
@@ -49,6 +50,18 @@ def as_number(value: Any) -> float:
     if not math.isfinite(value):
         raise ValueError(f"expected a finite number, got {value}")
     return float(value)
+
+
+def at_most(limit: float, reason: str) -> pydantic.AfterValidator:
+    """A pydantic validator refusing a number above ``limit`` with ``reason`` (why the bound: the size
+    it would make, what it would cost), for keys that size a run (counts of terms, spans, rates)."""
+
+    def check(value):
+        if value > limit:
+            raise ValueError(f"{value:g} is more than the limit of {limit:g}: {reason}")
+        return value
+
+    return pydantic.AfterValidator(check)
 
 
 Real = Annotated[float, pydantic.BeforeValidator(as_number)]
@@ -166,6 +179,8 @@ def resolve_config(name_or_path: str | Path, folder: str, what: str) -> Path:
     text = str(name_or_path)
     path = Path(text)
     if text.endswith(".toml") or path.exists() or "/" in text:
+        if path.is_dir():
+            raise ConfigError(f"is a folder, not a {what} file: name a .toml file in it", file=path)
         if not path.is_file():
             raise ConfigError("no such file", file=path)
         return path

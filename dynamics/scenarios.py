@@ -11,17 +11,21 @@ from __future__ import annotations
 import importlib
 import os
 from pathlib import Path
-from typing import ClassVar
+from typing import Annotated, ClassVar
 
 import numpy as np
 import tomli_w
 
-from .config import ConfigError, PositiveReal, Section, config_dir, read_toml, resolve_config, validate
+from .config import ConfigError, PositiveReal, Section, at_most, config_dir, read_toml, resolve_config, validate
 from .trajectory import Trajectory, concatenate_trajectories
 
 __all__ = [
     "ScenarioSpec",
     "Scenario",
+    "MAX_DURATION_S",
+    "MAX_RATE_HZ",
+    "Duration",
+    "Rate",
     "KINDS",
     "SEGMENT_SAMPLES",
     "segment_bounds",
@@ -50,12 +54,27 @@ KINDS: dict[str, str] = {
 """Scenario kind → ``"module:SpecClass"``."""
 
 
+MAX_DURATION_S = 1e7
+"""The longest ``duration_s`` of a scenario file, s (about 116 days; ``gyroemu simulate --duration``'s limit
+too): longer runs are more samples than any disk holds at a useful rate, and a float64 clock of seconds
+resolves 2 ns there."""
+
+MAX_RATE_HZ = 1e6
+"""The highest ``rate_hz`` of a scenario file, Hz (``gyroemu simulate --rate``'s limit too): a hundred times
+the fastest IMU's output; every sample of the truth is 184 bytes, so a higher rate fills memory in seconds."""
+
+Duration = Annotated[PositiveReal, at_most(MAX_DURATION_S, "about 116 days, more samples than a disk holds")]
+"""A scenario's span, s: positive, at most :data:`MAX_DURATION_S`."""
+Rate = Annotated[PositiveReal, at_most(MAX_RATE_HZ, "a hundred times the fastest IMU's output rate")]
+"""A scenario's truth rate, Hz: positive, at most :data:`MAX_RATE_HZ`."""
+
+
 class ScenarioSpec(Section):
     """Keys common to every scenario file. A kind subclasses this and implements :meth:`trajectory`."""
 
     kind: str
-    duration_s: PositiveReal
-    rate_hz: PositiveReal
+    duration_s: Duration
+    rate_hz: Rate
     description: str = ""
 
     pointwise: ClassVar[bool] = False

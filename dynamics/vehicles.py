@@ -31,7 +31,7 @@ import numpy as np
 from numpy.polynomial import Chebyshev
 from pydantic import Field, StrictInt, field_validator
 
-from .config import NonNegativeReal, PositiveReal, Real, Section, Vec3
+from .config import NonNegativeReal, PositiveReal, Real, Section, Vec3, at_most
 from .jit import njit
 from .motion_kernels import (
     TimeGrid,
@@ -145,6 +145,16 @@ def _euler_zyx_sample(
 # --------------------------------------------------------------------------------------------------
 
 
+MAX_SINE_TERMS = 1000
+"""The most ``terms`` a ``[rotation]`` or ``[translation]`` band takes. A sum of that many sines of random
+phase is already Gaussian band-limited motion to the eye of any filter (its amplitude distribution
+converges as 1/sqrt(terms)); every term costs every sample three channels' work and its offset tables
+(3 x 1024 x 16 bytes), so a million terms would take gigabytes and minutes for nothing more."""
+
+
+_at_most_terms = at_most(MAX_SINE_TERMS, "more random-phase sines make the motion no more random, only slower")
+
+
 def _band(value):
     low, high = value
     if not 0 < low <= high:
@@ -169,7 +179,7 @@ class RotationBand(Section):
     mean_rpy_deg: Vec3 = (0.0, 0.0, 0.0)
     amplitude_deg: Vec3 = (20.0, 10.0, 90.0)
     frequency_hz: tuple[PositiveReal, PositiveReal] = (0.02, 0.5)
-    terms: Annotated[StrictInt, Field(ge=1)] = 6
+    terms: Annotated[StrictInt, Field(ge=1), _at_most_terms] = 6
 
     _band = field_validator("frequency_hz")(_band)
     _amplitudes = field_validator("amplitude_deg")(_non_negative)
@@ -184,7 +194,7 @@ class TranslationBand(Section):
 
     amplitude_m: Vec3 = (50.0, 50.0, 5.0)
     frequency_hz: tuple[PositiveReal, PositiveReal] = (0.005, 0.1)
-    terms: Annotated[StrictInt, Field(ge=1)] = 6
+    terms: Annotated[StrictInt, Field(ge=1), _at_most_terms] = 6
 
     _band = field_validator("frequency_hz")(_band)
     _amplitudes = field_validator("amplitude_m")(_non_negative)

@@ -84,14 +84,15 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _cmd_info(args) -> int:
-    from gyroemu.pipelines.jobs.info import log_info
+    from gyroemu.pipelines.jobs.info import check_plot, log_info
 
+    picture = check_plot(Path(args.log), force=args.force) if args.plot else None  # InfoError before any work
     info = log_info(Path(args.log))
     print(json.dumps(info.to_dict(configs=args.configs), indent=2) if args.json else info.text(configs=args.configs))
     if args.plot:
         from gyroemu.pipelines.jobs.plots import plot_info
 
-        picture = plot_info(Path(args.log))
+        picture = plot_info(Path(args.log), picture)
         print(f"drew {picture}", file=sys.stderr if args.json else sys.stdout)
     return 0
 
@@ -141,7 +142,7 @@ def _cmd_estimate(args) -> int:
         raise UsageError(f"argument --out: {out} is the input: the input is never modified")
     started = time.perf_counter()
     try:
-        check_options(source, out, force=args.force)
+        check_options(source, out, force=args.force, plot=args.plot, topic_out=args.topic_out)
         summary = estimate_log(
             source,
             out,
@@ -154,6 +155,8 @@ def _cmd_estimate(args) -> int:
         )
     except EstimateError as e:  # names its argument
         raise UsageError(str(e)) from None
+    except GyroemuError:  # a log that cannot be read: its message names the file
+        raise
     except ValueError as e:  # a filter refusing the data (e.g. stamps): name the file
         raise UsageError(f"{source}: {e}") from None
     elapsed = time.perf_counter() - started
@@ -251,19 +254,13 @@ def _cmd_allan(args: argparse.Namespace) -> int:
         AllanLogError,
         MotionWarning,
         allan_of_log,
-        plot_format,
+        check_options,
         write_allan_plot,
         write_kalibr_yaml,
     )
 
     log = Path(args.log)
-    out = Path(args.out) if args.out else log.with_suffix(".allan.png")
-    try:
-        plot_format(out)  # refused before any work
-    except ValueError as e:
-        raise UsageError(f"argument --out: {e}") from None
-    if args.kalibr and Path(args.kalibr).exists() and not args.force:
-        raise UsageError(f"argument --kalibr: {args.kalibr} exists (pass --force to overwrite it)")
+    out = check_options(log, args.out, args.kalibr, force=args.force)  # AllanError before any work
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", MotionWarning)
         try:
@@ -333,6 +330,8 @@ def _cmd_campaign(args) -> int:
         given = [f for f, v in (("--scenario", args.scenario), ("--device", args.device), ("--log", args.log)) if v]
         given += [f for f, v in (("--filter", args.filter), ("--6d", args.six_d), ("--batched", args.batched)) if v]
         given += ["--latency"] if args.latency else []
+        numbers = (("--duration", args.duration), ("--runs", args.runs), ("--seed", args.seed))
+        given += [f for f, v in (*numbers, ("--threshold-deg", args.threshold_deg)) if v is not None]
         if given:
             raise UsageError(f"argument --campaign: the campaign file sets the grid; drop {', '.join(given)}")
         spec = Path(args.campaign)
@@ -364,7 +363,7 @@ def _cmd_campaign(args) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UsageError(f"argument --out: {out} is not a folder")
-    options = CampaignOptions(spec=spec, out=out, scheduler=args.scheduler, workers=args.workers)
+    options = CampaignOptions(spec=spec, out=out, scheduler=args.scheduler, workers=args.workers, force=args.force)
     try:
         summary = run_campaign(options)
     except SchedulerLostError as e:
@@ -405,15 +404,23 @@ def _cmd_generate(args) -> int:
     return 1 if summary.failures else 0
 
 
+_BENCH_NUMBERS = {"duration": 60.0, "runs": 3, "seed": 0, "threshold_deg": 2.0}
+"""``bench``'s numbers not given (None: a campaign file refuses them) and their defaults."""
+
+
 def _cmd_bench(args) -> int:
     import warnings
 
+    if args.campaign is None:
+        for name, default in _BENCH_NUMBERS.items():
+            if getattr(args, name) is None:
+                setattr(args, name, default)
     if args.campaign is not None or args.scheduler is not None:
         return _cmd_campaign(args)
 
     from gyroemu.dynamics import ConfigError, load_scenario
     from gyroemu.pipelines.estimation.registry import FilterError, filter_class
-    from gyroemu.pipelines.jobs.bench import BenchWarning, LogCase, SimCase, run_bench
+    from gyroemu.pipelines.jobs.bench import BenchWarning, LogCase, SimCase, check_report_folder, run_bench
 
     # Names first, so that a typo fails at once and names its argument.
     for spec in args.filter or ():
@@ -456,6 +463,7 @@ def _cmd_bench(args) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UsageError(f"argument --out: {out} is not a folder")
+    check_report_folder(out, force=args.force)  # BenchError before any work
     with warnings.catch_warnings():
         warnings.simplefilter("always", BenchWarning)
         warnings.showwarning = lambda message, category, *a, **k: print(
@@ -519,7 +527,9 @@ def _cmd_demo(args) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UsageError(f"argument --out: {out} is not a folder")
-    return run_demo(scenario=args.scenario, duration=args.duration, out=out, live_seconds=args.live_seconds)
+    return run_demo(
+        scenario=args.scenario, duration=args.duration, out=out, live_seconds=args.live_seconds, force=args.force
+    )
 
 
 def _argument_error(error: ValueError, fallback: str) -> Exception:
@@ -876,11 +886,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--live-seconds",
         type=_positive,
         default=20.0,
-        help="seconds of the live stream to the recorder and the filter (default: 20)",
+        help="seconds of the live stream to the recorder and the filter, at most 3600 (default: 20)",
     )
     p.add_argument(
         "--out", default="gyroemu-demo", help="folder for the log, report and plot (default: ./gyroemu-demo)"
     )
+    p.add_argument("--force", action="store_true", help="overwrite an earlier demo's log and report in --out")
     p.set_defaults(func=_cmd_demo)
 
     p = sub.add_parser("scenarios", help="list the built-in scenarios, one line each")
@@ -918,6 +929,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--configs", action="store_true", help="also print the embedded scenario and device configs")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--plot", action="store_true", help="draw each IMU topic's series into LOG.info.png")
+    p.add_argument("--force", action="store_true", help="overwrite LOG.info.png (--plot) if it exists")
     p.set_defaults(func=_cmd_info)
 
     p = sub.add_parser(
@@ -961,9 +973,9 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="NAME",
         help="built-in device or TOML path (repeatable; default: consumer_mems unless only --log)",
     )
-    p.add_argument("--duration", type=_duration, default=60.0, help="seconds per simulated run (default: 60)")
-    p.add_argument("--runs", type=int, default=3, help="Monte Carlo runs per simulated case (default: 3)")
-    p.add_argument("--seed", type=_seed, default=0, help="device seed of the first run (default: 0)")
+    p.add_argument("--duration", type=_duration, default=None, help="seconds per simulated run (default: 60)")
+    p.add_argument("--runs", type=int, default=None, help="Monte Carlo runs per simulated case (default: 3)")
+    p.add_argument("--seed", type=_seed, default=None, help="device seed of the first run (default: 0)")
     p.add_argument(
         "--log",
         action="append",
@@ -986,8 +998,11 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="run the mekf over all runs of a simulated case at once (vectorised across runs)",
     )
-    p.add_argument("--threshold-deg", type=_positive, default=2.0, help="convergence threshold, degrees (default: 2)")
+    p.add_argument("--threshold-deg", type=_positive, default=None, help="convergence threshold, degrees (default: 2)")
     p.add_argument("--out", default="bench", help="folder for the report (default: ./bench)")
+    p.add_argument(
+        "--force", action="store_true", help="overwrite an earlier report in --out (bench.md, bench.json, .png plots)"
+    )
     p.add_argument(
         "--campaign",
         default=None,
@@ -1003,7 +1018,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="write a dataset of MCAP logs over a campaign file's grid, in parallel on Dask",
         description="Write one MCAP log per scenario x device x duration x seed of a campaign file (as "
         "'gyroemu simulate' writes it, byte for byte) and index.parquet / index.csv listing them; "
-        "logs already there are kept.",
+        "a log already there is kept; any other file in a log's or the index's place is refused, never replaced.",
     )
     p.add_argument("spec", metavar="SPEC.toml", help="the campaign file")
     p.add_argument("--out-dir", required=True, help="folder of the logs and the index (made if missing)")
@@ -1053,7 +1068,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("file", metavar="FILE.mcap", help="the log to filter (read only)")
     p.add_argument("--out", required=True, help="MCAP file to write")
-    p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    p.add_argument(
+        "--force", action="store_true", help="overwrite --out (and with --plot, OUT.estimate.png) if they exist"
+    )
     p.add_argument(
         "--filter",
         default="mekf",
@@ -1105,7 +1122,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--kalibr", default=None, metavar="IMU.yaml", help="also write the noise model as Kalibr's/OpenVINS's imu.yaml"
     )
-    p.add_argument("--force", action="store_true", help="overwrite an existing --kalibr file")
+    p.add_argument(
+        "--force", action="store_true", help="overwrite an existing plot (--out) or --kalibr file (never LOG itself)"
+    )
     p.set_defaults(func=_cmd_allan)
 
     p = sub.add_parser(
@@ -1200,7 +1219,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("record", help="record gyroemu zenoh streams into an MCAP file", epilog=zenoh_note)
     p.add_argument("--out", required=True, help="MCAP file to write (written in place)")
-    p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    p.add_argument("--force", action="store_true", help="overwrite --out and --report if they exist")
     p.add_argument("--duration", type=_duration, default=None, help="seconds (default: until SIGINT/SIGTERM)")
     p.add_argument(
         "--key", default=None, help="key expression to subscribe to (default: gyroemu/**; with --ros2: <domain>/**)"

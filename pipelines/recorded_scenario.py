@@ -38,7 +38,7 @@ from pydantic import PrivateAttr, field_validator
 from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Quat, Section
 from gyroemu.dynamics.earth import Site
 from gyroemu.dynamics.recorded import MotionSamples, RecordedMotion, RecordedMotionError, SmoothingOptions
-from gyroemu.dynamics.scenarios import ScenarioSpec
+from gyroemu.dynamics.scenarios import Duration, Rate, ScenarioSpec
 from gyroemu.dynamics.trajectory import Trajectory
 from gyroemu.errors import ConfigError
 
@@ -75,8 +75,8 @@ class RecordedSpec(ScenarioSpec):
 
     kind: Literal["recorded"]
     pointwise: ClassVar[bool] = True  # the truth is a closed form in t
-    duration_s: PositiveReal | None = None  # type: ignore[assignment]
-    rate_hz: PositiveReal | None = None  # type: ignore[assignment]
+    duration_s: Duration | None = None  # type: ignore[assignment]
+    rate_hz: Rate | None = None  # type: ignore[assignment]
     path: str
     format: Literal["mcap", "broad", "tum", "csv"]
     time_offset_s: NonNegativeReal = 0.0

@@ -48,7 +48,7 @@ import tomli_w
 from pydantic import Field, field_validator
 
 from gyroemu.dynamics import Trajectory
-from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3, validate
+from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3, at_most, validate
 from gyroemu.dynamics.truth_source import SampledTruth, TruthSource
 from gyroemu.errors import ConfigError
 
@@ -59,7 +59,7 @@ from .magnetometer import MagnetometerSpec
 from .mechanism import GYRO_KINDS, GyroMechanism, mechanism_class
 from .samples import ImuSamples
 
-__all__ = ["DeviceSpec", "Device", "MountingSpec", "ClockSpec", "TemperatureSpec", "GyroSpec"]
+__all__ = ["MAX_DEVICE_RATE_HZ", "DeviceSpec", "Device", "MountingSpec", "ClockSpec", "TemperatureSpec", "GyroSpec"]
 
 
 class MountingSpec(Section):
@@ -110,12 +110,17 @@ class GyroSpec(Section):
     positive: the sensor lags the truth. Left out of the resolved config when 0."""
 
 
+MAX_DEVICE_RATE_HZ = 1e6
+"""The highest ``rate_hz`` of a device, Hz: a hundred times the fastest IMU's output (a few kHz); an
+.mcap sample is over a kilobyte, so a device faster than this fills a disk within seconds of motion."""
+
+
 class DeviceSpec(Section):
     """A device file (``configs/devices/*.toml``)."""
 
     description: str
     resembles: str = ""
-    rate_hz: PositiveReal
+    rate_hz: Annotated[PositiveReal, at_most(MAX_DEVICE_RATE_HZ, "a hundred times the fastest IMU's output rate")]
     output: Literal["rate", "increment"] = "rate"
     mounting: MountingSpec = MountingSpec()
     clock: ClockSpec = ClockSpec()
@@ -159,6 +164,15 @@ def _white_noise_budget(
         total = np.full(3, np.sqrt(intrinsic**2 + quantiser))
         return dataclasses.replace(model, noise_density=np.zeros(3)), total
     specified = np.asarray(model.noise_density, dtype=float)
+    with np.errstate(over="ignore"):
+        per_sample = specified**2 / period  # the white noise's variance per sample, (SI unit)²
+    if not np.all(np.isfinite(per_sample)):
+        raise ConfigError(
+            f"a white noise of {specified.max():.4g} per sqrt(s) (SI) at rate_hz = {1.0 / period:g} has a per-sample "
+            "variance beyond float64's range: the output would be inf or NaN (no sensor is that noisy)",
+            file=file,
+            key=f"{prefix}.{given}",
+        )
     rest = specified**2 - intrinsic**2 - quantiser
     if np.any(rest < -1e-12 * specified**2):
         parts = []

@@ -11,7 +11,7 @@ The jobs are :mod:`gyroemu.pipelines.jobs.campaign` (``gyroemu bench --campaign`
 a campaign runs.
 """
 
-from .engine import SchedulerLostError, TaskFailure, default_workers, run_tasks
+from .engine import SchedulerLostError, TaskFailure, default_workers, run_tasks, scheduler_problem
 from .progress import RunsProgress
 from .spec import Campaign, CampaignSpec, Cell, CellTask, SeedRange, campaign_from_spec, config_hash, load_campaign
 from .store import PartStore, readable
@@ -39,4 +39,5 @@ __all__ = [
     "row_schema",
     "run_cell",
     "run_tasks",
+    "scheduler_problem",
 ]

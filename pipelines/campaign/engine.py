@@ -20,12 +20,13 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import re
 import uuid
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
-__all__ = ["SchedulerLostError", "TaskFailure", "default_workers", "run_tasks"]
+__all__ = ["SchedulerLostError", "TaskFailure", "default_workers", "run_tasks", "scheduler_problem"]
 
 T = TypeVar("T")
 
@@ -40,6 +41,21 @@ class TaskFailure(Generic[T]):
 
     task: T
     error: str
+
+
+_ADDRESS = re.compile(r"^(?:(?:tcp|tls)://)?(?P<host>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):(?P<port>[0-9]{1,5})$")
+
+
+def scheduler_problem(address: str) -> str | None:
+    """Why ``address`` is no Dask scheduler address ``tcp://HOST:PORT`` (or ``tls://HOST:PORT``, or
+    ``HOST:PORT``, which Dask takes as tcp; an IPv6 host in brackets), or None when it is one. Checked
+    before a job starts anything: distributed itself raises a bare ``ValueError`` only on connecting."""
+    m = _ADDRESS.match(address)
+    if m is None:
+        return f"{address!r} is not a scheduler address like tcp://HOST:8786"
+    if not 0 < int(m.group("port")) < 65536:
+        return f"{address!r}: the port must be 1 to 65535"
+    return None
 
 
 def default_workers() -> int:

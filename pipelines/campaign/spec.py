@@ -6,7 +6,7 @@ on each. The file holds these top-level keys (every other key is refused, naming
     name = "example"                      # optional label (default: the file's stem)
     scenarios = ["smooth_manoeuvre"]      # built-in names or TOML paths (relative to this file)
     devices = ["consumer_mems"]           # built-in names or TOML paths (relative to this file)
-    durations_s = [60.0]                  # seconds per run (default [60.0])
+    durations_s = [60.0]                  # seconds per run (default [60.0]; at most 1e7, as simulate's)
     seeds = [0, 1, 2]                     # device seeds, or instead:
     seed_range = { start = 0, count = 100 }   # seeds start … start + count − 1 (default 0 … 2)
     filters = ["mekf", "madgwick"]        # default: every available built-in
@@ -32,7 +32,8 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from gyroemu.dynamics.config import ConfigError, PositiveReal, Section, read_toml, validate
+from gyroemu.dynamics.config import ConfigError, PositiveReal, Section, at_most, read_toml, validate
+from gyroemu.pipelines.jobs.simulate import MAX_DURATION_S
 
 __all__ = [
     "Campaign",
@@ -49,6 +50,8 @@ SEED_LIMIT = 2**63  # seeds are stored as int64
 
 Seed = Annotated[int, Field(ge=0, lt=SEED_LIMIT, strict=True)]
 
+Duration = Annotated[PositiveReal, at_most(MAX_DURATION_S, "the longest run 'gyroemu simulate --duration' takes")]
+
 
 class SeedRange(Section):
     """Seeds ``start … start + count − 1``."""
@@ -63,7 +66,7 @@ class CampaignSpec(Section):
     name: str | None = None
     scenarios: Annotated[list[str], Field(min_length=1)]
     devices: Annotated[list[str], Field(min_length=1)]
-    durations_s: Annotated[list[PositiveReal], Field(min_length=1)] = [60.0]
+    durations_s: Annotated[list[Duration], Field(min_length=1)] = [60.0]
     seeds: Annotated[list[Seed], Field(min_length=1)] | None = None
     seed_range: SeedRange | None = None
     filters: Annotated[list[str], Field(min_length=1)] | None = None

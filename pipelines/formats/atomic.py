@@ -17,7 +17,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["folder_problem", "write_atomic", "write_text_atomic", "write_figure_atomic"]
+__all__ = ["folder_problem", "output_folder_problem", "write_atomic", "write_text_atomic", "write_figure_atomic"]
 
 
 def write_atomic(path: str | os.PathLike[str], write: Callable[[IO[Any]], object], *, binary: bool = True) -> Path:
@@ -70,6 +70,18 @@ def folder_problem(folder: str | os.PathLike[str]) -> str | None:
     except OSError:
         pass
     return "not writable"
+
+
+def output_folder_problem(folder: str | os.PathLike[str]) -> str | None:
+    """Why ``folder``, an output folder made with its parents when missing, cannot take new files, as
+    ``"<where>: <why>"`` (``where`` the folder, or its nearest existing ancestor where it is missing:
+    the folder the first one would be made in), or None when it can: :func:`folder_problem` of that folder."""
+    folder = Path(folder) if str(folder) else Path(".")
+    where = folder
+    while not where.exists() and not where.is_symlink() and where != where.parent:
+        where = where.parent
+    problem = folder_problem(where)
+    return None if problem is None else f"{where}: {problem}"
 
 
 def _umask() -> int:

@@ -1,10 +1,13 @@
-"""File names made from free text: a report's case or trial names turned into safe, distinct stems."""
+"""File names: a report's case or trial names turned into safe, distinct stems; inputs given twice."""
 
 from __future__ import annotations
 
+import os
 import re
+from collections.abc import Iterable
+from pathlib import Path
 
-__all__ = ["unique_stems"]
+__all__ = ["repeated_file", "unique_stems"]
 
 
 def unique_stems(names: list[str]) -> list[str]:
@@ -17,3 +20,20 @@ def unique_stems(names: list[str]) -> list[str]:
         seen[stem] = seen.get(stem, 0) + 1
         stems.append(stem if seen[stem] == 1 else f"{stem}_{seen[stem]}")
     return stems
+
+
+def repeated_file(paths: Iterable[str | os.PathLike[str]]) -> tuple[Path, Path] | None:
+    """The first file of ``paths`` given again, as ``(first, again)`` (the two paths as given; the same
+    file by any path to it: a symbolic or hard link, ``./a`` and ``a``), or None when each is given once.
+    A path that cannot be read counts by its resolved name."""
+    seen: dict[object, Path] = {}
+    for path in map(Path, paths):
+        try:
+            st = os.stat(path)
+            key: object = (st.st_dev, st.st_ino)
+        except OSError:
+            key = path.resolve()
+        if key in seen:
+            return seen[key], path
+        seen[key] = path
+    return None

@@ -110,11 +110,13 @@ class ImportSummary:
     duration_s: float
     truth_nan_rows: int
     movement_samples: int
+    sample_nan_rows: int = 0  # samples with a NaN in the gyro, accelerometer or magnetometer: dropouts, kept
 
     def __str__(self) -> str:
+        dropouts = f", sensor NaN (dropouts, kept) in {self.sample_nan_rows} rows" if self.sample_nan_rows else ""
         return (
             f"{self.source.name} ({self.format}): {self.samples} samples at {self.rate_hz:.6g} Hz over "
-            f"{self.duration_s:.6g} s, reference NaN in {self.truth_nan_rows} rows, movement in "
+            f"{self.duration_s:.6g} s, reference NaN in {self.truth_nan_rows} rows{dropouts}, movement in "
             f"{self.movement_samples} samples -> {self.out}"
         )
 
@@ -249,6 +251,7 @@ def read_broad(path) -> BroadTrial:
     as_float = {
         name: np.asarray(arrays[name], dtype=np.float64) for name in ("imu_gyr", "imu_acc", "imu_mag", "opt_quat")
     }
+    _check_values(as_float, opt_pos, path)
     return BroadTrial(
         path=path,
         gyro=as_float["imu_gyr"],
@@ -260,6 +263,43 @@ def read_broad(path) -> BroadTrial:
         info=info,
         opt_pos=opt_pos,
     )
+
+
+_QUAT_NORM_TOLERANCE = 0.01
+"""How far from 1 the norm of an ``opt_quat`` row may be (BROAD's are unit to 1e-6): a row beyond it, a
+zero row above all, is no rotation, and a reader that normalises it would make one up."""
+
+
+def _rows(mask: np.ndarray) -> str:
+    """``row k`` (the first row where ``mask``, rows (N,) or (N, M)) and how many rows there are."""
+    rows = np.flatnonzero(mask.reshape(len(mask), -1).any(axis=1))
+    return f"row {rows[0]}" + (f" (and {len(rows) - 1} more)" if len(rows) > 1 else "")
+
+
+def _check_values(arrays: dict[str, np.ndarray], opt_pos: np.ndarray | None, path: Path) -> None:
+    """Refuse what is not a measurement: ±inf in any dataset, and an ``opt_quat`` row that is no
+    rotation (:data:`_QUAT_NORM_TOLERANCE`). NaN rows pass: the reference's are lost tracking (module
+    notes), the sensors' dropouts a filter bridges (the import's summary counts them)."""
+    named = dict(arrays) if opt_pos is None else {**arrays, "opt_pos": opt_pos}
+    for name, values in named.items():
+        infinite = np.isinf(values)
+        if infinite.any():
+            raise ImportInputError(
+                f"inf at {_rows(infinite)}: not a measurement (NaN marks a missing one)",
+                file=path,
+                item=f"dataset '{name}'",
+            )
+    quat = arrays["opt_quat"]
+    with np.errstate(invalid="ignore"):
+        off = np.abs(np.linalg.norm(quat, axis=1) - 1.0) > _QUAT_NORM_TOLERANCE  # NaN rows compare False
+    if off.any():
+        k = int(np.flatnonzero(off)[0])
+        raise ImportInputError(
+            f"{quat[k].tolist()} at {_rows(off)} is not a unit quaternion (norm "
+            f"{np.linalg.norm(quat[k]):.6g}): no rotation (a lost reference is a NaN row)",
+            file=path,
+            item="dataset 'opt_quat'",
+        )
 
 
 def broad_stamps_ns(n: int, rate_hz: float) -> np.ndarray:
@@ -325,6 +365,7 @@ def import_broad(path, out, *, device_name: str = "imu0", force: bool = False) -
         duration_s=(n - 1) / trial.rate_hz,
         truth_nan_rows=int(np.isnan(trial.opt_quat).any(axis=1).sum()),
         movement_samples=int(trial.movement.sum()),
+        sample_nan_rows=int(np.isnan(np.hstack([trial.gyro, trial.accel, trial.mag_ut])).any(axis=1).sum()),
     )
 
 

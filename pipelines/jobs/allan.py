@@ -24,6 +24,9 @@ accumulated batch by batch as the log streams): the accelerometer's specific for
 magnitude and direction, and, when the log has ``/truth/imu`` (or ``truth/...`` arrays), the true rate
 and attitude must keep still. A log in motion raises :class:`AllanMotionError` unless
 ``allow_motion``. :func:`kalibr_imu_yaml` gives the fit as Kalibr's (and OpenVINS's) ``imu.yaml``.
+
+:func:`check_options` refuses, before any work, the command's bad options (:class:`AllanError`): an
+output that is the log itself, a folder, in a folder that cannot take it, or that exists without ``force``.
 """
 
 from __future__ import annotations
@@ -38,13 +41,14 @@ from typing import cast
 
 import numpy as np
 
-from gyroemu.errors import LogError
-from gyroemu.pipelines.formats.atomic import write_atomic, write_text_atomic
+from gyroemu.errors import ConfigError, LogError
+from gyroemu.pipelines.formats.atomic import folder_problem, write_atomic, write_text_atomic
 from gyroemu.sensors.allan import TERMS, AllanDeviation, AllanFit, Coefficient, allan_deviation, fit_allan
 from gyroemu.sensors.allan_stream import OverlappingAllanAccumulator
 from gyroemu.sensors.errors import STANDARD_GRAVITY, ErrorModel
 
 __all__ = [
+    "AllanError",
     "AllanLogError",
     "AllanMotionError",
     "MotionWarning",
@@ -53,6 +57,8 @@ __all__ = [
     "StaticCheck",
     "allan_report",
     "allan_of_log",
+    "check_options",
+    "default_plot_path",
     "BATCH",
     "plot_allan",
     "plot_format",
@@ -314,6 +320,66 @@ def allan_report(
                 tuple(fit_allan(allan_deviation(accel[:, i] - accel[:, i].mean(), dt)) for i in range(3)),
             )
     return AllanReport(fits=fits, spec=spec, accel_fits=accel_fits, accel_spec=accel_spec, rate_hz=1.0 / dt)
+
+
+class AllanError(ConfigError):
+    """Bad options of ``gyroemu allan``, found before any work (the message names the argument)."""
+
+
+def default_plot_path(log: str | os.PathLike) -> Path:
+    """The plot's path without ``--out``: the log's, with ``.allan.png`` for its suffix."""
+    return Path(log).with_suffix(".allan.png")
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether ``a`` and ``b`` name one file: the same resolved path (through symlinks, ``..``), or
+    the same existing file (a hard link)."""
+    try:
+        return a.resolve() == b.resolve() or (a.exists() and b.exists() and os.path.samefile(a, b))
+    except (OSError, RuntimeError):  # a symlink loop
+        return False
+
+
+def _check_output(path: Path, argument: str, log: Path, force: bool) -> None:
+    if _same_file(path, log):
+        raise AllanError(f"argument {argument}: {path} is the log LOG: refusing to overwrite it (even with --force)")
+    if path.is_dir():
+        raise AllanError(f"argument {argument}: {path} is a folder: name a file")
+    problem = folder_problem(path.parent)
+    if problem is not None:
+        raise AllanError(f"argument {argument}: {path}: cannot write in its folder {path.parent}: {problem}")
+    if (path.exists() or path.is_symlink()) and not force:
+        raise AllanError(f"argument {argument}: {path} exists (pass --force to overwrite it)")
+
+
+def check_options(
+    log: str | os.PathLike,
+    out: str | os.PathLike | None = None,
+    kalibr: str | os.PathLike | None = None,
+    force: bool = False,
+) -> Path:
+    """Refuse, before any work, ``gyroemu allan``'s bad options with :class:`AllanError` (the message
+    names the argument): a plot format matplotlib does not write, a missing ``log``, an output (the
+    plot ``out``, default :func:`default_plot_path`; the ``kalibr`` imu.yaml) that is the log itself
+    (even with ``force``), a folder, in a folder that cannot take it (:func:`folder_problem`: missing,
+    read-only, not writable), or that exists without ``force``; ``kalibr`` the same file as the plot.
+    Returns the plot's path."""
+    log = Path(log)
+    plot = Path(out) if out is not None else default_plot_path(log)
+    argument = "--out" if out is not None else "--out (default: LOG with .allan.png)"
+    try:
+        plot_format(plot)
+    except ValueError as e:
+        raise AllanError(f"argument {argument}: {e}") from None
+    if not log.is_file():
+        raise AllanError(f"argument LOG: {log}: {'not a file' if log.exists() else 'no such file'}")
+    _check_output(plot, argument, log, force)
+    if kalibr is not None:
+        kalibr = Path(kalibr)
+        _check_output(kalibr, "--kalibr", log, force)
+        if _same_file(kalibr, plot):
+            raise AllanError(f"argument --kalibr: {kalibr} is the plot's file too ({argument})")
+    return plot
 
 
 class AllanLogError(LogError):
@@ -625,6 +691,22 @@ def _npz_series(log: Path) -> tuple[_GyroSeries, float, str | None, _TruthStats 
     ``imu/gyro``, ``imu/accel`` and ``imu/t`` are read whole, then fed to the accumulators in batches
     like an .mcap's; ``truth/omega_b`` and ``truth/q_wb``, when present, to the truth's figures.
     """
+    import zipfile
+    import zlib
+
+    from gyroemu.pipelines.formats.mcap_records import MAGIC
+
+    try:
+        with open(log, "rb") as f:
+            head = f.read(len(MAGIC))
+    except OSError as e:
+        raise AllanLogError(f"cannot read it: {e.strerror or e}", file=log) from None
+    if not head:
+        raise AllanLogError("an empty file, not a gyroemu log (.mcap or .npz)", file=log)
+    if head.startswith(MAGIC[:5]):
+        raise AllanLogError("an MCAP log without the .mcap suffix: name it .mcap", file=log)
+    if not head.startswith((b"PK\x03\x04", b"PK\x05\x06")):  # an .npz is a zip archive, as np.load tells
+        raise AllanLogError("not a gyroemu log (.mcap, or .npz: a zip of NumPy arrays)", file=log)
     accel = truth = None
     try:
         with np.load(log, allow_pickle=False) as data:
@@ -640,7 +722,11 @@ def _npz_series(log: Path) -> tuple[_GyroSeries, float, str | None, _TruthStats 
                     omega, q = data["truth/omega_b"], data["truth/q_wb"]
                     for start in range(0, len(omega), BATCH):
                         truth.add(omega[start : start + BATCH], q[start : start + BATCH])
+    except (zipfile.BadZipFile, EOFError, zlib.error) as e:
+        raise AllanLogError(f"a truncated or corrupt .npz archive: {e}", file=log) from None
     except (OSError, ValueError) as e:
+        if "allow_pickle" in str(e) or "pickled" in str(e):
+            raise AllanLogError("holds object (pickled) arrays, which gyroemu does not load", file=log) from None
         raise AllanLogError(f"not a gyroemu log (.mcap or .npz): {e}", file=log) from None
     if gyro is None:
         raise AllanLogError("holds no gyro samples (write one with 'gyroemu simulate --device ...')", file=log)

@@ -54,6 +54,8 @@ What is reported, per (case, filter), as mean ± standard deviation over the run
 Outputs: :meth:`BenchReport.to_markdown` (``bench.md``), :meth:`BenchReport.to_json` (``bench.json``: every
 number, every run) and :meth:`BenchReport.save_plots` (one PNG per case: the error of every filter
 against time, first run). :meth:`BenchReport.save` writes all three, each through a temporary file.
+:func:`check_report_folder` refuses, before any work, a folder that cannot take them or that holds an
+earlier report (``bench.md``, ``bench.json``, a ``.png``) unless told to overwrite it.
 """
 
 from __future__ import annotations
@@ -61,6 +63,7 @@ from __future__ import annotations
 import datetime
 import json
 import math
+import os
 import sys
 import time
 import warnings
@@ -81,7 +84,7 @@ from gyroemu.pipelines.estimation.registry import (
     takes_whole_log,
     unavailable_filters,
 )
-from gyroemu.pipelines.formats.atomic import write_figure_atomic, write_text_atomic
+from gyroemu.pipelines.formats.atomic import output_folder_problem, write_figure_atomic, write_text_atomic
 from gyroemu.pipelines.formats.file_names import unique_stems
 from gyroemu.pipelines.jobs.bench_cases import PLOT_POINTS, BenchError, BenchWarning, LogCase, SimCase
 from gyroemu.pipelines.jobs.bench_filters import WARM_UP_SAMPLES, check_estimate, warm_up
@@ -116,7 +119,9 @@ __all__ = [
     "LogCase",
     "RunResult",
     "SimCase",
+    "check_report_folder",
     "evaluate_run",
+    "report_files_in",
     "report_figures",
     "run_bench",
 ]
@@ -416,6 +421,38 @@ class BenchReport:
         write_text_atomic(paths["markdown"], self.to_markdown())
         paths["plots"] = self.save_plots(directory)
         return paths
+
+
+REPORT_FILES = ("bench.md", "bench.json")
+"""The report's files in its folder, besides one ``.png`` per case named after the case."""
+
+
+def report_files_in(folder: str | os.PathLike[str]) -> list[str]:
+    """The names of the files in ``folder`` that a report written there may replace: ``bench.md``,
+    ``bench.json`` and every ``.png`` (the plots are named after their cases, known once the logs are read)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    names = [name for name in REPORT_FILES if (folder / name).exists()]
+    return names + sorted(p.name for p in folder.glob("*.png") if not p.name.startswith("."))
+
+
+def check_report_folder(folder: str | os.PathLike[str], *, force: bool = False, argument: str = "--out") -> None:
+    """:class:`BenchError` naming ``argument`` for a report folder (made with its parents when missing)
+    that cannot take the report: not a folder, read-only, not writable; or that holds files the report
+    may replace (:func:`report_files_in`) and ``force`` is not given. Before any work."""
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise BenchError(f"argument {argument}: {folder} is not a folder")
+    problem = output_folder_problem(folder)
+    if problem is not None:
+        raise BenchError(f"argument {argument}: {problem}")
+    there = report_files_in(folder)
+    if there and not force:
+        raise BenchError(
+            f"argument {argument}: {folder} holds {', '.join(there)}, which the report would overwrite "
+            "(use --force to overwrite them, or another folder)"
+        )
 
 
 def report_figures(data: dict) -> dict:

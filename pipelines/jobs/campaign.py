@@ -18,6 +18,10 @@ Outputs in ``out``:
 A task that raises is reported (``bench.md``, ``bench.json``, :attr:`CampaignSummary.failures`) and the
 others complete; a lost scheduler raises :class:`~gyroemu.pipelines.campaign.SchedulerLostError`
 after the finished tasks are stored.
+
+Before any work (:func:`check_options`): the scheduler's address, and ``out``: a folder that can take
+files (made if missing), whose report files (``bench.md``, ``bench.json``, ``.png``) are a campaign's
+own (beside its ``runs/`` store, rewritten on each run) or may be overwritten (``force``).
 """
 
 from __future__ import annotations
@@ -30,18 +34,26 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from gyroemu.errors import ConfigError
+
 if TYPE_CHECKING:
     from gyroemu.pipelines.campaign import Campaign, CampaignSpec, CellTask, TaskFailure
     from gyroemu.pipelines.jobs.bench import BenchReport
 
 __all__ = [
+    "CampaignError",
     "CampaignOptions",
     "CampaignSummary",
     "campaign_report",
+    "check_options",
     "run_campaign",
     "save_campaign_report",
     "spec_from_bench_flags",
 ]
+
+
+class CampaignError(ConfigError):
+    """Bad options of ``gyroemu bench --campaign`` (the message names the argument)."""
 
 
 @dataclass(frozen=True)
@@ -64,6 +76,8 @@ class CampaignOptions:
         A bar on stderr (runs done, total, rate, time left); None: when stderr is a terminal.
     plots : bool
         Write the per-cell plots.
+    force : bool
+        Overwrite report files in ``out`` that are not a campaign's (no ``runs/`` store beside them).
     """
 
     spec: Path | CampaignSpec
@@ -73,6 +87,7 @@ class CampaignOptions:
     processes: bool = True
     progress: bool | None = None
     plots: bool = True
+    force: bool = False
 
     def __post_init__(self) -> None:
         if isinstance(self.spec, (str, Path)):
@@ -102,17 +117,45 @@ class CampaignSummary:
         return self.runs_made / self.elapsed_s if self.elapsed_s > 0 else float("nan")
 
 
+def check_options(options: CampaignOptions) -> None:
+    """:class:`CampaignError` naming the argument, before any work: a scheduler address that is none
+    (:func:`~gyroemu.pipelines.campaign.scheduler_problem`); an ``out`` that is not a folder or cannot
+    take files (read-only, not writable; where it would be made when missing); report files in ``out``
+    (``bench.md``, ``bench.json``, ``.png``) without a campaign's ``runs/`` store beside them, unless
+    ``force``."""
+    from gyroemu.pipelines.campaign import scheduler_problem
+    from gyroemu.pipelines.formats.atomic import output_folder_problem
+    from gyroemu.pipelines.jobs.bench import report_files_in
+
+    if options.scheduler is not None:
+        problem = scheduler_problem(options.scheduler)
+        if problem is not None:
+            raise CampaignError(f"argument --scheduler: {problem}")
+    out = options.out
+    if out.exists() and not out.is_dir():
+        raise CampaignError(f"argument --out: {out} is not a folder")
+    problem = output_folder_problem(out)
+    if problem is not None:
+        raise CampaignError(f"argument --out: {problem}")
+    there = report_files_in(out)
+    if there and not (out / "runs").is_dir() and not options.force:
+        raise CampaignError(
+            f"argument --out: {out} holds {', '.join(there)} but no campaign's runs/: the report would overwrite "
+            "them (use --force to overwrite them, or another folder)"
+        )
+
+
 def run_campaign(options: CampaignOptions) -> CampaignSummary:
     """Run the campaign ``options.spec`` (see the module's notes) and write its report.
 
     Raises
     ------
     gyroemu.errors.ConfigError
-        A bad campaign file (names the file and key), before any work.
+        A bad campaign file (names the file and key), before any work; :class:`CampaignError` for bad
+        options (:func:`check_options`).
     gyroemu.pipelines.campaign.SchedulerLostError
         The scheduler unreachable or lost; the finished tasks are stored, and a new run resumes.
     """
-    from gyroemu.errors import ConfigError
     from gyroemu.pipelines.campaign import (
         PartStore,
         campaign_from_spec,
@@ -127,9 +170,8 @@ def run_campaign(options: CampaignOptions) -> CampaignSummary:
         campaign = load_campaign(options.spec)
     else:
         campaign = campaign_from_spec(options.spec)
+    check_options(options)
     out = options.out
-    if out.exists() and not out.is_dir():
-        raise ConfigError("is not a folder", file=out)
     store = PartStore(out / "runs", row_schema())
     todo = [t for t in campaign.tasks if not store.has(t.key)]
     resumed = len(campaign.tasks) - len(todo)

@@ -16,11 +16,16 @@
 The demo is an orchestrator: unlike the jobs, which never import one another, it calls them (the
 stream, :func:`gyroemu.pipelines.transport.stream.run_stream`, in this process; the recorder as a ``gyroemu
 record`` process; the benchmark, :func:`gyroemu.pipelines.jobs.bench.run_bench`).
+
+Its options are checked before any work (:func:`check_options`): the scenario, the durations (at most
+:data:`MAX_SECONDS` each: the truth is made in memory, the live stage runs in real time), and ``out``,
+which must take files and hold no earlier demo's (``demo.mcap``, the report in ``bench/``) unless ``force``.
 """
 
 from __future__ import annotations
 
 import io
+import math
 import signal
 import subprocess
 import sys
@@ -29,13 +34,72 @@ from pathlib import Path
 
 import numpy as np
 
-from gyroemu.dynamics import load_scenario
+from gyroemu.dynamics import ConfigError, load_scenario
 from gyroemu.dynamics.rotation import quat_angle
 from gyroemu.sensors import list_devices, load_device
 from gyroemu.sensors.gyrocompass import gyrocompass, heading_uncertainty
 from gyroemu.sensors.sampling import SensorTruth
 
-__all__ = ["run_demo"]
+__all__ = ["DemoError", "MAX_SECONDS", "check_options", "run_demo"]
+
+MAX_SECONDS = 3600.0
+"""The longest ``--duration`` and ``--live-seconds`` the demo takes: its truth is simulated in memory and
+summarised, and its live stage runs in real time, paced to the clock (then benchmarked); an hour of
+either is a long demo. ``gyroemu simulate`` and ``gyroemu stream`` take longer runs."""
+
+
+class DemoError(ConfigError):
+    """Bad options of ``gyroemu demo`` (the message names the argument)."""
+
+
+def _seconds(value: float | None, argument: str, why: str) -> None:
+    if value is None:
+        return
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+        raise DemoError(f"argument {argument}: must be a finite positive number of seconds, got {value!r}")
+    if value > MAX_SECONDS:
+        raise DemoError(f"argument {argument}: {value:g} s is more than the demo's limit of {MAX_SECONDS:g} s: {why}")
+
+
+def check_options(
+    scenario: str = "heavy_top",
+    duration: float | None = None,
+    out: str | Path = "gyroemu-demo",
+    live_seconds: float = 20.0,
+    *,
+    force: bool = False,
+) -> None:
+    """:class:`DemoError` naming the argument, before any work: a duration or live time that is not a
+    finite positive number of seconds up to :data:`MAX_SECONDS`; an ``out`` that is not a folder or
+    cannot take files (read-only, not writable; where it would be made when missing), or holds an earlier
+    demo's files (``demo.mcap``, ``bench/bench.md``, ``bench/bench.json``, ``bench/*.png``) and ``force``
+    is not given. A bad scenario raises its :class:`~gyroemu.dynamics.ConfigError` (naming it)."""
+    from gyroemu.pipelines.formats.atomic import output_folder_problem
+    from gyroemu.pipelines.jobs.bench import report_files_in
+
+    _seconds(duration, "--duration", "the demo makes its truth in memory ('gyroemu simulate' writes longer runs)")
+    _seconds(live_seconds, "--live-seconds", "the live stage runs in real time ('gyroemu stream' runs longer)")
+    try:
+        load_scenario(scenario)
+    except ConfigError as e:
+        if e.file is not None:
+            raise  # a bad scenario file: names the file and key
+        raise DemoError(f"argument --scenario: {e}") from None
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise DemoError(f"argument --out: {out} is not a folder")
+    problem = output_folder_problem(out)
+    if problem is not None:
+        raise DemoError(f"argument --out: {problem}")
+    if (out / "bench").exists() and not (out / "bench").is_dir():
+        raise DemoError(f"argument --out: {out / 'bench'} is not a folder")
+    there = ["demo.mcap"] if (out / "demo.mcap").exists() else []
+    there += [f"bench/{name}" for name in report_files_in(out / "bench")]
+    if there and not force:
+        raise DemoError(
+            f"argument --out: {out} holds {', '.join(there)} (an earlier demo's?), which the demo would "
+            "overwrite (use --force to overwrite them, or another folder)"
+        )
 
 
 def run_demo(
@@ -43,8 +107,12 @@ def run_demo(
     duration: float | None = None,
     out: str | Path = "gyroemu-demo",
     live_seconds: float = 20.0,
+    *,
+    force: bool = False,
 ) -> int:
-    """Run the demo and print its summary; returns the exit status (0)."""
+    """Run the demo and print its summary; returns the exit status (0). :class:`DemoError` for bad
+    options (:func:`check_options`), before any work; ``force``: overwrite an earlier demo's files."""
+    check_options(scenario, duration, out, live_seconds, force=force)
     _truth(scenario, duration)
     _sensors()
     _gyrocompass()

@@ -14,7 +14,10 @@ one, and the bias-corrected rate) goes to ``topic_out`` (default ``/estimate/imu
 message of the IMU topic it follows, right after it in the file, with its log and publish times and its
 header stamp. Its ``frame_id`` is the IMU message's, except for a gyroemu log's device, whose estimates
 are in ``base_link`` as ``interface.md`` has them. The channel uses the IMU channel's schema. An input
-channel of the same topic (an earlier estimate) is replaced; a topic of another type there is an error.
+channel of the same topic is replaced when it is an earlier estimate (a topic ``.../estimate/imu`` of
+type ``sensor_msgs/msg/Imu``); any other topic the input has, and the contract's other topics
+(``/imu``, ``/mag``, ``/truth/imu``, ``/truth/pose``, ``/raw/<kind>``, ``/movement``, under any device
+prefix, and ``/tf``, ``/tf_static``), are refused (:data:`RESERVED_TOPICS`).
 
 Which IMU topic: ``topic`` when given (any ``sensor_msgs/msg/Imu`` topic that
 :func:`~gyroemu.pipelines.formats.mcap_log.read_mcap` takes as a device's measurements). Without it the
@@ -35,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gyroemu.errors import ConfigError
 from gyroemu.pipelines.estimation import registry
 from gyroemu.pipelines.estimation.protocol import AttitudeFilter, learns_in_blocks
 from gyroemu.pipelines.estimation.registry import make_filter
@@ -51,6 +55,7 @@ from gyroemu.pipelines.estimation.setup import (
     latencies_for_log,
     setup_from_metadata,
 )
+from gyroemu.pipelines.formats.atomic import folder_problem
 from gyroemu.pipelines.formats.channels import (
     BODY_FRAME,
     ESTIMATE_ROLE,
@@ -87,6 +92,7 @@ __all__ = [
     "EstimateError",
     "EstimateSummary",
     "EstimateTopicError",
+    "RESERVED_TOPICS",
     "check_disk",
     "check_options",
     "estimate_log",
@@ -96,7 +102,12 @@ DEFAULT_TOPIC_OUT = "/estimate/imu"
 """Where the estimate goes unless the caller names a topic."""
 
 
-class EstimateError(ValueError):
+RESERVED_TOPICS = ("/tf", "/tf_static")
+"""Topics an estimate never goes to, besides the roles of ``interface.md`` other than the estimate's
+(``imu``, ``mag``, ``truth/imu``, ``truth/pose``, ``raw/<kind>``, ``movement``, under any prefix)."""
+
+
+class EstimateError(ConfigError):
     """Bad options of ``gyroemu estimate`` (the message names the argument)."""
 
 
@@ -104,18 +115,55 @@ class EstimateTopicError(EstimateError):
     """The IMU topic to filter, or the topic to write, cannot be chosen (the message names the argument)."""
 
 
-def check_options(path: str | os.PathLike[str], out: str | os.PathLike[str], *, force: bool = False) -> None:
-    """:class:`EstimateError` for an output that cannot be written: in a missing folder, a folder, the
-    input itself, or an existing file without ``force``."""
+def check_options(
+    path: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    force: bool = False,
+    plot: bool = False,
+    topic_out: str | None = None,
+) -> None:
+    """:class:`EstimateError` for an output that cannot be written: in a missing, read-only or unwritable
+    folder, a folder, the input itself, or an existing file without ``force``; with ``plot``, the same of
+    the picture :func:`~gyroemu.pipelines.jobs.plots.plot_estimate` draws beside ``out``
+    (``OUT.estimate.png``); a ``topic_out`` that is no topic name or one of the reserved topics
+    (module's notes)."""
     path, out = Path(path), Path(out)
     if not out.parent.is_dir():
         raise EstimateError(f"argument --out: {out.parent} is not a folder")
+    problem = folder_problem(out.parent)
+    if problem is not None:
+        raise EstimateError(f"argument --out: {out.parent}: {problem}")
     if out.is_dir():
         raise EstimateError(f"argument --out: {out} is a folder")
     if out.exists() and path.exists() and out.resolve() == path.resolve():
         raise EstimateError(f"argument --out: {out} is the input: the input is never modified")
     if out.exists() and not force:
         raise EstimateError(f"argument --out: {out} exists (use --force to overwrite it)")
+    if plot:
+        from gyroemu.pipelines.jobs.plots import estimate_plot_path
+
+        picture = estimate_plot_path(out)
+        if picture.is_dir():
+            raise EstimateError(f"argument --plot: {picture} is a folder")
+        if picture.exists() and path.exists() and picture.resolve() == path.resolve():
+            raise EstimateError(f"argument --plot: {picture} is the input: the input is never modified")
+        if picture.exists() and not force:
+            raise EstimateError(f"argument --plot: {picture} exists (use --force to overwrite it)")
+    if topic_out is not None:
+        _check_topic_out_name(topic_out)
+
+
+def _check_topic_out_name(topic_out: str) -> None:
+    """:class:`EstimateTopicError` for a ``topic_out`` that is no topic name, or a reserved topic."""
+    if not topic_out.startswith("/") or topic_out == "/" or any(c.isspace() for c in topic_out):
+        raise EstimateTopicError(f"argument --topic-out: {topic_out!r} is not a topic name like /estimate/imu")
+    role = split_topic(topic_out)[1]
+    if topic_out in RESERVED_TOPICS or (role and role != ESTIMATE_ROLE):
+        raise EstimateTopicError(
+            f"argument --topic-out: {topic_out} is a topic of the log format's own (interface.md): "
+            "name another topic, e.g. /estimate/imu"
+        )
 
 
 @dataclass(frozen=True)
@@ -150,8 +198,7 @@ def _choose(devices_found, path, topic: str | None, topic_out: str | None) -> li
     ``topics`` and ``metadata``, a :class:`DeviceLog` or a :class:`StreamDevice`)."""
     devices = {d.topics[IMU_ROLE]: d for d in devices_found}
     if topic_out is not None:
-        if not topic_out.startswith("/") or topic_out == "/" or any(c.isspace() for c in topic_out):
-            raise EstimateTopicError(f"argument --topic-out: {topic_out!r} is not a topic name like /estimate/imu")
+        _check_topic_out_name(topic_out)
     if topic is not None:
         name = _topic_name(topic)
         if name not in devices:
@@ -242,7 +289,7 @@ def estimate_log(
         check_latency_sensors(latency_s or {})
     except ValueError as e:
         raise EstimateError(f"argument --latency: {e}") from None
-    check_options(path, out, force=force)
+    check_options(path, out, force=force, topic_out=topic_out)
     if not read_whole:
         try:
             return _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latency_s or {})
@@ -458,10 +505,18 @@ def _target(dev, topic_out: str, stamp_ns: np.ndarray, fields: dict) -> Estimate
 
 
 def _check_topics_out(path: Path, chosen: list, channels) -> None:
-    """:class:`EstimateTopicError` for an estimate topic the log holds with another type."""
+    """:class:`EstimateTopicError` for an estimate topic the log holds already, unless it is an earlier
+    estimate (``.../estimate/imu`` of type ``sensor_msgs/msg/Imu``), which the copy replaces."""
     types = {c.topic: c.schema_name for c in channels}
     for _, name in chosen:
-        if name in types and types[name] not in ("sensor_msgs/msg/Imu", "sensor_msgs/Imu"):
+        if name not in types:
+            continue
+        if types[name] not in ("sensor_msgs/msg/Imu", "sensor_msgs/Imu"):
             raise EstimateTopicError(
                 f"argument --topic-out: {path} has {name} of type {types[name]}: name another topic"
+            )
+        if split_topic(name)[1] != ESTIMATE_ROLE:
+            raise EstimateTopicError(
+                f"argument --topic-out: {path} has {name} already: name another topic (only an earlier "
+                "estimate, a topic .../estimate/imu, is replaced)"
             )

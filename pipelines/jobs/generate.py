@@ -13,6 +13,12 @@ path); each log appears whole (a temporary file and a rename). Each finished log
 as a Parquet part in ``out_dir/.index/``; at the end ``index.parquet`` and ``index.csv`` list every log
 of the campaign with its parameters, config hashes, sample count, size and SHA-256. Started again, the
 job makes only the logs that are missing.
+
+Other people's files are never replaced (:func:`check_options`, before any work): a file at a log's
+path is kept when it is that log (its ``gyroemu`` metadata: the task's scenario and device configs, by
+their hashes, and its seed), and otherwise refused; so is an ``index.parquet`` or ``index.csv`` that is
+not an index ``generate`` wrote (its columns, :data:`INDEX_COLUMNS`). A log of the task without its
+index part (a run stopped between the two) is made again: the same bytes.
 """
 
 from __future__ import annotations
@@ -22,10 +28,21 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from gyroemu.errors import ConfigError
+
 if TYPE_CHECKING:
     from gyroemu.pipelines.campaign import Campaign, LogTask, TaskFailure
 
-__all__ = ["GenerateOptions", "GenerateSummary", "INDEX_COLUMNS", "index_schema", "log_tasks", "run_generate"]
+__all__ = [
+    "GenerateError",
+    "GenerateOptions",
+    "GenerateSummary",
+    "INDEX_COLUMNS",
+    "check_options",
+    "index_schema",
+    "log_tasks",
+    "run_generate",
+]
 
 INDEX_COLUMNS: dict[str, str] = {
     "file": "string",
@@ -44,6 +61,10 @@ INDEX_COLUMNS: dict[str, str] = {
     "gyroemu_version": "string",
 }
 """The columns of ``index.parquet`` / ``index.csv`` and their Arrow types."""
+
+
+class GenerateError(ConfigError):
+    """Bad options of ``gyroemu generate`` (the message names the argument and the file at fault)."""
 
 
 @dataclass(frozen=True)
@@ -125,13 +146,96 @@ def index_schema() -> Any:
     return arrow_schema(INDEX_COLUMNS)
 
 
+def _log_mismatch(task: LogTask) -> str | None:
+    """Why the file at ``task``'s path is not that log (None when it is): not an MCAP file, no ``gyroemu``
+    metadata, or another scenario, device or seed."""
+    from mcap.reader import make_reader
+
+    from gyroemu.pipelines.campaign import config_hash
+
+    try:
+        with open(task.out, "rb") as f:
+            if f.read(8) != b"\x89MCAP0\r\n":
+                return "not an MCAP file"
+            f.seek(0)
+            records = [m.metadata for m in make_reader(f).iter_metadata() if m.name == "gyroemu"]
+    except Exception as exc:  # any reader's complaint: not a log of ours
+        return f"an MCAP file that cannot be read ({type(exc).__name__})"
+    if len(records) != 1:
+        return "not a gyroemu log of one device"
+    meta = records[0]
+    if meta.get("seed") != str(task.seed):
+        return f"the log of seed {meta.get('seed') or '(none)'}, not {task.seed}"
+    for what, text, digest in (
+        ("scenario", meta.get("scenario", ""), task.scenario_hash),
+        ("device", meta.get("device", ""), task.device_hash),
+    ):
+        if config_hash(text) != digest:
+            return f"a log of another {what} config"
+    return None
+
+
+def _foreign_index(path: Path) -> bool:
+    """Whether ``path`` (an existing ``index.parquet`` or ``index.csv``) is not an index ``generate`` wrote."""
+    if path.is_dir():
+        return True
+    try:
+        if path.suffix == ".parquet":
+            import pyarrow.parquet as pq
+
+            return pq.read_schema(path).names != list(INDEX_COLUMNS)
+        with open(path, encoding="utf-8") as f:
+            header = f.readline().rstrip("\r\n")
+    except Exception:  # unreadable, or not Parquet / UTF-8 text: not ours
+        return True
+    return header != ",".join(f'"{name}"' for name in INDEX_COLUMNS)
+
+
+def check_options(options: GenerateOptions, tasks: list[LogTask]) -> None:
+    """:class:`GenerateError` naming the argument (and the file at fault), before any work: a scheduler
+    address that is none; an ``out_dir`` that is not a folder or cannot take files (read-only, not
+    writable; where it would be made when missing); a file at a log's path that is not that log
+    (:func:`_log_mismatch`); an ``index.parquet``, ``index.csv`` or ``.index`` there that is not
+    ``generate``'s."""
+    from gyroemu.pipelines.campaign import scheduler_problem
+    from gyroemu.pipelines.formats.atomic import output_folder_problem
+
+    if options.scheduler is not None:
+        problem = scheduler_problem(options.scheduler)
+        if problem is not None:
+            raise GenerateError(f"argument --scheduler: {problem}")
+    out = options.out_dir
+    if out.exists() and not out.is_dir():
+        raise GenerateError(f"argument --out-dir: {out} is not a folder")
+    problem = output_folder_problem(out)
+    if problem is not None:
+        raise GenerateError(f"argument --out-dir: {problem}")
+    if not out.is_dir():
+        return
+    keep = "generate replaces no file of anyone else's: move it away, or choose another --out-dir"
+    for task in tasks:
+        path = out / Path(task.out).name  # task.out made absolute
+        if path.is_dir():
+            raise GenerateError(f"argument --out-dir: {path} is a folder where a log goes: {keep}")
+        if path.exists() or path.is_symlink():
+            why = _log_mismatch(task) if path.is_file() else "not a file"
+            if why is not None:
+                raise GenerateError(f"argument --out-dir: {path} is not this campaign's log ({why}): {keep}")
+    for name in ("index.parquet", "index.csv"):
+        if (out / name).exists() and _foreign_index(out / name):
+            raise GenerateError(f"argument --out-dir: {out / name} is not an index 'gyroemu generate' wrote: {keep}")
+    if (out / ".index").exists() and not (out / ".index").is_dir():
+        raise GenerateError(f"argument --out-dir: {out / '.index'} is not a folder: {keep}")
+
+
 def run_generate(options: GenerateOptions) -> GenerateSummary:
     """Write the campaign's logs and their index (see the module's notes).
 
     Raises
     ------
     gyroemu.errors.ConfigError
-        A bad campaign file (names the file and key) or ``out_dir`` not a folder, before any work.
+        A bad campaign file (names the file and key), before any work; :class:`GenerateError` for bad
+        options or files in ``out_dir`` it would replace (:func:`check_options`).
     gyroemu.pipelines.campaign.SchedulerLostError
         The scheduler unreachable or lost; the finished logs and their index parts are kept, and a new
         run makes the missing logs and writes the index.
@@ -139,7 +243,6 @@ def run_generate(options: GenerateOptions) -> GenerateSummary:
     import pyarrow.csv as pacsv
     import pyarrow.parquet as pq
 
-    from gyroemu.errors import ConfigError
     from gyroemu.pipelines.campaign import PartStore, load_campaign, make_log, readable, run_tasks
     from gyroemu.pipelines.campaign.progress import RunsProgress
     from gyroemu.pipelines.formats.atomic import write_atomic
@@ -147,8 +250,9 @@ def run_generate(options: GenerateOptions) -> GenerateSummary:
     campaign = load_campaign(options.spec)
     out = options.out_dir
     if out.exists() and not out.is_dir():
-        raise ConfigError("is not a folder", file=out)
+        raise GenerateError(f"argument --out-dir: {out} is not a folder")
     tasks = log_tasks(campaign, out)
+    check_options(options, tasks)
     out.mkdir(parents=True, exist_ok=True)
     store = PartStore(out / ".index", index_schema())
     todo = [t for t in tasks if not (store.has(t.key) and Path(t.out).is_file())]

@@ -17,6 +17,7 @@ before any work (:class:`IdentifyError`, naming the argument).
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -24,7 +25,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from gyroemu.errors import ConfigError
-from gyroemu.pipelines.formats.atomic import write_text_atomic
+from gyroemu.pipelines.formats.atomic import folder_problem, write_text_atomic
+from gyroemu.pipelines.formats.file_names import repeated_file
 
 if TYPE_CHECKING:
     from gyroemu.pipelines.identification import Identification, TrialData
@@ -88,8 +90,11 @@ class IdentifySummary:
 def _check_out(path: Path, argument: str, force: bool) -> None:
     if path.suffix != ".toml":
         raise IdentifyError(f"argument {argument}: {path}: write a .toml file (got '{path.suffix}')")
-    if not path.parent.is_dir():
-        raise IdentifyError(f"argument {argument}: {path.parent} is not a folder")
+    problem = folder_problem(path.parent)
+    if problem is not None:
+        raise IdentifyError(f"argument {argument}: {path.parent}: {problem}")
+    if path.is_dir():
+        raise IdentifyError(f"argument {argument}: {path} is a folder: name a file in it")
     if path.exists() and not force:
         raise IdentifyError(f"argument {argument}: {path} exists (use --force to overwrite it)")
 
@@ -104,18 +109,34 @@ def check_options(options: IdentifyOptions) -> None:
             raise IdentifyError(f"argument LOG: {log}: {'not a file' if log.exists() else 'no such file'}")
         if log.suffix not in _SUFFIXES:
             raise IdentifyError(f"argument LOG: {log}: expected an .mcap log or a BROAD .hdf5 trial")
+    twice = repeated_file(options.logs)
+    if twice is not None:  # pooled as two, one recording's noise would count twice (every σ / sqrt(2))
+        first, again = twice
+        alias = "" if str(first) == str(again) else f" (as {first})"
+        raise IdentifyError(f"argument LOG: {again} is given twice{alias}: give each recording once")
     _check_out(options.out, "--out", options.force)
     if options.site_out is not None:
         _check_out(options.site_out, "--site-out", options.force)
         if options.site_out.resolve() == options.out.resolve():
             raise IdentifyError("argument --site-out: the same file as --out")
     for a, b in options.rest_intervals or ():
+        if not (math.isfinite(a) and math.isfinite(b)):
+            raise IdentifyError(f"argument --rest: {a:g}:{b:g}: expected finite seconds")
         if not a < b:
             raise IdentifyError(f"argument --rest: {a:g}:{b:g}: start must be before stop")
     if not options.gravity_m_s2 > 0:
         raise IdentifyError(f"argument --gravity: must be positive, got {options.gravity_m_s2:g}")
     if options.latitude_deg is not None and not -90.0 <= options.latitude_deg <= 90.0:
         raise IdentifyError(f"argument --latitude: must lie in [-90, 90] degrees, got {options.latitude_deg:g}")
+
+
+def _check_samples(count: int, path: Path) -> None:
+    """``LogError`` naming ``path`` for a recording of fewer than two samples: no sample interval, so
+    every fit would divide by NaN."""
+    if count < 2:
+        from gyroemu.errors import LogError
+
+        raise LogError(f"holds {count} sample(s): identify needs a recording of many", file=path)
 
 
 def read_trial(path: Path) -> TrialData:
@@ -132,6 +153,7 @@ def read_trial(path: Path) -> TrialData:
         from gyroemu.pipelines.formats.importers import read_broad
 
         trial = read_broad(path)
+        _check_samples(len(trial), path)
         t = np.arange(len(trial)) / trial.rate_hz
         with h5py.File(path, "r") as f:
             pos = np.asarray(f["opt_pos"][()], dtype=float) if "opt_pos" in f else None
@@ -157,6 +179,7 @@ def read_trial(path: Path) -> TrialData:
     if truth is None or truth.q_wb is None:
         raise LogError("has no /truth/imu attitude to identify against", file=path)
     s = log.samples
+    _check_samples(len(s.t), path)
     mag = s.mag if s.mag is not None and np.isfinite(s.mag).any() else None
     # Seconds from the log's first sample: the samples' exactly (float seconds since the epoch resolve
     # 0.24 µs, which would skew the rate written), the truth's and pose's to 0.24 µs.
@@ -188,8 +211,6 @@ def read_trial(path: Path) -> TrialData:
 
 def identify_logs(options: IdentifyOptions) -> Identification:
     """Read and identify the logs of ``options`` (no files written)."""
-    import math
-
     from gyroemu.dynamics.earth import earth_rate_enu
     from gyroemu.pipelines.identification import TrialSettings, identify
 

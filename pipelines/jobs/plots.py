@@ -30,14 +30,25 @@ from typing import Any
 
 import numpy as np
 
+from gyroemu.pipelines.formats.atomic import write_figure_atomic
 from gyroemu.pipelines.formats.messages import DecodedBatch
 from gyroemu.pipelines.jobs.plot_envelope import Envelope
 
 __all__ = ["BUCKETS", "EstimateCurves", "InfoCurves", "StampMatch", "attitude_error_deg", "estimate_curves"]
-__all__ += ["euler_zyx_deg", "info_curves", "plot_estimate", "plot_info"]
+__all__ += ["estimate_plot_path", "euler_zyx_deg", "info_curves", "info_plot_path", "plot_estimate", "plot_info"]
 
 BUCKETS = 2000
 """Columns of time of a long log's curves (a figure 7 inches wide at 110 dpi has 770 pixels)."""
+
+
+def estimate_plot_path(path: str | os.PathLike[str]) -> Path:
+    """Where :func:`plot_estimate` draws the log ``path`` by default: beside it, ``.estimate.png``."""
+    return Path(path).with_suffix(".estimate.png")
+
+
+def info_plot_path(path: str | os.PathLike[str]) -> Path:
+    """Where :func:`plot_info` draws the log ``path`` by default: beside it, ``.info.png``."""
+    return Path(path).with_suffix(".info.png")
 
 
 def euler_zyx_deg(q_wb: np.ndarray) -> np.ndarray:
@@ -385,7 +396,7 @@ def plot_estimate(
     ``.estimate.png``); returns the file written. ``ValueError`` when no device of the log has an
     ``/estimate/imu``. ``buckets``, ``read_whole``: :func:`estimate_curves`'."""
     path = Path(path)
-    out = Path(out) if out is not None else path.with_suffix(".estimate.png")
+    out = Path(out) if out is not None else estimate_plot_path(path)
     devices = estimate_curves(path, buckets, read_whole=read_whole)
     if not devices:
         raise ValueError(f"{path}: no /estimate/imu to draw")
@@ -423,9 +434,7 @@ def plot_estimate(
         ax.set_xlabel("time, s")
         ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return write_figure_atomic(fig, out, dpi=110)  # whole or not at all; closes the figure
 
 
 def info_curves(path: str | os.PathLike[str], buckets: int = BUCKETS, *, read_whole: bool = False) -> list[InfoCurves]:
@@ -477,7 +486,7 @@ def plot_info(
     ``out`` (default: ``path`` with ``.info.png``); returns the file written. ``buckets``,
     ``read_whole``: :func:`info_curves`'."""
     path = Path(path)
-    out = Path(out) if out is not None else path.with_suffix(".info.png")
+    out = Path(out) if out is not None else info_plot_path(path)
     devices = info_curves(path, buckets, read_whole=read_whole)
     plt = _pyplot()
     fig, axes = plt.subplots(3, len(devices), figsize=(7 * len(devices), 9), sharex="col", squeeze=False)
@@ -500,6 +509,4 @@ def plot_info(
             ax.grid(alpha=0.3)
         axes[-1, column].set_xlabel("time, s")
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return write_figure_atomic(fig, out, dpi=110)  # whole or not at all; closes the figure

@@ -31,6 +31,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gyroemu.errors import ConfigError
+from gyroemu.pipelines.formats.atomic import folder_problem
 from gyroemu.pipelines.jobs.disk_space import MCAP_RECORD_OVERHEAD, free_bytes, human_size
 
 if TYPE_CHECKING:
@@ -244,6 +246,33 @@ def _check_size(options: SimulateOptions, scenario: Scenario, device: Device | N
         )
 
 
+_LAST_STAMP_S = 2.0**31  # builtin_interfaces/Time's int32 seconds: a stamp must lie before 2038-01-19T03:14:08Z
+
+
+def _check_last_stamp(options: SimulateOptions, span_s: float | None, device: Device | None) -> None:
+    """Refuse an .mcap run whose last stamp (``--start-time`` plus the span, the device clock's offset and
+    two samples of jitter) lies beyond ROS time's int32 seconds, which the writer would find only there."""
+    if options.out.suffix != ".mcap" or span_s is None:
+        return
+    start_s = start_ns(options) / 1e9
+    late = 0.0 if device is None else max(float(device.spec.clock.offset_s), 0.0) + 2.0 / float(device.spec.rate_hz)
+    if not start_s + float(span_s) + late < _LAST_STAMP_S:
+        from gyroemu.pipelines.formats.frames import SIMULATE_EPOCH_NS, format_stamp
+
+        last = format_stamp(int(_LAST_STAMP_S) * 10**9 - 1) + ", the last stamp ROS time's int32 seconds can hold"
+        if device is not None and start_s + float(span_s) < _LAST_STAMP_S:  # the device's clock is at fault
+            raise ConfigError(
+                f"an offset of {device.spec.clock.offset_s:g} s puts the run's stamps after {last}",
+                file=device.path or device.name,
+                key="clock.offset_s",
+            )
+        start = format_stamp(SIMULATE_EPOCH_NS) if options.start_time is None else options.start_time
+        raise SimulateError(
+            f"argument --start-time: {start} plus the {float(span_s):g} s run ends after {last}: start earlier "
+            "or shorten --duration"
+        )
+
+
 def check_options(options: SimulateOptions, scenario: Scenario | None = None, device: Device | None = None) -> None:
     """Check ``options`` before any work; raise :class:`SimulateError` naming the argument at fault.
 
@@ -262,7 +291,8 @@ def check_options(options: SimulateOptions, scenario: Scenario | None = None, de
         ``duration`` or ``rate`` not finite and positive or above :data:`MAX_DURATION_S` or
         :data:`MAX_RATE_HZ`; ``seed`` not an integer ``0 <= seed < 2**128``; ``out`` with a suffix other
         than .mcap or .npz, in a missing folder, naming a folder, or an existing file without ``force``;
-        an .mcap without a device; and, given ``scenario``, an output that needs more disk than is free
+        an .mcap without a device; an .mcap whose last stamp (``start_time`` plus the span) lies beyond
+        ROS time's int32 seconds (2038-01-19); and, given ``scenario``, an output that needs more disk than is free
         in ``out``'s folder or (.npz, made in memory) more memory than the machine has.
     """
     _check_number(options.duration, "--duration", "s", MAX_DURATION_S)
@@ -283,16 +313,19 @@ def check_options(options: SimulateOptions, scenario: Scenario | None = None, de
         raise SimulateError(f"argument --out: {out} is a folder: name a file in it")
     if out.suffix not in (".npz", ".mcap"):
         raise SimulateError(f"argument --out: {out}: write a .mcap (ROS 2) or .npz file (got '{out.suffix}')")
-    if not out.parent.is_dir():
-        what = "is not a folder" if out.parent.exists() else "no such folder"
-        raise SimulateError(f"argument --out: {out.parent}: {what}")
+    problem = folder_problem(out.parent)
+    if problem is not None:
+        raise SimulateError(f"argument --out: {out.parent}: {problem}")
     if out.exists() and not options.force:
         raise SimulateError(f"argument --out: {out} exists (use --force to overwrite it)")
     if out.suffix == ".mcap" and not options.device:
         raise SimulateError(
             "argument --device: an .mcap log holds a device's samples: name a device ('gyroemu presets' lists them)"
         )
-    if scenario is not None:
+    if scenario is None:
+        _check_last_stamp(options, options.duration, None)
+    else:
+        _check_last_stamp(options, scenario.duration_s if options.duration is None else options.duration, device)
         _check_size(options, scenario, device)
 
 
@@ -329,6 +362,14 @@ def run_simulate(options: SimulateOptions) -> SimulateSummary:
     span = scenario.duration_s if options.duration is None else options.duration
     if longest is not None and span > longest * (1 + 1e-9):
         raise SimulateError(f"argument --duration: {span:g} s is longer than the recording's {longest:.6g} s")
+    truth_rate = scenario.rate_hz if rate is None else rate
+    if round(span * truth_rate) < 1:  # Scenario.times: round(span · rate) + 1 samples
+        argument = "--rate" if options.rate is not None else "--duration" if options.duration is not None else None
+        where = f"argument {argument}" if argument else f"{scenario.path or scenario.name}: key 'rate_hz'"
+        raise SimulateError(
+            f"{where}: {span:g} s at {truth_rate:g} Hz is one truth sample; the truth needs two or more "
+            f"(at least {1.0 / span:.3g} Hz over {span:g} s)"
+        )
     if device is not None and span < 2.0 / device.spec.rate_hz:
         raise SimulateError(
             f"{scenario.path or scenario.name}: {span:.6g} s of motion is shorter than two samples of "

@@ -22,6 +22,8 @@ from typing import Any
 import numpy as np
 
 from gyroemu.errors import ConfigError
+from gyroemu.pipelines.formats.atomic import folder_problem
+from gyroemu.pipelines.formats.file_names import repeated_file
 from gyroemu.pipelines.twin import (
     METRICS,
     RANKED_FILTERS,
@@ -128,6 +130,11 @@ def check_options(options: TwinOptions) -> tuple[list[str], dict, dict, Handling
             raise TwinError(f"argument TRIAL: {trial}: no such file")
         if trial.suffix.lower() not in RECORDING_FORMATS:
             raise TwinError(f"argument TRIAL: {trial}: expected a BROAD .hdf5 trial or a gyroemu .mcap log")
+    twice = repeated_file(options.trials)
+    if twice is not None:  # reported twice, and its rests pooled twice
+        first, again = twice
+        alias = "" if str(first) == str(again) else f" (as {first})"
+        raise TwinError(f"argument TRIAL: {again} is given twice{alias}: give each recording once")
     if isinstance(options.seeds, bool) or not isinstance(options.seeds, int) or options.seeds < 1:
         raise TwinError(f"argument --seeds: must be a whole number of at least 1, got {options.seeds!r}")
     if isinstance(options.workers, bool) or not isinstance(options.workers, int) or options.workers < 1:
@@ -159,8 +166,10 @@ def check_options(options: TwinOptions) -> tuple[list[str], dict, dict, Handling
             raise TwinError(f"argument --out: {out} is not a folder")
         if any(out.iterdir()) and not options.force:
             raise TwinError(f"argument --out: {out} is not empty (use --force to write into it)")
-    elif not out.parent.is_dir() and out.parent != Path(""):
-        raise TwinError(f"argument --out: {out.parent} is not a folder")
+    folder = out if out.exists() else out.parent  # the report's folder, or where it is made
+    problem = folder_problem(folder)
+    if problem is not None:
+        raise TwinError(f"argument --out: {folder}: {problem}")
     return filters, unavailable, site, handling, device
 
 
@@ -192,6 +201,16 @@ def _check_smoothing(smoothing: dict | None, real: Recording) -> None:
                 raise TwinError(f"argument --smoothing: {key}: {real.path.name}: {e}") from None
 
 
+def _trial_error(path: Path, error: Exception) -> TwinError:
+    """:class:`TwinError` naming ``argument TRIAL`` and ``path`` once, for ``error`` reading or checking it:
+    the readers' messages start with the file already, and the recorded scenario made of the recording
+    names it (by its name) with its key ``path`` before its reader's message, which names it again."""
+    text = str(error)
+    for prefix in ((f"{path}: ", f"{path.name}: "), ("key 'path': ",), (f"{path}: ",)):
+        text = next((text.removeprefix(p) for p in prefix if text.startswith(p)), text)
+    return TwinError(f"argument TRIAL: {path}: {text}")
+
+
 def run_twin(options: TwinOptions) -> TwinReport:
     """Run the real recordings and their twins through the filters (module notes) and return the report
     (:meth:`TwinReport.save` writes it).
@@ -214,10 +233,8 @@ def run_twin(options: TwinOptions) -> TwinReport:
             twin_scenario(real, site, 0, options.smoothing)  # the recorded motion reads and checks
         except TwinError:
             raise
-        except ConfigError as e:
-            raise TwinError(f"argument TRIAL: {e}") from None
-        except Exception as e:  # noqa: BLE001 - LogError and friends: the file at fault
-            raise TwinError(f"argument TRIAL: {path}: {e}") from None
+        except Exception as e:  # noqa: BLE001 - LogError, ConfigError and friends: the file at fault
+            raise _trial_error(path, e) from None
         reals.append(real)
     timings: dict[str, float] = {"load and check": time.perf_counter() - started}
     has_dev_mag = device.spec.magnetometer is not None

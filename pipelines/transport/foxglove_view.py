@@ -58,6 +58,7 @@ From Python::
 
 from __future__ import annotations
 
+import errno
 import math
 import os
 import queue
@@ -72,6 +73,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gyroemu.errors import ConfigError
 from gyroemu.pipelines.formats.channels import (
     BODY_FRAME,
     ESTIMATE_FRAME,
@@ -109,6 +111,7 @@ __all__ = [
     "imu_fields",
     "log_channel_specs",
     "check_view_options",
+    "ViewOptionError",
     "start_view_server",
     "ViewPublisher",
     "FoxgloveView",
@@ -292,25 +295,38 @@ def log_channel_specs(
     ]
 
 
+class ViewOptionError(ConfigError):
+    """A bad Foxglove view option (port, rate, host), found before any work; the message names the argument."""
+
+
 def check_view_options(
-    options: ViewOptions, port_arg: str = "--foxglove-port", rate_arg: str = "--foxglove-rate"
+    options: ViewOptions,
+    port_arg: str = "--foxglove-port",
+    rate_arg: str = "--foxglove-rate",
+    host_arg: str = "--host",
 ) -> None:
-    """``ValueError`` naming ``port_arg`` or ``rate_arg`` unless the port is in 0..65535 and free on
-    ``options.host`` and the rate is in (0, 1000] Hz; done before any work."""
+    """:class:`ViewOptionError` (a ``ValueError``) naming ``port_arg``, ``rate_arg`` or ``host_arg``
+    unless the port is in 0..65535 and free on ``options.host``, the host an address of this machine
+    (a name that does not resolve, or an address no interface has, is the host's fault, not the port's),
+    and the rate is in (0, 1000] Hz; done before any work."""
     rate = options.rate_hz
     if not (isinstance(rate, (int, float)) and math.isfinite(rate) and 0 < rate <= MAX_RATE_HZ):
-        raise ValueError(f"argument {rate_arg}: must be in (0, {MAX_RATE_HZ:g}] Hz, got {rate}")
+        raise ViewOptionError(f"argument {rate_arg}: must be in (0, {MAX_RATE_HZ:g}] Hz, got {rate}")
     port = options.port
     if not (isinstance(port, int) and 0 <= port <= 65535):
-        raise ValueError(f"argument {port_arg}: must be a TCP port, 0 to 65535, got {port}")
-    if port == 0:
-        return
-    with socket.socket(socket.AF_INET6 if ":" in options.host else socket.AF_INET, socket.SOCK_STREAM) as s:
+        raise ViewOptionError(f"argument {port_arg}: must be a TCP port, 0 to 65535, got {port}")
+    host = options.host
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM) as s:
         try:
-            s.bind((options.host, port))
+            s.bind((host, port))  # port 0: any free one, so only the host is checked
         except OSError as e:
-            raise ValueError(
-                f"argument {port_arg}: cannot listen on {options.host}:{port}: {e.strerror or e} "
+            if isinstance(e, socket.gaierror) or e.errno == errno.EADDRNOTAVAIL:
+                raise ViewOptionError(
+                    f"argument {host_arg}: cannot listen on {host!r}: {e.strerror or e} (name an address of "
+                    "this machine: 127.0.0.1, 0.0.0.0 for every interface, ::1, or a host name that resolves to one)"
+                ) from None
+            raise ViewOptionError(
+                f"argument {port_arg}: cannot listen on {host}:{port}: {e.strerror or e} "
                 "(another Foxglove server? choose another port, or 0 for any)"
             ) from None
 

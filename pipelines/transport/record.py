@@ -75,6 +75,8 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 
+from gyroemu.errors import ConfigError
+from gyroemu.pipelines.formats.atomic import folder_problem, write_text_atomic
 from gyroemu.pipelines.formats.channels import topic_message_type
 from gyroemu.pipelines.formats.frames import TF_STATIC_TOPIC, TF_TOPIC
 from gyroemu.pipelines.formats.messages import MESSAGE_TYPES
@@ -82,6 +84,7 @@ from gyroemu.pipelines.formats.tf_messages import TF_MESSAGE_TYPE, tf_stamp_ns
 from gyroemu.pipelines.transport.zenoh_io import (
     CONFIG_TOPIC,
     SessionOptions,
+    check_key_expr,
     config_fields,
     config_key,
     connect_warning,
@@ -99,6 +102,8 @@ if TYPE_CHECKING:
 
 __all__ = [
     "RecordOptions",
+    "RecordError",
+    "check_record_options",
     "SequenceTracker",
     "Recorder",
     "KeyInfo",
@@ -488,17 +493,21 @@ class RecordOptions:
     Attributes
     ----------
     out_path : Path
-        The MCAP file to write (in place).
+        The MCAP file to write (in place), a ``.mcap`` name.
     duration : float or None
         Seconds to record; None: until SIGINT/SIGTERM.
     key_expr : str or None
-        Key expression to subscribe to; None: ``gyroemu/**`` (``<domain>/**`` in ROS 2 mode).
+        Key expression to subscribe to (a valid zenoh one, not empty); None: ``gyroemu/**``
+        (``<domain>/**`` in ROS 2 mode).
     report_path : Path or None
-        Also write the sequence report there as JSON.
+        Also write the sequence report there as JSON (a file other than ``out_path``).
     session : SessionOptions
         The zenoh session (and ROS 2 mode: rmw_zenoh's keys, a ROS 2 node with a subscription token per topic).
     force : bool
-        Replace ``out_path`` if it exists (otherwise ``ValueError`` before any work).
+        Replace ``out_path`` and ``report_path`` if they exist (otherwise :class:`RecordError` before
+        any work).
+
+    :func:`check_record_options` checks them all before any work.
     """
 
     out_path: Path
@@ -514,6 +523,42 @@ class RecordOptions:
             object.__setattr__(self, "report_path", Path(self.report_path))
 
 
+class RecordError(ConfigError):
+    """Bad options of ``gyroemu record``, found before any work (the message names the argument)."""
+
+
+def _check_output(path: Path, argument: str, force: bool) -> None:
+    """``path`` can take a new file of ``argument``: not a folder, its folder writable
+    (:func:`~gyroemu.pipelines.formats.atomic.folder_problem`), not an existing file unless ``force``."""
+    if path.is_dir():
+        raise RecordError(f"argument {argument}: {path} is a folder: name a file in it")
+    problem = folder_problem(path.parent)
+    if problem is not None:
+        raise RecordError(f"argument {argument}: {path.parent}: {problem}")
+    if path.exists() and not force:
+        raise RecordError(f"argument {argument}: {path} exists (use --force to overwrite it)")
+
+
+def check_record_options(options: RecordOptions) -> None:
+    """:class:`RecordError` (or the session's ``LiveOptionError``) naming the argument at fault, before
+    any work: ``--out`` not a ``.mcap`` file name, a folder, in a folder that cannot take it, or an
+    existing file without ``--force``; ``--report`` the same file as ``--out``, or refused as ``--out``
+    is (any suffix); ``--key`` empty or no zenoh key expression."""
+    out = options.out_path
+    if out.is_dir():
+        raise RecordError(f"argument --out: {out} is a folder: name a file in it")
+    if out.suffix != ".mcap":
+        raise RecordError(f"argument --out: {out}: record writes an MCAP log: name a .mcap file (got '{out.suffix}')")
+    _check_output(out, "--out", options.force)
+    report = options.report_path
+    if report is not None:
+        if report.resolve() == out.resolve() or (report.exists() and out.exists() and report.samefile(out)):
+            raise RecordError(f"argument --report: {report} is the --out file: name another file for the report")
+        _check_output(report, "--report", options.force)
+    if options.key_expr is not None:
+        check_key_expr(options.key_expr, "--key")
+
+
 def _take_reply(recorder: Recorder, device: str, sample: zenoh.Sample) -> None:
     """A reply to the recorder's ``get`` of ``device``'s config: into the recorder (a bad one is ignored)."""
     try:
@@ -526,15 +571,10 @@ def _take_reply(recorder: Recorder, device: str, sample: zenoh.Sample) -> None:
 
 def run_record(options: RecordOptions, *, out: TextIO = sys.stdout) -> int:
     """Record until SIGINT/SIGTERM or ``options.duration`` s (see the module's notes); the report goes to
-    ``out``. Returns the exit status (0). Raises ``ValueError`` naming the argument at fault (an
-    existing ``out_path`` without ``force`` among them). Nothing received: says so, writes no log."""
-    out_path = options.out_path
-    if out_path.is_dir():
-        raise ValueError(f"argument --out: {out_path} is a folder: name a file in it")
-    if not out_path.parent.is_dir():
-        raise ValueError(f"argument --out: {out_path.parent} is not a folder")
-    if out_path.exists() and not options.force:
-        raise ValueError(f"argument --out: {out_path} exists (use --force to overwrite it)")
+    ``out``. Returns the exit status (0). Raises ``ValueError`` naming the argument at fault, before any
+    work (:func:`check_record_options`: an existing ``out_path`` or ``report_path`` without ``force``
+    among them). Nothing received: says so, writes no log (the report, if asked for, is written)."""
+    check_record_options(options)
     ros2, key_expr = options.session.ros2, options.key_expr
     domain = None
     if ros2:
@@ -612,7 +652,14 @@ def run_record(options: RecordOptions, *, out: TextIO = sys.stdout) -> int:
     else:
         print(f"record: nothing received on {key_expr}: no file written ({recorder.path})", file=out, flush=True)
     if options.report_path:
-        options.report_path.write_text(json.dumps(report, indent=1))
+        try:
+            write_text_atomic(options.report_path, json.dumps(report, indent=1))  # whole or not at all
+        except OSError as e:
+            from gyroemu.pipelines.jobs.disk_space import is_disk_full
+
+            if is_disk_full(e):
+                raise  # not the argument's fault: the command line says so, status 1
+            raise RecordError(f"argument --report: {options.report_path}: {e.strerror or e}") from None
     return 0
 
 

@@ -83,6 +83,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
+from gyroemu.errors import ConfigError
 from gyroemu.pipelines.formats.channels import is_device_prefix, is_stream_role, role_topic, split_topic
 from gyroemu.pipelines.formats.frames import TF_STATIC_TOPIC, TF_TOPIC
 from gyroemu.pipelines.formats.mcap_log import check_mcap_noting
@@ -93,6 +94,7 @@ from gyroemu.pipelines.transport.read_ahead import BATCH, READ_AHEAD, Batch, Rea
 from gyroemu.pipelines.transport.zenoh_io import (
     PacingOptions,
     SessionOptions,
+    check_pacing_options,
     key_to_topic,
     live_session,
     open_session,
@@ -113,14 +115,23 @@ __all__ = [
     "READ_AHEAD",
     "BATCH",
     "CLOCK_HZ",
+    "MIN_RATE",
+    "MAX_RATE",
 ]
 
 CLOCK_HZ = 40.0
 """``--clock``: /clock messages a second of wall time, at most (``ros2 bag play --clock``'s default)."""
 
+# The speed factors the pacing can do. A deadline is round(log time since the start / rate) ns: at 1e6
+# a 1 kHz log's 1 ms becomes the deadline's 1 ns, so a faster factor changes nothing (the publisher
+# already sends as fast as it can) -- and 1e300 overflowed (the /clock step, rate * 1e9 / CLOCK_HZ, is
+# infinite). At 1e-6 a log's second takes 11.6 days of wall time: slower is no replay, and 1e-300 made
+# the deadlines infinite (OverflowError).
+MIN_RATE, MAX_RATE = 1e-6, 1e6
 
-class ReplayError(ValueError):
-    """Bad usage of ``gyroemu replay`` (the message names the argument)."""
+
+class ReplayError(ConfigError):
+    """Bad usage of ``gyroemu replay`` (the message names the argument; a ``ValueError`` too)."""
 
 
 @dataclass(frozen=True)
@@ -132,8 +143,8 @@ class ReplayOptions:
     path : Path
         The MCAP file to replay (only ever read).
     rate : float
-        Speed factor, > 0: message i goes out at ``t_start + (log_time_i - log_time_0) / rate``
-        (2: twice as fast as recorded).
+        Speed factor, :data:`MIN_RATE` to :data:`MAX_RATE`: message i goes out at
+        ``t_start + (log_time_i - log_time_0) / rate`` (2: twice as fast as recorded).
     loop : bool
         Repeat the file until SIGINT/SIGTERM, deadlines increasing across passes.
     topics : tuple of str or None
@@ -307,8 +318,10 @@ def _channels_to_publish(options: ReplayOptions, out: TextIO) -> tuple[dict[str,
     """Validate the file and the options; ``({topic: key}, ROS 2 keys or None, the topics whose type
     starts with a header)``, skipped topics said on ``out``."""
     path, topics = options.path, options.topics
-    if not options.rate > 0:
-        raise ReplayError(f"argument --rate: must be positive, got {options.rate}")
+    rate = options.rate
+    if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not MIN_RATE <= rate <= MAX_RATE:
+        raise ReplayError(f"argument --rate: must be a speed factor from {MIN_RATE:g} to {MAX_RATE:g}, got {rate}")
+    check_pacing_options(options.pacing)  # LiveOptionError naming --wait
     if options.foxglove is not None:
         from gyroemu.pipelines.transport.foxglove_view import check_view_options
 

@@ -91,6 +91,7 @@ from gyroemu.pipelines.transport.zenoh_io import (
     ConfigAnnouncer,
     PacingOptions,
     SessionOptions,
+    check_pacing_options,
     connect_warning,
     live_session,
     open_session,
@@ -236,6 +237,7 @@ def _check(options: StreamOptions) -> None:
         raise ValueError(f"argument --device-name: {e}") from None
     if options.start_time is not None:
         stream_start_ns(options)  # ValueError naming --start-time
+    check_pacing_options(options.pacing)  # LiveOptionError naming --wait
     if options.frame_id is not None:
         from gyroemu.pipelines.formats.frames import check_frame_id
 

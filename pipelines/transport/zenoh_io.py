@@ -60,6 +60,7 @@ import ctypes
 import errno
 import gc
 import json
+import math
 import os
 import re
 import secrets
@@ -75,8 +76,15 @@ from typing import Protocol, overload
 import numpy as np
 import zenoh
 
+from gyroemu.errors import ConfigError
+
 __all__ = [
     "DEFAULT_ENDPOINT",
+    "LiveOptionError",
+    "check_endpoint",
+    "check_key_expr",
+    "check_pacing_options",
+    "MAX_WAIT_S",
     "KEY_ROOT",
     "ATTACHMENT_SIZE",
     "SessionOptions",
@@ -128,6 +136,32 @@ def _insert(config: zenoh.Config, key: str, value) -> None:
     config.insert_json5(key, json.dumps(value))
 
 
+class LiveOptionError(ConfigError):
+    """A live job's bad session, key or pacing option, found before any work (the message names the argument)."""
+
+
+_ENDPOINT_FORM = "an endpoint looks like PROTOCOL/ADDRESS, e.g. tcp/HOST:PORT (tcp/192.168.1.10:7447, tcp/[::1]:7447)"
+_PORTED = ("tcp", "udp")  # protocols whose address is HOST:PORT
+
+
+def check_endpoint(endpoint: str, argument: str) -> None:
+    """:class:`LiveOptionError` naming ``argument`` (``--connect``, ``--listen``) unless zenoh's config
+    takes ``endpoint`` (``PROTOCOL/ADDRESS[?METADATA][#CONFIG]``) and, for tcp and udp, its address ends
+    in ``:PORT`` with PORT in 0..65535. No session is opened."""
+    try:
+        _insert(zenoh.Config(), "connect/endpoints", [endpoint])
+    except Exception:  # zenoh.ZError: Json5Err(Message { msg: "Endpoints must be of the form ...", ... })
+        raise LiveOptionError(f"argument {argument}: {endpoint!r} is not a zenoh endpoint: {_ENDPOINT_FORM}") from None
+    protocol, _, rest = endpoint.partition("/")
+    if protocol in _PORTED:
+        address = re.split(r"[?#]", rest, maxsplit=1)[0]
+        port = re.fullmatch(r".*:(\d{1,5})", address)
+        if port is None or int(port.group(1)) > 65535:
+            raise LiveOptionError(
+                f"argument {argument}: {endpoint!r} has no port 0..65535 after its host: {_ENDPOINT_FORM}"
+            )
+
+
 def session_config(
     connect: Sequence[str] | None = None,
     listen: Sequence[str] | None = None,
@@ -162,6 +196,9 @@ def session_config(
         config = zenoh.Config()
         _insert(config, "scouting/multicast/enabled", False)
         _insert(config, "scouting/gossip/enabled", True)
+    for argument, endpoints in (("--connect", connect), ("--listen", listen)):
+        for endpoint in endpoints or ():
+            check_endpoint(endpoint, argument)  # LiveOptionError naming the option, not zenoh's Json5Err
     try:
         if mode is not None:
             _insert(config, "mode", mode)
@@ -382,6 +419,27 @@ def topic_to_key(device: str, topic: str) -> str:
     if not topic.startswith("/") or topic.endswith("/") or "//" in topic:
         raise ValueError(f"topic {topic!r} must look like /a/b")
     return f"{KEY_ROOT}/{device}{topic}"
+
+
+def check_key_expr(key: str, argument: str = "--key") -> str:
+    """``key`` if zenoh takes it as a key expression (as a subscriber would declare it: canon form, no
+    empty chunk, no ``#`` or ``?``), else :class:`LiveOptionError` naming ``argument``, with the canon
+    form when zenoh knows one (``a/**/**`` -> ``a/**``). No session is opened."""
+    if not key:
+        raise LiveOptionError(
+            f"argument {argument}: empty: name a key expression, e.g. {KEY_ROOT}/** or {KEY_ROOT}/imu0/*"
+        )
+    try:
+        zenoh.KeyExpr(key)
+    except Exception as e:  # zenoh.ZError
+        reason = _zenoh_message(e).rstrip(".")
+        try:
+            canon = str(zenoh.KeyExpr.autocanonize(key))
+        except Exception:
+            canon = None
+        hint = f" (write {canon})" if canon else f" (e.g. {KEY_ROOT}/** or {KEY_ROOT}/imu0/*)"
+        raise LiveOptionError(f"argument {argument}: {reason}{hint}") from None
+    return key
 
 
 def key_to_topic(key: str) -> tuple[str, str]:
@@ -610,6 +668,28 @@ class PacingOptions:
     wait_s: float = 10.0
     timing: Timing = PRECISE
     linger_s: float = 0.5
+
+
+# The longest --wait: a day. The wait is for the subscribers of a run about to start (a recorder or a
+# ROS 2 node started by hand), after which the job publishes anyway; much longer is a slip or a try at
+# "forever" (which --wait cannot mean), and left a job hanging with nothing said (--wait 1e300 never ran
+# out; inf and nan were taken too). A day still covers a stream left to wait overnight for its recorder.
+MAX_WAIT_S = 86400.0
+
+
+def check_pacing_options(options: PacingOptions, wait_arg: str = "--wait") -> None:
+    """:class:`LiveOptionError` naming ``wait_arg`` unless ``options.wait_s`` is a finite number of seconds
+    from 0 to :data:`MAX_WAIT_S`; done before any work."""
+    wait = options.wait_s
+    if (
+        isinstance(wait, bool)
+        or not isinstance(wait, (int, float))
+        or not math.isfinite(wait)
+        or not 0 <= wait <= MAX_WAIT_S
+    ):
+        raise LiveOptionError(
+            f"argument {wait_arg}: must be a number of seconds from 0 (no wait) to {MAX_WAIT_S:g} (a day), got {wait}"
+        )
 
 
 _PR_SET_TIMERSLACK, _PR_GET_TIMERSLACK = 29, 30

@@ -78,6 +78,8 @@ def load_recording(path: Path) -> Recording:
     s = dev.samples
     tt = np.asarray(dev.truth.t, float)
     t = np.asarray(s.t, float)
+    if len(t) < 2 or len(tt) < 2:  # no sample interval, hence no rate
+        raise RecordingError(f"holds {len(t)} sample(s) and {len(tt)} truth sample(s): a twin needs many")
     # the motion file's clock (read_mcap_motion): from the first truth stamp, exactly where the truth is
     # at the samples' stamps (float seconds since the epoch resolve 0.24 µs: a 1 kHz log read 1000.07 Hz)
     clock = dev.seconds_from_first() if np.array_equal(tt, t) else t - tt[0]

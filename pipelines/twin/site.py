@@ -30,6 +30,7 @@ class SiteFileError(ConfigError):
 
 def read_site(path: Path) -> tuple[dict, Handling | None]:
     """The site file's ``[site]`` table and its optional ``[handling]`` (errors name the file and key)."""
+    from gyroemu.dynamics.config import validate
     from gyroemu.dynamics.earth import Site
 
     if not path.is_file():
@@ -38,6 +39,13 @@ def read_site(path: Path) -> tuple[dict, Handling | None]:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
         raise SiteFileError(f"{path}: {e}") from None
+    unknown = sorted(set(data) - {"site", "handling"})
+    if unknown:
+        raise SiteFileError(
+            f"unknown table [{unknown[0]}] (a site file has [site] and an optional [handling])",
+            file=path,
+            key=unknown[0],
+        )
     site = data.get("site")
     if not isinstance(site, dict):
         raise SiteFileError(f"{path}: has no [site] table")
@@ -45,9 +53,9 @@ def read_site(path: Path) -> tuple[dict, Handling | None]:
     if env is not None and not isinstance(env, dict):
         raise SiteFileError(f"{path}: [site.magnetic_environment] is not a table")
     try:
-        Site.model_validate(site_with_seed(site, 0))
-    except Exception as e:  # noqa: BLE001 - pydantic's ValidationError, named
-        raise SiteFileError(f"{path}: {e}") from None
+        validate(Site, site_with_seed(site, 0), file=path, prefix="site")
+    except ConfigError as e:  # every problem, on one line
+        raise SiteFileError(e.reason.replace("\n  ", "; "), file=path, key=e.key) from None
     return site, _read_handling(data.get("handling"), path)
 
 

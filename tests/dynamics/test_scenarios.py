@@ -125,6 +125,27 @@ def test_unknown_and_missing_kind_are_named():
         scenario_from_dict({"duration_s": 1, "rate_hz": 1}, name="x.toml")
 
 
+@pytest.mark.parametrize(
+    "change, key",
+    [
+        ({"rotation": {"terms": 100_000_000}}, "rotation.terms"),  # 14 GB, minutes, before a bound
+        ({"translation": {"terms": 1001}}, "translation.terms"),
+        ({"duration_s": 1e9}, "duration_s"),
+        ({"rate_hz": 1e8}, "rate_hz"),
+    ],
+)
+def test_keys_that_size_a_run_are_bounded_naming_the_key_and_why(change, key):
+    """A count or span that would take gigabytes is refused when the file is read, with the reason."""
+    data = tomllib.loads((config_dir() / "scenarios" / "smooth_manoeuvre.toml").read_text())
+    for k, v in change.items():
+        data[k] = {**data[k], **v} if isinstance(v, dict) else v
+    with pytest.raises(ConfigError, match=rf"x.toml: key '{key}': .* is more than the limit of .*: \w+"):
+        scenario_from_dict(data, name="x.toml")
+    edge = tomllib.loads((config_dir() / "scenarios" / "smooth_manoeuvre.toml").read_text())
+    edge["rotation"]["terms"] = 1000
+    assert scenario_from_dict(edge, name="x.toml").spec.rotation.terms == 1000
+
+
 @pytest.mark.parametrize("name", ["omega_b", "alpha_b", "specific_force_b", "pos_w", "vel_w", "mag_b"])
 @pytest.mark.parametrize("shape", [(4, 4), (3, 3), (4,)])
 def test_trajectory_refuses_a_vector_of_the_wrong_shape_naming_it(name, shape):

@@ -8,7 +8,9 @@ Logs are short (``consumer_mems`` at 1 kHz, 60 s static, 20 s of manoeuvre) to k
 from __future__ import annotations
 
 import json
+import os
 import re
+import shutil
 import warnings
 
 import numpy as np
@@ -16,7 +18,9 @@ import pytest
 from cli_runs import run_cli
 
 from gyroemu.pipelines.formats.mcap_log import read_mcap
+from gyroemu.pipelines.jobs import allan as allan_job
 from gyroemu.pipelines.jobs.allan import (
+    AllanLogError,
     AllanMotionError,
     MotionWarning,
     allan_of_log,
@@ -157,3 +161,123 @@ def test_json_report(logs, tmp_path):
     assert check["static"] is True
     assert set(check["figures"]["accel_direction"]) == {"value", "limit", "unit", "static"}
     assert "Allan plot" in err
+
+
+def one_error_line(err: str) -> str:
+    """The one line ``gyroemu allan`` printed for bad input (no traceback)."""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("gyroemu allan: error: "), err
+    return lines[0]
+
+
+def test_an_output_that_is_the_log_is_refused_even_with_force(logs, tmp_path):
+    log = tmp_path / "s2.mcap"
+    shutil.copyfile(logs["static"], log)
+    before = log.read_bytes()
+    (tmp_path / "sub").mkdir()
+    os.symlink(log, tmp_path / "link.png")
+    os.link(log, tmp_path / "hard.yaml")
+    for args in (
+        ["--kalibr", log, "--force"],
+        ["--kalibr", tmp_path / "sub" / ".." / "s2.mcap", "--force"],
+        ["--kalibr", tmp_path / "hard.yaml", "--force"],
+        ["--out", tmp_path / "link.png", "--force"],
+    ):
+        status, _, err = run(log, *args)
+        assert status == 2, (args, err)
+        assert "is the log LOG" in one_error_line(err) and args[0] in err, err
+        assert log.read_bytes() == before
+        assert not (tmp_path / "s2.allan.png").exists()
+    status, _, err = run(log, "--out", tmp_path / "a.png", "--kalibr", tmp_path / "sub" / ".." / "a.png")
+    assert status == 2 and "argument --kalibr" in one_error_line(err) and "plot" in err
+    assert not (tmp_path / "a.png").exists()
+
+
+def test_an_existing_plot_is_refused_without_force_as_kalibr_is(logs, tmp_path):
+    log = tmp_path / "static.mcap"
+    os.symlink(logs["static"], log)
+    default, named = tmp_path / "static.allan.png", tmp_path / "x.png"
+    for plot, args in ((default, []), (named, ["--out", named])):
+        plot.write_text("u\n")
+        status, _, err = run(log, *args)
+        assert status == 2, err
+        line = one_error_line(err)
+        assert "argument --out" in line and f"{plot.name} exists" in line and "--force" in line
+        assert plot.read_text() == "u\n"
+    status, _, err = run(log, "--out", named, "--force")
+    assert status == 0, err
+    assert named.read_bytes().startswith(b"\x89PNG")
+
+
+def test_an_output_in_a_missing_folder_is_refused_before_any_work(logs, tmp_path):
+    plot = tmp_path / "a.png"
+    (tmp_path / "afile").write_text("")
+    for args, argument in (
+        (["--out", tmp_path / "nodir" / "x.png"], "--out"),
+        (["--out", plot, "--kalibr", tmp_path / "nodir" / "k.yaml"], "--kalibr"),
+        (["--out", plot, "--kalibr", tmp_path / "afile" / "k.yaml"], "--kalibr"),
+    ):
+        status, _, err = run(logs["static"], *args)
+        assert status == 2, err
+        line = one_error_line(err)
+        assert f"argument {argument}:" in line and ("no such folder" in line or "not a folder" in line), line
+        assert not plot.exists()
+
+
+def test_a_folder_named_as_an_output_file_is_refused_as_a_folder(logs, tmp_path):
+    (tmp_path / "kdir").mkdir()
+    (tmp_path / "pdir.png").mkdir()
+    plot = tmp_path / "a.png"
+    for args in (["--kalibr", tmp_path / "kdir"], ["--kalibr", tmp_path / "kdir", "--force"]):
+        status, _, err = run(logs["static"], "--out", plot, *args)
+        assert status == 2, err
+        assert "argument --kalibr" in one_error_line(err) and "kdir is a folder" in err
+        assert not plot.exists()
+    status, _, err = run(logs["static"], "--out", tmp_path / "pdir.png", "--force")
+    assert status == 2 and "argument --out" in one_error_line(err) and "pdir.png is a folder" in err
+
+
+def test_an_output_folder_that_cannot_take_a_file_is_refused_naming_the_option(logs, tmp_path, monkeypatch):
+    """A read-only mount cannot be made here: ``folder_problem`` says it of the folder ``ro``."""
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    os.symlink(logs["static"], ro / "static.mcap")
+    real = allan_job.folder_problem
+    monkeypatch.setattr(
+        allan_job, "folder_problem", lambda f: "read-only file system" if os.fspath(f) == os.fspath(ro) else real(f)
+    )
+    plot = tmp_path / "a.png"
+    for args, argument in (
+        ([ro / "static.mcap"], "--out (default"),
+        ([logs["static"], "--out", ro / "x.png"], "--out:"),
+        ([logs["static"], "--out", plot, "--kalibr", ro / "k.yaml"], "--kalibr:"),
+    ):
+        status, _, err = run(*args)
+        assert status == 2, err
+        line = one_error_line(err)
+        assert f"argument {argument}" in line and "read-only file system" in line, line
+        assert not plot.exists() and os.listdir(ro) == ["static.mcap"]
+
+
+def test_a_broken_npz_log_is_a_clear_error_naming_it(logs, tmp_path):
+    rng = np.random.default_rng(0)
+    good = tmp_path / "good.npz"
+    np.savez(good, **{"imu/gyro": rng.normal(size=(20_000, 3)), "imu/t": np.arange(20_000) * 1e-3})
+    empty, truncated, text, mcap, pickled = (tmp_path / f"{n}.npz" for n in ("e", "h", "t", "m", "p"))
+    empty.write_bytes(b"")
+    truncated.write_bytes(good.read_bytes()[: good.stat().st_size // 2])
+    text.write_text("not a log\n")
+    shutil.copyfile(logs["static"], mcap)
+    np.savez(pickled, **{"imu/gyro": np.array([None] * 3, dtype=object), "imu/t": np.arange(3.0)})
+    for path, words in (
+        (empty, "empty file"),
+        (truncated, "truncated or corrupt .npz"),
+        (text, "not a gyroemu log"),
+        (mcap, "MCAP log without the .mcap suffix"),
+        (pickled, "object (pickled) arrays"),
+    ):
+        with pytest.raises(AllanLogError, match=re.escape(f"{path}: ")) as caught:
+            allan_of_log(path)
+        assert words in str(caught.value) and "allow_pickle" not in str(caught.value)
+        status, _, err = run(path, "--out", tmp_path / "a.png")
+        assert status == 2 and f"argument LOG: {path}: " in one_error_line(err) and words in err

@@ -461,6 +461,42 @@ def test_bad_input_exits_2_naming_it(tmp_path, capsys):
     assert not (tmp_path / "out").exists()  # nothing written
 
 
+def test_an_earlier_report_is_overwritten_only_with_force(tmp_path, configs, capsys):
+    """A folder holding a report's files (bench.md, bench.json, a .png: the plots are named after their
+    cases) is refused before any work, naming --out and the files, which stay as they were; --force writes."""
+    out = tmp_path / "report"
+    out.mkdir()
+    (out / "bench.md").write_text("someone's notes")
+    (out / "photo.png").write_text("someone's picture")
+    argv = ["--scenario", configs / "rotation.toml", "--device", configs / "ideal200.toml", "--duration", 0.5]
+    argv += ["--runs", 1, "--filter", "madgwick", "--out", out]
+    assert run_cli(*argv) == 2
+    printed = capsys.readouterr()
+    assert f"argument --out: {out} holds bench.md, photo.png" in printed.err and "--force" in printed.err
+    assert printed.out == ""
+    assert sorted(p.name for p in out.iterdir()) == ["bench.md", "photo.png"]
+    assert (out / "bench.md").read_text() == "someone's notes"
+    assert run_cli(*argv, "--force") == 0, capsys.readouterr().err
+    assert (out / "bench.md").read_text().startswith("# gyroemu bench")
+
+
+@pytest.mark.parametrize("sub", ["", "report"])
+def test_a_read_only_out_folder_is_refused_before_work(tmp_path, monkeypatch, capsys, sub):
+    """A folder that cannot take the report (a read-only mount refuses even root, which a test cannot
+    make: folder_problem is told so) is refused naming --out, before any work, not as an OSError at the
+    end; a missing --out is made there, so that folder is named."""
+    import gyroemu.pipelines.formats.atomic as atomic
+
+    locked = tmp_path / "ro"
+    locked.mkdir()
+    real = atomic.folder_problem
+    monkeypatch.setattr(atomic, "folder_problem", lambda f: "read-only file system" if f == locked else real(f))
+    assert run_cli("--runs", 1, "--duration", 0.5, "--filter", "madgwick", "--out", locked / sub) == 2
+    printed = capsys.readouterr()
+    assert f"argument --out: {locked}: read-only file system" in printed.err and printed.out == ""
+    assert list(locked.iterdir()) == []
+
+
 def test_log_with_nan_samples_warns_and_runs(tmp_path, capsys):
     n = 400
     stamps = np.arange(1, n + 1) * 5_000_000

@@ -131,6 +131,121 @@ def test_cli_bad_campaign_exits_2_before_any_work(tmp_path, capsys):
     assert not out.exists()
 
 
+def test_durations_are_bounded_as_simulate_bounds_them(tmp_path):
+    """A duration simulate refuses (> 1e7 s) is refused with the file, before any work (not per task)."""
+    spec = _write(tmp_path / "c.toml", TINY.replace("[0.5]", "[0.5, 1e9]"))
+    with pytest.raises(ConfigError) as info:
+        load_campaign(spec)
+    assert (info.value.file, info.value.key) == (str(spec), "durations_s[1]")
+    assert "1e+09 is more than the limit of 1e+07" in str(info.value)
+    out = tmp_path / "data"
+    assert cli.main(["generate", str(spec), "--out-dir", str(out)]) == 2
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("flags", [["--duration", "7"], ["--seed", "5"], ["--runs", "4"], ["--threshold-deg", "9"]])
+def test_cli_campaign_refuses_the_numbers_of_todays_flags(tmp_path, capsys, flags):
+    """The campaign file sets durations, seeds and threshold: the flags are refused, not ignored."""
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as info:
+        cli.main(["bench", "--campaign", str(_write(tmp_path / "c.toml", TINY)), *flags, "--out", str(out)])
+    assert info.value.code == 2
+    assert f"the campaign file sets the grid; drop {flags[0]}" in capsys.readouterr().err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("command", ["bench", "generate"])
+def test_a_bad_scheduler_address_is_refused_before_any_work(tmp_path, capsys, command):
+    spec = _write(tmp_path / "c.toml", TINY)
+    out = tmp_path / "out"
+    argv = ["bench", "--runs", "1"] if command == "bench" else ["generate", str(spec)]
+    argv += ["--out" if command == "bench" else "--out-dir", str(out), "--scheduler", "nonsense"]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert "argument --scheduler: 'nonsense' is not a scheduler address like tcp://HOST:8786" in err, err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("command", ["bench", "generate"])
+def test_a_read_only_out_folder_is_refused_before_any_work(tmp_path, monkeypatch, capsys, command):
+    """A read-only mount refuses even root, which a test cannot make: folder_problem is told so. The
+    output folder (made when missing) is refused naming the option, not as an OSError later."""
+    import gyroemu.pipelines.formats.atomic as atomic
+
+    locked = tmp_path / "ro"
+    locked.mkdir()
+    real = atomic.folder_problem
+    monkeypatch.setattr(atomic, "folder_problem", lambda f: "read-only file system" if f == locked else real(f))
+    spec = _write(tmp_path / "c.toml", TINY)
+    named = "--out" if command == "bench" else "--out-dir"
+    argv = ["bench", "--campaign", str(spec)] if command == "bench" else ["generate", str(spec)]
+    assert cli.main([*argv, named, str(locked / "made")]) == 2
+    assert f"argument {named}: {locked}: read-only file system" in capsys.readouterr().err
+    assert list(locked.iterdir()) == []
+
+
+def test_a_campaign_overwrites_a_report_not_its_own_only_with_force(tmp_path, capsys):
+    """bench.md there without a campaign's runs/ store is someone else's (a plain bench's, a user's)."""
+    from gyroemu.pipelines.jobs.campaign import CampaignError, CampaignOptions, check_options
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "bench.md").write_text("someone's notes")
+    spec = _write(tmp_path / "c.toml", TINY)
+    assert cli.main(["bench", "--campaign", str(spec), "--out", str(out)]) == 2
+    assert f"argument --out: {out} holds bench.md" in capsys.readouterr().err
+    assert [p.name for p in out.iterdir()] == ["bench.md"] and (out / "bench.md").read_text() == "someone's notes"
+    check_options(CampaignOptions(spec=spec, out=out, force=True))
+    (out / "runs").mkdir()  # the campaign's own report, rewritten as it resumes
+    check_options(CampaignOptions(spec=spec, out=out))
+    with pytest.raises(CampaignError, match="argument --scheduler"):
+        check_options(CampaignOptions(spec=spec, out=out, scheduler="tcp://host"))
+
+
+LOG = "smooth_manoeuvre__consumer_mems__0.5s__seed0.mcap"
+
+
+def test_generate_replaces_no_file_it_did_not_write(tmp_path, capsys):
+    """A file at a log's path is kept only when it is that log (its gyroemu metadata: scenario and device
+    configs, seed); anything else there, and an index generate did not write, is refused before any work
+    naming the file, which stays as it was."""
+    from gyroemu.pipelines.jobs.generate import (
+        INDEX_COLUMNS,
+        GenerateError,
+        GenerateOptions,
+        check_options,
+        log_tasks,
+    )
+
+    spec = _write(tmp_path / "c.toml", 'scenarios = ["smooth_manoeuvre"]\ndevices = ["consumer_mems"]\n')
+    spec.write_text(spec.read_text() + "durations_s = [0.5]\nseeds = [0]\n")
+    out = tmp_path / "data"
+    out.mkdir()
+    log = out / LOG
+    log.write_text("someone's notes")
+    assert cli.main(["generate", str(spec), "--out-dir", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"argument --out-dir: {log} is not this campaign's log (not an MCAP file)" in err, err
+    assert [p.name for p in out.iterdir()] == [LOG] and log.read_text() == "someone's notes"
+
+    options = GenerateOptions(spec=spec, out_dir=out)
+    tasks = log_tasks(load_campaign(spec), out)
+    argv = ["--scenario", "smooth_manoeuvre", "--device", "consumer_mems", "--duration", "0.5", "--out", str(log)]
+    assert cli.main(["simulate", *argv, "--seed", "1", "--force"]) == 0
+    with pytest.raises(GenerateError, match="the log of seed 1, not 0"):
+        check_options(options, tasks)
+    assert cli.main(["simulate", *argv, "--seed", "0", "--force"]) == 0
+    check_options(options, tasks)  # the task's own log: kept (or made again, the same bytes)
+
+    (out / "index.csv").write_text("my,own,index\n")
+    assert cli.main(["generate", str(spec), "--out-dir", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"argument --out-dir: {out / 'index.csv'} is not an index 'gyroemu generate' wrote" in err, err
+    assert (out / "index.csv").read_text() == "my,own,index\n"
+    (out / "index.csv").write_text(",".join(f'"{c}"' for c in INDEX_COLUMNS) + "\n")  # generate's own
+    check_options(options, tasks)
+
+
 def test_bench_flags_make_the_same_tasks_as_a_file(tmp_path):
     from gyroemu.pipelines.campaign import campaign_from_spec
     from gyroemu.pipelines.jobs.campaign import spec_from_bench_flags

@@ -147,3 +147,50 @@ def test_info_on_a_non_mcap_file_exits_2_naming_it(tmp_path):
     result = gyroemu("info", str(bad))
     assert result.returncode == 2 and str(bad) in result.stderr
     assert digest(bad) == before
+
+
+@pytest.mark.parametrize(
+    "options, named",
+    [
+        (["--live-seconds", "1e9"], "argument --live-seconds: 1e+09 s is more than the demo's limit of 3600 s"),
+        (["--duration", "1e9"], "argument --duration: 1e+09 s is more than the demo's limit of 3600 s"),
+        (["--scenario", "no_such_scenario"], "argument --scenario: unknown scenario 'no_such_scenario'"),
+    ],
+)
+def test_demo_refuses_what_it_cannot_run_before_any_work(tmp_path, options, named):
+    from cli_runs import run_cli
+
+    code, stdout, stderr = run_cli(["demo", *options, "--out", str(tmp_path / "demo")])
+    assert code == 2 and named in stderr, stderr
+    assert stdout == "" and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("there", ["demo.mcap", "bench/bench.md", "bench/plot.png"])
+def test_demo_overwrites_an_earlier_demo_only_with_force(tmp_path, there):
+    from cli_runs import run_cli
+
+    from gyroemu.pipelines.jobs.demo import check_options
+
+    out = tmp_path / "demo"
+    (out / there).parent.mkdir(parents=True)
+    (out / there).write_text("someone's file")
+    code, stdout, stderr = run_cli(["demo", "--duration", "1", "--live-seconds", "1", "--out", str(out)])
+    assert code == 2 and f"argument --out: {out} holds {there}" in stderr and "--force" in stderr, stderr
+    assert stdout == "" and (out / there).read_text() == "someone's file"
+    assert [p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()] == [there]
+    check_options("heavy_top", 1.0, out, 1.0, force=True)  # --force: the demo runs
+
+
+def test_demo_into_a_read_only_folder_is_refused_before_any_work(tmp_path, monkeypatch):
+    """A read-only mount refuses even root, which a test cannot make: folder_problem is told so."""
+    from cli_runs import run_cli
+
+    import gyroemu.pipelines.formats.atomic as atomic
+
+    locked = tmp_path / "ro"
+    locked.mkdir()
+    real = atomic.folder_problem
+    monkeypatch.setattr(atomic, "folder_problem", lambda f: "read-only file system" if f == locked else real(f))
+    code, stdout, stderr = run_cli(["demo", "--duration", "1", "--live-seconds", "1", "--out", str(locked / "d")])
+    assert code == 2 and f"argument --out: {locked}: read-only file system" in stderr, stderr
+    assert stdout == "" and list(locked.iterdir()) == []

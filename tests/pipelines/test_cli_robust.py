@@ -118,6 +118,73 @@ def test_simulate_refuses_an_out_it_cannot_write(tmp_path, out, named):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["folder", "folder.npz"]
 
 
+@pytest.mark.parametrize("suffix", [".mcap", ".npz"])
+def test_simulate_refuses_a_read_only_out_folder_before_work(tmp_path, monkeypatch, suffix):
+    """A folder that cannot take the output (a read-only mount refuses even root, which a test cannot
+    make: folder_problem is told so) is refused naming --out, before any work, not as an OSError at the end."""
+    import gyroemu.pipelines.jobs.simulate as simulate
+
+    locked = tmp_path / "ro"
+    locked.mkdir()
+    monkeypatch.setattr(simulate, "folder_problem", lambda f: "read-only file system" if f == locked else None)
+    argv = ["simulate", "--scenario", "heavy_top", "--device", "consumer_mems", "--duration", "1"]
+    code, _, stderr = run_cli([*argv, "--out", str(locked / f"b{suffix}")])
+    assert code == 2 and f"argument --out: {locked}: read-only file system" in stderr, stderr
+    assert list(locked.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        ["--duration", "5", "--start-time", "2038-01-19T03:14:06Z"],
+        ["--start-time", "2038-01-19T03:10:00Z"],  # the scenario's own 300 s
+    ],
+)
+def test_simulate_refuses_a_run_ending_beyond_ros_time_before_work(tmp_path, options):
+    """The start is within ROS time's int32 seconds, its end is not: refused naming --start-time, not a
+    ValueError from the writer mid-run."""
+    argv = ["simulate", "--scenario", "smooth_manoeuvre", "--device", "consumer_mems", *options]
+    code, _, stderr = run_cli([*argv, "--out", str(tmp_path / "c.mcap")])
+    assert code == 2 and "argument --start-time: 2038-01-19T03:1" in stderr and "int32" in stderr, stderr
+    assert list(tmp_path.iterdir()) == []
+    fits = SimulateOptions(
+        scenario="smooth_manoeuvre",
+        device="consumer_mems",
+        out=tmp_path / "c.mcap",
+        duration=5.0,
+        start_time="2038-01-19T03:14:00Z",
+    )
+    check_options(fits)
+    device = tmp_path / "late.toml"  # the device's clock offset carries the stamps past it
+    device.write_text('description = "x"\nrate_hz = 100\n\n[clock]\noffset_s = 1e12\n')
+    code, _, stderr = run_cli(
+        [*argv[:3], "--device", str(device), "--duration", "5", "--out", str(tmp_path / "c.mcap")]
+    )
+    assert code == 2 and f"{device}: key 'clock.offset_s'" in stderr, stderr
+
+
+def test_simulate_names_the_argument_or_key_at_fault(tmp_path):
+    """The argument or key that is wrong, not another: --rate too low for two truth samples (not the
+    device's 'duration'), a device's absurd rate_hz (not --duration), a folder for a config (not 'no
+    such file')."""
+    device = tmp_path / "fast.toml"
+    device.write_text('description = "x"\nrate_hz = 1e9\n')
+    (tmp_path / "configs").mkdir()
+    cases = [
+        (["--device", "consumer_mems", "--rate", "0.1", "--duration", "5"], "argument --rate: 5 s at 0.1 Hz"),
+        (["--device", str(device), "--duration", "5"], f"{device}: key 'rate_hz': 1e+09 is more than the limit"),
+        (["--device", str(tmp_path / "configs")], f"{tmp_path}/configs: is a folder, not a device file"),
+    ]
+    for options, named in cases:
+        code, _, stderr = run_cli(
+            ["simulate", "--scenario", "smooth_manoeuvre", *options, "--out", str(tmp_path / "a.mcap")]
+        )
+        assert code == 2 and named in stderr, stderr
+    code, _, stderr = run_cli(["simulate", "--scenario", str(tmp_path / "configs"), "--out", str(tmp_path / "a.npz")])
+    assert code == 2 and f"{tmp_path}/configs: is a folder, not a scenario file" in stderr, stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["configs", "fast.toml"]
+
+
 @pytest.mark.parametrize(
     "change, named",
     [
@@ -344,6 +411,118 @@ def test_import_and_record_refuse_a_folder_as_out(tmp_path, command):
     assert list(out.iterdir()) == []
 
 
+@pytest.fixture
+def no_session(monkeypatch):
+    """The live jobs may not open a zenoh session: their bad options are refused before any work."""
+    from gyroemu.pipelines.transport import record, replay, stream
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a zenoh session was opened before the options were checked")
+
+    for module in (record, replay, stream):
+        monkeypatch.setattr(module, "open_session", refuse)
+
+
+@pytest.mark.parametrize(
+    "report, force, named",
+    [
+        ("user.mcap", False, "argument --report: {tmp}/user.mcap exists (use --force to overwrite it)"),
+        ("r.mcap", False, "argument --report: {tmp}/r.mcap is the --out file"),
+        ("r.mcap", True, "argument --report: {tmp}/r.mcap is the --out file"),
+        ("./r.mcap", True, "argument --report: {tmp}/r.mcap is the --out file"),
+        ("missing/x.json", False, "argument --report: {tmp}/missing: no such folder"),
+        ("folder", True, "argument --report: {tmp}/folder is a folder"),
+        ("user.mcap/x.json", False, "argument --report: {tmp}/user.mcap: not a folder"),
+    ],
+)
+def test_record_checks_its_report_like_its_out_before_any_work(tmp_path, no_session, report, force, named):
+    """--report is an output as --out is: someone's file is not replaced without --force (it was, by the
+    JSON report, with "no file written" said), nor is --out's, and a missing folder or a folder is named
+    as --report before recording (it was found after, and blamed on --out)."""
+    (tmp_path / "user.mcap").write_bytes(b"someone's log")
+    (tmp_path / "folder").mkdir()
+    out = tmp_path / "r.mcap"
+    argv = ["record", "--out", str(out), "--duration", "1", "--report", f"{tmp_path}/{report}"]
+    code, _, stderr = run_cli([*argv, *(["--force"] if force else [])])
+    assert code == 2 and named.format(tmp=tmp_path) in stderr, stderr
+    assert (tmp_path / "user.mcap").read_bytes() == b"someone's log"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["folder", "user.mcap"]
+
+
+def test_record_report_over_a_file_needs_force(tmp_path):
+    from gyroemu.pipelines.transport.record import RecordError, RecordOptions, check_record_options
+
+    (tmp_path / "old.json").write_text("{}")
+    options = RecordOptions(tmp_path / "r.mcap", report_path=tmp_path / "old.json")
+    with pytest.raises(RecordError, match="argument --report: .*old.json exists"):
+        check_record_options(options)
+    check_record_options(RecordOptions(tmp_path / "r.mcap", report_path=tmp_path / "old.json", force=True))
+
+
+@pytest.mark.parametrize("out", ["r.txt", "r", "r.mcap.json"])
+def test_record_refuses_an_out_that_is_no_mcap_name(tmp_path, no_session, out):
+    """record writes MCAP: another suffix is refused as simulate refuses it."""
+    code, _, stderr = run_cli(["record", "--out", str(tmp_path / out), "--duration", "1"])
+    assert code == 2 and f"argument --out: {tmp_path / out}: record writes an MCAP log" in stderr, stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("which", ["--out", "--report"])
+def test_record_refuses_a_read_only_folder_before_work(tmp_path, monkeypatch, no_session, which):
+    """A read-only mount (which refuses even root; a test cannot make one, so folder_problem is told so)
+    is refused naming the option, before any session or recording (it recorded, then wrote nothing)."""
+    import gyroemu.pipelines.transport.record as record
+
+    locked = tmp_path / "ro"
+    locked.mkdir()
+    monkeypatch.setattr(record, "folder_problem", lambda f: "read-only file system" if f == locked else None)
+    out, report = (
+        (locked / "r.mcap", tmp_path / "r.json") if which == "--out" else (tmp_path / "r.mcap", locked / "r.json")
+    )
+    code, _, stderr = run_cli(["record", "--out", str(out), "--report", str(report), "--duration", "1"])
+    assert code == 2 and f"argument {which}: {locked}: read-only file system" in stderr, stderr
+    assert list(locked.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "key, named",
+    [
+        ("a//b", "argument --key: Invalid Key Expr `a//b`: empty chunks are forbidden"),
+        ("", "argument --key: empty: name a key expression"),
+        ("gyroemu/imu0#", "argument --key: Invalid Key Expr `gyroemu/imu0#`: `#` and `?` are forbidden"),
+        ("gyroemu/**/**", "(write gyroemu/**)"),
+    ],
+)
+def test_record_refuses_a_bad_key_before_any_work(tmp_path, no_session, key, named):
+    """A key zenoh refuses was a zenoh.ZError traceback (exit 1) once the session was open; an empty one
+    silently became gyroemu/**."""
+    code, _, stderr = run_cli(["record", "--out", str(tmp_path / "r.mcap"), "--duration", "1", "--key", key])
+    assert code == 2 and named in stderr and "Traceback" not in stderr, stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("command", ["stream", "replay"])
+@pytest.mark.parametrize("wait", ["1e300", "inf", "nan", "-1", "86401"])
+def test_stream_and_replay_refuse_a_bad_wait(tmp_path, no_session, command, wait):
+    """--wait 1e300 blocked for ever; -1 and nan were taken. 0 to a day (MAX_WAIT_S) is."""
+    argv = {
+        "stream": ["stream", "--scenario", "heavy_top", "--device", "consumer_mems", "--duration", "1"],
+        "replay": ["replay", str(tmp_path / "never-read.mcap")],
+    }[command]
+    code, _, stderr = run_cli([*argv, f"--wait={wait}"])
+    assert code == 2 and "argument --wait: must be a number of seconds from 0 (no wait) to 86400" in stderr, stderr
+
+
+def test_check_pacing_options_takes_0_to_a_day():
+    from gyroemu.pipelines.transport.zenoh_io import MAX_WAIT_S, LiveOptionError, PacingOptions, check_pacing_options
+
+    for good in (0, 0.0, 10.0, MAX_WAIT_S):
+        check_pacing_options(PacingOptions(wait_s=good))
+    for bad in (-0.001, MAX_WAIT_S * 1.001, float("nan"), float("inf"), True, "10"):
+        with pytest.raises(LiveOptionError, match="argument --wait"):
+            check_pacing_options(PacingOptions(wait_s=bad))
+
+
 def test_recorder_that_records_nothing_leaves_no_file(tmp_path):
     from gyroemu.pipelines.transport.record import Recorder
 
@@ -369,16 +548,16 @@ def test_record_receiving_nothing_says_so_and_keeps_the_old_file(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["r.mcap"]
 
 
-def test_bench_out_is_a_folder_and_has_no_force(tmp_path):
+def test_bench_out_is_a_folder_and_has_a_force(tmp_path):
     """bench writes its reports into a folder (each file whole, :mod:`gyroemu.pipelines.formats.atomic`);
-    a file there is refused, and it has no --force."""
+    a file there is refused; --force overwrites an earlier report there (test_bench.py)."""
     report = tmp_path / "bench"
     report.write_text("a file")
     code, _, stderr = run_cli(["bench", "--out", str(report)])
     assert code == 2 and f"argument --out: {report} is not a folder" in stderr, stderr
     assert report.read_text() == "a file"
     code, stdout, _ = run_cli(["bench", "--help"])
-    assert code == 0 and "--out" in stdout and "--force" not in stdout
+    assert code == 0 and "--out" in stdout and "--force" in stdout
 
 
 # ---------------------------------------------------------------------------------------------------

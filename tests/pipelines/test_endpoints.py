@@ -65,3 +65,33 @@ def test_peer_connect_where_nothing_answers_warns(tmp_path):
     result = gyroemu("record", "--out", str(tmp_path / "r.mcap"), "--connect", endpoint, "--duration", "0.5")
     assert result.returncode == 0, result.stderr
     assert f"record: warning: nothing answers at --connect {endpoint} yet" in result.stdout, result.stdout
+
+
+@pytest.mark.parametrize("option", ["--connect", "--listen"])
+@pytest.mark.parametrize(
+    "endpoint, why",
+    [("garbage", "is not a zenoh endpoint"), ("tcp/", "is not a zenoh endpoint"), ("tcp/host", "has no port")],
+)
+def test_a_malformed_endpoint_is_named_with_the_form_of_one(tmp_path, monkeypatch, option, endpoint, why):
+    """``--connect garbage`` printed zenoh's ``Json5Err(Message {...})`` under "--connect/--listen/--mode":
+    the option is named, and what an endpoint looks like said, before any session is opened."""
+    from cli_runs import run_cli
+
+    from gyroemu.pipelines.transport import record
+    from gyroemu.pipelines.transport.zenoh_io import LiveOptionError, session_config
+
+    monkeypatch.setattr(record, "open_session", lambda *a, **k: pytest.fail("a session was opened"))
+    code, _, stderr = run_cli(["record", "--out", str(tmp_path / "r.mcap"), "--duration", "1", option, endpoint])
+    assert code == 2, stderr
+    assert f"gyroemu record: error: argument {option}: {endpoint!r} {why}" in stderr, stderr
+    assert "an endpoint looks like PROTOCOL/ADDRESS, e.g. tcp/HOST:PORT" in stderr and "Json5Err" not in stderr
+    with pytest.raises(LiveOptionError, match=f"argument {option}: "):
+        session_config(**{option[2:]: [endpoint]})
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_well_formed_endpoints_are_taken():
+    from gyroemu.pipelines.transport.zenoh_io import session_config
+
+    for endpoint in ("tcp/127.0.0.1:7447", "tcp/[::1]:0", "tcp/localhost:7447#iface=lo", "udp/224.0.0.224:7446"):
+        session_config(connect=[endpoint], listen=[endpoint])

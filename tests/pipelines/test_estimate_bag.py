@@ -131,3 +131,49 @@ def test_estimate_log_refuses_a_latency_of_another_sensor(bag, tmp_path):
     with pytest.raises(EstimateError, match="argument --latency: no sensor accel"):
         estimate_log(bag, tmp_path / "out.mcap", latency_s={"accel": 1e-3})
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "topic_out, named",
+    [
+        ("/imu_a", "has /imu_a already"),  # another IMU of the bag: it would be replaced by estimates
+        ("/tf", "/tf is a topic of the log format's own"),
+        ("/truth/imu", "/truth/imu is a topic of the log format's own"),  # absent, but the contract's truth
+        ("/a/mag", "/a/mag is a topic of the log format's own"),
+        ("/tf_static", "/tf_static is a topic of the log format's own"),
+    ],
+)
+def test_estimate_refuses_a_topic_out_the_log_has_or_the_contract_reserves(bag, tmp_path, capsys, topic_out, named):
+    """Only an earlier estimate (``.../estimate/imu``) is replaced; any other topic of the log, and the
+    contract's own topics, are refused naming --topic-out before anything is written."""
+    out = tmp_path / "out.mcap"
+    with pytest.raises(SystemExit) as exit_:
+        main(["estimate", str(bag), "--topic", "/imu_b", "--topic-out", topic_out, "--out", str(out)])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert "argument --topic-out: " in err and named in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_unreadable_log_is_named_once(tmp_path, capsys):
+    bad = tmp_path / "x.mcap"
+    bad.write_text("not a log")
+    assert main(["estimate", str(bad), "--out", str(tmp_path / "y.mcap")]) == 2
+    err = capsys.readouterr().err
+    assert f"gyroemu estimate: error: {bad}: not an MCAP file" in err and err.count(str(bad)) == 1, err
+    assert [p.name for p in tmp_path.iterdir()] == ["x.mcap"]
+
+
+def test_estimate_into_a_read_only_folder_is_refused_before_work(bag, tmp_path, monkeypatch, capsys):
+    """A read-only mount refuses even root, which a test cannot make: folder_problem is told so."""
+    import gyroemu.pipelines.jobs.estimate as estimate
+
+    locked = tmp_path / "ro"
+    locked.mkdir()
+    real = estimate.folder_problem
+    monkeypatch.setattr(estimate, "folder_problem", lambda f: "read-only file system" if f == locked else real(f))
+    with pytest.raises(SystemExit) as exit_:
+        main(["estimate", str(bag), "--topic", "/imu_b", "--out", str(locked / "e.mcap")])
+    assert exit_.value.code == 2
+    assert f"argument --out: {locked}: read-only file system" in capsys.readouterr().err
+    assert list(locked.iterdir()) == []

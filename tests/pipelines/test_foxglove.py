@@ -329,6 +329,18 @@ def test_bad_port_and_rate_are_refused_before_any_work():
             check_view_options(ViewOptions(port=s.getsockname()[1]))
 
 
+@pytest.mark.parametrize("port", [8765, 0])
+@pytest.mark.parametrize("host", ["bad!!", "bad:host!!", "192.0.2.1"])  # 192.0.2.1: TEST-NET-1, no interface's
+def test_a_bad_host_is_named_not_the_port(host, port):
+    """``gyroemu view --host 'bad!!'`` blamed --port; with --port 0 the host went unchecked."""
+    from cli_runs import run_cli
+
+    with pytest.raises(ValueError, match=r"argument --host: cannot listen on .*name an address of this machine"):
+        check_view_options(ViewOptions(port=port, host=host), "--port", "--rate")
+    code, _, err = run_cli(["view", "/nonexistent/run.mcap", "--host", host, "--port", str(port)])
+    assert code == 2 and "argument --host" in err and "--port" not in err, err
+
+
 # -- processes: `gyroemu stream --foxglove`, `gyroemu view` ------------------------------------------------
 
 
@@ -504,13 +516,12 @@ def test_cli_refuses_a_port_in_use_with_status_2(capsys):
         s.bind(("127.0.0.1", 0))
         s.listen()
         busy = str(s.getsockname()[1])
-        with pytest.raises(SystemExit) as e:
-            main(["view", "/nonexistent/run.mcap", "--port", busy])
-        assert e.value.code == 2 and "argument --port" in capsys.readouterr().err
+        # a ViewOptionError (a ConfigError): main returns 2
+        assert main(["view", "/nonexistent/run.mcap", "--port", busy]) == 2
+        assert "argument --port" in capsys.readouterr().err
         stream = ["stream", "--scenario", "smooth_manoeuvre", "--device", "consumer_mems", "--duration", "1"]
-        with pytest.raises(SystemExit) as e:
-            main([*stream, "--foxglove", "--foxglove-port", busy])
-        assert e.value.code == 2 and "argument --foxglove-port" in capsys.readouterr().err
+        assert main([*stream, "--foxglove", "--foxglove-port", busy]) == 2
+        assert "argument --foxglove-port" in capsys.readouterr().err
         with pytest.raises(SystemExit) as e:
             main([*stream, "--foxglove-rate", "30"])
         assert e.value.code == 2 and "only with --foxglove" in capsys.readouterr().err

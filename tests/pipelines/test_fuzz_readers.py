@@ -412,7 +412,10 @@ def valid_trial(folder: Path) -> bytes:
     path = folder / "trial.hdf5"
     with h5py.File(path, "w") as f:
         for name, width in {"imu_gyr": 3, "imu_acc": 3, "imu_mag": 3, "opt_quat": 4, "opt_pos": 3}.items():
-            f.create_dataset(name, data=rng.normal(size=(n, width)))
+            values = rng.normal(size=(n, width))
+            if name == "opt_quat":  # unit quaternions: read_broad refuses a row that is no rotation
+                values /= np.linalg.norm(values, axis=1, keepdims=True)
+            f.create_dataset(name, data=values)
         f.create_dataset("movement", data=np.arange(n) % 7 < 4)
         f.attrs["sampling_rate"] = 100.0
     return path.read_bytes()

@@ -364,6 +364,69 @@ def test_options_are_checked_before_work(tmp_path: Path):
     assert e.value.code == 2
 
 
+def test_every_output_folder_is_checked_before_any_is_written(tmp_path: Path, monkeypatch, capsys):
+    """--out and --site-out in a folder that cannot take a file (a read-only mount refuses even root; a
+    test cannot make one, so folder_problem is told) are refused naming the option, before --out is written."""
+    from gyroemu.pipelines.jobs import identify as job
+
+    log = tmp_path / "a.mcap"
+    log.write_bytes(b"")
+    locked = tmp_path / "ro"
+    locked.mkdir()
+    monkeypatch.setattr(job, "folder_problem", lambda f: "read-only file system" if f == locked else None)
+    out = tmp_path / "dev.toml"
+    for options, named in (
+        (IdentifyOptions(logs=[log], out=out, site_out=locked / "s.toml"), "--site-out"),
+        (IdentifyOptions(logs=[log], out=locked / "d.toml"), "--out"),
+    ):
+        with pytest.raises(IdentifyError, match=f"argument {named}: {locked}: read-only file system"):
+            check_options(options)
+    with pytest.raises(SystemExit) as e:
+        cli.main(["identify", str(log), "--out", str(out), "--site-out", str(locked / "s.toml")])
+    assert e.value.code == 2 and "argument --site-out" in capsys.readouterr().err
+    assert not out.exists() and list(locked.iterdir()) == []
+    (tmp_path / "folder.toml").mkdir()
+    with pytest.raises(IdentifyError, match="folder.toml is a folder"):
+        check_options(IdentifyOptions(logs=[log], out=tmp_path / "folder.toml", force=True))
+
+
+def test_the_same_log_twice_is_refused_naming_it(tmp_path: Path):
+    """One recording pooled as two would count its noise twice (every uncertainty shrinks by sqrt(2)):
+    refused by any path to it (as given, ./a, a symbolic or a hard link)."""
+    log = tmp_path / "a.mcap"
+    log.write_bytes(b"")
+    (tmp_path / "link.mcap").symlink_to(log)
+    (tmp_path / "hard.mcap").hardlink_to(log)
+    (tmp_path / "b.mcap").write_bytes(b"")
+    out = tmp_path / "dev.toml"
+    for again in (log, tmp_path / "." / "a.mcap", tmp_path / "link.mcap", tmp_path / "hard.mcap"):
+        with pytest.raises(IdentifyError, match=f"argument LOG: {again} is given twice"):
+            check_options(IdentifyOptions(logs=[log, tmp_path / "b.mcap", again], out=out))
+    check_options(IdentifyOptions(logs=[log, tmp_path / "b.mcap"], out=out))
+
+
+def test_a_one_sample_recording_and_a_nan_rest_are_named(tmp_path: Path):
+    """A recording without a sample interval is named as such (not 'cannot convert float NaN to
+    integer'); a rest interval of NaN seconds is not 'start must be before stop'."""
+    import h5py
+
+    from gyroemu.errors import LogError
+    from gyroemu.pipelines.jobs.identify import read_trial
+
+    trial = tmp_path / "one.hdf5"
+    with h5py.File(trial, "w") as f:
+        for name, width in (("imu_gyr", 3), ("imu_acc", 3), ("imu_mag", 3), ("opt_quat", 4), ("opt_pos", 3)):
+            f[name] = np.ones((1, width)) / (2.0 if name == "opt_quat" else 1.0)
+        f["movement"] = np.zeros(1, bool)
+        f.attrs["sampling_rate"] = 100.0
+    with pytest.raises(LogError, match="holds 1 sample"):
+        read_trial(trial)
+    out = tmp_path / "dev.toml"
+    for rest, named in (((float("nan"), 1.0), "nan:1: expected finite seconds"), ((0.0, float("inf")), "0:inf")):
+        with pytest.raises(IdentifyError, match=f"argument --rest: {named}"):
+            check_options(IdentifyOptions(logs=[trial], out=out, rest_intervals=[rest]))
+
+
 UNDISTURBED = [
     "02_undisturbed_slow_rotation_B.hdf5",
     "07_undisturbed_fast_rotation_B.hdf5",

@@ -320,6 +320,43 @@ def test_bad_input_exits_2_naming_file_and_item(tmp_path, case, named):
 
 
 @pytest.mark.parametrize(
+    "dataset, row, value, named",
+    [
+        ("imu_acc", 20, [0.0, np.inf, 9.81], "dataset 'imu_acc': inf at row 20: not a measurement"),
+        ("imu_gyr", 3, [-np.inf, 0.0, 0.0], "dataset 'imu_gyr': inf at row 3"),
+        ("opt_pos", 7, [np.inf, 0.0, 0.0], "dataset 'opt_pos': inf at row 7"),
+        ("opt_quat", 30, [0.0, 0.0, 0.0, 0.0], "dataset 'opt_quat': [0.0, 0.0, 0.0, 0.0] at row 30 is not a unit"),
+        ("opt_quat", 31, [2.0, 0.0, 0.0, 0.0], "dataset 'opt_quat': [2.0, 0.0, 0.0, 0.0] at row 31 is not a unit"),
+    ],
+)
+def test_values_that_are_no_measurement_exit_2_naming_file_and_dataset(tmp_path, dataset, row, value, named):
+    """inf is no measurement and a zero (or far from unit) quaternion no rotation: refused, naming the
+    file, dataset and row; nothing written."""
+    source = tmp_path / "trial.hdf5"
+    data = write_trial(source)
+    values = data[dataset].copy()
+    values[row] = value
+    with h5py.File(source, "a") as f:
+        f[dataset][...] = values
+    code, _, stderr = run_cli(["import", "broad", str(source), "--out", str(tmp_path / "t.mcap")])
+    assert code == 2 and f"{source}: {named}" in stderr, stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["trial.hdf5"]
+
+
+def test_sensor_nan_rows_are_dropouts_kept_and_counted(tmp_path):
+    """A NaN sample is a dropout a filter bridges: imported as NaN, and the summary says how many rows."""
+    source = tmp_path / "trial.hdf5"
+    data = write_trial(source)
+    gyro = data["imu_gyr"].copy()
+    gyro[10:13] = np.nan
+    with h5py.File(source, "a") as f:
+        f["imu_gyr"][...] = gyro
+    summary = import_broad(source, tmp_path / "t.mcap")
+    assert summary.sample_nan_rows == 3 and "sensor NaN (dropouts, kept) in 3 rows" in str(summary)
+    assert np.isnan(read_quietly(tmp_path / "t.mcap").device.samples.gyro[10:13]).all()
+
+
+@pytest.mark.parametrize(
     "argv, named",
     [
         (["import", "broad", "{src}", "--out", "{tmp}/no/such/folder/t.mcap"], "argument --out: {tmp}/no/such/folder"),

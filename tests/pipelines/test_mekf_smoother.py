@@ -344,7 +344,10 @@ def test_estimate_smooth_writes_the_smoothed_estimate(tmp_path):
     assert est is not None and len(est.t) == n
     setup = setup_from_metadata(dev.metadata, rate_of(dev.stamp_ns), use_mag=True)  # as estimate does
     want = MekfSmoother(setup).process(
-        dev.seconds_from_first(), dev.samples.gyro, dev.samples.accel, dev.samples.mag  # as estimate runs it
+        dev.seconds_from_first(),
+        dev.samples.gyro,
+        dev.samples.accel,
+        dev.samples.mag,  # as estimate runs it
     )
     assert np.allclose(est.q_wb, want.q_wb, rtol=0, atol=1e-12)
     assert np.allclose(est.q_wb_covariance, want.q_wb_covariance, rtol=1e-12, atol=0)

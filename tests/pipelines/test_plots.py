@@ -10,6 +10,7 @@ import struct
 
 import numpy as np
 import pytest
+from cli_runs import run_cli
 
 from gyroemu.pipelines.jobs.plots import attitude_error_deg, euler_zyx_deg
 
@@ -245,3 +246,48 @@ def test_a_log_without_truth_draws_its_estimate_and_bias(tmp_path):
     for whole in (False, True):
         (c,) = plots.estimate_curves(tmp_path / "est.mcap", 16, read_whole=whole)
         assert len(c.angles) == len(c.bias) == len(samples.t) and len(c.error) == 0 and c.rms is None
+
+
+@pytest.fixture(scope="module")
+def short_log(tmp_path_factory):
+    """Half a second of the consumer MEMS (a gyroemu log)."""
+    log = tmp_path_factory.mktemp("short") / "run.mcap"
+    argv = ["--scenario", "smooth_manoeuvre", "--device", "consumer_mems", "--duration", "0.5", "--out", str(log)]
+    code, _, stderr = run_cli(["simulate", *argv])
+    assert code == 0, stderr
+    return log
+
+
+@pytest.mark.parametrize("command", ["estimate", "info"])
+def test_a_picture_there_is_overwritten_only_with_force(tmp_path, short_log, command):
+    """``--plot`` draws beside --out (estimate) or the log (info): a file there is someone's, refused
+    before any work (nothing printed, nothing written), naming --plot; --force is what overwrites it."""
+    log = tmp_path / "run.mcap"
+    log.write_bytes(short_log.read_bytes())
+    if command == "estimate":
+        argv, picture = ["estimate", str(log), "--out", str(tmp_path / "e.mcap"), "--plot"], tmp_path / "e.estimate.png"
+    else:
+        argv, picture = ["info", str(log), "--plot"], tmp_path / "run.info.png"
+    picture.write_bytes(b"someone's picture")
+    code, stdout, stderr = run_cli(argv)
+    assert code == 2 and f"argument --plot: {picture} exists (use --force to overwrite it)" in stderr, stderr
+    assert stdout == ""
+    assert picture.read_bytes() == b"someone's picture"
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["run.mcap", picture.name])
+    code, stdout, _ = run_cli([command, "--help"])
+    assert code == 0 and "--force" in stdout
+
+
+def test_info_plot_in_a_read_only_folder_is_refused_before_work(monkeypatch, short_log):
+    """The log's folder cannot take LOG.info.png (a read-only mount refuses even root, which a test cannot
+    make: folder_problem is told so): refused naming --plot before the summary, not an OSError after."""
+    import gyroemu.pipelines.formats.atomic as atomic
+
+    real = atomic.folder_problem
+    monkeypatch.setattr(
+        atomic, "folder_problem", lambda f: "read-only file system" if f == short_log.parent else real(f)
+    )
+    code, stdout, stderr = run_cli(["info", str(short_log), "--plot"])
+    assert code == 2 and f"argument --plot: {short_log.parent}: read-only file system" in stderr, stderr
+    assert stdout == ""
+    assert not short_log.with_suffix(".info.png").exists()

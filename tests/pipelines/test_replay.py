@@ -225,12 +225,35 @@ def test_bad_inputs_exit_2_naming_the_file(tmp_path, gyroemu_mcap, capsys):
         err = capsys.readouterr().err
         print(f"{name}: exit {status}: {err.strip()}")
         assert status == 2 and str(path) in err, (name, status, err)
-    with pytest.raises(SystemExit) as e:
-        main(["replay", str(gyroemu_mcap), "--topics", "/imu", "/nope", "--wait", "0"])
+    try:  # a ReplayError (a ConfigError): main returns 2
+        status = main(["replay", str(gyroemu_mcap), "--topics", "/imu", "/nope", "--wait", "0"])
+    except SystemExit as e:
+        status = e.code
     err = capsys.readouterr().err
     print(err.strip())
-    assert e.value.code == 2 and "/nope" in err and str(gyroemu_mcap) in err
+    assert status == 2 and "/nope" in err and str(gyroemu_mcap) in err
     assert gyroemu_mcap.read_bytes() == data
+
+
+@pytest.mark.parametrize("rate", ["1e300", "1e-300", "2e6", "5e-7"])
+def test_rate_beyond_what_the_pacing_can_do_is_refused(tmp_path, rate, monkeypatch):
+    """--rate 1e300 was an OverflowError traceback (the /clock step, infinite), 1e-300 too (the
+    deadlines): refused naming --rate, before the log is read or a session opened."""
+    from cli_runs import run_cli
+
+    from gyroemu.pipelines.transport import replay
+    from gyroemu.pipelines.transport.replay import MAX_RATE, MIN_RATE, ReplayError, ReplayOptions
+
+    monkeypatch.setattr(replay, "open_session", lambda *a, **k: pytest.fail("a session was opened"))
+    log = tmp_path / "never-read.mcap"
+    code, _, stderr = run_cli(["replay", str(log), "--rate", rate, "--wait", "0"])
+    assert code == 2 and f"argument --rate: must be a speed factor from {MIN_RATE:g} to {MAX_RATE:g}" in stderr, stderr
+    assert "Traceback" not in stderr
+    for good in (MIN_RATE, 1.0, MAX_RATE):  # taken: on to the log, which is missing
+        code, _, stderr = run_cli(["replay", str(log), "--rate", str(good), "--wait", "0"])
+        assert code == 2 and "--rate" not in stderr and str(log) in stderr, stderr
+    with pytest.raises(ReplayError, match="argument --rate"):
+        replay._channels_to_publish(ReplayOptions(log, rate=float("nan")), sys.stdout)
 
 
 def test_topic_keys_rule():

@@ -169,6 +169,28 @@ def test_bad_handling_table_exits_2_naming_the_key(synthetic, tmp_path, capsys, 
     assert not out.exists()
 
 
+@pytest.mark.parametrize(
+    "text, named",
+    [
+        ("[site]\n\n[bogus]\nx = 1\n", "key 'bogus': unknown table [bogus]"),
+        ("[site]\nfoo_uT = 1.0\n", "key 'site.foo_uT': unknown key"),
+        ("[site]\nlatitude_deg = nan\n", "key 'site.latitude_deg': expected a finite number, got nan"),
+        ("[site]\nfoo_uT = 1.0\nlatitude_deg = nan\n", "key 'site.foo_uT': unknown key"),
+    ],
+)
+def test_a_bad_site_file_is_one_line_naming_the_file_and_key(tmp_path, text, named):
+    """A table the site file does not take is refused (not ignored); a bad [site] key is named on one
+    line, not as pydantic's multi-line report with a URL."""
+    from gyroemu.pipelines.twin import SiteFileError, read_site
+
+    site = tmp_path / "site.toml"
+    site.write_text(text)
+    with pytest.raises(SiteFileError) as e:
+        read_site(site)
+    message = str(e.value)
+    assert message.startswith(f"{site}: {named}") and "\n" not in message and "pydantic" not in message, message
+
+
 def test_the_twins_filters_are_told_the_twins_rate(synthetic, tmp_path, monkeypatch):
     """The twins are sampled at the device's rate (here 285.7 Hz against the log's 1 kHz): their filters,
     which step at 1 / rate, are set up with it, and the real log's with its own (they were given the
@@ -220,6 +242,65 @@ def test_a_recording_that_moves_throughout_has_no_rest(tmp_path):
     rest = report.trials[0].rest
     assert rest["intervals_s"] == [] and rest["still_s"] == [], rest
     assert rest["source"].startswith("none")
+
+
+def test_an_out_folder_that_cannot_take_the_report_is_refused_before_work(tmp_path, monkeypatch):
+    """--out (made, or its parent when missing) that cannot take a file: a read-only mount refuses even
+    root, which a test cannot make, so folder_problem is told; named before any run, not an OSError after."""
+    from gyroemu.pipelines.jobs import twin
+    from gyroemu.pipelines.jobs.twin import check_options
+
+    trial = tmp_path / "a.mcap"
+    trial.write_bytes(b"")  # read after the options are checked
+    locked = tmp_path / "ro"
+    locked.mkdir()
+    monkeypatch.setattr(twin, "folder_problem", lambda f: "read-only file system" if f == locked else None)
+    for out in (locked, locked / "tw"):
+        with pytest.raises(TwinError, match=f"argument --out: {locked}: read-only file system"):
+            check_options(TwinOptions(trials=[trial], device="tactical_mems", filters=["vqf"], out=out))
+    assert list(locked.iterdir()) == []
+
+
+def test_the_same_trial_twice_is_refused_naming_it(tmp_path):
+    """A recording given twice (by any path to it) would be reported twice and its rests pooled twice."""
+    from gyroemu.pipelines.jobs.twin import check_options
+
+    trial = tmp_path / "a.mcap"
+    trial.write_bytes(b"")
+    (tmp_path / "link.mcap").symlink_to(trial)
+    for again in (trial, tmp_path / "link.mcap"):
+        with pytest.raises(TwinError, match=f"argument TRIAL: {again} is given twice"):
+            check_options(TwinOptions(trials=[trial, again], filters=["vqf"], out=tmp_path / "o"))
+
+
+def test_a_trial_that_cannot_be_read_is_named_once(tmp_path):
+    """The reader's message names the file already: the error says 'TRIAL: m/x.mcap: ...', not the
+    file twice, nor the recorded scenario's key 'path'."""
+    folder = tmp_path / "m"
+    folder.mkdir()
+    garbage = folder / "x.mcap"
+    garbage.write_text("not a log")
+    with pytest.raises(TwinError) as e:
+        run_twin(TwinOptions(trials=[garbage], filters=["vqf"], out=tmp_path / "o"))
+    assert str(e.value) == f"argument TRIAL: {garbage}: not an MCAP file (it does not start with the MCAP magic bytes)"
+
+
+def test_a_one_sample_log_is_named_not_the_smoothing(tmp_path):
+    """One sample has no interval: the recording is at fault, not --smoothing's 'Nyquist frequency nan Hz'."""
+    import h5py
+
+    from gyroemu.pipelines.formats.importers import import_broad
+
+    trial = tmp_path / "one.hdf5"
+    with h5py.File(trial, "w") as f:
+        for name, width in (("imu_gyr", 3), ("imu_acc", 3), ("imu_mag", 3), ("opt_quat", 4)):
+            f[name] = np.ones((1, width)) / (2.0 if name == "opt_quat" else 1.0)
+        f["movement"] = np.zeros(1, bool)
+        f.attrs["sampling_rate"] = 100.0
+    log = tmp_path / "one.mcap"
+    import_broad(trial, log)
+    with pytest.raises(TwinError, match=f"argument TRIAL: {log}: holds 1 sample"):
+        run_twin(TwinOptions(trials=[log], filters=["vqf"], out=tmp_path / "o"))
 
 
 def test_missing_trial_named(tmp_path):

@@ -164,6 +164,23 @@ def test_bad_device_config_names_the_key(edit, key):
     assert info.value.key == key and info.value.file == "dev.toml"
 
 
+@pytest.mark.parametrize(
+    "sensor, key",
+    [
+        ("gyro", "noise_density_deg_per_s_per_sqrt_hz"),
+        ("gyro", "arw_deg_per_sqrt_h"),
+        ("accelerometer", "noise_density_ug_per_sqrt_hz"),
+    ],
+)
+def test_a_white_noise_whose_per_sample_variance_overflows_is_refused_naming_the_key(sensor, key):
+    """1e300 is a finite number, but its square per sample is not: refused when the device is read, not
+    overflow warnings and NaN in the output."""
+    with pytest.raises(ConfigError, match="per-sample variance beyond float64") as info:
+        device_from_dict({"description": "x", "rate_hz": 1000, sensor: {"errors": {key: 1e300}}}, name="dev.toml")
+    assert info.value.key == f"{sensor}.errors.{key}" and info.value.file == "dev.toml"
+    device_from_dict({"description": "x", "rate_hz": 1000, sensor: {"errors": {key: 1e100}}}, name="dev.toml")
+
+
 @pytest.mark.parametrize("kind", sorted(GYRO_KINDS))
 def test_each_mechanism_reads_only_what_it_declares(kind):
     # The IMU leaves the optional truth fields a mechanism does not declare as None; run each
