@@ -36,7 +36,21 @@ from .trajectory import Trajectory, concatenate_trajectories
 if TYPE_CHECKING:
     from .scenarios import Scenario
 
-__all__ = ["WINDOW_MARGIN", "TruthSource", "SampledTruth", "ScenarioTruth", "truth_source"]
+__all__ = [
+    "WHOLE_TRUTH_BYTES",
+    "WINDOW_MARGIN",
+    "TruthSource",
+    "SampledTruth",
+    "ScenarioTruth",
+    "truth_source",
+    "simulated_whole",
+    "whole_truth_bytes",
+]
+
+WHOLE_TRUTH_BYTES = 200
+"""Memory a truth sample takes where a run is simulated whole, bytes (measured: README, "Long runs in
+bounded memory"; a :class:`~gyroemu.dynamics.Trajectory` holds 23 float64 a sample, 184 bytes, beside
+the integrator's own)."""
 
 WINDOW_MARGIN = 32
 """Samples a window reaches beyond the stretch asked for, each side (see the module notes)."""
@@ -141,6 +155,24 @@ def truth_source(scenario: Scenario, duration: float | None = None, rate_hz: flo
     """The scenario's truth as a :class:`TruthSource`: evaluated window by window where its kind is
     pointwise, otherwise simulated whole. ``duration`` None: the scenario's own (a run without end is
     a :class:`ScenarioTruth` with ``duration`` None)."""
-    if scenario.spec.pointwise and getattr(getattr(scenario.spec, "site", None), "magnetic_environment", None) is None:
+    if not simulated_whole(scenario):
         return ScenarioTruth(scenario, scenario.duration_s if duration is None else duration, rate_hz)
     return SampledTruth(scenario.simulate(duration=duration, rate_hz=rate_hz))
+
+
+def simulated_whole(scenario: Scenario) -> bool:
+    """Whether :func:`truth_source` simulates ``scenario`` whole (a kind that integrates equations of
+    motion, or a path through a magnetic environment) rather than reading it in windows."""
+    return (
+        not scenario.spec.pointwise
+        or getattr(getattr(scenario.spec, "site", None), "magnetic_environment", None) is not None
+    )
+
+
+def whole_truth_bytes(scenario: Scenario, duration: float | None = None, rate_hz: float | None = None) -> float:
+    """About the memory, bytes, of ``scenario``'s truth over ``duration`` s at ``rate_hz`` (the
+    scenario's own where None) held whole: :data:`WHOLE_TRUTH_BYTES` a sample, counted without making the
+    time grid (a run of 10⁷ s at 1 kHz would need 80 GB for its times alone)."""
+    span = scenario.spec.span_s() if duration is None else float(duration)
+    rate = scenario.spec.default_rate_hz() if rate_hz is None else float(rate_hz)
+    return (math.floor(span * rate) + 1) * WHOLE_TRUTH_BYTES

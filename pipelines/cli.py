@@ -417,6 +417,8 @@ def _cmd_bench(args) -> int:
                 setattr(args, name, default)
     if args.campaign is not None or args.scheduler is not None:
         return _cmd_campaign(args)
+    if args.workers is not None:  # the local Dask cluster's: a plain bench runs in this process
+        raise UsageError("argument --workers: sets the local cluster of --campaign; a plain bench runs in this process")
 
     from gyroemu.dynamics import ConfigError, load_scenario
     from gyroemu.pipelines.estimation.registry import FilterError, filter_class
@@ -1030,8 +1032,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="compare attitude filters on a recording with truth and on its emulated twins",
         description="Run attitude filters over a recording with truth (a BROAD .hdf5 trial or a gyroemu .mcap "
         "log) and over --seeds twins of it (the recorded motion sensed by --device in the site's modelled "
-        "field; twin i of a recording: device and magnetic-environment seeds drawn from i and the recording's "
-        "file name), and write twin.md, twin.json and one plot "
+        "field; twin i of a recording: device, magnetic-environment and handling-offset seeds drawn from i and "
+        "the recording's file name), and write twin.md, twin.json and one plot "
         "per recording (residual Allan deviations and spectra at rest, real vs twin) into --out.",
     )
     p.add_argument("trial", nargs="+", metavar="TRIAL", help="a BROAD .hdf5 trial or a .mcap log with /truth/imu")

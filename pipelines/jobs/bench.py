@@ -604,10 +604,18 @@ class _Progress:
 def _sim_case(case: SimCase, runs: int, seed: int):
     """Load a simulated case: (scenario, devices per run, setup, traj, name, mode)."""
     from gyroemu.dynamics import load_scenario
+    from gyroemu.dynamics.truth_source import WHOLE_TRUTH_BYTES, whole_truth_bytes
     from gyroemu.pipelines.estimation.setup import setup_for
+    from gyroemu.pipelines.jobs.disk_space import memory_problem
     from gyroemu.sensors import load_device
 
     scenario = load_scenario(case.scenario)  # ConfigError: unknown name, or the file and key at fault
+    # a simulated case holds its truth whole, whatever its kind (the metrics compare every sample with it)
+    problem = memory_problem(
+        whole_truth_bytes(scenario, case.duration), f"the truth held whole, {WHOLE_TRUTH_BYTES} bytes a sample"
+    )
+    if problem is not None:
+        raise BenchError(f"argument --duration: {case.duration:g} s of {scenario.name} {problem}: shorten it")
     devices = [load_device(case.device, seed=seed + r) for r in range(runs)]
     has_mag = devices[0].spec.magnetometer is not None
     mode = "9D" if has_mag and not case.six_d else "6D"

@@ -1,4 +1,4 @@
-"""Disk space for a job's output: how much there is, said for people, and the error of a disk that fills.
+"""Disk space and memory for a job: how much there is, said for people, and the error of a disk that fills.
 
 A job that knows its output's size checks it against its folder's free space before any work
 (``simulate``: samples × bytes per sample; ``estimate``: the log's copy, the estimates and the smoother's
@@ -13,7 +13,7 @@ import errno
 import os
 import shutil
 
-__all__ = ["MCAP_RECORD_OVERHEAD", "free_bytes", "human_size", "is_disk_full"]
+__all__ = ["MCAP_RECORD_OVERHEAD", "free_bytes", "human_size", "is_disk_full", "machine_memory", "memory_problem"]
 
 MCAP_RECORD_OVERHEAD = 31 + 16
 """Bytes an MCAP message record adds to its message: its header, and its entry in the chunk's message index."""
@@ -36,3 +36,21 @@ def is_disk_full(error: BaseException) -> bool:
     """Whether ``error`` is a write refused for want of space: no space left on the device (ENOSPC) or
     the user's quota used up (EDQUOT)."""
     return isinstance(error, OSError) and error.errno in (errno.ENOSPC, errno.EDQUOT)
+
+
+def machine_memory() -> int | None:
+    """The machine's physical memory, bytes (None where the system does not say)."""
+    try:
+        memory = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):  # not every system says
+        return None
+    return memory if memory > 0 else None
+
+
+def memory_problem(need_bytes: float, what: str) -> str | None:
+    """Why a job that holds ``need_bytes`` in memory (``what``: of what, for the message) cannot run on
+    this machine (more than its physical memory), or None when it can or the machine does not say."""
+    memory = machine_memory()
+    if memory is None or need_bytes <= memory:
+        return None
+    return f"needs about {human_size(need_bytes)} of memory ({what}), more than this machine's {human_size(memory)}"

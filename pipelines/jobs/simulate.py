@@ -33,7 +33,7 @@ import numpy as np
 
 from gyroemu.errors import ConfigError
 from gyroemu.pipelines.formats.atomic import folder_problem
-from gyroemu.pipelines.jobs.disk_space import MCAP_RECORD_OVERHEAD, free_bytes, human_size
+from gyroemu.pipelines.jobs.disk_space import MCAP_RECORD_OVERHEAD, free_bytes, human_size, memory_problem
 
 if TYPE_CHECKING:
     from gyroemu.dynamics import Scenario
@@ -206,7 +206,10 @@ def _raw_npz_bytes(device: Device) -> int:
 
 def _check_size(options: SimulateOptions, scenario: Scenario, device: Device | None) -> None:
     """Refuse a run whose output needs more disk than is free in ``--out``'s folder or, for an .npz
-    (made in memory), more memory than the machine has."""
+    (made in memory), more memory than the machine has; or whose truth, simulated whole (a kind that
+    integrates its motion), needs more memory than the machine has."""
+    from gyroemu.dynamics.truth_source import WHOLE_TRUTH_BYTES, simulated_whole, whole_truth_bytes
+
     span = float(scenario.duration_s if options.duration is None else options.duration)
     device_rate = None if device is None else float(device.spec.rate_hz)
     truth_rate = options.rate or getattr(scenario.spec, "rate_hz", None) or device_rate
@@ -214,6 +217,14 @@ def _check_size(options: SimulateOptions, scenario: Scenario, device: Device | N
     free = free_bytes(folder)
     if options.out.suffix == ".mcap":
         assert device is not None and device_rate is not None  # an .mcap needs a device: checked before
+        if simulated_whole(scenario):  # its truth is held whole while the log is written block by block
+            held = whole_truth_bytes(scenario, span, truth_rate)
+            problem = memory_problem(held, f"the truth simulated whole, {WHOLE_TRUTH_BYTES} bytes a sample")
+            if problem is not None:
+                raise SimulateError(
+                    f"argument --duration: {span:g} s of {scenario.name} {problem}: shorten "
+                    "--duration (a kind that integrates its motion is simulated whole before it is measured)"
+                )
         samples = span * device_rate + 1
         per = _mcap_bytes_per_sample(device)
         need = samples * per
@@ -229,14 +240,10 @@ def _check_size(options: SimulateOptions, scenario: Scenario, device: Device | N
             need += samples * per
             what += f" + {samples:.4g} device samples x {per} bytes"
         change = "shorten --duration" + (" or lower --rate" if truth_rate is not None else "")
-        try:
-            memory = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-        except (ValueError, OSError, AttributeError):  # not every system says
-            memory = None
-        if memory is not None and memory > 0 and need > memory:
+        problem = memory_problem(need, f"{what}; an .npz is made in memory")
+        if problem is not None:
             raise SimulateError(
-                f"argument --duration: {span:g} s needs about {human_size(need)} of memory ({what}; an .npz is made "
-                f"in memory), more than this machine's {human_size(memory)}: {change}, or write an .mcap log "
+                f"argument --duration: {span:g} s {problem}: {change}, or write an .mcap log "
                 "(--out run.mcap, made block by block)"
             )
     if need > free:

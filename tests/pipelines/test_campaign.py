@@ -370,3 +370,20 @@ def test_progress_counts_stored_runs_as_done_and_hides_off_a_terminal():
         assert bar.bar is None
         bar.advance(24)
     assert quiet.getvalue() == ""
+
+
+def test_a_plain_bench_refuses_workers_it_would_ignore(tmp_path, capsys, monkeypatch):
+    """``--workers`` sizes the local Dask cluster of ``--campaign``; a plain bench runs in its own process,
+    so the option is refused (it was ignored), before any work."""
+    from gyroemu.pipelines.jobs import bench
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("the bench ran")
+
+    monkeypatch.setattr(bench, "run_bench", no_work)
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as info:
+        cli.main(["bench", "--runs", "1", "--duration", "2", "--workers", "2", "--out", str(out)])
+    assert info.value.code == 2
+    assert "argument --workers" in capsys.readouterr().err
+    assert not out.exists()

@@ -15,6 +15,7 @@ import threading
 import time
 import types
 
+import numpy as np
 import pytest
 from cli_runs import run_cli
 from live_processes import free_port
@@ -618,3 +619,41 @@ def test_bench_latency_needs_a_log(tmp_path):
     code, _, stderr = run_cli(["bench", "--latency", "gyro=2", "--out", str(tmp_path / "b")])
     assert code == 2 and "argument --latency: times a --log; a simulated device has its own latency_s" in stderr, stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_truth_held_whole_beyond_the_memory_is_refused_before_work(tmp_path, monkeypatch):
+    """A kind that integrates its motion (the heavy top) is simulated whole before it is measured, and
+    ``bench`` holds any case's truth whole: with 1000 pages of memory (4 MB), ``simulate`` to an .mcap and
+    ``stream`` refuse 60 s of the top (12 MB at its 1 kHz), ``bench`` 600 s of the smooth manoeuvre (24 MB
+    at its 200 Hz), naming --duration and writing nothing; a pointwise kind, read in windows,
+    is not held to it (``simulate`` of the smooth manoeuvre to an .mcap runs)."""
+    sysconf = os.sysconf
+    monkeypatch.setattr(os, "sysconf", lambda name: 1000 if name == "SC_PHYS_PAGES" else sysconf(name))
+    heavy = ["--scenario", "heavy_top", "--device", "consumer_mems", "--duration", "60"]
+    code, _, stderr = run_cli(["simulate", *heavy, "--out", str(tmp_path / "t.mcap")])
+    assert code == 2, stderr
+    assert "argument --duration: 60 s of heavy_top needs about" in stderr and "simulated whole" in stderr
+    code, _, stderr = run_cli(["stream", *heavy, "--listen", f"tcp/127.0.0.1:{free_port()}"])
+    assert code == 2 and "argument --duration: 60 s of heavy_top needs about" in stderr, stderr
+    bench = ["bench", "--scenario", "smooth_manoeuvre", "--runs", "1", "--duration", "600"]  # 24 MB at 200 Hz
+    code, _, stderr = run_cli([*bench, "--out", str(tmp_path / "b")])
+    assert code == 2 and "argument --duration: 600 s of smooth_manoeuvre needs about" in stderr, stderr
+    assert list(tmp_path.iterdir()) == []
+    smooth = ["--scenario", "smooth_manoeuvre", "--device", "consumer_mems", "--duration", "2"]
+    code, _, stderr = run_cli(["simulate", *smooth, "--out", str(tmp_path / "s.mcap")])
+    assert code == 0, stderr
+
+
+def test_whole_truth_bytes_bounds_what_a_trajectory_holds():
+    """``WHOLE_TRUTH_BYTES`` a sample is at least what a simulated trajectory's arrays take, and the count
+    is the time grid's, made without the grid."""
+    from gyroemu.dynamics import load_scenario
+    from gyroemu.dynamics.truth_source import WHOLE_TRUTH_BYTES, simulated_whole, whole_truth_bytes
+
+    scenario = load_scenario("heavy_top")
+    assert simulated_whole(scenario) and not simulated_whole(load_scenario("smooth_manoeuvre"))
+    traj = scenario.simulate(duration=2.0, rate_hz=500.0)
+    n = len(traj.t)
+    held = sum(v.nbytes for v in vars(traj).values() if isinstance(v, np.ndarray))
+    assert held <= n * WHOLE_TRUTH_BYTES
+    assert whole_truth_bytes(scenario, 2.0, 500.0) == n * WHOLE_TRUTH_BYTES
