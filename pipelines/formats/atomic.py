@@ -73,10 +73,13 @@ def folder_problem(folder: str | os.PathLike[str]) -> str | None:
 
 
 def output_folder_problem(folder: str | os.PathLike[str]) -> str | None:
-    """Why ``folder``, an output folder made with its parents when missing, cannot take new files, as
-    ``"<where>: <why>"`` (``where`` the folder, or its nearest existing ancestor where it is missing:
-    the folder the first one would be made in), or None when it can: :func:`folder_problem` of that folder."""
+    """Why ``folder``, an output folder made with its parents when missing, cannot take new files:
+    ``"<folder> is not a folder"`` for a file there, else ``"<where>: <why>"`` (``where`` the folder, or
+    its nearest existing ancestor where it is missing: the folder the first one would be made in); None
+    when it can (:func:`folder_problem` of that folder)."""
     folder = Path(folder) if str(folder) else Path(".")
+    if folder.exists() and not folder.is_dir():
+        return f"{folder} is not a folder"
     where = folder
     while not where.exists() and not where.is_symlink() and where != where.parent:
         where = where.parent

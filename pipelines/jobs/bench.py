@@ -442,8 +442,6 @@ def check_report_folder(folder: str | os.PathLike[str], *, force: bool = False, 
     that cannot take the report: not a folder, read-only, not writable; or that holds files the report
     may replace (:func:`report_files_in`) and ``force`` is not given. Before any work."""
     folder = Path(folder)
-    if folder.exists() and not folder.is_dir():
-        raise BenchError(f"argument {argument}: {folder} is not a folder")
     problem = output_folder_problem(folder)
     if problem is not None:
         raise BenchError(f"argument {argument}: {problem}")

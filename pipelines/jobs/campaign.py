@@ -132,8 +132,6 @@ def check_options(options: CampaignOptions) -> None:
         if problem is not None:
             raise CampaignError(f"argument --scheduler: {problem}")
     out = options.out
-    if out.exists() and not out.is_dir():
-        raise CampaignError(f"argument --out: {out} is not a folder")
     problem = output_folder_problem(out)
     if problem is not None:
         raise CampaignError(f"argument --out: {problem}")

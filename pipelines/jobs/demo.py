@@ -86,8 +86,6 @@ def check_options(
             raise  # a bad scenario file: names the file and key
         raise DemoError(f"argument --scenario: {e}") from None
     out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise DemoError(f"argument --out: {out} is not a folder")
     problem = output_folder_problem(out)
     if problem is not None:
         raise DemoError(f"argument --out: {problem}")

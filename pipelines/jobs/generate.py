@@ -205,8 +205,6 @@ def check_options(options: GenerateOptions, tasks: list[LogTask]) -> None:
         if problem is not None:
             raise GenerateError(f"argument --scheduler: {problem}")
     out = options.out_dir
-    if out.exists() and not out.is_dir():
-        raise GenerateError(f"argument --out-dir: {out} is not a folder")
     problem = output_folder_problem(out)
     if problem is not None:
         raise GenerateError(f"argument --out-dir: {problem}")

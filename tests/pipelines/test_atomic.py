@@ -47,3 +47,14 @@ def test_folder_problem_names_what_is_wrong(tmp_path: Path):
         locked = tmp_path / "locked"
         locked.mkdir(mode=0o555)
         assert folder_problem(locked) == "not writable"
+
+
+def test_output_folder_problem_names_the_folder_a_missing_one_would_be_made_in(tmp_path: Path, monkeypatch):
+    from gyroemu.pipelines.formats import atomic
+
+    assert atomic.output_folder_problem(tmp_path / "a" / "b") is None  # made in tmp_path, which can take it
+    (tmp_path / "file").write_text("x")
+    assert atomic.output_folder_problem(tmp_path / "file") == f"{tmp_path / 'file'} is not a folder"
+    assert atomic.output_folder_problem(tmp_path / "file" / "sub") == f"{tmp_path / 'file'}: not a folder"
+    monkeypatch.setattr(atomic, "folder_problem", lambda f: "read-only file system" if Path(f) == tmp_path else None)
+    assert atomic.output_folder_problem(tmp_path / "a" / "b") == f"{tmp_path}: read-only file system"
