@@ -43,14 +43,24 @@ class TaskFailure(Generic[T]):
     error: str
 
 
-_ADDRESS = re.compile(r"^(?:(?:tcp|tls)://)?(?P<host>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):(?P<port>[0-9]{1,5})$")
+_HOST_PORT = re.compile(r"^(?P<host>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):(?P<port>[0-9]{1,5})$")
+_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
+"""distributed's communication backends whose addresses are ``HOST:PORT`` (and ``inproc://``, in-process)."""
 
 
 def scheduler_problem(address: str) -> str | None:
-    """Why ``address`` is no Dask scheduler address ``tcp://HOST:PORT`` (or ``tls://HOST:PORT``, or
-    ``HOST:PORT``, which Dask takes as tcp; an IPv6 host in brackets), or None when it is one. Checked
-    before a job starts anything: distributed itself raises a bare ``ValueError`` only on connecting."""
-    m = _ADDRESS.match(address)
+    """Why ``address`` is no Dask scheduler address, or None when it is one: ``PROTOCOL://HOST:PORT`` for
+    one of distributed's backends (``tcp``, ``tls``, ``ws``, ``wss``, ``ucx``; an IPv6 host in brackets),
+    ``HOST:PORT`` (which Dask takes as tcp) or ``inproc://…``. Checked before a job starts anything:
+    distributed itself raises a bare ``ValueError`` only on connecting."""
+    scheme, sep, rest = address.partition("://")
+    if not sep:
+        scheme, rest = "tcp", address
+    if scheme == "inproc" and rest:
+        return None
+    if scheme not in _SCHEMES:
+        return f"{address!r}: no Dask protocol {scheme}:// (tcp, tls, ws, wss, ucx or inproc)"
+    m = _HOST_PORT.match(rest)
     if m is None:
         return f"{address!r} is not a scheduler address like tcp://HOST:8786"
     if not 0 < int(m.group("port")) < 65536:

@@ -33,7 +33,7 @@ from typing import Annotated, Literal
 from pydantic import Field, model_validator
 
 from gyroemu.dynamics.config import ConfigError, PositiveReal, Section, at_most, read_toml, validate
-from gyroemu.pipelines.jobs.simulate import MAX_DURATION_S
+from gyroemu.dynamics.scenarios import MAX_DURATION_S
 
 __all__ = [
     "Campaign",

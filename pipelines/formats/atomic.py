@@ -3,7 +3,8 @@
 A reader (or a crash) never sees a half-written file at ``path``: the data go to
 ``.<name>.<random>.tmp`` beside it, which :func:`os.replace` moves to ``path`` once it is complete; on any
 error the temporary file is removed and ``path`` is untouched. The file gets the mode a plain ``open``
-would give it (``0o666`` less the process's umask; the temporary file's own is ``0o600``).
+would leave it with: an existing file's own, a new one ``0o666`` less the process's umask (the temporary
+file's is ``0o600``); where the file system keeps no modes (FAT, some network mounts) it gets what it gets.
 
 :func:`folder_problem` says, before any work, why a folder cannot take an output (missing, not a
 folder, read-only or not writable), so that a job refuses it up front naming its argument.
@@ -12,6 +13,7 @@ folder, read-only or not writable), so that a job refuses it up front naming its
 from __future__ import annotations
 
 import os
+import stat
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -28,7 +30,7 @@ def write_atomic(path: str | os.PathLike[str], write: Callable[[IO[Any]], object
     try:
         with os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8") as f:
             write(f)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp's 0o600 is for the temporary file, not the output
+        _give_mode(tmp, path)  # mkstemp's 0o600 is for the temporary file, not the output
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -85,6 +87,19 @@ def output_folder_problem(folder: str | os.PathLike[str]) -> str | None:
         where = where.parent
     problem = folder_problem(where)
     return None if problem is None else f"{where}: {problem}"
+
+
+def _give_mode(tmp: str, path: Path) -> None:
+    """Give ``tmp`` the mode ``open`` would leave ``path`` with: its own when it exists, else ``0o666``
+    less the umask. A file system that keeps no modes refuses or ignores it: that is no error."""
+    try:
+        mode = stat.S_IMODE(os.stat(path).st_mode)
+    except OSError:  # no file there yet (or none we may stat): a new file's mode
+        mode = 0o666 & ~_umask()
+    try:
+        os.chmod(tmp, mode)
+    except OSError:
+        pass
 
 
 def _umask() -> int:

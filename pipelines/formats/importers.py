@@ -58,6 +58,7 @@ from pathlib import Path
 import numpy as np
 
 from gyroemu.dynamics import ConfigError
+from gyroemu.pipelines.formats.atomic import folder_problem
 from gyroemu.pipelines.formats.channels import ImuSeries, PoseSeries
 from gyroemu.pipelines.formats.mcap_log import Recording, write_mcap
 from gyroemu.pipelines.formats.messages import ns_to_stamps
@@ -352,6 +353,9 @@ def import_broad(path, out, *, device_name: str = "imu0", force: bool = False) -
         raise FileExistsError(errno.EEXIST, "is a folder: name a file in it")
     if out.exists() and not force:
         raise FileExistsError(errno.EEXIST, "exists (use --force to overwrite it)")
+    problem = folder_problem(out.parent)  # a read-only mount stops root too: before the trial is read
+    if problem is not None:
+        raise PermissionError(errno.EROFS if "read-only" in problem else errno.EACCES, f"its folder: {problem}")
     trial = read_broad(path)
     recording = broad_recording(trial, device_name)
     write_mcap(out, recording)

@@ -350,9 +350,9 @@ def ns_to_stamps(ns: np.ndarray) -> np.ndarray:
 
 def seconds_since(ns: np.ndarray, first_ns: int) -> np.ndarray:
     """Integer nanosecond stamps ``ns`` as seconds from the stamp ``first_ns``, float64: the clock the
-    filters run on. The difference is taken in integers, so a step of 1,000,000 ns is 0.001 s to float64's
-    resolution at the span, where float seconds since the epoch resolve 0.24 µs today (a 1 kHz log's steps
-    read 0.99993, 1.00017 or 1.0004 ms)."""
+    filters run on. The difference is taken in integers, so a step of 1,000,000 ns is 0.001 s within a unit
+    in the last place at the span (the product by 1e-9 is not the correctly rounded quotient), where float
+    seconds since the epoch resolve 0.24 µs today (a 1 kHz log's steps read 0.99993, 1.00017 or 1.0004 ms)."""
     return (np.asarray(ns, dtype=np.int64) - np.int64(first_ns)) * 1e-9
 
 

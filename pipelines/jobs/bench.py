@@ -448,8 +448,8 @@ def check_report_folder(folder: str | os.PathLike[str], *, force: bool = False, 
     there = report_files_in(folder)
     if there and not force:
         raise BenchError(
-            f"argument {argument}: {folder} holds {', '.join(there)}, which the report would overwrite "
-            "(use --force to overwrite them, or another folder)"
+            f"argument {argument}: {folder} holds an earlier report ({', '.join(there)}): use another folder, or "
+            "--force to write this one over it (its plots of other cases stay)"
         )
 
 
@@ -602,19 +602,19 @@ class _Progress:
 def _sim_case(case: SimCase, runs: int, seed: int):
     """Load a simulated case: (scenario, devices per run, setup, traj, name, mode)."""
     from gyroemu.dynamics import load_scenario
-    from gyroemu.dynamics.truth_source import WHOLE_TRUTH_BYTES, whole_truth_bytes
+    from gyroemu.dynamics.truth_source import WHOLE_TRUTH_BYTES
     from gyroemu.pipelines.estimation.setup import setup_for
-    from gyroemu.pipelines.jobs.disk_space import memory_problem
+    from gyroemu.pipelines.jobs.disk_space import whole_truth_problem
     from gyroemu.sensors import load_device
 
     scenario = load_scenario(case.scenario)  # ConfigError: unknown name, or the file and key at fault
-    # a simulated case holds its truth whole, whatever its kind (the metrics compare every sample with it)
-    problem = memory_problem(
-        whole_truth_bytes(scenario, case.duration), f"the truth held whole, {WHOLE_TRUTH_BYTES} bytes a sample"
-    )
-    if problem is not None:
-        raise BenchError(f"argument --duration: {case.duration:g} s of {scenario.name} {problem}: shorten it")
     devices = [load_device(case.device, seed=seed + r) for r in range(runs)]
+    # a simulated case holds its truth whole, whatever its kind (the metrics compare every sample with it),
+    # and each run's samples with the truth at them: (t, gyro, accel, mag) 80 bytes and a truth sample each
+    per_second = runs * float(devices[0].spec.rate_hz) * (80 + WHOLE_TRUTH_BYTES)
+    problem = whole_truth_problem(scenario, case.duration, besides=(per_second, f"{runs} runs' samples and truth"))
+    if problem is not None:
+        raise BenchError(problem)
     has_mag = devices[0].spec.magnetometer is not None
     mode = "9D" if has_mag and not case.six_d else "6D"
     setup = setup_for(devices[0], scenario, use_mag=mode == "9D")

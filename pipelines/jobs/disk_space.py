@@ -13,7 +13,15 @@ import errno
 import os
 import shutil
 
-__all__ = ["MCAP_RECORD_OVERHEAD", "free_bytes", "human_size", "is_disk_full", "machine_memory", "memory_problem"]
+__all__ = [
+    "MCAP_RECORD_OVERHEAD",
+    "free_bytes",
+    "human_size",
+    "is_disk_full",
+    "machine_memory",
+    "memory_problem",
+    "whole_truth_problem",
+]
 
 MCAP_RECORD_OVERHEAD = 31 + 16
 """Bytes an MCAP message record adds to its message: its header, and its entry in the chunk's message index."""
@@ -54,3 +62,27 @@ def memory_problem(need_bytes: float, what: str) -> str | None:
     if memory is None or need_bytes <= memory:
         return None
     return f"needs about {human_size(need_bytes)} of memory ({what}), more than this machine's {human_size(memory)}"
+
+
+def whole_truth_problem(
+    scenario, duration: float | None, rate_hz: float | None = None, besides: tuple[float, str] | None = None
+) -> str | None:
+    """Why a run of ``scenario`` over ``duration`` s (None: the scenario file's ``duration_s``) at
+    ``rate_hz`` (None: its own) cannot hold its truth whole on this machine (with ``besides``, bytes held
+    beside it per second of the run and what they are), naming what to change (``--duration``,
+    ``--rate``, or the file's key), or None when it can
+    (:func:`gyroemu.dynamics.truth_source.whole_truth_bytes`)."""
+    from gyroemu.dynamics.truth_source import WHOLE_TRUTH_BYTES, whole_truth_bytes
+
+    need = whole_truth_bytes(scenario, duration, rate_hz)
+    what = f"the truth held whole, {WHOLE_TRUTH_BYTES} bytes a sample"
+    if besides is not None:
+        need += besides[0] * float(scenario.duration_s if duration is None else duration)
+        what += f", and {besides[1]}"
+    problem = memory_problem(need, what)
+    if problem is None:
+        return None
+    if duration is None:
+        return f"{scenario.name}: key 'duration_s': {scenario.duration_s:g} s {problem}: give a shorter --duration"
+    rate = " or lower --rate" if rate_hz is not None else ""
+    return f"argument --duration: {float(duration):g} s of {scenario.name} {problem}: shorten --duration{rate}"

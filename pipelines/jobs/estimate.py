@@ -79,6 +79,7 @@ from gyroemu.pipelines.formats.mcap_records import McapRecordWalk
 from gyroemu.pipelines.formats.messages import IMU, seconds_since
 from gyroemu.pipelines.jobs.disk_space import MCAP_RECORD_OVERHEAD, free_bytes, human_size
 from gyroemu.pipelines.jobs.estimate_copy import (
+    ESTIMATE_CHANNEL,
     FIRST_BLOCK_S,
     BlockRun,
     EstimateTarget,
@@ -506,8 +507,11 @@ def _target(dev, topic_out: str, stamp_ns: np.ndarray, fields: dict) -> Estimate
 
 def _check_topics_out(path: Path, chosen: list, channels) -> None:
     """:class:`EstimateTopicError` for an estimate topic the log holds already, unless it is an earlier
-    estimate (``.../estimate/imu`` of type ``sensor_msgs/msg/Imu``), which the copy replaces."""
+    estimate, which the copy replaces: of type ``sensor_msgs/msg/Imu``, and a channel ``gyroemu estimate``
+    marked as its own (:data:`~.estimate_copy.ESTIMATE_CHANNEL`), or named ``.../estimate/imu`` (logs
+    estimated before the mark)."""
     types = {c.topic: c.schema_name for c in channels}
+    marked = {c.topic for c in channels if c.metadata.get("gyroemu") == ESTIMATE_CHANNEL}
     for _, name in chosen:
         if name not in types:
             continue
@@ -515,8 +519,8 @@ def _check_topics_out(path: Path, chosen: list, channels) -> None:
             raise EstimateTopicError(
                 f"argument --topic-out: {path} has {name} of type {types[name]}: name another topic"
             )
-        if split_topic(name)[1] != ESTIMATE_ROLE:
+        if name not in marked and split_topic(name)[1] != ESTIMATE_ROLE:
             raise EstimateTopicError(
-                f"argument --topic-out: {path} has {name} already: name another topic (only an earlier "
-                "estimate, a topic .../estimate/imu, is replaced)"
+                f"argument --topic-out: {path} has {name} already, and not as an estimate gyroemu wrote: name "
+                "another topic (an earlier estimate is replaced)"
             )

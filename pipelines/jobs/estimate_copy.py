@@ -40,7 +40,20 @@ from gyroemu.pipelines.formats.mcap_records import (
 )
 from gyroemu.pipelines.formats.messages import IMU, ns_to_stamps, seconds_since
 
-__all__ = ["FIRST_BLOCK_S", "BlockRun", "EstimateTarget", "StreamFeed", "add_estimate_tf", "copy_with_estimates"]
+__all__ = [
+    "ESTIMATE_CHANNEL",
+    "FIRST_BLOCK_S",
+    "BlockRun",
+    "EstimateTarget",
+    "StreamFeed",
+    "add_estimate_tf",
+    "copy_with_estimates",
+]
+
+ESTIMATE_CHANNEL = "estimate"
+"""Channel metadata ``gyroemu`` of an estimate's channel (``/estimate/imu`` or the ``--topic-out`` given):
+what ``gyroemu estimate`` may replace when it estimates the log again (any other topic of the input is
+the user's data)."""
 
 
 @dataclass
@@ -233,7 +246,7 @@ def copy_with_estimates(
                 if target is not None and schema is not None and c.message_encoding == "cdr":
                     follows[channel_id] = target
                     if not target.channel_out:
-                        metadata = {"offered_qos_profiles": OFFERED_QOS_PROFILES}
+                        metadata = {"offered_qos_profiles": OFFERED_QOS_PROFILES, "gyroemu": ESTIMATE_CHANNEL}
                         if "topic_type_hash" in c.metadata:
                             metadata["topic_type_hash"] = c.metadata["topic_type_hash"]
                         target.channel_out = writer.register_channel(target.topic_out, "cdr", schema_id, metadata)

@@ -33,7 +33,13 @@ import numpy as np
 
 from gyroemu.errors import ConfigError
 from gyroemu.pipelines.formats.atomic import folder_problem
-from gyroemu.pipelines.jobs.disk_space import MCAP_RECORD_OVERHEAD, free_bytes, human_size, memory_problem
+from gyroemu.pipelines.jobs.disk_space import (
+    MCAP_RECORD_OVERHEAD,
+    free_bytes,
+    human_size,
+    memory_problem,
+    whole_truth_problem,
+)
 
 if TYPE_CHECKING:
     from gyroemu.dynamics import Scenario
@@ -148,10 +154,13 @@ class SimulateSummary:
 
 
 MAX_DURATION_S = 1e7
-"""The longest ``--duration`` :func:`check_options` accepts, seconds (about 116 days)."""
+"""The longest ``--duration`` :func:`check_options` accepts, seconds (about 116 days): a scenario file's
+``duration_s`` limit (``dynamics.scenarios.MAX_DURATION_S``; a test holds them equal: imported from there,
+parsing the command line's numbers would load the dynamics, 75 ms)."""
 
 MAX_RATE_HZ = 1e6
-"""The highest ``--rate`` :func:`check_options` accepts, Hz."""
+"""The highest ``--rate`` :func:`check_options` accepts, Hz: a scenario file's ``rate_hz`` limit too
+(``dynamics.scenarios.MAX_RATE_HZ``, held equal by a test)."""
 
 _SEED_LIMIT = 2**128  # numpy's SeedSequence takes integers 0 <= seed < 2**128 here
 
@@ -208,7 +217,7 @@ def _check_size(options: SimulateOptions, scenario: Scenario, device: Device | N
     """Refuse a run whose output needs more disk than is free in ``--out``'s folder or, for an .npz
     (made in memory), more memory than the machine has; or whose truth, simulated whole (a kind that
     integrates its motion), needs more memory than the machine has."""
-    from gyroemu.dynamics.truth_source import WHOLE_TRUTH_BYTES, simulated_whole, whole_truth_bytes
+    from gyroemu.dynamics.truth_source import simulated_whole
 
     span = float(scenario.duration_s if options.duration is None else options.duration)
     device_rate = None if device is None else float(device.spec.rate_hz)
@@ -218,13 +227,9 @@ def _check_size(options: SimulateOptions, scenario: Scenario, device: Device | N
     if options.out.suffix == ".mcap":
         assert device is not None and device_rate is not None  # an .mcap needs a device: checked before
         if simulated_whole(scenario):  # its truth is held whole while the log is written block by block
-            held = whole_truth_bytes(scenario, span, truth_rate)
-            problem = memory_problem(held, f"the truth simulated whole, {WHOLE_TRUTH_BYTES} bytes a sample")
+            problem = whole_truth_problem(scenario, options.duration, options.rate)
             if problem is not None:
-                raise SimulateError(
-                    f"argument --duration: {span:g} s of {scenario.name} {problem}: shorten "
-                    "--duration (a kind that integrates its motion is simulated whole before it is measured)"
-                )
+                raise SimulateError(f"{problem} (a kind that integrates its motion is simulated whole first)")
         samples = span * device_rate + 1
         per = _mcap_bytes_per_sample(device)
         need = samples * per

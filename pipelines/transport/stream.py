@@ -558,16 +558,10 @@ def run_stream(options: StreamOptions, *, out: TextIO = sys.stdout) -> int:
     Returns the exit status (0, or 130 when stopped by SIGINT/SIGTERM). Raises ``ValueError`` naming the
     argument at fault, before simulating."""
     from gyroemu.dynamics import load_scenario
-    from gyroemu.dynamics.truth_source import (
-        WHOLE_TRUTH_BYTES,
-        ScenarioTruth,
-        simulated_whole,
-        truth_source,
-        whole_truth_bytes,
-    )
+    from gyroemu.dynamics.truth_source import ScenarioTruth, simulated_whole, truth_source
     from gyroemu.pipelines.formats.ros2_keys import Ros2Keys, ros_topic, type_hash
     from gyroemu.pipelines.formats.tf_messages import TF_DEFINITIONS, TF_MESSAGE_TYPE
-    from gyroemu.pipelines.jobs.disk_space import memory_problem
+    from gyroemu.pipelines.jobs.disk_space import whole_truth_problem
     from gyroemu.sensors import load_device
 
     config = options.session.config()
@@ -580,12 +574,9 @@ def run_stream(options: StreamOptions, *, out: TextIO = sys.stdout) -> int:
     endless = options.duration is None and runs_without_end(scen)
     # an integrated kind is simulated whole here (truth_source); a pointwise one is read window by window
     if not endless and simulated_whole(scen):
-        problem = memory_problem(
-            whole_truth_bytes(scen, options.duration), f"the truth simulated whole, {WHOLE_TRUTH_BYTES} bytes a sample"
-        )
+        problem = whole_truth_problem(scen, options.duration)
         if problem is not None:
-            span = scen.duration_s if options.duration is None else options.duration
-            raise ValueError(f"argument --duration: {span:g} s of {scen.name} {problem}: shorten it")
+            raise ValueError(problem)
     source = ScenarioTruth(scen, None) if endless else truth_source(scen, options.duration)
     run = dev.run(source)
     blocks = iter(run)

@@ -58,3 +58,15 @@ def test_output_folder_problem_names_the_folder_a_missing_one_would_be_made_in(t
     assert atomic.output_folder_problem(tmp_path / "file" / "sub") == f"{tmp_path / 'file'}: not a folder"
     monkeypatch.setattr(atomic, "folder_problem", lambda f: "read-only file system" if Path(f) == tmp_path else None)
     assert atomic.output_folder_problem(tmp_path / "a" / "b") == f"{tmp_path}: read-only file system"
+
+
+def test_an_existing_file_keeps_its_own_mode(tmp_path: Path):
+    """Written over (a --force), a file keeps the mode its owner gave it, as ``open`` would leave it."""
+    target = tmp_path / "k.yaml"
+    target.write_text("old")
+    target.chmod(0o600)
+    write_text_atomic(target, "new")
+    assert target.read_text() == "new" and stat.S_IMODE(target.stat().st_mode) == 0o600
+    target.chmod(0o640)
+    write_text_atomic(target, "newer")
+    assert stat.S_IMODE(target.stat().st_mode) == 0o640

@@ -472,7 +472,8 @@ def test_an_earlier_report_is_overwritten_only_with_force(tmp_path, configs, cap
     argv += ["--runs", 1, "--filter", "madgwick", "--out", out]
     assert run_cli(*argv) == 2
     printed = capsys.readouterr()
-    assert f"argument --out: {out} holds bench.md, photo.png" in printed.err and "--force" in printed.err
+    assert f"argument --out: {out} holds an earlier report (bench.md, photo.png)" in printed.err
+    assert "--force" in printed.err
     assert printed.out == ""
     assert sorted(p.name for p in out.iterdir()) == ["bench.md", "photo.png"]
     assert (out / "bench.md").read_text() == "someone's notes"

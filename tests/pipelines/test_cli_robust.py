@@ -639,6 +639,11 @@ def test_a_truth_held_whole_beyond_the_memory_is_refused_before_work(tmp_path, m
     code, _, stderr = run_cli([*bench, "--out", str(tmp_path / "b")])
     assert code == 2 and "argument --duration: 600 s of smooth_manoeuvre needs about" in stderr, stderr
     assert list(tmp_path.iterdir()) == []
+    own = ["--scenario", "heavy_top", "--device", "consumer_mems"]  # the file's duration_s: named as its key
+    code, _, stderr = run_cli(["simulate", *own, "--out", str(tmp_path / "t.mcap")])
+    assert code == 2 and "heavy_top: key 'duration_s': " in stderr and "give a shorter --duration" in stderr, stderr
+    code, _, stderr = run_cli(["simulate", *heavy, "--rate", "1000", "--out", str(tmp_path / "t.mcap")])
+    assert code == 2 and "shorten --duration or lower --rate" in stderr, stderr
     smooth = ["--scenario", "smooth_manoeuvre", "--device", "consumer_mems", "--duration", "2"]
     code, _, stderr = run_cli(["simulate", *smooth, "--out", str(tmp_path / "s.mcap")])
     assert code == 0, stderr
@@ -657,3 +662,32 @@ def test_whole_truth_bytes_bounds_what_a_trajectory_holds():
     held = sum(v.nbytes for v in vars(traj).values() if isinstance(v, np.ndarray))
     assert held <= n * WHOLE_TRUTH_BYTES
     assert whole_truth_bytes(scenario, 2.0, 500.0) == n * WHOLE_TRUTH_BYTES
+
+
+def test_import_refuses_a_read_only_out_folder_before_reading_the_trial(tmp_path, monkeypatch):
+    """A read-only mount (which a test cannot make; folder_problem is told so) is refused naming --out
+    before the trial is read: a trial that cannot be read is not what it reports."""
+    from gyroemu.pipelines.formats import importers
+
+    def no_read(path):
+        raise AssertionError("the trial was read before --out was checked")
+
+    locked = tmp_path / "ro"
+    locked.mkdir()
+    monkeypatch.setattr(importers, "folder_problem", lambda f: "read-only file system" if f == locked else None)
+    monkeypatch.setattr(importers, "read_broad", no_read)
+    trial = tmp_path / "t.hdf5"
+    trial.write_bytes(b"not read")
+    code, _, stderr = run_cli(["import", "broad", str(trial), "--out", str(locked / "b.mcap")])
+    assert code == 2, stderr
+    assert f"argument --out: {locked / 'b.mcap'}: its folder: read-only file system" in stderr
+    assert list(locked.iterdir()) == []
+
+
+def test_the_command_line_and_the_scenario_files_have_the_same_limits():
+    """``simulate --duration`` / ``--rate`` and a scenario file's ``duration_s`` / ``rate_hz`` are bounded
+    alike (two constants, so that parsing numbers does not load the dynamics)."""
+    from gyroemu.dynamics import scenarios
+    from gyroemu.pipelines.jobs import simulate
+
+    assert (simulate.MAX_DURATION_S, simulate.MAX_RATE_HZ) == (scenarios.MAX_DURATION_S, scenarios.MAX_RATE_HZ)

@@ -177,3 +177,22 @@ def test_estimate_into_a_read_only_folder_is_refused_before_work(bag, tmp_path, 
     assert exit_.value.code == 2
     assert f"argument --out: {locked}: read-only file system" in capsys.readouterr().err
     assert list(locked.iterdir()) == []
+
+
+def test_an_earlier_estimate_on_a_topic_of_ones_own_is_replaced(bag, tmp_path):
+    """``--topic-out /att`` twice: the second run replaces the first's estimate (its channel is marked as
+    gyroemu's estimate), where a topic the log has of its own (``/imu_a``) is refused."""
+    from mcap.reader import make_reader
+
+    first, second = tmp_path / "a.mcap", tmp_path / "b.mcap"
+    assert main(["estimate", str(bag), "--topic", "/imu_b", "--topic-out", "/att", "--out", str(first)]) == 0
+    argv = ["estimate", str(first), "--topic", "/imu_b", "--topic-out", "/att", "--filter", "madgwick"]
+    assert main([*argv, "--out", str(second)]) == 0
+    with open(second, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    att = [c for c in summary.channels.values() if c.topic == "/att"]
+    assert len(att) == 1 and att[0].metadata["gyroemu"] == "estimate"  # one channel: the earlier one replaced
+    count = summary.statistics.channel_message_counts[att[0].id]
+    imu_b = next(c.id for c in summary.channels.values() if c.topic == "/imu_b")
+    assert count == summary.statistics.channel_message_counts[imu_b]  # one estimate per /imu_b message
