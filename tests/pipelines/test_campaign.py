@@ -387,3 +387,27 @@ def test_a_plain_bench_refuses_workers_it_would_ignore(tmp_path, capsys, monkeyp
     assert info.value.code == 2
     assert "argument --workers" in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "address, problem",
+    [
+        ("tcp://127.0.0.1:8786", None),
+        ("127.0.0.1:8786", None),
+        ("[::1]:8786", None),
+        ("tls://host:8786", None),
+        ("ws://127.0.0.1:8799", None),  # Dask's other backends: taken as they are (a review, 2026-11-27)
+        ("wss://host:443", None),
+        ("ucx://host:13337", None),
+        ("inproc://192.168.1.2/123/4", None),
+        ("nonsense", "is not a scheduler address"),
+        ("ftp://host:21", "no Dask protocol ftp://"),
+        ("tcp://host:0", "the port must be 1 to 65535"),
+        ("tcp://host", "is not a scheduler address"),
+    ],
+)
+def test_scheduler_addresses_of_every_dask_protocol_are_taken(address, problem):
+    from gyroemu.pipelines.campaign import scheduler_problem
+
+    found = scheduler_problem(address)
+    assert (found is None) if problem is None else (found is not None and problem in found), found
