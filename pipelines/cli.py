@@ -138,8 +138,6 @@ def _cmd_estimate(args) -> int:
         raise UsageError(f"argument --filter: {e}") from None
     latencies = _latencies(args)
     source, out = Path(args.file), _mcap_out(args.out)
-    if out.resolve() == source.resolve():
-        raise UsageError(f"argument --out: {out} is the input: the input is never modified")
     started = time.perf_counter()
     try:
         check_options(source, out, force=args.force, plot=args.plot, topic_out=args.topic_out)

@@ -7,7 +7,7 @@ import re
 from collections.abc import Iterable
 from pathlib import Path
 
-__all__ = ["repeated_file", "unique_stems"]
+__all__ = ["repeated_file", "same_file", "unique_stems"]
 
 
 def unique_stems(names: list[str]) -> list[str]:
@@ -20,6 +20,17 @@ def unique_stems(names: list[str]) -> list[str]:
         seen[stem] = seen.get(stem, 0) + 1
         stems.append(stem if seen[stem] == 1 else f"{stem}_{seen[stem]}")
     return stems
+
+
+def same_file(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> bool:
+    """Whether ``a`` and ``b`` name one file: the same resolved path (through symbolic links and ``..``,
+    whether it exists or not), or the same existing file (a hard link). An output that is an input is
+    refused by this, whatever path names it."""
+    a, b = Path(a), Path(b)
+    try:
+        return a.resolve() == b.resolve() or (a.exists() and b.exists() and os.path.samefile(a, b))
+    except (OSError, RuntimeError):  # a symbolic link loop
+        return False
 
 
 def repeated_file(paths: Iterable[str | os.PathLike[str]]) -> tuple[Path, Path] | None:

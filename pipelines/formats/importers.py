@@ -51,7 +51,6 @@ dataset or attribute at fault; the output is written through a temporary file re
 from __future__ import annotations
 
 import errno
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -60,6 +59,7 @@ import numpy as np
 from gyroemu.dynamics import ConfigError
 from gyroemu.pipelines.formats.atomic import folder_problem
 from gyroemu.pipelines.formats.channels import ImuSeries, PoseSeries
+from gyroemu.pipelines.formats.file_names import same_file
 from gyroemu.pipelines.formats.mcap_log import Recording, write_mcap
 from gyroemu.pipelines.formats.messages import ns_to_stamps
 from gyroemu.sensors.samples import ImuSamples
@@ -345,7 +345,7 @@ def import_broad(path, out, *, device_name: str = "imu0", force: bool = False) -
         ``out`` exists (a file: without ``force``; a folder: always).
     """
     path, out = Path(path), Path(out)
-    if out.exists() and path.exists() and os.path.samefile(out, path):
+    if same_file(out, path):
         raise ImportInputError("is the input file: the import never overwrites its input", file=out)
     if not out.parent.is_dir():
         raise FileNotFoundError(f"{out.parent} is not a folder")

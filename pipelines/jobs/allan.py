@@ -43,6 +43,7 @@ import numpy as np
 
 from gyroemu.errors import ConfigError, LogError
 from gyroemu.pipelines.formats.atomic import folder_problem, write_atomic, write_text_atomic
+from gyroemu.pipelines.formats.file_names import same_file
 from gyroemu.sensors.allan import TERMS, AllanDeviation, AllanFit, Coefficient, allan_deviation, fit_allan
 from gyroemu.sensors.allan_stream import OverlappingAllanAccumulator
 from gyroemu.sensors.errors import STANDARD_GRAVITY, ErrorModel
@@ -331,17 +332,8 @@ def default_plot_path(log: str | os.PathLike) -> Path:
     return Path(log).with_suffix(".allan.png")
 
 
-def _same_file(a: Path, b: Path) -> bool:
-    """Whether ``a`` and ``b`` name one file: the same resolved path (through symlinks, ``..``), or
-    the same existing file (a hard link)."""
-    try:
-        return a.resolve() == b.resolve() or (a.exists() and b.exists() and os.path.samefile(a, b))
-    except (OSError, RuntimeError):  # a symlink loop
-        return False
-
-
 def _check_output(path: Path, argument: str, log: Path, force: bool) -> None:
-    if _same_file(path, log):
+    if same_file(path, log):
         raise AllanError(f"argument {argument}: {path} is the log LOG: refusing to overwrite it (even with --force)")
     if path.is_dir():
         raise AllanError(f"argument {argument}: {path} is a folder: name a file")
@@ -377,7 +369,7 @@ def check_options(
     if kalibr is not None:
         kalibr = Path(kalibr)
         _check_output(kalibr, "--kalibr", log, force)
-        if _same_file(kalibr, plot):
+        if same_file(kalibr, plot):
             raise AllanError(f"argument --kalibr: {kalibr} is the plot's file too ({argument})")
     return plot
 

@@ -73,6 +73,7 @@ from gyroemu.pipelines.formats.device_stream import (
     count_samples,
     scan_devices,
 )
+from gyroemu.pipelines.formats.file_names import same_file
 from gyroemu.pipelines.formats.frames import TF_LOG_RATE_HZ, TfThinning
 from gyroemu.pipelines.formats.mcap_log import LogWarning, read_mcap
 from gyroemu.pipelines.formats.mcap_records import McapRecordWalk
@@ -137,7 +138,7 @@ def check_options(
         raise EstimateError(f"argument --out: {out.parent}: {problem}")
     if out.is_dir():
         raise EstimateError(f"argument --out: {out} is a folder")
-    if out.exists() and path.exists() and out.resolve() == path.resolve():
+    if same_file(out, path):
         raise EstimateError(f"argument --out: {out} is the input: the input is never modified")
     if out.exists() and not force:
         raise EstimateError(f"argument --out: {out} exists (use --force to overwrite it)")
@@ -147,7 +148,7 @@ def check_options(
         picture = estimate_plot_path(out)
         if picture.is_dir():
             raise EstimateError(f"argument --plot: {picture} is a folder")
-        if picture.exists() and path.exists() and picture.resolve() == path.resolve():
+        if same_file(picture, path):
             raise EstimateError(f"argument --plot: {picture} is the input: the input is never modified")
         if picture.exists() and not force:
             raise EstimateError(f"argument --plot: {picture} exists (use --force to overwrite it)")

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 
 from gyroemu.errors import ConfigError
 from gyroemu.pipelines.formats.atomic import folder_problem, write_text_atomic
-from gyroemu.pipelines.formats.file_names import repeated_file
+from gyroemu.pipelines.formats.file_names import repeated_file, same_file
 
 if TYPE_CHECKING:
     from gyroemu.pipelines.identification import Identification, TrialData
@@ -117,7 +117,7 @@ def check_options(options: IdentifyOptions) -> None:
     _check_out(options.out, "--out", options.force)
     if options.site_out is not None:
         _check_out(options.site_out, "--site-out", options.force)
-        if options.site_out.resolve() == options.out.resolve():
+        if same_file(options.site_out, options.out):
             raise IdentifyError("argument --site-out: the same file as --out")
     for a, b in options.rest_intervals or ():
         if not (math.isfinite(a) and math.isfinite(b)):

@@ -28,6 +28,7 @@ import numpy as np
 
 from gyroemu.errors import ConfigError
 from gyroemu.pipelines.formats.channels import IMU_ROLE
+from gyroemu.pipelines.formats.file_names import same_file
 from gyroemu.pipelines.formats.messages import MessageType
 
 __all__ = ["GAP_FACTOR", "InfoError", "TopicStats", "DeviceInfo", "LogInfo", "check_plot", "topic_stats", "log_info"]
@@ -58,7 +59,7 @@ def check_plot(path: str | os.PathLike[str], *, force: bool = False) -> Path:
         raise InfoError(f"argument --plot: {picture.parent}: {problem}")
     if picture.is_dir():
         raise InfoError(f"argument --plot: {picture} is a folder")
-    if picture.exists() and path.exists() and picture.resolve() == path.resolve():
+    if same_file(picture, path):
         raise InfoError(f"argument --plot: {picture} is the log: the log is never modified")
     if picture.exists() and not force:
         raise InfoError(f"argument --plot: {picture} exists (use --force to overwrite it)")

@@ -78,6 +78,7 @@ import numpy as np
 from gyroemu.errors import ConfigError
 from gyroemu.pipelines.formats.atomic import folder_problem, write_text_atomic
 from gyroemu.pipelines.formats.channels import topic_message_type
+from gyroemu.pipelines.formats.file_names import same_file
 from gyroemu.pipelines.formats.frames import TF_STATIC_TOPIC, TF_TOPIC
 from gyroemu.pipelines.formats.messages import MESSAGE_TYPES
 from gyroemu.pipelines.formats.tf_messages import TF_MESSAGE_TYPE, tf_stamp_ns
@@ -552,7 +553,7 @@ def check_record_options(options: RecordOptions) -> None:
     _check_output(out, "--out", options.force)
     report = options.report_path
     if report is not None:
-        if report.resolve() == out.resolve() or (report.exists() and out.exists() and report.samefile(out)):
+        if same_file(report, out):
             raise RecordError(f"argument --report: {report} is the --out file: name another file for the report")
         _check_output(report, "--report", options.force)
     if options.key_expr is not None:
