@@ -5,6 +5,8 @@ Entry points (``interface.md``): :func:`load_scenario` and :meth:`Scenario.simul
 :mod:`gyroemu.dynamics.inertia`.
 """
 
+from __future__ import annotations
+
 from .config import ConfigError
 from .earth import EARTH_RATE, Environment, Site, earth_rate_enu, normal_gravity
 from .scenarios import KINDS, Scenario, ScenarioSpec, list_scenarios, load_scenario, scenario_from_dict

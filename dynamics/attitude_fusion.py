@@ -90,7 +90,7 @@ def complementary_attitude(
 
 
 @njit
-def _integrate(t, omega, first, q):
+def _integrate(t: NDArray[np.float64], omega: NDArray[np.float64], first: int, q: NDArray[np.float64]) -> None:
     """q_{k+1} = q_k ⊗ exp(φ_k / 2) with φ_k = (ω_k + ω_{k+1}) (t_{k+1} − t_k) / 2, from row ``first``."""
     for k in range(first, len(t) - 1):
         h = t[k + 1] - t[k]

@@ -16,14 +16,14 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from .rotation import quat_multiply
 
 __all__ = ["rotation_matrix", "rotate", "rotate_back", "cross", "stack_state", "pure_quat", "quat_product"]
 
 
-def rotation_matrix(q: ArrayLike) -> np.ndarray:
+def rotation_matrix(q: ArrayLike) -> NDArray[np.float64]:
     """``R(q)`` of shape ``(..., 3, 3)`` from quaternions ``q`` ``(..., 4)``; ``q`` need not be of unit norm
     (it is normalised first)."""
     q = np.asarray(q, dtype=float)
@@ -49,17 +49,19 @@ def rotation_matrix(q: ArrayLike) -> np.ndarray:
     )
 
 
-def rotate(r: np.ndarray, v: ArrayLike) -> np.ndarray:
+def rotate(r: NDArray[np.float64], v: ArrayLike) -> NDArray[np.float64]:
     """``R v`` for matrices ``(..., 3, 3)`` and vectors ``(..., 3)``: body to world; returns ``(..., 3)``."""
-    return np.matmul(r, np.asarray(v, dtype=float)[..., None])[..., 0]
+    rv: NDArray[np.float64] = np.matmul(r, np.asarray(v, dtype=float)[..., None])[..., 0]
+    return rv
 
 
-def rotate_back(r: np.ndarray, v: ArrayLike) -> np.ndarray:
+def rotate_back(r: NDArray[np.float64], v: ArrayLike) -> NDArray[np.float64]:
     """``Rᵀ v`` for matrices ``(..., 3, 3)`` and vectors ``(..., 3)``: world to body; returns ``(..., 3)``."""
-    return np.matmul(np.asarray(v, dtype=float)[..., None, :], r)[..., 0, :]
+    vr: NDArray[np.float64] = np.matmul(np.asarray(v, dtype=float)[..., None, :], r)[..., 0, :]
+    return vr
 
 
-def cross(a: ArrayLike, b: ArrayLike) -> np.ndarray:
+def cross(a: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
     """``a × b`` over the last axis, broadcasting (``numpy.cross`` without its overhead); ``(..., 3)``."""
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
@@ -72,7 +74,7 @@ def cross(a: ArrayLike, b: ArrayLike) -> np.ndarray:
     return np.stack([a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1], axis=-1)
 
 
-def stack_state(lead: tuple[int, ...], parts: Sequence[np.ndarray]) -> np.ndarray:
+def stack_state(lead: tuple[int, ...], parts: Sequence[NDArray[np.float64]]) -> NDArray[np.float64]:
     """Concatenate state parts ``(..., k_i)`` along the last axis, broadcasting each to the leading shape
     ``lead``; returns ``lead + (Σ k_i,)``."""
     return np.concatenate(
@@ -80,13 +82,13 @@ def stack_state(lead: tuple[int, ...], parts: Sequence[np.ndarray]) -> np.ndarra
     )
 
 
-def pure_quat(omega: ArrayLike) -> np.ndarray:
+def pure_quat(omega: ArrayLike) -> NDArray[np.float64]:
     """The pure quaternion ``(0, ω)`` ``(..., 4)`` of vectors ``ω`` ``(..., 3)`` (any unit, e.g. rad/s)."""
     omega = np.asarray(omega, dtype=float)
     return np.concatenate([np.zeros(omega.shape[:-1] + (1,)), omega], axis=-1)
 
 
-def quat_product(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+def quat_product(p: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
     """Hamilton product ``p ⊗ q`` of quaternions ``(..., 4)``: :func:`gyroemu.dynamics.rotation.quat_multiply`,
     with plain floats for two single quaternions (the integrator's case, where they beat the compiled ufunc's
     call overhead)."""

@@ -56,7 +56,7 @@ def at_most(limit: float, reason: str) -> pydantic.AfterValidator:
     """A pydantic validator refusing a number above ``limit`` with ``reason`` (why the bound: the size
     it would make, what it would cost), for keys that size a run (counts of terms, spans, rates)."""
 
-    def check(value):
+    def check(value: float) -> float:
         if value > limit:
             raise ValueError(f"{value:g} is more than the limit of {limit:g}: {reason}")
         return value
@@ -80,7 +80,7 @@ class Section(BaseModel):
 M = TypeVar("M", bound=BaseModel)
 
 
-def read_toml(path: str | Path) -> dict:
+def read_toml(path: str | Path) -> dict[str, Any]:
     """Read a TOML file into a dict, or raise :class:`ConfigError` naming the file."""
     path = Path(path)
     try:

@@ -93,7 +93,7 @@ def not_a_knot(x: ArrayLike, y: ArrayLike) -> Callable[[ArrayLike], NDArray[np.f
 
 
 @njit
-def _interval(x, value, hint):
+def _interval(x: NDArray[np.float64], value: float, hint: int) -> int:
     """scipy's ``find_interval`` with extrapolation: ``i`` with ``x_i ≤ value < x_{i+1}`` (``len(x) − 2``
     at and beyond the end, 0 before the start), −1 for NaN; ``hint`` the previous answer."""
     n = len(x)
@@ -125,7 +125,14 @@ def _interval(x, value, hint):
 
 
 @njit
-def _hermite_evaluate(x, y, dydx, points, nu, out):
+def _hermite_evaluate(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    dydx: NDArray[np.float64],
+    points: NDArray[np.float64],
+    nu: int,
+    out: NDArray[np.float64],
+) -> None:
     """The Hermite cubics (``nu`` 0) or their derivatives (``nu`` 1) at ``points`` into ``out`` (N, D):
     the coefficients of CubicHermiteSpline.__init__ and the sum of PPoly's evaluate_poly1."""
     n_axes = y.shape[1]
@@ -167,7 +174,7 @@ def _hermite_evaluate(x, y, dydx, points, nu, out):
 
 
 @njit
-def _not_a_knot_slopes(x, y, out):
+def _not_a_knot_slopes(x: NDArray[np.float64], y: NDArray[np.float64], out: NDArray[np.float64]) -> None:
     """CubicSpline.__init__'s tridiagonal system (not-a-knot ends, M ≥ 4 knots) solved as LAPACK's
     dgtsv does for several right-hand sides, into ``out`` (M, D)."""
     m, n_axes = y.shape

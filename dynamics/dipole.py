@@ -38,4 +38,5 @@ def dipole_field(pos_w: ArrayLike, position_m: ArrayLike, moment_A_m2: ArrayLike
     m = np.asarray(moment_A_m2, dtype=float)
     dist = np.linalg.norm(r, axis=1, keepdims=True)
     r_hat = r / dist
-    return MU0_OVER_4PI * (3.0 * (r_hat @ m)[:, None] * r_hat - m) / dist**3
+    field: NDArray[np.float64] = MU0_OVER_4PI * (3.0 * (r_hat @ m)[:, None] * r_hat - m) / dist**3
+    return field

@@ -58,7 +58,10 @@ def normal_gravity(latitude_rad: ArrayLike, height_m: ArrayLike = 0.0) -> float 
     s2 = np.sin(latitude_rad) ** 2
     g0 = _GAMMA_E * (1.0 + _K_SOMIGLIANA * s2) / np.sqrt(1.0 - _E2 * s2)
     h = np.asarray(height_m, dtype=float)
-    return g0 * (1.0 - 2.0 / WGS84_A * (1.0 + WGS84_F + _M - 2.0 * WGS84_F * s2) * h + 3.0 * h * h / WGS84_A**2)
+    g: float | NDArray[np.float64] = g0 * (
+        1.0 - 2.0 / WGS84_A * (1.0 + WGS84_F + _M - 2.0 * WGS84_F * s2) * h + 3.0 * h * h / WGS84_A**2
+    )
+    return g
 
 
 def earth_rate_enu(latitude_rad: float) -> NDArray[np.float64]:
@@ -109,9 +112,9 @@ class Environment:
         Magnetic flux density, tesla.
     """
 
-    gravity_w: np.ndarray
-    earth_rate_w: np.ndarray
-    magnetic_field_w: np.ndarray
+    gravity_w: NDArray[np.float64]
+    earth_rate_w: NDArray[np.float64]
+    magnetic_field_w: NDArray[np.float64]
 
     @classmethod
     def inertial(cls, gravity_m_s2: float = 0.0, magnetic_field_w: ArrayLike = (0.0, 0.0, 0.0)) -> Environment:

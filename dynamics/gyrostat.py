@@ -46,9 +46,10 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, overload
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from .body_kernels import cross, pure_quat, quat_product, rotate, rotate_back, rotation_matrix, stack_state
 from .inertia import check_inertia
@@ -61,8 +62,13 @@ P = slice(7, 10)
 W = slice(10, 13)
 GIMBALS = slice(13, None)
 
+_Load = Callable[[ArrayLike, NDArray[np.float64]], NDArray[np.float64]]
+"""``f(t, y) -> (..., k)``: a force, a torque or the gimbals' commanded rates at states ``y``."""
 
-def _gimbal_axes(delta, spin0, transverse):
+
+def _gimbal_axes(
+    delta: ArrayLike, spin0: NDArray[np.float64], transverse: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Spin and output axes of gimballed rotors turned by ``δ``: ``ŝ(δ) = cos δ ŝ₀ + sin δ (ĝ × ŝ₀)`` and
     ``ĝ × ŝ(δ) = dŝ/dδ = cos δ (ĝ × ŝ₀) − sin δ ŝ₀``, shapes ``δ.shape + (3,)``. ``spin0`` and
     ``transverse`` (``ŝ₀``, ``ĝ × ŝ₀``) are (3,) for one rotor or (n_gimbals, 3) stacked."""
@@ -71,12 +77,13 @@ def _gimbal_axes(delta, spin0, transverse):
     return c * spin0 + s * transverse, c * transverse - s * spin0
 
 
-def _unit(v, name) -> np.ndarray:
+def _unit(v: ArrayLike, name: str) -> NDArray[np.float64]:
     v = np.asarray(v, dtype=float).reshape(3)
     n = np.linalg.norm(v)
     if not n > 0:
         raise ValueError(f"{name} must be a non-zero vector")
-    return v / n
+    unit: NDArray[np.float64] = v / n
+    return unit
 
 
 @dataclass(frozen=True)
@@ -105,18 +112,18 @@ class SpinProfile:
             return ()
         return (self.t_start, self.t_start + self.duration)
 
-    def _s(self, t):
+    def _s(self, t: ArrayLike) -> NDArray[np.float64]:
         t = np.asarray(t, dtype=float)
         if self.duration <= 0:
             return np.where(t >= self.t_start, 1.0, 0.0)
         return np.clip((t - self.t_start) / self.duration, 0.0, 1.0)
 
-    def rate(self, t) -> np.ndarray:
+    def rate(self, t: ArrayLike) -> NDArray[np.float64]:
         """``Ω(t)``, rad/s, shape of ``t``."""
         s = self._s(t)
         return self.rate0 + (self.final - self.rate0) * 0.5 * (1.0 - np.cos(np.pi * s))
 
-    def accel(self, t) -> np.ndarray:
+    def accel(self, t: ArrayLike) -> NDArray[np.float64]:
         """``Ω̇(t)``, rad/s² (zero for a step, whose jump the solver meets at a breakpoint)."""
         if self.duration <= 0 or self.final == self.rate0:
             return np.zeros(np.shape(t))
@@ -135,18 +142,18 @@ class Rotor:
     spin : SpinProfile, spin rate relative to the body
     """
 
-    axis_b: np.ndarray
+    axis_b: NDArray[np.float64]
     inertia_kgm2: float
     spin: SpinProfile
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         object.__setattr__(self, "axis_b", _unit(self.axis_b, "rotor axis"))
 
-    def momentum_b(self, t) -> np.ndarray:
+    def momentum_b(self, t: ArrayLike) -> NDArray[np.float64]:
         """``h = J Ω(t) ŝ``, shape ``t.shape + (3,)``, N m s."""
         return (self.inertia_kgm2 * self.spin.rate(t))[..., None] * self.axis_b
 
-    def momentum_rate_b(self, t) -> np.ndarray:
+    def momentum_rate_b(self, t: ArrayLike) -> NDArray[np.float64]:
         """``ḣ = J Ω̇(t) ŝ`` (relative to the body)."""
         return (self.inertia_kgm2 * self.spin.accel(t))[..., None] * self.axis_b
 
@@ -163,12 +170,12 @@ class GimballedRotor:
     spin : SpinProfile
     """
 
-    gimbal_axis_b: np.ndarray
-    spin_axis_b: np.ndarray
+    gimbal_axis_b: NDArray[np.float64]
+    spin_axis_b: NDArray[np.float64]
     inertia_kgm2: float
     spin: SpinProfile
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         g = _unit(self.gimbal_axis_b, "gimbal axis")
         s = _unit(self.spin_axis_b, "spin axis")
         if abs(g @ s) > 1e-9:
@@ -177,15 +184,15 @@ class GimballedRotor:
         object.__setattr__(self, "spin_axis_b", s)
 
     @property
-    def transverse_b(self) -> np.ndarray:
+    def transverse_b(self) -> NDArray[np.float64]:
         """``ĝ × ŝ₀``: where the spin axis points at ``δ = +90°``."""
         return np.cross(self.gimbal_axis_b, self.spin_axis_b)
 
-    def spin_axis(self, delta) -> np.ndarray:
+    def spin_axis(self, delta: ArrayLike) -> NDArray[np.float64]:
         """``ŝ(δ) = cos δ ŝ₀ + sin δ (ĝ × ŝ₀)``, shape ``δ.shape + (3,)``."""
         return _gimbal_axes(delta, self.spin_axis_b, self.transverse_b)[0]
 
-    def torque_axis(self, delta) -> np.ndarray:
+    def torque_axis(self, delta: ArrayLike) -> NDArray[np.float64]:
         """``ĝ × ŝ(δ) = dŝ/dδ``: the direction of ``ḣ`` for a gimbal rate (the output axis)."""
         return _gimbal_axes(delta, self.spin_axis_b, self.transverse_b)[1]
 
@@ -204,19 +211,19 @@ class Gyrostat:
     """
 
     mass: float
-    inertia_b: np.ndarray
+    inertia_b: NDArray[np.float64]
     rotors: Sequence[Rotor] = ()
     gimbals: Sequence[GimballedRotor] = ()
-    frame_rate_w: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    frame_rate_w: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     if TYPE_CHECKING:  # set by __post_init__; declared for the type checker only, not dataclass fields
-        _inertia_inv: np.ndarray = field(init=False, repr=False)
+        _inertia_inv: NDArray[np.float64] = field(init=False, repr=False)
         _rotating: bool = field(init=False, repr=False)
-        _s0: np.ndarray = field(init=False, repr=False)
-        _t0: np.ndarray = field(init=False, repr=False)
-        _j: np.ndarray = field(init=False, repr=False)
-        _jw_constant: np.ndarray | None = field(init=False, repr=False)
+        _s0: NDArray[np.float64] = field(init=False, repr=False)
+        _t0: NDArray[np.float64] = field(init=False, repr=False)
+        _j: NDArray[np.float64] = field(init=False, repr=False)
+        _jw_constant: NDArray[np.float64] | None = field(init=False, repr=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not self.mass > 0:
             raise ValueError(f"mass must be positive, got {self.mass}")
         object.__setattr__(self, "inertia_b", check_inertia(self.inertia_b))
@@ -245,7 +252,14 @@ class Gyrostat:
         rotors: tuple[Rotor | GimballedRotor, ...] = (*self.rotors, *self.gimbals)
         return tuple(sorted({b for r in rotors for b in r.spin.breakpoints}))
 
-    def state(self, pos_w=(0, 0, 0), q_wb=(1, 0, 0, 0), vel_w=(0, 0, 0), omega_b=(0, 0, 0), gimbal_angles=()):
+    def state(
+        self,
+        pos_w: ArrayLike = (0, 0, 0),
+        q_wb: ArrayLike = (1, 0, 0, 0),
+        vel_w: ArrayLike = (0, 0, 0),
+        omega_b: ArrayLike = (0, 0, 0),
+        gimbal_angles: ArrayLike = (),
+    ) -> NDArray[np.float64]:
         """State vector ``[x, q, P, ω, δ]`` (1-D)."""
         q = np.asarray(q_wb, dtype=float)
         delta = np.asarray(gimbal_angles, dtype=float).reshape(-1)
@@ -263,7 +277,9 @@ class Gyrostat:
 
     # -- rotor momentum ------------------------------------------------------------------------------
 
-    def _gimbal_spin_rates(self, t, shape):
+    def _gimbal_spin_rates(
+        self, t: ArrayLike, shape: tuple[int, ...]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """``J Ω`` and ``J Ω̇`` of each gimballed rotor, shape ``shape + (n_gimbals,)``."""
         if self._jw_constant is not None:
             return self._jw_constant, np.zeros(len(self.gimbals))
@@ -272,15 +288,25 @@ class Gyrostat:
         jw_dot = np.stack([r.inertia_kgm2 * r.spin.accel(t) for r in self.gimbals], axis=-1)
         return jw, jw_dot
 
-    def spin_axes(self, delta) -> np.ndarray:
+    def spin_axes(self, delta: ArrayLike) -> NDArray[np.float64]:
         """``ŝ_i(δ_i)`` of every gimballed rotor, shape ``δ.shape + (3,)``."""
         return _gimbal_axes(delta, self._s0, self._t0)[0]
 
-    def torque_axes(self, delta) -> np.ndarray:
+    def torque_axes(self, delta: ArrayLike) -> NDArray[np.float64]:
         """``ĝ_i × ŝ_i(δ_i)``, shape ``δ.shape + (3,)``."""
         return _gimbal_axes(delta, self._s0, self._t0)[1]
 
-    def rotor_momentum_b(self, t, y, gimbal_rates=None):
+    @overload
+    def rotor_momentum_b(self, t: ArrayLike, y: ArrayLike, gimbal_rates: None = None) -> NDArray[np.float64]: ...
+
+    @overload
+    def rotor_momentum_b(
+        self, t: ArrayLike, y: ArrayLike, gimbal_rates: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+
+    def rotor_momentum_b(
+        self, t: ArrayLike, y: ArrayLike, gimbal_rates: NDArray[np.float64] | None = None
+    ) -> NDArray[np.float64] | tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Rotors' momentum relative to the body ``h`` and, when ``gimbal_rates`` is given, ``ḣ``.
 
         ``h = Σ J Ω ŝ``; ``ḣ = Σ (J Ω̇ ŝ + J Ω δ̇ (ĝ × ŝ))``. Shapes ``y.shape[:-1] + (3,)``.
@@ -303,35 +329,38 @@ class Gyrostat:
                 h_dot = h_dot + spin_up + turning
         return (h, h_dot) if gimbal_rates is not None else h
 
-    def gimbal_jacobian(self, t, delta) -> np.ndarray:
+    def gimbal_jacobian(self, t: ArrayLike, delta: ArrayLike) -> NDArray[np.float64]:
         """``A = ∂h/∂δ``, columns ``J_i Ω_i (ĝ_i × ŝ_i)``: shape ``δ.shape[:-1] + (3, n_gimbals)``, so that
         the gimbals' share of ``ḣ`` is ``A δ̇``."""
         delta = np.asarray(delta, dtype=float)
         jw, _ = self._gimbal_spin_rates(t, delta.shape[:-1])
         return np.swapaxes(jw[..., None] * self.torque_axes(delta), -1, -2)
 
-    def angular_momentum_w(self, t, y) -> np.ndarray:
+    def angular_momentum_w(self, t: ArrayLike, y: ArrayLike) -> NDArray[np.float64]:
         """Total angular momentum ``R (I ω + h)``, inertial, world axes, N m s."""
         y = np.asarray(y, dtype=float)
         r = rotation_matrix(y[..., Q])
         return rotate(r, y[..., W] @ self.inertia_b.T + self.rotor_momentum_b(t, y))
 
-    def kinetic_energy(self, t, y) -> np.ndarray:
+    def kinetic_energy(self, t: ArrayLike, y: ArrayLike) -> float | NDArray[np.float64]:
         """Body-and-locked-rotor kinetic energy ``½ m v² + ½ ω·Iω`` (rotor spin energy excluded), J."""
         y = np.asarray(y, dtype=float)
         w = y[..., W]
-        return 0.5 * np.sum(y[..., P] ** 2, -1) / self.mass + 0.5 * np.einsum("...i,ij,...j->...", w, self.inertia_b, w)
+        energy: float | NDArray[np.float64] = 0.5 * np.sum(y[..., P] ** 2, -1) / self.mass + 0.5 * np.einsum(
+            "...i,ij,...j->...", w, self.inertia_b, w
+        )
+        return energy
 
     # -- equations of motion -----------------------------------------------------------------------
 
     def derivative(
         self,
-        t,
-        y,
-        force_w: Callable | None = None,
-        torque_b: Callable | None = None,
-        gimbal_rate: Callable | None = None,
-    ) -> np.ndarray:
+        t: ArrayLike,
+        y: ArrayLike,
+        force_w: _Load | None = None,
+        torque_b: _Load | None = None,
+        gimbal_rate: _Load | None = None,
+    ) -> NDArray[np.float64]:
         """``ẏ`` for states ``(..., size)``.
 
         Parameters

@@ -50,18 +50,20 @@ them; this overestimates the braking of a box that slides and spins at once), ea
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
 import numpy as np
 import pydantic
+from numpy.typing import ArrayLike, NDArray
 from pydantic import Field
 
 from .body_kernels import cross, quat_product, rotate, rotation_matrix
 from .config import NonNegativeReal, PositiveReal, Real, Section, Vec3
 from .earth import Environment, Site
 from .inertia import box, inertia_config
-from .integrate import Event, Jump, Jumped, integrate
+from .integrate import Event, Jump, Jumped, Solution, integrate
 from .rigid_body import L, P, Q, RigidBody, X, contact_mass_matrix, world_motion_trajectory
 from .rotation import quat_from_euler_zyx, quat_from_rotvec
 from .scenarios import ScenarioSpec
@@ -120,7 +122,7 @@ class DropSpec(ScenarioSpec):
     contact: Contact = Contact()
 
     @pydantic.model_validator(mode="after")
-    def _starts_above_ground(self):
+    def _starts_above_ground(self) -> DropSpec:
         corners = _corners(self.body.size_m)
         # The corners' heights: the third row of R = Rz(yaw) Ry(pitch) Rx(roll) (quat_from_euler_zyx's
         # convention), (−sin θ, sin φ cos θ, cos φ cos θ), in closed form so that validating a file
@@ -135,11 +137,11 @@ class DropSpec(ScenarioSpec):
     def model(self) -> Drop:
         return Drop.from_spec(self)
 
-    def trajectory(self, t: np.ndarray) -> Trajectory:
+    def trajectory(self, t: NDArray[np.float64]) -> Trajectory:
         return self.model().trajectory(t)
 
 
-def _corners(size) -> np.ndarray:
+def _corners(size: ArrayLike) -> NDArray[np.float64]:
     """The 8 corners of a box centred at the origin, (8, 3)."""
     half = 0.5 * np.asarray(size, dtype=float)
     signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
@@ -152,8 +154,14 @@ def _corners(size) -> np.ndarray:
 
 
 def contact_impulse(
-    mass, inertia_w_inv, lever_w, velocity_w, restitution, friction, normal=(0.0, 0.0, 1.0)
-) -> np.ndarray:
+    mass: float,
+    inertia_w_inv: NDArray[np.float64],
+    lever_w: ArrayLike,
+    velocity_w: ArrayLike,
+    restitution: float,
+    friction: float,
+    normal: ArrayLike = (0.0, 0.0, 1.0),
+) -> NDArray[np.float64]:
     """Impulse ``J`` (N s, world) on the body at a contact point (module docstring).
 
     Parameters
@@ -169,7 +177,7 @@ def contact_impulse(
     u = np.asarray(velocity_w, dtype=float)
     k = contact_mass_matrix(mass, inertia_w_inv, lever_w)
     un = u @ n
-    frictionless = -(1.0 + restitution) * un / (n @ k @ n) * n
+    frictionless: NDArray[np.float64] = -(1.0 + restitution) * un / (n @ k @ n) * n
     if friction == 0.0:
         return frictionless
     j = np.linalg.solve(k, -restitution * un * n - u)  # sticking: u⁺ = −e u_n n
@@ -196,7 +204,7 @@ class Settling:
     """The box lying on a face from ``t``: in-plane slide and spin braked by Coulomb friction."""
 
     t: float
-    slide_direction_w: np.ndarray  # unit, horizontal (zero if not sliding)
+    slide_direction_w: NDArray[np.float64]  # unit, horizontal (zero if not sliding)
     slide_decel: float  # μ g, m/s²
     slide_end: float  # when the slide stops, s
     spin_decel: float  # signed ṡ, rad/s² (opposes the spin)
@@ -209,22 +217,23 @@ class Drop:
     """The drop's body, contact law and contact history (filled while integrating)."""
 
     body: RigidBody
-    size: np.ndarray
+    size: NDArray[np.float64]
     environment: Environment
-    y0: np.ndarray
+    y0: NDArray[np.float64]
     restitution: float
     friction: float
     pulse_duration: float
     rest_speed: float
     settle_tilt: float = np.radians(5.0)
-    pulses: list = field(default_factory=list)  # (t_c, J_w, lever_b), in time order, never overlapping
-    impulses: list = field(default_factory=list)  # ideal mode: (t_c, J_w)
+    # (t_c, J_w, lever_b), in time order, never overlapping
+    pulses: list[tuple[float, NDArray[np.float64], NDArray[np.float64]]] = field(default_factory=list)
+    impulses: list[tuple[float, NDArray[np.float64]]] = field(default_factory=list)  # ideal mode: (t_c, J_w)
     settling: Settling | None = None
-    recent_contacts: list = field(default_factory=list)  # times of the contacts within the last microsecond
+    recent_contacts: list[float] = field(default_factory=list)  # times of the contacts within the last microsecond
     # The pulses stacked into arrays for _pulse (start times, impulses, levers), rebuilt when one is added.
-    _pulse_table: tuple | None = field(default=None, init=False, repr=False)
+    _pulse_table: tuple[NDArray[np.float64], ...] | None = field(default=None, init=False, repr=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.corners_b = _corners(self.size)  # (8, 3), body axes
 
     @classmethod
@@ -250,7 +259,7 @@ class Drop:
 
     # -- loads -----------------------------------------------------------------------------------------
 
-    def _pulse(self, t):
+    def _pulse(self, t: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The contact pulse's force at ``t`` (world, N) and its lever arm (body axes), ``t.shape + (3,)``.
 
         ``F = J π/(2τ) sin(π s)``, ``s = (t − t_c)/τ`` in ``[0, 1]``, so ``∫ F dt = J``. Pulses never
@@ -270,7 +279,12 @@ class Drop:
         shape = np.where(on, np.pi / (2.0 * self.pulse_duration) * np.sin(np.pi * np.clip(s, 0.0, 1.0)), 0.0)
         return shape[..., None] * impulses[kk], levers[kk]
 
-    def force(self, t, y, pulse=None) -> np.ndarray:
+    def force(
+        self,
+        t: ArrayLike,
+        y: ArrayLike,
+        pulse: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+    ) -> NDArray[np.float64]:
         """Total force, world axes, N: gravity and contact pulses; once settled, gravity and the
         ground's support (holding the box on the ground against weight and Coriolis) and friction.
         ``pulse``: :meth:`_pulse` at ``t`` when the caller has it already."""
@@ -286,7 +300,12 @@ class Drop:
         settled = 2.0 * cross(self.body.frame_rate_w, y[..., P]) + friction  # so that Ṗ = friction
         return np.where((t >= st.t)[..., None], settled, flying)
 
-    def torque(self, t, y, pulse=None) -> np.ndarray:
+    def torque(
+        self,
+        t: ArrayLike,
+        y: ArrayLike,
+        pulse: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+    ) -> NDArray[np.float64]:
         """Moment about the centre of mass, world axes, N m: the pulse's ``r × F``; once settled, the
         ground's moment that keeps the box flat, ``ω × L + I_w (Ω × ω) + ṡ I_w ẑ``, which makes the
         rotation relative to the world ``s ẑ`` with the spin ``s`` braked at the rate ``ṡ``.
@@ -294,8 +313,8 @@ class Drop:
         y = np.asarray(y, dtype=float)
         t = np.asarray(t, dtype=float)
         r = rotation_matrix(y[..., Q])
-        pulse, lever_b = self._pulse(t) if pulse is None else pulse
-        flying = cross(rotate(r, lever_b), pulse)  # τ = r × F
+        pulse_w, lever_b = self._pulse(t) if pulse is None else pulse
+        flying = cross(rotate(r, lever_b), pulse_w)  # τ = r × F
         if self.settling is None:
             return flying
         st = self.settling
@@ -309,7 +328,7 @@ class Drop:
         )  # d/dt (I_w ω) with ω = Ω + s ẑ
         return np.where((t >= st.t)[..., None], held, flying)
 
-    def derivative(self, t, y) -> np.ndarray:
+    def derivative(self, t: ArrayLike, y: NDArray[np.float64]) -> NDArray[np.float64]:
         pulse = self._pulse(t)  # for the force and its moment alike
         return self.body.derivative(
             t, y, lambda tt, yy: self.force(tt, yy, pulse), lambda tt, yy: self.torque(tt, yy, pulse)
@@ -317,33 +336,35 @@ class Drop:
 
     # -- contacts --------------------------------------------------------------------------------------
 
-    def _contacts_enabled(self, t) -> bool:
+    def _contacts_enabled(self, t: float) -> bool:
         if t >= self.settle_time:
             return False
         return not (self.pulses and self.pulses[-1][0] <= t < self.pulses[-1][0] + self.pulse_duration)
 
-    def _corner_heights(self, y) -> np.ndarray:
+    def _corner_heights(self, y: NDArray[np.float64]) -> NDArray[np.float64]:
         r = rotation_matrix(y[Q])
-        return y[2] + self.corners_b @ r[2]  # z + (R r_i)_z
+        heights: NDArray[np.float64] = y[2] + self.corners_b @ r[2]  # z + (R r_i)_z
+        return heights
 
-    def _corner_condition(self, i):
-        def condition(t, y):
+    def _corner_condition(self, i: int) -> Callable[[float, NDArray[np.float64]], float]:
+        def condition(t: float, y: NDArray[np.float64]) -> float:
             if not self._contacts_enabled(t):
                 return 1.0
-            return self._corner_heights(y)[i]
+            height: float = self._corner_heights(y)[i]
+            return height
 
         return condition
 
-    def _corner_velocities(self, y) -> np.ndarray:
+    def _corner_velocities(self, y: NDArray[np.float64]) -> NDArray[np.float64]:
         return self.body.point_velocity_w(y, self.corners_b)
 
-    def _pending(self, t, y) -> bool:
+    def _pending(self, t: float, y: NDArray[np.float64]) -> bool:
         if not self._contacts_enabled(t):
             return False
         closing = (self._corner_heights(y) <= 0.0) & (self._corner_velocities(y)[:, 2] < 0.0)
         return bool(np.any(closing))
 
-    def _face_down(self, r):
+    def _face_down(self, r: NDArray[np.float64]) -> tuple[int, NDArray[np.float64], float]:
         """Index of the body axis most nearly vertical, the outward normal (body axes) of the face that
         points down, and the tilt of that face from horizontal, rad."""
         downness = -r[2]  # world −z component of each body axis
@@ -352,7 +373,7 @@ class Drop:
         face_b[k] = np.sign(downness[k])
         return k, face_b, float(np.arccos(np.clip(abs(downness[k]), -1.0, 1.0)))
 
-    def _on_contact(self, t, y):
+    def _on_contact(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64] | Jumped:
         """The contact action: settle, an ideal impulse, or the start of a pulse."""
         heights = self._corner_heights(y)
         speeds = self._corner_velocities(y)
@@ -377,7 +398,7 @@ class Drop:
         self.impulses.append((t, j))
         return self.body.apply_impulse(y, j, y[X] + lever_w)  # ΔP = J, ΔL = r × J
 
-    def bounce_energy(self, y) -> float:
+    def bounce_energy(self, y: NDArray[np.float64]) -> float:
         """Energy of the motion out of lying flat: ``½ m v_z² + ½ ω_hᵀ I_w ω_h + m g (z − z_face)``, with
         ``ω_h`` the horizontal part of the rotation relative to the world and ``z_face`` the height of
         the centre of mass lying on the face that points down, J."""
@@ -392,7 +413,7 @@ class Drop:
             + self.body.mass * self.gravity * (y[2] - 0.5 * self.size[k])
         )
 
-    def _settle(self, t, y):
+    def _settle(self, t: float, y: NDArray[np.float64]) -> Jumped:
         """Lay the box flat on its downward face (a rotation by the small remaining tilt), on the ground,
         keeping its in-plane slide and spin, which friction then brakes at constant rates."""
         r = rotation_matrix(y[Q])
@@ -410,7 +431,8 @@ class Drop:
         # Pivoting friction: uniform pressure on the face, torque μ m g ρ̄ with ρ̄ the face's mean radius.
         sides = np.delete(self.size, k)
         grid = (np.arange(64) + 0.5) / 64 - 0.5
-        rho = np.mean(np.hypot(*np.meshgrid(grid * sides[0], grid * sides[1])))
+        # np.mean's result is a float64 already; np.float64() types it as one (numpy's stubs say floating).
+        rho = np.float64(np.mean(np.hypot(*np.meshgrid(grid * sides[0], grid * sides[1]))))
         i_vertical = float(face_b @ self.body.inertia_b @ face_b)
         spin_decel = self.friction * self.body.mass * self.gravity * rho / i_vertical
         self.settling = Settling(
@@ -427,13 +449,13 @@ class Drop:
         stops = (Jump(self.settling.slide_end, self._stop_slide), Jump(self.settling.spin_end, self._stop_spin))
         return Jumped(self.body.state(pos, q, v, omega_b), jumps=stops)
 
-    def _stop_slide(self, t, y):
+    def _stop_slide(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
         """Friction has braked the slide to zero: clear the integrator's residue (about rtol of it)."""
         y = np.array(y)
         y[P] = 0.0
         return y
 
-    def _stop_spin(self, t, y):
+    def _stop_spin(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
         """The spin is braked to zero: the box turns with the Earth only (clears the residue)."""
         r = rotation_matrix(y[Q])
         return self.body.state(y[X], y[Q], y[P] / self.body.mass, rotate(r.T, self.body.frame_rate_w))
@@ -447,13 +469,13 @@ class Drop:
 
     # -- simulation ----------------------------------------------------------------------------------
 
-    def solve(self, t, rtol=1e-10):
+    def solve(self, t: ArrayLike, rtol: float = 1e-10) -> Solution:
         self.pulses, self.impulses, self.settling, self.recent_contacts = [], [], None, []
         self._pulse_table = None
         atol = np.concatenate([np.full(3, 1e-12), np.full(4, 1e-12), np.full(6, 1e-14)])
         return integrate(self.derivative, t, self.y0, events=self.events(), rtol=rtol, atol=atol)
 
-    def trajectory(self, t, rtol=1e-10) -> Trajectory:
+    def trajectory(self, t: ArrayLike, rtol: float = 1e-10) -> Trajectory:
         t = np.asarray(t, dtype=float)
         sol = self.solve(t, rtol)
         y, y_dot = sol.y, sol.y_dot

@@ -6,7 +6,11 @@ Solids have their symmetry axis along z and their centre of mass at the origin.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
+from typing import TypeVar
+
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from .rotation import quat_to_matrix
 
@@ -32,7 +36,10 @@ class InertiaError(ValueError):
     """A tensor that no rigid body can have; the message says which property fails."""
 
 
-def check_inertia(inertia, *, rtol: float = 1e-9) -> np.ndarray:
+_Inertia = TypeVar("_Inertia", bound="ArrayLike | None")
+
+
+def check_inertia(inertia: ArrayLike, *, rtol: float = 1e-9) -> NDArray[np.float64]:
     """Return ``inertia`` as a float 3x3 array, or raise :class:`InertiaError` saying what is wrong.
 
     A physical inertia tensor is symmetric, positive definite, and its principal moments satisfy the
@@ -55,10 +62,11 @@ def check_inertia(inertia, *, rtol: float = 1e-9) -> np.ndarray:
             f"principal moments {m.tolist()} kg m² break the triangle inequality "
             f"I1 + I2 >= I3 ({m[0] + m[1]:.6g} < {m[2]:.6g}): no mass distribution has them"
         )
-    return 0.5 * (i + i.T)
+    symmetric: NDArray[np.float64] = 0.5 * (i + i.T)
+    return symmetric
 
 
-def inertia_tensor(value) -> np.ndarray:
+def inertia_tensor(value: ArrayLike) -> NDArray[np.float64]:
     """A validated 3x3 tensor from three principal moments ``(Ixx, Iyy, Izz)`` or a 3x3 matrix."""
     v = np.asarray(value, dtype=float)
     if v.shape == (3,):
@@ -68,7 +76,7 @@ def inertia_tensor(value) -> np.ndarray:
     return check_inertia(v)
 
 
-def inertia_config(value):
+def inertia_config(value: _Inertia) -> _Inertia:
     """A config file's inertia (three principal moments, a 3x3 matrix, or ``None`` for a default),
     returned unchanged once :func:`inertia_tensor` accepts it: the validator of the scenario kinds'
     ``inertia_kgm2`` keys. Raises :class:`InertiaError` (a ``ValueError``) saying what is wrong."""
@@ -77,7 +85,7 @@ def inertia_config(value):
     return value
 
 
-def point_masses(masses, positions) -> np.ndarray:
+def point_masses(masses: ArrayLike, positions: ArrayLike) -> NDArray[np.float64]:
     """Tensor of point masses about the origin: ``Σ m_i ((r_i·r_i) 1 − r_i r_iᵀ)``.
 
     Parameters
@@ -88,20 +96,21 @@ def point_masses(masses, positions) -> np.ndarray:
     m = np.asarray(masses, dtype=float)
     r = np.asarray(positions, dtype=float).reshape(-1, 3)
     rr = np.einsum("i,ij,ij->", m, r, r)
-    return rr * np.eye(3) - np.einsum("i,ij,ik->jk", m, r, r)
+    tensor: NDArray[np.float64] = rr * np.eye(3) - np.einsum("i,ij,ik->jk", m, r, r)
+    return tensor
 
 
-def box(mass, lx, ly, lz) -> np.ndarray:
+def box(mass: float, lx: float, ly: float, lz: float) -> NDArray[np.float64]:
     """Solid cuboid with edges ``lx, ly, lz`` along the axes: ``m (ly² + lz²)/12`` etc."""
     return mass / 12.0 * np.diag([ly**2 + lz**2, lx**2 + lz**2, lx**2 + ly**2])
 
 
-def sphere(mass, radius, *, hollow: bool = False) -> np.ndarray:
+def sphere(mass: float, radius: float, *, hollow: bool = False) -> NDArray[np.float64]:
     """Solid sphere ``2/5 m r²``, or thin spherical shell ``2/3 m r²``."""
     return (2.0 / 3.0 if hollow else 2.0 / 5.0) * mass * radius**2 * np.eye(3)
 
 
-def cylinder(mass, radius, height, *, inner_radius: float = 0.0) -> np.ndarray:
+def cylinder(mass: float, radius: float, height: float, *, inner_radius: float = 0.0) -> NDArray[np.float64]:
     """Solid or hollow (``inner_radius > 0``) circular cylinder, axis z.
 
     ``Izz = m (r² + r_i²)/2``, ``Ixx = Iyy = m (3 (r² + r_i²) + h²)/12``.
@@ -111,12 +120,12 @@ def cylinder(mass, radius, height, *, inner_radius: float = 0.0) -> np.ndarray:
     return np.diag([ixx, ixx, mass * r2 / 2.0])
 
 
-def disc(mass, radius, *, inner_radius: float = 0.0) -> np.ndarray:
+def disc(mass: float, radius: float, *, inner_radius: float = 0.0) -> NDArray[np.float64]:
     """Thin disc or annulus in the x-y plane: a cylinder of zero height."""
     return cylinder(mass, radius, 0.0, inner_radius=inner_radius)
 
 
-def cone(mass, radius, height) -> np.ndarray:
+def cone(mass: float, radius: float, height: float) -> NDArray[np.float64]:
     """Solid right circular cone about its centre of mass (a quarter of the height above the base).
 
     ``Izz = 3/10 m r²``, ``Ixx = Iyy = 3/20 m r² + 3/80 m h²``.
@@ -125,14 +134,15 @@ def cone(mass, radius, height) -> np.ndarray:
     return np.diag([ixx, ixx, 0.3 * mass * radius**2])
 
 
-def parallel_axis(inertia_cm, mass, offset) -> np.ndarray:
+def parallel_axis(inertia_cm: ArrayLike, mass: float, offset: ArrayLike) -> NDArray[np.float64]:
     """Tensor about a point displaced by ``-offset`` from the centre of mass (Steiner):
     ``I_cm + m ((d·d) 1 − d dᵀ)`` with ``d = offset`` the centre of mass seen from the new point."""
     d = np.asarray(offset, dtype=float)
-    return np.asarray(inertia_cm, dtype=float) + mass * (d @ d * np.eye(3) - np.outer(d, d))
+    moved: NDArray[np.float64] = np.asarray(inertia_cm, dtype=float) + mass * (d @ d * np.eye(3) - np.outer(d, d))
+    return moved
 
 
-def composite(parts):
+def composite(parts: Iterable[Sequence[ArrayLike]]) -> tuple[float, NDArray[np.float64], NDArray[np.float64]]:
     """Mass, centre of mass and tensor about it of rigidly joined parts.
 
     Parameters
@@ -165,7 +175,7 @@ def composite(parts):
     return float(total), cm, inertia
 
 
-def principal_axes(inertia):
+def principal_axes(inertia: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Principal moments (ascending) and axes of a tensor.
 
     Returns
@@ -181,7 +191,8 @@ def principal_axes(inertia):
     return moments, axes
 
 
-def world_tensor(q_wb, inertia_b) -> np.ndarray:
+def world_tensor(q_wb: ArrayLike, inertia_b: ArrayLike) -> NDArray[np.float64]:
     """``R I_body Rᵀ`` for attitudes ``q_wb`` of shape ``(..., 4)``: shape ``(..., 3, 3)``."""
     r = quat_to_matrix(q_wb)
-    return r @ np.asarray(inertia_b, dtype=float) @ np.swapaxes(r, -1, -2)
+    turned: NDArray[np.float64] = r @ np.asarray(inertia_b, dtype=float) @ np.swapaxes(r, -1, -2)
+    return turned

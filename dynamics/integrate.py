@@ -30,12 +30,14 @@ from __future__ import annotations
 import bisect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Protocol, cast
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["Jump", "Jumped", "Event", "Solution", "integrate"]
 
-Derivative = Callable[[np.ndarray, np.ndarray], np.ndarray]
+Derivative = Callable[[ArrayLike, NDArray[np.float64]], NDArray[np.float64]]
 
 
 @dataclass(frozen=True)
@@ -43,7 +45,7 @@ class Jumped:
     """What an event's ``apply`` may return: the new state, times the solver must stop at, and jumps
     to schedule later (:class:`Jump`)."""
 
-    y: np.ndarray
+    y: NDArray[np.float64]
     breakpoints: Sequence[float] = ()
     jumps: Sequence[Jump] = ()
 
@@ -53,7 +55,7 @@ class Jump:
     """A state jump at a known time ``t``: ``y⁺ = apply(t, y⁻)``; ``apply=None`` is a bare breakpoint."""
 
     t: float
-    apply: Callable[[float, np.ndarray], np.ndarray] | None = None
+    apply: Callable[[float, NDArray[np.float64]], NDArray[np.float64]] | None = None
 
 
 @dataclass(frozen=True)
@@ -73,10 +75,10 @@ class Event:
         already closing when a previous pulse ends).
     """
 
-    condition: Callable[[float, np.ndarray], float]
-    apply: Callable[[float, np.ndarray], object]
+    condition: Callable[[float, NDArray[np.float64]], float]
+    apply: Callable[[float, NDArray[np.float64]], ArrayLike | Jumped | None]
     direction: float = -1.0
-    pending: Callable[[float, np.ndarray], bool] | None = None
+    pending: Callable[[float, NDArray[np.float64]], bool] | None = None
 
 
 @dataclass
@@ -97,15 +99,29 @@ class Solution:
         Accepted solver steps and derivative evaluations, summed over segments.
     """
 
-    t: np.ndarray
-    y: np.ndarray
-    y_dot: np.ndarray
-    jumps: list = field(default_factory=list)
+    t: NDArray[np.float64]
+    y: NDArray[np.float64]
+    y_dot: NDArray[np.float64]
+    jumps: list[tuple[float, NDArray[np.float64], NDArray[np.float64]]] = field(default_factory=list)
     n_steps: int = 0
     n_fun: int = 0
 
 
-def _normalised(y, quaternion):
+_Action = Callable[[float, NDArray[np.float64]], ArrayLike | Jumped | None]
+"""A jump's or an event's ``apply``: the state after it (``None``: no change), or a :class:`Jumped`."""
+
+
+class _SolverEvent(Protocol):
+    """An event as :func:`scipy.integrate.solve_ivp` takes it: a function of ``(t, y)`` that carries its
+    ``terminal`` and ``direction`` as attributes."""
+
+    terminal: bool
+    direction: float
+
+    def __call__(self, tt: float, yy: NDArray[np.float64], /) -> float: ...
+
+
+def _normalised(y: NDArray[np.float64], quaternion: slice | None) -> NDArray[np.float64]:
     if quaternion is None:
         return y
     y = np.array(y, dtype=float)
@@ -113,7 +129,7 @@ def _normalised(y, quaternion):
     return y
 
 
-def _as_jumped(result, y):
+def _as_jumped(result: ArrayLike | Jumped | None, y: NDArray[np.float64]) -> Jumped:
     if result is None:
         return Jumped(y)
     if isinstance(result, Jumped):
@@ -123,14 +139,14 @@ def _as_jumped(result, y):
 
 def integrate(
     fun: Derivative,
-    t_out,
-    y0,
+    t_out: ArrayLike,
+    y0: ArrayLike,
     *,
     t0: float | None = None,
     jumps: Sequence[Jump] = (),
     events: Sequence[Event] = (),
     rtol: float = 1e-10,
-    atol: float | np.ndarray = 1e-12,
+    atol: float | NDArray[np.float64] = 1e-12,
     max_step: float = np.inf,
     quaternion: slice | None = slice(3, 7),
     max_segments: int = 100_000,
@@ -171,46 +187,48 @@ def integrate(
     y = _normalised(np.asarray(y0, dtype=float), quaternion)
 
     # Scheduled stops: time-ordered, each with its jump (or None for a bare breakpoint).
-    stops: list[tuple[float, int, Callable | None]] = []
+    stops: list[tuple[float, int, _Action | None]] = []
     for k, jump in enumerate(jumps):
         if t <= jump.t < t_end or (jump.t == t_end and jump.apply is None):
             stops.append((float(jump.t), k, jump.apply))
     stops.sort(key=lambda s: (s[0], s[1]))
     counter = len(stops)
 
-    def add_stops(times, actions=None):
+    def add_stops(times: Sequence[float], actions: Sequence[_Action | None] | None = None) -> None:
         nonlocal counter
         for bt, action in zip(times, actions or [None] * len(times)):
             if t < bt < t_end:
                 bisect.insort(stops, (float(bt), counter, action), key=lambda s: (s[0], s[1]))
                 counter += 1
 
-    def solver_events(t_start):
+    def solver_events(t_start: float) -> list[_SolverEvent] | None:
         """The events for solve_ivp on a segment starting at ``t_start``. A condition that is exactly
         zero there (the event that just acted, at its root) is taken as lying on its pre-crossing side,
         so that the root finder looks for the next crossing instead of returning ``t_start`` again."""
-        out = []
+        out: list[_SolverEvent] = []
         for ev in events:
 
-            def g(tt, yy, ev=ev):
+            def g(tt: float, yy: NDArray[np.float64], ev: Event = ev) -> float:
                 value = ev.condition(tt, yy)
                 if tt == t_start and value == 0.0:
-                    return -np.copysign(np.finfo(float).tiny, ev.direction or -1.0)
+                    before: float = -np.copysign(np.finfo(float).tiny, ev.direction or -1.0)
+                    return before
                 return value
 
-            g.terminal = True
-            g.direction = ev.direction
-            out.append(g)
+            event = cast(_SolverEvent, g)  # a function's attributes, which mypy cannot type on a def
+            event.terminal = True
+            event.direction = ev.direction
+            out.append(event)
         return out or None
 
     n = y.size
     y_out = np.empty((t_out.size, n))
     y_dot = np.empty((t_out.size, n))
     filled = np.zeros(t_out.size, dtype=bool)
-    history: list = []
+    history: list[tuple[float, NDArray[np.float64], NDArray[np.float64]]] = []
     n_steps = n_fun = 0
 
-    def apply_jump(tt, yy, action):
+    def apply_jump(tt: float, yy: NDArray[np.float64], action: _Action) -> NDArray[np.float64]:
         result = _as_jumped(action(tt, yy), yy)
         after = _normalised(result.y, quaternion)
         history.append((tt, yy.copy(), after.copy()))

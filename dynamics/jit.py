@@ -55,7 +55,7 @@ import threading
 import types
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, overload
 
 __all__ = ["Deferred", "cache_path", "callee_files", "compile_lock", "lock_path", "njit"]
 
@@ -69,7 +69,8 @@ def _user_folder() -> Path:
     import gyroemu
 
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "gyroemu" / gyroemu.__version__
+    version: str = gyroemu.__version__  # read through the package's module __getattr__, so Any to mypy
+    return Path(base) / "gyroemu" / version
 
 
 def lock_path() -> Path:
@@ -251,12 +252,22 @@ class Deferred:
         return getattr(self.compiled(), name)
 
 
+@overload
+def njit(function: Callable[..., Any], **options: Any) -> Any: ...
+
+
+@overload
+def njit(function: None = None, **options: Any) -> Callable[[Callable[..., Any]], Any]: ...
+
+
 def njit(function: Callable[..., Any] | None = None, **options: Any) -> Any:
     """``numba.njit(cache=True, nogil=True, **options)``, deferred to first use, compiling under
     :func:`compile_lock`.
 
     Used bare (``@njit``) or with numba's options (``@njit(parallel=True)``). Only the dispatcher made
-    here is locked: its ``compile`` is replaced on the instance, not on numba's class.
+    here is locked: its ``compile`` is replaced on the instance, not on numba's class. To a type
+    checker the decorated function is ``Any`` either way (a :class:`Deferred`, then numba's
+    dispatcher), so its annotations check its body, not its callers.
     """
     options.setdefault("cache", True)
     options.setdefault("nogil", True)  # a compiled loop lets the writer's thread run meanwhile

@@ -285,7 +285,14 @@ def with_magnetic_environment(
 # No "contract" among the fast-math flags: with fused multiply-adds a position's bits came to depend on
 # whether its anchor was computed at it or before it (1 ulp); without, the same position, same bits.
 @njit(fastmath={"reassoc", "arcp", "nsz"})
-def _features(pos, w, cos_weights, sin_weights, spacing, out):  # pragma: no cover - compiled
+def _features(
+    pos: NDArray[np.float64],
+    w: NDArray[np.float64],
+    cos_weights: NDArray[np.float64],
+    sin_weights: NDArray[np.float64],
+    spacing: float,
+    out: NDArray[np.float64],
+) -> None:  # pragma: no cover - compiled
     """``out[n] = Σ_m cos_weights[:, m] cos(ω_m·p_n) + sin_weights[:, m] sin(ω_m·p_n)``, for (N, 3) ``pos``
     and (3, M) ``w``, ``cos_weights``, ``sin_weights``.
 

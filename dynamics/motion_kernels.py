@@ -22,7 +22,7 @@ The compiled functions are called from other compiled functions; import them by 
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from .jit import njit
 from .rotation import quat_multiply
@@ -43,6 +43,15 @@ __all__ = [
 ]
 
 _EPS = np.finfo(float).eps
+
+PhasorTable = tuple[float, float, NDArray[np.float64], NDArray[np.float64]]
+"""What :meth:`TimeGrid.phasor` gives and :func:`phasor_block` takes: ``(ω, φ, cos table, sin table)``."""
+
+SinesTable = tuple[
+    NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]
+]
+"""What :meth:`TimeGrid.sines` gives and :func:`sines_block` takes: amplitudes, angular frequencies and
+phases (C, K), and the offset tables (C, K, B)."""
 
 # --------------------------------------------------------------------------------------------------
 # Time grids and sinusoids
@@ -97,7 +106,7 @@ class TimeGrid:
     def __len__(self) -> int:
         return len(self.t)
 
-    def _offset_tables(self, omega):
+    def _offset_tables(self, omega: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """``cos(ω i h)`` and ``sin(ω i h)`` for ``i < B``, shape ``omega.shape + (B,)``; empty (last axis
         0) on other grids, whose kernels evaluate directly."""
         omega = np.asarray(omega, dtype=float)
@@ -107,14 +116,12 @@ class TimeGrid:
         angle = omega[..., None] * (np.arange(self.BLOCK) * self.h)
         return np.cos(angle), np.sin(angle)
 
-    def phasor(self, omega: float, phase: float = 0.0) -> tuple[float, float, np.ndarray, np.ndarray]:
+    def phasor(self, omega: float, phase: float = 0.0) -> PhasorTable:
         """What :func:`phasor_block` needs for ``cos(ω t + φ)``, ``sin(ω t + φ)``: ``(ω, φ, cos table,
         sin table)``, ``ω`` in rad/s, ``φ`` in rad, the tables (B,) (empty on a grid that is not uniform)."""
         return (float(omega), float(phase)) + self._offset_tables(float(omega))
 
-    def sines(
-        self, amplitude: ArrayLike, omega: ArrayLike, phase: ArrayLike
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def sines(self, amplitude: ArrayLike, omega: ArrayLike, phase: ArrayLike) -> SinesTable:
         """What :func:`sines_block` needs for ``x_c = Σ_k A_ck sin(ω_ck t + φ_ck)``: the arrays (C, K)
         broadcast from ``amplitude, omega, phase`` (any of (C, K), (C, 1), (K,), scalar; any unit, rad/s,
         rad) and the offset tables (C, K, B) (empty last axis on a grid that is not uniform)."""
@@ -126,13 +133,13 @@ class TimeGrid:
         )
         return (a, w, p) + self._offset_tables(w)
 
-    def cos_sin(self, omega: float, phase: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    def cos_sin(self, omega: float, phase: float = 0.0) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """``cos(ω t + φ)`` and ``sin(ω t + φ)``, each (N,); ``ω`` in rad/s, ``φ`` in rad."""
         c, s = np.empty(len(self.t)), np.empty(len(self.t))
         _cos_sin_kernel(self.t, self.uniform, self.BLOCK, self.phasor(omega, phase), c, s)
         return c, s
 
-    def sum_of_sines(self, amplitude: ArrayLike, omega: ArrayLike, phase: ArrayLike) -> np.ndarray:
+    def sum_of_sines(self, amplitude: ArrayLike, omega: ArrayLike, phase: ArrayLike) -> NDArray[np.float64]:
         """Sums of sinusoids per channel and their first two time derivatives.
 
         ``x_c(t) = Σ_k A_ck sin(ω_ck t + φ_ck)``, ``ẋ_c = Σ A ω cos(…)``,
@@ -169,7 +176,7 @@ SINCOS_LIMIT = 1e6
 
 
 @njit(inline="always")
-def _sincos_branchless(x):  # pragma: no cover - compiled
+def _sincos_branchless(x: float) -> tuple[float, float]:  # pragma: no cover - compiled
     """``(sin x, cos x)`` for ``|x| ≤ SINCOS_LIMIT``, branch-free (see the comment above)."""
     # x = n π/2 + y0 + y1 with |y0 + y1| ≤ π/4: π/2 in 33-bit parts (each product with n exact) and a
     # tail, fdlibm's reduction to 118 bits (its "second iteration", here always taken).
@@ -202,16 +209,19 @@ def _sincos_branchless(x):  # pragma: no cover - compiled
 
 
 @njit
-def sin_cos(x):  # pragma: no cover - compiled
+def sin_cos(x: float) -> tuple[float, float]:  # pragma: no cover - compiled
     """``(sin x, cos x)`` of one angle ``x`` (rad, float): :func:`_sincos_branchless` for
     ``|x| ≤ SINCOS_LIMIT``, the C library beyond (and for NaN, inf). Returns two floats."""
     if abs(x) <= SINCOS_LIMIT:
-        return _sincos_branchless(x)
+        pair: tuple[float, float] = _sincos_branchless(x)
+        return pair
     return np.sin(x), np.cos(x)
 
 
 @njit
-def sincos_block(x, count, s, c):  # pragma: no cover - compiled
+def sincos_block(
+    x: NDArray[np.float64], count: int, s: NDArray[np.float64], c: NDArray[np.float64]
+) -> None:  # pragma: no cover - compiled
     """``s[i], c[i] = sin x[i], cos x[i]`` for ``i < count``: one vectorised loop, then the library for
     arguments beyond :data:`SINCOS_LIMIT` (and NaN).
 
@@ -225,7 +235,7 @@ def sincos_block(x, count, s, c):  # pragma: no cover - compiled
 
 
 @njit
-def _grid_deviation(t, t0, h):  # pragma: no cover - compiled
+def _grid_deviation(t: NDArray[np.float64], t0: float, h: float) -> float:  # pragma: no cover - compiled
     """``max_n |t_n − (t_0 + n h)|`` in one pass (numpy would make three temporaries of N)."""
     deviation = 0.0
     for n in range(len(t)):
@@ -234,7 +244,15 @@ def _grid_deviation(t, t0, h):  # pragma: no cover - compiled
 
 
 @njit
-def phasor_block(t, start, count, uniform, phasor, c, s):  # pragma: no cover - compiled
+def phasor_block(
+    t: NDArray[np.float64],
+    start: int,
+    count: int,
+    uniform: bool,
+    phasor: PhasorTable,
+    c: NDArray[np.float64],
+    s: NDArray[np.float64],
+) -> None:  # pragma: no cover - compiled
     """``cos(ω t + φ)``, ``sin(ω t + φ)`` at the samples ``start … start + count − 1`` into
     ``c[:count]``, ``s[:count]``; ``phasor`` from :meth:`TimeGrid.phasor`. On a uniform grid ``start``
     must begin a block (a multiple of ``B``).
@@ -257,7 +275,9 @@ def phasor_block(t, start, count, uniform, phasor, c, s):  # pragma: no cover - 
 
 
 @njit
-def sines_block(t, start, count, uniform, sines, out):  # pragma: no cover - compiled
+def sines_block(
+    t: NDArray[np.float64], start: int, count: int, uniform: bool, sines: SinesTable, out: NDArray[np.float64]
+) -> None:  # pragma: no cover - compiled
     """Value, first and second derivative of the sums of sinusoids ``sines`` (:meth:`TimeGrid.sines`)
     at the samples ``start … start + count − 1`` into ``out[d, c, :count]`` (d = 0, 1, 2).
 
@@ -299,7 +319,14 @@ def sines_block(t, start, count, uniform, sines, out):  # pragma: no cover - com
 
 
 @njit
-def _cos_sin_kernel(t, uniform, block, phasor, c, s):  # pragma: no cover - compiled
+def _cos_sin_kernel(
+    t: NDArray[np.float64],
+    uniform: bool,
+    block: int,
+    phasor: PhasorTable,
+    c: NDArray[np.float64],
+    s: NDArray[np.float64],
+) -> None:  # pragma: no cover - compiled
     """:meth:`TimeGrid.cos_sin` block by block."""
     for start in range(0, len(t), block):
         count = min(block, len(t) - start)
@@ -307,7 +334,9 @@ def _cos_sin_kernel(t, uniform, block, phasor, c, s):  # pragma: no cover - comp
 
 
 @njit
-def _sum_of_sines_kernel(t, uniform, block, sines, out):  # pragma: no cover - compiled
+def _sum_of_sines_kernel(
+    t: NDArray[np.float64], uniform: bool, block: int, sines: SinesTable, out: NDArray[np.float64]
+) -> None:  # pragma: no cover - compiled
     """:meth:`TimeGrid.sum_of_sines` block by block, into ``out`` (3, C, N)."""
     for start in range(0, len(t), block):
         count = min(block, len(t) - start)
@@ -320,7 +349,7 @@ def _sum_of_sines_kernel(t, uniform, block, sines, out):  # pragma: no cover - c
 
 
 @njit
-def smooth_step_at(u):  # pragma: no cover - compiled
+def smooth_step_at(u: float) -> tuple[float, float, float, float, float]:  # pragma: no cover - compiled
     """``(S, S′, S″, S‴, I)`` of :func:`smooth_step` at one ``u`` (float, normalised time or distance):
     five floats, derivatives with respect to ``u``."""
     if u <= 0.0:
@@ -341,13 +370,13 @@ def smooth_step_at(u):  # pragma: no cover - compiled
 
 
 @njit
-def _smooth_step_kernel(u, out):  # pragma: no cover - compiled
+def _smooth_step_kernel(u: NDArray[np.float64], out: NDArray[np.float64]) -> None:  # pragma: no cover - compiled
     """:func:`smooth_step` of every ``u`` (N,) into ``out`` (5, N)."""
     for n in range(len(u)):
         out[0, n], out[1, n], out[2, n], out[3, n], out[4, n] = smooth_step_at(u[n])
 
 
-def smooth_step(u: ArrayLike, derivatives: int = 3, integral: bool = False) -> tuple[np.ndarray, ...]:
+def smooth_step(u: ArrayLike, derivatives: int = 3, integral: bool = False) -> tuple[NDArray[np.float64], ...]:
     """A smooth step from 0 to 1 with its derivatives, for speed changes, turns and tumble moves.
 
     ``S′(u) = (16/5) sin⁶(πu)`` is a bump of unit area on [0, 1], so::
@@ -387,7 +416,7 @@ def smooth_step(u: ArrayLike, derivatives: int = 3, integral: bool = False) -> t
 
 def rotation_basis(
     axis: ArrayLike, q_left: ArrayLike = (1.0, 0.0, 0.0, 0.0), q_right: ArrayLike = (1.0, 0.0, 0.0, 0.0)
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The two constant quaternions of a rotation about a fixed axis.
 
     ``q_left ⊗ exp(½ θ n) ⊗ q_right = cos(θ/2) A + sin(θ/2) B`` with ``A = q_left ⊗ q_right`` and
@@ -409,7 +438,9 @@ def rotation_basis(
 
 
 @njit
-def quat_rotate_xyz(q, x, y, z):  # pragma: no cover - compiled
+def quat_rotate_xyz(
+    q: NDArray[np.float64] | tuple[float, float, float, float], x: float, y: float, z: float
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
     """``q ⊗ (0, v) ⊗ q*`` for one vector ``v = (x, y, z)``: the formula of
     :func:`gyroemu.dynamics.rotation.quat_rotate`, ``v + 2w (u × v) + 2 u × (u × v)``.
 
@@ -428,13 +459,15 @@ def quat_rotate_xyz(q, x, y, z):  # pragma: no cover - compiled
 
 
 @njit
-def cross_xyz(ax, ay, az, bx, by, bz):  # pragma: no cover - compiled
+def cross_xyz(
+    ax: float, ay: float, az: float, bx: float, by: float, bz: float
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
     """``a × b`` as ``np.cross`` computes it, for vectors given as three floats each; returns three floats."""
     return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
 
 
 @njit
-def segment_index(edges, x, k):  # pragma: no cover - compiled
+def segment_index(edges: NDArray[np.float64], x: float, k: int) -> int:  # pragma: no cover - compiled
     """``max(searchsorted(edges, x, side="right") − 1, 0)``: the last of the sorted ``edges`` at or
     before ``x`` (0 before the first). Tries ``k``, the previous sample's segment, first: consecutive
     samples mostly share it.
@@ -445,4 +478,4 @@ def segment_index(edges, x, k):  # pragma: no cover - compiled
     last = len(edges) - 1
     if (k == 0 or edges[k] <= x) and (k == last or x < edges[k + 1]):
         return k
-    return max(np.searchsorted(edges, x, side="right") - 1, 0)
+    return max(int(np.searchsorted(edges, x, side="right")) - 1, 0)

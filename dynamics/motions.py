@@ -47,11 +47,14 @@ from __future__ import annotations
 from typing import Annotated, ClassVar, Literal
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from .config import NonNegativeReal, PositiveReal, Real, Section, Vec3
 from .jit import njit
 from .motion_kernels import (
+    PhasorTable,
+    SinesTable,
     TimeGrid,
     cross_xyz,
     phasor_block,
@@ -85,12 +88,13 @@ __all__ = [
 _E_Z = np.array([0.0, 0.0, 1.0])
 
 
-def _unit(v, what: str) -> np.ndarray:
+def _unit(v: ArrayLike, what: str) -> NDArray[np.float64]:
     v = np.asarray(v, dtype=float)
     norm = np.linalg.norm(v)
     if not norm > 0:
         raise ValueError(f"{what} must be a non-zero vector")
-    return v / norm
+    unit: NDArray[np.float64] = v / norm
+    return unit
 
 
 # --------------------------------------------------------------------------------------------------
@@ -109,7 +113,7 @@ class StaticSpec(EarthBoundSpec):
     pointwise: ClassVar[bool] = True  # the truth is a closed form in t
     attitude: Attitude = Field(default_factory=Attitude)
 
-    def world_motion(self, t):
+    def world_motion(self, t: NDArray[np.float64]) -> WorldMotion:
         n = len(t)
         q = np.empty((n, 4))
         q[:] = self.attitude.quat()
@@ -165,13 +169,15 @@ class RateSteps(Section):
 
     @field_validator("dwell_s")
     @classmethod
-    def _one_dwell_per_rate(cls, dwell, info: ValidationInfo):
+    def _one_dwell_per_rate(cls, dwell: list[float], info: ValidationInfo) -> list[float]:
         rates = info.data.get("rates_deg_s")
         if rates is not None and len(dwell) != len(rates):
             raise ValueError(f"needs one dwell time per rate: {len(rates)} rates, {len(dwell)} dwell times")
         return dwell
 
-    def schedule(self):
+    def schedule(
+        self,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Segments of constant acceleration: start time (s), angle (rad), rate (rad/s), accel (rad/s²).
 
         Returns four arrays (M,); segment ``m`` lasts from ``start[m]`` to ``start[m + 1]`` (the last one
@@ -180,7 +186,7 @@ class RateSteps(Section):
         max_accel = np.radians(self.max_accel_deg_s2)
         start, angle, rate, accel = [0.0], [np.radians(self.initial_angle_deg)], [0.0], []
 
-        def run(duration, a, rate_after):
+        def run(duration: float, a: float, rate_after: float) -> None:
             """Close the open segment after ``duration`` at acceleration ``a``; open the next one."""
             accel.append(a)
             start.append(start[-1] + duration)
@@ -194,7 +200,7 @@ class RateSteps(Section):
         accel.append(0.0)  # the last rate is held
         return np.array(start), np.array(angle), np.array(rate), np.array(accel)
 
-    def angle(self, t):
+    def angle(self, t: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Table angle, rate and acceleration (N,) each: piecewise quadratic, linear, constant."""
         start, angle0, rate0, accel = self.schedule()
         k = np.clip(np.searchsorted(start, t, side="right") - 1, 0, None)
@@ -220,7 +226,7 @@ class Tumble(Section):
     dwell_s: PositiveReal
     move_s: PositiveReal
 
-    def schedule(self):
+    def schedule(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Positions as quaternions (K, 4) and the rotation vectors (K, 3) of the moves from each to the
         next in table-top axes (the last one zero), rad."""
         q = quat_from_rpy_deg(np.asarray(self.rpy_deg, dtype=float).reshape(-1, 3))
@@ -250,14 +256,14 @@ class RateTableSpec(EarthBoundSpec):
 
     @field_validator("steps", "tumble")
     @classmethod
-    def _one_mode(cls, value, info: ValidationInfo):
+    def _one_mode(cls, value: RateSteps | Tumble | None, info: ValidationInfo) -> RateSteps | Tumble | None:
         given = [m for m in ("constant", "steps") if m != info.field_name and info.data.get(m) is not None]
         if value is not None and given:
             raise ValueError(f"give one mode table only, not both [{given[0]}] and [{info.field_name}]")
         return value
 
     @model_validator(mode="after")
-    def _a_mode(self):
+    def _a_mode(self) -> RateTableSpec:
         if self.constant is None and self.steps is None and self.tumble is None:
             raise ValueError("a rate table needs one mode table: [constant], [steps] or [tumble]")
         return self
@@ -266,7 +272,7 @@ class RateTableSpec(EarthBoundSpec):
     def mode(self) -> str:
         return next(m for m in ("constant", "steps", "tumble") if getattr(self, m) is not None)
 
-    def world_motion(self, t):
+    def world_motion(self, t: ArrayLike) -> WorldMotion:
         t = np.asarray(t, dtype=float)
         q_base = quat_from_rpy_deg(self.table.base_rpy_deg)
         q_mount = quat_from_rpy_deg(self.table.mount_rpy_deg)
@@ -281,6 +287,7 @@ class RateTableSpec(EarthBoundSpec):
             schedule = tuple(np.array([x]) for x in (0.0, initial, rate, 0.0))
             half = grid.phasor(0.5 * rate, 0.5 * initial)
         else:
+            assert self.steps is not None  # neither tumble nor constant: the steps (_a_mode holds one mode)
             schedule = self.steps.schedule()
             half = grid.phasor(0.0)  # unused: cos(θ/2), sin(θ/2) directly
         # q_wb = q_base ⊗ Rz(θ) ⊗ q_mount = cos(θ/2) A + sin(θ/2) B
@@ -308,8 +315,11 @@ class RateTableSpec(EarthBoundSpec):
         )
         return WorldMotion(t, *arrays, extras={"table_angle_rad": angle, "table_rate_rad_s": rate})
 
-    def _tumble_motion(self, t, q_base, q_mount):
+    def _tumble_motion(
+        self, t: NDArray[np.float64], q_base: NDArray[np.float64], q_mount: NDArray[np.float64]
+    ) -> WorldMotion:
         tumble = self.tumble
+        assert tumble is not None  # world_motion calls this in tumble mode only
         positions, moves = tumble.schedule()
         angles = np.linalg.norm(moves, axis=1)  # |φ_k|, rad
         axes = moves / np.where(angles > 0, angles, 1.0)[:, None]  # φ̂_k, table-top axes
@@ -337,26 +347,26 @@ class RateTableSpec(EarthBoundSpec):
 
 @njit
 def _rate_table_kernel(
-    t,
-    uniform,
-    block,
-    schedule,
-    half,
-    by_phasor,
-    a,
-    b,
-    axis_b,
-    q_base,
-    lever,
-    q,
-    omega,
-    alpha,
-    pos,
-    vel,
-    acc,
-    angle_out,
-    rate_out,
-):  # pragma: no cover - compiled
+    t: NDArray[np.float64],
+    uniform: bool,
+    block: int,
+    schedule: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
+    half: PhasorTable,
+    by_phasor: bool,
+    a: NDArray[np.float64],
+    b: NDArray[np.float64],
+    axis_b: NDArray[np.float64],
+    q_base: NDArray[np.float64],
+    lever: NDArray[np.float64],
+    q: NDArray[np.float64],
+    omega: NDArray[np.float64],
+    alpha: NDArray[np.float64],
+    pos: NDArray[np.float64],
+    vel: NDArray[np.float64],
+    acc: NDArray[np.float64],
+    angle_out: NDArray[np.float64],
+    rate_out: NDArray[np.float64],
+) -> None:  # pragma: no cover - compiled
     """:meth:`RateTableSpec.world_motion` in the turning modes, block by block.
 
     ``schedule``: segments of constant angular acceleration (:meth:`RateSteps.schedule`), which give the
@@ -410,8 +420,24 @@ def _rate_table_kernel(
 
 @njit
 def _tumble_kernel(
-    t, period, dwell, move, angles, a, b, axes, axes_b, q_mount_conj, lever, q, omega, alpha, pos, vel, acc
-):  # pragma: no cover - compiled
+    t: NDArray[np.float64],
+    period: float,
+    dwell: float,
+    move: float,
+    angles: NDArray[np.float64],
+    a: NDArray[np.float64],
+    b: NDArray[np.float64],
+    axes: NDArray[np.float64],
+    axes_b: NDArray[np.float64],
+    q_mount_conj: NDArray[np.float64],
+    lever: NDArray[np.float64],
+    q: NDArray[np.float64],
+    omega: NDArray[np.float64],
+    alpha: NDArray[np.float64],
+    pos: NDArray[np.float64],
+    vel: NDArray[np.float64],
+    acc: NDArray[np.float64],
+) -> None:  # pragma: no cover - compiled
     """The tumble of :meth:`RateTableSpec._tumble_motion`, one pass over the samples."""
     has_lever = lever[0] != 0.0 or lever[1] != 0.0 or lever[2] != 0.0
     last = len(angles) - 1
@@ -468,7 +494,7 @@ class AngularOscillation(Section):
 
     @field_validator("axis_b")
     @classmethod
-    def _nonzero(cls, axis):
+    def _nonzero(cls, axis: Vec3) -> Vec3:
         _unit(axis, "the oscillation axis")
         return axis
 
@@ -494,7 +520,7 @@ class OscillationSpec(EarthBoundSpec):
     angular: AngularOscillation
     linear: LinearOscillation | None = None
 
-    def world_motion(self, t):
+    def world_motion(self, t: ArrayLike) -> WorldMotion:
         t = np.asarray(t, dtype=float)
         grid = TimeGrid(t)
         osc = self.angular
@@ -516,8 +542,21 @@ class OscillationSpec(EarthBoundSpec):
 
 @njit
 def _axis_oscillation_kernel(
-    t, uniform, block, sines, a, b, axis, directions, q, omega, alpha, pos, vel, acc
-):  # pragma: no cover - compiled
+    t: NDArray[np.float64],
+    uniform: bool,
+    block: int,
+    sines: SinesTable,
+    a: NDArray[np.float64],
+    b: NDArray[np.float64],
+    axis: NDArray[np.float64],
+    directions: NDArray[np.float64],
+    q: NDArray[np.float64],
+    omega: NDArray[np.float64],
+    alpha: NDArray[np.float64],
+    pos: NDArray[np.float64],
+    vel: NDArray[np.float64],
+    acc: NDArray[np.float64],
+) -> None:  # pragma: no cover - compiled
     """Oscillation about a fixed body axis with linear oscillations, block by block (oscillation, sculling).
 
     Channel 0 of the sums of sinusoids ``sines`` is the angle θ about ``axis`` (body axes):
@@ -591,7 +630,7 @@ class ConingSpec(EarthBoundSpec):
     pointwise: ClassVar[bool] = True  # the truth is a closed form in t
     coning: Coning
 
-    def world_motion(self, t):
+    def world_motion(self, t: ArrayLike) -> WorldMotion:
         t = np.asarray(t, dtype=float)
         cone = self.coning
         theta, omega = np.radians(cone.half_angle_deg), 2 * np.pi * cone.frequency_hz
@@ -621,7 +660,21 @@ class ConingSpec(EarthBoundSpec):
 
 
 @njit
-def _coning_kernel(t, uniform, block, phasor, sj, sk, cq, rate_x, w, ow, q, rate, accel):  # pragma: no cover
+def _coning_kernel(
+    t: NDArray[np.float64],
+    uniform: bool,
+    block: int,
+    phasor: PhasorTable,
+    sj: NDArray[np.float64],
+    sk: NDArray[np.float64],
+    cq: NDArray[np.float64],
+    rate_x: float,
+    w: float,
+    ow: float,
+    q: NDArray[np.float64],
+    rate: NDArray[np.float64],
+    accel: NDArray[np.float64],
+) -> None:  # pragma: no cover
     """:meth:`ConingSpec.world_motion` block by block: ``q = cos Ωt sj + sin Ωt sk + cq``,
     ``ω = (rate_x, −w sin Ωt, w cos Ωt)``, ``α = (0, ow cos Ωt, ow sin Ωt)`` with ``ow = −Ω w``."""
     c, s = np.empty(block), np.empty(block)
@@ -678,7 +731,7 @@ class ScullingSpec(EarthBoundSpec):
     pointwise: ClassVar[bool] = True  # the truth is a closed form in t
     sculling: Sculling
 
-    def world_motion(self, t):
+    def world_motion(self, t: ArrayLike) -> WorldMotion:
         t = np.asarray(t, dtype=float)
         sc = self.sculling
         omega = 2 * np.pi * sc.frequency_hz

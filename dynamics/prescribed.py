@@ -16,10 +16,12 @@ yaw 0 points body x east, yaw 90 north.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 from pydantic import Field
 
 from .config import Section, Vec3
@@ -31,7 +33,7 @@ from .trajectory import Trajectory, trajectory_from_world_motion
 __all__ = ["quat_from_rpy_deg", "WorldMotion", "motion_arrays", "EarthBoundSpec", "Attitude"]
 
 
-def quat_from_rpy_deg(rpy_deg: ArrayLike) -> np.ndarray:
+def quat_from_rpy_deg(rpy_deg: ArrayLike) -> NDArray[np.float64]:
     """Quaternion (4,) or (K, 4) of ``[roll, pitch, yaw]`` in degrees, ``R = Rz(yaw) Ry(pitch) Rx(roll)``."""
     return quat_from_euler_zyx(np.radians(np.asarray(rpy_deg, dtype=float)))
 
@@ -54,17 +56,24 @@ class WorldMotion:
         Truth particular to the kind (table angle, car speed, ...), first axis N.
     """
 
-    t: np.ndarray
-    q_wb: np.ndarray
-    omega_wb_b: np.ndarray
-    alpha_wb_b: np.ndarray
-    pos_w: np.ndarray
-    vel_w: np.ndarray
-    acc_w: np.ndarray
-    extras: dict = field(default_factory=dict)
+    t: NDArray[np.float64]
+    q_wb: NDArray[np.float64]
+    omega_wb_b: NDArray[np.float64]
+    alpha_wb_b: NDArray[np.float64]
+    pos_w: NDArray[np.float64]
+    vel_w: NDArray[np.float64]
+    acc_w: NDArray[np.float64]
+    extras: dict[str, NDArray[Any]] = field(default_factory=dict)
 
     @classmethod
-    def rotation_only(cls, t, q_wb, omega_wb_b, alpha_wb_b, extras=None) -> WorldMotion:
+    def rotation_only(
+        cls,
+        t: NDArray[np.float64],
+        q_wb: NDArray[np.float64],
+        omega_wb_b: NDArray[np.float64],
+        alpha_wb_b: NDArray[np.float64],
+        extras: dict[str, NDArray[Any]] | None = None,
+    ) -> WorldMotion:
         """A body that rotates about its fixed reference point at the world origin."""
         # Three calls, not copies of one: np.zeros maps zero pages lazily, copies would write them.
         n = len(t)
@@ -72,7 +81,16 @@ class WorldMotion:
         return cls(t, q_wb, omega_wb_b, alpha_wb_b, pos, vel, acc, extras or {})
 
 
-def motion_arrays(n: int, moves: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def motion_arrays(
+    n: int, moves: bool
+) -> tuple[
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+]:
     """Outputs for a kind's kernel: ``q_wb`` (N, 4), ``ω_wb``, ``α_wb`` (N, 3), position, velocity,
     acceleration (N, 3). The kernel writes all of them if the body ``moves``; else position, velocity and
     acceleration are zeros (``np.zeros`` maps fresh zero pages lazily, cheaper than writing zeros; for
@@ -87,16 +105,16 @@ class EarthBoundSpec(ScenarioSpec):
 
     site: Site = Field(default_factory=Site)
 
-    def world_motion(self, t: np.ndarray) -> WorldMotion:
+    def world_motion(self, t: NDArray[np.float64]) -> WorldMotion:
         """The motion relative to the world frame at the times ``t`` (N,), s."""
         raise NotImplementedError
 
-    def evaluator(self):
+    def evaluator(self) -> Callable[[NDArray[np.float64]], WorldMotion]:
         """A callable ``t -> WorldMotion`` with the time-independent setup (series, schedules) done once,
         for evaluating the motion piece by piece (a stream); by default :meth:`world_motion` itself."""
         return self.world_motion
 
-    def trajectory(self, t) -> Trajectory:
+    def trajectory(self, t: ArrayLike) -> Trajectory:
         m = self.world_motion(np.asarray(t, dtype=float))
         return trajectory_from_world_motion(
             m.t,
@@ -116,6 +134,6 @@ class Attitude(Section):
 
     rpy_deg: Vec3 = (0.0, 0.0, 0.0)
 
-    def quat(self) -> np.ndarray:
+    def quat(self) -> NDArray[np.float64]:
         """``q_wb`` (4,)."""
         return quat_from_rpy_deg(self.rpy_deg)

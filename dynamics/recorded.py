@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -101,11 +102,11 @@ class MotionSamples:
         The text file's line of each sample, for messages (None: messages name rows from 0).
     """
 
-    t: np.ndarray
-    q_wb: np.ndarray
-    pos_w: np.ndarray | None = None
+    t: NDArray[np.float64]
+    q_wb: NDArray[np.float64]
+    pos_w: NDArray[np.float64] | None = None
     source: str = "<samples>"
-    lines: np.ndarray | None = None
+    lines: NDArray[np.integer[Any]] | None = None
 
     def __post_init__(self) -> None:
         n = len(self.t)
@@ -306,8 +307,8 @@ class RecordedMotion:
 
     def _lambda(
         self,
-        t: np.ndarray,
-        y: np.ndarray,
+        t: NDArray[np.float64],
+        y: NDArray[np.float64],
         lam: float | None,
         cutoff: float | None,
         noise: float | None,
@@ -340,7 +341,8 @@ class RecordedMotion:
             raise RecordedMotionError(
                 f"{self.source}: times {t.min():.6g}..{t.max():.6g} s leave the recording's span 0..{span:.6g} s"
             )
-        return np.clip(t, 0.0, span)
+        clipped: NDArray[np.float64] = np.clip(t, 0.0, span)
+        return clipped
 
     def attitude(self, t: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """``q_wb`` (M, 4), ``ω_wb`` and ``α_wb`` (M, 3, body axes, relative to the world) at times ``t``

@@ -43,9 +43,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from .body_kernels import cross, pure_quat, quat_product, rotate, rotate_back, rotation_matrix, stack_state
 from .earth import Environment
@@ -72,7 +73,7 @@ Q = slice(3, 7)
 P = slice(7, 10)
 L = slice(10, 13)
 
-ForceFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+ForceFn = Callable[[ArrayLike, NDArray[np.float64]], NDArray[np.float64]]
 """``force(t, y) -> (..., 3)``: world axes, newtons (or N m for a torque about the centre of mass)."""
 
 
@@ -81,7 +82,7 @@ ForceFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 # --------------------------------------------------------------------------------------------
 
 
-def point_position(pos, r, lever) -> np.ndarray:
+def point_position(pos: ArrayLike, r: NDArray[np.float64], lever: ArrayLike) -> NDArray[np.float64]:
     """World position of a body-fixed point: ``x + R r_b``.
 
     Parameters
@@ -93,7 +94,7 @@ def point_position(pos, r, lever) -> np.ndarray:
     return np.asarray(pos, dtype=float) + rotate(r, lever)
 
 
-def point_velocity(vel, omega, lever) -> np.ndarray:
+def point_velocity(vel: ArrayLike, omega: ArrayLike, lever: ArrayLike) -> NDArray[np.float64]:
     """Velocity of a body-fixed point: ``v + ω × r`` (scribe notes: ``v_p = v_cm + ω × r_i``).
 
     All three arguments in one set of axes, and ``ω`` relative to the frame ``v`` is measured in:
@@ -104,7 +105,7 @@ def point_velocity(vel, omega, lever) -> np.ndarray:
     return np.asarray(vel, dtype=float) + cross(omega, lever)
 
 
-def point_acceleration(acc, omega, alpha, lever) -> np.ndarray:
+def point_acceleration(acc: ArrayLike, omega: ArrayLike, alpha: ArrayLike, lever: ArrayLike) -> NDArray[np.float64]:
     """Acceleration of a body-fixed point: ``a + α × r + ω × (ω × r)`` (tangential and centripetal).
 
     ``ω`` and ``α = dω/dt`` relative to the frame in which ``a`` is taken; all vectors in one set of
@@ -116,7 +117,7 @@ def point_acceleration(acc, omega, alpha, lever) -> np.ndarray:
     return np.asarray(acc, dtype=float) + cross(alpha, lever) + cross(omega, cross(omega, lever))
 
 
-def contact_mass_matrix(mass, inertia_w_inv, lever_w) -> np.ndarray:
+def contact_mass_matrix(mass: float, inertia_w_inv: NDArray[np.float64], lever_w: ArrayLike) -> NDArray[np.float64]:
     """``K`` with ``Δu = K J``: the change of a point's velocity under an impulse ``J`` at that point.
 
     ``K = (1/m) 1 − [r]× I_w⁻¹ [r]×`` (Mirtich 1996, *Impulse-based dynamic simulation of rigid body
@@ -151,13 +152,13 @@ class RigidBody:
     """
 
     mass: float
-    inertia_b: np.ndarray
-    frame_rate_w: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    inertia_b: NDArray[np.float64]
+    frame_rate_w: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     if TYPE_CHECKING:  # set by __post_init__; declared for the type checker only, not dataclass fields
-        _inertia_inv: np.ndarray = field(init=False, repr=False)
+        _inertia_inv: NDArray[np.float64] = field(init=False, repr=False)
         _rotating: bool = field(init=False, repr=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not self.mass > 0:
             raise ValueError(f"mass must be positive, got {self.mass}")
         object.__setattr__(self, "inertia_b", check_inertia(self.inertia_b))
@@ -167,7 +168,13 @@ class RigidBody:
 
     # -- building and reading states ---------------------------------------------------------------
 
-    def state(self, pos_w=(0, 0, 0), q_wb=(1, 0, 0, 0), vel_w=(0, 0, 0), omega_b=(0, 0, 0)) -> np.ndarray:
+    def state(
+        self,
+        pos_w: ArrayLike = (0, 0, 0),
+        q_wb: ArrayLike = (1, 0, 0, 0),
+        vel_w: ArrayLike = (0, 0, 0),
+        omega_b: ArrayLike = (0, 0, 0),
+    ) -> NDArray[np.float64]:
         """The state ``[x, q, P, L]`` of a body at ``pos_w`` with attitude ``q_wb``, moving at ``vel_w``
         (world-relative, m/s) and turning at ``omega_b`` (inertial, body axes, rad/s). Shapes broadcast;
         returns ``(..., 13)``."""
@@ -179,32 +186,37 @@ class RigidBody:
         shape = np.broadcast_shapes(pos.shape[:-1], q.shape[:-1], vel.shape[:-1], omega.shape[:-1])
         return stack_state(shape, [pos, q, momentum, angular_momentum])
 
-    def omega_b(self, y, r=None) -> np.ndarray:
+    def omega_b(self, y: NDArray[np.float64], r: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
         """Inertial angular velocity in body axes: ``ω_b = I_b⁻¹ Rᵀ L``; ``(..., 3)``."""
         r = rotation_matrix(y[..., Q]) if r is None else r
         return rotate_back(r, y[..., L]) @ self._inertia_inv.T
 
-    def omega_wb_w(self, y, r=None) -> np.ndarray:
+    def omega_wb_w(self, y: NDArray[np.float64], r: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
         """Angular velocity relative to the world frame, world axes: ``R ω_b − Ω``; ``(..., 3)``."""
         r = rotation_matrix(y[..., Q]) if r is None else r
         return rotate(r, self.omega_b(y, r)) - self.frame_rate_w
 
-    def velocity(self, y) -> np.ndarray:
+    def velocity(self, y: NDArray[np.float64]) -> NDArray[np.float64]:
         """World-relative velocity of the centre of mass: ``v = P / m``."""
         return y[..., P] / self.mass
 
-    def kinetic_energy(self, y) -> np.ndarray:
+    def kinetic_energy(self, y: NDArray[np.float64]) -> float | NDArray[np.float64]:
         """``½ P·P/m + ½ ω_b · I_b ω_b``, J (with world-relative ``P``, inertial ``ω``)."""
         w = self.omega_b(y)
-        return 0.5 * np.sum(y[..., P] ** 2, -1) / self.mass + 0.5 * np.einsum("...i,ij,...j->...", w, self.inertia_b, w)
+        energy: float | NDArray[np.float64] = 0.5 * np.sum(y[..., P] ** 2, -1) / self.mass + 0.5 * np.einsum(
+            "...i,ij,...j->...", w, self.inertia_b, w
+        )
+        return energy
 
-    def inertia_w_inv(self, r) -> np.ndarray:
+    def inertia_w_inv(self, r: NDArray[np.float64]) -> NDArray[np.float64]:
         """``I_w⁻¹ = R I_b⁻¹ Rᵀ``, ``(..., 3, 3)``."""
         return r @ self._inertia_inv @ np.swapaxes(r, -1, -2)
 
     # -- equations of motion -----------------------------------------------------------------------
 
-    def derivative(self, t, y, force: ForceFn | None = None, torque: ForceFn | None = None) -> np.ndarray:
+    def derivative(
+        self, t: ArrayLike, y: ArrayLike, force: ForceFn | None = None, torque: ForceFn | None = None
+    ) -> NDArray[np.float64]:
         """``ẏ = [ẋ, q̇, Ṗ, L̇]`` (module docstring) for states ``(..., 13)`` at times ``t``.
 
         ``force(t, y)`` and ``torque(t, y)`` return world-axes vectors (N, and N m about the centre of
@@ -223,7 +235,9 @@ class RigidBody:
             l_dot = l_dot - cross(self.frame_rate_w, y[..., L])  # turning axes: − Ω×L
         return stack_state(y.shape[:-1], [x_dot, q_dot, p_dot, l_dot])
 
-    def accelerations(self, t, y, force: ForceFn | None = None, torque: ForceFn | None = None):
+    def accelerations(
+        self, t: ArrayLike, y: ArrayLike, force: ForceFn | None = None, torque: ForceFn | None = None
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Exact accelerations at states ``(..., 13)``.
 
         Returns
@@ -245,7 +259,7 @@ class RigidBody:
 
     # -- impulses ------------------------------------------------------------------------------------
 
-    def apply_impulse(self, y, impulse_w, point_w) -> np.ndarray:
+    def apply_impulse(self, y: ArrayLike, impulse_w: ArrayLike, point_w: ArrayLike) -> NDArray[np.float64]:
         """State after an impulse ``J`` (N s, world) at the world point ``point_w``:
         ``ΔP = J``, ``ΔL = r × J`` with ``r = point − x`` (scribe notes: ``τ = r × F``)."""
         y = np.array(y, dtype=float)
@@ -254,14 +268,22 @@ class RigidBody:
         y[..., L] += cross(np.asarray(point_w, dtype=float) - y[..., X], j)
         return y
 
-    def point_velocity_w(self, y, lever_b) -> np.ndarray:
+    def point_velocity_w(self, y: NDArray[np.float64], lever_b: ArrayLike) -> NDArray[np.float64]:
         """World-relative velocity of the body point ``lever_b`` (body axes from the centre of mass)."""
         r = rotation_matrix(y[..., Q])
         return point_velocity(self.velocity(y), self.omega_wb_w(y, r), rotate(r, lever_b))
 
 
 def world_motion_trajectory(
-    t, pos_w, q_wb, vel_w, acc_w, omega_b, alpha_b, environment: Environment, extras=None
+    t: ArrayLike,
+    pos_w: ArrayLike,
+    q_wb: ArrayLike,
+    vel_w: ArrayLike,
+    acc_w: ArrayLike,
+    omega_b: NDArray[np.float64],
+    alpha_b: NDArray[np.float64],
+    environment: Environment,
+    extras: dict[str, NDArray[Any]] | None = None,
 ) -> Trajectory:
     """A :class:`Trajectory` from integrated states, given the *inertial* ``omega_b`` and ``alpha_b``.
 

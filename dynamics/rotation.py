@@ -22,9 +22,10 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, overload
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from .jit import njit
 
@@ -61,14 +62,14 @@ __all__ = [
 ]
 
 
-def _q(q) -> np.ndarray:
+def _q(q: ArrayLike) -> NDArray[np.float64]:
     q = np.asarray(q, dtype=float)
     if q.shape[-1] != 4:
         raise ValueError(f"quaternions need a last axis of length 4 (w, x, y, z), got shape {q.shape}")
     return q
 
 
-def _v(v) -> np.ndarray:
+def _v(v: ArrayLike) -> NDArray[np.float64]:
     v = np.asarray(v, dtype=float)
     if v.shape[-1] != 3:
         raise ValueError(f"vectors need a last axis of length 3, got shape {v.shape}")
@@ -80,7 +81,9 @@ def _v(v) -> np.ndarray:
 
 
 @njit
-def half_turn(phi_x, phi_y, phi_z):  # pragma: no cover - compiled
+def half_turn(
+    phi_x: float, phi_y: float, phi_z: float
+) -> tuple[float, float, float, float]:  # pragma: no cover - compiled
     """exp(φ/2) = (cos |φ|/2, sin(|φ|/2) φ/|φ|) of a rotation vector φ (rad), as (w, x, y, z)."""
     angle = math.sqrt(phi_x * phi_x + phi_y * phi_y + phi_z * phi_z)
     s = math.sin(0.5 * angle) / angle if angle > 1e-12 else 0.5 - angle * angle / 48.0
@@ -88,7 +91,9 @@ def half_turn(phi_x, phi_y, phi_z):  # pragma: no cover - compiled
 
 
 @njit
-def hamilton_product(aw, ax, ay, az, bw, bx, by, bz):  # pragma: no cover - compiled
+def hamilton_product(
+    aw: float, ax: float, ay: float, az: float, bw: float, bx: float, by: float, bz: float
+) -> tuple[float, float, float, float]:  # pragma: no cover - compiled
     """a ⊗ b (Hamilton) of two quaternions given by their components, as (w, x, y, z); not renormalised."""
     w = aw * bw - ax * bx - ay * by - az * bz
     x = aw * bx + ax * bw + ay * bz - az * by
@@ -98,7 +103,9 @@ def hamilton_product(aw, ax, ay, az, bw, bx, by, bz):  # pragma: no cover - comp
 
 
 @njit
-def set_product(q, aw, ax, ay, az, bw, bx, by, bz):  # pragma: no cover - compiled
+def set_product(
+    q: NDArray[np.float64], aw: float, ax: float, ay: float, az: float, bw: float, bx: float, by: float, bz: float
+) -> None:  # pragma: no cover - compiled
     """q ← a ⊗ b (Hamilton), renormalised; ``q`` (4,) in place (it may hold a or b)."""
     w, x, y, z = hamilton_product(aw, ax, ay, az, bw, bx, by, bz)
     n = math.sqrt(w * w + x * x + y * y + z * z)
@@ -106,14 +113,18 @@ def set_product(q, aw, ax, ay, az, bw, bx, by, bz):  # pragma: no cover - compil
 
 
 @njit
-def rotate_body(q, phi_x, phi_y, phi_z):  # pragma: no cover - compiled
+def rotate_body(
+    q: NDArray[np.float64], phi_x: float, phi_y: float, phi_z: float
+) -> None:  # pragma: no cover - compiled
     """q ← q ⊗ exp(φ/2) for a body-frame rotation vector φ (rad): the strapdown step."""
     c, dx, dy, dz = half_turn(phi_x, phi_y, phi_z)
     set_product(q, q[0], q[1], q[2], q[3], c, dx, dy, dz)
 
 
 @njit
-def _multiply_rows(p, q, out):  # pragma: no cover - compiled
+def _multiply_rows(
+    p: NDArray[np.float64], q: NDArray[np.float64], out: NDArray[np.float64]
+) -> None:  # pragma: no cover - compiled
     for i in range(out.shape[0]):
         pw, px, py, pz = p[i, 0], p[i, 1], p[i, 2], p[i, 3]
         qw, qx, qy, qz = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
@@ -123,7 +134,9 @@ def _multiply_rows(p, q, out):  # pragma: no cover - compiled
         out[i, 3] = pw * qz + px * qy - py * qx + pz * qw
 
 
-def _rows(a: np.ndarray, b: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[int, ...]]:
+def _rows(
+    a: NDArray[np.float64], b: NDArray[np.float64], width: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], tuple[int, ...]]:
     """``a`` and ``b`` broadcast over their leading axes and viewed as rows, the output rows of ``width``
     values, and the output's leading shape (the rows are views where the shapes allow)."""
     lead = a.shape[:-1]
@@ -135,35 +148,36 @@ def _rows(a: np.ndarray, b: np.ndarray, width: int) -> tuple[np.ndarray, np.ndar
     return a2, b2, np.empty((a2.shape[0], width)), lead
 
 
-def quat_multiply(p, q) -> np.ndarray:
+def quat_multiply(p: ArrayLike, q: ArrayLike) -> NDArray[np.float64]:
     """Hamilton product ``p ⊗ q``; shapes ``(..., 4)`` broadcast against each other."""
     a, b, out, lead = _rows(_q(p), _q(q), 4)
     _multiply_rows(a, b, out)
     return out.reshape(lead + (4,))
 
 
-def quat_conjugate(q) -> np.ndarray:
+def quat_conjugate(q: ArrayLike) -> NDArray[np.float64]:
     """Conjugate ``(w, -x, -y, -z)``: the inverse of a unit quaternion."""
     q = _q(q)
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
+    conjugate: NDArray[np.float64] = q * np.array([1.0, -1.0, -1.0, -1.0])
+    return conjugate
 
 
-def quat_normalize(q) -> np.ndarray:
+def quat_normalize(q: ArrayLike) -> NDArray[np.float64]:
     """Scale each quaternion to unit norm; a zero quaternion raises ``ValueError``."""
     q = _q(q)
-    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    n: NDArray[np.float64] = np.linalg.norm(q, axis=-1, keepdims=True)
     if np.any(n == 0):
         raise ValueError("cannot normalise a zero quaternion")
     return q / n
 
 
-def quat_positive(q) -> np.ndarray:
+def quat_positive(q: ArrayLike) -> NDArray[np.float64]:
     """The same rotations with ``w >= 0`` (``q`` and ``-q`` are one rotation)."""
     q = _q(q)
     return np.where(q[..., :1] < 0, -q, q)
 
 
-def quat_exp(v) -> np.ndarray:
+def quat_exp(v: ArrayLike) -> NDArray[np.float64]:
     """Exponential of the pure quaternion ``(0, v)``: ``(cos|v|, sin|v| v/|v|)``.
 
     A rotation by angle ``θ`` about unit axis ``n`` is ``quat_exp(θ n / 2)``.
@@ -175,28 +189,28 @@ def quat_exp(v) -> np.ndarray:
     return np.concatenate([np.cos(a), k * v], axis=-1)
 
 
-def quat_log(q) -> np.ndarray:
+def quat_log(q: ArrayLike) -> NDArray[np.float64]:
     """Logarithm of a unit quaternion: the vector part ``v`` of ``log q = (0, v)``, ``|v| <= π/2``
     after choosing the sign with ``w >= 0``. Inverse of :func:`quat_exp` on that range."""
     q = quat_positive(q)
     w = np.clip(q[..., :1], -1.0, 1.0)
     s = np.linalg.norm(q[..., 1:], axis=-1, keepdims=True)
     a = np.arctan2(s, w)
-    k = np.where(s < 1e-8, 1.0 + a * a / 6.0, a / np.where(s == 0, 1.0, s))
+    k: NDArray[np.float64] = np.where(s < 1e-8, 1.0 + a * a / 6.0, a / np.where(s == 0, 1.0, s))
     return k * q[..., 1:]
 
 
-def quat_from_rotvec(phi) -> np.ndarray:
+def quat_from_rotvec(phi: ArrayLike) -> NDArray[np.float64]:
     """Quaternion of the rotation vector ``phi`` (axis times angle, rad)."""
     return quat_exp(0.5 * _v(phi))
 
 
-def quat_to_rotvec(q) -> np.ndarray:
+def quat_to_rotvec(q: ArrayLike) -> NDArray[np.float64]:
     """Rotation vector (axis times angle in ``[0, π]``, rad) of unit quaternions."""
     return 2.0 * quat_log(q)
 
 
-def quat_slerp(q0, q1, s) -> np.ndarray:
+def quat_slerp(q0: ArrayLike, q1: ArrayLike, s: ArrayLike) -> NDArray[np.float64]:
     """Spherical linear interpolation ``q0 ⊗ (q0* ⊗ q1)^s`` along the shorter arc.
 
     ``s`` is the fraction (0 gives ``q0``, 1 gives ``q1``) and broadcasts against the quaternions'
@@ -208,7 +222,9 @@ def quat_slerp(q0, q1, s) -> np.ndarray:
 
 
 @njit
-def _interpolate_rows(t, q, t_query, out):  # pragma: no cover - compiled
+def _interpolate_rows(
+    t: NDArray[np.float64], q: NDArray[np.float64], t_query: NDArray[np.float64], out: NDArray[np.float64]
+) -> None:  # pragma: no cover - compiled
     n = t.shape[0]
     for i in range(t_query.shape[0]):
         tq = t_query[i]
@@ -254,7 +270,7 @@ def _interpolate_rows(t, q, t_query, out):  # pragma: no cover - compiled
         out[i, 3] = aw * ez + ax * ey - ay * ex + az * ew
 
 
-def quat_interpolate(t, q, t_query) -> np.ndarray:
+def quat_interpolate(t: ArrayLike, q: ArrayLike, t_query: ArrayLike) -> NDArray[np.float64]:
     """Attitude of a sampled rotation at other instants, by spherical linear interpolation.
 
     Between samples k and k + 1, ``q_k ⊗ (q_k* ⊗ q_{k+1})^s`` along the shorter arc, with
@@ -289,7 +305,9 @@ def quat_interpolate(t, q, t_query) -> np.ndarray:
 
 
 @njit
-def _rotate_rows(q, v, out):  # pragma: no cover - compiled
+def _rotate_rows(
+    q: NDArray[np.float64], v: NDArray[np.float64], out: NDArray[np.float64]
+) -> None:  # pragma: no cover - compiled
     for i in range(out.shape[0]):
         w, x, y, z = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
         v0, v1, v2 = v[i, 0], v[i, 1], v[i, 2]
@@ -301,7 +319,7 @@ def _rotate_rows(q, v, out):  # pragma: no cover - compiled
         out[i, 2] = v2 + w * tz + (x * ty - y * tx)
 
 
-def quat_rotate(q, v) -> np.ndarray:
+def quat_rotate(q: ArrayLike, v: ArrayLike) -> NDArray[np.float64]:
     """Rotate vectors: ``q ⊗ (0, v) ⊗ q*``, shapes ``(..., 4)`` and ``(..., 3)`` broadcast.
 
     Uses ``v + 2w (u × v) + 2 u × (u × v)`` with ``u`` the vector part.
@@ -311,42 +329,43 @@ def quat_rotate(q, v) -> np.ndarray:
     return out.reshape(lead + (3,))
 
 
-def quat_to_matrix(q) -> np.ndarray:
+def quat_to_matrix(q: ArrayLike) -> NDArray[np.float64]:
     """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)``."""
     from scipy.spatial.transform import Rotation
 
     q = _q(q)
-    m = Rotation.from_quat(q.reshape(-1, 4), scalar_first=True).as_matrix()
+    m: NDArray[np.float64] = Rotation.from_quat(q.reshape(-1, 4), scalar_first=True).as_matrix()
     return m.reshape(q.shape[:-1] + (3, 3))
 
 
-def quat_from_matrix(m) -> np.ndarray:
+def quat_from_matrix(m: ArrayLike) -> NDArray[np.float64]:
     """Unit quaternions ``(..., 4)``, ``w >= 0``, of rotation matrices ``(..., 3, 3)``."""
     from scipy.spatial.transform import Rotation
 
     m = np.asarray(m, dtype=float)
-    q = Rotation.from_matrix(m.reshape(-1, 3, 3)).as_quat(canonical=True, scalar_first=True)
+    q: NDArray[np.float64] = Rotation.from_matrix(m.reshape(-1, 3, 3)).as_quat(canonical=True, scalar_first=True)
     return q.reshape(m.shape[:-2] + (4,))
 
 
-def quat_from_euler_zxz(angles) -> np.ndarray:
+def quat_from_euler_zxz(angles: ArrayLike) -> NDArray[np.float64]:
     """Quaternions of Z-X-Z angles ``(..., 3)`` = (precession φ, nutation θ, spin ψ), rad."""
     from scipy.spatial.transform import Rotation
 
     a = _v(angles)
-    q = Rotation.from_euler("ZXZ", a.reshape(-1, 3)).as_quat(scalar_first=True)
+    q: NDArray[np.float64] = Rotation.from_euler("ZXZ", a.reshape(-1, 3)).as_quat(scalar_first=True)
     return q.reshape(a.shape[:-1] + (4,))
 
 
-def _as_euler(rotation: Rotation, seq: str) -> np.ndarray:
+def _as_euler(rotation: Rotation, seq: str) -> NDArray[np.float64]:
     """``rotation.as_euler(seq)`` without scipy's gimbal-lock warning: at the lock the split of the
     angles is a convention, documented by the callers (``suppress_warnings=`` needs scipy 1.17)."""
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", "Gimbal lock detected", UserWarning)
-        return rotation.as_euler(seq)
+        angles: NDArray[np.float64] = rotation.as_euler(seq)
+        return angles
 
 
-def euler_zxz_from_quat(q) -> np.ndarray:
+def euler_zxz_from_quat(q: ArrayLike) -> NDArray[np.float64]:
     """Z-X-Z angles (φ, θ, ψ) with ``θ`` in ``[0, π]``; at ``θ = 0`` or ``π`` only φ±ψ is defined."""
     from scipy.spatial.transform import Rotation
 
@@ -355,16 +374,16 @@ def euler_zxz_from_quat(q) -> np.ndarray:
     return a.reshape(q.shape[:-1] + (3,))
 
 
-def quat_from_euler_zyx(rpy) -> np.ndarray:
+def quat_from_euler_zyx(rpy: ArrayLike) -> NDArray[np.float64]:
     """Quaternions of (roll φ, pitch θ, yaw ψ) ``(..., 3)``, rad, with ``R = Rz(ψ) Ry(θ) Rx(φ)``."""
     from scipy.spatial.transform import Rotation
 
     a = _v(rpy)
-    q = Rotation.from_euler("ZYX", a.reshape(-1, 3)[:, ::-1]).as_quat(scalar_first=True)
+    q: NDArray[np.float64] = Rotation.from_euler("ZYX", a.reshape(-1, 3)[:, ::-1]).as_quat(scalar_first=True)
     return q.reshape(a.shape[:-1] + (4,))
 
 
-def euler_zyx_from_quat(q) -> np.ndarray:
+def euler_zyx_from_quat(q: ArrayLike) -> NDArray[np.float64]:
     """(roll, pitch, yaw), rad, pitch in ``[-π/2, π/2]``, of unit quaternions."""
     from scipy.spatial.transform import Rotation
 
@@ -373,13 +392,14 @@ def euler_zyx_from_quat(q) -> np.ndarray:
     return a[:, ::-1].reshape(q.shape[:-1] + (3,))
 
 
-def quat_angle(p, q) -> np.ndarray:
+def quat_angle(p: ArrayLike, q: ArrayLike) -> NDArray[np.float64]:
     """Angle (rad, in ``[0, π]``) of the rotation that takes ``q`` to ``p``."""
     d = quat_multiply(p, quat_conjugate(q))
-    return 2.0 * np.arctan2(np.linalg.norm(d[..., 1:], axis=-1), np.abs(d[..., 0]))
+    angle: NDArray[np.float64] = 2.0 * np.arctan2(np.linalg.norm(d[..., 1:], axis=-1), np.abs(d[..., 0]))
+    return angle
 
 
-def skew(v) -> np.ndarray:
+def skew(v: ArrayLike) -> NDArray[np.float64]:
     """Cross-product matrices ``[v]×`` ``(..., 3, 3)``, so that ``skew(a) @ b == cross(a, b)``."""
     v = _v(v)
     x, y, z = np.moveaxis(v, -1, 0)
@@ -387,12 +407,24 @@ def skew(v) -> np.ndarray:
     return np.stack([np.stack([o, -z, y], -1), np.stack([z, o, -x], -1), np.stack([-y, x, o], -1)], -2)
 
 
-def body_rate_from_quat_derivative(q, q_dot) -> np.ndarray:
+def body_rate_from_quat_derivative(q: ArrayLike, q_dot: ArrayLike) -> NDArray[np.float64]:
     """Body angular velocity ``ω_b`` from ``q̇ = ½ q ⊗ (0, ω_b)``: ``ω_b = 2 (q* ⊗ q̇)_vec``."""
     return 2.0 * quat_multiply(quat_conjugate(q), q_dot)[..., 1:]
 
 
-def body_rate_from_euler_zxz(angles, rates, accels=None):
+@overload
+def body_rate_from_euler_zxz(angles: ArrayLike, rates: ArrayLike, accels: None = None) -> NDArray[np.float64]: ...
+
+
+@overload
+def body_rate_from_euler_zxz(
+    angles: ArrayLike, rates: ArrayLike, accels: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+
+
+def body_rate_from_euler_zxz(
+    angles: ArrayLike, rates: ArrayLike, accels: ArrayLike | None = None
+) -> NDArray[np.float64] | tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Body angular velocity (and acceleration) of a Z-X-Z motion.
 
     Parameters
@@ -425,7 +457,19 @@ def body_rate_from_euler_zxz(angles, rates, accels=None):
     return omega, alpha
 
 
-def body_rate_from_euler_zyx(rpy, rpy_rates, rpy_accels=None):
+@overload
+def body_rate_from_euler_zyx(rpy: ArrayLike, rpy_rates: ArrayLike, rpy_accels: None = None) -> NDArray[np.float64]: ...
+
+
+@overload
+def body_rate_from_euler_zyx(
+    rpy: ArrayLike, rpy_rates: ArrayLike, rpy_accels: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+
+
+def body_rate_from_euler_zyx(
+    rpy: ArrayLike, rpy_rates: ArrayLike, rpy_accels: ArrayLike | None = None
+) -> NDArray[np.float64] | tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Body angular velocity (and acceleration) of a roll-pitch-yaw motion.
 
     Parameters

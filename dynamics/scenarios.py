@@ -11,10 +11,11 @@ from __future__ import annotations
 import importlib
 import os
 from pathlib import Path
-from typing import Annotated, ClassVar
+from typing import Annotated, Any, ClassVar
 
 import numpy as np
 import tomli_w
+from numpy.typing import NDArray
 
 from .config import ConfigError, PositiveReal, Section, at_most, config_dir, read_toml, resolve_config, validate
 from .trajectory import Trajectory, concatenate_trajectories
@@ -83,7 +84,7 @@ class ScenarioSpec(Section):
     and a long run reads those segments one at a time (:mod:`gyroemu.dynamics.truth_source`), never the
     whole. Kinds that integrate equations of motion need the whole past and are not."""
 
-    def trajectory(self, t: np.ndarray) -> Trajectory:
+    def trajectory(self, t: NDArray[np.float64]) -> Trajectory:
         """Truth sampled at the times ``t`` (s, uniform from 0 at ``rate_hz``)."""
         raise NotImplementedError
 
@@ -104,7 +105,7 @@ class ScenarioSpec(Section):
         return ""
 
     @classmethod
-    def prepare(cls, data: dict, path: Path | None) -> dict:
+    def prepare(cls, data: dict[str, Any], path: Path | None) -> dict[str, Any]:
         """The file's table before validation, given the file's ``path`` (a kind may resolve relative paths)."""
         return data
 
@@ -146,7 +147,7 @@ class Scenario:
     def description(self) -> str:
         return self.spec.description
 
-    def times(self, duration: float | None = None, rate_hz: float | None = None) -> np.ndarray:
+    def times(self, duration: float | None = None, rate_hz: float | None = None) -> NDArray[np.float64]:
         """Sample times ``k / rate_hz`` for ``k = 0 … round(duration · rate_hz)``, s (rounded down where the
         kind's span is bounded, :meth:`ScenarioSpec.max_span_s`)."""
         duration = self.spec.span_s() if duration is None else float(duration)
@@ -229,10 +230,11 @@ def segment_bounds(index: int, last: int | None) -> tuple[int, int]:
 
 def _spec_class(kind: str) -> type[ScenarioSpec]:
     module, cls = KINDS[kind].split(":")
-    return getattr(importlib.import_module(module), cls)
+    spec_class: type[ScenarioSpec] = getattr(importlib.import_module(module), cls)
+    return spec_class
 
 
-def scenario_from_dict(data: dict, name: str = "<dict>", path: Path | None = None) -> Scenario:
+def scenario_from_dict(data: dict[str, Any], name: str = "<dict>", path: Path | None = None) -> Scenario:
     """Validate a scenario given as a dict (as read from TOML); errors name ``path`` or ``name``."""
     where = path if path is not None else name
     if not isinstance(data, dict):

@@ -73,9 +73,11 @@ sub-step (1e-8 after an hour at 1 kHz). The quaternion is renormalised at each s
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from .inertia import principal_axes
 from .jit import njit
@@ -107,7 +109,7 @@ class Composition:
 
     name: str
     order: int
-    gammas: np.ndarray
+    gammas: NDArray[np.float64]
     error_constant: float
 
     @property
@@ -115,29 +117,31 @@ class Composition:
         return len(self.gammas)
 
     @property
-    def a(self) -> np.ndarray:
+    def a(self) -> NDArray[np.float64]:
         """Fractions of the outer flow ``A`` in ``A(a_0 h) B(b_0 h) A(a_1 h) … B(b_{s-1} h) A(a_s h)``:
         ``a_0 = γ_1/2``, ``a_i = (γ_i + γ_{i+1})/2``, ``a_s = γ_s/2`` (touching half-steps merged)."""
         g = self.gammas
-        return 0.5 * (np.concatenate([g, [0.0]]) + np.concatenate([[0.0], g]))
+        fractions: NDArray[np.float64] = 0.5 * (np.concatenate([g, [0.0]]) + np.concatenate([[0.0], g]))
+        return fractions
 
     @property
-    def b(self) -> np.ndarray:
+    def b(self) -> NDArray[np.float64]:
         """Fractions ``b_i = γ_{i+1}`` of the inner flow ``B``."""
         return self.gammas
 
     def max_phase_per_step(self, tol: float) -> float:
         """Largest ``ω h`` (rad) with error per radian ``K_p (ω h)^p`` at most ``tol``."""
-        return (tol / self.error_constant) ** (1.0 / self.order)
+        phase: float = (tol / self.error_constant) ** (1.0 / self.order)
+        return phase
 
 
-def _triple_jump() -> np.ndarray:
+def _triple_jump() -> NDArray[np.float64]:
     # Yoshida (1990), Suzuki (1990): γ1 = γ3 = 1 / (2 − 2^(1/3)), γ2 = 1 − 2 γ1.
     g1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
     return np.array([g1, 1.0 - 2.0 * g1, g1])
 
 
-def _symmetric(half: list[float]) -> np.ndarray:
+def _symmetric(half: list[float]) -> NDArray[np.float64]:
     """``γ_1 … γ_m … γ_1`` from ``γ_1 … γ_m``."""
     return np.array(half + half[-2::-1])
 
@@ -188,7 +192,12 @@ DEFAULT_TOL = 1e-14
 ~5e-16, the round-off of the step itself; an hour of the toy top (2·10⁵ rad) stays within 2e-9."""
 
 
-def plan_steps(t, omega, tol: float, compositions=COMPOSITIONS):
+def plan_steps(
+    t: ArrayLike,
+    omega: Callable[[int], float] | float,
+    tol: float,
+    compositions: Sequence[Composition] = COMPOSITIONS,
+) -> tuple[Composition, NDArray[np.int64]]:
     """Composition and step counts for output times ``t`` (s) and error target ``tol``.
 
     Parameters
@@ -213,7 +222,7 @@ def plan_steps(t, omega, tol: float, compositions=COMPOSITIONS):
         raise ValueError("output times must be increasing and not negative")
     dt_max = float(dt.max()) if dt.size else 0.0
 
-    def h_max(comp):
+    def h_max(comp: Composition) -> float:
         w = omega(comp.order) if callable(omega) else float(omega)
         return comp.max_phase_per_step(tol) / w if w > 0 else np.inf
 
@@ -229,7 +238,7 @@ def plan_steps(t, omega, tol: float, compositions=COMPOSITIONS):
 
 
 @njit(inline="always")
-def _turn_body_z(q, L, a):
+def _turn_body_z(q: NDArray[np.float64], L: NDArray[np.float64], a: float) -> None:
     """Body turns by ``a`` about its own z axis: ``q ← q ⊗ (cos a/2, 0, 0, sin a/2)``,
     ``L_b ← R_z(a)ᵀ L_b``.
 
@@ -253,7 +262,7 @@ def _turn_body_z(q, L, a):
 
 
 @njit(inline="always")
-def _turn_body_y(q, L, a):
+def _turn_body_y(q: NDArray[np.float64], L: NDArray[np.float64], a: float) -> None:
     """Body turns by ``a`` about its own y axis: ``q ← q ⊗ (cos a/2, 0, sin a/2, 0)``,
     ``L_b ← R_y(a)ᵀ L_b`` (increments as in :func:`_turn_body_z`)."""
     c2 = np.cos(0.5 * a)
@@ -272,7 +281,7 @@ def _turn_body_y(q, L, a):
 
 
 @njit(inline="always")
-def _turn_world(q, L, h_over_a):
+def _turn_world(q: NDArray[np.float64], L: NDArray[np.float64], h_over_a: float) -> None:
     """Body turns about the world vector ``L`` by ``|L| h / A``: ``q ← exp(L h / 2A) ⊗ q``."""
     norm_l = np.sqrt(L[0] * L[0] + L[1] * L[1] + L[2] * L[2])
     if norm_l == 0.0:
@@ -292,7 +301,7 @@ def _turn_world(q, L, h_over_a):
 
 
 @njit(inline="always")
-def _kick(q, L, h_mgl):
+def _kick(q: NDArray[np.float64], L: NDArray[np.float64], h_mgl: float) -> None:
     """Gravity acts for ``h`` with the attitude fixed: ``L_w ← L_w + h m g l ẑ × n``, where
     ``n = R(q) e_z`` is the symmetry axis and ``ẑ × n = (−n_y, n_x, 0)``."""
     w, x, y, z = q[0], q[1], q[2], q[3]
@@ -303,7 +312,7 @@ def _kick(q, L, h_mgl):
 
 
 @njit(inline="always")
-def _normalise(q):
+def _normalise(q: NDArray[np.float64]) -> None:
     """``q ← q / |q|``."""
     norm = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     for j in range(4):
@@ -311,7 +320,7 @@ def _normalise(q):
 
 
 @njit(inline="always")
-def _quat_mul(p, q):
+def _quat_mul(p: NDArray[np.float64], q: NDArray[np.float64]) -> tuple[float, float, float, float]:
     """Hamilton product ``p ⊗ q`` of two length-4 arrays, as a tuple."""
     return (
         p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3],
@@ -322,7 +331,22 @@ def _quat_mul(p, q):
 
 
 @njit
-def _free_body_kernel(t, q0, L0, lw, cz, cy, inv_a, q_ib, m_bi, a_coef, b_coef, n_steps, q_out, L_out):
+def _free_body_kernel(
+    t: NDArray[np.float64],
+    q0: NDArray[np.float64],
+    L0: NDArray[np.float64],
+    lw: NDArray[np.float64],
+    cz: float,
+    cy: float,
+    inv_a: float,
+    q_ib: NDArray[np.float64],
+    m_bi: NDArray[np.float64],
+    a_coef: NDArray[np.float64],
+    b_coef: NDArray[np.float64],
+    n_steps: NDArray[np.int64],
+    q_out: NDArray[np.float64],
+    L_out: NDArray[np.float64],
+) -> None:
     """Torque-free body sampled at ``t``: the split flow of ``Hz + Hy``, then ``H0`` and the axes.
 
     ``q0`` (4,), ``L0`` (3,): attitude and body momentum at time 0 in the internal frame; ``lw`` (3,)
@@ -367,7 +391,19 @@ def _free_body_kernel(t, q0, L0, lw, cz, cy, inv_a, q_ib, m_bi, a_coef, b_coef, 
 
 
 @njit
-def _heavy_top_kernel(t, q0, Lw0, inv_a, mgl, spin_rate, a_coef, b_coef, n_steps, q_out, Lw_out):
+def _heavy_top_kernel(
+    t: NDArray[np.float64],
+    q0: NDArray[np.float64],
+    Lw0: NDArray[np.float64],
+    inv_a: float,
+    mgl: float,
+    spin_rate: float,
+    a_coef: NDArray[np.float64],
+    b_coef: NDArray[np.float64],
+    n_steps: NDArray[np.int64],
+    q_out: NDArray[np.float64],
+    Lw_out: NDArray[np.float64],
+) -> None:
     """Heavy top sampled at ``t``: the split flow of ``H0 + V``, then ``Hz`` in closed form.
 
     ``q0`` (4,) attitude and ``Lw0`` (3,) world angular momentum about the pivot at time 0;
@@ -408,7 +444,14 @@ def _heavy_top_kernel(t, q0, Lw0, inv_a, mgl, spin_rate, a_coef, b_coef, n_steps
 # --------------------------------------------------------------------------------------------------
 
 
-def integrate_free_body(t, q0_wb, L0_b, inertia_b, tol: float = DEFAULT_TOL, compositions=COMPOSITIONS):
+def integrate_free_body(
+    t: ArrayLike,
+    q0_wb: ArrayLike,
+    L0_b: ArrayLike,
+    inertia_b: ArrayLike,
+    tol: float = DEFAULT_TOL,
+    compositions: Sequence[Composition] = COMPOSITIONS,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Torque-free rigid body, sampled at ``t``.
 
     Parameters
@@ -454,10 +497,11 @@ def integrate_free_body(t, q0_wb, L0_b, inertia_b, tol: float = DEFAULT_TOL, com
     L0_i = m_bi.T @ np.asarray(L0_b, dtype=float)
     norm_l = float(np.linalg.norm(L0_i))
 
-    def omega(p):
+    def omega(p: int) -> float:
         # Error terms are brackets holding Hz and Hy at least once each: ~ c_max^p c_min |L|^(p+1).
         c_max, c_min = max(abs(cz), abs(cy)), min(abs(cz), abs(cy))
-        return norm_l * (c_max**p * c_min) ** (1.0 / (p + 1))
+        rate: float = norm_l * (c_max**p * c_min) ** (1.0 / (p + 1))
+        return rate
 
     comp, n_steps = plan_steps(t, omega, tol, compositions)
     q_wb = np.empty((len(t), 4))
@@ -468,7 +512,16 @@ def integrate_free_body(t, q0_wb, L0_b, inertia_b, tol: float = DEFAULT_TOL, com
     return q_wb, L_b
 
 
-def integrate_heavy_top(t, q0_wb, L0_w, moment_a, moment_c, mgl, tol: float = DEFAULT_TOL, compositions=COMPOSITIONS):
+def integrate_heavy_top(
+    t: ArrayLike,
+    q0_wb: ArrayLike,
+    L0_w: ArrayLike,
+    moment_a: float,
+    moment_c: float,
+    mgl: float,
+    tol: float = DEFAULT_TOL,
+    compositions: Sequence[Composition] = COMPOSITIONS,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Symmetric top on a fixed pivot under uniform gravity along −z, sampled at ``t``.
 
     Parameters

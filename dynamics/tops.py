@@ -17,9 +17,11 @@ from Euler's equations ``I α = τ − ω × I ω`` at each sample, not from dif
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Literal
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from pydantic import field_validator
 
 from .config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3, as_number
@@ -64,7 +66,7 @@ class FreeBody(Section):
 
     @field_validator("inertia_kgm2", mode="before")
     @classmethod
-    def _shape(cls, value):
+    def _shape(cls, value: object) -> tuple[float, ...] | tuple[tuple[float, ...], ...]:
         # Sort out the two accepted shapes here, so that a wrong one gets one plain message.
         if isinstance(value, (list, tuple)) and len(value) == 3:
             rows = [isinstance(row, (list, tuple)) for row in value]
@@ -76,10 +78,10 @@ class FreeBody(Section):
 
     @field_validator("inertia_kgm2")
     @classmethod
-    def _physical(cls, value):
+    def _physical(cls, value: Vec3 | tuple[Vec3, Vec3, Vec3]) -> Vec3 | tuple[Vec3, Vec3, Vec3]:
         return inertia_config(value)  # raises InertiaError (a ValueError) saying what is wrong
 
-    def tensor(self) -> np.ndarray:
+    def tensor(self) -> NDArray[np.float64]:
         """The inertia tensor in body axes, (3, 3), kg m²."""
         return inertia_tensor(self.inertia_kgm2)
 
@@ -94,7 +96,7 @@ class FreeInitial(Section):
 
     @field_validator("q_wb")
     @classmethod
-    def _unit(cls, q):
+    def _unit(cls, q: Quat) -> tuple[float, ...]:
         norm = float(np.linalg.norm(q))
         if abs(norm - 1.0) > _UNIT_NORM_TOL:
             raise ValueError(f"must be a unit quaternion (w, x, y, z), its norm is {norm:.9g}")
@@ -112,7 +114,7 @@ class FreeRigidBodySpec(ScenarioSpec):
     body: FreeBody
     initial: FreeInitial
 
-    def trajectory(self, t: np.ndarray) -> Trajectory:
+    def trajectory(self, t: NDArray[np.float64]) -> Trajectory:
         t = np.asarray(t, dtype=float)
         q_wb, omega_b, alpha_b = free_body_motion(
             t, self.body.tensor(), np.asarray(self.initial.q_wb), np.asarray(self.initial.omega_b)
@@ -132,7 +134,9 @@ class FreeRigidBodySpec(ScenarioSpec):
         )
 
 
-def free_body_motion(t, inertia_b, q0_wb, omega0_b):
+def free_body_motion(
+    t: ArrayLike, inertia_b: ArrayLike, q0_wb: ArrayLike, omega0_b: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Attitude and body rates of a torque-free body.
 
     Parameters
@@ -182,7 +186,7 @@ class HeavyTopBody(Section):
 
     @field_validator("inertia_kgm2")
     @classmethod
-    def _symmetric_top(cls, value):
+    def _symmetric_top(cls, value: Vec3) -> Vec3:
         inertia_tensor(value)
         ixx, iyy, _ = value
         if abs(ixx - iyy) > _SYMMETRY_RTOL * max(ixx, iyy):
@@ -224,7 +228,7 @@ class HeavyTopSpec(ScenarioSpec):
     initial: HeavyTopInitial
     environment: HeavyTopEnvironment = HeavyTopEnvironment()
 
-    def trajectory(self, t: np.ndarray) -> Trajectory:
+    def trajectory(self, t: NDArray[np.float64]) -> Trajectory:
         t = np.asarray(t, dtype=float)
         body, gravity = self.body, self.environment.gravity_m_s2
         a, c = pivot_moments(body.mass_kg, body.inertia_kgm2, body.cm_height_m)
@@ -250,12 +254,14 @@ class HeavyTopSpec(ScenarioSpec):
         )
 
 
-def pivot_moments(mass_kg, inertia_cm, cm_height_m):
+def pivot_moments(mass_kg: float, inertia_cm: Sequence[float], cm_height_m: float) -> tuple[float, float]:
     """Transverse and axial moments about the pivot: ``A = Ixx + m l²`` (Steiner), ``C = Izz``."""
     return inertia_cm[0] + mass_kg * cm_height_m**2, inertia_cm[2]
 
 
-def heavy_top_attitude(t, moment_a, moment_c, mgl, euler0, euler_rates0):
+def heavy_top_attitude(
+    t: ArrayLike, moment_a: float, moment_c: float, mgl: float, euler0: ArrayLike, euler_rates0: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Attitude and angular momentum of a symmetric heavy top.
 
     Parameters
@@ -282,7 +288,20 @@ def heavy_top_attitude(t, moment_a, moment_c, mgl, euler0, euler_rates0):
 
 
 @njit
-def _heavy_top_samples(q_wb, L_w, a, c, mgl, l, g, omega_b, alpha_b, pos_w, vel_w, f_b):
+def _heavy_top_samples(
+    q_wb: NDArray[np.float64],
+    L_w: NDArray[np.float64],
+    a: float,
+    c: float,
+    mgl: float,
+    l: float,
+    g: float,
+    omega_b: NDArray[np.float64],
+    alpha_b: NDArray[np.float64],
+    pos_w: NDArray[np.float64],
+    vel_w: NDArray[np.float64],
+    f_b: NDArray[np.float64],
+) -> None:
     """Rates, accelerations and centre-of-mass motion at each sample, written into the (N, 3) outputs.
 
     Equations (body axes unless marked w; ``r = (0, 0, l)`` the centre of mass, ``up`` the world

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from .earth import Environment
 from .jit import njit
@@ -41,18 +42,18 @@ class Trajectory:
         The fields the body moved in (gravity, world-frame rotation, magnetic field).
     """
 
-    t: np.ndarray
-    q_wb: np.ndarray
-    omega_b: np.ndarray
-    alpha_b: np.ndarray
-    specific_force_b: np.ndarray
-    pos_w: np.ndarray
-    vel_w: np.ndarray
-    mag_b: np.ndarray
-    extras: dict = field(default_factory=dict)
+    t: NDArray[np.float64]
+    q_wb: NDArray[np.float64]
+    omega_b: NDArray[np.float64]
+    alpha_b: NDArray[np.float64]
+    specific_force_b: NDArray[np.float64]
+    pos_w: NDArray[np.float64]
+    vel_w: NDArray[np.float64]
+    mag_b: NDArray[np.float64]
+    extras: dict[str, NDArray[Any]] = field(default_factory=dict)
     environment: Environment | None = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         n = np.shape(self.t)[0] if np.ndim(self.t) == 1 else -1
         if n < 0:
             raise ValueError(f"t must be 1-D, got shape {np.shape(self.t)}")
@@ -68,7 +69,9 @@ class Trajectory:
     def __len__(self) -> int:
         return len(self.t)
 
-    def __getitem__(self, index) -> Trajectory:
+    def __getitem__(
+        self, index: int | np.integer[Any] | slice | NDArray[np.bool_] | NDArray[np.integer[Any]]
+    ) -> Trajectory:
         """Samples selected by a slice, boolean mask or index array, as a new Trajectory."""
         if isinstance(index, (int, np.integer)):
             index = slice(index, index + 1 if index != -1 else None)
@@ -101,7 +104,9 @@ def concatenate_trajectories(parts: list[Trajectory]) -> Trajectory:
 
 
 @njit
-def _to_body(q, v, out):  # pragma: no cover - compiled
+def _to_body(
+    q: NDArray[np.float64], v: NDArray[np.float64], out: NDArray[np.float64]
+) -> None:  # pragma: no cover - compiled
     """out = R_bw v = q* ⊗ v ⊗ q (the inverse rotation of :func:`gyroemu.dynamics.rotation.quat_rotate`)."""
     w, x, y, z = q[0], -q[1], -q[2], -q[3]
     tx = 2.0 * (y * v[2] - z * v[1])
@@ -114,8 +119,19 @@ def _to_body(q, v, out):  # pragma: no cover - compiled
 
 @njit
 def _world_to_imu(
-    q_wb, omega_wb, alpha_wb, vel_w, acc_w, earth_w, gravity_w, field_w, omega_b, alpha_b, force_b, mag_b
-):  # pragma: no cover - compiled
+    q_wb: NDArray[np.float64],
+    omega_wb: NDArray[np.float64],
+    alpha_wb: NDArray[np.float64],
+    vel_w: NDArray[np.float64],
+    acc_w: NDArray[np.float64],
+    earth_w: NDArray[np.float64],
+    gravity_w: NDArray[np.float64],
+    field_w: NDArray[np.float64],
+    omega_b: NDArray[np.float64],
+    alpha_b: NDArray[np.float64],
+    force_b: NDArray[np.float64],
+    mag_b: NDArray[np.float64],
+) -> None:  # pragma: no cover - compiled
     """The equations of :func:`trajectory_from_world_motion`, one pass per sample."""
     earth_b = np.empty(3)
     f_w = np.empty(3)
@@ -147,7 +163,7 @@ def trajectory_from_world_motion(
     vel_w: ArrayLike,
     acc_w: ArrayLike,
     environment: Environment,
-    extras: dict | None = None,
+    extras: dict[str, NDArray[Any]] | None = None,
 ) -> Trajectory:
     """Build a Trajectory from motion relative to the world frame, adding what the Earth contributes.
 

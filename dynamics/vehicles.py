@@ -24,16 +24,19 @@ quadrature; see :class:`Road`), independent of the output grid.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from functools import lru_cache
 from typing import Annotated, ClassVar, Literal
 
 import numpy as np
 from numpy.polynomial import Chebyshev
+from numpy.typing import ArrayLike, NDArray
 from pydantic import Field, StrictInt, field_validator
 
 from .config import NonNegativeReal, PositiveReal, Real, Section, Vec3, at_most
 from .jit import njit
 from .motion_kernels import (
+    SinesTable,
     TimeGrid,
     segment_index,
     sin_cos,
@@ -62,7 +65,9 @@ __all__ = [
 ]
 
 
-def euler_zyx_motion(rpy, rpy_rates, rpy_accels):
+def euler_zyx_motion(
+    rpy: ArrayLike, rpy_rates: ArrayLike, rpy_accels: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Attitude, body rate and body angular acceleration of a roll-pitch-yaw motion.
 
     The same equations as :func:`gyroemu.dynamics.rotation.quat_from_euler_zyx` and
@@ -92,7 +97,14 @@ def euler_zyx_motion(rpy, rpy_rates, rpy_accels):
 
 
 @njit
-def _euler_zyx_kernel(rpy, rpy_rates, rpy_accels, q, omega, alpha):  # pragma: no cover - compiled
+def _euler_zyx_kernel(
+    rpy: NDArray[np.float64],
+    rpy_rates: NDArray[np.float64],
+    rpy_accels: NDArray[np.float64],
+    q: NDArray[np.float64],
+    omega: NDArray[np.float64],
+    alpha: NDArray[np.float64],
+) -> None:  # pragma: no cover - compiled
     """:func:`euler_zyx_motion`, one sample at a time, written into ``q``, ``omega``, ``alpha``."""
     for i in range(rpy.shape[1]):
         _euler_zyx_sample(
@@ -116,8 +128,22 @@ def _euler_zyx_kernel(rpy, rpy_rates, rpy_accels, q, omega, alpha):  # pragma: n
 
 @njit
 def _euler_zyx_sample(
-    cr, sr, cp, sp, cy, sy, droll, dpitch, dyaw, ddroll, ddpitch, ddyaw, q, omega, alpha
-):  # pragma: no cover - compiled
+    cr: float,
+    sr: float,
+    cp: float,
+    sp: float,
+    cy: float,
+    sy: float,
+    droll: float,
+    dpitch: float,
+    dyaw: float,
+    ddroll: float,
+    ddpitch: float,
+    ddyaw: float,
+    q: NDArray[np.float64],
+    omega: NDArray[np.float64],
+    alpha: NDArray[np.float64],
+) -> None:  # pragma: no cover - compiled
     """One sample of :func:`euler_zyx_motion` from the cosines and sines of the half angles
     ``φ/2, θ/2, ψ/2`` and the angles' rates and accelerations, into ``q`` (4,), ``omega``, ``alpha`` (3,)."""
     # q = q_z(ψ) ⊗ q_y(θ) ⊗ q_x(φ), written out in the half-angle cosines and sines.
@@ -155,14 +181,14 @@ converges as 1/sqrt(terms)); every term costs every sample three channels' work 
 _at_most_terms = at_most(MAX_SINE_TERMS, "more random-phase sines make the motion no more random, only slower")
 
 
-def _band(value):
+def _band(value: tuple[float, float]) -> tuple[float, float]:
     low, high = value
     if not 0 < low <= high:
         raise ValueError(f"a frequency band is [low, high] with 0 < low <= high, got [{low}, {high}]")
     return value
 
 
-def _non_negative(value):
+def _non_negative(value: Vec3) -> Vec3:
     if any(v < 0 for v in value):
         raise ValueError(f"amplitudes must be >= 0, got {list(value)}")
     return value
@@ -200,7 +226,9 @@ class TranslationBand(Section):
     _amplitudes = field_validator("amplitude_m")(_non_negative)
 
 
-def _draw_sines(rng: np.random.Generator, bounds, band, terms: int):
+def _draw_sines(
+    rng: np.random.Generator, bounds: Sequence[float] | NDArray[np.float64], band: tuple[float, float], terms: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Amplitudes (C, K) summing to ``bounds`` per channel, angular frequencies uniform in the band,
     phases uniform in [0, 2π): drawn in this order, all amplitudes first."""
     u = rng.random((len(bounds), terms))
@@ -224,7 +252,12 @@ class RandomManoeuvreSpec(EarthBoundSpec):
     rotation: RotationBand = Field(default_factory=RotationBand)
     translation: TranslationBand = Field(default_factory=TranslationBand)
 
-    def sines(self):
+    def sines(
+        self,
+    ) -> tuple[
+        tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
+        tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
+    ]:
         """The drawn terms: ``(rotation, translation)``, each ``(amplitude, omega, phase)`` arrays (3, K)
         in rad or m, rad/s, rad."""
         rng = np.random.default_rng(self.seed)
@@ -234,7 +267,7 @@ class RandomManoeuvreSpec(EarthBoundSpec):
             _draw_sines(rng, tr.amplitude_m, tr.frequency_hz, tr.terms),
         )
 
-    def world_motion(self, t):
+    def world_motion(self, t: ArrayLike) -> WorldMotion:
         t = np.asarray(t, dtype=float)
         grid = TimeGrid(t)
         rotation, translation = self.sines()
@@ -253,8 +286,19 @@ class RandomManoeuvreSpec(EarthBoundSpec):
 
 @njit
 def _manoeuvre_kernel(
-    t, uniform, block, rotation, mean, translation, q, omega, alpha, pos, vel, acc
-):  # pragma: no cover - compiled
+    t: NDArray[np.float64],
+    uniform: bool,
+    block: int,
+    rotation: SinesTable,
+    mean: NDArray[np.float64],
+    translation: SinesTable,
+    q: NDArray[np.float64],
+    omega: NDArray[np.float64],
+    alpha: NDArray[np.float64],
+    pos: NDArray[np.float64],
+    vel: NDArray[np.float64],
+    acc: NDArray[np.float64],
+) -> None:  # pragma: no cover - compiled
     """:meth:`RandomManoeuvreSpec.world_motion` block by block: roll, pitch, yaw (``mean`` plus the sums
     of sinusoids ``rotation``) into :func:`_euler_zyx_sample`; east, north, up from ``translation``."""
     angles, coordinates = np.empty((3, 3, block)), np.empty((3, 3, block))
@@ -428,14 +472,14 @@ class Road:
             s = self.start[k] + self.length[k]
 
     @classmethod
-    def _antiderivative(cls, heading, angle, length):
+    def _antiderivative(cls, heading: float, angle: float, length: float) -> tuple[Chebyshev, Chebyshev]:
         """Chebyshev series of ``∫₀^σ (cos ψ, sin ψ) dσ′`` on ``[0, L]`` through one turn.
 
         The degree is doubled until the last quarter of the coefficients is round-off, then the series
         is chopped after its last coefficient above round-off (a plateau-detecting chop, as Chebfun's).
         """
 
-        def psi(sigma):
+        def psi(sigma: NDArray[np.float64]) -> NDArray[np.float64]:
             return heading + angle * smooth_step(sigma / length, derivatives=0)[0]
 
         for degree in (32, 64, 128, 256, 512, 1024):
@@ -447,7 +491,18 @@ class Road:
                 return cx.cutdeg(keep).integ(lbnd=0.0), cy.cutdeg(keep).integ(lbnd=0.0)
         raise ValueError(f"a turn of {np.degrees(angle):g} deg in {length:g} m is too sharp to integrate")
 
-    def __call__(self, s):
+    def __call__(
+        self, s: NDArray[np.float64]
+    ) -> tuple[
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.float64],
+    ]:
         """At distances ``s`` (N,), m: heading ψ (rad) with its cosine and sine, curvature κ and its
         first two derivatives along the road (1/m, 1/m², 1/m³), and the east and north position (m)."""
         if len(self.start) == 0:
@@ -507,7 +562,7 @@ class SuspensionTransient:
         self.peak = float(np.abs(self(grid, derivatives=0)[0]).max())
         self.duration = np.log(1e17 / self.peak) / (damping_ratio * wn) + 4 * rise_s
 
-    def __call__(self, tau, derivatives: int = 2):
+    def __call__(self, tau: ArrayLike, derivatives: int = 2) -> tuple[NDArray[np.float64], ...]:
         """``g``, ``ġ``, ``g̈`` (per s, s²) at ``τ`` (N,), s, for ``0 ≤ τ``."""
         exps = np.exp(np.multiply.outer(tau, self._mu))  # (N, 4)
         return tuple(np.imag(exps @ (self._c * self._mu**d)) / self.peak for d in range(derivatives + 1))
@@ -540,7 +595,7 @@ class CarSpec(EarthBoundSpec):
 
     @field_validator("turns")
     @classmethod
-    def _turns_in_order(cls, turns):
+    def _turns_in_order(cls, turns: list[Turn]) -> list[Turn]:
         for k in range(1, len(turns)):
             end = turns[k - 1].start_m + turns[k - 1].length_m
             if turns[k].start_m < end:
@@ -554,7 +609,7 @@ class CarSpec(EarthBoundSpec):
         """The car's closed forms with the road series and transients set up once."""
         return CarMotion(self)
 
-    def world_motion(self, t):
+    def world_motion(self, t: NDArray[np.float64]) -> WorldMotion:
         return self.evaluator()(t)
 
 
@@ -571,6 +626,47 @@ def _road(turns: tuple[Turn, ...], initial_yaw_rad: float) -> Road:
 @lru_cache(maxsize=64)
 def _suspension_transient(frequency_hz: float, damping_ratio: float, rise_s: float) -> SuspensionTransient:
     return SuspensionTransient(frequency_hz, damping_ratio, rise_s)
+
+
+_SpeedTable = tuple[
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+]
+"""The legs as :meth:`CarMotion._speed_table` lays them out for :func:`_car_kernel`."""
+
+_RoadTable = tuple[
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.intp],
+    NDArray[np.float64],
+]
+"""The turns as :meth:`CarMotion._road_table` lays them out for :func:`_car_kernel`."""
+
+_BumpTable = tuple[
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.complex128],
+    NDArray[np.complex128],
+]
+"""The bumps as :meth:`CarMotion._bump_table` lays them out for :func:`_car_kernel`."""
 
 
 class CarMotion:
@@ -600,14 +696,14 @@ class CarMotion:
         tables = self._speed_table(), self._road_table(), self._bump_table()
         self._tables = (*tables, self.k_roll, self.k_pitch)  # the arguments of _car_kernel after t, block
 
-    def _speed_table(self):
+    def _speed_table(self) -> _SpeedTable:
         """The legs (:class:`SpeedProfile`): start time, distance and speed, speed change Δv, its
         duration T with T² and T³, and the distance where the change ends."""
         sp = self.speed
         ramp = sp.ramp
         return sp.start, sp.distance, sp.speed, sp.change, ramp, ramp**2, ramp**3, sp.distance_after
 
-    def _road_table(self):
+    def _road_table(self) -> _RoadTable:
         """The turns (:class:`Road`): start, length L with L² and L³, angle; the headings with their
         cosines and sines; where each turn begins and ends; the Chebyshev coefficients of the x and y
         antiderivatives, (2, turns, size) zero-padded, with their sizes (2, turns), and the map of
@@ -626,7 +722,7 @@ class CarMotion:
         lengths = road.length, road.length**2, road.length**3
         return (road.start, *lengths, road.angle, *headings, road.begin, road.end, coef, sizes, maps)
 
-    def _bump_table(self):
+    def _bump_table(self) -> _BumpTable:
         """The bumps: time, rise time τ_r; per mode (heave, pitch): scale (height, nose-up angle), end of
         the transient (``at + duration``), peak, λ = μ_0 and the weights ``w_dm = c_m μ_m^d``
         (d = 0, 1, 2) of :class:`SuspensionTransient`."""
@@ -640,7 +736,7 @@ class CarMotion:
                 weights[b, k] = [mode._c * mode._mu**d for d in range(3)]
         return at, self._rise, scale, end, peak, lam, weights
 
-    def __call__(self, t) -> WorldMotion:
+    def __call__(self, t: ArrayLike) -> WorldMotion:
         t = np.asarray(t, dtype=float)
         n = len(t)
         arrays = motion_arrays(n, moves=True)
@@ -650,22 +746,34 @@ class CarMotion:
 
 
 @njit
-def _chebval(coef, size, x):  # pragma: no cover - compiled
+def _chebval(coef: NDArray[np.float64], size: int, x: float) -> float:  # pragma: no cover - compiled
     """``numpy.polynomial.chebyshev.chebval(x, coef[:size])`` for one ``x``, by the same Clenshaw
     recurrence."""
+    value: float
     if size == 1:
-        return coef[0] + 0.0 * x
+        value = coef[0] + 0.0 * x
+        return value
     if size == 2:
-        return coef[0] + coef[1] * x
+        value = coef[0] + coef[1] * x
+        return value
     x2 = 2 * x
     c0, c1 = coef[size - 2], coef[size - 1]
     for i in range(3, size + 1):
         c0, c1 = coef[size - i] - c1, c0 + c1 * x2
-    return c0 + c1 * x
+    value = c0 + c1 * x
+    return value
 
 
 @njit
-def _chebval_block(coef, size, x, count, b0, b1, out):  # pragma: no cover - compiled
+def _chebval_block(
+    coef: NDArray[np.float64],
+    size: int,
+    x: NDArray[np.float64],
+    count: int,
+    b0: NDArray[np.float64],
+    b1: NDArray[np.float64],
+    out: NDArray[np.float64],
+) -> None:  # pragma: no cover - compiled
     """:func:`_chebval` at ``x[:count]`` into ``out``: the same recurrence with the samples innermost,
     where it vectorises (one sample's recurrence is a chain of ``size`` dependent steps)."""
     if size <= 2:
@@ -684,8 +792,22 @@ def _chebval_block(coef, size, x, count, b0, b1, out):  # pragma: no cover - com
 
 @njit
 def _transients_block(
-    t, start, count, at, rise, end, lam, weights, peak, scale, sign, out0, out1, out2, work
-):  # pragma: no cover - compiled
+    t: NDArray[np.float64],
+    start: int,
+    count: int,
+    at: float,
+    rise: float,
+    end: float,
+    lam: complex,
+    weights: NDArray[np.complex128],
+    peak: float,
+    scale: float,
+    sign: float,
+    out0: NDArray[np.float64],
+    out1: NDArray[np.float64],
+    out2: NDArray[np.float64],
+    work: NDArray[np.float64],
+) -> None:  # pragma: no cover - compiled
     """Adds ``sign · scale · g⁽ᵈ⁾(t − at)`` (:class:`SuspensionTransient`, d = 0, 1, 2) to ``out0``,
     ``out1``, ``out2`` at the samples ``start … start + count − 1`` with ``at ≤ t < end``.
 
@@ -728,22 +850,22 @@ def _transients_block(
 
 @njit
 def _car_kernel(
-    t,
-    block,
-    speed_table,
-    road_table,
-    bump_table,
-    k_roll,
-    k_pitch,
-    q,
-    omega,
-    alpha,
-    pos,
-    vel,
-    acc,
-    speed_out,
-    distance_out,
-):  # pragma: no cover - compiled
+    t: NDArray[np.float64],
+    block: int,
+    speed_table: _SpeedTable,
+    road_table: _RoadTable,
+    bump_table: _BumpTable,
+    k_roll: float,
+    k_pitch: float,
+    q: NDArray[np.float64],
+    omega: NDArray[np.float64],
+    alpha: NDArray[np.float64],
+    pos: NDArray[np.float64],
+    vel: NDArray[np.float64],
+    acc: NDArray[np.float64],
+    speed_out: NDArray[np.float64],
+    distance_out: NDArray[np.float64],
+) -> None:  # pragma: no cover - compiled
     """The car (:class:`CarSpec`), block by block.
 
     Sample by sample: the speed profile, the road and the Euler angles with their derivatives. Then for

@@ -54,6 +54,7 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 import pydantic
+from numpy.typing import ArrayLike, NDArray
 from pydantic import Field, StrictInt
 
 from .body_kernels import cross, quat_product, rotate_back, rotation_matrix
@@ -61,7 +62,7 @@ from .config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3
 from .earth import Environment, Site
 from .gyrostat import GIMBALS, GimballedRotor, Gyrostat, P, Q, SpinProfile, W, X
 from .inertia import inertia_config, inertia_tensor
-from .integrate import Jump, integrate
+from .integrate import Jump, Solution, integrate
 from .rigid_body import world_motion_trajectory
 from .rotation import body_rate_from_euler_zyx, euler_zyx_from_quat, quat_conjugate, quat_from_euler_zyx, quat_positive
 from .scenarios import ScenarioSpec
@@ -95,7 +96,7 @@ RPM = 2.0 * np.pi / 60.0
 # ================================================================================================
 
 
-def jonswap(omega, significant_height, peak_period, gamma=3.3) -> np.ndarray:
+def jonswap(omega: ArrayLike, significant_height: float, peak_period: float, gamma: float = 3.3) -> NDArray[np.float64]:
     """JONSWAP wave spectrum ``S(ω)``, m² s/rad (DNV-RP-C205, eqs. 3.5.3–3.5.5).
 
     ``S = A_γ · 5/16 Hs² ω_p⁴ ω⁻⁵ exp(−5/4 (ω/ω_p)⁻⁴) · γ^exp(−(ω − ω_p)²/(2 σ² ω_p²))``, with
@@ -107,7 +108,8 @@ def jonswap(omega, significant_height, peak_period, gamma=3.3) -> np.ndarray:
     pm = 5.0 / 16.0 * significant_height**2 * wp**4 * omega**-5.0 * np.exp(-1.25 * (omega / wp) ** -4.0)
     sigma = np.where(omega <= wp, 0.07, 0.09)
     peak = gamma ** np.exp(-0.5 * ((omega - wp) / (sigma * wp)) ** 2)
-    return (1.0 - 0.287 * np.log(gamma)) * pm * peak
+    spectrum: NDArray[np.float64] = (1.0 - 0.287 * np.log(gamma)) * pm * peak
+    return spectrum
 
 
 @dataclass(frozen=True)
@@ -117,13 +119,21 @@ class WaveComponents:
     Attributes (K components): ``omega`` rad/s, ``amplitude`` m, ``phase`` rad, ``wavenumber`` rad/m.
     """
 
-    omega: np.ndarray
-    amplitude: np.ndarray
-    phase: np.ndarray
-    wavenumber: np.ndarray
+    omega: NDArray[np.float64]
+    amplitude: NDArray[np.float64]
+    phase: NDArray[np.float64]
+    wavenumber: NDArray[np.float64]
 
     @classmethod
-    def from_spectrum(cls, rng: np.random.Generator, significant_height, peak_period, gamma, count, g):
+    def from_spectrum(
+        cls,
+        rng: np.random.Generator,
+        significant_height: float,
+        peak_period: float,
+        gamma: float,
+        count: int,
+        g: float,
+    ) -> WaveComponents:
         """Seeded components of a JONSWAP sea: one random frequency in each of ``count`` equal bands
         over ``[0.5, 3] ω_p``, amplitude ``sqrt(2 S(ω) Δω)``, phase uniform in ``[0, 2π)``."""
         wp = 2.0 * np.pi / peak_period
@@ -134,15 +144,16 @@ class WaveComponents:
         amplitude = np.sqrt(2.0 * jonswap(omega, significant_height, peak_period, gamma) * width)
         return cls(omega, amplitude, phase, omega**2 / g)  # deep water: k = ω²/g
 
-    def phasors(self, t) -> np.ndarray:
+    def phasors(self, t: ArrayLike) -> NDArray[np.complex128]:
         """``exp(i (ω_k t + θ_k))``, shape ``t.shape + (K,)``."""
-        return np.exp(1j * (np.asarray(t, dtype=float)[..., None] * self.omega + self.phase))
+        phasors: NDArray[np.complex128] = np.exp(1j * (np.asarray(t, dtype=float)[..., None] * self.omega + self.phase))
+        return phasors
 
-    def elevation(self, t) -> np.ndarray:
+    def elevation(self, t: ArrayLike) -> NDArray[np.float64]:
         """``η(t)``, m."""
         return np.cos(np.asarray(t, dtype=float)[..., None] * self.omega + self.phase) @ self.amplitude
 
-    def slope(self, t) -> np.ndarray:
+    def slope(self, t: ArrayLike) -> NDArray[np.float64]:
         """Wave slope ``Σ k ζ sin(ω t + θ)`` across the ship, rad."""
         return np.sin(np.asarray(t, dtype=float)[..., None] * self.omega + self.phase) @ (
             self.wavenumber * self.amplitude
@@ -208,7 +219,7 @@ class ShipSpec(ScenarioSpec):
     def model(self) -> Ship:
         return Ship.from_spec(self)
 
-    def trajectory(self, t: np.ndarray) -> Trajectory:
+    def trajectory(self, t: NDArray[np.float64]) -> Trajectory:
         return self.model().trajectory(t)
 
 
@@ -217,7 +228,7 @@ class ShipSpec(ScenarioSpec):
 # ================================================================================================
 
 
-def _wrap(angle):
+def _wrap(angle: NDArray[np.float64]) -> NDArray[np.float64]:
     return (angle + np.pi) % (2.0 * np.pi) - np.pi
 
 
@@ -298,7 +309,7 @@ class Ship:
         return self.body.mass
 
     @property
-    def inertia(self) -> np.ndarray:
+    def inertia(self) -> NDArray[np.float64]:
         return np.diag(self.body.inertia_b)
 
     @property
@@ -315,15 +326,15 @@ class Ship:
 
     # -- loads ------------------------------------------------------------------------------------------
 
-    def roll_moment(self, t) -> np.ndarray:
+    def roll_moment(self, t: ArrayLike) -> NDArray[np.float64]:
         """Wave roll moment ``r Δ g GM · slope(t)``, N m."""
         return self.roll_moment_per_slope * self.waves.slope(t)
 
-    def _rates_wb(self, y, r):
+    def _rates_wb(self, y: NDArray[np.float64], r: NDArray[np.float64]) -> NDArray[np.float64]:
         """Body rates relative to the world (the water), body axes."""
         return y[..., W] - rotate_back(r, self.environment.earth_rate_w)
 
-    def force_w(self, t, y) -> np.ndarray:
+    def force_w(self, t: ArrayLike, y: NDArray[np.float64]) -> NDArray[np.float64]:
         """Weight, buoyancy, heave restoring and damping, mooring: world axes, N."""
         x, v = y[..., X], y[..., P] / self.mass
         weight = self.mass * self.environment.gravity_w  # m g
@@ -331,9 +342,16 @@ class Ship:
         heave = -self.heave_stiffness * (x[..., 2] - self.waves.elevation(t)) - self.heave_damping * v[..., 2]
         mooring = -self.mooring_stiffness * x - self.mooring_damping * v  # surge, sway: anchor −k x − c v
         hydro = np.stack(np.broadcast_arrays(mooring[..., 0], mooring[..., 1], heave), axis=-1)  # −C (z − η) − c ż
-        return weight + buoyancy + hydro
+        force: NDArray[np.float64] = weight + buoyancy + hydro
+        return force
 
-    def torque_b(self, t, y, r=None, rates=None) -> np.ndarray:
+    def torque_b(
+        self,
+        t: ArrayLike,
+        y: NDArray[np.float64],
+        r: NDArray[np.float64] | None = None,
+        rates: NDArray[np.float64] | None = None,
+    ) -> NDArray[np.float64]:
         """Hydrostatic, damping, wave and course-keeping moments about the centre of mass, body axes.
         ``r``, ``rates``: ``R(q)`` and :meth:`_rates_wb` when the caller has them already."""
         r = rotation_matrix(y[..., Q]) if r is None else r
@@ -346,7 +364,9 @@ class Ship:
         yaw = -self.yaw_stiffness * yaw_error - self.yaw_damping * rates[..., 2]
         return np.stack(np.broadcast_arrays(roll, pitch, yaw), axis=-1)
 
-    def gimbal_rate(self, t, y, rates=None) -> np.ndarray:
+    def gimbal_rate(
+        self, t: ArrayLike, y: NDArray[np.float64], rates: NDArray[np.float64] | None = None
+    ) -> NDArray[np.float64]:
         """Commanded precession rate ``δ̇ = K p − k_c δ``, faded out over the last 10° before a stop.
         ``rates``: :meth:`_rates_wb` when the caller has it already."""
         p = (self._rates_wb(y, rotation_matrix(y[..., Q])) if rates is None else rates)[..., 0]
@@ -354,9 +374,10 @@ class Ship:
         u = self.gain * p - self.centring * delta
         margin = np.radians(10.0)
         room = np.clip((self.gimbal_limit - np.sign(u) * delta) / margin, 0.0, 1.0)  # towards the stop
-        return (u * room)[..., None]
+        rate: NDArray[np.float64] = (u * room)[..., None]
+        return rate
 
-    def derivative(self, t, y) -> np.ndarray:
+    def derivative(self, t: ArrayLike, y: NDArray[np.float64]) -> NDArray[np.float64]:
         # R(q) and the rates relative to the water once, for the torque and the gimbal command alike.
         r = rotation_matrix(y[..., Q])
         rates = self._rates_wb(y, r)
@@ -368,7 +389,7 @@ class Ship:
 
     # -- linear theory -------------------------------------------------------------------------------
 
-    def linear_model(self):
+    def linear_model(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The linearised roll–pitch(–gimbal) system ``ẋ = A x + B M`` about upright and ``δ = 0``.
 
         States ``x = [φ, p, θ, q]`` (+ ``δ`` with a stabiliser), input the wave roll moment ``M``::
@@ -396,14 +417,14 @@ class Ship:
         b[1] = 1.0 / ix
         return a, b
 
-    def roll_transfer(self, omega) -> np.ndarray:
+    def roll_transfer(self, omega: ArrayLike) -> NDArray[np.complexfloating[Any, Any]]:
         """Roll angle per unit roll moment, ``H(iω) = [(iω − A)⁻¹ B]_φ``, rad/(N m), complex."""
         a, b = self.linear_model()
         omega = np.asarray(omega, dtype=float)
         m = 1j * omega[..., None, None] * np.eye(len(b)) - a
         return np.linalg.solve(m, np.broadcast_to(b, omega.shape + b.shape)[..., None])[..., 0, 0]
 
-    def linear_response(self, t) -> np.ndarray:
+    def linear_response(self, t: ArrayLike) -> NDArray[np.float64]:
         """Steady-state linear response to the wave components: ``[φ, p, θ, q(, δ)]`` at ``t``,
         shape ``t.shape + (n,)``; ``x(t) = Im Σ (iω_k − A)⁻¹ B M_k e^{i(ω_k t + θ_k)}``."""
         a, b = self.linear_model()
@@ -412,7 +433,7 @@ class Ship:
         x_k = np.linalg.solve(1j * w.omega[:, None, None] * np.eye(len(b)) - a, (b[None, :] * m_k[:, None])[..., None])
         return np.imag(w.phasors(t) @ x_k[..., 0])
 
-    def heave_response(self, t):
+    def heave_response(self, t: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Steady-state heave ``z`` and ``ż``: ``m z̈ = −C (z − η) − c ż``, component by component."""
         w = self.waves
         z_k = (
@@ -431,7 +452,7 @@ class Ship:
 
     # -- simulation ----------------------------------------------------------------------------------
 
-    def initial_state(self, t0: float = 0.0) -> np.ndarray:
+    def initial_state(self, t0: float = 0.0) -> NDArray[np.float64]:
         """The linear steady state at ``t0`` (roll, pitch, rates, gimbal angle, heave)."""
         x = self.linear_response(np.array(t0))
         z, z_dot = self.heave_response(np.array(t0))
@@ -442,7 +463,7 @@ class Ship:
         delta = x[4:5] if self.body.gimbals else ()
         return self.body.state((0.0, 0.0, float(z)), q, (0.0, 0.0, float(z_dot)), omega, delta)
 
-    def solve(self, t, rtol=1e-10):
+    def solve(self, t: NDArray[np.float64], rtol: float = 1e-10) -> Solution:
         """Integrate over the sample times ``t`` (from ``t[0]``); returns the :class:`Solution`."""
         atol = np.concatenate(
             [
@@ -455,7 +476,7 @@ class Ship:
         )
         return integrate(self.derivative, t, self.initial_state(float(t[0])), rtol=rtol, atol=atol)
 
-    def trajectory(self, t, rtol=1e-10) -> Trajectory:
+    def trajectory(self, t: ArrayLike, rtol: float = 1e-10) -> Trajectory:
         t = np.asarray(t, dtype=float)
         sol = self.solve(t, rtol)
         y, y_dot = sol.y, sol.y_dot
@@ -495,7 +516,7 @@ class SpacecraftBody(Section):
 
     @pydantic.field_validator("q_wb")
     @classmethod
-    def _unit(cls, q):
+    def _unit(cls, q: Quat) -> Quat:
         if not np.linalg.norm(q) > 0:
             raise ValueError("a quaternion must be non-zero")
         return q
@@ -526,7 +547,7 @@ class Slew(Section):
 
     @pydantic.field_validator("axis_b")
     @classmethod
-    def _nonzero(cls, v):
+    def _nonzero(cls, v: Vec3) -> Vec3:
         if not np.linalg.norm(v) > 0:
             raise ValueError("the slew axis must be a non-zero vector")
         return v
@@ -543,11 +564,11 @@ class SpacecraftSpec(ScenarioSpec):
     def model(self) -> Spacecraft:
         return Spacecraft.from_spec(self)
 
-    def trajectory(self, t: np.ndarray) -> Trajectory:
+    def trajectory(self, t: NDArray[np.float64]) -> Trajectory:
         return self.model().trajectory(t)
 
 
-def pyramid_gimbals(skew_angle, rotor_inertia, spin_rate):
+def pyramid_gimbals(skew_angle: float, rotor_inertia: float, spin_rate: float) -> tuple[GimballedRotor, ...]:
     """Four CMGs on a pyramid of skew angle ``β`` (Wie §7.3.2): gimbal axes
     ``ĝ_i = (cos a_i sin β, sin a_i sin β, cos β)`` with ``a_i = 0°, 90°, 180°, 270°`` and spin axes at
     zero gimbal angle ``ŝ_i = ẑ × ĝ_i / |·|`` (pointing around the pyramid, summing to zero)."""
@@ -565,8 +586,8 @@ class Spacecraft:
     """The spacecraft, its CMGs, the slew command, controller and steering law (module docstring)."""
 
     body: Gyrostat
-    q0: np.ndarray
-    q_target: np.ndarray
+    q0: NDArray[np.float64]
+    q_target: NDArray[np.float64]
     start: float
     k: float  # 1/s²
     c: float  # 1/s
@@ -574,7 +595,7 @@ class Spacecraft:
     gimbal_rate_limit: float
     singularity_gain: float
     singularity_sharpness: float
-    initial_gimbal: np.ndarray
+    initial_gimbal: NDArray[np.float64]
 
     @classmethod
     def from_spec(cls, spec: SpacecraftSpec) -> Spacecraft:
@@ -601,24 +622,24 @@ class Spacecraft:
             initial_gimbal=np.radians(np.asarray(cmg.initial_gimbal_deg, dtype=float)),
         )
 
-    def commanded_attitude(self, t) -> np.ndarray:
+    def commanded_attitude(self, t: ArrayLike) -> NDArray[np.float64]:
         """``q0`` before the slew starts, the target after; shape ``t.shape + (4,)``."""
         after = (np.asarray(t, dtype=float) >= self.start)[..., None]
         return np.where(after, self.q_target, self.q0)
 
-    def attitude_error(self, t, q) -> np.ndarray:
+    def attitude_error(self, t: ArrayLike, q: ArrayLike) -> NDArray[np.float64]:
         """``q_e = q_c* ⊗ q`` (body-axes error), sign chosen with ``w ≥ 0`` (the short way round)."""
         qe = quat_product(quat_conjugate(self.commanded_attitude(t)), np.asarray(q, dtype=float))
         return quat_positive(qe)
 
-    def control_torque(self, t, y) -> np.ndarray:
+    def control_torque(self, t: ArrayLike, y: NDArray[np.float64]) -> NDArray[np.float64]:
         """Eigen-axis slew law ``u = −k I q_e − c I ω + ω × I ω``, body axes, N m."""
         omega = y[..., W]
         i_omega = omega @ self.body.inertia_b.T
         qe = self.attitude_error(t, y[..., Q] / np.linalg.norm(y[..., Q], axis=-1, keepdims=True))
         return (-self.k * qe[..., 1:] - self.c * omega) @ self.body.inertia_b.T + cross(omega, i_omega)
 
-    def gimbal_rate(self, t, y) -> np.ndarray:
+    def gimbal_rate(self, t: ArrayLike, y: NDArray[np.float64]) -> NDArray[np.float64]:
         """Singularity-robust steering: ``δ̇ = Aᵀ (A Aᵀ + λ 1)⁻¹ (−u − ω × h)``, rate-limited."""
         delta = y[..., GIMBALS]
         a = self.body.gimbal_jacobian(t, delta)  # (..., 3, 4)
@@ -630,19 +651,20 @@ class Spacecraft:
         m = aat + lam[..., None, None] * np.eye(3)
         rates = (np.swapaxes(a, -1, -2) @ np.linalg.solve(m, h_dot[..., None]))[..., 0]
         peak = np.max(np.abs(rates), axis=-1, keepdims=True)
-        return rates * np.minimum(1.0, self.gimbal_rate_limit / np.maximum(peak, 1e-300))
+        limited: NDArray[np.float64] = rates * np.minimum(1.0, self.gimbal_rate_limit / np.maximum(peak, 1e-300))
+        return limited
 
-    def derivative(self, t, y) -> np.ndarray:
+    def derivative(self, t: ArrayLike, y: NDArray[np.float64]) -> NDArray[np.float64]:
         return self.body.derivative(t, y, gimbal_rate=self.gimbal_rate)
 
-    def initial_state(self) -> np.ndarray:
+    def initial_state(self) -> NDArray[np.float64]:
         return self.body.state(q_wb=self.q0, gimbal_angles=self.initial_gimbal)
 
-    def solve(self, t, rtol=1e-10):
+    def solve(self, t: ArrayLike, rtol: float = 1e-10) -> Solution:
         atol = np.concatenate([np.full(13, 1e-12), np.full(4, 1e-12)])
         return integrate(self.derivative, t, self.initial_state(), jumps=[Jump(self.start)], rtol=rtol, atol=atol)
 
-    def trajectory(self, t, rtol=1e-10) -> Trajectory:
+    def trajectory(self, t: ArrayLike, rtol: float = 1e-10) -> Trajectory:
         t = np.asarray(t, dtype=float)
         sol = self.solve(t, rtol)
         y, y_dot = sol.y, sol.y_dot
