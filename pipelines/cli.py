@@ -108,14 +108,16 @@ def _mcap_out(text: str) -> Path:
 
 
 def _cmd_import(args) -> int:
-    from gyroemu.pipelines.formats.importers import IMPORTERS
+    from gyroemu.pipelines.formats.importers import IMPORTERS, ImportOutputError
     from gyroemu.pipelines.jobs.disk_space import is_disk_full
 
     source, out = Path(args.file), _mcap_out(args.out)
     started = time.perf_counter()
     try:
         summary = IMPORTERS[args.format](source, out, force=args.force)
-    except OSError as e:  # reading errors are ImportInputError (a ConfigError); this is the output
+    except ImportOutputError as e:
+        raise UsageError(f"argument --out: {e}") from None
+    except OSError as e:  # reading errors are ImportInputError (a ConfigError); this is the output's write
         if is_disk_full(e):
             raise  # not the argument's fault: main says so, status 1
         raise UsageError(f"argument --out: {out}: {e.strerror or e}") from None
@@ -258,7 +260,7 @@ def _cmd_allan(args: argparse.Namespace) -> int:
     )
 
     log = Path(args.log)
-    out = check_options(log, args.out, args.kalibr, force=args.force)  # AllanError before any work
+    out = check_options(log, args.out, args.kalibr, force=args.force, plot=not args.no_plot)  # AllanError first
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", MotionWarning)
         try:
@@ -275,12 +277,13 @@ def _cmd_allan(args: argparse.Namespace) -> int:
     else:
         print(report.tables())
     done = sys.stderr if args.json else sys.stdout
-    out = write_allan_plot(report, out, f"Allan deviation: {log.name}")
-    print(f"Allan plot -> {out}", file=done)
+    if out is not None:
+        out = write_allan_plot(report, out, f"Allan deviation: {log.name}")
+        print(f"Allan plot -> {out}", file=done)
     if args.kalibr:
         try:
             kalibr = write_kalibr_yaml(report, args.kalibr, force=args.force)
-        except (ValueError, FileExistsError) as e:
+        except ValueError as e:  # no accelerometer fit, or an AllanError saying why the file cannot be written
             raise UsageError(f"argument --kalibr: {e}") from None
         print(f"Kalibr imu.yaml -> {kalibr}", file=done)
     return 0
@@ -480,8 +483,10 @@ def _cmd_bench(args) -> int:
             )
         except FilterError as e:
             raise UsageError(f"argument --filter: {e}") from None
-    paths = report.save(out)
+    paths = report.save(out, replace_earlier=args.force)
     print(report.to_markdown())
+    for png in paths["removed"]:
+        print(f"removed {png}: the earlier report's plot of a case this bench does not have")
     print(f"report -> {paths['markdown']}, {paths['json']}")
     for png in paths["plots"]:
         print(f"plot -> {png}")
@@ -1001,7 +1006,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--threshold-deg", type=_positive, default=None, help="convergence threshold, degrees (default: 2)")
     p.add_argument("--out", default="bench", help="folder for the report (default: ./bench)")
     p.add_argument(
-        "--force", action="store_true", help="overwrite an earlier report in --out (bench.md, bench.json, .png plots)"
+        "--force",
+        action="store_true",
+        help="overwrite an earlier report in --out (bench.md, bench.json, .png plots); a plain bench first "
+        "removes that report's plots of cases it does not have (the plots its bench.json names, no other file)",
     )
     p.add_argument(
         "--campaign",
@@ -1108,12 +1116,21 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.set_defaults(func=_cmd_precompile)
 
-    p = sub.add_parser("allan", help="fit the noise terms of a static IMU log and draw its Allan plot")
+    p = sub.add_parser(
+        "allan", help="fit the noise terms of a static IMU log and draw its Allan plot (unless --no-plot)"
+    )
     p.add_argument("log", metavar="LOG", help="a static gyro log (.mcap, or .npz from 'gyroemu simulate')")
-    p.add_argument(
+    picture = p.add_mutually_exclusive_group()
+    picture.add_argument(
         "--out",
         default=None,
         help="plot to write, in the format its suffix names: .png, .pdf, .svg, ... (default: LOG with .allan.png)",
+    )
+    picture.add_argument(
+        "--no-plot",
+        action="store_true",
+        help="draw no plot: only the report (and --kalibr); no plot file is written or checked, so a script "
+        "may run allan on one log again without --force",
     )
     p.add_argument(
         "--allow-motion", action="store_true", help="analyse a log that is not static (a warning, not an error)"
@@ -1123,7 +1140,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--kalibr", default=None, metavar="IMU.yaml", help="also write the noise model as Kalibr's/OpenVINS's imu.yaml"
     )
     p.add_argument(
-        "--force", action="store_true", help="overwrite an existing plot (--out) or --kalibr file (never LOG itself)"
+        "--force",
+        action="store_true",
+        help="overwrite an existing plot (--out, or LOG with .allan.png) or --kalibr file (never LOG itself)",
     )
     p.set_defaults(func=_cmd_allan)
 

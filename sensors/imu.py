@@ -6,7 +6,9 @@
    ``rate_error_ppm``, so the true instants are ``τ_k = t₀ + k T (1 + ε)``. It stamps sample ``k``
    with ``t_k = k T + offset_s + jitter`` (white, σ = ``jitter_s``).
 2. **Gyro mechanism.** The truth on the mechanism's inner grid (``m`` inner steps per output
-   interval, ``m = ceil(inner_rate / rate_hz)``) goes through :meth:`GyroMechanism.respond` in chunks
+   interval, ``m = ceil(inner_rate / rate_hz)``, at most ``BLOCK_INNER_SAMPLES``: a block of a run holds
+   that many, so a device whose output is too slow for its mechanism is refused, naming ``rate_hz``)
+   goes through :meth:`GyroMechanism.respond` in chunks
    that carry its state (:mod:`gyroemu.sensors.mechanism`), giving the indicated angle; sample ``k`` is its
    increment over ``[τ_{k−1}, τ_k]``, divided by ``T`` for a rate.
 3. **Error terms** (:func:`gyroemu.sensors.errors.apply_errors`) on that rate: bias, scale factor,
@@ -53,7 +55,7 @@ from gyroemu.dynamics.truth_source import SampledTruth, TruthSource
 from gyroemu.errors import ConfigError
 
 from .accelerometer import AccelerometerSpec, LatencySeconds
-from .device_run import DeviceRun, concatenate_samples
+from .device_run import BLOCK_INNER_SAMPLES, DeviceRun, concatenate_samples
 from .errors import AccelErrors, ErrorModel, GyroErrors
 from .magnetometer import MagnetometerSpec
 from .mechanism import GYRO_KINDS, GyroMechanism, mechanism_class
@@ -276,6 +278,15 @@ class Device:
             raise ConfigError(
                 f"the output rate {spec.rate_hz:g} Hz is above the gyro mechanism's inner rate "
                 f"{self.inner_rate_hz:g} Hz",
+                file=where,
+                key="rate_hz",
+            )
+        steps = math.ceil(self.inner_rate_hz / spec.rate_hz - 1e-9)  # DeviceRun's inner steps a sample
+        if steps > BLOCK_INNER_SAMPLES:  # one sample's inner grid would be more than a block holds
+            raise ConfigError(
+                f"at {spec.rate_hz:g} Hz each sample needs {steps} steps of the gyro mechanism's inner grid "
+                f"({self.inner_rate_hz:g} Hz), more than the limit of {BLOCK_INNER_SAMPLES}: a block of the run "
+                "holds at most that many (its memory); raise the output rate",
                 file=where,
                 key="rate_hz",
             )

@@ -98,14 +98,24 @@ import math
 from typing import Annotated, ClassVar, Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, ValidationInfo, field_validator
 
 from gyroemu.dynamics.config import PositiveReal, Real
 from gyroemu.dynamics.jit import njit
 
 from .mechanism import GyroMechanism, GyroResponse, GyroTruth
 
-__all__ = ["RateGyro", "RPM", "StopAngle", "sdf_axes", "foh_matrices", "simulate_gimbal", "inner_rate_for"]
+__all__ = [
+    "RateGyro",
+    "RPM",
+    "StopAngle",
+    "MAX_GIMBAL_POLE_HZ",
+    "gimbal_pole_problem",
+    "sdf_axes",
+    "foh_matrices",
+    "simulate_gimbal",
+    "inner_rate_for",
+]
 
 #: rad/s per rpm.
 RPM = 2.0 * math.pi / 60.0
@@ -115,6 +125,13 @@ StopAngle = Annotated[Real, Field(gt=0, lt=90)]
 
 # The inner step resolves the fastest pole of a gimbal loop with this many samples per period.
 SAMPLES_PER_PERIOD = 20
+
+MAX_GIMBAL_POLE_HZ = 100_000.0
+"""The fastest gimbal pole a single-degree-of-freedom gyro may have (a rate gyro's natural frequency, a
+floated gyro's float corner and rebalance loop), Hz: a hundred times the fastest of real ones (rate gyros
+ring at tens of hertz, floats have corners up to about a kilohertz). The inner grid takes
+:data:`SAMPLES_PER_PERIOD` steps a period of it: at this limit 2·10⁶ steps a simulated second (a gimbal
+of 10¹² Hz asked for 2·10¹³)."""
 
 
 class RateGyro(GyroMechanism):
@@ -135,9 +152,21 @@ class RateGyro(GyroMechanism):
     rotor_inertia_kgm2: PositiveReal = 4.0e-6
     spin_speed_rpm: PositiveReal = 24000.0
     gimbal_inertia_kgm2: PositiveReal = 8.5e-6
-    spring_stiffness_n_m_per_rad: PositiveReal = 0.3
+    # validate_default: the natural frequency must also be checked when only the inertia is given.
+    spring_stiffness_n_m_per_rad: PositiveReal = Field(0.3, validate_default=True)
     damping_n_m_s_per_rad: PositiveReal = 2.2e-3
     stop_angle_deg: StopAngle = 3.5
+
+    @field_validator("spring_stiffness_n_m_per_rad")
+    @classmethod
+    def _natural_frequency(cls, stiffness, info: ValidationInfo):
+        inertia = info.data.get("gimbal_inertia_kgm2")
+        if inertia is not None:
+            frequency = math.sqrt(stiffness / inertia) / (2 * math.pi)
+            problem = gimbal_pole_problem(f"the natural frequency √(K/J)/2π (J = {inertia:g} kg·m²)", frequency)
+            if problem is not None:
+                raise ValueError(problem)
+        return stiffness
 
     # ---- derived quantities (SI) ------------------------------------------------------------------
 
@@ -226,6 +255,17 @@ def sdf_axes(truth: GyroTruth) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     omega, alpha = np.asarray(truth.omega, dtype=float), np.asarray(truth.alpha, dtype=float)
     return omega, omega[:, [2, 0, 1]], alpha[:, [1, 2, 0]]
+
+
+def gimbal_pole_problem(what: str, frequency_hz: float) -> str | None:
+    """Why a gimbal pole of ``frequency_hz`` (Hz; ``what`` names it) cannot be simulated, or None: more
+    than :data:`MAX_GIMBAL_POLE_HZ`, which sets the inner rate (:func:`inner_rate_for`)."""
+    if frequency_hz <= MAX_GIMBAL_POLE_HZ:
+        return None
+    return (
+        f"{what} would be {frequency_hz:.4g} Hz, more than the limit of {MAX_GIMBAL_POLE_HZ:g} Hz: a hundred "
+        f"times the fastest gimbal of real gyros (the inner grid steps {SAMPLES_PER_PERIOD} times its period)"
+    )
 
 
 def inner_rate_for(fastest_hz: float, output_rate_hz: float) -> float:

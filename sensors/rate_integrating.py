@@ -105,7 +105,7 @@ from pydantic import Field, StrictBool, ValidationInfo, field_validator
 from gyroemu.dynamics.config import NonNegativeReal, PositiveReal
 
 from .mechanism import GyroMechanism, GyroResponse, GyroTruth
-from .rate_gyro import RPM, StopAngle, inner_rate_for, sdf_axes, simulate_gimbal
+from .rate_gyro import RPM, StopAngle, gimbal_pole_problem, inner_rate_for, sdf_axes, simulate_gimbal
 
 __all__ = ["RateIntegratingGyro"]
 
@@ -130,7 +130,8 @@ class RateIntegratingGyro(GyroMechanism):
     rotor_inertia_kgm2: PositiveReal = 2.0e-6
     spin_speed_rpm: PositiveReal = 24000.0
     gimbal_inertia_kgm2: PositiveReal = 1.0e-5
-    damping_n_m_s_per_rad: PositiveReal = 5.0e-3
+    # validate_default: the float's corner must also be checked when only the inertia is given.
+    damping_n_m_s_per_rad: PositiveReal = Field(5.0e-3, validate_default=True)
     stop_angle_deg: StopAngle = 2.0
     torque_rebalance: StrictBool = True
     torquer_scale_n_m_per_a: PositiveReal = 0.02
@@ -138,21 +139,38 @@ class RateIntegratingGyro(GyroMechanism):
     # validate_default: the stability check must also run when only the other gains are given.
     loop_integral_a_per_rad_s: NonNegativeReal = Field(4000.0, validate_default=True)
 
+    @field_validator("damping_n_m_s_per_rad")
+    @classmethod
+    def _float_corner(cls, c, info: ValidationInfo):
+        j = info.data.get("gimbal_inertia_kgm2")
+        if j is not None:  # the open loop's pole, and the closed loop's fastest when the float is fast
+            problem = gimbal_pole_problem(f"the float's corner c/2πJ (J = {j:g} kg·m²)", c / j / (2 * math.pi))
+            if problem is not None:
+                raise ValueError(problem)
+        return c
+
     @field_validator("loop_integral_a_per_rad_s")
     @classmethod
     def _stable_loop(cls, k_i, info: ValidationInfo):
-        j, c, k_p = (
+        j, c, k_t, k_p = (
             info.data.get(key)
-            for key in ("gimbal_inertia_kgm2", "damping_n_m_s_per_rad", "loop_proportional_a_per_rad")
+            for key in (
+                "gimbal_inertia_kgm2",
+                "damping_n_m_s_per_rad",
+                "torquer_scale_n_m_per_a",
+                "loop_proportional_a_per_rad",
+            )
         )
-        if (
-            info.data.get("torque_rebalance")
-            and j is not None
-            and c is not None
-            and k_p is not None
-            and not k_i < c * k_p / j
-        ):
+        if not info.data.get("torque_rebalance") or j is None or c is None or k_p is None:
+            return k_i
+        if not k_i < c * k_p / j:
             raise ValueError(f"makes the rebalance loop unstable: it needs k_i < c k_p / J = {c * k_p / j:.6g}")
+        if k_t is not None:  # the roots of J s³ + c s² + k_t k_p s + k_t k_i (loop_polynomial)
+            fastest = float(np.abs(np.roots([j, c, k_t * k_p, k_t * k_i])).max()) / (2 * math.pi)
+            what = "the rebalance loop's fastest pole (from J, c, k_t, k_p and k_i)"
+            problem = gimbal_pole_problem(what, fastest)
+            if problem is not None:
+                raise ValueError(problem)
         return k_i
 
     # ---- derived quantities (SI) ------------------------------------------------------------------

@@ -113,17 +113,17 @@ L. N. G. Filon, Proc. R. Soc. Edinburgh 49, 38 (1928) for the oscillatory quadra
 from __future__ import annotations
 
 import math
-from typing import ClassVar, Literal
+from typing import Annotated, ClassVar, Literal
 
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator
 
-from gyroemu.dynamics.config import NonNegativeReal, PositiveReal
+from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, at_most
 from gyroemu.dynamics.jit import njit
 
 from .mechanism import GyroMechanism, GyroResponse, GyroTruth
 
-__all__ = ["RingLaserGyro"]
+__all__ = ["RingLaserGyro", "MAX_DITHER_FREQUENCY_HZ", "MAX_SIMULATION_RATE_HZ"]
 
 _ARCSEC = math.pi / (180 * 3600)  # rad per arcsecond
 _DEG_PER_H = math.pi / 180 / 3600  # rad/s per °/h
@@ -132,6 +132,15 @@ _DEG_PER_H = math.pi / 180 / 3600  # rad/s per °/h
 STEPS_PER_DITHER_CYCLE = 50
 #: Largest lock-in phase rate K Ω_L times the step (the two-term Picard step is exact to O((kh)³)).
 MAX_LOCK_IN_PER_STEP = 0.05
+MAX_DITHER_FREQUENCY_HZ = 10_000.0
+"""The highest ``dither_frequency_hz``, Hz: ten times the fastest body dither of real RLGs (300 Hz to
+about 1 kHz: a dithered block on its springs is a mechanical resonator); the integrator takes at least
+:data:`STEPS_PER_DITHER_CYCLE` steps a cycle, so this needs a ``simulation_rate_hz`` of 5·10⁵ Hz."""
+MAX_SIMULATION_RATE_HZ = 1_000_000.0
+"""The highest ``simulation_rate_hz`` (the mechanism's inner rate), Hz: twice what the fastest dither
+(:data:`MAX_DITHER_FREQUENCY_HZ`) needs, and 30 times the default, which resolves the dither and the
+lock-in time of a navigation RLG; at about 60 ns a step and axis, 0.2 s of computing a simulated second
+(a 10¹² Hz rate asked for 10¹² steps a second)."""
 # A step is near a turn-around when its phase rate is within _NEAR·√|Φ''| of zero at either end (or
 # changes sign); there it is cut into sub-intervals of phase curvature |Φ''| h_s² ≤ _CURVATURE rad.
 _NEAR = 10.0
@@ -159,10 +168,15 @@ class RingLaserGyro(GyroMechanism):
     )
     wavelength_nm: PositiveReal = 632.8
     lock_in_rate_deg_per_h: NonNegativeReal = 200.0
-    dither_frequency_hz: PositiveReal = 437.0
+    dither_frequency_hz: Annotated[
+        PositiveReal, at_most(MAX_DITHER_FREQUENCY_HZ, "ten times the fastest body dither of real RLGs (about 1 kHz)")
+    ] = 437.0
     dither_amplitude_arcsec: NonNegativeReal = 200.0
     dither_amplitude_noise_fraction: NonNegativeReal = Field(default=0.05, le=0.5)
-    simulation_rate_hz: PositiveReal = Field(default=32_000.0, validate_default=True)
+    simulation_rate_hz: Annotated[
+        PositiveReal,
+        at_most(MAX_SIMULATION_RATE_HZ, "twice the 50 steps a cycle of a 10 kHz dither, ten times real RLGs' fastest"),
+    ] = Field(default=32_000.0, validate_default=True)
 
     @field_validator("area_m2")
     @classmethod

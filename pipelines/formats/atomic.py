@@ -7,7 +7,11 @@ would leave it with: an existing file's own, a new one ``0o666`` less the proces
 file's is ``0o600``); where the file system keeps no modes (FAT, some network mounts) it gets what it gets.
 
 :func:`folder_problem` says, before any work, why a folder cannot take an output (missing, not a
-folder, read-only or not writable), so that a job refuses it up front naming its argument.
+folder, read-only or not writable), so that a job refuses it up front naming its argument;
+:func:`output_folder_problem` the same of an output folder made when missing, and :func:`output_file_problem`
+of an output file (a folder, an input, its folder, an existing file without ``--force``). They live
+beside the writer because they answer the question it would otherwise answer too late: can this file be
+written here?
 """
 
 from __future__ import annotations
@@ -15,11 +19,20 @@ from __future__ import annotations
 import os
 import stat
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["folder_problem", "output_folder_problem", "write_atomic", "write_text_atomic", "write_figure_atomic"]
+from gyroemu.pipelines.formats.file_names import same_file
+
+__all__ = [
+    "folder_problem",
+    "output_file_problem",
+    "output_folder_problem",
+    "write_atomic",
+    "write_text_atomic",
+    "write_figure_atomic",
+]
 
 
 def write_atomic(path: str | os.PathLike[str], write: Callable[[IO[Any]], object], *, binary: bool = True) -> Path:
@@ -87,6 +100,39 @@ def output_folder_problem(folder: str | os.PathLike[str]) -> str | None:
         where = where.parent
     problem = folder_problem(where)
     return None if problem is None else f"{where}: {problem}"
+
+
+def output_file_problem(
+    path: str | os.PathLike[str],
+    *,
+    force: bool,
+    inputs: Iterable[str | os.PathLike[str]] = (),
+) -> str | None:
+    """Why the output file ``path`` cannot be written, or None when it can; checked in this order, the
+    first that holds is said:
+
+    - ``"<path> is a folder: name a file in it"``;
+    - ``"<path> is an input[ (<input>)]: inputs are never overwritten, even with --force"``: ``path`` is
+      one of ``inputs`` by any path to it (:func:`~gyroemu.pipelines.formats.file_names.same_file`), the
+      input named when given otherwise;
+    - ``"<folder>: <why>"``: ``path``'s folder cannot take a new file (:func:`folder_problem`);
+    - ``"<path> exists (use --force to overwrite it)"``: a file (or a symbolic link, dangling or not)
+      is there and ``force`` is not given.
+
+    A job raises its own error with ``f"argument {argument}: {problem}"``."""
+    path = Path(path)
+    if path.is_dir():
+        return f"{path} is a folder: name a file in it"
+    for given in inputs:
+        if same_file(path, given):
+            alias = "" if os.fspath(given) == os.fspath(path) else f" ({os.fspath(given)})"
+            return f"{path} is an input{alias}: inputs are never overwritten, even with --force"
+    problem = folder_problem(path.parent)
+    if problem is not None:
+        return f"{path.parent}: {problem}"
+    if (path.exists() or path.is_symlink()) and not force:
+        return f"{path} exists (use --force to overwrite it)"
+    return None
 
 
 def _give_mode(tmp: str, path: Path) -> None:

@@ -44,28 +44,28 @@ float), ``time_stamps`` (the rule above) and ``source_info`` (the file's ``info`
 has one).
 
 Bad input raises :class:`ImportInputError` (a :class:`gyroemu.dynamics.ConfigError`) naming the file and the
-dataset or attribute at fault; the output is written through a temporary file renamed at the end
+dataset or attribute at fault, and an output it cannot write :class:`ImportOutputError`, before the input
+is read; the output is written through a temporary file renamed at the end
 (:class:`gyroemu.pipelines.formats.mcap_log.McapLogWriter`), so a failure leaves nothing at ``out``.
 """
 
 from __future__ import annotations
 
-import errno
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from gyroemu.dynamics import ConfigError
-from gyroemu.pipelines.formats.atomic import folder_problem
+from gyroemu.pipelines.formats.atomic import output_file_problem
 from gyroemu.pipelines.formats.channels import ImuSeries, PoseSeries
-from gyroemu.pipelines.formats.file_names import same_file
 from gyroemu.pipelines.formats.mcap_log import Recording, write_mcap
 from gyroemu.pipelines.formats.messages import ns_to_stamps
 from gyroemu.sensors.samples import ImuSamples
 
 __all__ = [
     "ImportInputError",
+    "ImportOutputError",
     "ImportSummary",
     "BroadTrial",
     "BROAD_CITATION",
@@ -97,6 +97,10 @@ class ImportInputError(ConfigError):
     def __str__(self) -> str:
         where = [w for w in (self.file, self.item) if w]
         return (": ".join(where) + ": " if where else "") + self.reason
+
+
+class ImportOutputError(ConfigError):
+    """An output file an importer cannot write (the message says why; the command line names ``--out``)."""
 
 
 @dataclass(frozen=True)
@@ -336,26 +340,17 @@ def import_broad(path, out, *, device_name: str = "imu0", force: bool = False) -
 
     Raises
     ------
+    ImportOutputError
+        ``out`` cannot take the import, before the trial is read: a folder, the input itself (even with
+        ``force``), in a missing, read-only (a mount stops root too) or unwritable folder, or an existing
+        file without ``force`` (:func:`~gyroemu.pipelines.formats.atomic.output_file_problem`).
     ImportInputError
-        The input is missing, not HDF5, lacks a dataset or attribute, or has the wrong shapes; or ``out``
-        is the input file itself.
-    FileNotFoundError
-        ``out``'s folder does not exist.
-    FileExistsError
-        ``out`` exists (a file: without ``force``; a folder: always).
+        The input is missing, not HDF5, lacks a dataset or attribute, or has the wrong shapes.
     """
     path, out = Path(path), Path(out)
-    if same_file(out, path):
-        raise ImportInputError("is the input file: the import never overwrites its input", file=out)
-    if not out.parent.is_dir():
-        raise FileNotFoundError(f"{out.parent} is not a folder")
-    if out.is_dir():
-        raise FileExistsError(errno.EEXIST, "is a folder: name a file in it")
-    if out.exists() and not force:
-        raise FileExistsError(errno.EEXIST, "exists (use --force to overwrite it)")
-    problem = folder_problem(out.parent)  # a read-only mount stops root too: before the trial is read
+    problem = output_file_problem(out, force=force, inputs=(path,))
     if problem is not None:
-        raise PermissionError(errno.EROFS if "read-only" in problem else errno.EACCES, f"its folder: {problem}")
+        raise ImportOutputError(problem)
     trial = read_broad(path)
     recording = broad_recording(trial, device_name)
     write_mcap(out, recording)

@@ -26,7 +26,8 @@ and attitude must keep still. A log in motion raises :class:`AllanMotionError` u
 ``allow_motion``. :func:`kalibr_imu_yaml` gives the fit as Kalibr's (and OpenVINS's) ``imu.yaml``.
 
 :func:`check_options` refuses, before any work, the command's bad options (:class:`AllanError`): an
-output that is the log itself, a folder, in a folder that cannot take it, or that exists without ``force``.
+output that is the log itself, a folder, in a folder that cannot take it, or that exists without ``force``
+(the plot's only when one is drawn: ``--no-plot`` draws none).
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ from typing import cast
 import numpy as np
 
 from gyroemu.errors import ConfigError, LogError
-from gyroemu.pipelines.formats.atomic import folder_problem, write_atomic, write_text_atomic
+from gyroemu.pipelines.formats.atomic import output_file_problem, write_atomic, write_text_atomic
 from gyroemu.pipelines.formats.file_names import same_file
 from gyroemu.sensors.allan import TERMS, AllanDeviation, AllanFit, Coefficient, allan_deviation, fit_allan
 from gyroemu.sensors.allan_stream import OverlappingAllanAccumulator
@@ -333,15 +334,10 @@ def default_plot_path(log: str | os.PathLike) -> Path:
 
 
 def _check_output(path: Path, argument: str, log: Path, force: bool) -> None:
-    if same_file(path, log):
-        raise AllanError(f"argument {argument}: {path} is the log LOG: refusing to overwrite it (even with --force)")
-    if path.is_dir():
-        raise AllanError(f"argument {argument}: {path} is a folder: name a file")
-    problem = folder_problem(path.parent)
+    """:class:`AllanError` naming ``argument`` when ``path`` cannot take an output (:func:`output_file_problem`)."""
+    problem = output_file_problem(path, force=force, inputs=(log,))
     if problem is not None:
-        raise AllanError(f"argument {argument}: {path}: cannot write in its folder {path.parent}: {problem}")
-    if (path.exists() or path.is_symlink()) and not force:
-        raise AllanError(f"argument {argument}: {path} exists (pass --force to overwrite it)")
+        raise AllanError(f"argument {argument}: {problem}")
 
 
 def check_options(
@@ -349,29 +345,35 @@ def check_options(
     out: str | os.PathLike | None = None,
     kalibr: str | os.PathLike | None = None,
     force: bool = False,
-) -> Path:
+    plot: bool = True,
+) -> Path | None:
     """Refuse, before any work, ``gyroemu allan``'s bad options with :class:`AllanError` (the message
     names the argument): a plot format matplotlib does not write, a missing ``log``, an output (the
     plot ``out``, default :func:`default_plot_path`; the ``kalibr`` imu.yaml) that is the log itself
-    (even with ``force``), a folder, in a folder that cannot take it (:func:`folder_problem`: missing,
-    read-only, not writable), or that exists without ``force``; ``kalibr`` the same file as the plot.
-    Returns the plot's path."""
+    (even with ``force``), a folder, in a folder that cannot take it (missing, read-only, not writable),
+    or that exists without ``force`` (:func:`output_file_problem`); ``kalibr`` the same file as the plot.
+    Without ``plot`` (``--no-plot``) no plot is drawn, so none is checked (an ``out`` is refused: it
+    names a plot). Returns the plot's path, or None without ``plot``."""
     log = Path(log)
-    plot = Path(out) if out is not None else default_plot_path(log)
+    if not plot and out is not None:
+        raise AllanError(f"argument --no-plot: draws no plot, but --out names one ({out}): drop one of them")
+    picture = Path(out) if out is not None else default_plot_path(log)
     argument = "--out" if out is not None else "--out (default: LOG with .allan.png)"
-    try:
-        plot_format(plot)
-    except ValueError as e:
-        raise AllanError(f"argument {argument}: {e}") from None
+    if plot:
+        try:
+            plot_format(picture)
+        except ValueError as e:
+            raise AllanError(f"argument {argument}: {e}") from None
     if not log.is_file():
         raise AllanError(f"argument LOG: {log}: {'not a file' if log.exists() else 'no such file'}")
-    _check_output(plot, argument, log, force)
+    if plot:
+        _check_output(picture, argument, log, force)
     if kalibr is not None:
         kalibr = Path(kalibr)
         _check_output(kalibr, "--kalibr", log, force)
-        if same_file(kalibr, plot):
+        if plot and same_file(kalibr, picture):
             raise AllanError(f"argument --kalibr: {kalibr} is the plot's file too ({argument})")
-    return plot
+    return picture if plot else None
 
 
 class AllanLogError(LogError):
@@ -1059,9 +1061,11 @@ def kalibr_imu_yaml(report: AllanReport, rostopic: str | None = None) -> str:
 
 
 def write_kalibr_yaml(report: AllanReport, path: str | os.PathLike, force: bool = False) -> Path:
-    """Write :func:`kalibr_imu_yaml` to ``path`` whole or not at all; ``FileExistsError`` when ``path``
-    exists and not ``force``."""
+    """Write :func:`kalibr_imu_yaml` to ``path`` whole or not at all; :class:`AllanError` (a ``ValueError``)
+    saying why when ``path`` cannot take it (:func:`output_file_problem`: it exists and not ``force``,
+    among others)."""
     path = Path(path)
-    if path.exists() and not force:
-        raise FileExistsError(f"{path} exists (pass --force to overwrite it)")
+    problem = output_file_problem(path, force=force)
+    if problem is not None:
+        raise AllanError(problem)
     return write_text_atomic(path, kalibr_imu_yaml(report))

@@ -53,9 +53,11 @@ What is reported, per (case, filter), as mean ± standard deviation over the run
 
 Outputs: :meth:`BenchReport.to_markdown` (``bench.md``), :meth:`BenchReport.to_json` (``bench.json``: every
 number, every run) and :meth:`BenchReport.save_plots` (one PNG per case: the error of every filter
-against time, first run). :meth:`BenchReport.save` writes all three, each through a temporary file.
-:func:`check_report_folder` refuses, before any work, a folder that cannot take them or that holds an
-earlier report (``bench.md``, ``bench.json``, a ``.png``) unless told to overwrite it.
+against time, first run; ``bench.json`` lists their names). :meth:`BenchReport.save` writes all three, each
+through a temporary file. :func:`check_report_folder` refuses, before any work, a folder that cannot take
+them or that holds an earlier report (``bench.md``, ``bench.json``, a ``.png``) unless told to overwrite
+it; overwriting it, :meth:`BenchReport.save` first removes the earlier report's plots this one does not
+write (:func:`earlier_plots`: those its ``bench.json`` names, and no other file).
 """
 
 from __future__ import annotations
@@ -120,7 +122,9 @@ __all__ = [
     "RunResult",
     "SimCase",
     "check_report_folder",
+    "earlier_plots",
     "evaluate_run",
+    "plot_names",
     "report_files_in",
     "report_figures",
     "run_bench",
@@ -366,6 +370,7 @@ class BenchReport:
                 }
                 for c in self.cases
             ],
+            "plots": plot_names([c.name for c in self.cases]),
         }
 
     def to_json(self) -> str:
@@ -386,7 +391,7 @@ class BenchReport:
 
         directory = Path(directory)
         written = []
-        for case, stem in zip(self.cases, unique_stems([c.name for c in self.cases])):
+        for case, name in zip(self.cases, plot_names([c.name for c in self.cases])):
             panels = (
                 [("total", "curve_total_deg"), ("inclination", "curve_inclination_deg")]
                 if case.mode == "9D"
@@ -408,23 +413,67 @@ class BenchReport:
             axes[0, 0].legend(fontsize=8, loc="upper right")
             axes[-1, 0].set_xlabel("time, s")
             fig.tight_layout()
-            path = directory / f"{stem}.png"
-            written.append(write_figure_atomic(fig, path, dpi=110))
+            written.append(write_figure_atomic(fig, directory / name, dpi=110))
         return written
 
-    def save(self, directory) -> dict:
-        """``bench.md``, ``bench.json`` and the plots in ``directory`` (made if missing); their paths."""
+    def save(self, directory, *, replace_earlier: bool = False) -> dict:
+        """``bench.md``, ``bench.json`` and the plots in ``directory`` (made if missing); their paths, and
+        under ``"removed"`` the earlier report's plots removed. With ``replace_earlier`` (``--force``), the
+        plots of an earlier report there (:func:`earlier_plots`) that this one does not write are removed
+        first, before its ``bench.json`` is replaced: no other file is touched."""
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
-        paths = {"markdown": directory / "bench.md", "json": directory / "bench.json"}
+        ours = set(plot_names([c.name for c in self.cases]))
+        removed = [p for p in (earlier_plots(directory) if replace_earlier else []) if p.name not in ours]
+        for plot in removed:  # before bench.json, which names them, is replaced: a stop here leaves it naming them
+            plot.unlink(missing_ok=True)
+        paths: dict = {"markdown": directory / "bench.md", "json": directory / "bench.json"}
         write_text_atomic(paths["json"], self.to_json())
         write_text_atomic(paths["markdown"], self.to_markdown())
         paths["plots"] = self.save_plots(directory)
+        paths["removed"] = removed
         return paths
 
 
 REPORT_FILES = ("bench.md", "bench.json")
-"""The report's files in its folder, besides one ``.png`` per case named after the case."""
+"""The report's files in its folder, besides one ``.png`` per case named after the case (:func:`plot_names`)."""
+
+
+def plot_names(case_names: list[str]) -> list[str]:
+    """The file names of a report's plots, one per case in order: ``<stem>.png``, the stem the case's name
+    made safe and distinct (:func:`~gyroemu.pipelines.formats.file_names.unique_stems`). ``bench.json``
+    lists them (``"plots"``)."""
+    return [f"{stem}.png" for stem in unique_stems(case_names)]
+
+
+def earlier_plots(folder: str | os.PathLike[str]) -> list[Path]:
+    """The plots of the report in ``folder``, as its ``bench.json`` names them: its ``"plots"``, or, in a
+    report written before ``bench.json`` listed them (2026-11-27), the names bench gives the plots of its
+    ``"cases"`` (:func:`plot_names`, the rule since plots were named after cases). Only those that are
+    there as plain files (no folder, no symbolic link) and whose names are a plain ``.png`` name in
+    ``folder`` (no path, not hidden): a hand-edited ``bench.json`` cannot name any other file. None when
+    ``folder`` holds no ``bench.json``, or one that cannot be read or is no bench report (no
+    ``"gyroemu_bench"``): a ``bench.md`` alone is prose, and another file's plots are not guessed."""
+    folder = Path(folder)
+    try:
+        data = json.loads((folder / "bench.json").read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return []
+    if not isinstance(data, dict) or "gyroemu_bench" not in data:
+        return []
+    names = data.get("plots")
+    if names is None:
+        cases = data.get("cases")
+        given = [c.get("name") for c in cases if isinstance(c, dict)] if isinstance(cases, list) else []
+        case_names = [n for n in given if isinstance(n, str)]
+        if len(case_names) != len(given):
+            return []
+        names = plot_names(case_names)
+    if not isinstance(names, list):
+        return []
+    plain = [n for n in dict.fromkeys(names) if isinstance(n, str) and n.endswith(".png") and not n.startswith(".")]
+    plots = [folder / n for n in plain if Path(n).name == n]
+    return [p for p in plots if p.is_file() and not p.is_symlink()]
 
 
 def report_files_in(folder: str | os.PathLike[str]) -> list[str]:
@@ -449,7 +498,7 @@ def check_report_folder(folder: str | os.PathLike[str], *, force: bool = False, 
     if there and not force:
         raise BenchError(
             f"argument {argument}: {folder} holds an earlier report ({', '.join(there)}): use another folder, or "
-            "--force to write this one over it (its plots of other cases stay)"
+            "--force to write this one over it (and remove the earlier report's plots its bench.json names)"
         )
 
 

@@ -376,7 +376,8 @@ def save_campaign_report(report: BenchReport, table: Any, out: Path, *, plots: b
 
     out.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Any] = {"markdown": out / "bench.md", "json": out / "bench.json", "plots": []}
-    write_text_atomic(paths["json"], json.dumps(report.to_dict(), indent=1, ensure_ascii=False, allow_nan=False))
+    data = report.to_dict() | ({} if plots else {"plots": []})  # the names of the plots written beside it
+    write_text_atomic(paths["json"], json.dumps(data, indent=1, ensure_ascii=False, allow_nan=False))
     write_text_atomic(paths["markdown"], _markdown(report))
     if plots:
         paths["plots"] = _box_plots(report, out)
@@ -393,10 +394,10 @@ def _box_plots(report: BenchReport, out: Path) -> list[Path]:
     import numpy as np
 
     from gyroemu.pipelines.formats.atomic import write_figure_atomic
-    from gyroemu.pipelines.formats.file_names import unique_stems
+    from gyroemu.pipelines.jobs.bench import plot_names
 
     written = []
-    for case, stem in zip(report.cases, unique_stems([c.name for c in report.cases])):
+    for case, name in zip(report.cases, plot_names([c.name for c in report.cases])):
         metric = "total_deg" if case.mode == "9D" else "inclination_deg"
         data, labels = [], []
         for fr in case.filters:
@@ -413,5 +414,5 @@ def _box_plots(report: BenchReport, out: Path) -> list[Path]:
         ax.set_title(f"{case.name} ({case.mode}), {case.runs} runs", fontsize=9)
         ax.grid(True, which="both", alpha=0.3)
         fig.tight_layout()
-        written.append(write_figure_atomic(fig, out / f"{stem}.png", dpi=110))
+        written.append(write_figure_atomic(fig, out / name, dpi=110))
     return written

@@ -55,7 +55,7 @@ from gyroemu.pipelines.estimation.setup import (
     latencies_for_log,
     setup_from_metadata,
 )
-from gyroemu.pipelines.formats.atomic import folder_problem
+from gyroemu.pipelines.formats.atomic import output_file_problem
 from gyroemu.pipelines.formats.channels import (
     BODY_FRAME,
     ESTIMATE_ROLE,
@@ -73,7 +73,6 @@ from gyroemu.pipelines.formats.device_stream import (
     count_samples,
     scan_devices,
 )
-from gyroemu.pipelines.formats.file_names import same_file
 from gyroemu.pipelines.formats.frames import TF_LOG_RATE_HZ, TfThinning
 from gyroemu.pipelines.formats.mcap_log import LogWarning, read_mcap
 from gyroemu.pipelines.formats.mcap_records import McapRecordWalk
@@ -125,33 +124,22 @@ def check_options(
     plot: bool = False,
     topic_out: str | None = None,
 ) -> None:
-    """:class:`EstimateError` for an output that cannot be written: in a missing, read-only or unwritable
-    folder, a folder, the input itself, or an existing file without ``force``; with ``plot``, the same of
+    """:class:`EstimateError` for an output that cannot be written (a folder, the input itself, in a
+    missing, read-only or unwritable folder, or an existing file without ``force``:
+    :func:`~gyroemu.pipelines.formats.atomic.output_file_problem`); with ``plot``, the same of
     the picture :func:`~gyroemu.pipelines.jobs.plots.plot_estimate` draws beside ``out``
     (``OUT.estimate.png``); a ``topic_out`` that is no topic name or one of the reserved topics
     (module's notes)."""
     path, out = Path(path), Path(out)
-    if not out.parent.is_dir():
-        raise EstimateError(f"argument --out: {out.parent} is not a folder")
-    problem = folder_problem(out.parent)
+    problem = output_file_problem(out, force=force, inputs=(path,))
     if problem is not None:
-        raise EstimateError(f"argument --out: {out.parent}: {problem}")
-    if out.is_dir():
-        raise EstimateError(f"argument --out: {out} is a folder")
-    if same_file(out, path):
-        raise EstimateError(f"argument --out: {out} is the input: the input is never modified")
-    if out.exists() and not force:
-        raise EstimateError(f"argument --out: {out} exists (use --force to overwrite it)")
+        raise EstimateError(f"argument --out: {problem}")
     if plot:
         from gyroemu.pipelines.jobs.plots import estimate_plot_path
 
-        picture = estimate_plot_path(out)
-        if picture.is_dir():
-            raise EstimateError(f"argument --plot: {picture} is a folder")
-        if same_file(picture, path):
-            raise EstimateError(f"argument --plot: {picture} is the input: the input is never modified")
-        if picture.exists() and not force:
-            raise EstimateError(f"argument --plot: {picture} exists (use --force to overwrite it)")
+        problem = output_file_problem(estimate_plot_path(out), force=force, inputs=(path,))
+        if problem is not None:
+            raise EstimateError(f"argument --plot: {problem}")
     if topic_out is not None:
         _check_topic_out_name(topic_out)
 

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from gyroemu.errors import ConfigError
-from gyroemu.pipelines.formats.atomic import folder_problem, write_text_atomic
+from gyroemu.pipelines.formats.atomic import output_file_problem, write_text_atomic
 from gyroemu.pipelines.formats.file_names import repeated_file, same_file
 
 if TYPE_CHECKING:
@@ -87,16 +87,12 @@ class IdentifySummary:
     notes: list[str] = field(default_factory=list)
 
 
-def _check_out(path: Path, argument: str, force: bool) -> None:
+def _check_out(path: Path, argument: str, force: bool, logs: Sequence[Path]) -> None:
     if path.suffix != ".toml":
         raise IdentifyError(f"argument {argument}: {path}: write a .toml file (got '{path.suffix}')")
-    problem = folder_problem(path.parent)
+    problem = output_file_problem(path, force=force, inputs=logs)
     if problem is not None:
-        raise IdentifyError(f"argument {argument}: {path.parent}: {problem}")
-    if path.is_dir():
-        raise IdentifyError(f"argument {argument}: {path} is a folder: name a file in it")
-    if path.exists() and not force:
-        raise IdentifyError(f"argument {argument}: {path} exists (use --force to overwrite it)")
+        raise IdentifyError(f"argument {argument}: {problem}")
 
 
 def check_options(options: IdentifyOptions) -> None:
@@ -114,9 +110,9 @@ def check_options(options: IdentifyOptions) -> None:
         first, again = twice
         alias = "" if str(first) == str(again) else f" (as {first})"
         raise IdentifyError(f"argument LOG: {again} is given twice{alias}: give each recording once")
-    _check_out(options.out, "--out", options.force)
+    _check_out(options.out, "--out", options.force, options.logs)
     if options.site_out is not None:
-        _check_out(options.site_out, "--site-out", options.force)
+        _check_out(options.site_out, "--site-out", options.force, options.logs)
         if same_file(options.site_out, options.out):
             raise IdentifyError("argument --site-out: the same file as --out")
     for a, b in options.rest_intervals or ():

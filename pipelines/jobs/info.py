@@ -28,7 +28,6 @@ import numpy as np
 
 from gyroemu.errors import ConfigError
 from gyroemu.pipelines.formats.channels import IMU_ROLE
-from gyroemu.pipelines.formats.file_names import same_file
 from gyroemu.pipelines.formats.messages import MessageType
 
 __all__ = ["GAP_FACTOR", "InfoError", "TopicStats", "DeviceInfo", "LogInfo", "check_plot", "topic_stats", "log_info"]
@@ -47,22 +46,16 @@ def check_plot(path: str | os.PathLike[str], *, force: bool = False) -> Path:
     """The picture ``gyroemu info --plot`` draws of the log ``path`` (``LOG.info.png``, beside it), checked
     before any work: :class:`InfoError` naming ``--plot`` when its folder cannot take it (read-only, not
     writable), it is a folder or the log itself, or it exists and ``force`` is not given."""
-    from gyroemu.pipelines.formats.atomic import folder_problem
+    from gyroemu.pipelines.formats.atomic import output_file_problem
     from gyroemu.pipelines.jobs.plots import info_plot_path
 
     path = Path(path)
     picture = info_plot_path(path)
     if not picture.parent.is_dir():
         return picture  # no log there either: reading it says so, naming it
-    problem = folder_problem(picture.parent)
+    problem = output_file_problem(picture, force=force, inputs=(path,))
     if problem is not None:
-        raise InfoError(f"argument --plot: {picture.parent}: {problem}")
-    if picture.is_dir():
-        raise InfoError(f"argument --plot: {picture} is a folder")
-    if same_file(picture, path):
-        raise InfoError(f"argument --plot: {picture} is the log: the log is never modified")
-    if picture.exists() and not force:
-        raise InfoError(f"argument --plot: {picture} exists (use --force to overwrite it)")
+        raise InfoError(f"argument --plot: {problem}")
     return picture
 
 

@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gyroemu.errors import ConfigError
-from gyroemu.pipelines.formats.atomic import folder_problem
+from gyroemu.pipelines.formats.atomic import output_file_problem
 from gyroemu.pipelines.jobs.disk_space import (
     MCAP_RECORD_OVERHEAD,
     free_bytes,
@@ -321,15 +321,11 @@ def check_options(options: SimulateOptions, scenario: Scenario | None = None, de
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < _SEED_LIMIT:
         raise SimulateError(f"argument --seed: must be an integer from 0 to 2**128 - 1, got {seed!r}")
     out = options.out
-    if out.is_dir():
-        raise SimulateError(f"argument --out: {out} is a folder: name a file in it")
-    if out.suffix not in (".npz", ".mcap"):
+    if out.suffix not in (".npz", ".mcap") and not out.is_dir():  # a folder is said to be one, below
         raise SimulateError(f"argument --out: {out}: write a .mcap (ROS 2) or .npz file (got '{out.suffix}')")
-    problem = folder_problem(out.parent)
+    problem = output_file_problem(out, force=options.force)
     if problem is not None:
-        raise SimulateError(f"argument --out: {out.parent}: {problem}")
-    if out.exists() and not options.force:
-        raise SimulateError(f"argument --out: {out} exists (use --force to overwrite it)")
+        raise SimulateError(f"argument --out: {problem}")
     if out.suffix == ".mcap" and not options.device:
         raise SimulateError(
             "argument --device: an .mcap log holds a device's samples: name a device ('gyroemu presets' lists them)"

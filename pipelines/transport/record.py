@@ -76,7 +76,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 import numpy as np
 
 from gyroemu.errors import ConfigError
-from gyroemu.pipelines.formats.atomic import folder_problem, write_text_atomic
+from gyroemu.pipelines.formats.atomic import output_file_problem, write_text_atomic
 from gyroemu.pipelines.formats.channels import topic_message_type
 from gyroemu.pipelines.formats.file_names import same_file
 from gyroemu.pipelines.formats.frames import TF_STATIC_TOPIC, TF_TOPIC
@@ -529,15 +529,12 @@ class RecordError(ConfigError):
 
 
 def _check_output(path: Path, argument: str, force: bool) -> None:
-    """``path`` can take a new file of ``argument``: not a folder, its folder writable
-    (:func:`~gyroemu.pipelines.formats.atomic.folder_problem`), not an existing file unless ``force``."""
-    if path.is_dir():
-        raise RecordError(f"argument {argument}: {path} is a folder: name a file in it")
-    problem = folder_problem(path.parent)
+    """:class:`RecordError` naming ``argument`` when ``path`` cannot take a new file: a folder, in a folder
+    that cannot take it, an existing file without ``force``
+    (:func:`~gyroemu.pipelines.formats.atomic.output_file_problem`)."""
+    problem = output_file_problem(path, force=force)
     if problem is not None:
-        raise RecordError(f"argument {argument}: {path.parent}: {problem}")
-    if path.exists() and not force:
-        raise RecordError(f"argument {argument}: {path} exists (use --force to overwrite it)")
+        raise RecordError(f"argument {argument}: {problem}")
 
 
 def check_record_options(options: RecordOptions) -> None:
@@ -546,9 +543,7 @@ def check_record_options(options: RecordOptions) -> None:
     existing file without ``--force``; ``--report`` the same file as ``--out``, or refused as ``--out``
     is (any suffix); ``--key`` empty or no zenoh key expression."""
     out = options.out_path
-    if out.is_dir():
-        raise RecordError(f"argument --out: {out} is a folder: name a file in it")
-    if out.suffix != ".mcap":
+    if out.suffix != ".mcap" and not out.is_dir():  # a folder is said to be one, below
         raise RecordError(f"argument --out: {out}: record writes an MCAP log: name a .mcap file (got '{out.suffix}')")
     _check_output(out, "--out", options.force)
     report = options.report_path

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from cli_runs import run_cli
 
+from gyroemu.pipelines.formats import atomic
 from gyroemu.pipelines.formats.mcap_log import read_mcap
-from gyroemu.pipelines.jobs import allan as allan_job
 from gyroemu.pipelines.jobs.allan import (
     AllanLogError,
     AllanMotionError,
@@ -163,6 +163,45 @@ def test_json_report(logs, tmp_path):
     assert "Allan plot" in err
 
 
+def test_no_plot_draws_none_and_checks_none_so_a_script_may_run_twice(logs, tmp_path):
+    """``--json --no-plot`` run twice on one log: no picture written, none checked (an earlier plot at the
+    default path stays as it was, without --force); the same report both times; --kalibr still written
+    and still refused without --force; with --out it is refused before any work."""
+    log = tmp_path / "static.mcap"
+    os.symlink(logs["static"], log)
+    earlier = tmp_path / "static.allan.png"
+    earlier.write_bytes(b"an earlier plot")
+    reports = []
+    for _ in range(2):
+        status, out, err = run(log, "--json", "--no-plot")
+        assert status == 0, err
+        assert "Allan plot" not in err
+        reports.append(json.loads(out))
+    assert reports[0] == reports[1]
+    assert earlier.read_bytes() == b"an earlier plot"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["static.allan.png", "static.mcap"]
+    kalibr = tmp_path / "imu.yaml"
+    assert run(log, "--no-plot", "--kalibr", kalibr)[0] == 0 and kalibr.read_text().startswith("# IMU noise")
+    status, _, err = run(log, "--no-plot", "--kalibr", kalibr)
+    assert status == 2 and f"argument --kalibr: {kalibr} exists (use --force" in one_error_line(err)
+    status, _, err = run(log, "--no-plot", "--out", tmp_path / "x.png")
+    assert status == 2 and "argument --out: not allowed with argument --no-plot" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["imu.yaml", "static.allan.png", "static.mcap"]
+
+
+def test_check_options_without_a_plot_checks_none_and_refuses_an_out(tmp_path):
+    from gyroemu.pipelines.jobs.allan import AllanError, check_options
+
+    log = tmp_path / "static.mcap"
+    log.write_bytes(b"a log")
+    (tmp_path / "static.allan.png").write_bytes(b"an earlier plot")
+    assert check_options(log, plot=False) is None
+    with pytest.raises(AllanError, match="static.allan.png exists"):
+        check_options(log)
+    with pytest.raises(AllanError, match="argument --no-plot: draws no plot, but --out names one"):
+        check_options(log, tmp_path / "x.png", plot=False)
+
+
 def one_error_line(err: str) -> str:
     """The one line ``gyroemu allan`` printed for bad input (no traceback)."""
     lines = err.strip().splitlines()
@@ -185,7 +224,8 @@ def test_an_output_that_is_the_log_is_refused_even_with_force(logs, tmp_path):
     ):
         status, _, err = run(log, *args)
         assert status == 2, (args, err)
-        assert "is the log LOG" in one_error_line(err) and args[0] in err, err
+        line = one_error_line(err)
+        assert f"{args[0]}: " in line and "is an input" in line and "never overwritten, even with --force" in line
         assert log.read_bytes() == before
         assert not (tmp_path / "s2.allan.png").exists()
     status, _, err = run(log, "--out", tmp_path / "a.png", "--kalibr", tmp_path / "sub" / ".." / "a.png")
@@ -242,9 +282,9 @@ def test_an_output_folder_that_cannot_take_a_file_is_refused_naming_the_option(l
     ro = tmp_path / "ro"
     ro.mkdir()
     os.symlink(logs["static"], ro / "static.mcap")
-    real = allan_job.folder_problem
+    real = atomic.folder_problem
     monkeypatch.setattr(
-        allan_job, "folder_problem", lambda f: "read-only file system" if os.fspath(f) == os.fspath(ro) else real(f)
+        atomic, "folder_problem", lambda f: "read-only file system" if os.fspath(f) == os.fspath(ro) else real(f)
     )
     plot = tmp_path / "a.png"
     for args, argument in (

@@ -1,5 +1,5 @@
 """Files written whole or not at all (:mod:`gyroemu.pipelines.formats.atomic`), with the mode a plain
-``open`` gives, and the up-front check of an output's folder."""
+``open`` gives, and the up-front checks of an output's folder and file."""
 
 from __future__ import annotations
 
@@ -58,6 +58,34 @@ def test_output_folder_problem_names_the_folder_a_missing_one_would_be_made_in(t
     assert atomic.output_folder_problem(tmp_path / "file" / "sub") == f"{tmp_path / 'file'}: not a folder"
     monkeypatch.setattr(atomic, "folder_problem", lambda f: "read-only file system" if Path(f) == tmp_path else None)
     assert atomic.output_folder_problem(tmp_path / "a" / "b") == f"{tmp_path}: read-only file system"
+
+
+def test_output_file_problem_says_the_first_of_folder_input_its_folder_existing(tmp_path: Path, monkeypatch):
+    """One check of an output file for every job, in one order and one wording: a folder, an input (even
+    with --force; by any path to it), a folder that cannot take it, an existing file (or link) without
+    --force."""
+    from gyroemu.pipelines.formats import atomic
+
+    log, plot = tmp_path / "log.mcap", tmp_path / "p.png"
+    log.write_text("x")
+    (tmp_path / "dir.png").mkdir()
+    (tmp_path / "sub").mkdir()
+    os.symlink(tmp_path / "gone", tmp_path / "dangling.png")
+    problem = atomic.output_file_problem
+    assert problem(plot, force=False, inputs=(log,)) is None
+    assert problem(tmp_path / "dir.png", force=True) == f"{tmp_path / 'dir.png'} is a folder: name a file in it"
+    never = "inputs are never overwritten, even with --force"
+    assert problem(log, force=True, inputs=(plot, log)) == f"{log} is an input: {never}"
+    again = tmp_path / "sub" / ".." / "log.mcap"
+    assert problem(again, force=True, inputs=[log]) == f"{again} is an input ({log}): {never}"
+    assert problem(tmp_path / "no" / "p.png", force=True) == f"{tmp_path / 'no'}: no such folder"
+    assert problem(log, force=False) == f"{log} exists (use --force to overwrite it)"
+    assert problem(log, force=True) is None
+    dangling = tmp_path / "dangling.png"
+    assert problem(dangling, force=False) == f"{dangling} exists (use --force to overwrite it)"
+    monkeypatch.setattr(atomic, "folder_problem", lambda f: "read-only file system" if Path(f) == tmp_path else None)
+    assert problem(log, force=False) == f"{tmp_path}: read-only file system"  # before "exists"
+    assert problem(log, force=False, inputs=[log]) == f"{log} is an input: {never}"  # before the folder
 
 
 def test_an_existing_file_keeps_its_own_mode(tmp_path: Path):

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -479,6 +480,57 @@ def test_an_earlier_report_is_overwritten_only_with_force(tmp_path, configs, cap
     assert (out / "bench.md").read_text() == "someone's notes"
     assert run_cli(*argv, "--force") == 0, capsys.readouterr().err
     assert (out / "bench.md").read_text().startswith("# gyroemu bench")
+
+
+def test_force_removes_the_earlier_reports_plots_of_other_cases_and_no_other_file(tmp_path, configs, capsys):
+    """--force over an earlier report: its plots of cases this bench does not have are removed (they
+    stayed, beside a report that no longer spoke of them), before the new bench.json; a .png the earlier
+    report does not name (someone's picture) stays, as does any other file."""
+    out = tmp_path / "report"
+    argv = ["--scenario", configs / "rotation.toml", "--duration", 0.5, "--runs", 1, "--filter", "madgwick"]
+    two = ["--device", configs / "ideal200.toml", "--device", configs / "jittery200.toml"]
+    assert run_cli(*argv, *two, "--out", out) == 0, capsys.readouterr().err
+    capsys.readouterr()
+    first = json.loads((out / "bench.json").read_text())
+    assert len(first["plots"]) == 2 and sorted(first["plots"]) == sorted(p.name for p in out.glob("*.png"))
+    kept, gone = first["plots"]
+    (out / "photo.png").write_bytes(b"someone's picture")
+    (out / "notes.txt").write_text("someone's notes")
+    assert run_cli(*argv, "--device", configs / "ideal200.toml", "--out", out, "--force") == 0
+    printed = capsys.readouterr().out
+    assert f"removed {out / gone}: the earlier report's plot of a case this bench does not have" in printed
+    assert json.loads((out / "bench.json").read_text())["plots"] == [kept]
+    assert sorted(p.name for p in out.iterdir()) == sorted(["bench.json", "bench.md", kept, "photo.png", "notes.txt"])
+    assert (out / "photo.png").read_bytes() == b"someone's picture"
+
+
+def test_earlier_plots_are_only_those_the_earlier_bench_json_names(tmp_path):
+    """The plots a --force removes: the earlier bench.json's "plots", or, written before it listed them,
+    the names bench gives its cases' plots; plain .png files in the folder only, whatever the JSON says."""
+    from gyroemu.pipelines.jobs.bench import earlier_plots, plot_names
+
+    out = tmp_path / "report"
+    out.mkdir()
+    for name in ("a.png", "b.png", "case.png", "case_2.png", "photo.png", ".hidden.png", "x.txt"):
+        (out / name).write_bytes(b"png")
+    (out / "dir.png").mkdir()
+    os.symlink(out / "photo.png", out / "link.png")
+    (tmp_path / "outside.png").write_bytes(b"not in the folder")
+
+    def named(data) -> list[str]:
+        (out / "bench.json").write_text(json.dumps(data))
+        return [p.name for p in earlier_plots(out)]
+
+    assert earlier_plots(tmp_path / "missing") == [] and named({"cases": [], "plots": ["a.png"]}) == []
+    listed = ["a.png", "gone.png", "../outside.png", "sub/a.png", ".hidden.png", "x.txt", "dir.png", "link.png", 3]
+    assert named({"gyroemu_bench": 1, "plots": listed}) == ["a.png"]
+    assert plot_names(["case", "case", "b"]) == ["case.png", "case_2.png", "b.png"]
+    older = {"gyroemu_bench": 1, "cases": [{"name": "case"}, {"name": "case"}, {"name": "b"}]}
+    assert named(older) == ["case.png", "case_2.png", "b.png"]
+    assert named({"gyroemu_bench": 1, "cases": [{"name": 1}]}) == [] and named({"gyroemu_bench": 1}) == []
+    (out / "bench.json").write_text("{not json")
+    assert earlier_plots(out) == []
+    assert (tmp_path / "outside.png").exists()
 
 
 @pytest.mark.parametrize("sub", ["", "report"])

@@ -123,11 +123,11 @@ def test_simulate_refuses_an_out_it_cannot_write(tmp_path, out, named):
 def test_simulate_refuses_a_read_only_out_folder_before_work(tmp_path, monkeypatch, suffix):
     """A folder that cannot take the output (a read-only mount refuses even root, which a test cannot
     make: folder_problem is told so) is refused naming --out, before any work, not as an OSError at the end."""
-    import gyroemu.pipelines.jobs.simulate as simulate
+    import gyroemu.pipelines.formats.atomic as atomic
 
     locked = tmp_path / "ro"
     locked.mkdir()
-    monkeypatch.setattr(simulate, "folder_problem", lambda f: "read-only file system" if f == locked else None)
+    monkeypatch.setattr(atomic, "folder_problem", lambda f: "read-only file system" if f == locked else None)
     argv = ["simulate", "--scenario", "heavy_top", "--device", "consumer_mems", "--duration", "1"]
     code, _, stderr = run_cli([*argv, "--out", str(locked / f"b{suffix}")])
     assert code == 2 and f"argument --out: {locked}: read-only file system" in stderr, stderr
@@ -397,6 +397,51 @@ def test_import_estimate_record_refuse_an_existing_out(tmp_path, command):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.hdf5", "out.mcap"]
 
 
+@pytest.mark.parametrize(
+    "command, argument, output",
+    [
+        ("simulate", "--out", "user.npz"),
+        ("estimate", "--out", "user.mcap"),
+        ("estimate", "--plot", "e.estimate.png"),
+        ("info", "--plot", "in.info.png"),
+        ("allan", "--out", "user.png"),
+        ("allan", "--out (default: LOG with .allan.png)", "in.allan.png"),
+        ("allan", "--kalibr", "user.yaml"),
+        ("identify", "--out", "user.toml"),
+        ("identify", "--site-out", "user.toml"),
+        ("import", "--out", "user.mcap"),
+        ("record", "--out", "user.mcap"),
+        ("record", "--report", "user.json"),
+    ],
+)
+def test_every_command_says_an_existing_output_alike(tmp_path, no_session, command, argument, output):
+    """One check of an output file (``formats.atomic.output_file_problem``), one wording: someone's file is
+    refused before any work, naming the option, the file and --force (``allan`` said "pass --force")."""
+    source = tmp_path / ("in.hdf5" if command == "import" else "in.mcap")
+    source.write_bytes(b"an input")  # refused before any reading: the input's content does not matter
+    user = tmp_path / output
+    user.write_bytes(b"someone's file")
+    fresh = str(tmp_path / "fresh")
+    argv = {
+        "simulate": ["simulate", "--scenario", "heavy_top", "--out", str(user)],
+        "estimate": ["estimate", str(source), "--out", str(user if argument == "--out" else tmp_path / "e.mcap")],
+        "info": ["info", str(source)],
+        "allan": ["allan", str(source)],
+        "identify": ["identify", str(source), "--out", str(user if argument == "--out" else f"{fresh}.toml")],
+        "import": ["import", "broad", str(source), "--out", str(user)],
+        "record": ["record", "--out", str(user if argument == "--out" else f"{fresh}.mcap"), "--duration", "1"],
+    }[command]
+    argv += {"--plot": ["--plot"], "--kalibr": ["--kalibr", str(user)], "--site-out": ["--site-out", str(user)]}.get(
+        argument, ["--out", str(user)] if argument == "--out" and command == "allan" else []
+    )
+    argv += ["--report", str(user)] if argument == "--report" else []
+    code, stdout, stderr = run_cli(argv)
+    assert code == 2, stderr
+    assert f"gyroemu {command}: error: argument {argument}: {user} exists (use --force to overwrite it)\n" == stderr
+    assert stdout == "" and user.read_bytes() == b"someone's file" and source.read_bytes() == b"an input"
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted({source.name, user.name})
+
+
 @pytest.mark.parametrize("command", ["import", "record"])
 def test_import_and_record_refuse_a_folder_as_out(tmp_path, command):
     source = tmp_path / "in.hdf5"
@@ -472,11 +517,11 @@ def test_record_refuses_an_out_that_is_no_mcap_name(tmp_path, no_session, out):
 def test_record_refuses_a_read_only_folder_before_work(tmp_path, monkeypatch, no_session, which):
     """A read-only mount (which refuses even root; a test cannot make one, so folder_problem is told so)
     is refused naming the option, before any session or recording (it recorded, then wrote nothing)."""
-    import gyroemu.pipelines.transport.record as record
+    import gyroemu.pipelines.formats.atomic as atomic
 
     locked = tmp_path / "ro"
     locked.mkdir()
-    monkeypatch.setattr(record, "folder_problem", lambda f: "read-only file system" if f == locked else None)
+    monkeypatch.setattr(atomic, "folder_problem", lambda f: "read-only file system" if f == locked else None)
     out, report = (
         (locked / "r.mcap", tmp_path / "r.json") if which == "--out" else (tmp_path / "r.mcap", locked / "r.json")
     )
@@ -667,20 +712,20 @@ def test_whole_truth_bytes_bounds_what_a_trajectory_holds():
 def test_import_refuses_a_read_only_out_folder_before_reading_the_trial(tmp_path, monkeypatch):
     """A read-only mount (which a test cannot make; folder_problem is told so) is refused naming --out
     before the trial is read: a trial that cannot be read is not what it reports."""
-    from gyroemu.pipelines.formats import importers
+    from gyroemu.pipelines.formats import atomic, importers
 
     def no_read(path):
         raise AssertionError("the trial was read before --out was checked")
 
     locked = tmp_path / "ro"
     locked.mkdir()
-    monkeypatch.setattr(importers, "folder_problem", lambda f: "read-only file system" if f == locked else None)
+    monkeypatch.setattr(atomic, "folder_problem", lambda f: "read-only file system" if f == locked else None)
     monkeypatch.setattr(importers, "read_broad", no_read)
     trial = tmp_path / "t.hdf5"
     trial.write_bytes(b"not read")
     code, _, stderr = run_cli(["import", "broad", str(trial), "--out", str(locked / "b.mcap")])
     assert code == 2, stderr
-    assert f"argument --out: {locked / 'b.mcap'}: its folder: read-only file system" in stderr
+    assert f"argument --out: {locked}: read-only file system" in stderr
     assert list(locked.iterdir()) == []
 
 
@@ -691,3 +736,20 @@ def test_the_command_line_and_the_scenario_files_have_the_same_limits():
     from gyroemu.pipelines.jobs import simulate
 
     assert (simulate.MAX_DURATION_S, simulate.MAX_RATE_HZ) == (scenarios.MAX_DURATION_S, scenarios.MAX_RATE_HZ)
+
+
+@pytest.mark.parametrize("argument", ["--out", "--site-out"])
+def test_identify_refuses_a_toml_that_is_a_log_even_with_force(tmp_path, argument):
+    """A ``.toml`` name that is a link to one of identify's logs is the log: refused with --force too
+    (``output_file_problem`` is given the logs as inputs), and the log keeps its bytes."""
+    log = tmp_path / "in.mcap"
+    log.write_bytes(b"an input")
+    link = tmp_path / "device.toml"
+    link.symlink_to(log)
+    out = link if argument == "--out" else tmp_path / "fresh.toml"
+    argv = ["identify", str(log), "--out", str(out), "--force"]
+    argv += ["--site-out", str(link)] if argument == "--site-out" else []
+    code, stdout, stderr = run_cli(argv)
+    assert code == 2 and stdout == "", stderr
+    assert f"argument {argument}: {link} is an input ({log}): inputs are never overwritten" in stderr, stderr
+    assert log.read_bytes() == b"an input" and link.is_symlink()

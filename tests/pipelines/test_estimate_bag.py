@@ -166,12 +166,12 @@ def test_an_unreadable_log_is_named_once(tmp_path, capsys):
 
 def test_estimate_into_a_read_only_folder_is_refused_before_work(bag, tmp_path, monkeypatch, capsys):
     """A read-only mount refuses even root, which a test cannot make: folder_problem is told so."""
-    import gyroemu.pipelines.jobs.estimate as estimate
+    import gyroemu.pipelines.formats.atomic as atomic
 
     locked = tmp_path / "ro"
     locked.mkdir()
-    real = estimate.folder_problem
-    monkeypatch.setattr(estimate, "folder_problem", lambda f: "read-only file system" if f == locked else real(f))
+    real = atomic.folder_problem
+    monkeypatch.setattr(atomic, "folder_problem", lambda f: "read-only file system" if f == locked else real(f))
     with pytest.raises(SystemExit) as exit_:
         main(["estimate", str(bag), "--topic", "/imu_b", "--out", str(locked / "e.mcap")])
     assert exit_.value.code == 2

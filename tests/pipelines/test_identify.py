@@ -367,13 +367,13 @@ def test_options_are_checked_before_work(tmp_path: Path):
 def test_every_output_folder_is_checked_before_any_is_written(tmp_path: Path, monkeypatch, capsys):
     """--out and --site-out in a folder that cannot take a file (a read-only mount refuses even root; a
     test cannot make one, so folder_problem is told) are refused naming the option, before --out is written."""
-    from gyroemu.pipelines.jobs import identify as job
+    from gyroemu.pipelines.formats import atomic
 
     log = tmp_path / "a.mcap"
     log.write_bytes(b"")
     locked = tmp_path / "ro"
     locked.mkdir()
-    monkeypatch.setattr(job, "folder_problem", lambda f: "read-only file system" if f == locked else None)
+    monkeypatch.setattr(atomic, "folder_problem", lambda f: "read-only file system" if f == locked else None)
     out = tmp_path / "dev.toml"
     for options, named in (
         (IdentifyOptions(logs=[log], out=out, site_out=locked / "s.toml"), "--site-out"),

@@ -380,7 +380,8 @@ def test_output_never_replaces_the_input(tmp_path):
     write_trial(source)
     before = fingerprint(source)
     code, _, stderr = run_cli(["import", "broad", str(source), "--out", str(source)])
-    assert code == 2 and "is the input file" in stderr and fingerprint(source) == before
+    said = f"argument --out: {source} is an input: inputs are never overwritten, even with --force"
+    assert code == 2 and said in stderr and fingerprint(source) == before, stderr
 
 
 def test_failed_write_leaves_nothing(tmp_path, monkeypatch):

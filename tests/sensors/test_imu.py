@@ -1,5 +1,8 @@
 """The IMU around the mechanisms: sampling convention, mounting, lever arm, clock, seeds, noise budget."""
 
+import re
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy.interpolate import CubicHermiteSpline
@@ -162,6 +165,61 @@ def test_bad_device_config_names_the_key(edit, key):
     with pytest.raises(ConfigError) as info:
         device_from_dict({"description": "x", "rate_hz": 100, **edit}, name="dev.toml")
     assert info.value.key == key and info.value.file == "dev.toml"
+
+
+@pytest.mark.parametrize(
+    "kind, mechanism, key, limit",
+    [
+        ("mems", {"drive_frequency_hz": 1e12}, "drive_frequency_hz", "200000"),
+        ("mems", {"model": "carrier", "drive_frequency_hz": 1e12}, "drive_frequency_hz", "200000"),
+        ("rlg", {"simulation_rate_hz": 1e12}, "simulation_rate_hz", "1e+06"),
+        ("rlg", {"dither_frequency_hz": 1e9}, "dither_frequency_hz", "10000"),
+        ("rate-gyro", {"spring_stiffness_n_m_per_rad": 1e12}, "spring_stiffness_n_m_per_rad", "100000 Hz"),
+        ("rate-gyro", {"gimbal_inertia_kgm2": 1e-15}, "spring_stiffness_n_m_per_rad", "100000 Hz"),
+        ("rate-integrating", {"gimbal_inertia_kgm2": 1e-12}, "damping_n_m_s_per_rad", "100000 Hz"),
+        (
+            "rate-integrating",
+            {"torque_rebalance": False, "gimbal_inertia_kgm2": 1e-12},
+            "damping_n_m_s_per_rad",
+            "100000 Hz",
+        ),
+        (
+            "rate-integrating",
+            {"loop_proportional_a_per_rad": 1e9, "loop_integral_a_per_rad_s": 1.0},
+            "loop_integral_a_per_rad_s",
+            "100000 Hz",
+        ),
+    ],
+)
+def test_a_mechanism_whose_inner_rate_would_be_absurd_is_refused_naming_the_key(kind, mechanism, key, limit):
+    """A key that sets how fast a mechanism is stepped inside (a MEMS drive of 10¹² Hz asked the carrier
+    model for 2.4·10¹³ steps a simulated second) is bounded, the error naming it, its limit and why."""
+    with pytest.raises(ConfigError, match=re.escape(f"more than the limit of {limit}")) as info:
+        device_from_dict({"description": "x", "rate_hz": 100, "gyro": {"mechanism": {"kind": kind, **mechanism}}}, "d")
+    assert info.value.key == f"gyro.mechanism.{key}", info.value
+    assert "real" in info.value.reason  # the physical reason: what real gyros of the kind do
+
+
+def test_an_output_too_slow_for_its_mechanism_is_refused_naming_rate_hz():
+    """An output sample's inner grid must fit a block of the run (BLOCK_INNER_SAMPLES steps): a 32 kHz RLG
+    read at 0.1 Hz would need 320 000 steps a sample in one block, refused naming rate_hz."""
+    rlg = {"gyro": {"mechanism": {"kind": "rlg"}}}
+    with pytest.raises(ConfigError, match="320000 steps of the gyro mechanism's inner grid") as info:
+        device_from_dict({"description": "x", "rate_hz": 0.1, **rlg}, name="dev.toml")
+    assert info.value.key == "rate_hz" and info.value.file == "dev.toml"
+    assert device_from_dict({"description": "x", "rate_hz": 0.2, **rlg}).inner_rate_hz == 32_000.0
+
+
+def test_the_inner_rate_limits_leave_every_shipped_device_and_the_mechanisms_defaults():
+    """Every preset and every mechanism's defaults are well inside the bounds (their outputs unchanged)."""
+    from gyroemu.sensors.presets import list_devices
+
+    devices = list_devices()  # each shipped device file, validated
+    assert len(devices) == len(list((Path(__file__).parents[2] / "configs" / "devices").glob("*.toml")))
+    for device in devices:
+        assert device.inner_rate_hz <= 1e5, device.name
+    for kind in GYRO_KINDS:
+        assert mechanism_class(kind)().inner_rate_hz(1000.0) <= 1e5, kind
 
 
 @pytest.mark.parametrize(

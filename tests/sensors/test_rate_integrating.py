@@ -227,7 +227,7 @@ def test_bandwidth_formula():
     assert abs(LOOP.loop_response(LOOP.loop_bandwidth_hz)) == pytest.approx(2**-0.5, rel=1e-12)
     f = np.linspace(0.01, 0.999, 2000) * LOOP.loop_bandwidth_hz
     assert np.all(abs(LOOP.loop_response(f)) > 2**-0.5)  # the first crossing
-    fast = RateIntegratingGyro(gimbal_inertia_kgm2=1e-9)
+    fast = RateIntegratingGyro(gimbal_inertia_kgm2=1e-8)  # float corner 80 kHz (MAX_GIMBAL_POLE_HZ: 100 kHz)
     wn2, two_zeta_wn = KT * fast.loop_integral_a_per_rad_s / C, KT * fast.loop_proportional_a_per_rad / C
     q = 1 + 2 * (two_zeta_wn**2 / (4 * wn2))
     second_order = math.sqrt(wn2 * (q + math.sqrt(q * q + 1))) / (2 * math.pi)
