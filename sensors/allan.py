@@ -20,14 +20,74 @@ weighted least squares of σ²(τ) itself. Each point is weighted by the standar
 Allan variance estimate, σ²(τ)·√(2/ν), with ν the equivalent degrees of freedom of the chi-squared
 distribution of the estimate. We take ν = ⌊n/m⌋ − 1 for n samples and clusters of m samples: the
 number of independent clusters less one, IEEE 952 Annex C's count, which gives the familiar relative
-uncertainty 1/√(2(n/m − 1)) of σ(τ) (conservative for the overlapping estimator). Weighting by the
-model's σ² rather than the noisy estimate (iterated a few times) keeps the fit from favouring points
-that happen to be low; relative weights make it a fit of the log curve. Each coefficient's 68 %
-confidence interval is read as IEEE 952 reads the coefficient itself, off one point of the curve: the τ
-where that term is best determined (largest share of σ² for its ν), as a chi-squared interval
-(:func:`chi2_interval`, as allantools' ``confidence_interval``) with ν·share² degrees of freedom.
-Octave points share data (and for random-walk noise are strongly correlated), so combining them as
-independent would overstate the confidence; the one-point interval is on the cautious side.
+uncertainty 1/√(2(n/m − 1)) of σ(τ) (conservative for the overlapping estimator of white noise beyond
+τ = Δt, where ν is 3n/(2m)·4m²/(4m² + 5), NIST SP 1065 Table 5; at τ = Δt itself that is 2n/3, below
+the count). Weighting by the model's σ² rather than the noisy estimate (iterated a few times) keeps
+the fit from favouring points that happen to be low; relative weights make it a fit of the log curve.
+
+A band limit (``band_limit=True``). White noise smoothed before it is sampled (an anti-alias or
+digital low-pass, a MEMS gyro's demodulator filter) loses Allan variance at short τ. For a filter of
+impulse response h (unit gain) whose memory is shorter than τ, the second difference of the phase
+gives
+
+    σ²(τ) = N²/τ − (3/2) N² ⟨|s|⟩ / τ²,      ⟨|s|⟩ = ∫ |s| R_h(s) ds,  R_h(s) = ∫ h(u) h(u + s) du
+
+(the Wiener phase's second difference has covariance N²(2τ − 3|s|) at lag |s| ≤ τ); for a first-order
+low-pass of time constant T, ⟨|s|⟩ = T, the first terms of IEEE 952 Annex C's exponentially correlated
+noise, σ² = (N²/τ)(1 − (T/2τ)(3 − 4e^(−τ/T) + e^(−2τ/T))). That is the quantisation column 3/τ² with
+the opposite sign: the Allan curve alone cannot part a quantiser from a low-pass, only their sum. A
+fit that holds Q² ≥ 0 meets the sag by lowering N, which is then read below the device's (by 2 % for
+``consumer_mems`` at 150 s, whose demodulator filters a ninth of its white noise's variance: ten
+half-widths of the one-point interval), and even without a filter, clipping the scatter of Q² at 0
+biases N low (0.2–0.4 % for ``aktos_t_broad`` at 240 s, against a half-width of 0.27 %). With
+``band_limit=True`` the τ⁻² coefficient takes either sign (its column is projected out and the others
+found by NNLS in the rest: Lawson and Hanson, *Solving Least Squares Problems*, 1974, ch. 23); a
+positive one is read as Q, a negative one is :attr:`AllanFit.band_limit` = −3c_Q = (3/2) N² ⟨|s|⟩ and
+Q is reported not found.
+
+Each coefficient's 68 % confidence interval is the chi-squared interval of √c_j (:func:`chi2_interval`,
+as allantools' ``confidence_interval``) with the smaller of two degrees of freedom, so the wider of
+two intervals:
+
+* read off one point, as IEEE 952 reads the coefficient itself: at the τ where the term is best
+  determined (largest share s_i = c_j A_ij / σ²(τ_i) for its ν_i), ν_i s_i² degrees of freedom;
+* from the fit as a whole, which carries what the term trades with its neighbours (N against the
+  quantisation or band limit, whose columns 3/τ² and 1/τ are nearly collinear over the short
+  octaves; the floor against N and K): the sandwich covariance of the weighted least squares over the
+  fitted terms (those not held at 0 by the bound), with X the design A divided row-wise by each
+  point's standard deviation d_i = σ²_model(τ_i)·√(2/ν_i), the fit's weights (Huber 1967; White 1980),
+
+      cov(c) = (XᵀX)⁻¹ Xᵀ D⁻¹ Σ D⁻¹ X (XᵀX)⁻¹,       ν_j = 2 c_j² / cov(c)_jj
+
+  (Satterthwaite's equivalent degrees of freedom: a chi-squared of ν degrees of freedom scaled to mean
+  c has variance 2c²/ν), D = diag(d). Σ is the covariance of the Allan variance estimates, which the
+  weights misstate for the white noise that pins N: octave points of one record share its data, and
+  the count ν is not white noise's. So Σ takes the white part W(τ) = N²/τ (with a band limit, less
+  band_limit/τ²) exactly, and the rest as the weights do, independent, with the scatter ε:
+
+      Σ_ab = ρ_ab W_a W_b √((2/ν_w,a)(2/ν_w,b))  +  δ_ab ((2/ν_a − ε²)(σ⁴_a − W_a²) + ε² σ⁴_a)
+
+  ν_w = (3/2)(n/m)·4m²/(4m² + 5) is the overlapping estimator's for white noise (NIST SP 1065
+  Table 5; :func:`white_edf`, with n/m the count; the count itself when Δt is not known), and ρ the
+  correlation of its estimates at τ_a and τ_b (:func:`white_correlation`), from the second differences'
+  spectrum 4 sin⁴(πfτ)/(πf)² (Parseval, and ∫ Σ c_k cos(ω_k u)/u⁴ du = (π/6) Σ c_k |ω_k|³ for
+  Σ c_k = Σ c_k ω_k² = 0) in the large-sample, continuous-time limit,
+
+      ρ(τ_a, τ_b) = J(τ_a, τ_b) / √(J(τ_a, τ_a) J(τ_b, τ_b)),
+      J(a, b) = Σ_{i,k=0..2} α_i α_k (|i a + k b|³ + |i a − k b|³),   α = (3, −4, 1),
+
+  which for τ_b ≥ 2τ_a is (3/2)(τ_a/τ_b)^(3/2): 0.53 for neighbouring octaves, 0.19 two apart (the
+  sampled estimator's at τ = Δt, 2Δt is 0.46). Counted as independent with the count's ν, N's variance
+  was three quarters of its scatter over draws of white noise (tests/sensors/test_allan_covariance.py).
+  The rest of Σ keeps the weights' count, cautious for flicker, and no correlation between octaves,
+  which random walk and flicker have more of than white noise: for B and K the one-point interval, the
+  other candidate, is often the wider.
+
+Simulated at rest (``tests/benchmarks/identify_coverage.py``: 100 runs each of ``consumer_mems`` for
+150 s and ``aktos_t_broad`` for 240 s, the gyro's and the accelerometer's axes), the white noise's 68 %
+interval holds the device's N in 403 and 406 of 600 (0.672, 0.677; an exact 68 % interval holds
+0.626–0.740, three binomial standard deviations); with τ⁻² ≥ 0 and the one-point interval alone it
+held it in 166 and 315 (the gyro of ``consumer_mems`` in 10 of 300).
 
 A term is *resolved* when the data show it: at some τ its share of σ² exceeds :data:`RESOLVE_SIGMAS` (2)
 times the relative standard deviation √(2/ν) of the Allan variance estimate there, i.e. the
@@ -63,6 +123,10 @@ __all__ = [
     "allan_confidence",
     "chi2_interval",
     "fit_allan",
+    "fit_covariance",
+    "weighted_fit",
+    "white_correlation",
+    "white_edf",
     "TERMS",
     "RESOLVE_SIGMAS",
 ]
@@ -148,8 +212,12 @@ class AllanDeviation:
     tau : (M,) averaging times, s.
     adev : (M,) Allan deviation σ(τ), in the data's unit.
     clusters : (M,) number of independent (non-overlapping) clusters ⌊n/m⌋.
-    edf : (M,) chi-squared equivalent degrees of freedom, ν = clusters − 1.
+    edf : (M,) chi-squared equivalent degrees of freedom, ν = clusters − 1 (less where a relative
+        scatter beyond the sampling error was added: 2/ν = 2/(clusters − 1) + scatter²).
     low, high : (M,) 68 % confidence interval of σ(τ).
+    dt : the sample interval, s, so τ = mΔt (NaN when not known: a curve from σ(τ) alone).
+    scatter : the relative scatter ε of the Allan variance about a model beyond its sampling error that
+        ``edf`` holds (:func:`gyroemu.pipelines.identification.noise.with_model_scatter`); 0 for none.
     """
 
     tau: np.ndarray
@@ -158,6 +226,8 @@ class AllanDeviation:
     edf: np.ndarray
     low: np.ndarray
     high: np.ndarray
+    dt: float = math.nan
+    scatter: float = 0.0
 
     def slope(self) -> np.ndarray:
         """(M−1,) local log-log slope between neighbouring points (−1 quantisation … +1 ramp)."""
@@ -201,10 +271,10 @@ def allan_deviation(data: np.ndarray, dt: float, taus: str | np.ndarray = "octav
         return allan
     tau, adev = _explicit_oadev(data, dt, _keyword_taus(taus, data.size, dt) if isinstance(taus, str) else taus)
     clusters = np.floor(data.size / np.round(tau / dt))
-    return allan_confidence(tau, adev, clusters)
+    return allan_confidence(tau, adev, clusters, dt=dt)
 
 
-def allan_confidence(tau: np.ndarray, adev: np.ndarray, clusters: np.ndarray) -> AllanDeviation:
+def allan_confidence(tau: np.ndarray, adev: np.ndarray, clusters: np.ndarray, dt: float = math.nan) -> AllanDeviation:
     """An :class:`AllanDeviation` from σ(τ) computed elsewhere (a streamed estimate), with the confidence
     :func:`allan_deviation` gives: ν = clusters − 1 and the 68 % chi-squared interval of σ(τ).
 
@@ -213,6 +283,8 @@ def allan_confidence(tau: np.ndarray, adev: np.ndarray, clusters: np.ndarray) ->
     tau : (M,) averaging times, s.
     adev : (M,) Allan deviation σ(τ), in the data's unit.
     clusters : (M,) independent clusters ⌊n/m⌋ of each τ = mΔt, each at least 2.
+    dt : the sample interval Δt, s (NaN: not known; the fit's covariance then counts white noise's
+        points as the others', module notes).
     """
     tau, adev = np.asarray(tau, dtype=float), np.asarray(adev, dtype=float)
     clusters = np.asarray(clusters, dtype=float)
@@ -220,7 +292,7 @@ def allan_confidence(tau: np.ndarray, adev: np.ndarray, clusters: np.ndarray) ->
         raise ValueError("every τ needs at least two independent clusters (ν ≥ 1)")
     edf = clusters - 1
     low, high = chi2_interval(adev, edf)
-    return AllanDeviation(tau=tau, adev=adev, clusters=clusters, edf=edf, low=low, high=high)
+    return AllanDeviation(tau=tau, adev=adev, clusters=clusters, edf=edf, low=low, high=high, dt=float(dt))
 
 
 @dataclass(frozen=True)
@@ -254,7 +326,11 @@ class Coefficient:
 
 @dataclass(frozen=True)
 class AllanFit:
-    """IEEE 952 coefficients fitted to an Allan deviation (units in the module notes)."""
+    """IEEE 952 coefficients fitted to an Allan deviation (units in the module notes).
+
+    ``band_limit`` (unit²·s², ≥ 0): the Allan variance a low-pass takes off, band_limit/τ², when the fit
+    let the τ⁻² coefficient fall below 0 (``fit_allan(..., band_limit=True)``; module notes); 0 otherwise.
+    """
 
     quantisation: Coefficient  # Q, slope −1
     arw: Coefficient  # N, slope −½, σ(1 s)
@@ -262,11 +338,13 @@ class AllanFit:
     rrw: Coefficient  # K, slope +½, σ(3 s)
     rate_ramp: Coefficient  # R, slope +1
     allan: AllanDeviation
+    band_limit: float = 0.0
 
     def model(self, tau) -> np.ndarray:
         """The fitted σ(τ) at ``tau``, s."""
+        tau = np.asarray(tau, dtype=float)
         c = np.array([getattr(self, name).value for name in TERMS]) ** 2
-        return np.sqrt(_basis(np.asarray(tau, dtype=float)) @ c)
+        return np.sqrt(np.maximum(_basis(tau) @ c - self.band_limit / tau**2, 0.0))
 
 
 def _basis(tau: np.ndarray) -> np.ndarray:
@@ -275,57 +353,184 @@ def _basis(tau: np.ndarray) -> np.ndarray:
     return np.stack([3 / tau**2, 1 / tau, floor, tau / 3, tau**2 / 2], axis=-1)
 
 
-def fit_allan(allan: AllanDeviation, terms=TERMS, iterations: int = 5) -> AllanFit:
+def white_correlation(tau: np.ndarray) -> np.ndarray:
+    """(M, M) correlation ρ of the overlapping Allan variance estimates at ``tau`` (M,) for white noise,
+    in the large-sample, continuous-time limit (module notes):
+
+        ρ = J(τ_a, τ_b) / √(J(τ_a, τ_a) J(τ_b, τ_b)),  J(a, b) = Σ_{i,k=0..2} α_i α_k (|ia + kb|³ + |ia − kb|³),
+
+    α = (3, −4, 1); for τ_b ≥ 2τ_a that is (3/2)(τ_a/τ_b)^(3/2), taken in that form (the sum cancels
+    to J = 24a³ there, losing digits as τ_b/τ_a grows).
+    """
+    tau = np.asarray(tau, dtype=float)
+    short = np.minimum.outer(tau, tau)
+    ratio = np.maximum.outer(tau, tau) / short  # ≥ 1; J is homogeneous of degree 3: J(a, b) = a³ J(1, b/a)
+    alpha = (3.0, -4.0, 1.0)
+    j = sum(
+        alpha[i] * alpha[k] * (np.abs(i + k * ratio) ** 3 + np.abs(i - k * ratio) ** 3)
+        for i in range(3)
+        for k in range(3)
+    )
+    j_self = 16.0  # J(1, 1): the sum at ratio 1 (J(a, a) = 16 a³)
+    near = j / np.sqrt(j_self * j_self * ratio**3)
+    return np.where(ratio >= 2.0, 1.5 * ratio**-1.5, near)
+
+
+def _constrained_lsq(design: np.ndarray, target: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """min ‖design·c − target‖ with c_j ≥ 0 except where ``free`` (J,) is True: the free columns are
+    projected out, the others found by NNLS in what is left, and the free ones by least squares on the
+    rest (Lawson and Hanson 1974, ch. 23). Without free columns, plain NNLS."""
+    from scipy.optimize import nnls  # about 0.3 s to import: only when a curve is fitted
+
+    if not free.any():
+        return nnls(design, target)[0]
+    q, _ = np.linalg.qr(design[:, free])  # orthonormal basis of the free columns
+
+    def rest(v: np.ndarray) -> np.ndarray:
+        return v - q @ (q.T @ v)
+
+    c = np.zeros(design.shape[1])
+    bounded = ~free
+    if bounded.any():
+        c[bounded] = nnls(rest(design[:, bounded]), rest(target))[0]
+    c[free] = np.linalg.lstsq(design[:, free], target - design[:, bounded] @ c[bounded], rcond=None)[0]
+    return c
+
+
+def weighted_fit(
+    allan: AllanDeviation, basis: np.ndarray, free: np.ndarray | None = None, iterations: int = 5
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Coefficients of ``basis`` (M, J) fitted to the Allan variance of ``allan`` (module notes): every
+    point weighted by σ²·√(2/ν), from the data first and then from the model, ``iterations`` times;
+    non-negative but where ``free`` (J,) is True. Returns (coefficients (J,), model σ² (M,), weighted
+    residual χ²)."""
+    free = np.zeros(basis.shape[1], dtype=bool) if free is None else np.asarray(free, dtype=bool)
+    avar = allan.adev**2
+    relative_sd = np.sqrt(2 / allan.edf)
+    model = avar  # weights from the data first, then from the model
+    c = np.zeros(basis.shape[1])
+    for _ in range(iterations):
+        sd = model * relative_sd
+        c = _constrained_lsq(basis / sd[:, None], avar / sd, free)
+        model = np.maximum(basis @ c, np.finfo(float).tiny)
+    chi2 = float(np.sum(((avar - model) / (model * relative_sd)) ** 2))
+    return c, model, chi2
+
+
+def white_edf(allan: AllanDeviation) -> np.ndarray:
+    """(M,) degrees of freedom of ``allan``'s Allan variance estimates for white noise (module notes):
+    the overlapping estimator's, 3n/(2m)·4m²/(4m² + 5) for n samples (NIST SP 1065, Table 5), with n/m
+    taken as the count: ν_w = (3/2) ν_count 4m²/(4m² + 5), ν_count = 2/(2/ν − ε²) the count ν without the
+    scatter ε, m = τ/Δt. Where Δt is not known (NaN), the count itself."""
+    count = 2.0 / np.maximum(2.0 / allan.edf - allan.scatter**2, np.finfo(float).tiny)
+    if not (np.isfinite(allan.dt) and allan.dt > 0):
+        return count
+    m = np.maximum(np.round(allan.tau / allan.dt), 1.0)
+    return 1.5 * count * 4 * m * m / (4 * m * m + 5)
+
+
+def fit_covariance(
+    allan: AllanDeviation,
+    basis: np.ndarray,
+    coefficients: np.ndarray,
+    model: np.ndarray,
+    free: np.ndarray | None = None,
+) -> np.ndarray:
+    """(J, J) sandwich covariance of the coefficients of :func:`weighted_fit` over the fitted terms
+    (non-zero, or ``free``; 0 for terms held at 0), module notes:
+
+        cov(c) = (XᵀX)⁻¹ Xᵀ V X (XᵀX)⁻¹,   X = basis / d row-wise,  d = σ²_model √(2/ν),  V = D⁻¹ Σ D⁻¹,
+        Σ_ab = ρ_ab W_a W_b √(2/ν_w,a · 2/ν_w,b) + δ_ab ((2/ν_a − ε²)(σ⁴_a − W_a²) + ε² σ⁴_a)
+
+    with ``basis``'s first two columns the τ⁻² and τ⁻¹ terms (:data:`TERMS`' order), W the white noise
+    with its band limit (c₁/τ + min(c₀, 0)·3/τ², at least 0), ν_w :func:`white_edf`, ρ
+    :func:`white_correlation` and ε ``allan.scatter``. A term the points cannot part from the others
+    (X of lower rank than the fitted terms) gets an infinite variance."""
+    j = basis.shape[1]
+    free = np.zeros(j, dtype=bool) if free is None else np.asarray(free, dtype=bool)
+    coefficients = np.asarray(coefficients, dtype=float)
+    fitted = (coefficients != 0) | free
+    covariance = np.zeros((j, j))
+    if not fitted.any():
+        return covariance
+    sd = model * np.sqrt(2 / allan.edf)
+    x = basis[:, fitted] / sd[:, None]
+    scale = np.linalg.norm(x, axis=0)  # columns to unit length: their sizes span many decades
+    if not np.all(scale > 0):
+        covariance[np.ix_(fitted, fitted)] = np.inf
+        return covariance
+    u, s, vt = np.linalg.svd(x / scale, full_matrices=False)
+    if x.shape[0] < x.shape[1] or s[-1] <= s[0] * 1e-10:  # fewer points than terms, or collinear
+        covariance[np.ix_(fitted, fitted)] = np.inf
+        return covariance
+    # The points' covariance Σ, each in units of its own standard deviation d.
+    eps2 = allan.scatter**2
+    white = np.zeros_like(model)
+    if j >= 2:  # N²/τ, less a band limit (the τ⁻² term below 0)
+        white = np.clip(basis[:, 1] * coefficients[1] + basis[:, 0] * min(coefficients[0], 0.0), 0.0, model)
+    w = white * np.sqrt(2.0 / white_edf(allan))
+    rest = np.maximum(2.0 / allan.edf - eps2, 0.0) * (model**2 - white**2) + eps2 * model**2
+    points = (white_correlation(allan.tau) * np.outer(w, w) + np.diag(rest)) / np.outer(sd, sd)
+    p = (vt.T / s) @ u.T  # (XᵀX)⁻¹Xᵀ of the scaled columns
+    covariance[np.ix_(fitted, fitted)] = (p @ points @ p.T) / np.outer(scale, scale)
+    return covariance
+
+
+def coefficient_dof(
+    j: int, coefficients: np.ndarray, basis: np.ndarray, model: np.ndarray, allan: AllanDeviation, covariance
+) -> float:
+    """Degrees of freedom of the chi-squared interval of the coefficient √c_j (module notes): the smaller
+    of the one-point ν_i s_i² at its best τ and the fit's 2c_j²/cov(c)_jj. ``coefficients`` > 0 at j."""
+    relative_sd = np.sqrt(2 / allan.edf)
+    share = coefficients[j] * basis[:, j] / model
+    best = np.argmin(relative_sd / share)
+    one_point = allan.edf[best] * share[best] ** 2
+    variance = covariance[j, j]
+    from_fit = 2 * coefficients[j] ** 2 / variance if variance > 0 else np.inf
+    return float(min(one_point, from_fit))
+
+
+def fit_allan(allan: AllanDeviation, terms=TERMS, iterations: int = 5, *, band_limit: bool = False) -> AllanFit:
     """Fit the IEEE 952 terms named in ``terms`` (a subset of :data:`TERMS`) to ``allan``.
 
     Leave out terms known to be absent (a static test has no rate ramp): a spare term soaks up some
-    of the scatter of its neighbours. Returns every term; those left out are 0.
+    of the scatter of its neighbours. Returns every term; those left out are 0. ``band_limit``: let
+    the τ⁻² coefficient take either sign (quantisation when positive, a low-pass's sag
+    :attr:`AllanFit.band_limit` when negative; module notes); it needs ``quantisation`` in ``terms``.
     """
     unknown = set(terms) - set(TERMS)
     if unknown:
         raise ValueError(f"unknown terms {sorted(unknown)}; known: {', '.join(TERMS)}")
     used = np.array([name in terms for name in TERMS])
+    free = used & (np.arange(len(TERMS)) == 0) if band_limit else np.zeros(len(TERMS), dtype=bool)
     basis = _basis(allan.tau) * used  # (M, 5): a term left out has a zero column
-    avar = allan.adev**2
-    relative_sd = np.sqrt(2 / allan.edf)  # sd of an Allan variance estimate, per unit variance
-
-    from scipy.optimize import nnls  # about 0.3 s to import: only when a curve is fitted
-
-    model = avar  # weights from the data first, then from the model
-    for _ in range(iterations):
-        sd = model * relative_sd
-        c, _ = nnls(basis[:, used] / sd[:, None], avar / sd)
-        coefficients = np.zeros(len(TERMS))
-        coefficients[used] = c
-        model = np.maximum(basis @ coefficients, np.finfo(float).tiny)
-
+    c, model, _ = weighted_fit(allan, basis[:, used], free[used], iterations)
+    coefficients = np.zeros(len(TERMS))
+    coefficients[used] = c
+    covariance = fit_covariance(allan, basis, coefficients, model, free)
     fitted = {
-        name: _read(j, coefficients, basis, model, allan) if use else Coefficient(0.0, 0.0, 0.0)
+        name: _read(j, coefficients, basis, model, allan, covariance) if use else Coefficient(0.0, 0.0, 0.0)
         for j, (name, use) in enumerate(zip(TERMS, used))
     }
-    return AllanFit(allan=allan, **fitted)
+    return AllanFit(allan=allan, band_limit=float(max(0.0, -3.0 * coefficients[0])), **fitted)
 
 
-def _read(j: int, c: np.ndarray, basis: np.ndarray, model: np.ndarray, allan: AllanDeviation) -> Coefficient:
-    """Coefficient j with its confidence, read where the data pin it best.
-
-    At τ_i, term j makes the share s_i = c_j A_ij / σ²(τ_i) of the Allan variance, so τ_i alone would
-    give c_j with a relative standard deviation √(2/ν_i) / s_i: the chi-squared of ν_i s_i² degrees of
-    freedom. We take the best τ_i (adjacent octaves share data, so they are not combined). A term not
-    found gets the upper limit at which it would have made one standard deviation where it shows most;
-    a term found but never holding enough of the variance for one degree of freedom is undetermined,
-    with the interval (0, ∞).
+def _read(
+    j: int, c: np.ndarray, basis: np.ndarray, model: np.ndarray, allan: AllanDeviation, covariance: np.ndarray
+) -> Coefficient:
+    """Coefficient j with its confidence (:func:`coefficient_dof`: the wider of the one-point and the
+    whole fit's interval). A term not found (c_j ≤ 0) gets the upper limit at which it would have made
+    one standard deviation where it shows most; a term found but pinned by less than one degree of
+    freedom is undetermined, with the interval (0, ∞).
     """
     relative_sd = np.sqrt(2 / allan.edf)
     detectable = np.min(model * relative_sd / basis[:, j])  # c_j making one sd where it shows most
     limit = float(np.sqrt(RESOLVE_SIGMAS * detectable))  # ... RESOLVE_SIGMAS sd: the detection limit
     if c[j] <= 0:
         return Coefficient(0.0, 0.0, float(np.sqrt(detectable)), limit)
-    share = c[j] * basis[:, j] / model
-    best = np.argmin(relative_sd / share)
     value = np.sqrt(c[j])
-    dof = allan.edf[best] * share[best] ** 2
-    if dof < 1.0:  # the term never holds enough of the variance to be pinned: undetermined
+    dof = coefficient_dof(j, c, basis, model, allan, covariance)
+    if dof < 1.0:  # the term is not pinned by one degree of freedom: undetermined
         return Coefficient(float(value), 0.0, float("inf"), limit)
     low, high = chi2_interval(value, dof)
     return Coefficient(float(value), float(low), float(high), limit)

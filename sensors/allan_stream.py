@@ -276,4 +276,4 @@ class OverlappingAllanAccumulator:
         tau = m * dt
         clusters = np.floor(self._n / m.astype(float))
         adev = np.sqrt(self.variances())
-        return tuple(allan_confidence(tau, adev[:, axis], clusters) for axis in range(self.n_axes))
+        return tuple(allan_confidence(tau, adev[:, axis], clusters, dt=dt) for axis in range(self.n_axes))

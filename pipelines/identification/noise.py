@@ -9,36 +9,54 @@ weighted by their independent clusters c_i = ⌊n_i/m⌋:
 and the 68 % interval of σ(τ) is the chi-squared one of ν (Lesage–Audoin; NIST SP 1065 eq. 45). τ is kept
 only up to a third of the longest phase (each phase contributes up to a third of its own length):
 beyond it there are fewer than three independent clusters and nothing is observable. The IEEE 952
-terms are fitted to the pooled curve by :func:`gyroemu.sensors.allan.fit_allan`, whose intervals are
-read off the best-determined τ.
+terms are fitted to the pooled curve by :func:`gyroemu.sensors.allan.fit_allan` with its τ⁻² term of
+either sign (``band_limit=True``): positive it is quantisation, negative the Allan variance a low-pass
+(an anti-alias or digital filter, a MEMS gyro's demodulator) takes off the white noise at short τ,
+which a non-negative fit met by reading N low (1–2 % for ``consumer_mems``; the module notes of
+:mod:`gyroemu.sensors.allan`). Each coefficient's 68 % interval is the wider of the one read off its
+best-determined τ and the one from the whole fit's covariance, which carries what N trades with the
+τ⁻² term and B with N and K (same notes). The device file's comments give a band limit as the time
+constant T of the first-order low-pass that would take it off, band_limit = (3/2) N² T
+(:attr:`AxisNoise.smoothing_s`).
+
+Simulated at rest (``tests/benchmarks/identify_coverage.py``; ``tests/pipelines/test_identify_coverage.py``
+holds it on 30 s), the white noise's interval holds the device's N as often as a 68 % interval should:
+403 of 600 runs of ``consumer_mems`` (150 s) and 406 of 600 of ``aktos_t_broad`` (240 s), where an exact
+68 % interval holds 376–444 (three binomial standard deviations); read off one τ with τ⁻² ≥ 0 it held
+166 and 315.
 
 What the rest length allows: white noise (slope −½) is always seen. Bias instability (the floor) and
-random walk (+½) only when they dominate somewhere below τ_max = L_max/3; otherwise each is reported
-as an upper bound: every term adds variance, so at every τ
+random walk (+½) only when they dominate somewhere below τ_max = L_max/3 (and their interval from the
+fit holds a degree of freedom); otherwise each is reported as an upper bound: every term adds variance
+(a band limit takes variance off the white noise alone, whose smoothed part keeps a positive one), so
+at every τ
 
     (2 ln2/π) B² ≤ σ²_high(τ)   and   K² τ/3 ≤ σ²_high(τ)      (σ_high: the 68 % upper limit)
 
-and the smallest right-hand side over τ bounds the term.
+and the smallest right-hand side over τ bounds the term. That is a one-sigma bound of each point, not a
+fit: a floor read from another draw of the same noise can lie above it.
 
 Gauss–Markov term (exponentially correlated noise of standard deviation σ and correlation time τ_c,
 :func:`gyroemu.sensors.noise.gauss_markov_avar`, which for the sampled process at τ_c ≫ τ rises like
 a random walk and for τ_c ≪ τ falls like white noise, with a bump between): for each τ_c of a grid
 log-spaced over the observed τ (8 per decade, τ_0 … τ_max), its Allan variance per unit σ² is a fifth
-basis function beside the four terms, and the five non-negative coefficients are fitted by the same
-iterated, model-weighted least squares as :func:`gyroemu.sensors.allan.fit_allan`. The τ_c with the
-least weighted residual χ² = Σ ((σ̂² − σ²_model)/(σ²_model √(2/ν)))² is kept, and the term with it
-only if it is significant by an F-test of the nested fits: with χ²₀ the four-term fit's residual, M
+basis function beside the four terms, and the five coefficients (non-negative but for the τ⁻² one)
+are fitted by the same iterated, model-weighted least squares as
+:func:`gyroemu.sensors.allan.fit_allan`. The τ_c with the least weighted residual
+χ² = Σ ((σ̂² − σ²_model)/(σ²_model √(2/ν)))² is kept, and the term with it only if it is significant
+by an F-test of the nested fits: with χ²₀ the four-term fit's residual, M
 points and p = 6 parameters (four terms, σ, τ_c),
 
     F = ((χ²₀ − χ²)/2) / (χ²/(M − p))  >  F₀.₉₉(2, M − p)
 
 (two parameters added; dividing by χ²/(M − p) scales out how far the point weights misstate the
-scatter, as octave points share data), and the term is pinned where it shows most (its 68 % interval,
-read off one τ as for the other terms, is finite). A kept term's σ carries that interval, τ_c the range
-of grid τ_c whose χ² is within χ²/(M − p) of the least (Δχ² = 1 with the scaled weights), widened by
-one grid step each side (the grid's resolution); the four other terms are then those of the five-term
-fit. Otherwise the term is reported as not significant, with an upper bound on σ at the best τ_c (as
-for the other terms, from every τ's 68 % upper limit), and the four-term fit stands unchanged.
+scatter, as octave points share data), and the term is pinned (its 68 % interval, the wider of the
+one-point and the five-term fit's covariance one as for the other terms, is finite). A kept term's σ
+carries that interval, τ_c the range of grid τ_c whose χ² is within χ²/(M − p) of the least
+(Δχ² = 1 with the scaled weights), widened by one grid step each side (the grid's resolution); the
+four other terms are then those of the five-term fit. Otherwise the term is reported as not
+significant, with an upper bound on σ at the best τ_c (as for the other terms, from every τ's 68 %
+upper limit), and the four-term fit stands unchanged.
 
 Scatter beyond the sampling error. The four terms are a model, and a real sensor's curve may hold
 what they cannot draw: BROAD's aktos-t gyro z carries a band of 17–29 Hz at rest, which lifts σ at
@@ -53,9 +71,14 @@ terms, or 5 with a kept Gauss–Markov term, whose F-test already scales the sca
 ν_eff = 2/(2/ν + ε²) degrees of freedom, in the fit and in every interval and bound read off it
 (:func:`with_model_scatter`): a curve the model draws within its sampling error is fitted as before,
 bit for bit, and one it does not is fitted with its points weighted by how well the model can meet
-them. On BROAD's gyro z, ε = 9.3 %: the floor is not observable (below 16.5 °/h) and the model meets
-the curve within 1.5 % from 0.9 s to 7.2 s. The price: with such a scatter a floor that is there may
-be reported as an upper bound only (tests/pipelines/test_identify.py).
+them. On BROAD's gyro z, ε = 8.2 % (9.3 % with τ⁻² ≥ 0): the floor is not observable (below 7.6 °/h)
+and the model meets the curve within 5 % from 0.9 s to 7.2 s. The price: with such a scatter a floor
+that is there may be reported as an upper bound only (tests/pipelines/test_identify.py). A band's
+Allan variance rises over the short octaves and falls like τ⁻² beyond its peak, which the τ⁻² term
+of either sign follows in part: with a simulated 17–29 Hz band (the test's; seeds 11–16, 18 axes) N
+reads 3–6.5 % high (4.6 % on average), against 3–5 % (3.8 %) with τ⁻² ≥ 0, one to two of the
+interval's half-widths; on BROAD's gyro z, N moved from 6.09 to 6.21 mdps/√Hz with the band limit,
+within the former interval.
 
 An axis without noise. An axis that reads an exact constant at rest (a simulated device whose noise
 terms on it are all 0; a reading whose noise stays below one step of its quantiser) has σ(τ) = 0 at
@@ -68,9 +91,10 @@ quantised sensor that is "no noise measurable at its resolution", not a proof of
 
 With BROAD's rest layout (eight phases of about 33 s at 286 Hz, M = 12 octaves up to 7.2 s) and white
 noise of 2.7·10⁻³ m/s²·√s, simulated: without a Gauss–Markov term, 1 axis in 45 kept one (the test's
-nominal 1 %, on the side of caution for a scanned τ_c); with σ = 5·10⁻³ m/s² at τ_c = 0.8 s, 10 in 15
-found it (σ within its interval, τ_c 0.56–0.99 s); at σ = 2.5·10⁻³, 1 in 15. Twelve octave points see
-a bump that adds under about half the variance at its peak poorly.
+nominal 1 %; a scanned τ_c may add to it: 3 in 120 of ``_rest_segments`` seeds 100–139, 4 with
+τ⁻² ≥ 0); with σ = 5·10⁻³ m/s² at τ_c = 0.8 s, 10 in 15 found it (σ within its interval, τ_c
+0.56–0.99 s; seeds 200–204: 7 in 15 with the band limit or without); at σ = 2.5·10⁻³, 1 in 15. Twelve
+octave points see a bump that adds under about half the variance at its peak poorly.
 """
 
 from __future__ import annotations
@@ -81,7 +105,17 @@ from typing import Literal
 
 import numpy as np
 
-from gyroemu.sensors.allan import AllanDeviation, AllanFit, Coefficient, allan_deviation, chi2_interval, fit_allan
+from gyroemu.sensors.allan import (
+    AllanDeviation,
+    AllanFit,
+    Coefficient,
+    allan_deviation,
+    chi2_interval,
+    coefficient_dof,
+    fit_allan,
+    fit_covariance,
+    weighted_fit,
+)
 from gyroemu.sensors.noise import gauss_markov_avar
 
 __all__ = [
@@ -151,8 +185,10 @@ class MarkovTerm:
 class AxisNoise:
     """The noise of one axis: white noise density N (unit·√s = unit/√Hz), bias instability B (unit),
     random walk K (unit/√s), the Allan curve and its four-term fit, the Gauss–Markov term (None
-    when not fitted), and the relative scatter ε of the curve about the four-term model beyond its
-    sampling error (module notes; 0 when the model meets the curve within it)."""
+    when not fitted), the relative scatter ε of the curve about the four-term model beyond its
+    sampling error (module notes; 0 when the model meets the curve within it), and the band limit
+    (unit²·s²): the Allan variance band_limit/τ² a low-pass took off the white noise at short τ, as
+    the fit that gave N found it (module notes; 0 when the τ⁻² term came out positive, quantisation)."""
 
     noise_density: NoiseTerm
     bias_instability: NoiseTerm
@@ -160,11 +196,19 @@ class AxisNoise:
     fit: AllanFit
     markov: MarkovTerm | None = None
     model_scatter: float = 0.0
+    band_limit: float = 0.0
 
     @property
     def noiseless(self) -> bool:
         """Whether the axis read a constant at rest: its Allan variance is 0 at every τ (module notes)."""
         return not np.any(self.fit.allan.adev**2 > 0)
+
+    @property
+    def smoothing_s(self) -> float:
+        """The band limit as the time constant T of a first-order low-pass over all of the white noise
+        that would take it off, band_limit = (3/2) N² T (module notes), s; 0 without one."""
+        n = self.noise_density.value
+        return 2.0 * self.band_limit / (3.0 * n * n) if self.band_limit > 0 and n > 0 else 0.0
 
 
 @dataclass(frozen=True)
@@ -226,7 +270,7 @@ def pooled_allan(segments: Sequence[np.ndarray], dt: float, tau_min_s: float = 0
     tau, clusters, edf = octaves[keep], clusters[keep], edf[keep]
     adev = np.sqrt(avar[keep] / clusters)
     low, high = chi2_interval(adev, edf, ci=_ONE_SIGMA)
-    return AllanDeviation(tau=tau, adev=adev, clusters=clusters, edf=edf, low=low, high=high)
+    return AllanDeviation(tau=tau, adev=adev, clusters=clusters, edf=edf, low=low, high=high, dt=float(dt))
 
 
 def _four_basis(tau: np.ndarray) -> np.ndarray:
@@ -235,21 +279,19 @@ def _four_basis(tau: np.ndarray) -> np.ndarray:
     return np.column_stack([3 / tau**2, 1 / tau, np.full_like(tau, _FLOOR), tau / 3])
 
 
-def _weighted_fit(allan: AllanDeviation, basis: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """Non-negative coefficients of ``basis`` (M, J) fitted to the Allan variance as ``fit_allan`` does
-    (weights σ²·√(2/ν), from the data first, then from the model, iterated): (coefficients (J,), model
-    (M,), weighted residual χ²)."""
-    from scipy.optimize import nnls
+def _signed(basis: np.ndarray) -> np.ndarray:
+    """(J,) which coefficients of ``basis`` may take either sign: the first, τ⁻² (quantisation or band
+    limit, module notes)."""
+    free = np.zeros(basis.shape[1], dtype=bool)
+    free[0] = True
+    return free
 
-    avar = allan.adev**2
-    relative_sd = np.sqrt(2 / allan.edf)
-    model = avar
-    for _ in range(_ITERATIONS):
-        sd = model * relative_sd
-        c, _ = nnls(basis / sd[:, None], avar / sd)
-        model = np.maximum(basis @ c, np.finfo(float).tiny)
-    chi2 = float(np.sum(((avar - model) / (model * relative_sd)) ** 2))
-    return c, model, chi2
+
+def _weighted_fit(allan: AllanDeviation, basis: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """The coefficients of ``basis`` (M, J; its first column the τ⁻² term, of either sign, the others
+    non-negative) fitted to the Allan variance as ``fit_allan`` does (weights σ²·√(2/ν), from the data
+    first, then from the model, iterated): (coefficients (J,), model (M,), weighted residual χ²)."""
+    return weighted_fit(allan, basis, _signed(basis), _ITERATIONS)
 
 
 def model_scatter(allan: AllanDeviation, basis: np.ndarray) -> float:
@@ -283,20 +325,21 @@ def with_model_scatter(allan: AllanDeviation, eps: float) -> AllanDeviation:
         return allan
     edf = 2.0 / (2.0 / allan.edf + eps**2)
     low, high = chi2_interval(allan.adev, edf, ci=_ONE_SIGMA)
-    return AllanDeviation(tau=allan.tau, adev=allan.adev, clusters=allan.clusters, edf=edf, low=low, high=high)
+    return replace(allan, edf=edf, low=low, high=high, scatter=float(np.hypot(allan.scatter, eps)))
 
 
-def _one_point(value2: float, column: np.ndarray, model: np.ndarray, allan: AllanDeviation) -> tuple[float, float]:
-    """The 68 % interval of a coefficient √value2 read where its term holds the largest share of the
-    Allan variance for its degrees of freedom (as ``fit_allan`` reads every term; (0, ∞) when it never
-    holds one degree of freedom)."""
-    relative_sd = np.sqrt(2 / allan.edf)
-    share = value2 * column / model
-    best = int(np.argmin(relative_sd / share))
-    dof = allan.edf[best] * share[best] ** 2
+def _interval(
+    j: int, c: np.ndarray, basis: np.ndarray, model: np.ndarray, allan: AllanDeviation
+) -> tuple[float, float]:
+    """The 68 % interval of the coefficient √c_j (c_j > 0) of a :func:`_weighted_fit`, as ``fit_allan``
+    reads every term: the wider of the one read where its term holds the largest share of the Allan
+    variance and the one from the whole fit's covariance ((0, ∞) when it is not pinned by one degree of
+    freedom)."""
+    covariance = fit_covariance(allan, basis, c, model, _signed(basis))
+    dof = coefficient_dof(j, c, basis, model, allan, covariance)
     if dof < 1.0:
         return 0.0, float("inf")
-    low, high = chi2_interval(np.sqrt(value2), dof, ci=_ONE_SIGMA)
+    low, high = chi2_interval(np.sqrt(c[j]), dof, ci=_ONE_SIGMA)
     return float(low), float(high)
 
 
@@ -331,7 +374,8 @@ def fit_markov(allan: AllanDeviation, dt: float) -> tuple[MarkovTerm, np.ndarray
         hi += 1
     lo, hi = max(lo - 1, 0), min(hi + 1, len(grid) - 1)  # and the grid's resolution, a step each side
     tau_c = NoiseTerm(float(grid[best]), float(grid[lo]), float(grid[hi]), "fitted")
-    low, high = _one_point(c[-1], column, model, allan) if c[-1] > 0 else (0.0, float("inf"))
+    five = np.column_stack([four, column])
+    low, high = _interval(five.shape[1] - 1, c, five, model, allan) if c[-1] > 0 else (0.0, float("inf"))
     if c[-1] > 0 and f_ratio > f_critical and np.isfinite(high):
         sigma = NoiseTerm(float(np.sqrt(c[-1])), low, high, "fitted")
         term = MarkovTerm(sigma, tau_c, float(f_ratio), f_critical, chi2_without, chi2_with, points)
@@ -351,11 +395,19 @@ def _noiseless_axis(allan: AllanDeviation) -> AxisNoise:
     return AxisNoise(NoiseTerm(0.0, 0.0, 0.0, "fitted"), none, none, fit)
 
 
+def _read_term(j: int, c: np.ndarray, basis: np.ndarray, model: np.ndarray, allan: AllanDeviation) -> Coefficient:
+    """Coefficient j of a :func:`_weighted_fit` with its 68 % interval (:func:`_interval`), or, not found
+    (c_j ≤ 0), 0 with the value that would have made one standard deviation where it shows most."""
+    if c[j] <= 0:
+        return Coefficient(0.0, 0.0, float(np.sqrt(np.min(model * np.sqrt(2 / allan.edf) / basis[:, j]))))
+    return Coefficient(float(np.sqrt(c[j])), *_interval(j, c, basis, model, allan))
+
+
 def _axis_noise(allan: AllanDeviation, dt: float, markov: bool) -> AxisNoise:
     if not np.any(allan.adev**2 > 0):  # a constant: the fits' weights σ²·√(2/ν) would all be 0
         return _noiseless_axis(allan)
     four = _four_basis(allan.tau)
-    gm, c5, model = None, None, None
+    gm, c5, model, five = None, None, None, None
     if markov and len(allan.tau) > len(_TERMS) + 2:  # the F-test needs a point beyond the parameters
         gm, c5, model = fit_markov(allan, dt)  # its F-test scales out the scatter itself (module notes)
     if gm is not None and c5 is not None:  # kept: the scatter is that about the five-term model
@@ -364,13 +416,13 @@ def _axis_noise(allan: AllanDeviation, dt: float, markov: bool) -> AxisNoise:
         if eps > 0:
             allan = with_model_scatter(allan, eps)
             c5, model, _ = _weighted_fit(allan, five)
-            low, high = _one_point(c5[-1], five[:, -1], model, allan) if c5[-1] > 0 else (0.0, float("inf"))
+            low, high = _interval(five.shape[1] - 1, c5, five, model, allan) if c5[-1] > 0 else (0.0, float("inf"))
             if np.isfinite(high):
                 gm = replace(gm, sigma=NoiseTerm(float(np.sqrt(c5[-1])), low, high, "fitted"))
     else:
         eps = model_scatter(allan, four)
         allan = with_model_scatter(allan, eps)
-    fit = fit_allan(allan, terms=_TERMS)
+    fit = fit_allan(allan, terms=_TERMS, band_limit=True)
     high2 = allan.high**2
     b_bound = float(np.sqrt(np.min(high2 / _FLOOR)))
     k_bound = float(np.sqrt(np.min(high2 * 3.0 / allan.tau)))
@@ -381,21 +433,16 @@ def _axis_noise(allan: AllanDeviation, dt: float, markov: bool) -> AxisNoise:
         return NoiseTerm(0.0, 0.0, min(bound, c.high) if c.high > 0 else bound, "upper_bound")
 
     arw, bias_instability, rrw = fit.arw, fit.bias_instability, fit.rrw
-    if c5 is not None and model is not None:  # kept: the other terms are those of the five-term fit
-
-        def read(j: int):
-            if c5[j] <= 0:
-                limit = np.min(model * np.sqrt(2 / allan.edf) / four[:, j])
-                return Coefficient(0.0, 0.0, float(np.sqrt(limit)))
-            return Coefficient(float(np.sqrt(c5[j])), *_one_point(c5[j], four[:, j], model, allan))
-
-        arw, bias_instability, rrw = read(1), read(2), read(3)
+    band_limit = fit.band_limit
+    if c5 is not None and model is not None and five is not None:  # kept: the others are the five-term fit's
+        arw, bias_instability, rrw = (_read_term(j, c5, five, model, allan) for j in (1, 2, 3))
+        band_limit = float(max(0.0, -3.0 * c5[0]))
     if arw.value > 0 and np.isfinite(arw.high):
         white = NoiseTerm(arw.value, arw.low, arw.high, "fitted")
     else:  # white noise always shows at the shortest τ: read it there, σ(τ)·√τ (slope −½)
         s = np.sqrt(allan.tau[0])
         white = NoiseTerm(float(allan.adev[0] * s), float(allan.low[0] * s), float(allan.high[0] * s), "fitted")
-    return AxisNoise(white, term(bias_instability, b_bound), term(rrw, k_bound), fit, gm, eps)
+    return AxisNoise(white, term(bias_instability, b_bound), term(rrw, k_bound), fit, gm, eps, band_limit)
 
 
 def sensor_noise(

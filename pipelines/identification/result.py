@@ -321,6 +321,14 @@ class Identification:
             if any(a.model_scatter > 0 for a in noise.axes):
                 scatter = "; ".join(f"{axis} {100 * a.model_scatter:.2g} %" for axis, a in zip("xyz", noise.axes))
                 lines.append(f"  scatter about the model beyond sampling (in the fit's weights): {scatter}")
+            if any(a.band_limit > 0 for a in noise.axes):
+                sag = "; ".join(
+                    f"{axis} {a.smoothing_s * 1e3:.3g} ms" if a.band_limit > 0 else f"{axis} none"
+                    for axis, a in zip("xyz", noise.axes)
+                )
+                lines.append(
+                    f"  band limit of the white noise (a low-pass's sag at short tau, as a time constant): {sag}"
+                )
             if any(a.markov is not None for a in noise.axes):
                 lines.append(f"  gauss_markov sigma {unit[1]}, tau_c s (kept if F > F_0.99(2, M-6)):")
                 for axis, a in zip("xyz", noise.axes):
