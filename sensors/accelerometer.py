@@ -12,6 +12,7 @@ from __future__ import annotations
 from typing import Annotated
 
 import numpy as np
+from numpy.typing import NDArray
 from pydantic import Field
 
 from gyroemu.dynamics.config import Real, Section
@@ -43,7 +44,7 @@ class AccelerometerSpec(Section):
     ``latency_s`` earlier than the true instants; positive: the sensor lags the truth."""
 
 
-def mean_specific_force(truth: SensorTruth, instants: np.ndarray, substeps: int) -> np.ndarray:
+def mean_specific_force(truth: SensorTruth, instants: NDArray[np.float64], substeps: int) -> NDArray[np.float64]:
     """Mean specific force (sensor axes, m/s²) over each interval between consecutive ``instants``.
 
     Parameters
@@ -69,7 +70,7 @@ def mean_specific_force(truth: SensorTruth, instants: np.ndarray, substeps: int)
 
 
 @njit
-def _simpson_means(f, substeps, out):
+def _simpson_means(f: NDArray[np.float64], substeps: int, out: NDArray[np.float64]) -> None:
     """Interval ``i``'s composite Simpson rule over the points ``i·substeps … (i + 1)·substeps`` of ``f``
     (K·substeps + 1, A), in units of the interval: scipy's ``simpson(f[idx], dx=1/substeps, axis=1)``
     for each interval's points ``idx``, bit for bit (its panels ``f₀ + 4.0 f₁ + f₂`` summed in order,

@@ -109,9 +109,11 @@ K[deg/h/√h] = K·(180/π)·3600·60.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from gyroemu.sensors.allan_stream import OverlappingAllanAccumulator
 
@@ -143,8 +145,8 @@ _TAU_KEYWORDS = ("octave", "all", "decade", "log10")
 
 
 def chi2_interval(
-    dev: float | np.ndarray, edf: float | np.ndarray, ci: float = _ONE_SIGMA
-) -> tuple[np.ndarray, np.ndarray]:
+    dev: float | NDArray[np.float64], edf: float | NDArray[np.float64], ci: float = _ONE_SIGMA
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Chi-squared confidence interval of a deviation estimated with ``edf`` degrees of freedom.
 
     With α = 1 − ``ci`` (NIST SP 1065 eq. 45; what ``allantools.confidence_interval`` gives)::
@@ -172,7 +174,7 @@ def chi2_interval(
     return low, high
 
 
-def _keyword_taus(keyword: str, n: int, dt: float) -> np.ndarray:
+def _keyword_taus(keyword: str, n: int, dt: float) -> NDArray[np.float64]:
     """The τ list allantools' keywords name, for n samples (n + 1 phase points) at Δt."""
     points = n + 1
     if keyword == "all":
@@ -186,7 +188,9 @@ def _keyword_taus(keyword: str, n: int, dt: float) -> np.ndarray:
     return dt * np.logspace(0, top, top + 1, base=2.0)
 
 
-def _explicit_oadev(data: np.ndarray, dt: float, taus: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _explicit_oadev(
+    data: NDArray[np.float64], dt: float, taus: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(τ, σ(τ)) at the given τ, overlapping estimator (NIST SP 1065 eq. 11) from the phase.
 
     x_k = Δt Σ_{j<k} (y_j − ȳ), k = 0 … n, and σ²(τ) = Σ_k (x_{k+2m} − 2x_{k+m} + x_k)² / (2τ²(n + 1 − 2m)),
@@ -220,21 +224,21 @@ class AllanDeviation:
         ``edf`` holds (:func:`gyroemu.pipelines.identification.noise.with_model_scatter`); 0 for none.
     """
 
-    tau: np.ndarray
-    adev: np.ndarray
-    clusters: np.ndarray
-    edf: np.ndarray
-    low: np.ndarray
-    high: np.ndarray
+    tau: NDArray[np.float64]
+    adev: NDArray[np.float64]
+    clusters: NDArray[np.float64]
+    edf: NDArray[np.float64]
+    low: NDArray[np.float64]
+    high: NDArray[np.float64]
     dt: float = math.nan
     scatter: float = 0.0
 
-    def slope(self) -> np.ndarray:
+    def slope(self) -> NDArray[np.float64]:
         """(M−1,) local log-log slope between neighbouring points (−1 quantisation … +1 ramp)."""
         return np.diff(np.log(self.adev)) / np.diff(np.log(self.tau))
 
 
-def allan_deviation(data: np.ndarray, dt: float, taus: str | np.ndarray = "octave") -> AllanDeviation:
+def allan_deviation(data: ArrayLike, dt: float, taus: str | NDArray[np.float64] = "octave") -> AllanDeviation:
     """Overlapping Allan deviation of rate samples ``data`` (n,) taken every ``dt`` seconds.
 
     Parameters
@@ -274,7 +278,7 @@ def allan_deviation(data: np.ndarray, dt: float, taus: str | np.ndarray = "octav
     return allan_confidence(tau, adev, clusters, dt=dt)
 
 
-def allan_confidence(tau: np.ndarray, adev: np.ndarray, clusters: np.ndarray, dt: float = math.nan) -> AllanDeviation:
+def allan_confidence(tau: ArrayLike, adev: ArrayLike, clusters: ArrayLike, dt: float = math.nan) -> AllanDeviation:
     """An :class:`AllanDeviation` from σ(τ) computed elsewhere (a streamed estimate), with the confidence
     :func:`allan_deviation` gives: ν = clusters − 1 and the 68 % chi-squared interval of σ(τ).
 
@@ -340,20 +344,21 @@ class AllanFit:
     allan: AllanDeviation
     band_limit: float = 0.0
 
-    def model(self, tau) -> np.ndarray:
+    def model(self, tau: ArrayLike) -> NDArray[np.float64]:
         """The fitted σ(τ) at ``tau``, s."""
         tau = np.asarray(tau, dtype=float)
         c = np.array([getattr(self, name).value for name in TERMS]) ** 2
-        return np.sqrt(np.maximum(_basis(tau) @ c - self.band_limit / tau**2, 0.0))
+        sigma: NDArray[np.float64] = np.sqrt(np.maximum(_basis(tau) @ c - self.band_limit / tau**2, 0.0))
+        return sigma
 
 
-def _basis(tau: np.ndarray) -> np.ndarray:
+def _basis(tau: NDArray[np.float64]) -> NDArray[np.float64]:
     """(…, 5) Allan variance of each term per unit coefficient²: 3/τ², 1/τ, 2 ln2/π, τ/3, τ²/2."""
     floor = np.full_like(tau, 2 * np.log(2) / np.pi)
     return np.stack([3 / tau**2, 1 / tau, floor, tau / 3, tau**2 / 2], axis=-1)
 
 
-def white_correlation(tau: np.ndarray) -> np.ndarray:
+def white_correlation(tau: ArrayLike) -> NDArray[np.float64]:
     """(M, M) correlation ρ of the overlapping Allan variance estimates at ``tau`` (M,) for white noise,
     in the large-sample, continuous-time limit (module notes):
 
@@ -373,20 +378,24 @@ def white_correlation(tau: np.ndarray) -> np.ndarray:
     )
     j_self = 16.0  # J(1, 1): the sum at ratio 1 (J(a, a) = 16 a³)
     near = j / np.sqrt(j_self * j_self * ratio**3)
-    return np.where(ratio >= 2.0, 1.5 * ratio**-1.5, near)
+    rho: NDArray[np.float64] = np.where(ratio >= 2.0, 1.5 * ratio**-1.5, near)
+    return rho
 
 
-def _constrained_lsq(design: np.ndarray, target: np.ndarray, free: np.ndarray) -> np.ndarray:
+def _constrained_lsq(
+    design: NDArray[np.float64], target: NDArray[np.float64], free: NDArray[np.bool_]
+) -> NDArray[np.float64]:
     """min ‖design·c − target‖ with c_j ≥ 0 except where ``free`` (J,) is True: the free columns are
     projected out, the others found by NNLS in what is left, and the free ones by least squares on the
     rest (Lawson and Hanson 1974, ch. 23). Without free columns, plain NNLS."""
     from scipy.optimize import nnls  # about 0.3 s to import: only when a curve is fitted
 
     if not free.any():
-        return nnls(design, target)[0]
+        fitted: NDArray[np.float64] = nnls(design, target)[0]  # scipy: untyped
+        return fitted
     q, _ = np.linalg.qr(design[:, free])  # orthonormal basis of the free columns
 
-    def rest(v: np.ndarray) -> np.ndarray:
+    def rest(v: NDArray[np.float64]) -> NDArray[np.float64]:
         return v - q @ (q.T @ v)
 
     c = np.zeros(design.shape[1])
@@ -398,8 +407,8 @@ def _constrained_lsq(design: np.ndarray, target: np.ndarray, free: np.ndarray) -
 
 
 def weighted_fit(
-    allan: AllanDeviation, basis: np.ndarray, free: np.ndarray | None = None, iterations: int = 5
-) -> tuple[np.ndarray, np.ndarray, float]:
+    allan: AllanDeviation, basis: NDArray[np.float64], free: ArrayLike | None = None, iterations: int = 5
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
     """Coefficients of ``basis`` (M, J) fitted to the Allan variance of ``allan`` (module notes): every
     point weighted by σ²·√(2/ν), from the data first and then from the model, ``iterations`` times;
     non-negative but where ``free`` (J,) is True. Returns (coefficients (J,), model σ² (M,), weighted
@@ -417,7 +426,7 @@ def weighted_fit(
     return c, model, chi2
 
 
-def white_edf(allan: AllanDeviation) -> np.ndarray:
+def white_edf(allan: AllanDeviation) -> NDArray[np.float64]:
     """(M,) degrees of freedom of ``allan``'s Allan variance estimates for white noise (module notes):
     the overlapping estimator's, 3n/(2m)·4m²/(4m² + 5) for n samples (NIST SP 1065, Table 5), with n/m
     taken as the count: ν_w = (3/2) ν_count 4m²/(4m² + 5), ν_count = 2/(2/ν − ε²) the count ν without the
@@ -426,16 +435,17 @@ def white_edf(allan: AllanDeviation) -> np.ndarray:
     if not (np.isfinite(allan.dt) and allan.dt > 0):
         return count
     m = np.maximum(np.round(allan.tau / allan.dt), 1.0)
-    return 1.5 * count * 4 * m * m / (4 * m * m + 5)
+    edf: NDArray[np.float64] = 1.5 * count * 4 * m * m / (4 * m * m + 5)
+    return edf
 
 
 def fit_covariance(
     allan: AllanDeviation,
-    basis: np.ndarray,
-    coefficients: np.ndarray,
-    model: np.ndarray,
-    free: np.ndarray | None = None,
-) -> np.ndarray:
+    basis: NDArray[np.float64],
+    coefficients: ArrayLike,
+    model: NDArray[np.float64],
+    free: ArrayLike | None = None,
+) -> NDArray[np.float64]:
     """(J, J) sandwich covariance of the coefficients of :func:`weighted_fit` over the fitted terms
     (non-zero, or ``free``; 0 for terms held at 0), module notes:
 
@@ -477,7 +487,12 @@ def fit_covariance(
 
 
 def coefficient_dof(
-    j: int, coefficients: np.ndarray, basis: np.ndarray, model: np.ndarray, allan: AllanDeviation, covariance
+    j: int,
+    coefficients: NDArray[np.float64],
+    basis: NDArray[np.float64],
+    model: NDArray[np.float64],
+    allan: AllanDeviation,
+    covariance: NDArray[np.float64],
 ) -> float:
     """Degrees of freedom of the chi-squared interval of the coefficient √c_j (module notes): the smaller
     of the one-point ν_i s_i² at its best τ and the fit's 2c_j²/cov(c)_jj. ``coefficients`` > 0 at j."""
@@ -490,7 +505,9 @@ def coefficient_dof(
     return float(min(one_point, from_fit))
 
 
-def fit_allan(allan: AllanDeviation, terms=TERMS, iterations: int = 5, *, band_limit: bool = False) -> AllanFit:
+def fit_allan(
+    allan: AllanDeviation, terms: Sequence[str] = TERMS, iterations: int = 5, *, band_limit: bool = False
+) -> AllanFit:
     """Fit the IEEE 952 terms named in ``terms`` (a subset of :data:`TERMS`) to ``allan``.
 
     Leave out terms known to be absent (a static test has no rate ramp): a spare term soaks up some
@@ -516,7 +533,12 @@ def fit_allan(allan: AllanDeviation, terms=TERMS, iterations: int = 5, *, band_l
 
 
 def _read(
-    j: int, c: np.ndarray, basis: np.ndarray, model: np.ndarray, allan: AllanDeviation, covariance: np.ndarray
+    j: int,
+    c: NDArray[np.float64],
+    basis: NDArray[np.float64],
+    model: NDArray[np.float64],
+    allan: AllanDeviation,
+    covariance: NDArray[np.float64],
 ) -> Coefficient:
     """Coefficient j with its confidence (:func:`coefficient_dof`: the wider of the one-point and the
     whole fit's interval). A term not found (c_j ≤ 0) gets the upper limit at which it would have made

@@ -59,6 +59,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 if TYPE_CHECKING:  # imported where used: gyroemu.sensors.allan pulls in scipy
     from gyroemu.sensors.allan import AllanDeviation
@@ -132,22 +133,22 @@ class OverlappingAllanAccumulator:
         return self._n
 
     @property
-    def offset(self) -> np.ndarray:
+    def offset(self) -> NDArray[np.float64]:
         """(axes,) the constant taken off the samples before summing (the first chunk's mean), rate unit."""
         return self._offset.copy()
 
     @property
-    def octaves(self) -> np.ndarray:
+    def octaves(self) -> NDArray[np.int64]:
         """(L,) every m = 2^k the accumulator tracks (those with 2m ≤ N − 1 are reported)."""
         return self._m.copy()
 
     @property
-    def strides(self) -> np.ndarray:
+    def strides(self) -> NDArray[np.int64]:
         """(L,) overlap step of each octave's terms: 1 for the exact ones, m/R for the decimated."""
         return self._stride.copy()
 
     @property
-    def terms(self) -> np.ndarray:
+    def terms(self) -> NDArray[np.int64]:
         """(L,) second differences summed so far per octave: N + 1 − 2m exact, ⌊(N − 2m)/s⌋ + 1 decimated."""
         return self._terms.copy()
 
@@ -158,7 +159,7 @@ class OverlappingAllanAccumulator:
 
     # -- feeding ---------------------------------------------------------------------------------
 
-    def update(self, chunk: np.ndarray) -> None:
+    def update(self, chunk: ArrayLike) -> None:
         """Add the next ``chunk`` (n, axes) of rate samples (or (n,) for one axis), in the data's unit.
 
         Raises ``ValueError`` for a wrong shape or NaN/infinite samples (nothing is added then).
@@ -182,7 +183,7 @@ class OverlappingAllanAccumulator:
         self._coarse(u)
         self._n += n
 
-    def _add(self, level: int, squares: np.ndarray, count: int) -> None:
+    def _add(self, level: int, squares: NDArray[np.float64], count: int) -> None:
         """Σ over one chunk of one octave's squared terms (axes,), compensated (Neumaier)."""
         total = self._sum[level]
         new = total + squares
@@ -192,12 +193,12 @@ class OverlappingAllanAccumulator:
         self._terms[level] += count
 
     @staticmethod
-    def _second_differences(e: np.ndarray, lo: int, lag: int) -> np.ndarray:
+    def _second_differences(e: NDArray[np.float64], lo: int, lag: int) -> NDArray[np.float64]:
         """(axes, E − lo) e[i] − 2e[i − lag] + e[i − 2·lag] for i = lo … E − 1 (columns of ``e``)."""
         end = e.shape[1]
         return e[:, lo:] - 2.0 * e[:, lo - lag : end - lag] + e[:, lo - 2 * lag : end - 2 * lag]
 
-    def _exact(self, u: np.ndarray) -> None:
+    def _exact(self, u: NDArray[np.float64]) -> None:
         """Octaves m ≤ M₀: every term whose newest phase point is one of the chunk's."""
         size = self._tail.shape[1]
         filled = self._tail_filled
@@ -216,7 +217,7 @@ class OverlappingAllanAccumulator:
         self._tail[:, size - keep :] = e[:, end - keep :] - u[:, -1:]  # re-based on S_{K+n}
         self._tail_filled = keep
 
-    def _coarse(self, u: np.ndarray) -> None:
+    def _coarse(self, u: NDArray[np.float64]) -> None:
         """Octaves m > M₀ on the phase decimated by s = m/R: terms k = 0, s, 2s, …"""
         r = self.coarse_overlap
         size = 2 * r + 1
@@ -243,11 +244,11 @@ class OverlappingAllanAccumulator:
 
     # -- result ----------------------------------------------------------------------------------
 
-    def reported(self) -> np.ndarray:
+    def reported(self) -> NDArray[np.bool_]:
         """(L,) bool: the octaves :meth:`deviations` reports for the samples fed, 2m ≤ N − 1."""
         return 2 * self._m <= self._n - 1
 
-    def variances(self) -> np.ndarray:
+    def variances(self) -> NDArray[np.float64]:
         """(M, axes) overlapping Allan variance σ²(τ) of the reported octaves, in the data's unit squared.
 
         σ²(mΔt) = Σ (ΔS)² / (2m²·terms)

@@ -25,9 +25,10 @@ import math
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
+from numpy.typing import NDArray
 
 from gyroemu.dynamics import Trajectory
 from gyroemu.dynamics.jit import njit
@@ -66,15 +67,15 @@ class _OtherSensors:
 class _BlockReading:
     """One block's samples but for the gyro's, and what the gyro reads (:meth:`DeviceRun._read`)."""
 
-    stamps: np.ndarray  # (n,) sample stamps, device clock, s
-    instants: np.ndarray  # (n + 1,) true interval bounds τ_{k−1} … τ_k, s
+    stamps: NDArray[np.float64]  # (n,) sample stamps, device clock, s
+    instants: NDArray[np.float64]  # (n + 1,) true interval bounds τ_{k−1} … τ_k, s
     window: Trajectory  # the truth samples read
     truth: SensorTruth  # their interpolants
-    temperature: np.ndarray  # (n,) °C at τ_k
+    temperature: NDArray[np.float64]  # (n,) °C at τ_k
     gyro_truth: GyroTruth  # the gyro mechanism's inner grid
-    force_mean: np.ndarray  # (n, 3) mean specific force over each interval, m/s²
-    accel: np.ndarray  # (n, 3) the accelerometer's samples, m/s²
-    mag: np.ndarray  # (n, 3) the magnetometer's samples, T (NaN without one)
+    force_mean: NDArray[np.float64]  # (n, 3) mean specific force over each interval, m/s²
+    accel: NDArray[np.float64]  # (n, 3) the accelerometer's samples, m/s²
+    mag: NDArray[np.float64]  # (n, 3) the magnetometer's samples, T (NaN without one)
 
 
 @dataclass(frozen=True)
@@ -160,7 +161,7 @@ class DeviceRun:
         rng_clock, rng_mech, rng_gyro, rng_accel, rng_mag = streams
         gyro_errors = SensorErrors(device.gyro_errors, self.true_period, rng_gyro)
         others = _OtherSensors(rng_clock, SensorErrors(device.accel_errors, self.true_period, rng_accel), rng_mag)
-        mechanism_state: dict = {}
+        mechanism_state: dict[str, Any] = {}
         increment = device.spec.output == "increment"
         for block in self._blocks_ahead(others):
             increments, raw = self._gyro_increments(block.gyro_truth, len(block.stamps), rng_mech, mechanism_state)
@@ -223,7 +224,8 @@ class DeviceRun:
         truth = SensorTruth(window, spec.mounting.q_bs, spec.mounting.lever_arm_m)
         temperature = spec.temperature.at(instants[1:] - self.t0)
         latency_gyro, latency_accel, latency_mag = self.device.latencies
-        stamps = k * self.period + spec.clock.offset_s
+        # k (int64) times a float is float64, which numpy's stubs type as floating[Any]
+        stamps = cast("NDArray[np.float64]", k * self.period + spec.clock.offset_s)
         if spec.clock.jitter_s > 0:
             stamps = stamps + spec.clock.jitter_s * others.rng_clock.standard_normal(n)
         force_instants = instants if latency_accel == 0.0 else instants - latency_accel
@@ -259,7 +261,8 @@ class DeviceRun:
         device's instants (clock, temperature); with a ``latency`` ``L``, the motion at ``t − L``."""
         device, m, h = self.device, self.inner_steps, self.inner_step_s
         j = np.arange(done * m, (done + n) * m + 1)
-        t = self.t0 + (self.first - 1) * self.true_period + j * h
+        # j (int64) times a float is float64, which numpy's stubs type as floating[Any]
+        t = cast("NDArray[np.float64]", self.t0 + (self.first - 1) * self.true_period + j * h)
         seen = t if latency == 0.0 else t - latency  # the motion's instants
         omega, alpha = truth.omega_alpha(seen)
         reads = device.mechanism.reads
@@ -274,8 +277,8 @@ class DeviceRun:
         )
 
     def _gyro_increments(
-        self, chunk: GyroTruth, n: int, rng: np.random.Generator, state: dict
-    ) -> tuple[np.ndarray, dict]:
+        self, chunk: GyroTruth, n: int, rng: np.random.Generator, state: dict[str, Any]
+    ) -> tuple[NDArray[np.float64], dict[str, NDArray[Any]]]:
         """Indicated angle increments (n, 3) over the block's intervals, and its raw observables: the
         mechanism's response to ``chunk`` (:meth:`_gyro_truth`), carrying ``state``."""
         m, h = self.inner_steps, self.inner_step_s
@@ -294,7 +297,7 @@ class DeviceRun:
 
 
 @njit
-def _trapezoid_increments(rate, dx, m, out):
+def _trapezoid_increments(rate: NDArray[np.float64], dx: float, m: int, out: NDArray[np.float64]) -> None:
     """``np.diff(cumulative_trapezoid(rate, dx=dx, axis=0, initial=0)[::m], axis=0)`` into ``out`` (n, A):
     the running sum of ``(dx (y_{k+1} + y_k)) / 2`` in order, differenced every ``m`` samples."""
     n_inner, n_axes = rate.shape
@@ -314,7 +317,7 @@ def concatenate_samples(blocks: list[ImuSamples]) -> ImuSamples:
     if len(blocks) == 1:
         return first
 
-    def joined(name: str) -> np.ndarray | None:
+    def joined(name: str) -> NDArray[np.float64] | None:
         values = [getattr(b, name) for b in blocks]
         return None if values[0] is None else np.concatenate(values)
 

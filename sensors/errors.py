@@ -55,10 +55,10 @@ choice of which truth array feeds which sensor. The sample times given here must
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, Any, ClassVar, Literal, TypeGuard, TypeVar, cast
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 from pydantic import BeforeValidator, Field, ValidationInfo, field_validator
 
 from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Real, Section
@@ -86,11 +86,14 @@ _UG = 1e-6 * STANDARD_GRAVITY  # m/s² per µg
 # --------------------------------------------------------------------------------------------------
 
 
-def _is_number(value) -> bool:
+_V = TypeVar("_V")
+
+
+def _is_number(value: object) -> TypeGuard[int | float]:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
-def _axes(value):
+def _axes(value: object) -> object:
     """One number for all three axes, or a list of three."""
     if _is_number(value):
         return (value, value, value)
@@ -101,7 +104,7 @@ def _axes(value):
     return value
 
 
-def _axes_nonnegative(value):
+def _axes_nonnegative(value: object) -> object:
     if _is_number(value) and value < 0:
         raise ValueError(f"must be >= 0 (a noise or uncertainty magnitude), got {value}")
     return _axes(value)
@@ -132,7 +135,7 @@ class _CommonErrors(Section):
 
     @field_validator("cross_axis_matrix")
     @classmethod
-    def _one_misalignment(cls, value, info: ValidationInfo):
+    def _one_misalignment(cls, value: Matrix3 | None, info: ValidationInfo) -> Matrix3 | None:
         if value is not None and info.data.get("misalignment_mrad") is not None:
             raise ValueError("give either misalignment_mrad or cross_axis_matrix, not both")
         if value is not None and any(value[i][i] != 0 for i in range(3)):
@@ -141,7 +144,7 @@ class _CommonErrors(Section):
 
     @field_validator("bias_instability_tau_range_s")
     @classmethod
-    def _ascending(cls, value):
+    def _ascending(cls, value: tuple[float, float]) -> tuple[float, float]:
         if not value[0] < value[1]:
             raise ValueError(f"expected (min, max) with min < max, got {value}")
         return value
@@ -156,7 +159,7 @@ class _CommonErrors(Section):
     markov_keys: ClassVar[tuple[str, str]]
     """The Gauss–Markov term's keys (σ in the sensor's unit, τ_c in s), both given or neither."""
 
-    def _markov_si(self, unit: float) -> tuple[np.ndarray, np.ndarray]:
+    def _markov_si(self, unit: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(σ, τ_c) of the Gauss–Markov term in SI, σ given in ``unit`` (zeros when off)."""
         sigma_key, tau_key = self.markov_keys
         sigma, tau = getattr(self, sigma_key), getattr(self, tau_key)
@@ -164,7 +167,7 @@ class _CommonErrors(Section):
             return np.zeros(3), np.zeros(3)
         return np.array(sigma, dtype=float) * unit, np.array(tau, dtype=float)
 
-    def _cross_axis(self) -> np.ndarray:
+    def _cross_axis(self) -> NDArray[np.float64]:
         if self.cross_axis_matrix is not None:
             return np.array(self.cross_axis_matrix, dtype=float)
         m = np.zeros((3, 3))
@@ -174,11 +177,11 @@ class _CommonErrors(Section):
         return m
 
 
-def _exclusive(*earlier: str):
+def _exclusive(*earlier: str) -> classmethod[Any, Any, Any]:
     """A validator for the last of alternative keys: refuse it when one of the ``earlier`` keys (declared
     before it) is given too, naming both."""
 
-    def check(cls, value, info: ValidationInfo):
+    def check(cls: type[_CommonErrors], value: _V, info: ValidationInfo) -> _V:
         if value is not None:
             for first in earlier:
                 if info.data.get(first) is not None:
@@ -188,27 +191,33 @@ def _exclusive(*earlier: str):
     return classmethod(check)
 
 
-def _markov_pair(sigma_key: str):
+def _markov_pair(sigma_key: str) -> classmethod[Any, Any, Any]:
     """A validator for ``markov_tau_s`` (validated even when absent): the Gauss–Markov term takes both
     keys or neither, and τ_c > 0 wherever σ > 0."""
 
-    def check(cls, value, info: ValidationInfo):
+    def check(
+        cls: type[_CommonErrors], value: tuple[float, float, float] | None, info: ValidationInfo
+    ) -> tuple[float, float, float] | None:
         if sigma_key not in info.data:  # σ itself was refused: its own error says why
             return value
         sigma = info.data[sigma_key]
         if (sigma is None) != (value is None):
             raise ValueError(f"give both {sigma_key} and {info.field_name} (a Gauss–Markov term), or neither")
-        if sigma is not None and any(s > 0 and not t > 0 for s, t in zip(sigma, value)):
+        # value is not None where sigma is not (checked just above): the cast only tells mypy so
+        taus = cast("tuple[float, float, float]", value)
+        if sigma is not None and any(s > 0 and not t > 0 for s, t in zip(sigma, taus)):
             raise ValueError(f"must be > 0 on every axis where {sigma_key} is > 0")
         return value
 
     return classmethod(check)
 
 
-def _needs_range(range_key: str):
+def _needs_range(range_key: str) -> classmethod[Any, Any, Any]:
     """A validator for the nonlinearity: it is in ppm of full scale, so the range must be given."""
 
-    def check(cls, value, info: ValidationInfo):
+    def check(
+        cls: type[_CommonErrors], value: tuple[float, float, float], info: ValidationInfo
+    ) -> tuple[float, float, float]:
         if any(value) and info.data.get(range_key) is None:
             raise ValueError(f"is in ppm of full scale: give {range_key} too")
         return value
@@ -375,7 +384,7 @@ class AccelErrors(_CommonErrors):
         )
 
 
-def _quadratic(ppm_of_full_scale, full_scale: float | None) -> np.ndarray:
+def _quadratic(ppm_of_full_scale: ArrayLike, full_scale: float | None) -> NDArray[np.float64]:
     """k of the quadratic term k·x², from a nonlinearity in ppm of full scale: k·FS² = ppm·1e-6·FS."""
     ppm = np.array(ppm_of_full_scale, dtype=float)
     return np.zeros(3) if full_scale is None else ppm * _PPM / full_scale
@@ -424,45 +433,45 @@ class ErrorModel:
         (the default) is off and draws nothing.
     """
 
-    bias: np.ndarray
-    turn_on_bias: np.ndarray
-    bias_temperature: np.ndarray
-    scale_factor: np.ndarray
-    scale_factor_temperature: np.ndarray
+    bias: NDArray[np.float64]
+    turn_on_bias: NDArray[np.float64]
+    bias_temperature: NDArray[np.float64]
+    scale_factor: NDArray[np.float64]
+    scale_factor_temperature: NDArray[np.float64]
     reference_temperature_degC: float
-    nonlinearity: np.ndarray
-    cross_axis: np.ndarray
-    g_sensitivity: np.ndarray | None
-    noise_density: np.ndarray
-    bias_instability: np.ndarray
+    nonlinearity: NDArray[np.float64]
+    cross_axis: NDArray[np.float64]
+    g_sensitivity: NDArray[np.float64] | None
+    noise_density: NDArray[np.float64]
+    bias_instability: NDArray[np.float64]
     bias_instability_tau_range: tuple[float, float]
-    random_walk: np.ndarray
-    ramp: np.ndarray
+    random_walk: NDArray[np.float64]
+    ramp: NDArray[np.float64]
     integral_lsb: float | None
     output_lsb: float | None
     full_scale: float | None
     bandwidth_hz: float | None
     filter_order: int
-    markov_sigma: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    markov_tau_s: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    turn_on_scale_factor: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    markov_sigma: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    markov_tau_s: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    turn_on_scale_factor: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
 
 
-def _turn_on(sigma: np.ndarray, rng: np.random.Generator) -> np.ndarray | float:
+def _turn_on(sigma: NDArray[np.float64], rng: np.random.Generator) -> NDArray[np.float64] | float:
     """A power-up's draw of a term with standard deviation ``sigma`` (3,): σ·z, z three normal draws;
     0.0, drawing nothing, when the term is off."""
     return sigma * rng.standard_normal(3) if np.any(sigma) else 0.0
 
 
 def apply_errors(
-    truth: np.ndarray,
-    t: np.ndarray,
+    truth: ArrayLike,
+    t: ArrayLike,
     spec: GyroErrors | AccelErrors | ErrorModel,
     rng: np.random.Generator,
     *,
     temperature_degC: ArrayLike | None = None,
-    specific_force: np.ndarray | None = None,
-) -> np.ndarray:
+    specific_force: ArrayLike | None = None,
+) -> NDArray[np.float64]:
     """What a three-axis sensor with the error terms ``spec`` outputs for the true input ``truth``.
 
     One power-up, all samples at once: :class:`SensorErrors` with the interval of ``t``, applied once.
@@ -535,8 +544,8 @@ class SensorErrors:
         self._noise = noise.SensorNoise(
             rng, 3, dt, white=m.noise_density, random_walk=m.random_walk, flicker=flicker, markov=markov
         )
-        self._filter: tuple[np.ndarray, np.ndarray] | None = None
-        self._filter_state: np.ndarray | None = None  # set from the first sample
+        self._filter: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
+        self._filter_state: NDArray[np.float64] | None = None  # set from the first sample
         if m.bandwidth_hz is not None:
             import scipy.signal  # here, not at the top: it costs 0.5 s to import, and few devices need it
 
@@ -544,18 +553,18 @@ class SensorErrors:
         self._counter_angle = None if m.integral_lsb is None else rng.random(3) * m.integral_lsb
 
     @property
-    def bias(self) -> np.ndarray:
+    def bias(self) -> NDArray[np.float64]:
         """The power-up's bias b + b_on (3,), unit."""
         return np.array(self._bias, dtype=float) * np.ones(3)
 
     def apply(
         self,
-        truth: np.ndarray,
-        t: np.ndarray,
+        truth: ArrayLike,
+        t: ArrayLike,
         *,
         temperature_degC: ArrayLike | None = None,
-        specific_force: np.ndarray | None = None,
-    ) -> np.ndarray:
+        specific_force: ArrayLike | None = None,
+    ) -> NDArray[np.float64]:
         """The output for the run's next samples: ``truth`` (n, 3) at times ``t`` (n,), s since power-up
         (read only by the rate ramp); other parameters as :func:`apply_errors`. Returns (n, 3)."""
         m = self.model
@@ -607,8 +616,9 @@ class SensorErrors:
             _lfilter_into(b, a, self._filter_state, y)
         if m.full_scale is not None:
             np.clip(y, -m.full_scale, m.full_scale, out=y)
-        if self._counter_angle is not None:
-            noise.quantise_angle(y, self.dt, m.integral_lsb, None, out=y, angle=self._counter_angle)
+        if self._counter_angle is not None:  # set exactly when m.integral_lsb is: the cast only tells mypy so
+            lsb = cast(float, m.integral_lsb)
+            noise.quantise_angle(y, self.dt, lsb, None, out=y, angle=self._counter_angle)
         if m.output_lsb is not None:
             np.round(y / m.output_lsb, out=y)
             y *= m.output_lsb
@@ -616,7 +626,20 @@ class SensorErrors:
 
 
 @njit
-def _response(x, t, dT, f, gain, k, b_T, s_T, G, bias, ramp, out):
+def _response(
+    x: NDArray[np.float64],
+    t: NDArray[np.float64],
+    dT: NDArray[np.float64],
+    f: NDArray[np.float64],
+    gain: NDArray[np.float64],
+    k: NDArray[np.float64],
+    b_T: NDArray[np.float64],
+    s_T: NDArray[np.float64],
+    G: NDArray[np.float64],
+    bias: NDArray[np.float64],
+    ramp: NDArray[np.float64],
+    out: NDArray[np.float64],
+) -> None:
     """The deterministic terms, written out per sample k and axis i (shapes as in apply_errors)."""
     for n in range(x.shape[0]):
         for i in range(3):
@@ -635,7 +658,9 @@ def _response(x, t, dT, f, gain, k, b_T, s_T, G, bias, ramp, out):
 
 
 @njit
-def _lfilter_into(b, a, z, y):
+def _lfilter_into(
+    b: NDArray[np.float64], a: NDArray[np.float64], z: NDArray[np.float64], y: NDArray[np.float64]
+) -> None:
     """``scipy.signal.lfilter(b, a, y, axis=0, zi=z)`` written into ``y`` (n, A), with the final
     state ``zf`` written into ``z`` (order, A); a[0] = 1.
 

@@ -92,9 +92,10 @@ W. K. Burns (ed.), "Optical Fiber Rotation Sensing", Academic Press, 1994.
 from __future__ import annotations
 
 import math
-from typing import ClassVar, Literal
+from typing import Any, ClassVar, Literal, overload
 
 import numpy as np
+from numpy.typing import NDArray
 from pydantic import Field, ValidationInfo, field_validator
 
 from gyroemu.dynamics.config import PositiveReal
@@ -138,7 +139,7 @@ class FiberOpticGyro(GyroMechanism):
 
     @field_validator("spectral_width_nm")
     @classmethod
-    def _narrower_than_wavelength(cls, width, info: ValidationInfo):
+    def _narrower_than_wavelength(cls, width: float, info: ValidationInfo) -> float:
         wavelength = info.data.get("wavelength_nm")
         if wavelength is not None and width >= wavelength:
             raise ValueError(f"{width:g} nm is not narrower than the wavelength {wavelength:g} nm")
@@ -146,7 +147,7 @@ class FiberOpticGyro(GyroMechanism):
 
     @field_validator("responsivity_a_per_w")
     @classmethod
-    def _quantum_efficiency_at_most_one(cls, responsivity, info: ValidationInfo):
+    def _quantum_efficiency_at_most_one(cls, responsivity: float, info: ValidationInfo) -> float:
         wavelength = info.data.get("wavelength_nm")
         if wavelength is not None:
             ideal = ELEMENTARY_CHARGE * wavelength * 1e-9 / (PLANCK * SPEED_OF_LIGHT)  # η = 1
@@ -159,7 +160,7 @@ class FiberOpticGyro(GyroMechanism):
 
     @field_validator("modulation_depth_rad")
     @classmethod
-    def _below_first_zero_of_j1(cls, depth):
+    def _below_first_zero_of_j1(cls, depth: float) -> float:
         if depth >= J1_FIRST_ZERO:
             raise ValueError(
                 f"{depth:g} rad is not below {J1_FIRST_ZERO:.4f} rad, the first zero of J₁ "
@@ -169,7 +170,7 @@ class FiberOpticGyro(GyroMechanism):
 
     @field_validator("feedback_range_rad")
     @classmethod
-    def _at_most_pi(cls, value):
+    def _at_most_pi(cls, value: float) -> float:
         if value > math.pi:
             raise ValueError(f"{value:g} rad exceeds π: ramp steps of φ and φ − 2π are the same to the light")
         return value
@@ -197,7 +198,17 @@ class FiberOpticGyro(GyroMechanism):
         wavelength = self.wavelength_nm * 1e-9
         return wavelength**2 / (SPEED_OF_LIGHT * self.spectral_width_nm * 1e-9)
 
-    def phase_noise(self, sagnac_phase=0.0, terms: Literal["total", "shot", "rin"] = "total"):
+    @overload
+    def phase_noise(self, sagnac_phase: float = 0.0, terms: Literal["total", "shot", "rin"] = "total") -> float: ...
+
+    @overload
+    def phase_noise(
+        self, sagnac_phase: NDArray[np.float64], terms: Literal["total", "shot", "rin"] = "total"
+    ) -> NDArray[np.float64]: ...
+
+    def phase_noise(
+        self, sagnac_phase: float | NDArray[np.float64] = 0.0, terms: Literal["total", "shot", "rin"] = "total"
+    ) -> float | NDArray[np.float64]:
         """σ(Δφ): noise of the demodulated output in units of sin Δφ (= phase noise at Δφ = 0),
         rad/√Hz as the standard deviation of a 1 s average (module notes). Array in, array out.
 
@@ -214,11 +225,15 @@ class FiberOpticGyro(GyroMechanism):
         first = 1 + u0 * c  # weight of the fundamental in i(t)·cos ω_m t
         shot = ELEMENTARY_CHARGE / (self.responsivity_a_per_w * self.detector_power_uw * 1e-6) * first
         rin = 0.25 * self.relative_intensity_noise_per_hz * (first**2 + u * c**2 + v * s**2)
+        density: float | NDArray[np.float64]  # of sagnac_phase's shape (numpy's ufuncs are typed Any)
         if terms == "shot":
-            return np.sqrt(shot) / j[1]
+            density = np.sqrt(shot) / j[1]
+            return density
         if terms == "rin":
-            return np.sqrt(rin) / j[1]
-        return np.sqrt(shot + rin) / j[1]
+            density = np.sqrt(rin) / j[1]
+            return density
+        density = np.sqrt(shot + rin) / j[1]
+        return density
 
     # --- the mechanism contract --------------------------------------------------------------------
 
@@ -232,7 +247,7 @@ class FiberOpticGyro(GyroMechanism):
         """N = σ(0)/S, rad/s/√Hz: the angle random walk from shot noise and excess RIN."""
         return float(self.phase_noise(0.0)) / self.scale_factor_s
 
-    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict | None = None) -> GyroResponse:
+    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict[str, Any] | None = None) -> GyroResponse:
         """Indicated angle (M, 3) from the demodulated Sagnac phase of each inner step.
 
         raw: ``sagnac_phase_rad`` Δφ = SΩ at the nodes; ``detector_power_w``, the mean power on the
@@ -256,7 +271,7 @@ class FiberOpticGyro(GyroMechanism):
                 read = np.arcsin(np.clip(read, -1.0, 1.0))
             rate = read / S
             residual = phase
-            raw = {}
+            raw: dict[str, NDArray[np.float64]] = {}
         else:
             # Mean of Δφ over each step (exact for the cubic Hermite of Ω), nulled by the ramp step.
             mean_phase = 0.5 * (phase[1:] + phase[:-1]) + (h * S / 12.0) * (alpha[:-1] - alpha[1:])

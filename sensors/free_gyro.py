@@ -131,9 +131,10 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from pydantic import Field
 
 from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Real
@@ -213,7 +214,7 @@ class FreeGyro(GyroMechanism):
         """The output rate: the model has no dynamics of its own to resolve."""
         return output_rate_hz
 
-    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict | None = None) -> GyroResponse:
+    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict[str, Any] | None = None) -> GyroResponse:
         """Indicated rate (M, 3), rad/s, from the gimbal angles. Draws nothing.
 
         Raw: ``gimbal_angle_rad`` (M, 4) = (θ₁ inner, ψ₁ outer, θ₂ inner, ψ₂ outer); ``attitude_xyz_rad``
@@ -261,12 +262,12 @@ class FreeGyro(GyroMechanism):
 
     def _spins(
         self,
-        q_rel: np.ndarray,
-        omega: np.ndarray,
+        q_rel: NDArray[np.float64],
+        omega: NDArray[np.float64],
         dt: float,
-        spins0: np.ndarray = SPIN_AXES,
-        state: dict | None = None,
-    ) -> np.ndarray:
+        spins0: ArrayLike = SPIN_AXES,
+        state: dict[str, Any] | None = None,
+    ) -> NDArray[np.float64]:
         """Rotor directions (M, 2, 3) in the rotor (inertial) frame from ``spins0`` at the first sample:
         fixed, or drifting by (4). With Dahl's law the bearing torques continue from
         ``state["bearing_torque"]`` (unloaded without it) and are stored back there."""
@@ -310,7 +311,7 @@ class FreeGyro(GyroMechanism):
         )
         return out
 
-    def _report_lock(self, t: np.ndarray, gimbals: np.ndarray, locked: np.ndarray) -> None:
+    def _report_lock(self, t: NDArray[np.float64], gimbals: NDArray[np.float64], locked: NDArray[np.bool_]) -> None:
         first = int(np.argmax(locked))
         which = 1 + int(abs(gimbals[first, 2]) > abs(gimbals[first, 0]))
         worst = math.degrees(np.abs(gimbals[:, [0, 2]]).max())
@@ -330,7 +331,7 @@ class FreeGyro(GyroMechanism):
 # --------------------------------------------------------------------------------------------------
 
 
-def gimbal_angles(spins_case: np.ndarray) -> np.ndarray:
+def gimbal_angles(spins_case: NDArray[np.float64]) -> NDArray[np.float64]:
     """Gimbal angles (..., 4) = (θ₁, ψ₁, θ₂, ψ₂), rad, from the rotor directions (..., 2, 3) in case axes.
 
     Gyro 1 (spin x, inner y, outer z): s = Rz(−ψ₁) Ry(−θ₁) e_x, equation (1).
@@ -343,7 +344,9 @@ def gimbal_angles(spins_case: np.ndarray) -> np.ndarray:
     )
 
 
-def euler_xyz_from_spins(spins_case: np.ndarray, gimbals: np.ndarray | None = None) -> np.ndarray:
+def euler_xyz_from_spins(
+    spins_case: NDArray[np.float64], gimbals: NDArray[np.float64] | None = None
+) -> NDArray[np.float64]:
     """Attitude (..., 3) = (φ, θ, ψ), rad, with R = Rx(φ) Ry(θ) Rz(ψ), from the rotor directions (..., 2, 3).
 
     θ and ψ are gyro 1's gimbal angles (``gimbals``, their :func:`gimbal_angles` when already at
@@ -359,7 +362,7 @@ def euler_xyz_from_spins(spins_case: np.ndarray, gimbals: np.ndarray | None = No
     return np.stack([np.arctan2(-v_z, v_y), theta, psi], axis=-1)
 
 
-def body_rate_from_euler_xyz(angles: np.ndarray, rates: np.ndarray) -> np.ndarray:
+def body_rate_from_euler_xyz(angles: NDArray[np.float64], rates: NDArray[np.float64]) -> NDArray[np.float64]:
     """Body angular velocity (..., 3) of R = Rx(φ) Ry(θ) Rz(ψ) from (φ, θ, ψ) and their rates, equation (3)."""
     phi_dot, theta_dot, psi_dot = np.moveaxis(rates, -1, 0)
     theta, psi = angles[..., 1], angles[..., 2]
@@ -369,7 +372,7 @@ def body_rate_from_euler_xyz(angles: np.ndarray, rates: np.ndarray) -> np.ndarra
     )
 
 
-def time_derivative(y: np.ndarray, h: float) -> np.ndarray:
+def time_derivative(y: ArrayLike, h: float) -> NDArray[np.float64]:
     """dy/dt along axis 0 of uniform samples ``y`` (M, ...), by fourth-order finite differences.
 
     Interior: (y_{k−2} − 8 y_{k−1} + 8 y_{k+1} − y_{k+2}) / 12h, error h⁴ y⁽⁵⁾/30; the two samples at
@@ -380,7 +383,8 @@ def time_derivative(y: np.ndarray, h: float) -> np.ndarray:
     if len(y) < 2:
         return np.zeros_like(y)
     if len(y) < 5:
-        return np.gradient(y, h, axis=0)
+        gradient: NDArray[np.float64] = np.gradient(y, h, axis=0)
+        return gradient
     d = np.empty_like(y)
     d[2:-2] = y[:-4] - 8 * y[1:-3] + 8 * y[3:-1] - y[4:]
     d[0] = -25 * y[0] + 48 * y[1] - 36 * y[2] + 16 * y[3] - 3 * y[4]
@@ -396,7 +400,7 @@ def time_derivative(y: np.ndarray, h: float) -> np.ndarray:
 
 
 @njit
-def _rotate(q, v, conjugate):
+def _rotate(q: NDArray[np.float64], v: NDArray[np.float64], conjugate: bool) -> NDArray[np.float64]:
     """q ⊗ v ⊗ q* (or q* ⊗ v ⊗ q with ``conjugate``) for one quaternion (4,) and vector (3,)."""
     w = q[0]
     ux, uy, uz = (-q[1], -q[2], -q[3]) if conjugate else (q[1], q[2], q[3])
@@ -407,7 +411,17 @@ def _rotate(q, v, conjugate):
 
 
 @njit
-def _spin_rate(q, omega, s, h, b_o, c_o, b_i, c_i, min_cos2):
+def _spin_rate(
+    q: NDArray[np.float64],
+    omega: NDArray[np.float64],
+    s: NDArray[np.float64],
+    h: float,
+    b_o: float,
+    c_o: float,
+    b_i: float,
+    c_i: float,
+    min_cos2: float,
+) -> NDArray[np.float64]:
     """ds/dt (3,) in the rotor frame by (4), for rotor direction ``s`` and the carrier at ``q``, ``omega``."""
     sc = _rotate(q, s, True)  # s in case axes; the outer axis a_o is case z
     cos2 = max(1.0 - sc[2] * sc[2], min_cos2)  # cos²θ of the inner gimbal
@@ -419,11 +433,24 @@ def _spin_rate(q, omega, s, h, b_o, c_o, b_i, c_i, min_cos2):
     tau_i = -(b_i * w_i + c_i * np.sign(w_i))
     tau_o = -(b_o * w_o + c_o * np.sign(w_o))
     torque = tau_i * a_i + (tau_o / cos2) * m
-    return _rotate(q, torque, False) / h
+    rate: NDArray[np.float64] = _rotate(q, torque, False) / h
+    return rate
 
 
 @njit
-def _drift(q_rel, omega, dt, h, b_o, c_o, b_i, c_i, min_cos2, spins0, out):
+def _drift(
+    q_rel: NDArray[np.float64],
+    omega: NDArray[np.float64],
+    dt: float,
+    h: float,
+    b_o: float,
+    c_o: float,
+    b_i: float,
+    c_i: float,
+    min_cos2: float,
+    spins0: NDArray[np.float64],
+    out: NDArray[np.float64],
+) -> None:
     """Integrate (4) for each rotor by Heun's method with renormalisation; fills ``out`` (M, 2, 3)."""
     n = q_rel.shape[0]
     for g in range(spins0.shape[0]):
@@ -444,7 +471,9 @@ def _drift(q_rel, omega, dt, h, b_o, c_o, b_i, c_i, min_cos2, spins0, out):
 
 
 @njit
-def _bearings(q, omega, s, min_cos2):
+def _bearings(
+    q: NDArray[np.float64], omega: NDArray[np.float64], s: NDArray[np.float64], min_cos2: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float, float, float]:
     """Inner axis a_i, m = a_o − (a_o·s) s (case axes), cos²θ and the carrier-driven bearing rates."""
     sc = _rotate(q, s, True)
     cos2 = max(1.0 - sc[2] * sc[2], min_cos2)
@@ -457,7 +486,7 @@ def _bearings(q, omega, s, min_cos2):
 
 
 @njit
-def _dahl(z, coulomb, displacement, theta_d):
+def _dahl(z: float, coulomb: float, displacement: float, theta_d: float) -> float:
     """Dahl's model over a bearing displacement: z relaxes towards τ_c sgn Δx as e^{−|Δx|/θ_d}."""
     if displacement == 0.0:
         return z
@@ -466,7 +495,21 @@ def _dahl(z, coulomb, displacement, theta_d):
 
 
 @njit
-def _drift_dahl(q_rel, omega, dt, h, b_o, c_o, b_i, c_i, min_cos2, theta_d, spins0, z, out):
+def _drift_dahl(
+    q_rel: NDArray[np.float64],
+    omega: NDArray[np.float64],
+    dt: float,
+    h: float,
+    b_o: float,
+    c_o: float,
+    b_i: float,
+    c_i: float,
+    min_cos2: float,
+    theta_d: float,
+    spins0: NDArray[np.float64],
+    z: NDArray[np.float64],
+    out: NDArray[np.float64],
+) -> None:
     """Heun's method for (4) with Dahl's Coulomb part; ``z`` (2, 2) = (inner, outer) per gyro, in and out."""
     n = q_rel.shape[0]
     for g in range(spins0.shape[0]):

@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from gyroemu.dynamics.earth import EARTH_RATE
 from gyroemu.dynamics.rotation import quat_from_matrix
@@ -42,13 +43,13 @@ class Alignment:
         The latitude implied by the measured Earth rate, rad.
     """
 
-    q_ws: np.ndarray
+    q_ws: NDArray[np.float64]
     heading: float
     horizontal_earth_rate: float
     latitude: float
 
 
-def gyrocompass(gyro: np.ndarray, accel: np.ndarray) -> Alignment:
+def gyrocompass(gyro: ArrayLike, accel: ArrayLike) -> Alignment:
     """Align from static samples: ``gyro`` (N, 3) rad/s and ``accel`` (N, 3) m/s², sensor axes."""
     w = np.mean(np.atleast_2d(gyro), axis=0)
     f = np.mean(np.atleast_2d(accel), axis=0)
@@ -69,12 +70,12 @@ def heading_uncertainty(
     latitude_rad: float,
     duration_s: float,
     *,
-    bias=0.0,
-    noise_density=0.0,
-    bias_instability=0.0,
-    random_walk=0.0,
-    accel_bias=0.0,
-    gravity=9.81,
+    bias: float = 0.0,
+    noise_density: float = 0.0,
+    bias_instability: float = 0.0,
+    random_walk: float = 0.0,
+    accel_bias: float = 0.0,
+    gravity: float = 9.81,
 ) -> float:
     """Standard uncertainty of a gyrocompass heading, rad, from the sensors' error terms (SI).
 

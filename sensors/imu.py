@@ -43,10 +43,11 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import tomli_w
+from numpy.typing import ArrayLike, NDArray
 from pydantic import Field, field_validator
 
 from gyroemu.dynamics import Trajectory
@@ -74,7 +75,7 @@ class MountingSpec(Section):
 
     @field_validator("q_bs")
     @classmethod
-    def _unit(cls, q):
+    def _unit(cls, q: Quat) -> Quat:
         if abs(math.sqrt(sum(x * x for x in q)) - 1.0) > 1e-6:
             raise ValueError(
                 f"must be a unit quaternion (w, x, y, z), its norm is {math.sqrt(sum(x * x for x in q)):.6g}"
@@ -97,7 +98,7 @@ class TemperatureSpec(Section):
     final_degC: Real = 25.0
     time_constant_s: PositiveReal = 600.0
 
-    def at(self, t: np.ndarray) -> np.ndarray:
+    def at(self, t: ArrayLike) -> NDArray[np.float64]:
         """Temperature at times ``t`` (s since power-up), °C."""
         return self.final_degC + (self.initial_degC - self.final_degC) * np.exp(-np.asarray(t) / self.time_constant_s)
 
@@ -105,7 +106,7 @@ class TemperatureSpec(Section):
 class GyroSpec(Section):
     """``[gyro]``: the mechanism (``[gyro.mechanism]``, with its ``kind``), the error terms and the latency."""
 
-    mechanism: dict = {"kind": "ideal"}
+    mechanism: dict[Any, Any] = {"kind": "ideal"}  # dict[Any, Any]: pydantic validates it as it did a bare dict
     errors: GyroErrors = GyroErrors()
     latency_s: LatencySeconds = 0.0
     """The sample stamped ``t_k`` measures the motion at the true instant ``τ_k − latency_s``;
@@ -132,7 +133,7 @@ class DeviceSpec(Section):
     magnetometer: MagnetometerSpec | None = None
 
 
-def validate_mechanism(data: dict, file=None) -> GyroMechanism:
+def validate_mechanism(data: dict[str, Any], file: str | Path | None = None) -> GyroMechanism:
     """The typed mechanism of a ``[gyro.mechanism]`` table; errors name ``gyro.mechanism.<key>``."""
     kind = data.get("kind")
     if kind is None:
@@ -145,8 +146,15 @@ def validate_mechanism(data: dict, file=None) -> GyroMechanism:
 
 
 def _white_noise_budget(
-    model: ErrorModel, period: float, intrinsic: float, *, keys: GyroErrors | AccelErrors, prefix: str, what: str, file
-):
+    model: ErrorModel,
+    period: float,
+    intrinsic: float,
+    *,
+    keys: GyroErrors | AccelErrors,
+    prefix: str,
+    what: str,
+    file: str | Path | None,
+) -> tuple[ErrorModel, NDArray[np.float64]]:
     """Split a specified white-noise density between its sources, so the total at the output is it.
 
     A datasheet's noise density is measured at the output: it holds the mechanism's own noise
@@ -209,7 +217,14 @@ at 0.47 q it is 2.1 %, at 0.36 q (``consumer_mems`` at 100 Hz) 12 %. A configura
 
 
 def _check_dithered(
-    model: ErrorModel, period: float, specified: np.ndarray, *, keys: GyroErrors | AccelErrors, prefix: str, given, file
+    model: ErrorModel,
+    period: float,
+    specified: NDArray[np.float64],
+    *,
+    keys: GyroErrors | AccelErrors,
+    prefix: str,
+    given: str,
+    file: str | Path | None,
 ) -> None:
     """Refuse an output quantiser the white noise ahead of it does not dither (:data:`DITHER_MIN_SIGMA_LSB`).
 
@@ -266,7 +281,7 @@ class Device:
         The file the spec was read from (named in errors).
     """
 
-    def __init__(self, spec: DeviceSpec, name: str = "imu0", seed: int = 0, path: Path | None = None):
+    def __init__(self, spec: DeviceSpec, name: str = "imu0", seed: int = 0, path: Path | None = None) -> None:
         self.spec = spec
         self.name = name
         self.seed = int(seed)
@@ -335,7 +350,7 @@ class Device:
             )
 
     @property
-    def gyro_noise_density(self) -> np.ndarray:
+    def gyro_noise_density(self) -> NDArray[np.float64]:
         """Total white rate noise of each gyro axis at the output, rad/s/√Hz: the specified ARW when
         one is given; otherwise the mechanism's own and the output quantiser's."""
         return self._gyro_noise_density

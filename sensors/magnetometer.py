@@ -13,6 +13,7 @@ sensor's axes; the output is then clipped to the range and rounded to the quantu
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import NDArray
 
 from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Section, Vec3
 
@@ -35,9 +36,11 @@ class MagnetometerSpec(Section):
     """The sample stamped ``t_k`` measures the field at the true instant ``τ_k − latency_s``; positive:
     the sensor lags the truth (a real IMU's magnetometer: 9–16 ms)."""
 
-    def measure(self, field_s: np.ndarray, dt: float, rng: np.random.Generator) -> np.ndarray:
+    def measure(self, field_s: NDArray[np.float64], dt: float, rng: np.random.Generator) -> NDArray[np.float64]:
         """Measured field (N, 3), tesla, for the true sensor-axes field ``field_s`` (N, 3) sampled every ``dt``."""
-        m = np.einsum("ij,nj->ni", np.array(self.soft_iron), field_s) + np.array(self.hard_iron_uT) * 1e-6
+        m: NDArray[np.float64] = (
+            np.einsum("ij,nj->ni", np.array(self.soft_iron), field_s) + np.array(self.hard_iron_uT) * 1e-6
+        )
         if self.noise_density_uT_per_sqrt_hz > 0:
             m += rng.standard_normal(m.shape) * (self.noise_density_uT_per_sqrt_hz * 1e-6 / np.sqrt(dt))
         if self.range_uT is not None:

@@ -40,9 +40,10 @@ from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass, field
-from typing import ClassVar, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
+from numpy.typing import NDArray
 
 from gyroemu.dynamics.config import Section
 
@@ -71,7 +72,8 @@ GYRO_KINDS: dict[str, str] = {
 def mechanism_class(kind: str) -> type[GyroMechanism]:
     """The mechanism class of a gyro kind (imported on first use)."""
     module, cls = GYRO_KINDS[kind].split(":")
-    return getattr(importlib.import_module(module), cls)
+    mechanism: type[GyroMechanism] = getattr(importlib.import_module(module), cls)
+    return mechanism
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,13 +103,13 @@ class GyroTruth:
     than the physics).
     """
 
-    t: np.ndarray
+    t: NDArray[np.float64]
     dt: float
-    omega: np.ndarray
-    alpha: np.ndarray
-    specific_force: np.ndarray | None = None
-    q_is: np.ndarray | None = None
-    temperature_degC: np.ndarray | None = None
+    omega: NDArray[np.float64]
+    alpha: NDArray[np.float64]
+    specific_force: NDArray[np.float64] | None = None
+    q_is: NDArray[np.float64] | None = None
+    temperature_degC: NDArray[np.float64] | None = None
 
     def __len__(self) -> int:
         return len(self.t)
@@ -131,11 +133,11 @@ class GyroResponse:
         The physical observables, first axis M (e.g. ``gimbal_angle_rad``, ``sagnac_phase_rad``).
     """
 
-    angle: np.ndarray | None = None
-    rate: np.ndarray | None = None
-    raw: dict = field(default_factory=dict)
+    angle: NDArray[np.float64] | None = None
+    rate: NDArray[np.float64] | None = None
+    raw: dict[str, NDArray[Any]] = field(default_factory=dict)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.angle is None and self.rate is None:
             raise ValueError("a GyroResponse has an angle, a rate or both")
 
@@ -170,7 +172,7 @@ class GyroMechanism(Section):
         """
         return float("inf")
 
-    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict | None = None) -> GyroResponse:
+    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict[str, Any] | None = None) -> GyroResponse:
         """The mechanism's indicated angle or rate, and its raw observables, for ``truth``.
 
         ``state``: read the initial condition from it (empty or None: power-up) and write the final
@@ -189,11 +191,11 @@ class IdealGyro(GyroMechanism):
     kind: Literal["ideal"] = "ideal"
     reads: ClassVar[frozenset[str]] = frozenset()
 
-    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict | None = None) -> GyroResponse:
+    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict[str, Any] | None = None) -> GyroResponse:
         return GyroResponse(angle=hermite_integral(truth.omega, truth.alpha, truth.dt))
 
 
-def hermite_integral(y: np.ndarray, dy: np.ndarray, h: float) -> np.ndarray:
+def hermite_integral(y: NDArray[np.float64], dy: NDArray[np.float64], h: float) -> NDArray[np.float64]:
     """Cumulative integral of the piecewise cubic Hermite interpolant of samples ``y`` with slopes ``dy``.
 
     On each step ``∫ = h (y_i + y_{i+1})/2 + h² (dy_i − dy_{i+1})/12`` (the corrected trapezoid rule,

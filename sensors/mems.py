@@ -143,9 +143,10 @@ draw the same numbers.
 from __future__ import annotations
 
 import math
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, Any, ClassVar, Literal, TypeVar, cast, overload
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from pydantic import ValidationInfo, field_validator
 
 from gyroemu.dynamics.config import PositiveReal, Real, at_most
@@ -173,8 +174,11 @@ model's cost does not depend on the drive."""
 _PPM = 1e-6
 _NOISE_DROP = 1e-5  # baseband noise directions below this share of the variance are not drawn
 
+#: A state-space matrix's element type: real (the carrier model's oscillator) or complex (the envelope).
+_S = TypeVar("_S", np.float64, np.complex128)
 
-def element_axes() -> tuple[np.ndarray, np.ndarray]:
+
+def element_axes() -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """(drive, sense) sensor-axis index of each element k = 0, 1, 2: (k+1) mod 3 and (k+2) mod 3."""
     return np.array([1, 2, 0]), np.array([2, 0, 1])
 
@@ -215,7 +219,7 @@ class MemsGyro(GyroMechanism):
 
     @field_validator("mode_split_hz")
     @classmethod
-    def _sense_mode(cls, split, info: ValidationInfo):
+    def _sense_mode(cls, split: float, info: ValidationInfo) -> float:
         drive = info.data.get("drive_frequency_hz")
         if drive is None:
             return split
@@ -234,28 +238,28 @@ class MemsGyro(GyroMechanism):
 
     @field_validator("sense_quality_factor", "drive_quality_factor")
     @classmethod
-    def _resonator(cls, q):
+    def _resonator(cls, q: float) -> float:
         if q < 5:
             raise ValueError(f"must be at least 5 (a resonator, not an overdamped mass), got {q:g}")
         return q
 
     @field_validator("demodulation_phase_error_rad")
     @classmethod
-    def _phase(cls, phase):
+    def _phase(cls, phase: float) -> float:
         if not abs(phase) < math.pi / 2:
             raise ValueError(f"|{phase:g}| rad must be below π/2: at 90° the rate channel sees no rate")
         return phase
 
     @field_validator("reference_temperature_degC")
     @classmethod
-    def _above_absolute_zero(cls, t):
+    def _above_absolute_zero(cls, t: float) -> float:
         if not t > -ZERO_CELSIUS_K:
             raise ValueError(f"{t:g} °C is below absolute zero")
         return t
 
     @field_validator("demodulator_bandwidth_hz")
     @classmethod
-    def _below_carrier(cls, bandwidth, info: ValidationInfo):
+    def _below_carrier(cls, bandwidth: float | None, info: ValidationInfo) -> float | None:
         drive = info.data.get("drive_frequency_hz")
         if bandwidth is not None and drive is not None and not bandwidth <= drive / 4:
             raise ValueError(
@@ -268,7 +272,15 @@ class MemsGyro(GyroMechanism):
     # The physics in closed form
     # ----------------------------------------------------------------------------------------------
 
-    def frequencies(self, temperature_degC=None):
+    @overload
+    def frequencies(self, temperature_degC: float | None = None) -> tuple[float, float]: ...
+
+    @overload
+    def frequencies(self, temperature_degC: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+
+    def frequencies(
+        self, temperature_degC: float | NDArray[np.float64] | None = None
+    ) -> tuple[float | NDArray[np.float64], float | NDArray[np.float64]]:
         """(ω_d, ω_s), rad/s, at ``temperature_degC`` (scalar or array; None: the reference)."""
         dt = 0.0 if temperature_degC is None else np.asarray(temperature_degC, float) - self.reference_temperature_degC
         w_d = 2 * np.pi * self.drive_frequency_hz * (1 + self.drive_frequency_tc_ppm_per_degC * _PPM * dt)
@@ -280,12 +292,30 @@ class MemsGyro(GyroMechanism):
         )
         return w_d, w_s
 
-    def sense_response(self, temperature_degC=None):
+    @overload
+    def sense_response(self, temperature_degC: float | None = None) -> complex: ...
+
+    @overload
+    def sense_response(self, temperature_degC: NDArray[np.float64]) -> NDArray[np.complex128]: ...
+
+    def sense_response(
+        self, temperature_degC: float | NDArray[np.float64] | None = None
+    ) -> complex | NDArray[np.complex128]:
         """H = 1/(ω_s² − ω_d² + i ω_d ω_s/Q_s), m per m/s² of force amplitude at the drive frequency (3)."""
         w_d, w_s = self.frequencies(temperature_degC)
-        return 1.0 / (w_s**2 - w_d**2 + 1j * w_d * w_s / self.sense_quality_factor)
+        # complex128 where ω is an array, which numpy's stubs widen to complexfloating[Any, Any]
+        return cast(
+            "complex | NDArray[np.complex128]",
+            1.0 / (w_s**2 - w_d**2 + 1j * w_d * w_s / self.sense_quality_factor),
+        )
 
-    def _coriolis_amplitude(self, w_d):
+    @overload
+    def _coriolis_amplitude(self, w_d: float) -> float: ...
+
+    @overload
+    def _coriolis_amplitude(self, w_d: NDArray[np.float64]) -> NDArray[np.float64]: ...
+
+    def _coriolis_amplitude(self, w_d: float | NDArray[np.float64]) -> float | NDArray[np.float64]:
         """c = −2 x₀ ω_d: complex force amplitude per unit mass per rad/s (real: drive-velocity phase)."""
         return -2.0 * self.drive_amplitude_m * w_d
 
@@ -295,11 +325,22 @@ class MemsGyro(GyroMechanism):
         coriolis_response = self.sense_response() * self._coriolis_amplitude(w_d)
         return float(np.angle(coriolis_response)) + self.demodulation_phase_error_rad
 
-    def scale_factor_v_per_rad_per_s(self, temperature_degC=None):
+    @overload
+    def scale_factor_v_per_rad_per_s(self, temperature_degC: float | None = None) -> float: ...
+
+    @overload
+    def scale_factor_v_per_rad_per_s(self, temperature_degC: NDArray[np.float64]) -> NDArray[np.float64]: ...
+
+    def scale_factor_v_per_rad_per_s(
+        self, temperature_degC: float | NDArray[np.float64] | None = None
+    ) -> float | NDArray[np.float64]:
         """Rate-channel output per rad/s in steady state, V/(rad/s): G_p Re{H c e^{−iφ_ref}} (4)."""
         w_d, _ = self.frequencies(temperature_degC)
         h = self.sense_response(temperature_degC) * self._coriolis_amplitude(w_d)
-        return self.pickoff_gain_v_per_m * np.real(h * np.exp(-1j * self.reference_phase()))
+        scale: float | NDArray[np.float64] = self.pickoff_gain_v_per_m * np.real(
+            h * np.exp(-1j * self.reference_phase())
+        )
+        return scale
 
     def envelope_pole(self) -> complex:
         """p, rad/s: the sense mode's pole seen from the frame turning at ω_d (reference temperature)."""
@@ -324,20 +365,37 @@ class MemsGyro(GyroMechanism):
         w_d, w_s = self.frequencies()
         return self.drive_force_sense_coupling_per_m * w_d / (2 * self.drive_quality_factor * w_s**2)
 
-    def brownian_noise_density(self, temperature_degC=None):
+    @overload
+    def brownian_noise_density(self, temperature_degC: float | None = None) -> float: ...
+
+    @overload
+    def brownian_noise_density(self, temperature_degC: NDArray[np.float64]) -> NDArray[np.float64]: ...
+
+    def brownian_noise_density(
+        self, temperature_degC: float | NDArray[np.float64] | None = None
+    ) -> float | NDArray[np.float64]:
         """Ω_n = √(4 k_B T ω_s/(m Q_s))/(2 x₀ ω_d), rad/s/√Hz (7), at ``temperature_degC`` (None: the
         reference)."""
         temp = self.reference_temperature_degC if temperature_degC is None else np.asarray(temperature_degC, float)
         w_d, w_s = self.frequencies(temperature_degC)
         m, q = self.proof_mass_kg, self.sense_quality_factor
-        return np.sqrt(4 * K_BOLTZMANN * (temp + ZERO_CELSIUS_K) * w_s / (m * q)) / (2 * self.drive_amplitude_m * w_d)
+        density: float | NDArray[np.float64] = np.sqrt(4 * K_BOLTZMANN * (temp + ZERO_CELSIUS_K) * w_s / (m * q)) / (
+            2 * self.drive_amplitude_m * w_d
+        )
+        return density
 
     def intrinsic_noise_density(self) -> float:
         """White rate noise of the calibrated output at the reference temperature, rad/s/√Hz:
         the Brownian floor (7) over cos φ_e (the rate channel's share of the in-phase noise)."""
         return float(self.brownian_noise_density()) / math.cos(self.demodulation_phase_error_rad)
 
-    def steady_state_rate(self, omega, specific_force=None, temperature_degC=None, alpha=None):
+    def steady_state_rate(
+        self,
+        omega: ArrayLike,
+        specific_force: ArrayLike | None = None,
+        temperature_degC: float | NDArray[np.float64] | None = None,
+        alpha: ArrayLike | None = None,
+    ) -> NDArray[np.float64]:
         """Indicated rate (…, 3), rad/s, once the envelope has settled on constant inputs (closed form).
 
         ``omega``, ``specific_force``, ``alpha``: (…, 3) in sensor axes; ``temperature_degC``: scalar
@@ -351,9 +409,18 @@ class MemsGyro(GyroMechanism):
         w_d, w_s = np.asarray(w_d)[..., None], np.asarray(w_s)[..., None]
         h = self.sense_response(temperature_degC)
         envelope = np.asarray(h)[..., None] * self._forcing(omega, alpha, force, w_d, w_s)
-        return self._demodulate(envelope)[0] / self.scale_factor_v_per_rad_per_s()
+        rate: NDArray[np.float64] = self._demodulate(envelope)[0] / self.scale_factor_v_per_rad_per_s()
+        return rate
 
-    def rate_response(self, frequency_hz, exact: bool = False):
+    @overload
+    def rate_response(self, frequency_hz: float, exact: bool = False) -> complex: ...
+
+    @overload
+    def rate_response(self, frequency_hz: NDArray[np.float64], exact: bool = False) -> NDArray[np.complex128]: ...
+
+    def rate_response(
+        self, frequency_hz: float | NDArray[np.float64], exact: bool = False
+    ) -> complex | NDArray[np.complex128]:
         """Complex gain from a rate Ω cos(2π f t) about the sensing axis to the indicated rate.
 
         The rate's envelope force c Ω and the Euler force i x₀ Ω̇ of its angular acceleration put
@@ -377,9 +444,10 @@ class MemsGyro(GyroMechanism):
         lower = lower * (1 - w / (2 * w_d))
         phase = np.exp(-1j * self.demodulation_phase_error_rad)
         gain = (upper * phase + np.conj(lower * phase)) / (2 * math.cos(self.demodulation_phase_error_rad))
-        return gain * self._filter_response(w)
+        response: complex | NDArray[np.complex128] = gain * self._filter_response(w)
+        return response
 
-    def _filter_response(self, w):
+    def _filter_response(self, w: ArrayLike) -> NDArray[np.complex128]:
         """The demodulator filter's gain at angular frequency ``w`` (1 when there is none): the product
         of its sections −p_k/(jw − p_k) over the Butterworth poles p_k."""
         w = np.asarray(w, dtype=float)
@@ -414,7 +482,14 @@ class MemsGyro(GyroMechanism):
     # Forces, demodulation
     # ----------------------------------------------------------------------------------------------
 
-    def _forcing(self, omega, alpha, force, w_d, w_s):
+    def _forcing(
+        self,
+        omega: NDArray[np.float64],
+        alpha: NDArray[np.float64],
+        force: NDArray[np.float64],
+        w_d: float | NDArray[np.float64],
+        w_s: float | NDArray[np.float64],
+    ) -> NDArray[np.complex128]:
         """Complex force amplitude F per unit mass on each element's sense mode, (…, 3), m/s².
 
         ``omega``, ``alpha``, ``force``: (…, 3) sensor axes; ``w_d``, ``w_s``: broadcastable to (…, 1).
@@ -433,7 +508,14 @@ class MemsGyro(GyroMechanism):
         )
         return out
 
-    def _forcing_on_grid(self, omega, alpha, force, w_d, w_s):
+    def _forcing_on_grid(
+        self,
+        omega: NDArray[np.float64],
+        alpha: NDArray[np.float64],
+        force: NDArray[np.float64],
+        w_d: NDArray[np.float64],
+        w_s: NDArray[np.float64],
+    ) -> NDArray[np.complex128]:
         """:meth:`_forcing` on the inner grid, (M, 3) complex, bit for bit: ``omega``, ``alpha``, ``force``
         (M, 3), ``w_d``, ``w_s`` (M,), in one compiled pass (no temporaries)."""
         drive, sense = element_axes()
@@ -456,7 +538,7 @@ class MemsGyro(GyroMechanism):
         )
         return out
 
-    def _demodulate(self, envelope):
+    def _demodulate(self, envelope: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(I, Q) volts of a sense envelope A (m): G_p Re{A e^{−iφ_ref}} and −G_p Im{A e^{−iφ_ref}}.
 
         Equal to averaging v = G_p Re{A e^{iθ}} times 2 cos(θ + φ_ref) and times 2 sin(θ + φ_ref).
@@ -466,7 +548,9 @@ class MemsGyro(GyroMechanism):
         envelope = np.asarray(envelope)
         return cos * envelope.real + sin * envelope.imag, cos * -envelope.imag + sin * envelope.real
 
-    def _filter_state_space(self):
+    def _filter_state_space(
+        self,
+    ) -> tuple[NDArray[np.complex128], NDArray[np.complex128], NDArray[np.complex128]] | None:
         """The demodulator filter as (A_f, B_f, C_f), complex, or None when there is none.
 
         A cascade of first-order sections −p_k/(s − p_k) over the Butterworth poles p_k (unit DC gain,
@@ -484,11 +568,11 @@ class MemsGyro(GyroMechanism):
         c[-1] = 1.0
         return a, b, c
 
-    def _response(self, envelope) -> GyroResponse:
+    def _response(self, envelope: NDArray[np.complex128]) -> GyroResponse:
         """Demodulate the (filtered) sense envelope (M, 3) and calibrate: indicated rate I/SF₀."""
         return self._calibrated(*self._demodulate(envelope))
 
-    def _calibrated(self, in_phase, quadrature) -> GyroResponse:
+    def _calibrated(self, in_phase: NDArray[np.float64], quadrature: NDArray[np.float64]) -> GyroResponse:
         """The indicated rate I/SF₀ of the demodulated channels (M, 3), with the channels as raw observables."""
         return GyroResponse(
             rate=in_phase / self.scale_factor_v_per_rad_per_s(),
@@ -499,7 +583,7 @@ class MemsGyro(GyroMechanism):
     # Simulation
     # ----------------------------------------------------------------------------------------------
 
-    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict | None = None) -> GyroResponse:
+    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict[str, Any] | None = None) -> GyroResponse:
         """Indicated rate (M, 3) on the inner grid and the demodulated channels, by ``self.model``."""
         state = {} if state is None else state
         if np.any(np.asarray(truth.temperature_degC) <= -ZERO_CELSIUS_K):
@@ -508,7 +592,7 @@ class MemsGyro(GyroMechanism):
             return self._respond_carrier(truth, rng, state)
         return self._respond_baseband(truth, rng, state)
 
-    def baseband_system(self):
+    def baseband_system(self) -> tuple[NDArray[np.complex128], NDArray[np.complex128], NDArray[np.complex128]]:
         """The envelope (5) and the demodulator filter as one complex system ż = A z + b F, Ã = c·z.
 
         Returns (A (S, S), b (S,), c (S,)), complex, S = 1 + filter order: z = (A, filter states).
@@ -529,13 +613,19 @@ class MemsGyro(GyroMechanism):
         c = np.concatenate([[0.0], c_f])
         return a, b, c
 
-    def _thermal_psd(self, temperature_degC=None):
+    @overload
+    def _thermal_psd(self, temperature_degC: float | None = None) -> float: ...
+
+    @overload
+    def _thermal_psd(self, temperature_degC: NDArray[np.float64]) -> NDArray[np.float64]: ...
+
+    def _thermal_psd(self, temperature_degC: float | NDArray[np.float64] | None = None) -> float | NDArray[np.float64]:
         """Two-sided PSD of the Brownian force per unit mass, (m/s²)²/Hz: 2 k_B T ω_s/(m Q_s)."""
         temp = self.reference_temperature_degC if temperature_degC is None else temperature_degC
         _, w_s = self.frequencies(temperature_degC)
         return 2 * K_BOLTZMANN * (temp + ZERO_CELSIUS_K) * w_s / (self.proof_mass_kg * self.sense_quality_factor)
 
-    def _respond_baseband(self, truth: GyroTruth, rng, state: dict) -> GyroResponse:
+    def _respond_baseband(self, truth: GyroTruth, rng: np.random.Generator, state: dict[str, Any]) -> GyroResponse:
         """The envelope system over the grid's steps, each exact for the forcing's cubic Hermite
         interpolant (see :func:`hermite_hold`); ``state["envelope_state"]`` (3, S) carries it, and
         ``state["discretisation"]`` keeps the step matrices for the next chunk of the same step.
@@ -547,7 +637,8 @@ class MemsGyro(GyroMechanism):
         temperature = np.asarray(truth.temperature_degC, float)
         w_d, w_s = self.frequencies(temperature)
         ratio = self.sense_response(temperature) / self.sense_response()  # H_T/H₀: temperature, exact in steady state
-        forcing = ratio[:, None] * self._forcing_on_grid(truth.omega, truth.alpha, truth.specific_force, w_d, w_s)
+        force = cast("NDArray[np.float64]", truth.specific_force)  # in self.reads: never None here
+        forcing = ratio[:, None] * self._forcing_on_grid(truth.omega, truth.alpha, force, w_d, w_s)
         smooth, slope = self._smooth_forcing(truth.omega, truth.alpha, w_d, h)
         smooth *= ratio[:, None]
         slope *= ratio[:, None]
@@ -602,7 +693,9 @@ class MemsGyro(GyroMechanism):
         angle = np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
         return GyroResponse(angle=angle, rate=response.rate, raw=response.raw)
 
-    def _smooth_forcing(self, omega, alpha, w_d, h: float):
+    def _smooth_forcing(
+        self, omega: NDArray[np.float64], alpha: NDArray[np.float64], w_d: ArrayLike, h: float
+    ) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]:
         """The part P of the forcing whose time derivative the truth gives, and h·Ṗ, (M, 3) complex.
 
         P = c(ω_d) Ω_k + i x₀ (k_q/m + Ω_d Ω_s), so Ṗ = c(ω_d) α_k + i x₀ (α_d Ω_s + Ω_d α_s), with ω_d
@@ -618,7 +711,7 @@ class MemsGyro(GyroMechanism):
         slope = h * (coriolis * alpha + 1j * (x0 * turning))
         return np.ascontiguousarray(smooth), np.ascontiguousarray(slope)
 
-    def _respond_carrier(self, truth: GyroTruth, rng, state: dict) -> GyroResponse:
+    def _respond_carrier(self, truth: GyroTruth, rng: np.random.Generator, state: dict[str, Any]) -> GyroResponse:
         """The sense oscillators on the phase-locked carrier grid, from power-up (``state["carrier"]``
         carries grid origin and index, held temperature, oscillator, demodulator and filter)."""
         run = state.get("carrier")
@@ -637,7 +730,8 @@ class MemsGyro(GyroMechanism):
 
         # The forces at the truth samples; the carrier steps see them linear in between, like the
         # baseband model. F: complex amplitude at the carrier; −f_s: the DC force (deflection y_g).
-        forcing = self._forcing(truth.omega, truth.alpha, truth.specific_force, w_d, w_s)
+        force = cast("NDArray[np.float64]", truth.specific_force)  # in self.reads: never None here
+        forcing = self._forcing(truth.omega, truth.alpha, force, w_d, w_s)
         assert truth.specific_force is not None  # in self.reads
         static = np.ascontiguousarray(-truth.specific_force[:, sense])
 
@@ -711,7 +805,9 @@ class MemsGyro(GyroMechanism):
         state["carrier"] = run
         return self._response(held)
 
-    def _filter_cycles(self, cycles, run: dict, period: float):
+    def _filter_cycles(
+        self, cycles: NDArray[np.complex128], run: dict[str, Any], period: float
+    ) -> NDArray[np.complex128]:
         """The demodulator filter over per-cycle envelopes (K, 3), input linear between cycles; state kept."""
         filt = self._filter_state_space()
         if filt is None or len(cycles) == 0:
@@ -733,15 +829,16 @@ class MemsGyro(GyroMechanism):
 # --------------------------------------------------------------------------------------------------
 
 
-def butterworth_poles(order: int) -> np.ndarray:
+def butterworth_poles(order: int) -> NDArray[np.complex128]:
     """The analogue Butterworth prototype's poles (cut-off 1 rad/s), −exp(iπ m/2n) for
     m = −n+1, −n+3, …, n−1 (``scipy.signal.buttap``'s expression, so the same numbers; written here so
     that a device need not import scipy.signal, 0.5 s)."""
     m = np.arange(-order + 1, order, 2, dtype=np.float64)
-    return -np.exp(1j * np.pi * m / (2 * order))
+    poles: NDArray[np.complex128] = -np.exp(1j * np.pi * m / (2 * order))
+    return poles
 
 
-def first_order_hold(a: np.ndarray, b: np.ndarray, h: float):
+def first_order_hold(a: NDArray[_S], b: NDArray[_S], h: float) -> tuple[NDArray[_S], NDArray[_S], NDArray[_S]]:
     """(Φ, Γ₀, Γ₁) with x_{k+1} = Φ x_k + Γ₀ u_k + Γ₁ u_{k+1}: ẋ = A x + b u exactly for u linear over
     the step.
 
@@ -759,7 +856,9 @@ def first_order_hold(a: np.ndarray, b: np.ndarray, h: float):
     return e[:s, :s], e[:s, s] - e[:s, s + 1], e[:s, s + 1]
 
 
-def hermite_hold(a: np.ndarray, b: np.ndarray, c: np.ndarray, h: float):
+def hermite_hold(
+    a: NDArray[np.complex128], b: NDArray[np.complex128], c: NDArray[np.complex128], h: float
+) -> tuple[NDArray[np.complex128], NDArray[np.complex128], NDArray[np.complex128], NDArray[np.complex128]]:
     """(Φ, G (S, 4), r (S,), g (4,)): one step h of ż = A z + b u, and the step's mean of y = c·z,
     exact for u the cubic Hermite interpolant of (u₀, u₁) with slopes (u̇₀, u̇₁):
 
@@ -789,7 +888,9 @@ def hermite_hold(a: np.ndarray, b: np.ndarray, c: np.ndarray, h: float):
     return e[:s, :s], response[:s], e[s, :s], response[s]
 
 
-def mean_augmented(a: np.ndarray, b: np.ndarray, c: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+def mean_augmented(
+    a: NDArray[np.complex128], b: NDArray[np.complex128], c: NDArray[np.complex128], h: float
+) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]:
     """(A', b') of ż = A z + b u extended by the running mean of y = c·z over a step h, μ̇ = c·z/h:
     the system whose discrete noise covariance over h (:func:`discrete_noise_covariance`) is that of
     the state and the step's mean together."""
@@ -800,7 +901,9 @@ def mean_augmented(a: np.ndarray, b: np.ndarray, c: np.ndarray, h: float) -> tup
     return a_mean, np.concatenate([b, [0.0]]).astype(complex)
 
 
-def carrier_hold(a: np.ndarray, b: np.ndarray, w: float, h: float):
+def carrier_hold(
+    a: NDArray[np.float64], b: NDArray[np.float64], w: float, h: float
+) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]:
     """(G₀, G₁), complex (S,): the response over one step of ẋ = A x + b Re{e^{iθ_k} (F_k + ΔF τ/h) e^{iwτ}}
     from x = 0 is Re{e^{iθ_k} (G₀ F_k + G₁ ΔF)}.
 
@@ -821,7 +924,7 @@ def carrier_hold(a: np.ndarray, b: np.ndarray, w: float, h: float):
     return scipy.linalg.expm(m0 * h)[:s, s + 1], scipy.linalg.expm(m1 * h)[:s, s + 1]
 
 
-def discrete_noise_covariance(a: np.ndarray, b: np.ndarray, psd: float, h: float) -> np.ndarray:
+def discrete_noise_covariance(a: NDArray[_S], b: NDArray[_S], psd: float, h: float) -> NDArray[_S]:
     """Q = ∫₀ʰ e^{Aσ} b S b* e^{A*σ} dσ: the covariance one step of white input (two-sided PSD S) adds.
 
     Van Loan's method: exp([[−A, b S b*], [0, A*]] h) = [[·, Φ⁻¹Q], [0, Φ*]]. Its e^{−Ah} grows as
@@ -845,10 +948,11 @@ def discrete_noise_covariance(a: np.ndarray, b: np.ndarray, psd: float, h: float
     for _ in range(halvings):
         q = q + phi @ q @ np.conj(phi).T
         phi = phi @ phi
-    return 0.5 * (q + np.conj(q).T)
+    covariance: NDArray[_S] = 0.5 * (q + np.conj(q).T)
+    return covariance
 
 
-def stationary_covariance(a: np.ndarray, b: np.ndarray, psd: float) -> np.ndarray:
+def stationary_covariance(a: NDArray[_S], b: NDArray[_S], psd: float) -> NDArray[_S]:
     """P with A P + P A* + b S b* = 0: the covariance white input (two-sided PSD S) settles to.
 
     Solved as the linear system (I ⊗ A + Ā ⊗ I) vec P = −vec(b S b*) (S ≤ 5 states here).
@@ -858,10 +962,11 @@ def stationary_covariance(a: np.ndarray, b: np.ndarray, psd: float) -> np.ndarra
     lhs = np.kron(eye, a) + np.kron(np.conj(a), eye)
     rhs = -psd * np.outer(b, np.conj(b))
     p = np.linalg.solve(lhs, rhs.reshape(-1, order="F")).reshape(s, s, order="F")
-    return 0.5 * (p + np.conj(p).T)
+    covariance: NDArray[_S] = 0.5 * (p + np.conj(p).T)
+    return covariance
 
 
-def covariance_factor(q: np.ndarray, drop: float = 0.0) -> np.ndarray:
+def covariance_factor(q: NDArray[_S], drop: float = 0.0) -> NDArray[_S]:
     """L (S, R) with L L* = Q, for a positive semi-definite Q, by eigen-decomposition.
 
     With ``drop`` > 0 the directions that carry less than ``drop`` of the total variance tr Q are left
@@ -874,10 +979,11 @@ def covariance_factor(q: np.ndarray, drop: float = 0.0) -> np.ndarray:
     return np.ascontiguousarray(vectors[:, keep] * np.sqrt(values[keep]))
 
 
-def _circular_normal(rng: np.random.Generator, shape) -> np.ndarray:
+def _circular_normal(rng: np.random.Generator, shape: tuple[int, ...]) -> NDArray[np.complex128]:
     """Circular complex normals, E|w|² = 1, real then imaginary part drawn for each element."""
     pair = rng.standard_normal((*shape, 2))
-    return (pair[..., 0] + 1j * pair[..., 1]) / math.sqrt(2)
+    # complex128, which numpy's stubs type as float64 (a float64 array times 1j)
+    return cast("NDArray[np.complex128]", (pair[..., 0] + 1j * pair[..., 1]) / math.sqrt(2))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -886,7 +992,21 @@ def _circular_normal(rng: np.random.Generator, shape) -> np.ndarray:
 
 
 @njit
-def _forcing_run(omega, alpha, force, w_d, w_s, drive, sense, x0, leak_scale, q_d, coriolis_scale, quad, out):
+def _forcing_run(
+    omega: NDArray[np.float64],
+    alpha: NDArray[np.float64],
+    force: NDArray[np.float64],
+    w_d: NDArray[np.float64],
+    w_s: NDArray[np.float64],
+    drive: NDArray[np.int64],
+    sense: NDArray[np.int64],
+    x0: float,
+    leak_scale: float,
+    q_d: float,
+    coriolis_scale: float,
+    quad: float,
+    out: NDArray[np.complex128],
+) -> None:
     """:meth:`MemsGyro._forcing` sample by sample, the same operations in the same order (so the same
     bits): leak = (−κ x₀) ω_d² / (Q_d ω_s²), Re F = (−2 x₀) ω_d Ω_k + leak f_s,
     Im F = x₀ ((k_q/m + α_k) + Ω_d Ω_s). ``omega``, ``alpha``, ``force`` (M, 3); ``w_d``, ``w_s`` (M,)."""
@@ -906,24 +1026,24 @@ def _forcing_run(omega, alpha, force, w_d, w_s, drive, sense, x0, leak_scale, q_
 
 @njit
 def _hermite_run(
-    phi,
-    g_state,
-    r_mean,
-    g_mean,
-    noise,
-    c,
-    forcing,
-    smooth,
-    slope,
-    noise_scale,
-    z,
-    rng,
-    dem_cos,
-    dem_sin,
-    in_phase,
-    quadrature,
-    mean_in_phase,
-):
+    phi: NDArray[np.complex128],
+    g_state: NDArray[np.complex128],
+    r_mean: NDArray[np.complex128],
+    g_mean: NDArray[np.complex128],
+    noise: NDArray[np.complex128],
+    c: NDArray[np.complex128],
+    forcing: NDArray[np.complex128],
+    smooth: NDArray[np.complex128],
+    slope: NDArray[np.complex128],
+    noise_scale: NDArray[np.float64],
+    z: NDArray[np.complex128],
+    rng: np.random.Generator,
+    dem_cos: float,
+    dem_sin: float,
+    in_phase: NDArray[np.float64],
+    quadrature: NDArray[np.float64],
+    mean_in_phase: NDArray[np.float64],
+) -> None:
     """Over each step k → k+1 and axis: u = (F_k, F_{k+1}, D_k, D_{k+1}) with the slopes
     D = h Ṗ + ΔF − ΔP (the smooth part P's own slope; the rest of F is held linear, since a Hermite
     interpolant whose slopes are the secant is the straight line), then z_{k+1} = Φ z_k + G u + s_k L_z w_k
@@ -983,27 +1103,27 @@ def _hermite_run(
 
 @njit
 def _carrier_run(
-    phi,
-    dc0,
-    dc1,
-    g0,
-    g1,
-    noise,
-    carrier,
-    j0,
-    j_end,
-    offset,
-    ratio,
-    forcing,
-    static,
-    force_at_j,
-    static_at_j,
-    x,
-    acc,
-    rng,
-    cycles,
-    done,
-):
+    phi: NDArray[np.float64],
+    dc0: NDArray[np.float64],
+    dc1: NDArray[np.float64],
+    g0: NDArray[np.complex128],
+    g1: NDArray[np.complex128],
+    noise: NDArray[np.float64],
+    carrier: NDArray[np.complex128],
+    j0: int,
+    j_end: int,
+    offset: float,
+    ratio: float,
+    forcing: NDArray[np.complex128],
+    static: NDArray[np.float64],
+    force_at_j: NDArray[np.complex128],
+    static_at_j: NDArray[np.float64],
+    x: NDArray[np.float64],
+    acc: NDArray[np.complex128],
+    rng: np.random.Generator,
+    cycles: NDArray[np.complex128],
+    done: NDArray[np.int64],
+) -> int:
     """Step the sense oscillators over carrier steps j0 → j_end and demodulate them.
 
     x_{j+1} = Φ x_j + Re{e^{iθ_j}(G₀ F_j + G₁ (F_{j+1} − F_j))} + Γ₀ u_j + Γ₁ u_{j+1} + L w_j: F the
@@ -1065,7 +1185,16 @@ def _carrier_run(
 
 
 @njit
-def _filter_run(phi, gamma0, gamma1, c, u, s, previous, out):
+def _filter_run(
+    phi: NDArray[np.complex128],
+    gamma0: NDArray[np.complex128],
+    gamma1: NDArray[np.complex128],
+    c: NDArray[np.complex128],
+    u: NDArray[np.complex128],
+    s: NDArray[np.complex128],
+    previous: NDArray[np.complex128],
+    out: NDArray[np.complex128],
+) -> None:
     """s_{k+1} = Φ s_k + Γ₀ u_{k−1} + Γ₁ u_k, out[k] = c·s_{k+1}, per axis; ``s`` (A, S) and
     ``previous`` (A,) (the input before u[0]) are updated in place. ``u``, ``out``: (K, A)."""
     n, n_axes = u.shape

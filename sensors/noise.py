@@ -71,9 +71,10 @@ of relaxation processes.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from gyroemu.dynamics.jit import njit
 
@@ -109,7 +110,13 @@ _STEPS_PER_TAU = 16
 
 
 @njit
-def _ar1_sum_into(rng, phi, c, state, out):
+def _ar1_sum_into(
+    rng: np.random.Generator,
+    phi: NDArray[np.float64],
+    c: NDArray[np.float64],
+    state: NDArray[np.float64],
+    out: NDArray[np.float64],
+) -> None:
     """Add Σ_j x_j to ``out``, where x_j[k] = φ_j x_j[k−1] + c_j w, w ~ N(0, 1) from ``rng``.
 
     ``phi``, ``c``, ``state``: (J, A), one row per term and a column per axis; ``state`` holds x_j[−1]
@@ -130,19 +137,21 @@ def _ar1_sum_into(rng, phi, c, state, out):
             out[k, a] += total
 
 
-def _shape2d(shape) -> tuple[tuple[int, ...], tuple[int, int]]:
+def _shape2d(shape: int | tuple[int, ...]) -> tuple[tuple[int, ...], tuple[int, int]]:
     """The requested shape and the (n, axes) shape the kernels work on."""
-    shape = (int(shape),) if np.ndim(shape) == 0 else tuple(int(s) for s in shape)
+    given: Any = shape  # n or (n, axes): np.ndim tells them apart, which mypy cannot follow
+    shape = (int(given),) if np.ndim(given) == 0 else tuple(int(s) for s in given)
     if len(shape) not in (1, 2) or shape[0] < 1:
         raise ValueError(f"shape must be n or (n, axes) with n >= 1, got {shape}")
     return shape, (shape[0], shape[1] if len(shape) == 2 else 1)
 
 
-def _per_axis(value, n_axes: int, name: str, *, nonnegative: bool = True) -> np.ndarray:
+def _per_axis(value: ArrayLike, n_axes: int, name: str, *, nonnegative: bool = True) -> NDArray[np.float64]:
     """A coefficient as an (axes,) float array: a scalar applies to every axis."""
     v = np.broadcast_to(np.asarray(value, dtype=float), (n_axes,)).copy()
     if nonnegative and np.any(v < 0):
-        raise ValueError(f"{name} must be >= 0, got {value}")
+        given: object = value  # as given (ArrayLike admits bytes, which mypy will not format)
+        raise ValueError(f"{name} must be >= 0, got {given}")
     return v
 
 
@@ -151,7 +160,9 @@ def _per_axis(value, n_axes: int, name: str, *, nonnegative: bool = True) -> np.
 # --------------------------------------------------------------------------------------------------
 
 
-def white_noise(rng: np.random.Generator, shape, dt: float, density) -> np.ndarray:
+def white_noise(
+    rng: np.random.Generator, shape: int | tuple[int, ...], dt: float, density: ArrayLike
+) -> NDArray[np.float64]:
     """White rate noise (angle or velocity random walk) of noise density ``density``.
 
     Parameters
@@ -166,10 +177,13 @@ def white_noise(rng: np.random.Generator, shape, dt: float, density) -> np.ndarr
     """
     shape, (_, n_axes) = _shape2d(shape)
     sigma = _per_axis(density, n_axes, "density") / np.sqrt(dt)  # per-sample σ = N / √Δt
-    return (rng.standard_normal(shape).reshape(-1, n_axes) * sigma).reshape(shape)
+    noise: NDArray[np.float64] = (rng.standard_normal(shape).reshape(-1, n_axes) * sigma).reshape(shape)
+    return noise
 
 
-def random_walk(rng: np.random.Generator, shape, dt: float, density) -> np.ndarray:
+def random_walk(
+    rng: np.random.Generator, shape: int | tuple[int, ...], dt: float, density: ArrayLike
+) -> NDArray[np.float64]:
     """Rate random walk: the running sum of white increments of σ = K √Δt, starting from 0.
 
     Parameters
@@ -186,7 +200,7 @@ def random_walk(rng: np.random.Generator, shape, dt: float, density) -> np.ndarr
     return np.cumsum(rng.standard_normal((n, n_axes)) * step, axis=0).reshape(shape)
 
 
-def rate_ramp(shape, dt: float, ramp) -> np.ndarray:
+def rate_ramp(shape: int | tuple[int, ...], dt: float, ramp: ArrayLike) -> NDArray[np.float64]:
     """Rate ramp R·t at the sample times t_k = k Δt (deterministic: no Generator).
 
     Parameters
@@ -199,7 +213,9 @@ def rate_ramp(shape, dt: float, ramp) -> np.ndarray:
     return (np.arange(n)[:, None] * dt * slope).reshape(shape)
 
 
-def gauss_markov(rng: np.random.Generator, shape, dt: float, sigma, tau_c) -> np.ndarray:
+def gauss_markov(
+    rng: np.random.Generator, shape: int | tuple[int, ...], dt: float, sigma: ArrayLike, tau_c: ArrayLike
+) -> NDArray[np.float64]:
     """First-order Gauss–Markov (exponentially correlated) noise, stationary from the first sample.
 
     x_k = φ x_{k−1} + σ √(1 − φ²) w_k, φ = exp(−Δt/τ_c): the exact discretisation of
@@ -223,7 +239,9 @@ def gauss_markov(rng: np.random.Generator, shape, dt: float, sigma, tau_c) -> np
     return out.reshape(shape)
 
 
-def gauss_markov_avar(tau, sigma, tau_c, dt: float | None = None):
+def gauss_markov_avar(
+    tau: ArrayLike, sigma: ArrayLike, tau_c: ArrayLike, dt: float | None = None
+) -> NDArray[np.float64]:
     """Allan variance of a Gauss–Markov process of standard deviation σ and correlation time τ_c.
 
     Continuous time (``dt`` None), the process averaged over each τ:
@@ -243,7 +261,7 @@ def gauss_markov_avar(tau, sigma, tau_c, dt: float | None = None):
     with np.errstate(over="ignore", invalid="ignore"):
         exact = (2 * x + 4 * np.expm1(-x) - np.expm1(-2 * x)) / x**2
     series = x * (2 / 3 - x / 2 + 7 * x**2 / 30)
-    avar = sigma**2 * np.where(x < 1e-3, series, exact)
+    avar: NDArray[np.float64] = sigma**2 * np.where(x < 1e-3, series, exact)
     if dt is None:
         return avar
     m = tau / dt
@@ -252,7 +270,8 @@ def gauss_markov_avar(tau, sigma, tau_c, dt: float | None = None):
     u = -np.expm1(-m * dt / tau_c)  # 1 − φ^m
     with np.errstate(divide="ignore", invalid="ignore"):
         sampled = sigma**2 * (m * (1 + phi) / one_minus_phi - (2 * phi * u + phi * u**2) / one_minus_phi**2) / m**2
-    return np.where(tau_c > 1000 * dt, avar, sampled)
+    chosen: NDArray[np.float64] = np.where(tau_c > 1000 * dt, avar, sampled)
+    return chosen
 
 
 # --------------------------------------------------------------------------------------------------
@@ -271,19 +290,20 @@ class FlickerBank:
     tau_range : (τ_min, τ_max), s: where the floor is flat.
     """
 
-    tau_c: np.ndarray
-    sigma: np.ndarray
+    tau_c: NDArray[np.float64]
+    sigma: NDArray[np.float64]
     tau_range: tuple[float, float]
 
-    def avar(self, tau, dt: float | None = None) -> np.ndarray:
+    def avar(self, tau: ArrayLike, dt: float | None = None) -> NDArray[np.float64]:
         """The bank's Allan variance at ``tau`` (..., A): the sum of its components' (closed form,
         of the sampled components when ``dt`` is given)."""
         tau = np.asarray(tau, dtype=float)[..., None, None]
-        return np.sum(gauss_markov_avar(tau, self.sigma, self.tau_c[:, None], dt), axis=-2)
+        total: NDArray[np.float64] = np.sum(gauss_markov_avar(tau, self.sigma, self.tau_c[:, None], dt), axis=-2)
+        return total
 
 
 def flicker_bank(
-    bias_instability, tau_range: tuple[float, float], dt: float | None = None, n_axes: int = 1
+    bias_instability: ArrayLike, tau_range: tuple[float, float], dt: float | None = None, n_axes: int = 1
 ) -> FlickerBank:
     """Design the Gauss–Markov sum for flicker noise of bias instability B, flat over ``tau_range``.
 
@@ -323,8 +343,12 @@ def flicker_bank(
 
 
 def flicker_noise(
-    rng: np.random.Generator, shape, dt: float, bias_instability, tau_range: tuple[float, float]
-) -> np.ndarray:
+    rng: np.random.Generator,
+    shape: int | tuple[int, ...],
+    dt: float,
+    bias_instability: ArrayLike,
+    tau_range: tuple[float, float],
+) -> NDArray[np.float64]:
     """Flicker (1/f) bias-instability noise: Allan deviation flat at 0.664 B over ``tau_range``.
 
     Parameters
@@ -346,7 +370,9 @@ def flicker_noise(
 # --------------------------------------------------------------------------------------------------
 
 
-def quantisation_noise(rng: np.random.Generator, shape, dt: float, lsb) -> np.ndarray:
+def quantisation_noise(
+    rng: np.random.Generator, shape: int | tuple[int, ...], dt: float, lsb: ArrayLike
+) -> NDArray[np.float64]:
     """Rate noise of an angle quantiser of step ``lsb`` (IEEE 952's quantisation noise, alone).
 
     The quantised angle differs from the true one by e_k, uniform on [−LSB/2, LSB/2) and independent
@@ -365,14 +391,14 @@ def quantisation_noise(rng: np.random.Generator, shape, dt: float, lsb) -> np.nd
 
 
 def quantise_angle(
-    rate: np.ndarray,
+    rate: ArrayLike,
     dt: float,
-    lsb,
+    lsb: ArrayLike,
     rng: np.random.Generator | None,
-    out: np.ndarray | None = None,
+    out: NDArray[np.float64] | None = None,
     *,
-    angle: np.ndarray | None = None,
-) -> np.ndarray:
+    angle: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64]:
     """Quantise the integrated angle of ``rate`` (n,) or (n, A), as a pulse-counting gyro does.
 
     The angle θ_k = θ₀ + Δt Σ_{i≤k} rate_i is counted in whole quanta, c_k = ⌊θ_k / LSB⌋, and the
@@ -395,7 +421,8 @@ def quantise_angle(
     rate2 = np.ascontiguousarray(rate.reshape(rate.shape[0], -1))
     q = _per_axis(lsb, rate2.shape[1], "lsb")
     if np.any(q <= 0):
-        raise ValueError(f"lsb must be > 0, got {lsb}")
+        given: object = lsb  # as given (ArrayLike admits bytes, which mypy will not format)
+        raise ValueError(f"lsb must be > 0, got {given}")
     if angle is None:
         if rng is None:
             raise ValueError("quantise_angle needs a Generator for the counter's initial fraction, or its angle")
@@ -412,7 +439,13 @@ def quantise_angle(
 
 
 @njit
-def _count_quanta(rate, dt, lsb, theta0, out):
+def _count_quanta(
+    rate: NDArray[np.float64],
+    dt: float,
+    lsb: NDArray[np.float64],
+    theta0: NDArray[np.float64],
+    out: NDArray[np.float64],
+) -> None:
     """Write to ``out`` the rate of whole quanta counted from the running angle θ₀ + Δt Σ rate
     (see quantise_angle); ``out`` may be ``rate``. ``theta0`` (A,) is left holding the final angle,
     where a next call continues the count."""
@@ -435,14 +468,14 @@ def _count_quanta(rate, dt, lsb, theta0, out):
 
 def sensor_noise(
     rng: np.random.Generator,
-    shape,
+    shape: int | tuple[int, ...],
     dt: float,
     *,
-    white=0.0,
-    random_walk=0.0,
+    white: ArrayLike = 0.0,
+    random_walk: ArrayLike = 0.0,
     flicker: FlickerBank | None = None,
-    out: np.ndarray | None = None,
-) -> np.ndarray:
+    out: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64]:
     """White noise + rate random walk + flicker, generated together in one pass over the samples.
 
     Statistically the sum of :func:`white_noise`, :func:`random_walk` and :func:`flicker_noise`
@@ -481,12 +514,12 @@ class _SlowLevel:
     interpolated there; ``state`` the components' last values (J, A); ``rng`` the level's own draws."""
 
     step: int
-    phi: np.ndarray
-    c: np.ndarray
-    state: np.ndarray
+    phi: NDArray[np.float64]
+    c: NDArray[np.float64]
+    state: NDArray[np.float64]
     rng: np.random.Generator
     base: int
-    knots: np.ndarray
+    knots: NDArray[np.float64]
 
 
 class SensorNoise:
@@ -530,8 +563,8 @@ class SensorNoise:
         n_axes: int,
         dt: float,
         *,
-        white=0.0,
-        random_walk=0.0,
+        white: ArrayLike = 0.0,
+        random_walk: ArrayLike = 0.0,
         flicker: FlickerBank | None = None,
         markov: tuple[ArrayLike, ArrayLike] | None = None,
     ) -> None:
@@ -577,7 +610,7 @@ class SensorNoise:
         """Knots the slow flicker levels hold now: the state beyond the AR(1) values, a few per level."""
         return sum(len(level.knots) for level in self._levels)
 
-    def add_into(self, out: np.ndarray) -> np.ndarray:
+    def add_into(self, out: NDArray[np.float64]) -> NDArray[np.float64]:
         """Add the run's next ``len(out)`` samples of noise to ``out`` (n, A), C-contiguous float64."""
         n, n_axes = out.shape
         if n_axes != self.n_axes or out.dtype != np.float64 or not out.flags.c_contiguous:
@@ -613,7 +646,7 @@ class SensorNoise:
         level.knots = np.concatenate([level.knots, block])
 
 
-def _interpolated(level: _SlowLevel, index: np.ndarray, ratio: int) -> np.ndarray:
+def _interpolated(level: _SlowLevel, index: NDArray[np.int64], ratio: int) -> NDArray[np.float64]:
     """The linear interpolation of ``level``'s knots at ``index / ratio`` (knot units), (len(index), A):
     ``v_j + (r / ratio)(v_{j+1} − v_j)`` with ``j = index // ratio``, ``r = index % ratio``; on a knot, v_j."""
     out = np.empty((len(index), level.knots.shape[1]))
@@ -622,7 +655,9 @@ def _interpolated(level: _SlowLevel, index: np.ndarray, ratio: int) -> np.ndarra
 
 
 @njit
-def _interpolate_into(knots, base, index, ratio, out):
+def _interpolate_into(
+    knots: NDArray[np.float64], base: int, index: NDArray[np.int64], ratio: int, out: NDArray[np.float64]
+) -> None:
     """:func:`_interpolated`'s arithmetic sample by sample (the same bits): ``out[k] = v_j`` on a knot,
     else ``v_j + (r / ratio)(v_{j+1} − v_j)``; ``knots`` (K, A) from index ``base``, ``index`` (n,) ≥ 0."""
     n_axes = knots.shape[1]
@@ -648,7 +683,9 @@ def _trim(level: _SlowLevel, keep_from: int) -> None:
         level.base = keep_from
 
 
-def _gauss_markov_rows(rng, sigma, tau_c, step):
+def _gauss_markov_rows(
+    rng: np.random.Generator, sigma: NDArray[np.float64], tau_c: NDArray[np.float64], step: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """AR(1) rows (φ, c, stationary x_{-1}) of Gauss–Markov components sampled every ``step`` s:
     ``sigma`` (J, A), ``tau_c`` broadcastable to it (one per component, or per component and axis)."""
     phi = np.exp(-step / tau_c) * np.ones_like(sigma)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from gyroemu.dynamics.config import config_dir, read_toml, resolve_config, validate
 from gyroemu.errors import ConfigError
@@ -12,7 +13,7 @@ from .imu import Device, DeviceSpec
 __all__ = ["load_device", "device_from_dict", "list_devices"]
 
 
-def device_from_dict(data: dict, name: str = "imu0", seed: int = 0, path: Path | None = None) -> Device:
+def device_from_dict(data: dict[str, Any], name: str = "imu0", seed: int = 0, path: Path | None = None) -> Device:
     """Validate a device given as a dict (as read from TOML); errors name ``path`` or ``name``."""
     where = path if path is not None else name
     if not isinstance(data, dict):

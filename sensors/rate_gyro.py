@@ -95,9 +95,10 @@ Sources
 from __future__ import annotations
 
 import math
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from pydantic import Field, ValidationInfo, field_validator
 
 from gyroemu.dynamics.config import PositiveReal, Real
@@ -159,7 +160,7 @@ class RateGyro(GyroMechanism):
 
     @field_validator("spring_stiffness_n_m_per_rad")
     @classmethod
-    def _natural_frequency(cls, stiffness, info: ValidationInfo):
+    def _natural_frequency(cls, stiffness: float, info: ValidationInfo) -> float:
         inertia = info.data.get("gimbal_inertia_kgm2")
         if inertia is not None:
             frequency = math.sqrt(stiffness / inertia) / (2 * math.pi)
@@ -201,7 +202,7 @@ class RateGyro(GyroMechanism):
         """The largest indicated rate, K θ_stop/H, rad/s."""
         return self.stop_angle_rad / self.static_gain_s
 
-    def state_space(self) -> tuple[np.ndarray, np.ndarray]:
+    def state_space(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """A (2, 2), B (2,) of ẋ = A x + B u, x = (θ, θ'), u = gyroscopic and inertial torque, N·m."""
         j, c, k = self.gimbal_inertia_kgm2, self.damping_n_m_s_per_rad, self.spring_stiffness_n_m_per_rad
         return np.array([[0.0, 1.0], [-k / j, -c / j]]), np.array([0.0, 1.0 / j])
@@ -216,7 +217,7 @@ class RateGyro(GyroMechanism):
         """An integer multiple of the output rate, at least 20 natural frequencies."""
         return inner_rate_for(self.natural_frequency_hz, output_rate_hz)
 
-    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict | None = None) -> GyroResponse:
+    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict[str, Any] | None = None) -> GyroResponse:
         """Indicated rate K θ/H (M, 3), rad/s; raw ``gimbal_angle_rad`` θ (M, 3). Draws nothing.
 
         ``state["gimbal_state"]`` (3, 2): (θ, θ') of each gyro at the last sample (rad, rad/s); absent
@@ -247,7 +248,7 @@ class RateGyro(GyroMechanism):
 # --------------------------------------------------------------------------------------------------
 
 
-def sdf_axes(truth: GyroTruth) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def sdf_axes(truth: GyroTruth) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """The rates each gyro of a single-degree-of-freedom triad feels, each (M, 3), column k = gyro k.
 
     Gyro k has IA = e_k, OA = e_{k+1}, SRA = e_{k+2}; returns (ω_IA, ω_SRA, ω'_OA) in rad/s, rad/s²:
@@ -273,7 +274,9 @@ def inner_rate_for(fastest_hz: float, output_rate_hz: float) -> float:
     return output_rate_hz * max(1, math.ceil(SAMPLES_PER_PERIOD * fastest_hz / output_rate_hz))
 
 
-def foh_matrices(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def foh_matrices(
+    a: NDArray[np.float64], b: NDArray[np.float64], dt: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Φ (n, n), Γ₀ (n,), Γ₁ (n,) of (2): the exact step of ẋ = A x + B u for u linear over the step.
 
     From ``scipy.signal.cont2discrete(method="foh")`` with C = I, D = 0, whose output is in the shifted
@@ -288,17 +291,17 @@ def foh_matrices(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, n
 
 
 def simulate_gimbal(
-    a: np.ndarray,
-    b: np.ndarray,
+    a: NDArray[np.float64],
+    b: NDArray[np.float64],
     dt: float,
-    x0: np.ndarray,
+    x0: ArrayLike,
     spin_momentum: float,
     gimbal_inertia: float,
-    w_ia: np.ndarray,
-    w_sra: np.ndarray,
-    a_oa: np.ndarray,
+    w_ia: NDArray[np.float64],
+    w_sra: NDArray[np.float64],
+    a_oa: NDArray[np.float64],
     stop: float,
-) -> np.ndarray:
+) -> NDArray[np.float64]:
     """States of a single-degree-of-freedom gimbal loop on the inner grid, (M, 3, n).
 
     Parameters
@@ -336,13 +339,25 @@ def simulate_gimbal(
 
 
 @njit
-def _torque(h, j, w_ia, w_sra, a_oa, theta):
+def _torque(h: float, j: float, w_ia: float, w_sra: float, a_oa: float, theta: float) -> float:
     """u(θ) = H (ω_IA cos θ − ω_SRA sin θ) − J ω'_OA, N·m: the right-hand side of (1)."""
     return h * (w_ia * math.cos(theta) - w_sra * math.sin(theta)) - j * a_oa
 
 
 @njit
-def _gimbal_recurrence(phi, gamma0, gamma1, x0, h, j, w_ia, w_sra, a_oa, stop, out):
+def _gimbal_recurrence(
+    phi: NDArray[np.float64],
+    gamma0: NDArray[np.float64],
+    gamma1: NDArray[np.float64],
+    x0: NDArray[np.float64],
+    h: float,
+    j: float,
+    w_ia: NDArray[np.float64],
+    w_sra: NDArray[np.float64],
+    a_oa: NDArray[np.float64],
+    stop: float,
+    out: NDArray[np.float64],
+) -> None:
     """Recurrence (2) with the θ-dependent torque solved per step and inelastic stops; fills ``out``."""
     n_samples, n_axes = w_ia.shape
     n = phi.shape[0]
@@ -382,7 +397,15 @@ def _gimbal_recurrence(phi, gamma0, gamma1, x0, h, j, w_ia, w_sra, a_oa, stop, o
                 out[k, axis, i] = x[i]
 
 
-def _static_balance(stiffness, h, w_ia, w_sra, torque, stop, iterations: int = 8) -> np.ndarray:
+def _static_balance(
+    stiffness: float,
+    h: float,
+    w_ia: NDArray[np.float64],
+    w_sra: NDArray[np.float64],
+    torque: NDArray[np.float64],
+    stop: float,
+    iterations: int = 8,
+) -> NDArray[np.float64]:
     """θ (3,) solving K θ = H (ω_IA cos θ − ω_SRA sin θ) + torque, by Newton from H ω_IA/K, clipped to
     the stops (where the balance has no root inside them, the gimbal rests on a stop)."""
     theta = np.clip((h * w_ia + torque) / stiffness, -stop, stop)

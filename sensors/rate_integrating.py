@@ -97,9 +97,10 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import ClassVar, Literal
+from typing import Any, ClassVar, Literal, overload
 
 import numpy as np
+from numpy.typing import NDArray
 from pydantic import Field, StrictBool, ValidationInfo, field_validator
 
 from gyroemu.dynamics.config import NonNegativeReal, PositiveReal
@@ -141,7 +142,7 @@ class RateIntegratingGyro(GyroMechanism):
 
     @field_validator("damping_n_m_s_per_rad")
     @classmethod
-    def _float_corner(cls, c, info: ValidationInfo):
+    def _float_corner(cls, c: float, info: ValidationInfo) -> float:
         j = info.data.get("gimbal_inertia_kgm2")
         if j is not None:  # the open loop's pole, and the closed loop's fastest when the float is fast
             problem = gimbal_pole_problem(f"the float's corner c/2πJ (J = {j:g} kg·m²)", c / j / (2 * math.pi))
@@ -151,7 +152,7 @@ class RateIntegratingGyro(GyroMechanism):
 
     @field_validator("loop_integral_a_per_rad_s")
     @classmethod
-    def _stable_loop(cls, k_i, info: ValidationInfo):
+    def _stable_loop(cls, k_i: float, info: ValidationInfo) -> float:
         j, c, k_t, k_p = (
             info.data.get(key)
             for key in (
@@ -196,7 +197,7 @@ class RateIntegratingGyro(GyroMechanism):
         return math.radians(self.stop_angle_deg)
 
     @property
-    def loop_polynomial(self) -> np.ndarray:
+    def loop_polynomial(self) -> NDArray[np.float64]:
         """Coefficients of the closed loop's characteristic polynomial J s³ + c s² + k_t k_p s + k_t k_i."""
         kt = self.torquer_scale_n_m_per_a
         return np.array(
@@ -208,11 +209,18 @@ class RateIntegratingGyro(GyroMechanism):
             ]
         )
 
-    def loop_response(self, frequency_hz) -> np.ndarray:
+    @overload
+    def loop_response(self, frequency_hz: float) -> complex: ...
+
+    @overload
+    def loop_response(self, frequency_hz: NDArray[np.float64]) -> NDArray[np.complex128]: ...
+
+    def loop_response(self, frequency_hz: float | NDArray[np.float64]) -> complex | NDArray[np.complex128]:
         """Transfer function (4) from ω_IA to the indicated rate k_t i/H at ``frequency_hz`` (complex)."""
         s = 2j * np.pi * np.asarray(frequency_hz, dtype=float)
         kt, kp, ki = self.torquer_scale_n_m_per_a, self.loop_proportional_a_per_rad, self.loop_integral_a_per_rad_s
-        return kt * (kp * s + ki) / np.polyval(self.loop_polynomial, s)
+        response: complex | NDArray[np.complex128] = kt * (kp * s + ki) / np.polyval(self.loop_polynomial, s)
+        return response
 
     @property
     def loop_bandwidth_hz(self) -> float:
@@ -223,7 +231,7 @@ class RateIntegratingGyro(GyroMechanism):
         x = roots.real[(np.abs(roots.imag) <= 1e-9 * np.abs(roots)) & (roots.real > 0)].min()
         return math.sqrt(x) / (2 * math.pi)
 
-    def state_space(self) -> tuple[np.ndarray, np.ndarray]:
+    def state_space(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """A, B of ẋ = A x + B u: x = (θ, θ') open-loop, (θ, θ', ∫θ dt, ∫i dt) closed-loop; u in N·m."""
         j, c = self.gimbal_inertia_kgm2, self.damping_n_m_s_per_rad
         if not self.torque_rebalance:
@@ -246,7 +254,7 @@ class RateIntegratingGyro(GyroMechanism):
         fastest = np.abs(np.linalg.eigvals(self.state_space()[0])).max() / (2 * math.pi)
         return inner_rate_for(fastest, output_rate_hz)
 
-    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict | None = None) -> GyroResponse:
+    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict[str, Any] | None = None) -> GyroResponse:
         """Indicated angle (M, 3), rad, from 0 at t[0]; raw ``gimbal_angle_rad`` and ``torquer_current_a``
         (M, 3). Draws nothing.
 
@@ -292,7 +300,7 @@ class RateIntegratingGyro(GyroMechanism):
             angle=(kt / h) * (charge - charge[0]), raw={"gimbal_angle_rad": theta, "torquer_current_a": current}
         )
 
-    def _initial_state(self, u0: np.ndarray, u_dot: np.ndarray) -> np.ndarray:
+    def _initial_state(self, u0: NDArray[np.float64], u_dot: NDArray[np.float64]) -> NDArray[np.float64]:
         """Equilibrium (3, n) for a torque u0 + u_dot t (3,) (the particular solution; see the notes)."""
         j, c = self.gimbal_inertia_kgm2, self.damping_n_m_s_per_rad
         zero = np.zeros_like(u0)

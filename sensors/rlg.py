@@ -113,9 +113,10 @@ L. N. G. Filon, Proc. R. Soc. Edinburgh 49, 38 (1928) for the oscillatory quadra
 from __future__ import annotations
 
 import math
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
 import numpy as np
+from numpy.typing import NDArray
 from pydantic import Field, ValidationInfo, field_validator
 
 from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, at_most
@@ -180,7 +181,7 @@ class RingLaserGyro(GyroMechanism):
 
     @field_validator("area_m2")
     @classmethod
-    def _isoperimetric(cls, area, info: ValidationInfo):
+    def _isoperimetric(cls, area: float, info: ValidationInfo) -> float:
         perimeter = info.data.get("perimeter_m")
         if perimeter is not None and area > perimeter**2 / (4 * math.pi) * (1 + 1e-12):
             raise ValueError(
@@ -191,7 +192,7 @@ class RingLaserGyro(GyroMechanism):
 
     @field_validator("simulation_rate_hz")
     @classmethod
-    def _resolves_dither_and_lock_in(cls, rate, info: ValidationInfo):
+    def _resolves_dither_and_lock_in(cls, rate: float, info: ValidationInfo) -> float:
         d = info.data
         if d.get("dither_amplitude_arcsec", 0.0) > 0 and "dither_frequency_hz" in d:
             needed = STEPS_PER_DITHER_CYCLE * d["dither_frequency_hz"]
@@ -260,7 +261,7 @@ class RingLaserGyro(GyroMechanism):
     def intrinsic_noise_density(self) -> float:
         return self.dither_random_walk()
 
-    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict | None = None) -> GyroResponse:
+    def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict[str, Any] | None = None) -> GyroResponse:
         """Fringe-counted angle (dither removed) on the inner grid, with the beat's raw observables.
 
         raw: ``fringe_count`` (M, 3) int64 since power-up, ``beat_phase_rad`` (M, 3) ψ since power-up,
@@ -301,14 +302,16 @@ class RingLaserGyro(GyroMechanism):
 
     # --- dither ------------------------------------------------------------------------------------
 
-    def _cycle_amplitudes(self, rng: np.random.Generator, cycles: int) -> np.ndarray:
+    def _cycle_amplitudes(self, rng: np.random.Generator, cycles: int) -> NDArray[np.float64]:
         """(cycles, 3) dither amplitudes, rad: log-normal about the mean amplitude (no draw if fixed)."""
         spread = self.dither_amplitude_noise_fraction
         if self.dither_amplitude == 0 or spread == 0:
             return np.full((cycles, 3), self.dither_amplitude)
         return self.dither_amplitude * np.exp(spread * rng.standard_normal((cycles, 3)))
 
-    def _dither(self, t: np.ndarray, rng: np.random.Generator, state: dict):
+    def _dither(
+        self, t: NDArray[np.float64], rng: np.random.Generator, state: dict[str, Any]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Dither angle θ_d and rate (M, 3) at times ``t``; draws the amplitudes of new cycles.
 
         With u = f_d (t − t_power_up), θ_d = A(u) sin 2πu, the amplitude going linearly from A_n to
@@ -340,7 +343,17 @@ class RingLaserGyro(GyroMechanism):
 
 
 @njit(error_model="numpy", fastmath=_FAST)
-def _adler_kernel(omega, alpha, dither, dither_rate, h, K, k_lock, psi0, out):
+def _adler_kernel(
+    omega: NDArray[np.float64],
+    alpha: NDArray[np.float64],
+    dither: NDArray[np.float64],
+    dither_rate: NDArray[np.float64],
+    h: float,
+    K: float,
+    k_lock: float,
+    psi0: NDArray[np.float64],
+    out: NDArray[np.float64],
+) -> None:
     """Integrate dψ/dt = K (ω + dθ_d/dt) − k sin ψ over the nodes of a uniform grid (all axes at once).
 
     omega, alpha : (M, A) vehicle rate, rad/s, and its derivative, rad/s².
@@ -377,7 +390,7 @@ def _adler_kernel(omega, alpha, dither, dither_rate, h, K, k_lock, psi0, out):
 
 
 @njit(error_model="numpy", fastmath=_FAST)
-def _step_integrals(gain, rate0, rate1, h):
+def _step_integrals(gain: float, rate0: float, rate1: float, h: float) -> tuple[complex, complex, complex]:
     """I = ∫₀ʰ e^{iφ(s)} ds, M = ∫₀ʰ e^{iφ(s)} conj(I(s)) ds and e^{iφ(h)} for the cubic Hermite phase
     φ with φ(0) = 0, φ(h) = ``gain``, φ'(0) = ``rate0``, φ'(h) = ``rate1``.
 
@@ -425,7 +438,7 @@ def _step_integrals(gain, rate0, rate1, h):
 
 
 @njit(error_model="numpy", fastmath=_FAST)
-def _filon_weights(ex, x):
+def _filon_weights(ex: complex, x: float) -> tuple[complex, complex, complex]:
     """Weights of a sub-interval whose phase advances linearly by ``x`` (``ex`` = e^{ix}), per unit
     length (u = s/h_s ∈ [0, 1]):
 
@@ -450,7 +463,14 @@ def _filon_weights(ex, x):
 
 
 @njit(error_model="numpy")
-def _dither_nodes(elapsed, frequency_hz, table, first_cycle, angle, rate):
+def _dither_nodes(
+    elapsed: NDArray[np.float64],
+    frequency_hz: float,
+    table: NDArray[np.float64],
+    first_cycle: int,
+    angle: NDArray[np.float64],
+    rate: NDArray[np.float64],
+) -> None:
     """Dither angle θ_d = A(u) sin 2πu and rate dθ_d/dt at u = f_d × ``elapsed`` (M,), written to
     ``angle``, ``rate`` (M, 3). A(u) = A_n + (A_{n+1} − A_n)(u − n), n = ⌊u⌋, with A_n = ``table[n −
     first_cycle]`` (a row of 3 amplitudes per cycle)."""
@@ -473,7 +493,7 @@ _PIO2_3 = 2.02226624879595063154e-21
 
 
 @njit(error_model="numpy", inline="always")
-def _sincos(x):
+def _sincos(x: float) -> tuple[float, float]:
     """(sin x, cos x), three times faster than two libm calls here (the kernel's main cost).
 
     x = k π/2 + r with |r| ≤ π/4 (Cody–Waite reduction), then the Taylor series of sin r and cos r to

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 __all__ = ["ImuSamples"]
 
@@ -36,18 +38,18 @@ class ImuSamples:
         The device's name.
     """
 
-    t: np.ndarray
-    gyro: np.ndarray
-    accel: np.ndarray
-    mag: np.ndarray
-    raw: dict = field(default_factory=dict)
-    delta_angle: np.ndarray | None = None
-    delta_velocity: np.ndarray | None = None
-    t_true: np.ndarray | None = None
-    temperature_degC: np.ndarray | None = None
+    t: NDArray[np.float64]
+    gyro: NDArray[np.float64]
+    accel: NDArray[np.float64]
+    mag: NDArray[np.float64]
+    raw: dict[str, dict[str, NDArray[Any]]] = field(default_factory=dict)
+    delta_angle: NDArray[np.float64] | None = None
+    delta_velocity: NDArray[np.float64] | None = None
+    t_true: NDArray[np.float64] | None = None
+    temperature_degC: NDArray[np.float64] | None = None
     device: str = "imu0"
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         n = len(self.t)
         for name in ("gyro", "accel", "mag"):
             if np.shape(getattr(self, name)) != (n, 3):

@@ -21,9 +21,11 @@ origin sits at the lever arm ``r`` (body axes) from the body's reference point::
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import cached_property
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from gyroemu.dynamics import Trajectory
 from gyroemu.dynamics.cubic import HermiteCubic, not_a_knot
@@ -53,7 +55,12 @@ class SensorTruth:
         Sensor origin from the body's reference point, body axes, m.
     """
 
-    def __init__(self, trajectory: Trajectory, q_bs=(1.0, 0.0, 0.0, 0.0), lever_arm_b=(0.0, 0.0, 0.0)):
+    def __init__(
+        self,
+        trajectory: Trajectory,
+        q_bs: ArrayLike = (1.0, 0.0, 0.0, 0.0),
+        lever_arm_b: ArrayLike = (0.0, 0.0, 0.0),
+    ) -> None:
         if len(trajectory) < 2:
             raise ValueError("a sensor needs a trajectory of at least two samples")
         t = trajectory.t
@@ -72,40 +79,45 @@ class SensorTruth:
     # field (only a magnetometer).
 
     @cached_property
-    def _angle(self):
+    def _angle(self) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
         from scipy.interpolate import CubicHermiteSpline  # scipy where used: the CLI's listings skip it
 
         trajectory = self._trajectory
-        return CubicHermiteSpline(trajectory.t, trajectory.omega_b, trajectory.alpha_b, axis=0).antiderivative()
+        # scipy's PPoly (untyped): called with times, it gives the (M, 3) antiderivative
+        angle: Callable[[NDArray[np.float64]], NDArray[np.float64]] = CubicHermiteSpline(
+            trajectory.t, trajectory.omega_b, trajectory.alpha_b, axis=0
+        ).antiderivative()
+        return angle
 
     @cached_property
-    def _mag(self):
+    def _mag(self) -> Callable[[ArrayLike], NDArray[np.float64]]:
         return not_a_knot(self._trajectory.t, self._trajectory.mag_b)
 
-    def _attitude(self, t: np.ndarray) -> np.ndarray:
+    def _attitude(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
         return quat_interpolate(self._trajectory.t, self._trajectory.q_wb, t)
 
-    def _check(self, t):
+    def _check(self, t: ArrayLike) -> NDArray[np.float64]:
         t = np.asarray(t, dtype=float)
         span = self.t_end - self.t_start
         if t.size and (t.min() < self.t_start - 1e-9 * span or t.max() > self.t_end + 1e-9 * span):
             raise ValueError(
                 f"times {t.min():g}..{t.max():g} s leave the trajectory's span {self.t_start:g}..{self.t_end:g} s"
             )
-        return np.clip(t, self.t_start, self.t_end)
+        clipped: NDArray[np.float64] = np.clip(t, self.t_start, self.t_end)
+        return clipped
 
-    def omega_alpha(self, t):
+    def omega_alpha(self, t: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Sensor-axes ``ω_s`` (rad/s) and ``α_s`` (rad/s²) at times ``t`` (M,): two (M, 3) arrays."""
         t = self._check(t)
         return quat_rotate(self.q_sb, self._omega(t)), quat_rotate(self.q_sb, self._alpha(t))
 
-    def mean_omega(self, instants):
+    def mean_omega(self, instants: ArrayLike) -> NDArray[np.float64]:
         """Sensor-axes mean angular velocity over each interval between consecutive ``instants``
         (K+1,), rad/s, (K, 3): what an ideal gyro reports on the strapdown sampling convention."""
         t = self._check(instants)
         return quat_rotate(self.q_sb, np.diff(self._angle(t), axis=0) / np.diff(t)[:, None])
 
-    def specific_force(self, t):
+    def specific_force(self, t: ArrayLike) -> NDArray[np.float64]:
         """Sensor-axes specific force at the sensor's origin, m/s², (M, 3)."""
         t = self._check(t)
         f = self._force(t)
@@ -113,11 +125,11 @@ class SensorTruth:
             f = point_acceleration(f, self._omega(t), self._alpha(t), self.lever_arm_b)
         return quat_rotate(self.q_sb, f)
 
-    def magnetic_field(self, t):
+    def magnetic_field(self, t: ArrayLike) -> NDArray[np.float64]:
         """Sensor-axes magnetic flux density, tesla, (M, 3)."""
         return quat_rotate(self.q_sb, self._mag(self._check(t)))
 
-    def attitude_inertial(self, t):
+    def attitude_inertial(self, t: ArrayLike) -> NDArray[np.float64]:
         """``q_is``: the sensor's attitude relative to the inertial frame that is the world frame at
         ``t = 0``, (M, 4)."""
         t = self._check(t)
@@ -125,16 +137,16 @@ class SensorTruth:
         q_iw = quat_from_rotvec(t[:, None] * self._earth_rate_w)
         return quat_multiply(quat_multiply(q_iw, q_wb), self.q_bs)
 
-    def attitude_world(self, t):
+    def attitude_world(self, t: ArrayLike) -> NDArray[np.float64]:
         """``q_wb`` of the body (not the sensor) at ``t``, (M, 4): what ``/truth/imu`` reports."""
         return self._attitude(self._check(t))
 
-    def body_truth(self, t):
+    def body_truth(self, t: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Body-frame truth at ``t`` as ``(q_wb, omega_b, specific_force_b)``, for truth channels."""
         t = self._check(t)
         return self._attitude(t), self._omega(t), self._force(t)
 
-    def body_rates(self, t):
+    def body_rates(self, t: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Body-frame ``(omega_b, specific_force_b)`` at ``t``: :meth:`body_truth` without the attitude
         (for a caller that has it from :meth:`attitude_world` already)."""
         t = self._check(t)

@@ -27,8 +27,10 @@ nearly independent, as the covariance s²(XᵀX)⁻¹ assumes). The truth is rea
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from .lsq import linear_fit
 from .truth import interpolate_attitude, interpolate_vectors, rotation_bw, truth_angular_velocity
@@ -48,17 +50,22 @@ __all__ = [
 ]
 
 
-def window_means(x: np.ndarray, length: int) -> np.ndarray:
+def window_means(x: ArrayLike, length: int) -> NDArray[np.float64]:
     """(N // length, ...) means of ``x`` (N, ...) over non-overlapping windows of ``length`` samples;
     NaN for a window holding a NaN."""
     x = np.asarray(x, dtype=float)
     k = len(x) // length
-    return x[: k * length].reshape((k, length) + x.shape[1:]).mean(axis=1)
+    means: NDArray[np.float64] = x[: k * length].reshape((k, length) + x.shape[1:]).mean(axis=1)
+    return means
 
 
 def paired_windows(
-    t: np.ndarray, truth: np.ndarray, measured: np.ndarray, mask: np.ndarray | None, window_s: float
-) -> tuple[np.ndarray, np.ndarray, int]:
+    t: NDArray[np.float64],
+    truth: NDArray[np.float64],
+    measured: NDArray[np.float64],
+    mask: NDArray[np.bool_] | None,
+    window_s: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
     """Window means of a truth and a measurement at the samples ``t`` (N,): the measurement is NaN
     outside ``mask`` (N,) bool, the windows last ``window_s`` (at least one sample); returns both
     windowed arrays and the window's length in samples."""
@@ -69,7 +76,7 @@ def paired_windows(
     return window_means(truth, length), window_means(meas, length), length
 
 
-def polar_decomposition(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def polar_decomposition(m: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(P, C) with ``m`` (3, 3) = P C, P symmetric positive definite, C a rotation (det +1)."""
     u, s, vt = np.linalg.svd(m)
     c = u @ vt
@@ -81,8 +88,8 @@ def polar_decomposition(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def truth_specific_force_world(
-    truth_t: np.ndarray, pos_w: np.ndarray | None, gravity_m_s2: float = 9.81, step_s: float = 0.02
-) -> np.ndarray:
+    truth_t: NDArray[np.float64], pos_w: NDArray[np.float64] | None, gravity_m_s2: float = 9.81, step_s: float = 0.02
+) -> NDArray[np.float64]:
     """(M, 3) a_w + g e_z, m/s², world axes: a_w from the second difference of ``pos_w`` (M, 3) m over
     ±``step_s`` (a_k ≈ (p_{k+h} − 2p_k + p_{k−h}) / (hΔt)²), or 0 without a position track."""
     n = len(truth_t)
@@ -95,27 +102,29 @@ def truth_specific_force_world(
     h = max(1, int(round(step_s / dt)))
     acc = np.full((n, 3), np.nan)
     acc[h:-h] = (p[2 * h :] - 2 * p[h:-h] + p[: -2 * h]) / (h * dt) ** 2
-    return force + acc
+    total: NDArray[np.float64] = force + acc
+    return total
 
 
 def truth_specific_force_body(
-    t: np.ndarray,
-    truth_t: np.ndarray,
-    q_wb: np.ndarray,
+    t: NDArray[np.float64],
+    truth_t: NDArray[np.float64],
+    q_wb: NDArray[np.float64],
     latency_s: float = 0.0,
-    pos_w: np.ndarray | None = None,
+    pos_w: NDArray[np.float64] | None = None,
     gravity_m_s2: float = 9.81,
-) -> np.ndarray:
+) -> NDArray[np.float64]:
     """(N, 3) the truth's specific force R_bw (a_w + g e_z) in body axes, m/s², at the instants
     ``t`` (N,) s less ``latency_s`` (what an accelerometer with that delay senses at its origin), from
     ``q_wb`` (M, 4) and ``pos_w`` (M, 3) m at ``truth_t`` (:func:`truth_specific_force_world`)."""
     times = np.asarray(t, dtype=float) - latency_s
     q = interpolate_attitude(truth_t, q_wb, times)
     force_w = interpolate_vectors(truth_t, truth_specific_force_world(truth_t, pos_w, gravity_m_s2), times)
-    return np.einsum("nij,nj->ni", rotation_bw(q), force_w)
+    force_b: NDArray[np.float64] = np.einsum("nij,nj->ni", rotation_bw(q), force_w)
+    return force_b
 
 
-def _row_cov(cov: np.ndarray, c: np.ndarray) -> np.ndarray:
+def _row_cov(cov: NDArray[np.float64], c: NDArray[np.float64]) -> NDArray[np.float64]:
     """(3, 3) standard uncertainties of P = M Cᵀ from the (3, p, p) covariances of M's rows (C fixed)."""
     sig = np.empty((3, 3))
     for i in range(3):
@@ -143,35 +152,35 @@ class GyroCalibration:
     note : why not observable, or "".
     """
 
-    bias: np.ndarray
-    bias_sigma: np.ndarray
-    matrix: np.ndarray
-    matrix_sigma: np.ndarray
-    scale: np.ndarray
-    scale_sigma: np.ndarray
-    misalignment: np.ndarray
-    misalignment_sigma: np.ndarray
-    c_sb: np.ndarray
+    bias: NDArray[np.float64]
+    bias_sigma: NDArray[np.float64]
+    matrix: NDArray[np.float64]
+    matrix_sigma: NDArray[np.float64]
+    scale: NDArray[np.float64]
+    scale_sigma: NDArray[np.float64]
+    misalignment: NDArray[np.float64]
+    misalignment_sigma: NDArray[np.float64]
+    c_sb: NDArray[np.float64]
     observable: bool
-    excitation_rad_s: np.ndarray
+    excitation_rad_s: NDArray[np.float64]
     condition: float
     windows: int
-    residual_rms: np.ndarray
+    residual_rms: NDArray[np.float64]
     note: str
 
 
 def fit_gyro(
-    t: np.ndarray,
-    gyro: np.ndarray,
-    truth_t: np.ndarray,
-    q_wb: np.ndarray,
+    t: NDArray[np.float64],
+    gyro: NDArray[np.float64],
+    truth_t: NDArray[np.float64],
+    q_wb: NDArray[np.float64],
     latency_s: float = 0.0,
     *,
     window_s: float = 0.1,
-    earth_rate_w: np.ndarray | None = None,
+    earth_rate_w: NDArray[np.float64] | None = None,
     min_rate_rad_s: float = 0.2,
     max_condition: float = 50.0,
-    mask: np.ndarray | None = None,
+    mask: NDArray[np.bool_] | None = None,
 ) -> GyroCalibration:
     """Fit ω_m = M ω + b (module notes). ``gyro`` (N, 3) rad/s at ``t`` (N,) s; truth ``q_wb`` (M, 4)
     at ``truth_t``; ``earth_rate_w`` (3,) rad/s world axes; ``mask`` (N,) bool: samples to use."""
@@ -257,37 +266,37 @@ class AccelCalibration:
     note : why not observable, or "".
     """
 
-    bias: np.ndarray
-    bias_sigma: np.ndarray
-    scale: np.ndarray
-    scale_sigma: np.ndarray
-    cross_axis: np.ndarray
-    cross_axis_sigma: np.ndarray
+    bias: NDArray[np.float64]
+    bias_sigma: NDArray[np.float64]
+    scale: NDArray[np.float64]
+    scale_sigma: NDArray[np.float64]
+    cross_axis: NDArray[np.float64]
+    cross_axis_sigma: NDArray[np.float64]
     observable: bool
-    tilt_excitation: np.ndarray
+    tilt_excitation: NDArray[np.float64]
     condition: float
     windows: int
-    residual_rms: np.ndarray
+    residual_rms: NDArray[np.float64]
     used_position: bool
     note: str
 
 
 def fit_accel(
-    t: np.ndarray,
-    accel: np.ndarray,
-    truth_t: np.ndarray,
-    q_wb: np.ndarray,
+    t: NDArray[np.float64],
+    accel: NDArray[np.float64],
+    truth_t: NDArray[np.float64],
+    q_wb: NDArray[np.float64],
     latency_s: float = 0.0,
     *,
-    pos_w: np.ndarray | None = None,
+    pos_w: NDArray[np.float64] | None = None,
     gravity_m_s2: float = 9.81,
-    c_sb: np.ndarray | None = None,
+    c_sb: NDArray[np.float64] | None = None,
     window_s: float = 0.1,
     max_rate_rad_s: float = 0.3,
     max_force_error_m_s2: float = 0.1,
     min_tilt: float = 0.1,
     max_condition: float = 50.0,
-    mask: np.ndarray | None = None,
+    mask: NDArray[np.bool_] | None = None,
 ) -> AccelCalibration:
     """Fit f_m = A R_bw (a_w + g e_z) + b (module notes). ``accel`` (N, 3) m/s² at ``t`` (N,) s; truth
     ``q_wb`` (M, 4) and optional ``pos_w`` (M, 3) m at ``truth_t``; ``c_sb`` (3, 3) the gyro's mounting
@@ -370,34 +379,37 @@ class MagCalibration:
     note : why not observable, or "".
     """
 
-    hard_iron: np.ndarray
-    hard_iron_sigma: np.ndarray
-    k_matrix: np.ndarray
-    soft_iron: np.ndarray
-    soft_iron_sigma: np.ndarray
-    field_w: np.ndarray
+    hard_iron: NDArray[np.float64]
+    hard_iron_sigma: NDArray[np.float64]
+    k_matrix: NDArray[np.float64]
+    soft_iron: NDArray[np.float64]
+    soft_iron_sigma: NDArray[np.float64]
+    field_w: NDArray[np.float64]
     observable: bool
     condition: float
     windows: int
-    residual_rms: np.ndarray
+    residual_rms: NDArray[np.float64]
     note: str
 
-    def calibrated_body(self, mag: np.ndarray) -> np.ndarray:
+    def calibrated_body(self, mag: NDArray[np.float64]) -> NDArray[np.float64]:
         """(N, 3) R_bw m_w recovered from measurements ``mag`` (N, 3) tesla: K⁻¹ (m − h)."""
-        return np.linalg.solve(self.k_matrix, (np.asarray(mag, dtype=float) - self.hard_iron).T).T
+        # float64, which numpy's stubs type as floating[Any] (np.linalg.solve)
+        return cast(
+            "NDArray[np.float64]", np.linalg.solve(self.k_matrix, (np.asarray(mag, dtype=float) - self.hard_iron).T).T
+        )
 
 
 def fit_mag(
-    t: np.ndarray,
-    mag: np.ndarray,
-    truth_t: np.ndarray,
-    q_wb: np.ndarray,
+    t: NDArray[np.float64],
+    mag: NDArray[np.float64],
+    truth_t: NDArray[np.float64],
+    q_wb: NDArray[np.float64],
     latency_s: float = 0.0,
     *,
-    c_sb: np.ndarray | None = None,
+    c_sb: NDArray[np.float64] | None = None,
     window_s: float = 0.1,
     max_condition: float = 200.0,
-    mask: np.ndarray | None = None,
+    mask: NDArray[np.bool_] | None = None,
 ) -> MagCalibration:
     """Fit m_m = K R_bw m_w + h (module notes). ``mag`` (N, 3) tesla at ``t`` (N,) s; truth ``q_wb``
     (M, 4) at ``truth_t``; ``c_sb`` (3, 3) the gyro's mounting (None: C from K's polar decomposition)."""

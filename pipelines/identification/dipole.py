@@ -17,6 +17,7 @@ point are not in the path (the grid keeps that distance).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -47,7 +48,7 @@ class DipoleFit:
     samples: int
 
 
-def _design(pos: np.ndarray, p_d: np.ndarray) -> np.ndarray:
+def _design(pos: NDArray[np.float64], p_d: NDArray[np.float64]) -> NDArray[np.float64]:
     """(3N, 6) matrix of the model's linear part: columns B₀ (3) and m (3), rows x, y, z per sample."""
     n = len(pos)
     a = np.zeros((n, 3, 6))
@@ -59,13 +60,18 @@ def _design(pos: np.ndarray, p_d: np.ndarray) -> np.ndarray:
     return a.reshape(3 * n, 6)
 
 
-def _linear(pos: np.ndarray, field: np.ndarray, p_d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _linear(
+    pos: NDArray[np.float64], field: NDArray[np.float64], p_d: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     a = _design(pos, p_d)
     coef, *_ = np.linalg.lstsq(a, field.reshape(-1), rcond=None)
-    return coef, field.reshape(-1) - a @ coef
+    # float64, which numpy's stubs type as floating[Any] (np.linalg.lstsq)
+    return cast("NDArray[np.float64]", coef), field.reshape(-1) - a @ coef
 
 
-def fit_dipole(pos_w: np.ndarray, field_w: np.ndarray, min_distance_m: float = 0.05, grid_m: float = 0.05) -> DipoleFit:
+def fit_dipole(
+    pos_w: NDArray[np.float64], field_w: NDArray[np.float64], min_distance_m: float = 0.05, grid_m: float = 0.05
+) -> DipoleFit:
     """Fit ``B₀`` and one dipole to the field ``field_w`` (N, 3), tesla, at positions ``pos_w`` (N, 3), m
     (NaN rows skipped); see the module's notes."""
     from scipy.optimize import least_squares
@@ -94,9 +100,10 @@ def fit_dipole(pos_w: np.ndarray, field_w: np.ndarray, min_distance_m: float = 0
     p_d = result.x
     coef, residual = _linear(pos, field, p_d)
 
-    def full(x: np.ndarray) -> np.ndarray:
+    def full(x: NDArray[np.float64]) -> NDArray[np.float64]:
         model = x[:3] + dipole_field(pos, x[6:9], x[3:6])
-        return (field - model).reshape(-1)
+        difference: NDArray[np.float64] = (field - model).reshape(-1)
+        return difference
 
     x = np.concatenate([coef, p_d])
     step = np.concatenate([np.full(3, 1e-9), np.maximum(np.abs(coef[3:]) * 1e-6, 1e-9), np.full(3, 1e-6)])

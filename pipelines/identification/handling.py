@@ -27,6 +27,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .calibration import paired_windows, truth_specific_force_body, window_means
 from .truth import interpolate_vectors, truth_angular_velocity
@@ -47,20 +48,20 @@ class HandlingOffset:
     rest_windows, movement_windows : windows used on each side.
     """
 
-    offset: np.ndarray
-    offset_sigma: np.ndarray
-    rest_mean: np.ndarray
-    movement_mean: np.ndarray
+    offset: NDArray[np.float64]
+    offset_sigma: NDArray[np.float64]
+    rest_mean: NDArray[np.float64]
+    movement_mean: NDArray[np.float64]
     rest_windows: int
     movement_windows: int
 
     @property
-    def tilt_deg(self) -> np.ndarray:
+    def tilt_deg(self) -> NDArray[np.float64]:
         """(2,) the step as a tilt of the sensor about its x and y axes, degrees (small angles)."""
         return np.degrees(np.array([self.offset[1], -self.offset[0]]) / _G0)
 
 
-def _block_mean(d: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray]:
+def _block_mean(d: NDArray[np.float64], block: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Mean of ``d`` (k, 3) and its standard error over consecutive blocks of ``block`` rows."""
     k = len(d)
     n = max(1, k // block)
@@ -71,17 +72,17 @@ def _block_mean(d: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def handling_offset(
-    t: np.ndarray,
-    accel: np.ndarray,
-    truth_t: np.ndarray,
-    q_wb: np.ndarray,
+    t: NDArray[np.float64],
+    accel: NDArray[np.float64],
+    truth_t: NDArray[np.float64],
+    q_wb: NDArray[np.float64],
     latency_s: float,
-    rest: np.ndarray,
-    movement: np.ndarray,
+    rest: NDArray[np.bool_],
+    movement: NDArray[np.bool_],
     *,
-    pos_w: np.ndarray | None = None,
+    pos_w: NDArray[np.float64] | None = None,
     gravity_m_s2: float = 9.81,
-    c_sb: np.ndarray | None = None,
+    c_sb: NDArray[np.float64] | None = None,
     window_s: float = 0.1,
     block_s: float = 2.0,
     max_rate_rad_s: float = 0.5,
@@ -116,7 +117,7 @@ def handling_offset(
     )
 
 
-def pool_handling_offsets(offsets: Sequence[HandlingOffset]) -> tuple[np.ndarray, np.ndarray]:
+def pool_handling_offsets(offsets: Sequence[HandlingOffset]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(mean, standard deviation) (3,) m/s² of the recordings' offsets: each handling is one draw
     (the standard deviation is 0 with one recording)."""
     x = np.array([o.offset for o in offsets], dtype=float)

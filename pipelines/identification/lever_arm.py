@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .calibration import truth_specific_force_body, window_means
 from .lsq import linear_fit
@@ -41,15 +42,15 @@ class LeverArmFit:
     windows : windows used. residual_rms : (3,) m/s² after the fit; rms_before : (3,) before.
     """
 
-    lever_arm_b: np.ndarray
-    lever_arm_sigma: np.ndarray
-    bias: np.ndarray
+    lever_arm_b: NDArray[np.float64]
+    lever_arm_sigma: NDArray[np.float64]
+    bias: NDArray[np.float64]
     windows: int
-    residual_rms: np.ndarray
-    rms_before: np.ndarray
+    residual_rms: NDArray[np.float64]
+    rms_before: NDArray[np.float64]
 
 
-def _skew(v: np.ndarray) -> np.ndarray:
+def _skew(v: NDArray[np.float64]) -> NDArray[np.float64]:
     """(N, 3, 3) [v×] of ``v`` (N, 3)."""
     x, y, z = v[:, 0], v[:, 1], v[:, 2]
     o = np.zeros_like(x)
@@ -57,17 +58,17 @@ def _skew(v: np.ndarray) -> np.ndarray:
 
 
 def fit_lever_arm(
-    t: np.ndarray,
-    accel: np.ndarray,
-    gyro: np.ndarray,
-    truth_t: np.ndarray,
-    q_wb: np.ndarray,
-    pos_w: np.ndarray,
+    t: NDArray[np.float64],
+    accel: NDArray[np.float64],
+    gyro: NDArray[np.float64],
+    truth_t: NDArray[np.float64],
+    q_wb: NDArray[np.float64],
+    pos_w: NDArray[np.float64],
     latency_s: float,
-    mask: np.ndarray,
+    mask: NDArray[np.bool_],
     *,
-    gyro_bias: np.ndarray | None = None,
-    c_sb: np.ndarray | None = None,
+    gyro_bias: NDArray[np.float64] | None = None,
+    c_sb: NDArray[np.float64] | None = None,
     gravity_m_s2: float = 9.81,
     window_s: float = 0.1,
     min_windows: int = 50,

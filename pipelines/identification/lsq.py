@@ -12,8 +12,10 @@ parameters the excitation does not reach (unobservable).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
+from numpy.typing import NDArray
 
 __all__ = ["LinearFit", "linear_fit"]
 
@@ -31,14 +33,14 @@ class LinearFit:
     n : rows used.
     """
 
-    coef: np.ndarray
-    cov: np.ndarray
-    residual_rms: np.ndarray
-    singular_values: np.ndarray
+    coef: NDArray[np.float64]
+    cov: NDArray[np.float64]
+    residual_rms: NDArray[np.float64]
+    singular_values: NDArray[np.float64]
     n: int
 
     @property
-    def sigma(self) -> np.ndarray:
+    def sigma(self) -> NDArray[np.float64]:
         """(p, k) standard uncertainty of each coefficient."""
         return np.sqrt(np.diagonal(self.cov, axis1=1, axis2=2)).T
 
@@ -49,7 +51,7 @@ class LinearFit:
         return float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
 
 
-def linear_fit(x: np.ndarray, y: np.ndarray) -> LinearFit:
+def linear_fit(x: NDArray[np.float64], y: NDArray[np.float64]) -> LinearFit:
     """Fit ``y`` (n, k) on ``x`` (n, p) (module notes); rows with a NaN are dropped."""
     x = np.asarray(x, dtype=float)
     y = np.asarray(y, dtype=float)
@@ -68,4 +70,7 @@ def linear_fit(x: np.ndarray, y: np.ndarray) -> LinearFit:
     s2 = np.sum(resid**2, axis=0) / (n - p)
     xtx_inv = np.linalg.pinv(x.T @ x)
     cov = s2[:, None, None] * xtx_inv[None]
-    return LinearFit(coef=coef, cov=cov, residual_rms=np.sqrt(s2), singular_values=sv, n=int(n))
+    # coef: float64, which numpy's stubs type as floating[Any] (np.linalg.lstsq)
+    return LinearFit(
+        coef=cast("NDArray[np.float64]", coef), cov=cov, residual_rms=np.sqrt(s2), singular_values=sv, n=int(n)
+    )

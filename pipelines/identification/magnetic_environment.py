@@ -47,6 +47,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .truth import interpolate_attitude, moving_average, rotation_bw
 
@@ -66,15 +67,21 @@ FIELD_AGREEMENT = 3.0
 
 
 def world_field(
-    t: np.ndarray, mag_body: np.ndarray, truth_t: np.ndarray, q_wb: np.ndarray, latency_s: float = 0.0
-) -> np.ndarray:
+    t: NDArray[np.float64],
+    mag_body: NDArray[np.float64],
+    truth_t: NDArray[np.float64],
+    q_wb: NDArray[np.float64],
+    latency_s: float = 0.0,
+) -> NDArray[np.float64]:
     """(N, 3) world-axes field of calibrated body-axes measurements ``mag_body`` (N, 3) at ``t`` (N,),
     turned by the truth attitude at t − ``latency_s``; NaN where the truth is unknown."""
     q = interpolate_attitude(truth_t, q_wb, np.asarray(t, dtype=float) - latency_s)
-    return np.einsum("nji,nj->ni", rotation_bw(q), np.asarray(mag_body, dtype=float))  # R_wb = R_bwᵀ
+    # R_wb = R_bwᵀ
+    field: NDArray[np.float64] = np.einsum("nji,nj->ni", rotation_bw(q), np.asarray(mag_body, dtype=float))
+    return field
 
 
-def _heading(m: np.ndarray) -> np.ndarray:
+def _heading(m: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.arctan2(m[..., 0], m[..., 1])
 
 
@@ -98,21 +105,23 @@ class MagneticEnvironment:
     samples : movement samples used.
     """
 
-    rest_field_w: np.ndarray
+    rest_field_w: NDArray[np.float64]
     norm: float
     dip: float
     heading: float
-    axis_sigma: np.ndarray
+    axis_sigma: NDArray[np.float64]
     spatial_sigma: float
     heading_offset: float
     heading_offset_sigma: float
     correlation_length_m: float | None
     correlation_time_s: float
     samples: int
-    raw_sigma: np.ndarray | None = None
+    raw_sigma: NDArray[np.float64] | None = None
 
 
-def _spatial_part(delta: np.ndarray, pos: np.ndarray, r_bw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _spatial_part(
+    delta: NDArray[np.float64], pos: NDArray[np.float64], r_bw: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The position-explained part of ``delta`` (N, 3) beyond the attitude's (module notes), and its
     per-axis standard deviation ``sqrt(var(r_att) − var(r_att+pos))``."""
     p = pos - pos.mean(axis=0)
@@ -128,7 +137,7 @@ def _spatial_part(delta: np.ndarray, pos: np.ndarray, r_bw: np.ndarray) -> tuple
     return spatial - spatial.mean(axis=0), sigma
 
 
-def _e_folding_separation(separation: np.ndarray, products: np.ndarray, bins: int) -> float:
+def _e_folding_separation(separation: NDArray[np.float64], products: NDArray[np.float64], bins: int) -> float:
     """The separation (a distance or a lag) where the correlation ``products`` (n, n), binned by their
     pair ``separation`` (n, n) over half its range, first falls below 1/e."""
     edges = np.linspace(0.0, separation.max() / 2, bins + 1)
@@ -140,7 +149,7 @@ def _e_folding_separation(separation: np.ndarray, products: np.ndarray, bins: in
     return _first_below(0.5 * (edges[:-1] + edges[1:])[have], sums[have] / counts[have], np.exp(-1.0))
 
 
-def _first_below(x: np.ndarray, rho: np.ndarray, level: float) -> float:
+def _first_below(x: NDArray[np.float64], rho: NDArray[np.float64], level: float) -> float:
     """First x where rho (sampled at x) falls below level, linearly interpolated; inf if never."""
     below = np.flatnonzero(rho < level)
     if not len(below):
@@ -151,7 +160,7 @@ def _first_below(x: np.ndarray, rho: np.ndarray, level: float) -> float:
     return float(x[j - 1] + (x[j] - x[j - 1]) * (rho[j - 1] - level) / (rho[j - 1] - rho[j]))
 
 
-def _require_motion(samples: int, pos: np.ndarray | None, r_bw: np.ndarray | None) -> None:
+def _require_motion(samples: int, pos: NDArray[np.float64] | None, r_bw: NDArray[np.float64] | None) -> None:
     """ValueError when the movement samples show no path (module notes): a position track that never
     leaves one point, or without one an attitude that never changes."""
     if pos is not None and not np.ptp(pos, axis=0).any():
@@ -167,14 +176,14 @@ def _require_motion(samples: int, pos: np.ndarray | None, r_bw: np.ndarray | Non
 
 
 def magnetic_environment(
-    t: np.ndarray,
-    field_w: np.ndarray,
+    t: NDArray[np.float64],
+    field_w: NDArray[np.float64],
     rest: slice,
-    movement: np.ndarray,
-    pos_w: np.ndarray | None = None,
+    movement: NDArray[np.bool_],
+    pos_w: NDArray[np.float64] | None = None,
     bins: int = 25,
     smooth_s: float = 0.25,
-    r_bw: np.ndarray | None = None,
+    r_bw: NDArray[np.float64] | None = None,
 ) -> MagneticEnvironment:
     """The environment (module notes) of a world field ``field_w`` (N, 3) tesla at ``t`` (N,) s.
 

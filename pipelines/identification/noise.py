@@ -101,9 +101,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Literal
+from typing import Literal, cast
 
 import numpy as np
+from numpy.typing import NDArray
 
 from gyroemu.sensors.allan import (
     AllanDeviation,
@@ -228,11 +229,11 @@ class SensorNoise:
     rest_s: float
     phases: int
 
-    def values(self, term: str) -> np.ndarray:
+    def values(self, term: str) -> NDArray[np.float64]:
         """(3,) the term's value per axis (``noise_density``, ``bias_instability``, ``random_walk``)."""
         return np.array([getattr(a, term).value for a in self.axes])
 
-    def markov(self) -> tuple[np.ndarray, np.ndarray] | None:
+    def markov(self) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
         """(σ (3,), τ_c (3,) s) of the Gauss–Markov term, 0 on axes where it is not kept; None when no
         axis keeps it."""
         terms = [a.markov for a in self.axes]
@@ -243,11 +244,12 @@ class SensorNoise:
         return sigma, tau
 
 
-def pooled_allan(segments: Sequence[np.ndarray], dt: float, tau_min_s: float = 0.0) -> AllanDeviation:
+def pooled_allan(segments: Sequence[NDArray[np.float64]], dt: float, tau_min_s: float = 0.0) -> AllanDeviation:
     """Allan deviation pooled over ``segments`` (each (n_i,), one axis, mean removed here), sampled every
     ``dt`` s, at octave τ from ``tau_min_s`` up to a third of the longest segment (module notes)."""
     longest = max(len(s) for s in segments)
-    octaves = dt * 2.0 ** np.arange(int(np.floor(np.log2(max(longest / 3, 1)))) + 1)
+    # float64, which numpy's stubs type as floating[Any] (a float to the power of an int array)
+    octaves = cast("NDArray[np.float64]", dt * 2.0 ** np.arange(int(np.floor(np.log2(max(longest / 3, 1)))) + 1))
     avar = np.zeros(len(octaves))
     clusters = np.zeros(len(octaves))
     edf = np.zeros(len(octaves))
@@ -273,13 +275,13 @@ def pooled_allan(segments: Sequence[np.ndarray], dt: float, tau_min_s: float = 0
     return AllanDeviation(tau=tau, adev=adev, clusters=clusters, edf=edf, low=low, high=high, dt=float(dt))
 
 
-def _four_basis(tau: np.ndarray) -> np.ndarray:
+def _four_basis(tau: NDArray[np.float64]) -> NDArray[np.float64]:
     """(M, 4) Allan variance per unit coefficient² of quantisation, white noise, bias instability and
     random walk (IEEE 952 Annex C): 3/τ², 1/τ, 2 ln2/π, τ/3."""
     return np.column_stack([3 / tau**2, 1 / tau, np.full_like(tau, _FLOOR), tau / 3])
 
 
-def _signed(basis: np.ndarray) -> np.ndarray:
+def _signed(basis: NDArray[np.float64]) -> NDArray[np.bool_]:
     """(J,) which coefficients of ``basis`` may take either sign: the first, τ⁻² (quantisation or band
     limit, module notes)."""
     free = np.zeros(basis.shape[1], dtype=bool)
@@ -287,20 +289,22 @@ def _signed(basis: np.ndarray) -> np.ndarray:
     return free
 
 
-def _weighted_fit(allan: AllanDeviation, basis: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+def _weighted_fit(
+    allan: AllanDeviation, basis: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
     """The coefficients of ``basis`` (M, J; its first column the τ⁻² term, of either sign, the others
     non-negative) fitted to the Allan variance as ``fit_allan`` does (weights σ²·√(2/ν), from the data
     first, then from the model, iterated): (coefficients (J,), model (M,), weighted residual χ²)."""
     return weighted_fit(allan, basis, _signed(basis), _ITERATIONS)
 
 
-def model_scatter(allan: AllanDeviation, basis: np.ndarray) -> float:
+def model_scatter(allan: AllanDeviation, basis: NDArray[np.float64]) -> float:
     """ε, the relative scatter of the Allan variance of ``allan`` about the model spanned by ``basis``
     (M, J) beyond its sampling error (module notes): 0 when the fit's χ² is within its M − J degrees of
     freedom, else the ε ≥ 0 at which the fit with every point's relative variance 2/ν + ε² has χ² = M − J."""
     from scipy.optimize import brentq
 
-    free = len(allan.tau) - basis.shape[1]
+    free: int = len(allan.tau) - basis.shape[1]
     if free <= 0:
         return 0.0
 
@@ -329,7 +333,7 @@ def with_model_scatter(allan: AllanDeviation, eps: float) -> AllanDeviation:
 
 
 def _interval(
-    j: int, c: np.ndarray, basis: np.ndarray, model: np.ndarray, allan: AllanDeviation
+    j: int, c: NDArray[np.float64], basis: NDArray[np.float64], model: NDArray[np.float64], allan: AllanDeviation
 ) -> tuple[float, float]:
     """The 68 % interval of the coefficient √c_j (c_j > 0) of a :func:`_weighted_fit`, as ``fit_allan``
     reads every term: the wider of the one read where its term holds the largest share of the Allan
@@ -343,7 +347,9 @@ def _interval(
     return float(low), float(high)
 
 
-def fit_markov(allan: AllanDeviation, dt: float) -> tuple[MarkovTerm, np.ndarray | None, np.ndarray | None]:
+def fit_markov(
+    allan: AllanDeviation, dt: float
+) -> tuple[MarkovTerm, NDArray[np.float64] | None, NDArray[np.float64] | None]:
     """The Gauss–Markov term of the pooled Allan deviation ``allan`` of samples every ``dt`` s (module
     notes): the term, and when it is kept the five-term fit's coefficients² (quantisation, white noise,
     bias instability, random walk, σ²) with its model σ²(τ) (M,); else None, None."""
@@ -395,7 +401,9 @@ def _noiseless_axis(allan: AllanDeviation) -> AxisNoise:
     return AxisNoise(NoiseTerm(0.0, 0.0, 0.0, "fitted"), none, none, fit)
 
 
-def _read_term(j: int, c: np.ndarray, basis: np.ndarray, model: np.ndarray, allan: AllanDeviation) -> Coefficient:
+def _read_term(
+    j: int, c: NDArray[np.float64], basis: NDArray[np.float64], model: NDArray[np.float64], allan: AllanDeviation
+) -> Coefficient:
     """Coefficient j of a :func:`_weighted_fit` with its 68 % interval (:func:`_interval`), or, not found
     (c_j ≤ 0), 0 with the value that would have made one standard deviation where it shows most."""
     if c[j] <= 0:
@@ -427,7 +435,7 @@ def _axis_noise(allan: AllanDeviation, dt: float, markov: bool) -> AxisNoise:
     b_bound = float(np.sqrt(np.min(high2 / _FLOOR)))
     k_bound = float(np.sqrt(np.min(high2 * 3.0 / allan.tau)))
 
-    def term(c, bound: float) -> NoiseTerm:
+    def term(c: Coefficient, bound: float) -> NoiseTerm:
         if c.value > 0 and np.isfinite(c.high) and c.low > 0:
             return NoiseTerm(c.value, c.low, c.high, "fitted")
         return NoiseTerm(0.0, 0.0, min(bound, c.high) if c.high > 0 else bound, "upper_bound")
@@ -446,7 +454,7 @@ def _axis_noise(allan: AllanDeviation, dt: float, markov: bool) -> AxisNoise:
 
 
 def sensor_noise(
-    segments: Sequence[np.ndarray], dt: float, tau_min_s: float = 0.0, *, markov: bool = True
+    segments: Sequence[NDArray[np.float64]], dt: float, tau_min_s: float = 0.0, *, markov: bool = True
 ) -> SensorNoise:
     """Noise of a three-axis sensor from its rest ``segments`` (each (n_i, 3), in the sensor's SI unit)
     sampled every ``dt`` s; NaN rows are dropped.

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from .truth import moving_average
 
@@ -43,17 +44,18 @@ class RestPhase:
         return self.stop - self.start
 
 
-def _moving_std(x: np.ndarray, length: int) -> np.ndarray:
+def _moving_std(x: NDArray[np.float64], length: int) -> NDArray[np.float64]:
     """(N,) norm over axes of the centred moving standard deviation of ``x`` (N, 3)."""
     m1 = moving_average(x, length)
     m2 = moving_average(x * x, length)
-    return np.sqrt(np.sum(np.maximum(m2 - m1 * m1, 0.0), axis=1))
+    spread: NDArray[np.float64] = np.sqrt(np.sum(np.maximum(m2 - m1 * m1, 0.0), axis=1))
+    return spread
 
 
 def find_rest_phases(
-    t: np.ndarray,
-    gyro: np.ndarray,
-    accel: np.ndarray,
+    t: ArrayLike,
+    gyro: ArrayLike,
+    accel: ArrayLike,
     *,
     window_s: float = 0.5,
     min_duration_s: float = 3.0,
@@ -98,7 +100,7 @@ def find_rest_phases(
     return phases
 
 
-def phases_from_intervals(t: np.ndarray, intervals: Sequence[tuple[float, float]]) -> list[RestPhase]:
+def phases_from_intervals(t: ArrayLike, intervals: Sequence[tuple[float, float]]) -> list[RestPhase]:
     """Rest phases from user intervals ``[(t_start, t_stop), …]`` in the recording's seconds.
 
     Raises ``ValueError`` for an interval that is empty, reversed or holds fewer than 4 samples.

@@ -38,8 +38,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from gyroemu.dynamics.rotation import quat_from_matrix
 
@@ -69,14 +71,21 @@ _UG = 1e-6 * _G0
 class Pooled:
     """A pooled estimate: value and standard uncertainty (arrays of any shape), the trials used."""
 
-    value: np.ndarray
-    sigma: np.ndarray
+    value: NDArray[np.float64]
+    sigma: NDArray[np.float64]
     trials: int
 
 
 def _inverse_variance(
-    values: Sequence[np.ndarray], sigmas: Sequence[np.ndarray]
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    values: Sequence[NDArray[np.float64]], sigmas: Sequence[NDArray[np.float64]]
+) -> tuple[
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.bool_],
+    NDArray[np.float64],
+    NDArray[np.bool_],
+    NDArray[np.float64],
+]:
     """The inputs as arrays (k, ...), which σ are known (finite, > 0), their weights 1/σ² (0 where
     unknown), which elements have any weight, and the weights' sum (1 where none: safe to divide)."""
     x = np.asarray(values, dtype=float)
@@ -90,7 +99,7 @@ def _inverse_variance(
     return x, s, known, w, weighted, np.where(weighted, total, 1.0)
 
 
-def pool_estimates(values: Sequence[np.ndarray], sigmas: Sequence[np.ndarray]) -> Pooled:
+def pool_estimates(values: Sequence[NDArray[np.float64]], sigmas: Sequence[NDArray[np.float64]]) -> Pooled:
     """Inverse-variance mean with Birge inflation (module notes), element by element."""
     x, _, _, w, weighted, safe = _inverse_variance(values, sigmas)
     mean = np.where(weighted, np.sum(w * x, axis=0) / safe, x.mean(axis=0))
@@ -101,7 +110,9 @@ def pool_estimates(values: Sequence[np.ndarray], sigmas: Sequence[np.ndarray]) -
     return Pooled(mean, sigma, len(x))
 
 
-def pool_random_effects(values: Sequence[np.ndarray], sigmas: Sequence[np.ndarray]) -> tuple[Pooled, np.ndarray]:
+def pool_random_effects(
+    values: Sequence[NDArray[np.float64]], sigmas: Sequence[NDArray[np.float64]]
+) -> tuple[Pooled, NDArray[np.float64]]:
     """Random-effects mean of per-trial estimates ``values`` ± ``sigmas`` (each an array of one shape),
     element by element (module notes, DerSimonian and Laird): the pooled estimate and τ, the standard
     deviation of the true values between trials (0 where the trials agree within their σ_i). Elements
@@ -130,33 +141,33 @@ class Identification:
 
     trials: list[TrialIdentification]
     rate_hz: float
-    latency: dict  # sensor -> Pooled (s)
+    latency: dict[str, Pooled]  # sensor -> Pooled (s)
     gyro_bias: Pooled  # rad/s
-    gyro_bias_spread: np.ndarray  # (3,) rad/s, std across trials (0 for one trial)
+    gyro_bias_spread: NDArray[np.float64]  # (3,) rad/s, std across trials (0 for one trial)
     gyro_scale: Pooled | None  # random-effects mean (module notes)
     gyro_misalignment: Pooled | None
-    c_sb: np.ndarray
+    c_sb: NDArray[np.float64]
     accel_bias: Pooled
     accel_scale: Pooled | None
     accel_cross_axis: Pooled | None
     hard_iron: Pooled | None
     soft_iron: Pooled | None
-    k_matrix: np.ndarray | None
+    k_matrix: NDArray[np.float64] | None
     gyro_noise: SensorNoise | None
     accel_noise: SensorNoise | None
     mag_noise: SensorNoise | None
     environments: list[MagneticEnvironment | None]
     notes: list[str]
-    handling: tuple[np.ndarray, np.ndarray] | None = None  # (3,) mean, (3,) std across trials, m/s²
+    handling: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None  # (3,) mean, (3,) std across trials, m/s²
     lever_arm: Pooled | None = None  # (3,) m, body axes: the accelerometer's lever arm from the truth's origin
-    gyro_scale_spread: np.ndarray | None = None  # (3,) τ, the scale factor's spread between power-ups
-    latency_bounds: frozenset = frozenset()  # sensors whose latency no trial resolved: not written
+    gyro_scale_spread: NDArray[np.float64] | None = None  # (3,) τ, the scale factor's spread between power-ups
+    latency_bounds: frozenset[str] = frozenset()  # sensors whose latency no trial resolved: not written
 
     # ----------------------------------------------------------------------------------------------
-    def device_dict(self) -> dict:
+    def device_dict(self) -> dict[str, Any]:
         """The device config (keys of :class:`gyroemu.sensors.imu.DeviceSpec`, plus ``latency_s``)."""
         names = ", ".join(t.name for t in self.trials)
-        gyro_errors: dict = {"bias_deg_per_h": _list(self.gyro_bias.value * _DEG * 3600)}
+        gyro_errors: dict[str, Any] = {"bias_deg_per_h": _list(self.gyro_bias.value * _DEG * 3600)}
         if len(self.trials) > 1:
             gyro_errors["turn_on_bias_deg_per_h"] = _list(self.gyro_bias_spread * _DEG * 3600)
         if self.gyro_scale is not None and self.gyro_misalignment is not None:
@@ -173,7 +184,7 @@ class Identification:
             if markov is not None:
                 gyro_errors["markov_sigma_deg_per_h"] = _list(markov[0] * _DEG * 3600, 4)
                 gyro_errors["markov_tau_s"] = _list(markov[1], 4)
-        accel_errors: dict = {"bias_ug": _list(self.accel_bias.value / _UG)}
+        accel_errors: dict[str, Any] = {"bias_ug": _list(self.accel_bias.value / _UG)}
         if self.accel_scale is not None and self.accel_cross_axis is not None:
             accel_errors["scale_factor_ppm"] = _list(self.accel_scale.value * 1e6)
             accel_errors["cross_axis_matrix"] = [_list(r) for r in self.accel_cross_axis.value]
@@ -192,7 +203,7 @@ class Identification:
         # which matches the motion at its middle, τ − T/2 − latency_s (to second order in T): the
         # device's latency_s = d − T/2. Its magnetometer samples at τ − latency_s: latency_s = d.
         half = 0.5 / float(self.rate_hz)
-        out: dict = {
+        out: dict[str, Any] = {
             "description": f"Identified by gyroemu identify from {names}",
             "rate_hz": round(float(self.rate_hz), 6),
             "mounting": {"q_bs": _list(q_bs, 9)}
@@ -201,7 +212,7 @@ class Identification:
             "accelerometer": self._latency_key("accelerometer", half) | {"errors": accel_errors},
         }
         if "magnetometer" in self.latency:
-            mag: dict = self._latency_key("magnetometer", 0.0)
+            mag: dict[str, Any] = self._latency_key("magnetometer", 0.0)
             if self.mag_noise is not None:
                 mag["noise_density_uT_per_sqrt_hz"] = round(
                     float(np.mean(self.mag_noise.values("noise_density"))) * 1e6, 5
@@ -350,7 +361,7 @@ class Identification:
         lines.extend(self.notes)
         return lines
 
-    def _latency_key(self, sensor: str, half: float) -> dict:
+    def _latency_key(self, sensor: str, half: float) -> dict[str, float]:
         """``{"latency_s": delay − half}`` for a fitted delay; nothing for a bound (:attr:`latency_bounds`)."""
         if sensor in self.latency_bounds:
             return {}
@@ -364,10 +375,10 @@ class Identification:
         return head + "\n" + tomli_w.dumps(self.device_dict())
 
     # ----------------------------------------------------------------------------------------------
-    def site_dict(self) -> dict | None:
+    def site_dict(self) -> dict[str, Any] | None:
         """``[site]`` with ``magnetic_field_enu_uT`` and ``[site.magnetic_environment]`` (with a magnetometer
         environment) and ``[handling]`` (with a handling offset); None with neither."""
-        out: dict = {}
+        out: dict[str, Any] = {}
         if self.handling is not None:
             offset, spread = self.handling
             out["handling"] = {"accel_offset_m_s2": _list(offset, 4), "accel_offset_sigma_m_s2": _list(spread, 4)}
@@ -376,7 +387,7 @@ class Identification:
             return out or None
         mean, sigma = pool_heading_offsets(envs)
         field = np.mean([e.rest_field_w for e in envs], axis=0)
-        env: dict = {
+        env: dict[str, Any] = {
             "spatial_sigma_uT": round(float(np.mean([e.spatial_sigma for e in envs])) * 1e6, 4),
             "heading_offset_mean_deg": round(float(np.degrees(mean)), 4),
             "heading_offset_sigma_deg": round(float(np.degrees(sigma)), 4),
@@ -449,11 +460,12 @@ class Identification:
         return "".join(f"# {line}\n" for line in lines) + "\n" + tomli_w.dumps(data)
 
 
-def _list(x, digits: int = 6) -> list:
+def _list(x: ArrayLike, digits: int = 6) -> list[float]:
     return [float(f"{v:.{digits}g}") for v in np.ravel(x)]
 
 
-def _pm(x: float, s: float) -> str:
+def _pm(x: float | NDArray[np.float64], s: float | NDArray[np.float64]) -> str:
+    # x, s: floats, or a pooled latency's value and sigma (float64s taken from arrays, typed as Pooled's arrays)
     return f"{x:.4g} +- {s:.2g}"
 
 
@@ -462,7 +474,7 @@ def _pool_latency(estimates: Sequence[LatencyEstimate]) -> Pooled:
     return Pooled(p.value[0], p.sigma[0], p.trials)
 
 
-def _pool_field(results, attr: str, sigma_attr: str) -> Pooled | None:
+def _pool_field(results: Sequence[object], attr: str, sigma_attr: str) -> Pooled | None:
     vals = [getattr(r, attr) for r in results]
     sigs = [getattr(r, sigma_attr) for r in results]
     return pool_estimates(vals, sigs) if vals else None

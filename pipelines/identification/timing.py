@@ -25,8 +25,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, cast
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .truth import interpolate_attitude, interpolate_vectors, moving_average, rotation_bw, truth_angular_velocity
 
@@ -48,21 +50,21 @@ class LatencyEstimate:
 
     latency_s: float
     sigma_s: float
-    delays_s: np.ndarray
-    cost: np.ndarray
+    delays_s: NDArray[np.float64]
+    cost: NDArray[np.float64]
     rows: int
     at_edge: bool
 
 
 def estimate_latency(
-    t: np.ndarray,
-    y: np.ndarray,
-    truth_t: np.ndarray,
-    features: Callable[[np.ndarray], np.ndarray],
+    t: NDArray[np.float64],
+    y: NDArray[np.float64],
+    truth_t: NDArray[np.float64],
+    features: Callable[[NDArray[np.float64]], NDArray[np.float64]],
     *,
     search_s: float = 0.06,
     smooth_s: float = 0.05,
-    mask: np.ndarray | None = None,
+    mask: NDArray[np.bool_] | None = None,
 ) -> LatencyEstimate:
     """Latency of the output ``y`` (N, k) stamped ``t`` (N,) s against a truth sampled at ``truth_t``.
 
@@ -76,7 +78,10 @@ def estimate_latency(
     step = float(np.median(np.diff(truth_t)))
     dt = float(np.median(np.diff(t)))
     length = max(1, int(round(smooth_s / dt)))
-    delays = step * np.arange(-int(np.ceil(search_s / step)), int(np.ceil(search_s / step)) + 1)
+    # float64, which numpy's stubs type as floating[Any] (a float times an int array)
+    delays = cast(
+        "NDArray[np.float64]", step * np.arange(-int(np.ceil(search_s / step)), int(np.ceil(search_s / step)) + 1)
+    )
     ys = moving_average(y, length)
     if mask is not None:
         ys[~np.asarray(mask, dtype=bool)] = np.nan
@@ -121,20 +126,26 @@ def estimate_latency(
     return LatencyEstimate(float(fine[i] + shift * h), sigma, all_d[order], all_cost / s0, n, False)
 
 
-def gyro_latency(t: np.ndarray, gyro: np.ndarray, truth_t: np.ndarray, q_wb: np.ndarray, **kwargs) -> LatencyEstimate:
+def gyro_latency(
+    t: NDArray[np.float64],
+    gyro: NDArray[np.float64],
+    truth_t: NDArray[np.float64],
+    q_wb: NDArray[np.float64],
+    **kwargs: Any,
+) -> LatencyEstimate:
     """Latency of a gyro ``gyro`` (N, 3) rad/s against the truth attitude ``q_wb`` (M, 4) at ``truth_t``."""
     omega = truth_angular_velocity(truth_t, q_wb)
     return estimate_latency(t, gyro, truth_t, lambda times: interpolate_vectors(truth_t, omega, times), **kwargs)
 
 
 def accel_latency(
-    t: np.ndarray,
-    accel: np.ndarray,
-    truth_t: np.ndarray,
-    q_wb: np.ndarray,
-    pos_w: np.ndarray | None = None,
+    t: NDArray[np.float64],
+    accel: NDArray[np.float64],
+    truth_t: NDArray[np.float64],
+    q_wb: NDArray[np.float64],
+    pos_w: NDArray[np.float64] | None = None,
     gravity_m_s2: float = 9.81,
-    **kwargs,
+    **kwargs: Any,
 ) -> LatencyEstimate:
     """Latency of an accelerometer ``accel`` (N, 3) m/s² against the truth attitude (and position
     ``pos_w`` (M, 3) m, when known: its second difference gives a_w)."""
@@ -142,17 +153,24 @@ def accel_latency(
 
     force_w = truth_specific_force_world(truth_t, pos_w, gravity_m_s2)
 
-    def features(times: np.ndarray) -> np.ndarray:
+    def features(times: NDArray[np.float64]) -> NDArray[np.float64]:
         r_bw = rotation_bw(interpolate_attitude(truth_t, q_wb, times))
-        return np.einsum("nij,nj->ni", r_bw, interpolate_vectors(truth_t, force_w, times))
+        force_b: NDArray[np.float64] = np.einsum("nij,nj->ni", r_bw, interpolate_vectors(truth_t, force_w, times))
+        return force_b
 
     return estimate_latency(t, accel, truth_t, features, **kwargs)
 
 
-def mag_latency(t: np.ndarray, mag: np.ndarray, truth_t: np.ndarray, q_wb: np.ndarray, **kwargs) -> LatencyEstimate:
+def mag_latency(
+    t: NDArray[np.float64],
+    mag: NDArray[np.float64],
+    truth_t: NDArray[np.float64],
+    q_wb: NDArray[np.float64],
+    **kwargs: Any,
+) -> LatencyEstimate:
     """Latency of a magnetometer ``mag`` (N, 3) against the truth attitude (field assumed uniform)."""
 
-    def features(times: np.ndarray) -> np.ndarray:
+    def features(times: NDArray[np.float64]) -> NDArray[np.float64]:
         return rotation_bw(interpolate_attitude(truth_t, q_wb, times)).reshape(len(times), 9)
 
     return estimate_latency(t, mag, truth_t, features, **kwargs)

@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import NDArray
 
 from gyroemu.dynamics.earth import earth_rate_enu
 
@@ -42,15 +43,15 @@ class TrialData:
     """
 
     name: str
-    t: np.ndarray
-    gyro: np.ndarray
-    accel: np.ndarray
-    mag: np.ndarray | None
-    truth_t: np.ndarray
-    q_wb: np.ndarray
-    pos_w: np.ndarray | None = None
-    movement: np.ndarray | None = None
-    valid: np.ndarray | None = None
+    t: NDArray[np.float64]
+    gyro: NDArray[np.float64]
+    accel: NDArray[np.float64]
+    mag: NDArray[np.float64] | None
+    truth_t: NDArray[np.float64]
+    q_wb: NDArray[np.float64]
+    pos_w: NDArray[np.float64] | None = None
+    movement: NDArray[np.bool_] | None = None
+    valid: NDArray[np.bool_] | None = None
     latitude_rad: float | None = None
 
     @property

@@ -16,6 +16,7 @@ The plain central difference D_1 errs by (2πfh)²/6 of a rate at frequency f: 4
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from gyroemu.dynamics.rotation import quat_conjugate, quat_multiply, quat_to_rotvec
 
@@ -28,11 +29,12 @@ __all__ = [
 ]
 
 
-def _valid_quat(q: np.ndarray) -> np.ndarray:
-    return np.all(np.isfinite(q), axis=-1)
+def _valid_quat(q: NDArray[np.float64]) -> NDArray[np.bool_]:
+    valid: NDArray[np.bool_] = np.all(np.isfinite(q), axis=-1)
+    return valid
 
 
-def _central(t: np.ndarray, q: np.ndarray, j: int) -> np.ndarray:
+def _central(t: NDArray[np.float64], q: NDArray[np.float64], j: int) -> NDArray[np.float64]:
     """(N, 3) D_j: rotvec(q_{k−j}⁻¹ q_{k+j}) / (t_{k+j} − t_{k−j}); NaN where undefined."""
     out = np.full((len(t), 3), np.nan)
     if len(t) <= 2 * j:
@@ -48,7 +50,7 @@ def _central(t: np.ndarray, q: np.ndarray, j: int) -> np.ndarray:
     return out
 
 
-def truth_angular_velocity(t: np.ndarray, q_wb: np.ndarray, order: int = 4) -> np.ndarray:
+def truth_angular_velocity(t: ArrayLike, q_wb: ArrayLike, order: int = 4) -> NDArray[np.float64]:
     """Body-axes angular velocity relative to the world frame, (N, 3) rad/s, of the attitude track
     ``q_wb`` (N, 4) at stamps ``t`` (N,) s (uniform for ``order=4``); NaN at the ends and next to NaN
     rows. ``order``: 4 (Richardson, the default) or 2 (plain central difference)."""
@@ -60,7 +62,7 @@ def truth_angular_velocity(t: np.ndarray, q_wb: np.ndarray, order: int = 4) -> n
     return (4.0 * d1 - _central(t, q, 2)) / 3.0
 
 
-def interpolate_vectors(t_src: np.ndarray, x: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
+def interpolate_vectors(t_src: ArrayLike, x: ArrayLike, t_dst: ArrayLike) -> NDArray[np.float64]:
     """Linear interpolation of ``x`` (N, D) at stamps ``t_src`` (N,) to ``t_dst`` (M,): (M, D); NaN
     outside ``t_src`` and wherever a neighbour is NaN."""
     t_src = np.asarray(t_src, dtype=float)
@@ -68,13 +70,13 @@ def interpolate_vectors(t_src: np.ndarray, x: np.ndarray, t_dst: np.ndarray) -> 
     t_dst = np.asarray(t_dst, dtype=float)
     j = np.clip(np.searchsorted(t_src, t_dst, side="right") - 1, 0, len(t_src) - 2)
     w = (t_dst - t_src[j]) / (t_src[j + 1] - t_src[j])
-    out = x[j] * (1.0 - w)[:, None] + x[j + 1] * w[:, None]
+    out: NDArray[np.float64] = x[j] * (1.0 - w)[:, None] + x[j + 1] * w[:, None]
     outside = (t_dst < t_src[0]) | (t_dst > t_src[-1])
     out[outside] = np.nan
     return out
 
 
-def interpolate_attitude(t_src: np.ndarray, q_wb: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
+def interpolate_attitude(t_src: ArrayLike, q_wb: ArrayLike, t_dst: ArrayLike) -> NDArray[np.float64]:
     """Attitudes (M, 4) at ``t_dst`` by normalised linear interpolation (nlerp, exact to second order in
     the step's angle) between the neighbouring rows of ``q_wb`` (N, 4); NaN where unknown."""
     q = np.asarray(q_wb, dtype=float).copy()
@@ -85,10 +87,11 @@ def interpolate_attitude(t_src: np.ndarray, q_wb: np.ndarray, t_dst: np.ndarray)
     parity = np.concatenate([[0], np.cumsum(flip) % 2])
     q[parity == 1] *= -1.0
     out = interpolate_vectors(t_src, q, t_dst)
-    return out / np.linalg.norm(out, axis=1, keepdims=True)
+    normalised: NDArray[np.float64] = out / np.linalg.norm(out, axis=1, keepdims=True)
+    return normalised
 
 
-def rotation_bw(q_wb: np.ndarray) -> np.ndarray:
+def rotation_bw(q_wb: ArrayLike) -> NDArray[np.float64]:
     """R_bw (N, 3, 3), the matrices turning world vectors into body axes, of ``q_wb`` (N, 4); NaN rows
     stay NaN."""
     q = np.asarray(q_wb, dtype=float)
@@ -105,7 +108,7 @@ def rotation_bw(q_wb: np.ndarray) -> np.ndarray:
     return np.swapaxes(r_wb, -1, -2)
 
 
-def moving_average(x: np.ndarray, length: int) -> np.ndarray:
+def moving_average(x: ArrayLike, length: int) -> NDArray[np.float64]:
     """Centred moving average of ``x`` (N, ...) over ``length`` samples (odd lengths are centred
     exactly); NaN where the window is incomplete or holds a NaN."""
     x = np.asarray(x, dtype=float)
