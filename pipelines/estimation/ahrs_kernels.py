@@ -37,6 +37,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from gyroemu.dynamics.jit import njit
 
@@ -44,26 +45,27 @@ __all__ = ["ekf_block", "madgwick_block", "mahony_block"]
 
 
 @njit
-def _usable(v, k):
+def _usable(v: NDArray[np.float64], k: int) -> bool:
     """Row ``k`` of ``v`` is finite and not all zero (the adapter's test for a usable sample)."""
     x, y, z = v[k, 0], v[k, 1], v[k, 2]
     if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
         return False
-    return abs(x) + abs(y) + abs(z) > 0.0
+    nonzero: bool = abs(x) + abs(y) + abs(z) > 0.0
+    return nonzero
 
 
 @njit
-def _norm3(x, y, z):
+def _norm3(x: float, y: float, z: float) -> float:
     return math.sqrt(x * x + y * y + z * z)
 
 
 @njit
-def _norm4(w, x, y, z):
+def _norm4(w: float, x: float, y: float, z: float) -> float:
     return math.sqrt(w * w + x * x + y * y + z * z)
 
 
 @njit
-def _step_dt(tk, t_last, dt_nominal):
+def _step_dt(tk: float, t_last: float, dt_nominal: float) -> float:
     dt = tk - t_last
     if not (dt > 0.0 and math.isfinite(dt)):
         dt = dt_nominal
@@ -74,7 +76,23 @@ def _step_dt(tk, t_last, dt_nominal):
 
 
 @njit
-def _madgwick_step(q, gx, gy, gz, ax, ay, az, use_a, mx, my, mz, use_m, dt, dt_nominal, gain):
+def _madgwick_step(
+    q: NDArray[np.float64],
+    gx: float,
+    gy: float,
+    gz: float,
+    ax: float,
+    ay: float,
+    az: float,
+    use_a: bool,
+    mx: float,
+    my: float,
+    mz: float,
+    use_m: bool,
+    dt: float,
+    dt_nominal: float,
+    gain: float,
+) -> None:
     """``updateMARG`` (``use_m``) or ``updateIMU`` of ahrs 0.4 on ``q`` (in place). ``use_a`` False: the
     adapter's zero accelerometer vector."""
     n = _norm4(q[0], q[1], q[2], q[3])  # Quaternion(q)
@@ -165,7 +183,18 @@ def _madgwick_step(q, gx, gy, gz, ax, ay, az, use_a, mx, my, mz, use_m, dt, dt_n
 
 
 @njit
-def _madgwick_loop(t, gyro, accel, mag, has_mag, q, t_last, dt_nominal, gain, q_out):
+def _madgwick_loop(
+    t: NDArray[np.float64],
+    gyro: NDArray[np.float64],
+    accel: NDArray[np.float64],
+    mag: NDArray[np.float64],
+    has_mag: bool,
+    q: NDArray[np.float64],
+    t_last: float,
+    dt_nominal: float,
+    gain: float,
+    q_out: NDArray[np.float64],
+) -> float:
     for k in range(t.shape[0]):
         if math.isfinite(gyro[k, 0]) and math.isfinite(gyro[k, 1]) and math.isfinite(gyro[k, 2]):
             dt = _step_dt(t[k], t_last, dt_nominal)
@@ -199,7 +228,25 @@ def _madgwick_loop(t, gyro, accel, mag, has_mag, q, t_last, dt_nominal, gain, q_
 
 
 @njit
-def _mahony_step(q, b, gx, gy, gz, ax, ay, az, use_a, mx, my, mz, use_m, dt, dt_nominal, k_p, k_i):
+def _mahony_step(
+    q: NDArray[np.float64],
+    b: NDArray[np.float64],
+    gx: float,
+    gy: float,
+    gz: float,
+    ax: float,
+    ay: float,
+    az: float,
+    use_a: bool,
+    mx: float,
+    my: float,
+    mz: float,
+    use_m: bool,
+    dt: float,
+    dt_nominal: float,
+    k_p: float,
+    k_i: float,
+) -> None:
     """``updateMARG`` (``use_m``) or ``updateIMU`` of ahrs 0.4 on ``q`` and the bias ``b`` (in place)."""
     n = _norm4(q[0], q[1], q[2], q[3])  # Quaternion(q)
     w, x, y, z = q[0] / n, q[1] / n, q[2] / n, q[3] / n
@@ -261,7 +308,21 @@ def _mahony_step(q, b, gx, gy, gz, ax, ay, az, use_a, mx, my, mz, use_m, dt, dt_
 
 
 @njit
-def _mahony_loop(t, gyro, accel, mag, has_mag, q, b, t_last, dt_nominal, k_p, k_i, q_out, b_out):
+def _mahony_loop(
+    t: NDArray[np.float64],
+    gyro: NDArray[np.float64],
+    accel: NDArray[np.float64],
+    mag: NDArray[np.float64],
+    has_mag: bool,
+    q: NDArray[np.float64],
+    b: NDArray[np.float64],
+    t_last: float,
+    dt_nominal: float,
+    k_p: float,
+    k_i: float,
+    q_out: NDArray[np.float64],
+    b_out: NDArray[np.float64],
+) -> float:
     for k in range(t.shape[0]):
         if math.isfinite(gyro[k, 0]) and math.isfinite(gyro[k, 1]) and math.isfinite(gyro[k, 2]):
             dt = _step_dt(t[k], t_last, dt_nominal)
@@ -299,7 +360,9 @@ def _mahony_loop(t, gyro, accel, mag, has_mag, q, b, t_last, dt_nominal, k_p, k_
 
 
 @njit
-def _invert(s, m, inv, lu, piv):
+def _invert(
+    s: NDArray[np.float64], m: int, inv: NDArray[np.float64], lu: NDArray[np.float64], piv: NDArray[np.int64]
+) -> None:
     """``inv ← s⁻¹`` (m × m) by LU with partial pivoting (what ``np.linalg.inv``'s LAPACK ``gesv`` does)."""
     for i in range(m):
         for j in range(m):
@@ -338,7 +401,19 @@ def _invert(s, m, inv, lu, piv):
 
 
 @njit
-def _ekf_predict(q, gx, gy, gz, dt, p, g_noise, q_t, f, wm, tmp):
+def _ekf_predict(
+    q: NDArray[np.float64],
+    gx: float,
+    gy: float,
+    gz: float,
+    dt: float,
+    p: NDArray[np.float64],
+    g_noise: float,
+    q_t: NDArray[np.float64],
+    f: NDArray[np.float64],
+    wm: NDArray[np.float64],
+    tmp: NDArray[np.float64],
+) -> None:
     """q_t = f(q, ω, dt); P ← F P Fᵀ + g_noise W Wᵀ (in place). Returns nothing; ``f`` holds F."""
     hd = 0.5 * dt
     # F = dfdq(ω, dt) = I + Ω(0.5 dt ω), the same matrix as f's I + 0.5 dt Ω(ω)
@@ -375,7 +450,23 @@ def _ekf_predict(q, gx, gy, gz, dt, p, g_noise, q_t, f, wm, tmp):
 
 
 @njit
-def _ekf_loop(t, gyro, acc, mag, has_mag, q, p, t_last, dt_nominal, a_ref, m_ref, g_noise, a_noise, m_noise, q_out):
+def _ekf_loop(
+    t: NDArray[np.float64],
+    gyro: NDArray[np.float64],
+    acc: NDArray[np.float64],
+    mag: NDArray[np.float64],
+    has_mag: bool,
+    q: NDArray[np.float64],
+    p: NDArray[np.float64],
+    t_last: float,
+    dt_nominal: float,
+    a_ref: NDArray[np.float64],
+    m_ref: NDArray[np.float64],
+    g_noise: float,
+    a_noise: float,
+    m_noise: float,
+    q_out: NDArray[np.float64],
+) -> float:
     q_t = np.empty(4)
     f = np.empty((4, 4))
     wm = np.empty((4, 3))
@@ -511,7 +602,9 @@ def _ekf_loop(t, gyro, acc, mag, has_mag, q, p, t_last, dt_nominal, a_ref, m_ref
 # --- Block interfaces --------------------------------------------------------------------------------
 
 
-def _block_inputs(t, gyro, accel, mag):
+def _block_inputs(
+    t: ArrayLike, gyro: ArrayLike, accel: ArrayLike, mag: ArrayLike | None
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], bool]:
     t = np.ascontiguousarray(t, dtype=np.float64).reshape(-1)
     gyro = np.ascontiguousarray(gyro, dtype=np.float64).reshape(-1, 3)
     accel = np.ascontiguousarray(accel, dtype=np.float64).reshape(-1, 3)
@@ -520,7 +613,16 @@ def _block_inputs(t, gyro, accel, mag):
     return t, gyro, accel, np.ascontiguousarray(mag, dtype=np.float64).reshape(-1, 3), True
 
 
-def madgwick_block(t, gyro, accel, mag, q, t_last, dt_nominal, gain):
+def madgwick_block(
+    t: ArrayLike,
+    gyro: ArrayLike,
+    accel: ArrayLike,
+    mag: ArrayLike | None,
+    q: NDArray[np.float64],
+    t_last: float,
+    dt_nominal: float,
+    gain: float,
+) -> tuple[NDArray[np.float64], float]:
     """Madgwick (ahrs 0.4) over a block of samples from the started state ``q`` (library frame, NWU; updated
     in place) and ``t_last`` (stamp of the last update). ``mag`` None: 6D (``updateIMU``). Returns the
     per-sample quaternions (n, 4) and the new ``t_last``."""
@@ -530,7 +632,18 @@ def madgwick_block(t, gyro, accel, mag, q, t_last, dt_nominal, gain):
     return q_out, float(t_last)
 
 
-def mahony_block(t, gyro, accel, mag, q, b, t_last, dt_nominal, k_p, k_i):
+def mahony_block(
+    t: ArrayLike,
+    gyro: ArrayLike,
+    accel: ArrayLike,
+    mag: ArrayLike | None,
+    q: NDArray[np.float64],
+    b: NDArray[np.float64],
+    t_last: float,
+    dt_nominal: float,
+    k_p: float,
+    k_i: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
     """Mahony (ahrs 0.4) over a block from the started state ``q`` (library frame, ENU) and bias integral
     ``b`` (both updated in place). Returns the per-sample quaternions (n, 4), biases (n, 3) and ``t_last``."""
     t, gyro, accel, mag, has_mag = _block_inputs(t, gyro, accel, mag)
@@ -542,7 +655,19 @@ def mahony_block(t, gyro, accel, mag, q, b, t_last, dt_nominal, k_p, k_i):
     return q_out, b_out, float(t_last)
 
 
-def ekf_block(t, gyro, acc, mag, q, p, t_last, dt_nominal, a_ref, m_ref, noises):
+def ekf_block(
+    t: ArrayLike,
+    gyro: ArrayLike,
+    acc: ArrayLike,
+    mag: ArrayLike | None,
+    q: NDArray[np.float64],
+    p: NDArray[np.float64],
+    t_last: float,
+    dt_nominal: float,
+    a_ref: ArrayLike,
+    m_ref: ArrayLike,
+    noises: tuple[float, float, float],
+) -> tuple[NDArray[np.float64], float]:
     """The ahrs 0.4 EKF (``update``, and prediction only for a missing accelerometer sample) over a block
     from the started state ``q`` (library frame) and covariance ``p`` (4 × 4), both updated in place.
     ``acc`` is what the library is given (the adapter's ``−accel``), ``mag`` None a 6D filter; ``a_ref``,

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from gyroemu.dynamics.jit import njit
 
@@ -27,13 +28,19 @@ __all__ = ["mekf_batch"]
 
 
 @njit
-def kalman_predict(P, F, Q):
+def kalman_predict(P: NDArray[np.float64], F: NDArray[np.float64], Q: NDArray[np.float64]) -> None:
     """P ← F P Fᵀ + Q (the error state is zero between windows, so x stays zero)."""
     P[:, :] = F @ P @ F.T + Q
 
 
 @njit
-def kalman_update(x, P, z, H, R):
+def kalman_update(
+    x: NDArray[np.float64],
+    P: NDArray[np.float64],
+    z: NDArray[np.float64],
+    H: NDArray[np.float64],
+    R: NDArray[np.float64],
+) -> None:
     """y = z − H x, S = H P Hᵀ + R, K = P Hᵀ S⁻¹, x ← x + K y, P ← (I − K H) P (I − K H)ᵀ + K R Kᵀ."""
     PHT = P @ H.T
     S = H @ PHT + R
@@ -44,7 +51,18 @@ def kalman_update(x, P, z, H, R):
 
 
 @njit
-def _window(q, b, slow, win, phi, P, x, earth, params, use_mag):
+def _window(
+    q: NDArray[np.float64],
+    b: NDArray[np.float64],
+    slow: NDArray[np.float64],
+    win: NDArray[np.float64],
+    phi: NDArray[np.float64],
+    P: NDArray[np.float64],
+    x: NDArray[np.float64],
+    earth: NDArray[np.float64],
+    params: NDArray[np.float64],
+    use_mag: bool,
+) -> None:
     """One window's prediction and updates, then the injection: :meth:`Mekf._window`, compiled."""
     F = np.empty((kern.X_SIZE, kern.X_SIZE))
     Q = np.empty((kern.X_SIZE, kern.X_SIZE))
@@ -64,7 +82,22 @@ def _window(q, b, slow, win, phi, P, x, earth, params, use_mag):
 
 
 @njit(parallel=True)
-def _run(q, b, slow, P, t, gyro, delta, accel, mag, earth, params, use_mag, q_out, b_out):
+def _run(
+    q: NDArray[np.float64],
+    b: NDArray[np.float64],
+    slow: NDArray[np.float64],
+    P: NDArray[np.float64],
+    t: NDArray[np.float64],
+    gyro: NDArray[np.float64],
+    delta: NDArray[np.float64],
+    accel: NDArray[np.float64],
+    mag: NDArray[np.float64],
+    earth: NDArray[np.float64],
+    params: NDArray[np.float64],
+    use_mag: bool,
+    q_out: NDArray[np.float64],
+    b_out: NDArray[np.float64],
+) -> None:
     runs, n = gyro.shape[0], len(t)
     for r in numba.prange(runs):
         win = np.zeros(kern.W_SIZE)
@@ -86,7 +119,14 @@ def _run(q, b, slow, P, t, gyro, delta, accel, mag, earth, params, use_mag, q_ou
 
 
 def mekf_batch(
-    setup: FilterSetup, t, gyro, accel, mag=None, *, delta_angle=None, params: MekfParams | None = None
+    setup: FilterSetup,
+    t: ArrayLike,
+    gyro: ArrayLike | None,
+    accel: ArrayLike,
+    mag: ArrayLike | None = None,
+    *,
+    delta_angle: ArrayLike | None = None,
+    params: MekfParams | None = None,
 ) -> Estimate:
     """Run the MEKF over R runs that share their stamps.
 

@@ -121,7 +121,8 @@ def estimate_field_lag(
 
     def centred(v: np.ndarray) -> np.ndarray:
         means = np.stack([np.bincount(window, v[:, i]) for i in range(3)], axis=1) / count[:, None]
-        return v - means[window]
+        deviation: np.ndarray = v - means[window]
+        return deviation
 
     stretches = max(groups, 2)
     group = np.minimum(window * stretches // len(windows), stretches - 1)

@@ -45,7 +45,7 @@ gyro gyroemu models, and is not added).
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 
@@ -161,7 +161,7 @@ class LatencyCompensated:
         learner = cast(BlockLearner, self.inner)  # an AttributeError for one that does not learn
         learner.learn(t, gyro, accel, field_at_gyro_instant(mag, gyro, gyro_l, mag_l))
 
-    def __getattr__(self, name: str):
+    def __getattr__(self, name: str) -> Any:
         # "inner" before it is set (a copy being made): no recursion; "process_increments" would feed the
         # wrapped filter untimed, so a timed filter takes rates only
         if name in ("inner", "process_increments"):

@@ -34,6 +34,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
+from numpy.typing import ArrayLike, NDArray
 
 from gyroemu.dynamics.earth import EARTH_RATE
 from gyroemu.dynamics.rotation import quat_from_rotvec, quat_multiply, quat_rotate
@@ -307,7 +308,14 @@ class InitialState:
     slow: np.ndarray
 
 
-def initial_state(t, gyro, accel, mag, setup: FilterSetup, params: MekfParams) -> InitialState:
+def initial_state(
+    t: ArrayLike,
+    gyro: NDArray[np.float64],
+    accel: NDArray[np.float64],
+    mag: NDArray[np.float64] | None,
+    setup: FilterSetup,
+    params: MekfParams,
+) -> InitialState:
     """The initial state from the first samples of a run (see the module's docstring)."""
     t = np.asarray(t, dtype=float)
     n = max(1, int(np.searchsorted(t, t[0] + params.init_s)))
@@ -366,11 +374,19 @@ def initial_state(t, gyro, accel, mag, setup: FilterSetup, params: MekfParams) -
     return InitialState(q=q, b=np.zeros(3), P=P, slow=slow)
 
 
-def _gyrocompass_heading(t, gyro, accel, q_tilt, setup, params):
+def _gyrocompass_heading(
+    t: NDArray[np.float64],
+    gyro: NDArray[np.float64],
+    accel: NDArray[np.float64],
+    q_tilt: NDArray[np.float64],
+    setup: FilterSetup,
+    params: MekfParams,
+) -> tuple[NDArray[np.float64], float] | None:
     """North from Earth's rate over the first ``gyrocompass_s`` at rest, when the gyro's expected
     heading error (:func:`gyroemu.sensors.gyrocompass.heading_uncertainty`) is below 20°; else None."""
     from gyroemu.sensors.gyrocompass import gyrocompass, heading_uncertainty
 
+    assert setup.latitude_rad is not None  # the caller's condition
     n = int(np.searchsorted(t, t[0] + params.gyrocompass_s))
     g, a = np.asarray(gyro[:n]), np.asarray(accel[:n])
     ok = np.isfinite(g).all(axis=1) & np.isfinite(a).all(axis=1)
@@ -438,7 +454,14 @@ class Mekf:
         delta = np.asarray(delta_angle, dtype=float)
         return self._run(t, delta / np.diff(t, prepend=t[0] - 1 / self.setup.rate_hz)[:, None], delta, accel, mag)
 
-    def _run(self, t, gyro, delta, accel, mag) -> Estimate:
+    def _run(
+        self,
+        t: ArrayLike,
+        gyro: NDArray[np.float64],
+        delta: NDArray[np.float64],
+        accel: ArrayLike,
+        mag: ArrayLike | None,
+    ) -> Estimate:
         t = np.ascontiguousarray(t, dtype=float)
         accel = np.ascontiguousarray(accel, dtype=float)
         n = len(t)

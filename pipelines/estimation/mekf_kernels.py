@@ -43,8 +43,10 @@ Measurements, made at the end of each window
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from gyroemu.dynamics.jit import njit
 from gyroemu.dynamics.rotation import half_turn, rotate_body, set_product
@@ -94,7 +96,7 @@ N_DRIFT = X_ACC - X_BIAS  # the error states that drive the attitude error: δb 
 
 
 @njit
-def quat_to_matrix(q, r):
+def quat_to_matrix(q: NDArray[np.float64], r: NDArray[np.float64]) -> None:
     """R (3, 3) of the unit quaternion q = (w, x, y, z), written into ``r``."""
     w, x, y, z = q[0], q[1], q[2], q[3]
     r[0, 0] = 1 - 2 * (y * y + z * z)
@@ -109,7 +111,22 @@ def quat_to_matrix(q, r):
 
 
 @njit
-def strapdown(q, b, slow, win, phi, t, gyro, delta_angle, accel, mag, earth_rate_w, params, start, q_out):
+def strapdown(
+    q: NDArray[np.float64],
+    b: NDArray[np.float64],
+    slow: NDArray[np.float64],
+    win: NDArray[np.float64],
+    phi: NDArray[np.float64],
+    t: NDArray[np.float64],
+    gyro: NDArray[np.float64],
+    delta_angle: NDArray[np.float64],
+    accel: NDArray[np.float64],
+    mag: NDArray[np.float64],
+    earth_rate_w: NDArray[np.float64],
+    params: NDArray[np.float64],
+    start: int,
+    q_out: NDArray[np.float64],
+) -> int:
     """Advance the filter from sample ``start`` until a window closes or the samples end.
 
     ``t`` (n,) s; ``gyro`` (n, 3) rad/s, or ``delta_angle`` (n, 3) rad when it has rows (then
@@ -240,16 +257,17 @@ def strapdown(q, b, slow, win, phi, t, gyro, delta_angle, accel, mag, earth_rate
 
 
 @njit
-def body_vertical(q):
+def body_vertical(q: NDArray[np.float64]) -> tuple[float, float, float]:
     """The world's vertical in body axes, ``Rᵀ e_z`` (the third row of R), of the unit quaternion q = (w, x, y, z)."""
     w, x, y, z = q[0], q[1], q[2], q[3]
     return 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
 
 
 @njit
-def window_due(win, params):
+def window_due(win: NDArray[np.float64], params: NDArray[np.float64]) -> bool:
     """Whether the window has run its time or its sample count."""
-    return win[W_T] >= params[P_WINDOW] or win[W_N] >= params[P_WINDOW_N]
+    due: bool = win[W_T] >= params[P_WINDOW] or win[W_N] >= params[P_WINDOW_N]
+    return due
 
 
 # Parameter vector layout (see MekfParams for meanings and units).
@@ -293,7 +311,15 @@ P_SIZE = 36
 
 
 @njit
-def transition(win, phi, q, earth_rate_w, params, F, Q):
+def transition(
+    win: NDArray[np.float64],
+    phi: NDArray[np.float64],
+    q: NDArray[np.float64],
+    earth_rate_w: NDArray[np.float64],
+    params: NDArray[np.float64],
+    F: NDArray[np.float64],
+    Q: NDArray[np.float64],
+) -> None:
     """The window's transition ``F`` and process noise ``Q`` (X_SIZE, X_SIZE), written in place; ``q`` the
     attitude (w, x, y, z) at the window's end, whose body vertical splits the bias's random walk."""
     T = win[W_T]
@@ -336,7 +362,14 @@ def transition(win, phi, q, earth_rate_w, params, F, Q):
 
 
 @njit
-def gravity_measurement(win, slow, params, z, H, R):
+def gravity_measurement(
+    win: NDArray[np.float64],
+    slow: NDArray[np.float64],
+    params: NDArray[np.float64],
+    z: NDArray[np.float64],
+    H: NDArray[np.float64],
+    R: NDArray[np.float64],
+) -> bool:
     """The gravity-direction measurement at the end of a window: ``z`` (2,), ``H`` (2, X_SIZE), ``R`` (2, 2).
 
     ``z`` is the horizontal part of the direction of the low-passed world-frame specific force
@@ -387,7 +420,9 @@ def gravity_measurement(win, slow, params, z, H, R):
 
 
 @njit
-def heading_measurement(win, slow, params):
+def heading_measurement(
+    win: NDArray[np.float64], slow: NDArray[np.float64], params: NDArray[np.float64]
+) -> tuple[bool, float, float, float, float]:
     """The heading measurement, when its window (``mag_window_s``) is complete: ``(ok, y, r, h_x, h_y)``
     with the innovation ``y = ψ − D`` (rad, wrapped), its variance ``r`` and the tilt columns of its
     ``H = (h_x, h_y, 1, 0, …, 0)``; the window's sums are then cleared. Not ok while the window is
@@ -429,7 +464,9 @@ def heading_measurement(win, slow, params):
 
 
 @njit
-def heading_gain(P, h, r, q, K):
+def heading_gain(
+    P: NDArray[np.float64], h: NDArray[np.float64], r: float, q: NDArray[np.float64], K: NDArray[np.float64]
+) -> float:
     """Kalman gain ``K`` (X_SIZE,) of the heading measurement ``H = hᵀ`` (:func:`heading_measurement`),
     constrained so that it never corrects inclination: the ``δθ_x``, ``δθ_y`` rows are zero, and the
     bias correction is kept to the body's vertical axis ``v = Rᵀ e_z`` (the only bias the heading
@@ -438,7 +475,8 @@ def heading_gain(P, h, r, q, K):
     BROAD's magnet trial 31 it cost 1.3° of heading); the gravity direction, seen through turns about
     every axis, teaches ``δM``. Returns ``S = H P Hᵀ + r``."""
     Ph = P @ h
-    S = h @ Ph + r
+    hPh: Any = h @ Ph  # a scalar (1-D @ 1-D), which numpy's stubs type as an array
+    S: float = hPh + r
     for i in range(X_SIZE):
         K[i] = Ph[i] / S
     K[0] = 0.0
@@ -451,7 +489,7 @@ def heading_gain(P, h, r, q, K):
 
 
 @njit
-def joseph_update(P, K, h, r):
+def joseph_update(P: NDArray[np.float64], K: NDArray[np.float64], h: NDArray[np.float64], r: float) -> None:
     """P ← (I − K hᵀ) P (I − K hᵀ)ᵀ + K r Kᵀ for a scalar measurement ``H = hᵀ``: valid for any gain,
     optimal or not."""
     A = np.eye(len(K)) - np.outer(K, h)
@@ -459,7 +497,17 @@ def joseph_update(P, K, h, r):
 
 
 @njit
-def rest_measurement(win, q, b, earth_rate_w, params, z, H, R, P):
+def rest_measurement(
+    win: NDArray[np.float64],
+    q: NDArray[np.float64],
+    b: NDArray[np.float64],
+    earth_rate_w: NDArray[np.float64],
+    params: NDArray[np.float64],
+    z: NDArray[np.float64],
+    H: NDArray[np.float64],
+    R: NDArray[np.float64],
+    P: NDArray[np.float64],
+) -> None:
     """The rest measurement: ``z = ω̄_m − Rᵀ Ω_ie − b`` (3,), ``H = [Rᵀ [Ω_ie×], I, 0]`` (3, X_SIZE),
     ``R`` (3, 3): white noise over the window's rest samples plus the residual-rate floor (at rest
     the scale and misalignment errors turn nothing, δM ω ≈ 0), plus what the linear ``H`` leaves out
@@ -488,7 +536,14 @@ def rest_measurement(win, q, b, earth_rate_w, params, z, H, R, P):
 
 
 @njit
-def gravity_gate(P, z, H, R, slow, params):
+def gravity_gate(
+    P: NDArray[np.float64],
+    z: NDArray[np.float64],
+    H: NDArray[np.float64],
+    R: NDArray[np.float64],
+    slow: NDArray[np.float64],
+    params: NDArray[np.float64],
+) -> bool:
     """Decide on the gravity measurement (``x = 0``, as it is the first after the prediction).
 
     First ``R`` is matched to what the innovations show (``R`` is modified in place). The low-passed
@@ -553,7 +608,13 @@ def gravity_gate(P, z, H, R, slow, params):
 
 
 @njit
-def gravity_update(x, P, z, H, R):
+def gravity_update(
+    x: NDArray[np.float64],
+    P: NDArray[np.float64],
+    z: NDArray[np.float64],
+    H: NDArray[np.float64],
+    R: NDArray[np.float64],
+) -> None:
     """The gravity measurement's Kalman update, ``x`` (X_SIZE,) and ``P`` in place, with the acceleration
     ``δa`` a *consider* state (the Schmidt–Kalman filter: Schmidt, "Application of state-space methods to
     navigation problems", Advances in Control Systems 3, 1966): its rows of the gain are zero, so the
@@ -570,7 +631,7 @@ def gravity_update(x, P, z, H, R):
 
 
 @njit
-def rest_gate(win, slow, params):
+def rest_gate(win: NDArray[np.float64], slow: NDArray[np.float64], params: NDArray[np.float64]) -> bool:
     """Whether the window's mean rate at rest is the stretch's (then it joins the stretch's mean).
 
     The detector calls rest whatever turns more slowly than its thresholds: a car cruising straight is at
@@ -600,7 +661,14 @@ def rest_gate(win, slow, params):
 
 
 @njit
-def heading_update(x, P, q, win, slow, params):
+def heading_update(
+    x: NDArray[np.float64],
+    P: NDArray[np.float64],
+    q: NDArray[np.float64],
+    win: NDArray[np.float64],
+    slow: NDArray[np.float64],
+    params: NDArray[np.float64],
+) -> bool:
     """The heading measurement, gated, applied with the constrained gain of :func:`heading_gain`
     (Joseph form): ``x`` (X_SIZE,) and ``P`` are updated in place. Returns whether it was applied."""
     T = win[W_MAG_T]
@@ -628,13 +696,21 @@ def heading_update(x, P, q, win, slow, params):
 
 
 @njit
-def rest_due(win, slow, params):
+def rest_due(win: NDArray[np.float64], slow: NDArray[np.float64], params: NDArray[np.float64]) -> bool:
     """Whether the window ends a stretch at rest long enough for the rest measurement."""
-    return slow[S_REST_T] >= params[P_REST_TIME] and win[W_REST_N] >= 1.0
+    due: bool = slow[S_REST_T] >= params[P_REST_TIME] and win[W_REST_N] >= 1.0
+    return due
 
 
 @njit
-def inject(x, q, b, slow, win, phi):
+def inject(
+    x: NDArray[np.float64],
+    q: NDArray[np.float64],
+    b: NDArray[np.float64],
+    slow: NDArray[np.float64],
+    win: NDArray[np.float64],
+    phi: NDArray[np.float64],
+) -> None:
     """Fold the error estimate into the nominal state (``q ← exp(δθ) ⊗ q``, ``b ← b + δb``,
     ``M̂ ← M̂ + δM``), zero it, and open a new window."""
     turn = np.empty(4)
@@ -674,7 +750,7 @@ def inject(x, q, b, slow, win, phi):
 
 
 @njit
-def rotations_since_first(t, gyro):
+def rotations_since_first(t: NDArray[np.float64], gyro: NDArray[np.float64]) -> NDArray[np.float64]:
     """``R_0k`` (n, 3, 3): the rotation from sample k's body axes to sample 0's, integrated from the
     gyro (NaN samples count as zero rate), for averaging the first samples in one frame."""
     n = len(t)

@@ -26,6 +26,7 @@ import time
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from . import mekf_kernels as kern
 from . import mekf_smoother_kernels as skern
@@ -85,7 +86,14 @@ class SmootherResult:
 
 
 def smooth_log(
-    setup: FilterSetup, t, gyro, accel, mag=None, *, delta_angle=None, params: MekfParams | None = None
+    setup: FilterSetup,
+    t: ArrayLike,
+    gyro: ArrayLike | None,
+    accel: ArrayLike,
+    mag: ArrayLike | None = None,
+    *,
+    delta_angle: ArrayLike | None = None,
+    params: MekfParams | None = None,
 ) -> SmootherResult:
     """The MEKF forward and the RTS smoother backward over one whole log.
 

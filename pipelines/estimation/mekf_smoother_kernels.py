@@ -56,6 +56,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import NDArray
 
 from gyroemu.dynamics.jit import njit
 from gyroemu.dynamics.rotation import half_turn, hamilton_product, set_product
@@ -65,9 +66,36 @@ from .batched import kalman_predict, kalman_update
 
 X = kern.X_SIZE
 
+WindowStore = tuple[
+    NDArray[np.int64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+]
+"""What :func:`window_store` gives and :func:`forward_pass` takes, in that order: ``end_index``, ``M_post``,
+``F_top``, ``P_prior``, ``P_post``, ``x_upd``."""
+
 
 @njit
-def _store_window(q, b, slow, win, phi, P, x, earth, params, use_mag, F_top, P_prior, P_post, x_upd, j):
+def _store_window(
+    q: NDArray[np.float64],
+    b: NDArray[np.float64],
+    slow: NDArray[np.float64],
+    win: NDArray[np.float64],
+    phi: NDArray[np.float64],
+    P: NDArray[np.float64],
+    x: NDArray[np.float64],
+    earth: NDArray[np.float64],
+    params: NDArray[np.float64],
+    use_mag: bool,
+    F_top: NDArray[np.float64],
+    P_prior: NDArray[np.float64],
+    P_post: NDArray[np.float64],
+    x_upd: NDArray[np.float64],
+    j: int,
+) -> None:
     """One window of :func:`.batched._window` (prediction, gravity, rest, heading, injection), storing
     its transition's top rows, the covariance before and after the updates and the update, at ``j``."""
     F = np.empty((X, X))
@@ -94,7 +122,7 @@ def _store_window(q, b, slow, win, phi, P, x, earth, params, use_mag, F_top, P_p
     kern.inject(x, q, b, slow, win, phi)
 
 
-def window_store(cap: int) -> tuple[np.ndarray, ...]:
+def window_store(cap: int) -> WindowStore:
     """Empty storage for ``cap`` windows of :func:`forward_pass`, in the order it takes them:
     ``end_index`` (cap,) int64 (−1), ``M_post`` (cap, 9), ``F_top`` (cap, 5, X_SIZE), ``P_prior`` and
     ``P_post`` (cap, X_SIZE, X_SIZE), ``x_upd`` (cap, X_SIZE)."""
@@ -110,9 +138,32 @@ def window_store(cap: int) -> tuple[np.ndarray, ...]:
 
 @njit
 def forward_pass(
-    q, b, slow, P, win, phi, t, gyro, delta, accel, mag, earth, params, use_mag, start, q_out, b_out, cov_out,
-    end_index, M_post, F_top, P_prior, P_post, x_upd, j0,
-):  # fmt: skip
+    q: NDArray[np.float64],
+    b: NDArray[np.float64],
+    slow: NDArray[np.float64],
+    P: NDArray[np.float64],
+    win: NDArray[np.float64],
+    phi: NDArray[np.float64],
+    t: NDArray[np.float64],
+    gyro: NDArray[np.float64],
+    delta: NDArray[np.float64],
+    accel: NDArray[np.float64],
+    mag: NDArray[np.float64],
+    earth: NDArray[np.float64],
+    params: NDArray[np.float64],
+    use_mag: bool,
+    start: int,
+    q_out: NDArray[np.float64],
+    b_out: NDArray[np.float64],
+    cov_out: NDArray[np.float64],
+    end_index: NDArray[np.int64],
+    M_post: NDArray[np.float64],
+    F_top: NDArray[np.float64],
+    P_prior: NDArray[np.float64],
+    P_post: NDArray[np.float64],
+    x_upd: NDArray[np.float64],
+    j0: int,
+) -> tuple[int, int]:
     """Run the filter from sample ``start`` until the samples end or the window storage (``F_top`` …,
     length ``cap``) fills. ``q``, ``b``, ``slow``, ``P``, ``win``, ``phi`` carry the filter's state.
     Writes ``q_out``, ``b_out`` (n, 3) and ``cov_out`` (n, 3, 3: the forward attitude covariance);
@@ -142,7 +193,7 @@ def forward_pass(
 
 
 @njit
-def reset_composition(e, u, out):
+def reset_composition(e: NDArray[np.float64], u: NDArray[np.float64], out: NDArray[np.float64]) -> None:
     """The smoothed error ``e`` (X_SIZE,) of a window's posterior nominal state as an error of its prior
     nominal state, into which the forward pass injected the update ``u`` (:func:`.mekf_kernels.inject`):
     ``out`` (X_SIZE,).
@@ -175,7 +226,15 @@ def reset_composition(e, u, out):
 
 
 @njit
-def rts_backward(F_top, P_prior, P_post, x_upd, e_s, P_s, multiplicative=True):
+def rts_backward(
+    F_top: NDArray[np.float64],
+    P_prior: NDArray[np.float64],
+    P_post: NDArray[np.float64],
+    x_upd: NDArray[np.float64],
+    e_s: NDArray[np.float64],
+    P_s: NDArray[np.float64],
+    multiplicative: bool = True,
+) -> None:
     """The RTS recursion of the module's notes over windows ``0 … W−1``: ``e_s`` (W, X_SIZE) the
     smoothed errors, ``P_s`` (W, X_SIZE, X_SIZE) their covariances, from ``e_s[W−1]`` and ``P_s[W−1]``
     as given (at the log's last window 0 and ``P_post[W−1]``; a stretch of windows ends with the next
@@ -206,7 +265,18 @@ def rts_backward(F_top, P_prior, P_post, x_upd, e_s, P_s, multiplicative=True):
 
 
 @njit
-def per_sample(t, q_fwd, b_fwd, end_index, e_s, P_s, x_upd, q_out, b_out, cov_out):
+def per_sample(
+    t: NDArray[np.float64],
+    q_fwd: NDArray[np.float64],
+    b_fwd: NDArray[np.float64],
+    end_index: NDArray[np.int64],
+    e_s: NDArray[np.float64],
+    P_s: NDArray[np.float64],
+    x_upd: NDArray[np.float64],
+    q_out: NDArray[np.float64],
+    b_out: NDArray[np.float64],
+    cov_out: NDArray[np.float64],
+) -> None:
     """The smoothed attitude, bias and attitude covariance of every sample (module's notes). Window
     ``j ≥ 1`` holds the samples ``end_index[j−1]+1 … end_index[j]`` (``end_index[0] = −1``: the
     initial state before the first sample); samples after the last window end keep its smoothed error."""

@@ -32,6 +32,7 @@ import tempfile
 from typing import BinaryIO
 
 import numpy as np
+from numpy.typing import NDArray
 
 from . import mekf_kernels as kern
 from . import mekf_smoother_kernels as skern
@@ -125,7 +126,7 @@ class SmootherSpool:
         self._earth = earth_rate_enu(setup)
         self._files = [tempfile.TemporaryFile(dir=folder) for _ in range(3)]
         self._windows, self._samples, self._smoothed = self._files
-        self._state: tuple | None = None  # q, b, slow, P, win, phi of the forward pass
+        self._state: tuple[NDArray[np.float64], ...] | None = None  # q, b, slow, P, win, phi of the forward pass
         self._store = skern.window_store(self.segment)
         self._stored = 0  # windows in the store
         self.windows = 0  # windows filed
@@ -135,7 +136,12 @@ class SmootherSpool:
         self._served = 0  # samples given out by process
         self._next_window = 1  # the first window whose samples are not yet made
         # samples made: stamps, attitudes, biases, covariances; those from ``_at`` on not yet given out
-        self._made: tuple = (np.empty(0), np.empty((0, 4)), np.empty((0, 3)), np.empty((0, 3, 3)))
+        self._made: tuple[NDArray[np.float64], ...] = (
+            np.empty(0),
+            np.empty((0, 4)),
+            np.empty((0, 3)),
+            np.empty((0, 3, 3)),
+        )
         self._at = 0
 
     @property

@@ -95,4 +95,5 @@ def attitude_nees(q_ref: np.ndarray, q_est: np.ndarray, covariance: np.ndarray, 
     """
     e = attitude_error_vector(q_ref, q_est)[:, :dof]
     cov = np.asarray(covariance, dtype=float)[:, :dof, :dof]
-    return np.einsum("ki,ki->k", e, np.linalg.solve(cov, e[:, :, None])[:, :, 0])
+    nees: np.ndarray = np.einsum("ki,ki->k", e, np.linalg.solve(cov, e[:, :, None])[:, :, 0])
+    return nees

@@ -78,8 +78,10 @@ Initialisation, time steps, units, missing samples
 from __future__ import annotations
 
 import math
+from typing import Any, cast
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from gyroemu.dynamics.rotation import quat_conjugate, quat_from_matrix, quat_from_rotvec, quat_multiply, skew
 
@@ -115,7 +117,7 @@ def initial_attitude(accel: np.ndarray, mag: np.ndarray | None = None) -> np.nda
         w = 1.0 + up[2]
         if w < 1e-9:  # upside down: half a turn about x
             return np.array([0.0, 1.0, 0.0, 0.0])
-        q = np.array([w, up[1], -up[0], 0.0])  # (1 + c, up × z) normalised
+        q: NDArray[np.float64] = np.array([w, up[1], -up[0], 0.0])  # (1 + c, up × z) normalised
         return q / np.linalg.norm(q)
     m = np.asarray(mag, dtype=float)
     east = _unit(np.cross(m, up))
@@ -125,7 +127,9 @@ def initial_attitude(accel: np.ndarray, mag: np.ndarray | None = None) -> np.nda
     return quat_from_matrix(np.array([east, north, up]))  # rows: world axes in body coordinates
 
 
-def _as_inputs(t, gyro, accel, mag, use_mag: bool):
+def _as_inputs(
+    t: ArrayLike, gyro: ArrayLike, accel: ArrayLike, mag: ArrayLike | None, use_mag: bool
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64] | None]:
     t = np.asarray(t, dtype=float).reshape(-1)
     gyro = np.asarray(gyro, dtype=float).reshape(-1, 3)
     accel = np.asarray(accel, dtype=float).reshape(-1, 3)
@@ -150,6 +154,7 @@ class _AhrsPeer:
     has_bias = False
     _to_enu = _Q_IDENTITY  # library world frame -> ENU (magnetic)
     _reference = False  # True: the library's per-sample Python updates instead of the compiled kernels
+    _f: Any  # the library's filter object (made by _start)
 
     def __init__(self, setup: FilterSetup):
         self.setup = setup
@@ -162,16 +167,34 @@ class _AhrsPeer:
     def _start(self, q_lib: np.ndarray, accel: np.ndarray, mag: np.ndarray | None) -> None:
         """Make the library's filter object, starting at ``q_lib``."""
 
-    def _step(self, q, gyro, accel, mag, dt):
+    def _step(
+        self,
+        q: NDArray[np.float64],
+        gyro: NDArray[np.float64],
+        accel: NDArray[np.float64] | None,
+        mag: NDArray[np.float64] | None,
+        dt: float,
+    ) -> NDArray[np.float64]:
         """One library update (``accel`` or ``mag`` None: not usable in this sample). Madgwick's and
         Mahony's share their API: ``updateMARG`` with a field, ``updateIMU`` without."""
         if accel is None:
             accel = np.zeros(3)  # the library skips the correction for a zero vector
+        q_new: NDArray[np.float64]
         if mag is not None:
-            return self._f.updateMARG(q, gyr=gyro, acc=accel, mag=mag, dt=dt)
-        return self._f.updateIMU(q, gyr=gyro, acc=accel, dt=dt)
+            q_new = self._f.updateMARG(q, gyr=gyro, acc=accel, mag=mag, dt=dt)
+            return q_new
+        q_new = self._f.updateIMU(q, gyr=gyro, acc=accel, dt=dt)
+        return q_new
 
-    def _block(self, t, gyro, accel, mag, q_out, b_out) -> None:
+    def _block(
+        self,
+        t: NDArray[np.float64],
+        gyro: NDArray[np.float64],
+        accel: NDArray[np.float64],
+        mag: NDArray[np.float64] | None,
+        q_out: NDArray[np.float64],
+        b_out: NDArray[np.float64] | None,
+    ) -> None:
         """The compiled kernel over a block of a started filter: fills ``q_out`` (and ``b_out``), carries
         ``self._q``, ``self._t_last`` and the library object's state (bias, covariance)."""
         raise NotImplementedError
@@ -179,12 +202,12 @@ class _AhrsPeer:
     def _bias(self) -> np.ndarray:
         return np.full(3, np.nan)
 
-    def process(self, t, gyro, accel, mag=None) -> Estimate:
+    def process(self, t: ArrayLike, gyro: ArrayLike, accel: ArrayLike, mag: ArrayLike | None = None) -> Estimate:
         t, gyro, accel, mag = _as_inputs(t, gyro, accel, mag, self.setup.use_mag)
         n = len(t)
         q_out = np.full((n, 4), np.nan)
         b_out = np.full((n, 3), np.nan) if self.has_bias else None
-        finite_g = np.isfinite(gyro).all(axis=1)
+        finite_g = cast(NDArray[np.bool_], np.isfinite(gyro).all(axis=1))  # numpy's stubs: a bool or an array
         finite_a = np.isfinite(accel).all(axis=1) & (np.abs(accel).sum(axis=1) > 0)
         # None exactly when mag is None (the loop tests it in mag's stead)
         finite_m = None if mag is None else np.isfinite(mag).all(axis=1) & (np.abs(mag).sum(axis=1) > 0)
@@ -195,7 +218,8 @@ class _AhrsPeer:
                     continue  # not started: NaN
                 # The field of this sample, or of the block's next one that has it (a slower magnetometer).
                 later = None if finite_m is None else np.flatnonzero(finite_m[k:])
-                m0 = mag[k + later[0]] if later is not None and len(later) else None
+                # (mag is not None where finite_m is not)
+                m0 = cast(NDArray[np.float64], mag)[k + later[0]] if later is not None and len(later) else None
                 q0 = initial_attitude(accel[k], m0)
                 if q0 is None:
                     continue
@@ -222,7 +246,7 @@ class _AhrsPeer:
                         self._q,
                         gyro[k],
                         accel[k] if finite_a[k] else None,
-                        mag[k] if finite_m is not None and finite_m[k] else None,
+                        cast(NDArray[np.float64], mag)[k] if finite_m is not None and finite_m[k] else None,
                         dt,
                     ),
                     dtype=float,
@@ -242,14 +266,23 @@ class Madgwick(_AhrsPeer):
     name = "madgwick"
     _to_enu = _Q_NWU_TO_ENU
 
-    def _start(self, q_lib, accel, mag):
+    def _start(self, q_lib: NDArray[np.float64], accel: NDArray[np.float64], mag: NDArray[np.float64] | None) -> None:
         from ahrs.filters import Madgwick as _Madgwick
 
         self._f = _Madgwick(frequency=self.setup.rate_hz)
         # The gain was chosen for the architecture: gain_marg with a magnetometer, gain_imu without.
         self._f.gain = self._f.gain_marg if self.setup.use_mag else self._f.gain_imu
 
-    def _block(self, t, gyro, accel, mag, q_out, b_out):
+    def _block(
+        self,
+        t: NDArray[np.float64],
+        gyro: NDArray[np.float64],
+        accel: NDArray[np.float64],
+        mag: NDArray[np.float64] | None,
+        q_out: NDArray[np.float64],
+        b_out: NDArray[np.float64] | None,
+    ) -> None:
+        assert self._q is not None and self._t_last is not None  # process started the filter
         q_out[:], self._t_last = madgwick_block(t, gyro, accel, mag, self._q, self._t_last, self.period, self._f.gain)
 
 
@@ -259,15 +292,24 @@ class Mahony(_AhrsPeer):
     name = "mahony"
     has_bias = True
 
-    def _start(self, q_lib, accel, mag):
+    def _start(self, q_lib: NDArray[np.float64], accel: NDArray[np.float64], mag: NDArray[np.float64] | None) -> None:
         from ahrs.filters import Mahony as _Mahony
 
         self._f = _Mahony(frequency=self.setup.rate_hz)
 
-    def _bias(self):
+    def _bias(self) -> NDArray[np.float64]:
         return np.array(self._f.b, dtype=float)
 
-    def _block(self, t, gyro, accel, mag, q_out, b_out):
+    def _block(
+        self,
+        t: NDArray[np.float64],
+        gyro: NDArray[np.float64],
+        accel: NDArray[np.float64],
+        mag: NDArray[np.float64] | None,
+        q_out: NDArray[np.float64],
+        b_out: NDArray[np.float64] | None,
+    ) -> None:
+        assert self._q is not None and self._t_last is not None and b_out is not None  # started, with a bias
         f = self._f
         f.b = np.array(f.b, dtype=float)  # the library's bias integral, carried in place
         q_out[:], b_out[:], self._t_last = mahony_block(
@@ -281,10 +323,10 @@ class AhrsEkf(_AhrsPeer):
     name = "ahrs-ekf"
     _to_enu = _Q_NED_TO_ENU
 
-    def _start(self, q_lib, accel, mag):
+    def _start(self, q_lib: NDArray[np.float64], accel: NDArray[np.float64], mag: NDArray[np.float64] | None) -> None:
         from ahrs.filters import EKF
 
-        kwargs = {}
+        kwargs: dict[str, float] = {}
         if mag is not None:
             up, m = accel / np.linalg.norm(accel), mag / np.linalg.norm(mag)
             kwargs["magnetic_ref"] = float(np.degrees(np.arcsin(np.clip(-up @ m, -1.0, 1.0))))  # dip, down +
@@ -292,25 +334,44 @@ class AhrsEkf(_AhrsPeer):
         self._f.mag = np.zeros((1, 3)) if mag is not None else None  # h() and H() switch on this attribute
         self._mag_mode = self._f.mag
 
-    def _step(self, q, gyro, accel, mag, dt):
+    def _step(
+        self,
+        q: NDArray[np.float64],
+        gyro: NDArray[np.float64],
+        accel: NDArray[np.float64] | None,
+        mag: NDArray[np.float64] | None,
+        dt: float,
+    ) -> NDArray[np.float64]:
         f = self._f
         if accel is None:  # the library returns q unchanged for a zero accelerometer: predict only
             q_t = f.f(q, gyro, dt)
             F = f.dfdq(gyro, dt)
             W = 0.5 * dt * np.r_[[-q[1:]], q[0] * np.identity(3) + skew(q[1:])]
             f.P = F @ f.P @ F.T + f.g_noise * W @ W.T
-            return q_t / np.linalg.norm(q_t)
+            q_next: NDArray[np.float64] = q_t / np.linalg.norm(q_t)
+            return q_next
         if self._mag_mode is None:  # started without a field: 6D throughout
             mag = None
         if mag is None and self._mag_mode is not None:
             f.mag = None
             try:
-                return f.update(q, gyro, -accel, None, dt=dt)
+                q_6d: NDArray[np.float64] = f.update(q, gyro, -accel, None, dt=dt)
+                return q_6d
             finally:
                 f.mag = self._mag_mode
-        return f.update(q, gyro, -accel, mag, dt=dt)
+        q_new: NDArray[np.float64] = f.update(q, gyro, -accel, mag, dt=dt)
+        return q_new
 
-    def _block(self, t, gyro, accel, mag, q_out, b_out):
+    def _block(
+        self,
+        t: NDArray[np.float64],
+        gyro: NDArray[np.float64],
+        accel: NDArray[np.float64],
+        mag: NDArray[np.float64] | None,
+        q_out: NDArray[np.float64],
+        b_out: NDArray[np.float64] | None,
+    ) -> None:
+        assert self._q is not None and self._t_last is not None  # process started the filter
         f = self._f
         f.P = np.array(f.P, dtype=float)  # the library's covariance, carried in place
         q_out[:], self._t_last = ekf_block(
@@ -336,7 +397,8 @@ def import_vqf() -> type:
         raise VqfUnavailable(
             f"the optional 'vqf' package is not installed (pip install 'gyroemu[vqf]' or pip install vqf): {exc}"
         ) from exc
-    return VQF
+    vqf_class: type = VQF  # vqf ships no types
+    return vqf_class
 
 
 class Vqf:
@@ -351,13 +413,15 @@ class Vqf:
         self._out_rot = quat_from_rotvec([0.0, 0.0, -setup.declination_rad]) if setup.use_mag else _Q_IDENTITY
         self._last: tuple[np.ndarray, np.ndarray] | None = None  # (q, bias) of the last sample, for held ones
 
-    def _batch(self, gyro, accel, mag):
+    def _batch(
+        self, gyro: NDArray[np.float64], accel: NDArray[np.float64], mag: NDArray[np.float64] | None
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         out = self._f.updateBatch(
             np.ascontiguousarray(gyro), np.ascontiguousarray(accel), None if mag is None else np.ascontiguousarray(mag)
         )
         return (out["quat9D"] if mag is not None else out["quat6D"]), out["bias"]
 
-    def process(self, t, gyro, accel, mag=None) -> Estimate:
+    def process(self, t: ArrayLike, gyro: ArrayLike, accel: ArrayLike, mag: ArrayLike | None = None) -> Estimate:
         t, gyro, accel, mag = _as_inputs(t, gyro, accel, mag, self.setup.use_mag)
         n = len(t)
         # VQF skips an all-zero accelerometer or magnetometer sample: missing values become zeros.
@@ -408,7 +472,7 @@ class OfflineVqf:
         self._out_rot = quat_from_rotvec([0.0, 0.0, -setup.declination_rad]) if setup.use_mag else _Q_IDENTITY
         self._done = False
 
-    def process(self, t, gyro, accel, mag=None) -> Estimate:
+    def process(self, t: ArrayLike, gyro: ArrayLike, accel: ArrayLike, mag: ArrayLike | None = None) -> Estimate:
         if self._done:
             raise ValueError("offline-vqf is offline: it takes the whole log in one process() call")
         self._done = True

@@ -133,11 +133,13 @@ class Estimate:
     def concatenate(parts: list[Estimate]) -> Estimate:
         """Blocks joined in order (a field is kept only when every block has it)."""
 
-        def join(name):
+        def join(name: str) -> np.ndarray | None:
             values = [getattr(p, name) for p in parts]
             return None if any(v is None for v in values) else np.concatenate(values)
 
-        return Estimate(q_wb=join("q_wb"), gyro_bias=join("gyro_bias"), q_wb_covariance=join("q_wb_covariance"))
+        q_wb = join("q_wb")
+        assert q_wb is not None  # every block has its attitude
+        return Estimate(q_wb=q_wb, gyro_bias=join("gyro_bias"), q_wb_covariance=join("q_wb_covariance"))
 
 
 @runtime_checkable

@@ -72,7 +72,7 @@ class FilterSpec:
         """The filter's class; :class:`FilterError` (with the reason) when it cannot be imported."""
         module, _, attr = self.target.partition(":")
         try:
-            cls = getattr(importlib.import_module(module), attr)
+            cls: type = getattr(importlib.import_module(module), attr)
         except ImportError as exc:
             hint = f" (pip install 'gyroemu[{self.extra}]')" if self.extra else ""
             raise FilterError(f"filter '{self.name}' is not available: {exc}{hint}") from exc
@@ -204,7 +204,7 @@ def _user_class(spec: str) -> type:
                 f"filter '{spec}': importing '{module_name}' failed: {type(exc).__name__}: {exc}"
             ) from exc
     try:
-        cls = getattr(module, attr)
+        cls: type = getattr(module, attr)
     except AttributeError:
         raise FilterError(f"filter '{spec}': module '{module_name}' has no attribute '{attr}'") from None
     if not callable(cls):
@@ -219,7 +219,7 @@ def filter_class(name_or_spec: str) -> type:
     return _user_class(name_or_spec)
 
 
-def make_filter(name_or_spec: str, setup: FilterSetup):
+def make_filter(name_or_spec: str, setup: FilterSetup) -> protocol.AttitudeFilter:
     """A filter object for ``setup``: a built-in name (``FILTERS``) or a user's ``module:Class``.
 
     Raises
@@ -231,7 +231,7 @@ def make_filter(name_or_spec: str, setup: FilterSetup):
     """
     cls = filter_class(name_or_spec)
     try:
-        filt = cls(setup)
+        filt: protocol.AttitudeFilter = cls(setup)  # checked against the protocol below
     except FilterError:
         raise
     except Exception as exc:  # noqa: BLE001 - a user's constructor failing is the user's argument at fault

@@ -9,6 +9,8 @@ bench) and the live filter.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from gyroemu.errors import LogError
@@ -19,7 +21,7 @@ from .protocol import Estimate
 __all__ = ["check_counts", "check_samples", "estimate_series", "median_step_ns", "not_increasing_error", "rate_of"]
 
 
-def check_samples(path, name: str, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray) -> str | None:
+def check_samples(path: str | Path | None, name: str, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray) -> str | None:
     """Refuse samples a filter cannot run on, naming the file (:class:`LogError`): fewer than two,
     stamps that do not increase, or NaN everywhere. Some NaN samples are usable (the filters skip
     them): returns a note saying how many, None when there are none."""
@@ -32,7 +34,7 @@ def check_samples(path, name: str, t: np.ndarray, gyro: np.ndarray, accel: np.nd
     return check_counts(path, name, len(t), int(finite.sum()))
 
 
-def not_increasing_error(path, name: str, first: tuple[int, float, float, int]) -> LogError:
+def not_increasing_error(path: str | Path | None, name: str, first: tuple[int, float, float, int]) -> LogError:
     """The error for IMU stamps that do not increase: ``first`` is the first such sample's index, its stamp
     and the one before it (s), and how many such steps there are."""
     k, t, before, count = first
@@ -43,7 +45,7 @@ def not_increasing_error(path, name: str, first: tuple[int, float, float, int]) 
     )
 
 
-def check_counts(path, name: str, count: int, finite: int) -> str | None:
+def check_counts(path: str | Path | None, name: str, count: int, finite: int) -> str | None:
     """:func:`check_samples` for samples counted as they went by (their stamps increasing): ``count``
     samples, ``finite`` of them with finite gyro and accelerometer rows."""
     if count < 2:
@@ -95,7 +97,7 @@ def _integer_ns(stamp_ns: np.ndarray) -> np.ndarray:
     return stamp_ns.astype(np.int64, copy=False)
 
 
-def estimate_series(t, estimate: Estimate, gyro) -> ImuSeries:
+def estimate_series(t: np.ndarray, estimate: Estimate, gyro: np.ndarray) -> ImuSeries:
     """The ``/estimate/imu`` content of an estimate: attitude, covariance, bias-corrected rate."""
     rate = gyro - estimate.gyro_bias if estimate.gyro_bias is not None else None
     return ImuSeries(t=t, q_wb=estimate.q_wb, omega_b=rate, q_wb_covariance=estimate.q_wb_covariance)

@@ -11,7 +11,7 @@ import tomllib
 import warnings
 from collections.abc import Mapping
 from dataclasses import replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -20,6 +20,7 @@ from .protocol import DeviceNoise, FilterSetup
 
 if TYPE_CHECKING:
     from gyroemu.dynamics import Scenario
+    from gyroemu.dynamics.earth import Site
     from gyroemu.sensors import Device
 
 __all__ = [
@@ -61,9 +62,10 @@ def noise_from_device(device: Device) -> DeviceNoise:
     )
 
 
-def _site(scenario):
+def _site(scenario: Scenario | None) -> Site | None:
     """The scenario's ``[site]`` (None for kinds in an inertial frame, such as the tops)."""
-    return getattr(scenario.spec, "site", None) if scenario is not None else None
+    site: Site | None = getattr(scenario.spec, "site", None) if scenario is not None else None
+    return site
 
 
 def setup_for(device: Device, scenario: Scenario | None = None, *, use_mag: bool | None = None) -> FilterSetup:
@@ -102,7 +104,7 @@ def setup_for(device: Device, scenario: Scenario | None = None, *, use_mag: bool
     )
 
 
-def setup_from_metadata(metadata: dict | None, rate_hz: float, *, use_mag: bool) -> FilterSetup:
+def setup_from_metadata(metadata: dict[str, Any] | None, rate_hz: float, *, use_mag: bool) -> FilterSetup:
     """The setup for a recorded log: from its ``gyroemu`` metadata record when it has one (device and
     scenario configs as TOML), otherwise the defaults at ``rate_hz``. A config that no longer validates
     is ignored with a warning (the log stays usable)."""

@@ -38,7 +38,7 @@ import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import cast
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -48,6 +48,10 @@ from gyroemu.pipelines.formats.file_names import same_file
 from gyroemu.sensors.allan import TERMS, AllanDeviation, AllanFit, Coefficient, allan_deviation, fit_allan
 from gyroemu.sensors.allan_stream import OverlappingAllanAccumulator
 from gyroemu.sensors.errors import STANDARD_GRAVITY, ErrorModel
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 __all__ = [
     "AllanError",
@@ -180,7 +184,7 @@ class StaticCheck:
         """The figures beyond their limits, described and joined by "; " ("" when static)."""
         return "; ".join(f.describe() for f in self.figures if not f.static)
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """The figures as plain data (JSON)."""
         return {
             "static": self.static,
@@ -239,18 +243,20 @@ class AllanReport:
         """The gyro's table, and the accelerometer's below it when there is one."""
         return "\n\n".join(t for t in (self.table("gyro"), self.table("accel")) if t)
 
-    def _sensor(self, sensor: str) -> tuple:
+    def _sensor(
+        self, sensor: str
+    ) -> tuple[tuple[AllanFit, AllanFit, AllanFit] | None, ErrorModel | None, dict[str, tuple[float, str]]]:
         if sensor == "gyro":
             return self.fits, self.spec, SPEC_UNITS
         if sensor == "accel":
             return self.accel_fits, self.accel_spec, ACCEL_SPEC_UNITS
         raise ValueError(f"sensor must be 'gyro' or 'accel', got {sensor!r}")
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """The report as plain data (``gyroemu allan --json``): per sensor and term, its unit, each
         axis's value, low, high (68 %), resolved and upper_limit in that unit (null: infinite or not
         given), and the spec; the static check's figures; the sample rate."""
-        out: dict = {"rate_hz": _finite(self.rate_hz), "topic": self.topic}
+        out: dict[str, Any] = {"rate_hz": _finite(self.rate_hz), "topic": self.topic}
         for sensor in ("gyro", "accel"):
             fits, spec, units = self._sensor(sensor)
             if fits is None:
@@ -259,7 +265,7 @@ class AllanReport:
             specified = _spec_terms(spec) if spec is not None else {}
             terms = {}
             for term, (factor, unit) in units.items():
-                entry: dict = {"label": TERM_LABELS[sensor][term], "unit": unit}
+                entry: dict[str, Any] = {"label": TERM_LABELS[sensor][term], "unit": unit}
                 for axis, fit in zip("xyz", fits):
                     c = getattr(fit, term)
                     entry[axis] = {
@@ -281,7 +287,7 @@ class AllanReport:
         return json.dumps(self.to_dict(), indent=2)
 
 
-def _spec_terms(spec: ErrorModel) -> dict:
+def _spec_terms(spec: ErrorModel) -> dict[str, Any]:
     """The specification's Allan coefficients in SI (axis x; presets give the same for all axes)."""
     q = spec.integral_lsb / np.sqrt(12) if spec.integral_lsb else None
     return {
@@ -328,7 +334,7 @@ class AllanError(ConfigError):
     """Bad options of ``gyroemu allan``, found before any work (the message names the argument)."""
 
 
-def default_plot_path(log: str | os.PathLike) -> Path:
+def default_plot_path(log: str | os.PathLike[str]) -> Path:
     """The plot's path without ``--out``: the log's, with ``.allan.png`` for its suffix."""
     return Path(log).with_suffix(".allan.png")
 
@@ -341,9 +347,9 @@ def _check_output(path: Path, argument: str, log: Path, force: bool) -> None:
 
 
 def check_options(
-    log: str | os.PathLike,
-    out: str | os.PathLike | None = None,
-    kalibr: str | os.PathLike | None = None,
+    log: str | os.PathLike[str],
+    out: str | os.PathLike[str] | None = None,
+    kalibr: str | os.PathLike[str] | None = None,
     force: bool = False,
     plot: bool = True,
 ) -> Path | None:
@@ -397,7 +403,7 @@ _MIN_SAMPLES = 64
 _MAX_STEP_BINS = 1 << 16
 
 
-def _shape_error(shape: tuple) -> str:
+def _shape_error(shape: tuple[int, ...]) -> str:
     return f"an Allan analysis needs a (N, 3) gyro record with N >= {_MIN_SAMPLES}, got shape {shape}"
 
 
@@ -829,7 +835,7 @@ def _mcap_series(log: Path) -> tuple[_GyroSeries, float, str | None, _TruthStats
     metadata = [dict(m.metadata) for m in scan.metadata if m.name == "gyroemu"]
     records = {m.get("topic_prefix", ""): m for m in metadata}
 
-    def meta(channel_id: int) -> dict | None:
+    def meta(channel_id: int) -> dict[str, Any] | None:
         key = place(channel_id)[0]
         return records.get(key) or (metadata[0] if key == "" and len(metadata) == 1 else None)
 
@@ -844,7 +850,7 @@ def _mcap_series(log: Path) -> tuple[_GyroSeries, float, str | None, _TruthStats
     return chosen, chosen.steps.median() * 1e-9, device_toml, truth, scan.data[channel_id].channel.topic
 
 
-def allan_of_log(path: str | os.PathLike, allow_motion: bool = False) -> AllanReport:
+def allan_of_log(path: str | os.PathLike[str], allow_motion: bool = False) -> AllanReport:
     """Fit a static log's gyro and accelerometer: an .mcap (its device, with the device's config when
     the log carries it), or an .npz of ``gyroemu simulate --device`` (``imu/gyro``, ``imu/accel``,
     ``imu/t``, ``device_toml``). The sample interval is the median step of the stamps. Raises
@@ -916,7 +922,7 @@ def _static_check(blocks: _BlockMeans, truth: _TruthStats | None, sigma_min: flo
     return StaticCheck(figures=tuple(figures), notes=tuple(notes))
 
 
-def plot_format(out: str | os.PathLike) -> str:
+def plot_format(out: str | os.PathLike[str]) -> str:
     """The format matplotlib draws ``out`` in, named by its suffix (``png``, ``pdf``, ``svg``, ...);
     ``ValueError`` for a suffix matplotlib does not write."""
     from matplotlib.backend_bases import FigureCanvasBase
@@ -931,7 +937,7 @@ def plot_format(out: str | os.PathLike) -> str:
     return suffix
 
 
-def write_allan_plot(report: AllanReport, out: str | os.PathLike, title: str = "") -> Path:
+def write_allan_plot(report: AllanReport, out: str | os.PathLike[str], title: str = "") -> Path:
     """:func:`plot_allan` to ``out``, in the format its suffix names (:func:`plot_format`), whole or
     not at all (a temporary file beside it, renamed over it); returns ``out``."""
     import matplotlib
@@ -967,7 +973,7 @@ def plot_allan(report: AllanReport, out: str | Path, title: str = "") -> Path:
     return out
 
 
-def _allan_figure(report: AllanReport, title: str):
+def _allan_figure(report: AllanReport, title: str) -> Figure:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -984,7 +990,9 @@ def _allan_figure(report: AllanReport, title: str):
     return fig
 
 
-def _draw_panel(ax, fits, spec: ErrorModel | None, scale: float, ylabel: str, title: str) -> None:
+def _draw_panel(
+    ax: Axes, fits: tuple[AllanFit, AllanFit, AllanFit], spec: ErrorModel | None, scale: float, ylabel: str, title: str
+) -> None:
     """One sensor's curves, models and spec lines on ``ax``, in the data's unit times ``scale``."""
     for axis, (fit, colour) in enumerate(zip(fits, ("tab:red", "tab:green", "tab:blue"))):
         a = fit.allan
@@ -1060,7 +1068,7 @@ def kalibr_imu_yaml(report: AllanReport, rostopic: str | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_kalibr_yaml(report: AllanReport, path: str | os.PathLike, force: bool = False) -> Path:
+def write_kalibr_yaml(report: AllanReport, path: str | os.PathLike[str], force: bool = False) -> Path:
     """Write :func:`kalibr_imu_yaml` to ``path`` whole or not at all; :class:`AllanError` (a ``ValueError``)
     saying why when ``path`` cannot take it (:func:`output_file_problem`: it exists and not ``force``,
     among others)."""

@@ -69,12 +69,13 @@ import os
 import sys
 import time
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from gyroemu.pipelines.estimation.protocol import Estimate, FilterSetup
 from gyroemu.pipelines.estimation.registry import (
@@ -148,6 +149,16 @@ class _Run:
     seed: int | None = None
 
 
+if TYPE_CHECKING:
+    from gyroemu.dynamics import Scenario, Trajectory
+    from gyroemu.sensors import Device
+
+    _SimItem = tuple[Scenario, list[Device], FilterSetup, str, str]
+    """A simulated case loaded (:func:`_sim_case`): scenario, devices per run, setup, name, mode."""
+    _LogItem = tuple[str, str, FilterSetup, _Run, dict[str, Any], list[str]]
+    """A log device read whole (:func:`_log_runs`): name, mode, setup, run, source, notes."""
+
+
 # ==================================================================================================
 # Results
 
@@ -174,7 +185,7 @@ class FilterResult:
     def diverged_runs(self) -> int:
         return sum(r.diverged for r in self.runs)
 
-    def summary(self, metric: str) -> dict:
+    def summary(self, metric: str) -> dict[str, Any]:
         """Mean, standard deviation (ddof 1) and count over the runs that did not diverge (finite values);
         for convergence also how many never converged."""
         values = [getattr(r, metric) for r in self.runs if not r.diverged or metric in ("throughput", "wall_s")]
@@ -201,7 +212,7 @@ class CaseResult:
     samples: int
     duration_s: float
     runs: int
-    source: dict
+    source: dict[str, Any]
     filters: list[FilterResult] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
 
@@ -214,9 +225,9 @@ class BenchReport:
     """What :func:`run_bench` found."""
 
     cases: list[CaseResult]
-    settings: dict
+    settings: dict[str, Any]
     notes: list[str] = field(default_factory=list)
-    unavailable: dict = field(default_factory=dict)
+    unavailable: dict[str, str] = field(default_factory=dict)
 
     # --- Markdown ---------------------------------------------------------------------------------
     def to_markdown(self) -> str:
@@ -322,7 +333,7 @@ class BenchReport:
         return cells
 
     # --- JSON -------------------------------------------------------------------------------------
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {
             "gyroemu_bench": 1,
             "settings": self.settings,
@@ -376,12 +387,12 @@ class BenchReport:
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=1, ensure_ascii=False, allow_nan=False)
 
-    def figures(self) -> dict:
+    def figures(self) -> dict[str, Any]:
         """:func:`report_figures` of this report."""
         return report_figures(self.to_dict())
 
     # --- Plots ------------------------------------------------------------------------------------
-    def save_plots(self, directory) -> list[Path]:
+    def save_plots(self, directory: str | os.PathLike[str]) -> list[Path]:
         """One PNG per case, ``<case>.png`` in ``directory``: each filter's error against time (first run;
         9D: total and inclination, 6D: inclination), log scale, the convergence threshold dashed."""
         import matplotlib
@@ -416,7 +427,7 @@ class BenchReport:
             written.append(write_figure_atomic(fig, directory / name, dpi=110))
         return written
 
-    def save(self, directory, *, replace_earlier: bool = False) -> dict:
+    def save(self, directory: str | os.PathLike[str], *, replace_earlier: bool = False) -> dict[str, Any]:
         """``bench.md``, ``bench.json`` and the plots in ``directory`` (made if missing); their paths, and
         under ``"removed"`` the earlier report's plots removed. With ``replace_earlier`` (``--force``), the
         plots of an earlier report there (:func:`earlier_plots`) that this one does not write are removed
@@ -427,7 +438,7 @@ class BenchReport:
         removed = [p for p in (earlier_plots(directory) if replace_earlier else []) if p.name not in ours]
         for plot in removed:  # before bench.json, which names them, is replaced: a stop here leaves it naming them
             plot.unlink(missing_ok=True)
-        paths: dict = {"markdown": directory / "bench.md", "json": directory / "bench.json"}
+        paths: dict[str, Any] = {"markdown": directory / "bench.md", "json": directory / "bench.json"}
         write_text_atomic(paths["json"], self.to_json())
         write_text_atomic(paths["markdown"], self.to_markdown())
         paths["plots"] = self.save_plots(directory)
@@ -502,7 +513,7 @@ def check_report_folder(folder: str | os.PathLike[str], *, force: bool = False, 
         )
 
 
-def report_figures(data: dict) -> dict:
+def report_figures(data: dict[str, Any]) -> dict[str, Any]:
     """A report's content (``BenchReport.to_dict()`` or ``bench.json`` read) without what differs from
     one run to the next of the same bench: the settings (the date) and every wall time and throughput.
     Two benches of the same cases give equal figures (a log read a block at a time and whole do)."""
@@ -524,7 +535,7 @@ def _si(x: float) -> str:
     return f"{x:.3g}"
 
 
-def _cell(summary: dict, digits: int, metric: str) -> str:
+def _cell(summary: dict[str, Any], digits: int, metric: str) -> str:
     never = summary.get("never", 0)
     if summary["mean"] is None:
         return "never" if never else "—"
@@ -541,22 +552,22 @@ def _cell(summary: dict, digits: int, metric: str) -> str:
 
 
 def evaluate_run(
-    t,
-    q_est,
-    q_true,
+    t: ArrayLike,
+    q_est: ArrayLike,
+    q_true: ArrayLike,
     *,
-    mask=None,
-    six_d=False,
-    threshold_deg=2.0,
-    bias_est=None,
-    omega_true=None,
-    gyro=None,
-    rate_hz=None,
-    wall_s=float("nan"),
-    throughput=None,
-    seed=None,
-    reason="",
-) -> tuple[RunResult, dict]:
+    mask: ArrayLike | None = None,
+    six_d: bool = False,
+    threshold_deg: float = 2.0,
+    bias_est: np.ndarray | None = None,
+    omega_true: np.ndarray | None = None,
+    gyro: np.ndarray | None = None,
+    rate_hz: float | None = None,
+    wall_s: float = float("nan"),
+    throughput: float | None = None,
+    seed: int | None = None,
+    reason: str = "",
+) -> tuple[RunResult, dict[str, Any]]:
     """The metrics of one filter run (see the module's docstring) and the per-sample errors (degrees,
     NaN outside the counted samples) as ``{"total": ..., "inclination": ...}``: :class:`RunMetrics`
     given the run as one block (a log read a block at a time gives the same to the bit)."""
@@ -573,7 +584,8 @@ def evaluate_run(
         t_last=float(t[-1]) if n else math.nan,
         six_d=six_d,
         threshold_deg=threshold_deg,
-        bias_window=max(1, int(round(BIAS_WINDOW_S * rate_hz))) if with_bias else None,
+        # with_bias: rate_hz is a rate
+        bias_window=max(1, int(round(BIAS_WINDOW_S * cast(float, rate_hz)))) if with_bias else None,
     )
     errors = metrics.add(t, q_est, q_true, mask, bias_est, omega_true, gyro)
     metrics.wall_s = float(wall_s)
@@ -584,7 +596,9 @@ def evaluate_run(
 # Running
 
 
-def _run_filter(spec: str, setup: FilterSetup, run: _Run, *, six_d: bool, threshold_deg: float):
+def _run_filter(
+    spec: str, setup: FilterSetup, run: _Run, *, six_d: bool, threshold_deg: float
+) -> tuple[RunResult, dict[str, np.ndarray], str]:
     """One filter on one run: (RunResult, errors, name)."""
     filt = make_filter(spec, setup)
     name = str(filt.name)
@@ -616,7 +630,7 @@ def _run_filter(spec: str, setup: FilterSetup, run: _Run, *, six_d: bool, thresh
     return result, errors, name
 
 
-def _curve(fr: FilterResult, t: np.ndarray, errors: dict) -> None:
+def _curve(fr: FilterResult, t: np.ndarray, errors: dict[str, Any]) -> None:
     step = max(1, len(t) // PLOT_POINTS)
     fr.curve_t = (t - t[0])[::step]
     fr.curve_total_deg = errors["total"][::step]
@@ -624,7 +638,7 @@ def _curve(fr: FilterResult, t: np.ndarray, errors: dict) -> None:
 
 
 class _Progress:
-    def __init__(self, total: int, enabled: bool | None):
+    def __init__(self, total: int, enabled: bool | None) -> None:
         if enabled is None:
             enabled = sys.stderr.isatty()
         self.bar = None
@@ -648,7 +662,7 @@ class _Progress:
             self.bar.close()
 
 
-def _sim_case(case: SimCase, runs: int, seed: int):
+def _sim_case(case: SimCase, runs: int, seed: int) -> _SimItem:
     """Load a simulated case: (scenario, devices per run, setup, traj, name, mode)."""
     from gyroemu.dynamics import load_scenario
     from gyroemu.dynamics.truth_source import WHOLE_TRUTH_BYTES
@@ -671,7 +685,7 @@ def _sim_case(case: SimCase, runs: int, seed: int):
     return scenario, devices, setup, name, mode
 
 
-def _sim_run(traj, device, seed) -> _Run:
+def _sim_run(traj: Trajectory, device: Device, seed: int) -> _Run:
     from gyroemu.pipelines.formats.mcap_log import truth_series
 
     samples = device.measure(traj)
@@ -690,7 +704,7 @@ def _sim_run(traj, device, seed) -> _Run:
     )
 
 
-def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, list[str]]]:
+def _log_runs(case: LogCase) -> list[_LogItem]:
     """The devices of a log to bench, the log read whole: (name, mode, setup, run, source, notes) each."""
     from gyroemu.pipelines.estimation.series import check_samples, median_step_ns, rate_of
     from gyroemu.pipelines.formats.device_stream import nearest
@@ -701,6 +715,7 @@ def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, li
     chosen = choose_devices(path, log.devices, case, lambda n, d: d.truth is not None and d.truth.q_wb is not None)
     out = []
     for name, dev in chosen.items():
+        assert dev.truth is not None and dev.truth.q_wb is not None  # choose_devices kept a truth attitude
         s = dev.samples
         t = np.asarray(s.t, dtype=float)
         note = check_samples(path, name, t, s.gyro, s.accel)  # LogError: too few, stamps, all NaN
@@ -744,8 +759,8 @@ def _log_runs(case: LogCase) -> list[tuple[str, str, FilterSetup, _Run, dict, li
     return out
 
 
-def _resolve_filters(filters) -> tuple[list[str], dict]:
-    unavailable = {}
+def _resolve_filters(filters: Iterable[str] | None) -> tuple[list[str], dict[str, str]]:
+    unavailable: dict[str, str] = {}
     if filters is None:
         unavailable = unavailable_filters()
         filters = available_filters()
@@ -756,8 +771,8 @@ def _resolve_filters(filters) -> tuple[list[str], dict]:
 
 
 def run_bench(
-    cases=None,
-    filters=None,
+    cases: Iterable[SimCase | LogCase] | None = None,
+    filters: Iterable[str] | None = None,
     runs: int = 3,
     seed: int = 0,
     *,
@@ -843,7 +858,16 @@ def run_bench(
     return BenchReport(cases=results, settings=settings, unavailable=unavailable)
 
 
-def _bench_sim(case: SimCase, item, filters, runs, seed, threshold_deg, batch_fn, bar) -> CaseResult:
+def _bench_sim(
+    case: SimCase,
+    item: _SimItem,
+    filters: list[str],
+    runs: int,
+    seed: int,
+    threshold_deg: float,
+    batch_fn: Callable[..., Estimate] | None,
+    bar: _Progress,
+) -> CaseResult:
     scenario, devices, setup, name, mode = item
     six_d = mode == "6D"
     traj = scenario.simulate(duration=case.duration)
@@ -894,7 +918,9 @@ def _bench_sim(case: SimCase, item, filters, runs, seed, threshold_deg, batch_fn
     )
 
 
-def _bench_batched(batch_fn, setup, runs: list[_Run], six_d, threshold_deg) -> FilterResult:
+def _bench_batched(
+    batch_fn: Callable[..., Estimate], setup: FilterSetup, runs: list[_Run], six_d: bool, threshold_deg: float
+) -> FilterResult:
     """All runs through ``mekf_batch`` at once when they share their stamps, else one by one."""
     fr = FilterResult(filter="mekf", name="mekf", batched=True, runs=[])
     shared = all(len(r.t) == len(runs[0].t) and np.array_equal(r.t, runs[0].t) for r in runs)
@@ -956,7 +982,7 @@ def _bench_batched(batch_fn, setup, runs: list[_Run], six_d, threshold_deg) -> F
     return fr
 
 
-def _log_items(case: LogCase, filters: list[str]) -> list:
+def _log_items(case: LogCase, filters: list[str]) -> list[LogDevice] | list[_LogItem]:
     """A log case's devices: read a block at a time (:class:`LogDevice`), or whole where one pass cannot
     pair the log or the case asks for it (the tuples of :func:`_log_runs`)."""
     from gyroemu.pipelines.formats.device_stream import NotStreamable
@@ -969,7 +995,9 @@ def _log_items(case: LogCase, filters: list[str]) -> list:
     return _log_runs(case)
 
 
-def _bench_log_stream(path: Path, dev: LogDevice, filters, threshold_deg, bar) -> CaseResult:
+def _bench_log_stream(
+    path: Path, dev: LogDevice, filters: list[str], threshold_deg: float, bar: _Progress
+) -> CaseResult:
     """A log device read a block at a time (:func:`.bench_log.bench_log_device`)."""
     runs = bench_log_device(path, dev, filters, threshold_deg, bar.describe)
     results = []
@@ -982,7 +1010,16 @@ def _bench_log_stream(path: Path, dev: LogDevice, filters, threshold_deg, bar) -
     return _log_case(dev.label, dev.mode, dev.setup, dev.samples, duration, dev.source, results, dev.notes)
 
 
-def _log_case(name, mode, setup: FilterSetup, samples: int, duration_s: float, source, filters, notes) -> CaseResult:
+def _log_case(
+    name: str,
+    mode: str,
+    setup: FilterSetup,
+    samples: int,
+    duration_s: float,
+    source: dict[str, Any],
+    filters: list[FilterResult],
+    notes: list[str],
+) -> CaseResult:
     """A log device's case in the report, read whole or a block at a time."""
     return CaseResult(
         name=name,
@@ -998,7 +1035,7 @@ def _log_case(name, mode, setup: FilterSetup, samples: int, duration_s: float, s
     )
 
 
-def _bench_log(item, filters, threshold_deg, bar) -> CaseResult:
+def _bench_log(item: _LogItem, filters: list[str], threshold_deg: float, bar: _Progress) -> CaseResult:
     name, mode, setup, run, source, notes = item
     results = []
     for spec in filters:

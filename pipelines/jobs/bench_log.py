@@ -151,7 +151,7 @@ def mask_notes(path: Path, name: str, flags: bool | None, mask_count: int, no_re
 
 
 def log_setup(
-    metadata: dict | None,
+    metadata: dict[str, Any] | None,
     rate_hz: float,
     mode: str,
     case: LogCase,
@@ -187,7 +187,7 @@ class LogDevice:
     label: str
     mode: str  # "9D" or "6D"
     setup: FilterSetup
-    source: dict
+    source: dict[str, Any]
     notes: list[str]
     device: StreamDevice
     samples: int

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -72,7 +73,7 @@ class RunResult:
     diverged: bool
     reason: str = ""
 
-    def to_json(self) -> dict:
+    def to_json(self) -> dict[str, Any]:
         d = {k: json_number(v) for k, v in self.__dict__.items()}
         d["converged"] = self.convergence_s is not None and math.isfinite(self.convergence_s)
         return d

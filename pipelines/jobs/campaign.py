@@ -104,12 +104,12 @@ class CampaignSummary:
     tasks: int
     resumed: int
     ran: int
-    failures: list[TaskFailure]
+    failures: list[TaskFailure[CellTask]]
     rows: int
     elapsed_s: float
     report: BenchReport
     runs_made: int = 0
-    paths: dict = field(default_factory=dict)
+    paths: dict[str, Any] = field(default_factory=dict)
 
     @property
     def runs_per_s(self) -> float:
@@ -178,7 +178,7 @@ def run_campaign(options: CampaignOptions) -> CampaignSummary:
     done_before = campaign.runs - sum(t.runs for t in todo)
     with RunsProgress(campaign.runs, done_before, label=f"campaign {campaign.name}", enabled=options.progress) as bar:
 
-        def stored(task: CellTask, rows: list[dict]) -> None:
+        def stored(task: CellTask, rows: list[dict[str, Any]]) -> None:
             store.write(task.key, rows)
             ran.append(task)
             bar.advance(task.runs)
@@ -250,7 +250,7 @@ def _num(v: Any) -> Any:
 
 
 def campaign_report(
-    campaign: Campaign, table: Any, failures: list[TaskFailure] | None = None, *, store: Path | None = None
+    campaign: Campaign, table: Any, failures: list[TaskFailure[CellTask]] | None = None, *, store: Path | None = None
 ) -> BenchReport:
     """The campaign's stored rows (a ``pyarrow.Table`` of :data:`ROW_COLUMNS`) as a
     :class:`~gyroemu.pipelines.jobs.bench.BenchReport`: a case per cell, runs in seed order; the
@@ -259,7 +259,7 @@ def campaign_report(
 
     failures = list(failures or [])
     by_task = {t.key: t for t in campaign.tasks}
-    rows_by_cell: dict[Any, list[dict]] = defaultdict(list)
+    rows_by_cell: dict[Any, list[dict[str, Any]]] = defaultdict(list)
     for row in table.to_pylist():
         task = by_task.get(row["task"])
         if task is not None:
@@ -370,7 +370,7 @@ def _markdown(report: BenchReport) -> str:
     return "\n".join(head) + "\n" + body
 
 
-def save_campaign_report(report: BenchReport, table: Any, out: Path, *, plots: bool = True) -> dict:
+def save_campaign_report(report: BenchReport, table: Any, out: Path, *, plots: bool = True) -> dict[str, Any]:
     """``bench.md``, ``bench.json`` and (``plots``) one box plot per cell in ``out``; their paths."""
     from gyroemu.pipelines.formats.atomic import write_text_atomic
 

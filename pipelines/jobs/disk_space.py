@@ -12,6 +12,10 @@ from __future__ import annotations
 import errno
 import os
 import shutil
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from gyroemu.dynamics.scenarios import Scenario
 
 __all__ = [
     "MCAP_RECORD_OVERHEAD",
@@ -65,7 +69,7 @@ def memory_problem(need_bytes: float, what: str) -> str | None:
 
 
 def whole_truth_problem(
-    scenario, duration: float | None, rate_hz: float | None = None, besides: tuple[float, str] | None = None
+    scenario: Scenario, duration: float | None, rate_hz: float | None = None, besides: tuple[float, str] | None = None
 ) -> str | None:
     """Why a run of ``scenario`` over ``duration`` s (None: the scenario file's ``duration_s``) at
     ``rate_hz`` (None: its own) cannot hold its truth whole on this machine (with ``besides``, bytes held

@@ -32,9 +32,10 @@ from __future__ import annotations
 import math
 import os
 import warnings
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
@@ -65,6 +66,7 @@ from gyroemu.pipelines.formats.channels import (
     split_topic,
 )
 from gyroemu.pipelines.formats.device_stream import (
+    Counted,
     DeviceBlock,
     DeviceCensus,
     DeviceStream,
@@ -74,8 +76,8 @@ from gyroemu.pipelines.formats.device_stream import (
     scan_devices,
 )
 from gyroemu.pipelines.formats.frames import TF_LOG_RATE_HZ, TfThinning
-from gyroemu.pipelines.formats.mcap_log import LogWarning, read_mcap
-from gyroemu.pipelines.formats.mcap_records import McapRecordWalk
+from gyroemu.pipelines.formats.mcap_log import DeviceLog, LogWarning, read_mcap
+from gyroemu.pipelines.formats.mcap_records import ChannelInfo, McapRecordWalk
 from gyroemu.pipelines.formats.messages import IMU, seconds_since
 from gyroemu.pipelines.jobs.disk_space import MCAP_RECORD_OVERHEAD, free_bytes, human_size
 from gyroemu.pipelines.jobs.estimate_copy import (
@@ -87,6 +89,11 @@ from gyroemu.pipelines.jobs.estimate_copy import (
     add_estimate_tf,
     copy_with_estimates,
 )
+
+if TYPE_CHECKING:
+    from gyroemu.pipelines.estimation.field_lag import FieldLag
+
+_Device = TypeVar("_Device", DeviceLog, StreamDevice)  # a log's device, read whole or found for the streamed path
 
 __all__ = [
     "DEFAULT_TOPIC_OUT",
@@ -174,16 +181,18 @@ class EstimateSummary:
     """
 
     path: Path
-    devices: list
-    topics: list = field(default_factory=list)
-    field_lags: list = field(default_factory=list)
+    devices: list[tuple[str, int, str, bool]]
+    topics: list[tuple[str, str, int]] = field(default_factory=list)
+    field_lags: list[tuple[str, FieldLag, float]] = field(default_factory=list)
 
 
 def _topic_name(topic: str) -> str:
     return topic if topic.startswith("/") else "/" + topic
 
 
-def _choose(devices_found, path, topic: str | None, topic_out: str | None) -> list:
+def _choose(
+    devices_found: Iterable[_Device], path: Path, topic: str | None, topic_out: str | None
+) -> list[tuple[_Device, str]]:
     """``[(device, estimate topic)]`` by the rules of the module's notes (a device: anything with
     ``topics`` and ``metadata``, a :class:`DeviceLog` or a :class:`StreamDevice`)."""
     devices = {d.topics[IMU_ROLE]: d for d in devices_found}
@@ -288,7 +297,15 @@ def estimate_log(
     return _estimate_whole(path, out, filter_name, use_mag, topic, topic_out, latency_s)
 
 
-def _estimate_whole(path, out, filter_name, use_mag, topic, topic_out, latency_s) -> EstimateSummary:
+def _estimate_whole(
+    path: Path,
+    out: Path,
+    filter_name: str,
+    use_mag: bool | None,
+    topic: str | None,
+    topic_out: str | None,
+    latency_s: Mapping[str, float | str] | None,
+) -> EstimateSummary:
     """:func:`estimate_log` with the log read into memory (a log whose topics
     :mod:`~gyroemu.pipelines.formats.device_stream` cannot pair in one pass, or ``read_whole``)."""
     with warnings.catch_warnings(record=True) as caught:
@@ -322,7 +339,15 @@ def _estimate_whole(path, out, filter_name, use_mag, topic, topic_out, latency_s
     return EstimateSummary(path=out, devices=done, topics=topics, field_lags=field_lags)
 
 
-def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latency_s) -> EstimateSummary:
+def _estimate_streamed(
+    path: Path,
+    out: Path,
+    filter_name: str,
+    use_mag: bool | None,
+    topic: str | None,
+    topic_out: str | None,
+    latency_s: Mapping[str, float | str],
+) -> EstimateSummary:
     """:func:`estimate_log` a block at a time: three passes over the log (validate it and find its devices;
     count their samples, keeping the first minute, or all of them for an offline filter or a field lag
     read from the samples; copy it while filtering), in memory that does not grow with its length for
@@ -375,7 +400,7 @@ def _estimate_streamed(path, out, filter_name, use_mag, topic, topic_out, latenc
     return EstimateSummary(path=out, devices=done, topics=topics, field_lags=field_lags)
 
 
-def _size_frame(dev) -> str:
+def _size_frame(dev: DeviceLog | StreamDevice) -> str:
     """A frame id as long as the estimate's of ``dev`` (:func:`_target`: ``base_link``, or its IMU's,
     whose name is about the device's)."""
     return BODY_FRAME if dev.metadata is not None else dev.name
@@ -450,7 +475,7 @@ def _learn(path: Path, filters: list[_DeviceFilter]) -> None:
         f.feed(stream.take(final=True), rest=True)
 
 
-def _block_run(dev, name: str, f: _DeviceFilter, counted, tf_device: str | None) -> BlockRun:
+def _block_run(dev: StreamDevice, name: str, f: _DeviceFilter, counted: Counted, tf_device: str | None) -> BlockRun:
     """The :class:`BlockRun` of device ``dev``'s filter ``f`` (its census ``counted``), started."""
     target = _target(dev, name, np.empty(0, np.int64), {})
     if dev.name == tf_device:
@@ -476,7 +501,17 @@ def _pass_on(caught: list[warnings.WarningMessage]) -> None:
             warnings.warn(w.message, w.category, stacklevel=3)
 
 
-def _device_filter(dev, rate_hz, has_mag, use_mag, filter_name, latency_s, t_rel, gyro, mag) -> tuple:
+def _device_filter(
+    dev: DeviceLog | StreamDevice,
+    rate_hz: float,
+    has_mag: bool,
+    use_mag: bool | None,
+    filter_name: str,
+    latency_s: Mapping[str, float | str] | None,
+    t_rel: np.ndarray,
+    gyro: np.ndarray,
+    mag: np.ndarray | None,
+) -> tuple[bool, AttitudeFilter, list[tuple[str, FieldLag, float]]]:
     """``(9D?, the filter, [(device, FieldLag, the magnetometer's latency)] or [])`` for device ``dev``
     (anything with ``name`` and ``metadata``) of samples at ``rate_hz``; ``t_rel``, ``gyro``, ``mag`` the
     samples the field's lag is read from when ``latency_s`` asks for it (every sample of the device)."""
@@ -488,13 +523,15 @@ def _device_filter(dev, rate_hz, has_mag, use_mag, filter_name, latency_s, t_rel
     return nine, make_filter(filter_name, setup), [] if lag is None else [(dev.name, lag, setup.mag_latency_s)]
 
 
-def _target(dev, topic_out: str, stamp_ns: np.ndarray, fields: dict) -> EstimateTarget:
+def _target(
+    dev: DeviceLog | StreamDevice, topic_out: str, stamp_ns: np.ndarray, fields: dict[str, Any]
+) -> EstimateTarget:
     """The estimate of device ``dev`` (a gyroemu device's in ``base_link``, another's in its IMU's frame)."""
     frame_id = BODY_FRAME if dev.metadata is not None else None
     return EstimateTarget(dev.topics[IMU_ROLE], topic_out, stamp_ns, fields, frame_id)
 
 
-def _check_topics_out(path: Path, chosen: list, channels) -> None:
+def _check_topics_out(path: Path, chosen: Sequence[tuple[object, str]], channels: Sequence[ChannelInfo]) -> None:
     """:class:`EstimateTopicError` for an estimate topic the log holds already, unless it is an earlier
     estimate, which the copy replaces: of type ``sensor_msgs/msg/Imu``, and a channel ``gyroemu estimate``
     marked as its own (:data:`~.estimate_copy.ESTIMATE_CHANNEL`), or named ``.../estimate/imu`` (logs

@@ -23,6 +23,7 @@ import secrets
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -63,7 +64,7 @@ class EstimateTarget:
     topic: str
     topic_out: str
     stamp_ns: np.ndarray  # (N,) int64, increasing: the filtered samples' header stamps
-    fields: dict  # Imu body fields of the estimate, (N, ...) each
+    fields: dict[str, Any]  # Imu body fields of the estimate, (N, ...) each
     frame_id: str | None  # None: the IMU message's
     channel_out: int = 0
     sequence: int = 0
@@ -317,13 +318,17 @@ def _estimate_tf_rows(target: EstimateTarget, row: np.ndarray, stamps: np.ndarra
     return encode_tf(stamps, [(WORLD_FRAME, ESTIMATE_FRAME)], target.tf_pos[row][:, None], xyzw[:, None])
 
 
-def _with_estimates(batch: RawMessages, channel_ids: np.ndarray, follows: dict[int, EstimateTarget]) -> tuple:
+def _with_estimates(
+    batch: RawMessages, channel_ids: np.ndarray, follows: dict[int, EstimateTarget]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The arguments of :meth:`McapFileWriter.add_raw_messages` for ``batch``: its messages on their
     output channels (dropped channels left out), each target's estimate right after its IMU message."""
     channel = batch.channel_id.astype(np.int64)
     n = len(channel)
     position = [np.arange(n, dtype=np.int64) * 2]  # sort keys: message i at 2 i, its estimate at 2 i + 1
-    parts = [(channel_ids[channel], batch.sequence, batch.log_time, batch.publish_time, batch.start, batch.size)]
+    parts: list[tuple[np.ndarray, ...]] = [
+        (channel_ids[channel], batch.sequence, batch.log_time, batch.publish_time, batch.start, batch.size)
+    ]
     buffers = [batch.buffer]
     base = len(batch.buffer)
 
@@ -331,6 +336,8 @@ def _with_estimates(batch: RawMessages, channel_ids: np.ndarray, follows: dict[i
         """Put encoded ``rows`` (m, size) on ``channel_out`` right after the input messages ``k`` (m,),
         with their log and publish times; returns m."""
         nonlocal base
+        m: int
+        size: int
         m, size = rows.shape
         buffers.append(rows.reshape(-1))
         parts.append(

@@ -107,7 +107,7 @@ class GenerateSummary:
     logs: int
     resumed: int
     made: int
-    failures: list[TaskFailure]
+    failures: list[TaskFailure[LogTask]]
     index: Path
     elapsed_s: float
 
@@ -183,7 +183,8 @@ def _foreign_index(path: Path) -> bool:
         if path.suffix == ".parquet":
             import pyarrow.parquet as pq
 
-            return pq.read_schema(path).names != list(INDEX_COLUMNS)
+            foreign: bool = pq.read_schema(path).names != list(INDEX_COLUMNS)  # pyarrow ships no types
+            return foreign
         with open(path, encoding="utf-8") as f:
             header = f.readline().rstrip("\r\n")
     except Exception:  # unreadable, or not Parquet / UTF-8 text: not ours
@@ -259,7 +260,7 @@ def run_generate(options: GenerateOptions) -> GenerateSummary:
     started = time.perf_counter()
     with RunsProgress(len(tasks), resumed, label="generate", unit="logs", enabled=options.progress) as bar:
 
-        def stored(task: LogTask, rows: list[dict]) -> None:
+        def stored(task: LogTask, rows: list[dict[str, Any]]) -> None:
             nonlocal made
             store.write(task.key, rows)
             made += 1

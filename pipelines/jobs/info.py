@@ -23,12 +23,16 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from gyroemu.errors import ConfigError
 from gyroemu.pipelines.formats.channels import IMU_ROLE
 from gyroemu.pipelines.formats.messages import MessageType
+
+if TYPE_CHECKING:
+    from gyroemu.pipelines.formats.mcap_records import RawMessages
 
 __all__ = ["GAP_FACTOR", "InfoError", "TopicStats", "DeviceInfo", "LogInfo", "check_plot", "topic_stats", "log_info"]
 
@@ -108,7 +112,7 @@ class TopicStats:
         span = self.span_s
         return (self.count - 1) / span if span > 0 else float("nan")
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """The figures as JSON-ready values (None for what is undefined).
 
         Returns
@@ -311,7 +315,7 @@ class _LogWalk:
                 self.intervals.setdefault(int(ids[0]), _Intervals()).add(group)
         return self
 
-    def _imu_stamps(self, batch, channel: np.ndarray) -> None:
+    def _imu_stamps(self, batch: RawMessages, channel: np.ndarray) -> None:
         from gyroemu.pipelines.formats.mcap_records import decoded_type
         from gyroemu.pipelines.formats.messages import IMU
 
@@ -365,8 +369,8 @@ class DeviceInfo:
     samples: int
     span_s: float
     rate_hz: float
-    topics: dict
-    metadata: dict | None = None
+    topics: dict[str, str]
+    metadata: dict[str, Any] | None = None
 
 
 @dataclass
@@ -397,9 +401,9 @@ class LogInfo:
     truncated: bool
     devices: list[DeviceInfo] = field(default_factory=list)
     topics: list[TopicStats] = field(default_factory=list)
-    skipped: dict = field(default_factory=dict)
+    skipped: dict[str, str] = field(default_factory=dict)
 
-    def to_dict(self, configs: bool = False) -> dict:
+    def to_dict(self, configs: bool = False) -> dict[str, Any]:
         """The same content as :meth:`text`, as JSON-ready values.
 
         Parameters

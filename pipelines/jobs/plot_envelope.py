@@ -13,7 +13,12 @@ of its samples exactly, whichever blocks the series came in (its mean to round-o
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 __all__ = ["Envelope"]
 
@@ -122,7 +127,7 @@ class Envelope:
 
     def draw(
         self,
-        ax,
+        ax: Axes,
         *,
         channels: list[int] | None = None,
         labels: list[str] | None = None,

@@ -24,15 +24,22 @@ Time axes are seconds from the device's first stamp.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from gyroemu.pipelines.formats.atomic import write_figure_atomic
 from gyroemu.pipelines.formats.messages import DecodedBatch
 from gyroemu.pipelines.jobs.plot_envelope import Envelope
+
+if TYPE_CHECKING:
+    from gyroemu.pipelines.formats.device_stream import StreamDevice
+
+_T = TypeVar("_T")
 
 __all__ = ["BUCKETS", "EstimateCurves", "InfoCurves", "StampMatch", "attitude_error_deg", "estimate_curves"]
 __all__ += ["estimate_plot_path", "euler_zyx_deg", "info_curves", "info_plot_path", "plot_estimate", "plot_info"]
@@ -72,10 +79,11 @@ def attitude_error_deg(q_true: np.ndarray, q_est: np.ndarray) -> np.ndarray:
     b = np.asarray(q_est, dtype=float)
     w = a[:, 0] * b[:, 0] - np.sum(a[:, 1:] * b[:, 1:], axis=1)
     v = a[:, :1] * b[:, 1:] + b[:, :1] * a[:, 1:] + np.cross(a[:, 1:], b[:, 1:])
-    return np.degrees(2 * np.arctan2(np.linalg.norm(v, axis=1), np.abs(w)))
+    angle: np.ndarray = np.degrees(2 * np.arctan2(np.linalg.norm(v, axis=1), np.abs(w)))
+    return angle
 
 
-def _pyplot():
+def _pyplot() -> ModuleType:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -235,7 +243,7 @@ class InfoCurves:
         self.field.add(t[ok], np.asarray(magnetic_field)[ok] * 1e6)
 
 
-def _nan_if_none(values, n: int, width: int) -> np.ndarray:
+def _nan_if_none(values: ArrayLike | None, n: int, width: int) -> np.ndarray:
     return np.full((n, width), np.nan) if values is None else np.asarray(values, dtype=float)
 
 
@@ -248,7 +256,7 @@ def _add_finite(match: StampMatch, side: int, stamp_ns: np.ndarray, values: np.n
         match.add(side, stamp_ns[ok], np.asarray(values, dtype=float)[ok])
 
 
-def _quietly(function, *args):
+def _quietly(function: Callable[..., _T], *args: object) -> _T:
     import warnings
 
     from gyroemu.pipelines.formats.mcap_log import LogWarning
@@ -258,7 +266,7 @@ def _quietly(function, *args):
         return function(*args)
 
 
-def _stream_devices(path: Path, read_whole: bool) -> dict | None:
+def _stream_devices(path: Path, read_whole: bool) -> dict[str, StreamDevice] | None:
     """The log's devices for reading it a chunk at a time (:func:`scan_devices`), or None: asked to
     read it whole, or a log one pass cannot pair (:class:`NotStreamable`)."""
     from gyroemu.pipelines.formats.device_stream import NotStreamable, scan_devices
@@ -304,7 +312,9 @@ class _Topic:
         return self.read == self.count
 
 
-def _walk_devices(path: Path, devices: dict, roles: tuple[str, ...]) -> Iterator[tuple[str, str, Any]]:
+def _walk_devices(
+    path: Path, devices: dict[str, StreamDevice], roles: tuple[str, ...]
+) -> Iterator[tuple[str, str, Any]]:
     """Per device name, its samples a block at a time as :func:`read_mcap` pairs them (``"samples"``: the
     raw topics' drops, the field at each sample's stamp) and its topics of ``roles`` a chunk at a time
     (a ``DecodedBatch``), each followed by None once it has ended."""

@@ -15,11 +15,13 @@ from __future__ import annotations
 import contextlib
 import sys
 import threading
+from collections.abc import Iterator
+from typing import TextIO
 
 __all__ = ["PhaseProgress", "CountProgress"]
 
 
-def _shown(stream, enabled: bool | None) -> bool:
+def _shown(stream: TextIO, enabled: bool | None) -> bool:
     """Whether a bar goes on ``stream``: ``enabled`` when given, else whether ``stream`` is a terminal."""
     if enabled is not None:
         return enabled
@@ -36,7 +38,9 @@ class PhaseProgress:
 
     REDRAW_S = 0.5  # seconds between redraws within a phase
 
-    def __init__(self, phases: list[str], *, label: str = "", stream=None, enabled: bool | None = None):
+    def __init__(
+        self, phases: list[str], *, label: str = "", stream: TextIO | None = None, enabled: bool | None = None
+    ) -> None:
         self.stream = sys.stderr if stream is None else stream
         enabled = _shown(self.stream, enabled)
         self.phases = list(phases)
@@ -66,7 +70,7 @@ class PhaseProgress:
                 bar.refresh()
 
     @contextlib.contextmanager
-    def phase(self, name: str):
+    def phase(self, name: str) -> Iterator[None]:
         """Show ``name`` as the current phase for the block; count it done when the block ends."""
         if self.bar is None:
             yield
@@ -84,10 +88,10 @@ class PhaseProgress:
             self.bar.close()
             self.bar = None
 
-    def __enter__(self):
+    def __enter__(self) -> PhaseProgress:
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
 
@@ -105,11 +109,11 @@ class CountProgress:
         *,
         label: str = "",
         unit: str = "samples",
-        stream=None,
+        stream: TextIO | None = None,
         enabled: bool | None = None,
         initial: int = 0,
         unit_scale: bool = True,
-    ):
+    ) -> None:
         self.stream = sys.stderr if stream is None else stream
         enabled = _shown(self.stream, enabled)
         self.bar = None
@@ -138,8 +142,8 @@ class CountProgress:
             self.bar.close()
             self.bar = None
 
-    def __enter__(self):
+    def __enter__(self) -> CountProgress:
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         self.close()

@@ -479,7 +479,7 @@ def npz_arrays(
     return arrays
 
 
-def write_npz_atomic(path: str | os.PathLike, arrays: Mapping[str, Any]) -> None:
+def write_npz_atomic(path: str | os.PathLike[str], arrays: Mapping[str, Any]) -> None:
     """Write ``arrays`` (name: array-like) to ``path`` (.npz) whole or not at all
     (:func:`gyroemu.pipelines.formats.atomic.write_atomic`)."""
     from gyroemu.pipelines.formats.atomic import write_atomic

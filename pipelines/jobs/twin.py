@@ -14,10 +14,10 @@ import datetime
 import os
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -48,6 +48,9 @@ from gyroemu.pipelines.twin import (
     twin_scenario,
     twin_seed,
 )
+
+if TYPE_CHECKING:
+    from gyroemu.sensors import Device
 
 __all__ = [
     "METRICS",
@@ -105,7 +108,7 @@ class TwinOptions:
     force: bool = False
     site: Path = field(default_factory=default_site_file)
     workers: int = 2
-    smoothing: dict | None = None
+    smoothing: dict[str, Any] | None = None
 
     def __post_init__(self) -> None:
         if self.smoothing is None:
@@ -117,7 +120,7 @@ class TwinOptions:
             object.__setattr__(self, "filters", tuple(dict.fromkeys(self.filters)))
 
 
-def check_options(options: TwinOptions) -> tuple[list[str], dict, dict, Handling | None, Any]:
+def check_options(options: TwinOptions) -> tuple[list[str], dict[str, str], dict[str, Any], Handling | None, Device]:
     """:class:`TwinError` for any bad option. Returns the filters, those left out, the site table, the
     site's handling offset (None without a ``[handling]`` table) and the device (seed 0)."""
     from gyroemu.pipelines.estimation.registry import FilterError, available_filters, filter_class, unavailable_filters
@@ -139,7 +142,7 @@ def check_options(options: TwinOptions) -> tuple[list[str], dict, dict, Handling
         raise TwinError(f"argument --seeds: must be a whole number of at least 1, got {options.seeds!r}")
     if isinstance(options.workers, bool) or not isinstance(options.workers, int) or options.workers < 1:
         raise TwinError(f"argument --workers: must be a whole number of at least 1, got {options.workers!r}")
-    unavailable: dict = {}
+    unavailable: dict[str, str] = {}
     if options.filters is None:
         filters = available_filters()
         unavailable = unavailable_filters()
@@ -173,7 +176,7 @@ def check_options(options: TwinOptions) -> tuple[list[str], dict, dict, Handling
     return filters, unavailable, site, handling, device
 
 
-def _check_smoothing(smoothing: dict | None, real: Recording) -> None:
+def _check_smoothing(smoothing: dict[str, Any] | None, real: Recording) -> None:
     """:class:`TwinError` naming ``--smoothing`` for a key the recorded scenario's ``[smoothing]`` does not
     take, a bad value, or a cut-off at or above the Nyquist frequency of the truth's stamps (the motion
     is fitted there; found otherwise only when the first twin fits its motion, after the real run)."""
@@ -285,7 +288,7 @@ def run_twin(options: TwinOptions) -> TwinReport:
                     ),
                 )
             )
-    results: dict[tuple, dict] = {}
+    results: dict[tuple[int, int | None], dict[str, Any]] = {}
     run_started = time.perf_counter()
     workers = min(options.workers, len(tasks))
     if workers > 1:
@@ -341,7 +344,9 @@ def run_twin(options: TwinOptions) -> TwinReport:
     return TwinReport(trials=trials, settings=settings, timings=timings, notes=notes, pooled_residuals=pooled)
 
 
-def _task(payload: tuple) -> tuple[tuple, dict]:
+def _task(
+    payload: tuple[tuple[int, int | None], Callable[..., dict[str, Any]], tuple[Any, ...]],
+) -> tuple[tuple[int, int | None], dict[str, Any]]:
     key, fn, args = payload
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -19,11 +19,15 @@ from __future__ import annotations
 
 import zlib
 from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .recording import Recording
 from .site import site_with_seed
+
+if TYPE_CHECKING:
+    from gyroemu.dynamics.scenarios import Scenario
 
 __all__ = ["TWIN_SMOOTHING", "TWIN_GYRO_CROSSOVER_HZ", "twin_attitude", "twin_seed", "twin_scenario"]
 
@@ -84,7 +88,9 @@ def twin_attitude(
     return q
 
 
-def twin_scenario(real: Recording, site: dict, seed: int, smoothing: dict | None = None):
+def twin_scenario(
+    real: Recording, site: dict[str, Any], seed: int, smoothing: dict[str, Any] | None = None
+) -> Scenario:
     """The ``recorded`` scenario of twin seed ``seed`` (:func:`twin_seed`) of ``real`` in ``site``, with the
     ``[smoothing]`` table ``smoothing`` (the kind's defaults when None)."""
     from gyroemu.dynamics.scenarios import scenario_from_dict

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -38,7 +39,7 @@ class Recording:
     q_true: np.ndarray  # (N, 4), NaN rows without reference
     mask: np.ndarray  # (N,) bool: samples that count
     rate_hz: float
-    metadata: dict | None
+    metadata: dict[str, Any] | None
     counted: str
     omega_true: np.ndarray | None = None  # (N, 3) rad/s, a log's /truth/imu rate
     force_true: np.ndarray | None = None  # (N, 3) m/s², a log's /truth/imu specific force
@@ -115,7 +116,7 @@ def load_recording(path: Path) -> Recording:
     )
 
 
-def rest_phases(real: Recording) -> tuple[list[slice], dict]:
+def rest_phases(real: Recording) -> tuple[list[slice], dict[str, Any]]:
     """The rest phases of the real recording with a reference (each trimmed to it, at least 64 samples):
     (their samples, a description). The rest detector's threshold is relative to the recording's
     quietest stretch, so in a recording with a movement mask a phase is also trimmed to its longest run

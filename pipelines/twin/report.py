@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, SupportsFloat
 
 import numpy as np
 
@@ -31,14 +32,14 @@ def format_vector(v: np.ndarray) -> str:
     return "(" + ", ".join(f"{x:.4g}" for x in v) + ")"
 
 
-def _finite(x) -> float | None:
+def _finite(x: SupportsFloat | None) -> float | None:
     if x is None:
         return None
     x = float(x)
     return x if math.isfinite(x) else None
 
 
-def _list(a: np.ndarray, digits: int = 6) -> list:
+def _list(a: np.ndarray, digits: int = 6) -> list[Any]:
     return [_list(v, digits) if np.ndim(v) else _finite(float(f"{v:.{digits}g}")) for v in np.asarray(a)]
 
 
@@ -47,16 +48,16 @@ class TrialResult:
     """One recording beside its twins."""
 
     name: str
-    source: dict
+    source: dict[str, Any]
     mode: str
     rate_hz: float
     twin_rate_hz: float
     t0_s: float
-    rest: dict
-    filters: list[dict]
-    ranking: dict
-    residuals: dict
-    curves: dict  # for the plot: real and twin Allan deviations and spectra
+    rest: dict[str, Any]
+    filters: list[dict[str, Any]]
+    ranking: dict[str, Any]
+    residuals: dict[str, Any]
+    curves: dict[str, Any]  # for the plot: real and twin Allan deviations and spectra
     notes: list[str] = field(default_factory=list)
 
 
@@ -65,12 +66,12 @@ class TwinReport:
     """What :func:`run_twin` found."""
 
     trials: list[TrialResult]
-    settings: dict
-    timings: dict
+    settings: dict[str, Any]
+    timings: dict[str, Any]
     notes: list[str] = field(default_factory=list)
-    pooled_residuals: dict | None = None
+    pooled_residuals: dict[str, Any] | None = None
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {
             "gyroemu_twin": 1,
             "settings": self.settings,
@@ -178,7 +179,7 @@ class TwinReport:
                 r = tr.residuals[key]
                 scale = math.degrees(1.0) if key == "gyro" else 1.0
 
-                def fmt(v, scale=scale):
+                def fmt(v: float | None, scale: float = scale) -> str:
                     return "—" if v is None else f"{v * scale:.3g}"
 
                 ratio = (
@@ -214,7 +215,7 @@ class TwinReport:
             lines += ["", "Notes:"] + [f"- {n}" for n in self.notes]
         return "\n".join(lines) + "\n"
 
-    def save_plots(self, directory) -> list[Path]:
+    def save_plots(self, directory: str | os.PathLike[str]) -> list[Path]:
         import matplotlib
 
         matplotlib.use("Agg")
@@ -259,7 +260,7 @@ class TwinReport:
             written.append(write_figure_atomic(fig, path, dpi=100))
         return written
 
-    def save(self, directory) -> dict:
+    def save(self, directory: str | os.PathLike[str]) -> dict[str, Any]:
         """``twin.md``, ``twin.json`` and the plots in ``directory`` (made if missing); their paths."""
         from gyroemu.pipelines.formats.atomic import write_text_atomic
 
@@ -272,7 +273,7 @@ class TwinReport:
         return paths
 
 
-def _summary(values: list) -> dict:
+def _summary(values: list[float | None]) -> dict[str, Any]:
     finite = [float(v) for v in values if v is not None and math.isfinite(v)]
     return {
         "mean": float(np.mean(finite)) if finite else None,
@@ -282,7 +283,7 @@ def _summary(values: list) -> dict:
     }
 
 
-def _rank(values: dict) -> list[str]:
+def _rank(values: dict[str, Any]) -> list[str]:
     return sorted(values, key=lambda f: values[f])
 
 
@@ -291,7 +292,7 @@ def _discordant_pairs(real: list[str], twin: list[str]) -> list[list[str]]:
     return [[a, b] for i, a in enumerate(real) for b in real[i + 1 :] if twin.index(a) > twin.index(b)]
 
 
-def _unresolved_pairs(real: list[str], means: dict, seeds: dict) -> list[list[str]]:
+def _unresolved_pairs(real: list[str], means: dict[str, Any], seeds: dict[str, Any]) -> list[list[str]]:
     """Pairs of filters whose twin mean 9D totals the seeds cannot tell apart: the seeds share their
     data, so the paired differences ``d_s`` are tested, ``|mean d| < t_{0.975, n−1} · sd(d)/√n``
     (Student's t, two-sided 5 %). Listed in the real ranking's order."""
@@ -312,11 +313,11 @@ def _unresolved_pairs(real: list[str], means: dict, seeds: dict) -> list[list[st
 
 def trial_result(
     real: Recording,
-    real_run: dict,
-    twins: list[dict],
+    real_run: dict[str, Any],
+    twins: list[dict[str, Any]],
     filters: list[str],
     mode: str,
-    rest: dict,
+    rest: dict[str, Any],
     seeds: int,
     twin_rate: float,
 ) -> TrialResult:

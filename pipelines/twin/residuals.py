@@ -72,7 +72,7 @@ def welch_spectrum(segments: list[np.ndarray], fs: float) -> tuple[np.ndarray, n
     return f, (total / weight if total is not None else np.zeros((0, 3)))
 
 
-def rest_residuals(gyro_res: list[np.ndarray], accel_res: list[np.ndarray], fs: float) -> dict:
+def rest_residuals(gyro_res: list[np.ndarray], accel_res: list[np.ndarray], fs: float) -> dict[str, Any]:
     """Allan deviations, spectra and standard deviations of the residuals over the rest segments."""
     gs, acs = [], []
     for g, a in zip(gyro_res, accel_res):
@@ -92,7 +92,7 @@ def rest_residuals(gyro_res: list[np.ndarray], accel_res: list[np.ndarray], fs: 
     return out
 
 
-def pool_adev(runs: list[dict], key: str) -> tuple[np.ndarray, np.ndarray]:
+def pool_adev(runs: list[dict[str, Any]], key: str) -> tuple[np.ndarray, np.ndarray]:
     """Allan deviation (len(TAUS_S), 3) pooled over runs (their variances weighted by clusters), clusters."""
     avar = np.zeros((len(TAUS_S), 3))
     clusters = np.zeros((len(TAUS_S), 3))
@@ -115,7 +115,7 @@ def rms_over_seeds(values: list[np.ndarray]) -> np.ndarray:
     return np.where(count > 0, np.sqrt(mean), np.nan)
 
 
-def pooled_residuals(real_runs: list[dict], twin_runs_by_seed: list[list[dict]]) -> dict:
+def pooled_residuals(real_runs: list[dict[str, Any]], twin_runs_by_seed: list[list[dict[str, Any]]]) -> dict[str, Any]:
     """The residual Allan deviations at rest pooled over every recording's rest phases, real and twin
     (RMS over seeds), their ratio per τ and axis, and the real clusters behind each τ."""
     out: dict[str, Any] = {"tau_s": TAUS_S}

@@ -14,7 +14,7 @@ sample (real time = twin time + t0), and over the recording's movement mask carr
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -25,6 +25,7 @@ from .site import Handling
 
 if TYPE_CHECKING:
     from gyroemu.pipelines.estimation.protocol import FilterSetup
+    from gyroemu.pipelines.recorded_scenario import RecordedSpec
 
 __all__ = ["METRICS", "GRAVITY_M_S2", "filter_errors", "run_real", "run_one_twin"]
 
@@ -45,7 +46,7 @@ def filter_errors(
     q_true: np.ndarray,
     mask: np.ndarray,
     timings: dict[str, float],
-) -> dict:
+) -> dict[str, dict[str, Any]]:
     """{filter: {metric: RMSE deg or None, "error": what failed or None}} of each filter run over ``t``
     (N,) s, ``gyro`` rad/s, ``accel`` m/s², ``mag`` T (9D with ``setup9``, 6D with ``setup6``; None: not
     run), scored against ``q_true`` (N, 4) over ``mask`` (N,); wall times added to ``timings``."""
@@ -53,7 +54,7 @@ def filter_errors(
     from gyroemu.pipelines.estimation.registry import make_filter
 
     counted = mask & np.isfinite(q_true).all(axis=1)
-    out: dict[str, dict] = {}
+    out: dict[str, dict[str, Any]] = {}
     for spec in filters:
         row: dict[str, Any] = dict.fromkeys(METRICS)
         row["error"] = None
@@ -87,7 +88,7 @@ def filter_errors(
 
 def run_real(
     real: Recording, filters: list[str], setup9: FilterSetup | None, setup6: FilterSetup, rests: list[slice]
-) -> dict:
+) -> dict[str, Any]:
     """The real recording ``real``: every filter's errors (9D with ``setup9`` unless None, 6D with ``setup6``)
     and the residuals at rest over the samples ``rests``, with wall times."""
     from gyroemu.pipelines.identification.truth import rotation_bw
@@ -120,8 +121,8 @@ def run_real(
 
 def run_one_twin(
     real: Recording,
-    site: dict,
-    smoothing: dict | None,
+    site: dict[str, Any],
+    smoothing: dict[str, Any] | None,
     device_name: str,
     seed: int,
     filters: list[str],
@@ -130,7 +131,7 @@ def run_one_twin(
     rest_t: list[tuple[float, float]],
     attitude: np.ndarray | None = None,
     handling: Handling | None = None,
-) -> dict:
+) -> dict[str, Any]:
     """Twin ``seed`` of ``real`` (its device ``device_name`` and site drawn from :func:`twin_seed`): the
     recorded motion (with the refined ``attitude`` when given) sensed by the device, every filter's
     errors against the recording's reference, and the residuals over the rest stretches ``rest_t``
@@ -143,9 +144,10 @@ def run_one_twin(
     seed = twin_seed(seed, real.name)
     scenario = twin_scenario(real, site, seed, smoothing)
     device = load_device(device_name, seed=seed)
+    spec = cast("RecordedSpec", scenario.spec)  # twin_scenario's kind is "recorded"
     if attitude is not None:  # the recording's twin attitude (:func:`twin_attitude`), the same for every seed
-        scenario.spec.replace_attitude(real.t, attitude)
-    t0 = float(scenario.spec.motion().t0)
+        spec.replace_attitude(real.t, attitude)
+    t0 = float(spec.motion().t0)
     timings["scenario (load, fit)"] = time.perf_counter() - started
     started = time.perf_counter()
     traj = scenario.simulate(rate_hz=device.spec.rate_hz)

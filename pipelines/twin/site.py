@@ -14,6 +14,7 @@ from __future__ import annotations
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -28,7 +29,7 @@ class SiteFileError(ConfigError):
     """A site file that cannot be read or has a bad table (the message starts with the file's path)."""
 
 
-def read_site(path: Path) -> tuple[dict, Handling | None]:
+def read_site(path: Path) -> tuple[dict[str, Any], Handling | None]:
     """The site file's ``[site]`` table and its optional ``[handling]`` (errors name the file and key)."""
     from gyroemu.dynamics.config import validate
     from gyroemu.dynamics.earth import Site
@@ -95,7 +96,7 @@ def _read_handling(table: object, path: Path) -> Handling | None:
     return Handling(values[0], values[1])
 
 
-def site_with_seed(site: dict, seed: int) -> dict:
+def site_with_seed(site: dict[str, Any], seed: int) -> dict[str, Any]:
     """``site`` with its magnetic environment (when it has one) drawn from ``seed``."""
     out = dict(site)
     env = dict(out.get("magnetic_environment") or {})
