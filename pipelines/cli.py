@@ -36,7 +36,7 @@ class UsageError(Exception):
     """A bad command-line argument; the message names it."""
 
 
-def _cmd_scenarios(args) -> int:
+def _cmd_scenarios(args: argparse.Namespace) -> int:
     from gyroemu.dynamics import list_scenarios
 
     scenarios = list_scenarios()
@@ -83,7 +83,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_info(args) -> int:
+def _cmd_info(args: argparse.Namespace) -> int:
     from gyroemu.pipelines.jobs.info import check_plot, log_info
 
     picture = check_plot(Path(args.log), force=args.force) if args.plot else None  # InfoError before any work
@@ -107,7 +107,7 @@ def _mcap_out(text: str) -> Path:
     return out
 
 
-def _cmd_import(args) -> int:
+def _cmd_import(args: argparse.Namespace) -> int:
     from gyroemu.pipelines.formats.importers import IMPORTERS, ImportOutputError
     from gyroemu.pipelines.jobs.disk_space import is_disk_full
 
@@ -125,7 +125,7 @@ def _cmd_import(args) -> int:
     return 0
 
 
-def _cmd_estimate(args) -> int:
+def _cmd_estimate(args: argparse.Namespace) -> int:
     from gyroemu.pipelines.estimation.registry import FilterError, filter_class
     from gyroemu.pipelines.estimation.setup import FIELD_LAG_FROM_LOG
     from gyroemu.pipelines.jobs.estimate import EstimateError, check_options, estimate_log
@@ -209,14 +209,14 @@ def _cmd_estimate(args) -> int:
     return 0
 
 
-def _cmd_precompile(args) -> int:
+def _cmd_precompile(args: argparse.Namespace) -> int:
     from gyroemu.pipelines.jobs.precompile import run_precompile
 
     run_precompile(out=sys.stderr)
     return 0
 
 
-def _cmd_presets(args) -> int:
+def _cmd_presets(args: argparse.Namespace) -> int:
     import numpy as np
 
     from gyroemu.sensors import list_devices
@@ -322,7 +322,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_campaign(args) -> int:
+def _cmd_campaign(args: argparse.Namespace) -> int:
     from gyroemu.pipelines.campaign import CampaignSpec, SchedulerLostError, campaign_from_spec
     from gyroemu.pipelines.jobs.campaign import CampaignOptions, run_campaign, spec_from_bench_flags
 
@@ -383,7 +383,7 @@ def _cmd_campaign(args) -> int:
     return 1 if summary.failures else 0
 
 
-def _cmd_generate(args) -> int:
+def _cmd_generate(args: argparse.Namespace) -> int:
     from gyroemu.pipelines.campaign import SchedulerLostError
     from gyroemu.pipelines.jobs.generate import GenerateOptions, run_generate
 
@@ -409,7 +409,7 @@ _BENCH_NUMBERS = {"duration": 60.0, "runs": 3, "seed": 0, "threshold_deg": 2.0}
 """``bench``'s numbers not given (None: a campaign file refuses them) and their defaults."""
 
 
-def _cmd_bench(args) -> int:
+def _cmd_bench(args: argparse.Namespace) -> int:
     import warnings
 
     if args.campaign is None:
@@ -526,7 +526,7 @@ def _cmd_twin(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_demo(args) -> int:
+def _cmd_demo(args: argparse.Namespace) -> int:
     from gyroemu.pipelines.jobs.demo import run_demo
 
     out = Path(args.out)
@@ -707,7 +707,7 @@ def _cmd_completion(args: argparse.Namespace) -> int:
     return 0
 
 
-def _add_zenoh_arguments(p, modes=True) -> None:
+def _add_zenoh_arguments(p: argparse.ArgumentParser, modes: bool = True) -> None:
     p.add_argument(
         "--connect",
         action="append",
@@ -727,7 +727,7 @@ def _add_zenoh_arguments(p, modes=True) -> None:
     p.add_argument("--config", default=None, metavar="FILE.json5", help="a zenoh JSON5 config file")
 
 
-def _add_foxglove_arguments(p) -> None:
+def _add_foxglove_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--foxglove",
         action="store_true",
@@ -740,7 +740,7 @@ def _add_foxglove_arguments(p) -> None:
     )
 
 
-def _add_ros2_arguments(p, what: str) -> None:
+def _add_ros2_arguments(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument(
         "--ros2",
         action="store_true",
@@ -752,7 +752,7 @@ def _add_ros2_arguments(p, what: str) -> None:
     )
 
 
-def _add_dask_arguments(p) -> None:
+def _add_dask_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--scheduler",
         default=None,
@@ -808,7 +808,7 @@ def _add_latency_option(p: argparse.ArgumentParser, whose: str) -> None:
     )
 
 
-def _latencies(args) -> dict[str, float | str]:
+def _latencies(args: argparse.Namespace) -> dict[str, float | str]:
     """``--latency``'s sensors and seconds (or ``"auto"``); a sensor given twice is a usage error."""
     latencies: dict[str, float | str] = {}
     for sensor, seconds in args.latency:
@@ -1394,7 +1394,8 @@ def main(argv: list[str] | None = None) -> int:
     previous = signal.signal(signal.SIGTERM, _raise_terminated) if handling else None
     try:
         with cli_logging(verbosity_level(quiet=args.quiet, verbose=args.verbose)):
-            return args.func(args)
+            status: int = args.func(args)
+            return status
     except UsageError as e:
         parser.exit(2, f"gyroemu {args.command}: error: {e}\n")
     except KeyboardInterrupt:

@@ -48,7 +48,7 @@ def _actions(parser: argparse.ArgumentParser) -> list[argparse.Action]:
     return list(parser._actions)
 
 
-def _subcommands(parser: argparse.ArgumentParser) -> tuple[argparse.Action | None, dict]:
+def _subcommands(parser: argparse.ArgumentParser) -> tuple[argparse.Action | None, dict[str, argparse.ArgumentParser]]:
     for action in _actions(parser):
         if isinstance(action.choices, dict) and action.option_strings == []:
             return action, action.choices

@@ -16,6 +16,7 @@ import logging
 import sys
 import warnings
 from collections.abc import Iterator
+from typing import TextIO
 
 __all__ = ["OneLineFormatter", "cli_logging", "verbosity_level"]
 
@@ -41,19 +42,21 @@ class OneLineFormatter(logging.Formatter):
         return f"gyroemu: {record.levelname.lower()}: {text}"
 
 
-class _StderrHandler(logging.StreamHandler):
+class _StderrHandler(logging.StreamHandler[TextIO]):
     """A handler writing to whatever ``sys.stderr`` is when a record is emitted (tests replace it)."""
 
     @property
-    def stream(self):  # noqa: D102 - StreamHandler's attribute
+    def stream(self) -> TextIO:  # noqa: D102 - StreamHandler's attribute
         return sys.stderr
 
     @stream.setter
-    def stream(self, value) -> None:
+    def stream(self, value: TextIO) -> None:
         pass
 
 
-def _warning_text(message, category, filename, lineno, line=None) -> str:
+def _warning_text(
+    message: Warning | str, category: type[Warning], filename: str, lineno: int, line: str | None = None
+) -> str:
     """:func:`warnings.formatwarning` while :func:`cli_logging` runs: the message alone."""
     return str(message)
 

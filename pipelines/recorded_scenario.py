@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any, ClassVar, Literal
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from pydantic import PrivateAttr, field_validator
 
 from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Quat, Section
@@ -142,7 +143,7 @@ class RecordedSpec(ScenarioSpec):
                 key="duration_s",
             )
 
-    def replace_attitude(self, t: np.ndarray, q_wb: np.ndarray) -> None:
+    def replace_attitude(self, t: ArrayLike, q_wb: ArrayLike) -> None:
         """Take the attitude ``q_wb`` (M, 4) at stamps ``t`` (M,, the recording's clock; NaN rows where
         missing) as the recording's before the motion is fitted: e.g. the reference refined by the
         recording's own gyro (:func:`gyroemu.dynamics.attitude_fusion.complementary_attitude`). It is
@@ -218,7 +219,7 @@ class RecordedSpec(ScenarioSpec):
         parts.append(str(motion.gaps))
         return "; ".join(parts)
 
-    def trajectory(self, t: np.ndarray) -> Trajectory:
+    def trajectory(self, t: NDArray[np.float64]) -> Trajectory:
         """The truth at scenario times ``t`` (s; motion time ``t + time_offset_s``), stamped ``t``."""
         motion = self.motion()
         traj = motion.trajectory(np.asarray(t, dtype=float) + self.time_offset_s, self.site.environment())

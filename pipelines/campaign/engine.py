@@ -24,7 +24,10 @@ import re
 import uuid
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
-from typing import Any, Generic, TypeVar
+from typing import TYPE_CHECKING, Any, Generic, TypeVar
+
+if TYPE_CHECKING:
+    from distributed import Client
 
 __all__ = ["SchedulerLostError", "TaskFailure", "default_workers", "run_tasks", "scheduler_problem"]
 
@@ -97,7 +100,7 @@ def _quiet_distributed(level: int = logging.CRITICAL) -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def _client(scheduler: str | None, workers: int | None, processes: bool, connect_timeout_s: float) -> Iterator[Any]:
+def _client(scheduler: str | None, workers: int | None, processes: bool, connect_timeout_s: float) -> Iterator[Client]:
     """A ``distributed.Client`` on ``scheduler``, or on a local cluster of ``workers`` single-threaded
     workers (processes unless ``processes`` is False); everything it started is closed after."""
     from distributed import Client, LocalCluster

@@ -4,7 +4,7 @@ the time left at that rate. Piped or redirected stderr, CI logs and the tests se
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TextIO
 
 from gyroemu.pipelines.jobs.progress import CountProgress
 
@@ -22,7 +22,7 @@ class RunsProgress(CountProgress):
         *,
         label: str = "",
         unit: str = "runs",
-        stream: Any = None,
+        stream: TextIO | None = None,
         enabled: bool | None = None,
     ) -> None:
         super().__init__(total, label=label, unit=unit, stream=stream, enabled=enabled, initial=done, unit_scale=False)

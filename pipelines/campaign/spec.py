@@ -155,7 +155,7 @@ class Campaign:
     seeds: tuple[int, ...]
     cells: tuple[Cell, ...]
     tasks: tuple[CellTask, ...]
-    unavailable: dict
+    unavailable: dict[str, str]
 
     @property
     def runs(self) -> int:
@@ -217,7 +217,7 @@ def campaign_from_spec(spec: CampaignSpec, *, path: Path | None = None) -> Campa
         except ConfigError as exc:
             raise named("devices", i, exc) from None
         devices.setdefault(entry, (config_hash(device.to_toml()), device.spec.magnetometer is not None))
-    unavailable: dict = {}
+    unavailable: dict[str, str] = {}
     if spec.filters is None:
         filters = tuple(available_filters())
         unavailable = dict(unavailable_filters())

@@ -63,7 +63,7 @@ class PartStore:
         n = len(self.PREFIX)
         return {p.name[n : -len(self.SUFFIX)] for p in self.folder.glob(f"{self.PREFIX}*{self.SUFFIX}")}
 
-    def write(self, key: str, rows: list[dict]) -> Path:
+    def write(self, key: str, rows: list[dict[str, Any]]) -> Path:
         """Store ``rows`` (dicts of column: value) as task ``key``'s part, atomically; returns its path."""
         import pyarrow as pa
         import pyarrow.parquet as pq

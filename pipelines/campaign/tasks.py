@@ -80,7 +80,7 @@ def _version() -> str:
     return str(gyroemu.__version__)
 
 
-def run_cell(task: CellTask) -> list[dict]:
+def run_cell(task: CellTask) -> list[dict[str, Any]]:
     """Every filter of ``task`` on each of its seeds: one row per (seed, filter), in seed order.
 
     Raises what :func:`~gyroemu.pipelines.jobs.bench.run_bench` raises for a cell it cannot run (a
@@ -90,7 +90,7 @@ def run_cell(task: CellTask) -> list[dict]:
 
     started = time.perf_counter()
     c = task.cell
-    rows: list[dict] = []
+    rows: list[dict[str, Any]] = []
     for first, count in consecutive(task.seeds):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -187,7 +187,7 @@ class LogTask:
         )
 
 
-def make_log(task: LogTask) -> list[dict]:
+def make_log(task: LogTask) -> list[dict[str, Any]]:
     """Write ``task``'s log with :func:`~gyroemu.pipelines.jobs.simulate.run_simulate` (overwriting a
     copy a previous attempt finished: the bytes are the same) and return its index row."""
     import hashlib

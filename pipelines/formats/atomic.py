@@ -21,9 +21,12 @@ import stat
 import tempfile
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
 from gyroemu.pipelines.formats.file_names import same_file
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = [
     "folder_problem",
@@ -56,7 +59,7 @@ def write_text_atomic(path: str | os.PathLike[str], text: str) -> Path:
     return write_atomic(path, lambda f: f.write(text), binary=False)
 
 
-def write_figure_atomic(fig: Any, path: str | os.PathLike[str], dpi: int) -> Path:
+def write_figure_atomic(fig: Figure, path: str | os.PathLike[str], dpi: int) -> Path:
     """Save the matplotlib figure ``fig`` as a PNG at ``path`` whole or not at all, and close it."""
     import matplotlib.pyplot as plt
 

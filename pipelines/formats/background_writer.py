@@ -14,7 +14,7 @@ import queue
 import threading
 from collections.abc import Callable
 from types import TracebackType
-from typing import Generic, TypeVar
+from typing import Generic, TypeVar, cast
 
 __all__ = ["BackgroundWriter"]
 
@@ -52,7 +52,7 @@ class BackgroundWriter(Generic[T]):
             if item is _DONE or self._stop.is_set():
                 return
             try:
-                self._write(item)  # type: ignore[arg-type]
+                self._write(cast(T, item))  # not _DONE: an item given to put()
             except BaseException as e:  # handed to the producer
                 self._error = e
                 self._stop.set()

@@ -38,9 +38,10 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from gyroemu.pipelines.formats.messages import (
     FLAG,
@@ -222,15 +223,15 @@ class ImuSeries:
     when every message says so, and NaN rows where only some do.
     """
 
-    t: np.ndarray
-    q_wb: np.ndarray | None = None
-    omega_b: np.ndarray | None = None
-    specific_force_b: np.ndarray | None = None
-    q_wb_covariance: np.ndarray | None = None
-    omega_b_covariance: np.ndarray | None = None
-    specific_force_b_covariance: np.ndarray | None = None
+    t: NDArray[np.float64]
+    q_wb: NDArray[np.float64] | None = None
+    omega_b: NDArray[np.float64] | None = None
+    specific_force_b: NDArray[np.float64] | None = None
+    q_wb_covariance: NDArray[np.float64] | None = None
+    omega_b_covariance: NDArray[np.float64] | None = None
+    specific_force_b_covariance: NDArray[np.float64] | None = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         n = len(self.t)
         for name, width in (
             ("q_wb", (4,)),
@@ -274,11 +275,11 @@ class PoseSeries:
         Attitude, unit quaternion (w, x, y, z) turning body vectors into the world frame.
     """
 
-    t: np.ndarray
-    pos_w: np.ndarray
-    q_wb: np.ndarray
+    t: NDArray[np.float64]
+    pos_w: NDArray[np.float64]
+    q_wb: NDArray[np.float64]
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         n = len(self.t)
         for name, width in (("pos_w", 3), ("q_wb", 4)):
             if np.shape(getattr(self, name)) != (n, width):
@@ -288,7 +289,7 @@ class PoseSeries:
         return len(self.t)
 
 
-def encode_pose(stamp_ns: np.ndarray, pose: PoseSeries) -> np.ndarray:
+def encode_pose(stamp_ns: ArrayLike, pose: PoseSeries) -> NDArray[np.uint8]:
     """``/truth/pose`` rows of ``pose`` at ``stamp_ns``, frame :data:`WORLD_FRAME`."""
     q = np.asarray(pose.q_wb, dtype=float)
     return POSE_STAMPED.encode(
@@ -304,13 +305,13 @@ def pose_from_batch(batch: DecodedBatch) -> PoseSeries:
 
 
 def measured_fields(
-    samples: ImuSamples, gyro_variance: np.ndarray | None = None, accel_variance: np.ndarray | None = None
-) -> dict:
+    samples: ImuSamples, gyro_variance: ArrayLike | None = None, accel_variance: ArrayLike | None = None
+) -> dict[str, ArrayLike]:
     """Imu message fields of a device's samples (``/imu``): rate and specific force, no orientation
     (``orientation_covariance[0] = -1``). ``gyro_variance``, ``accel_variance`` (3,): the per-sample
     variances of the device's noise (:mod:`gyroemu.pipelines.formats.imu_covariance`), written on the
     covariances' diagonals; None leaves that covariance zero ("unknown", REP 145)."""
-    fields: dict = {
+    fields: dict[str, ArrayLike] = {
         "orientation": (0.0, 0.0, 0.0, 1.0),
         "orientation_covariance": _NO_ESTIMATE,
         "angular_velocity": samples.gyro,
@@ -323,10 +324,10 @@ def measured_fields(
     return fields
 
 
-def series_fields(series: ImuSeries) -> dict:
+def series_fields(series: ImuSeries) -> dict[str, NDArray[np.float64] | tuple[float, ...]]:
     """Imu message fields of an :class:`ImuSeries` (scalar-first quaternions to x, y, z, w)."""
     n = len(series)
-    fields: dict[str, np.ndarray | tuple[float, ...]] = {}
+    fields: dict[str, NDArray[np.float64] | tuple[float, ...]] = {}
     for value_name, cov_name, field_name, cov_field in _IMU_QUANTITIES:
         value, cov = getattr(series, value_name), getattr(series, cov_name)
         if value is None:
@@ -345,7 +346,7 @@ def series_from_batch(batch: DecodedBatch) -> ImuSeries:
     """An :class:`ImuSeries` from decoded Imu messages, the inverse of :func:`series_fields` (x, y, z, w
     to scalar-first; -1 covariances to None, or NaN rows where only some messages have them)."""
     n = len(batch)
-    out: dict[str, np.ndarray | None] = {}
+    out: dict[str, NDArray[np.float64] | None] = {}
     for value_name, cov_name, field_name, cov_field in _IMU_QUANTITIES:
         cov = batch[cov_field]
         absent = cov[:, 0] == -1.0
@@ -364,29 +365,29 @@ def series_from_batch(batch: DecodedBatch) -> ImuSeries:
 
 
 def encode_measured(
-    stamp_ns: np.ndarray,
+    stamp_ns: ArrayLike,
     frame_id: str,
     samples: ImuSamples,
-    gyro_variance: np.ndarray | None = None,
-    accel_variance: np.ndarray | None = None,
-) -> np.ndarray:
+    gyro_variance: ArrayLike | None = None,
+    accel_variance: ArrayLike | None = None,
+) -> NDArray[np.uint8]:
     """``/imu`` rows ``(N, size)`` of a device's samples at ``stamp_ns`` (variances: :func:`measured_fields`)."""
     return IMU.encode(stamp_ns, frame_id, measured_fields(samples, gyro_variance, accel_variance))
 
 
-def encode_mag(stamp_ns: np.ndarray, frame_id: str, samples: ImuSamples) -> np.ndarray:
+def encode_mag(stamp_ns: ArrayLike, frame_id: str, samples: ImuSamples) -> NDArray[np.uint8]:
     """``/mag`` rows of a device's samples (NaN fields where the device has no magnetometer)."""
     return MAGNETIC_FIELD.encode(stamp_ns, frame_id, {"magnetic_field": samples.mag})
 
 
-def encode_series(stamp_ns: np.ndarray, series: ImuSeries) -> np.ndarray:
+def encode_series(stamp_ns: ArrayLike, series: ImuSeries) -> NDArray[np.uint8]:
     """``/truth/imu`` or ``/estimate/imu`` rows of ``series`` at ``stamp_ns``, frame :data:`BODY_FRAME`."""
     return IMU.encode(stamp_ns, BODY_FRAME, series_fields(series))
 
 
 def encode_raw(
-    stamp_ns: np.ndarray, frame_id: str, kind: str, observables: Mapping[str, np.ndarray]
-) -> tuple[MessageType, np.ndarray, list[str]]:
+    stamp_ns: NDArray[np.int64], frame_id: str, kind: str, observables: Mapping[str, NDArray[Any]]
+) -> tuple[MessageType, NDArray[np.uint8], list[str]]:
     """``/raw/<kind>`` rows of gyro ``kind``'s raw observables (``ImuSamples.raw[kind]``).
 
     Returns ``(type, rows, ignored)``, ``ignored`` the observables the message has no field for. Raises
@@ -401,7 +402,7 @@ def encode_raw(
     return mtype, mtype.encode(stamp_ns, frame_id, fields), ignored
 
 
-def encode_movement(stamp_ns: np.ndarray, frame_id: str, movement: np.ndarray) -> np.ndarray:
+def encode_movement(stamp_ns: NDArray[np.int64], frame_id: str, movement: ArrayLike) -> NDArray[np.uint8]:
     """``/movement`` rows: one ``gyroemu_msgs/msg/Flag`` per stamp (``ValueError`` unless ``movement``
     holds one boolean, or 0/1, per stamp)."""
     n = len(stamp_ns)

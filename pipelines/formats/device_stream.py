@@ -26,11 +26,13 @@ dropped) and keeps its first samples; the third pass is the command's own, with 
 from __future__ import annotations
 
 import warnings
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from gyroemu.pipelines.formats.channels import IMU_ROLE, MAG_ROLE, MOVEMENT_ROLE, POSE_ROLE, TRUTH_ROLE, raw_kind
 from gyroemu.pipelines.formats.mcap_log import (
@@ -102,14 +104,14 @@ class DeviceBlock:
         The ``/truth/imu`` message nearest each sample's stamp (None unless the stream pairs it).
     """
 
-    stamp_ns: np.ndarray
-    gyro: np.ndarray
-    accel: np.ndarray
-    mag: np.ndarray
-    pose_ns: np.ndarray
-    pose_pos: np.ndarray
+    stamp_ns: NDArray[np.int64]
+    gyro: NDArray[np.float64]
+    accel: NDArray[np.float64]
+    mag: NDArray[np.float64]
+    pose_ns: NDArray[np.int64]
+    pose_pos: NDArray[np.float64]
     through_ns: int | None
-    movement: np.ndarray | None = None
+    movement: NDArray[np.bool_] | None = None
     truth: NearestTruth | None = None
 
     def __len__(self) -> int:
@@ -165,11 +167,11 @@ class NearestTruth:
         ``|t_truth − t|`` in seconds (both as ``ns_to_stamps`` has them); inf where there is no truth.
     """
 
-    q_wb: np.ndarray
-    omega_b: np.ndarray
-    gap_s: np.ndarray
+    q_wb: NDArray[np.float64]
+    omega_b: NDArray[np.float64]
+    gap_s: NDArray[np.float64]
 
-    def rows(self, index: slice | np.ndarray) -> NearestTruth:
+    def rows(self, index: slice | NDArray[np.intp]) -> NearestTruth:
         """The samples ``index``."""
         return NearestTruth(self.q_wb[index], self.omega_b[index], self.gap_s[index])
 
@@ -183,7 +185,7 @@ TRUTH_FIELDS = ("orientation", "orientation_covariance", "angular_velocity", "an
 """The ``/truth/imu`` fields :class:`DeviceStream` reads to pair the truth."""
 
 
-def truth_values(values: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+def truth_values(values: Mapping[str, NDArray[Any]]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Attitudes (m, 4), scalar first, and body rates (m, 3) of decoded ``/truth/imu`` messages, NaN where
     a message says it has none (its covariance's first element −1), as :func:`series_from_batch` reads
     them."""
@@ -194,7 +196,7 @@ def truth_values(values: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarr
     return q, omega
 
 
-def nearest(t: np.ndarray, tt: np.ndarray) -> np.ndarray:
+def nearest(t: NDArray[np.float64], tt: NDArray[np.float64]) -> NDArray[np.intp]:
     """Index into ``tt`` (sorted, not empty) of the stamp nearest each of ``t``, the earlier of two as
     near (``gyroemu bench``'s rule: both neighbours' distances computed in float64 seconds)."""
     if len(tt) < 2:
@@ -230,8 +232,8 @@ class _Pending:
 
     channel_id: int
     mtype: MessageType
-    stamp_ns: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64))
-    values: dict[str, np.ndarray] = field(default_factory=dict)
+    stamp_ns: NDArray[np.int64] = field(default_factory=lambda: np.empty(0, np.int64))
+    values: dict[str, NDArray[Any]] = field(default_factory=dict)
     last_log_time: int = -1
     seen: int = -(1 << 62)  # the largest stamp read so far
     count: int | None = None  # the topic's messages in the log (None: not known)
@@ -266,7 +268,7 @@ class _Pending:
         )
         self.pop(count)
 
-    def pop(self, count: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    def pop(self, count: int) -> tuple[NDArray[np.int64], dict[str, NDArray[Any]]]:
         out = self.stamp_ns[:count], {k: v[:count] for k, v in self.values.items()}
         self.stamp_ns = self.stamp_ns[count:]
         self.values = {k: v[count:] for k, v in self.values.items()}
@@ -407,7 +409,7 @@ class DeviceStream:
             truth=truth,
         )
 
-    def _nearest_truth(self, stamp_ns: np.ndarray, last: int | None) -> NearestTruth:
+    def _nearest_truth(self, stamp_ns: NDArray[np.int64], last: int | None) -> NearestTruth:
         """The samples' nearest truth messages (every truth stamp later than each sample's has been read, or
         the file has ended); the truth before ``last`` is then forgotten but its last message, the earlier
         neighbour of the samples to come."""
@@ -430,7 +432,7 @@ class DeviceStream:
         return 0 if self._pose is None else len(self._pose.stamp_ns)
 
 
-def _kept(stamp_ns: np.ndarray, raw) -> np.ndarray:
+def _kept(stamp_ns: NDArray[np.int64], raw: Iterable[_Pending]) -> NDArray[np.intp]:
     """Indices of the samples every raw topic has a message at."""
     keep = np.arange(len(stamp_ns))
     for pending in raw:
@@ -452,10 +454,10 @@ class RateCounter:
         self._last: int | None = None
         self._values = np.empty(0, np.int64)
         self._counts = np.empty(0, np.int64)
-        self._waiting: list[np.ndarray] = []
+        self._waiting: list[NDArray[np.int64]] = []
         self._waiting_n = 0
 
-    def add(self, stamp_ns: np.ndarray) -> None:
+    def add(self, stamp_ns: ArrayLike) -> None:
         """The next stamps, integer ns (a block's ``stamp_ns``); TypeError for others (float seconds)."""
         stamp_ns = np.asarray(stamp_ns)
         if not np.issubdtype(stamp_ns.dtype, np.integer):
@@ -617,7 +619,7 @@ class StreamDevice:
 
     name: str
     topics: dict[str, str]
-    metadata: dict | None
+    metadata: dict[str, str] | None
     channels: dict[str, tuple[int, MessageType]]
     messages: dict[str, int] = field(default_factory=dict)
 

@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from gyroemu.pipelines.formats.channels import BODY_FRAME, ESTIMATE_FRAME, WORLD_FRAME
 
@@ -129,7 +130,7 @@ def check_frame_id(frame_id: str) -> str:
     return frame_id
 
 
-def mounting_of(device: object) -> tuple[np.ndarray, np.ndarray] | None:
+def mounting_of(device: object) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
     """``(q_bs (4,) w, x, y, z; lever_arm_m (3,))`` of a device (a ``Device``, or its resolved config as
     TOML text); identity and zero where the config has no ``[mounting]``; None when ``device`` is None
     or text that is not a device config."""
@@ -176,7 +177,7 @@ class TfThinning:
             raise ValueError(f"a /tf rate must be positive, got {self.rate_hz}")
         self._period = max(1, round(1e9 / self.rate_hz))
 
-    def keep(self, stamp_ns: np.ndarray) -> np.ndarray:
+    def keep(self, stamp_ns: ArrayLike) -> NDArray[np.intp]:
         """Indices into ``stamp_ns`` (N,) int64, the next block of the series, to put on /tf."""
         stamp_ns = np.asarray(stamp_ns, dtype=np.int64)
         if not len(stamp_ns):
@@ -197,7 +198,7 @@ class TfThinning:
         return self._last_seen is not None and self._last_seen != self._last_kept
 
 
-def tf_indices(stamp_ns: np.ndarray, rate_hz: float) -> np.ndarray:
+def tf_indices(stamp_ns: NDArray[np.int64], rate_hz: float) -> NDArray[np.intp]:
     """Indices of a whole series' stamps (N,) that go on /tf: :class:`TfThinning`'s, and the last."""
     thinning = TfThinning(rate_hz)
     index = thinning.keep(stamp_ns)

@@ -51,10 +51,13 @@ is read; the output is written through a temporary file renamed at the end
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import NDArray
 
 from gyroemu.dynamics import ConfigError
 from gyroemu.pipelines.formats.atomic import output_file_problem
@@ -62,6 +65,9 @@ from gyroemu.pipelines.formats.channels import ImuSeries, PoseSeries
 from gyroemu.pipelines.formats.mcap_log import Recording, write_mcap
 from gyroemu.pipelines.formats.messages import ns_to_stamps
 from gyroemu.sensors.samples import ImuSamples
+
+if TYPE_CHECKING:
+    import h5py
 
 __all__ = [
     "ImportInputError",
@@ -90,7 +96,7 @@ class ImportInputError(ConfigError):
     """A file an importer cannot use. ``file`` names it; ``item`` names the dataset or attribute at fault
     (``dataset 'imu_gyr'``, ``attribute 'sampling_rate'``) or is None for the file as a whole."""
 
-    def __init__(self, reason: str, *, file, item: str | None = None):
+    def __init__(self, reason: str, *, file: str | Path | None, item: str | None = None) -> None:
         self.item = item
         super().__init__(reason, file=file)
 
@@ -131,14 +137,14 @@ class BroadTrial:
     """A BROAD trial as stored (units of the file: µT for the magnetometer)."""
 
     path: Path
-    gyro: np.ndarray  # (N, 3) rad/s
-    accel: np.ndarray  # (N, 3) m/s²
-    mag_ut: np.ndarray  # (N, 3) µT
-    opt_quat: np.ndarray  # (N, 4) w, x, y, z; NaN rows
-    movement: np.ndarray  # (N,) bool
+    gyro: NDArray[np.float64]  # (N, 3) rad/s
+    accel: NDArray[np.float64]  # (N, 3) m/s²
+    mag_ut: NDArray[np.float64]  # (N, 3) µT
+    opt_quat: NDArray[np.float64]  # (N, 4) w, x, y, z; NaN rows
+    movement: NDArray[np.bool_]  # (N,)
     rate_hz: float
     info: str = ""
-    opt_pos: np.ndarray | None = None  # (N, 3) m; NaN rows
+    opt_pos: NDArray[np.float64] | None = None  # (N, 3) m; NaN rows
 
     def __len__(self) -> int:
         return len(self.gyro)
@@ -149,7 +155,7 @@ _MAX_EXPANSION = 64
 from a corrupt dataspace, would have the read allocate memory the file cannot fill."""
 
 
-def _check_size(node, path: Path, item: str) -> None:
+def _check_size(node: h5py.Dataset, path: Path, item: str) -> None:
     """Refuse a dataset whose shape asks for more bytes than the file could hold (:data:`_MAX_EXPANSION`)."""
     limit = _MAX_EXPANSION * path.stat().st_size + (1 << 20)
     if node.size * node.dtype.itemsize > limit:
@@ -161,7 +167,7 @@ def _check_size(node, path: Path, item: str) -> None:
         )
 
 
-def read_broad(path) -> BroadTrial:
+def read_broad(path: str | os.PathLike[str]) -> BroadTrial:
     """Read and check a BROAD trial (opened read-only). Raises :class:`ImportInputError`."""
     import h5py  # imported where used: only importers need it
 
@@ -275,13 +281,13 @@ _QUAT_NORM_TOLERANCE = 0.01
 zero row above all, is no rotation, and a reader that normalises it would make one up."""
 
 
-def _rows(mask: np.ndarray) -> str:
+def _rows(mask: NDArray[np.bool_]) -> str:
     """``row k`` (the first row where ``mask``, rows (N,) or (N, M)) and how many rows there are."""
     rows = np.flatnonzero(mask.reshape(len(mask), -1).any(axis=1))
     return f"row {rows[0]}" + (f" (and {len(rows) - 1} more)" if len(rows) > 1 else "")
 
 
-def _check_values(arrays: dict[str, np.ndarray], opt_pos: np.ndarray | None, path: Path) -> None:
+def _check_values(arrays: dict[str, NDArray[np.float64]], opt_pos: NDArray[np.float64] | None, path: Path) -> None:
     """Refuse what is not a measurement: ±inf in any dataset, and an ``opt_quat`` row that is no
     rotation (:data:`_QUAT_NORM_TOLERANCE`). NaN rows pass: the reference's are lost tracking (module
     notes), the sensors' dropouts a filter bridges (the import's summary counts them)."""
@@ -307,7 +313,7 @@ def _check_values(arrays: dict[str, np.ndarray], opt_pos: np.ndarray | None, pat
         )
 
 
-def broad_stamps_ns(n: int, rate_hz: float) -> np.ndarray:
+def broad_stamps_ns(n: int, rate_hz: float) -> NDArray[np.int64]:
     """``t_k = k / rate_hz`` for k = 0 … n−1 as integer nanoseconds, rounded to nearest: (n,) int64."""
     k = np.arange(n, dtype=np.float64)
     return np.rint(k * 1e9 / float(rate_hz)).astype(np.int64)
@@ -334,7 +340,9 @@ def broad_recording(trial: BroadTrial, device_name: str = "imu0") -> Recording:
     return Recording(samples, truth=truth, pose=pose, movement=trial.movement, metadata=metadata)
 
 
-def import_broad(path, out, *, device_name: str = "imu0", force: bool = False) -> ImportSummary:
+def import_broad(
+    path: str | os.PathLike[str], out: str | os.PathLike[str], *, device_name: str = "imu0", force: bool = False
+) -> ImportSummary:
     """Turn the BROAD trial ``path`` into the MCAP log ``out`` (see the module's notes); an existing
     ``out`` is replaced only with ``force``.
 

@@ -35,7 +35,13 @@ states). Nothing here draws random numbers.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, cast
+
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+if TYPE_CHECKING:
+    from gyroemu.sensors.imu import Device
 
 __all__ = ["measurement_variances", "white_variance", "mechanism_noise_gain"]
 
@@ -66,7 +72,7 @@ def mechanism_noise_gain(mechanism: object, period: float) -> float:
 
 
 def white_variance(
-    density: np.ndarray,
+    density: ArrayLike,
     period: float,
     *,
     output_lsb: float | None = None,
@@ -76,7 +82,7 @@ def white_variance(
     filter_order: int = 1,
     shaped_density: float = 0.0,
     shaped_gain: float = 1.0,
-) -> np.ndarray:
+) -> NDArray[np.float64]:
     """Per-sample variance (3,) of an axis triad whose white noise has Allan reading ``density`` (3,)
     (unit/√Hz, i.e. unit·√s) sampled every ``period`` s; see the module's notes for each term.
     ``lsb_included``: ``density`` already holds the rate quantiser's share ``output_lsb² T/12``;
@@ -91,15 +97,15 @@ def white_variance(
     return white + quantiser + counts
 
 
-def measurement_variances(device: object) -> tuple[np.ndarray, np.ndarray] | None:
+def measurement_variances(device: object) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
     """``(gyro (3,) (rad/s)², accel (3,) (m/s²)²)``: the per-sample variances of a ``Device``'s output
     at its rate; None for anything that is not a Device (a config's text, None)."""
     spec = getattr(device, "spec", None)
     if spec is None or not hasattr(device, "gyro_noise_density"):
         return None
     period = 1.0 / float(spec.rate_hz)
-    gyro_model = device.gyro_errors  # type: ignore[attr-defined]
-    accel_model = device.accel_errors  # type: ignore[attr-defined]
+    gyro_model = cast("Device", device).gyro_errors  # a Device: it has a spec and a noise density
+    accel_model = cast("Device", device).accel_errors
     gyro = white_variance(
         device.gyro_noise_density,
         period,

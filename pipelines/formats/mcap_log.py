@@ -65,9 +65,10 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import TYPE_CHECKING, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar, cast
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 import gyroemu
 from gyroemu.pipelines.formats.channels import (
@@ -110,6 +111,8 @@ from gyroemu.pipelines.formats.imu_covariance import measurement_variances
 from gyroemu.pipelines.formats.mcap_records import (
     COMPRESSION_LEVEL,
     OFFERED_QOS_PROFILES,
+    ChannelInfo,
+    DecodedChannel,
     LogError,
     McapFileWriter,
     McapScan,
@@ -126,12 +129,15 @@ from gyroemu.pipelines.formats.messages import (
 from gyroemu.pipelines.formats.tf_messages import TF_MESSAGE_TYPE, Transforms, decode_tf, encode_tf, tf_schema
 from gyroemu.sensors.samples import ImuSamples
 
-EncodedBlock = list[tuple[int, np.ndarray, np.ndarray]]
+EncodedBlock = list[tuple[int, NDArray[np.int64], NDArray[np.uint8]]]
 """A block's messages as :meth:`McapLogWriter.prepare` serialised them: ``(channel_id, stamp_ns (N,),
 payloads (N, size) uint8)`` per channel, for :meth:`McapLogWriter.write_prepared`."""
 
 if TYPE_CHECKING:
+    from mcap.records import Channel
+
     from gyroemu.dynamics import Scenario, Trajectory
+    from gyroemu.sensors.imu import Device
     from gyroemu.sensors.sampling import SensorTruth
 
 __all__ = [
@@ -175,7 +181,7 @@ def truth_series(
     trajectory: Trajectory,
     samples: ImuSamples,
     sensor_truth: SensorTruth | None = None,
-    q_wb: np.ndarray | None = None,
+    q_wb: NDArray[np.float64] | None = None,
 ) -> ImuSeries:
     """Body truth at the instants the device sampled (``samples.t_true``), stamped with the device's
     stamps ``samples.t``: what ``/truth/imu`` holds. ``sensor_truth``: the trajectory's interpolants,
@@ -197,7 +203,7 @@ def truth_pose(
     trajectory: Trajectory,
     samples: ImuSamples,
     sensor_truth: SensorTruth | None = None,
-    q_wb: np.ndarray | None = None,
+    q_wb: NDArray[np.float64] | None = None,
 ) -> PoseSeries:
     """The body's true position and attitude in the world at the instants the device sampled, stamped
     with the device's stamps: what ``/truth/pose`` holds. The position is the cubic Hermite spline
@@ -253,15 +259,15 @@ class Recording:
     samples: ImuSamples
     truth: ImuSeries | None = None
     estimate: ImuSeries | None = None
-    device: object = None
+    device: Device | str | None = None
     seed: int | None = None
-    movement: np.ndarray | None = None
-    metadata: dict | None = None
-    stamp_ns: np.ndarray | None = None
+    movement: NDArray[np.bool_] | None = None
+    metadata: dict[str, str] | None = None
+    stamp_ns: NDArray[np.int64] | None = None
     pose: PoseSeries | None = None
     frame_id: str | None = None
-    gyro_variance: np.ndarray | None = None
-    accel_variance: np.ndarray | None = None
+    gyro_variance: NDArray[np.float64] | None = None
+    accel_variance: NDArray[np.float64] | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -294,19 +300,19 @@ class DeviceLog:
     """
 
     name: str
-    topics: dict
+    topics: dict[str, str]
     samples: ImuSamples
-    stamp_ns: np.ndarray
+    stamp_ns: NDArray[np.int64]
     truth: ImuSeries | None = None
     estimate: ImuSeries | None = None
-    metadata: dict | None = None
-    movement: np.ndarray | None = None
+    metadata: dict[str, str] | None = None
+    movement: NDArray[np.bool_] | None = None
     pose: PoseSeries | None = None
     frame_id: str = ""
-    gyro_variance: np.ndarray | None = None
-    accel_variance: np.ndarray | None = None
+    gyro_variance: NDArray[np.float64] | None = None
+    accel_variance: NDArray[np.float64] | None = None
 
-    def seconds_from_first(self) -> np.ndarray:
+    def seconds_from_first(self) -> NDArray[np.float64]:
         """The samples' stamps in seconds from the first, exactly from their nanoseconds (N,): the float
         seconds of ``samples.t`` resolve 0.24 µs at Unix-epoch times, which differences would read as
         jitter (:func:`~gyroemu.pipelines.formats.messages.seconds_since`)."""
@@ -337,13 +343,13 @@ class McapLog:
     """
 
     path: Path
-    devices: dict
-    metadata: list
+    devices: dict[str, DeviceLog]
+    metadata: list[dict[str, str]]
     profile: str
     message_count: int
     truncated: bool = False
-    skipped: dict = field(default_factory=dict)
-    channels: tuple = ()
+    skipped: dict[str, str] = field(default_factory=dict)
+    channels: tuple[ChannelInfo, ...] = ()
 
     @property
     def device(self) -> DeviceLog:
@@ -396,11 +402,11 @@ it, so ``ros2 bag play`` latches the mounting for late subscribers."""
 class _DeviceChannels:
     name: str
     prefix: str
-    channels: dict  # role -> channel id
+    channels: dict[str, int]  # role -> channel id
     frame_id: str
-    warned: set = field(default_factory=set)
-    variances: tuple = (None, None)
-    mounting: tuple | None = None
+    warned: set[str] = field(default_factory=set)
+    variances: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None] = (None, None)
+    mounting: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
     static_written: bool = False
 
 
@@ -410,10 +416,10 @@ class _TfSeries:
 
     child: str
     thinning: TfThinning
-    last: tuple | None = None  # (stamp_ns, translation (3,), rotation xyzw (4,))
+    last: tuple[int, NDArray[np.float64], NDArray[np.float64]] | None = None  # (stamp_ns, translation, xyzw)
 
 
-def _toml(value) -> str:
+def _toml(value: Scenario | Device | str | None) -> str:
     """A scenario's or device's resolved config as TOML text (given as an object or as the text)."""
     if value is None:
         return ""
@@ -603,8 +609,13 @@ class McapLogWriter:
         return self._tf_channels[topic]
 
     def _tf_rows(
-        self, device: str, child: str, stamp_ns: np.ndarray, pos: np.ndarray | None, q_wb: np.ndarray
-    ) -> tuple[int, np.ndarray, np.ndarray] | None:
+        self,
+        device: str,
+        child: str,
+        stamp_ns: NDArray[np.int64],
+        pos: NDArray[np.float64] | None,
+        q_wb: NDArray[np.float64],
+    ) -> tuple[int, NDArray[np.int64], NDArray[np.uint8]] | None:
         """``/tf`` batch ``map`` -> ``child`` of one block of a series (thinned), or None."""
         if self._tf_rate_hz is None:
             return None
@@ -627,7 +638,7 @@ class McapLogWriter:
         rows = encode_tf(stamp_ns[index], [(WORLD_FRAME, child)], pos[index, None, :], xyzw[index, None, :])
         return (self._tf_channel(TF_TOPIC), stamp_ns[index], rows)
 
-    def _encode_tf(self, device: _DeviceChannels, recording: Recording, stamp_ns: np.ndarray) -> list[tuple]:
+    def _encode_tf(self, device: _DeviceChannels, recording: Recording, stamp_ns: NDArray[np.int64]) -> EncodedBlock:
         """``/tf_static`` (once per device) and ``/tf`` batches of a recording's block."""
         batches = []
         if device.mounting is not None and not device.static_written and len(stamp_ns):
@@ -662,7 +673,9 @@ class McapLogWriter:
                 batches.append(rows)
         return batches
 
-    def _series_stamps(self, recording: Recording, t: np.ndarray, what: str, stamp_ns: np.ndarray) -> np.ndarray:
+    def _series_stamps(
+        self, recording: Recording, t: ArrayLike, what: str, stamp_ns: NDArray[np.int64]
+    ) -> NDArray[np.int64]:
         """A truth, estimate or pose series' stamps, ns: the samples' exact stamps where they are the same."""
         series_ns = _log_stamps(t, what) + self._start_ns
         if (
@@ -673,7 +686,7 @@ class McapLogWriter:
             return stamp_ns
         return series_ns
 
-    def _encode(self, device: _DeviceChannels, recording: Recording) -> list[tuple]:
+    def _encode(self, device: _DeviceChannels, recording: Recording) -> EncodedBlock:
         """``(channel_id, stamp_ns, payloads)`` of every channel of a recording."""
         samples = recording.samples
         stamp_ns = _log_stamps(samples.t, "samples.t") + self._start_ns
@@ -758,7 +771,7 @@ class McapLogWriter:
             self._tmp.unlink(missing_ok=True)
 
 
-def _log_stamps(t: np.ndarray, what: str) -> np.ndarray:
+def _log_stamps(t: ArrayLike, what: str) -> NDArray[np.int64]:
     stamp_ns = stamps_to_ns(t)
     if len(stamp_ns) and stamp_ns.min() < 0:
         raise ValueError(f"{what} has stamps before 0 s ({stamp_ns.min() * 1e-9:g} s): MCAP log times are unsigned")
@@ -789,7 +802,9 @@ def write_mcap(
 # Reading: from channels to devices.
 
 
-def match_stamps(reference_ns: np.ndarray, stamp_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def match_stamps(
+    reference_ns: NDArray[np.int64], stamp_ns: NDArray[np.int64]
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
     """Indices ``(i, j)`` with ``reference_ns[i] == stamp_ns[j]`` (first match of each, in order): how a
     device's samples find their messages on its other topics."""
     if len(reference_ns) == len(stamp_ns) and np.array_equal(reference_ns, stamp_ns):
@@ -897,8 +912,8 @@ class LogCheck:
     """
 
     path: Path
-    channels: tuple
-    metadata: list
+    channels: tuple[ChannelInfo, ...]
+    metadata: list[dict[str, str]]
     message_count: int
     truncated: bool
 
@@ -931,7 +946,7 @@ def check_mcap_noting(path: str | os.PathLike[str], note: Callable[[str], None])
     )
 
 
-def _is_tf(topic: str, scan: McapScan, channel) -> bool:
+def _is_tf(topic: str, scan: McapScan, channel: Channel) -> bool:
     schema = scan.schemas.get(channel.schema_id)
     return topic in (TF_TOPIC, TF_STATIC_TOPIC) and schema is not None and schema.name == TF_MESSAGE_TYPE
 
@@ -955,7 +970,7 @@ class TypedChannel(Protocol):
 ChannelT = TypeVar("ChannelT", bound=TypedChannel)
 
 
-def group_devices(path: Path, channels: Iterable[ChannelT], skipped: dict) -> dict[str, dict[str, ChannelT]]:
+def group_devices(path: Path, channels: Iterable[ChannelT], skipped: dict[str, str]) -> dict[str, dict[str, ChannelT]]:
     """Topic prefix → role → channel: the channels (anything with ``topic`` and ``mtype``, of a type
     gyroemu decodes) grouped into devices as :func:`read_mcap` groups them. Topics that belong to no
     device go into ``skipped`` with the reason (and a :class:`LogWarning`)."""
@@ -988,14 +1003,16 @@ def group_devices(path: Path, channels: Iterable[ChannelT], skipped: dict) -> di
     return groups
 
 
-def device_name(prefix: str, metadata: list[dict]) -> tuple[str, dict | None]:
+def device_name(prefix: str, metadata: list[dict[str, str]]) -> tuple[str, dict[str, str] | None]:
     """A device's name and its ``gyroemu`` metadata record (None without one), from its topic prefix."""
     records = {m.get("topic_prefix", ""): m for m in metadata}
     meta = records.get(prefix) or (metadata[0] if prefix == "" and len(metadata) == 1 else None)
     return (meta or {}).get("device_name") or (prefix.strip("/") or "imu0"), meta
 
 
-def _devices(path: Path, decoded: dict, metadata: list, skipped: dict) -> dict:
+def _devices(
+    path: Path, decoded: dict[int, DecodedChannel], metadata: list[dict[str, str]], skipped: dict[str, str]
+) -> dict[str, DeviceLog]:
     """Group decoded channels into devices."""
     devices = {}
     for prefix, group in group_devices(path, decoded.values(), skipped).items():
@@ -1019,11 +1036,11 @@ def unflagged_samples(path: Path, count: int, imu_topic: str, topic: str) -> str
     )
 
 
-def _device_log(path: Path, name: str, group: dict, meta: dict | None) -> DeviceLog:
+def _device_log(path: Path, name: str, group: dict[str, DecodedChannel], meta: dict[str, str] | None) -> DeviceLog:
     imu = group[IMU_ROLE]
     stamp_ns = imu.batch.stamp_ns
     keep = np.arange(len(stamp_ns))
-    raw: dict[str, dict[str, np.ndarray]] = {}
+    raw: dict[str, dict[str, NDArray[Any]]] = {}
     for role, d in group.items():
         if raw_kind(role) is not None:
             i, j = match_stamps(stamp_ns[keep], d.batch.stamp_ns)
@@ -1031,7 +1048,8 @@ def _device_log(path: Path, name: str, group: dict, meta: dict | None) -> Device
                 warnings.warn(dropped_samples(path, len(keep) - len(i), imu.topic, d.topic), LogWarning, stacklevel=4)
                 keep = keep[i]
                 raw = {k: {n: v[i] for n, v in obs.items()} for k, obs in raw.items()}
-            raw[d.mtype.kind] = {n: v[j] for n, v in raw_observables(d.mtype, d.batch).items()}
+            kind = cast(str, d.mtype.kind)  # a raw role's type is a raw type (role_accepts): it has a kind
+            raw[kind] = {n: v[j] for n, v in raw_observables(d.mtype, d.batch).items()}
     mag = np.full((len(keep), 3), np.nan)
     if MAG_ROLE in group:
         d = group[MAG_ROLE]

@@ -46,12 +46,12 @@ import os
 import struct
 import threading
 import zlib
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from io import BytesIO
 from pathlib import Path
-from typing import BinaryIO, NamedTuple
+from typing import TYPE_CHECKING, BinaryIO, NamedTuple, TypeAlias, cast
 
 import numpy as np
 import zstandard
@@ -64,16 +64,21 @@ from mcap.records import (
     DataEnd,
     Footer,
     Header,
+    McapRecord,
     Metadata,
     MetadataIndex,
     Schema,
     Statistics,
     SummaryOffset,
 )
+from numpy.typing import ArrayLike, NDArray
 
 import gyroemu
 from gyroemu.errors import LogError
 from gyroemu.pipelines.formats.messages import DecodedBatch, MessageType, message_type
+
+if TYPE_CHECKING:
+    from typing_extensions import Buffer
 
 __all__ = [
     "COMPRESSION_LEVEL",
@@ -133,9 +138,9 @@ class _Member:
     """One channel's messages in a block, before their records are laid out."""
 
     channel_id: int
-    sequence: np.ndarray  # (N,) uint32
-    log_time: np.ndarray  # (N,) uint64
-    payloads: np.ndarray  # (N, size) uint8
+    sequence: NDArray[np.uint32]  # (N,)
+    log_time: NDArray[np.uint64]  # (N,)
+    payloads: NDArray[np.uint8]  # (N, size)
 
 
 @dataclass
@@ -143,10 +148,10 @@ class _Group:
     """Message records of channels that share their log times: row k holds every channel's message k,
     in the channels' order, as one contiguous unit."""
 
-    rows: np.ndarray  # (N, total record size) uint8
-    channel: np.ndarray  # (K,) uint16
-    sizes: np.ndarray  # (K,) int64, record sizes
-    log_time: np.ndarray  # (N,) uint64
+    rows: NDArray[np.uint8]  # (N, total record size)
+    channel: NDArray[np.uint16]  # (K,)
+    sizes: NDArray[np.int64]  # (K,), record sizes
+    log_time: NDArray[np.uint64]  # (N,)
 
 
 def _group_records(members: Sequence[_Member]) -> _Group:
@@ -179,7 +184,12 @@ def _group_records(members: Sequence[_Member]) -> _Group:
     return _Group(rows, channel, sizes, log_time)
 
 
-def _no_messages():
+_Records: TypeAlias = tuple[NDArray[np.uint8], NDArray[np.uint16], NDArray[np.uint64], NDArray[np.int64]]
+"""``(data, channel_id, log_time, offset)``: Message records laid end to end and, per message, its channel,
+log time and offset in ``data``."""
+
+
+def _no_messages() -> _Records:
     """``(data, channel_id, log_time, offset)`` of no message (see :func:`_interleave`)."""
     return np.empty(0, np.uint8), np.empty(0, np.uint16), np.empty(0, np.uint64), np.empty(0, np.int64)
 
@@ -200,7 +210,7 @@ def _groups(members: Sequence[_Member]) -> list[_Group]:
     return [_group_records(group) for group in grouped]
 
 
-def _interleave(groups: Sequence[_Group]):
+def _interleave(groups: Sequence[_Group]) -> _Records:
     """Records of several groups of channels (:func:`_groups`) in time order (ties: the order of
     ``groups``).
 
@@ -277,7 +287,7 @@ simulated log (IMU, field, truth and raw channels: noisy floats): 874 against 53
 more bytes (ratio 4.90 against 4.98)."""
 
 
-def _rows(buffer: np.ndarray, size: int) -> np.ndarray:
+def _rows(buffer: NDArray[np.uint8], size: int) -> NDArray[np.uint8]:
     """Every run of ``size`` bytes of ``buffer`` (n,) as a row of a (n − size + 1, size) view: indexed by
     start offsets, it reads or writes whole payloads without an index per byte."""
     return np.lib.stride_tricks.sliding_window_view(buffer, size, writeable=buffer.flags.writeable)
@@ -315,7 +325,7 @@ class McapFileWriter:
         self._compressor = zstandard.ZstdCompressor(level=compression_level)
         self._parallel = zstandard.backend == "cext"  # the cffi backend has no multi_compress_to_buffer
         self._schemas: dict[int, Schema] = {}
-        self._schema_ids: dict[tuple, int] = {}
+        self._schema_ids: dict[tuple[str, str, bytes], int] = {}
         self._channels: dict[int, Channel] = {}
         self._chunk_indexes: list[ChunkIndex] = []
         self._metadata_indexes: list[MetadataIndex] = []
@@ -324,7 +334,7 @@ class McapFileWriter:
         self._time_range: list[int] | None = None
         self._metadata_count = 0
         self._pending = _no_messages()
-        self._held: list[tuple[object, str | None]] = []  # registered records not yet written (_hold)
+        self._held: list[tuple[McapRecord, str | None]] = []  # registered records not yet written (_hold)
         self._held_lock = threading.Lock()
         self._finished = False
         self._write(MAGIC)
@@ -336,16 +346,16 @@ class McapFileWriter:
         self._out.write(data)
         self._position += len(data)
 
-    def _write_record(self, record) -> int:
+    def _write_record(self, record: McapRecord) -> int:
         """Write one ``mcap.records`` record; returns its offset."""
         builder = RecordBuilder()
         record.write(builder)
-        data = builder.end()
+        data: bytes = builder.end()
         offset = self._position
         self._write(data)
         return offset
 
-    def _hold(self, record, metadata_name: str | None = None) -> None:
+    def _hold(self, record: McapRecord, metadata_name: str | None = None) -> None:
         """Queue a Schema, Channel or Metadata record: written, in order, before the next messages (or at
         :meth:`finish`), so that a thread preparing messages may register channels while another writes."""
         with self._held_lock:
@@ -370,7 +380,9 @@ class McapFileWriter:
             self._hold(schema)
         return self._schema_ids[key]
 
-    def register_channel(self, topic: str, message_encoding: str, schema_id: int, metadata: dict | None = None) -> int:
+    def register_channel(
+        self, topic: str, message_encoding: str, schema_id: int, metadata: Mapping[str, str] | None = None
+    ) -> int:
         """A new channel's id (written before any of its messages)."""
         channel = Channel(
             id=len(self._channels) + 1,
@@ -384,7 +396,9 @@ class McapFileWriter:
         self._hold(channel)
         return channel.id
 
-    def register_ros2_channel(self, topic: str, mtype: MessageType | None, metadata: dict | None = None) -> int:
+    def register_ros2_channel(
+        self, topic: str, mtype: MessageType | None, metadata: Mapping[str, str] | None = None
+    ) -> int:
         """A new ``cdr`` channel of type ``mtype`` (its ``ros2msg`` schema, registered once; None: no
         schema) with the ``offered_qos_profiles`` of the ``ros2`` profile, then ``metadata``."""
         schema_id = 0 if mtype is None else self.register_schema(mtype.name, "ros2msg", mtype.schema.encode())
@@ -392,12 +406,12 @@ class McapFileWriter:
             topic, "cdr", schema_id, {"offered_qos_profiles": OFFERED_QOS_PROFILES, **(metadata or {})}
         )
 
-    def add_metadata(self, name: str, data: dict) -> None:
+    def add_metadata(self, name: str, data: Mapping[str, object]) -> None:
         """A Metadata record (and its index in the summary), written before the next messages."""
         self._hold(Metadata(name=name, metadata={str(k): str(v) for k, v in data.items()}), name)
         self._metadata_count += 1
 
-    def add_messages(self, batches: Iterable[tuple[int, np.ndarray, np.ndarray]]) -> None:
+    def add_messages(self, batches: Iterable[tuple[int, ArrayLike, ArrayLike]]) -> None:
         """Append messages of several channels, interleaved in time order, after the records registered
         before them.
 
@@ -445,13 +459,13 @@ class McapFileWriter:
 
     def add_raw_messages(
         self,
-        channel_id: np.ndarray,
-        sequence: np.ndarray,
-        log_time: np.ndarray,
-        publish_time: np.ndarray,
-        buffer: np.ndarray,
-        start: np.ndarray,
-        size: np.ndarray,
+        channel_id: ArrayLike,
+        sequence: ArrayLike,
+        log_time: ArrayLike,
+        publish_time: ArrayLike,
+        buffer: ArrayLike,
+        start: ArrayLike,
+        size: ArrayLike,
     ) -> None:
         """Append messages exactly as given, in the given order (no interleaving, no renumbering).
 
@@ -513,7 +527,13 @@ class McapFileWriter:
         self._write_held()
         self._append(data, channel, log_time, offset)
 
-    def _append(self, data: np.ndarray, channel: np.ndarray, log_time: np.ndarray, offset: np.ndarray) -> None:
+    def _append(
+        self,
+        data: NDArray[np.uint8],
+        channel: NDArray[np.uint16],
+        log_time: NDArray[np.uint64],
+        offset: NDArray[np.int64],
+    ) -> None:
         """Queue Message records (``data``; per message its channel, log time and offset in ``data``)
         for the chunks, writing every chunk they complete."""
         self._message_count += len(log_time)
@@ -551,12 +571,12 @@ class McapFileWriter:
         a = starts[-1]
         self._pending = (data[offset[a] :].copy(), channel[a:], log_time[a:], offset[a:] - offset[a])
 
-    def _write_chunks(self, pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]) -> None:
+    def _write_chunks(self, pieces: list[_Records]) -> None:
         """Chunks of ``(records, channel, log_time, offset)``, compressed on every core at once (zstd
         and zlib release the GIL; each chunk is one zstd frame, the same bytes as compressed alone), then
         written in order."""
         raws: list[bytes | bytearray | memoryview] = [
-            memoryview(np.ascontiguousarray(records))  # type: ignore[arg-type]  # numpy stubs: __buffer__ 3.12+ only
+            memoryview(cast("Buffer", np.ascontiguousarray(records)))  # numpy's stubs: __buffer__ 3.12+ only
             for records, _, _, _ in pieces
         ]
         if len(raws) > 1 and self._parallel:
@@ -576,9 +596,9 @@ class McapFileWriter:
         raw: bytes | bytearray | memoryview,
         compressed: bytes,
         crc: int,
-        channel: np.ndarray,
-        log_time: np.ndarray,
-        offset: np.ndarray,
+        channel: NDArray[np.uint16],
+        log_time: NDArray[np.uint64],
+        offset: NDArray[np.int64],
     ) -> None:
         """One Chunk record (opcode 0x06) and its Message Index records (0x07)."""
         compression = b"zstd"
@@ -635,7 +655,7 @@ class McapFileWriter:
         builder = RecordBuilder()
         groups = []
 
-        def group(opcode, records):
+        def group(opcode: Opcode, records: Iterable[McapRecord]) -> None:
             start = builder.count
             for record in records:
                 record.write(builder)
@@ -669,7 +689,7 @@ class McapFileWriter:
         summary_offset_start = summary_start + builder.count
         for offset_record in groups:
             offset_record.write(builder)
-        summary = builder.end()
+        summary: bytes = builder.end()
         crc = zlib.crc32(summary)
         crc = zlib.crc32(struct.pack("<BQQQ", Opcode.FOOTER, 8 + 8 + 4, summary_start, summary_offset_start), crc)
         self._write(summary)
@@ -693,10 +713,11 @@ class ChannelData:
 
     channel: Channel
     mtype: MessageType | None = None  # None: not decoded
-    order: list = field(default_factory=list)  # global message ordinal per block
-    header: list = field(default_factory=list)  # _MESSAGE_FIELDS arrays
-    payload: list = field(default_factory=list)  # (m, L) uint8
-    loose: list = field(default_factory=list)  # messages outside chunks: (ordinal, (1,) fields, bytes)
+    order: list[NDArray[np.int64]] = field(default_factory=list)  # global message ordinal per block
+    header: list[NDArray[np.void]] = field(default_factory=list)  # _MESSAGE_FIELDS arrays
+    payload: list[NDArray[np.uint8]] = field(default_factory=list)  # (m, L)
+    # messages outside chunks: (ordinal, (1,) fields, bytes)
+    loose: list[tuple[int, NDArray[np.void], bytes]] = field(default_factory=list)
 
 
 @dataclass
@@ -705,7 +726,7 @@ class DecodedChannel:
 
     topic: str
     mtype: MessageType
-    log_time: np.ndarray  # (N,) uint64, ns
+    log_time: NDArray[np.uint64]  # (N,), ns
     batch: DecodedBatch
 
 
@@ -881,7 +902,7 @@ class McapScan:
             self.skipped[channel.topic] = reason
         self.data[channel.id] = ChannelData(channel, mtype=mtype)
 
-    def _loose_fields(self, content: bytes) -> tuple[np.ndarray, int]:
+    def _loose_fields(self, content: bytes) -> tuple[NDArray[np.void], int]:
         """The fixed fields (``(1,)`` :data:`_MESSAGE_FIELDS`) and channel id of a Message record outside chunks."""
         if len(content) < 22:
             raise ValueError("a Message record shorter than its fixed fields")
@@ -961,7 +982,15 @@ class McapScan:
         header = _gather(buffer, starts + 9, 22).view(_MESSAGE_FIELDS)[:, 0]
         self._chunk_messages(data, buffer, header, starts, lengths, position)
 
-    def _chunk_messages(self, data, buffer, header, starts, lengths, position) -> None:
+    def _chunk_messages(
+        self,
+        data: bytes,
+        buffer: NDArray[np.uint8],
+        header: NDArray[np.void],
+        starts: NDArray[np.int64],
+        lengths: NDArray[np.int64],
+        position: int,
+    ) -> None:
         """Gather each wanted channel's payloads, in bulk."""
         ordinal = self.message_count + np.arange(len(starts))
         self.message_count += len(starts)
@@ -1031,7 +1060,9 @@ def _period(ops: list[int], lens: list[int]) -> int | None:
     )
 
 
-def _record_positions(data: bytes, buffer: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _record_positions(
+    data: bytes, buffer: NDArray[np.uint8]
+) -> tuple[NDArray[np.int64], NDArray[np.uint8], NDArray[np.int64]]:
     """Start offset, opcode and content length of every record in a decompressed chunk.
 
     Records follow each other (opcode u8, length u64, content), so finding them is a walk. It runs in
@@ -1089,7 +1120,7 @@ def _record_positions(data: bytes, buffer: np.ndarray) -> tuple[np.ndarray, np.n
     return np.concatenate(starts), np.concatenate(opcodes), np.concatenate(lengths)
 
 
-def _gather(buffer: np.ndarray, starts: np.ndarray, width: int) -> np.ndarray:
+def _gather(buffer: NDArray[np.uint8], starts: NDArray[np.int64], width: int) -> NDArray[np.uint8]:
     """Rows ``buffer[s:s + width]`` for each start ``s``: (M, width) uint8, a copy. Indexing the rows of
     a sliding-window view copies each row whole (25 times faster than a gather of M × width bytes)."""
     if len(starts) == 0:
@@ -1107,7 +1138,8 @@ def _opcode_name(opcode: int) -> str:
 def _decode_channel(path: Path, data: ChannelData, mtype: MessageType) -> DecodedChannel:
     """All messages of a channel, decoded, in log-time order (file order for equal times)."""
     orders, headers, batches = [], [], []
-    by_width: dict[int, list] = {}
+    by_width: dict[int, list[tuple[NDArray[np.int64], NDArray[np.void], NDArray[np.uint8]]]] = {}
+    payload: NDArray[np.uint8] | bytes  # a block's rows, then a loose message's bytes
     for order, header, payload in zip(data.order, data.header, data.payload):
         by_width.setdefault(payload.shape[1], []).append((order, header, payload))
     for ordinal, fields, payload in data.loose:
@@ -1188,7 +1220,15 @@ class _MessageWalk(McapScan):
         if wanted is not None:
             self.out.append(McapMessage(wanted[0], wanted[1], int(fields["log_time"][0]), bytes(content[22:])))
 
-    def _chunk_messages(self, data, buffer, header, starts, lengths, position) -> None:
+    def _chunk_messages(
+        self,
+        data: bytes,
+        buffer: NDArray[np.uint8],
+        header: NDArray[np.void],
+        starts: NDArray[np.int64],
+        lengths: NDArray[np.int64],
+        position: int,
+    ) -> None:
         """Hand out each wanted message as its own :class:`McapMessage`, in file order."""
         self.message_count += len(starts)
         unknown = [int(c) for c in np.unique(header["channel_id"]) if int(c) not in self.wanted]
@@ -1251,7 +1291,7 @@ class ChannelInfo(NamedTuple):
     schema_name: str  # '' when the channel has no schema
     schema_encoding: str
     schema_data: bytes
-    metadata: dict
+    metadata: dict[str, str]
 
 
 def mcap_channel_info(path: str | os.PathLike[str]) -> list[ChannelInfo]:
@@ -1271,19 +1311,19 @@ class RawMessages(NamedTuple):
     (:meth:`McapFileWriter.add_raw_messages` takes the same arrays).
     """
 
-    channel_id: np.ndarray  # (M,) uint16
-    sequence: np.ndarray  # (M,) uint32
-    log_time: np.ndarray  # (M,) uint64
-    publish_time: np.ndarray  # (M,) uint64
-    buffer: np.ndarray  # uint8
-    start: np.ndarray  # (M,) int64
-    size: np.ndarray  # (M,) int64
+    channel_id: NDArray[np.uint16]  # (M,)
+    sequence: NDArray[np.uint32]  # (M,)
+    log_time: NDArray[np.uint64]  # (M,)
+    publish_time: NDArray[np.uint64]  # (M,)
+    buffer: NDArray[np.uint8]
+    start: NDArray[np.int64]  # (M,)
+    size: NDArray[np.int64]  # (M,)
 
     def payload(self, k: int) -> bytes:
         """Message k's payload bytes."""
         return self.buffer[int(self.start[k]) : int(self.start[k] + self.size[k])].tobytes()
 
-    def payloads(self, index: np.ndarray) -> np.ndarray | list[bytes]:
+    def payloads(self, index: NDArray[np.intp]) -> NDArray[np.uint8] | list[bytes]:
         """The payloads of messages ``index`` (m,), as :meth:`MessageType.decode` takes them: one (m, size)
         uint8 array when they are all of one size (a copy, row by row from a window view of the buffer),
         else a list of bytes."""
@@ -1293,7 +1333,9 @@ class RawMessages(NamedTuple):
         return _rows(self.buffer, int(size[0]))[self.start[index]]
 
     @classmethod
-    def from_headers(cls, headers: np.ndarray, buffer: np.ndarray, start: np.ndarray, size: np.ndarray) -> RawMessages:
+    def from_headers(
+        cls, headers: NDArray[np.void], buffer: NDArray[np.uint8], start: ArrayLike, size: ArrayLike
+    ) -> RawMessages:
         """The messages whose 22-byte headers are ``headers`` (fields ``channel_id``, ``sequence``,
         ``log_time``, ``publish_time``), their payloads at ``start`` (M,) of ``size`` (M,) in ``buffer``."""
         return cls(
@@ -1329,7 +1371,15 @@ class McapRecordWalk(McapScan):
         buffer = np.frombuffer(content, dtype=np.uint8)
         self.out.append(RawMessages.from_headers(fields, buffer, np.array([22]), np.array([len(content) - 22])))
 
-    def _chunk_messages(self, data, buffer, header, starts, lengths, position) -> None:
+    def _chunk_messages(
+        self,
+        data: bytes,
+        buffer: NDArray[np.uint8],
+        header: NDArray[np.void],
+        starts: NDArray[np.int64],
+        lengths: NDArray[np.int64],
+        position: int,
+    ) -> None:
         self.message_count += len(starts)
         unknown = [int(c) for c in np.unique(header["channel_id"]) if int(c) not in self.channels]
         if unknown:

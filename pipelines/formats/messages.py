@@ -55,10 +55,12 @@ from __future__ import annotations
 
 import re
 import struct
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
+from typing import Any, TypedDict, Unpack, cast
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "ENCAPSULATION_CDR_LE",
@@ -304,7 +306,7 @@ def _short(name: str) -> str:
 def _dependencies(name: str, text: str) -> list[str]:
     """Message types a definition's fields use, sorted (``std::set`` order, as rosbag2 lists them)."""
     package = name.split("/")[0]
-    deps = set()
+    deps: set[str] = set()
     for m in _FIELD_TYPE.finditer(text):
         pkg, typ = m.group(1), m.group(2)
         if pkg is None and typ in _PRIMITIVES:
@@ -320,7 +322,7 @@ def schema_text(name: str, definitions: Mapping[str, str] = ROS_DEFINITIONS) -> 
     out = [definitions[root]]
     seen = {root}
 
-    def visit(type_name: str):
+    def visit(type_name: str) -> None:
         for dep in _dependencies(type_name, definitions[type_name]):
             if dep not in seen:
                 seen.add(dep)
@@ -335,7 +337,7 @@ def schema_text(name: str, definitions: Mapping[str, str] = ROS_DEFINITIONS) -> 
 # Time stamps.
 
 
-def stamps_to_ns(t: np.ndarray) -> np.ndarray:
+def stamps_to_ns(t: ArrayLike) -> NDArray[np.int64]:
     """Times in seconds (float) to integer nanoseconds, rounded to nearest: (N,) int64."""
     t = np.asarray(t, dtype=np.float64)
     if not np.all(np.isfinite(t)):
@@ -343,20 +345,21 @@ def stamps_to_ns(t: np.ndarray) -> np.ndarray:
     return np.rint(t * 1e9).astype(np.int64)
 
 
-def ns_to_stamps(ns: np.ndarray) -> np.ndarray:
+def ns_to_stamps(ns: ArrayLike) -> NDArray[np.float64]:
     """Integer nanoseconds to seconds, float64 (correctly rounded: ``ns / 10^9``)."""
     return np.asarray(ns, dtype=np.int64) / 1e9
 
 
-def seconds_since(ns: np.ndarray, first_ns: int) -> np.ndarray:
+def seconds_since(ns: ArrayLike, first_ns: int) -> NDArray[np.float64]:
     """Integer nanosecond stamps ``ns`` as seconds from the stamp ``first_ns``, float64: the clock the
     filters run on. The difference is taken in integers, so a step of 1,000,000 ns is 0.001 s within a unit
     in the last place at the span (the product by 1e-9 is not the correctly rounded quotient), where float
     seconds since the epoch resolve 0.24 µs today (a 1 kHz log's steps read 0.99993, 1.00017 or 1.0004 ms)."""
-    return (np.asarray(ns, dtype=np.int64) - np.int64(first_ns)) * 1e-9
+    # numpy's stubs type an integer array times a float as floating[Any]; it is float64
+    return cast("NDArray[np.float64]", (np.asarray(ns, dtype=np.int64) - np.int64(first_ns)) * 1e-9)
 
 
-def _split_ns(ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _split_ns(ns: ArrayLike) -> tuple[NDArray[np.int32], NDArray[np.uint32]]:
     """``builtin_interfaces/Time`` fields of nanosecond stamps: ``sec = floor(ns / 1e9)``, ``nanosec >= 0``."""
     sec, nanosec = np.divmod(np.asarray(ns, dtype=np.int64), 1_000_000_000)
     if sec.size and (sec.min() < -(2**31) or sec.max() >= 2**31):
@@ -397,7 +400,7 @@ class FieldSpec:
     def itemsize(self) -> int:
         return np.dtype(self.dtype).itemsize
 
-    def shape(self, n: int) -> tuple:
+    def shape(self, n: int) -> tuple[int, ...]:
         """The array shape of ``n`` messages' values: (n,) for a scalar, else (n, count)."""
         return (n,) if self.count == 1 else (n, self.count)
 
@@ -415,14 +418,14 @@ class DecodedBatch:
         Body fields by :class:`FieldSpec` name, shape (N,) or (N, count).
     """
 
-    stamp_ns: np.ndarray
-    frame_id: np.ndarray
-    fields: dict
+    stamp_ns: NDArray[np.int64]
+    frame_id: NDArray[np.str_]
+    fields: dict[str, NDArray[Any]]
 
     def __len__(self) -> int:
         return len(self.stamp_ns)
 
-    def __getitem__(self, name: str) -> np.ndarray:
+    def __getitem__(self, name: str) -> NDArray[Any]:
         return self.fields[name]
 
 
@@ -441,16 +444,16 @@ class MessageType:
     """
 
     name: str
-    body: tuple
+    body: tuple[FieldSpec, ...]
     kind: str | None = None
-    _layouts: dict = field(default_factory=dict, repr=False, compare=False)
+    _layouts: dict[tuple[int, int | None], np.dtype[np.void]] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def schema(self) -> str:
         """The ``ros2msg`` schema text (definition and dependencies), as stored in MCAP."""
         return schema_text(self.name)
 
-    def layout(self, frame_id_length: int, size: int | None = None) -> np.dtype:
+    def layout(self, frame_id_length: int, size: int | None = None) -> np.dtype[np.void]:
         """The structured dtype of one serialised message (encapsulation header included) whose
         frame_id has ``frame_id_length`` bytes before its NUL; ``size`` (at least the minimum) lets
         trailing padding count in the itemsize."""
@@ -490,10 +493,10 @@ class MessageType:
 
     def encode(
         self,
-        stamp_ns: np.ndarray,
+        stamp_ns: ArrayLike,
         frame_id: str,
-        fields: Mapping[str, np.ndarray] | None = None,
-    ) -> np.ndarray:
+        fields: Mapping[str, ArrayLike] | None = None,
+    ) -> NDArray[np.uint8]:
         """Serialise N messages at once.
 
         Parameters
@@ -545,7 +548,7 @@ class MessageType:
                 out[spec.name] = spec.default
         return out.view(np.uint8).reshape(n, dtype.itemsize)
 
-    def decode(self, payloads) -> DecodedBatch:
+    def decode(self, payloads: NDArray[np.uint8] | Iterable[bytes]) -> DecodedBatch:
         """Deserialise a batch of messages of this type.
 
         Parameters
@@ -576,7 +579,7 @@ class MessageType:
             parts.append((index, self._decode_block(block.reshape(len(index), int(length)), int(index[0]))))
         return self._merge(parts, len(payloads))
 
-    def _merge(self, parts: list, n: int) -> DecodedBatch:
+    def _merge(self, parts: list[tuple[NDArray[np.intp], DecodedBatch]], n: int) -> DecodedBatch:
         """One batch of ``n`` messages from decoded parts ``(index, batch)``."""
         if len(parts) == 1 and np.array_equal(parts[0][0], np.arange(n)):
             return parts[0][1]
@@ -590,7 +593,7 @@ class MessageType:
                 fields[name][index] = values
         return DecodedBatch(stamp_ns=stamp_ns, frame_id=frame_id.astype(str) if n else np.empty(0, str), fields=fields)
 
-    def _decode_block(self, rows: np.ndarray, first: int) -> DecodedBatch:
+    def _decode_block(self, rows: NDArray[np.uint8], first: int) -> DecodedBatch:
         """Decode equal-length messages, rows of (M, size) uint8; ``first`` numbers them in errors."""
         m, size = rows.shape
         if m == 0:
@@ -617,7 +620,7 @@ class MessageType:
             parts.append((index, self._decode_layout(rows[index], int(length), first + int(index[0]))))
         return self._merge(parts, m)
 
-    def _decode_layout(self, rows: np.ndarray, string_length: int, first: int) -> DecodedBatch:
+    def _decode_layout(self, rows: NDArray[np.uint8], string_length: int, first: int) -> DecodedBatch:
         """Decode rows that share one layout (their frame ids have ``string_length - 1`` bytes)."""
         m, size = rows.shape
         frame_len = string_length - 1
@@ -645,7 +648,7 @@ class MessageType:
         return DecodedBatch(stamp_ns=stamp_ns, frame_id=frame_id, fields=fields)
 
 
-def split_payloads(rows: np.ndarray) -> list[bytes]:
+def split_payloads(rows: NDArray[np.uint8]) -> list[bytes]:
     """One ``bytes`` object per row of an encoded batch (for per-message transports such as zenoh)."""
     rows = np.ascontiguousarray(rows)
     data = rows.tobytes()
@@ -657,7 +660,14 @@ def split_payloads(rows: np.ndarray) -> list[bytes]:
 # The types gyroemu uses.
 
 
-def _f8(name, count=1, **kw):
+class _FieldOptions(TypedDict, total=False):
+    """The keyword fields of :class:`FieldSpec` that :func:`_f8` passes on."""
+
+    default: float
+    present_flag: str | None
+
+
+def _f8(name: str, count: int = 1, **kw: Unpack[_FieldOptions]) -> FieldSpec:
     return FieldSpec(name, "<f8", count, **kw)
 
 
@@ -738,7 +748,7 @@ def message_type(name: str) -> MessageType | None:
     return MESSAGE_TYPES.get(name)
 
 
-def raw_fields(kind: str, raw: Mapping[str, np.ndarray]) -> tuple[MessageType, dict, list[str]]:
+def raw_fields(kind: str, raw: Mapping[str, NDArray[Any]]) -> tuple[MessageType, dict[str, NDArray[Any]], list[str]]:
     """The raw message type of gyro ``kind`` and the fields to encode from ``ImuSamples.raw[kind]``.
 
     Returns ``(type, fields, ignored)``: ``ignored`` lists observables the message has no field for.
@@ -760,7 +770,7 @@ def raw_fields(kind: str, raw: Mapping[str, np.ndarray]) -> tuple[MessageType, d
     return mtype, fields, ignored
 
 
-def raw_observables(mtype: MessageType, batch: DecodedBatch) -> dict[str, np.ndarray]:
+def raw_observables(mtype: MessageType, batch: DecodedBatch) -> dict[str, NDArray[Any]]:
     """``ImuSamples.raw[kind]`` from decoded raw messages: presence flags removed, a flagged field kept
     only when its flag is set in every message."""
     flags = {spec.present_flag for spec in mtype.body if spec.present_flag}

@@ -38,7 +38,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from gyroemu.dynamics.recorded import MotionSamples
 from gyroemu.dynamics.rotation import quat_multiply, quat_rotate
@@ -79,7 +79,7 @@ def _text_lines(path: Path) -> list[str]:
 
 def _numbers(
     path: Path, rows: list[tuple[int, list[str]]], columns: Sequence[str], layout: str, stamp: int | None = None
-) -> np.ndarray:
+) -> NDArray[np.float64]:
     """The rows' fields as an (N, len(columns)) float array; errors name the line and the column.
 
     With ``stamp`` (the stamp's column), an empty field elsewhere reads as NaN: a frame in which the
@@ -162,7 +162,9 @@ def read_csv(path: str | os.PathLike[str]) -> MotionSamples:
     return _samples(path, col["t_s"], q, pos, [line for line, _ in rows])
 
 
-def _samples(path: Path, t, q, pos, lines: list[int]) -> MotionSamples:
+def _samples(
+    path: Path, t: NDArray[np.float64], q: NDArray[np.float64], pos: NDArray[np.float64] | None, lines: list[int]
+) -> MotionSamples:
     return MotionSamples(t=t, q_wb=q, pos_w=pos, source=str(path), lines=np.asarray(lines))
 
 

@@ -76,7 +76,7 @@ import os
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING, TextIO, TypedDict
 
 from gyroemu.pipelines.formats.channels import raw_role, role_topic
 from gyroemu.pipelines.formats.messages import MESSAGE_TYPES, ROS_DEFINITIONS
@@ -160,6 +160,36 @@ _TYPE = re.compile(
 _MSG_SECTION = re.compile(r"^MSG: (\S+)\s*$", re.MULTILINE)
 
 
+class _FieldType(TypedDict):
+    """``type_description_interfaces/msg/FieldType``, as REP-2011 hashes it."""
+
+    type_id: int
+    capacity: int
+    string_capacity: int
+    nested_type_name: str
+
+
+class _Field(TypedDict):
+    """``type_description_interfaces/msg/Field`` (without its default value, which is not hashed)."""
+
+    name: str
+    type: _FieldType
+
+
+class _IndividualTypeDescription(TypedDict):
+    """``type_description_interfaces/msg/IndividualTypeDescription``."""
+
+    type_name: str
+    fields: list[_Field]
+
+
+class _TypeDescription(TypedDict):
+    """The hashed part of ``type_description_interfaces/msg/TypeDescription``."""
+
+    type_description: _IndividualTypeDescription
+    referenced_type_descriptions: list[_IndividualTypeDescription]
+
+
 def full_type_name(name: str, package: str | None = None) -> str:
     """``pkg/Type``, ``pkg/msg/Type`` or (inside ``package``) ``Type`` -> ``pkg/msg/Type``."""
     parts = name.split("/")
@@ -178,7 +208,7 @@ def _strip_comment(line: str) -> str:
     return line.split("#", 1)[0].strip()
 
 
-def _field_type(token: str, package: str) -> dict:
+def _field_type(token: str, package: str) -> _FieldType:
     """The ``FieldType`` dict of a ``.msg`` type token such as ``float64[9]``, ``string<=8[<=3]``, ``Header``."""
     m = _TYPE.match(token)
     if not m:
@@ -210,11 +240,11 @@ def _field_type(token: str, package: str) -> dict:
     return {"type_id": element, "capacity": capacity, "string_capacity": string_capacity, "nested_type_name": nested}
 
 
-def _fields(name: str, text: str) -> list[dict]:
+def _fields(name: str, text: str) -> list[_Field]:
     """The fields (``{"name", "type"}``) of ``.msg`` text ``text`` of type ``name`` (``pkg/msg/Type``);
     constants (``TYPE NAME=value``) are not fields; no field: rosidl's placeholder member."""
     package = name.split("/")[0]
-    fields = []
+    fields: list[_Field] = []
     for raw in text.splitlines():
         line = _strip_comment(raw)
         if not line:
@@ -256,7 +286,7 @@ def parse_definitions(schema: str, name: str) -> dict[str, str]:
     return out
 
 
-def type_description(name: str, definitions: Mapping[str, str] = ROS_DEFINITIONS) -> dict:
+def type_description(name: str, definitions: Mapping[str, str] = ROS_DEFINITIONS) -> _TypeDescription:
     """The hashed part of ``type_description_interfaces/msg/TypeDescription`` of ``name``, as a dict
     in the key order REP-2011 hashes: the type's fields, then each referenced type, sorted by name.
 
@@ -264,7 +294,7 @@ def type_description(name: str, definitions: Mapping[str, str] = ROS_DEFINITIONS
     :class:`Ros2Error` when a referenced type is missing or a definition does not parse."""
     texts = {full_type_name(k): v for k, v in definitions.items()}
     root = full_type_name(name)
-    described: dict[str, dict] = {}
+    described: dict[str, _IndividualTypeDescription] = {}
     pending = [root]
     while pending:
         current = pending.pop()
@@ -420,7 +450,7 @@ def qos_keyexpr(
     are infinite (the defaults) and liveliness automatic. ``depth`` 0 means the default depth.
     Default arguments: reliable keep-all (what a BLOCK publisher is): ``::2,:,:,:,,``."""
 
-    def part(key, value):
+    def part(key: str, value: int) -> str:
         return "" if value == _DEFAULT_QOS[key] else str(value)
 
     depth = depth or _DEFAULT_QOS["depth"]
@@ -483,7 +513,7 @@ class Ros2Node:
     token per publisher/subscription added (:meth:`publisher`, :meth:`subscription`). The tokens live
     until :meth:`close` (or the session's end: zenoh withdraws them then, so ROS tools see the node go)."""
 
-    def __init__(self, session, domain: int, name: str, namespace: str = "/"):
+    def __init__(self, session: zenoh.Session, domain: int, name: str, namespace: str = "/") -> None:
         if not _TOKEN.match(name):
             raise Ros2Error(f"node name {name!r} is not a ROS 2 name")
         self.session, self.domain, self.name, self.namespace = session, int(domain), name, namespace

@@ -27,6 +27,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from gyroemu.pipelines.formats.messages import ENCAPSULATION_CDR_LE, ROS_DEFINITIONS, ns_to_stamps, schema_text
 
@@ -86,10 +87,10 @@ def tf_schema() -> str:
     return schema_text(TF_MESSAGE_TYPE, TF_DEFINITIONS)
 
 
-def _layout(pairs: Sequence[tuple[str, str]]) -> np.dtype:
+def _layout(pairs: Sequence[tuple[str, str]]) -> np.dtype[np.void]:
     """The structured dtype of a TFMessage of ``len(pairs)`` transforms ``(frame_id, child_frame_id)``."""
     names: list[str] = ["encapsulation", "count"]
-    formats: list = [("u1", (4,)), "<u4"]
+    formats: list[str | tuple[str, tuple[int]]] = [("u1", (4,)), "<u4"]
     offsets = [0, 4]
     position = 4  # payload offset
     for k, (frame, child) in enumerate(pairs):
@@ -120,11 +121,11 @@ def _layout(pairs: Sequence[tuple[str, str]]) -> np.dtype:
 
 
 def encode_tf(
-    stamp_ns: np.ndarray | Sequence[int],
+    stamp_ns: ArrayLike,
     pairs: Sequence[tuple[str, str]],
-    translation: np.ndarray,
-    rotation_xyzw: np.ndarray,
-) -> np.ndarray:
+    translation: ArrayLike,
+    rotation_xyzw: ArrayLike,
+) -> NDArray[np.uint8]:
     """Serialise N TFMessages of K transforms each, all at once.
 
     Parameters
@@ -181,17 +182,17 @@ class Transforms:
         Rotation child -> parent as (w, x, y, z) (scalar first, gyroemu's order).
     """
 
-    stamp_ns: np.ndarray
-    frame_id: np.ndarray
-    child_frame_id: np.ndarray
-    translation: np.ndarray
-    q: np.ndarray
+    stamp_ns: NDArray[np.int64]
+    frame_id: NDArray[np.str_]
+    child_frame_id: NDArray[np.str_]
+    translation: NDArray[np.float64]
+    q: NDArray[np.float64]
 
     def __len__(self) -> int:
         return len(self.stamp_ns)
 
     @property
-    def t(self) -> np.ndarray:
+    def t(self) -> NDArray[np.float64]:
         """Stamps, s (float64)."""
         return ns_to_stamps(self.stamp_ns)
 
@@ -216,6 +217,10 @@ def _string(data: bytes, position: int) -> tuple[str, int]:
 
 def decode_tf(payloads: Sequence[bytes]) -> Transforms:
     """Every TransformStamped of little-endian CDR TFMessages (``ValueError`` for a malformed one)."""
+    stamps: list[int]
+    frames: list[str]
+    children: list[str]
+    vectors: list[tuple[float, ...]]
     stamps, frames, children, vectors = [], [], [], []
     for index, data in enumerate(payloads):
         data = bytes(data)
@@ -283,5 +288,7 @@ def tf_stamp_ns(payload: bytes) -> int:
     (count,) = struct.unpack_from("<I", payload, 4)
     if count < 1:
         return -1
+    sec: int
+    nanosec: int
     sec, nanosec = struct.unpack_from("<iI", payload, 8)
     return sec * 1_000_000_000 + nanosec

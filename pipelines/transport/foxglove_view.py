@@ -72,6 +72,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from gyroemu.errors import ConfigError
 from gyroemu.pipelines.formats.channels import (
@@ -90,7 +91,10 @@ from gyroemu.pipelines.transport.read_ahead import Batch
 from gyroemu.pipelines.transport.zenoh_io import drain, subscribe
 
 if TYPE_CHECKING:
+    import foxglove
     import zenoh
+    from foxglove.messages import ArrowPrimitive, CubePrimitive, FrameTransforms, SceneUpdate
+    from foxglove.websocket import Capability, ServerListener, WebSocketServer
 
     from gyroemu.pipelines.formats.mcap_records import ChannelInfo
 
@@ -239,8 +243,8 @@ class Mounting:
     """
 
     frame_id: str
-    q_bs: np.ndarray
-    lever_arm_m: np.ndarray
+    q_bs: NDArray[np.float64]
+    lever_arm_m: NDArray[np.float64]
 
 
 def log_mounting(path: str | os.PathLike[str]) -> Mounting | None:
@@ -335,11 +339,11 @@ def start_view_server(
     options: ViewOptions,
     name: str,
     *,
-    capabilities: Iterable[Any] = (),
+    capabilities: Iterable[Capability] = (),
     playback_time_range: tuple[int, int] | None = None,
-    server_listener: Any = None,
+    server_listener: ServerListener | None = None,
     port_arg: str = "--foxglove-port",
-) -> tuple[Any, Any]:
+) -> tuple[foxglove.Context, WebSocketServer]:
     """Start a Foxglove WebSocket server on a context of its own: ``(context, server)``. ``ValueError``
     naming ``port_arg`` when it cannot listen."""
     import foxglove
@@ -361,7 +365,7 @@ def start_view_server(
     return context, server
 
 
-def _matrix(q: Sequence[float]) -> np.ndarray:
+def _matrix(q: Sequence[float]) -> NDArray[np.float64]:
     """Rotation matrix ``R_wb`` (3, 3) of a unit quaternion (w, x, y, z), Hamilton convention (the
     standard closed form, e.g. Sola, "Quaternion kinematics for the error-state Kalman filter", eq. 115)."""
     w, x, y, z = q
@@ -374,7 +378,7 @@ def _matrix(q: Sequence[float]) -> np.ndarray:
     )
 
 
-def _x_to(d: np.ndarray) -> tuple[float, float, float, float]:
+def _x_to(d: NDArray[np.float64]) -> tuple[float, float, float, float]:
     """The shortest rotation (x, y, z, w) turning +x onto unit vector ``d`` (an arrow points along its
     pose's +x): half-way quaternion ``(1 + x.d, x cross d)`` normalised."""
     c = 1.0 + d[0]
@@ -390,7 +394,9 @@ _IMU_BODY = 37
 (9), angular velocity (3) and its covariance (9), linear acceleration (3) and its covariance (9)."""
 
 
-def imu_fields(payloads: list[bytes]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def imu_fields(
+    payloads: list[bytes],
+) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64], NDArray[np.bool_]]:
     """What the view reads of ``sensor_msgs/msg/Imu`` CDR messages, straight from their bytes:
     ``(stamp ns (N,), q_wb (N, 4) w x y z, has_q (N,), angular velocity (N, 3) rad/s, has_rate (N,))``,
     ``has_*`` False where the covariance's element 0 is -1 ("no estimate") or the quaternion is not finite.
@@ -476,11 +482,13 @@ class ViewPublisher:
         Messages forwarded and frames drawn so far.
     """
 
-    def __init__(self, context: Any, channels: Iterable[ChannelSpec], mounting: Mounting | None = None) -> None:
+    def __init__(
+        self, context: foxglove.Context, channels: Iterable[ChannelSpec], mounting: Mounting | None = None
+    ) -> None:
         import foxglove
         from foxglove.channels import FrameTransformsChannel, SceneUpdateChannel
 
-        self._channels: dict[str, tuple[Any, bool]] = {}
+        self._channels: dict[str, tuple[foxglove.Channel | None, bool]] = {}
         for spec in channels:
             schema = (
                 foxglove.Schema(name=spec.schema_name, encoding=spec.schema_encoding, data=spec.schema_data)
@@ -515,7 +523,7 @@ class ViewPublisher:
         self._scene = SceneUpdateChannel(SCENE_TOPIC, context=context)
         self._errors = foxglove.Channel(ERRORS_TOPIC, schema=ERRORS_SCHEMA, context=context)
         self._field_sum = [0.0, 0.0, 0.0]
-        self.field_w: np.ndarray | None = None
+        self.field_w: NDArray[np.float64] | None = None
         self._field_seen: bytes | None = None
         self._static_drawn: dict[str, bool] = {}
         self.messages = 0
@@ -550,7 +558,7 @@ class ViewPublisher:
         for track in self._followed.values():
             track.clear()
 
-    def _mounting_transforms(self, stamp_ns: int) -> Any:
+    def _mounting_transforms(self, stamp_ns: int) -> FrameTransforms:
         """``base_link`` -> the IMU's frame as ``foxglove.FrameTransforms`` stamped ``stamp_ns``."""
         from foxglove.messages import FrameTransform, FrameTransforms, Quaternion, Timestamp, Vector3
 
@@ -673,7 +681,7 @@ class ViewPublisher:
 
     def _scene_update(
         self, stamp_ns: int, truth: tuple[int, list[float]] | None, estimate: tuple[int, list[float]] | None
-    ) -> Any:
+    ) -> SceneUpdate | None:
         """The scene's changes (None: none): the estimate's vectors every frame; the boxes, their axes and
         the truth's vectors (fixed in their frames) when they first can be drawn and every
         :data:`STATIC_EVERY` frames (for clients that connect later)."""
@@ -761,7 +769,7 @@ def _orientation(payload: bytes | None, stamp: int | None) -> tuple[int, list[fl
     return stamp, [w, x, y, z]
 
 
-def _arrow(direction: np.ndarray, length: float, rgba: tuple[float, ...]) -> Any:
+def _arrow(direction: NDArray[np.float64], length: float, rgba: tuple[float, ...]) -> ArrowPrimitive:
     """A ``foxglove.ArrowPrimitive`` from the frame's origin along unit ``direction``, ``length`` m long."""
     from foxglove.messages import ArrowPrimitive, Color, Pose, Quaternion, Vector3
 
@@ -776,7 +784,7 @@ def _arrow(direction: np.ndarray, length: float, rgba: tuple[float, ...]) -> Any
     )
 
 
-def _box(rgba: tuple[float, ...]) -> Any:
+def _box(rgba: tuple[float, ...]) -> CubePrimitive:
     """A ``foxglove.CubePrimitive``: the body's box, centred on its frame's origin."""
     from foxglove.messages import Color, CubePrimitive, Pose, Quaternion, Vector3
 
@@ -834,7 +842,7 @@ class FoxgloveView:
         self._pending: deque[Batch] = deque()  # taken from the queue, not yet all due
         self._cursor = 0  # the first message of pending[0] not yet forwarded
         self._anchor_ns: int | None = None
-        self._followed: list[tuple[Any, str]] = []
+        self._followed: list[tuple[zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]], str]] = []
         self._follow_lock = threading.Lock()
         self._stop = threading.Event()
         self.dropped = 0

@@ -19,8 +19,10 @@ from __future__ import annotations
 
 import threading
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import NDArray
 
 from gyroemu.pipelines.estimation.series import estimate_series
 from gyroemu.pipelines.formats.channels import (
@@ -36,6 +38,11 @@ from gyroemu.pipelines.formats.frames import TF_TOPIC, TfThinning
 from gyroemu.pipelines.formats.messages import IMU, MAGNETIC_FIELD
 from gyroemu.pipelines.formats.tf_messages import encode_tf
 from gyroemu.pipelines.transport.zenoh_io import PacedPublisher, drain, subscribe, topic_to_key
+
+if TYPE_CHECKING:
+    import zenoh
+
+    from gyroemu.pipelines.estimation.protocol import AttitudeFilter
 
 __all__ = ["LiveEstimator"]
 
@@ -61,7 +68,9 @@ class LiveEstimator:
         Estimates sent so far.
     """
 
-    def __init__(self, session, device: str, flt, use_mag: bool, tf_rate_hz: float | None = None):
+    def __init__(
+        self, session: zenoh.Session, device: str, flt: AttitudeFilter, use_mag: bool, tf_rate_hz: float | None = None
+    ) -> None:
         self.flt = flt
         self.use_mag = use_mag
         self.published = 0
@@ -70,10 +79,10 @@ class LiveEstimator:
         self.key = topic_to_key(device, role_topic(ESTIMATE_ROLE))
         self.tf_key = topic_to_key(device, TF_TOPIC) if tf_rate_hz is not None else None
         self._thinning = TfThinning(tf_rate_hz) if tf_rate_hz is not None else None
-        self._last_tf: np.ndarray | None = None
+        self._last_tf: NDArray[np.uint8] | None = None
         self._out = PacedPublisher(session, [self.key] if self.tf_key is None else [self.key, self.tf_key])
-        self._pending: list[tuple[int, np.ndarray, np.ndarray]] = []  # (stamp ns, gyro, accel)
-        self._fields: dict[int, np.ndarray] = {}
+        self._pending: list[tuple[int, NDArray[np.float64], NDArray[np.float64]]] = []  # (stamp ns, gyro, accel)
+        self._fields: dict[int, NDArray[np.float64]] = {}
         self._t0_ns: int | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="gyroemu-live-estimate", daemon=True)
@@ -102,7 +111,7 @@ class LiveEstimator:
                 sub.undeclare()
 
     @staticmethod
-    def _tf_rows(stamp_ns: np.ndarray, q_wb: np.ndarray) -> np.ndarray:
+    def _tf_rows(stamp_ns: NDArray[np.int64], q_wb: NDArray[np.float64]) -> NDArray[np.uint8]:
         """``map`` -> ``body_estimate`` TFMessages at ``stamp_ns`` (N,): rotations ``q_wb`` (N, 4), w first."""
         return encode_tf(stamp_ns, [(WORLD_FRAME, ESTIMATE_FRAME)], np.zeros(3), q_wb[:, None, [1, 2, 3, 0]])
 

@@ -53,7 +53,7 @@ class ReadAheadThread(threading.Thread):
 
     def __init__(self, depth: int = READ_AHEAD, name: str = "read-ahead") -> None:
         super().__init__(name=name, daemon=True)
-        self.queue: queue.Queue = queue.Queue(depth)
+        self.queue: queue.Queue[Batch | BaseException | None] = queue.Queue(depth)
         self.stopping = threading.Event()
         self.ready = threading.Event()
 
@@ -61,7 +61,7 @@ class ReadAheadThread(threading.Thread):
         """The batches, in order (a generator; it may run without end). Implemented by subclasses."""
         raise NotImplementedError
 
-    def put(self, item: object) -> bool:
+    def put(self, item: Batch | BaseException | None) -> bool:
         """Queue ``item``, waiting while the queue is full; False (not queued) once :attr:`stopping` is set."""
         while not self.stopping.is_set():
             try:

@@ -142,7 +142,7 @@ class SequenceTracker:
     received: int = 0
     first: int | None = None
     next: int = 0
-    missing: set = field(default_factory=set)
+    missing: set[int] = field(default_factory=set)
     duplicates: int = 0
     late: int = 0
 
@@ -209,7 +209,7 @@ class Recorder:
 
     def __init__(
         self,
-        path: str | os.PathLike,
+        path: str | os.PathLike[str],
         chunk_size: int = 1 << 18,
         parse_key: Callable[[str], KeyInfo] = gyroemu_key,
         on_new_topic: Callable[[KeyInfo], None] | None = None,
@@ -227,7 +227,7 @@ class Recorder:
         self._mcap: Any = None
         self._channels: dict[tuple[str, str], int] = {}
         self._devices: dict[str, str] = {}  # device -> topic prefix
-        self._pending: dict[tuple[int, int], tuple[list, list]] = {}  # (channel, size) -> stamps, payloads
+        self._pending: dict[tuple[int, int], tuple[list[int], list[bytes]]] = {}  # (channel, size) -> stamps, payloads
         self.trackers: dict[bytes, SequenceTracker] = {}
         self._parse_key = parse_key
         self._on_new_topic = on_new_topic

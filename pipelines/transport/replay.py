@@ -179,7 +179,7 @@ class ReplayOptions:
 
 
 def topic_keys(
-    topics: Iterable[str], metadata: list[dict], device_name: str = "imu0"
+    topics: Iterable[str], metadata: list[dict[str, str]], device_name: str = "imu0"
 ) -> tuple[dict[str, str], dict[str, str]]:
     """``({topic: key}, {topic: why it cannot be published})`` by the rule in the module's notes."""
     by_prefix = {m.get("topic_prefix", ""): m.get("device_name") or "" for m in metadata}
@@ -257,7 +257,7 @@ class ReadAhead(ReadAheadThread):
 
     def __init__(
         self,
-        path: str | os.PathLike,
+        path: str | os.PathLike[str],
         keys: dict[str, str],
         rate: float,
         loop: bool,

@@ -62,9 +62,10 @@ import sys
 import time
 from collections.abc import Generator, Iterable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Protocol, TextIO
+from typing import TYPE_CHECKING, Protocol, TextIO, TypeAlias
 
 import numpy as np
+from numpy.typing import NDArray
 
 from gyroemu.pipelines.formats.channels import (
     BODY_FRAME,
@@ -106,6 +107,9 @@ if TYPE_CHECKING:
     from gyroemu.sensors import Device
     from gyroemu.sensors.device_run import MeasuredBlock
     from gyroemu.sensors.samples import ImuSamples
+
+    _Variances: TypeAlias = tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]
+    """``(gyro (3,), accel (3,))`` per-sample variances for ``/imu``'s covariances, each None when unknown."""
 
 __all__ = [
     "StreamOptions",
@@ -183,9 +187,9 @@ def encode_run(
     truth: ImuSeries | None = None,
     *,
     start_ns: int = 0,
-    variances: tuple = (None, None),
+    variances: _Variances = (None, None),
     frame_id: str | None = None,
-) -> dict[str, np.ndarray]:
+) -> dict[str, NDArray[np.uint8]]:
     """Topic -> ``(N, size)`` encoded rows of a device's samples (and truth), as an MCAP log holds them:
     stamps ``start_ns`` + the samples' times; ``variances``: ``(gyro (3,), accel (3,))`` per-sample
     variances for ``/imu``'s covariances (:func:`~gyroemu.pipelines.formats.imu_covariance.measurement_variances`);
@@ -384,7 +388,7 @@ class BlockProducer(ReadAheadThread):
         depth: int = READ_AHEAD,
         *,
         start_ns: int = 0,
-        variances: tuple = (None, None),
+        variances: _Variances = (None, None),
         sparse: SparseTopics | None = None,
         frame_id: str | None = None,
     ) -> None:
@@ -478,7 +482,7 @@ class StreamTf:
     def __init__(
         self,
         frame_id: str,
-        mounting: tuple[np.ndarray, np.ndarray],
+        mounting: tuple[NDArray[np.float64], NDArray[np.float64]],
         rate_hz: float,
         *,
         start_ns: int = 0,
@@ -495,7 +499,7 @@ class StreamTf:
         self._static: bytes | None = None
         self._last: bytes | None = None  # the /tf message of the last sample seen
 
-    def _tf(self, stamp_ns: np.ndarray, pos_w: np.ndarray, q_wb: np.ndarray) -> list[bytes]:
+    def _tf(self, stamp_ns: NDArray[np.int64], pos_w: NDArray[np.float64], q_wb: NDArray[np.float64]) -> list[bytes]:
         from gyroemu.pipelines.formats.tf_messages import encode_tf
 
         rows = encode_tf(stamp_ns, [(WORLD_FRAME, BODY_FRAME)], pos_w[:, None, :], q_wb[:, None, [1, 2, 3, 0]])
@@ -543,8 +547,8 @@ class StreamTf:
 
 
 def encode_block(
-    block: MeasuredBlock, *, start_ns: int = 0, variances: tuple = (None, None), frame_id: str | None = None
-) -> dict[str, np.ndarray]:
+    block: MeasuredBlock, *, start_ns: int = 0, variances: _Variances = (None, None), frame_id: str | None = None
+) -> dict[str, NDArray[np.uint8]]:
     """Topic -> encoded rows of one block of a device run (:class:`gyroemu.sensors.device_run.MeasuredBlock`):
     :func:`encode_run` of its samples and of its ``/truth/imu`` (interpolated in the block's truth window)."""
     from gyroemu.pipelines.formats.mcap_log import truth_series

@@ -71,10 +71,11 @@ import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol, overload
+from typing import Any, Protocol, cast, overload
 
 import numpy as np
 import zenoh
+from numpy.typing import NDArray
 
 from gyroemu.errors import ConfigError
 
@@ -132,7 +133,7 @@ def _zenoh_message(error: Exception) -> str:
     return re.sub(r" at /\S+\.rs:\d+\.?", "", str(error))
 
 
-def _insert(config: zenoh.Config, key: str, value) -> None:
+def _insert(config: zenoh.Config, key: str, value: object) -> None:
     config.insert_json5(key, json.dumps(value))
 
 
@@ -166,7 +167,7 @@ def session_config(
     connect: Sequence[str] | None = None,
     listen: Sequence[str] | None = None,
     mode: str | None = None,
-    config_file: str | os.PathLike | None = None,
+    config_file: str | os.PathLike[str] | None = None,
 ) -> zenoh.Config:
     """The zenoh configuration of a gyroemu process (see the module's notes for the default session).
 
@@ -214,7 +215,7 @@ def session_config(
 def router_config(
     listen: Sequence[str] | None = None,
     connect: Sequence[str] | None = None,
-    config_file: str | os.PathLike | None = None,
+    config_file: str | os.PathLike[str] | None = None,
 ) -> zenoh.Config:
     """A router's configuration: listens on ``listen`` (default ``tcp/0.0.0.0:7447``)."""
     return session_config(
@@ -222,7 +223,7 @@ def router_config(
     )
 
 
-def _config_value(config: zenoh.Config, key: str):
+def _config_value(config: zenoh.Config, key: str) -> Any:
     """A value of ``config`` (None when unset or unreadable)."""
     try:
         return json.loads(config.get_json(key))
@@ -396,10 +397,10 @@ class SessionOptions:
 
 
 @contextlib.contextmanager
-def stop_on_signals() -> Iterator[list]:
+def stop_on_signals() -> Iterator[list[int]]:
     """For the block, SIGINT and SIGTERM append to the list it yields instead of ending the process
     (the command's loops poll it to stop cleanly); the previous handlers are back after the block."""
-    stopping: list = []
+    stopping: list[int] = []
     previous = {s: signal.signal(s, lambda *_: stopping.append(1)) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield stopping
@@ -548,11 +549,14 @@ def pack_attachment(sequence: int, source_timestamp_ns: int, publisher_id: bytes
     return _ATTACHMENT.pack(sequence, source_timestamp_ns, 16, publisher_id)
 
 
-def unpack_attachment(data) -> tuple[int, int, bytes]:
+def unpack_attachment(data: bytes | bytearray | memoryview) -> tuple[int, int, bytes]:
     """``(sequence, source_timestamp_ns, publisher_id)`` of a 33-byte attachment (``ValueError`` otherwise)."""
     data = bytes(data)
     if len(data) != ATTACHMENT_SIZE:
         raise ValueError(f"attachment of {len(data)} bytes, expected {ATTACHMENT_SIZE}")
+    sequence: int
+    stamp: int
+    gid: bytes
     sequence, stamp, length, gid = _ATTACHMENT.unpack(data)
     if length != 16:
         raise ValueError(f"attachment publisher-id length byte is {length}, expected 16")
@@ -561,6 +565,8 @@ def unpack_attachment(data) -> tuple[int, int, bytes]:
 
 def header_stamp_ns(payload: bytes) -> int:
     """``header.stamp`` (ns) of a CDR message: int32 sec and uint32 nanosec after the 4-byte encapsulation."""
+    sec: int
+    nanosec: int
     sec, nanosec = struct.unpack_from("<iI", payload, 4)
     return sec * 1_000_000_000 + nanosec
 
@@ -574,7 +580,7 @@ class PacingReport:
     """How late each sample went out relative to its deadline (seconds): ``t0 + k / rate``
     (:meth:`PacedPublisher.run`) or the message's own (:meth:`PacedPublisher.run_schedule`)."""
 
-    lateness_s: np.ndarray
+    lateness_s: NDArray[np.float64]
     messages: int
     elapsed_s: float
 
@@ -701,7 +707,7 @@ def _timer_slack(ns: int | None) -> int | None:
         return None
     try:
         libc = ctypes.CDLL(None, use_errno=True)
-        previous = libc.prctl(_PR_GET_TIMERSLACK, 0, 0, 0, 0)
+        previous: int = libc.prctl(_PR_GET_TIMERSLACK, 0, 0, 0, 0)
         if previous < 0 or libc.prctl(_PR_SET_TIMERSLACK, int(ns), 0, 0, 0) != 0:
             return None
         return previous
@@ -710,7 +716,7 @@ def _timer_slack(ns: int | None) -> int | None:
 
 
 @contextlib.contextmanager
-def hot_loop(timing: Timing):
+def hot_loop(timing: Timing) -> Iterator[None]:
     """Apply ``timing``'s process settings (switch interval, collector, timer slack) for a block, and
     restore them after it, whatever happens."""
     interval = sys.getswitchinterval()
@@ -794,11 +800,11 @@ class PacedPublisher:
     def matched(self) -> bool:
         """Whether every publisher has at least one matching subscriber."""
         return all(
-            t.publisher.matching_status.matching  # type: ignore[attr-defined]  # stub: bool; really a MatchingStatus
+            cast("zenoh.MatchingStatus", t.publisher.matching_status).matching  # the stub says bool
             for t in self._topics.values()
         )
 
-    def wait_for_subscribers(self, timeout_s: float, stop=None) -> bool:
+    def wait_for_subscribers(self, timeout_s: float, stop: Callable[[], object] | None = None) -> bool:
         """Wait (up to ``timeout_s``, or until ``stop()`` is true) until every key has a subscriber;
         returns whether they all do."""
         end = time.monotonic() + timeout_s
@@ -813,7 +819,9 @@ class PacedPublisher:
         topic.publisher.put(payload, attachment=pack_attachment(topic.sequence, time.time_ns(), topic.gid))
         topic.sequence += 1
 
-    def run(self, batches: dict[str, list[bytes]], rate_hz: float | None, stop=None) -> PacingReport:
+    def run(
+        self, batches: dict[str, list[bytes]], rate_hz: float | None, stop: Callable[[], object] | None = None
+    ) -> PacingReport:
         """Send sample k's messages (``batches[key][k]`` for every key, in the dict's order) at
         ``t0 + k / rate_hz``: wait for each deadline, or send at once when behind (never a sleep per
         sample that would accumulate). ``rate_hz=None``: as fast as possible. ``stop()`` returning True
@@ -843,7 +851,12 @@ class PacedPublisher:
             elapsed = (time.monotonic_ns() - t0) * 1e-9
         return PacingReport(lateness_s=lateness[:sent], messages=sent * len(keys), elapsed_s=elapsed)
 
-    def run_schedule(self, batches: Iterable, stop=None, max_samples: int = 1 << 20) -> PacingReport:
+    def run_schedule(
+        self,
+        batches: Iterable[Sequence[tuple[int, str, bytes]]],
+        stop: Callable[[], object] | None = None,
+        max_samples: int = 1 << 20,
+    ) -> PacingReport:
         """Send messages at their own deadlines ``t0 + offset_ns`` (``t0``: when the run starts,
         monotonic clock): wait for each deadline, or send at once when behind -- the same drift-free
         rule as :meth:`run`, with deadlines given per message instead of ``k / rate``.
@@ -924,7 +937,7 @@ class LiveSession:
         :class:`~gyroemu.pipelines.formats.ros2_keys.Ros2Keys`), set by the job; closed at the end.
     """
 
-    def __init__(self, session: zenoh.Session, stopping: list) -> None:
+    def __init__(self, session: zenoh.Session, stopping: list[int]) -> None:
         self.session = session
         self.stopping = stopping
         self.publisher: PacedPublisher | None = None
@@ -965,13 +978,17 @@ def live_session(session: zenoh.Session) -> Iterator[LiveSession]:
 # Subscribing.
 
 
-def subscribe(session: zenoh.Session, key_expr: str = f"{KEY_ROOT}/**", capacity: int = 1 << 16) -> zenoh.Subscriber:
+def subscribe(
+    session: zenoh.Session, key_expr: str = f"{KEY_ROOT}/**", capacity: int = 1 << 16
+) -> zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]]:
     """A subscriber whose samples queue in a FIFO channel (``capacity`` samples; when it is full zenoh
     waits, which with BLOCK publishers slows them down rather than dropping)."""
     return session.declare_subscriber(key_expr, zenoh.handlers.FifoChannel(capacity))
 
 
-def drain(subscriber: zenoh.Subscriber, limit: int = 1 << 14) -> list:
+def drain(
+    subscriber: zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]], limit: int = 1 << 14
+) -> list[zenoh.Sample]:
     """Up to ``limit`` samples already queued (does not wait)."""
     out = []
     for _ in range(limit):

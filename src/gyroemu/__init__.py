@@ -12,12 +12,15 @@ Importing ``gyroemu`` loads nothing: each subpackage is imported when asked for,
 (from the installed package's metadata) when it is first read.
 """
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 __all__ = ["__version__"]
 
+if TYPE_CHECKING:
+    __version__: str  # served by __getattr__ below, from the installed package's metadata
 
-def __getattr__(name: str) -> Any:
+
+def __getattr__(name: str) -> str:
     if name == "__version__":
         from importlib.metadata import PackageNotFoundError, version
 
