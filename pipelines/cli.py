@@ -98,12 +98,11 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 
 def _mcap_out(text: str) -> Path:
-    """``--out`` of a command that writes an MCAP file: a .mcap name in an existing folder."""
+    """``--out`` of a command that writes an MCAP file: a .mcap name (a folder is the job's to refuse,
+    with its folder, an input or an existing file: ``formats.atomic.output_file_problem``)."""
     out = Path(text)
-    if out.suffix != ".mcap":
+    if out.suffix != ".mcap" and not out.is_dir():
         raise UsageError(f"argument --out: {out}: write a .mcap file (got '{out.suffix}')")
-    if not out.parent.is_dir():
-        raise UsageError(f"argument --out: {out.parent} is not a folder")
     return out
 
 
@@ -625,11 +624,8 @@ def _cmd_stream(args: argparse.Namespace) -> int:
 def _record_options(args: argparse.Namespace) -> RecordOptions:
     from gyroemu.pipelines.transport.record import RecordOptions
 
-    out = Path(args.out)
-    if not out.parent.is_dir():
-        raise UsageError(f"argument --out: {out.parent} is not a folder")
     return RecordOptions(
-        out_path=out,
+        out_path=Path(args.out),
         duration=args.duration,
         key_expr=args.key,
         report_path=args.report,

@@ -176,7 +176,10 @@ class RingLaserGyro(GyroMechanism):
     dither_amplitude_noise_fraction: NonNegativeReal = Field(default=0.05, le=0.5)
     simulation_rate_hz: Annotated[
         PositiveReal,
-        at_most(MAX_SIMULATION_RATE_HZ, "twice the 50 steps a cycle of a 10 kHz dither, ten times real RLGs' fastest"),
+        at_most(
+            MAX_SIMULATION_RATE_HZ,
+            "twice the 50 steps a cycle of a 10 kHz dither, twenty times what a real RLG's 1 kHz dither needs",
+        ),
     ] = Field(default=32_000.0, validate_default=True)
 
     @field_validator("area_m2")

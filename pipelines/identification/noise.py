@@ -438,7 +438,10 @@ def _axis_noise(allan: AllanDeviation, dt: float, markov: bool) -> AxisNoise:
     def term(c: Coefficient, bound: float) -> NoiseTerm:
         if c.value > 0 and np.isfinite(c.high) and c.low > 0:
             return NoiseTerm(c.value, c.low, c.high, "fitted")
-        return NoiseTerm(0.0, 0.0, min(bound, c.high) if c.high > 0 else bound, "upper_bound")
+        # Not observable: the model-free bound of the module notes (every term adds variance). The fit's
+        # own detection level (c.high of a term at 0) is one standard deviation at one τ, blind to what
+        # the term trades with its neighbours, and would claim a tighter bound than the curve allows.
+        return NoiseTerm(0.0, 0.0, bound, "upper_bound")
 
     arw, bias_instability, rrw = fit.arw, fit.bias_instability, fit.rrw
     band_limit = fit.band_limit

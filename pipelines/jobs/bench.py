@@ -460,9 +460,10 @@ def plot_names(case_names: list[str]) -> list[str]:
 def earlier_plots(folder: str | os.PathLike[str]) -> list[Path]:
     """The plots of the report in ``folder``, as its ``bench.json`` names them: its ``"plots"``, or, in a
     report written before ``bench.json`` listed them (2026-11-27), the names bench gives the plots of its
-    ``"cases"`` (:func:`plot_names`, the rule since plots were named after cases). Only those that are
-    there as plain files (no folder, no symbolic link) and whose names are a plain ``.png`` name in
-    ``folder`` (no path, not hidden): a hand-edited ``bench.json`` cannot name any other file. None when
+    ``"cases"`` (:func:`plot_names`, the rule since plots were named after cases). Only names that bench
+    gives the plots of that report's cases, and only those there as plain files (no folder, no symbolic
+    link) with a plain ``.png`` name in ``folder`` (no path, not hidden): a hand-edited ``"plots"`` cannot
+    name any other file. None when
     ``folder`` holds no ``bench.json``, or one that cannot be read or is no bench report (no
     ``"gyroemu_bench"``): a ``bench.md`` alone is prose, and another file's plots are not guessed."""
     folder = Path(folder)
@@ -472,16 +473,16 @@ def earlier_plots(folder: str | os.PathLike[str]) -> list[Path]:
         return []
     if not isinstance(data, dict) or "gyroemu_bench" not in data:
         return []
-    names = data.get("plots")
-    if names is None:
-        cases = data.get("cases")
-        given = [c.get("name") for c in cases if isinstance(c, dict)] if isinstance(cases, list) else []
-        case_names = [n for n in given if isinstance(n, str)]
-        if len(case_names) != len(given):
-            return []
-        names = plot_names(case_names)
+    cases = data.get("cases")
+    given = [c.get("name") for c in cases if isinstance(c, dict)] if isinstance(cases, list) else []
+    case_names = [n for n in given if isinstance(n, str)]
+    if len(case_names) != len(given):
+        return []
+    ours = plot_names(case_names)  # what bench would have named the plots of these cases
+    names = data.get("plots", ours)
     if not isinstance(names, list):
         return []
+    names = [n for n in names if n in ours]  # a name bench would not give is never removed
     plain = [n for n in dict.fromkeys(names) if isinstance(n, str) and n.endswith(".png") and not n.startswith(".")]
     plots = [folder / n for n in plain if Path(n).name == n]
     return [p for p in plots if p.is_file() and not p.is_symlink()]

@@ -323,7 +323,12 @@ def check_options(options: SimulateOptions, scenario: Scenario | None = None, de
     out = options.out
     if out.suffix not in (".npz", ".mcap") and not out.is_dir():  # a folder is said to be one, below
         raise SimulateError(f"argument --out: {out}: write a .mcap (ROS 2) or .npz file (got '{out.suffix}')")
-    problem = output_file_problem(out, force=options.force)
+    # The inputs: the scenario's and the device's files, and (once loaded) a recorded motion's file.
+    inputs = [Path(name) for name in (options.scenario, options.device) if name and Path(name).suffix == ".toml"]
+    motion = getattr(scenario.spec, "path", None) if scenario is not None else None
+    if isinstance(motion, str):
+        inputs.append(Path(motion))
+    problem = output_file_problem(out, force=options.force, inputs=inputs)
     if problem is not None:
         raise SimulateError(f"argument --out: {problem}")
     if out.suffix == ".mcap" and not options.device:

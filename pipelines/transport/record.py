@@ -243,6 +243,9 @@ class Recorder:
         if self._mcap is None:
             from gyroemu.pipelines.formats.mcap_records import McapFileWriter
 
+            # A new file, as every other command's atomic write makes: an existing one (told --force) is
+            # unlinked first, so that a symbolic or hard link's other names keep what they had.
+            self.path.unlink(missing_ok=True)
             self._file = open(self.path, "wb")
             self._mcap = McapFileWriter(self._file, chunk_size=self._chunk_size)
         return self._mcap

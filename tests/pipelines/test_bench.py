@@ -506,7 +506,8 @@ def test_force_removes_the_earlier_reports_plots_of_other_cases_and_no_other_fil
 
 def test_earlier_plots_are_only_those_the_earlier_bench_json_names(tmp_path):
     """The plots a --force removes: the earlier bench.json's "plots", or, written before it listed them,
-    the names bench gives its cases' plots; plain .png files in the folder only, whatever the JSON says."""
+    the names bench gives its cases' plots; only names bench gives its cases' plots (a hand-edited
+    "plots" naming someone's picture removes nothing of theirs), plain .png files in the folder only."""
     from gyroemu.pipelines.jobs.bench import earlier_plots, plot_names
 
     out = tmp_path / "report"
@@ -523,7 +524,10 @@ def test_earlier_plots_are_only_those_the_earlier_bench_json_names(tmp_path):
 
     assert earlier_plots(tmp_path / "missing") == [] and named({"cases": [], "plots": ["a.png"]}) == []
     listed = ["a.png", "gone.png", "../outside.png", "sub/a.png", ".hidden.png", "x.txt", "dir.png", "link.png", 3]
-    assert named({"gyroemu_bench": 1, "plots": listed}) == ["a.png"]
+    assert named({"gyroemu_bench": 1, "plots": listed}) == []  # no case makes any of them
+    cases = [{"name": "a"}, {"name": "gone"}]
+    assert named({"gyroemu_bench": 1, "cases": cases, "plots": listed}) == ["a.png"]
+    assert named({"gyroemu_bench": 1, "cases": cases, "plots": ["photo.png", "a.png"]}) == ["a.png"]  # hand-edited
     assert plot_names(["case", "case", "b"]) == ["case.png", "case_2.png", "b.png"]
     older = {"gyroemu_bench": 1, "cases": [{"name": "case"}, {"name": "case"}, {"name": "b"}]}
     assert named(older) == ["case.png", "case_2.png", "b.png"]

@@ -753,3 +753,55 @@ def test_identify_refuses_a_toml_that_is_a_log_even_with_force(tmp_path, argumen
     assert code == 2 and stdout == "", stderr
     assert f"argument {argument}: {link} is an input ({log}): inputs are never overwritten" in stderr, stderr
     assert log.read_bytes() == b"an input" and link.is_symlink()
+
+
+@pytest.mark.parametrize("target", ["motion", "scenario"])
+def test_simulate_refuses_an_output_that_is_its_recorded_motion_or_scenario(tmp_path, target):
+    """``simulate --force`` never writes over what it reads: the recorded motion's file and the scenario
+    file (here reached through a link with the output's suffix) are inputs, refused before any work."""
+    from gyroemu.dynamics import load_scenario
+    from gyroemu.pipelines.formats.motion_files import write_tum
+
+    truth = load_scenario("smooth_manoeuvre").simulate(duration=2.0, rate_hz=100.0)
+    motion = tmp_path / "m.tum"
+    write_tum(motion, truth.t, truth.q_wb, truth.pos_w)
+    scenario = tmp_path / "motion.toml"
+    scenario.write_text('kind = "recorded"\npath = "m.tum"\nformat = "tum"\n')
+    before = {p: p.read_bytes() for p in (motion, scenario)}
+    out = tmp_path / "out.npz"
+    out.symlink_to(motion if target == "motion" else scenario)
+    code, stdout, stderr = run_cli(["simulate", "--scenario", str(scenario), "--out", str(out), "--force"])
+    assert code == 2 and stdout == "", stderr
+    assert f"argument --out: {out} is an input" in stderr and "inputs are never overwritten" in stderr, stderr
+    assert {p: p.read_bytes() for p in before} == before and out.is_symlink()
+
+
+@pytest.mark.parametrize("link", ["symbolic", "hard"])
+def test_record_force_replaces_a_linked_out_and_not_what_it_links_to(tmp_path, link):
+    """``record --force`` over a link makes a new file, as every other command's atomic write does: the
+    link's target (a symbolic link) or the file's other name (a hard link) keeps its bytes."""
+    from gyroemu.pipelines.formats.messages import IMU
+    from gyroemu.pipelines.transport.record import Recorder
+    from gyroemu.pipelines.transport.zenoh_io import pack_attachment
+
+    class Payload:
+        def __init__(self, data: bytes) -> None:
+            self.data = data
+
+        def to_bytes(self) -> bytes:
+            return self.data
+
+    class Sample:  # what the recorder reads of a zenoh sample
+        def __init__(self, key: str, payload: bytes, attachment: bytes) -> None:
+            self.key_expr, self.payload, self.attachment = key, Payload(payload), Payload(attachment)
+
+    someone = tmp_path / "someone.mcap"
+    someone.write_bytes(b"someone's recording")
+    out = tmp_path / "r.mcap"
+    out.symlink_to(someone) if link == "symbolic" else os.link(someone, out)
+    recorder = Recorder(out)
+    payload = bytes(IMU.encode(np.array([1_000_000_000]), "dev")[0])
+    recorder.add(Sample("gyroemu/dev/imu", payload, pack_attachment(0, 1, bytes(16))))
+    recorder.close()
+    assert recorder.messages == 1 and not out.is_symlink() and out.read_bytes()[:8] == b"\x89MCAP0\r\n"
+    assert someone.read_bytes() == b"someone's recording"
