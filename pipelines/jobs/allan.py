@@ -15,6 +15,21 @@ The plot shows each axis's measured curve with its confidence band, the fitted m
 log carries its device's config, the specification's lines (quantisation, ARW, bias instability
 floor, RRW) beside them; the accelerometer, analysed the same way, in a second panel.
 
+The τ⁻² term is fitted with either sign (``fit_allan(..., band_limit=True)``, :func:`allan_fits`): white
+noise low-passed before it is sampled (a MEMS gyro's demodulator, an anti-alias filter) loses
+(3/2)N²⟨|s|⟩/τ² of Allan variance at short τ, the quantisation column with the opposite sign, and a fit
+holding that term ≥ 0 read N low to make up for it (1.1 % on ``consumer_mems``, eight times the
+half-width of its 68 % interval over 300 s; the module notes of :mod:`gyroemu.sensors.allan`). The curve
+shows only the sum of a quantiser's 3Q² and a low-pass's sag: a positive τ⁻² term is reported as the
+quantisation Q (a quantiser less any low-pass: Q² − (1/2)N²⟨|s|⟩), a negative one as the band limit, given
+as the time constant T of the first-order low-pass over all of the white noise that would take it off,
+band_limit = (3/2)N²T (as ``gyroemu identify`` gives it), with the quantisation not found and no upper
+limit (a quantiser can hide behind the sag). The τ⁻² term of either sign is resolved when it exceeds
+its detection limit, the larger of the one-point one below and two standard deviations of its
+coefficient from the fit's covariance (it trades with N over the short octaves, which one point does
+not see: with the one-point test alone it was resolved on 58 of 150 axes of a simulated
+``navigation_fog`` gyro, which has neither a quantiser nor a low-pass; now 13).
+
 Each term is printed with its 68 % interval, or as ``not resolved (< limit)`` when the data do not
 resolve it (:attr:`gyroemu.sensors.allan.Coefficient.resolved`: its share of the Allan variance never
 exceeds two standard deviations of the estimate).
@@ -36,9 +51,10 @@ import json
 import math
 import os
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -63,6 +79,9 @@ __all__ = [
     "StaticCheck",
     "allan_report",
     "allan_of_log",
+    "allan_fits",
+    "BandLimit",
+    "band_limit_of",
     "check_options",
     "default_plot_path",
     "BATCH",
@@ -111,6 +130,65 @@ def _cell(c: Coefficient, factor: float) -> str:
     if not c.resolved:
         return f"not resolved (< {c.upper_limit * factor:.3g})"
     return f"{c.value * factor:.3g} ({c.low * factor:.3g}–{c.high * factor:.3g})"
+
+
+@dataclass(frozen=True)
+class BandLimit:
+    """The band limit of one axis's fit (:func:`band_limit_of`): the Allan variance ``coefficient``/τ² a
+    low-pass took off the white noise at short τ (unit²·s²; 0 when the τ⁻² term came out ≥ 0), as the
+    time constant T of the first-order low-pass over all of the white noise that would take it off,
+    coefficient = (3/2)N²T (s), and T's detection limit (s): the quantisation's with the opposite sign,
+    the T whose sag would make two standard deviations of the Allan variance estimate where it shows
+    most, or two standard deviations of the τ⁻² coefficient from the fit's covariance, the larger
+    (:func:`gyroemu.sensors.allan.fit_allan`)."""
+
+    coefficient: float
+    time_constant: float
+    limit: float
+
+    @property
+    def found(self) -> bool:
+        """Whether the τ⁻² term came out negative (the quantisation is then not found)."""
+        return self.coefficient > 0
+
+    @property
+    def resolved(self) -> bool:
+        """Whether the data resolve the band limit: T exceeds its detection limit."""
+        return self.found and self.time_constant > self.limit
+
+    @property
+    def upper_limit(self) -> float:
+        """The bound to report for a band limit not resolved (as :attr:`Coefficient.upper_limit`): the
+        detection limit, or T when larger."""
+        return max(self.limit, self.time_constant)
+
+    def cell(self) -> str:
+        """``0.0229`` (T in ms), ``not resolved (< 0.004)`` or ``none`` (the τ⁻² term ≥ 0)."""
+        if not self.found:
+            return "none"
+        if not self.resolved:
+            return f"not resolved (< {self.limit * 1e3:.3g})"
+        return f"{self.time_constant * 1e3:.3g}"
+
+
+def band_limit_of(fit: AllanFit) -> BandLimit:
+    """The band limit of ``fit`` (:class:`BandLimit`): T = 2·band_limit/(3N²), and its detection limit
+    2·limit_Q²/N² from the quantisation's (limit_Q² is the smallest |c| of the τ⁻² column 3c/τ² the data
+    resolve, and band_limit = −3c). Without white noise (N = 0: nothing to smooth) T is 0 and its limit
+    infinite, as it is when the τ⁻² term cannot be parted from the others (an infinite limit): never
+    resolved."""
+    n2 = fit.arw.value**2
+    limit = fit.quantisation.limit
+    if not n2 > 0:
+        return BandLimit(fit.band_limit, 0.0, math.inf)
+    return BandLimit(fit.band_limit, 2.0 * fit.band_limit / (3.0 * n2), 2.0 * limit * limit / n2)
+
+
+def _quantisation_cell(fit: AllanFit, factor: float) -> str:
+    """The quantisation's cell: ``not found (band limit)`` when a band limit is resolved, else :func:`_cell`."""
+    if band_limit_of(fit).resolved:
+        return "not found (band limit)"
+    return _cell(fit.quantisation, factor)
 
 
 def _finite(x: float) -> float | None:
@@ -233,10 +311,16 @@ class AllanReport:
         lines = [f"{sensor + ' term':<17}{'unit':<14}{'x':>30}{'y':>30}{'z':>30}{'spec':>12}"]
         specified = _spec_terms(spec) if spec is not None else {}
         for term, (factor, unit) in units.items():
-            cells = "".join(f"{_cell(getattr(f, term), factor):>30}" for f in fits)
+            if term == "quantisation":
+                cells = "".join(f"{_quantisation_cell(f, factor):>30}" for f in fits)
+            else:
+                cells = "".join(f"{_cell(getattr(f, term), factor):>30}" for f in fits)
             value = specified.get(term)
             spec_text = f"{value * factor:12.4g}" if value is not None else f"{'-':>12}"
             lines.append(f"{labels[term]:<17}{unit:<14}{cells}{spec_text}")
+            if term == "quantisation":
+                cells = "".join(f"{band_limit_of(f).cell():>30}" for f in fits)
+                lines.append(f"{'band_limit T':<17}{'ms':<14}{cells}{'-':>12}")
         return "\n".join(lines)
 
     def tables(self) -> str:
@@ -255,7 +339,11 @@ class AllanReport:
     def to_dict(self) -> dict[str, Any]:
         """The report as plain data (``gyroemu allan --json``): per sensor and term, its unit, each
         axis's value, low, high (68 %), resolved and upper_limit in that unit (null: infinite or not
-        given), and the spec; the static check's figures; the sample rate."""
+        given; the quantisation's high and upper_limit are null when a band limit is resolved: a quantiser
+        may hide behind it), and the spec; per sensor the band limit (``band_limit``: each axis's time
+        constant T as ``value``, s, 0 when the τ⁻² term came out ≥ 0, with ``resolved``, ``upper_limit``
+        (:attr:`BandLimit.upper_limit`) and ``coefficient``, the Allan variance coefficient/τ² taken off,
+        in the sensor's SI unit²·s², :class:`BandLimit`); the static check's figures; the sample rate."""
         out: dict[str, Any] = {"rate_hz": _finite(self.rate_hz), "topic": self.topic}
         for sensor in ("gyro", "accel"):
             fits, spec, units = self._sensor(sensor)
@@ -268,16 +356,28 @@ class AllanReport:
                 entry: dict[str, Any] = {"label": TERM_LABELS[sensor][term], "unit": unit}
                 for axis, fit in zip("xyz", fits):
                     c = getattr(fit, term)
+                    hidden = term == "quantisation" and band_limit_of(fit).resolved  # no bound: module notes
                     entry[axis] = {
                         "value": _finite(c.value * factor),
                         "low": _finite(c.low * factor),
-                        "high": _finite(c.high * factor),
+                        "high": None if hidden else _finite(c.high * factor),
                         "resolved": c.resolved,
-                        "upper_limit": _finite(c.upper_limit * factor),
+                        "upper_limit": None if hidden else _finite(c.upper_limit * factor),
                     }
                 value = specified.get(term)
                 entry["spec"] = None if value is None else _finite(value * factor)
                 terms[term] = entry
+            band: dict[str, Any] = {"label": "band_limit", "unit": "s"}
+            for axis, fit in zip("xyz", fits):
+                b = band_limit_of(fit)
+                band[axis] = {
+                    "value": _finite(b.time_constant),
+                    "resolved": b.resolved,
+                    "upper_limit": _finite(b.upper_limit),
+                    "coefficient": _finite(b.coefficient),
+                }
+            band["spec"] = None
+            terms["band_limit"] = band
             out[sensor] = terms
         out["static_check"] = None if self.static is None else self.static.to_dict()
         return out
@@ -299,6 +399,16 @@ def _spec_terms(spec: ErrorModel) -> dict[str, Any]:
     }
 
 
+def allan_fits(deviations: Sequence[AllanDeviation]) -> tuple[AllanFit, AllanFit, AllanFit]:
+    """The fit of each of three axes' Allan deviations, as ``gyroemu allan`` fits them: every IEEE 952
+    term, the τ⁻² one of either sign (``fit_allan(..., band_limit=True)``: quantisation when positive, a
+    band limit when negative; module notes)."""
+    if len(deviations) != 3:
+        raise ValueError(f"three axes' Allan deviations are needed, got {len(deviations)}")
+    x, y, z = (fit_allan(d, band_limit=True) for d in deviations)
+    return x, y, z
+
+
 def allan_report(
     gyro: np.ndarray,
     dt: float,
@@ -313,20 +423,14 @@ def allan_report(
         raise ValueError(f"an Allan analysis needs a (N, 3) gyro record with N >= 64, got shape {gyro.shape}")
     if not np.all(np.isfinite(gyro)):
         raise ValueError("the gyro record has NaN or infinite samples")
-    fits = cast(  # one per axis: three
-        tuple[AllanFit, AllanFit, AllanFit],
-        tuple(fit_allan(allan_deviation(gyro[:, i] - gyro[:, i].mean(), dt)) for i in range(3)),
-    )
+    fits = allan_fits([allan_deviation(gyro[:, i] - gyro[:, i].mean(), dt) for i in range(3)])
     accel_fits = None
     if accel is not None:
         accel = np.asarray(accel, dtype=float)
         if accel.shape != gyro.shape:
             raise ValueError(f"the accelerometer record's shape {accel.shape} is not the gyro's {gyro.shape}")
         if np.all(np.isfinite(accel)) and np.all(np.ptp(accel, axis=0) > 0):
-            accel_fits = cast(
-                tuple[AllanFit, AllanFit, AllanFit],
-                tuple(fit_allan(allan_deviation(accel[:, i] - accel[:, i].mean(), dt)) for i in range(3)),
-            )
+            accel_fits = allan_fits([allan_deviation(accel[:, i] - accel[:, i].mean(), dt) for i in range(3)])
     return AllanReport(fits=fits, spec=spec, accel_fits=accel_fits, accel_spec=accel_spec, rate_hz=1.0 / dt)
 
 
@@ -884,13 +988,13 @@ def allan_of_log(path: str | os.PathLike[str], allow_motion: bool = False) -> Al
         accel_spec = device.spec.accelerometer.errors.to_si()
     try:
         deviations = series.deviations(dt)
-        fits = cast(tuple[AllanFit, AllanFit, AllanFit], tuple(fit_allan(d) for d in deviations))
+        fits = allan_fits(deviations)
     except ValueError as e:
         raise AllanLogError(str(e), file=log) from None
     accel_deviations = series.accel_deviations(dt)
     accel_fits = None
     if accel_deviations is not None:
-        accel_fits = cast(tuple[AllanFit, AllanFit, AllanFit], tuple(fit_allan(d) for d in accel_deviations))
+        accel_fits = allan_fits(accel_deviations)
     static = _static_check(series.blocks, truth, min(float(f.allan.adev.min()) for f in fits))
     if not static.static:
         if not allow_motion:

@@ -108,3 +108,13 @@ def test_fit_covariance_of_white_noise_meets_the_scatter_of_the_fitted_density()
     assert np.median(predicted) == pytest.approx(empirical, rel=tolerance)
     fit = fit_allan(allan, terms=("quantisation", "arw"), band_limit=True)
     assert fit.arw.value == pytest.approx(np.sqrt(values[-1]), rel=1e-12)
+
+
+def test_a_band_limit_needs_the_tau_minus_2_term():
+    """``band_limit=True`` frees the τ⁻² column; without it in ``terms`` there is nothing to free, and the
+    fit says so rather than fitting non-negatively in silence."""
+    from gyroemu.sensors.allan import allan_deviation, fit_allan
+
+    allan = allan_deviation(np.random.default_rng(3).standard_normal(4096), 0.01)
+    with pytest.raises(ValueError, match="quantisation"):
+        fit_allan(allan, terms=("arw", "bias_instability"), band_limit=True)
