@@ -132,6 +132,9 @@ __all__ = [
     "chi2_interval",
     "fit_allan",
     "fit_covariance",
+    "read_coefficient",
+    "smoothing_time_constant",
+    "coefficient_dof",
     "weighted_fit",
     "white_correlation",
     "white_edf",
@@ -512,6 +515,15 @@ def coefficient_dof(
     return float(min(one_point, from_fit))
 
 
+def smoothing_time_constant(band_limit: float, noise_density: float) -> float:
+    """T (s) of the first-order low-pass over all of the white noise N (``noise_density``, unit·√s) that
+    takes the Allan variance ``band_limit``/τ² off it (unit²·s²): band_limit = (3/2) N² T (module notes,
+    "A band limit"); 0 without a band limit or without white noise to smooth."""
+    if not (band_limit > 0 and noise_density > 0):
+        return 0.0
+    return 2.0 * band_limit / (3.0 * noise_density**2)
+
+
 def fit_allan(
     allan: AllanDeviation, terms: Sequence[str] = TERMS, iterations: int = 5, *, band_limit: bool = False
 ) -> AllanFit:
@@ -538,7 +550,7 @@ def fit_allan(
     coefficients[used] = c
     covariance = fit_covariance(allan, basis, coefficients, model, free)
     fitted = {
-        name: _read(j, coefficients, basis, model, allan, covariance) if use else Coefficient(0.0, 0.0, 0.0)
+        name: read_coefficient(j, coefficients, basis, model, allan, covariance) if use else Coefficient(0.0, 0.0, 0.0)
         for j, (name, use) in enumerate(zip(TERMS, used))
     }
     if free[0]:  # the τ⁻² term of either sign: resolved only beyond two standard deviations of the fit's too
@@ -548,7 +560,7 @@ def fit_allan(
     return AllanFit(allan=allan, band_limit=float(max(0.0, -3.0 * coefficients[0])), **fitted)
 
 
-def _read(
+def read_coefficient(
     j: int,
     c: NDArray[np.float64],
     basis: NDArray[np.float64],
@@ -556,7 +568,8 @@ def _read(
     allan: AllanDeviation,
     covariance: NDArray[np.float64],
 ) -> Coefficient:
-    """Coefficient j with its confidence (:func:`coefficient_dof`: the wider of the one-point and the
+    """Coefficient j of a fit (``c`` (J,) over ``basis`` (M, J), ``model`` its σ², ``covariance`` its
+    :func:`fit_covariance`) with its confidence (:func:`coefficient_dof`: the wider of the one-point and the
     whole fit's interval). A term not found (c_j ≤ 0) gets the upper limit at which it would have made
     one standard deviation where it shows most; a term found but pinned by less than one degree of
     freedom is undetermined, with the interval (0, ∞).

@@ -112,9 +112,10 @@ from gyroemu.sensors.allan import (
     Coefficient,
     allan_deviation,
     chi2_interval,
-    coefficient_dof,
     fit_allan,
     fit_covariance,
+    read_coefficient,
+    smoothing_time_constant,
     weighted_fit,
 )
 from gyroemu.sensors.noise import gauss_markov_avar
@@ -208,8 +209,7 @@ class AxisNoise:
     def smoothing_s(self) -> float:
         """The band limit as the time constant T of a first-order low-pass over all of the white noise
         that would take it off, band_limit = (3/2) N² T (module notes), s; 0 without one."""
-        n = self.noise_density.value
-        return 2.0 * self.band_limit / (3.0 * n * n) if self.band_limit > 0 and n > 0 else 0.0
+        return smoothing_time_constant(self.band_limit, self.noise_density.value)
 
 
 @dataclass(frozen=True)
@@ -332,19 +332,15 @@ def with_model_scatter(allan: AllanDeviation, eps: float) -> AllanDeviation:
     return replace(allan, edf=edf, low=low, high=high, scatter=float(np.hypot(allan.scatter, eps)))
 
 
-def _interval(
+def _read_fit(
     j: int, c: NDArray[np.float64], basis: NDArray[np.float64], model: NDArray[np.float64], allan: AllanDeviation
-) -> tuple[float, float]:
-    """The 68 % interval of the coefficient √c_j (c_j > 0) of a :func:`_weighted_fit`, as ``fit_allan``
-    reads every term: the wider of the one read where its term holds the largest share of the Allan
-    variance and the one from the whole fit's covariance ((0, ∞) when it is not pinned by one degree of
-    freedom)."""
-    covariance = fit_covariance(allan, basis, c, model, _signed(basis))
-    dof = coefficient_dof(j, c, basis, model, allan, covariance)
-    if dof < 1.0:
-        return 0.0, float("inf")
-    low, high = chi2_interval(np.sqrt(c[j]), dof, ci=_ONE_SIGMA)
-    return float(low), float(high)
+) -> Coefficient:
+    """Coefficient j of a :func:`_weighted_fit` with its 68 % interval, read as ``fit_allan`` reads every
+    term (:func:`gyroemu.sensors.allan.read_coefficient`): the wider of the one read where its term holds
+    the largest share of the Allan variance and the one from the whole fit's covariance ((0, ∞) when it
+    is not pinned by one degree of freedom); not found (c_j ≤ 0), 0 with the value that would have made
+    one standard deviation where it shows most."""
+    return read_coefficient(j, c, basis, model, allan, fit_covariance(allan, basis, c, model, _signed(basis)))
 
 
 def fit_markov(
@@ -381,9 +377,9 @@ def fit_markov(
     lo, hi = max(lo - 1, 0), min(hi + 1, len(grid) - 1)  # and the grid's resolution, a step each side
     tau_c = NoiseTerm(float(grid[best]), float(grid[lo]), float(grid[hi]), "fitted")
     five = np.column_stack([four, column])
-    low, high = _interval(five.shape[1] - 1, c, five, model, allan) if c[-1] > 0 else (0.0, float("inf"))
-    if c[-1] > 0 and f_ratio > f_critical and np.isfinite(high):
-        sigma = NoiseTerm(float(np.sqrt(c[-1])), low, high, "fitted")
+    read = _read_fit(five.shape[1] - 1, c, five, model, allan)
+    if c[-1] > 0 and f_ratio > f_critical and np.isfinite(read.high):
+        sigma = NoiseTerm(read.value, read.low, read.high, "fitted")
         term = MarkovTerm(sigma, tau_c, float(f_ratio), f_critical, chi2_without, chi2_with, points)
         return term, c, model
     bound = float(np.sqrt(np.min(allan.high**2 / column)))  # every term adds variance
@@ -401,16 +397,6 @@ def _noiseless_axis(allan: AllanDeviation) -> AxisNoise:
     return AxisNoise(NoiseTerm(0.0, 0.0, 0.0, "fitted"), none, none, fit)
 
 
-def _read_term(
-    j: int, c: NDArray[np.float64], basis: NDArray[np.float64], model: NDArray[np.float64], allan: AllanDeviation
-) -> Coefficient:
-    """Coefficient j of a :func:`_weighted_fit` with its 68 % interval (:func:`_interval`), or, not found
-    (c_j ≤ 0), 0 with the value that would have made one standard deviation where it shows most."""
-    if c[j] <= 0:
-        return Coefficient(0.0, 0.0, float(np.sqrt(np.min(model * np.sqrt(2 / allan.edf) / basis[:, j]))))
-    return Coefficient(float(np.sqrt(c[j])), *_interval(j, c, basis, model, allan))
-
-
 def _axis_noise(allan: AllanDeviation, dt: float, markov: bool) -> AxisNoise:
     if not np.any(allan.adev**2 > 0):  # a constant: the fits' weights σ²·√(2/ν) would all be 0
         return _noiseless_axis(allan)
@@ -424,9 +410,9 @@ def _axis_noise(allan: AllanDeviation, dt: float, markov: bool) -> AxisNoise:
         if eps > 0:
             allan = with_model_scatter(allan, eps)
             c5, model, _ = _weighted_fit(allan, five)
-            low, high = _interval(five.shape[1] - 1, c5, five, model, allan) if c5[-1] > 0 else (0.0, float("inf"))
-            if np.isfinite(high):
-                gm = replace(gm, sigma=NoiseTerm(float(np.sqrt(c5[-1])), low, high, "fitted"))
+            read = _read_fit(five.shape[1] - 1, c5, five, model, allan)
+            if c5[-1] > 0 and np.isfinite(read.high):
+                gm = replace(gm, sigma=NoiseTerm(read.value, read.low, read.high, "fitted"))
     else:
         eps = model_scatter(allan, four)
         allan = with_model_scatter(allan, eps)
@@ -446,7 +432,8 @@ def _axis_noise(allan: AllanDeviation, dt: float, markov: bool) -> AxisNoise:
     arw, bias_instability, rrw = fit.arw, fit.bias_instability, fit.rrw
     band_limit = fit.band_limit
     if c5 is not None and model is not None and five is not None:  # kept: the others are the five-term fit's
-        arw, bias_instability, rrw = (_read_term(j, c5, five, model, allan) for j in (1, 2, 3))
+        covariance = fit_covariance(allan, five, c5, model, _signed(five))
+        arw, bias_instability, rrw = (read_coefficient(j, c5, five, model, allan, covariance) for j in (1, 2, 3))
         band_limit = float(max(0.0, -3.0 * c5[0]))
     if arw.value > 0 and np.isfinite(arw.high):
         white = NoiseTerm(arw.value, arw.low, arw.high, "fitted")

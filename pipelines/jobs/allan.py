@@ -61,7 +61,15 @@ import numpy as np
 from gyroemu.errors import ConfigError, LogError
 from gyroemu.pipelines.formats.atomic import output_file_problem, write_atomic, write_text_atomic
 from gyroemu.pipelines.formats.file_names import same_file
-from gyroemu.sensors.allan import TERMS, AllanDeviation, AllanFit, Coefficient, allan_deviation, fit_allan
+from gyroemu.sensors.allan import (
+    TERMS,
+    AllanDeviation,
+    AllanFit,
+    Coefficient,
+    allan_deviation,
+    fit_allan,
+    smoothing_time_constant,
+)
 from gyroemu.sensors.allan_stream import OverlappingAllanAccumulator
 from gyroemu.sensors.errors import STANDARD_GRAVITY, ErrorModel
 
@@ -181,7 +189,8 @@ def band_limit_of(fit: AllanFit) -> BandLimit:
     limit = fit.quantisation.limit
     if not n2 > 0:
         return BandLimit(fit.band_limit, 0.0, math.inf)
-    return BandLimit(fit.band_limit, 2.0 * fit.band_limit / (3.0 * n2), 2.0 * limit * limit / n2)
+    time_constant = smoothing_time_constant(fit.band_limit, fit.arw.value)
+    return BandLimit(fit.band_limit, time_constant, 2.0 * limit * limit / n2)
 
 
 def _quantisation_cell(fit: AllanFit, factor: float) -> str:
