@@ -143,7 +143,7 @@ draw the same numbers.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, ClassVar, Literal, TypeVar, cast, overload
+from typing import Annotated, Any, ClassVar, Literal, NamedTuple, TypeVar, cast, overload
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -155,22 +155,34 @@ from gyroemu.dynamics.jit import njit
 from .errors import STANDARD_GRAVITY
 from .mechanism import GyroMechanism, GyroResponse, GyroTruth
 
-__all__ = ["MemsGyro", "CARRIER_STEPS_PER_CYCLE", "K_BOLTZMANN", "MAX_DRIVE_FREQUENCY_HZ", "element_axes"]
+__all__ = [
+    "MemsGyro",
+    "CycleFilter",
+    "CARRIER_CYCLES_PER_PASS",
+    "CARRIER_STEPS_PER_CYCLE",
+    "K_BOLTZMANN",
+    "MAX_DRIVE_FREQUENCY_HZ",
+    "element_axes",
+]
 
 K_BOLTZMANN = 1.380649e-23
 """Boltzmann constant, J/K (exact, SI 2019)."""
 ZERO_CELSIUS_K = 273.15
 CARRIER_STEPS_PER_CYCLE = 24
 """Steps per drive cycle of the carrier-level model (exact discretisation; ≥ 20 asked)."""
+CARRIER_CYCLES_PER_PASS = 1 << 16
+"""Drive cycles the carrier model steps and demodulates at a time (its per-cycle values, about 3 MB a
+pass, are read down to the truth's grid before the next pass), so a block's memory does not grow
+with the drive frequency."""
 MAX_DRIVE_FREQUENCY_HZ = 200_000.0
 """The highest ``drive_frequency_hz``, Hz: twice the fastest drive of real MEMS Coriolis gyros, about
 100 kHz (consumer parts drive at 10–50 kHz; the tuning forks, frames and rings this lumped comb-drive
 model describes; bulk-acoustic-wave disks ring at megahertz in modes it does not). Every inner rate of
 the model follows the drive: the carrier model steps 24 times a drive cycle and keeps one value a cycle
-for a block of the run (a 20 s run at 1 kHz took 6.4 s and 0.6 GB at this limit, 25 s and 2 GB at
-1 MHz; 10¹² Hz asked for 2.4·10¹³ steps a simulated second), and its inner grid is four times its
-band (the envelope pole's or the demodulator's, at most about a quarter of the drive). The baseband
-model's cost does not depend on the drive."""
+for a pass of ``CARRIER_CYCLES_PER_PASS`` cycles (a 20 s run at 1 kHz took 6.4 s at this limit, 25 s at
+1 MHz; 10¹² Hz asked for 2.4·10¹³ steps a simulated second), and its inner grid is four times its band
+(the envelope pole's or the demodulator's, at most about a quarter of the drive). The baseband model's
+cost does not depend on the drive."""
 _PPM = 1e-6
 _NOISE_DROP = 1e-5  # baseband noise directions below this share of the variance are not drawn
 
@@ -181,6 +193,18 @@ _S = TypeVar("_S", np.float64, np.complex128)
 def element_axes() -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """(drive, sense) sensor-axis index of each element k = 0, 1, 2: (k+1) mod 3 and (k+2) mod 3."""
     return np.array([1, 2, 0]), np.array([2, 0, 1])
+
+
+class CycleFilter(NamedTuple):
+    """The demodulator filter discretised over one drive cycle (first-order hold of its input):
+    s_{k+1} = Φ s_k + Γ₀ u_{k−1} + Γ₁ u_k, y_k = c·s_{k+1}; ``settled`` = −A_f⁻¹ B_f, its state per unit
+    of a constant input."""
+
+    phi: NDArray[np.complex128]
+    gamma0: NDArray[np.complex128]
+    gamma1: NDArray[np.complex128]
+    c: NDArray[np.complex128]
+    settled: NDArray[np.complex128]
 
 
 class MemsGyro(GyroMechanism):
@@ -762,64 +786,81 @@ class MemsGyro(GyroMechanism):
         acc = np.array(run["acc"], dtype=complex)
         force_at_j = np.array(run["force_at_j"], dtype=complex)
         static_at_j = np.array(run["static_at_j"], dtype=float)
-        cycles = np.empty(((j_end - j0) // steps + 2, 3), complex)
-        done = np.empty(len(cycles), np.int64)
-        count = _carrier_run(
-            phi,
-            dc0,
-            dc1,
-            g0,
-            g1,
-            noise,
-            carrier,
-            j0,
-            j_end,
-            (run["t0"] - truth.t[0]) / truth.dt,
-            h / truth.dt,
-            forcing,
-            static,
-            force_at_j,
-            static_at_j,
-            x,
-            acc,
-            rng,
-            cycles,
-            done,
-        )
-        cycles, done = cycles[:count], done[:count]
 
-        # The demodulator filter over the cycle averages, one sample per drive cycle, then held.
-        filtered = self._filter_cycles(cycles, run, steps * h)
+        # Pass by pass (CARRIER_CYCLES_PER_PASS drive cycles): step the oscillators, demodulate, filter
+        # the cycle averages (one a drive cycle), and hold at each truth sample the last cycle done by
+        # then; `filled` truth samples are set, the rest see `latest` until a later cycle is done.
         held = np.empty((len(truth.t), 3), complex)
-        index = np.searchsorted(run["t0"] + done * h, truth.t + 1e-9 * h, side="right") - 1
-        held[index < 0] = run["held"]
-        held[index >= 0] = filtered[index[index >= 0]]
-        run.update(
-            j=j_end,
-            x=x,
-            acc=acc,
-            force_at_j=force_at_j,
-            static_at_j=static_at_j,
-            held=filtered[-1] if count else run["held"],
-        )
+        seen = truth.t + 1e-9 * h  # a cycle done at a truth sample's instant counts for it
+        latest = run["held"]
+        filled = 0
+        cycle_filter = self._cycle_filter(steps * h)
+        for j_a in range(j0, j_end, CARRIER_CYCLES_PER_PASS * steps):
+            j_b = min(j_end, j_a + CARRIER_CYCLES_PER_PASS * steps)
+            cycles = np.empty(((j_b - j_a) // steps + 2, 3), complex)
+            done = np.empty(len(cycles), np.int64)
+            count = _carrier_run(
+                phi,
+                dc0,
+                dc1,
+                g0,
+                g1,
+                noise,
+                carrier,
+                j_a,
+                j_b,
+                (run["t0"] - truth.t[0]) / truth.dt,
+                h / truth.dt,
+                forcing,
+                static,
+                force_at_j,
+                static_at_j,
+                x,
+                acc,
+                rng,
+                cycles,
+                done,
+            )
+            if count == 0:
+                continue
+            filtered = self._filter_cycles(cycles[:count], run, cycle_filter)
+            times = run["t0"] + done[:count] * h
+            start = int(np.searchsorted(seen, times[0], side="left"))  # the first to see this pass
+            stop = int(np.searchsorted(seen, times[-1], side="left"))  # the first to see its last cycle
+            held[filled:start] = latest
+            held[start:stop] = filtered[np.searchsorted(times, seen[start:stop], side="right") - 1]
+            latest, filled = filtered[-1], stop
+        held[filled:] = latest
+        run.update(j=j_end, x=x, acc=acc, force_at_j=force_at_j, static_at_j=static_at_j, held=latest)
         state["carrier"] = run
         return self._response(held)
 
-    def _filter_cycles(
-        self, cycles: NDArray[np.complex128], run: dict[str, Any], period: float
-    ) -> NDArray[np.complex128]:
-        """The demodulator filter over per-cycle envelopes (K, 3), input linear between cycles; state kept."""
+    def _cycle_filter(self, period: float) -> CycleFilter | None:
+        """The demodulator filter discretised over one drive cycle ``period`` (s), input linear between
+        cycles, for :meth:`_filter_cycles`; None when there is no filter."""
         filt = self._filter_state_space()
-        if filt is None or len(cycles) == 0:
-            return cycles
+        if filt is None:
+            return None
         a_f, b_f, c_f = filt
         phi, gamma0, gamma1 = first_order_hold(a_f, b_f, period)
+        settled = np.linalg.solve(a_f, -b_f).astype(complex)
+        return CycleFilter(phi, gamma0, gamma1, c_f, settled)
+
+    def _filter_cycles(
+        self, cycles: NDArray[np.complex128], run: dict[str, Any], discrete: CycleFilter | None
+    ) -> NDArray[np.complex128]:
+        """The demodulator filter (``discrete``, from :meth:`_cycle_filter`) over per-cycle envelopes
+        (K, 3); its state is kept in ``run``."""
+        if discrete is None or len(cycles) == 0:
+            return cycles
         if run["filter_state"] is None:  # settled on the power-up envelope
-            run["filter_state"] = np.outer(run["filter_input"], np.linalg.solve(a_f, -b_f))
+            run["filter_state"] = np.outer(run["filter_input"], discrete.settled)
         s = np.array(run["filter_state"], dtype=complex)  # copies: the kernel updates them in place
         previous = np.array(run["filter_input"], dtype=complex)
         out = np.empty_like(cycles)
-        _filter_run(phi, gamma0, gamma1, c_f, np.ascontiguousarray(cycles), s, previous, out)
+        _filter_run(
+            discrete.phi, discrete.gamma0, discrete.gamma1, discrete.c, np.ascontiguousarray(cycles), s, previous, out
+        )
         run.update(filter_state=s, filter_input=previous)
         return out
 

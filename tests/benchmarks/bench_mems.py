@@ -9,7 +9,10 @@ the forcing's cubic Hermite interpolant; 4 kHz at 1 kHz output for the carrier m
 ``gyroemu.sensors.device_run.BLOCK_INNER_SAMPLES`` carrying their state, as the IMU feeds them. The truth is a
 tumbling, vibrating, warming sensor; making it is not timed, only ``respond``. Each figure is the best
 of ``--repeats`` runs after a warm-up that loads the numba kernels. Printed: simulated seconds per
-wall-clock second ("× real time") for each model, and their ratio.
+wall-clock second ("× real time") for each model, and their ratio; then the carrier model's peak
+memory over one block of the IMU's (``BLOCK_INNER_SAMPLES`` inner samples, traced by ``tracemalloc``)
+at the highest drive frequency it takes, stepping ``CARRIER_CYCLES_PER_PASS`` drive cycles at a time
+against the whole block in one pass (as it did before 2026-11-27), in the same run.
 
 The target is 100× real time for the baseband model; the carrier model (24 steps per drive cycle,
 650 k steps per second at 27 kHz) is the baseline. Everything runs on one thread (the numba kernels
@@ -23,6 +26,7 @@ import argparse
 import os
 import sys
 import time
+import tracemalloc
 from pathlib import Path
 
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
@@ -32,9 +36,10 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
+from gyroemu.sensors import mems  # noqa: E402
 from gyroemu.sensors.device_run import BLOCK_INNER_SAMPLES  # noqa: E402
 from gyroemu.sensors.mechanism import GyroTruth  # noqa: E402
-from gyroemu.sensors.mems import CARRIER_STEPS_PER_CYCLE, MemsGyro  # noqa: E402
+from gyroemu.sensors.mems import CARRIER_STEPS_PER_CYCLE, MAX_DRIVE_FREQUENCY_HZ, MemsGyro  # noqa: E402
 
 TARGET = 100.0
 
@@ -76,6 +81,25 @@ def best(gyro: MemsGyro, seconds: float, inner_hz: float, repeats: int) -> float
     return min(run(gyro, seconds, inner_hz) for _ in range(repeats))
 
 
+def block_peak_memory(gyro: MemsGyro, inner_hz: float, cycles_per_pass: int) -> tuple[float, float]:
+    """Peak traced memory (MB) and wall time (s) of ``respond`` over one IMU block of truth, stepping
+    ``cycles_per_pass`` drive cycles at a time."""
+    dt = 1.0 / inner_hz
+    truth = truth_chunk(np.arange(BLOCK_INNER_SAMPLES + 1) * dt, dt)
+    default = mems.CARRIER_CYCLES_PER_PASS
+    mems.CARRIER_CYCLES_PER_PASS = cycles_per_pass
+    try:
+        tracemalloc.start()
+        start = time.perf_counter()
+        gyro.respond(truth, np.random.default_rng(0), {})
+        elapsed = time.perf_counter() - start
+        peak = tracemalloc.get_traced_memory()[1] / 1e6
+        tracemalloc.stop()
+    finally:
+        mems.CARRIER_CYCLES_PER_PASS = default
+    return peak, elapsed
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=600.0, help="simulated time, baseband model")
@@ -112,6 +136,16 @@ def main() -> int:
         f"  baseband / carrier: {speed_base / speed_carrier:.0f} x;  target {TARGET:g} x real time: "
         f"{'met' if speed_base >= TARGET else 'MISSED'}"
     )
+
+    fastest = MemsGyro(model="carrier", drive_frequency_hz=MAX_DRIVE_FREQUENCY_HZ)
+    block_hz = fastest.inner_rate_hz(args.output_rate_hz)
+    print(
+        f"carrier model, f_d {MAX_DRIVE_FREQUENCY_HZ:g} Hz: one block of {BLOCK_INNER_SAMPLES} inner samples "
+        f"({BLOCK_INNER_SAMPLES / block_hz:g} s at {block_hz:g} Hz)"
+    )
+    for label, cycles in (("in passes", mems.CARRIER_CYCLES_PER_PASS), ("in one pass (before)", 1 << 62)):
+        peak, elapsed = block_peak_memory(fastest, block_hz, cycles)
+        print(f"  {label:<22} peak {peak:8.1f} MB traced, {elapsed:6.1f} s")
     return 0 if speed_base >= TARGET else 1
 
 

@@ -14,7 +14,7 @@ from scipy.optimize import brentq
 
 from gyroemu.dynamics import Environment, trajectory_from_world_motion
 from gyroemu.dynamics.config import ConfigError, validate
-from gyroemu.sensors import device_from_dict
+from gyroemu.sensors import device_from_dict, mems
 from gyroemu.sensors.allan import allan_deviation
 from gyroemu.sensors.mechanism import GyroTruth
 from gyroemu.sensors.mems import (
@@ -518,6 +518,25 @@ def test_chunks_continue_one_run(model):
     key = "sense_quadrature_v"
     quadrature = np.concatenate([parts[0].raw[key]] + [p.raw[key][1:] for p in parts[1:]])
     np.testing.assert_allclose(quadrature, whole.raw["sense_quadrature_v"], rtol=1e-10)
+
+
+@pytest.mark.parametrize("bandwidth", [None, 40.0])
+def test_carrier_passes_do_not_show_in_the_output(monkeypatch, bandwidth):
+    """The carrier model steps and demodulates CARRIER_CYCLES_PER_PASS drive cycles at a time (bounded
+    memory): a pass ending between two truth samples, or a truth sample between two cycles' ends of
+    different passes, gives the same bytes as one pass over the chunk. 7 cycles a pass puts a boundary
+    at every few truth samples (800 Hz truth, 20 kHz drive: 25 cycles a sample)."""
+    g = MemsGyro(model="carrier", drive_frequency_hz=20_000.0, demodulator_bandwidth_hz=bandwidth)
+    truth = wandering(grid(0.05, 800))
+    responses = []
+    for cycles in (7, 1 << 40):
+        monkeypatch.setattr(mems, "CARRIER_CYCLES_PER_PASS", cycles)
+        rng, state = np.random.default_rng(5), {}
+        first = g.respond(truth, rng, state)
+        responses.append((first, g.respond(wandering(grid(0.05, 800)[-1] + grid(0.02, 800)), rng, state)))
+    for one, other in zip(*responses, strict=True):
+        np.testing.assert_array_equal(one.rate, other.rate)
+        np.testing.assert_array_equal(one.raw["sense_quadrature_v"], other.raw["sense_quadrature_v"])
 
 
 @pytest.mark.parametrize("model", MODELS)
