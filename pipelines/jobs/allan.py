@@ -30,6 +30,12 @@ coefficient from the fit's covariance (it trades with N over the short octaves, 
 not see: with the one-point test alone it was resolved on 58 of 150 axes of a simulated
 ``navigation_fog`` gyro, which has neither a quantiser nor a low-pass; now 13).
 
+The fit starts at the first τ where the low-pass it finds has forgotten its input
+(:func:`gyroemu.sensors.allan.fit_band_limited`): behind a heavy low-pass (a first-order one at a tenth of
+the sample rate read N 26 % low over every octave) the shortest τ, within the filter's memory, are left
+out, and the row ``fitted from τ`` (``--json``: ``fitted_from``, s) gives where each axis's fit starts;
+the plot draws the model from there.
+
 Each term is printed with its 68 % interval, or as ``not resolved (< limit)`` when the data do not
 resolve it (:attr:`gyroemu.sensors.allan.Coefficient.resolved`: its share of the Allan variance never
 exceeds two standard deviations of the estimate).
@@ -67,7 +73,7 @@ from gyroemu.sensors.allan import (
     AllanFit,
     Coefficient,
     allan_deviation,
-    fit_allan,
+    fit_band_limited,
     smoothing_time_constant,
 )
 from gyroemu.sensors.allan_stream import OverlappingAllanAccumulator
@@ -90,6 +96,7 @@ __all__ = [
     "allan_fits",
     "BandLimit",
     "band_limit_of",
+    "fitted_from",
     "check_options",
     "default_plot_path",
     "BATCH",
@@ -330,6 +337,8 @@ class AllanReport:
             if term == "quantisation":
                 cells = "".join(f"{band_limit_of(f).cell():>30}" for f in fits)
                 lines.append(f"{'band_limit T':<17}{'ms':<14}{cells}{'-':>12}")
+        cells = "".join(f"{fitted_from(f) * 1e3:>30.3g}" for f in fits)
+        lines.append(f"{'fitted from τ':<17}{'ms':<14}{cells}{'-':>12}")
         return "\n".join(lines)
 
     def tables(self) -> str:
@@ -387,6 +396,11 @@ class AllanReport:
                 }
             band["spec"] = None
             terms["band_limit"] = band
+            start: dict[str, Any] = {"label": "fitted from τ", "unit": "s"}
+            for axis, fit in zip("xyz", fits):
+                start[axis] = {"value": _finite(fitted_from(fit))}
+            start["spec"] = None
+            terms["fitted_from"] = start
             out[sensor] = terms
         out["static_check"] = None if self.static is None else self.static.to_dict()
         return out
@@ -410,12 +424,19 @@ def _spec_terms(spec: ErrorModel) -> dict[str, Any]:
 
 def allan_fits(deviations: Sequence[AllanDeviation]) -> tuple[AllanFit, AllanFit, AllanFit]:
     """The fit of each of three axes' Allan deviations, as ``gyroemu allan`` fits them: every IEEE 952
-    term, the τ⁻² one of either sign (``fit_allan(..., band_limit=True)``: quantisation when positive, a
-    band limit when negative; module notes)."""
+    term, the τ⁻² one of either sign (quantisation when positive, a band limit when negative), from the
+    first τ where the low-pass the fit finds has forgotten its input (:func:`fit_band_limited`; module
+    notes)."""
     if len(deviations) != 3:
         raise ValueError(f"three axes' Allan deviations are needed, got {len(deviations)}")
-    x, y, z = (fit_allan(d, band_limit=True) for d in deviations)
+    x, y, z = (fit_band_limited(d) for d in deviations)
     return x, y, z
+
+
+def fitted_from(fit: AllanFit) -> float:
+    """The shortest τ (s) of ``fit``'s curve that the fit used (shorter ones lie within a low-pass's
+    memory: :func:`gyroemu.sensors.allan.fit_band_limited`)."""
+    return float(fit.allan.tau[fit.skipped])
 
 
 def allan_report(
@@ -1111,7 +1132,8 @@ def _draw_panel(
         a = fit.allan
         ax.fill_between(a.tau, a.low * scale, a.high * scale, color=colour, alpha=0.15, lw=0)
         ax.loglog(a.tau, a.adev * scale, "o", ms=3, color=colour, label=f"measured {'xyz'[axis]}")
-        ax.loglog(a.tau, fit.model(a.tau) * scale, "-", lw=1, color=colour, alpha=0.8)
+        fitted = a.tau[fit.skipped :]  # the model where it was fitted (shorter τ: within a low-pass's memory)
+        ax.loglog(fitted, fit.model(fitted) * scale, "-", lw=1, color=colour, alpha=0.8)
     tau = fits[0].allan.tau
     if spec is not None:
         s = _spec_terms(spec)
