@@ -3,7 +3,9 @@ has them whole: for commands that filter a log of any length in bounded memory (
 
 :func:`read_mcap` pairs a device's topics by header stamp over the whole file: a sample is kept where
 every ``/raw/<kind>`` topic has a message at its stamp (the others are dropped, with a warning per
-topic), takes the ``/mag`` message at its stamp (NaN without one) and the ``/movement`` flag (False,
+topic), takes the latest ``/mag`` message since the sample before (:func:`match_latest`: at its stamp in
+gyroemu's logs, within a sample interval before it on a field's own clock; NaN without one) and the
+``/movement`` flag (False,
 with a warning, without one); ``/truth/pose`` pairs with the samples by index. :class:`DeviceStream`
 does the same as the file's chunks go by (:meth:`feed` a :class:`RawMessages` batch, :meth:`take` the
 samples that are complete), which a single pass can do when, in log-time order,
@@ -41,9 +43,11 @@ from gyroemu.pipelines.formats.mcap_log import (
     device_name,
     dropped_samples,
     group_devices,
+    match_latest,
     match_stamps,
     no_imu_error,
     unflagged_samples,
+    unpaired_field,
 )
 from gyroemu.pipelines.formats.mcap_records import McapRecordWalk, McapScan, RawMessages
 from gyroemu.pipelines.formats.messages import DecodedBatch, MessageType, ns_to_stamps, stamps_to_ns
@@ -90,7 +94,8 @@ class DeviceBlock:
     gyro, accel : ndarray (n, 3)
         rad/s and m/s².
     mag : ndarray (n, 3)
-        The field at the same stamp, T; NaN rows where ``/mag`` has none (and without a ``/mag``).
+        The field, T: the latest ``/mag`` message since the sample before (:func:`match_latest`); NaN rows
+        where ``/mag`` has none (and without a ``/mag``).
     pose_ns, pose_pos : ndarray (m,) int64 and (m, 3), m ≤ n
         ``/truth/pose`` stamps (as :func:`pose_from_batch` has them, through seconds) and positions, m,
         paired by index with the first m samples (empty unless the stream pairs poses).
@@ -333,6 +338,8 @@ class DeviceStream:
         self._raw = {role: pending(role) for role in roles if raw_kind(role) is not None}
         self.raw_dropped = dict.fromkeys(self._raw, 0)
         self.movement_missing = 0
+        self.field_used = 0
+        self._previous_ns: int | None = None  # the last sample taken (its field's interval ends there)
 
     def feed(self, batch: RawMessages) -> int | None:
         """Take in the device's messages of one chunk (in file order, as the walk hands them out).
@@ -379,10 +386,14 @@ class DeviceStream:
         stamp_ns = stamp_ns[keep]
         mag = np.full((len(keep), 3), np.nan)
         if self._mag is not None:
-            i, j = match_stamps(stamp_ns, self._mag.stamp_ns)
+            i, j = match_latest(stamp_ns, self._mag.stamp_ns, self._previous_ns)
             if len(i):
                 mag[i] = self._mag.values["magnetic_field"][j]
-            self._mag.drop(last, final)
+            self.field_used += len(i)
+            # What the last sample's interval held is used; later messages wait for the next samples.
+            self._mag.drop(int(stamp_ns[-1]) if len(stamp_ns) else None, final)
+        if len(stamp_ns):
+            self._previous_ns = int(stamp_ns[-1])
         movement = None
         if self._movement is not None:
             i, j = match_stamps(stamp_ns, self._movement.stamp_ns)
@@ -576,12 +587,17 @@ class DeviceCensus:
         return self.pose_matches and self.pose_count == self.count and stream.pose_left() == 0
 
 
-def warn_drops(path: Path, stream: DeviceStream, topics: Mapping[str, str]) -> None:
+def warn_drops(path: Path, stream: DeviceStream, topics: Mapping[str, str], messages: Mapping[str, int]) -> None:
     """The warnings :func:`read_mcap` gives for the samples a device's paired topics dropped or left
-    unflagged (``topics``: role to topic), once the stream has ended."""
+    unflagged, and for field messages no sample takes (``topics``: role to topic; ``messages``: role to its
+    messages in the log), once the stream has ended."""
     for role, dropped in stream.raw_dropped.items():
         if dropped:
             warnings.warn(dropped_samples(path, dropped, topics[IMU_ROLE], topics[role]), LogWarning, stacklevel=2)
+    total = messages.get(MAG_ROLE, 0)
+    if MAG_ROLE in topics and stream.field_used < total:
+        unused = unpaired_field(path, total - stream.field_used, total, topics[IMU_ROLE], topics[MAG_ROLE])
+        warnings.warn(unused, LogWarning, stacklevel=2)
     if stream.movement_missing:
         warnings.warn(
             unflagged_samples(path, stream.movement_missing, topics[IMU_ROLE], topics[MOVEMENT_ROLE]),
@@ -716,7 +732,7 @@ def count_samples(
     out = {}
     for name, stream in streams.items():
         add(name, stream.take(final=True))
-        warn_drops(path, stream, devices[name].topics)
+        warn_drops(path, stream, devices[name].topics, devices[name].messages)
         out[name] = Counted(
             census=census[name],
             pose_pairs=pose_of == name and census[name].pose_pairs(stream),

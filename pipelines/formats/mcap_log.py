@@ -49,7 +49,10 @@ Reading
 -------
 :func:`read_mcap` reads any ``ros2`` MCAP file (:class:`~gyroemu.pipelines.formats.mcap_records.McapScan`)
 and gathers each channel's messages into arrays. Every channel of type ``sensor_msgs/msg/Imu``
-counts, whatever its topic; channels of unknown types are skipped with a :class:`LogWarning`. A file
+counts, whatever its topic; channels of unknown types are skipped with a :class:`LogWarning`. Each
+sample takes the latest ``/mag`` message since the sample before it (:func:`match_latest`): in gyroemu's
+logs the one at its own stamp, in a robot's bag the magnetometer's reading on its own clock and rate, at
+most a sample interval old; a warning counts the messages no sample takes. A file
 cut short (a recorder killed mid-write, no footer) yields the messages of its complete chunks, with a
 warning that says so and how many were recovered. Files that are not MCAP, are corrupt, or hold no IMU
 messages raise :class:`~gyroemu.pipelines.formats.mcap_records.LogError`, which names the file. The input is
@@ -164,7 +167,9 @@ __all__ = [
     "LogCheck",
     "check_mcap_noting",
     "dropped_samples",
+    "match_latest",
     "match_stamps",
+    "unpaired_field",
     "unflagged_samples",
 ]
 
@@ -819,6 +824,39 @@ def match_stamps(
     return i, order[position[i]]
 
 
+def match_latest(
+    reference_ns: NDArray[np.int64], stamp_ns: NDArray[np.int64], previous_ns: int | None = None
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Indices ``(i, j)``: each sample i with the latest message j stamped in its interval
+    (reference[i−1], reference[i]], how a device's samples find their field (``/mag`` on its own clock or
+    at a lower rate: the newest reading when the sample is taken, at most one sample interval old).
+    The first sample's interval starts at ``previous_ns`` (the sample before it, of an earlier block),
+    or, without one, holds its own stamp only. A message at a sample's own stamp pairs with it, as
+    :func:`match_stamps` pairs it; of several in one interval the latest (at equal stamps, the later in
+    file order)."""
+    if len(reference_ns) == len(stamp_ns) and np.array_equal(reference_ns, stamp_ns):
+        index = np.arange(len(stamp_ns))
+        return index, index
+    if not len(stamp_ns) or not len(reference_ns):
+        return np.empty(0, np.intp), np.empty(0, np.intp)
+    order = np.argsort(stamp_ns, kind="stable")
+    ordered = stamp_ns[order]
+    latest = np.searchsorted(ordered, reference_ns, side="right") - 1  # the last message at or before each
+    start = int(reference_ns[0]) - 1 if previous_ns is None else int(previous_ns)
+    lower = np.concatenate(([start], reference_ns[:-1]))  # each interval's open end
+    i = np.flatnonzero((latest >= 0) & (ordered[np.maximum(latest, 0)] > lower))
+    return i, order[latest[i]]
+
+
+def unpaired_field(path: Path, count: int, total: int, imu_topic: str, topic: str) -> str:
+    """The warning for ``count`` of ``total`` messages on the field's ``topic`` that no sample of
+    ``imu_topic`` takes (:func:`match_latest`)."""
+    return (
+        f"{path}: {count} of {total} messages on {topic} are not used: before the first sample of "
+        f"{imu_topic}, after its last, or not the latest in a sample's interval"
+    )
+
+
 def no_imu_error(scan: McapScan, path: str | Path) -> LogError:
     """The error for a scanned file that holds no IMU messages: what it holds instead, and where it
     was cut off when truncated."""
@@ -1053,8 +1091,14 @@ def _device_log(path: Path, name: str, group: dict[str, DecodedChannel], meta: d
     mag = np.full((len(keep), 3), np.nan)
     if MAG_ROLE in group:
         d = group[MAG_ROLE]
-        i, j = match_stamps(stamp_ns[keep], d.batch.stamp_ns)
+        i, j = match_latest(stamp_ns[keep], d.batch.stamp_ns)
         mag[i] = d.batch["magnetic_field"][j]
+        if len(i) < len(d.batch.stamp_ns):
+            warnings.warn(
+                unpaired_field(path, len(d.batch.stamp_ns) - len(i), len(d.batch.stamp_ns), imu.topic, d.topic),
+                LogWarning,
+                stacklevel=4,
+            )
     movement = None
     if MOVEMENT_ROLE in group:
         d = group[MOVEMENT_ROLE]

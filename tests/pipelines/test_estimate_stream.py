@@ -22,7 +22,15 @@ from gyroemu.pipelines.formats.device_stream import (
     count_samples,
     scan_devices,
 )
-from gyroemu.pipelines.formats.mcap_log import LogWarning, Recording, read_mcap, truth_pose, truth_series, write_mcap
+from gyroemu.pipelines.formats.mcap_log import (
+    LogWarning,
+    Recording,
+    read_mcap,
+    truth_pose,
+    truth_series,
+    unpaired_field,
+    write_mcap,
+)
 from gyroemu.pipelines.formats.mcap_records import McapFileWriter, McapRecordWalk, RawMessages
 from gyroemu.pipelines.formats.messages import FLAG, IMU, MAGNETIC_FIELD, POSE_STAMPED
 from gyroemu.pipelines.jobs.estimate import estimate_log
@@ -34,11 +42,23 @@ T0_NS = 1_700_000_000 * 10**9
 
 
 def crafted_log(
-    path, n=3000, chunk_size=2048, *, drop_raw=(), drop_mag=(), drop_flag=(), nan=(), pose=True, poses=None
+    path,
+    n=3000,
+    chunk_size=2048,
+    *,
+    drop_raw=(),
+    drop_mag=(),
+    drop_flag=(),
+    nan=(),
+    pose=True,
+    poses=None,
+    mag_every=1,
+    mag_offset_ns=0,
 ):
     """A device's topics written message by message: /imu at 100 Hz (rows ``nan`` NaN), /raw/mems,
     /mag, /movement and /truth/pose at the same stamps but where dropped (the first ``poses`` poses only:
-    all when None), in small chunks (a chunk ends between an /imu message and its /mag)."""
+    all when None), in small chunks (a chunk ends between an /imu message and its /mag). The field on a
+    clock of its own: every ``mag_every``-th of its messages, ``mag_offset_ns`` from the sample's stamp."""
     rng = np.random.default_rng(11)
     stamps = T0_NS + np.arange(n, dtype=np.int64) * 10_000_000
     gyro = rng.normal(0, 0.02, (n, 3))
@@ -53,11 +73,12 @@ def crafted_log(
         mag = w.register_ros2_channel("/mag", MAGNETIC_FIELD)
         raw = w.register_ros2_channel("/raw/mems", raw_type)
         flag = w.register_ros2_channel("/movement", FLAG)
-        k_raw, k_mag, k_flag = keep(drop_raw), keep(drop_mag), keep(drop_flag)
+        k_raw, k_mag, k_flag = keep(drop_raw), keep(drop_mag)[::mag_every], keep(drop_flag)
+        mag_ns = stamps[k_mag] + mag_offset_ns
         channels = [
             (imu, stamps, IMU.encode(stamps, "imu", {"angular_velocity": gyro, "linear_acceleration": accel})),
             (raw, stamps[k_raw], raw_type.encode(stamps[k_raw], "imu")),
-            (mag, stamps[k_mag], MAGNETIC_FIELD.encode(stamps[k_mag], "imu", {"magnetic_field": field[k_mag]})),
+            (mag, mag_ns, MAGNETIC_FIELD.encode(mag_ns, "imu", {"magnetic_field": field[k_mag]})),
             (flag, stamps[k_flag], FLAG.encode(stamps[k_flag], "imu", {"data": np.ones(len(k_flag), bool)})),
         ]
         if pose:
@@ -115,10 +136,13 @@ def streamed(path, pair_pose=True, seed=0):
         {},
         {"drop_raw": [5, 6, 999, 2999], "drop_mag": [0, 40, 41, 1500], "drop_flag": [7, 2000], "nan": [3, 300]},
         {"drop_mag": list(range(100, 3000))},  # the field ends early
+        {"mag_offset_ns": 1000, "drop_raw": [5, 6, 999]},  # a field 1 µs after each sample: the next one's
+        {"mag_offset_ns": -3_000_000, "mag_every": 7, "drop_mag": [40]},  # its own, slower clock
     ],
-    ids=["whole", "gaps", "field-ends"],
+    ids=["whole", "gaps", "field-ends", "field-late", "field-slower"],
 )
-def test_stream_pairs_the_topics_as_read_mcap(tmp_path, damage):
+def test_stream_pairs_the_topics_as_read_mcap(tmp_path, damage, request):
+    case = request.node.callspec.id
     path = crafted_log(tmp_path / "log.mcap", **damage)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", LogWarning)
@@ -139,6 +163,17 @@ def test_stream_pairs_the_topics_as_read_mcap(tmp_path, damage):
     assert census.pose_pairs(stream) == (len(damage.get("drop_raw", [])) == 0)  # a pose per sample kept
     read_warnings = [str(w.message) for w in caught if "have no message" in str(w.message)]
     assert len(read_warnings) == bool(damage.get("drop_raw")) + bool(damage.get("drop_flag"))
+    # The field's messages no sample takes (match_latest): at a dropped sample's stamp, before a kept
+    # sample's own (gaps: 5 and 6 before 7, 999 before 1000, 2999 after the last kept), after the last
+    # sample (late), before the first with no sample before it to open its interval (slower).
+    unused = {"whole": 0, "gaps": 4, "field-ends": 0, "field-late": 4, "field-slower": 1}[case]
+    messages = len(np.setdiff1d(np.arange(3000), damage.get("drop_mag", []))[:: damage.get("mag_every", 1)])
+    assert stream.field_used == messages - unused
+    notes = [str(w.message) for w in caught if "are not used" in str(w.message)]
+    assert notes == [unpaired_field(path, unused, messages, "/imu", "/mag")] * bool(unused)
+    assert "1 of 7 messages on /mag are not used: before the first sample of /imu, after its last" in (
+        unpaired_field(path, 1, 7, "/imu", "/mag")
+    )
 
 
 def test_rate_counter_is_numpys_median():

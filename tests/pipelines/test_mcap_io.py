@@ -769,6 +769,37 @@ def test_stamps_match_nothing_on_an_empty_channel():
     assert list(i) == [0, 2] and list(j) == [1, 0]
 
 
+def test_a_field_pairs_with_the_first_sample_at_or_after_it():
+    """match_latest against its definition written out: sample i takes the latest message stamped in
+    (reference[i−1], reference[i]] (the first sample: in (previous, reference[0]], or at its own stamp
+    without a previous), at equal stamps the later in file order; and a series cut into blocks, each
+    given the last stamp of the block before, pairs as it does whole."""
+    from gyroemu.pipelines.formats.mcap_log import match_latest, match_stamps
+
+    rng = np.random.default_rng(4)
+    for _ in range(200):
+        reference = np.cumsum(rng.integers(1, 6, rng.integers(1, 30))).astype(np.int64)
+        stamps = rng.integers(-2, int(reference[-1]) + 3, rng.integers(0, 40)).astype(np.int64)
+        previous = None if rng.random() < 0.5 else int(reference[0]) - int(rng.integers(1, 4))
+        want_i, want_j = [], []
+        for i, s_i in enumerate(reference):
+            low = (int(reference[0]) - 1 if previous is None else previous) if i == 0 else int(reference[i - 1])
+            inside = [j for j, m in enumerate(stamps) if low < m <= s_i]
+            if inside:
+                latest = max(stamps[j] for j in inside)
+                want_i.append(i)
+                want_j.append(max(j for j in inside if stamps[j] == latest))
+        i, j = match_latest(reference, stamps, previous)
+        assert list(i) == want_i and list(j) == want_j
+        cut = int(rng.integers(1, len(reference) + 1))
+        a_i, a_j = match_latest(reference[:cut], stamps, previous)
+        b_i, b_j = match_latest(reference[cut:], stamps, int(reference[cut - 1]))
+        assert list(np.concatenate([a_i, b_i + cut])) == want_i and list(np.concatenate([a_j, b_j])) == want_j
+    exact = np.array([5, 7, 9], np.int64)
+    for stamps in (exact, np.array([9, 5], np.int64), np.array([7], np.int64)):  # at the samples' stamps
+        assert [list(x) for x in match_latest(exact, stamps)] == [list(x) for x in match_stamps(exact, stamps)]
+
+
 def test_topic_message_types_by_role():
     """Live-stream topics by their role, whatever the device prefix; /movement is for files only."""
     assert topic_message_type("/imu") is IMU and topic_message_type("/imu0/imu") is IMU
