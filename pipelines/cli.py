@@ -263,7 +263,7 @@ def _cmd_allan(args: argparse.Namespace) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", MotionWarning)
         try:
-            report = allan_of_log(log, allow_motion=args.allow_motion)
+            report = allan_of_log(log, allow_motion=args.allow_motion, topic=args.topic)
         except AllanLogError as e:
             raise UsageError(f"argument LOG: {e}") from None
     for w in caught:
@@ -1130,6 +1130,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--allow-motion", action="store_true", help="analyse a log that is not static (a warning, not an error)"
+    )
+    p.add_argument(
+        "--topic", default=None, metavar="TOPIC", help="the sensor_msgs/msg/Imu topic to analyse (needed when several)"
     )
     p.add_argument("--json", action="store_true", help="print the report as JSON instead of the tables")
     p.add_argument(

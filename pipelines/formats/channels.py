@@ -73,6 +73,7 @@ __all__ = [
     "raw_kind",
     "role_topic",
     "split_topic",
+    "absolute_topic",
     "is_device_prefix",
     "is_prefix_name",
     "is_stream_role",
@@ -140,6 +141,11 @@ def raw_kind(role: str) -> str | None:
 def role_topic(role: str, prefix: str = "") -> str:
     """The topic of ``role`` under a device prefix (``""`` or ``/<device>``): ``("imu", "/a") -> "/a/imu"``."""
     return f"{prefix}/{role}"
+
+
+def absolute_topic(topic: str) -> str:
+    """A topic as given on the command line, with its leading slash (``imu_a`` -> ``/imu_a``)."""
+    return topic if topic.startswith("/") else "/" + topic
 
 
 def split_topic(topic: str) -> tuple[str, str]:

@@ -1010,8 +1010,13 @@ ChannelT = TypeVar("ChannelT", bound=TypedChannel)
 
 def group_devices(path: Path, channels: Iterable[ChannelT], skipped: dict[str, str]) -> dict[str, dict[str, ChannelT]]:
     """Topic prefix → role → channel: the channels (anything with ``topic`` and ``mtype``, of a type
-    gyroemu decodes) grouped into devices as :func:`read_mcap` groups them. Topics that belong to no
-    device go into ``skipped`` with the reason (and a :class:`LogWarning`)."""
+    gyroemu decodes) grouped into devices as :func:`read_mcap` groups them: by prefix (``/<device>/imu``,
+    ``/<device>/mag``, ...), an IMU topic of no role (``/imu/data_raw``) a device of its own, which takes
+    the field of the namespace above it (``/imu/mag``) when no IMU topic of that namespace has it. An
+    estimate without an IMU topic beside it (``/estimate/imu``, which ``gyroemu estimate`` writes for a
+    foreign topic) is the estimate of the log's one measured device, or, beside several or none, a device
+    of its own, as a lone truth is. Topics that belong to no device go into ``skipped`` with the reason
+    (and a :class:`LogWarning`)."""
     groups: dict[str, dict[str, ChannelT]] = {}
     for d in channels:
         topic, mtype = d.topic, d.mtype
@@ -1026,9 +1031,19 @@ def group_devices(path: Path, channels: Iterable[ChannelT], skipped: dict[str, s
                 warnings.warn(f"{path}: skipping topic {topic}: {skipped[topic]}", LogWarning, stacklevel=3)
             continue
         groups.setdefault(prefix, {})[role] = d
-    # Truth or estimate without a measured IMU: a device of its own (it holds Imu messages).
+    # Truth or estimate without a measured IMU: a device of its own (it holds Imu messages). A field
+    # without one goes to the IMU topics under its namespace (a driver's /imu/data_raw and /imu/mag).
     for prefix in list(groups):
         group = groups[prefix]
+        if IMU_ROLE not in group and MAG_ROLE in group:
+            under = [key for key, g in groups.items() if IMU_ROLE in g and g[IMU_ROLE].topic.startswith(prefix + "/")]
+            for key in under:
+                groups[key].setdefault(MAG_ROLE, group[MAG_ROLE])
+            if under:
+                del group[MAG_ROLE]
+        measured = [g for g in groups.values() if IMU_ROLE in g]
+        if IMU_ROLE not in group and ESTIMATE_ROLE in group and len(measured) == 1 and ESTIMATE_ROLE not in measured[0]:
+            measured[0][ESTIMATE_ROLE] = group.pop(ESTIMATE_ROLE)  # `estimate`'s output for a foreign IMU topic
         if IMU_ROLE not in group:
             for role in (TRUTH_ROLE, ESTIMATE_ROLE):  # a lone /truth/pose has no Imu messages: skipped
                 if role in group:

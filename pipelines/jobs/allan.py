@@ -876,7 +876,7 @@ def _npz_series(log: Path) -> tuple[_GyroSeries, float, str | None, _TruthStats 
     return series, dt, device_toml, truth
 
 
-def _mcap_series(log: Path) -> tuple[_GyroSeries, float, str | None, _TruthStats | None, str]:
+def _mcap_series(log: Path, topic: str | None = None) -> tuple[_GyroSeries, float, str | None, _TruthStats | None, str]:
     """An .mcap log's IMU series (its one device's IMU channel), median step (s), device TOML, the
     figures of its device's ``/truth/imu`` (None without one) and the IMU topic.
 
@@ -887,9 +887,17 @@ def _mcap_series(log: Path) -> tuple[_GyroSeries, float, str | None, _TruthStats
     errors and warnings; unlike ``read_mcap`` it keeps every sample of the channel (``read_mcap`` drops
     samples that lack a ``/raw/<kind>`` message at their stamp, which gyroemu's logs never do). Each
     chunk's messages are put in log-time order; a channel whose chunks overlap in time (so that only
-    a whole-file sort would order it) is refused.
+    a whole-file sort would order it) is refused. A log of several devices needs ``topic``, the IMU
+    topic to analyse (:class:`AllanLogError` otherwise, naming them).
     """
-    from gyroemu.pipelines.formats.channels import ESTIMATE_ROLE, IMU_ROLE, TRUTH_ROLE, role_accepts, split_topic
+    from gyroemu.pipelines.formats.channels import (
+        ESTIMATE_ROLE,
+        IMU_ROLE,
+        TRUTH_ROLE,
+        absolute_topic,
+        role_accepts,
+        split_topic,
+    )
     from gyroemu.pipelines.formats.mcap_log import announce_scan, no_imu_error
     from gyroemu.pipelines.formats.mcap_records import LogError, McapScan
     from gyroemu.pipelines.formats.messages import IMU
@@ -975,22 +983,36 @@ def _mcap_series(log: Path) -> tuple[_GyroSeries, float, str | None, _TruthStats
 
     if not devices:
         raise no_imu_error(scan, log)
+    measured = [c for c in devices if place(c)[2] not in (TRUTH_ROLE, ESTIMATE_ROLE)]
+    if len(measured) == 1:  # a lone /estimate/imu beside one measured device is its estimate (read_mcap)
+        devices = {c: s for c, s in devices.items() if place(c)[2] != ESTIMATE_ROLE}
+    topics = {scan.data[c].channel.topic: c for c in devices}
+    if topic is not None:
+        if absolute_topic(topic) not in topics:
+            raise AllanLogError(
+                f"--topic {topic}: no sensor_msgs/msg/Imu topic of that name (IMU topics: {', '.join(sorted(topics))})",
+                file=log,
+            )
+        devices = {topics[absolute_topic(topic)]: devices[topics[absolute_topic(topic)]]}
     if len(devices) != 1:
-        names = [(meta(c) or {}).get("device_name") or (keys[c][0].strip("/") or "imu0") for c in devices]
-        raise ValueError(f"{log}: {len(devices)} devices ({', '.join(names)}); choose one from .devices")
+        raise AllanLogError(
+            f"{len(devices)} IMU topics ({', '.join(sorted(topics))}): choose the one to analyse with --topic",
+            file=log,
+        )
     channel_id, chosen = next(iter(devices.items()))
     device_toml = (meta(channel_id) or {}).get("device") or None
     truth = truths.get(place(channel_id)[1])
     return chosen, chosen.steps.median() * 1e-9, device_toml, truth, scan.data[channel_id].channel.topic
 
 
-def allan_of_log(path: str | os.PathLike[str], allow_motion: bool = False) -> AllanReport:
+def allan_of_log(path: str | os.PathLike[str], allow_motion: bool = False, topic: str | None = None) -> AllanReport:
     """Fit a static log's gyro and accelerometer: an .mcap (its device, with the device's config when
     the log carries it), or an .npz of ``gyroemu simulate --device`` (``imu/gyro``, ``imu/accel``,
     ``imu/t``, ``device_toml``). The sample interval is the median step of the stamps. Raises
     :class:`AllanLogError` for a log it cannot use, :class:`gyroemu.errors.LogError` for an .mcap it
     cannot read, and :class:`AllanMotionError` for a log that is not static (:class:`StaticCheck`)
-    unless ``allow_motion`` (then a :class:`MotionWarning`).
+    unless ``allow_motion`` (then a :class:`MotionWarning`). ``topic``: an .mcap's IMU topic to analyse,
+    needed where it has several (``/imu/data_raw`` and ``/imu/data``, or several devices).
 
     The log is read and analysed in batches of :data:`BATCH` samples: memory is bounded by the batch
     (and, for an .npz, by the arrays, which that format holds in memory), not by the log's length.
@@ -999,7 +1021,7 @@ def allan_of_log(path: str | os.PathLike[str], allow_motion: bool = False) -> Al
     if not log.is_file():
         raise AllanLogError("no such file", file=log)
     if log.suffix == ".mcap":
-        series, dt, device_toml, truth, topic = _mcap_series(log)
+        series, dt, device_toml, truth, topic = _mcap_series(log, topic)
     else:
         (series, dt, device_toml, truth), topic = _npz_series(log), ""
     spec = accel_spec = None

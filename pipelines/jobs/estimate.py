@@ -61,6 +61,7 @@ from gyroemu.pipelines.formats.channels import (
     BODY_FRAME,
     ESTIMATE_ROLE,
     IMU_ROLE,
+    absolute_topic,
     role_topic,
     series_fields,
     split_topic,
@@ -186,10 +187,6 @@ class EstimateSummary:
     field_lags: list[tuple[str, FieldLag, float]] = field(default_factory=list)
 
 
-def _topic_name(topic: str) -> str:
-    return topic if topic.startswith("/") else "/" + topic
-
-
 def _choose(
     devices_found: Iterable[_Device], path: Path, topic: str | None, topic_out: str | None
 ) -> list[tuple[_Device, str]]:
@@ -199,7 +196,7 @@ def _choose(
     if topic_out is not None:
         _check_topic_out_name(topic_out)
     if topic is not None:
-        name = _topic_name(topic)
+        name = absolute_topic(topic)
         if name not in devices:
             raise EstimateTopicError(
                 f"argument --topic: {path}: no sensor_msgs/msg/Imu topic {topic!r} "

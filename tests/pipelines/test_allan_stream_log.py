@@ -149,13 +149,16 @@ def test_a_short_log_and_a_log_with_nan_are_refused_as_before(tmp_path):
     assert isinstance(missing.value, LogError) and missing.value.file == str(tmp_path / "missing.mcap")
 
 
-def test_a_log_of_two_devices_raises_what_read_mcap_raises(tmp_path):
+def test_a_log_of_two_devices_asks_for_a_topic(tmp_path):
+    """Two devices: the error names their IMU topics and asks for one; ``topic`` picks the device
+    read_mcap reads under that name."""
     log = write_mcap(tmp_path / "two.mcap", [samples(200, device="a"), samples(200, device="b", seed=1)])
-    with pytest.raises(ValueError) as expected:
-        _ = read_mcap(log).device
-    with pytest.raises(ValueError) as got:
+    with pytest.raises(AllanLogError, match=r"2 IMU topics \(/a/imu, /b/imu\): choose the one to analyse with --topic"):
         allan_of_log(log)
-    assert str(got.value) == str(expected.value)
+    device = read_mcap(log).devices["b"]
+    dt = float(np.median(np.diff(device.samples.t)))
+    reference = allan_report(device.samples.gyro, dt)
+    assert_reports_agree(allan_of_log(log, topic="/b/imu"), reference, device.samples.gyro, device.samples.t, dt)
 
 
 def test_a_prefixed_single_device_log_is_read(tmp_path):

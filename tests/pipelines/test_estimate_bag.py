@@ -196,3 +196,52 @@ def test_an_earlier_estimate_on_a_topic_of_ones_own_is_replaced(bag, tmp_path):
     count = summary.statistics.channel_message_counts[att[0].id]
     imu_b = next(c.id for c in summary.channels.values() if c.topic == "/imu_b")
     assert count == summary.statistics.channel_message_counts[imu_b]  # one estimate per /imu_b message
+
+
+def test_a_drivers_topics_pair_the_field_and_its_estimate(tmp_path, capsys):
+    """A driver's /imu/data_raw with /imu/mag (imu_tools' names): the field goes to the IMU topic under its
+    namespace, so the estimate is 9D, and the same as the bag with /imu and /mag, to the bit; the
+    estimate written for that foreign topic (/estimate/imu) is then the device's, not a device of its
+    own, so `allan` and `info` see one device. Beside a filter's /imu/data, the field goes to both."""
+    from gyroemu.pipelines.formats.mcap_log import read_mcap
+
+    named = write_foreign_bag(tmp_path / "driver", imu_topics=("/imu/data_raw",), mag_topic="/imu/mag", n=300)
+    plain = write_foreign_bag(tmp_path / "plain", imu_topics=("/imu",), mag_topic="/mag", n=300)
+    outs = []
+    for bag in (named, plain):
+        outs.append(tmp_path / f"{bag.parent.name}.est.mcap")
+        assert main(["estimate", str(bag), "--out", str(outs[-1])]) == 0
+        assert "mekf (9D)" in capsys.readouterr().out
+    (device,) = read_mcap(outs[0]).devices.values()
+    assert device.topics == {"imu": "/imu/data_raw", "mag": "/imu/mag", "estimate/imu": "/estimate/imu"}
+    estimates = [_read(out)[0]["/estimate/imu"] for out in outs]
+    assert [m[0] for m in estimates[0]] == [m[0] for m in estimates[1]]
+    assert main(["allan", str(outs[0]), "--no-plot", "--allow-motion"]) == 0
+    both = write_foreign_bag(tmp_path / "both", imu_topics=("/imu/data_raw", "/imu/data"), mag_topic="/imu/mag", n=300)
+    devices = read_mcap(both).devices
+    assert {name: d.topics.get("mag") for name, d in devices.items()} == {
+        "imu/data_raw": "/imu/mag",
+        "imu/data": "/imu/mag",
+    }
+
+
+def test_allan_of_several_imu_topics_asks_for_one(tmp_path, capsys):
+    """Two IMU topics: `allan` names them and asks for --topic (exit 2, no traceback); --topic, with or
+    without its slash, picks one (the other's samples are not read into it); an unknown one is named."""
+    bag = write_foreign_bag(tmp_path / "bag", n=300)
+    with pytest.raises(SystemExit) as exit_:
+        main(["allan", str(bag), "--no-plot"])
+    assert exit_.value.code == 2
+    assert "2 IMU topics (/imu_a, /imu_b): choose the one to analyse with --topic" in capsys.readouterr().err
+    reports = []
+    for topic in ("/imu_b", "imu_b", "/imu_a"):
+        assert main(["allan", str(bag), "--no-plot", "--json", "--allow-motion", "--topic", topic]) == 0
+        reports.append(capsys.readouterr().out)
+    assert reports[0] == reports[1] != reports[2]
+    assert '"topic": "/imu_b"' in reports[0]
+    with pytest.raises(SystemExit) as exit_:
+        main(["allan", str(bag), "--no-plot", "--topic", "/imu_c"])
+    assert exit_.value.code == 2
+    assert "--topic /imu_c: no sensor_msgs/msg/Imu topic of that name (IMU topics: /imu_a, /imu_b)" in (
+        capsys.readouterr().err
+    )
