@@ -764,6 +764,10 @@ class McapScan:
         The byte offset where a file without footer ends.
     footer : bool
         The footer and closing magic were read.
+    summary : bool
+        The footer points at a summary section (schemas, channels, statistics, indexes).
+    chunk_indexes : int
+        Chunk index records read (a summary's index of the chunks; 0 in an unchunked file).
     """
 
     def __init__(self, path: Path) -> None:
@@ -778,6 +782,8 @@ class McapScan:
         self.chunks = 0
         self.truncated_at: int | None = None
         self.footer = False
+        self.summary = False
+        self.chunk_indexes = 0
 
     def error(self, reason: str, offset: int | None = None) -> LogError:
         """A :class:`LogError` about this file (``offset``: the byte of the record at fault)."""
@@ -891,6 +897,10 @@ class McapScan:
             self._loose_message(content)
         elif opcode == Opcode.METADATA:
             self.metadata.append(Metadata.read(ReadDataStream(BytesIO(content))))
+        elif opcode == Opcode.CHUNK_INDEX:
+            self.chunk_indexes += 1
+        elif opcode == Opcode.FOOTER:
+            self.summary = Footer.read(ReadDataStream(BytesIO(content))).summary_start != 0
 
     def _channel(self, channel: Channel) -> None:
         """Register a channel (once: the summary repeats them) and decide whether to decode it."""

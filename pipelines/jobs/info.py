@@ -387,6 +387,9 @@ class LogInfo:
         Messages read (every channel).
     truncated : bool
         The file ends before its footer: only complete chunks were read.
+    summary, indexed : bool
+        The file has a summary section; its chunks are indexed there (every chunk a chunk index, and
+        chunks to index).
     devices : list of DeviceInfo
     topics : list of TopicStats
         Every channel, from :func:`topic_stats`.
@@ -399,6 +402,8 @@ class LogInfo:
     profile: str
     message_count: int
     truncated: bool
+    summary: bool = True
+    indexed: bool = True
     devices: list[DeviceInfo] = field(default_factory=list)
     topics: list[TopicStats] = field(default_factory=list)
     skipped: dict[str, str] = field(default_factory=dict)
@@ -437,6 +442,8 @@ class LogInfo:
             "size_bytes": self.size_bytes,
             "message_count": self.message_count,
             "truncated": self.truncated,
+            "summary": self.summary,
+            "indexed": self.indexed,
             "devices": devices,
             "topics": [t.to_dict() for t in self.topics],
             "skipped": dict(self.skipped),
@@ -454,7 +461,12 @@ class LogInfo:
         -------
         str
         """
-        state = "TRUNCATED: only complete chunks were recovered" if self.truncated else "complete (summary and indexes)"
+        if self.truncated:
+            state = "TRUNCATED: only complete chunks were recovered"
+        elif not self.summary:
+            state = "complete, without a summary or indexes"
+        else:
+            state = "complete (summary and indexes)" if self.indexed else "complete (summary, no chunk indexes)"
         lines = [
             f"{self.path}: MCAP, profile '{self.profile}', {self.size_bytes / 1e6:.3g} MB, "
             f"{self.message_count} messages, {state}"
@@ -548,6 +560,8 @@ def log_info(path: str | os.PathLike[str]) -> LogInfo:
         profile=scan.profile,
         message_count=scan.message_count,
         truncated=scan.truncated_at is not None,
+        summary=scan.summary,
+        indexed=scan.summary and scan.chunks > 0 and scan.chunk_indexes >= scan.chunks,
         devices=list(devices.values()),
         topics=walked.topic_stats(),
         skipped=dict(skipped),

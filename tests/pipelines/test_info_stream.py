@@ -128,3 +128,40 @@ def test_a_corrupt_message_fails_validation_as_read_mcap_fails(tmp_path):
         writer.finish()
     with pytest.raises(LogError, match="holds no sensor_msgs/msg/Imu messages"):
         check_mcap_noting(empty, print)
+
+
+def test_info_says_whether_the_file_has_a_summary_and_indexes(tmp_path):
+    """A writer's options decide what a reader can seek by: info says what the file has, not what
+    gyroemu's writer would have written (it said "summary and indexes" of every complete file)."""
+    from mcap.writer import IndexType
+    from mcap.writer import Writer as PlainMcapWriter
+
+    from gyroemu.pipelines.formats.messages import IMU
+
+    rows = IMU.encode(np.arange(1, 101) * 10**7, "imu", {"linear_acceleration": np.tile([0.0, 0.0, 9.8], (100, 1))})
+    bare = {
+        "index_types": IndexType.NONE,
+        "repeat_channels": False,
+        "repeat_schemas": False,
+        "use_statistics": False,
+        "use_summary_offsets": False,
+    }
+    cases = {
+        "indexed": ({}, "complete (summary and indexes)", True, True),
+        "bare": (bare, "complete, without a summary or indexes", False, False),
+        "unchunked": ({"use_chunking": False}, "complete (summary, no chunk indexes)", True, False),
+    }
+    for name, (options, state, summary, indexed) in cases.items():
+        path = tmp_path / f"{name}.mcap"
+        with open(path, "wb") as f:
+            writer = PlainMcapWriter(f, **options)
+            writer.start("ros2", "test")
+            schema = writer.register_schema("sensor_msgs/msg/Imu", "ros2msg", IMU.schema.encode())
+            channel = writer.register_channel("/imu", "cdr", schema)
+            for k, row in enumerate(rows):
+                writer.add_message(channel, log_time=(k + 1) * 10**7, data=row.tobytes(), publish_time=0, sequence=k)
+            writer.finish()
+        info = log_info(path)
+        assert (info.summary, info.indexed) == (summary, indexed), name
+        assert info.text().splitlines()[0].endswith(state), name
+        assert (info.to_dict()["summary"], info.to_dict()["indexed"]) == (summary, indexed)
