@@ -694,6 +694,38 @@ def test_rosbags_anyreader_reads_our_log(tmp_path, runs):
     assert counts == {"/imu": len(samples), "/truth/imu": len(samples), "/raw/rlg": len(samples)}
 
 
+def test_an_unchunked_file_is_handed_out_in_batches(tmp_path, monkeypatch):
+    """Messages outside chunks (rosbag2's 'fastwrite' preset) go out LOOSE_BATCH at a time, in file order,
+    every field as found, with the channels' other records between them; check() counts them all
+    (a message at a time, the copy cost 0.35 ms a message). The walk's batches of a chunked file are
+    its chunks, as before."""
+    from gyroemu.pipelines.formats import mcap_records
+    from gyroemu.pipelines.formats.mcap_records import McapRecordWalk, McapScan
+
+    monkeypatch.setattr(mcap_records, "LOOSE_BATCH", 16)
+    path = tmp_path / "plain.mcap"
+    n = 50
+    rows = IMU.encode(np.arange(1, n + 1) * 10**7, "imu", {"angular_velocity": np.arange(3.0 * n).reshape(n, 3)})
+    with open(path, "wb") as f:
+        writer = PlainMcapWriter(f, use_chunking=False)
+        writer.start("ros2", "test")
+        schema = writer.register_schema("sensor_msgs/msg/Imu", "ros2msg", IMU.schema.encode())
+        first = writer.register_channel("/imu", "cdr", schema)
+        for k, row in enumerate(rows):
+            if k == 20:  # a channel defined between the messages
+                second = writer.register_channel("/imu2", "cdr", schema)
+            channel = first if k < 20 or k % 2 else second
+            writer.add_message(channel, log_time=(k + 1) * 10**7, data=row.tobytes(), publish_time=k, sequence=7 * k)
+        writer.finish()
+    batches = list(McapRecordWalk(path).batches())
+    assert [len(b.size) for b in batches] == [16, 16, 16, 2]
+    joined = [(int(b.channel_id[k]), int(b.sequence[k]), int(b.log_time[k]), int(b.publish_time[k]), b.payload(k))
+              for b in batches for k in range(len(b.size))]  # fmt: skip
+    assert [(s, t, p) for _, s, t, p, _ in joined] == [(7 * k, (k + 1) * 10**7, k) for k in range(n)]
+    assert [payload for *_, payload in joined] == [row.tobytes() for row in rows]
+    assert sum(McapScan(path).check().values()) == n
+
+
 def test_rosbag2_mcap_written_by_rosbags_is_read(tmp_path):
     from rosbags.rosbag2 import StoragePlugin
     from rosbags.rosbag2 import Writer as BagWriter
@@ -961,7 +993,7 @@ def test_record_walk_hands_out_every_message_unchanged(tmp_path):
         path = tmp_path / f"walk_{chunked}.mcap"
         _plain_imu_file(path, rows, chunked)
         batches = list(McapRecordWalk(path).batches())
-        assert (len(batches) < 30) if chunked else (len(batches) == 30)  # a batch per chunk, or per loose record
+        assert (1 < len(batches) < 30) if chunked else (len(batches) == 1)  # a batch per chunk; LOOSE_BATCH loose
         payloads = [b.payload(k) for b in batches for k in range(len(b.size))]
         assert payloads == [row.tobytes() for row in rows]
         assert np.all(np.concatenate([b.size for b in batches]) == rows.shape[1])  # not just slices cut short
