@@ -254,12 +254,17 @@ def _check(options: StreamOptions) -> None:
     if options.estimate is not None and options.session.ros2:
         raise ValueError("argument --estimate: not available with --ros2")
     if options.estimate is not None:
-        from gyroemu.pipelines.estimation.registry import FilterError, filter_class
+        from gyroemu.pipelines.estimation.registry import FilterError, filter_class, is_offline
 
         try:
             filter_class(options.estimate)
         except FilterError as e:
             raise ValueError(f"argument --estimate: {e}") from None
+        if is_offline(options.estimate):
+            raise ValueError(
+                f"argument --estimate: {options.estimate} is offline (it needs the whole log): "
+                "choose an online filter, or record the stream and run 'gyroemu estimate' on it"
+            )
     if options.foxglove is not None:
         from gyroemu.pipelines.transport.foxglove_view import check_view_options
 

@@ -73,6 +73,17 @@ def test_stream_and_bench_refuse_bad_numbers(tmp_path, command, options, named):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("name", ["offline-vqf", "mekf-smooth"])
+def test_stream_refuses_an_offline_live_estimate_before_streaming(name):
+    """An offline filter cannot run on a live stream: refused by name before anything is streamed (it
+    streamed, then a thread's traceback, then an error blaming the endpoints)."""
+    code, stdout, stderr = run_cli(
+        ["stream", "--scenario", "heavy_top", "--device", "consumer_mems", "--estimate", name]
+    )
+    assert code == 2 and f"argument --estimate: {name} is offline (it needs the whole log)" in stderr, stderr
+    assert stdout == "" and "Traceback" not in stderr
+
+
 @pytest.mark.parametrize(
     "values, named",
     [
