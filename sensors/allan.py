@@ -466,7 +466,8 @@ def weighted_fit(
     for _ in range(iterations):
         sd = model * relative_sd
         c = _constrained_lsq(basis / sd[:, None], avar / sd, free)
-        model = np.maximum(basis @ c, np.finfo(float).tiny)
+        fitted = basis @ c
+        model = np.where(fitted > 0, fitted, avar)  # where no term reaches (none fitted): the data's weight
     chi2 = float(np.sum(((avar - model) / (model * relative_sd)) ** 2))
     return c, model, chi2
 
@@ -576,9 +577,17 @@ def fit_allan(
     The quantisation's detection limit is then at least √(2 sd), sd the standard deviation of the τ⁻²
     coefficient from the fit's covariance (module notes), which also bounds a band limit: it is resolved
     when band_limit/3 exceeds the limit². ``skip``: leave out the curve's ``skip`` shortest τ (the
-    returned fit keeps the whole curve, with :attr:`AllanFit.skipped`).
+    returned fit keeps the whole curve, with :attr:`AllanFit.skipped`). A curve that is 0 everywhere (a
+    constant series: a saturated axis, a noiseless device) gives every term 0 with the interval [0, 0];
+    one that is 0 at some τ only, ``ValueError``.
     """
     whole, allan = allan, allan.without_first(skip) if skip else allan
+    if not np.any(allan.adev > 0):  # a constant (a saturated axis, a noiseless device): every term 0
+        zero = Coefficient(0.0, 0.0, 0.0, 0.0)
+        return AllanFit(zero, zero, zero, zero, zero, allan=whole, skipped=skip)
+    if not np.all(allan.adev > 0):
+        at = allan.tau[np.flatnonzero(~(allan.adev > 0))[0]]
+        raise ValueError(f"σ(τ) is 0 at τ = {at:g} s but not everywhere: no noise model has that curve")
     unknown = set(terms) - set(TERMS)
     if unknown:
         raise ValueError(f"unknown terms {sorted(unknown)}; known: {', '.join(TERMS)}")

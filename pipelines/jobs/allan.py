@@ -712,12 +712,14 @@ class _TruthStats:
         self.angle = max(self.angle, float(4 * np.arcsin(np.clip(chord.max() / 2, 0.0, 1.0))))
 
     def figures(self, sigma_min: float) -> tuple[list[MotionFigure], list[str]]:
-        """The rate and attitude figures; ``sigma_min`` the gyro's lowest measured Allan deviation, rad/s."""
+        """The rate and attitude figures; ``sigma_min`` the gyro's lowest measured Allan deviation (of its
+        axes with noise; 0 for none), rad/s."""
         if self.n == 0:
             return [], ["the truth was not checked: it has no finite rates"]
         mean = self.total / self.n
         wander = float(np.max(np.maximum(self.high - mean, mean - self.low)))
-        rate_limit = _MOTION_FRACTION * sigma_min
+        # A gyro without noise (sigma_min 0) leaves only the truth's round-off: 2¹⁰ ulps of its rate.
+        rate_limit = max(_MOTION_FRACTION * sigma_min, 1024 * np.finfo(float).eps * float(np.linalg.norm(mean)))
         tilt_limit = min(np.radians(TOLERANCE_DIRECTION), rate_limit / _EARTH_RATE)
         figures = [
             MotionFigure(
@@ -1047,7 +1049,8 @@ def allan_of_log(path: str | os.PathLike[str], allow_motion: bool = False, topic
     accel_fits = None
     if accel_deviations is not None:
         accel_fits = allan_fits(accel_deviations)
-    static = _static_check(series.blocks, truth, min(float(f.allan.adev.min()) for f in fits))
+    noisy = [float(f.allan.adev[f.allan.adev > 0].min()) for f in fits if np.any(f.allan.adev > 0)]
+    static = _static_check(series.blocks, truth, min(noisy, default=0.0))  # a constant (saturated) axis: none
     if not static.static:
         if not allow_motion:
             raise AllanMotionError(

@@ -70,6 +70,22 @@ def test_a_moving_log_is_refused_naming_the_figure_unless_motion_is_allowed(logs
     assert not report.static.static
 
 
+def test_a_spin_that_saturates_an_axis_is_refused_as_motion(tmp_path):
+    """A heavy top's 150 rad/s spin holds consumer_mems's z at its range: a constant axis, whose σ(τ) is 0.
+    The log is refused as moving, naming the figures with a threshold from the axes that have noise
+    (it ended in 'array must not contain infs or NaNs', from fitting the constant axis first); with
+    --allow-motion the constant axis's terms are 0."""
+    log = tmp_path / "spin.mcap"
+    run_simulate(SimulateOptions(scenario="heavy_top", device="consumer_mems", duration=10.0, out=log, progress=False))
+    with pytest.raises(AllanMotionError, match=r"the true rate moves by [\d.]+ deg/s \(static: < 0\.\d*[1-9]"):
+        allan_of_log(log)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MotionWarning)
+        report = allan_of_log(log, allow_motion=True)
+    assert report.fits[2].arw.value == 0.0 and report.fits[2].arw.high == 0.0
+    assert report.fits[0].arw.value > 0.0
+
+
 def test_random_walk_of_a_short_white_and_bias_instability_run_is_not_resolved():
     """10 min at 100 Hz of white noise and bias instability only: no random walk to resolve."""
     dt, n = 0.01, 60_000

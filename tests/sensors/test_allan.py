@@ -121,3 +121,21 @@ def test_a_term_too_small_to_pin_is_reported_undetermined_not_nonsense():
     for name in ("quantisation", "arw", "bias_instability", "rrw", "rate_ramp"):
         c = getattr(fit, name)
         assert c.low <= c.value <= c.high, (name, c)
+
+
+def test_a_constant_series_has_every_term_zero_and_a_curve_zero_in_places_is_refused():
+    """A constant axis (a gyro saturated by a fast spin, a noiseless device) has σ(τ) = 0 at every τ: every
+    term 0 with the interval [0, 0] (it was nonsense from weights of 0: 'array must not contain infs or
+    NaNs'); σ(τ) 0 at some τ only fits no model, and is refused by name."""
+    constant = allan_deviation(np.full(4096, 0.25), 0.01)
+    for fit in (fit_allan(constant), fit_allan(constant, band_limit=True)):
+        for name in TERMS:
+            c = getattr(fit, name)
+            assert (c.value, c.low, c.high) == (0.0, 0.0, 0.0), name
+    noisy = allan_deviation(np.random.default_rng(0).normal(0.0, 1e-3, 4096), 0.01)
+    holed = AllanDeviation(
+        tau=noisy.tau, adev=np.where(np.arange(len(noisy.tau)) == 3, 0.0, noisy.adev), clusters=noisy.clusters,
+        edf=noisy.edf, low=noisy.low, high=noisy.high, dt=noisy.dt,
+    )  # fmt: skip
+    with pytest.raises(ValueError, match=r"σ\(τ\) is 0 at τ = 0.08 s but not everywhere"):
+        fit_allan(holed)
