@@ -55,8 +55,8 @@ def check_counts(path: str | Path | None, name: str, count: int, finite: int) ->
     if finite == count:
         return None
     return (
-        f"{count - finite} of {count} IMU samples of device '{name}' hold NaN or infinite values; they are passed to the "
-        "filters as they are (the built-in filters hold their estimate over them)"
+        f"{count - finite} of {count} IMU samples of device '{name}' hold NaN or infinite values; they are "
+        "passed to the filters as they are (the built-in filters hold their estimate over them)"
     )
 
 
