@@ -39,8 +39,8 @@ def not_increasing_error(path: str | Path | None, name: str, first: tuple[int, f
     and the one before it (s), and how many such steps there are."""
     k, t, before, count = first
     return LogError(
-        f"IMU stamps of device '{name}' are not increasing: sample {k} at {t:.9f} s follows "
-        f"{before:.9f} s ({count} such steps)",
+        f"IMU stamps of device '{name}' are not increasing: sample {k} at {float(t)!r} s follows "
+        f"{float(before)!r} s ({count} such steps)",
         file=path,
     )
 

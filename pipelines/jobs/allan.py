@@ -757,6 +757,7 @@ class _GyroSeries:
         self.accel_usable = True  # every accelerometer sample given and finite so far
         self.last_stamp: int | None = None
         self.last_log_time: int | None = None
+        self.not_increasing: tuple[int, float, float, int] | None = None  # as DeviceCensus counts it
         self._pending: list[tuple[np.ndarray, np.ndarray | None]] = []
         self._pending_n = 0
 
@@ -771,6 +772,12 @@ class _GyroSeries:
                 self.steps.add(np.diff(stamps))
             else:
                 self.steps.add(np.diff(stamps, prepend=self.last_stamp))
+            before = np.concatenate(([stamps[0] - 1 if self.last_stamp is None else self.last_stamp], stamps[:-1]))
+            bad = np.flatnonzero(stamps <= before)
+            if len(bad):  # the first such sample, its stamp and the one before (s), and how many
+                k = int(bad[0])
+                first = self.not_increasing or (self.n + k, stamps[k] / 1e9, before[k] / 1e9, 0)
+                self.not_increasing = (first[0], first[1], first[2], first[3] + len(bad))
             self.last_stamp = int(stamps[-1])
         self.n += len(gyro)
         if accel is None or not np.all(np.isfinite(accel)):
@@ -892,6 +899,7 @@ def _mcap_series(log: Path, topic: str | None = None) -> tuple[_GyroSeries, floa
     a whole-file sort would order it) is refused. A log of several devices needs ``topic``, the IMU
     topic to analyse (:class:`AllanLogError` otherwise, naming them).
     """
+    from gyroemu.pipelines.estimation.series import not_increasing_error
     from gyroemu.pipelines.formats.channels import (
         ESTIMATE_ROLE,
         IMU_ROLE,
@@ -1002,6 +1010,9 @@ def _mcap_series(log: Path, topic: str | None = None) -> tuple[_GyroSeries, floa
             file=log,
         )
     channel_id, chosen = next(iter(devices.items()))
+    if chosen.not_increasing is not None:  # as estimate refuses them: the samples' order is not their stamps'
+        name = (meta(channel_id) or {}).get("device_name") or (keys[channel_id][0].strip("/") or "imu0")
+        raise AllanLogError(not_increasing_error(None, name, chosen.not_increasing).reason, file=log)
     device_toml = (meta(channel_id) or {}).get("device") or None
     truth = truths.get(place(channel_id)[1])
     return chosen, chosen.steps.median() * 1e-9, device_toml, truth, scan.data[channel_id].channel.topic

@@ -187,3 +187,33 @@ def test_jittered_stamps_give_the_median_step_within_half_a_bin(tmp_path):
     tau = allan_of_log(log).fits[0].allan.tau[0]
     expected = float(np.median(steps)) * 1e-9
     assert abs(tau - expected) <= 2 ** (shift - 1) * 1e-9 + 4 * EPS * expected
+
+
+def test_stamps_that_do_not_increase_are_refused_as_estimate_refuses_them(tmp_path):
+    """Two samples swapped and one repeated (a relay that reorders, a driver that repeats): estimate
+    refuses the log; allan, which took the samples in log order, gave figures for an order that is not
+    the stamps'. Both now refuse it, in the same words."""
+    from gyroemu.pipelines.formats.mcap_records import McapFileWriter
+    from gyroemu.pipelines.formats.messages import IMU
+    from gyroemu.pipelines.jobs.estimate import estimate_log
+
+    n = 400
+    log_time = 1_700_000_000 * 10**9 + np.arange(n, dtype=np.int64) * 10_000_000
+    stamps = log_time.copy()  # the header stamps; the messages are logged in order
+    stamps[[100, 101]] = stamps[[101, 100]]
+    stamps[300] = stamps[299]
+    rng = np.random.default_rng(2)
+    fields = {"angular_velocity": rng.normal(0, 1e-3, (n, 3)), "linear_acceleration": np.tile([0, 0, 9.81], (n, 1))}
+    log = tmp_path / "swapped.mcap"
+    with open(log, "wb") as f:
+        writer = McapFileWriter(f)
+        writer.add_messages([(writer.register_ros2_channel("/imu", IMU), log_time, IMU.encode(stamps, "imu", fields))])
+        writer.finish()
+    with pytest.raises(LogError) as estimated:
+        estimate_log(log, tmp_path / "out.mcap")
+    with pytest.raises(AllanLogError) as analysed:
+        allan_of_log(log)
+    assert "IMU stamps of device 'imu0' are not increasing: sample 101 at 1700000001.0 s follows 1700000001.01 s" in (
+        str(analysed.value)
+    )
+    assert "(2 such steps)" in str(analysed.value) and str(analysed.value) == str(estimated.value)
