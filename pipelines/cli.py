@@ -465,7 +465,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UsageError(f"argument --out: {out} is not a folder")
-    check_report_folder(out, force=args.force)  # BenchError before any work
+    check_report_folder(out, force=args.force, cases=cases)  # BenchError before any work
     with warnings.catch_warnings():
         warnings.simplefilter("always", BenchWarning)
         warnings.showwarning = lambda message, category, *a, **k: print(

@@ -57,7 +57,10 @@ against time, first run; ``bench.json`` lists their names). :meth:`BenchReport.s
 through a temporary file. :func:`check_report_folder` refuses, before any work, a folder that cannot take
 them or that holds an earlier report (``bench.md``, ``bench.json``, a ``.png``) unless told to overwrite
 it; overwriting it, :meth:`BenchReport.save` first removes the earlier report's plots this one does not
-write (:func:`earlier_plots`: those its ``bench.json`` names, and no other file).
+write (:func:`earlier_plots`: those its ``bench.json`` names, and no other file). An input (a log, a
+scenario or device file: :func:`bench_inputs`) is never overwritten or removed, even with ``--force``
+(:func:`report_input_problem`): refused before any work, and again, with the plots' names known, before
+:meth:`BenchReport.save` writes or removes anything.
 """
 
 from __future__ import annotations
@@ -87,8 +90,13 @@ from gyroemu.pipelines.estimation.registry import (
     takes_whole_log,
     unavailable_filters,
 )
-from gyroemu.pipelines.formats.atomic import output_folder_problem, write_figure_atomic, write_text_atomic
-from gyroemu.pipelines.formats.file_names import unique_stems
+from gyroemu.pipelines.formats.atomic import (
+    output_file_problem,
+    output_folder_problem,
+    write_figure_atomic,
+    write_text_atomic,
+)
+from gyroemu.pipelines.formats.file_names import same_file, unique_stems
 from gyroemu.pipelines.jobs.bench_cases import PLOT_POINTS, BenchError, BenchWarning, LogCase, SimCase
 from gyroemu.pipelines.jobs.bench_filters import WARM_UP_SAMPLES, check_estimate, warm_up
 from gyroemu.pipelines.jobs.bench_log import (
@@ -120,14 +128,18 @@ __all__ = [
     "FilterError",
     "FilterResult",
     "LogCase",
+    "REPORT_FILES",
     "RunResult",
     "SimCase",
+    "bench_inputs",
     "check_report_folder",
     "earlier_plots",
     "evaluate_run",
+    "loaded_inputs",
     "plot_names",
     "report_files_in",
     "report_figures",
+    "report_input_problem",
     "run_bench",
 ]
 
@@ -228,6 +240,9 @@ class BenchReport:
     settings: dict[str, Any]
     notes: list[str] = field(default_factory=list)
     unavailable: dict[str, str] = field(default_factory=dict)
+    inputs: list[Path] = field(default_factory=list)
+    """The files the bench read (:func:`bench_inputs`, :func:`loaded_inputs`), which :meth:`save` never
+    overwrites or removes; not in the report."""
 
     # --- Markdown ---------------------------------------------------------------------------------
     def to_markdown(self) -> str:
@@ -431,10 +446,15 @@ class BenchReport:
         """``bench.md``, ``bench.json`` and the plots in ``directory`` (made if missing); their paths, and
         under ``"removed"`` the earlier report's plots removed. With ``replace_earlier`` (``--force``), the
         plots of an earlier report there (:func:`earlier_plots`) that this one does not write are removed
-        first, before its ``bench.json`` is replaced: no other file is touched."""
+        first, before its ``bench.json`` is replaced: no other file is touched. :class:`BenchError`, before
+        anything is written or removed, when one of those files is an input (:func:`report_input_problem`)."""
         directory = Path(directory)
+        names = plot_names([c.name for c in self.cases])
+        problem = report_input_problem(directory, self.inputs, plots=names, replace_earlier=replace_earlier)
+        if problem is not None:
+            raise BenchError(problem)
         directory.mkdir(parents=True, exist_ok=True)
-        ours = set(plot_names([c.name for c in self.cases]))
+        ours = set(names)
         removed = [p for p in (earlier_plots(directory) if replace_earlier else []) if p.name not in ours]
         for plot in removed:  # before bench.json, which names them, is replaced: a stop here leaves it naming them
             plot.unlink(missing_ok=True)
@@ -498,10 +518,18 @@ def report_files_in(folder: str | os.PathLike[str]) -> list[str]:
     return names + sorted(p.name for p in folder.glob("*.png") if not p.name.startswith("."))
 
 
-def check_report_folder(folder: str | os.PathLike[str], *, force: bool = False, argument: str = "--out") -> None:
+def check_report_folder(
+    folder: str | os.PathLike[str],
+    *,
+    force: bool = False,
+    argument: str = "--out",
+    cases: Iterable[SimCase | LogCase] = (),
+) -> None:
     """:class:`BenchError` naming ``argument`` for a report folder (made with its parents when missing)
     that cannot take the report: not a folder, read-only, not writable; or that holds files the report
-    may replace (:func:`report_files_in`) and ``force`` is not given. Before any work."""
+    may replace (:func:`report_files_in`) and ``force`` is not given; or where the report would
+    overwrite or remove an input of ``cases`` (:func:`bench_inputs`, :func:`report_input_problem`: the
+    plots of the simulated ones, whose names are known before any work). Before any work."""
     folder = Path(folder)
     problem = output_folder_problem(folder)
     if problem is not None:
@@ -512,6 +540,78 @@ def check_report_folder(folder: str | os.PathLike[str], *, force: bool = False, 
             f"argument {argument}: {folder} holds an earlier report ({', '.join(there)}): use another folder, or "
             "--force to write this one over it (and remove the earlier report's plots its bench.json names)"
         )
+    cases = list(cases)
+    inputs = bench_inputs(cases)
+    if not inputs or not folder.is_dir():  # a folder still to be made holds no input
+        return
+    names: list[str] = []
+    for case in cases:
+        if isinstance(case, SimCase):  # loaded again (checked already): its name, and the files it reads
+            scenario, devices, _, name, _ = _sim_case(case, 1, 0)
+            names.append(name)
+            inputs += loaded_inputs(scenario, devices[0])
+    # the plots' names: the simulated cases' are known before any work, when no log comes before them
+    plots = plot_names(names) if all(isinstance(c, SimCase) for c in cases[: len(names)]) else []
+    problem = report_input_problem(folder, inputs, plots=plots, replace_earlier=force, argument=argument)
+    if problem is not None:
+        raise BenchError(problem)
+
+
+def bench_inputs(cases: Iterable[SimCase | LogCase]) -> list[Path]:
+    """The files a bench of ``cases`` reads, as given: each log, and each scenario or device named by a
+    path (the config resolver takes any path there is as a file, whatever its suffix). Once loaded, the
+    files they were read from are :func:`loaded_inputs`."""
+    inputs: list[Path] = []
+    for case in cases:
+        if isinstance(case, LogCase):
+            inputs.append(Path(case.path))
+        elif isinstance(case, SimCase):
+            inputs += [Path(name) for name in (case.scenario, case.device) if name and Path(name).exists()]
+    return inputs
+
+
+def loaded_inputs(*loaded: Scenario | Device | None) -> list[Path]:
+    """The files loaded scenarios and devices were read from, and a recorded scenario's motion file."""
+    from gyroemu.dynamics import Scenario as LoadedScenario  # where used: the CLI's listings skip it
+
+    inputs: list[Path] = []
+    for item in loaded:
+        if item is not None and item.path:
+            inputs.append(Path(item.path))
+        motion = getattr(item.spec, "path", None) if isinstance(item, LoadedScenario) else None
+        if isinstance(motion, (str, Path)):
+            inputs.append(Path(motion))
+    return inputs
+
+
+def report_input_problem(
+    folder: str | os.PathLike[str],
+    inputs: Iterable[str | os.PathLike[str]],
+    *,
+    plots: Iterable[str] = (),
+    replace_earlier: bool = False,
+    argument: str = "--out",
+) -> str | None:
+    """Why a report written in ``folder`` would overwrite or remove one of ``inputs``, naming the argument
+    (``argument`` for a file it writes: ``bench.md``, ``bench.json``, one of ``plots``; ``--force`` for an
+    earlier report's plot that ``replace_earlier`` removes, :func:`earlier_plots`), or None when it
+    would not. An input is never overwritten or removed, even with ``--force``."""
+    folder = Path(folder)
+    inputs = list(inputs)
+    if not inputs or not folder.is_dir():  # a folder still to be made holds no input
+        return None
+    for name in (*REPORT_FILES, *plots):
+        # force: an earlier report is check_report_folder's to refuse; here only inputs (and folders)
+        problem = output_file_problem(folder / name, force=True, inputs=inputs)
+        if problem is not None:
+            return f"argument {argument}: {problem}"
+    for plot in earlier_plots(folder) if replace_earlier else []:
+        if any(same_file(plot, given) for given in inputs):
+            return (
+                f"argument --force: {plot} is an input: it is a plot of the earlier report in {folder} (its "
+                "bench.json names it), which --force removes; inputs are never removed: use another folder"
+            )
+    return None
 
 
 def report_figures(data: dict[str, Any]) -> dict[str, Any]:
@@ -679,11 +779,32 @@ def _sim_case(case: SimCase, runs: int, seed: int) -> _SimItem:
     problem = whole_truth_problem(scenario, case.duration, besides=(per_second, f"{runs} runs' samples and truth"))
     if problem is not None:
         raise BenchError(problem)
+    _check_samples(case, scenario, devices[0])
     has_mag = devices[0].spec.magnetometer is not None
     mode = "9D" if has_mag and not case.six_d else "6D"
     setup = setup_for(devices[0], scenario, use_mag=mode == "9D")
     name = f"{scenario.name} × {devices[0].name}" + (" (6D)" if case.six_d and has_mag else "")
     return scenario, devices, setup, name, mode
+
+
+def _check_samples(case: SimCase, scenario: Scenario, device: Device) -> None:
+    """:class:`BenchError` naming ``--duration`` (or the scenario file's ``duration_s``, when the case
+    takes the scenario's) for a run of fewer than two truth samples or two of the device's samples
+    (``gyroemu simulate``'s rule): found before any work, not as a ``ValueError`` from the sensor."""
+    span = scenario.duration_s if case.duration is None else float(case.duration)
+    where = (
+        "argument --duration" if case.duration is not None else f"{scenario.path or scenario.name}: key 'duration_s'"
+    )
+    truth_rate, rate = scenario.rate_hz, device.spec.rate_hz
+    if round(span * truth_rate) < 1:  # Scenario.times: round(span · rate) + 1 samples
+        raise BenchError(
+            f"{where}: {span:g} s of {scenario.name} at its {truth_rate:g} Hz is one truth sample; the truth "
+            f"needs two or more (a step is {1.0 / truth_rate:g} s)"
+        )
+    if span < 2.0 / rate:
+        raise BenchError(
+            f"{where}: {span:g} s is shorter than two samples of device {device.name} ({2.0 / rate:g} s at {rate:g} Hz)"
+        )
 
 
 def _sim_run(traj: Trajectory, device: Device, seed: int) -> _Run:
@@ -818,9 +939,12 @@ def run_bench(
 
     # Load everything first: bad names and bad logs fail before any work.
     prepared: list[tuple[str, SimCase | LogCase, Any]] = []
+    inputs = bench_inputs(cases)  # never overwritten by the report (BenchReport.save)
     for case in cases:
         if isinstance(case, SimCase):
-            prepared.append(("sim", case, _sim_case(case, runs, seed)))
+            sim = _sim_case(case, runs, seed)
+            prepared.append(("sim", case, sim))
+            inputs += loaded_inputs(sim[0], sim[1][0])
         elif isinstance(case, LogCase):
             prepared += [("log", case, item) for item in _log_items(case, filters)]
         else:
@@ -856,7 +980,7 @@ def run_bench(
             for c in cases
         ],
     }
-    return BenchReport(cases=results, settings=settings, unavailable=unavailable)
+    return BenchReport(cases=results, settings=settings, unavailable=unavailable, inputs=inputs)
 
 
 def _bench_sim(

@@ -117,15 +117,16 @@ class CampaignSummary:
         return self.runs_made / self.elapsed_s if self.elapsed_s > 0 else float("nan")
 
 
-def check_options(options: CampaignOptions) -> None:
+def check_options(options: CampaignOptions, campaign: Campaign | None = None) -> None:
     """:class:`CampaignError` naming the argument, before any work: a scheduler address that is none
     (:func:`~gyroemu.pipelines.campaign.scheduler_problem`); an ``out`` that is not a folder or cannot
     take files (read-only, not writable; where it would be made when missing); report files in ``out``
     (``bench.md``, ``bench.json``, ``.png``) without a campaign's ``runs/`` store beside them, unless
-    ``force``."""
+    ``force``; a report file that is an input, even with ``force``: the campaign file, and the scenario
+    and device files ``campaign`` (loaded from it) names."""
     from gyroemu.pipelines.campaign import scheduler_problem
     from gyroemu.pipelines.formats.atomic import output_folder_problem
-    from gyroemu.pipelines.jobs.bench import report_files_in
+    from gyroemu.pipelines.jobs.bench import report_files_in, report_input_problem
 
     if options.scheduler is not None:
         problem = scheduler_problem(options.scheduler)
@@ -141,6 +142,16 @@ def check_options(options: CampaignOptions) -> None:
             f"argument --out: {out} holds {', '.join(there)} but no campaign's runs/: the report would overwrite "
             "them (use --force to overwrite them, or another folder)"
         )
+    inputs = [options.spec] if isinstance(options.spec, Path) else []
+    if campaign is not None:
+        inputs += [
+            Path(entry) for cell in campaign.cells for entry in (cell.scenario, cell.device) if Path(entry).is_file()
+        ]
+    # bench.md, bench.json, and an earlier report's plots that --force removes; the new plots' names come
+    # from the runs' rows, known only after the work (not checked: a .png named as a cell is no input)
+    problem = report_input_problem(out, inputs, replace_earlier=options.force)
+    if problem is not None:
+        raise CampaignError(problem)
 
 
 def run_campaign(options: CampaignOptions) -> CampaignSummary:
@@ -168,7 +179,7 @@ def run_campaign(options: CampaignOptions) -> CampaignSummary:
         campaign = load_campaign(options.spec)
     else:
         campaign = campaign_from_spec(options.spec)
-    check_options(options)
+    check_options(options, campaign)
     out = options.out
     store = PartStore(out / "runs", row_schema())
     todo = [t for t in campaign.tasks if not store.has(t.key)]

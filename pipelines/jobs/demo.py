@@ -19,17 +19,28 @@ record`` process; the benchmark, :func:`gyroemu.pipelines.jobs.bench.run_bench`)
 
 Its options are checked before any work (:func:`check_options`): the scenario, the durations (at most
 :data:`MAX_SECONDS` each: the truth is made in memory, the live stage runs in real time), and ``out``,
-which must take files and hold no earlier demo's (``demo.mcap``, the report in ``bench/``) unless ``force``.
+which must take files and hold no earlier demo's (``demo.mcap``, the report in ``bench/``) unless ``force``;
+none of them may be an input (the scenario's file, a recorded scenario's motion), even with ``force``.
+
+SIGINT or SIGTERM stops the demo at any stage, with status 130 or 143 as any command: the recorder
+writes a hidden file beside ``demo.mcap``, moved to that name only once the live stage has run to its
+end, so a stop (or a failed live stage) leaves no partial log under the name, and an earlier demo's as
+it was.
 """
 
 from __future__ import annotations
 
+import contextlib
 import io
 import math
+import os
+import secrets
 import signal
+import socket
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +52,9 @@ from gyroemu.sensors.gyrocompass import gyrocompass, heading_uncertainty
 from gyroemu.sensors.sampling import SensorTruth
 
 __all__ = ["DemoError", "MAX_SECONDS", "check_options", "run_demo"]
+
+LOG_NAME = "demo.mcap"
+"""The recorded log's name in ``out`` (its benchmark's report goes to ``out/bench``)."""
 
 MAX_SECONDS = 3600.0
 """The longest ``--duration`` and ``--live-seconds`` the demo takes: its truth is simulated in memory and
@@ -73,14 +87,16 @@ def check_options(
     finite positive number of seconds up to :data:`MAX_SECONDS`; an ``out`` that is not a folder or
     cannot take files (read-only, not writable; where it would be made when missing), or holds an earlier
     demo's files (``demo.mcap``, ``bench/bench.md``, ``bench/bench.json``, ``bench/*.png``) and ``force``
-    is not given. A bad scenario raises its :class:`~gyroemu.dynamics.ConfigError` (naming it)."""
-    from gyroemu.pipelines.formats.atomic import output_folder_problem
-    from gyroemu.pipelines.jobs.bench import report_files_in
+    is not given; or where one of those files is an input (the scenario's file, by any path to it, or a
+    recorded scenario's motion), even with ``force``. A bad scenario raises its
+    :class:`~gyroemu.dynamics.ConfigError` (naming it)."""
+    from gyroemu.pipelines.formats.atomic import output_file_problem, output_folder_problem
+    from gyroemu.pipelines.jobs.bench import REPORT_FILES, loaded_inputs, plot_names, report_files_in
 
     _seconds(duration, "--duration", "the demo makes its truth in memory ('gyroemu simulate' writes longer runs)")
     _seconds(live_seconds, "--live-seconds", "the live stage runs in real time ('gyroemu stream' runs longer)")
     try:
-        load_scenario(scenario)
+        loaded = load_scenario(scenario)
     except ConfigError as e:
         if e.file is not None:
             raise  # a bad scenario file: names the file and key
@@ -91,13 +107,21 @@ def check_options(
         raise DemoError(f"argument --out: {problem}")
     if (out / "bench").exists() and not (out / "bench").is_dir():
         raise DemoError(f"argument --out: {out / 'bench'} is not a folder")
-    there = ["demo.mcap"] if (out / "demo.mcap").exists() else []
+    there = [LOG_NAME] if (out / LOG_NAME).exists() else []
     there += [f"bench/{name}" for name in report_files_in(out / "bench")]
     if there and not force:
         raise DemoError(
             f"argument --out: {out} holds {', '.join(there)} (an earlier demo's?), which the demo would "
             "overwrite (use --force to overwrite them, or another folder)"
         )
+    inputs = [Path(scenario), *loaded_inputs(loaded)]  # a name of no file is no file either
+    # the log's report: one case, named after the log (one device), and its plot
+    written = [out / LOG_NAME, *(out / "bench" / name for name in (*REPORT_FILES, *plot_names([LOG_NAME])))]
+    for path in written:
+        if path.parent.is_dir():  # a folder still to be made holds no input
+            problem = output_file_problem(path, force=force, inputs=inputs)
+            if problem is not None:
+                raise DemoError(f"argument --out: {problem}")
 
 
 def run_demo(
@@ -108,13 +132,17 @@ def run_demo(
     *,
     force: bool = False,
 ) -> int:
-    """Run the demo and print its summary; returns the exit status (0). :class:`DemoError` for bad
-    options (:func:`check_options`), before any work; ``force``: overwrite an earlier demo's files."""
+    """Run the demo and print its summary; returns the exit status: 0, or 130 (SIGINT) or 143 (SIGTERM)
+    when its live stage is stopped by a signal (stopped at another stage, ``KeyboardInterrupt`` or the
+    caller's exception for SIGTERM goes through). :class:`DemoError` for bad options
+    (:func:`check_options`), before any work; ``force``: overwrite an earlier demo's files."""
     check_options(scenario, duration, out, live_seconds, force=force)
     _truth(scenario, duration)
     _sensors()
     _gyrocompass()
-    _live_and_bench(Path(out), live_seconds)
+    status = _live_and_bench(Path(out), live_seconds)
+    if status != 0:
+        return status
     print(
         "\nmore: 'gyroemu scenarios' and 'gyroemu presets' list what is built in;\n"
         "      'gyroemu simulate --scenario S --device D --out run.mcap' writes a ROS 2 log, 'gyroemu info run.mcap'\n"
@@ -207,8 +235,34 @@ def _gyrocompass(seconds: float = 600.0) -> None:
             )
 
 
-def _live_and_bench(out: Path, seconds: float) -> None:
-    """Stages 4 and 5 (see the module's docstring)."""
+@contextlib.contextmanager
+def _signals_caught() -> Iterator[list[int]]:
+    """For the block, the numbers of the signals that arrive (added at its end), whichever Python handler
+    takes them: the stream's own only notes that one came (:func:`signal.set_wakeup_fd`, which each
+    handled signal writes its number to). Empty where it cannot be set (not the main thread)."""
+    caught: list[int] = []
+    reader, writer = socket.socketpair()
+    reader.setblocking(False)
+    writer.setblocking(False)
+    previous: int | None
+    try:
+        previous = signal.set_wakeup_fd(writer.fileno(), warn_on_full_buffer=False)
+    except ValueError:  # not the main thread
+        previous = None
+    try:
+        yield caught
+    finally:
+        if previous is not None:
+            signal.set_wakeup_fd(previous)
+            with contextlib.suppress(BlockingIOError):
+                caught.extend(reader.recv(1024))
+        reader.close()
+        writer.close()
+
+
+def _live_and_bench(out: Path, seconds: float) -> int:
+    """Stages 4 and 5 (see the module's docstring); the exit status: 0, or 130 (SIGINT) or 143 (SIGTERM)
+    when a signal stops the live stage, which leaves no log (and no report)."""
     from gyroemu.pipelines.estimation.metrics import attitude_errors, rmse_deg
     from gyroemu.pipelines.formats.mcap_log import read_mcap
     from gyroemu.pipelines.jobs.bench import LogCase, run_bench
@@ -216,7 +270,8 @@ def _live_and_bench(out: Path, seconds: float) -> None:
     from gyroemu.pipelines.transport.zenoh_io import PacingOptions, topic_to_key
 
     out.mkdir(parents=True, exist_ok=True)
-    log = out / "demo.mcap"
+    log = out / LOG_NAME
+    partial = out / f".{log.stem}.{secrets.token_hex(6)}.mcap"  # moved to ``log`` once complete
     print(
         f"\n4. live: smooth_manoeuvre through consumer_mems for {seconds:g} s over zenoh (peer mode), "
         "to a recorder process and a live MEKF"
@@ -224,33 +279,49 @@ def _live_and_bench(out: Path, seconds: float) -> None:
     # only the demo's own device: other gyroemu streams on this machine's zenoh network are not its data
     name = "imu0"
     recorder = subprocess.Popen(
-        [sys.executable, "-m", "gyroemu", "record", "--out", str(log), "--force", "--key", topic_to_key(name, "/**")],
+        [sys.executable, "-m", "gyroemu", "record", "--out", str(partial), "--key", topic_to_key(name, "/**")],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
     )
     try:
-        talk = io.StringIO()
-        options = StreamOptions(
-            scenario="smooth_manoeuvre",
-            device="consumer_mems",
-            device_name=name,
-            duration=seconds,
-            seed=0,
-            estimate="mekf",
-            pacing=PacingOptions(wait_s=20.0),  # the recorder process starts meanwhile
-        )
-        status = run_stream(options, out=talk)
-        lines = talk.getvalue().splitlines()
-        print("\n".join("   " + line for line in lines if line.startswith("stream: ") and "publishing" not in line))
+        try:
+            talk = io.StringIO()
+            options = StreamOptions(
+                scenario="smooth_manoeuvre",
+                device="consumer_mems",
+                device_name=name,
+                duration=seconds,
+                seed=0,
+                estimate="mekf",
+                pacing=PacingOptions(wait_s=20.0),  # the recorder process starts meanwhile
+            )
+            with _signals_caught() as caught:
+                status = run_stream(options, out=talk)
+            lines = talk.getvalue().splitlines()
+            print("\n".join("   " + line for line in lines if line.startswith("stream: ") and "publishing" not in line))
+        finally:
+            time.sleep(0.5)
+            recorder.send_signal(signal.SIGINT)  # the recorder closes its MCAP (summary, indexes) on SIGINT
+            report, _ = recorder.communicate(timeout=30)
+        recorded_lines = (line.replace(str(partial), str(log)) for line in report.splitlines())
+        print("\n".join("   " + line for line in recorded_lines if line.startswith("record:")))
+        if status == 130:  # the stream stopped by SIGINT or SIGTERM: so is the demo
+            print("   the live stage was stopped: its recording is removed")
+            return 143 if signal.SIGTERM in caught else 130
+        if status != 0 or recorder.returncode not in (0, 130):
+            print(
+                f"   the live stage failed (stream {status}, recorder {recorder.returncode}): its recording is removed"
+            )
+            return 0
+        os.replace(partial, log)
+    except BaseException:  # a signal (KeyboardInterrupt, the CLI's SIGTERM) or an error: no recorder left
+        if recorder.poll() is None:
+            recorder.kill()
+            recorder.wait()
+        raise
     finally:
-        time.sleep(0.5)
-        recorder.send_signal(signal.SIGINT)  # the recorder closes its MCAP (summary, indexes) on SIGINT
-        report, _ = recorder.communicate(timeout=30)
-    print("\n".join("   " + line for line in report.splitlines() if line.startswith("record:")))
-    if status != 0 or recorder.returncode not in (0, 130):
-        print(f"   the live stage failed (stream {status}, recorder {recorder.returncode})")
-        return
+        partial.unlink(missing_ok=True)
     recorded = read_mcap(log).device
     if recorded.estimate is not None and recorded.truth is not None:
         # the stream's truth and live MEKF estimate both carry the attitude
@@ -268,3 +339,4 @@ def _live_and_bench(out: Path, seconds: float) -> None:
     print(f"\n   files: log {log}\n          report {paths['markdown']}, {paths['json']}")
     for png in paths["plots"]:
         print(f"          error plot {png}")
+    return 0

@@ -5,7 +5,8 @@ naming the argument), and :func:`run_twin`, which loads the recordings, runs the
 through every filter in ``workers`` processes, and returns the report. What a twin is, how it is run and
 scored, and what the report holds: :mod:`gyroemu.pipelines.twin` (one module per idea). Outputs in
 ``--out``: ``twin.md``, ``twin.json`` and ``<trial>.png``, each written through a temporary file; an
-existing non-empty folder is refused without ``force``.
+existing non-empty folder is refused without ``force``, and a file of the report that is an input (a
+recording, the device or site file) even with it.
 """
 
 from __future__ import annotations
@@ -22,8 +23,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gyroemu.errors import ConfigError
-from gyroemu.pipelines.formats.atomic import folder_problem
-from gyroemu.pipelines.formats.file_names import repeated_file
+from gyroemu.pipelines.formats.atomic import folder_problem, output_file_problem
+from gyroemu.pipelines.formats.file_names import repeated_file, unique_stems
 from gyroemu.pipelines.twin import (
     METRICS,
     RANKED_FILTERS,
@@ -63,6 +64,7 @@ __all__ = [
     "TwinReport",
     "check_options",
     "cpu_workers",
+    "report_files",
     "twin_attitude",
     "twin_seed",
     "default_site_file",
@@ -122,7 +124,9 @@ class TwinOptions:
 
 def check_options(options: TwinOptions) -> tuple[list[str], dict[str, str], dict[str, Any], Handling | None, Device]:
     """:class:`TwinError` for any bad option. Returns the filters, those left out, the site table, the
-    site's handling offset (None without a ``[handling]`` table) and the device (seed 0)."""
+    site's handling offset (None without a ``[handling]`` table) and the device (seed 0). A file of the
+    report (:func:`report_files`) that is an input (a recording, the device or site file, by any path
+    to it) is refused, even with ``force``."""
     from gyroemu.pipelines.estimation.registry import FilterError, available_filters, filter_class, unavailable_filters
     from gyroemu.sensors import load_device
 
@@ -173,7 +177,19 @@ def check_options(options: TwinOptions) -> tuple[list[str], dict[str, str], dict
     problem = folder_problem(folder)
     if problem is not None:
         raise TwinError(f"argument --out: {folder}: {problem}")
+    if out.is_dir():  # a folder still to be made holds no input
+        inputs = [*options.trials, options.site, *([Path(device.path)] if device.path else [])]
+        for name in report_files(options.trials):
+            problem = output_file_problem(out / name, force=options.force, inputs=inputs)
+            if problem is not None:
+                raise TwinError(f"argument --out: {problem}")
     return filters, unavailable, site, handling, device
+
+
+def report_files(trials: Sequence[Path]) -> list[str]:
+    """The names of the files the report of ``trials`` writes in its folder: ``twin.json``, ``twin.md``
+    and one ``<trial>.png`` per recording (:meth:`TwinReport.save`)."""
+    return ["twin.json", "twin.md", *(f"{stem}.png" for stem in unique_stems([Path(t).stem for t in trials]))]
 
 
 def _check_smoothing(smoothing: dict[str, Any] | None, real: Recording) -> None:

@@ -554,6 +554,89 @@ def test_a_read_only_out_folder_is_refused_before_work(tmp_path, monkeypatch, ca
     assert list(locked.iterdir()) == []
 
 
+def _level_log(path: Path) -> Path:
+    """A 1 s log at rest, level, with its truth: the smallest a bench reads."""
+    n = 200
+    stamps = np.arange(1, n + 1) * 5_000_000
+    gyro, accel = np.zeros((n, 3)), np.tile([0.0, 0.0, 9.81], (n, 1))
+    return write_raw_log(path, stamps, gyro, accel, np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)))
+
+
+def test_force_never_overwrites_or_removes_an_input(tmp_path, capsys):
+    """--force over an earlier report: a --log named like a file of the report (bench.json), or like a
+    plot the earlier bench.json names (which --force removes), is refused, exit 2, naming the argument;
+    the input is untouched and nothing is written."""
+    out = tmp_path / "report"
+    out.mkdir()
+    log = _level_log(out / "bench.json")
+    data = log.read_bytes()
+    assert run_cli("--log", log, "--filter", "madgwick", "--out", out, "--force") == 2
+    printed = capsys.readouterr()
+    assert f"argument --out: {log} is an input: inputs are never overwritten, even with --force" in printed.err
+    assert log.read_bytes() == data and sorted(p.name for p in out.iterdir()) == ["bench.json"]
+
+    earlier = tmp_path / "earlier"  # an earlier report whose bench.json names the plot x.png
+    earlier.mkdir()
+    (earlier / "bench.json").write_text(json.dumps({"gyroemu_bench": 1, "cases": [{"name": "x"}], "plots": ["x.png"]}))
+    log = _level_log(earlier / "x.png")
+    assert run_cli("--log", earlier / "x.png", "--filter", "madgwick", "--out", earlier, "--force") == 2
+    printed = capsys.readouterr()
+    assert f"argument --force: {log} is an input" in printed.err and "inputs are never removed" in printed.err
+    assert log.read_bytes() == data and sorted(p.name for p in earlier.iterdir()) == ["bench.json", "x.png"]
+
+
+def test_check_report_folder_refuses_an_input_before_any_work(tmp_path, configs):
+    """check_report_folder, given the cases: a log, a scenario file or a simulated case's plot (known
+    before any work) that the report would overwrite, by any path to it (a symbolic or hard link), or an
+    earlier report's plot it would remove, is refused before any work, naming the argument."""
+    from gyroemu.pipelines.jobs.bench import BenchError, check_report_folder
+
+    log = _level_log(tmp_path / "log.mcap")
+    ideal = str(configs / "ideal200.toml")
+    rotation = SimCase(scenario=str(configs / "rotation.toml"), device=ideal, duration=0.5)
+    folders = {name: tmp_path / name for name in ("link", "scenario", "plot", "earlier")}
+    for folder in folders.values():
+        folder.mkdir()
+    os.symlink(log, folders["link"] / "bench.md")
+    (folders["scenario"] / "bench.json").write_text(ROTATION_TOML)
+    os.link(log, folders["plot"] / "rotation_ideal200.png")
+    refused = {
+        "link": ([LogCase(log)], f"argument --out: {folders['link'] / 'bench.md'} is an input ({log})"),
+        "scenario": (
+            [SimCase(scenario=str(folders["scenario"] / "bench.json"), device=ideal, duration=0.5)],
+            f"argument --out: {folders['scenario'] / 'bench.json'} is an input",
+        ),
+        "plot": ([rotation, LogCase(log)], f"argument --out: {folders['plot'] / 'rotation_ideal200.png'} is an input"),
+    }
+    for name, (cases, message) in refused.items():
+        with pytest.raises(BenchError) as caught:
+            check_report_folder(folders[name], force=True, cases=cases)
+        assert str(caught.value).startswith(message), (name, str(caught.value))
+    check_report_folder(folders["plot"], force=True, cases=[LogCase(log)])  # the plot is not the log's
+    earlier = folders["earlier"]
+    (earlier / "bench.json").write_text(json.dumps({"gyroemu_bench": 1, "cases": [{"name": "x"}], "plots": ["x.png"]}))
+    os.link(log, earlier / "x.png")
+    with pytest.raises(BenchError, match="argument --force: .*x.png is an input"):
+        check_report_folder(earlier, force=True, cases=[LogCase(log)])
+    assert log.exists() and (earlier / "x.png").exists()
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ([], "argument --duration: 0.001 s of smooth_manoeuvre at its 200 Hz is one truth sample"),
+        (["--scenario", "heavy_top", "--device", "free_gyro"], "0.001 s is shorter than two samples of device"),
+    ],
+)
+def test_a_run_of_fewer_than_two_samples_is_refused_before_work(tmp_path, capsys, options, message):
+    """--duration too short for two truth samples, or two of the device's: exit 2 naming --duration
+    before any work (it was a ValueError from the sensor, exit 1, after the report folder was made)."""
+    out = tmp_path / "report"
+    assert run_cli(*options, "--duration", 0.001, "--runs", 1, "--filter", "madgwick", "--out", out) == 2
+    printed = capsys.readouterr()
+    assert message in printed.err and printed.out == "" and not out.exists()
+
+
 def test_log_with_nan_samples_warns_and_runs(tmp_path, capsys):
     n = 400
     stamps = np.arange(1, n + 1) * 5_000_000

@@ -202,6 +202,27 @@ def test_a_campaign_overwrites_a_report_not_its_own_only_with_force(tmp_path, ca
         check_options(CampaignOptions(spec=spec, out=out, scheduler="tcp://host"))
 
 
+def test_a_campaign_never_writes_over_its_own_files_even_with_force(tmp_path, capsys):
+    """The campaign file, or a device file it names, under a report file's name in --out: refused before
+    any work, even with --force (bench --campaign wrote its report over the campaign file)."""
+    from gyroemu.dynamics.config import config_dir
+    from gyroemu.pipelines.jobs.campaign import CampaignError, CampaignOptions, check_options
+
+    out = tmp_path / "out"
+    out.mkdir()
+    spec = _write(out / "bench.md", TINY)
+    assert cli.main(["bench", "--campaign", str(spec), "--out", str(out), "--force"]) == 2
+    assert f"argument --out: {spec} is an input: inputs are never overwritten, even with --force" in (
+        capsys.readouterr().err
+    )
+    assert spec.read_text() == TINY and [p.name for p in out.iterdir()] == ["bench.md"]
+    device = out / "bench.json"
+    device.write_text((config_dir() / "devices" / "consumer_mems.toml").read_text())
+    other = _write(tmp_path / "c.toml", TINY.replace('"consumer_mems"', f'"{device}"'))
+    with pytest.raises(CampaignError, match="bench.json is an input"):
+        check_options(CampaignOptions(spec=other, out=out, force=True), load_campaign(other))
+
+
 LOG = "smooth_manoeuvre__consumer_mems__0.5s__seed0.mcap"
 
 

@@ -273,6 +273,34 @@ def test_the_same_trial_twice_is_refused_naming_it(tmp_path):
             check_options(TwinOptions(trials=[trial, again], filters=["vqf"], out=tmp_path / "o"))
 
 
+def test_an_input_is_never_overwritten_even_with_force(tmp_path):
+    """A file of the report (twin.md, twin.json, <trial>.png) that is an input: the device file, the
+    site file or a recording, by any path to it (a symbolic link): refused naming --out before any work,
+    even with --force; an out folder holding only other files is taken."""
+    from gyroemu.pipelines.jobs.twin import check_options, default_site_file
+
+    out = tmp_path / "out"
+    out.mkdir()
+    trial = tmp_path / "a.mcap"
+    trial.write_bytes(b"")  # read after the options are checked
+    device = (Path(__file__).resolve().parents[2] / "configs" / "devices" / "tactical_mems.toml").read_text()
+    (out / "twin.md").write_text(device)
+    (out / "twin.json").write_text(default_site_file().read_text())
+    (out / "a.png").symlink_to(trial)
+    given = {"trials": [trial], "filters": ["vqf"], "out": out, "force": True}
+    refused = {
+        "twin.md": TwinOptions(**given, device=str(out / "twin.md")),
+        "twin.json": TwinOptions(**given, device="tactical_mems", site=out / "twin.json"),
+        "a.png": TwinOptions(**given, device="tactical_mems"),
+    }
+    for name, options in refused.items():
+        with pytest.raises(TwinError, match=f"argument --out: {out / name} is an input"):
+            check_options(options)
+    (out / "a.png").unlink()
+    check_options(refused["a.png"])  # twin.md and twin.json are no input of it: --force overwrites them
+    assert (out / "twin.md").read_text() == device and trial.exists()
+
+
 def test_a_trial_that_cannot_be_read_is_named_once(tmp_path):
     """The reader's message names the file already: the error says 'TRIAL: m/x.mcap: ...', not the
     file twice, nor the recorded scenario's key 'path'."""
