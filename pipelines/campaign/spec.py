@@ -192,6 +192,7 @@ def campaign_from_spec(spec: CampaignSpec, *, path: Path | None = None) -> Campa
         filter_class,
         unavailable_filters,
     )
+    from gyroemu.pipelines.jobs.run_span import short_run_problem
     from gyroemu.sensors import load_device
 
     base = None if path is None else path.parent
@@ -203,13 +204,17 @@ def campaign_from_spec(spec: CampaignSpec, *, path: Path | None = None) -> Campa
         return ConfigError(reason, file=path, key=f"{key}[{i}]")
 
     scenarios: dict[str, str] = {}
+    truth_rates: dict[str, tuple[str, float]] = {}  # entry -> the scenario's name and truth rate
     for i, text in enumerate(spec.scenarios):
         entry = _entry(text, base)
         try:
-            scenarios.setdefault(entry, config_hash(load_scenario(entry).to_toml()))
+            scenario = load_scenario(entry)
         except ConfigError as exc:
             raise named("scenarios", i, exc) from None
+        scenarios.setdefault(entry, config_hash(scenario.to_toml()))
+        truth_rates.setdefault(entry, (scenario.name, scenario.rate_hz))
     devices: dict[str, tuple[str, bool]] = {}
+    device_rates: dict[str, tuple[str, float]] = {}
     for i, text in enumerate(spec.devices):
         entry = _entry(text, base)
         try:
@@ -217,6 +222,13 @@ def campaign_from_spec(spec: CampaignSpec, *, path: Path | None = None) -> Campa
         except ConfigError as exc:
             raise named("devices", i, exc) from None
         devices.setdefault(entry, (config_hash(device.to_toml()), device.spec.magnetometer is not None))
+        device_rates.setdefault(entry, (device.name, device.spec.rate_hz))
+    for i, duration in enumerate(spec.durations_s):  # two truth samples and two of every device's
+        for scenario_name, truth_rate in truth_rates.values():
+            for device_name, rate in device_rates.values():
+                problem = short_run_problem(float(duration), scenario_name, truth_rate, device_name, rate)
+                if problem is not None:
+                    raise ConfigError(problem, file=path, key=f"durations_s[{i}]")
     unavailable: dict[str, str] = {}
     if spec.filters is None:
         filters = tuple(available_filters())

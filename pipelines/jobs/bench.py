@@ -119,6 +119,7 @@ from gyroemu.pipelines.jobs.bench_metrics import (
     RunResult,
     json_number,
 )
+from gyroemu.pipelines.jobs.run_span import short_run_problem
 
 __all__ = [
     "BenchError",
@@ -789,22 +790,17 @@ def _sim_case(case: SimCase, runs: int, seed: int) -> _SimItem:
 
 def _check_samples(case: SimCase, scenario: Scenario, device: Device) -> None:
     """:class:`BenchError` naming ``--duration`` (or the scenario file's ``duration_s``, when the case
-    takes the scenario's) for a run of fewer than two truth samples or two of the device's samples
-    (``gyroemu simulate``'s rule): found before any work, not as a ``ValueError`` from the sensor."""
+    takes the scenario's) for a run too short to sample (:func:`~.run_span.short_run_problem`): found
+    before any work, not as a ``ValueError`` from the sensor."""
     span = scenario.duration_s if case.duration is None else float(case.duration)
-    where = (
-        "argument --duration" if case.duration is not None else f"{scenario.path or scenario.name}: key 'duration_s'"
-    )
-    truth_rate, rate = scenario.rate_hz, device.spec.rate_hz
-    if round(span * truth_rate) < 1:  # Scenario.times: round(span · rate) + 1 samples
-        raise BenchError(
-            f"{where}: {span:g} s of {scenario.name} at its {truth_rate:g} Hz is one truth sample; the truth "
-            f"needs two or more (a step is {1.0 / truth_rate:g} s)"
+    problem = short_run_problem(span, scenario.name, scenario.rate_hz, device.name, device.spec.rate_hz)
+    if problem is not None:
+        where = (
+            "argument --duration"
+            if case.duration is not None
+            else f"{scenario.path or scenario.name}: key 'duration_s'"
         )
-    if span < 2.0 / rate:
-        raise BenchError(
-            f"{where}: {span:g} s is shorter than two samples of device {device.name} ({2.0 / rate:g} s at {rate:g} Hz)"
-        )
+        raise BenchError(f"{where}: {problem}")
 
 
 def _sim_run(traj: Trajectory, device: Device, seed: int) -> _Run:

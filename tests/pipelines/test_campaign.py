@@ -131,6 +131,22 @@ def test_cli_bad_campaign_exits_2_before_any_work(tmp_path, capsys):
     assert not out.exists()
 
 
+def test_a_duration_too_short_to_sample_is_refused_with_the_file(tmp_path):
+    """A duration of one truth sample (smooth_manoeuvre's truth at 200 Hz) or of fewer than two of a
+    device's samples: refused naming the file and the key, before any work (every task's worker failed
+    with a traceback naming an --duration generate does not have, and left an empty index)."""
+    for durations, devices, reason in (
+        ("[0.5, 0.001]", '["consumer_mems"]', "0.001 s of smooth_manoeuvre at its 200 Hz is one truth sample"),
+        ("[0.015]", '["free_gyro"]', "0.015 s is shorter than two samples of device free_gyro (0.02 s at 100 Hz)"),
+    ):
+        text = TINY.replace("[0.5]", durations).replace('["consumer_mems", "tactical_mems"]', devices)
+        spec = _write(tmp_path / "c.toml", text)
+        with pytest.raises(ConfigError) as info:
+            load_campaign(spec)
+        assert info.value.file == str(spec) and info.value.key.startswith("durations_s[")
+        assert reason in str(info.value), str(info.value)
+
+
 def test_durations_are_bounded_as_simulate_bounds_them(tmp_path):
     """A duration simulate refuses (> 1e7 s) is refused with the file, before any work (not per task)."""
     spec = _write(tmp_path / "c.toml", TINY.replace("[0.5]", "[0.5, 1e9]"))
