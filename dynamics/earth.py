@@ -17,7 +17,7 @@ from typing import Annotated
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from pydantic import Field
+from pydantic import Field, StrictBool
 
 from .config import Real, Section, Vec3
 from .magnetic_environment import MagneticEnvironmentSpec, reference_field
@@ -83,7 +83,7 @@ class Site(Section):
     longitude_deg: Real = 13.4
     height_m: Real = 34.0
     magnetic_field_enu_uT: Vec3 = (1.63, 18.6, -46.4)
-    earth_rotation: bool = True
+    earth_rotation: StrictBool = True
     magnetic_environment: MagneticEnvironmentSpec | None = None
 
     def environment(self) -> Environment:

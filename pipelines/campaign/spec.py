@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, StrictBool, model_validator
 
 from gyroemu.dynamics.config import ConfigError, PositiveReal, Section, at_most, read_toml, validate
 from gyroemu.dynamics.scenarios import MAX_DURATION_S
@@ -72,7 +72,7 @@ class CampaignSpec(Section):
     filters: Annotated[list[str], Field(min_length=1)] | None = None
     modes: Annotated[list[Literal["9D", "6D"]], Field(min_length=1)] = ["9D"]
     threshold_deg: PositiveReal = 2.0
-    batched: bool = True
+    batched: StrictBool = True
     seeds_per_task: Annotated[int, Field(ge=1, strict=True)] = 25
 
     @model_validator(mode="after")

@@ -30,6 +30,9 @@ def test_site_environment_and_bad_latitude():
     assert np.all(Site(earth_rotation=False).environment().earth_rate_w == 0)
     with pytest.raises(ValueError, match="latitude_deg"):
         Site(latitude_deg=91.0)
+    for not_a_boolean in ("no", 0):  # a string or a number was taken as a boolean ("no" as true)
+        with pytest.raises(ValueError, match="earth_rotation"):
+            Site(earth_rotation=not_a_boolean)
 
 
 def test_moving_body_feels_coriolis_and_rotating_world():

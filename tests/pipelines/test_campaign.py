@@ -84,6 +84,7 @@ def test_task_key_follows_the_config_content(tmp_path):
         ("\nseed_rnage = { start = 0, count = 2 }\n", "seed_rnage"),
         ("\nthreshold_deg = -1.0\n", "threshold_deg"),
         ("\nseeds = [1, 2]\n", None),  # with seed_range: one or the other
+        ('\nbatched = "yes"\n', "batched"),  # a string is no boolean (it was taken as true)
     ],
 )
 def test_bad_keys_name_the_file_and_key(tmp_path, edit, key):
