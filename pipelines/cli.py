@@ -411,6 +411,9 @@ _BENCH_NUMBERS = {"duration": 60.0, "runs": 3, "seed": 0, "threshold_deg": 2.0}
 def _cmd_bench(args: argparse.Namespace) -> int:
     import warnings
 
+    # given on the command line (before the defaults fill in): what a bench of logs alone refuses
+    simulation_only = [f"--{name}" for name in ("duration", "runs", "seed") if getattr(args, name) is not None]
+    simulation_only += ["--batched"] if args.batched else []
     if args.campaign is None:
         for name, default in _BENCH_NUMBERS.items():
             if getattr(args, name) is None:
@@ -422,6 +425,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
     from gyroemu.dynamics import ConfigError, load_scenario
     from gyroemu.pipelines.estimation.registry import FilterError, filter_class
+    from gyroemu.pipelines.formats.file_names import repeated_file
     from gyroemu.pipelines.jobs.bench import BenchWarning, LogCase, SimCase, check_report_folder, run_bench
 
     # Names first, so that a typo fails at once and names its argument.
@@ -433,6 +437,11 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     if args.runs < 1:
         raise UsageError(f"argument --runs: must be at least 1, got {args.runs}")
     simulated = not args.log or args.scenario or args.device
+    if not simulated and simulation_only:  # they set the simulated cases' runs: --log alone has none
+        raise UsageError(
+            f"argument {simulation_only[0]}: sets the simulated cases, and --log without --scenario or --device "
+            f"simulates none: drop {', '.join(simulation_only)} (or add a --scenario/--device case)"
+        )
     scenarios = args.scenario or ["smooth_manoeuvre"]
     devices = args.device or ["consumer_mems"]
     if simulated:
@@ -461,6 +470,12 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     for log in args.log or ():
         if not Path(log).is_file():
             raise UsageError(f"argument --log: {log}: no such file")
+    twice = repeated_file(args.log or ())
+    if twice is not None:  # one recording as two cases: a report of the same numbers twice
+        first, again = twice
+        alias = "" if str(first) == str(again) else f" (as {first})"
+        raise UsageError(f"argument --log: {again} is given twice{alias}: give each log once")
+    for log in args.log or ():
         cases.append(LogCase(path=log, six_d=args.six_d, latency_s=latencies or None))
     out = Path(args.out)
     if out.exists() and not out.is_dir():
@@ -1167,7 +1182,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="START:STOP",
         help="a rest interval in seconds from every log's first sample (repeatable; default: found from the data)",
     )
-    p.add_argument("--gravity", type=_positive, default=9.81, help="local gravity, m/s^2 (default: 9.81)")
+    p.add_argument("--gravity", type=_positive, default=9.81, help="local gravity, m/s^2, 9.7 to 9.9 (default: 9.81)")
     p.add_argument(
         "--latitude",
         type=float,

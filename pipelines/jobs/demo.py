@@ -30,17 +30,14 @@ it was.
 
 from __future__ import annotations
 
-import contextlib
 import io
 import math
 import os
 import secrets
 import signal
-import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -235,31 +232,6 @@ def _gyrocompass(seconds: float = 600.0) -> None:
             )
 
 
-@contextlib.contextmanager
-def _signals_caught() -> Iterator[list[int]]:
-    """For the block, the numbers of the signals that arrive (added at its end), whichever Python handler
-    takes them: the stream's own only notes that one came (:func:`signal.set_wakeup_fd`, which each
-    handled signal writes its number to). Empty where it cannot be set (not the main thread)."""
-    caught: list[int] = []
-    reader, writer = socket.socketpair()
-    reader.setblocking(False)
-    writer.setblocking(False)
-    previous: int | None
-    try:
-        previous = signal.set_wakeup_fd(writer.fileno(), warn_on_full_buffer=False)
-    except ValueError:  # not the main thread
-        previous = None
-    try:
-        yield caught
-    finally:
-        if previous is not None:
-            signal.set_wakeup_fd(previous)
-            with contextlib.suppress(BlockingIOError):
-                caught.extend(reader.recv(1024))
-        reader.close()
-        writer.close()
-
-
 def _live_and_bench(out: Path, seconds: float) -> int:
     """Stages 4 and 5 (see the module's docstring); the exit status: 0, or 130 (SIGINT) or 143 (SIGTERM)
     when a signal stops the live stage, which leaves no log (and no report)."""
@@ -296,8 +268,7 @@ def _live_and_bench(out: Path, seconds: float) -> int:
                 estimate="mekf",
                 pacing=PacingOptions(wait_s=20.0),  # the recorder process starts meanwhile
             )
-            with _signals_caught() as caught:
-                status = run_stream(options, out=talk)
+            status = run_stream(options, out=talk)  # 130 on SIGINT, 143 on SIGTERM
             lines = talk.getvalue().splitlines()
             print("\n".join("   " + line for line in lines if line.startswith("stream: ") and "publishing" not in line))
         finally:
@@ -306,9 +277,9 @@ def _live_and_bench(out: Path, seconds: float) -> int:
             report, _ = recorder.communicate(timeout=30)
         recorded_lines = (line.replace(str(partial), str(log)) for line in report.splitlines())
         print("\n".join("   " + line for line in recorded_lines if line.startswith("record:")))
-        if status == 130:  # the stream stopped by SIGINT or SIGTERM: so is the demo
+        if status in (130, 143):  # the stream stopped by SIGINT or SIGTERM: so is the demo
             print("   the live stage was stopped: its recording is removed")
-            return 143 if signal.SIGTERM in caught else 130
+            return status
         if status != 0 or recorder.returncode not in (0, 130):
             print(
                 f"   the live stage failed (stream {status}, recorder {recorder.returncode}): its recording is removed"

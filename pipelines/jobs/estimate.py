@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -152,10 +153,38 @@ def check_options(
         _check_topic_out_name(topic_out)
 
 
+_TOPIC_TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+_MAX_TOPIC_LENGTH = 255 - 8
+"""ROS 2's longest fully qualified topic name (rmw's ``RMW_TOPIC_MAX_NAME_LENGTH``: 8 characters of the
+DDS topic's 255 are its prefix)."""
+
+
+def _topic_name_problem(topic: str) -> str | None:
+    """Why ``topic`` is no fully qualified ROS 2 topic name (rmw's ``validate_full_topic_name``), or None:
+    it starts with '/', and each token between slashes is letters, digits and '_', not starting with a
+    digit (so no empty token: no '//', no trailing '/'), 247 characters at most."""
+    if not topic.startswith("/"):
+        return "it does not start with '/'"
+    if len(topic) > _MAX_TOPIC_LENGTH:
+        return f"{len(topic)} characters, ROS 2 takes {_MAX_TOPIC_LENGTH} at most"
+    for token in topic[1:].split("/"):
+        if not token:
+            return "an empty name between slashes ('//', or a '/' at the end)"
+        if _TOPIC_TOKEN.fullmatch(token) is None:
+            if token[0] in "0123456789":
+                return f"its name {token!r} starts with a digit"
+            return f"its name {token!r} has a character other than A-Z, a-z, 0-9 and '_'"
+    return None
+
+
 def _check_topic_out_name(topic_out: str) -> None:
-    """:class:`EstimateTopicError` for a ``topic_out`` that is no topic name, or a reserved topic."""
-    if not topic_out.startswith("/") or topic_out == "/" or any(c.isspace() for c in topic_out):
-        raise EstimateTopicError(f"argument --topic-out: {topic_out!r} is not a topic name like /estimate/imu")
+    """:class:`EstimateTopicError` for a ``topic_out`` that is no ROS 2 topic name (:func:`_topic_name_problem`),
+    or a reserved topic."""
+    problem = _topic_name_problem(topic_out)
+    if problem is not None:
+        raise EstimateTopicError(
+            f"argument --topic-out: {topic_out!r} is not a ROS 2 topic name like /estimate/imu: {problem}"
+        )
     role = split_topic(topic_out)[1]
     if topic_out in RESERVED_TOPICS or (role and role != ESTIMATE_ROLE):
         raise EstimateTopicError(

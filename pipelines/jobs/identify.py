@@ -31,9 +31,26 @@ from gyroemu.pipelines.formats.file_names import repeated_file, same_file
 if TYPE_CHECKING:
     from gyroemu.pipelines.identification import Identification, TrialData
 
-__all__ = ["IdentifyError", "IdentifyOptions", "IdentifySummary", "check_options", "read_trial", "run_identify"]
+__all__ = [
+    "GRAVITY_RANGE_M_S2",
+    "IdentifyError",
+    "IdentifyOptions",
+    "IdentifySummary",
+    "check_options",
+    "read_trial",
+    "run_identify",
+]
 
 _SUFFIXES = (".mcap", ".hdf5", ".h5")
+
+GRAVITY_RANGE_M_S2 = (9.7, 9.9)
+"""The ``gravity_m_s2`` :func:`check_options` takes: gravity anywhere a recording is made on Earth, with
+room. Normal gravity is 9.780 at the equator and 9.832 at the poles; height lowers it 0.003 per km
+(9.77 on Everest's summit, 9.74 at an airliner's 12 km, 9.70 at 25 km), anomalies move it by
+0.003 at most. The fit takes a gravity error for the accelerometers' scale factor (``TrialSettings``),
+so a value outside is a slip (98.1, 0.981, 1 in g, 32.2 in ft/s²) that would scale every accelerometer
+figure written by the ratio; gyroemu's sites are the Earth's (WGS 84 normal gravity), so another
+planet's is refused as well."""
 
 
 class IdentifyError(ConfigError):
@@ -52,7 +69,7 @@ class IdentifyOptions:
     force : overwrite existing outputs.
     rest_intervals : [(t_start, t_stop), …] s of every log (from its first sample), or None to find the
         rest phases.
-    gravity_m_s2 : local gravity.
+    gravity_m_s2 : local gravity, m/s² (:data:`GRAVITY_RANGE_M_S2`).
     latitude_deg : the site's latitude of every log, for the Earth's rate the gyro measures with the
         motion, or None: each log's own site's (a gyroemu log's), else unknown (that log's gyro bias then
         holds the Earth's rate, 15 °/h at most, and a note says so).
@@ -120,8 +137,12 @@ def check_options(options: IdentifyOptions) -> None:
             raise IdentifyError(f"argument --rest: {a:g}:{b:g}: expected finite seconds")
         if not a < b:
             raise IdentifyError(f"argument --rest: {a:g}:{b:g}: start must be before stop")
-    if not options.gravity_m_s2 > 0:
-        raise IdentifyError(f"argument --gravity: must be positive, got {options.gravity_m_s2:g}")
+    low, high = GRAVITY_RANGE_M_S2
+    if not low <= options.gravity_m_s2 <= high:
+        raise IdentifyError(
+            f"argument --gravity: local gravity in m/s^2, from {low:g} to {high:g} (the Earth's, 9.78 at the "
+            f"equator to 9.83 at the poles, less with height), got {options.gravity_m_s2:g}"
+        )
     if options.latitude_deg is not None and not -90.0 <= options.latitude_deg <= 90.0:
         raise IdentifyError(f"argument --latitude: must lie in [-90, 90] degrees, got {options.latitude_deg:g}")
 

@@ -44,7 +44,8 @@ mounting every second for late joiners), is counted but not stored again.
 
 From each message's attachment (sequence number, publisher id) the recorder counts, per publisher,
 messages received, sequence gaps (the exact missing numbers), duplicates and late (out-of-order)
-arrivals, and prints the report at the end (``--report FILE.json`` also writes it as JSON).
+arrivals, and prints the report at the end (``--report FILE.json`` also writes it as JSON; its ``file``
+is null when nothing was recorded, so no log was written).
 
 ROS 2 mode (``--ros2``)
 -----------------------
@@ -451,9 +452,10 @@ class Recorder:
         return self.messages > 0 and self.path.is_file()
 
     def report(self) -> dict[str, Any]:
-        """Counts of the recording and of each publisher (JSON-ready; :func:`format_report` prints it)."""
+        """Counts of the recording and of each publisher (JSON-ready; :func:`format_report` prints it);
+        ``file`` is the log written, None when the recording wrote none (nothing recorded)."""
         return {
-            "file": str(self.path),
+            "file": str(self.path) if self.written else None,
             "messages": self.messages,
             "skipped": self.skipped,
             "without_attachment": self.without_attachment,
@@ -572,7 +574,8 @@ def run_record(options: RecordOptions, *, out: TextIO = sys.stdout) -> int:
     """Record until SIGINT/SIGTERM or ``options.duration`` s (see the module's notes); the report goes to
     ``out``. Returns the exit status (0). Raises ``ValueError`` naming the argument at fault, before any
     work (:func:`check_record_options`: an existing ``out_path`` or ``report_path`` without ``force``
-    among them). Nothing received: says so, writes no log (the report, if asked for, is written)."""
+    among them). Nothing received: says so, writes no log; the report, if asked for, is written with
+    ``"file": null`` (the outcome a script waiting for it reads: no log, zero messages)."""
     check_record_options(options)
     ros2, key_expr = options.session.ros2, options.key_expr
     domain = None

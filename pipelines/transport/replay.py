@@ -403,26 +403,26 @@ def _start_view(options: ReplayOptions, keys: dict[str, str], stamped: frozenset
 
 def run_replay(options: ReplayOptions, *, out: TextIO = sys.stdout) -> int:
     """Replay ``options.path`` (see the module's notes); progress goes to ``out``. Returns the exit
-    status: 0 when done (or, with ``loop``, when stopped by SIGINT/SIGTERM), 130 when a single pass
-    was interrupted. Raises :class:`gyroemu.pipelines.formats.mcap_records.LogError` for bad input and
-    ``ValueError`` naming the argument at fault."""
+    status: 0 when done (or, with ``loop``, when stopped by SIGINT/SIGTERM), 130 (SIGINT) or 143
+    (SIGTERM) when a single pass was interrupted. Raises
+    :class:`gyroemu.pipelines.formats.mcap_records.LogError` for bad input and ``ValueError`` naming the
+    argument at fault (the endpoints and config before the plan is printed)."""
     config = options.session.config()
     keys, ros, stamped = _channels_to_publish(options, out)
     clock_key = _clock_key(options, keys, ros) if options.clock else None
     path, rate, loop, pacing = options.path, options.rate, options.loop, options.pacing
-
-    print(f"replay: {path}: {len(keys)} topics at rate x{rate:g}{', looping' if loop else ''}", file=out)
-    for topic, key in keys.items():
-        print(f"  {topic} -> {key}", file=out)
-    if clock_key is not None:
-        print(f"  /clock -> {clock_key} ({CLOCK_TYPE}, the log time, {CLOCK_HZ:g} Hz at most)", file=out)
-    view = _start_view(options, keys, stamped) if options.foxglove is not None else None
-    if view is not None:
-        print(f"replay: Foxglove view on {view.url} ({view.options.rate_hz:g} Hz)", file=out, flush=True)
-    session = open_session(config)
-    reader = None
+    session = open_session(config)  # a taken --listen, a client without a router: refused before the plan
+    reader = view = None
     with live_session(session) as live:
         try:
+            print(f"replay: {path}: {len(keys)} topics at rate x{rate:g}{', looping' if loop else ''}", file=out)
+            for topic, key in keys.items():
+                print(f"  {topic} -> {key}", file=out)
+            if clock_key is not None:
+                print(f"  /clock -> {clock_key} ({CLOCK_TYPE}, the log time, {CLOCK_HZ:g} Hz at most)", file=out)
+            view = _start_view(options, keys, stamped) if options.foxglove is not None else None
+            if view is not None:
+                print(f"replay: Foxglove view on {view.url} ({view.options.rate_hz:g} Hz)", file=out, flush=True)
             live.node = ros
             publisher = live.publish(sorted(set(keys.values()) | ({clock_key} if clock_key else set())), pacing.timing)
             if ros is not None:
@@ -450,4 +450,4 @@ def run_replay(options: ReplayOptions, *, out: TextIO = sys.stdout) -> int:
             if view is not None:
                 view.close()
     out.flush()
-    return 130 if live.stopped() and not loop else 0
+    return 0 if loop else live.stop_status()

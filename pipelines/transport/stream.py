@@ -28,7 +28,7 @@ not depend on its blocks, and ``/truth/imu``, interpolated in each block's windo
 with the whole run's interpolation to round-off (bit for bit in practice).
 
 How long: ``--duration`` seconds; without it, a scenario whose motion is a closed form in time
-(:func:`runs_without_end`) streams until SIGINT/SIGTERM (exit status 130), and a recording (a bounded
+(:func:`runs_without_end`) streams until SIGINT/SIGTERM (exit status 130/143), and a recording (a bounded
 span), a kind that integrates equations of motion (simulated whole before the first message) or a
 motion with a magnetic environment along its path stream the scenario's own duration.
 
@@ -564,7 +564,7 @@ def encode_block(
 
 def run_stream(options: StreamOptions, *, out: TextIO = sys.stdout) -> int:
     """Simulate, encode and publish a block at a time (see the module's notes); progress goes to ``out``.
-    Returns the exit status (0, or 130 when stopped by SIGINT/SIGTERM). Raises ``ValueError`` naming the
+    Returns the exit status (0, or 130 when stopped by SIGINT, 143 by SIGTERM). Raises ``ValueError`` naming the
     argument at fault, before simulating."""
     from gyroemu.dynamics import load_scenario
     from gyroemu.dynamics.truth_source import ScenarioTruth, simulated_whole, truth_source
@@ -578,6 +578,9 @@ def run_stream(options: StreamOptions, *, out: TextIO = sys.stdout) -> int:
     _check(options)
     device_name, pacing = options.device_name, options.pacing
     scen = load_scenario(options.scenario)
+    longest = scen.spec.max_span_s()  # a recording's span: its motion stops there
+    if options.duration is not None and longest is not None and options.duration > longest * (1 + 1e-9):
+        raise ValueError(f"argument --duration: {options.duration:g} s is longer than the recording's {longest:.6g} s")
     dev = load_device(options.device, seed=options.seed)
     started = time.perf_counter()
     endless = options.duration is None and runs_without_end(scen)
@@ -684,4 +687,4 @@ def run_stream(options: StreamOptions, *, out: TextIO = sys.stdout) -> int:
             if view.dropped:
                 print(f"stream: the Foxglove view dropped {view.dropped} batches (behind)", file=out)
     out.flush()
-    return 130 if live.stopped() else 0
+    return live.stop_status()

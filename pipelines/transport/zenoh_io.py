@@ -83,6 +83,7 @@ __all__ = [
     "DEFAULT_ENDPOINT",
     "LiveOptionError",
     "check_endpoint",
+    "PROTOCOLS",
     "check_key_expr",
     "check_pacing_options",
     "MAX_WAIT_S",
@@ -137,12 +138,33 @@ def _insert(config: zenoh.Config, key: str, value: object) -> None:
     config.insert_json5(key, json.dumps(value))
 
 
+def _config_file_message(error: Exception) -> str:
+    """zenoh's refusal of a JSON5 config file on one line: ``line L, column C: what`` from its parser's
+    report (several lines: the source line, a caret, ``= what``) or its serde message, else its lines joined."""
+    text = _zenoh_message(error).strip()
+    parsed = re.search(r"-->\s*(\d+):(\d+).*\n\s*=\s*(.+)\Z", text, re.DOTALL)
+    if parsed is not None:
+        return f"line {parsed.group(1)}, column {parsed.group(2)}: {' '.join(parsed.group(3).split())}"
+    serde = re.fullmatch(
+        r'(?:JSON error: )?Message \{ msg: "(.*)", location: Some\(Location \{ line: (\d+), column: (\d+) \}\) \}',
+        text,
+        re.DOTALL,
+    )
+    if serde is not None:
+        what = serde.group(1).replace('\\"', '"')
+        return f"line {serde.group(2)}, column {serde.group(3)}: {' '.join(what.split())}"
+    return " ".join(text.split())
+
+
 class LiveOptionError(ConfigError):
     """A live job's bad session, key or pacing option, found before any work (the message names the argument)."""
 
 
 _ENDPOINT_FORM = "an endpoint looks like PROTOCOL/ADDRESS, e.g. tcp/HOST:PORT (tcp/192.168.1.10:7447, tcp/[::1]:7447)"
 _PORTED = ("tcp", "udp")  # protocols whose address is HOST:PORT
+PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws", "unixsock-stream")
+"""The link protocols the eclipse-zenoh Python package is built with (1.x; its others, unixpipe, serial
+and vsock, are not: zenoh refuses them only when the session opens, "Unicast not supported")."""
 
 
 def check_endpoint(endpoint: str, argument: str) -> None:
@@ -154,6 +176,11 @@ def check_endpoint(endpoint: str, argument: str) -> None:
     except Exception:  # zenoh.ZError: Json5Err(Message { msg: "Endpoints must be of the form ...", ... })
         raise LiveOptionError(f"argument {argument}: {endpoint!r} is not a zenoh endpoint: {_ENDPOINT_FORM}") from None
     protocol, _, rest = endpoint.partition("/")
+    if protocol not in PROTOCOLS:
+        raise LiveOptionError(
+            f"argument {argument}: {endpoint!r}: no zenoh protocol {protocol!r} (zenoh here speaks "
+            f"{', '.join(PROTOCOLS)}): {_ENDPOINT_FORM}"
+        )
     if protocol in _PORTED:
         address = re.split(r"[?#]", rest, maxsplit=1)[0]
         port = re.fullmatch(r".*:(\d{1,5})", address)
@@ -192,7 +219,8 @@ def session_config(
         try:
             config = zenoh.Config.from_file(str(path))
         except Exception as e:  # zenoh.ZError and friends
-            raise ValueError(f"argument --config: {path}: not a zenoh JSON5 config: {_zenoh_message(e)}") from None
+            reason = _config_file_message(e)
+            raise ValueError(f"argument --config: {path}: not a zenoh JSON5 config: {reason}") from None
     else:
         config = zenoh.Config()
         _insert(config, "scouting/multicast/enabled", False)
@@ -297,6 +325,12 @@ def _open_error(error: Exception, listen: Sequence[str], connect: Sequence[str],
             f"argument --connect: no zenoh router answers at {', '.join(connect) or 'the configured endpoints'} "
             f"(a {mode} cannot start without one): {text}"
         )
+    unsupported = re.search(r"not supported for (\S+) protocol", text)
+    if unsupported is not None:  # an endpoint of the --config file: check_endpoint refused the options' own
+        return (
+            f"argument --config: an endpoint of no zenoh protocol {unsupported.group(1)!r} "
+            f"(zenoh here speaks {', '.join(PROTOCOLS)}): {text}"
+        )
     return f"argument --connect/--listen/--config: cannot open the zenoh session: {text}"
 
 
@@ -398,10 +432,10 @@ class SessionOptions:
 
 @contextlib.contextmanager
 def stop_on_signals() -> Iterator[list[int]]:
-    """For the block, SIGINT and SIGTERM append to the list it yields instead of ending the process
-    (the command's loops poll it to stop cleanly); the previous handlers are back after the block."""
+    """For the block, SIGINT and SIGTERM append their numbers to the list it yields instead of ending the
+    process (the command's loops poll it to stop cleanly); the previous handlers are back after the block."""
     stopping: list[int] = []
-    previous = {s: signal.signal(s, lambda *_: stopping.append(1)) for s in (signal.SIGINT, signal.SIGTERM)}
+    previous = {s: signal.signal(s, lambda n, _: stopping.append(n)) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield stopping
     finally:
@@ -929,7 +963,7 @@ class LiveSession:
     session : zenoh.Session
         The job's session.
     stopping : list
-        Non-empty once SIGINT or SIGTERM has arrived (:meth:`stopped`).
+        The numbers of the signals (SIGINT, SIGTERM) that have arrived (:meth:`stopped`, :meth:`stop_status`).
     publisher : PacedPublisher or None
         The job's publisher (:meth:`publish`); undeclared at the end.
     node : object with ``close()``, or None
@@ -946,6 +980,13 @@ class LiveSession:
     def stopped(self) -> bool:
         """Whether SIGINT or SIGTERM has arrived."""
         return bool(self.stopping)
+
+    def stop_status(self) -> int:
+        """The exit status of a job the signals stopped, as the command line's for any command: 143 when
+        SIGTERM arrived first, 130 for SIGINT; 0 when none has arrived."""
+        if not self.stopping:
+            return 0
+        return 143 if self.stopping[0] == signal.SIGTERM else 130
 
     def publish(self, keys: Sequence[str], timing: Timing | None = None) -> PacedPublisher:
         """Declare the job's :class:`PacedPublisher` of ``keys`` on the session."""

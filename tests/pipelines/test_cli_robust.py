@@ -605,6 +605,91 @@ def test_record_receiving_nothing_says_so_and_keeps_the_old_file(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["r.mcap"]
 
 
+def test_record_receiving_nothing_reports_no_file(tmp_path):
+    """--report of a recording that received nothing: written (the outcome a script waits for), saying
+    no log was written ("file": null, 0 messages); it named the .mcap that does not exist. In process,
+    on a loopback endpoint."""
+    import io
+    import json
+
+    from gyroemu.pipelines.transport.record import RecordOptions, run_record
+    from gyroemu.pipelines.transport.zenoh_io import SessionOptions
+
+    port = free_port()
+    options = RecordOptions(
+        out_path=tmp_path / "r.mcap",
+        duration=0.3,
+        key_expr=f"gyroemu/robust{os.getpid()}x{port}/**",  # nobody publishes there
+        report_path=tmp_path / "r.json",
+        session=SessionOptions(listen=(f"tcp/127.0.0.1:{port}",)),
+    )
+    printed = io.StringIO()
+    assert run_record(options, out=printed) == 0
+    assert "no file written" in printed.getvalue(), printed.getvalue()
+    assert [p.name for p in tmp_path.iterdir()] == ["r.json"]
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["file"] is None and report["messages"] == 0 and report["publishers"] == {}, report
+
+
+def test_stream_names_duration_longer_than_its_recording(no_session):
+    """A --duration past a recorded motion's end is --duration's fault (it was blamed on --connect/--listen),
+    found before any simulation or session."""
+    argv = ["stream", "--scenario", "recorded_motion", "--device", "consumer_mems", "--duration", "1000", "--wait", "0"]
+    code, _, stderr = run_cli(argv)
+    assert code == 2 and "argument --duration: 1000 s is longer than the recording's 15 s" in stderr, stderr
+
+
+@pytest.mark.parametrize(
+    "options, named",
+    [
+        (["--duration", "5", "--runs", "3", "--seed", "2"], "argument --duration: sets the simulated cases"),
+        (["--runs", "2"], "argument --runs: sets the simulated cases"),
+        (["--seed", "0"], "argument --seed: sets the simulated cases"),  # the default, but given
+        (["--batched"], "argument --batched: sets the simulated cases"),
+    ],
+)
+def test_bench_of_logs_alone_refuses_the_simulation_options(tmp_path, options, named):
+    """--log without --scenario/--device simulates nothing: --duration, --runs, --seed and --batched were
+    silently ignored; each given is named. With a simulated case beside the log they apply (not refused)."""
+    log = tmp_path / "x.mcap"
+    log.write_bytes(b"not read: the options are refused first")
+    code, _, stderr = run_cli(["bench", "--log", str(log), *options, "--out", str(tmp_path / "b")])
+    assert code == 2 and named in stderr and f"drop {', '.join(o for o in options if o.startswith('--'))}" in stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.mcap"]
+
+
+@pytest.mark.parametrize("again", ["{tmp}/x.mcap", "{tmp}/./x.mcap", "{tmp}/link.mcap"])
+def test_bench_refuses_a_log_given_twice(tmp_path, again):
+    """One recording given twice (as twin and identify refuse): two cases of the same numbers."""
+    log = tmp_path / "x.mcap"
+    log.write_bytes(b"not read: the option is refused first")
+    (tmp_path / "link.mcap").symlink_to(log)
+    second = again.format(tmp=tmp_path)
+    code, _, stderr = run_cli(["bench", "--log", str(log), "--log", second, "--out", str(tmp_path / "b")])
+    assert code == 2 and "argument --log: " in stderr and "is given twice" in stderr, stderr
+    assert not (tmp_path / "b").exists()
+
+
+@pytest.mark.parametrize("gravity", ["1e308", "98.1", "0.981", "1", "3.71", "9.5", "10.5"])
+def test_identify_bounds_gravity_before_any_work(tmp_path, gravity):
+    """--gravity 1e308 started the fit and then blamed the log; a value off the Earth's (a slip of units
+    or digits) would scale every accelerometer figure. Refused naming --gravity before reading a log."""
+    log = tmp_path / "x.mcap"
+    log.write_bytes(b"not read: the option is refused first")
+    code, _, stderr = run_cli(["identify", str(log), "--out", str(tmp_path / "d.toml"), "--gravity", gravity])
+    assert code == 2 and "argument --gravity: local gravity in m/s^2, from 9.7 to 9.9" in stderr, stderr
+    assert [p.name for p in tmp_path.iterdir()] == ["x.mcap"]
+
+
+def test_identify_takes_gravity_anywhere_on_earth():
+    from gyroemu.dynamics import normal_gravity
+    from gyroemu.pipelines.jobs.identify import GRAVITY_RANGE_M_S2
+
+    low, high = GRAVITY_RANGE_M_S2
+    for latitude_deg, height_m in ((0, 0), (90, 0), (-90, 0), (28, 8849), (0, 12000), (45, -3000)):
+        assert low <= float(normal_gravity(np.radians(latitude_deg), height_m)) <= high
+
+
 def test_bench_out_is_a_folder_and_has_a_force(tmp_path):
     """bench writes its reports into a folder (each file whole, :mod:`gyroemu.pipelines.formats.atomic`);
     a file there is refused; --force overwrites an earlier report there (test_bench.py)."""

@@ -78,10 +78,10 @@ def test_a_signal_in_the_live_stage_stops_the_demo(tmp_path, monkeypatch, capsys
     from gyroemu.pipelines.transport import stream
     from gyroemu.pipelines.transport.zenoh_io import stop_on_signals
 
-    def run_stream(options: Any, out: Any) -> int:
+    def run_stream(options: Any, out: Any) -> int:  # as the stream's LiveSession.stop_status says it
         with stop_on_signals() as stopping:
             signal.raise_signal(sig)
-            return 130 if stopping else 0
+            return 0 if not stopping else 143 if stopping[0] == signal.SIGTERM else 130
 
     def no_bench(*args: Any, **kwargs: Any) -> None:
         raise AssertionError("the bench ran after the demo was stopped")

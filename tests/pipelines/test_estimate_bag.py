@@ -141,6 +141,15 @@ def test_estimate_log_refuses_a_latency_of_another_sensor(bag, tmp_path):
         ("/truth/imu", "/truth/imu is a topic of the log format's own"),  # absent, but the contract's truth
         ("/a/mag", "/a/mag is a topic of the log format's own"),
         ("/tf_static", "/tf_static is a topic of the log format's own"),
+        # no ROS 2 topic name (rmw's validate_full_topic_name); /x//y and /x/ were taken
+        ("/x//y", "'/x//y' is not a ROS 2 topic name like /estimate/imu: an empty name between slashes"),
+        ("/x/", "'/x/' is not a ROS 2 topic name like /estimate/imu: an empty name between slashes"),
+        ("/", "'/' is not a ROS 2 topic name"),
+        ("x/y", "'x/y' is not a ROS 2 topic name like /estimate/imu: it does not start with '/'"),
+        ("/a/2d", "its name '2d' starts with a digit"),
+        ("/a-b", "its name 'a-b' has a character other than A-Z, a-z, 0-9 and '_'"),
+        ("/a b", "its name 'a b' has a character other than"),
+        ("/x" * 124, "248 characters, ROS 2 takes 247 at most"),
     ],
 )
 def test_estimate_refuses_a_topic_out_the_log_has_or_the_contract_reserves(bag, tmp_path, capsys, topic_out, named):

@@ -423,3 +423,74 @@ def test_clock_messages_and_keys(tmp_path):
     rosbags = pytest.importorskip("rosbags.typesys")
     hash_ = rosbags.get_typestore(rosbags.Stores.ROS2_JAZZY).hash_rihs01("rosgraph_msgs/msg/Clock")
     assert key.startswith("0/clock/rosgraph_msgs::msg::dds_::Clock_/") and key.endswith(hash_)
+
+
+class _SignalOn:
+    """A replay's ``out`` that raises ``sig`` in the process when ``marker`` is printed (the job's own
+    handlers take it: it is in its live stretch)."""
+
+    def __init__(self, sig: int, marker: str) -> None:
+        self.sig, self.marker, self.text = sig, marker, []
+
+    def write(self, text: str) -> int:
+        self.text.append(text)
+        if self.marker in text:
+            signal.raise_signal(self.sig)
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize(("sig", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)], ids=["SIGINT", "SIGTERM"])
+def test_a_single_pass_stopped_by_a_signal_returns_its_status(tmp_path, sig, status):
+    """A pass interrupted by SIGINT ends with 130, by SIGTERM with 143 (it was 130 for both). In process,
+    on a loopback endpoint; --loop's 0 is test_loop_repeats_with_increasing_deadlines_until_sigterm's."""
+    from gyroemu.pipelines.transport.replay import ReplayOptions, run_replay
+    from gyroemu.pipelines.transport.zenoh_io import PacingOptions, SessionOptions
+
+    path = tmp_path / "short.mcap"
+    write_foreign(path, 100)
+    options = ReplayOptions(
+        path=path,
+        session=SessionOptions(listen=(f"tcp/127.0.0.1:{free_port()}",)),
+        pacing=PacingOptions(wait_s=0.0),
+    )
+    out = _SignalOn(sig, "replay: publishing")
+    assert run_replay(options, out=out) == status, "".join(out.text)  # type: ignore[arg-type]
+
+
+def test_a_bad_endpoint_is_refused_before_the_plan(tmp_path):
+    """--listen notaproto/xyz printed the whole topic plan, then blamed --connect/--listen/--config once
+    the session failed to open; a config file zenoh refuses was a 6-line error; an endpoint of the config
+    file that zenoh refuses when the session opens came after the plan. Now one line naming the argument,
+    nothing printed before it."""
+    import io
+
+    from cli_runs import run_cli
+
+    from gyroemu.pipelines.transport.replay import ReplayOptions, run_replay
+    from gyroemu.pipelines.transport.zenoh_io import PacingOptions, SessionOptions
+
+    path = tmp_path / "short.mcap"
+    write_foreign(path, 10)
+    code, _, stderr = run_cli(["replay", str(path), "--listen", "notaproto/xyz", "--wait", "0"])
+    assert code == 2 and stderr.count("\n") == 1, stderr
+    assert stderr.startswith("gyroemu replay: error: argument --listen: 'notaproto/xyz': no zenoh protocol"), stderr
+    broken = tmp_path / "bad.json5"
+    broken.write_text('{ mode: "peer", listen: { endpoints: ["tcp/127.0.0.1:0"] }, bogus: 3, ')
+    for command in (["replay", str(path)], ["router"]):
+        code, _, stderr = run_cli([*command, "--config", str(broken)])
+        assert code == 2 and stderr.count("\n") == 1, stderr
+        assert f"argument --config: {broken}: not a zenoh JSON5 config: line 1, column 71: expected" in stderr, stderr
+    foreign = tmp_path / "endpoint.json5"
+    foreign.write_text('{ listen: { endpoints: ["notaproto/xyz"] }, scouting: { multicast: { enabled: false } } }')
+    cases = [
+        (SessionOptions(listen=("notaproto/xyz",)), "argument --listen: 'notaproto/xyz': no zenoh protocol"),
+        (SessionOptions(config_file=foreign), "argument --config: an endpoint of no zenoh protocol 'notaproto'"),
+    ]
+    for session, named in cases:
+        printed = io.StringIO()
+        with pytest.raises(ValueError, match=named):
+            run_replay(ReplayOptions(path=path, session=session, pacing=PacingOptions(wait_s=0.0)), out=printed)
+        assert printed.getvalue() == ""

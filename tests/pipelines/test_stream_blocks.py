@@ -205,10 +205,10 @@ from live_processes import free_port, procs  # noqa: E402,F401  (procs is a fixt
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
-def test_endless_stream_publishes_at_once_and_stops_on_signal(procs, tmp_path, sig):
+@pytest.mark.parametrize(("sig", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)], ids=["SIGINT", "SIGTERM"])
+def test_endless_stream_publishes_at_once_and_stops_on_signal(procs, tmp_path, sig, status):
     """No ``--duration``, a pointwise scenario: the stream says it runs until stopped, publishes within
-    seconds of its start, and on SIGINT/SIGTERM stops with exit 130; the recorder got every topic from
+    seconds of its start, and on SIGINT/SIGTERM stops with exit 130/143; the recorder got every topic from
     sequence 0 without a gap, every topic the same number of samples, /imu the bytes of the same run
     computed in-process."""
     from gyroemu.pipelines.formats.mcap_log import read_mcap
@@ -244,7 +244,7 @@ def test_endless_stream_publishes_at_once_and_stops_on_signal(procs, tmp_path, s
     procs.wait_for("stream", "stream: publishing", timeout=30)
     latency = time.monotonic() - started
     time.sleep(3.0)
-    assert procs.stop("stream", sig, timeout=30) == 130, procs.log("stream")
+    assert procs.stop("stream", sig, timeout=30) == status, procs.log("stream")
     time.sleep(0.5)
     assert procs.stop("rec") == 0, procs.log("rec")
     print(f"\nstream publishing {latency:.2f} s after its start (python start-up and recorder included)")
@@ -312,3 +312,40 @@ def test_endless_stream_with_live_estimate_through_a_router(procs, tmp_path):
     assert by_topic["imu0/estimate/imu"]["received"] > 100, by_topic
     assert by_topic["imu0/imu"]["missing"] == 0 and by_topic["imu0/imu"]["received"] > 1000
     assert procs.stop("router") == 0
+
+
+class _SignalOnPublishing:
+    """A stream's ``out`` that raises ``sig`` in the process when ``marker`` is printed: the job is in its
+    live stretch (its own handlers take the signal) and about to send."""
+
+    def __init__(self, sig: int, marker: str) -> None:
+        self.sig, self.marker, self.text = sig, marker, []
+
+    def write(self, text: str) -> int:
+        self.text.append(text)
+        if self.marker in text:
+            signal.raise_signal(self.sig)
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize(("sig", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)], ids=["SIGINT", "SIGTERM"])
+def test_a_stream_stopped_by_a_signal_returns_its_status(sig, status):
+    """SIGINT ends a stream with 130 and SIGTERM with 143, as any command (it was 130 for both: the
+    stream's own handlers only noted that a signal came). In process, on a loopback endpoint."""
+    from gyroemu.pipelines.transport.stream import StreamOptions, run_stream
+    from gyroemu.pipelines.transport.zenoh_io import PacingOptions, SessionOptions
+
+    options = StreamOptions(
+        scenario="smooth_manoeuvre",
+        device=DEVICE,
+        duration=2.0,
+        device_name=f"sig{free_port()}",
+        session=SessionOptions(listen=(f"tcp/127.0.0.1:{free_port()}",)),
+        pacing=PacingOptions(wait_s=0.0),
+    )
+    out = _SignalOnPublishing(sig, "stream: publishing")
+    assert run_stream(options, out=out) == status, "".join(out.text)  # type: ignore[arg-type]
+    assert "stream: sent" in "".join(out.text)
