@@ -90,6 +90,8 @@ __all__ = [
     "plan_steps",
     "integrate_free_body",
     "integrate_heavy_top",
+    "free_body_frequency",
+    "heavy_top_frequency",
 ]
 
 
@@ -444,6 +446,43 @@ def _heavy_top_kernel(
 # --------------------------------------------------------------------------------------------------
 
 
+def _internal_axes(inertia_b: ArrayLike) -> tuple[NDArray[np.float64], float, float, float]:
+    """The free body's internal axes and split coefficients: ``(m_bi, 1/A, cz, cy)``, ``m_bi`` (3, 3)
+    the internal axes (columns) in body coordinates, ``cz = 1/C − 1/A``, ``cy = 1/B − 1/A``."""
+    inertia_b = np.asarray(inertia_b, dtype=float)
+    if np.count_nonzero(inertia_b - np.diag(np.diag(inertia_b))) == 0:
+        moments, axes = np.diag(inertia_b).copy(), np.eye(3)  # already principal: no round-off
+    else:
+        moments, axes = principal_axes(inertia_b)  # axes: a proper rotation, columns in body axes
+    inv = 1.0 / moments
+
+    # Internal axes: a cyclic shift of the principal axes (a proper rotation) that puts on z the
+    # axis k whose two companions have the closest 1/I, so that the split's Hy is the smallest.
+    k = int(np.argmin([abs(inv[(j + 1) % 3] - inv[(j + 2) % 3]) for j in range(3)]))
+    perm = [(k + 1) % 3, (k + 2) % 3, k]  # internal x, y, z = principal axes perm[0], perm[1], perm[2]
+    m_bi = axes[:, perm]  # columns: internal axes in body coordinates
+    inv_a, inv_b, inv_c = inv[perm]
+    return m_bi, inv_a, inv_c - inv_a, inv_b - inv_a  # numpy scalars, as the integrator always had them
+
+
+def _free_body_rate(norm_l: float, cz: float, cy: float, p: int) -> float:
+    """The free body's fastest split frequency for an order-``p`` composition, rad/s."""
+    # Error terms are brackets holding Hz and Hy at least once each: ~ c_max^p c_min |L|^(p+1).
+    c_max, c_min = max(abs(cz), abs(cy)), min(abs(cz), abs(cy))
+    rate: float = norm_l * (c_max**p * c_min) ** (1.0 / (p + 1))
+    return rate
+
+
+def free_body_frequency(L0_b: ArrayLike, inertia_b: ArrayLike) -> float:
+    """The fastest split frequency ``ω`` :func:`integrate_free_body` steps a torque-free body by, rad/s
+    (module notes: its step is about 0.12 rad / ω at the default tolerance), for the highest order (the
+    largest: ``c_max (c_min/c_max)^(1/(p+1))`` grows with ``p``). ``L0_b``: angular momentum, body axes,
+    kg m²/s; ``inertia_b``: the (3, 3) tensor, kg m²."""
+    m_bi, _, cz, cy = _internal_axes(inertia_b)
+    norm_l = float(np.linalg.norm(m_bi.T @ np.asarray(L0_b, dtype=float)))
+    return _free_body_rate(norm_l, cz, cy, max(comp.order for comp in COMPOSITIONS))
+
+
 def integrate_free_body(
     t: ArrayLike,
     q0_wb: ArrayLike,
@@ -477,39 +516,42 @@ def integrate_free_body(
         Angular momentum in body axes, kg m²/s (``ω_b = I⁻¹ L_b``).
     """
     t = np.asarray(t, dtype=float)
-    inertia_b = np.asarray(inertia_b, dtype=float)
-    if np.count_nonzero(inertia_b - np.diag(np.diag(inertia_b))) == 0:
-        moments, axes = np.diag(inertia_b).copy(), np.eye(3)  # already principal: no round-off
-    else:
-        moments, axes = principal_axes(inertia_b)  # axes: a proper rotation, columns in body axes
-    inv = 1.0 / moments
-
-    # Internal axes: a cyclic shift of the principal axes (a proper rotation) that puts on z the
-    # axis k whose two companions have the closest 1/I, so that the split's Hy is the smallest.
-    k = int(np.argmin([abs(inv[(j + 1) % 3] - inv[(j + 2) % 3]) for j in range(3)]))
-    perm = [(k + 1) % 3, (k + 2) % 3, k]  # internal x, y, z = principal axes perm[0], perm[1], perm[2]
-    m_bi = axes[:, perm]  # columns: internal axes in body coordinates
+    m_bi, inv_a, cz, cy = _internal_axes(inertia_b)
     q_bi = quat_from_matrix(m_bi)
-    inv_a, inv_b, inv_c = inv[perm]
-    cz, cy = inv_c - inv_a, inv_b - inv_a
-
     q0_wi = quat_multiply(np.asarray(q0_wb, dtype=float), q_bi)
     L0_i = m_bi.T @ np.asarray(L0_b, dtype=float)
     norm_l = float(np.linalg.norm(L0_i))
-
-    def omega(p: int) -> float:
-        # Error terms are brackets holding Hz and Hy at least once each: ~ c_max^p c_min |L|^(p+1).
-        c_max, c_min = max(abs(cz), abs(cy)), min(abs(cz), abs(cy))
-        rate: float = norm_l * (c_max**p * c_min) ** (1.0 / (p + 1))
-        return rate
-
-    comp, n_steps = plan_steps(t, omega, tol, compositions)
+    comp, n_steps = plan_steps(t, lambda p: _free_body_rate(norm_l, cz, cy, p), tol, compositions)
     q_wb = np.empty((len(t), 4))
     L_b = np.empty((len(t), 3))
     L_w = quat_rotate(q0_wi, L0_i)  # constant
     q_ib = quat_conjugate(q_bi)
     _free_body_kernel(t, q0_wi, L0_i, L_w, cz, cy, inv_a, q_ib, m_bi, comp.a, comp.b, n_steps, q_wb, L_b)
     return q_wb, L_b
+
+
+def _heavy_top_rate(
+    q0: NDArray[np.float64], L0_w: NDArray[np.float64], moment_a: float, moment_c: float, mgl: float
+) -> tuple[float, float]:
+    """The heavy top's fastest split frequency (rad/s) and its spin momentum ``L₃`` (kg m²/s)."""
+    inv_a, inv_c = 1.0 / moment_a, 1.0 / moment_c
+    n0 = quat_rotate(q0, np.array([0.0, 0.0, 1.0]))  # symmetry axis, world
+    l3 = float(n0 @ L0_w)  # spin component, conserved
+
+    # Energy bounds |L|: |L|²/2A = E − ½(1/C − 1/A) L₃² − m g l n_z  ≤  E − ½(1/C − 1/A) L₃² + |m g l|.
+    energy = 0.5 * inv_a * (L0_w @ L0_w) + 0.5 * (inv_c - inv_a) * l3**2 + mgl * n0[2]
+    l_max = np.sqrt(max(2.0 * moment_a * (energy - 0.5 * (inv_c - inv_a) * l3**2 + abs(mgl)), 0.0))
+    omega = max(l_max * inv_a, np.sqrt(abs(mgl) * inv_a))  # rotation about L_w; pendulum frequency
+    return float(omega), l3
+
+
+def heavy_top_frequency(q0_wb: ArrayLike, L0_w: ArrayLike, moment_a: float, moment_c: float, mgl: float) -> float:
+    """The fastest split frequency ``ω`` :func:`integrate_heavy_top` steps a heavy top by, rad/s: the
+    larger of the fastest turn about ``L_w`` the energy allows and the pendulum frequency
+    ``√(|m g l|/A)`` (module notes: its step is about 0.12 rad / ω at the default tolerance). Arguments
+    as :func:`integrate_heavy_top`'s."""
+    q0 = np.asarray(q0_wb, dtype=float)
+    return _heavy_top_rate(q0, np.asarray(L0_w, dtype=float), moment_a, moment_c, mgl)[0]
 
 
 def integrate_heavy_top(
@@ -551,14 +593,7 @@ def integrate_heavy_top(
     q0 = np.asarray(q0_wb, dtype=float)
     L0_w = np.asarray(L0_w, dtype=float)
     inv_a, inv_c = 1.0 / moment_a, 1.0 / moment_c
-    n0 = quat_rotate(q0, np.array([0.0, 0.0, 1.0]))  # symmetry axis, world
-    l3 = float(n0 @ L0_w)  # spin component, conserved
-
-    # Energy bounds |L|: |L|²/2A = E − ½(1/C − 1/A) L₃² − m g l n_z  ≤  E − ½(1/C − 1/A) L₃² + |m g l|.
-    energy = 0.5 * inv_a * (L0_w @ L0_w) + 0.5 * (inv_c - inv_a) * l3**2 + mgl * n0[2]
-    l_max = np.sqrt(max(2.0 * moment_a * (energy - 0.5 * (inv_c - inv_a) * l3**2 + abs(mgl)), 0.0))
-    omega = max(l_max * inv_a, np.sqrt(abs(mgl) * inv_a))  # rotation about L_w; pendulum frequency
-
+    omega, l3 = _heavy_top_rate(q0, L0_w, moment_a, moment_c, mgl)
     comp, n_steps = plan_steps(t, omega, tol, compositions)
     q_wb = np.empty((len(t), 4))
     L_w = np.empty((len(t), 3))

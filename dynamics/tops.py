@@ -18,19 +18,20 @@ from Euler's equations ``I α = τ − ω × I ω`` at each sample, not from dif
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Literal
+from pathlib import Path
+from typing import Annotated, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from pydantic import field_validator
+from pydantic import AfterValidator, field_validator
 
-from .config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3, as_number
+from .config import ConfigError, NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3, as_number, at_most
 from .earth import Environment
 from .inertia import inertia_config, inertia_tensor
 from .jit import njit
 from .rotation import body_rate_from_euler_zxz, quat_from_euler_zxz, quat_rotate
 from .scenarios import ScenarioSpec
-from .splitting import integrate_free_body, integrate_heavy_top
+from .splitting import free_body_frequency, heavy_top_frequency, integrate_free_body, integrate_heavy_top
 from .trajectory import Trajectory
 
 __all__ = [
@@ -44,6 +45,12 @@ __all__ = [
     "free_body_motion",
     "heavy_top_attitude",
     "pivot_moments",
+    "MAX_RATE_RAD_S",
+    "MAX_SPLIT_FREQUENCY_RAD_S",
+    "INERTIA_RANGE_KGM2",
+    "MAX_TOP_MASS_KG",
+    "MAX_CM_HEIGHT_M",
+    "MAX_GRAVITY_M_S2",
 ]
 
 STANDARD_GRAVITY = 9.80665
@@ -51,6 +58,83 @@ STANDARD_GRAVITY = 9.80665
 
 _UNIT_NORM_TOL = 1e-6
 _SYMMETRY_RTOL = 1e-9
+
+MAX_RATE_RAD_S = 1.0e5
+"""The fastest initial rate of either body, rad/s (each of ``omega_b`` and ``euler_zxz_rates_rad_s``;
+about 955 000 rpm): twice the fastest spinning rigid bodies made, dental air turbines at some
+5·10⁴ rad/s (ultracentrifuge rotors reach 1.6·10⁴, gyroscope rotors 2.5·10³), whose rims are near their
+material's burst speed. It bounds the integrator's work: :mod:`gyroemu.dynamics.splitting` steps about
+0.12 rad of the fastest split rotation at a time (|L|/A, up to twice the body rate), some 5–10 µs of
+computing a radian: 0.3–3 s a simulated second at this limit. A spin of 10¹² rad/s asked for 10¹³ steps
+a second, a run of days in a kernel no signal interrupts; 10²⁰⁰ overflowed."""
+
+MAX_SPLIT_FREQUENCY_RAD_S = 1.0e6
+"""The fastest split rotation the integrator may have to follow, rad/s
+(:func:`~gyroemu.dynamics.splitting.heavy_top_frequency`, :func:`~gyroemu.dynamics.splitting.free_body_frequency`):
+ten times :data:`MAX_RATE_RAD_S`, about 5–10 s of computing a simulated second. Rates within their own
+limit exceed it only with an extreme body: a nearly flat asymmetric one (its spin about the thin axis
+follows the others' at (ΔI/I_min)·ω), or a top whose pendulum frequency √(m g l / A) is out of reach
+(a radius of gyration of nanometres)."""
+
+INERTIA_RANGE_KGM2 = (1.0e-20, 1.0e40)
+"""The range of a body's principal moments, kg m²: from a thousandth of a MEMS gyro's proof mass (a
+microgram 0.1 mm across, 10⁻¹⁷ kg m²) to a hundred times the Earth (8·10³⁷ kg m², whose free wobble is a
+free rigid body's). Beyond it ``|I ω|²`` leaves float64's range: 10³⁰⁰ kg m² overflowed, and at 10⁻³⁰⁰
+the momentum's norm rounded to 0 and the body stood still while ``omega_b`` said it turned."""
+
+MAX_TOP_MASS_KG = 1.0e6
+"""The heaviest heavy top, kg (1000 t): ten times the rotors of the largest gyroscopes built (ship
+stabilisers' rotors of about 100 t); 10³⁰⁰ kg made the integrator's step 0 (a division by zero)."""
+
+MAX_CM_HEIGHT_M = 100.0
+"""The longest pivot to centre of mass of a heavy top (or, negative, a gyroscopic pendulum), m: longer
+than the longest pendulums hung (Foucault's in the Panthéon: 67 m); 10³⁰⁰ m overflowed ``m l²``."""
+
+MAX_GRAVITY_M_S2 = 1.0e4
+"""The strongest uniform gravity under a heavy top, m/s² (about 1000 g): 36 times the Sun's surface
+gravity (274 m/s²); 10³⁰⁰ m/s² made the step counts overflow int64 and the top stand still."""
+
+
+def _inertia_in_range(value: Vec3 | tuple[Vec3, Vec3, Vec3]) -> Vec3 | tuple[Vec3, Vec3, Vec3]:
+    """Refuse principal moments outside :data:`INERTIA_RANGE_KGM2` (after :func:`inertia_config`)."""
+    low, high = INERTIA_RANGE_KGM2
+    moments = np.linalg.eigvalsh(inertia_tensor(value))
+    if moments.max() > high:
+        raise ValueError(
+            f"a principal moment of {moments.max():g} kg m² is more than the limit of {high:g}: a hundred times "
+            "the Earth's (8e37 kg m²)"
+        )
+    if moments.min() < low:
+        raise ValueError(
+            f"a principal moment of {moments.min():g} kg m² is less than the limit of {low:g}: a thousandth of a "
+            "MEMS gyro's proof mass (1e-17 kg m²)"
+        )
+    return value
+
+
+def _rates_at_most(value: Vec3) -> Vec3:
+    """Refuse an initial rate component beyond :data:`MAX_RATE_RAD_S` in magnitude."""
+    fastest = max(abs(x) for x in value)
+    if fastest > MAX_RATE_RAD_S:
+        raise ValueError(
+            f"{fastest:g} rad/s is more than the limit of {MAX_RATE_RAD_S:g}: twice the fastest rotors made "
+            "(dental turbines, 5e4 rad/s); the integrator's steps grow with the rate"
+        )
+    return value
+
+
+Rates = Annotated[Vec3, AfterValidator(_rates_at_most)]
+"""Three initial rates, rad/s, each at most :data:`MAX_RATE_RAD_S` in magnitude."""
+
+
+def _split_frequency_problem(omega: float) -> str | None:
+    """Why the integrator cannot follow a split rotation of ``omega`` rad/s, or None."""
+    if np.isfinite(omega) and omega <= MAX_SPLIT_FREQUENCY_RAD_S:
+        return None
+    return (
+        f"the integrator would follow a rotation of {omega:.4g} rad/s, more than the limit of "
+        f"{MAX_SPLIT_FREQUENCY_RAD_S:g} (ten times the fastest rotors made; about 8 steps a radian)"
+    )
 
 
 # --------------------------------------------------------------------------------------------------
@@ -79,7 +163,7 @@ class FreeBody(Section):
     @field_validator("inertia_kgm2")
     @classmethod
     def _physical(cls, value: Vec3 | tuple[Vec3, Vec3, Vec3]) -> Vec3 | tuple[Vec3, Vec3, Vec3]:
-        return inertia_config(value)  # raises InertiaError (a ValueError) saying what is wrong
+        return _inertia_in_range(inertia_config(value))  # raises InertiaError (a ValueError) saying what is wrong
 
     def tensor(self) -> NDArray[np.float64]:
         """The inertia tensor in body axes, (3, 3), kg m²."""
@@ -89,8 +173,8 @@ class FreeBody(Section):
 class FreeInitial(Section):
     """``[initial]`` state of a free rigid body."""
 
-    omega_b: Vec3
-    """Angular velocity, body axes, rad/s."""
+    omega_b: Rates
+    """Angular velocity, body axes, rad/s; each component at most :data:`MAX_RATE_RAD_S`."""
     q_wb: Quat = (1.0, 0.0, 0.0, 0.0)
     """Attitude (w, x, y, z), unit norm within 1e-6; stored normalised."""
 
@@ -113,6 +197,17 @@ class FreeRigidBodySpec(ScenarioSpec):
     kind: Literal["free-rigid-body"]
     body: FreeBody
     initial: FreeInitial
+
+    def load(self, file: str | Path | None = None) -> None:
+        """Refuse a body the integrator cannot follow in reasonable time (:data:`MAX_SPLIT_FREQUENCY_RAD_S`)."""
+        inertia = self.body.tensor()
+        problem = _split_frequency_problem(free_body_frequency(inertia @ np.asarray(self.initial.omega_b), inertia))
+        if problem is not None:
+            raise ConfigError(
+                f"{problem}: this rate turns about body axes whose moments (body.inertia_kgm2) differ so much",
+                file=file,
+                key="initial.omega_b",
+            )
 
     def trajectory(self, t: NDArray[np.float64]) -> Trajectory:
         t = np.asarray(t, dtype=float)
@@ -176,18 +271,27 @@ def free_body_motion(
 class HeavyTopBody(Section):
     """``[body]`` of a symmetric heavy top."""
 
-    mass_kg: PositiveReal
+    mass_kg: Annotated[PositiveReal, at_most(MAX_TOP_MASS_KG, "ten times the largest gyroscope rotors built")]
     inertia_kgm2: Vec3
     """Principal moments ``(Ixx, Iyy, Izz)`` about the centre of mass, kg m²; body z is the
     symmetry axis, so ``Ixx = Iyy``."""
     cm_height_m: Real
     """Pivot to centre of mass along body z, m (negative: the centre of mass hangs below the pivot,
-    a gyroscopic pendulum)."""
+    a gyroscopic pendulum); at most :data:`MAX_CM_HEIGHT_M` either way."""
+
+    @field_validator("cm_height_m")
+    @classmethod
+    def _not_too_long(cls, value: float) -> float:
+        if abs(value) > MAX_CM_HEIGHT_M:
+            raise ValueError(
+                f"{value:g} m is more than the limit of ±{MAX_CM_HEIGHT_M:g}: longer than the longest pendulums hung"
+            )
+        return value
 
     @field_validator("inertia_kgm2")
     @classmethod
     def _symmetric_top(cls, value: Vec3) -> Vec3:
-        inertia_tensor(value)
+        _inertia_in_range(inertia_config(value))
         ixx, iyy, _ = value
         if abs(ixx - iyy) > _SYMMETRY_RTOL * max(ixx, iyy):
             raise ValueError(
@@ -202,14 +306,16 @@ class HeavyTopInitial(Section):
 
     euler_zxz_rad: Vec3
     """(precession φ, nutation θ, spin ψ), rad; θ is the tilt of the symmetry axis from the vertical."""
-    euler_zxz_rates_rad_s: Vec3
-    """(φ̇, θ̇, ψ̇), rad/s."""
+    euler_zxz_rates_rad_s: Rates
+    """(φ̇, θ̇, ψ̇), rad/s; each at most :data:`MAX_RATE_RAD_S`."""
 
 
 class HeavyTopEnvironment(Section):
     """``[environment]`` of a heavy top: uniform gravity along world −z."""
 
-    gravity_m_s2: NonNegativeReal = STANDARD_GRAVITY
+    gravity_m_s2: Annotated[NonNegativeReal, at_most(MAX_GRAVITY_M_S2, "36 times the Sun's surface gravity")] = (
+        STANDARD_GRAVITY
+    )
 
 
 class HeavyTopSpec(ScenarioSpec):
@@ -227,6 +333,28 @@ class HeavyTopSpec(ScenarioSpec):
     body: HeavyTopBody
     initial: HeavyTopInitial
     environment: HeavyTopEnvironment = HeavyTopEnvironment()
+
+    def load(self, file: str | Path | None = None) -> None:
+        """Refuse a top the integrator cannot follow in reasonable time (:data:`MAX_SPLIT_FREQUENCY_RAD_S`)."""
+        body, gravity = self.body, self.environment.gravity_m_s2
+        a, c = pivot_moments(body.mass_kg, body.inertia_kgm2, body.cm_height_m)
+        mgl = body.mass_kg * gravity * body.cm_height_m
+        euler = np.asarray(self.initial.euler_zxz_rad)
+        q0 = quat_from_euler_zxz(euler)
+        omega0_b = body_rate_from_euler_zxz(euler, np.asarray(self.initial.euler_zxz_rates_rad_s))
+        L0_w = quat_rotate(q0, np.array([a, a, c]) * omega0_b)
+        problem = _split_frequency_problem(heavy_top_frequency(q0, L0_w, a, c, mgl))
+        if problem is None:
+            return
+        pendulum = np.sqrt(abs(mgl) / a)
+        if pendulum > MAX_SPLIT_FREQUENCY_RAD_S:  # the body, not the rates
+            raise ConfigError(
+                f"{problem}: the top's pendulum frequency √(m g l / A) = {pendulum:.4g} rad/s, its moments too "
+                "small for its mass, cm_height_m and gravity",
+                file=file,
+                key="body.inertia_kgm2",
+            )
+        raise ConfigError(problem, file=file, key="initial.euler_zxz_rates_rad_s")
 
     def trajectory(self, t: NDArray[np.float64]) -> Trajectory:
         t = np.asarray(t, dtype=float)

@@ -61,13 +61,22 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import BeforeValidator, Field, ValidationInfo, field_validator
 
-from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Real, Section
+from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Real, Section, at_most
 from gyroemu.dynamics.jit import njit
 from gyroemu.errors import ConfigError
 
 from . import noise
 
-__all__ = ["GyroErrors", "AccelErrors", "ErrorModel", "apply_errors", "SensorErrors", "STANDARD_GRAVITY"]
+__all__ = [
+    "GyroErrors",
+    "AccelErrors",
+    "ErrorModel",
+    "apply_errors",
+    "SensorErrors",
+    "STANDARD_GRAVITY",
+    "MAX_RATE_LSB_RAD_PER_S",
+    "MAX_ACCEL_LSB_M_PER_S2",
+]
 
 #: The unit g₀ in key names (``_per_g``, ``_ug``), m/s²; not the local gravity of a scenario.
 STANDARD_GRAVITY = 9.80665
@@ -85,6 +94,24 @@ _UG = 1e-6 * STANDARD_GRAVITY  # m/s² per µg
 # Config value types
 # --------------------------------------------------------------------------------------------------
 
+
+MAX_RATE_LSB_RAD_PER_S = 1000.0
+"""The coarsest ``quantisation_rad_per_s`` (a rate output's LSB), rad/s (57 000 °/s): twice the whole
+range of the widest gyros (about ±30 000 °/s, for spinning projectiles), so one count would hold every
+rate a gyro reads; the quantiser's white noise LSB² T / 12 of a coarser one leaves float64's range."""
+
+MAX_ACCEL_LSB_M_PER_S2 = 1.0e7
+"""The coarsest ``quantisation_m_per_s2`` (an acceleration output's LSB), m/s² (about 10⁶ g): five times
+the whole range of the widest shock accelerometers (about ±200 000 g, 2·10⁶ m/s²), so one count would
+hold every acceleration one reads; the quantiser's white noise LSB² T / 12 of a coarser one leaves
+float64's range."""
+
+_RateLsb = Annotated[
+    PositiveReal, at_most(MAX_RATE_LSB_RAD_PER_S, "one count would be more than the widest gyro's whole range")
+]
+_AccelLsb = Annotated[
+    PositiveReal, at_most(MAX_ACCEL_LSB_M_PER_S2, "one count would be more than the widest accelerometer's range")
+]
 
 _V = TypeVar("_V")
 
@@ -257,7 +284,7 @@ class GyroErrors(_CommonErrors):
     markov_tau_s: PerAxisNonNegative | None = Field(default=None, validate_default=True)
     rate_ramp_deg_per_h_per_h: PerAxis = _ZERO
     quantisation_rad: PositiveReal | None = None
-    quantisation_rad_per_s: PositiveReal | None = None
+    quantisation_rad_per_s: _RateLsb | None = None
 
     white_noise_keys = (
         "arw_deg_per_sqrt_h",
@@ -338,7 +365,7 @@ class AccelErrors(_CommonErrors):
     markov_tau_s: PerAxisNonNegative | None = Field(default=None, validate_default=True)
     ramp_ug_per_h: PerAxis = _ZERO
     quantisation_m_per_s: PositiveReal | None = None
-    quantisation_m_per_s2: PositiveReal | None = None
+    quantisation_m_per_s2: _AccelLsb | None = None
 
     white_noise_keys = ("vrw_m_per_s_per_sqrt_h", "noise_density_ug_per_sqrt_hz", "psd_one_sided_ug_per_sqrt_hz")
     markov_keys = ("markov_sigma_ug", "markov_tau_s")

@@ -124,7 +124,13 @@ from gyroemu.dynamics.jit import njit
 
 from .mechanism import GyroMechanism, GyroResponse, GyroTruth
 
-__all__ = ["RingLaserGyro", "MAX_DITHER_FREQUENCY_HZ", "MAX_SIMULATION_RATE_HZ"]
+__all__ = [
+    "RingLaserGyro",
+    "MAX_DITHER_FREQUENCY_HZ",
+    "MAX_DITHER_AMPLITUDE_ARCSEC",
+    "MAX_PERIMETER_M",
+    "MAX_SIMULATION_RATE_HZ",
+]
 
 _ARCSEC = math.pi / (180 * 3600)  # rad per arcsecond
 _DEG_PER_H = math.pi / 180 / 3600  # rad/s per °/h
@@ -137,6 +143,16 @@ MAX_DITHER_FREQUENCY_HZ = 10_000.0
 """The highest ``dither_frequency_hz``, Hz: ten times the fastest body dither of real RLGs (300 Hz to
 about 1 kHz: a dithered block on its springs is a mechanical resonator); the integrator takes at least
 :data:`STEPS_PER_DITHER_CYCLE` steps a cycle, so this needs a ``simulation_rate_hz`` of 5·10⁵ Hz."""
+MAX_DITHER_AMPLITUDE_ARCSEC = 3600.0
+"""The largest ``dither_amplitude_arcsec``, arcsec (1°): about ten times the body dither of real RLGs (a
+few arcminutes; 200″ here: the block rocks on a flexure, a small oscillation). With the fastest dither
+(:data:`MAX_DITHER_FREQUENCY_HZ`) the peak dither rate is then 1100 rad/s and its beat 6·10⁸ rad/s for the
+default cavity; a dither of 10³⁰⁰″ made the beat phase inf: all-NaN ``beat_phase_rad``, INT64_MIN fringe
+counts."""
+MAX_PERIMETER_M = 1000.0
+"""The largest ``perimeter_m``, m: eight times the largest ring laser built (the geodetic UG-2 at
+Christchurch, 21 m × 39.7 m, 121 m around); navigation RLGs are 0.1–0.5 m around. (The enclosed area is
+at most P²/4π, which a perimeter of 10²⁰⁰ m took beyond float64's range.)"""
 MAX_SIMULATION_RATE_HZ = 1_000_000.0
 """The highest ``simulation_rate_hz`` (the mechanism's inner rate), Hz: twice what the fastest dither
 (:data:`MAX_DITHER_FREQUENCY_HZ`) needs, and 30 times the default, which resolves the dither and the
@@ -162,7 +178,9 @@ class RingLaserGyro(GyroMechanism):
 
     kind: Literal["rlg"] = "rlg"
     reads: ClassVar[frozenset[str]] = frozenset()
-    perimeter_m: PositiveReal = 0.30
+    perimeter_m: Annotated[
+        PositiveReal, at_most(MAX_PERIMETER_M, "eight times the largest ring laser built (121 m around)")
+    ] = 0.30
     area_m2: PositiveReal = Field(
         default=0.25 * math.sqrt(3.0) * 0.10**2,  # triangle of 0.10 m sides
         validate_default=True,
@@ -172,7 +190,9 @@ class RingLaserGyro(GyroMechanism):
     dither_frequency_hz: Annotated[
         PositiveReal, at_most(MAX_DITHER_FREQUENCY_HZ, "ten times the fastest body dither of real RLGs (about 1 kHz)")
     ] = 437.0
-    dither_amplitude_arcsec: NonNegativeReal = 200.0
+    dither_amplitude_arcsec: Annotated[
+        NonNegativeReal, at_most(MAX_DITHER_AMPLITUDE_ARCSEC, "1°, ten times the body dither of real RLGs")
+    ] = 200.0
     dither_amplitude_noise_fraction: NonNegativeReal = Field(default=0.05, le=0.5)
     simulation_rate_hz: Annotated[
         PositiveReal,

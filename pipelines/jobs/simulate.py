@@ -285,6 +285,18 @@ def _check_last_stamp(options: SimulateOptions, span_s: float | None, device: De
         )
 
 
+def _config_file_given(name: str | None) -> Path | None:
+    """The file ``--scenario``/``--device`` ``name`` is, when the config resolver takes it as a path (it
+    ends in .toml, is a path there is, or has a folder: :func:`gyroemu.dynamics.config.resolve_config`'s
+    rule, restated here as importing it would load the dynamics, 130 ms); None for a built-in name or none.
+    A file of any suffix is read as TOML, so it is an input whatever its name."""
+    if not name:
+        return None
+    text = str(name)
+    path = Path(text)
+    return path if text.endswith(".toml") or path.exists() or "/" in text else None
+
+
 def check_options(options: SimulateOptions, scenario: Scenario | None = None, device: Device | None = None) -> None:
     """Check ``options`` before any work; raise :class:`SimulateError` naming the argument at fault.
 
@@ -302,7 +314,9 @@ def check_options(options: SimulateOptions, scenario: Scenario | None = None, de
     SimulateError
         ``duration`` or ``rate`` not finite and positive or above :data:`MAX_DURATION_S` or
         :data:`MAX_RATE_HZ`; ``seed`` not an integer ``0 <= seed < 2**128``; ``out`` with a suffix other
-        than .mcap or .npz, in a missing folder, naming a folder, or an existing file without ``force``;
+        than .mcap or .npz, in a missing folder, naming a folder, an existing file without ``force``, or a
+        file the run reads (the scenario's or device's file, whatever its suffix, or a recorded motion) even
+        with it;
         an .mcap without a device; an .mcap whose last stamp (``start_time`` plus the span) lies beyond
         ROS time's int32 seconds (2038-01-19); and, given ``scenario``, an output that needs more disk than is free
         in ``out``'s folder or (.npz, made in memory) more memory than the machine has.
@@ -323,11 +337,14 @@ def check_options(options: SimulateOptions, scenario: Scenario | None = None, de
     out = options.out
     if out.suffix not in (".npz", ".mcap") and not out.is_dir():  # a folder is said to be one, below
         raise SimulateError(f"argument --out: {out}: write a .mcap (ROS 2) or .npz file (got '{out.suffix}')")
-    # The inputs: the scenario's and the device's files, and (once loaded) a recorded motion's file.
-    inputs = [Path(name) for name in (options.scenario, options.device) if name and Path(name).suffix == ".toml"]
-    motion = getattr(scenario.spec, "path", None) if scenario is not None else None
-    if isinstance(motion, str):
-        inputs.append(Path(motion))
+    # The inputs: the scenario's and the device's files (whatever their suffix: the resolver reads any
+    # path it is given), and once loaded the files they were read from and a recorded motion's file.
+    inputs = [path for path in map(_config_file_given, (options.scenario, options.device)) if path is not None]
+    if scenario is not None:
+        inputs += [Path(loaded.path) for loaded in (scenario, device) if loaded is not None and loaded.path]
+        motion = getattr(scenario.spec, "path", None)
+        if isinstance(motion, str):
+            inputs.append(Path(motion))
     problem = output_file_problem(out, force=options.force, inputs=inputs)
     if problem is not None:
         raise SimulateError(f"argument --out: {problem}")

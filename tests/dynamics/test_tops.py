@@ -11,6 +11,8 @@ first time, while numba compiles and caches the kernels).
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 import tomli_w
@@ -415,3 +417,87 @@ def test_nearly_unit_quaternion_is_normalised():
     data = _edited("free_symmetric_top", "initial", "q_wb", [0.6, 0.0, 0.8, 1e-7])
     q = np.asarray(scenario_from_dict(data).spec.initial.q_wb)
     assert abs(np.linalg.norm(q) - 1) <= 2 * EPS  # a couple of roundings
+
+
+@pytest.mark.parametrize(
+    "name, section, key, value, words",
+    [
+        # 1e200 overflowed |L|² (OverflowError); 1e12 rad/s asked the integrator for 1e13 steps a second.
+        ("heavy_top", "initial", "euler_zxz_rates_rad_s", [0.0, 0.0, 1e200], "more than the limit of 100000"),
+        ("heavy_top", "initial", "euler_zxz_rates_rad_s", [0.0, 0.0, 1e12], "more than the limit of 100000"),
+        ("heavy_top", "initial", "euler_zxz_rates_rad_s", [-1e12, 0.0, 0.0], "more than the limit of 100000"),
+        ("heavy_top", "body", "mass_kg", 1e300, "more than the limit of 1e+06"),
+        ("heavy_top", "body", "cm_height_m", 1e300, "more than the limit of ±100"),
+        ("heavy_top", "body", "cm_height_m", -1e300, "more than the limit of ±100"),
+        ("heavy_top", "body", "inertia_kgm2", [1e300, 1e300, 1e300], "more than the limit of 1e+40"),
+        ("heavy_top", "body", "inertia_kgm2", [1e-300, 1e-300, 1e-300], "less than the limit of 1e-20"),
+        ("heavy_top", "environment", "gravity_m_s2", 1e300, "more than the limit of 10000"),
+        ("free_symmetric_top", "initial", "omega_b", [1e200, 0.0, 0.0], "more than the limit of 100000"),
+        ("intermediate_axis_flip", "initial", "omega_b", [0.02, 1e12, 0.02], "more than the limit of 100000"),
+        ("intermediate_axis_flip", "body", "inertia_kgm2", [1e300, 2e300, 2.5e300], "more than the limit of 1e+40"),
+        ("free_symmetric_top", "body", "inertia_kgm2", [1e-300, 1e-300, 1e-300], "less than the limit of 1e-20"),
+    ],
+)
+def test_absurd_rates_and_bodies_are_refused_naming_the_key(tmp_path, name, section, key, value, words):
+    """Values whose squares leave float64 (an OverflowError mid-run, or NaN and a body standing still) or whose
+    rates ask the integrator for days of work (a kernel no signal interrupts) are refused when the file is read."""
+    path = tmp_path / f"{name}.toml"
+    path.write_text(tomli_w.dumps(_edited(name, section, key, value)))
+    with pytest.raises(ConfigError, match=re.escape(words)) as err:
+        load_scenario(path)
+    assert err.value.key == f"{section}.{key}" and err.value.file == str(path)
+
+
+@pytest.mark.parametrize(
+    "name, edits, key",
+    [
+        # A slightly asymmetric rod spun about a long axis: its spin about the thin axis follows at (ΔI/I_min) ω.
+        (
+            "intermediate_axis_flip",
+            {("body", "inertia_kgm2"): [1e-6, 1.0, 1.000001], ("initial", "omega_b"): [0.0, 100.0, 0.01]},
+            "initial.omega_b",
+        ),
+        # A 1000 t top of 1e-13 m radius of gyration and cm height under 1000 g: a pendulum frequency of 2e8 rad/s.
+        (
+            "heavy_top",
+            {
+                ("body", "inertia_kgm2"): [1e-20, 1e-20, 1e-20],
+                ("body", "cm_height_m"): 1e-13,
+                ("body", "mass_kg"): 1e6,
+                ("environment", "gravity_m_s2"): 1e4,
+            },
+            "body.inertia_kgm2",
+        ),
+    ],
+)
+def test_a_body_the_integrator_cannot_follow_is_refused_naming_the_key(name, edits, key):
+    """Rates within their limit can still make the split rotations absurdly fast with an extreme body:
+    refused (MAX_SPLIT_FREQUENCY_RAD_S), not a run of hours."""
+    from gyroemu.dynamics.tops import MAX_SPLIT_FREQUENCY_RAD_S
+
+    data = read_toml(config_dir() / "scenarios" / f"{name}.toml")
+    for (section, k), value in edits.items():
+        data[section][k] = value
+    with pytest.raises(ConfigError, match=re.escape(f"more than the limit of {MAX_SPLIT_FREQUENCY_RAD_S:g}")) as err:
+        scenario_from_dict(data, name=name)
+    assert err.value.key == key
+
+
+def test_the_rate_limits_leave_the_shipped_tops_far_inside():
+    """The shipped tops' split frequencies are a thousandth of the limit or less (their outputs unchanged)."""
+    from gyroemu.dynamics.splitting import free_body_frequency, heavy_top_frequency
+    from gyroemu.dynamics.tops import MAX_SPLIT_FREQUENCY_RAD_S, pivot_moments
+
+    for name in ("heavy_top", "free_symmetric_top", "intermediate_axis_flip"):
+        spec = load_scenario(name).spec
+        if spec.kind == "heavy-top":
+            a, c = pivot_moments(spec.body.mass_kg, spec.body.inertia_kgm2, spec.body.cm_height_m)
+            mgl = spec.body.mass_kg * spec.environment.gravity_m_s2 * spec.body.cm_height_m
+            euler, rates = np.asarray(spec.initial.euler_zxz_rad), np.asarray(spec.initial.euler_zxz_rates_rad_s)
+            q0 = quat_from_euler_zxz(euler)
+            L0 = quat_rotate(q0, np.array([a, a, c]) * body_rate_from_euler_zxz(euler, rates))
+            omega = heavy_top_frequency(q0, L0, a, c, mgl)
+        else:
+            inertia = spec.body.tensor()
+            omega = free_body_frequency(inertia @ np.asarray(spec.initial.omega_b), inertia)
+        assert omega < MAX_SPLIT_FREQUENCY_RAD_S / 1000, name

@@ -239,6 +239,19 @@ def test_a_white_noise_whose_per_sample_variance_overflows_is_refused_naming_the
     device_from_dict({"description": "x", "rate_hz": 1000, sensor: {"errors": {key: 1e100}}}, name="dev.toml")
 
 
+@pytest.mark.parametrize(
+    "sensor, key, limit",
+    [("gyro", "quantisation_rad_per_s", 1000.0), ("accelerometer", "quantisation_m_per_s2", 1e7)],
+)
+def test_an_output_lsb_beyond_any_sensors_range_is_refused_naming_the_key(sensor, key, limit):
+    """An output LSB of 1e300 made the quantiser's noise LSB² T / 12 overflow (OverflowError, a traceback);
+    an LSB wider than the widest sensor's whole range is refused, the limit itself taken."""
+    with pytest.raises(ConfigError, match=re.escape(f"more than the limit of {limit:g}: ")) as info:
+        device_from_dict({"description": "x", "rate_hz": 1000, sensor: {"errors": {key: 1e300}}}, name="dev.toml")
+    assert info.value.key == f"{sensor}.errors.{key}" and info.value.file == "dev.toml"
+    device_from_dict({"description": "x", "rate_hz": 1000, sensor: {"errors": {key: limit}}}, name="dev.toml")
+
+
 @pytest.mark.parametrize("kind", sorted(GYRO_KINDS))
 def test_each_mechanism_reads_only_what_it_declares(kind):
     # The IMU leaves the optional truth fields a mechanism does not declare as None; run each

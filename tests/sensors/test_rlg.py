@@ -350,6 +350,31 @@ def test_bad_parameters_name_their_key(key, value):
     assert err.value.key == f"gyro.mechanism.{key}"
 
 
+@pytest.mark.parametrize(
+    "key, value, limit",
+    [
+        ("perimeter_m", 1e300, "1000"),  # P² overflowed in the area check (OverflowError)
+        ("perimeter_m", 1e200, "1000"),
+        ("dither_amplitude_arcsec", 1e300, "3600"),  # all-NaN beat_phase_rad, INT64_MIN fringe counts
+    ],
+)
+def test_absurd_sizes_are_refused_naming_their_key_and_why(key, value, limit):
+    with pytest.raises(ConfigError, match=f"more than the limit of {limit}: ") as err:
+        device_from_dict(
+            {"description": "x", "rate_hz": 1000, "gyro": {"mechanism": {"kind": "rlg", key: value}}}, name="dev.toml"
+        )
+    assert err.value.key == f"gyro.mechanism.{key}" and err.value.file == "dev.toml"
+
+
+def test_the_largest_dither_still_gives_a_finite_beat():
+    """At the limits (1°, 10 kHz) the beat phase and the fringe counts are finite numbers."""
+    rlg = RingLaserGyro(dither_amplitude_arcsec=3600.0, dither_frequency_hz=10_000.0, simulation_rate_hz=1e6)
+    t = np.arange(2001) * 1e-6
+    response = rlg.respond(make_truth(t, [0.1, 0.0, -0.2]), np.random.default_rng(0))
+    assert np.isfinite(response.raw["beat_phase_rad"]).all() and np.isfinite(response.angle).all()
+    assert response.raw["fringe_count"].min() > np.iinfo(np.int64).min
+
+
 def test_the_step_must_resolve_the_lock_in_time_and_the_dither():
     # Too slow for the lock-in time 1/(K Ω_L) without dither (k h ≤ 0.05) …
     with pytest.raises(ConfigError, match="lock-in time") as err:
