@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from cli_runs import run_cli
 from live_processes import free_port
+from zenoh_samples import Sample
 
 from gyroemu.pipelines.jobs.simulate import SimulateError, SimulateOptions, check_options
 
@@ -879,17 +880,6 @@ def test_record_force_replaces_a_linked_out_and_not_what_it_links_to(tmp_path, l
     from gyroemu.pipelines.formats.messages import IMU
     from gyroemu.pipelines.transport.record import Recorder
     from gyroemu.pipelines.transport.zenoh_io import pack_attachment
-
-    class Payload:
-        def __init__(self, data: bytes) -> None:
-            self.data = data
-
-        def to_bytes(self) -> bytes:
-            return self.data
-
-    class Sample:  # what the recorder reads of a zenoh sample
-        def __init__(self, key: str, payload: bytes, attachment: bytes) -> None:
-            self.key_expr, self.payload, self.attachment = key, Payload(payload), Payload(attachment)
 
     someone = tmp_path / "someone.mcap"
     someone.write_bytes(b"someone's recording")

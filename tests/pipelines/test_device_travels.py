@@ -15,6 +15,7 @@ import pytest
 zenoh = pytest.importorskip("zenoh")
 
 from live_processes import free_port, procs  # noqa: E402,F401  (procs is a fixture)
+from zenoh_samples import Sample  # noqa: E402
 
 from gyroemu.dynamics import load_scenario  # noqa: E402
 from gyroemu.pipelines.estimation.setup import noise_from_device, setup_from_metadata  # noqa: E402
@@ -27,33 +28,16 @@ from gyroemu.sensors import load_device  # noqa: E402
 SCENARIO, DEVICE = "smooth_manoeuvre", "consumer_mems"
 
 
-class _Bytes:
-    def __init__(self, data: bytes):
-        self._data = data
-
-    def to_bytes(self) -> bytes:
-        return self._data
-
-
-class _Sample:
-    """What the recorder reads of a zenoh sample."""
-
-    def __init__(self, key: str, payload: bytes, attachment: bytes | None = None):
-        self.key_expr = key
-        self.payload = _Bytes(payload)
-        self.attachment = None if attachment is None else _Bytes(attachment)
-
-
 def _samples(device: str, n: int = 20) -> list:
     dev = load_device(DEVICE, seed=3)
     rows = encode_run(dev.measure(load_scenario(SCENARIO).simulate(duration=n / dev.spec.rate_hz)))
-    return [_Sample(topic_to_key(device, "/imu"), bytes(row)) for row in rows["/imu"]]
+    return [Sample(topic_to_key(device, "/imu"), bytes(row)) for row in rows["/imu"]]
 
 
-def _config(device: str) -> _Sample:
+def _config(device: str) -> Sample:
     dev = load_device(DEVICE, seed=3)
     extra = json.dumps({"seed": "3", "scenario": load_scenario(SCENARIO).to_toml()}).encode()
-    return _Sample(config_key(device), dev.to_toml().encode(), extra)
+    return Sample(config_key(device), dev.to_toml().encode(), extra)
 
 
 def _record(path, feed, grace=1.0) -> Recorder:

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from live_processes import free_port, procs  # noqa: F401  (procs is a fixture)
 from tf_tree import EPS, interpolation_bound, quat_angle, quat_mul, tf_lookup
+from zenoh_samples import Sample
 
 from gyroemu.dynamics import load_scenario
 from gyroemu.dynamics.truth_source import truth_source
@@ -180,22 +181,11 @@ def test_the_live_estimate_goes_on_tf_beside_the_truth(procs, tmp_path):  # noqa
     assert not np.any(tree.translation)
 
 
-class _Bytes:
-    def __init__(self, data: bytes) -> None:
-        self.data = data
+def _sample(key: str, payload: bytes, sequence: int, gid: bytes) -> Sample:
+    """A sample of publisher ``gid``, numbered ``sequence``, as rmw_zenoh attaches it."""
+    from gyroemu.pipelines.transport.zenoh_io import pack_attachment
 
-    def to_bytes(self) -> bytes:
-        return self.data
-
-
-class _Sample:
-    """What :meth:`Recorder.add` reads of a zenoh sample."""
-
-    def __init__(self, key: str, payload: bytes, sequence: int, gid: bytes) -> None:
-        from gyroemu.pipelines.transport.zenoh_io import pack_attachment
-
-        self.key_expr, self.payload = key, _Bytes(payload)
-        self.attachment = _Bytes(pack_attachment(sequence, 0, gid))
+    return Sample(key, payload, pack_attachment(sequence, 0, gid))
 
 
 def test_ros2_tf_goes_to_the_global_topics_with_tf2_qos_and_is_recorded_as_the_files_tree(tmp_path):
@@ -241,9 +231,9 @@ def test_ros2_tf_goes_to_the_global_topics_with_tf2_qos_and_is_recorded_as_the_f
     path = tmp_path / "r.mcap"
     recorder = Recorder(path, parse_key=ros2_key)
     for k in range(2):
-        recorder.add(_Sample(imu_key, bytes(imu[k]), k, b"i" * 16))
-        recorder.add(_Sample(keys["/tf_static"], static, k, b"s" * 16))  # re-published: the same bytes
-        recorder.add(_Sample(keys["/tf"], bytes(tf[k]), k, b"t" * 16))
+        recorder.add(_sample(imu_key, bytes(imu[k]), k, b"i" * 16))
+        recorder.add(_sample(keys["/tf_static"], static, k, b"s" * 16))  # re-published: the same bytes
+        recorder.add(_sample(keys["/tf"], bytes(tf[k]), k, b"t" * 16))
     recorder.close()
     assert recorder.repeated == 1 and recorder.messages == 5
     channels = {c.topic: c for c in mcap_channel_info(path)}

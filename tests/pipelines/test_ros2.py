@@ -25,6 +25,7 @@ import pytest
 zenoh = pytest.importorskip("zenoh")
 
 from live_processes import Listener, free_port, mcap_messages, procs, write_foreign  # noqa: E402,F401
+from zenoh_samples import Sample  # noqa: E402
 
 from gyroemu.pipelines.formats import ros2_keys  # noqa: E402
 from gyroemu.pipelines.formats.ros2_keys import (  # noqa: E402
@@ -374,21 +375,6 @@ def test_replay_ros2_of_a_foreign_file(procs, tmp_path):
     assert got[text_key] == [m[2] for m in mcap_messages(path, "/rosout_text")]
 
 
-class _Bytes:
-    def __init__(self, data):
-        self.data = data
-
-    def to_bytes(self):
-        return self.data
-
-
-class _Sample:
-    """What the recorder reads of a zenoh sample: key expression, payload, attachment."""
-
-    def __init__(self, key, payload, attachment):
-        self.key_expr, self.payload, self.attachment = key, _Bytes(payload), _Bytes(attachment)
-
-
 def test_recorder_maps_ros2_keys_back_to_topics(tmp_path):
     """Without processes: a raw topic's kind comes back from its type (``rate_gyro`` -> ``rate-gyro``),
     the type hash goes into the channel metadata, the schema is the key's type, and a key of a
@@ -407,21 +393,21 @@ def test_recorder_maps_ros2_keys_back_to_topics(tmp_path):
     gid = bytes(range(16))
     recorder = Recorder(tmp_path / "r.mcap", parse_key=ros2_key)
     recorder.add(
-        _Sample(data_key(0, "/dev/imu", IMU.name, PUBLISHED[IMU.name]), imu_payload, pack_attachment(0, 1, gid))
+        Sample(data_key(0, "/dev/imu", IMU.name, PUBLISHED[IMU.name]), imu_payload, pack_attachment(0, 1, gid))
     )
     recorder.add(
-        _Sample(
+        Sample(
             data_key(0, ros_topic("dev", "/raw/rate-gyro"), raw.name, raw_hash),
             raw_payload,
             pack_attachment(0, 1, bytes(16)),
         )
     )
     recorder.add(
-        _Sample(
+        Sample(
             f"0/rosout/rcl_interfaces::msg::dds_::Log_/{PUBLISHED[IMU.name]}", imu_payload, pack_attachment(0, 1, gid)
         )
     )
-    recorder.add(_Sample("gyroemu/dev/imu", imu_payload, pack_attachment(1, 1, gid)))
+    recorder.add(Sample("gyroemu/dev/imu", imu_payload, pack_attachment(1, 1, gid)))
     recorder.close()
     assert (recorder.messages, recorder.skipped) == (2, 2)
     channels = {c.topic: c for c in mcap_channel_info(tmp_path / "r.mcap")}
