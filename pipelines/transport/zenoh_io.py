@@ -245,10 +245,12 @@ def router_config(
     connect: Sequence[str] | None = None,
     config_file: str | os.PathLike[str] | None = None,
 ) -> zenoh.Config:
-    """A router's configuration: listens on ``listen`` (default ``tcp/0.0.0.0:7447``)."""
-    return session_config(
-        connect=connect, listen=list(listen or ["tcp/0.0.0.0:7447"]), mode="router", config_file=config_file
-    )
+    """A router's configuration: listens on ``listen``, else where ``config_file`` says, else (neither
+    given, or the file leaves zenoh's default) on ``tcp/0.0.0.0:7447``."""
+    config = session_config(connect=connect, listen=list(listen or []), mode="router", config_file=config_file)
+    if not listen and _config_value(config, "listen/endpoints") == _config_value(zenoh.Config(), "listen/endpoints"):
+        _insert(config, "listen/endpoints", ["tcp/0.0.0.0:7447"])
+    return config
 
 
 def _config_value(config: zenoh.Config, key: str) -> Any:

@@ -95,3 +95,23 @@ def test_well_formed_endpoints_are_taken():
 
     for endpoint in ("tcp/127.0.0.1:7447", "tcp/[::1]:0", "tcp/localhost:7447#iface=lo", "udp/224.0.0.224:7446"):
         session_config(connect=[endpoint], listen=[endpoint])
+
+
+def test_a_router_listens_where_its_config_file_says(tmp_path):
+    """``router --config FILE``: the file's listen endpoints stand (the router put tcp/0.0.0.0:7447 over
+    them); --listen stands over the file; with neither, or a file that sets none, the router's default."""
+    import json
+
+    from gyroemu.pipelines.transport.zenoh_io import router_config
+
+    own = tmp_path / "own.json5"
+    own.write_text('{ listen: { endpoints: ["tcp/127.0.0.1:17999"] } }')
+    silent = tmp_path / "silent.json5"
+    silent.write_text('{ mode: "router" }')
+
+    def listening(**options):
+        return json.loads(router_config(**options).get_json("listen/endpoints"))
+
+    assert listening(config_file=own) == ["tcp/127.0.0.1:17999"]
+    assert listening(config_file=own, listen=["tcp/127.0.0.1:18000"]) == ["tcp/127.0.0.1:18000"]
+    assert listening(config_file=silent) == listening() == ["tcp/0.0.0.0:7447"]
