@@ -100,8 +100,11 @@ from gyroemu.pipelines.transport.zenoh_io import (
 )
 
 if TYPE_CHECKING:
+    import zenoh
+
     from gyroemu.dynamics import Scenario
     from gyroemu.pipelines.formats.channels import ImuSeries
+    from gyroemu.pipelines.formats.ros2_keys import Ros2Keys
     from gyroemu.pipelines.transport.foxglove_view import FoxgloveView, ViewOptions
     from gyroemu.pipelines.transport.live_estimate import LiveEstimator
     from gyroemu.sensors import Device
@@ -567,21 +570,43 @@ def run_stream(options: StreamOptions, *, out: TextIO = sys.stdout) -> int:
     Returns the exit status (0, or 130 when stopped by SIGINT, 143 by SIGTERM). Raises ``ValueError`` naming the
     argument at fault, before simulating."""
     from gyroemu.dynamics import load_scenario
-    from gyroemu.dynamics.truth_source import ScenarioTruth, simulated_whole, truth_source
-    from gyroemu.pipelines.formats.ros2_keys import Ros2Keys, ros_topic, type_hash
-    from gyroemu.pipelines.formats.tf_messages import TF_DEFINITIONS, TF_MESSAGE_TYPE
-    from gyroemu.pipelines.jobs.disk_space import whole_truth_problem
+    from gyroemu.pipelines.formats.ros2_keys import Ros2Keys
     from gyroemu.sensors import load_device
 
     config = options.session.config()
     ros = Ros2Keys(options.session.domain, "stream") if options.session.ros2 else None
     _check(options)
-    device_name, pacing = options.device_name, options.pacing
     scen = load_scenario(options.scenario)
     longest = scen.spec.max_span_s()  # a recording's span: its motion stops there
     if options.duration is not None and longest is not None and options.duration > longest * (1 + 1e-9):
         raise ValueError(f"argument --duration: {options.duration:g} s is longer than the recording's {longest:.6g} s")
     dev = load_device(options.device, seed=options.seed)
+    # Opened before any work: a taken --listen port or a client with no router is named first (it was
+    # named after the first block had been computed and announced). Closed by live_session below, or here
+    # on anything that stops the stream before that.
+    session = open_session(config)
+    try:
+        return _stream_on(options, session, ros, scen, dev, out)
+    except BaseException:
+        session.close()  # closing twice is harmless: live_session may have closed it already
+        raise
+
+
+def _stream_on(
+    options: StreamOptions,
+    session: zenoh.Session,
+    ros: Ros2Keys | None,
+    scen: Scenario,
+    dev: Device,
+    out: TextIO,
+) -> int:
+    """The stream of :func:`run_stream` on its open ``session`` (checked options, loaded configs)."""
+    from gyroemu.dynamics.truth_source import ScenarioTruth, simulated_whole, truth_source
+    from gyroemu.pipelines.formats.ros2_keys import ros_topic, type_hash
+    from gyroemu.pipelines.formats.tf_messages import TF_DEFINITIONS, TF_MESSAGE_TYPE
+    from gyroemu.pipelines.jobs.disk_space import whole_truth_problem
+
+    device_name, pacing = options.device_name, options.pacing
     started = time.perf_counter()
     endless = options.duration is None and runs_without_end(scen)
     # an integrated kind is simulated whole here (truth_source); a pointwise one is read window by window
@@ -634,8 +659,7 @@ def run_stream(options: StreamOptions, *, out: TextIO = sys.stdout) -> int:
         if options.estimate is not None:
             estimator = _start_estimator(options, dev, scen, first.samples)
         del first
-        producer.start()  # fills its queue while the session opens and subscribers are waited for
-        session = open_session(config)
+        producer.start()  # fills its queue while subscribers are waited for
         if estimator is not None:
             print(f"  {estimator.key} ({options.estimate}, {'9D' if estimator.use_mag else '6D'}, live)", file=out)
             if view is not None:

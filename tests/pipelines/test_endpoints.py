@@ -38,6 +38,16 @@ def test_listen_on_a_port_held_by_another_program_exits_2(held_port, tmp_path, c
     assert not (tmp_path / "r.mcap").exists()
 
 
+def test_stream_names_a_taken_port_before_any_work(held_port):
+    """``stream`` opens its session before it computes or announces anything: a taken --listen port is
+    the only thing it says (it was said after the first block was computed and the stream announced)."""
+    endpoint = f"tcp/127.0.0.1:{held_port}"
+    result = gyroemu("stream", "--scenario", "heavy_top", "--device", "consumer_mems", "--listen", endpoint)
+    assert result.returncode == 2, result.stderr
+    assert f"argument --listen: {endpoint} is taken by another program" in result.stderr
+    assert result.stdout == "" and "Traceback" not in result.stderr
+
+
 def test_port_is_free(held_port):
     assert port_is_free(f"tcp/127.0.0.1:{held_port}") is False
     with socket.socket() as s:
