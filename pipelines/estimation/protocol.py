@@ -27,11 +27,20 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from typing import Protocol, TypeGuard, runtime_checkable
+from typing import Any, Protocol, TypeGuard, cast, runtime_checkable
 
 import numpy as np
 
-__all__ = ["AttitudeFilter", "BlockLearner", "DeviceNoise", "Estimate", "FilterSetup", "learns_in_blocks"]
+__all__ = [
+    "PROCESS_PROTOCOL",
+    "AttitudeFilter",
+    "BlockLearner",
+    "DeviceNoise",
+    "Estimate",
+    "FilterSetup",
+    "estimate_problem",
+    "learns_in_blocks",
+]
 
 
 @dataclass(frozen=True)
@@ -179,3 +188,44 @@ def learns_in_blocks(filter_or_class: object) -> TypeGuard[BlockLearner]:
     return bool(getattr(filter_or_class, "learns_in_blocks", False)) and all(
         callable(getattr(filter_or_class, m, None)) for m in methods
     )
+
+
+PROCESS_PROTOCOL = (
+    "process(t, gyro, accel, mag=None) must return an Estimate: q_wb (N, 4), one attitude a sample given, "
+    "gyro_bias (N, 3) or None, q_wb_covariance (N, 3, 3) or None"
+)
+"""What the protocol asks of ``process``'s return value, in words (an error about a filter that breaks it
+says so)."""
+
+
+def estimate_problem(est: object, n: int, *, extras: bool = True) -> str | None:
+    """What is wrong with ``est`` as ``process``'s return value for ``n`` samples, or None: the words
+    that follow "process() returned" (``NoneType, not an Estimate``; ``q_wb of shape (3,), not one (4,)
+    quaternion a sample``; ``2 attitudes fewer than the samples it was given``, said without the count,
+    which is a block's where a log is read in blocks). An object with a ``q_wb`` passes for an Estimate.
+    With ``extras``, also ``gyro_bias`` and ``q_wb_covariance`` when not None: (n, 3) and (n, 3, 3)."""
+    if not isinstance(est, Estimate) and not hasattr(est, "q_wb"):
+        return f"{type(est).__name__}, not an Estimate"
+    try:
+        q = np.asarray(cast(Any, est).q_wb, dtype=float)
+    except (TypeError, ValueError) as e:
+        return f"q_wb that is no array of numbers ({e})"
+    if q.ndim != 2 or q.shape[1] != 4:
+        return f"q_wb of shape {q.shape}, not one (4,) quaternion a sample"
+    if len(q) != n:
+        d = len(q) - n
+        many = f"{abs(d)} attitude{'s' if abs(d) != 1 else ''} {'more' if d > 0 else 'fewer'}"
+        return f"{many} than the samples it was given"
+    if not extras:
+        return None
+    for name, shape in (("gyro_bias", (n, 3)), ("q_wb_covariance", (n, 3, 3))):
+        value = getattr(est, name, None)
+        if value is None:
+            continue
+        try:
+            got = np.asarray(value, dtype=float).shape
+        except (TypeError, ValueError) as e:
+            return f"{name} that is no array of numbers ({e})"
+        if got != shape:
+            return f"{name} of shape {got}, not {shape} (one {shape[1:]} a sample) or None"
+    return None

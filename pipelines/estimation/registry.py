@@ -25,7 +25,10 @@ Anything else is a user's filter: ``package.module:Class`` (imported; the curren
 too) or ``path/to/file.py:Class``. The class is called with the :class:`FilterSetup` and the object
 must have a ``name`` and a ``process(t, gyro, accel, mag=None)`` method (the protocol of
 :mod:`gyroemu.pipelines.estimation.protocol`). Each problem raises :class:`FilterError`, whose message names the
-argument as given.
+argument as given. What its ``process`` returns is checked too when the job asks (``make_filter(...,
+argument="--filter")``): a user's filter returning anything but an Estimate of one attitude a sample
+(None, say) raises :class:`FilterProtocolError` naming the argument, the filter and what the protocol
+asks, where it would otherwise fail later, deep in the job, with a traceback.
 """
 
 from __future__ import annotations
@@ -35,14 +38,20 @@ import importlib.util
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gyroemu.errors import GyroemuError
 
 from . import protocol
 from .latency import LatencyCompensated
-from .protocol import FilterSetup
+from .protocol import PROCESS_PROTOCOL, Estimate, FilterSetup, estimate_problem
 
 __all__ = [
     "FILTERS",
     "FilterError",
+    "FilterProtocolError",
     "FilterSpec",
     "available_filters",
     "filter_class",
@@ -56,6 +65,41 @@ __all__ = [
 
 class FilterError(ValueError):
     """A filter name or ``module:Class`` that cannot be used; the message names it."""
+
+
+class FilterProtocolError(GyroemuError, FilterError):
+    """A user's filter whose ``process`` broke the protocol (:data:`~.protocol.PROCESS_PROTOCOL`): bad
+    input named (the command line's status 2, the message as it is), a :class:`FilterError` too."""
+
+
+class _ProtocolChecked:
+    """A user's filter whose every ``process`` result is checked (:func:`~.protocol.estimate_problem`)
+    before anything uses it; every other attribute is the filter's own."""
+
+    def __init__(self, inner: Any, spec: str, argument: str) -> None:
+        self._inner, self._spec, self._argument = inner, spec, argument
+
+    def __getattr__(self, name: str) -> Any:  # only for what this object does not have itself
+        if name.startswith("_"):  # its own, not set yet (a copy or an unpickling): no endless recursion
+            raise AttributeError(name)
+        return getattr(self._inner, name)
+
+    def process(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None) -> Estimate:
+        est = self._inner.process(t, gyro, accel, mag)
+        problem = estimate_problem(est, len(t))
+        if problem is not None:
+            raise FilterProtocolError(
+                f"argument {self._argument}: filter '{self._spec}': {type(self._inner).__name__}.process() returned "
+                f"{problem}; {PROCESS_PROTOCOL} (pipelines/estimation/protocol.py)"
+            )
+        if isinstance(est, Estimate):
+            return est
+        # an object with a q_wb passes for an Estimate: one it is, with its other fields or None
+        return Estimate(
+            q_wb=np.asarray(est.q_wb),
+            gyro_bias=getattr(est, "gyro_bias", None),
+            q_wb_covariance=getattr(est, "q_wb_covariance", None),
+        )
 
 
 @dataclass(frozen=True)
@@ -219,8 +263,12 @@ def filter_class(name_or_spec: str) -> type:
     return _user_class(name_or_spec)
 
 
-def make_filter(name_or_spec: str, setup: FilterSetup) -> protocol.AttitudeFilter:
-    """A filter object for ``setup``: a built-in name (``FILTERS``) or a user's ``module:Class``.
+def make_filter(name_or_spec: str, setup: FilterSetup, *, argument: str | None = None) -> protocol.AttitudeFilter:
+    """A filter object for ``setup``: a built-in name (``FILTERS``) or a user's ``module:Class``. With
+    ``argument`` (the command line's, ``"--filter"``), a user's filter has what its ``process`` returns
+    checked on every call (type, shapes: :func:`~.protocol.estimate_problem`), which raises
+    :class:`FilterProtocolError` naming ``argument``, the filter and what the protocol asks; the
+    built-ins are not wrapped (their results, and their speed, are as without it).
 
     Raises
     ------
@@ -228,6 +276,9 @@ def make_filter(name_or_spec: str, setup: FilterSetup) -> protocol.AttitudeFilte
         Unknown name, a built-in that cannot run here (VQF without its package), a ``module:Class``
         that does not import, or an object without ``name`` and a callable ``process``. The message
         names ``name_or_spec``.
+    FilterProtocolError
+        From ``process``, with ``argument``: a user's filter's return value that is no Estimate of one
+        attitude a sample.
     """
     cls = filter_class(name_or_spec)
     try:
@@ -247,6 +298,8 @@ def make_filter(name_or_spec: str, setup: FilterSetup) -> protocol.AttitudeFilte
         )
     if not isinstance(filt.name, str) or not filt.name:
         raise FilterError(f"filter '{name_or_spec}': its 'name' must be a non-empty string, got {filt.name!r}")
+    if argument is not None and name_or_spec not in FILTERS:  # checked where it returns, under the latency's moves
+        filt = _ProtocolChecked(filt, name_or_spec, argument)
     if setup.gyro_latency_s or setup.mag_latency_s:  # every filter moved in time by the same rules
         return LatencyCompensated(filt, setup.gyro_latency_s, setup.mag_latency_s)
     return filt

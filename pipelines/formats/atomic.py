@@ -12,6 +12,11 @@ folder, read-only or not writable), so that a job refuses it up front naming its
 of an output file (a folder, an input, its folder, an existing file without ``--force``). They live
 beside the writer because they answer the question it would otherwise answer too late: can this file be
 written here?
+
+An output of several files (a report: its text, its data, its plots) is written whole or not at all by
+:func:`staged_files`: each file goes to its temporary file as above, and only once every one of them is
+complete are they all renamed into place; on any error (a full disk at the last plot, an interrupt)
+every temporary file is removed and the folder is left as it was, an earlier report in it kept.
 """
 
 from __future__ import annotations
@@ -19,7 +24,8 @@ from __future__ import annotations
 import os
 import stat
 import tempfile
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
@@ -32,6 +38,8 @@ __all__ = [
     "folder_problem",
     "output_file_problem",
     "output_folder_problem",
+    "StagedFiles",
+    "staged_files",
     "write_atomic",
     "write_text_atomic",
     "write_figure_atomic",
@@ -42,16 +50,27 @@ def write_atomic(path: str | os.PathLike[str], write: Callable[[IO[Any]], object
     """Call ``write(f)`` on a temporary file opened for writing (bytes, or UTF-8 text with
     ``binary=False``) and move it to ``path``. Returns ``path``."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    tmp = _write_temporary(path, write, binary=binary)
     try:
-        with os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8") as f:
-            write(f)
-        _give_mode(tmp, path)  # mkstemp's 0o600 is for the temporary file, not the output
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+def _write_temporary(path: Path, write: Callable[[IO[Any]], object], *, binary: bool) -> str:
+    """Call ``write(f)`` on a new temporary file beside ``path`` (given the mode ``path`` would get) and
+    return its name; on any error it is removed."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8") as f:
+            write(f)
+        _give_mode(tmp, path)  # mkstemp's 0o600 is for the temporary file, not the output
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return tmp
 
 
 def write_text_atomic(path: str | os.PathLike[str], text: str) -> Path:
@@ -67,6 +86,86 @@ def write_figure_atomic(fig: Figure, path: str | os.PathLike[str], dpi: int) -> 
         return write_atomic(path, lambda f: fig.savefig(f, dpi=dpi, format="png"))
     finally:
         plt.close(fig)
+
+
+class StagedFiles:
+    """The files of one output, each written in full to a temporary file beside it (:meth:`write`,
+    :meth:`write_text`, :meth:`write_figure`), and the files it replaces to remove (:meth:`remove`);
+    :func:`staged_files` makes one and puts them all in place at the end, or none."""
+
+    def __init__(self) -> None:
+        self._staged: list[tuple[str, Path]] = []  # (temporary file, target), in the order written
+        self._removals: list[Path] = []
+
+    def write(self, path: str | os.PathLike[str], write: Callable[[IO[Any]], object], *, binary: bool = True) -> Path:
+        """Call ``write(f)`` on a temporary file (as :func:`write_atomic`) that becomes ``path`` when the
+        output is complete. Returns ``path``."""
+        path = Path(path)
+        self._staged.append((_write_temporary(path, write, binary=binary), path))
+        return path
+
+    def write_text(self, path: str | os.PathLike[str], text: str) -> Path:
+        """Stage ``text`` (UTF-8) for ``path``."""
+        return self.write(path, lambda f: f.write(text), binary=False)
+
+    def write_figure(self, fig: Figure, path: str | os.PathLike[str], dpi: int) -> Path:
+        """Stage the matplotlib figure ``fig`` as a PNG for ``path``, and close it."""
+        import matplotlib.pyplot as plt
+
+        try:
+            return self.write(path, lambda f: fig.savefig(f, dpi=dpi, format="png"))
+        finally:
+            plt.close(fig)
+
+    def remove(self, path: str | os.PathLike[str]) -> None:
+        """Remove ``path`` (if there) when the output is complete, before the staged files are moved in."""
+        self._removals.append(Path(path))
+
+    def _commit(self) -> None:
+        for path in self._removals:
+            path.unlink(missing_ok=True)
+        while self._staged:
+            tmp, path = self._staged[0]
+            os.replace(tmp, path)
+            del self._staged[0]
+
+    def _discard(self) -> None:
+        for tmp, _ in self._staged:
+            Path(tmp).unlink(missing_ok=True)
+        self._staged.clear()
+
+
+@contextmanager
+def staged_files(folder: str | os.PathLike[str] | None = None) -> Iterator[StagedFiles]:
+    """Write an output of several files whole or none of it: the files written through the
+    :class:`StagedFiles` given go to temporary files, and when the ``with`` block ends without an error
+    the files it named to remove are removed and every staged file is renamed over its target, in the
+    order written. On any error (a full disk, ``KeyboardInterrupt``) every temporary file is removed and
+    nothing is renamed or removed: the folder is as it was. ``folder``, when given, is made with its
+    parents if missing, and the folders made are removed again (if still empty) on an error.
+
+    The renames (each atomic, in the same folder, needing no space) are the only step that can leave
+    part of the output: an error between two of them (a failing device) leaves the files already moved
+    in place, and the temporary files of the rest removed."""
+    made: list[Path] = []
+    if folder is not None:
+        where = Path(folder)
+        while not where.exists() and not where.is_symlink() and where != where.parent:
+            made.append(where)
+            where = where.parent
+        Path(folder).mkdir(parents=True, exist_ok=True)
+    staged = StagedFiles()
+    try:
+        yield staged
+        staged._commit()
+    except BaseException:
+        staged._discard()
+        for path in made:  # the deepest first
+            try:
+                path.rmdir()
+            except OSError:
+                break
+        raise
 
 
 def folder_problem(folder: str | os.PathLike[str]) -> str | None:

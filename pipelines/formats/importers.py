@@ -17,7 +17,8 @@ dataset        shape    holds
 ``movement``   (N,)     bool: the samples over which the dataset's errors are computed
 =============  =======  ==================================================================
 
-and the attribute ``sampling_rate`` (Hz; 285.714 for every trial), and, in every published trial,
+and the attribute ``sampling_rate`` (Hz; 285.714 for every trial; refused outside 1 Hz … 100 kHz:
+:data:`BROAD_RATE_RANGE_HZ` says why), and, in every published trial,
 ``opt_pos`` (N, 3), the optical reference's position of the IMU in m, NaN rows where lost (optional
 here: a trial without it imports without ``/truth/pose``). The file is opened read-only and read whole
 before anything is written. What is written (one device, ``imu0``, topics unprefixed):
@@ -76,6 +77,7 @@ __all__ = [
     "BroadTrial",
     "BROAD_CITATION",
     "BROAD_DATASETS",
+    "BROAD_RATE_RANGE_HZ",
     "read_broad",
     "broad_stamps_ns",
     "broad_recording",
@@ -90,6 +92,16 @@ BROAD_CITATION = (
 BROAD_LICENSE = "CC BY 4.0"
 BROAD_DATASETS = {"imu_gyr": (3,), "imu_acc": (3,), "imu_mag": (3,), "opt_quat": (4,), "movement": ()}
 """The datasets an import reads, with the shape of one sample (every dataset has N rows)."""
+BROAD_RATE_RANGE_HZ = (1.0, 100_000.0)
+"""The ``sampling_rate`` a trial may give, Hz (BROAD's own is 285.714…, 2000/7): the rates of an IMU,
+with room on both sides. Above 100 kHz no IMU samples (MEMS gyros' output rates top out at a few to
+32 kHz, optical gyros' at a few kHz), and the stamps, whole nanoseconds, lose their meaning: at 100 kHz
+a step is 10 µs and the stamp's rounding (≤ 0.5 ns) 5·10⁻⁵ of it, while at 10¹² Hz every step rounds to
+0 and the samples share stamps no reader takes. Below 1 Hz an attitude filter integrating the gyro
+over a step of more than a second of hand-held motion has nothing to follow, and the number is most
+likely in another unit (a period of 0.0035 s, or 0.286 kHz, for BROAD's rate); at 10⁻⁶ Hz the stamps
+``k·10⁹/fs`` overflow int64 nanoseconds after 9,223 samples. At ≥ 1 Hz they fit for 9.2·10⁹ samples
+(a trial of about 1 TB read whole), so the bound also keeps every stamp in range."""
 
 
 class ImportInputError(ConfigError):
@@ -236,6 +248,14 @@ def read_broad(path: str | os.PathLike[str]) -> BroadTrial:
                 or not float(rate.flat[0]) > 0
             ):
                 raise ImportInputError(f"{rate.tolist()!r}: expected a positive number of Hz", file=path, item=item)
+            low, high = BROAD_RATE_RANGE_HZ
+            if not low <= float(rate.flat[0]) <= high:
+                raise ImportInputError(
+                    f"{float(rate.flat[0]):.6g} Hz is outside {low:g} Hz … {high / 1000:g} kHz, the rates of an IMU "
+                    "(BROAD's: 285.714 Hz); a period in seconds or a rate in kHz?",
+                    file=path,
+                    item=item,
+                )
             opt_pos = None
             if "opt_pos" in f:
                 node = f["opt_pos"]
@@ -288,15 +308,27 @@ def _rows(mask: NDArray[np.bool_]) -> str:
 
 
 def _check_values(arrays: dict[str, NDArray[np.float64]], opt_pos: NDArray[np.float64] | None, path: Path) -> None:
-    """Refuse what is not a measurement: ±inf in any dataset, and an ``opt_quat`` row that is no
-    rotation (:data:`_QUAT_NORM_TOLERANCE`). NaN rows pass: the reference's are lost tracking (module
-    notes), the sensors' dropouts a filter bridges (the import's summary counts them)."""
+    """Refuse what is not a measurement: ±inf in any dataset, a gyro or accelerometer with NaN in every
+    row (no sample any reader could use: a column never measured, or none at all), and an ``opt_quat``
+    row that is no rotation (:data:`_QUAT_NORM_TOLERANCE`). NaN rows pass: the reference's are lost
+    tracking (module notes), the sensors' dropouts a filter bridges (the import's summary counts them);
+    so does a magnetometer or reference lost throughout (a 6D filter needs neither)."""
     named = dict(arrays) if opt_pos is None else {**arrays, "opt_pos": opt_pos}
     for name, values in named.items():
         infinite = np.isinf(values)
         if infinite.any():
             raise ImportInputError(
                 f"inf at {_rows(infinite)}: not a measurement (NaN marks a missing one)",
+                file=path,
+                item=f"dataset '{name}'",
+            )
+    for name in ("imu_gyr", "imu_acc"):
+        missing = np.isnan(arrays[name])
+        if missing.any(axis=1).all():
+            never = [axis for axis, column in zip("xyz", missing.T) if column.all()]
+            where = f"column {never[0]} NaN in every row" if len(never) == 1 else "NaN in every row"
+            raise ImportInputError(
+                f"{where}: no sample a filter could use (a dropout is a NaN row among measured ones)",
                 file=path,
                 item=f"dataset '{name}'",
             )

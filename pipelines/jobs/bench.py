@@ -53,8 +53,10 @@ What is reported, per (case, filter), as mean ± standard deviation over the run
 
 Outputs: :meth:`BenchReport.to_markdown` (``bench.md``), :meth:`BenchReport.to_json` (``bench.json``: every
 number, every run) and :meth:`BenchReport.save_plots` (one PNG per case: the error of every filter
-against time, first run; ``bench.json`` lists their names). :meth:`BenchReport.save` writes all three, each
-through a temporary file. :func:`check_report_folder` refuses, before any work, a folder that cannot take
+against time, first run; ``bench.json`` lists their names). :meth:`BenchReport.save` writes all three, all
+or none: each to a temporary file, renamed into place once all are complete (a full disk at the last plot
+leaves the folder as it was: :func:`~gyroemu.pipelines.formats.atomic.staged_files`).
+:func:`check_report_folder` refuses, before any work, a folder that cannot take
 them or that holds an earlier report (``bench.md``, ``bench.json``, a ``.png``) unless told to overwrite
 it; overwriting it, :meth:`BenchReport.save` first removes the earlier report's plots this one does not
 write (:func:`earlier_plots`: those its ``bench.json`` names, and no other file). An input (a log, a
@@ -91,10 +93,10 @@ from gyroemu.pipelines.estimation.registry import (
     unavailable_filters,
 )
 from gyroemu.pipelines.formats.atomic import (
+    StagedFiles,
     output_file_problem,
     output_folder_problem,
-    write_figure_atomic,
-    write_text_atomic,
+    staged_files,
 )
 from gyroemu.pipelines.formats.file_names import same_file, unique_stems
 from gyroemu.pipelines.jobs.bench_cases import PLOT_POINTS, BenchError, BenchWarning, LogCase, SimCase
@@ -410,13 +412,18 @@ class BenchReport:
     # --- Plots ------------------------------------------------------------------------------------
     def save_plots(self, directory: str | os.PathLike[str]) -> list[Path]:
         """One PNG per case, ``<case>.png`` in ``directory``: each filter's error against time (first run;
-        9D: total and inclination, 6D: inclination), log scale, the convergence threshold dashed."""
+        9D: total and inclination, 6D: inclination), log scale, the convergence threshold dashed; all or
+        none of them."""
+        with staged_files() as stage:
+            return self._stage_plots(stage, Path(directory))
+
+    def _stage_plots(self, stage: StagedFiles, directory: Path) -> list[Path]:
+        """:meth:`save_plots` through ``stage``."""
         import matplotlib
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        directory = Path(directory)
         written = []
         for case, name in zip(self.cases, plot_names([c.name for c in self.cases])):
             panels = (
@@ -440,29 +447,32 @@ class BenchReport:
             axes[0, 0].legend(fontsize=8, loc="upper right")
             axes[-1, 0].set_xlabel("time, s")
             fig.tight_layout()
-            written.append(write_figure_atomic(fig, directory / name, dpi=110))
+            written.append(stage.write_figure(fig, directory / name, dpi=110))
         return written
 
     def save(self, directory: str | os.PathLike[str], *, replace_earlier: bool = False) -> dict[str, Any]:
         """``bench.md``, ``bench.json`` and the plots in ``directory`` (made if missing); their paths, and
         under ``"removed"`` the earlier report's plots removed. With ``replace_earlier`` (``--force``), the
         plots of an earlier report there (:func:`earlier_plots`) that this one does not write are removed
-        first, before its ``bench.json`` is replaced: no other file is touched. :class:`BenchError`, before
-        anything is written or removed, when one of those files is an input (:func:`report_input_problem`)."""
+        first, before its ``bench.json`` is replaced: no other file is touched. All or nothing: every file
+        is written to a temporary file first, and only once all are complete are the earlier plots removed
+        and the files renamed into place; an error before (a full disk) leaves the folder as it was.
+        :class:`BenchError`, before anything is written or removed, when one of those files is an input
+        (:func:`report_input_problem`)."""
         directory = Path(directory)
         names = plot_names([c.name for c in self.cases])
         problem = report_input_problem(directory, self.inputs, plots=names, replace_earlier=replace_earlier)
         if problem is not None:
             raise BenchError(problem)
-        directory.mkdir(parents=True, exist_ok=True)
-        ours = set(names)
-        removed = [p for p in (earlier_plots(directory) if replace_earlier else []) if p.name not in ours]
-        for plot in removed:  # before bench.json, which names them, is replaced: a stop here leaves it naming them
-            plot.unlink(missing_ok=True)
         paths: dict[str, Any] = {"markdown": directory / "bench.md", "json": directory / "bench.json"}
-        write_text_atomic(paths["json"], self.to_json())
-        write_text_atomic(paths["markdown"], self.to_markdown())
-        paths["plots"] = self.save_plots(directory)
+        with staged_files(directory) as stage:
+            ours = set(names)
+            removed = [p for p in (earlier_plots(directory) if replace_earlier else []) if p.name not in ours]
+            stage.write_text(paths["json"], self.to_json())
+            stage.write_text(paths["markdown"], self.to_markdown())
+            paths["plots"] = self._stage_plots(stage, directory)
+            for plot in removed:  # before bench.json, which names them, is replaced: a stop there leaves it naming them
+                stage.remove(plot)
         paths["removed"] = removed
         return paths
 

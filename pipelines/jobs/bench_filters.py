@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from typing import Any, cast
+
 import numpy as np
 
-from gyroemu.pipelines.estimation.protocol import Estimate, FilterSetup
+from gyroemu.pipelines.estimation.protocol import Estimate, FilterSetup, estimate_problem
 from gyroemu.pipelines.estimation.registry import make_filter
 
 __all__ = ["WARM_UP_SAMPLES", "check_estimate", "warm_up"]
@@ -17,16 +19,12 @@ def check_estimate(est: object, n: int, label: str) -> tuple[np.ndarray, np.ndar
     """The attitudes (n, 4) and gyro biases (n, 3) of a filter's return value, or None for a bias it does
     not give (or gives in another shape); ``TypeError``/``ValueError`` naming ``label`` for attitudes that
     are not one per sample (the message says how many more or fewer, the same for the whole run and for a
-    block of it)."""
-    if not isinstance(est, Estimate) and not hasattr(est, "q_wb"):
-        raise TypeError(f"{label}.process() returned {type(est).__name__}, not an Estimate")
-    q = np.asarray(est.q_wb, dtype=float)
-    if q.ndim != 2 or q.shape[1] != 4:
-        raise ValueError(f"{label}.process() returned q_wb of shape {q.shape}, not one (4,) quaternion a sample")
-    if len(q) != n:  # said without the sample count, which is a block's where a log is read in blocks
-        d = len(q) - n
-        many = f"{abs(d)} attitude{'s' if abs(d) != 1 else ''} {'more' if d > 0 else 'fewer'}"
-        raise ValueError(f"{label}.process() returned {many} than the samples it was given")
+    block of it: :func:`~gyroemu.pipelines.estimation.protocol.estimate_problem`)."""
+    problem = estimate_problem(est, n, extras=False)
+    if problem is not None:
+        not_estimate = not isinstance(est, Estimate) and not hasattr(est, "q_wb")
+        raise (TypeError if not_estimate else ValueError)(f"{label}.process() returned {problem}")
+    q = np.asarray(cast(Any, est).q_wb, dtype=float)
     b = getattr(est, "gyro_bias", None)
     if b is not None:
         b = np.asarray(b, dtype=float)

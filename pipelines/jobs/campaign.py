@@ -13,7 +13,8 @@ Outputs in ``out``:
   "runs")`` or ``pandas.read_parquet`` read the folder as one table). Started again, the campaign
   runs only the tasks without a part: nothing twice, nothing lost.
 - ``bench.md``, ``bench.json`` (the format of ``gyroemu bench``, plus a ``campaign`` section), and one
-  box plot per cell (the per-run RMSE of each filter), all drawn from the stored rows.
+  box plot per cell (the per-run RMSE of each filter), all drawn from the stored rows; all or none of
+  them (:func:`save_campaign_report`).
 
 A task that raises is reported (``bench.md``, ``bench.json``, :attr:`CampaignSummary.failures`) and the
 others complete; a lost scheduler raises :class:`~gyroemu.pipelines.campaign.SchedulerLostError`
@@ -38,6 +39,7 @@ from gyroemu.errors import ConfigError
 
 if TYPE_CHECKING:
     from gyroemu.pipelines.campaign import Campaign, CampaignSpec, CellTask, TaskFailure
+    from gyroemu.pipelines.formats.atomic import StagedFiles
     from gyroemu.pipelines.jobs.bench import BenchReport
 
 __all__ = [
@@ -382,20 +384,22 @@ def _markdown(report: BenchReport) -> str:
 
 
 def save_campaign_report(report: BenchReport, table: Any, out: Path, *, plots: bool = True) -> dict[str, Any]:
-    """``bench.md``, ``bench.json`` and (``plots``) one box plot per cell in ``out``; their paths."""
-    from gyroemu.pipelines.formats.atomic import write_text_atomic
+    """``bench.md``, ``bench.json`` and (``plots``) one box plot per cell in ``out``; their paths. All or
+    nothing: each file is written to a temporary file, and they are renamed into place only once all are
+    complete; on an error (a full disk) ``out`` is left as it was, its run store untouched."""
+    from gyroemu.pipelines.formats.atomic import staged_files
 
-    out.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Any] = {"markdown": out / "bench.md", "json": out / "bench.json", "plots": []}
     data = report.to_dict() | ({} if plots else {"plots": []})  # the names of the plots written beside it
-    write_text_atomic(paths["json"], json.dumps(data, indent=1, ensure_ascii=False, allow_nan=False))
-    write_text_atomic(paths["markdown"], _markdown(report))
-    if plots:
-        paths["plots"] = _box_plots(report, out)
+    with staged_files(out) as stage:
+        stage.write_text(paths["json"], json.dumps(data, indent=1, ensure_ascii=False, allow_nan=False))
+        stage.write_text(paths["markdown"], _markdown(report))
+        if plots:
+            paths["plots"] = _box_plots(report, out, stage)
     return paths
 
 
-def _box_plots(report: BenchReport, out: Path) -> list[Path]:
+def _box_plots(report: BenchReport, out: Path, stage: StagedFiles) -> list[Path]:
     """One PNG per case: each filter's per-run RMSE (9D: total, 6D: inclination) as a box over the runs
     that did not diverge, every run a dot."""
     import matplotlib
@@ -404,7 +408,6 @@ def _box_plots(report: BenchReport, out: Path) -> list[Path]:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from gyroemu.pipelines.formats.atomic import write_figure_atomic
     from gyroemu.pipelines.jobs.bench import plot_names
 
     written = []
@@ -425,5 +428,5 @@ def _box_plots(report: BenchReport, out: Path) -> list[Path]:
         ax.set_title(f"{case.name} ({case.mode}), {case.runs} runs", fontsize=9)
         ax.grid(True, which="both", alpha=0.3)
         fig.tight_layout()
-        written.append(write_figure_atomic(fig, out / name, dpi=110))
+        written.append(stage.write_figure(fig, out / name, dpi=110))
     return written

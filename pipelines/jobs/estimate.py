@@ -546,7 +546,11 @@ def _device_filter(
     lag = None
     if latency_s:
         setup, lag = latencies_for_log(setup, latency_s, t_rel, gyro, mag if nine else None)
-    return nine, make_filter(filter_name, setup), [] if lag is None else [(dev.name, lag, setup.mag_latency_s)]
+    return (
+        nine,
+        make_filter(filter_name, setup, argument="--filter"),
+        [] if lag is None else [(dev.name, lag, setup.mag_latency_s)],
+    )
 
 
 def _target(

@@ -301,7 +301,7 @@ def _start_estimator(options: StreamOptions, dev: Device, scen: Scenario, sample
     assert options.estimate is not None
     setup = setup_for(dev, scen)
     # a throwaway run first, so that loading the compiled kernels does not stall the paced clock
-    make_filter(options.estimate, setup).process(
+    make_filter(options.estimate, setup, argument="--estimate").process(
         samples.t[:64] - samples.t[0],
         samples.gyro[:64],
         samples.accel[:64],
@@ -310,7 +310,7 @@ def _start_estimator(options: StreamOptions, dev: Device, scen: Scenario, sample
     return LiveEstimator(
         open_session(options.session.config()),
         options.device_name,
-        make_filter(options.estimate, setup),
+        make_filter(options.estimate, setup, argument="--estimate"),
         setup.use_mag,
         tf_rate_hz=options.tf_rate_hz,  # map -> body_estimate beside the stream's map -> base_link
     ).start()

@@ -2,7 +2,9 @@
 give, the residuals at rest) as ``twin.md``, ``twin.json`` and one plot per recording.
 
 Outputs in ``--out``: ``twin.md``, ``twin.json`` and ``<trial>.png`` (Allan deviations and spectra, real
-against twin), each written through a temporary file.
+against twin), all or none: each written to a temporary file, and all renamed into place once all are
+complete (:func:`~gyroemu.pipelines.formats.atomic.staged_files`), so a full disk at the last plot leaves
+``--out`` as it was.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, SupportsFloat
+from typing import TYPE_CHECKING, Any, SupportsFloat
 
 import numpy as np
 
@@ -20,6 +22,9 @@ from .motion import twin_seed
 from .recording import Recording
 from .residuals import TAUS_S, rms_over_seeds
 from .runs import METRICS
+
+if TYPE_CHECKING:
+    from gyroemu.pipelines.formats.atomic import StagedFiles
 
 __all__ = ["RANKED_FILTERS", "TrialResult", "TwinReport", "trial_result", "format_vector"]
 
@@ -216,15 +221,21 @@ class TwinReport:
         return "\n".join(lines) + "\n"
 
     def save_plots(self, directory: str | os.PathLike[str]) -> list[Path]:
+        """One ``<trial>.png`` per recording in ``directory``; all or none of them."""
+        from gyroemu.pipelines.formats.atomic import staged_files
+
+        with staged_files() as stage:
+            return self._stage_plots(stage, Path(directory))
+
+    def _stage_plots(self, stage: StagedFiles, directory: Path) -> list[Path]:
+        """:meth:`save_plots` through ``stage``."""
         import matplotlib
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        from gyroemu.pipelines.formats.atomic import write_figure_atomic
         from gyroemu.pipelines.formats.file_names import unique_stems
 
-        directory = Path(directory)
         written = []
         for tr, stem in zip(self.trials, unique_stems([Path(t.name).stem for t in self.trials])):
             fig, axes = plt.subplots(2, 2, figsize=(11, 7.5))
@@ -257,19 +268,21 @@ class TwinReport:
             fig.suptitle(f"{tr.name}: real vs twin ({self.settings['device']}, {self.settings['seeds']} seeds)")
             fig.tight_layout()
             path = directory / f"{stem}.png"
-            written.append(write_figure_atomic(fig, path, dpi=100))
+            written.append(stage.write_figure(fig, path, dpi=100))
         return written
 
     def save(self, directory: str | os.PathLike[str]) -> dict[str, Any]:
-        """``twin.md``, ``twin.json`` and the plots in ``directory`` (made if missing); their paths."""
-        from gyroemu.pipelines.formats.atomic import write_text_atomic
+        """``twin.md``, ``twin.json`` and the plots in ``directory`` (made if missing); their paths. All or
+        nothing: each file is written to a temporary file, and they are renamed into place only once all
+        are complete; on an error (a full disk) ``directory`` is left as it was."""
+        from gyroemu.pipelines.formats.atomic import staged_files
 
         directory = Path(directory)
-        directory.mkdir(parents=True, exist_ok=True)
         paths: dict[str, Any] = {"markdown": directory / "twin.md", "json": directory / "twin.json"}
-        write_text_atomic(paths["json"], self.to_json())
-        write_text_atomic(paths["markdown"], self.to_markdown())
-        paths["plots"] = self.save_plots(directory)
+        with staged_files(directory) as stage:
+            stage.write_text(paths["json"], self.to_json())
+            stage.write_text(paths["markdown"], self.to_markdown())
+            paths["plots"] = self._stage_plots(stage, directory)
         return paths
 
 

@@ -3,13 +3,15 @@
 
 from __future__ import annotations
 
+import errno
 import os
 import stat
 from pathlib import Path
 
 import pytest
+from full_disk import contents, disk_full_at
 
-from gyroemu.pipelines.formats.atomic import folder_problem, write_atomic, write_text_atomic
+from gyroemu.pipelines.formats.atomic import folder_problem, staged_files, write_atomic, write_text_atomic
 
 
 @pytest.mark.parametrize("umask", [0o022, 0o077, 0o002])
@@ -98,3 +100,46 @@ def test_an_existing_file_keeps_its_own_mode(tmp_path: Path):
     target.chmod(0o640)
     write_text_atomic(target, "newer")
     assert stat.S_IMODE(target.stat().st_mode) == 0o640
+
+
+@pytest.mark.parametrize("n", [1, 2, 3])
+def test_staged_files_put_every_file_in_place_or_none(tmp_path: Path, monkeypatch, n: int):
+    """A full disk at any file of a staged output leaves the folder as it was (the earlier files, the
+    one to remove, no temporary file); a folder it made is removed again."""
+    out = tmp_path / "report"
+    out.mkdir()
+    (out / "a.txt").write_text("earlier a")
+    (out / "b.png").write_bytes(b"earlier b")
+    (out / "old.png").write_bytes(b"earlier plot")
+    before = contents(out)
+    asked = disk_full_at(monkeypatch, n)
+    with pytest.raises(OSError) as caught:
+        with staged_files(out) as stage:
+            stage.write_text(out / "a.txt", "new a")
+            stage.write(out / "b.png", lambda f: f.write(b"new b"))
+            stage.remove(out / "old.png")
+            stage.write_text(out / "c.txt", "new c")
+    assert caught.value.errno == errno.ENOSPC and len(asked) == n
+    assert contents(out) == before
+    made = tmp_path / "made" / "report"
+    with pytest.raises(KeyboardInterrupt):
+        with staged_files(made) as stage:
+            stage.write_text(made / "a.txt", "a")
+            raise KeyboardInterrupt
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["report"]
+
+
+def test_staged_files_complete_replace_remove_and_keep_the_mode(tmp_path: Path):
+    out = tmp_path / "new" / "report"
+    with staged_files(out) as stage:
+        assert stage.write_text(out / "a.txt", "a") == out / "a.txt"
+        assert not (out / "a.txt").exists()  # nothing in place before the end
+    assert contents(out) == {"a.txt": b"a"}
+    (out / "a.txt").chmod(0o640)
+    (out / "old.png").write_bytes(b"x")
+    with staged_files(out) as stage:
+        stage.write_text(out / "a.txt", "A")
+        stage.write(out / "b.bin", lambda f: f.write(b"B"))
+        stage.remove(out / "old.png")
+    assert contents(out) == {"a.txt": b"A", "b.bin": b"B"}
+    assert stat.S_IMODE((out / "a.txt").stat().st_mode) == 0o640

@@ -322,6 +322,85 @@ def test_user_filter_protocol(configs, user_filters):
         registry.make_filter("kalman", FilterSetup(rate_hz=100.0))
 
 
+BREAKS_PROTOCOL = """\
+import numpy as np
+
+
+class ReturnsNone:
+    name = "none"
+
+    def __init__(self, setup):
+        pass
+
+    def process(self, t, gyro, accel, mag=None):
+        return None
+
+
+class ThreeColumns(ReturnsNone):
+    def process(self, t, gyro, accel, mag=None):
+        return type("R", (), {"q_wb": np.zeros((len(t), 3))})()
+
+
+class OneBias(ReturnsNone):
+    def process(self, t, gyro, accel, mag=None):
+        q = np.tile([1.0, 0.0, 0.0, 0.0], (len(t), 1))
+        return type("R", (), {"q_wb": q, "gyro_bias": np.zeros(3)})()
+
+
+class Duck(ReturnsNone):
+    def process(self, t, gyro, accel, mag=None):
+        return type("R", (), {"q_wb": np.tile([1.0, 0.0, 0.0, 0.0], (len(t), 1))})()
+"""
+
+
+@pytest.mark.parametrize(
+    "cls, said",
+    [
+        ("ReturnsNone", "ReturnsNone.process() returned NoneType, not an Estimate"),
+        ("ThreeColumns", "ThreeColumns.process() returned q_wb of shape (200, 3), not one (4,) quaternion a sample"),
+        ("OneBias", "OneBias.process() returned gyro_bias of shape (3,), not (200, 3)"),
+    ],
+)
+def test_estimate_refuses_a_filter_that_breaks_the_protocol(tmp_path, monkeypatch, capsys, cls, said):
+    """A user's filter whose process() returns no Estimate of one attitude a sample (None, say) stops
+    estimate with exit 2 and one line naming --filter, the filter and what the protocol asks, no output
+    (was: AttributeError 'NoneType' object has no attribute 'gyro_bias', a traceback). The check is
+    make_filter's with ``argument``; estimate's own call is made here as estimate must make it."""
+    from gyroemu.pipelines.jobs import estimate
+
+    def checked(spec, setup, **given):
+        return registry.make_filter(spec, setup, **{"argument": "--filter", **given})
+
+    monkeypatch.setattr(estimate, "make_filter", checked)
+    module = tmp_path / "badf.py"
+    module.write_text(BREAKS_PROTOCOL)
+    log, out = _level_log(tmp_path / "in.mcap"), tmp_path / "o.mcap"
+    assert cli.main(["estimate", str(log), "--out", str(out), "--filter", f"{module}:{cls}"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"gyroemu estimate: error: argument --filter: filter '{module}:{cls}': {said}"), err
+    assert "process(t, gyro, accel, mag=None) must return an Estimate: q_wb (N, 4)" in err
+    assert len(err.strip().splitlines()) == 1 and not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["badf.py", "in.mcap"]
+
+
+def test_protocol_checks_wrap_only_a_users_filter_and_only_when_asked(tmp_path):
+    """Without ``argument`` (bench, which checks the results itself) make_filter gives the user's object
+    as it is; the built-ins are never wrapped; an object with a q_wb passes as an Estimate."""
+    module = tmp_path / "badf.py"
+    module.write_text(BREAKS_PROTOCOL)
+    setup, n = FilterSetup(rate_hz=100.0), 5
+    t, gyro, accel = np.arange(n) / 100.0, np.zeros((n, 3)), np.tile([0.0, 0.0, 9.81], (n, 1))
+    assert registry.make_filter(f"{module}:ReturnsNone", setup).process(t, gyro, accel) is None
+    plain = type(registry.make_filter("madgwick", setup))
+    assert type(registry.make_filter("madgwick", setup, argument="--filter")) is plain
+    duck = registry.make_filter(f"{module}:Duck", setup, argument="--filter")
+    assert duck.name == "none"
+    est = duck.process(t, gyro, accel)
+    assert isinstance(est, Estimate) and est.q_wb.shape == (n, 4) and est.gyro_bias is None
+    with pytest.raises(registry.FilterProtocolError, match="argument --estimate: "):
+        registry.make_filter(f"{module}:ReturnsNone", setup, argument="--estimate").process(t, gyro, accel)
+
+
 def test_vqf_missing_is_reported_not_fatal(monkeypatch, configs):
     monkeypatch.setitem(sys.modules, "vqf", None)  # `import vqf` now raises ImportError
     assert "vqf" not in registry.available_filters()
@@ -502,6 +581,31 @@ def test_force_removes_the_earlier_reports_plots_of_other_cases_and_no_other_fil
     assert json.loads((out / "bench.json").read_text())["plots"] == [kept]
     assert sorted(p.name for p in out.iterdir()) == sorted(["bench.json", "bench.md", kept, "photo.png", "notes.txt"])
     assert (out / "photo.png").read_bytes() == b"someone's picture"
+
+
+@pytest.mark.parametrize("n", [1, 3])
+def test_a_full_disk_leaves_the_folder_as_it_was(tmp_path, configs, capsys, monkeypatch, n):
+    """The report is written all or none: a disk that fills at any of its files (bench.json, bench.md,
+    the plot) stops the bench with exit status 1 and one line, leaving an earlier report whole (its plot
+    of a case this bench does not have too) and no temporary file, or no folder where there was none."""
+    from full_disk import contents, disk_full_at
+
+    out = tmp_path / "report"
+    argv = ["--scenario", configs / "rotation.toml", "--duration", 0.5, "--runs", 1, "--filter", "madgwick"]
+    two = ["--device", configs / "ideal200.toml", "--device", configs / "jittery200.toml"]
+    assert run_cli(*argv, *two, "--out", out) == 0, capsys.readouterr().err
+    capsys.readouterr()
+    before = contents(out)
+    assert len(before) == 4
+    asked = disk_full_at(monkeypatch, n)
+    assert run_cli(*argv, "--device", configs / "ideal200.toml", "--out", out, "--force") == 1
+    printed = capsys.readouterr()
+    assert len(asked) == n and printed.err.startswith("gyroemu bench: error: No space left on device writing ")
+    assert contents(out) == before
+    fresh = tmp_path / "new" / "report"
+    disk_full_at(monkeypatch, n)
+    assert run_cli(*argv, "--device", configs / "ideal200.toml", "--out", fresh) == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["report"]
 
 
 def test_earlier_plots_are_only_those_the_earlier_bench_json_names(tmp_path):

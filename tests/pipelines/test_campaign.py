@@ -449,3 +449,38 @@ def test_scheduler_addresses_of_every_dask_protocol_are_taken(address, problem):
 
     found = scheduler_problem(address)
     assert (found is None) if problem is None else (found is not None and problem in found), found
+
+
+@pytest.mark.parametrize("n", [1, 3])
+def test_a_full_disk_leaves_the_earlier_campaign_report_as_it_was(tmp_path, monkeypatch, n):
+    """The report (bench.json, bench.md, a box plot per cell) is written all or none: a full disk at any
+    of its files leaves the earlier report whole and no temporary file (the run store is not touched)."""
+    import errno
+
+    from full_disk import contents, disk_full_at
+
+    from gyroemu.pipelines.jobs.bench import SimCase, run_bench
+    from gyroemu.pipelines.jobs.campaign import save_campaign_report
+
+    report = run_bench([SimCase("smooth_manoeuvre", "consumer_mems", duration=0.5)], filters=["madgwick"], runs=2)
+    report.settings["campaign"] = {
+        "name": "tiny",
+        "store": "runs",
+        "cells": 1,
+        "seeds": [0, 1],
+        "tasks": 1,
+        "rows_expected": 2,
+        "rows_stored": 2,
+        "failures": [],
+    }
+    out = tmp_path / "out"
+    (out / "runs").mkdir(parents=True)
+    earlier = save_campaign_report(report, None, out)
+    assert len(earlier["plots"]) == 1
+    before = contents(out)
+    report.settings["campaign"]["name"] = "again"
+    asked = disk_full_at(monkeypatch, n)
+    with pytest.raises(OSError) as caught:
+        save_campaign_report(report, None, out)
+    assert caught.value.errno == errno.ENOSPC and len(asked) == n
+    assert contents(out) == before

@@ -276,6 +276,13 @@ def test_irrational_rate_stamps_within_half_ns(tmp_path):
         ("empty", "dataset 'imu_gyr': holds no samples"),
         ("no_rate", "attribute 'sampling_rate': missing"),
         ("zero_rate", "attribute 'sampling_rate'"),
+        # stamps k·1e9/fs overflow int64 ns (were: ValueError "stamps before 0 s", a traceback)
+        ("tiny_rate", "attribute 'sampling_rate': 1e-06 Hz is outside 1 Hz … 100 kHz"),
+        # every stamp rounds to the same ns (were: a log of repeated stamps; identify: an 894 GiB array)
+        ("huge_rate", "attribute 'sampling_rate': 1e+12 Hz is outside 1 Hz … 100 kHz"),
+        ("period_as_rate", "attribute 'sampling_rate': 0.0035 Hz is outside"),
+        ("gyro_column_nan", "dataset 'imu_gyr': column y NaN in every row: no sample a filter could use"),
+        ("accel_nan", "dataset 'imu_acc': NaN in every row"),
     ],
 )
 def test_bad_input_exits_2_naming_file_and_item(tmp_path, case, named):
@@ -302,8 +309,11 @@ def test_bad_input_exits_2_naming_file_and_item(tmp_path, case, named):
                 name: np.zeros((0, w)) for name, w in (("imu_gyr", 3), ("imu_acc", 3), ("imu_mag", 3), ("opt_quat", 4))
             }
             | {"movement": np.zeros(0, bool)},
+            "gyro_column_nan": {"imu_gyr": np.zeros((50, 3)) + [0.0, np.nan, 0.0]},
+            "accel_nan": {"imu_acc": np.full((50, 3), np.nan)},
         }.get(case)
-        write_trial(source, replace=replace, attrs=case != "no_rate", rate=0.0 if case == "zero_rate" else 100.0)
+        rate = {"zero_rate": 0.0, "tiny_rate": 1e-6, "huge_rate": 1e12, "period_as_rate": 0.0035}.get(case, 100.0)
+        write_trial(source, replace=replace, attrs=case != "no_rate", rate=rate)
     before = fingerprint(source) if source.is_file() else None
     inputs = sorted(tmp_path.iterdir())
     out = tmp_path / "trial.mcap"
@@ -317,6 +327,22 @@ def test_bad_input_exits_2_naming_file_and_item(tmp_path, case, named):
         with pytest.raises(ImportInputError) as e:
             import_broad(source, out)
         assert e.value.file == str(source) and (e.value.item or "") in named
+
+
+@pytest.mark.parametrize("rate", [1.0, 100_000.0])
+def test_rates_at_the_bounds_import_and_identify_refuses_one_beyond(tmp_path, rate):
+    """1 Hz and 100 kHz are IMU rates (BROAD_RATE_RANGE_HZ): stamps k·1e9/fs exactly, distinct; a rate
+    beyond is refused by every reader of the trial, here identify's, exit 2 before any work."""
+    source = tmp_path / "trial.hdf5"
+    write_trial(source, n=60, rate=rate)
+    import_broad(source, tmp_path / "t.mcap")
+    stamp_ns = read_quietly(tmp_path / "t.mcap").device.stamp_ns
+    assert np.array_equal(stamp_ns, np.arange(60) * round(1e9 / rate))
+    write_trial(source, n=60, rate=rate * (0.5 if rate == 1.0 else 2.0))
+    code, _, stderr = run_cli(["identify", str(source), "--out", str(tmp_path / "dev.toml")])
+    assert code == 2 and f"{source}: attribute 'sampling_rate': " in stderr and "Traceback" not in stderr, stderr
+    assert len(stderr.strip().splitlines()) == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.mcap", "trial.hdf5"]
 
 
 @pytest.mark.parametrize(

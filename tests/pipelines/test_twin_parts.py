@@ -593,3 +593,28 @@ def test_the_pooled_table_gives_the_fewest_real_clusters_at_the_longest_tau():
     section = md[md.index("## Residuals at rest, pooled over the 2 recordings") :]
     (row,) = [line for line in section.splitlines() if line.startswith("| gyro | ")]
     assert row.endswith(" | 4 |"), row
+
+
+@pytest.mark.parametrize("n", [1, 4])
+def test_a_full_disk_leaves_the_earlier_twin_report_as_it_was(tmp_path, monkeypatch, n):
+    """twin.json, twin.md and the plots are written all or none: a disk that fills at any of them leaves
+    the earlier report whole and no temporary file, or no folder where there was none."""
+    import errno
+
+    from full_disk import contents, disk_full_at
+
+    out = tmp_path / "out"
+    report = _report([_trial("a.mcap"), _trial("bb.mcap")])
+    paths = report.save(out)
+    assert [p.name for p in paths["plots"]] == ["a.png", "bb.png"]
+    before = contents(out)
+    report.settings["device"] = "another"
+    asked = disk_full_at(monkeypatch, n)
+    with pytest.raises(OSError) as caught:
+        report.save(out)
+    assert caught.value.errno == errno.ENOSPC and len(asked) == n
+    assert contents(out) == before
+    disk_full_at(monkeypatch, n)
+    with pytest.raises(OSError):
+        report.save(tmp_path / "new" / "out")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
