@@ -197,6 +197,9 @@ def read_trial(path: Path) -> TrialData:
         raise LogError("has no /truth/imu attitude to identify against", file=path)
     s = log.samples
     _check_samples(len(s.t), path)
+    from gyroemu.pipelines.estimation.series import check_samples
+
+    check_samples(path, log.name, s.t, s.gyro, s.accel)  # stamps that do not increase, or NaN everywhere
     mag = s.mag if s.mag is not None and np.isfinite(s.mag).any() else None
     # Seconds from the log's first sample: the samples' exactly (float seconds since the epoch resolve
     # 0.24 µs, which would skew the rate written), the truth's and pose's to 0.24 µs.

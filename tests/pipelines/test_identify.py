@@ -1048,3 +1048,25 @@ def test_broad_trial_16_field_is_named_and_no_other(tmp_path: Path):
     assert len(named) == 1 and named[0].startswith(UNDISTURBED[3]), result.notes
     site = result.site_toml()
     assert site is not None and f"{UNDISTURBED[3]}: its field at rest lies" in site
+
+
+def test_a_recording_whose_stamps_repeat_is_named(tmp_path: Path):
+    """Stamps that repeat (an old import of a BROAD file at an absurd rate wrote them) ended in a
+    ZeroDivisionError; refused as estimate refuses them, naming the file."""
+    from gyroemu.errors import LogError
+    from gyroemu.pipelines.formats.channels import ImuSeries
+    from gyroemu.pipelines.formats.mcap_log import Recording, write_mcap
+    from gyroemu.pipelines.jobs.identify import read_trial
+    from gyroemu.sensors.samples import ImuSamples
+
+    n = 200
+    t = 1.0 + np.arange(n) * 0.01
+    t[100] = t[99]
+    rng = np.random.default_rng(0)
+    still = np.tile([0.0, 0.0, 9.81], (n, 1))
+    samples = ImuSamples(t=t, gyro=rng.normal(0, 1e-3, (n, 3)), accel=still, mag=np.full((n, 3), np.nan))
+    truth = ImuSeries(t=t, q_wb=np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)))
+    log = tmp_path / "repeated.mcap"
+    write_mcap(log, Recording(samples=samples, truth=truth))
+    with pytest.raises(LogError, match=r"repeated.mcap: IMU stamps of device 'imu0' are not increasing: sample 100"):
+        read_trial(log)
