@@ -81,6 +81,13 @@ def load_recording(path: Path) -> Recording:
     t = np.asarray(s.t, float)
     if len(t) < 2 or len(tt) < 2:  # no sample interval, hence no rate
         raise RecordingError(f"holds {len(t)} sample(s) and {len(tt)} truth sample(s): a twin needs many")
+    from gyroemu.errors import LogError
+    from gyroemu.pipelines.estimation.series import check_samples
+
+    try:  # stamps that do not increase, or no sample without NaN (the twin interpolated nothing: a traceback)
+        check_samples(path, dev.name, t, s.gyro, s.accel)
+    except LogError as e:
+        raise RecordingError(e.reason) from None
     # the motion file's clock (read_mcap_motion): from the first truth stamp, exactly where the truth is
     # at the samples' stamps (float seconds since the epoch resolve 0.24 µs: a 1 kHz log read 1000.07 Hz)
     clock = dev.seconds_from_first() if np.array_equal(tt, t) else t - tt[0]

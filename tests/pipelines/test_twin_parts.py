@@ -192,6 +192,27 @@ def test_load_recording_matches_each_sample_to_its_nearest_truth(tmp_path, shift
     assert rec.counted == "movement mask" and np.array_equal(rec.mask, movement)
 
 
+def test_a_log_with_a_gyro_axis_never_measured_is_refused_by_name(tmp_path):
+    """A gyro column NaN in every row leaves no sample to run on: refused as estimate refuses it (it ended
+    in np.interp's 'array of sample points is empty')."""
+    from gyroemu.pipelines.formats.channels import ImuSeries
+    from gyroemu.pipelines.formats.mcap_log import McapLogWriter
+    from gyroemu.pipelines.formats.mcap_log import Recording as LogRecording
+    from gyroemu.pipelines.twin.recording import RecordingError
+    from gyroemu.sensors.samples import ImuSamples
+
+    n = 200
+    t = 1.0 + np.arange(n) * 0.01
+    gyro = np.random.default_rng(1).standard_normal((n, 3))
+    gyro[:, 1] = np.nan
+    samples = ImuSamples(t=t, gyro=gyro, accel=np.ones((n, 3)), mag=np.full((n, 3), np.nan))
+    path = tmp_path / "blind.mcap"
+    with McapLogWriter(path, start_ns=EPOCH_2026_NS) as log:
+        log.write(LogRecording(samples, truth=ImuSeries(t=t, q_wb=np.tile([1.0, 0, 0, 0], (n, 1)))))
+    with pytest.raises(RecordingError, match="every IMU sample of device 'imu0' holds NaN"):
+        load_recording(path)
+
+
 def _recording(t, gyro, accel, q_true, mask, counted="movement mask", **truth) -> Recording:
     fs = 1.0 / float(np.median(np.diff(t)))
     return Recording(
