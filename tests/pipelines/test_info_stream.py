@@ -134,7 +134,7 @@ def test_info_says_whether_the_file_has_a_summary_and_indexes(tmp_path):
     """A writer's options decide what a reader can seek by: info says what the file has, not what
     gyroemu's writer would have written (it said "summary and indexes" of every complete file)."""
     from mcap.writer import IndexType
-    from mcap.writer import Writer as PlainMcapWriter
+    from plain_mcap import write_plain_imu
 
     from gyroemu.pipelines.formats.messages import IMU
 
@@ -152,15 +152,7 @@ def test_info_says_whether_the_file_has_a_summary_and_indexes(tmp_path):
         "unchunked": ({"use_chunking": False}, "complete (summary, no chunk indexes)", True, False),
     }
     for name, (options, state, summary, indexed) in cases.items():
-        path = tmp_path / f"{name}.mcap"
-        with open(path, "wb") as f:
-            writer = PlainMcapWriter(f, **options)
-            writer.start("ros2", "test")
-            schema = writer.register_schema("sensor_msgs/msg/Imu", "ros2msg", IMU.schema.encode())
-            channel = writer.register_channel("/imu", "cdr", schema)
-            for k, row in enumerate(rows):
-                writer.add_message(channel, log_time=(k + 1) * 10**7, data=row.tobytes(), publish_time=0, sequence=k)
-            writer.finish()
+        path = write_plain_imu(tmp_path / f"{name}.mcap", rows, **options)
         info = log_info(path)
         assert (info.summary, info.indexed) == (summary, indexed), name
         assert info.text().splitlines()[0].endswith(state), name

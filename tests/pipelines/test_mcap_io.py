@@ -26,6 +26,7 @@ from mcap.writer import CompressionType
 from mcap.writer import Writer as PlainMcapWriter
 from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2McapWriter
+from plain_mcap import write_plain_imu
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from gyroemu.dynamics import ConfigError, load_scenario
@@ -653,14 +654,7 @@ def test_foreign_file(tmp_path, compression):
 def test_unchunked_foreign_file(tmp_path):
     path = tmp_path / "plain.mcap"
     rows = IMU.encode(np.arange(1, 51) * 10**7, "imu", {"angular_velocity": np.arange(150.0).reshape(50, 3)})
-    with open(path, "wb") as f:
-        writer = PlainMcapWriter(f, use_chunking=False)
-        writer.start("ros2", "test")
-        schema = writer.register_schema("sensor_msgs/msg/Imu", "ros2msg", IMU.schema.encode())
-        channel = writer.register_channel("/imu", "cdr", schema)
-        for k, row in enumerate(rows):
-            writer.add_message(channel, log_time=(k + 1) * 10**7, data=row.tobytes(), publish_time=0, sequence=k)
-        writer.finish()
+    write_plain_imu(path, rows, use_chunking=False)
     log = read_quietly(path)
     assert list(log.devices) == ["imu0"]
     assert np.array_equal(log.samples.gyro, np.arange(150.0).reshape(50, 3))
@@ -959,26 +953,15 @@ def test_messages_of_equal_log_time_keep_their_file_order(tmp_path):
     assert np.array_equal(log.device.stamp_ns, np.arange(1, 51) * 10**7)
 
 
-def _plain_imu_file(path: Path, rows: np.ndarray, chunked: bool, log_time=None) -> None:
-    """``rows`` (N, size) as /imu messages of the mcap library's writer, chunked or not."""
-    with open(path, "wb") as f:
-        writer = PlainMcapWriter(f, use_chunking=chunked, chunk_size=4096, compression=CompressionType.NONE)
-        writer.start("ros2", "test")
-        schema = writer.register_schema("sensor_msgs/msg/Imu", "ros2msg", IMU.schema.encode())
-        channel = writer.register_channel("/imu", "cdr", schema)
-        for k, row in enumerate(rows):
-            t = (k + 1) * 10**7 if log_time is None else log_time
-            writer.add_message(channel, log_time=t, data=row.tobytes(), publish_time=7 * k, sequence=3 * k)
-        writer.finish()
-
-
 def test_equal_log_times_keep_file_order_across_payload_sizes(tmp_path):
     """Frame ids of two lengths make payloads of two sizes, decoded a size at a time: with every log
     time equal, only the messages' file order puts them back in sequence."""
     path = tmp_path / "two_sizes.mcap"
     n = 40
     rows = [IMU.encode([k + 1], ["imu", "imu_link"][k % 2], {"angular_velocity": [[k, 0.0, 0.0]]})[0] for k in range(n)]
-    _plain_imu_file(path, np.array(rows, dtype=object), chunked=True, log_time=10**9)
+    write_plain_imu(
+        path, np.array(rows, dtype=object), log_time=10**9, chunk_size=4096, compression=CompressionType.NONE
+    )
     log = read_quietly(path)
     assert np.array_equal(log.samples.gyro[:, 0], np.arange(n))
 
@@ -991,7 +974,7 @@ def test_record_walk_hands_out_every_message_unchanged(tmp_path):
     rows = IMU.encode(np.arange(1, 31) * 10**7, "imu", {"angular_velocity": np.arange(90.0).reshape(30, 3)})
     for chunked in (True, False):
         path = tmp_path / f"walk_{chunked}.mcap"
-        _plain_imu_file(path, rows, chunked)
+        write_plain_imu(path, rows, use_chunking=chunked, chunk_size=4096, compression=CompressionType.NONE)
         batches = list(McapRecordWalk(path).batches())
         assert (1 < len(batches) < 30) if chunked else (len(batches) == 1)  # a batch per chunk; LOOSE_BATCH loose
         payloads = [b.payload(k) for b in batches for k in range(len(b.size))]
@@ -1077,7 +1060,7 @@ def test_message_batches_carry_the_payloads_written(tmp_path):
 
     rows = IMU.encode(np.arange(1, 21) * 10**7, "imu_frame", {"angular_velocity": np.arange(60.0).reshape(20, 3)})
     path = tmp_path / "batches.mcap"
-    _plain_imu_file(path, rows, chunked=True)
+    write_plain_imu(path, rows, chunk_size=4096, compression=CompressionType.NONE)
     got = [m.data for batch in iter_mcap_batches(path) for m in batch]
     assert got == [row.tobytes() for row in rows]
 

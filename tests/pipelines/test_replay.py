@@ -19,6 +19,7 @@ import pytest
 zenoh = pytest.importorskip("zenoh")
 
 from live_processes import Listener, free_port, mcap_messages, procs, write_foreign  # noqa: E402,F401
+from signal_output import SignalOn  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO, DEVICE, DURATION = "heavy_top", "consumer_mems", 5.0
@@ -425,23 +426,6 @@ def test_clock_messages_and_keys(tmp_path):
     assert key.startswith("0/clock/rosgraph_msgs::msg::dds_::Clock_/") and key.endswith(hash_)
 
 
-class _SignalOn:
-    """A replay's ``out`` that raises ``sig`` in the process when ``marker`` is printed (the job's own
-    handlers take it: it is in its live stretch)."""
-
-    def __init__(self, sig: int, marker: str) -> None:
-        self.sig, self.marker, self.text = sig, marker, []
-
-    def write(self, text: str) -> int:
-        self.text.append(text)
-        if self.marker in text:
-            signal.raise_signal(self.sig)
-        return len(text)
-
-    def flush(self) -> None:
-        pass
-
-
 @pytest.mark.parametrize(("sig", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)], ids=["SIGINT", "SIGTERM"])
 def test_a_single_pass_stopped_by_a_signal_returns_its_status(tmp_path, sig, status):
     """A pass interrupted by SIGINT ends with 130, by SIGTERM with 143 (it was 130 for both). In process,
@@ -456,7 +440,7 @@ def test_a_single_pass_stopped_by_a_signal_returns_its_status(tmp_path, sig, sta
         session=SessionOptions(listen=(f"tcp/127.0.0.1:{free_port()}",)),
         pacing=PacingOptions(wait_s=0.0),
     )
-    out = _SignalOn(sig, "replay: publishing")
+    out = SignalOn(sig, "replay: publishing")
     assert run_replay(options, out=out) == status, "".join(out.text)  # type: ignore[arg-type]
 
 

@@ -202,6 +202,7 @@ def drain(run, depth):
 zenoh = pytest.importorskip("zenoh")
 
 from live_processes import free_port, procs  # noqa: E402,F401  (procs is a fixture)
+from signal_output import SignalOn  # noqa: E402
 
 
 @pytest.mark.slow
@@ -314,23 +315,6 @@ def test_endless_stream_with_live_estimate_through_a_router(procs, tmp_path):
     assert procs.stop("router") == 0
 
 
-class _SignalOnPublishing:
-    """A stream's ``out`` that raises ``sig`` in the process when ``marker`` is printed: the job is in its
-    live stretch (its own handlers take the signal) and about to send."""
-
-    def __init__(self, sig: int, marker: str) -> None:
-        self.sig, self.marker, self.text = sig, marker, []
-
-    def write(self, text: str) -> int:
-        self.text.append(text)
-        if self.marker in text:
-            signal.raise_signal(self.sig)
-        return len(text)
-
-    def flush(self) -> None:
-        pass
-
-
 @pytest.mark.parametrize(("sig", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)], ids=["SIGINT", "SIGTERM"])
 def test_a_stream_stopped_by_a_signal_returns_its_status(sig, status):
     """SIGINT ends a stream with 130 and SIGTERM with 143, as any command (it was 130 for both: the
@@ -346,6 +330,6 @@ def test_a_stream_stopped_by_a_signal_returns_its_status(sig, status):
         session=SessionOptions(listen=(f"tcp/127.0.0.1:{free_port()}",)),
         pacing=PacingOptions(wait_s=0.0),
     )
-    out = _SignalOnPublishing(sig, "stream: publishing")
+    out = SignalOn(sig, "stream: publishing")
     assert run_stream(options, out=out) == status, "".join(out.text)  # type: ignore[arg-type]
     assert "stream: sent" in "".join(out.text)
