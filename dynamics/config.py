@@ -32,6 +32,9 @@ __all__ = [
     "Real",
     "as_number",
     "at_most",
+    "at_least",
+    "MAX_ANGLE_TURNS",
+    "AngleRad",
     "PositiveReal",
     "NonNegativeReal",
     "Vec3",
@@ -64,10 +67,41 @@ def at_most(limit: float, reason: str) -> pydantic.AfterValidator:
     return pydantic.AfterValidator(check)
 
 
+def at_least(limit: float, reason: str) -> pydantic.AfterValidator:
+    """A pydantic validator refusing a number below ``limit`` with ``reason`` (why the bound), the
+    counterpart of :func:`at_most` for keys whose small values blow up what they divide."""
+
+    def check(value: float) -> float:
+        if value < limit:
+            raise ValueError(f"{value:g} is less than the limit of {limit:g}: {reason}")
+        return value
+
+    return pydantic.AfterValidator(check)
+
+
+MAX_ANGLE_TURNS = 4
+"""The largest magnitude of an orientation angle given in radians (``AngleRad``), in turns (4 turns,
+8π = 25.1 rad, 1440°). An orientation angle means the same modulo a turn, so a config writes it within
+a turn or two (−π…π, 0…2π, or a spin phase a little past it); a value far beyond is a unit slip
+(degrees in a ``_rad`` key: 90 there is 14 turns), and at 10³⁰⁰ rad no digit of its sine or cosine is
+left (float64 spaces numbers above 2⁵² · 2π ≈ 2.8·10¹⁶ more than a turn apart)."""
+
+
+def _angle_rad(value: float) -> float:
+    if abs(value) > MAX_ANGLE_TURNS * 2 * math.pi:
+        raise ValueError(
+            f"{value:g} rad is more than {MAX_ANGLE_TURNS} turns (±{MAX_ANGLE_TURNS * 2 * math.pi:.4g} rad): an "
+            "orientation angle means the same modulo 2π (degrees given in radians?)"
+        )
+    return value
+
+
 Real = Annotated[float, pydantic.BeforeValidator(as_number)]
 PositiveReal = Annotated[Real, Field(gt=0)]
 NonNegativeReal = Annotated[Real, Field(ge=0)]
 Vec3 = tuple[Real, Real, Real]
+AngleRad = Annotated[Real, pydantic.AfterValidator(_angle_rad)]
+"""An orientation angle in radians, at most :data:`MAX_ANGLE_TURNS` turns either way."""
 Quat = tuple[Real, Real, Real, Real]
 
 

@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import AfterValidator, field_validator
 
-from .config import ConfigError, NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3, as_number, at_most
+from .config import AngleRad, ConfigError, NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3, as_number, at_most
 from .earth import Environment
 from .inertia import inertia_config, inertia_tensor
 from .jit import njit
@@ -304,8 +304,10 @@ class HeavyTopBody(Section):
 class HeavyTopInitial(Section):
     """``[initial]`` state of a heavy top, as Z-X-Z Euler angles ``R = Rz(φ) Rx(θ) Rz(ψ)``."""
 
-    euler_zxz_rad: Vec3
-    """(precession φ, nutation θ, spin ψ), rad; θ is the tilt of the symmetry axis from the vertical."""
+    euler_zxz_rad: tuple[AngleRad, AngleRad, AngleRad]
+    """(precession φ, nutation θ, spin ψ), rad; θ is the tilt of the symmetry axis from the vertical.
+    Each at most :data:`gyroemu.dynamics.config.MAX_ANGLE_TURNS` turns either way (an angle far beyond
+    is a unit slip, and at 10³⁰⁰ rad no digit of its sine is left)."""
     euler_zxz_rates_rad_s: Rates
     """(φ̇, θ̇, ψ̇), rad/s; each at most :data:`MAX_RATE_RAD_S`."""
 

@@ -76,6 +76,9 @@ __all__ = [
     "STANDARD_GRAVITY",
     "MAX_RATE_LSB_RAD_PER_S",
     "MAX_ACCEL_LSB_M_PER_S2",
+    "MAX_ANGLE_LSB_RAD",
+    "MAX_VELOCITY_LSB_M_PER_S",
+    "MIN_BANDWIDTH_FRACTION",
 ]
 
 #: The unit g₀ in key names (``_per_g``, ``_ug``), m/s²; not the local gravity of a scenario.
@@ -106,11 +109,35 @@ the whole range of the widest shock accelerometers (about ±200 000 g, 2·10⁶ 
 hold every acceleration one reads; the quantiser's white noise LSB² T / 12 of a coarser one leaves
 float64's range."""
 
+MAX_ANGLE_LSB_RAD = 0.1
+"""The coarsest ``quantisation_rad`` (an integrating output's angle per count), rad (5.7°): over 250 times
+the coarsest counts of real integrating outputs (a 16-bit delta-angle word over ±720°, 3.8·10⁻⁴ rad; a
+ring laser's fringe is 10⁻⁵ rad). A count of 10³⁰⁰ rad was taken and every output sample read 0."""
+
+MAX_VELOCITY_LSB_M_PER_S = 1.0
+"""The coarsest ``quantisation_m_per_s`` (an integrating accelerometer's velocity per count), m/s: over 150
+times the coarsest counts of real delta-velocity outputs (a 16-bit word over ±200 m/s, 6·10⁻³ m/s;
+pulse-rebalanced accelerometers count 10⁻⁴ m/s). A count of 10³⁰⁰ m/s was taken and every output
+sample read 0."""
+
+MIN_BANDWIDTH_FRACTION = 1e-4
+"""The narrowest output low-pass (``bandwidth_hz``), as a fraction of the sample rate: a hundred times
+narrower than the output filters of real IMUs (which sit within about a hundredth of the output rate);
+at 10⁻⁶ of the rate the second-order Butterworth's coefficients have lost their digits in float64 (its
+noise gain came out 60 % off), and at 10⁻³⁰⁰ Hz its matrices were singular (a LinAlgError)."""
+
 _RateLsb = Annotated[
     PositiveReal, at_most(MAX_RATE_LSB_RAD_PER_S, "one count would be more than the widest gyro's whole range")
 ]
 _AccelLsb = Annotated[
     PositiveReal, at_most(MAX_ACCEL_LSB_M_PER_S2, "one count would be more than the widest accelerometer's range")
+]
+_AngleLsb = Annotated[
+    PositiveReal, at_most(MAX_ANGLE_LSB_RAD, "over 250 times the coarsest angle count of real integrating outputs")
+]
+_VelocityLsb = Annotated[
+    PositiveReal,
+    at_most(MAX_VELOCITY_LSB_M_PER_S, "over 150 times the coarsest velocity count of real integrating outputs"),
 ]
 
 _V = TypeVar("_V")
@@ -283,7 +310,7 @@ class GyroErrors(_CommonErrors):
     markov_sigma_deg_per_h: PerAxisNonNegative | None = None
     markov_tau_s: PerAxisNonNegative | None = Field(default=None, validate_default=True)
     rate_ramp_deg_per_h_per_h: PerAxis = _ZERO
-    quantisation_rad: PositiveReal | None = None
+    quantisation_rad: _AngleLsb | None = None
     quantisation_rad_per_s: _RateLsb | None = None
 
     white_noise_keys = (
@@ -364,7 +391,7 @@ class AccelErrors(_CommonErrors):
     markov_sigma_ug: PerAxisNonNegative | None = None
     markov_tau_s: PerAxisNonNegative | None = Field(default=None, validate_default=True)
     ramp_ug_per_h: PerAxis = _ZERO
-    quantisation_m_per_s: PositiveReal | None = None
+    quantisation_m_per_s: _VelocityLsb | None = None
     quantisation_m_per_s2: _AccelLsb | None = None
 
     white_noise_keys = ("vrw_m_per_s_per_sqrt_h", "noise_density_ug_per_sqrt_hz", "psd_one_sided_ug_per_sqrt_hz")
@@ -558,6 +585,12 @@ class SensorErrors:
             raise ConfigError(
                 f"{m.bandwidth_hz:g} Hz is not below the Nyquist frequency {0.5 / dt:g} Hz "
                 f"of the {1 / dt:g} Hz sample rate",
+                key="bandwidth_hz",
+            )
+        if m.bandwidth_hz is not None and m.bandwidth_hz < MIN_BANDWIDTH_FRACTION / dt:
+            raise ConfigError(
+                f"{m.bandwidth_hz:g} Hz is less than the limit of {MIN_BANDWIDTH_FRACTION:g} of the "
+                f"{1 / dt:g} Hz sample rate: a low-pass whose coefficients float64 cannot hold",
                 key="bandwidth_hz",
             )
         self.model = m

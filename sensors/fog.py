@@ -92,17 +92,25 @@ W. K. Burns (ed.), "Optical Fiber Rotation Sensing", Academic Press, 1994.
 from __future__ import annotations
 
 import math
-from typing import Any, ClassVar, Literal, overload
+from typing import Annotated, Any, ClassVar, Literal, overload
 
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field, ValidationInfo, field_validator
 
-from gyroemu.dynamics.config import PositiveReal
+from gyroemu.dynamics.config import PositiveReal, at_least, at_most
 
 from .mechanism import GyroMechanism, GyroResponse, GyroTruth
 
-__all__ = ["FiberOpticGyro", "SPEED_OF_LIGHT", "ELEMENTARY_CHARGE"]
+__all__ = [
+    "FiberOpticGyro",
+    "SPEED_OF_LIGHT",
+    "ELEMENTARY_CHARGE",
+    "COIL_LENGTH_RANGE_M",
+    "COIL_DIAMETER_RANGE_M",
+    "WAVELENGTH_RANGE_NM",
+    "MIN_MODULATION_DEPTH_RAD",
+]
 
 SPEED_OF_LIGHT = 299_792_458.0  # m/s
 ELEMENTARY_CHARGE = 1.602_176_634e-19  # C
@@ -111,6 +119,21 @@ PLANCK = 6.626_070_15e-34  # J s
 FIBRE_GROUP_INDEX = 1.468
 #: First zero of J₁: the first-harmonic signal vanishes there, so the bias depth must stay below it.
 J1_FIRST_ZERO = 3.831705970207512
+COIL_LENGTH_RANGE_M = (1.0, 100_000.0)
+"""The shortest and longest ``coil_length_m``, m. Real coils run from about 50 m (small tactical FOGs) to
+about 5 km (strategic-grade and seismic rotation sensors): the bounds leave a factor of 20 or more either
+way. The scale factor S and the noise σ/S follow the length: a coil of 10³⁰⁰ m (or 10⁻³⁰⁰ m) overflowed."""
+COIL_DIAMETER_RANGE_M = (0.001, 10.0)
+"""The smallest and largest ``coil_diameter_m``, m: a tenth of the tightest coils fibre survives (about
+10 mm: bend loss and breakage), thirty times the largest navigation coils (about 0.3 m)."""
+WAVELENGTH_RANGE_NM = (100.0, 10_000.0)
+"""The shortest and longest source ``wavelength_nm``, nm: FOG sources are at 830, 1310 or 1550 nm, and
+silica fibre guides light only from about 400 nm to 2 µm; the bounds leave four times that either way.
+A wavelength of 10³⁰⁰ nm overflowed the RIN λ²/(c Δλ) (an OverflowError)."""
+MIN_MODULATION_DEPTH_RAD = 0.1
+"""The lightest bias ``modulation_depth_rad``, rad: its first-harmonic signal J₁(0.1) = 0.05 is a
+twelfth of the peak J₁(1.84) = 0.58 at which real FOGs bias (1.8 rad here); at 10⁻³⁰⁰ rad the signal
+vanished and the noise σ/J₁ overflowed."""
 # Harmonics kept in the RIN sums (J_k(φ_b) for k > 40 is below 10⁻³⁰ for φ_b < J1_FIRST_ZERO).
 _HARMONICS = 40
 
@@ -126,13 +149,28 @@ class FiberOpticGyro(GyroMechanism):
 
     kind: Literal["fog"] = "fog"
     reads: ClassVar[frozenset[str]] = frozenset()
-    coil_length_m: PositiveReal = 200.0
-    coil_diameter_m: PositiveReal = 0.065
-    wavelength_nm: PositiveReal = 1550.0
+    coil_length_m: Annotated[
+        PositiveReal,
+        at_least(COIL_LENGTH_RANGE_M[0], "a fiftieth of the shortest coils of real FOGs (about 50 m)"),
+        at_most(COIL_LENGTH_RANGE_M[1], "twenty times the longest coils of real FOGs (about 5 km)"),
+    ] = 200.0
+    coil_diameter_m: Annotated[
+        PositiveReal,
+        at_least(COIL_DIAMETER_RANGE_M[0], "a tenth of the tightest coil fibre survives (about 10 mm)"),
+        at_most(COIL_DIAMETER_RANGE_M[1], "thirty times the largest coils of navigation FOGs (about 0.3 m)"),
+    ] = 0.065
+    wavelength_nm: Annotated[
+        PositiveReal,
+        at_least(WAVELENGTH_RANGE_NM[0], "a quarter of the shortest light silica fibre guides (about 400 nm)"),
+        at_most(WAVELENGTH_RANGE_NM[1], "five times the longest light silica fibre guides (about 2 µm)"),
+    ] = 1550.0
     spectral_width_nm: PositiveReal = Field(default=30.0, validate_default=True)
     detector_power_uw: PositiveReal = 20.0
     responsivity_a_per_w: PositiveReal = Field(default=0.9, validate_default=True)
-    modulation_depth_rad: PositiveReal = 1.8
+    modulation_depth_rad: Annotated[
+        PositiveReal,
+        at_least(MIN_MODULATION_DEPTH_RAD, "its signal J₁ would be under a twelfth of the peak real FOGs bias at"),
+    ] = 1.8
     loop: Literal["closed", "open"] = "closed"
     open_loop_readout: Literal["linear", "arcsin"] = "linear"
     feedback_range_rad: PositiveReal = math.pi

@@ -48,21 +48,41 @@ from typing import Annotated, Any, Literal
 import numpy as np
 import tomli_w
 from numpy.typing import ArrayLike, NDArray
-from pydantic import Field, field_validator
+from pydantic import AfterValidator, Field, field_validator
 
 from gyroemu.dynamics import Trajectory
-from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3, at_most, validate
+from gyroemu.dynamics.config import (
+    NonNegativeReal,
+    PositiveReal,
+    Quat,
+    Real,
+    Section,
+    Vec3,
+    at_least,
+    at_most,
+    validate,
+)
 from gyroemu.dynamics.truth_source import SampledTruth, TruthSource
 from gyroemu.errors import ConfigError
 
 from .accelerometer import AccelerometerSpec, LatencySeconds
 from .device_run import BLOCK_INNER_SAMPLES, DeviceRun, concatenate_samples
-from .errors import AccelErrors, ErrorModel, GyroErrors
+from .errors import MIN_BANDWIDTH_FRACTION, AccelErrors, ErrorModel, GyroErrors
 from .magnetometer import MagnetometerSpec
 from .mechanism import GYRO_KINDS, GyroMechanism, mechanism_class
 from .samples import ImuSamples
 
-__all__ = ["MAX_DEVICE_RATE_HZ", "DeviceSpec", "Device", "MountingSpec", "ClockSpec", "TemperatureSpec", "GyroSpec"]
+__all__ = [
+    "MAX_DEVICE_RATE_HZ",
+    "MIN_DEVICE_RATE_HZ",
+    "MAX_SENSOR_TEMPERATURE_DEGC",
+    "DeviceSpec",
+    "Device",
+    "MountingSpec",
+    "ClockSpec",
+    "TemperatureSpec",
+    "GyroSpec",
+]
 
 
 class MountingSpec(Section):
@@ -91,11 +111,31 @@ class ClockSpec(Section):
     jitter_s: NonNegativeReal = 0.0
 
 
+MAX_SENSOR_TEMPERATURE_DEGC = 1000.0
+"""The hottest ``[temperature]`` ``initial_degC`` and ``final_degC``, °C: five times the hottest rating of
+real inertial sensors (downhole-drilling parts, about 200 °C), below the 1414 °C at which silicon melts.
+The coldest is above absolute zero. A MEMS gyro at 10³⁰⁰ °C gave NaN, at −10³⁰⁰ °C a traceback."""
+
+
+def _sensor_temperature(value: float) -> float:
+    if not value > -273.15:
+        raise ValueError(f"{value:g} °C is at or below absolute zero (−273.15 °C)")
+    if value > MAX_SENSOR_TEMPERATURE_DEGC:
+        raise ValueError(
+            f"{value:g} is more than the limit of {MAX_SENSOR_TEMPERATURE_DEGC:g}: five times the hottest rating "
+            "of real inertial sensors (about 200 °C)"
+        )
+    return value
+
+
+SensorTemperature = Annotated[Real, AfterValidator(_sensor_temperature)]
+
+
 class TemperatureSpec(Section):
     """``[temperature]``: the sensor's temperature, a first-order warm-up from ``initial`` to ``final``."""
 
-    initial_degC: Real = 25.0
-    final_degC: Real = 25.0
+    initial_degC: SensorTemperature = 25.0
+    final_degC: SensorTemperature = 25.0
     time_constant_s: PositiveReal = 600.0
 
     def at(self, t: ArrayLike) -> NDArray[np.float64]:
@@ -117,13 +157,23 @@ MAX_DEVICE_RATE_HZ = 1e6
 """The highest ``rate_hz`` of a device, Hz: a hundred times the fastest IMU's output (a few kHz); an
 .mcap sample is over a kilobyte, so a device faster than this fills a disk within seconds of motion."""
 
+MIN_DEVICE_RATE_HZ = 0.1
+"""The lowest ``rate_hz`` of a device, Hz: a tenth of the slowest outputs of real IMUs (about 1 Hz, a
+consumer part's lowest-power data rate, 1.5625 Hz); a sample every 10 s already sums 10 s of motion
+into one reading. At 10⁻³⁰⁰ Hz one sample lasted 10³⁰⁰ s: the white noise's per-sample variance
+N²/T underflowed and the error named the noise key, or the run held no sample at all."""
+
 
 class DeviceSpec(Section):
     """A device file (``configs/devices/*.toml``)."""
 
     description: str
     resembles: str = ""
-    rate_hz: Annotated[PositiveReal, at_most(MAX_DEVICE_RATE_HZ, "a hundred times the fastest IMU's output rate")]
+    rate_hz: Annotated[
+        PositiveReal,
+        at_most(MAX_DEVICE_RATE_HZ, "a hundred times the fastest IMU's output rate"),
+        at_least(MIN_DEVICE_RATE_HZ, "a tenth of the slowest IMU's output rate (about 1 Hz)"),
+    ]
     output: Literal["rate", "increment"] = "rate"
     mounting: MountingSpec = MountingSpec()
     clock: ClockSpec = ClockSpec()
@@ -143,6 +193,31 @@ def validate_mechanism(data: dict[str, Any], file: str | Path | None = None) -> 
             f"unknown gyro kind {kind!r}; kinds: {', '.join(GYRO_KINDS)}", file=file, key="gyro.mechanism.kind"
         )
     return validate(mechanism_class(kind), data, file=file, prefix="gyro.mechanism")
+
+
+MAX_INTRINSIC_NOISE_DENSITY = 1e6
+"""The largest white noise a gyro mechanism may make, rad/s/√Hz: 10¹¹ times the noisiest real gyros
+(consumer MEMS, about 10⁻⁴ rad/s/√Hz), a backstop below where its square leaves float64's range (a FOG
+coil of 10⁻³⁰⁰ m made 10²⁹⁴ and an OverflowError); each mechanism's keys keep it far below."""
+
+
+def _check_bandwidth(bandwidth_hz: float, rate_hz: float, *, file: str | Path | None, key: str) -> None:
+    """Refuse an output low-pass at or above the Nyquist frequency, or narrower than
+    :data:`gyroemu.sensors.errors.MIN_BANDWIDTH_FRACTION` of the output rate."""
+    if not bandwidth_hz < rate_hz / 2:
+        raise ConfigError(
+            f"{bandwidth_hz:g} Hz is not below the Nyquist frequency {rate_hz / 2:g} Hz of the output rate",
+            file=file,
+            key=key,
+        )
+    if bandwidth_hz < MIN_BANDWIDTH_FRACTION * rate_hz:
+        raise ConfigError(
+            f"{bandwidth_hz:g} Hz is less than the limit of {MIN_BANDWIDTH_FRACTION:g} of the output rate "
+            f"{rate_hz:g} Hz ({MIN_BANDWIDTH_FRACTION * rate_hz:g} Hz): a hundred times narrower than the output "
+            "filters of real IMUs, and a low-pass whose coefficients float64 cannot hold",
+            file=file,
+            key=key,
+        )
 
 
 def _white_noise_budget(
@@ -314,7 +389,21 @@ class Device:
                 file=where,
                 key="gyro.errors.range_deg_per_s",
             )
+        accel_errors = spec.accelerometer.errors.to_si()
+        # The output low-passes before the noise budget, which takes their noise gain.
+        for model, prefix in ((self._gyro_errors, "gyro.errors"), (accel_errors, "accelerometer.errors")):
+            if model.bandwidth_hz is not None:
+                _check_bandwidth(model.bandwidth_hz, spec.rate_hz, file=where, key=f"{prefix}.bandwidth_hz")
         self.intrinsic_noise_density = float(self.mechanism.intrinsic_noise_density())
+        if not self.intrinsic_noise_density < MAX_INTRINSIC_NOISE_DENSITY:
+            # a backstop: each mechanism's keys are bounded so that their noise stays far below this
+            raise ConfigError(
+                f"the {self.mechanism.kind} mechanism's own white noise would be {self.intrinsic_noise_density:.4g} "
+                f"rad/s per sqrt(Hz), more than the limit of {MAX_INTRINSIC_NOISE_DENSITY:g}: its keys are far "
+                "outside any real gyro's",
+                file=where,
+                key="gyro.mechanism",
+            )
         period = 1.0 / spec.rate_hz
         self._gyro_errors, self._gyro_noise_density = _white_noise_budget(
             self._gyro_errors,
@@ -326,7 +415,7 @@ class Device:
             file=where,
         )
         self._accel_errors, _ = _white_noise_budget(
-            spec.accelerometer.errors.to_si(),
+            accel_errors,
             period,
             0.0,
             keys=spec.accelerometer.errors,
@@ -334,14 +423,6 @@ class Device:
             what="nothing",
             file=where,
         )
-        for model, prefix in ((self._gyro_errors, "gyro.errors"), (self._accel_errors, "accelerometer.errors")):
-            if model.bandwidth_hz is not None and not model.bandwidth_hz < spec.rate_hz / 2:
-                raise ConfigError(
-                    f"{model.bandwidth_hz:g} Hz is not below the Nyquist frequency "
-                    f"{spec.rate_hz / 2:g} Hz of the output rate",
-                    file=where,
-                    key=f"{prefix}.bandwidth_hz",
-                )
         if spec.clock.jitter_s >= 0.25 / spec.rate_hz:
             raise ConfigError(
                 f"jitter {spec.clock.jitter_s:g} s is not small against the sample interval {1 / spec.rate_hz:g} s",

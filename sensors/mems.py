@@ -149,7 +149,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import ValidationInfo, field_validator
 
-from gyroemu.dynamics.config import PositiveReal, Real, at_most
+from gyroemu.dynamics.config import PositiveReal, Real, at_least, at_most
 from gyroemu.dynamics.jit import njit
 
 from .errors import STANDARD_GRAVITY
@@ -162,6 +162,10 @@ __all__ = [
     "CARRIER_STEPS_PER_CYCLE",
     "K_BOLTZMANN",
     "MAX_DRIVE_FREQUENCY_HZ",
+    "MIN_DRIVE_FREQUENCY_HZ",
+    "DRIVE_AMPLITUDE_RANGE_M",
+    "MAX_QUADRATURE_STIFFNESS_FRACTION",
+    "MAX_REFERENCE_TEMPERATURE_DEGC",
     "element_axes",
 ]
 
@@ -183,6 +187,27 @@ for a pass of ``CARRIER_CYCLES_PER_PASS`` cycles (a 20 s run at 1 kHz took 6.4 s
 1 MHz; 10¹² Hz asked for 2.4·10¹³ steps a simulated second), and its inner grid is four times its band
 (the envelope pole's or the demodulator's, at most about a quarter of the drive). The baseband model's
 cost does not depend on the drive."""
+MIN_DRIVE_FREQUENCY_HZ = 1000.0
+"""The lowest ``drive_frequency_hz``, Hz: a third of the slowest drives of real MEMS Coriolis gyros (about
+3 kHz; a drive must sit far above the motion it measures, and the sense mode within a quarter of it). At
+10⁻³⁰⁰ Hz the Brownian floor √(4 k_B T ω_s/m Q_s)/(2 x₀ ω_d) overflowed (an OverflowError)."""
+DRIVE_AMPLITUDE_RANGE_M = (1.0e-8, 1.0e-3)
+"""The smallest and largest ``drive_amplitude_m``, m: a hundredth of the smallest drive amplitudes of real
+MEMS gyros (about 1 µm), fifty times the largest (about 20 µm: comb fingers and suspensions are tens of µm
+long). The Coriolis force 2 x₀ ω_d Ω and the noise's 1/x₀ follow it: 10³⁰⁰ m made every output NaN, 10⁻³⁰⁰
+m overflowed."""
+MAX_QUADRATURE_STIFFNESS_FRACTION = 0.1
+"""The largest ``quadrature_stiffness_n_per_m`` |k_q| as a fraction of the drive mode's stiffness m ω_d²:
+real couplings are 10⁻⁵ to 10⁻³ of it (the defaults: 1.3·10⁻⁵, 63 °/s of quadrature; a poorly trimmed
+part some thousands of °/s), so a tenth is a hundred times the worst; beyond a fraction of the stiffness the
+modes are not those of a gyro (their axes turn towards each other). The quadrature rate Ω_q = k_q/(2 m ω_d)
+is then at most ω_d/20. A k_q of 10³⁰⁰ N/m made every output NaN."""
+MAX_REFERENCE_TEMPERATURE_DEGC = 1000.0
+"""The highest ``reference_temperature_degC``, °C: five times the hottest rating of real MEMS gyros
+(downhole-drilling parts, 200 °C; consumer parts to 85 °C, automotive to 125 °C), below the 1414 °C at
+which silicon melts. At 10³⁰⁰ °C the Brownian floor came out 10¹⁴⁴ rad/s/√Hz and the frequencies drifted
+from it overflowed: the error blamed the noise key, or the run stopped in a LinAlgError ("Eigenvalues did
+not converge")."""
 _PPM = 1e-6
 _NOISE_DROP = 1e-5  # baseband noise directions below this share of the variance are not drawn
 
@@ -220,9 +245,15 @@ class MemsGyro(GyroMechanism):
     """``baseband``: the averaged envelope model (fast); ``carrier``: the sense oscillator itself."""
     proof_mass_kg: PositiveReal = 4.0e-9
     drive_frequency_hz: Annotated[
-        PositiveReal, at_most(MAX_DRIVE_FREQUENCY_HZ, "twice the fastest drive of real MEMS gyros (about 100 kHz)")
+        PositiveReal,
+        at_most(MAX_DRIVE_FREQUENCY_HZ, "twice the fastest drive of real MEMS gyros (about 100 kHz)"),
+        at_least(MIN_DRIVE_FREQUENCY_HZ, "a third of the slowest drive of real MEMS gyros (about 3 kHz)"),
     ] = 27_000.0
-    drive_amplitude_m: PositiveReal = 5.0e-6
+    drive_amplitude_m: Annotated[
+        PositiveReal,
+        at_least(DRIVE_AMPLITUDE_RANGE_M[0], "a hundredth of the smallest drive of real MEMS gyros (about 1 µm)"),
+        at_most(DRIVE_AMPLITUDE_RANGE_M[1], "fifty times the largest drive of real MEMS gyros (about 20 µm)"),
+    ] = 5.0e-6
     drive_quality_factor: PositiveReal = 1000.0
     mode_split_hz: Real = 2000.0
     """f_s − f_d: sense resonance above (> 0) or below (< 0) the drive."""
@@ -235,7 +266,10 @@ class MemsGyro(GyroMechanism):
     """κ: sideways drive force per drive force and per metre of sense deflection (g-sensitivity)."""
     drive_frequency_tc_ppm_per_degC: Real = -30.0
     sense_frequency_tc_ppm_per_degC: Real = -31.0
-    reference_temperature_degC: Real = 25.0
+    reference_temperature_degC: Annotated[
+        Real,
+        at_most(MAX_REFERENCE_TEMPERATURE_DEGC, "five times the hottest rating of real MEMS gyros (200 °C)"),
+    ] = 25.0
     """Where the frequencies above hold and the scale factor and reference phase were calibrated."""
     demodulator_bandwidth_hz: PositiveReal | None = 500.0
     """Cut-off of the Butterworth low-pass after the demodulator (None: no filter)."""
@@ -259,6 +293,21 @@ class MemsGyro(GyroMechanism):
                 "averaged envelope model) to hold"
             )
         return split
+
+    @field_validator("quadrature_stiffness_n_per_m")
+    @classmethod
+    def _coupling_small_against_the_mode(cls, k_q: float, info: ValidationInfo) -> float:
+        mass, drive = info.data.get("proof_mass_kg"), info.data.get("drive_frequency_hz")
+        if mass is None or drive is None:
+            return k_q
+        limit = MAX_QUADRATURE_STIFFNESS_FRACTION * mass * (2 * math.pi * drive) ** 2
+        if abs(k_q) > limit:
+            raise ValueError(
+                f"|{k_q:g}| N/m is more than the limit of {limit:.4g} N/m, {MAX_QUADRATURE_STIFFNESS_FRACTION:g} of "
+                f"the drive mode's stiffness m ω_d²: a hundred times the quadrature coupling of real MEMS gyros "
+                "(at most about 10⁻³ of it)"
+            )
+        return k_q
 
     @field_validator("sense_quality_factor", "drive_quality_factor")
     @classmethod

@@ -169,6 +169,22 @@ class RateGyro(GyroMechanism):
                 raise ValueError(problem)
         return stiffness
 
+    @field_validator("damping_n_m_s_per_rad")
+    @classmethod
+    def _overdamped_pole(cls, damping: float, info: ValidationInfo) -> float:
+        """An overdamped gimbal (ζ > 1) has a real pole faster than its natural frequency, (c + √(c² − 4KJ))/2J:
+        it too must be a gimbal's (a damper of 10³⁰⁰ N·m·s/rad made the gimbal angle and every output NaN)."""
+        inertia, stiffness = info.data.get("gimbal_inertia_kgm2"), info.data.get("spring_stiffness_n_m_per_rad")
+        if inertia is not None and stiffness is not None:
+            discriminant = damping * damping - 4 * stiffness * inertia
+            if discriminant > 0:
+                fast = (damping + math.sqrt(discriminant)) / (2 * inertia) / (2 * math.pi)
+                what = f"the overdamped gimbal's fast pole (c + √(c² − 4KJ))/4πJ (J = {inertia:g} kg·m²)"
+                problem = gimbal_pole_problem(what, fast)
+                if problem is not None:
+                    raise ValueError(problem)
+        return damping
+
     # ---- derived quantities (SI) ------------------------------------------------------------------
 
     @property

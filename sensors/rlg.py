@@ -119,7 +119,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field, ValidationInfo, field_validator
 
-from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, at_most
+from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, at_least, at_most
 from gyroemu.dynamics.jit import njit
 
 from .mechanism import GyroMechanism, GyroResponse, GyroTruth
@@ -130,6 +130,7 @@ __all__ = [
     "MAX_DITHER_AMPLITUDE_ARCSEC",
     "MAX_PERIMETER_M",
     "MAX_SIMULATION_RATE_HZ",
+    "WAVELENGTH_RANGE_NM",
 ]
 
 _ARCSEC = math.pi / (180 * 3600)  # rad per arcsecond
@@ -158,6 +159,12 @@ MAX_SIMULATION_RATE_HZ = 1_000_000.0
 (:data:`MAX_DITHER_FREQUENCY_HZ`) needs, and 30 times the default, which resolves the dither and the
 lock-in time of a navigation RLG; at about 60 ns a step and axis, 0.2 s of computing a simulated second
 (a 10¹² Hz rate asked for 10¹² steps a second)."""
+WAVELENGTH_RANGE_NM = (100.0, 10_000.0)
+"""The shortest and longest laser ``wavelength_nm``, nm: ring laser gyros lase at He-Ne's 632.8 nm (a
+few at 543 nm or 1.15 µm, the longest He-Ne line used 3.39 µm); the bounds leave a factor of three
+beyond the extremes either way. A wavelength of 10³⁰⁰ nm made the beat phase per radian K vanish, and
+the error blamed the ARW (the dither random walk Ω_L/√(K Ω_d) exceeded it); at 10⁻³⁰⁰ nm K overflowed
+and ``simulation_rate_hz`` was asked for "at least inf Hz"."""
 # A step is near a turn-around when its phase rate is within _NEAR·√|Φ''| of zero at either end (or
 # changes sign); there it is cut into sub-intervals of phase curvature |Φ''| h_s² ≤ _CURVATURE rad.
 _NEAR = 10.0
@@ -185,7 +192,11 @@ class RingLaserGyro(GyroMechanism):
         default=0.25 * math.sqrt(3.0) * 0.10**2,  # triangle of 0.10 m sides
         validate_default=True,
     )
-    wavelength_nm: PositiveReal = 632.8
+    wavelength_nm: Annotated[
+        PositiveReal,
+        at_least(WAVELENGTH_RANGE_NM[0], "a fifth of the shortest laser line of ring laser gyros (543 nm)"),
+        at_most(WAVELENGTH_RANGE_NM[1], "three times the longest He-Ne line (3.39 µm)"),
+    ] = 632.8
     lock_in_rate_deg_per_h: NonNegativeReal = 200.0
     dither_frequency_hz: Annotated[
         PositiveReal, at_most(MAX_DITHER_FREQUENCY_HZ, "ten times the fastest body dither of real RLGs (about 1 kHz)")

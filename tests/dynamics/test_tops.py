@@ -436,6 +436,10 @@ def test_nearly_unit_quaternion_is_normalised():
         ("intermediate_axis_flip", "initial", "omega_b", [0.02, 1e12, 0.02], "more than the limit of 100000"),
         ("intermediate_axis_flip", "body", "inertia_kgm2", [1e300, 2e300, 2.5e300], "more than the limit of 1e+40"),
         ("free_symmetric_top", "body", "inertia_kgm2", [1e-300, 1e-300, 1e-300], "less than the limit of 1e-20"),
+        # An angle of 1e300 rad was taken: its sine and cosine hold no digit (float64 steps past a turn there).
+        ("heavy_top", "initial", "euler_zxz_rad", [0.0, 1e300, 0.0], "more than 4 turns"),
+        ("heavy_top", "initial", "euler_zxz_rad", [-1e300, 0.349066, 0.0], "more than 4 turns"),
+        ("heavy_top", "initial", "euler_zxz_rad", [0.0, 0.349066, 26.0], "more than 4 turns"),
     ],
 )
 def test_absurd_rates_and_bodies_are_refused_naming_the_key(tmp_path, name, section, key, value, words):
@@ -445,7 +449,8 @@ def test_absurd_rates_and_bodies_are_refused_naming_the_key(tmp_path, name, sect
     path.write_text(tomli_w.dumps(_edited(name, section, key, value)))
     with pytest.raises(ConfigError, match=re.escape(words)) as err:
         load_scenario(path)
-    assert err.value.key == f"{section}.{key}" and err.value.file == str(path)
+    # a per-element bound (the angles) names the element: initial.euler_zxz_rad[1]
+    assert re.fullmatch(rf"{section}\.{key}(\[\d\])?", err.value.key) and err.value.file == str(path)
 
 
 @pytest.mark.parametrize(
@@ -501,3 +506,17 @@ def test_the_rate_limits_leave_the_shipped_tops_far_inside():
             inertia = spec.body.tensor()
             omega = free_body_frequency(inertia @ np.asarray(spec.initial.omega_b), inertia)
         assert omega < MAX_SPLIT_FREQUENCY_RAD_S / 1000, name
+
+
+def test_euler_angles_within_four_turns_are_taken_and_beyond_refused():
+    """The bound is 4 turns either way (MAX_ANGLE_TURNS): a spin phase of 3.9 turns and a precession of −4
+    turns are taken, the same top as at their remainders modulo 2π (to the rounding of the angle)."""
+    from gyroemu.dynamics.config import MAX_ANGLE_TURNS
+
+    limit = MAX_ANGLE_TURNS * 2 * np.pi
+    assert MAX_ANGLE_TURNS == 4
+    near = scenario_from_dict(_edited("heavy_top", "initial", "euler_zxz_rad", [-limit, 0.349066, 3.9 * 2 * np.pi]))
+    assert near.spec.initial.euler_zxz_rad[0] == -limit
+    with pytest.raises(ConfigError) as err:
+        scenario_from_dict(_edited("heavy_top", "initial", "euler_zxz_rad", [0.0, 0.349066, limit * (1 + 1e-12)]))
+    assert err.value.key == "initial.euler_zxz_rad[2]", err.value

@@ -187,6 +187,26 @@ def test_bandwidth_must_be_below_nyquist(motion):
     assert "Nyquist frequency 50 Hz of the 100 Hz sample rate" in str(error.value)
 
 
+def test_bandwidth_must_not_be_narrower_than_float64_holds(motion):
+    """At 1e-300 Hz the low-pass's matrices were singular (a LinAlgError); 10⁻⁴ of the rate is the limit."""
+    for bandwidth in (1e-300, 0.0099):
+        with pytest.raises(ConfigError, match="less than the limit of 0.0001 of the 100 Hz sample rate") as error:
+            measure(GyroErrors(bandwidth_hz=bandwidth), motion)
+        assert error.value.key == "bandwidth_hz"
+    assert np.isfinite(measure(GyroErrors(bandwidth_hz=0.01), motion)).all()
+
+
+@pytest.mark.parametrize(
+    "model, key, limit", [(GyroErrors, "quantisation_rad", 0.1), (AccelErrors, "quantisation_m_per_s", 1.0)]
+)
+def test_an_integrating_outputs_count_is_bounded(model, key, limit):
+    """A count of 1e300 was taken and every sample read 0: bounded like the rate LSB, the limit itself taken."""
+    with pytest.raises(ConfigError, match=f"more than the limit of {limit:g}: over") as error:
+        validate(model, {key: 1e300}, prefix="errors")
+    assert error.value.key == f"errors.{key}"
+    validate(model, {key: limit})
+
+
 # --------------------------------------------------------------------------------------------------
 # Randomness
 # --------------------------------------------------------------------------------------------------

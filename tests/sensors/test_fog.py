@@ -7,6 +7,7 @@ Statistical checks allow SIGMAS standard deviations of the estimate: σ/√n for
 """
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -379,11 +380,16 @@ def test_bad_parameters_name_their_key(key, value):
 
 
 def test_defaults_are_checked_against_the_given_wavelength():
-    """The default spectral width (30 nm) and responsivity (0.9 A/W) are validated against a given
-    wavelength too: at 20 nm the width is not narrower than the wavelength (a responsivity below
-    e λ/(h c) = 0.016 A/W isolates that check); at 1000 nm 0.9 A/W exceeds e λ/(h c) = 0.807 A/W."""
+    """The default responsivity (0.9 A/W) is validated against a given wavelength too: at 1000 nm 0.9 A/W
+    exceeds e λ/(h c) = 0.807 A/W. The width is checked against the wavelength (at 100 nm, the shortest
+    taken, a width of 150 nm is not narrower; the default 30 nm always is). A responsivity below
+    e λ/(h c) = 0.081 A/W isolates that check."""
     with pytest.raises(ConfigError) as err:
-        validate(FiberOpticGyro, {"kind": "fog", "wavelength_nm": 20.0, "responsivity_a_per_w": 0.01}, prefix="m")
+        validate(
+            FiberOpticGyro,
+            {"kind": "fog", "wavelength_nm": 100.0, "spectral_width_nm": 150.0, "responsivity_a_per_w": 0.05},
+            prefix="m",
+        )
     assert err.value.key == "m.spectral_width_nm"
     with pytest.raises(ConfigError) as err:
         validate(FiberOpticGyro, {"kind": "fog", "wavelength_nm": 1000.0}, prefix="m")
@@ -396,3 +402,34 @@ def test_max_rate_is_the_feedback_range_closed_loop_and_the_sine_extremum_open_l
     eps = np.finfo(float).eps
     assert closed.max_rate() == pytest.approx(2.5 / closed.scale_factor_s, rel=4 * eps)
     assert opened.max_rate() == pytest.approx(0.5 * np.pi / opened.scale_factor_s, rel=4 * eps)
+
+
+@pytest.mark.parametrize(
+    "key, value, words",
+    [
+        ("wavelength_nm", 1e300, "more than the limit of 10000: "),  # OverflowError in the RIN λ²/(c Δλ)
+        ("wavelength_nm", 1e-300, "less than the limit of 100: "),  # blamed spectral_width_nm
+        ("coil_length_m", 1e300, "more than the limit of 100000: "),  # blamed gyro.errors.range_deg_per_s
+        ("coil_length_m", 1e-300, "less than the limit of 1: "),  # OverflowError: the noise σ/S squared
+        ("coil_diameter_m", 1e300, "more than the limit of 10: "),
+        ("coil_diameter_m", 1e-300, "less than the limit of 0.001: "),  # OverflowError, as the length
+        ("modulation_depth_rad", 1e-300, "less than the limit of 0.1: "),  # OverflowError: σ/J₁ with J₁ → 0
+    ],
+)
+def test_absurd_coils_sources_and_biases_are_refused_naming_the_key(key, value, words):
+    with pytest.raises(ConfigError, match=re.escape(words)) as err:
+        device_from_dict(
+            {"description": "x", "rate_hz": 1000, "gyro": {"mechanism": {"kind": "fog", key: value}}}, name="dev.toml"
+        )
+    assert err.value.key == f"gyro.mechanism.{key}" and err.value.file == "dev.toml"
+    assert "FOGs" in err.value.reason or "fibre" in err.value.reason  # why: what real FOGs are
+
+
+def test_a_fog_at_the_limits_of_its_keys_is_finite():
+    """The shortest, thinnest coil at the longest wavelength and the lightest bias: a noisy gyro, but numbers."""
+    fog = FiberOpticGyro(coil_length_m=1.0, coil_diameter_m=0.001, wavelength_nm=10_000.0, modulation_depth_rad=0.1)
+    assert math.isfinite(fog.intrinsic_noise_density()) and math.isfinite(fog.max_rate())
+    t = np.arange(101) * 1e-3
+    omega = np.tile([0.1, 0.0, -0.2], (len(t), 1))
+    response = fog.respond(GyroTruth(t=t, dt=1e-3, omega=omega, alpha=np.zeros_like(omega)), np.random.default_rng(0))
+    assert response.angle is not None and np.isfinite(response.angle).all()

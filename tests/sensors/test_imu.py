@@ -241,7 +241,13 @@ def test_a_white_noise_whose_per_sample_variance_overflows_is_refused_naming_the
 
 @pytest.mark.parametrize(
     "sensor, key, limit",
-    [("gyro", "quantisation_rad_per_s", 1000.0), ("accelerometer", "quantisation_m_per_s2", 1e7)],
+    [
+        ("gyro", "quantisation_rad_per_s", 1000.0),
+        ("accelerometer", "quantisation_m_per_s2", 1e7),
+        # integrating outputs: a count of 1e300 was taken, every output sample 0
+        ("gyro", "quantisation_rad", 0.1),
+        ("accelerometer", "quantisation_m_per_s", 1.0),
+    ],
 )
 def test_an_output_lsb_beyond_any_sensors_range_is_refused_naming_the_key(sensor, key, limit):
     """An output LSB of 1e300 made the quantiser's noise LSB² T / 12 overflow (OverflowError, a traceback);
@@ -250,6 +256,64 @@ def test_an_output_lsb_beyond_any_sensors_range_is_refused_naming_the_key(sensor
         device_from_dict({"description": "x", "rate_hz": 1000, sensor: {"errors": {key: 1e300}}}, name="dev.toml")
     assert info.value.key == f"{sensor}.errors.{key}" and info.value.file == "dev.toml"
     device_from_dict({"description": "x", "rate_hz": 1000, sensor: {"errors": {key: limit}}}, name="dev.toml")
+
+
+@pytest.mark.parametrize("rate_hz, words", [(1e-300, "less than the limit of 0.1: "), (0.09, "less than the limit")])
+def test_an_output_rate_slower_than_any_imu_is_refused_naming_rate_hz(rate_hz, words):
+    """At 1e-300 Hz the error named the white-noise key (its per-sample variance N²/T underflowed) or the
+    scenario (no sample in the run); 0.1 Hz, a tenth of the slowest IMU outputs, is the limit."""
+    edit = {"gyro": {"errors": {"noise_density_deg_per_s_per_sqrt_hz": 0.0028, "quantisation_rad_per_s": 1e-3}}}
+    with pytest.raises(ConfigError, match=re.escape(words)) as info:
+        device_from_dict({"description": "x", "rate_hz": rate_hz, **edit}, name="dev.toml")
+    assert info.value.key == "rate_hz" and "slowest IMU" in info.value.reason
+    assert device_from_dict({"description": "x", "rate_hz": 0.1}).spec.rate_hz == 0.1
+
+
+@pytest.mark.parametrize(
+    "key, value, words",
+    [
+        ("initial_degC", 1e300, "more than the limit of 1000: "),  # a MEMS gyro's output NaN
+        ("final_degC", 1e300, "more than the limit of 1000: "),
+        ("initial_degC", -1e300, "absolute zero"),  # a traceback from the MEMS mechanism
+        ("final_degC", -273.15, "absolute zero"),
+    ],
+)
+def test_a_sensor_temperature_beyond_any_real_sensor_is_refused_naming_the_key(key, value, words):
+    mems = {"gyro": {"mechanism": {"kind": "mems"}}}
+    with pytest.raises(ConfigError, match=re.escape(words)) as info:
+        device_from_dict({"description": "x", "rate_hz": 100, "temperature": {key: value}, **mems}, name="dev.toml")
+    assert info.value.key == f"temperature.{key}" and info.value.file == "dev.toml"
+
+
+def test_a_mems_gyro_at_the_hottest_temperature_reads_finite_numbers():
+    temperature = {"initial_degC": 1000.0, "final_degC": 1000.0}
+    mems = {"gyro": {"mechanism": {"kind": "mems"}}}
+    device = device_from_dict({"description": "x", "rate_hz": 100, "temperature": temperature, **mems})
+    samples = device.measure(spinning(duration=0.2, hz=100.0))
+    assert np.isfinite(samples.gyro).all() and np.isfinite(samples.accel).all()
+
+
+@pytest.mark.parametrize("sensor", ["gyro", "accelerometer"])
+@pytest.mark.parametrize("bandwidth_hz", [1e-300, 0.099])
+def test_an_output_low_pass_too_narrow_for_float64_is_refused_naming_it(sensor, bandwidth_hz):
+    """1e-300 Hz stopped in a LinAlgError (singular matrices); below 10⁻⁴ of the output rate (0.1 Hz at 1 kHz)
+    the second-order Butterworth's coefficients lose their digits. The limit itself is taken."""
+    edit = {sensor: {"errors": {"bandwidth_hz": bandwidth_hz}}}
+    with pytest.raises(ConfigError, match="less than the limit of 0.0001 of the output rate") as info:
+        device_from_dict({"description": "x", "rate_hz": 1000, **edit}, name="dev.toml")
+    assert info.value.key == f"{sensor}.errors.bandwidth_hz" and info.value.file == "dev.toml"
+    device_from_dict({"description": "x", "rate_hz": 1000, sensor: {"errors": {"bandwidth_hz": 0.1}}})
+
+
+def test_a_mechanism_whose_own_noise_leaves_float64_is_refused_not_an_overflow(monkeypatch):
+    """The backstop behind the mechanisms' bounds: a noise of 1e300 (whose square overflowed in the budget,
+    an OverflowError) is refused naming the mechanism's table."""
+    from gyroemu.sensors.mechanism import IdealGyro
+
+    monkeypatch.setattr(IdealGyro, "intrinsic_noise_density", lambda self: 1e300)
+    with pytest.raises(ConfigError, match="own white noise would be 1e\\+300") as info:
+        device_from_dict({"description": "x", "rate_hz": 1000}, name="dev.toml")
+    assert info.value.key == "gyro.mechanism"
 
 
 @pytest.mark.parametrize("kind", sorted(GYRO_KINDS))

@@ -7,6 +7,7 @@ round-off and the difference is the noiseless response.
 """
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -619,6 +620,44 @@ def test_bad_parameters_name_the_key(key, value, why):
         validate(MemsGyro, {"kind": "mems", key: value}, prefix="gyro.mechanism")
     assert error.value.key == f"gyro.mechanism.{key}"
     assert why in error.value.reason
+
+
+@pytest.mark.parametrize(
+    "key, value, words",
+    [
+        ("drive_amplitude_m", 1e300, "more than the limit of 0.001: "),  # every output NaN
+        ("drive_amplitude_m", 1e-300, "less than the limit of 1e-08: "),  # OverflowError (the noise's 1/x₀)
+        ("quadrature_stiffness_n_per_m", 1e300, "more than the limit of 11.51 N/m"),  # every output NaN
+        ("quadrature_stiffness_n_per_m", -1e300, "more than the limit of 11.51 N/m"),
+        ("quadrature_stiffness_n_per_m", 12.0, "more than the limit of 11.51 N/m"),
+        ("reference_temperature_degC", 1e300, "more than the limit of 1000: "),  # LinAlgError, or the noise key
+        ("drive_frequency_hz", 1e-300, "less than the limit of 1000: "),  # OverflowError (the noise's 1/ω_d)
+    ],
+)
+def test_absurd_drives_couplings_and_temperatures_are_refused_naming_the_key(key, value, words):
+    with pytest.raises(ConfigError, match=re.escape(words)) as error:
+        device_from_dict(
+            {"description": "x", "rate_hz": 1000, "gyro": {"mechanism": {"kind": "mems", key: value}}}, name="dev.toml"
+        )
+    assert error.value.key == f"gyro.mechanism.{key}" and error.value.file == "dev.toml"
+    assert "real MEMS gyros" in error.value.reason
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_a_mems_gyro_at_the_limits_of_its_keys_gives_finite_numbers(model):
+    """The largest drive, the strongest quadrature coupling (a tenth of m ω_d²: Ω_q = ω_d/20, 8500 rad/s),
+    the slowest drive and the hottest reference: finite rates and channels (the range clips the rest)."""
+    for keys in (
+        {"drive_amplitude_m": 1e-3, "quadrature_stiffness_n_per_m": 0.1 * 4e-9 * (2 * np.pi * 27_000.0) ** 2 * 0.999},
+        {"drive_amplitude_m": 1e-8, "quadrature_stiffness_n_per_m": -0.1 * 4e-9 * (2 * np.pi * 27_000.0) ** 2 * 0.999},
+        {"drive_frequency_hz": 1000.0, "mode_split_hz": 100.0, "demodulator_bandwidth_hz": 50.0},
+        {"reference_temperature_degC": 1000.0},
+    ):
+        gyro = validate(MemsGyro, {"kind": "mems", "model": model, **keys})
+        t = grid(0.05, gyro.inner_rate_hz(1000.0))
+        response = gyro.respond(make_truth(t, omega=[0.1, -0.2, 0.3], force=[0, 0, G0]), np.random.default_rng(0), {})
+        assert response.rate is not None and np.isfinite(response.rate).all(), keys
+        assert all(np.isfinite(v).all() for v in response.raw.values()), keys
 
 
 def test_a_negative_sense_frequency_is_stated():

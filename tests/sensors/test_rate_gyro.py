@@ -417,3 +417,24 @@ def test_static_balance_solves_a_hard_unique_balance_to_round_off(w_ia, torque):
     assert abs(theta[0]) < stop
     residual = k * theta - h * (w_ia * np.cos(theta) - w_sra * np.sin(theta)) - torque
     assert abs(residual[0]) < 16 * np.finfo(float).eps * (k * abs(theta[0]) + h * math.hypot(w_ia, w_sra))
+
+
+@pytest.mark.parametrize("damping", [1e300, 1e3])
+def test_an_overdamped_gimbal_faster_than_any_real_one_is_refused_naming_the_damping(damping):
+    """A damper of 1e300 N·m·s/rad made the gimbal angle and every output NaN: the overdamped gimbal's fast
+    pole (c + √(c² − 4KJ))/4πJ is bounded like the natural frequency (MAX_GIMBAL_POLE_HZ)."""
+    with pytest.raises(ConfigError, match="fast pole") as err:
+        validate(RateGyro, {"kind": "rate-gyro", "damping_n_m_s_per_rad": damping}, prefix="gyro.mechanism")
+    assert err.value.key == "gyro.mechanism.damping_n_m_s_per_rad"
+    assert "real gyros" in err.value.reason
+
+
+def test_a_heavily_overdamped_gimbal_within_the_limit_gives_finite_numbers():
+    """ζ ≈ 1600 (c = 5 N·m·s/rad for the default J and K; its fast pole 94 kHz, inside the limit)."""
+    gyro = validate(RateGyro, {"kind": "rate-gyro", "damping_n_m_s_per_rad": 5.0})
+    dt = 1.0 / gyro.inner_rate_hz(200.0)
+    t = np.arange(201) * dt
+    omega = np.tile([0.1, -0.2, 0.3], (len(t), 1))
+    response = gyro.respond(GyroTruth(t=t, dt=dt, omega=omega, alpha=np.zeros_like(omega)), np.random.default_rng(0))
+    assert response.rate is not None and np.isfinite(response.rate).all()
+    assert np.isfinite(response.raw["gimbal_angle_rad"]).all()

@@ -356,6 +356,7 @@ def test_bad_parameters_name_their_key(key, value):
         ("perimeter_m", 1e300, "1000"),  # P² overflowed in the area check (OverflowError)
         ("perimeter_m", 1e200, "1000"),
         ("dither_amplitude_arcsec", 1e300, "3600"),  # all-NaN beat_phase_rad, INT64_MIN fringe counts
+        ("wavelength_nm", 1e300, "10000"),  # K vanished: the error blamed gyro.errors.arw_deg_per_sqrt_h
     ],
 )
 def test_absurd_sizes_are_refused_naming_their_key_and_why(key, value, limit):
@@ -364,6 +365,16 @@ def test_absurd_sizes_are_refused_naming_their_key_and_why(key, value, limit):
             {"description": "x", "rate_hz": 1000, "gyro": {"mechanism": {"kind": "rlg", key: value}}}, name="dev.toml"
         )
     assert err.value.key == f"gyro.mechanism.{key}" and err.value.file == "dev.toml"
+
+
+def test_a_wavelength_too_short_is_refused_naming_it():
+    """10⁻³⁰⁰ nm made K overflow, and simulation_rate_hz was asked for "at least inf Hz"."""
+    with pytest.raises(ConfigError, match="less than the limit of 100: ") as err:
+        device_from_dict(
+            {"description": "x", "rate_hz": 1000, "gyro": {"mechanism": {"kind": "rlg", "wavelength_nm": 1e-300}}},
+            name="dev.toml",
+        )
+    assert err.value.key == "gyro.mechanism.wavelength_nm" and "inf" not in str(err.value)
 
 
 def test_the_largest_dither_still_gives_a_finite_beat():
