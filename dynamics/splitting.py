@@ -534,8 +534,15 @@ def _heavy_top_rate(
     q0: NDArray[np.float64], L0_w: NDArray[np.float64], moment_a: float, moment_c: float, mgl: float
 ) -> tuple[float, float]:
     """The heavy top's fastest split frequency (rad/s) and its spin momentum ``L₃`` (kg m²/s)."""
-    inv_a, inv_c = 1.0 / moment_a, 1.0 / moment_c
     n0 = quat_rotate(q0, np.array([0.0, 0.0, 1.0]))  # symmetry axis, world
+    return _heavy_top_rate_about(n0, L0_w, moment_a, moment_c, mgl)
+
+
+def _heavy_top_rate_about(
+    n0: NDArray[np.float64], L0_w: NDArray[np.float64], moment_a: float, moment_c: float, mgl: float
+) -> tuple[float, float]:
+    """:func:`_heavy_top_rate` of the top whose symmetry axis is ``n0`` (world, unit)."""
+    inv_a, inv_c = 1.0 / moment_a, 1.0 / moment_c
     l3 = float(n0 @ L0_w)  # spin component, conserved
 
     # Energy bounds |L|: |L|²/2A = E − ½(1/C − 1/A) L₃² − m g l n_z  ≤  E − ½(1/C − 1/A) L₃² + |m g l|.
@@ -545,13 +552,14 @@ def _heavy_top_rate(
     return float(omega), l3
 
 
-def heavy_top_frequency(q0_wb: ArrayLike, L0_w: ArrayLike, moment_a: float, moment_c: float, mgl: float) -> float:
+def heavy_top_frequency(axis_w: ArrayLike, L0_w: ArrayLike, moment_a: float, moment_c: float, mgl: float) -> float:
     """The fastest split frequency ``ω`` :func:`integrate_heavy_top` steps a heavy top by, rad/s: the
     larger of the fastest turn about ``L_w`` the energy allows and the pendulum frequency
-    ``√(|m g l|/A)`` (module notes: its step is about 0.12 rad / ω at the default tolerance). Arguments
-    as :func:`integrate_heavy_top`'s."""
-    q0 = np.asarray(q0_wb, dtype=float)
-    return _heavy_top_rate(q0, np.asarray(L0_w, dtype=float), moment_a, moment_c, mgl)[0]
+    ``√(|m g l|/A)`` (module notes: its step is about 0.12 rad / ω at the default tolerance). ``axis_w``:
+    the top's symmetry axis at the start, world (unit; the body's z turned by ``q0_wb``); the others as
+    :func:`integrate_heavy_top`'s. Plain numpy: a config is checked with it without loading numba."""
+    n0 = np.asarray(axis_w, dtype=float)
+    return _heavy_top_rate_about(n0, np.asarray(L0_w, dtype=float), moment_a, moment_c, mgl)[0]
 
 
 def integrate_heavy_top(

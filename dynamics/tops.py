@@ -29,7 +29,7 @@ from .config import AngleRad, ConfigError, NonNegativeReal, PositiveReal, Quat, 
 from .earth import Environment
 from .inertia import inertia_config, inertia_tensor
 from .jit import njit
-from .rotation import body_rate_from_euler_zxz, quat_from_euler_zxz, quat_rotate
+from .rotation import body_rate_from_euler_zxz, quat_from_euler_zxz, quat_rotate, quat_to_matrix
 from .scenarios import ScenarioSpec
 from .splitting import free_body_frequency, heavy_top_frequency, integrate_free_body, integrate_heavy_top
 from .trajectory import Trajectory
@@ -342,10 +342,10 @@ class HeavyTopSpec(ScenarioSpec):
         a, c = pivot_moments(body.mass_kg, body.inertia_kgm2, body.cm_height_m)
         mgl = body.mass_kg * gravity * body.cm_height_m
         euler = np.asarray(self.initial.euler_zxz_rad)
-        q0 = quat_from_euler_zxz(euler)
+        r0 = quat_to_matrix(quat_from_euler_zxz(euler))  # numpy and scipy: listing configs loads no numba
         omega0_b = body_rate_from_euler_zxz(euler, np.asarray(self.initial.euler_zxz_rates_rad_s))
-        L0_w = quat_rotate(q0, np.array([a, a, c]) * omega0_b)
-        problem = _split_frequency_problem(heavy_top_frequency(q0, L0_w, a, c, mgl))
+        L0_w = r0 @ (np.array([a, a, c]) * omega0_b)
+        problem = _split_frequency_problem(heavy_top_frequency(r0[:, 2], L0_w, a, c, mgl))
         if problem is None:
             return
         pendulum = np.sqrt(abs(mgl) / a)

@@ -169,9 +169,9 @@ def test_estimate_and_bench_give_a_1khz_log_1000_hz_both_ways(tmp_path, monkeypa
     _log_at_2026(path)
     rates, make_filter = [], estimate.make_filter
 
-    def recording_make_filter(name, setup):
+    def recording_make_filter(name, setup, **options):
         rates.append(setup.rate_hz)
-        return make_filter(name, setup)
+        return make_filter(name, setup, **options)
 
     monkeypatch.setattr(estimate, "make_filter", recording_make_filter)
     for whole in (False, True):
@@ -200,8 +200,8 @@ def test_the_filters_run_on_exact_seconds_since_the_first_stamp(tmp_path, monkey
     def recording(module):
         make_filter = module.make_filter
 
-        def make(name, setup):
-            flt = make_filter(name, setup)
+        def make(name, setup, **options):
+            flt = make_filter(name, setup, **options)
             process = flt.process
 
             def spy(t, *args, **kwargs):
