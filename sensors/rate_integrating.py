@@ -108,7 +108,12 @@ from gyroemu.dynamics.config import NonNegativeReal, PositiveReal
 from .mechanism import GyroMechanism, GyroResponse, GyroTruth
 from .rate_gyro import RPM, StopAngle, gimbal_pole_problem, inner_rate_for, sdf_axes, simulate_gimbal
 
-__all__ = ["RateIntegratingGyro"]
+__all__ = ["RateIntegratingGyro", "MIN_INTEGRAL_CORNER_HZ"]
+
+MIN_INTEGRAL_CORNER_HZ = 1e-3
+"""The slowest integral corner k_i/(2π k_p) of the rebalance loop's PI, Hz (or k_i = 0): four decades
+below the default's 10.6 Hz and real loops' tens of Hz; below it the power-up state θ = u'/(k_t k_i)
+overflows (k_i = 1e-300 gave NaN output)."""
 
 
 class RateIntegratingGyro(GyroMechanism):
@@ -164,6 +169,14 @@ class RateIntegratingGyro(GyroMechanism):
         )
         if not info.data.get("torque_rebalance") or j is None or c is None or k_p is None:
             return k_i
+        corner = k_i / k_p / (2 * math.pi) if k_p > 0 else math.inf
+        if 0 < corner < MIN_INTEGRAL_CORNER_HZ:
+            raise ValueError(
+                f"puts the loop's integral corner k_i/(2π k_p) at {corner:.3g} Hz, below the limit of "
+                f"{MIN_INTEGRAL_CORNER_HZ:g} Hz (real loops put it at tens of Hz; the float's offset settles "
+                "over 1/corner, and θ = u'/(k_t k_i) at power-up grows without bound): give 0 for a "
+                "proportional loop"
+            )
         if not k_i < c * k_p / j:
             raise ValueError(f"makes the rebalance loop unstable: it needs k_i < c k_p / J = {c * k_p / j:.6g}")
         if k_t is not None:  # the roots of J s³ + c s² + k_t k_p s + k_t k_i (loop_polynomial)

@@ -354,6 +354,8 @@ def test_open_loop_warns_of_its_stops_once_per_run():
         ({"loop_integral_a_per_rad_s": -1}, "loop_integral_a_per_rad_s"),
         ({"loop_integral_a_per_rad_s": 30000}, "loop_integral_a_per_rad_s"),  # k_i ≥ c k_p/J = 30000
         ({"loop_proportional_a_per_rad": 5}, "loop_integral_a_per_rad_s"),  # the default k_i is now unstable
+        ({"loop_integral_a_per_rad_s": 1e-300}, "loop_integral_a_per_rad_s"),  # an integral corner of 3e-303 Hz
+        ({"loop_integral_a_per_rad_s": 0.37}, "loop_integral_a_per_rad_s"),  # 0.98 mHz: below MIN_INTEGRAL_CORNER_HZ
         ({"torque_rebalance": "yes"}, "torque_rebalance"),
         ({"damping_n_m_s_per_rad_per_degC": 1}, "damping_n_m_s_per_rad_per_degC"),
     ],
@@ -362,6 +364,25 @@ def test_bad_parameters_name_the_key(data, key):
     with pytest.raises(ConfigError) as err:
         validate(RateIntegratingGyro, {"kind": "rate-integrating", **data})
     assert err.value.key == key
+
+
+def test_the_slowest_integral_corner_is_taken_and_runs_finite():
+    """k_i at the 1 mHz corner (k_p 60: k_i = 0.377) and k_i = 0, a proportional loop, are taken; a
+    rebalanced gyro with the slow corner reads finite rates (k_i = 1e-300 read NaN)."""
+    import tomllib
+
+    from gyroemu.dynamics import load_scenario
+    from gyroemu.dynamics.config import config_dir
+    from gyroemu.sensors import device_from_dict
+    from gyroemu.sensors.rate_integrating import MIN_INTEGRAL_CORNER_HZ
+
+    k_i = 60 * 2 * np.pi * MIN_INTEGRAL_CORNER_HZ * (1 + 1e-12)
+    for value in (k_i, 0.0):
+        validate(RateIntegratingGyro, {"kind": "rate-integrating", "loop_integral_a_per_rad_s": value})
+    table = tomllib.loads((config_dir() / "devices" / "floated_rig.toml").read_text())
+    table["gyro"]["mechanism"]["loop_integral_a_per_rad_s"] = k_i
+    samples = device_from_dict(table).measure(load_scenario("smooth_manoeuvre").simulate(duration=0.5))
+    assert np.isfinite(samples.gyro).all()
 
 
 def test_unstable_gains_are_fine_with_the_loop_open():
