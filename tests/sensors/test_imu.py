@@ -185,7 +185,8 @@ def test_bad_device_config_names_the_key(edit, key):
         ),
         (
             "rate-integrating",
-            {"loop_proportional_a_per_rad": 1e9, "loop_integral_a_per_rad_s": 1.0},
+            # an integral corner of 0.16 Hz (above MIN_INTEGRAL_CORNER_HZ); the loop's pole √(k_t k_p/J) 225 kHz
+            {"loop_proportional_a_per_rad": 1e9, "loop_integral_a_per_rad_s": 1e9},
             "loop_integral_a_per_rad_s",
             "100000 Hz",
         ),
