@@ -463,12 +463,13 @@ def weighted_fit(
     relative_sd = np.sqrt(2 / allan.edf)
     model = avar  # weights from the data first, then from the model
     c = np.zeros(basis.shape[1])
+    fitted = avar
     for _ in range(iterations):
         sd = model * relative_sd
         c = _constrained_lsq(basis / sd[:, None], avar / sd, free)
         fitted = basis @ c
         model = np.where(fitted > 0, fitted, avar)  # where no term reaches (none fitted): the data's weight
-    chi2 = float(np.sum(((avar - model) / (model * relative_sd)) ** 2))
+    chi2 = float(np.sum(((avar - fitted) / (model * relative_sd)) ** 2))  # the fit's own misfit, even where ≤ 0
     return c, model, chi2
 
 

@@ -167,6 +167,7 @@ __all__ = [
     "LogCheck",
     "check_mcap_noting",
     "dropped_samples",
+    "is_the_devices_estimate",
     "match_latest",
     "match_stamps",
     "unpaired_field",
@@ -1012,11 +1013,12 @@ def group_devices(path: Path, channels: Iterable[ChannelT], skipped: dict[str, s
     """Topic prefix → role → channel: the channels (anything with ``topic`` and ``mtype``, of a type
     gyroemu decodes) grouped into devices as :func:`read_mcap` groups them: by prefix (``/<device>/imu``,
     ``/<device>/mag``, ...), an IMU topic of no role (``/imu/data_raw``) a device of its own, which takes
-    the field of the namespace above it (``/imu/mag``) when no IMU topic of that namespace has it. An
-    estimate without an IMU topic beside it (``/estimate/imu``, which ``gyroemu estimate`` writes for a
-    foreign topic) is the estimate of the log's one measured device, or, beside several or none, a device
-    of its own, as a lone truth is. Topics that belong to no device go into ``skipped`` with the reason
-    (and a :class:`LogWarning`)."""
+    the field of the nearest namespace above it that has no IMU topic (``/imu/mag``, before a root
+    ``/mag``; each IMU topic at most one field). An estimate without an IMU topic beside it
+    (``/estimate/imu``, which ``gyroemu estimate`` writes for a foreign topic) is the estimate of the log's
+    one measured device (:func:`is_the_devices_estimate`), else a device of its own, as a lone truth is.
+    Topics that belong to no device go into ``skipped`` with the reason (and a :class:`LogWarning`). The
+    grouping does not depend on the order the channels come in."""
     groups: dict[str, dict[str, ChannelT]] = {}
     for d in channels:
         topic, mtype = d.topic, d.mtype
@@ -1031,29 +1033,44 @@ def group_devices(path: Path, channels: Iterable[ChannelT], skipped: dict[str, s
                 warnings.warn(f"{path}: skipping topic {topic}: {skipped[topic]}", LogWarning, stacklevel=3)
             continue
         groups.setdefault(prefix, {})[role] = d
-    # Truth or estimate without a measured IMU: a device of its own (it holds Imu messages). A field
-    # without one goes to the IMU topics under its namespace (a driver's /imu/data_raw and /imu/mag).
-    for prefix in list(groups):
-        group = groups[prefix]
-        if IMU_ROLE not in group and MAG_ROLE in group:
-            under = [key for key, g in groups.items() if IMU_ROLE in g and g[IMU_ROLE].topic.startswith(prefix + "/")]
-            for key in under:
-                groups[key].setdefault(MAG_ROLE, group[MAG_ROLE])
-            if under:
-                del group[MAG_ROLE]
-        measured = [g for g in groups.values() if IMU_ROLE in g]
-        if IMU_ROLE not in group and ESTIMATE_ROLE in group and len(measured) == 1 and ESTIMATE_ROLE not in measured[0]:
-            measured[0][ESTIMATE_ROLE] = group.pop(ESTIMATE_ROLE)  # `estimate`'s output for a foreign IMU topic
-        if IMU_ROLE not in group:
-            for role in (TRUTH_ROLE, ESTIMATE_ROLE):  # a lone /truth/pose has no Imu messages: skipped
-                if role in group:
-                    groups[role_topic(role, prefix)] = {IMU_ROLE: group.pop(role)}
-            for d in group.values():
-                topic = d.topic
-                skipped[topic] = "no IMU topic of the same device"
-                warnings.warn(f"{path}: skipping topic {topic}: {skipped[topic]}", LogWarning, stacklevel=3)
-            del groups[prefix]
+    measured = [key for key, g in groups.items() if IMU_ROLE in g]
+    # A field with no IMU topic beside it goes to the IMU topics under its namespace that have no field
+    # of their own, the nearest namespace first (a driver's /imu/data_raw takes /imu/mag, not /mag).
+    fields = sorted((p for p, g in groups.items() if IMU_ROLE not in g and MAG_ROLE in g), key=len, reverse=True)
+    taken: set[str] = set()
+    for key in measured:
+        group = groups[key]
+        if MAG_ROLE not in group:
+            topic = group[IMU_ROLE].topic
+            nearest = next((p for p in fields if topic.startswith(p + "/")), None)
+            if nearest is not None:
+                group[MAG_ROLE] = groups[nearest][MAG_ROLE]
+                taken.add(nearest)
+    for prefix in taken:
+        del groups[prefix][MAG_ROLE]
+    # `estimate`'s output for a foreign IMU topic (/estimate/imu): the estimate of the log's one device.
+    lone = [p for p, g in groups.items() if IMU_ROLE not in g and ESTIMATE_ROLE in g]
+    if is_the_devices_estimate(len(measured), len(lone), any(ESTIMATE_ROLE in groups[k] for k in measured)):
+        groups[measured[0]][ESTIMATE_ROLE] = groups[lone[0]].pop(ESTIMATE_ROLE)
+    # Truth or estimate without a measured IMU: a device of its own (it holds Imu messages); what else is
+    # left belongs to no device.
+    for prefix in [p for p, g in groups.items() if IMU_ROLE not in g]:
+        group = groups.pop(prefix)
+        for role in (TRUTH_ROLE, ESTIMATE_ROLE):  # a lone /truth/pose has no Imu messages: skipped
+            if role in group:
+                groups[role_topic(role, prefix)] = {IMU_ROLE: group.pop(role)}
+        for d in group.values():
+            topic = d.topic
+            skipped[topic] = "no IMU topic of the same device"
+            warnings.warn(f"{path}: skipping topic {topic}: {skipped[topic]}", LogWarning, stacklevel=3)
     return groups
+
+
+def is_the_devices_estimate(measured: int, lone_estimates: int, device_has_one: bool) -> bool:
+    """Whether an estimate topic with no IMU topic beside it (``/estimate/imu``, as ``gyroemu estimate``
+    writes it for a foreign IMU topic) is the log's measured device's: the log has one measured device
+    (``measured``), one such estimate (``lone_estimates``), and the device no estimate of its own."""
+    return measured == 1 and lone_estimates == 1 and not device_has_one
 
 
 def device_name(prefix: str, metadata: list[dict[str, str]]) -> tuple[str, dict[str, str] | None]:

@@ -908,7 +908,7 @@ def _mcap_series(log: Path, topic: str | None = None) -> tuple[_GyroSeries, floa
         role_accepts,
         split_topic,
     )
-    from gyroemu.pipelines.formats.mcap_log import announce_scan, no_imu_error
+    from gyroemu.pipelines.formats.mcap_log import announce_scan, is_the_devices_estimate, no_imu_error
     from gyroemu.pipelines.formats.mcap_records import LogError, McapScan
     from gyroemu.pipelines.formats.messages import IMU
 
@@ -994,8 +994,12 @@ def _mcap_series(log: Path, topic: str | None = None) -> tuple[_GyroSeries, floa
     if not devices:
         raise no_imu_error(scan, log)
     measured = [c for c in devices if place(c)[2] not in (TRUTH_ROLE, ESTIMATE_ROLE)]
-    if len(measured) == 1:  # a lone /estimate/imu beside one measured device is its estimate (read_mcap)
-        devices = {c: s for c, s in devices.items() if place(c)[2] != ESTIMATE_ROLE}
+    lone = [c for c in devices if place(c)[2] == ESTIMATE_ROLE]
+    own = (
+        any(place(c)[2] == ESTIMATE_ROLE and place(c)[1] == place(measured[0])[1] for c in keys) if measured else False
+    )
+    if is_the_devices_estimate(len(measured), len(lone), own):  # the measured device's, as read_mcap has it
+        del devices[lone[0]]
     topics = {scan.data[c].channel.topic: c for c in devices}
     if topic is not None:
         if absolute_topic(topic) not in topics:

@@ -308,7 +308,7 @@ def _start_estimator(options: StreamOptions, dev: Device, scen: Scenario, sample
         samples.mag[:64] if setup.use_mag else None,
     )
     return LiveEstimator(
-        open_session(options.session.config()),
+        open_session(options.session.beside_config()),
         options.device_name,
         make_filter(options.estimate, setup, argument="--estimate"),
         setup.use_mag,

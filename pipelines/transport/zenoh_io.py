@@ -267,6 +267,11 @@ def _tcp_address(endpoint: str) -> tuple[str, int] | None:
     return (match.group(1), int(match.group(2))) if match else None
 
 
+def _loopback(endpoint: str) -> str:
+    """A listen endpoint as this machine connects to it: ``0.0.0.0`` and ``[::]`` as loopback."""
+    return endpoint.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:")
+
+
 def port_is_free(endpoint: str) -> bool | None:
     """Whether a ``tcp/host:port`` endpoint could be listened on now (None: not a TCP endpoint, or not
     an address of this machine): a plain socket binds it and lets go at once."""
@@ -426,6 +431,21 @@ class SessionOptions:
     def config(self) -> zenoh.Config:
         """The session's zenoh configuration (:func:`session_config`; ``ValueError`` names the argument)."""
         return session_config(connect=self.connect, listen=self.listen, mode=self.mode, config_file=self.config_file)
+
+    def beside_config(self) -> zenoh.Config:
+        """The configuration of a second session of this process beside one opened with :meth:`config` (a
+        live filter next to its stream): with ``listen`` endpoints it connects to them (an unspecified
+        address as loopback) and listens only on an ephemeral loopback port, so the two never contend for
+        a port (the second one's --listen was refused as taken by the first); otherwise :meth:`config`."""
+        if not self.listen:
+            return self.config()
+        reachable = [_loopback(e) for e in self.listen if (_tcp_address(e) or ("", 1))[1] != 0]  # not port 0
+        return session_config(
+            connect=[*reachable, *self.connect],
+            listen=["tcp/127.0.0.1:0"],
+            mode=self.mode,
+            config_file=self.config_file,
+        )
 
     def router_config(self) -> zenoh.Config:
         """A router's configuration (:func:`router_config`): ``mode`` does not apply."""

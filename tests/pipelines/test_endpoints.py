@@ -125,3 +125,20 @@ def test_a_router_listens_where_its_config_file_says(tmp_path):
     assert listening(config_file=own) == ["tcp/127.0.0.1:17999"]
     assert listening(config_file=own, listen=["tcp/127.0.0.1:18000"]) == ["tcp/127.0.0.1:18000"]
     assert listening(config_file=silent) == listening() == ["tcp/0.0.0.0:7447"]
+
+
+def test_a_live_estimate_beside_a_stream_that_listens(tmp_path):
+    """``stream --listen X --estimate``: the live filter's own session connects to X instead of listening
+    on it too (it was refused as 'taken by a zenoh process', the stream's own session, after the first
+    block); the filter publishes (how many depends on when its session links up: the stream waits for
+    no subscriber here)."""
+    import re
+
+    from live_processes import free_port
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    argv = ["--scenario", "rate_table_constant", "--device", "consumer_mems", "--duration", "1"]
+    result = gyroemu("stream", *argv, "--as-fast-as-possible", "--wait", "0", "--listen", endpoint, "--estimate")
+    assert result.returncode == 0, result.stderr
+    published = re.search(r"stream: (\d+) estimates published", result.stdout)
+    assert published is not None and int(published.group(1)) > 0, result.stdout

@@ -1074,3 +1074,38 @@ def test_a_record_cut_inside_its_head_is_refused():
     data = record * 3 + record[:5]
     with pytest.raises(ValueError, match="a partial record at its end"):
         _record_positions(data, np.frombuffer(data, np.uint8))
+
+
+@pytest.mark.parametrize(
+    "topics, devices, skipped",
+    [
+        (["/a/imu", "/a/mag", "/a/truth/imu", "/b/imu", "/b/mag"], {"/a": "/a/mag", "/b": "/b/mag"}, set()),
+        (["/imu/data_raw", "/imu/mag", "/mag"], {"/imu/data_raw": "/imu/mag"}, {"/mag"}),  # the nearest field
+        (
+            ["/r1/imu/data_raw", "/r1/imu/mag", "/r2/imu/data_raw", "/r2/imu/mag"],
+            {"/r1/imu/data_raw": "/r1/imu/mag", "/r2/imu/data_raw": "/r2/imu/mag"},
+            set(),
+        ),  # fmt: skip
+        (["/mag", "/a/imu", "/b/imu"], {"/a": "/mag", "/b": "/mag"}, set()),  # one field for the robot
+        (["/a/truth/imu", "/mag"], {"/a/truth/imu": None}, {"/mag"}),  # a truth is no magnetometer's device
+        (["/imu/data_raw", "/estimate/imu"], {"/imu/data_raw": None}, set()),
+    ],
+)
+def test_devices_are_grouped_whatever_the_channels_order(topics, devices, skipped):
+    """group_devices' namespace and lone-estimate rules give the same devices, fields and skipped topics
+    for the channels in either order (the first field met went to every IMU topic under the root, and a
+    truth promoted early counted as a measured device)."""
+    from types import SimpleNamespace
+
+    from gyroemu.pipelines.formats.mcap_log import group_devices
+
+    for order in (topics, topics[::-1]):
+        channels = [SimpleNamespace(topic=t, mtype=MAGNETIC_FIELD if t.endswith("mag") else IMU) for t in order]
+        found: dict[str, str] = {}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", LogWarning)
+            groups = group_devices(Path("x.mcap"), channels, found)
+        assert {k: (g["mag"].topic if "mag" in g else None) for k, g in groups.items()} == devices, order
+        assert set(found) == skipped, order
+    if "/estimate/imu" in topics:
+        assert groups["/imu/data_raw"]["estimate/imu"].topic == "/estimate/imu"

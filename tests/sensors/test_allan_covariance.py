@@ -118,3 +118,21 @@ def test_a_band_limit_needs_the_tau_minus_2_term():
     allan = allan_deviation(np.random.default_rng(3).standard_normal(4096), 0.01)
     with pytest.raises(ValueError, match="quantisation"):
         fit_allan(allan, terms=("arw", "bias_instability"), band_limit=True)
+
+
+def test_the_fit_residual_counts_a_point_the_signed_fit_takes_below_zero():
+    """With the τ⁻² term free, the model can go ≤ 0 at the first τ; that point then weighs by the data
+    (its model is no standard deviation), but its misfit still counts in the residual χ² that identify's
+    Gauss–Markov F-test compares (it counted 0: the χ² fell from 2608 to 679)."""
+    tau = 0.01 * 2.0 ** np.arange(10)
+    avar = 1e-4 / tau
+    avar[1] = 1e-9  # a second point far below the white line: the fit bends down through it
+    adev, edf = np.sqrt(avar), np.full(10, 1e3)
+    allan = AllanDeviation(tau=tau, adev=adev, clusters=edf + 1, edf=edf, low=adev, high=adev)
+    basis = _basis(tau)[:, :2]
+    c, model, chi2 = weighted_fit(allan, basis, free=[True, False])
+    fitted, avar = basis @ c, allan.adev**2  # the variance the fit sees
+    assert fitted[0] < 0 and model[0] == avar[0]
+    expected = np.sum(((avar - fitted) / (model * np.sqrt(2 / edf))) ** 2)
+    assert chi2 == pytest.approx(expected, rel=1e-12)
+    assert chi2 > 2 * np.sum(((avar - model) / (model * np.sqrt(2 / edf))) ** 2)
