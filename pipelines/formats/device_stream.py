@@ -69,6 +69,7 @@ __all__ = [
     "read_topic",
     "scan_devices",
     "truth_values",
+    "not_increasing_since",
     "warn_drops",
 ]
 
@@ -558,15 +559,7 @@ class DeviceCensus:
         n = len(block)
         if not n:
             return
-        t = ns_to_stamps(block.stamp_ns)
-        # each sample's stamp against the one before it (the previous block's last for the first)
-        skip = 0 if self.last_ns is not None else 1
-        before = t[:-1] if skip else np.concatenate((ns_to_stamps(np.array([self.last_ns])), t[:-1]))
-        bad = np.flatnonzero(~(t[skip:] > before))
-        if len(bad):
-            i = int(bad[0])
-            first = self.not_increasing or (self.count + i + skip, float(t[i + skip]), float(before[i]), 0)
-            self.not_increasing = (first[0], first[1], first[2], first[3] + len(bad))
+        self.not_increasing = not_increasing_since(block.stamp_ns, self.last_ns, self.count, self.not_increasing)
         if self.first_ns is None:
             self.first_ns = int(block.stamp_ns[0])
         self.last_ns = int(block.stamp_ns[-1])
@@ -604,6 +597,30 @@ def warn_drops(path: Path, stream: DeviceStream, topics: Mapping[str, str], mess
             LogWarning,
             stacklevel=2,
         )
+
+
+def not_increasing_since(
+    stamp_ns: NDArray[np.int64],
+    last_ns: int | None,
+    counted: int,
+    so_far: tuple[int, float, float, int] | None,
+) -> tuple[int, float, float, int] | None:
+    """The tally of samples whose stamp, in float seconds (as the filters take them: two stamps a
+    nanosecond apart at today's epoch are one float), does not follow the one before it, a block at a
+    time: ``stamp_ns`` (n,) the block's stamps, ``last_ns`` the sample's before it (None: the first
+    block), ``counted`` the samples before it, ``so_far`` the tally until then. Returns ``(index, t,
+    t_before, count)`` of the first such sample and how many there are
+    (:func:`~gyroemu.pipelines.estimation.series.not_increasing_error` says it), or None for none."""
+    t = ns_to_stamps(stamp_ns)
+    # each sample's stamp against the one before it (the previous block's last for the first)
+    skip = 0 if last_ns is not None else 1
+    before = t[:-1] if skip else np.concatenate((ns_to_stamps(np.array([last_ns])), t[:-1]))
+    bad = np.flatnonzero(~(t[skip:] > before))
+    if not len(bad):
+        return so_far
+    i = int(bad[0])
+    first = so_far or (counted + i + skip, float(t[i + skip]), float(before[i]), 0)
+    return (first[0], first[1], first[2], first[3] + len(bad))
 
 
 @dataclass

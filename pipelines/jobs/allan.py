@@ -66,6 +66,7 @@ import numpy as np
 
 from gyroemu.errors import ConfigError, LogError
 from gyroemu.pipelines.formats.atomic import output_file_problem, write_atomic, write_text_atomic
+from gyroemu.pipelines.formats.device_stream import not_increasing_since
 from gyroemu.pipelines.formats.file_names import same_file
 from gyroemu.sensors.allan import (
     TERMS,
@@ -757,7 +758,7 @@ class _GyroSeries:
         self.accel_usable = True  # every accelerometer sample given and finite so far
         self.last_stamp: int | None = None
         self.last_log_time: int | None = None
-        self.not_increasing: tuple[int, float, float, int] | None = None  # as DeviceCensus counts it
+        self.not_increasing: tuple[int, float, float, int] | None = None  # estimate's tally (not_increasing_since)
         self._pending: list[tuple[np.ndarray, np.ndarray | None]] = []
         self._pending_n = 0
 
@@ -772,12 +773,7 @@ class _GyroSeries:
                 self.steps.add(np.diff(stamps))
             else:
                 self.steps.add(np.diff(stamps, prepend=self.last_stamp))
-            before = np.concatenate(([stamps[0] - 1 if self.last_stamp is None else self.last_stamp], stamps[:-1]))
-            bad = np.flatnonzero(stamps <= before)
-            if len(bad):  # the first such sample, its stamp and the one before (s), and how many
-                k = int(bad[0])
-                first = self.not_increasing or (self.n + k, stamps[k] / 1e9, before[k] / 1e9, 0)
-                self.not_increasing = (first[0], first[1], first[2], first[3] + len(bad))
+            self.not_increasing = not_increasing_since(stamps, self.last_stamp, self.n, self.not_increasing)
             self.last_stamp = int(stamps[-1])
         self.n += len(gyro)
         if accel is None or not np.all(np.isfinite(accel)):
