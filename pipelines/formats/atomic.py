@@ -37,6 +37,7 @@ if TYPE_CHECKING:
 __all__ = [
     "folder_problem",
     "output_file_problem",
+    "report_files_problem",
     "output_folder_problem",
     "StagedFiles",
     "staged_files",
@@ -202,6 +203,22 @@ def output_folder_problem(folder: str | os.PathLike[str]) -> str | None:
         where = where.parent
     problem = folder_problem(where)
     return None if problem is None else f"{where}: {problem}"
+
+
+def report_files_problem(
+    folder: str | os.PathLike[str], names: Iterable[str], inputs: Iterable[str | os.PathLike[str]]
+) -> str | None:
+    """Why a report of files ``names`` written in ``folder`` would write over one of ``inputs`` (by any
+    path to it: :func:`output_file_problem`, an earlier report's files being the caller's to refuse), or
+    None; a folder still to be made holds no input."""
+    folder, inputs = Path(folder), list(inputs)
+    if not inputs or not folder.is_dir():
+        return None
+    for name in names:
+        problem = output_file_problem(folder / name, force=True, inputs=inputs)
+        if problem is not None:
+            return problem
+    return None
 
 
 def output_file_problem(

@@ -94,8 +94,8 @@ from gyroemu.pipelines.estimation.registry import (
 )
 from gyroemu.pipelines.formats.atomic import (
     StagedFiles,
-    output_file_problem,
     output_folder_problem,
+    report_files_problem,
     staged_files,
 )
 from gyroemu.pipelines.formats.file_names import same_file, unique_stems
@@ -609,14 +609,10 @@ def report_input_problem(
     would not. An input is never overwritten or removed, even with ``--force``."""
     folder = Path(folder)
     inputs = list(inputs)
-    if not inputs or not folder.is_dir():  # a folder still to be made holds no input
-        return None
-    for name in (*REPORT_FILES, *plots):
-        # force: an earlier report is check_report_folder's to refuse; here only inputs (and folders)
-        problem = output_file_problem(folder / name, force=True, inputs=inputs)
-        if problem is not None:
-            return f"argument {argument}: {problem}"
-    for plot in earlier_plots(folder) if replace_earlier else []:
+    problem = report_files_problem(folder, (*REPORT_FILES, *plots), inputs)  # an earlier report: not here
+    if problem is not None:
+        return f"argument {argument}: {problem}"
+    for plot in earlier_plots(folder) if replace_earlier and folder.is_dir() else []:
         if any(same_file(plot, given) for given in inputs):
             return (
                 f"argument --force: {plot} is an input: it is a plot of the earlier report in {folder} (its "

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gyroemu.errors import ConfigError
-from gyroemu.pipelines.formats.atomic import folder_problem, output_file_problem
+from gyroemu.pipelines.formats.atomic import folder_problem, report_files_problem
 from gyroemu.pipelines.formats.file_names import repeated_file, unique_stems
 from gyroemu.pipelines.twin import (
     METRICS,
@@ -177,12 +177,10 @@ def check_options(options: TwinOptions) -> tuple[list[str], dict[str, str], dict
     problem = folder_problem(folder)
     if problem is not None:
         raise TwinError(f"argument --out: {folder}: {problem}")
-    if out.is_dir():  # a folder still to be made holds no input
-        inputs = [*options.trials, options.site, *([Path(device.path)] if device.path else [])]
-        for name in report_files(options.trials):
-            problem = output_file_problem(out / name, force=options.force, inputs=inputs)
-            if problem is not None:
-                raise TwinError(f"argument --out: {problem}")
+    inputs = [*options.trials, options.site, *([Path(device.path)] if device.path else [])]
+    problem = report_files_problem(out, report_files(options.trials), inputs)  # even with --force
+    if problem is not None:
+        raise TwinError(f"argument --out: {problem}")
     return filters, unavailable, site, handling, device
 
 
