@@ -35,6 +35,8 @@ __all__ = [
     "at_least",
     "MAX_ANGLE_TURNS",
     "AngleRad",
+    "AngleDeg",
+    "AnglesDeg",
     "PositiveReal",
     "NonNegativeReal",
     "Vec3",
@@ -102,6 +104,21 @@ NonNegativeReal = Annotated[Real, Field(ge=0)]
 Vec3 = tuple[Real, Real, Real]
 AngleRad = Annotated[Real, pydantic.AfterValidator(_angle_rad)]
 """An orientation angle in radians, at most :data:`MAX_ANGLE_TURNS` turns either way."""
+
+
+def _angle_deg(value: float) -> float:
+    if abs(value) > MAX_ANGLE_TURNS * 360.0:
+        raise ValueError(
+            f"{value:g}° is more than {MAX_ANGLE_TURNS} turns (±{MAX_ANGLE_TURNS * 360:g}°): an orientation "
+            "angle means the same modulo 360° (radians given in degrees would be small; a unit slip?)"
+        )
+    return value
+
+
+AngleDeg = Annotated[Real, pydantic.AfterValidator(_angle_deg)]
+"""An orientation angle in degrees, at most :data:`MAX_ANGLE_TURNS` turns either way."""
+AnglesDeg = tuple[AngleDeg, AngleDeg, AngleDeg]
+"""Three orientation angles in degrees (roll, pitch, yaw), each :data:`AngleDeg`."""
 Quat = tuple[Real, Real, Real, Real]
 
 

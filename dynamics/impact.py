@@ -60,7 +60,7 @@ from numpy.typing import ArrayLike, NDArray
 from pydantic import Field
 
 from .body_kernels import cross, quat_product, rotate, rotation_matrix
-from .config import NonNegativeReal, PositiveReal, Real, Section, Vec3
+from .config import AnglesDeg, NonNegativeReal, PositiveReal, Real, Section, Vec3
 from .earth import Environment, Site
 from .inertia import box, inertia_config
 from .integrate import Event, Jump, Jumped, Solution, integrate
@@ -95,7 +95,7 @@ class DropInitial(Section):
 
     height_m: PositiveReal = 1.0
     """Height of the centre of mass above the ground."""
-    rpy_deg: Vec3 = (20.0, -10.0, 30.0)
+    rpy_deg: AnglesDeg = (20.0, -10.0, 30.0)
     omega_b: Vec3 = (4.0, -3.0, 2.0)
     """Tumble, body axes, rad/s (relative to the Earth)."""
     vel_w: Vec3 = (0.0, 0.0, 0.0)

@@ -50,7 +50,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
-from .config import NonNegativeReal, PositiveReal, Real, Section, Vec3
+from .config import AngleDeg, AnglesDeg, NonNegativeReal, PositiveReal, Real, Section, Vec3
 from .jit import njit
 from .motion_kernels import (
     PhasorTable,
@@ -141,8 +141,8 @@ class Table(Section):
         axis the body feels the centripetal and tangential accelerations.
     """
 
-    base_rpy_deg: Vec3 = (0.0, 0.0, 0.0)
-    mount_rpy_deg: Vec3 = (0.0, 0.0, 0.0)
+    base_rpy_deg: AnglesDeg = (0.0, 0.0, 0.0)
+    mount_rpy_deg: AnglesDeg = (0.0, 0.0, 0.0)
     lever_arm_m: Vec3 = (0.0, 0.0, 0.0)
 
 
@@ -150,7 +150,7 @@ class ConstantRate(Section):
     """``[constant]``: the table turns at ``rate_deg_s`` from ``t = 0``: ``θ = θ0 + ω t``."""
 
     rate_deg_s: Real
-    initial_angle_deg: Real = 0.0
+    initial_angle_deg: AngleDeg = 0.0
 
 
 class RateSteps(Section):
@@ -165,7 +165,7 @@ class RateSteps(Section):
     rates_deg_s: list[Real] = Field(min_length=1)
     dwell_s: list[PositiveReal]
     max_accel_deg_s2: PositiveReal
-    initial_angle_deg: Real = 0.0
+    initial_angle_deg: AngleDeg = 0.0
 
     @field_validator("dwell_s")
     @classmethod
@@ -490,7 +490,7 @@ class AngularOscillation(Section):
     axis_b: Vec3 = (1.0, 0.0, 0.0)
     amplitude_deg: NonNegativeReal
     frequency_hz: PositiveReal
-    phase_deg: Real = 0.0
+    phase_deg: AngleDeg = 0.0
 
     @field_validator("axis_b")
     @classmethod
@@ -504,7 +504,7 @@ class LinearOscillation(Section):
 
     amplitude_m: Vec3
     frequency_hz: PositiveReal
-    phase_deg: Real = 0.0
+    phase_deg: AngleDeg = 0.0
 
 
 class OscillationSpec(EarthBoundSpec):
@@ -604,7 +604,7 @@ class Coning(Section):
 
     half_angle_deg: Annotated[Real, Field(gt=0, lt=180)]
     frequency_hz: PositiveReal
-    reference_rpy_deg: Vec3 = (0.0, 0.0, 0.0)
+    reference_rpy_deg: AnglesDeg = (0.0, 0.0, 0.0)
 
 
 class ConingSpec(EarthBoundSpec):
@@ -704,8 +704,8 @@ class Sculling(Section):
     angular_amplitude_deg: Annotated[Real, Field(gt=0, le=90)]
     acceleration_amplitude_m_s2: PositiveReal
     frequency_hz: PositiveReal
-    phase_deg: Real = 0.0
-    reference_rpy_deg: Vec3 = (0.0, 0.0, 0.0)
+    phase_deg: AngleDeg = 0.0
+    reference_rpy_deg: AnglesDeg = (0.0, 0.0, 0.0)
 
 
 class ScullingSpec(EarthBoundSpec):

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import Field
 
-from .config import Section, Vec3
+from .config import AnglesDeg, Section
 from .earth import Site
 from .rotation import quat_from_euler_zyx
 from .scenarios import ScenarioSpec
@@ -132,7 +132,7 @@ class EarthBoundSpec(ScenarioSpec):
 class Attitude(Section):
     """``[attitude]``: ``rpy_deg = [roll, pitch, yaw]``, degrees, ``R_wb = Rz(yaw) Ry(pitch) Rx(roll)``."""
 
-    rpy_deg: Vec3 = (0.0, 0.0, 0.0)
+    rpy_deg: AnglesDeg = (0.0, 0.0, 0.0)
 
     def quat(self) -> NDArray[np.float64]:
         """``q_wb`` (4,)."""

@@ -33,7 +33,7 @@ from numpy.polynomial import Chebyshev
 from numpy.typing import ArrayLike, NDArray
 from pydantic import Field, StrictInt, field_validator
 
-from .config import NonNegativeReal, PositiveReal, Real, Section, Vec3, at_most
+from .config import AngleDeg, AnglesDeg, NonNegativeReal, PositiveReal, Real, Section, Vec3, at_most
 from .jit import njit
 from .motion_kernels import (
     SinesTable,
@@ -202,7 +202,7 @@ class RotationBand(Section):
     frequencies are drawn uniformly in ``frequency_hz = [low, high]``.
     """
 
-    mean_rpy_deg: Vec3 = (0.0, 0.0, 0.0)
+    mean_rpy_deg: AnglesDeg = (0.0, 0.0, 0.0)
     amplitude_deg: Vec3 = (20.0, 10.0, 90.0)
     frequency_hz: tuple[PositiveReal, PositiveReal] = (0.02, 0.5)
     terms: Annotated[StrictInt, Field(ge=1), _at_most_terms] = 6
@@ -347,7 +347,7 @@ class Drive(Section):
     ``brake_m_s2`` (slowing down): a change ``Δv`` takes ``16 |Δv| / (5 a_peak)`` seconds.
     """
 
-    initial_yaw_deg: Real = 0.0
+    initial_yaw_deg: AngleDeg = 0.0
     accel_m_s2: PositiveReal = 2.0
     brake_m_s2: PositiveReal = 3.0
 

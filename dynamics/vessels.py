@@ -58,7 +58,7 @@ from numpy.typing import ArrayLike, NDArray
 from pydantic import Field, StrictInt
 
 from .body_kernels import cross, quat_product, rotate_back, rotation_matrix
-from .config import NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3
+from .config import AngleDeg, NonNegativeReal, PositiveReal, Quat, Real, Section, Vec3
 from .earth import Environment, Site
 from .gyrostat import GIMBALS, GimballedRotor, Gyrostat, P, Q, SpinProfile, W, X
 from .inertia import inertia_config, inertia_tensor
@@ -178,7 +178,7 @@ class Hull(Section):
     roll_damping_ratio: Annotated[Real, Field(ge=0.0, lt=1.0)] = 0.07
     pitch_damping_ratio: Annotated[Real, Field(ge=0.0, lt=1.0)] = 0.2
     heave_damping_ratio: Annotated[Real, Field(ge=0.0, lt=1.0)] = 0.2
-    heading_deg: Real = 0.0
+    heading_deg: AngleDeg = 0.0
     """Compass heading of the bow, degrees clockwise from north."""
     heading_hold_period_s: PositiveReal = 40.0
     mooring_period_s: PositiveReal = 120.0

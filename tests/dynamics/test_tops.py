@@ -508,6 +508,24 @@ def test_the_rate_limits_leave_the_shipped_tops_far_inside():
         assert omega < MAX_SPLIT_FREQUENCY_RAD_S / 1000, name
 
 
+@pytest.mark.parametrize(
+    "name, section, key, value, named",
+    [
+        ("bench_static", "attitude", "rpy_deg", [0.0, 1e300, 0.0], "attitude.rpy_deg[1]"),
+        ("rate_table_constant", "table", "base_rpy_deg", [0.0, 0.0, 1441.0], "table.base_rpy_deg[2]"),
+        ("ship_waves", "ship", "heading_deg", -1e9, "ship.heading_deg"),
+    ],
+)
+def test_orientation_angles_in_degrees_are_bounded_as_those_in_radians(name, section, key, value, named):
+    """An orientation angle in degrees beyond 4 turns (1440°) is refused naming its key (1e300° was taken:
+    no digit of its sine is left); 1440° itself is taken."""
+    with pytest.raises(ConfigError) as err:
+        scenario_from_dict(_edited(name, section, key, value))
+    assert err.value.key == named, err.value
+    edge = [0.0, 0.0, 1440.0] if isinstance(value, list) else -1440.0
+    scenario_from_dict(_edited(name, section, key, edge))
+
+
 def test_euler_angles_within_four_turns_are_taken_and_beyond_refused():
     """The bound is 4 turns either way (MAX_ANGLE_TURNS): a spin phase of 3.9 turns and a precession of −4
     turns are taken, the same top as at their remainders modulo 2π (to the rounding of the angle)."""
