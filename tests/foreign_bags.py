@@ -17,11 +17,13 @@ def write_foreign_bag(
     n: int = N,
     mag_every: int = 1,
     mag_offset_ns: int = 0,
+    compress_each_message: bool = False,
 ) -> Path:
     """A rosbag2 MCAP bag (rosbags' writer): ``imu_topics`` (/imu_a in a_link, /imu_b in b_link, others in
     imu_link) at 100 Hz with log times 1 ms after their stamps, and a /tf every 5th sample; with
     ``mag_topic``, sensor_msgs/MagneticField on it every ``mag_every``-th sample, ``mag_offset_ns`` from
-    its stamp. ``n`` samples. Returns the file."""
+    its stamp. ``n`` samples; ``compress_each_message``: rosbag2's 'message' compression (zstd), each
+    payload a compressed frame. Returns the file."""
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -31,7 +33,12 @@ def write_foreign_bag(
     field_rng = np.random.default_rng(4)
     stamps = 1_700_000_000 * 10**9 + np.arange(n) * 10_000_000
     frames = {"/imu_a": "a_link", "/imu_b": "b_link"}
-    with Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP) as bag:
+    writer = Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP)
+    if compress_each_message:
+        from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
+
+        writer.set_compression(CompressionMode.MESSAGE, CompressionFormat.ZSTD)
+    with writer as bag:
         conns = {name: bag.add_connection(name, "sensor_msgs/msg/Imu", typestore=store) for name in imu_topics}
         tf = bag.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=store)
         mag = (

@@ -66,6 +66,7 @@ __all__ = [
     "ENCAPSULATION_CDR_LE",
     "FieldSpec",
     "MessageType",
+    "not_cdr",
     "DecodedBatch",
     "IMU",
     "MAGNETIC_FIELD",
@@ -429,6 +430,21 @@ class DecodedBatch:
         return self.fields[name]
 
 
+_COMPRESSED = {b"\x28\xb5\x2f\xfd": "zstd", b"\x04\x22\x4d\x18": "lz4"}  # the frames' magic numbers
+
+
+def not_cdr(head: bytes) -> str:
+    """What a payload whose first four bytes ``head`` are no little-endian plain CDR encapsulation is, in
+    words: a zstd or lz4 frame (rosbag2's per-message compression), or another encapsulation."""
+    packed = _COMPRESSED.get(head[:4])
+    if packed is not None:
+        return (
+            f"is {packed}-compressed on its own (rosbag2's 'message' compression mode): write the bag "
+            "uncompressed or with file or chunk compression, e.g. 'ros2 bag convert', and read that"
+        )
+    return f"is not little-endian plain CDR (encapsulation {head[:4].hex(' ')}; expected 00 01 00 00)"
+
+
 @dataclass(frozen=True)
 class MessageType:
     """A ROS 2 message type of a ``std_msgs/Header`` followed by fixed-size fields.
@@ -607,10 +623,7 @@ class MessageType:
         bad = (rows[:, 0] != 0) | (rows[:, 1] != 1)
         if np.any(bad):
             k = int(np.flatnonzero(bad)[0])
-            raise ValueError(
-                f"message {first + k} is not little-endian plain CDR "
-                f"(encapsulation {bytes(rows[k, :4]).hex(' ')}; expected 00 01 00 00)"
-            )
+            raise ValueError(f"message {first + k} {not_cdr(bytes(rows[k, :4]))}")
         string_length = rows[:, 4 + 8 : 4 + 12].copy().view("<u4")[:, 0]
         if np.all(string_length == string_length[0]):
             return self._decode_layout(rows, int(string_length[0]), first)

@@ -317,7 +317,7 @@ class _LogWalk:
 
     def _imu_stamps(self, batch: RawMessages, channel: np.ndarray) -> None:
         from gyroemu.pipelines.formats.mcap_records import decoded_type
-        from gyroemu.pipelines.formats.messages import IMU
+        from gyroemu.pipelines.formats.messages import IMU, not_cdr
 
         for channel_id in np.unique(channel):
             record = self.walk.channels[int(channel_id)]
@@ -329,7 +329,11 @@ class _LogWalk:
             if np.any(size < 12):
                 raise self.walk.error(f"a message on {record.topic} is too short for its header")
             head = batch.buffer[start[:, None] + np.arange(12)]
-            little = head[:, 1] == 1  # encapsulation CDR_LE (0x0001) or CDR_BE (0x0000)
+            plain = (head[:, 0] == 0) & (head[:, 1] <= 1)  # encapsulation CDR_LE (0x0001) or CDR_BE (0x0000)
+            if not plain.all():  # a compressed or foreign payload: its stamp is no stamp
+                k = int(np.flatnonzero(~plain)[0])
+                raise self.walk.error(f"topic {record.topic}: a message {not_cdr(bytes(head[k, :4]))}")
+            little = head[:, 1] == 1
             words = np.ascontiguousarray(head[:, 4:12])
             sec = np.where(little, words[:, :4].view("<i4")[:, 0], words[:, :4].view(">i4")[:, 0]).astype(np.int64)
             nsec = np.where(little, words[:, 4:].view("<u4")[:, 0], words[:, 4:].view(">u4")[:, 0]).astype(np.int64)

@@ -254,3 +254,17 @@ def test_allan_of_several_imu_topics_asks_for_one(tmp_path, capsys):
     assert "--topic /imu_c: no sensor_msgs/msg/Imu topic of that name (IMU topics: /imu_a, /imu_b)" in (
         capsys.readouterr().err
     )
+
+
+def test_a_bag_compressed_message_by_message_is_named_as_such(tmp_path, capsys):
+    """rosbag2's 'message' compression makes each payload a zstd frame: info printed a span of −56 s from
+    compressed bytes read as stamps, estimate called the messages corrupt; both now say what they are."""
+    bag = write_foreign_bag(tmp_path / "packed", imu_topics=("/imu",), n=100, compress_each_message=True)
+    for argv in (["info", str(bag)], ["estimate", str(bag), "--out", str(tmp_path / "o.mcap")]):
+        try:
+            status = main(argv)
+        except SystemExit as stop:  # a usage error: argparse's exit
+            status = stop.code
+        assert status == 2
+        assert "is zstd-compressed on its own (rosbag2's 'message' compression mode)" in capsys.readouterr().err
+    assert not (tmp_path / "o.mcap").exists()
