@@ -81,6 +81,7 @@ if TYPE_CHECKING:
     from typing_extensions import Buffer
 
 __all__ = [
+    "folder_not_mcap",
     "COMPRESSION_LEVEL",
     "MAGIC",
     "OFFERED_QOS_PROFILES",
@@ -852,7 +853,7 @@ class McapScan:
         try:
             f = open(self.path, "rb")
         except IsADirectoryError:
-            raise self.error("is a folder, not an MCAP file") from None
+            raise self.error(folder_not_mcap(self.path)) from None
         except OSError as e:
             raise self.error(f"cannot open: {e.strerror or e}") from None
         with f:
@@ -1148,6 +1149,15 @@ def _gather(buffer: NDArray[np.uint8], starts: NDArray[np.int64], width: int) ->
     if len(starts) == 0:
         return np.empty((0, width), np.uint8)
     return np.lib.stride_tricks.sliding_window_view(buffer, width)[starts]
+
+
+def folder_not_mcap(folder: Path) -> str:
+    """Why a folder given as a log is none, in words: a rosbag2 bag folder names the MCAP files it holds."""
+    inside = sorted(p.name for p in folder.glob("*.mcap")) if folder.is_dir() else []
+    if (folder / "metadata.yaml").is_file() and inside:
+        files = ", ".join(inside[:3]) + (", ..." if len(inside) > 3 else "")
+        return f"is a rosbag2 bag folder, not an MCAP file: give the file it holds ({files}), one at a time"
+    return "is a folder, not an MCAP file"
 
 
 def _opcode_name(opcode: int) -> str:

@@ -68,6 +68,7 @@ from gyroemu.errors import ConfigError, LogError
 from gyroemu.pipelines.formats.atomic import output_file_problem, write_atomic, write_text_atomic
 from gyroemu.pipelines.formats.device_stream import not_increasing_since
 from gyroemu.pipelines.formats.file_names import same_file
+from gyroemu.pipelines.formats.mcap_records import folder_not_mcap
 from gyroemu.sensors.allan import (
     TERMS,
     AllanDeviation,
@@ -506,7 +507,8 @@ def check_options(
         except ValueError as e:
             raise AllanError(f"argument {argument}: {e}") from None
     if not log.is_file():
-        raise AllanError(f"argument LOG: {log}: {'not a file' if log.exists() else 'no such file'}")
+        why = folder_not_mcap(log) if log.is_dir() else "not a file" if log.exists() else "no such file"
+        raise AllanError(f"argument LOG: {log}: {why}")
     if plot:
         _check_output(picture, argument, log, force)
     if kalibr is not None:

@@ -268,3 +268,17 @@ def test_a_bag_compressed_message_by_message_is_named_as_such(tmp_path, capsys):
         assert status == 2
         assert "is zstd-compressed on its own (rosbag2's 'message' compression mode)" in capsys.readouterr().err
     assert not (tmp_path / "o.mcap").exists()
+
+
+def test_a_rosbag2_folder_names_the_mcap_it_holds(tmp_path, capsys):
+    """A bag folder given where its MCAP file belongs: the folder is named as a rosbag2 bag, with its file
+    (it was 'is a folder, not an MCAP file', or allan's 'not a file')."""
+    bag = write_foreign_bag(tmp_path / "bag", imu_topics=("/imu",), n=100)
+    for argv in (["info", str(bag.parent)], ["allan", str(bag.parent), "--no-plot"]):
+        try:
+            status = main(argv)
+        except SystemExit as stop:
+            status = stop.code
+        assert status == 2
+        err = capsys.readouterr().err
+        assert f"is a rosbag2 bag folder, not an MCAP file: give the file it holds ({bag.name}), one at a time" in err
