@@ -15,21 +15,21 @@ def disk_full_at(monkeypatch: pytest.MonkeyPatch, n: int) -> list[str]:
     (``OSError(ENOSPC)``) after part of its data; returns the names of the files asked for, in order."""
     from gyroemu.pipelines.formats import atomic
 
-    real = atomic._write_temporary
+    real = atomic.StagedFiles.write
     asked: list[str] = []
 
-    def write(path, write, *, binary):
+    def write(self, path, write, *, binary=True):
         asked.append(Path(path).name)
         if len(asked) != n:
-            return real(path, write, binary=binary)
+            return real(self, path, write, binary=binary)
 
         def part_then_full(f) -> None:
             f.write(b"part" if binary else "part")
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-        return real(path, part_then_full, binary=binary)
+        return real(self, path, part_then_full, binary=binary)
 
-    monkeypatch.setattr(atomic, "_write_temporary", write)
+    monkeypatch.setattr(atomic.StagedFiles, "write", write)
     return asked
 
 

@@ -49,44 +49,22 @@ __all__ = [
 
 def write_atomic(path: str | os.PathLike[str], write: Callable[[IO[Any]], object], *, binary: bool = True) -> Path:
     """Call ``write(f)`` on a temporary file opened for writing (bytes, or UTF-8 text with
-    ``binary=False``) and move it to ``path``. Returns ``path``."""
-    path = Path(path)
-    tmp = _write_temporary(path, write, binary=binary)
-    try:
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
-
-
-def _write_temporary(path: Path, write: Callable[[IO[Any]], object], *, binary: bool) -> str:
-    """Call ``write(f)`` on a new temporary file beside ``path`` (given the mode ``path`` would get) and
-    return its name; on any error it is removed."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8") as f:
-            write(f)
-        _give_mode(tmp, path)  # mkstemp's 0o600 is for the temporary file, not the output
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return tmp
+    ``binary=False``) and move it to ``path``: an output of one file (:func:`staged_files`). Returns
+    ``path``."""
+    with staged_files() as out:
+        return out.write(path, write, binary=binary)
 
 
 def write_text_atomic(path: str | os.PathLike[str], text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` whole or not at all."""
-    return write_atomic(path, lambda f: f.write(text), binary=False)
+    with staged_files() as out:
+        return out.write_text(path, text)
 
 
 def write_figure_atomic(fig: Figure, path: str | os.PathLike[str], dpi: int) -> Path:
     """Save the matplotlib figure ``fig`` as a PNG at ``path`` whole or not at all, and close it."""
-    import matplotlib.pyplot as plt
-
-    try:
-        return write_atomic(path, lambda f: fig.savefig(f, dpi=dpi, format="png"))
-    finally:
-        plt.close(fig)
+    with staged_files() as out:
+        return out.write_figure(fig, path, dpi)
 
 
 class StagedFiles:
@@ -99,10 +77,19 @@ class StagedFiles:
         self._removals: list[Path] = []
 
     def write(self, path: str | os.PathLike[str], write: Callable[[IO[Any]], object], *, binary: bool = True) -> Path:
-        """Call ``write(f)`` on a temporary file (as :func:`write_atomic`) that becomes ``path`` when the
-        output is complete. Returns ``path``."""
+        """Call ``write(f)`` on a new temporary file beside ``path`` (bytes, or UTF-8 text with
+        ``binary=False``; removed on any error) that becomes ``path`` when the output is complete. Returns
+        ``path``."""
         path = Path(path)
-        self._staged.append((_write_temporary(path, write, binary=binary), path))
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        try:
+            with os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8") as f:
+                write(f)
+            _give_mode(tmp, path)  # mkstemp's 0o600 is for the temporary file, not the output
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        self._staged.append((tmp, path))
         return path
 
     def write_text(self, path: str | os.PathLike[str], text: str) -> Path:
