@@ -79,6 +79,7 @@ __all__ = [
     "MAX_ANGLE_LSB_RAD",
     "MAX_VELOCITY_LSB_M_PER_S",
     "MIN_BANDWIDTH_FRACTION",
+    "bandwidth_problem",
 ]
 
 #: The unit g₀ in key names (``_per_g``, ``_ug``), m/s²; not the local gravity of a scenario.
@@ -125,6 +126,23 @@ MIN_BANDWIDTH_FRACTION = 1e-4
 narrower than the output filters of real IMUs (which sit within about a hundredth of the output rate);
 at 10⁻⁶ of the rate the second-order Butterworth's coefficients have lost their digits in float64 (its
 noise gain came out 60 % off), and at 10⁻³⁰⁰ Hz its matrices were singular (a LinAlgError)."""
+
+
+def bandwidth_problem(bandwidth_hz: float, rate_hz: float, rate: str = "") -> str | None:
+    """Why an output low-pass of ``bandwidth_hz`` cannot filter samples at ``rate_hz`` (at or above the
+    Nyquist frequency, or narrower than :data:`MIN_BANDWIDTH_FRACTION` of the rate), or None; ``rate``
+    names the rate in the message (default: "the <rate_hz> Hz sample rate")."""
+    rate = rate or f"the {rate_hz:g} Hz sample rate"
+    if not bandwidth_hz < rate_hz / 2:
+        return f"{bandwidth_hz:g} Hz is not below the Nyquist frequency {rate_hz / 2:g} Hz of {rate}"
+    if bandwidth_hz < MIN_BANDWIDTH_FRACTION * rate_hz:
+        return (
+            f"{bandwidth_hz:g} Hz is less than the limit of {MIN_BANDWIDTH_FRACTION:g} of {rate} "
+            f"({MIN_BANDWIDTH_FRACTION * rate_hz:g} Hz): a hundred times narrower than the output filters of real "
+            "IMUs, and a low-pass whose coefficients float64 cannot hold"
+        )
+    return None
+
 
 _RateLsb = Annotated[
     PositiveReal, at_most(MAX_RATE_LSB_RAD_PER_S, "one count would be more than the widest gyro's whole range")
@@ -581,18 +599,9 @@ class SensorErrors:
 
     def __init__(self, spec: GyroErrors | AccelErrors | ErrorModel, dt: float, rng: np.random.Generator) -> None:
         m = spec if isinstance(spec, ErrorModel) else spec.to_si()
-        if m.bandwidth_hz is not None and not m.bandwidth_hz < 0.5 / dt:
-            raise ConfigError(
-                f"{m.bandwidth_hz:g} Hz is not below the Nyquist frequency {0.5 / dt:g} Hz "
-                f"of the {1 / dt:g} Hz sample rate",
-                key="bandwidth_hz",
-            )
-        if m.bandwidth_hz is not None and m.bandwidth_hz < MIN_BANDWIDTH_FRACTION / dt:
-            raise ConfigError(
-                f"{m.bandwidth_hz:g} Hz is less than the limit of {MIN_BANDWIDTH_FRACTION:g} of the "
-                f"{1 / dt:g} Hz sample rate: a low-pass whose coefficients float64 cannot hold",
-                key="bandwidth_hz",
-            )
+        problem = None if m.bandwidth_hz is None else bandwidth_problem(m.bandwidth_hz, 1 / dt)
+        if problem is not None:
+            raise ConfigError(problem, key="bandwidth_hz")
         self.model = m
         self.dt = float(dt)
         self._bias = m.bias + _turn_on(m.turn_on_bias, rng)

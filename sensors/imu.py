@@ -67,7 +67,7 @@ from gyroemu.errors import ConfigError
 
 from .accelerometer import AccelerometerSpec, LatencySeconds
 from .device_run import BLOCK_INNER_SAMPLES, DeviceRun, concatenate_samples
-from .errors import MIN_BANDWIDTH_FRACTION, AccelErrors, ErrorModel, GyroErrors
+from .errors import AccelErrors, ErrorModel, GyroErrors, bandwidth_problem
 from .magnetometer import MagnetometerSpec
 from .mechanism import GYRO_KINDS, GyroMechanism, mechanism_class
 from .samples import ImuSamples
@@ -199,25 +199,6 @@ MAX_INTRINSIC_NOISE_DENSITY = 1e6
 """The largest white noise a gyro mechanism may make, rad/s/√Hz: 10¹¹ times the noisiest real gyros
 (consumer MEMS, about 10⁻⁴ rad/s/√Hz), a backstop below where its square leaves float64's range (a FOG
 coil of 10⁻³⁰⁰ m made 10²⁹⁴ and an OverflowError); each mechanism's keys keep it far below."""
-
-
-def _check_bandwidth(bandwidth_hz: float, rate_hz: float, *, file: str | Path | None, key: str) -> None:
-    """Refuse an output low-pass at or above the Nyquist frequency, or narrower than
-    :data:`gyroemu.sensors.errors.MIN_BANDWIDTH_FRACTION` of the output rate."""
-    if not bandwidth_hz < rate_hz / 2:
-        raise ConfigError(
-            f"{bandwidth_hz:g} Hz is not below the Nyquist frequency {rate_hz / 2:g} Hz of the output rate",
-            file=file,
-            key=key,
-        )
-    if bandwidth_hz < MIN_BANDWIDTH_FRACTION * rate_hz:
-        raise ConfigError(
-            f"{bandwidth_hz:g} Hz is less than the limit of {MIN_BANDWIDTH_FRACTION:g} of the output rate "
-            f"{rate_hz:g} Hz ({MIN_BANDWIDTH_FRACTION * rate_hz:g} Hz): a hundred times narrower than the output "
-            "filters of real IMUs, and a low-pass whose coefficients float64 cannot hold",
-            file=file,
-            key=key,
-        )
 
 
 def _white_noise_budget(
@@ -392,8 +373,13 @@ class Device:
         accel_errors = spec.accelerometer.errors.to_si()
         # The output low-passes before the noise budget, which takes their noise gain.
         for model, prefix in ((self._gyro_errors, "gyro.errors"), (accel_errors, "accelerometer.errors")):
-            if model.bandwidth_hz is not None:
-                _check_bandwidth(model.bandwidth_hz, spec.rate_hz, file=where, key=f"{prefix}.bandwidth_hz")
+            problem = (
+                None
+                if model.bandwidth_hz is None
+                else bandwidth_problem(model.bandwidth_hz, spec.rate_hz, "the output rate")
+            )
+            if problem is not None:
+                raise ConfigError(problem, file=where, key=f"{prefix}.bandwidth_hz")
         self.intrinsic_noise_density = float(self.mechanism.intrinsic_noise_density())
         if not self.intrinsic_noise_density < MAX_INTRINSIC_NOISE_DENSITY:
             # a backstop: each mechanism's keys are bounded so that their noise stays far below this
