@@ -89,33 +89,28 @@ a turn or two (−π…π, 0…2π, or a spin phase a little past it); a value f
 left (float64 spaces numbers above 2⁵² · 2π ≈ 2.8·10¹⁶ more than a turn apart)."""
 
 
-def _angle_rad(value: float) -> float:
-    if abs(value) > MAX_ANGLE_TURNS * 2 * math.pi:
-        raise ValueError(
-            f"{value:g} rad is more than {MAX_ANGLE_TURNS} turns (±{MAX_ANGLE_TURNS * 2 * math.pi:.4g} rad): an "
-            "orientation angle means the same modulo 2π (degrees given in radians?)"
-        )
-    return value
+def _within_turns(turn: float, unit: str, slip: str) -> pydantic.AfterValidator:
+    """A validator refusing an orientation angle beyond :data:`MAX_ANGLE_TURNS` turns of ``turn`` (in
+    ``unit``), saying which unit slip such a value most likely is (``slip``)."""
+
+    def check(value: float) -> float:
+        if abs(value) > MAX_ANGLE_TURNS * turn:
+            raise ValueError(
+                f"{value:g}{unit} is more than {MAX_ANGLE_TURNS} turns (±{MAX_ANGLE_TURNS * turn:.4g}{unit}): an "
+                f"orientation angle means the same modulo {turn:.4g}{unit} ({slip})"
+            )
+        return value
+
+    return pydantic.AfterValidator(check)
 
 
 Real = Annotated[float, pydantic.BeforeValidator(as_number)]
 PositiveReal = Annotated[Real, Field(gt=0)]
 NonNegativeReal = Annotated[Real, Field(ge=0)]
 Vec3 = tuple[Real, Real, Real]
-AngleRad = Annotated[Real, pydantic.AfterValidator(_angle_rad)]
+AngleRad = Annotated[Real, _within_turns(2 * math.pi, " rad", "degrees given in radians?")]
 """An orientation angle in radians, at most :data:`MAX_ANGLE_TURNS` turns either way."""
-
-
-def _angle_deg(value: float) -> float:
-    if abs(value) > MAX_ANGLE_TURNS * 360.0:
-        raise ValueError(
-            f"{value:g}° is more than {MAX_ANGLE_TURNS} turns (±{MAX_ANGLE_TURNS * 360:g}°): an orientation "
-            "angle means the same modulo 360° (radians given in degrees would be small; a unit slip?)"
-        )
-    return value
-
-
-AngleDeg = Annotated[Real, pydantic.AfterValidator(_angle_deg)]
+AngleDeg = Annotated[Real, _within_turns(360.0, "°", "radians given in degrees would be small: a unit slip?")]
 """An orientation angle in degrees, at most :data:`MAX_ANGLE_TURNS` turns either way."""
 AnglesDeg = tuple[AngleDeg, AngleDeg, AngleDeg]
 """Three orientation angles in degrees (roll, pitch, yaw), each :data:`AngleDeg`."""
