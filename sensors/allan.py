@@ -646,10 +646,8 @@ def _low_pass_forgotten(allan: AllanDeviation, fit: AllanFit) -> bool:
         return bool(np.all(beyond <= 0.5 * sd))
     if len(avar) < 2:
         return True
-    band = RESOLVE_SIGMAS * np.hypot(sd * avar, sd[:, None] * avar[:, None])  # (M, M): 2 sd of a − b
-
-    def below(i: int, k: int) -> bool:  # point i significantly below point k
-        return bool(avar[k] - avar[i] > band[i, k])
+    def below(i: int, k: int) -> bool:  # point i below point k by more than 2 sd of their difference
+        return bool(avar[k] - avar[i] > RESOLVE_SIGMAS * np.hypot(sd[i] * avar[i], sd[k] * avar[k]))
 
     peak = int(np.argmax(np.diff(avar) <= 0)) if np.any(np.diff(avar) <= 0) else len(avar) - 1  # first top
     rises = below(0, 1)
