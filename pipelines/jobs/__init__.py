@@ -11,4 +11,6 @@
 - :mod:`.info`: what a log holds, per device and per topic (``gyroemu info``);
 - :mod:`.view`: a log served to the Foxglove app with play, pause and seek (``gyroemu view``);
 - :mod:`.progress`: progress bars, by phase or by samples; :mod:`.disk_space`: the disk an output needs.
+- :mod:`.inputs`: the files a job reads, which its outputs never write over; :mod:`.run_span`: how short
+  a run may be.
 """

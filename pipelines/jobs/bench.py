@@ -121,6 +121,7 @@ from gyroemu.pipelines.jobs.bench_metrics import (
     RunResult,
     json_number,
 )
+from gyroemu.pipelines.jobs.inputs import given_config_files, loaded_files
 from gyroemu.pipelines.jobs.run_span import short_run_problem
 
 __all__ = [
@@ -138,7 +139,6 @@ __all__ = [
     "check_report_folder",
     "earlier_plots",
     "evaluate_run",
-    "loaded_inputs",
     "plot_names",
     "report_files_in",
     "report_figures",
@@ -244,7 +244,7 @@ class BenchReport:
     notes: list[str] = field(default_factory=list)
     unavailable: dict[str, str] = field(default_factory=dict)
     inputs: list[Path] = field(default_factory=list)
-    """The files the bench read (:func:`bench_inputs`, :func:`loaded_inputs`), which :meth:`save` never
+    """The files the bench read (:func:`bench_inputs`, :func:`~.inputs.loaded_files`), which :meth:`save` never
     overwrites or removes; not in the report."""
 
     # --- Markdown ---------------------------------------------------------------------------------
@@ -560,7 +560,7 @@ def check_report_folder(
         if isinstance(case, SimCase):  # loaded again (checked already): its name, and the files it reads
             scenario, devices, _, name, _ = _sim_case(case, 1, 0)
             names.append(name)
-            inputs += loaded_inputs(scenario, devices[0])
+            inputs += loaded_files(scenario, devices[0])
     # the plots' names: the simulated cases' are known before any work, when no log comes before them
     plots = plot_names(names) if all(isinstance(c, SimCase) for c in cases[: len(names)]) else []
     problem = report_input_problem(folder, inputs, plots=plots, replace_earlier=force, argument=argument)
@@ -570,28 +570,14 @@ def check_report_folder(
 
 def bench_inputs(cases: Iterable[SimCase | LogCase]) -> list[Path]:
     """The files a bench of ``cases`` reads, as given: each log, and each scenario or device named by a
-    path (the config resolver takes any path there is as a file, whatever its suffix). Once loaded, the
-    files they were read from are :func:`loaded_inputs`."""
+    path (:func:`~.inputs.given_config_files`). Once loaded, the files they were read from are
+    :func:`~.inputs.loaded_files`."""
     inputs: list[Path] = []
     for case in cases:
         if isinstance(case, LogCase):
             inputs.append(Path(case.path))
         elif isinstance(case, SimCase):
-            inputs += [Path(name) for name in (case.scenario, case.device) if name and Path(name).exists()]
-    return inputs
-
-
-def loaded_inputs(*loaded: Scenario | Device | None) -> list[Path]:
-    """The files loaded scenarios and devices were read from, and a recorded scenario's motion file."""
-    from gyroemu.dynamics import Scenario as LoadedScenario  # where used: the CLI's listings skip it
-
-    inputs: list[Path] = []
-    for item in loaded:
-        if item is not None and item.path:
-            inputs.append(Path(item.path))
-        motion = getattr(item.spec, "path", None) if isinstance(item, LoadedScenario) else None
-        if isinstance(motion, (str, Path)):
-            inputs.append(Path(motion))
+            inputs += given_config_files(case.scenario, case.device)
     return inputs
 
 
@@ -946,7 +932,7 @@ def run_bench(
         if isinstance(case, SimCase):
             sim = _sim_case(case, runs, seed)
             prepared.append(("sim", case, sim))
-            inputs += loaded_inputs(sim[0], sim[1][0])
+            inputs += loaded_files(sim[0], sim[1][0])
         elif isinstance(case, LogCase):
             prepared += [("log", case, item) for item in _log_items(case, filters)]
         else:

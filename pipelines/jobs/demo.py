@@ -88,7 +88,8 @@ def check_options(
     recorded scenario's motion), even with ``force``. A bad scenario raises its
     :class:`~gyroemu.dynamics.ConfigError` (naming it)."""
     from gyroemu.pipelines.formats.atomic import output_file_problem, output_folder_problem
-    from gyroemu.pipelines.jobs.bench import REPORT_FILES, loaded_inputs, plot_names, report_files_in
+    from gyroemu.pipelines.jobs.bench import REPORT_FILES, plot_names, report_files_in
+    from gyroemu.pipelines.jobs.inputs import loaded_files
 
     _seconds(duration, "--duration", "the demo makes its truth in memory ('gyroemu simulate' writes longer runs)")
     _seconds(live_seconds, "--live-seconds", "the live stage runs in real time ('gyroemu stream' runs longer)")
@@ -111,7 +112,7 @@ def check_options(
             f"argument --out: {out} holds {', '.join(there)} (an earlier demo's?), which the demo would "
             "overwrite (use --force to overwrite them, or another folder)"
         )
-    inputs = [Path(scenario), *loaded_inputs(loaded)]  # a name of no file is no file either
+    inputs = [Path(scenario), *loaded_files(loaded)]  # a name of no file is no file either
     # the log's report: one case, named after the log (one device), and its plot
     written = [out / LOG_NAME, *(out / "bench" / name for name in (*REPORT_FILES, *plot_names([LOG_NAME])))]
     for path in written:

@@ -40,6 +40,7 @@ from gyroemu.pipelines.jobs.disk_space import (
     memory_problem,
     whole_truth_problem,
 )
+from gyroemu.pipelines.jobs.inputs import given_config_files, loaded_files
 
 if TYPE_CHECKING:
     from gyroemu.dynamics import Scenario
@@ -285,18 +286,6 @@ def _check_last_stamp(options: SimulateOptions, span_s: float | None, device: De
         )
 
 
-def _config_file_given(name: str | None) -> Path | None:
-    """The file ``--scenario``/``--device`` ``name`` is, when the config resolver takes it as a path (it
-    ends in .toml, is a path there is, or has a folder: :func:`gyroemu.dynamics.config.resolve_config`'s
-    rule, restated here as importing it would load the dynamics, 130 ms); None for a built-in name or none.
-    A file of any suffix is read as TOML, so it is an input whatever its name."""
-    if not name:
-        return None
-    text = str(name)
-    path = Path(text)
-    return path if text.endswith(".toml") or path.exists() or "/" in text else None
-
-
 def check_options(options: SimulateOptions, scenario: Scenario | None = None, device: Device | None = None) -> None:
     """Check ``options`` before any work; raise :class:`SimulateError` naming the argument at fault.
 
@@ -339,12 +328,9 @@ def check_options(options: SimulateOptions, scenario: Scenario | None = None, de
         raise SimulateError(f"argument --out: {out}: write a .mcap (ROS 2) or .npz file (got '{out.suffix}')")
     # The inputs: the scenario's and the device's files (whatever their suffix: the resolver reads any
     # path it is given), and once loaded the files they were read from and a recorded motion's file.
-    inputs = [path for path in map(_config_file_given, (options.scenario, options.device)) if path is not None]
+    inputs = given_config_files(options.scenario, options.device)
     if scenario is not None:
-        inputs += [Path(loaded.path) for loaded in (scenario, device) if loaded is not None and loaded.path]
-        motion = getattr(scenario.spec, "path", None)
-        if isinstance(motion, str):
-            inputs.append(Path(motion))
+        inputs += loaded_files(scenario, device)
     problem = output_file_problem(out, force=options.force, inputs=inputs)
     if problem is not None:
         raise SimulateError(f"argument --out: {problem}")
