@@ -646,6 +646,7 @@ def _low_pass_forgotten(allan: AllanDeviation, fit: AllanFit) -> bool:
         return bool(np.all(beyond <= 0.5 * sd))
     if len(avar) < 2:
         return True
+
     def below(i: int, k: int) -> bool:  # point i below point k by more than 2 sd of their difference
         return bool(avar[k] - avar[i] > RESOLVE_SIGMAS * np.hypot(sd[i] * avar[i], sd[k] * avar[k]))
 
