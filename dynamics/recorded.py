@@ -90,7 +90,7 @@ class MotionSamples:
     Attributes
     ----------
     t : ndarray (N,)
-        Stamps, s, strictly increasing (any origin: the motion's time starts at the first valid one).
+        Stamps, s, from ``origin_s``, strictly increasing (the motion's time starts at the first valid one).
     q_wb : ndarray (N, 4)
         Attitude (w, x, y, z), body to world ENU; NaN rows where tracking was lost.
     pos_w : ndarray (N, 3) or None
@@ -100,6 +100,10 @@ class MotionSamples:
         Where the samples came from (a file's name), for messages.
     lines : ndarray (N,) int or None
         The text file's line of each sample, for messages (None: messages name rows from 0).
+    origin_s : float
+        The recording's clock at ``t = 0``, s: sample ``k`` was stamped ``origin_s + t[k]``. Readers of
+        epoch stamps (1.7·10⁹ s, where a double resolves 0.24 µs) keep the whole seconds here, so that
+        ``t`` holds the stamps' digits and their steps exactly.
     """
 
     t: NDArray[np.float64]
@@ -107,6 +111,7 @@ class MotionSamples:
     pos_w: NDArray[np.float64] | None = None
     source: str = "<samples>"
     lines: NDArray[np.integer[Any]] | None = None
+    origin_s: float = 0.0
 
     def __post_init__(self) -> None:
         n = len(self.t)
@@ -140,9 +145,10 @@ class MotionSamples:
         steps = np.diff(self.t)
         if np.any(steps <= 0):
             i = int(np.flatnonzero(steps <= 0)[0]) + 1
+            stamp, before = (self.origin_s + float(self.t[j]) for j in (i, i - 1))
             raise RecordedMotionError(
-                f"{self.source}: {self.where(i)}: stamp {float(self.t[i])!r} s does not follow "
-                f"{float(self.t[i - 1])!r} s (stamps must increase strictly)"
+                f"{self.source}: {self.where(i)}: stamp {stamp!r} s does not follow "
+                f"{before!r} s (stamps must increase strictly)"
             )
         norm = np.linalg.norm(self.q_wb, axis=1)
         bad = np.isfinite(norm) & (np.abs(norm - 1.0) > _UNIT_TOLERANCE)
@@ -254,8 +260,8 @@ class RecordedMotion:
         rows = np.flatnonzero(valid)
         t = samples.t[rows]
         self.source = samples.source
-        self.t0 = float(t[0])
-        tm = t - self.t0
+        self.t0 = samples.origin_s + float(t[0])
+        tm = t - t[0]
         steps = np.diff(tm)
         median = float(np.median(steps))
         runs = contiguous_runs(tm)
