@@ -16,6 +16,7 @@ import difflib
 import importlib.resources
 import math
 import os
+import re
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
@@ -181,7 +182,13 @@ def _describe(model: type[BaseModel], err: Mapping[str, Any]) -> tuple[str, str]
     msg = err["msg"]
     if msg.startswith("Value error, "):
         msg = msg[len("Value error, ") :]
+    named = _NAMED_KEY.match(msg) if not key else None
+    if named:  # a check of the whole section that names the key it faults: "initial.height_m: ..."
+        return named.group(1), msg[named.end() :]
     return key, msg
+
+
+_NAMED_KEY = re.compile(r"^([a-z][a-z0-9_]*(?:\.[a-z][a-z0-9_]*)*): ")
 
 
 def _fields_at(model: type[BaseModel], loc: list[str]) -> list[str]:

@@ -27,7 +27,11 @@ How the impulse appears in the sampled specific force
   duration, ``F(t) = J π/(2 τ) sin(π (t − t_c)/τ)``, at the contacting body point, so
   ``∫ F dt = J`` exactly and the sampled specific force shows a finite shock of peak ``π/2 · J/(m τ)``,
   as an accelerometer on a real device sees it. The body moves during the pulse, so ``ΔL`` and the
-  rebound differ from the ideal impulse by ``O(τ)`` (gravity adds ``g τ`` to the rebound speed).
+  rebound differ from the ideal impulse by ``O(τ)`` (gravity takes ``g τ`` from the rebound speed: the
+  pulse carries ``J``, not the weight). The truth must sample a pulse at least :data:`PULSE_SAMPLES`
+  times (``rate_hz ≥ PULSE_SAMPLES / pulse_duration_s``): the sensors rebuild the force between the
+  truth's samples with a cubic spline, and at 2 samples per 1 ms pulse an ideal accelerometer read
+  14 % of the impulse short (Δv_z 4.55 against 5.29 m/s); at 20, 0.06 %.
   Contacts are not detected during a pulse; one pending at its end acts then.
 * ``pulse_duration_s = 0``: ideal impulses; the velocities jump, the Dirac force is not in the samples
   (specific force is free fall's zero on both sides), and ``extras["contact_impulse_w"]`` holds the
@@ -60,7 +64,7 @@ from numpy.typing import ArrayLike, NDArray
 from pydantic import Field
 
 from .body_kernels import cross, quat_product, rotate, rotation_matrix
-from .config import AnglesDeg, NonNegativeReal, PositiveReal, Real, Section, Vec3
+from .config import AnglesDeg, ConfigError, NonNegativeReal, PositiveReal, Real, Section, Vec3
 from .earth import Environment, Site
 from .inertia import box, inertia_config
 from .integrate import Event, Jump, Jumped, Solution, integrate
@@ -112,6 +116,21 @@ class Contact(Section):
     """Bouncing ends when its energy is below that of a landing at this speed."""
 
 
+PULSE_SAMPLES = 20
+"""Truth samples per contact pulse, at least (module notes): the rebuilt impulse within 0.1 %."""
+
+
+def pulse_rate_problem(rate_hz: float, pulse_duration_s: float) -> str | None:
+    """Why a truth at ``rate_hz`` cannot show contact pulses of ``pulse_duration_s`` (None: it can)."""
+    if pulse_duration_s > 0 and rate_hz * pulse_duration_s < PULSE_SAMPLES * (1 - 1e-9):
+        return (
+            f"{rate_hz:g} Hz samples a {pulse_duration_s * 1e3:g} ms contact pulse {rate_hz * pulse_duration_s:.3g} "
+            f"times; the sensors need {PULSE_SAMPLES} (at least {PULSE_SAMPLES / pulse_duration_s:g} Hz) to "
+            "read its impulse, or set contact.pulse_duration_s = 0 (ideal impulses)"
+        )
+    return None
+
+
 class DropSpec(ScenarioSpec):
     """``kind = "drop"``: a box dropped with a tumble onto the ground."""
 
@@ -134,10 +153,21 @@ class DropSpec(ScenarioSpec):
             raise ValueError(f"initial.height_m: the box's lowest corner starts {-lowest:.3g} m below the ground")
         return self
 
+    @pydantic.model_validator(mode="after")
+    def _samples_its_pulses(self) -> DropSpec:
+        problem = pulse_rate_problem(self.rate_hz, self.contact.pulse_duration_s)
+        if problem is not None:
+            raise ValueError(f"rate_hz: {problem}")
+        return self
+
     def model(self) -> Drop:
         return Drop.from_spec(self)
 
     def trajectory(self, t: NDArray[np.float64]) -> Trajectory:
+        if len(t) > 1:  # a rate asked for in place of the file's (Scenario.simulate's rate_hz)
+            problem = pulse_rate_problem(1.0 / float(t[1] - t[0]), self.contact.pulse_duration_s)
+            if problem is not None:
+                raise ConfigError(problem, key="rate_hz")
         return self.model().trajectory(t)
 
 

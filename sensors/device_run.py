@@ -73,7 +73,7 @@ class _BlockReading:
     truth: SensorTruth  # their interpolants
     temperature: NDArray[np.float64]  # (n,) °C at τ_k
     gyro_truth: GyroTruth  # the gyro mechanism's inner grid
-    force_mean: NDArray[np.float64]  # (n, 3) mean specific force over each interval, m/s²
+    gyro_force_mean: NDArray[np.float64] | None  # (n, 3) the mean specific force the gyro's g-sensitivity reads
     accel: NDArray[np.float64]  # (n, 3) the accelerometer's samples, m/s²
     mag: NDArray[np.float64]  # (n, 3) the magnetometer's samples, T (NaN without one)
 
@@ -167,9 +167,9 @@ class DeviceRun:
             increments, raw = self._gyro_increments(block.gyro_truth, len(block.stamps), rng_mech, mechanism_state)
             gyro = gyro_errors.apply(
                 increments / self.period,
-                block.instants[1:],
+                block.instants[1:] - self.t0,  # from power-up: the rate ramp is R (τ_k − t₀)
                 temperature_degC=block.temperature,
-                specific_force=block.force_mean if device.gyro_errors.g_sensitivity is not None else None,
+                specific_force=block.gyro_force_mean,
             )
             samples = ImuSamples(
                 t=block.stamps,
@@ -231,8 +231,15 @@ class DeviceRun:
         force_instants = instants if latency_accel == 0.0 else instants - latency_accel
         force_mean = mean_specific_force(truth, force_instants, substeps=self.substeps + self.substeps % 2)
         accel = others.accel_errors.apply(
-            force_mean * (self.true_period / self.period), instants[1:], temperature_degC=temperature
+            force_mean * (self.true_period / self.period), instants[1:] - self.t0, temperature_degC=temperature
         )
+        # The gyro's g-sensitivity reads the force the gyro feels, at its own latency (τ − L_g).
+        gyro_force_mean = None
+        if self.device.gyro_errors.g_sensitivity is not None:
+            gyro_force_mean = force_mean
+            if latency_gyro != latency_accel:
+                gyro_instants = instants if latency_gyro == 0.0 else instants - latency_gyro
+                gyro_force_mean = mean_specific_force(truth, gyro_instants, substeps=self.substeps + self.substeps % 2)
         if spec.magnetometer is not None:
             field_instants = instants[1:] if latency_mag == 0.0 else instants[1:] - latency_mag
             mag = spec.magnetometer.measure(truth.magnetic_field(field_instants), self.period, others.rng_mag)
@@ -245,7 +252,7 @@ class DeviceRun:
             truth=truth,
             temperature=temperature,
             gyro_truth=self._gyro_truth(truth, done, n, latency_gyro),
-            force_mean=force_mean,
+            gyro_force_mean=gyro_force_mean,
             accel=accel,
             mag=mag,
         )

@@ -135,3 +135,45 @@ def test_a_trajectory_in_memory_is_read_in_windows():
     assert len(window) <= 0.1 / step + 2 * WINDOW_MARGIN + 3
     edge = source.window(0.0, 0.01)
     assert edge.t[0] == traj.t[0]
+
+
+def test_the_rate_ramp_counts_from_power_up():
+    """A rate ramp R reads R (τ_k − t₀), t₀ the power-up (the trajectory's first instant): a run of the
+    same device on the same motion from t = 0 and from t = 10 s reads R T at its first sample either way
+    (it read R τ_k, the absolute time: 10 s later, R · 10 s more). Tolerance: the ideal gyro's interval
+    mean of a constant rate, exact but for round-off of its 7·10⁻⁵ rad/s."""
+    from gyroemu.sensors.presets import device_from_dict
+
+    ramp = 3600.0  # °/h/h
+    gyro = {"mechanism": {"kind": "ideal"}, "errors": {"rate_ramp_deg_per_h_per_h": ramp}}
+    device = {"description": "ramp", "rate_hz": 100, "gyro": gyro}
+    truth = load_scenario("bench_static").simulate(duration=20.0, rate_hz=100.0)
+    r_t = np.radians(ramp) / 3600**2 * 0.01  # R T, rad/s
+    for start in (0, 1000):  # power-up at t = 0 s and at t = 10 s
+        gyro = device_from_dict(device).measure(truth[start:]).gyro
+        assert abs(gyro[0, 0] - truth.omega_b[start, 0] - r_t) <= 1e-12
+
+
+def test_the_g_sensitivity_reads_the_force_at_the_gyros_latency():
+    """A gyro's g-sensitivity G reads the mean specific force over its own interval, at its latency
+    (τ − L_g), not the accelerometer's: with the accelerometer 0.1 s late and the gyro on time, the term
+    G f the gyro adds equals G times what an ideal accelerometer on time reads, to round-off (it read the
+    force 0.1 s late: 8.6 m/s² rms off on this 1 Hz, 19.7 m/s² oscillation)."""
+    from gyroemu.dynamics.scenarios import scenario_from_dict
+    from gyroemu.sensors.presets import device_from_dict
+
+    motion = {"kind": "oscillation", "duration_s": 4, "rate_hz": 200, "linear": {"amplitude_m": [0.5, 0, 0]}}
+    motion["angular"] = {"amplitude_deg": 0.0, "frequency_hz": 1.0, "axis_b": [0, 0, 1]}
+    motion["linear"]["frequency_hz"] = 1.0
+    truth = scenario_from_dict(motion).simulate()
+    g = 1000.0  # °/s/g about x from the force along x
+    sensitive = {"description": "g", "rate_hz": 200, "gyro": {"mechanism": {"kind": "ideal"}}}
+    sensitive["accelerometer"] = {"latency_s": 0.1}
+    sensitive["gyro"]["errors"] = {"g_sensitivity_deg_per_h_per_g": [[g * 3600, 0, 0], [0, 0, 0], [0, 0, 0]]}
+    plain = {"description": "plain", "rate_hz": 200, "gyro": {"mechanism": {"kind": "ideal"}}}
+    a, b = device_from_dict(sensitive).measure(truth), device_from_dict(plain).measure(truth)
+    same = np.isin(b.t_true, a.t_true)  # the late accelerometer's device starts 0.1 s later
+    assert np.array_equal(b.t_true[same], a.t_true)
+    read = (a.gyro[:, 0] - b.gyro[same, 0]) / (np.radians(g) / 9.80665)  # the force the term saw, m/s²
+    force = b.accel[same, 0]  # what an ideal accelerometer on time reads over the same intervals
+    assert np.abs(read - force).max() <= 1e3 * np.finfo(float).eps * np.abs(force).max()
