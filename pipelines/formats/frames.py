@@ -33,9 +33,11 @@ same seed gives the same bytes; ``stream`` at the wall clock.
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
+from decimal import Decimal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -75,6 +77,7 @@ SIMULATE_EPOCH_NS = 1_735_689_600_000_000_000
 """``simulate``'s default start time: 2025-01-01T00:00:00Z as ns since the Unix epoch."""
 
 _EPOCH_LIMIT_NS = (2**31 - 1) * 1_000_000_000  # builtin_interfaces/Time's int32 seconds
+_DECIMAL = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")  # what Decimal reads exactly
 
 
 def parse_start_time(text: str | float | int, argument: str = "--start-time") -> int:
@@ -90,9 +93,10 @@ def parse_start_time(text: str | float | int, argument: str = "--start-time") ->
     else:
         value = str(text).strip()
         try:
-            ns = round(float(value) * 1e9)
             if not math.isfinite(float(value)):
                 raise ValueError(f"argument {argument}: must be finite, got {value}")
+            # From the digits (a double of 1.7·10⁹ s resolves 0.24 µs: ".123456789" read 21 ns off).
+            ns = round(Decimal(value) * 1_000_000_000) if _DECIMAL.match(value) else round(float(value) * 1e9)
         except ValueError as e:
             if "finite" in str(e):
                 raise

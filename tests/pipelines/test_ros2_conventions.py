@@ -147,6 +147,10 @@ def test_start_time_forms():
     assert parse_start_time("2025-01-01T01:00:00+01:00") == SIMULATE_EPOCH_NS
     assert parse_start_time("2025-01-01T00:00:00.25") == SIMULATE_EPOCH_NS + 250_000_000  # no zone: UTC
     assert parse_start_time("1735689600.5") == SIMULATE_EPOCH_NS + 500_000_000
+    # Epoch seconds to the nanosecond, from their digits (as doubles they read 21 ns and 1 ns off)
+    assert parse_start_time("1735689600.123456789") == SIMULATE_EPOCH_NS + 123_456_789
+    assert parse_start_time("1735689600.000000001") == SIMULATE_EPOCH_NS + 1
+    assert parse_start_time("1.7356896e9") == SIMULATE_EPOCH_NS
     assert parse_start_time(0) == 0
     for bad in ("yesterday", "nan", "-1", "2040-01-01T00:00:00Z"):
         with pytest.raises(ValueError, match="--start-time"):
