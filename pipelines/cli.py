@@ -1082,8 +1082,9 @@ def build_parser() -> argparse.ArgumentParser:
         "same stamps and frame_id (estimated q_wb with its covariance, bias-corrected rate). A file with "
         "several IMU topics needs --topic; a gyroemu log of several devices gets every device filtered, "
         "each to /<device>/estimate/imu. 9D where the device has a magnetometer, unless --6d. A gyroemu log "
-        "gives the filter its device's noise figures and the site's latitude; other logs use the "
-        "filter's defaults.",
+        "gives the filter its device's noise figures and the site's latitude, and its estimate is the "
+        "body's, in base_link (the sensor's attitude and rate turned by the device's [mounting] q_bs); "
+        "other logs use the filter's defaults.",
     )
     p.add_argument("file", metavar="FILE.mcap", help="the log to filter (read only)")
     p.add_argument("--out", required=True, help="MCAP file to write")

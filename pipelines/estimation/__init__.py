@@ -7,7 +7,8 @@
 - :mod:`.latency`: any filter's field and attitudes in time when the sensors lag the motion;
   :mod:`.field_lag`: the magnetometer's lag behind the gyro read from a log;
 - :mod:`.peers`, :mod:`.registry`: Madgwick, Mahony, EKF (``ahrs``), VQF, and filters by name;
-- :mod:`.metrics`: BROAD's error definitions; :mod:`.setup`: a setup from a device or a log.
+- :mod:`.metrics`: BROAD's error definitions; :mod:`.setup`: a setup from a device or a log;
+- :mod:`.mounting`: a mounted sensor's estimate turned into the body's (``q̂_ws ⊗ q_bs*``).
 """
 
 from .field_lag import FieldLag, estimate_field_lag

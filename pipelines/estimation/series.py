@@ -4,7 +4,8 @@ bench) and the live filter.
 - :func:`check_samples`: refuse samples no filter can run on, naming the file (:class:`LogError`);
   :func:`check_counts` the same for samples counted as they went by;
 - :func:`median_step_ns`, :func:`rate_of`: the median interval and the nominal rate of integer stamps;
-- :func:`estimate_series`: the ``/estimate/imu`` content of an :class:`Estimate`.
+- :func:`estimate_series`: the ``/estimate/imu`` content of an :class:`Estimate` (the body's, turned
+  out of a mounted sensor's axes: :mod:`.mounting`).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 from gyroemu.errors import LogError
 from gyroemu.pipelines.formats.channels import ImuSeries
 
+from .mounting import body_estimate, body_vectors
 from .protocol import Estimate
 
 __all__ = ["check_counts", "check_samples", "estimate_series", "median_step_ns", "not_increasing_error", "rate_of"]
@@ -97,7 +99,13 @@ def _integer_ns(stamp_ns: np.ndarray) -> np.ndarray:
     return stamp_ns.astype(np.int64, copy=False)
 
 
-def estimate_series(t: np.ndarray, estimate: Estimate, gyro: np.ndarray) -> ImuSeries:
-    """The ``/estimate/imu`` content of an estimate: attitude, covariance, bias-corrected rate."""
+def estimate_series(t: np.ndarray, estimate: Estimate, gyro: np.ndarray, q_bs: np.ndarray | None = None) -> ImuSeries:
+    """The ``/estimate/imu`` content of an estimate of samples ``gyro`` (N, 3) rad/s at ``t`` (N,) s:
+    attitude (N, 4), world-axes covariance (N, 3, 3) rad², bias-corrected rate (N, 3) rad/s. With a
+    mounting ``q_bs`` (4,) (:func:`~.mounting.mounting_turn`, None: none), the body's: ``q̂_ws ⊗ q_bs*``
+    and ``R(q_bs) (ω_m − b̂)`` (:func:`~.mounting.body_estimate`)."""
     rate = gyro - estimate.gyro_bias if estimate.gyro_bias is not None else None
+    if q_bs is not None:
+        estimate = body_estimate(estimate, q_bs)
+        rate = None if rate is None else body_vectors(rate, q_bs)  # ω̂_b = R(q_bs) (ω_m − b̂)_s
     return ImuSeries(t=t, q_wb=estimate.q_wb, omega_b=rate, q_wb_covariance=estimate.q_wb_covariance)

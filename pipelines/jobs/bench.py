@@ -12,6 +12,12 @@ Cases
   The filter setup comes from the log's ``gyroemu`` metadata (:func:`setup_from_metadata`), or the
   filters' defaults for a foreign log.
 
+A filter knows only the sensor's axes: where the device's mounting is known (a simulated device's
+``[mounting] q_bs``, a gyroemu log's device's from its embedded config), each estimate is turned into
+the body's before it is compared with the body's truth: ``q̂_ws ⊗ q_bs*``, and the bias and the gyro
+by ``R(q_bs)`` (:func:`.bench_filters.in_body_axes`), so that a mounted device's errors are the filter's,
+not the mounting. A foreign log's estimates are compared as they are.
+
 A case is 9D when the device has a magnetometer (a log: any finite ``/mag`` sample), 6D otherwise or
 with ``six_d``. Each filter is made from the case's :class:`FilterSetup` for each run and given a
 simulated run in one ``process()`` call; a log's samples come a block at a time, in time order, as the
@@ -100,7 +106,7 @@ from gyroemu.pipelines.formats.atomic import (
 )
 from gyroemu.pipelines.formats.file_names import same_file, unique_stems
 from gyroemu.pipelines.jobs.bench_cases import PLOT_POINTS, BenchError, BenchWarning, LogCase, SimCase
-from gyroemu.pipelines.jobs.bench_filters import WARM_UP_SAMPLES, check_estimate, warm_up
+from gyroemu.pipelines.jobs.bench_filters import WARM_UP_SAMPLES, check_estimate, in_body_axes, warm_up
 from gyroemu.pipelines.jobs.bench_log import (
     TRUTH_MATCH,
     LogDevice,
@@ -162,6 +168,7 @@ class _Run:
     omega_true: np.ndarray | None
     mask: np.ndarray
     seed: int | None = None
+    q_bs: np.ndarray | None = None  # (4,) the device's mounting (sensor → body); None: unmounted or unknown
 
 
 if TYPE_CHECKING:
@@ -706,6 +713,7 @@ def _run_filter(
     except Exception as exc:  # noqa: BLE001 - a filter that fails is reported, not fatal
         wall = time.perf_counter() - started
         q, b, reason = np.full((n, 4), np.nan), None, f"process() raised {type(exc).__name__}: {exc}"
+    q, b, gyro = in_body_axes(q, b, run.gyro, run.q_bs)  # a mounted sensor's estimate as the body's
     result, errors = evaluate_run(
         run.t,
         q,
@@ -715,7 +723,7 @@ def _run_filter(
         threshold_deg=threshold_deg,
         bias_est=b,
         omega_true=run.omega_true,
-        gyro=run.gyro,
+        gyro=gyro,
         rate_hz=setup.rate_hz,
         wall_s=wall,
         seed=run.seed,
@@ -796,12 +804,17 @@ def _check_samples(case: SimCase, scenario: Scenario, device: Device) -> None:
 
 
 def _sim_run(traj: Trajectory, device: Device, seed: int) -> _Run:
+    """One Monte Carlo run: ``device``'s samples of ``traj``, the body's truth at them, and the device's
+    mounting (its filters' estimates are turned into the body's before they are compared)."""
+    from gyroemu.pipelines.estimation.mounting import mounting_turn
+    from gyroemu.pipelines.formats.frames import mounting_of
     from gyroemu.pipelines.formats.mcap_log import truth_series
 
     samples = device.measure(traj)
     truth = truth_series(traj, samples)
     assert truth.q_wb is not None  # truth_series always gives the attitude
     mag = samples.mag if np.isfinite(samples.mag).any() else None
+    mounting = mounting_of(device)
     return _Run(
         t=np.asarray(samples.t, float),
         gyro=samples.gyro,
@@ -811,11 +824,13 @@ def _sim_run(traj: Trajectory, device: Device, seed: int) -> _Run:
         omega_true=truth.omega_b,
         mask=np.ones(len(samples.t), bool),
         seed=seed,
+        q_bs=None if mounting is None else mounting_turn(mounting[0]),
     )
 
 
 def _log_runs(case: LogCase) -> list[_LogItem]:
     """The devices of a log to bench, the log read whole: (name, mode, setup, run, source, notes) each."""
+    from gyroemu.pipelines.estimation.mounting import mounting_from_metadata
     from gyroemu.pipelines.estimation.series import check_samples, median_step_ns, rate_of
     from gyroemu.pipelines.formats.device_stream import nearest
     from gyroemu.pipelines.formats.mcap_log import read_mcap
@@ -863,6 +878,7 @@ def _log_runs(case: LogCase) -> list[_LogItem]:
             q_true=q_true,
             omega_true=omega,
             mask=mask,
+            q_bs=mounting_from_metadata(dev.metadata),  # a gyroemu device's: its estimates as the body's
         )
         source = {"log": str(path), "device": name}
         out.append((log_label(path, name, len(log.devices), case, has_mag), mode, setup, run, source, notes))
@@ -1073,16 +1089,18 @@ def _bench_batched(
             wall = time.perf_counter() - started
             q, b, reason = np.full((len(group), n, 4), np.nan), None, f"mekf_batch raised {type(exc).__name__}: {exc}"
         for i, run in enumerate(group):
+            # a mounted sensor's estimate as the body's
+            q_i, b_i, gyro_i = in_body_axes(q[i], None if b is None else b[i], run.gyro, run.q_bs)
             res, errors = evaluate_run(
                 run.t,
-                q[i],
+                q_i,
                 run.q_true,
                 mask=run.mask,
                 six_d=six_d,
                 threshold_deg=threshold_deg,
-                bias_est=None if b is None else b[i],
+                bias_est=b_i,
                 omega_true=run.omega_true,
-                gyro=run.gyro,
+                gyro=gyro_i,
                 rate_hz=setup.rate_hz,
                 wall_s=wall,
                 throughput=len(group) * n / wall if wall > 0 else float("nan"),

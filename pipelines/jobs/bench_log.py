@@ -14,7 +14,9 @@ over the file's chunks:
 3. the reference: each sample's nearest ``/truth/imu`` message within a quarter of the sample interval
    (the interval is the census's median), to count the samples that count before any filter runs;
 4. (the smoother only) its forward pass, a block at a time (``learn``);
-5. every filter of the device on each block in turn, and each run's :class:`~.bench_metrics.RunMetrics`.
+5. every filter of the device on each block in turn, and each run's :class:`~.bench_metrics.RunMetrics`
+   (a gyroemu device's estimates turned out of its mounted sensor's axes into the body's, whose truth
+   they are compared with: :func:`~.bench_filters.in_body_axes`).
 
 The filters see the samples a log read whole would give them, in blocks (the filter protocol's blocks
 in time order; every built-in gives the same bytes whole or in blocks, ``tests/pipelines/
@@ -37,6 +39,7 @@ from typing import Any, Protocol, TypeVar
 import numpy as np
 
 from gyroemu.pipelines.estimation import registry
+from gyroemu.pipelines.estimation.mounting import mounting_from_metadata
 from gyroemu.pipelines.estimation.protocol import FilterSetup, learns_in_blocks
 from gyroemu.pipelines.estimation.registry import make_filter
 from gyroemu.pipelines.estimation.series import check_counts, not_increasing_error
@@ -53,7 +56,7 @@ from gyroemu.pipelines.formats.mcap_log import LogWarning
 from gyroemu.pipelines.formats.mcap_records import McapRecordWalk
 from gyroemu.pipelines.formats.messages import seconds_since
 from gyroemu.pipelines.jobs.bench_cases import PLOT_POINTS, BenchError, BenchWarning, LogCase
-from gyroemu.pipelines.jobs.bench_filters import check_estimate, warm_up
+from gyroemu.pipelines.jobs.bench_filters import check_estimate, in_body_axes, warm_up
 from gyroemu.pipelines.jobs.bench_metrics import BIAS_WINDOW_S, RunMetrics, RunResult
 
 __all__ = [
@@ -200,6 +203,7 @@ class LogDevice:
     rates: bool  # the truth has rates: the bias error
     first: DeviceBlock  # the first samples, for the warm-up (every sample when ``whole``)
     whole: bool
+    q_bs: np.ndarray | None = None  # (4,) a gyroemu device's mounting: estimates turned into the body's
 
 
 def _walk(path: Path, devices: Mapping[str, StreamDevice]) -> Iterator[tuple[str, DeviceBlock]]:
@@ -320,6 +324,7 @@ def stream_log_devices(case: LogCase, whole_samples: bool = False) -> list[LogDe
                 rates=counted[name].truth_rates > 0,
                 first=first,
                 whole=whole,
+                q_bs=mounting_from_metadata(dev.metadata),
             )
         )
     return out
@@ -411,7 +416,8 @@ def bench_log_device(
                 q, b = _checked(r, out, n)
                 if r.reason:
                     continue
-            errors = r.metrics.add(t, q, q_true, mask, b, omega if window else None, block.gyro)
+            q, b, gyro = in_body_axes(q, b, block.gyro, dev.q_bs)  # a mounted sensor's estimate as the body's
+            errors = r.metrics.add(t, q, q_true, mask, b, omega if window else None, gyro)
             r.curve.append((errors["total"][picked], errors["inclination"][picked]))
         offset += n
     for r in running:

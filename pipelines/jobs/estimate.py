@@ -13,11 +13,14 @@ The estimate (``sensor_msgs/msg/Imu``: the estimated ``q_wb`` with its covarianc
 one, and the bias-corrected rate) goes to ``topic_out`` (default ``/estimate/imu``): one message per
 message of the IMU topic it follows, right after it in the file, with its log and publish times and its
 header stamp. Its ``frame_id`` is the IMU message's, except for a gyroemu log's device, whose estimates
-are in ``base_link`` as ``interface.md`` has them. The channel uses the IMU channel's schema. An input
-channel of the same topic is replaced when it is an earlier estimate (a topic ``.../estimate/imu`` of
-type ``sensor_msgs/msg/Imu``); any other topic the input has, and the contract's other topics
-(``/imu``, ``/mag``, ``/truth/imu``, ``/truth/pose``, ``/raw/<kind>``, ``/movement``, under any device
-prefix, and ``/tf``, ``/tf_static``), are refused (:data:`RESERVED_TOPICS`).
+are in ``base_link`` as ``interface.md`` has them: the body's, the filter's sensor-frame attitude and
+rate turned by the device's ``[mounting] q_bs`` from the log's embedded config
+(:mod:`gyroemu.pipelines.estimation.mounting`: ``q̂_wb = q̂_ws ⊗ q_bs*``, ``ω̂_b = R(q_bs) ω̂_s``, the
+world-axes covariance as it is; an identity mounting turns nothing). The channel uses the IMU
+channel's schema. An input channel of the same topic is replaced when it is an earlier estimate (a
+topic ``.../estimate/imu`` of type ``sensor_msgs/msg/Imu``); any other topic the input has, and the
+contract's other topics (``/imu``, ``/mag``, ``/truth/imu``, ``/truth/pose``, ``/raw/<kind>``,
+``/movement``, under any device prefix, and ``/tf``, ``/tf_static``), are refused (:data:`RESERVED_TOPICS`).
 
 Which IMU topic: ``topic`` when given (any ``sensor_msgs/msg/Imu`` topic that
 :func:`~gyroemu.pipelines.formats.mcap_log.read_mcap` takes as a device's measurements). Without it the
@@ -42,6 +45,7 @@ import numpy as np
 
 from gyroemu.errors import ConfigError
 from gyroemu.pipelines.estimation import registry
+from gyroemu.pipelines.estimation.mounting import mounting_from_metadata
 from gyroemu.pipelines.estimation.protocol import AttitudeFilter, learns_in_blocks
 from gyroemu.pipelines.estimation.registry import make_filter
 from gyroemu.pipelines.estimation.series import (
@@ -354,7 +358,8 @@ def _estimate_whole(
         )
         field_lags += lag
         est = flt.process(t_rel, samples.gyro, samples.accel, samples.mag if nine else None)
-        fields = series_fields(estimate_series(samples.t, est, samples.gyro))
+        # a gyroemu device's estimate in base_link: the body's, out of its mounted sensor's axes
+        fields = series_fields(estimate_series(samples.t, est, samples.gyro, mounting_from_metadata(dev.metadata)))
         targets.append(
             _target(dev, name, np.asarray(dev.stamp_ns, dtype=np.int64), {k: np.asarray(v) for k, v in fields.items()})
         )
@@ -515,6 +520,7 @@ def _block_run(dev: StreamDevice, name: str, f: _DeviceFilter, counted: Counted,
         count=counted.census.count,
         pose=counted.pose_pairs,
         thinning=TfThinning(TF_LOG_RATE_HZ) if dev.name == tf_device else None,
+        q_bs=mounting_from_metadata(dev.metadata),
     )
     run.start(f.first)
     return run
@@ -556,7 +562,8 @@ def _device_filter(
 def _target(
     dev: DeviceLog | StreamDevice, topic_out: str, stamp_ns: np.ndarray, fields: dict[str, Any]
 ) -> EstimateTarget:
-    """The estimate of device ``dev`` (a gyroemu device's in ``base_link``, another's in its IMU's frame)."""
+    """The estimate of device ``dev`` (a gyroemu device's in ``base_link``, turned into the body's by its
+    mounting where ``fields`` are made; another's in its IMU's frame)."""
     frame_id = BODY_FRAME if dev.metadata is not None else None
     return EstimateTarget(dev.topics[IMU_ROLE], topic_out, stamp_ns, fields, frame_id)
 

@@ -95,6 +95,7 @@ class BlockRun:
     count: int  # the device's samples (the census)
     pose: bool  # /tf positions from /truth/pose (else the origin)
     thinning: TfThinning | None  # the device whose estimate also goes on /tf
+    q_bs: np.ndarray | None = None  # (4,) the device's mounting: its estimate turned into the body's (None: as is)
     done: int = 0
     ready_ns: int | None = None  # every IMU message up to this stamp has its estimate (or was dropped)
     _started_ns: int | None = field(default=None, init=False)  # the first block's IMU messages end here
@@ -116,7 +117,8 @@ class BlockRun:
         t = ns_to_stamps(block.stamp_ns)
         t_rel = seconds_since(block.stamp_ns, self.first_ns)
         est = self.flt.process(t_rel, block.gyro, block.accel, block.mag if self.nine else None)
-        fields = {k: np.asarray(v) for k, v in series_fields(estimate_series(t, est, block.gyro)).items()}
+        series = estimate_series(t, est, block.gyro, self.q_bs)
+        fields = {k: np.asarray(v) for k, v in series_fields(series).items()}
         n, target = len(block), self.target
         self.done += n
         target.stamp_ns = np.concatenate((target.stamp_ns, block.stamp_ns))

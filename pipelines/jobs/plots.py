@@ -11,7 +11,8 @@ columns); the error's RMS is summed as it goes. A log whose devices one pass can
 - :func:`plot_estimate`: per device with an ``/estimate/imu``, the estimated roll, pitch and yaw against
   the truth's (``/truth/imu``; Tait–Bryan z-y'-x'' angles of ``q_wb``, REP 103), the attitude error over
   time (the angle of ``q_true⁻¹ ⊗ q_est``, the same for every Euler convention), and the gyro bias the
-  filter estimated where it gives one (``/imu`` rate less ``/estimate/imu``'s bias-corrected rate).
+  filter estimated where it gives one (``/imu`` rate less ``/estimate/imu``'s bias-corrected rate, in
+  body axes: a gyroemu device's ``/imu`` turned by its mounting, as its estimate is).
 - :func:`plot_info`: per device, each IMU topic's series: ``/imu`` rate and specific force, and
   ``/mag`` where there is one.
 
@@ -143,11 +144,22 @@ class EstimateCurves:
     ``angles`` and ``true_angles``: roll, pitch, yaw, °; ``error``: the attitude error, °, where the
     truth has the estimate's stamp, with its ``rms`` and ``final`` (None: no such stamp); ``bias``: the
     gyro bias the estimate implies, °/h (``/imu`` rate less ``/estimate/imu``'s bias-corrected rate at
-    the same stamp; empty where the estimate has no rate). ``has_truth``, ``has_imu``: whether the log
-    has those topics (without one, nothing waits for it)."""
+    the same stamp; empty where the estimate has no rate), in body axes: with the device's mounting
+    ``q_bs`` (4,) (a gyroemu log's, :func:`~gyroemu.pipelines.estimation.mounting.mounting_from_metadata`;
+    None: none) the ``/imu`` rate is turned by ``R(q_bs)`` as ``gyroemu estimate`` turned the estimate's.
+    ``has_truth``, ``has_imu``: whether the log has those topics (without one, nothing waits for it)."""
 
-    def __init__(self, name: str, buckets: int = BUCKETS, *, has_truth: bool = True, has_imu: bool = True):
+    def __init__(
+        self,
+        name: str,
+        buckets: int = BUCKETS,
+        *,
+        has_truth: bool = True,
+        has_imu: bool = True,
+        q_bs: np.ndarray | None = None,
+    ):
         self.name = name
+        self.q_bs = q_bs
         self.t0: float | None = None
         self.angles, self.true_angles = Envelope(3, buckets), Envelope(3, buckets)
         self.error, self.bias = Envelope(1, buckets), Envelope(3, buckets)
@@ -170,6 +182,10 @@ class EstimateCurves:
         n, t = len(stamp_ns), ns_to_stamps(stamp_ns)
         if role == IMU_ROLE:
             self.t0 = float(t[0]) if self.t0 is None and n else self.t0
+            if self.q_bs is not None and omega_b is not None:
+                from gyroemu.pipelines.estimation.mounting import body_vectors
+
+                omega_b = body_vectors(omega_b, self.q_bs)  # ω_b = R(q_bs) ω_s: the estimate's axes
             if self._biases is not None:
                 _add_finite(self._biases, 1, stamp_ns, omega_b)
         elif role == TRUTH_ROLE:
@@ -349,6 +365,7 @@ def estimate_curves(
     """The curves :func:`plot_estimate` draws, per device with an ``/estimate/imu`` that holds an
     attitude, from one pass over the log after the one that finds its devices (module's notes);
     ``read_whole``: from the log read whole (the same curves)."""
+    from gyroemu.pipelines.estimation.mounting import mounting_from_metadata
     from gyroemu.pipelines.formats.channels import ESTIMATE_ROLE, IMU_ROLE, TRUTH_ROLE, series_from_batch
     from gyroemu.pipelines.formats.device_stream import NotStreamable
 
@@ -357,7 +374,10 @@ def estimate_curves(
     if devices is None:
         return _estimate_curves_whole(path, buckets)
     devices = {name: d for name, d in devices.items() if ESTIMATE_ROLE in d.channels}
-    curves = {name: EstimateCurves(name, buckets, has_truth=TRUTH_ROLE in d.channels) for name, d in devices.items()}
+    curves = {
+        name: EstimateCurves(name, buckets, has_truth=TRUTH_ROLE in d.channels, q_bs=mounting_from_metadata(d.metadata))
+        for name, d in devices.items()
+    }
     try:
         for name, role, rows in _walk_devices(path, devices, (TRUTH_ROLE, ESTIMATE_ROLE)):
             c = curves[name]
@@ -376,6 +396,7 @@ def estimate_curves(
 
 def _estimate_curves_whole(path: Path, buckets: int) -> list[EstimateCurves]:
     """:func:`estimate_curves` of a log read whole (:func:`read_mcap`): each series as one block."""
+    from gyroemu.pipelines.estimation.mounting import mounting_from_metadata
     from gyroemu.pipelines.formats.channels import ESTIMATE_ROLE, IMU_ROLE, TRUTH_ROLE
     from gyroemu.pipelines.formats.mcap_log import read_mcap
     from gyroemu.pipelines.formats.messages import stamps_to_ns
@@ -386,7 +407,7 @@ def _estimate_curves_whole(path: Path, buckets: int) -> list[EstimateCurves]:
         est, truth, s = dev.estimate, dev.truth, dev.samples
         if est is None or est.q_wb is None:
             continue
-        c = EstimateCurves(dev.name, buckets, has_truth=truth is not None)
+        c = EstimateCurves(dev.name, buckets, has_truth=truth is not None, q_bs=mounting_from_metadata(dev.metadata))
         c.add(IMU_ROLE, stamps_to_ns(s.t), None, s.gyro)
         c.add(ESTIMATE_ROLE, stamps_to_ns(est.t), est.q_wb, est.omega_b)
         if truth is not None:

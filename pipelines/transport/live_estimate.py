@@ -11,7 +11,10 @@ With a ``tf_rate_hz`` it also puts ``map`` → ``body_estimate`` (the estimated 
 origin: a live filter knows no position) on the device's ``/tf`` key, thinned to that rate as the
 stream thins its own ``/tf`` (:class:`~gyroemu.pipelines.formats.frames.TfThinning`), so a tf listener
 sees the estimate beside the truth's ``map`` → ``base_link``.
-Topics and the encoding of the estimate are the channel vocabulary's (:mod:`gyroemu.pipelines.formats.channels`),
+The estimate is the body's (``base_link``): with the device's mounting given (``q_bs``), the filter's
+sensor-frame attitude and rate are turned into the body's as ``gyroemu estimate`` turns them
+(:mod:`gyroemu.pipelines.estimation.mounting`). Topics and the encoding of the estimate are the channel
+vocabulary's (:mod:`gyroemu.pipelines.formats.channels`),
 so the live estimate holds the bytes ``gyroemu estimate`` writes into a file.
 """
 
@@ -24,6 +27,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from gyroemu.pipelines.estimation.mounting import mounting_turn
 from gyroemu.pipelines.estimation.series import estimate_series
 from gyroemu.pipelines.formats.channels import (
     ESTIMATE_FRAME,
@@ -61,6 +65,9 @@ class LiveEstimator:
         Pair ``/mag`` samples with ``/imu`` samples (9D).
     tf_rate_hz : float or None
         Also put ``map`` → ``body_estimate`` on ``/tf`` at this rate (None: not).
+    q_bs : ndarray (4,) or None
+        The device's mounting (w, x, y, z; sensor → body): the estimate published is the body's,
+        ``q̂_ws ⊗ q_bs*`` and ``R(q_bs) ω̂_s``. None or an identity: the filter's as it is.
 
     Attributes
     ----------
@@ -69,9 +76,16 @@ class LiveEstimator:
     """
 
     def __init__(
-        self, session: zenoh.Session, device: str, flt: AttitudeFilter, use_mag: bool, tf_rate_hz: float | None = None
+        self,
+        session: zenoh.Session,
+        device: str,
+        flt: AttitudeFilter,
+        use_mag: bool,
+        tf_rate_hz: float | None = None,
+        q_bs: NDArray[np.float64] | None = None,
     ) -> None:
         self.flt = flt
+        self.q_bs = mounting_turn(q_bs)  # None: nothing to turn (unmounted), the filter's bytes as they are
         self.use_mag = use_mag
         self.published = 0
         self._imu = subscribe(session, topic_to_key(device, role_topic(IMU_ROLE)))
@@ -155,7 +169,7 @@ class LiveEstimator:
             self._t0_ns = int(stamp_ns[0])
         t_rel = (stamp_ns - self._t0_ns) * 1e-9
         estimate = self.flt.process(t_rel, gyro, accel, field)
-        series = estimate_series(stamp_ns * 1e-9, estimate, gyro)
+        series = estimate_series(stamp_ns * 1e-9, estimate, gyro, self.q_bs)  # the body's, in base_link
         rows = encode_series(stamp_ns, series)
         tf_at = {}
         if self._thinning is not None and series.q_wb is not None:  # an attitude filter gives q_wb

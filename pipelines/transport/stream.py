@@ -296,10 +296,12 @@ def _start_estimator(options: StreamOptions, dev: Device, scen: Scenario, sample
     """The live filter of ``options.estimate``, on a session of its own, started."""
     from gyroemu.pipelines.estimation.registry import make_filter
     from gyroemu.pipelines.estimation.setup import setup_for
+    from gyroemu.pipelines.formats.frames import mounting_of
     from gyroemu.pipelines.transport.live_estimate import LiveEstimator
 
     assert options.estimate is not None
     setup = setup_for(dev, scen)
+    mounting = mounting_of(dev)
     # a throwaway run first, so that loading the compiled kernels does not stall the paced clock
     make_filter(options.estimate, setup, argument="--estimate").process(
         samples.t[:64] - samples.t[0],
@@ -313,6 +315,7 @@ def _start_estimator(options: StreamOptions, dev: Device, scen: Scenario, sample
         make_filter(options.estimate, setup, argument="--estimate"),
         setup.use_mag,
         tf_rate_hz=options.tf_rate_hz,  # map -> body_estimate beside the stream's map -> base_link
+        q_bs=None if mounting is None else mounting[0],  # the body's estimate, not the sensor's
     ).start()
 
 
