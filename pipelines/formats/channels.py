@@ -11,12 +11,19 @@ role                type                                    holds               
 ``mag``             ``sensor_msgs/msg/MagneticField``       the device's ``mag`` (tesla)       the device
 ``truth/imu``       ``sensor_msgs/msg/Imu``                 an :class:`ImuSeries` (truth)      ``base_link``
 ``estimate/imu``    ``sensor_msgs/msg/Imu``                 an :class:`ImuSeries` (estimate)   ``base_link``
-``raw/<kind>``      ``gyroemu_msgs/msg/<Kind>Raw``          the gyro kind's raw observables    the device
+``raw/<token>``     ``gyroemu_msgs/msg/<Kind>Raw``          the gyro kind's raw observables    the device
 ``movement``        ``gyroemu_msgs/msg/Flag``               an imported dataset's sample mask  the device
 ``truth/pose``      ``geometry_msgs/msg/PoseStamped``       a :class:`PoseSeries` (truth)      ``map``
 ==================  ======================================  =================================  ===========
 
 A pose's ``frame_id`` is the frame it is given in, the world (ENU), which REP 105 calls ``map``.
+
+A raw role's ``<token>`` is the gyro kind with ``-`` as ``_`` (:func:`topic_token`: ``raw/rate_gyro`` for kind
+``rate-gyro``), so that every topic is a valid ROS 2 name (letters, digits, ``_`` and ``/``): the one rule
+by which the log writer, the live stream, the recorder and the ROS 2 names of
+:mod:`gyroemu.pipelines.formats.ros2_keys` turn gyroemu's names into topics. Logs written before it name
+three kinds' topics with the hyphen (``/raw/rate-gyro``, ``/raw/rate-integrating``, ``/raw/free-gyro``):
+:func:`raw_kind` reads both spellings, and :func:`canonical_role` gives such a role today's name.
 
 Live streams (:mod:`gyroemu.pipelines.transport.zenoh_io`) carry the same roles but ``movement``
 (:func:`is_stream_role`); ``gyroemu stream`` does not publish ``truth/pose``, but a replayed file's
@@ -69,8 +76,11 @@ __all__ = [
     "WORLD_FRAME",
     "ESTIMATE_FRAME",
     "RESERVED_DEVICE_NAMES",
+    "topic_token",
     "raw_role",
     "raw_kind",
+    "canonical_role",
+    "canonical_topic",
     "role_topic",
     "split_topic",
     "absolute_topic",
@@ -128,14 +138,44 @@ _ROLE = re.compile(
 _DEVICE_PREFIX = re.compile(r"^(/[^/]+)?$")
 
 
+def topic_token(name: str) -> str:
+    """``name`` as a token of a topic: ``-`` becomes ``_`` (``rate-gyro`` -> ``rate_gyro``), since ROS 2
+    names hold letters, digits and ``_`` only. The one rule that turns gyroemu's names (gyro kinds) into
+    topic names, in files, on live streams and in ROS 2 mode."""
+    return name.replace("-", "_")
+
+
+_RAW_KINDS = {topic_token(kind): kind for kind in RAW_MESSAGE_TYPES}
+"""A raw role's token (either spelling, :func:`topic_token` of it) -> the gyro kind with a message type."""
+
+
 def raw_role(kind: str) -> str:
-    """The role of gyro ``kind``'s raw observables: ``raw/<kind>``."""
-    return f"{_RAW}{kind}"
+    """The role of gyro ``kind``'s raw observables: ``raw/<kind with - as _>`` (``raw/rate_gyro``)."""
+    return f"{_RAW}{topic_token(kind)}"
 
 
 def raw_kind(role: str) -> str | None:
-    """The gyro kind of a ``raw/<kind>`` role, None for other roles."""
-    return role[len(_RAW) :] if role.startswith(_RAW) else None
+    """The gyro kind of a ``raw/<token>`` role, None for other roles: a kind with a message type from
+    either spelling (``raw/rate_gyro`` and, as logs written before named it, ``raw/rate-gyro``:
+    ``rate-gyro``), else the token itself."""
+    if not role.startswith(_RAW):
+        return None
+    token = role[len(_RAW) :]
+    return _RAW_KINDS.get(topic_token(token), token)
+
+
+def canonical_role(role: str) -> str:
+    """``role`` as gyroemu names it now: the raw role of a kind with a message type by :func:`raw_role`
+    (``raw/rate-gyro``, an older log's, -> ``raw/rate_gyro``); any other role unchanged."""
+    kind = raw_kind(role)
+    return raw_role(kind) if kind is not None and kind in RAW_MESSAGE_TYPES else role
+
+
+def canonical_topic(topic: str) -> str:
+    """``topic`` with its role as gyroemu names it now (:func:`canonical_role`): ``/a/raw/rate-gyro`` ->
+    ``/a/raw/rate_gyro``; a topic of no role unchanged."""
+    prefix, role = split_topic(topic)
+    return role_topic(canonical_role(role), prefix) if role else topic
 
 
 def role_topic(role: str, prefix: str = "") -> str:

@@ -17,11 +17,15 @@ topic              type                                 holds
 ``/mag``           ``sensor_msgs/msg/MagneticField``    ``mag`` (tesla), only for devices with one
 ``/truth/imu``     ``sensor_msgs/msg/Imu``              true ``q_wb``, ``omega_b``, ``specific_force_b``
 ``/estimate/imu``  ``sensor_msgs/msg/Imu``              estimated ``q_wb`` (+ covariance), rate, ...
-``/raw/<kind>``    ``gyroemu_msgs/msg/<Kind>Raw``       the gyro kind's physical observables
+``/raw/<token>``   ``gyroemu_msgs/msg/<Kind>Raw``       the gyro kind's physical observables
 ``/movement``      ``gyroemu_msgs/msg/Flag``            an imported dataset's mask of the samples that count
 ``/tf``            ``tf2_msgs/msg/TFMessage``           ``map`` -> ``base_link`` (truth), ``map`` -> ``body_estimate``
 ``/tf_static``     ``tf2_msgs/msg/TFMessage``           ``base_link`` -> the IMU's frame (the device's mounting)
 =================  ===================================  =========================================
+
+A raw topic's ``<token>`` is the gyro kind with ``-`` as ``_`` (``/raw/rate_gyro`` for kind ``rate-gyro``;
+:func:`~gyroemu.pipelines.formats.channels.raw_role`), a valid ROS 2 name; logs written before named it
+with the hyphen (``/raw/rate-gyro``), and every reader here takes both.
 
 ``/tf`` and ``/tf_static`` are the file's, not a device's (no prefix): :mod:`gyroemu.pipelines.formats.frames`
 says which samples go on ``/tf`` (100 Hz at most, and the last) and why; :func:`read_tf` reads them.
@@ -87,6 +91,7 @@ from gyroemu.pipelines.formats.channels import (
     WORLD_FRAME,
     ImuSeries,
     PoseSeries,
+    canonical_role,
     encode_mag,
     encode_measured,
     encode_movement,
@@ -286,7 +291,8 @@ class DeviceLog:
         ``imu0``-style device name: the topic prefix without slashes, the gyroemu metadata's
         ``device_name`` for an unprefixed file, or a foreign IMU topic without its leading slash.
     topics : dict of str to str
-        Role (``imu``, ``mag``, ``truth``, ``estimate``, ``raw/<kind>``) to topic.
+        Role (``imu``, ``mag``, ``truth``, ``estimate``, ``raw/<token>`` as
+        :func:`~gyroemu.pipelines.formats.channels.raw_role` names it, whatever the file's spelling) to topic.
     samples : ImuSamples
     stamp_ns : ndarray (N,) int64
         The samples' header stamps exactly, ns (``samples.t`` is their float64 value in seconds, which
@@ -1025,6 +1031,7 @@ def group_devices(path: Path, channels: Iterable[ChannelT], skipped: dict[str, s
         prefix, role = split_topic(topic)
         if role and not role_accepts(role, mtype):
             role = ""  # e.g. a /raw/x topic of a standard type: take it as a plain topic
+        role = canonical_role(role)  # an older log's /raw/rate-gyro is role raw/rate_gyro
         if not role:
             if mtype is IMU:
                 groups.setdefault(topic, {})[IMU_ROLE] = d

@@ -40,8 +40,11 @@ gyroemu's topics (:mod:`gyroemu.pipelines.formats.channels`) become ROS topics b
 (``interface.md``): device
 ``imu0``'s ``/imu`` is ``/imu0/imu``, ``/raw/fog`` is ``/imu0/raw/fog``; a replayed file's ``/a/b``
 is ``/<device>/a/b``. ROS 2 names allow only letters, digits and ``_`` (a token not starting with a
-digit), so ``-`` becomes ``_`` (``/imu0/raw/rate_gyro``); the recorder restores a raw topic's kind
-from its message type (``gyroemu_msgs/msg/RateGyroRaw`` -> ``/raw/rate-gyro``).
+digit), so ``-`` becomes ``_`` in every token, by the rule gyroemu's own topics follow
+(:func:`gyroemu.pipelines.formats.channels.topic_token`): kind ``rate-gyro``'s raw topic is
+``/raw/rate_gyro`` in files and on every key, ``/imu0/raw/rate_gyro`` here, and a replayed older log's
+``/raw/rate-gyro`` goes out under that name too. The recorder records ROS 2 topic ``/<device>/<rest>``
+on ``/<rest>``.
 
 Liveliness tokens (rmw_zenoh's graph)
 -------------------------------------
@@ -78,8 +81,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, TextIO, TypedDict
 
-from gyroemu.pipelines.formats.channels import raw_role, role_topic
-from gyroemu.pipelines.formats.messages import MESSAGE_TYPES, ROS_DEFINITIONS
+from gyroemu.pipelines.formats.channels import topic_token
+from gyroemu.pipelines.formats.messages import ROS_DEFINITIONS
 
 if TYPE_CHECKING:
     import zenoh
@@ -357,14 +360,14 @@ gyroemu device's tree goes there (``gyroemu/<device>/tf`` on gyroemu's own keys)
 
 
 def ros_topic(device: str, topic: str) -> str:
-    """The ROS 2 topic of gyroemu ``topic`` of ``device``: ``("imu0", "/raw/rate-gyro")`` ->
-    ``/imu0/raw/rate_gyro`` (``-`` -> ``_``); a topic of :data:`GLOBAL_TOPICS` stays itself
-    (``("imu0", "/tf")`` -> ``/tf``); :class:`Ros2Error` when a token is still not a ROS name."""
+    """The ROS 2 topic of gyroemu ``topic`` of ``device``: ``("imu0", "/raw/rate_gyro")`` ->
+    ``/imu0/raw/rate_gyro``, every token by :func:`~gyroemu.pipelines.formats.channels.topic_token`
+    (``-`` -> ``_``: an older log's ``/raw/rate-gyro`` gives the same); a topic of :data:`GLOBAL_TOPICS`
+    stays itself (``("imu0", "/tf")`` -> ``/tf``); :class:`Ros2Error` when a token is still not a ROS name."""
     if topic in GLOBAL_TOPICS:
         return topic
     name = "/" + device + topic
-    tokens = name.strip("/").split("/")
-    tokens = [t.replace("-", "_") for t in tokens]
+    tokens = [topic_token(t) for t in name.strip("/").split("/")]
     for t in tokens:
         if not _TOKEN.match(t):
             raise Ros2Error(
@@ -374,22 +377,16 @@ def ros_topic(device: str, topic: str) -> str:
     return "/" + "/".join(tokens)
 
 
-def gyroemu_topic(topic: str, type_name: str | None = None) -> tuple[str, str]:
-    """``(device, topic)`` of ROS 2 topic ``/<device>/<rest>``; a gyroemu raw type restores its kind's
-    topic (``/imu0/raw/rate_gyro`` of ``gyroemu_msgs/msg/RateGyroRaw`` -> ``("imu0", "/raw/rate-gyro")``);
-    a topic of :data:`GLOBAL_TOPICS` has no device: ``("", "/tf")``."""
+def gyroemu_topic(topic: str) -> tuple[str, str]:
+    """``(device, topic)`` of ROS 2 topic ``/<device>/<rest>`` (``/imu0/raw/rate_gyro`` ->
+    ``("imu0", "/raw/rate_gyro")``, gyroemu's own name of kind ``rate-gyro``'s raw topic); a topic of
+    :data:`GLOBAL_TOPICS` has no device: ``("", "/tf")``."""
     if topic in GLOBAL_TOPICS:
         return "", topic
     tokens = topic.strip("/").split("/")
     if len(tokens) < 2 or not all(tokens):
         raise Ros2Error(f"ROS 2 topic {topic!r} is not /<device>/<topic>")
-    device, rest = tokens[0], "/" + "/".join(tokens[1:])
-    mtype = MESSAGE_TYPES.get(type_name or "")
-    if mtype is not None and mtype.kind is not None:
-        raw_topic = role_topic(raw_role(mtype.kind))
-        if rest.replace("-", "_") == raw_topic.replace("-", "_"):
-            rest = raw_topic
-    return device, rest
+    return tokens[0], "/" + "/".join(tokens[1:])
 
 
 def data_key(domain: int, topic: str, type_name: str, hash_: str) -> str:

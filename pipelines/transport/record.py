@@ -8,10 +8,10 @@ topic (:func:`~gyroemu.pipelines.transport.zenoh_io.key_to_topic`) and copies th
 ``ros2``, zstd chunks) without re-encoding: only the header stamp is read, and it becomes the message's
 ``log_time`` and ``publish_time``. Channels are registered per topic as they appear, with the schema the
 topic's role names (:func:`gyroemu.pipelines.formats.channels.topic_message_type`: ``/imu`` and ``/truth/imu``:
-``sensor_msgs/msg/Imu``, ``/mag``: MagneticField, ``/raw/<kind>``: the kind's raw type; other topics get
-no schema). The first device's topics are unprefixed (``/imu``), any further device's are prefixed
-(``/<device>/imu``); a ``gyroemu`` metadata record per device gives its name and prefix
-(:func:`~gyroemu.pipelines.formats.mcap_log.device_metadata`), so
+``sensor_msgs/msg/Imu``, ``/mag``: MagneticField, ``/raw/<kind>``: the kind's raw type; an older
+gyroemu's ``/raw/rate-gyro`` is recorded as ``/raw/rate_gyro``, :func:`gyroemu_key`). The first device's
+topics are unprefixed (``/imu``), any further device's are prefixed (``/<device>/imu``); a ``gyroemu``
+metadata record per device gives its name and prefix (:func:`~gyroemu.pipelines.formats.mcap_log.device_metadata`), so
 :func:`~gyroemu.pipelines.formats.mcap_log.read_mcap` names it.
 
 The file is written in place (not through a temporary name):
@@ -42,6 +42,18 @@ its first transform, so :func:`~gyroemu.pipelines.formats.mcap_log.read_tf` read
 ``/tf_static`` message that repeats one already recorded, byte for byte (a stream re-publishes its
 mounting every second for late joiners), is counted but not stored again.
 
+Other topics (a replayed bag's ``/robot1/imu/data_raw``) only their publisher can type: when the
+recorder first sees a device it also ``get``s ``gyroemu/<device>/@types``, which ``gyroemu replay``
+answers with each of its keys' type name, schema encoding and schema text as the file has them
+(:class:`~gyroemu.pipelines.transport.zenoh_io.TypesAnnouncer`, :mod:`gyroemu.pipelines.transport.replay`'s
+notes). A topic the recorder cannot type holds its messages (in memory, counted as recorded) until that
+answer comes, and its channel gets the announced schema; when the ``get`` is over without one for the key
+(a live publisher that says nothing), or :attr:`Recorder.config_grace_s` after its first message, or at
+the end, the channel is registered without a schema (``schema_id`` 0: gyroemu's readers skip it, and
+rosbags cannot open such a file). The answer comes on zenoh's thread and is queued, as the config's
+replies are, for the recording loop to take in (:meth:`Recorder.add_types`). In ROS 2 mode the key names
+the type: the announced schema is taken for a type gyroemu does not know, when the names agree.
+
 From each message's attachment (sequence number, publisher id) the recorder counts, per publisher,
 messages received, sequence gaps (the exact missing numbers), duplicates and late (out-of-order)
 arrivals, and prints the report at the end (``--report FILE.json`` also writes it as JSON; its ``file``
@@ -52,8 +64,8 @@ ROS 2 mode (``--ros2``)
 The recorder subscribes to ``<domain>/**`` instead (the data keys of rmw_zenoh,
 :mod:`gyroemu.pipelines.formats.ros2_keys`): a key ``<domain>/<device>/<rest>/<pkg::msg::dds_::T_>/<RIHS01 hash>``
 is recorded on topic ``/<rest>`` of device ``<device>`` (so what ``gyroemu stream --ros2`` publishes
-comes back on the topics of a plain recording; a raw topic gets its kind back from its type), with the
-schema the key's type names when gyroemu knows the type, and the type hash in the channel's
+comes back on the topics of a plain recording: ROS 2's ``/<device>/raw/rate_gyro`` is ``/raw/rate_gyro``),
+with the schema the key's type names when gyroemu knows the type, and the type hash in the channel's
 ``topic_type_hash`` metadata, as rosbag2 records it. Keys of topics with a single name token
 (``/rosout``) have no device and are skipped (counted). The process appears in the ROS graph as node
 ``gyroemu_record_<pid>``, with a subscription token per topic it records.
@@ -75,10 +87,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
+import zenoh
 
 from gyroemu.errors import ConfigError
 from gyroemu.pipelines.formats.atomic import output_file_problem, write_text_atomic
-from gyroemu.pipelines.formats.channels import topic_message_type
+from gyroemu.pipelines.formats.channels import canonical_topic, topic_message_type
 from gyroemu.pipelines.formats.file_names import same_file
 from gyroemu.pipelines.formats.frames import TF_STATIC_TOPIC, TF_TOPIC
 from gyroemu.pipelines.formats.messages import MESSAGE_TYPES
@@ -86,6 +99,7 @@ from gyroemu.pipelines.formats.tf_messages import TF_MESSAGE_TYPE, tf_stamp_ns
 from gyroemu.pipelines.transport.zenoh_io import (
     CONFIG_TOPIC,
     SessionOptions,
+    TopicType,
     check_key_expr,
     config_fields,
     config_key,
@@ -96,11 +110,13 @@ from gyroemu.pipelines.transport.zenoh_io import (
     live_session,
     open_session,
     subscribe,
+    topic_types,
+    types_key,
     unpack_attachment,
 )
 
 if TYPE_CHECKING:
-    import zenoh
+    from gyroemu.pipelines.formats.messages import MessageType
 
 __all__ = [
     "RecordOptions",
@@ -188,8 +204,11 @@ class KeyInfo:
 
 
 def gyroemu_key(key: str) -> KeyInfo:
-    """``gyroemu/<device>/<topic>`` (``ValueError`` for other keys)."""
-    return KeyInfo(*key_to_topic(key))
+    """``gyroemu/<device>/<topic>`` (``ValueError`` for other keys); an older gyroemu's raw topic of a
+    hyphenated kind is recorded under today's name (``/raw/rate-gyro`` -> ``/raw/rate_gyro``,
+    :func:`gyroemu.pipelines.formats.channels.canonical_topic`)."""
+    device, topic = key_to_topic(key)
+    return KeyInfo(device, canonical_topic(topic))
 
 
 def ros2_key(key: str) -> KeyInfo:
@@ -197,16 +216,32 @@ def ros2_key(key: str) -> KeyInfo:
     from gyroemu.pipelines.formats.ros2_keys import gyroemu_topic, parse_data_key
 
     parsed = parse_data_key(key)
-    device, topic = gyroemu_topic(parsed.topic, parsed.type_name)
+    device, topic = gyroemu_topic(parsed.topic)
     return KeyInfo(device, topic, parsed.type_name, parsed.type_hash, parsed.topic)
+
+
+@dataclass
+class _Held:
+    """The samples of a key whose channel waits for its type (:meth:`Recorder.add_types`)."""
+
+    info: KeyInfo
+    since: float  # monotonic time of its first sample
+    stamps: list[int] = field(default_factory=list)
+    payloads: list[bytes] = field(default_factory=list)
 
 
 class Recorder:
     """Copies received zenoh samples into an MCAP file (see the module's notes).
 
     ``parse_key`` turns a sample's key expression into a :class:`KeyInfo` (:func:`gyroemu_key`, or
-    :func:`ros2_key` in ROS 2 mode); ``on_new_topic(info)`` is called once per new channel. The file is
-    created with the first channel; :meth:`close` removes it if no message was recorded."""
+    :func:`ros2_key` in ROS 2 mode); ``on_new_topic(info)`` is called once per new channel and
+    ``on_new_device(device)`` once per new device (``run_record`` asks for its config and types there).
+    The file is created with the first channel; :meth:`close` removes it if no message was recorded.
+
+    A key of a topic the recorder cannot type (no role of gyroemu's, a ROS 2 type gyroemu does not know)
+    holds its samples until its device's types come (:meth:`add_types`, what a replay announces), or
+    ``config_grace_s`` after its first sample, or :meth:`close`: its channel then gets the announced
+    schema, or none."""
 
     def __init__(
         self,
@@ -232,7 +267,9 @@ class Recorder:
         self.trackers: dict[bytes, SequenceTracker] = {}
         self._parse_key = parse_key
         self._on_new_topic = on_new_topic
-        self._keys: dict[str, tuple[KeyInfo, int] | None] = {}  # key expression -> (info, channel) or None
+        self._keys: dict[str, tuple[KeyInfo, int | None] | None] = {}  # key -> (info, channel or None: held)
+        self._types: dict[str, dict[str, TopicType]] = {}  # device -> {key: type}, as its publisher announced them
+        self._held: dict[str, _Held] = {}  # key -> its samples, while its channel waits for its type
         self._static: set[bytes] = set()  # /tf_static payloads recorded
         self.repeated = 0  # /tf_static messages not stored again
         self.messages = 0
@@ -277,30 +314,79 @@ class Recorder:
             except Exception:
                 pass
 
-    def _channel(self, info: KeyInfo) -> int:
+    def _channel(self, key: str, info: KeyInfo) -> int | None:
+        """The channel of ``key``, registered the first time; None while its type is awaited (a topic
+        the recorder cannot type, whose device's types have not come)."""
         if info.topic in _TF_TOPICS and info.type_name in (None, _TF_TYPE):
             return self._tf_channel(info)
-        key = (info.device, info.topic)
-        if key not in self._channels:
-            self._writer()
-            device, topic = info.device, info.topic
-            if device not in self._devices:
-                prefix = "" if not self._devices else f"/{device}"
-                self._devices[device] = prefix
-                self._seen[device] = time.monotonic()
-                if device in self._configs:
-                    self._describe(device)
-                elif self._on_new_device is not None:
-                    try:
-                        self._on_new_device(device)
-                    except Exception:  # asking for the config is advisory: never lose data over it
-                        pass
-            mtype = MESSAGE_TYPES.get(info.type_name) if info.type_name else topic_message_type(topic)
-            # the type hash as rosbag2 (Iron and later) records it
-            metadata = {"topic_type_hash": info.type_hash} if info.type_hash else None
-            self._channels[key] = self._mcap.register_ros2_channel(self._devices[device] + topic, mtype, metadata)
-            self._announce_topic(info)
-        return self._channels[key]
+        if (info.device, info.topic) in self._channels:
+            return self._channels[(info.device, info.topic)]
+        self._writer()
+        self._see(info.device)
+        mtype = MESSAGE_TYPES.get(info.type_name) if info.type_name else topic_message_type(info.topic)
+        if mtype is None and info.device not in self._types:
+            return None
+        return self._register(key, info, mtype)
+
+    def _see(self, device: str) -> None:
+        """Give a device seen for the first time its topic prefix, and its record or the question for its config."""
+        if device in self._devices:
+            return
+        prefix = "" if not self._devices else f"/{device}"
+        self._devices[device] = prefix
+        self._seen[device] = time.monotonic()
+        if device in self._configs:
+            self._describe(device)
+        elif self._on_new_device is not None:
+            try:
+                self._on_new_device(device)
+            except Exception:  # asking for the config is advisory: never lose data over it
+                pass
+
+    def _register(self, key: str, info: KeyInfo, mtype: MessageType | None) -> int:
+        """Register ``key``'s channel: ``mtype``'s schema, else the type its device announced for the key
+        (the original's schema name, encoding and text), else none."""
+        from gyroemu.pipelines.formats.mcap_records import OFFERED_QOS_PROFILES
+
+        topic = self._devices[info.device] + info.topic
+        # the type hash as rosbag2 (Iron and later) records it
+        metadata = {"topic_type_hash": info.type_hash} if info.type_hash else None
+        announced = self._types.get(info.device, {}).get(key)
+        channel: int
+        if mtype is None and announced is not None and info.type_name in (None, announced.name):
+            schema_id = self._mcap.register_schema(announced.name, announced.encoding, announced.schema.encode())
+            channel = self._mcap.register_channel(
+                topic, "cdr", schema_id, {"offered_qos_profiles": OFFERED_QOS_PROFILES, **(metadata or {})}
+            )
+        else:
+            channel = self._mcap.register_ros2_channel(topic, mtype, metadata)
+        self._channels[(info.device, info.topic)] = channel
+        self._announce_topic(info)
+        return channel
+
+    def add_types(self, device: str, types: dict[str, TopicType]) -> None:
+        """Take in the types ``device``'s publisher announced (:func:`gyroemu.pipelines.transport.zenoh_io.topic_types`:
+        key -> type; ``{}`` when it announced none, or its answer is over), and register the channels
+        of its keys that waited for them. Later answers add to what came."""
+        self._types.setdefault(device, {}).update(types)
+        self._release(lambda held: held.info.device == device)
+
+    def _release(self, due: Callable[[_Held], bool]) -> None:
+        """Register the channels of the held keys that are ``due`` (with what is known of their types)
+        and move their samples to the pending ones."""
+        for key, held in list(self._held.items()):
+            if not due(held):
+                continue
+            del self._held[key]
+            info = held.info
+            channel = self._channels.get((info.device, info.topic))
+            if channel is None:
+                channel = self._register(key, info, None)
+            self._keys[key] = (info, channel)
+            for stamp, payload in zip(held.stamps, held.payloads):
+                stamps, payloads = self._pending.setdefault((channel, len(payload)), ([], []))
+                stamps.append(stamp)
+                payloads.append(payload)
 
     def _describe(self, device: str) -> None:
         """Write ``device``'s ``gyroemu`` metadata record: its name, prefix and (when known) config."""
@@ -336,15 +422,16 @@ class Recorder:
         """The devices whose metadata record holds their config."""
         return [d for d, done in self._described.items() if done]
 
-    def _key(self, key: str) -> tuple[KeyInfo, int] | None:
-        """The parsed key and its channel (cached per key expression); None for keys not recorded."""
+    def _key(self, key: str) -> tuple[KeyInfo, int | None] | None:
+        """The parsed key and its channel (cached per key expression; None while the channel waits for
+        its type); None for keys not recorded."""
         try:
             return self._keys[key]
         except KeyError:
             pass
         try:
             info = self._parse_key(key)
-            found = (info, self._channel(info))
+            found: tuple[KeyInfo, int | None] | None = (info, self._channel(key, info))
         except ValueError:
             found = None
         self._keys[key] = found
@@ -387,10 +474,17 @@ class Recorder:
                 self.repeated += 1
                 return
             self._static.add(payload)
+        self.messages += 1
+        if channel is None:  # its type is awaited
+            held = self._held.get(key)
+            if held is None:
+                held = self._held[key] = _Held(info, time.monotonic())
+            held.stamps.append(stamp)
+            held.payloads.append(payload)
+            return
         stamps, payloads = self._pending.setdefault((channel, len(payload)), ([], []))
         stamps.append(stamp)
         payloads.append(payload)
-        self.messages += 1
 
     def _take_config(self, key: str, sample: zenoh.Sample) -> bool:
         """A sample on ``gyroemu/<device>/config``: its config taken in (a bad one is skipped); False for
@@ -412,9 +506,13 @@ class Recorder:
 
     def flush(self) -> None:
         """Hand the pending messages to the MCAP writer (complete chunks reach the disk), and write the
-        metadata records of devices whose config has not come within ``config_grace_s``."""
+        metadata records of devices whose config has not come within ``config_grace_s``, and the channels
+        of keys whose types have not come within it (without a schema)."""
         if self._mcap is not None and self._seen:
             self._describe_overdue()
+        if self._held:
+            now = time.monotonic()
+            self._release(lambda held: now - held.since >= self.config_grace_s)
         if not self._pending:
             return
         batches = []
@@ -431,6 +529,7 @@ class Recorder:
         if self._mcap is None:
             return
         try:
+            self._release(lambda held: True)
             self.flush()
             self._describe_overdue(everyone=True)
             self._mcap.finish()
@@ -560,11 +659,23 @@ def check_record_options(options: RecordOptions) -> None:
         check_key_expr(options.key_expr, "--key")
 
 
-def _take_reply(recorder: Recorder, device: str, sample: zenoh.Sample) -> None:
-    """A reply to the recorder's ``get`` of ``device``'s config: into the recorder (a bad one is ignored)."""
+def _take_reply(recorder: Recorder, device: str, sample: zenoh.Sample | None) -> None:
+    """A reply to the recorder's ``get`` of ``device``'s config or types, into the recorder (a bad one is
+    ignored); None: the ``get`` of its types is over (:meth:`Recorder.add_types` with what came, if anything)."""
+    if sample is None:
+        recorder.add_types(device, {})
+        return
+    payload = sample.payload.to_bytes()
+    if str(sample.key_expr) == types_key(device):
+        try:
+            types = topic_types(payload)
+        except ValueError:
+            return
+        recorder.add_types(device, types)
+        return
     try:
         attachment = sample.attachment
-        fields = config_fields(sample.payload.to_bytes(), None if attachment is None else attachment.to_bytes())
+        fields = config_fields(payload, None if attachment is None else attachment.to_bytes())
     except ValueError:
         return
     recorder.add_config(device, fields)
@@ -604,7 +715,8 @@ def run_record(options: RecordOptions, *, out: TextIO = sys.stdout) -> int:
 
         else:
             on_new_topic = None
-        replies: deque[tuple[str, zenoh.Sample]] = deque()  # config replies, from zenoh's threads
+        # config and types replies (None: a types get is over), from zenoh's threads, taken in by this one
+        replies: deque[tuple[str, zenoh.Sample | None]] = deque()
 
         def ask_config(device: str) -> None:
             def on_reply(reply: zenoh.Reply) -> None:
@@ -612,6 +724,13 @@ def run_record(options: RecordOptions, *, out: TextIO = sys.stdout) -> int:
                     replies.append((device, reply.ok))
 
             session.get(config_key(device), on_reply, timeout=10.0)
+            # what a replay announces of its keys' types; once the get is over (every queryable answered,
+            # or none there), the keys held for their types are registered with what came
+            session.get(
+                types_key(device),
+                zenoh.handlers.Callback(on_reply, lambda: replies.append((device, None))),
+                timeout=10.0,
+            )
 
         recorder = Recorder(options.out_path, parse_key=parse_key, on_new_topic=on_new_topic, on_new_device=ask_config)
         try:

@@ -16,6 +16,23 @@ unchanged, on the key expression of its topic (``interface.md``, "Live streams: 
   publishes it), else ``--device-name``.
 - any other topic ``/a/b`` (someone else's file) goes to ``gyroemu/<device-name>/a/b``.
 
+An older gyroemu log's raw topic of a hyphenated kind (``/raw/rate-gyro``) goes out under today's name
+(``gyroemu/<device>/raw/rate_gyro``, :func:`gyroemu.pipelines.formats.channels.canonical_role`).
+
+Types
+-----
+A key carries a topic's bytes, not its type: a recorder types gyroemu's own topics by their role, but
+only the file knows what ``/robot1/imu/data_raw`` holds. So before it publishes, the replay declares,
+for each device of its keys, a queryable on ``gyroemu/<device>/@types``
+(:class:`gyroemu.pipelines.transport.zenoh_io.TypesAnnouncer`) that answers with every key's message
+type and schema (the channel's schema name, encoding and text, as the file has them; a channel without
+a schema, or whose schema is not UTF-8 text, is left out). ``gyroemu record`` asks it when it first sees
+the device, whenever it started, and registers a topic it cannot type by role with that schema, so the
+recording of a replayed bag holds the bag's schemas. Why a queryable: the per-device config reply
+carries a device's TOML, which someone else's file does not have, and the attachment is rmw_zenoh's 33
+bytes that every subscriber parses; a queryable adds nothing to the data keys and answers a recorder
+that joins late. In ROS 2 mode the keys are rmw_zenoh's, and the answer names them.
+
 The attachment is the publisher's (:class:`gyroemu.pipelines.transport.zenoh_io.PacedPublisher`): a sequence per key
 from 0 (continuing across ``--loop`` passes), the send time, a random publisher id per key.
 
@@ -84,7 +101,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 from gyroemu.errors import ConfigError
-from gyroemu.pipelines.formats.channels import is_device_prefix, is_stream_role, role_topic, split_topic
+from gyroemu.pipelines.formats.channels import (
+    canonical_role,
+    is_device_prefix,
+    is_stream_role,
+    role_topic,
+    split_topic,
+)
 from gyroemu.pipelines.formats.frames import TF_STATIC_TOPIC, TF_TOPIC
 from gyroemu.pipelines.formats.mcap_log import check_mcap_noting
 from gyroemu.pipelines.formats.mcap_records import iter_mcap_batches
@@ -94,6 +117,8 @@ from gyroemu.pipelines.transport.read_ahead import BATCH, READ_AHEAD, Batch, Rea
 from gyroemu.pipelines.transport.zenoh_io import (
     PacingOptions,
     SessionOptions,
+    TopicType,
+    TypesAnnouncer,
     check_pacing_options,
     key_to_topic,
     live_session,
@@ -110,6 +135,7 @@ __all__ = [
     "ReplayOptions",
     "topic_keys",
     "ros2_topic_keys",
+    "announced_types",
     "ReadAhead",
     "run_replay",
     "READ_AHEAD",
@@ -191,7 +217,7 @@ def topic_keys(
         device, rest = device_name, name
         prefix, role = split_topic(name)
         if is_stream_role(role) and is_device_prefix(prefix) and prefix in by_prefix:
-            device, rest = by_prefix[prefix] or prefix.strip("/") or device_name, role_topic(role)
+            device, rest = by_prefix[prefix] or prefix.strip("/") or device_name, role_topic(canonical_role(role))
         elif name in (TF_TOPIC, TF_STATIC_TOPIC):
             device = by_prefix.get("") or device_name
         try:
@@ -242,6 +268,24 @@ def ros2_topic_keys(
         except (ValueError, UnicodeDecodeError) as e:
             bad[topic] = f"no ROS 2 key: {e}"
     return out, bad
+
+
+def announced_types(
+    keys: dict[str, str], devices: dict[str, str], channels: Iterable[ChannelInfo]
+) -> dict[str, dict[str, TopicType]]:
+    """What each device's :class:`~gyroemu.pipelines.transport.zenoh_io.TypesAnnouncer` answers:
+    ``{device: {key: type}}`` of the replayed topics (``keys``: topic -> key as published; ``devices``:
+    topic -> its device) whose channel has a schema of UTF-8 text (the others are left out)."""
+    out: dict[str, dict[str, TopicType]] = {}
+    for c in channels:
+        if c.topic not in keys or not c.schema_name:
+            continue
+        try:
+            schema = c.schema_data.decode("utf-8")
+        except UnicodeDecodeError:
+            continue
+        out.setdefault(devices[c.topic], {})[keys[c.topic]] = TopicType(c.schema_name, c.schema_encoding, schema)
+    return out
 
 
 class ReadAhead(ReadAheadThread):
@@ -314,9 +358,11 @@ class ReadAhead(ReadAheadThread):
             offset += span + round(interval)
 
 
-def _channels_to_publish(options: ReplayOptions, out: TextIO) -> tuple[dict[str, str], Ros2Keys | None, frozenset[str]]:
+def _channels_to_publish(
+    options: ReplayOptions, out: TextIO
+) -> tuple[dict[str, str], Ros2Keys | None, frozenset[str], dict[str, dict[str, TopicType]]]:
     """Validate the file and the options; ``({topic: key}, ROS 2 keys or None, the topics whose type
-    starts with a header)``, skipped topics said on ``out``."""
+    starts with a header, each device's announced types)``, skipped topics said on ``out``."""
     path, topics = options.path, options.topics
     rate = options.rate
     if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not MIN_RATE <= rate <= MAX_RATE:
@@ -351,6 +397,7 @@ def _channels_to_publish(options: ReplayOptions, out: TextIO) -> tuple[dict[str,
         if c.message_encoding != "cdr" and not topics:
             print(f"replay: skipping {c.topic}: message encoding {c.message_encoding!r}, not cdr", file=out)
     keys, bad = topic_keys(cdr, log.metadata, options.device_name)
+    devices = {topic: key_to_topic(key)[0] for topic, key in keys.items()}
     if ros is not None:
         keys, more = ros2_topic_keys(keys, channels, ros)
         bad.update(more)
@@ -368,7 +415,7 @@ def _channels_to_publish(options: ReplayOptions, out: TextIO) -> tuple[dict[str,
             c.schema_name, c.schema_data.decode("utf-8", "replace") if c.schema_encoding == "ros2msg" else ""
         )
     )
-    return keys, ros, stamped
+    return keys, ros, stamped, announced_types(keys, devices, channels)
 
 
 def _clock_key(options: ReplayOptions, keys: dict[str, str], ros: Ros2Keys | None) -> str:
@@ -408,16 +455,21 @@ def run_replay(options: ReplayOptions, *, out: TextIO = sys.stdout) -> int:
     :class:`gyroemu.pipelines.formats.mcap_records.LogError` for bad input and ``ValueError`` naming the
     argument at fault (the endpoints and config before the plan is printed)."""
     config = options.session.config()
-    keys, ros, stamped = _channels_to_publish(options, out)
+    keys, ros, stamped, types = _channels_to_publish(options, out)
     clock_key = _clock_key(options, keys, ros) if options.clock else None
     path, rate, loop, pacing = options.path, options.rate, options.loop, options.pacing
     session = open_session(config)  # a taken --listen, a client without a router: refused before the plan
     reader = view = None
+    announcers: list[TypesAnnouncer] = []
     with live_session(session) as live:
         try:
             print(f"replay: {path}: {len(keys)} topics at rate x{rate:g}{', looping' if loop else ''}", file=out)
             for topic, key in keys.items():
                 print(f"  {topic} -> {key}", file=out)
+            # the keys' types, for recorders: declared before the first message goes out
+            announcers = [TypesAnnouncer(session, device, device_types) for device, device_types in types.items()]
+            for announcer in announcers:
+                print(f"  {announcer.key} (the topics' types, queryable)", file=out)
             if clock_key is not None:
                 print(f"  /clock -> {clock_key} ({CLOCK_TYPE}, the log time, {CLOCK_HZ:g} Hz at most)", file=out)
             view = _start_view(options, keys, stamped) if options.foxglove is not None else None
@@ -449,5 +501,7 @@ def run_replay(options: ReplayOptions, *, out: TextIO = sys.stdout) -> int:
                 reader.stopping.set()
             if view is not None:
                 view.close()
+            for announcer in announcers:
+                announcer.close()
     out.flush()
     return 0 if loop else live.stop_status()

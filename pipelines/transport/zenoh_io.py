@@ -9,6 +9,11 @@ What goes on the wire (``interface.md``, "Live streams: Eclipse Zenoh")
   int64 LE source timestamp (ns since the Unix epoch, taken when the message is sent), one byte 16 (the
   length of what follows), then the 16-byte publisher id (random per publisher, one publisher per
   key expression) (:func:`pack_attachment`, :func:`unpack_attachment`).
+- Beside the data, two queryables a recorder asks when it first sees a device:
+  ``gyroemu/<device>/config`` (``gyroemu stream``: the device's resolved config, :class:`ConfigAnnouncer`)
+  and ``gyroemu/<device>/@types`` (``gyroemu replay``: each key's message type and schema text, as the
+  replayed file's channel states it, :class:`TypesAnnouncer`; a verbatim ``@`` chunk, which no
+  subscriber's wildcard matches).
 
 The default session (no --connect/--listen/--mode/--config)
 -----------------------------------------------------------
@@ -68,7 +73,7 @@ import signal
 import struct
 import sys
 import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol, cast, overload
@@ -101,6 +106,12 @@ __all__ = [
     "ConfigAnnouncer",
     "CONFIG_TOPIC",
     "config_fields",
+    "TYPES_CHUNK",
+    "types_key",
+    "TopicType",
+    "types_payload",
+    "topic_types",
+    "TypesAnnouncer",
     "LiveSession",
     "live_session",
     "topic_to_key",
@@ -591,6 +602,95 @@ class ConfigAnnouncer:
     def announce(self) -> None:
         """Put the config once on the key (for subscribers; recorders ask the queryable)."""
         self._session.put(self.key, self.payload, attachment=self.attachment)
+
+    def close(self) -> None:
+        """Undeclare the queryable."""
+        with contextlib.suppress(Exception):
+            self._queryable.undeclare()
+
+
+TYPES_CHUNK = "@types"
+"""The last chunk of :func:`types_key`: a verbatim chunk (``@...``), which no wildcard matches."""
+
+
+def types_key(device: str) -> str:
+    """``gyroemu/<device>/@types``: where ``gyroemu replay`` answers with the message types of its
+    device's keys (:class:`TypesAnnouncer`). A verbatim chunk: a subscriber of ``gyroemu/**`` receives
+    nothing from it, and no topic's key is it (a ROS 2 name has no ``@``)."""
+    return topic_to_key(device, "/" + TYPES_CHUNK)
+
+
+@dataclass(frozen=True)
+class TopicType:
+    """A topic's message type as a file's channel states it: the schema's name (``sensor_msgs/msg/Imu``),
+    encoding (``ros2msg``) and text."""
+
+    name: str
+    encoding: str
+    schema: str
+
+
+def types_payload(types: Mapping[str, TopicType]) -> bytes:
+    """The JSON of :class:`TypesAnnouncer`'s replies: ``{"<key expr>": {"type": ..., "encoding": ...,
+    "schema": ...}, ...}``, UTF-8."""
+    body = {key: {"type": t.name, "encoding": t.encoding, "schema": t.schema} for key, t in types.items()}
+    return json.dumps(body, sort_keys=True).encode("utf-8")
+
+
+def topic_types(payload: bytes) -> dict[str, TopicType]:
+    """The key expressions and their types of a :func:`types_payload` (``ValueError`` when it is not one;
+    entries without a type name are left out)."""
+    try:
+        body = json.loads(bytes(payload).decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ValueError(f"not the JSON of a types reply: {e}") from None
+    if not isinstance(body, dict):
+        raise ValueError("a types reply is a JSON object")
+    out = {}
+    for key, entry in body.items():
+        if not isinstance(entry, dict):
+            raise ValueError(f"types reply: key {key!r}: not an object")
+        name, encoding, schema = entry.get("type"), entry.get("encoding"), entry.get("schema")
+        if not (isinstance(name, str) and isinstance(encoding, str) and isinstance(schema, str)):
+            raise ValueError(f"types reply: key {key!r}: type, encoding and schema must be strings")
+        if name:
+            out[key] = TopicType(name, encoding, schema)
+    return out
+
+
+class TypesAnnouncer:
+    """Answers ``get`` on ``gyroemu/<device>/@types`` (:func:`types_key`) with the message types of the
+    device's keys (:func:`types_payload`), for as long as the session lives.
+
+    A key carries a topic's bytes, not its type: a recorder types gyroemu's own topics by their role
+    (:func:`gyroemu.pipelines.formats.channels.topic_message_type`), but a replayed file's other topics
+    (``/robot1/imu/data_raw``) only the file knows. ``gyroemu replay`` declares one per device before it
+    publishes, and ``gyroemu record`` asks when it first sees the device, so a recording's channel gets
+    the original's schema, whenever the recorder started. A queryable, not a put: nothing goes to the
+    data keys' subscribers, and a late recorder still gets its answer.
+
+    Parameters
+    ----------
+    session : zenoh.Session
+        The publisher's session.
+    device_name : str
+        The device's name on the wire.
+    types : mapping of str to TopicType
+        Key expression (as published) -> its type.
+    """
+
+    def __init__(self, session: zenoh.Session, device_name: str, types: Mapping[str, TopicType]) -> None:
+        self.key = types_key(device_name)
+        self.payload = types_payload(types)
+        self.queries = 0
+        self._queryable = session.declare_queryable(self.key, self._reply)
+
+    def _reply(self, query: zenoh.Query) -> None:
+        try:
+            query.reply(self.key, self.payload)
+            self.queries += 1
+        except Exception:  # a query gone (timed out) by now: nothing to answer
+            pass
 
     def close(self) -> None:
         """Undeclare the queryable."""

@@ -119,7 +119,8 @@ def test_round_trip_every_preset(tmp_path, runs, scenario, preset):
         assert np.array_equal(getattr(d.truth, name), getattr(truth, name)), name
     assert d.truth.q_wb_covariance is None and d.estimate is None
     expected_topics = {"imu": "/imu", "truth/imu": "/truth/imu"}
-    expected_topics.update({f"raw/{k}": f"/raw/{k}" for k in samples.raw})
+    # the kind with "-" as "_" (/raw/rate_gyro): a ROS 2 name
+    expected_topics.update({f"raw/{k.replace('-', '_')}": f"/raw/{k.replace('-', '_')}" for k in samples.raw})
     if samples.has_mag:
         expected_topics["mag"] = "/mag"
     assert d.topics == expected_topics

@@ -257,6 +257,102 @@ def test_rate_beyond_what_the_pacing_can_do_is_refused(tmp_path, rate, monkeypat
         replay._channels_to_publish(ReplayOptions(log, rate=float("nan")), sys.stdout)
 
 
+def test_foreign_bag_replayed_and_recorded_keeps_its_schemas(procs, tmp_path):
+    """A rosbags-written bag whose IMU topic has no gyroemu role (``/robot1/imu/data_raw``), replayed
+    into ``gyroemu record``: the recording's channel has the bag's schema (name and text; it was
+    schemaless), so ``gyroemu estimate`` reads it and rosbags' AnyReader opens it."""
+    from foreign_bags import write_foreign_bag
+    from mcap.reader import make_reader
+    from rosbags.highlevel import AnyReader
+
+    from gyroemu.pipelines.formats.mcap_log import read_mcap
+
+    bag = write_foreign_bag(tmp_path / "bag", imu_topics=("/robot1/imu/data_raw",), mag_topic="/robot1/imu/mag", n=300)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    recording = tmp_path / "r.mcap"
+    procs.start("rec", "record", "--out", str(recording), "--listen", endpoint, "--key", "gyroemu/**")
+    procs.wait_for("rec", "subscribed")
+    procs.start("replay", "replay", str(bag), "--connect", endpoint, "--device-name", "robot", "--rate", "10")
+    assert procs.wait("replay", 60) == 0, procs.log("replay")
+    time.sleep(0.5)
+    assert procs.stop("rec") == 0, procs.log("rec")
+
+    def schemas(path):
+        with open(path, "rb") as f:
+            summary = make_reader(f).get_summary()
+        return {
+            c.topic: (summary.schemas[c.schema_id].name, summary.schemas[c.schema_id].data)
+            for c in summary.channels.values()
+            if c.schema_id
+        }, {c.topic for c in summary.channels.values()}
+
+    original, _ = schemas(bag)
+    recorded, topics = schemas(recording)
+    assert topics == {"/robot1/imu/data_raw", "/robot1/imu/mag", "/tf"}, procs.log("rec")
+    assert recorded.get("/robot1/imu/data_raw") == original["/robot1/imu/data_raw"]  # the bag's own text
+    assert recorded["/robot1/imu/mag"][0] == "sensor_msgs/msg/MagneticField"  # typed by its role
+    assert [m[2] for m in mcap_messages(recording, "/robot1/imu/data_raw")] == [
+        m[2] for m in mcap_messages(bag, "/robot1/imu/data_raw")
+    ]
+    out = tmp_path / "re.mcap"
+    procs.start("estimate", "estimate", str(recording), "--out", str(out))
+    assert procs.wait("estimate", 60) == 0, procs.log("estimate")
+    device = read_mcap(out).device
+    assert len(device.samples.t) == 300 and device.estimate is not None and len(device.estimate) == 300
+    with AnyReader([recording]) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+        for connection, _, raw in reader.messages():
+            reader.deserialize(raw, connection.msgtype)
+    assert counts["/robot1/imu/data_raw"] == 300 and counts["/robot1/imu/mag"] == 300
+
+
+def test_recorder_holds_an_untyped_key_until_its_types_come(tmp_path):
+    """Without processes: a key the recorder cannot type by role waits for its device's announced types
+    (:meth:`Recorder.add_types`, the replay's ``@types`` answer) and gets the announced schema; one whose
+    device announces nothing is recorded without a schema (at the types' answer, the grace or the end);
+    a topic of a gyroemu role is typed by its role at once."""
+    from mcap_ros2.writer import Writer
+    from zenoh_samples import Sample
+
+    from gyroemu.pipelines.formats.mcap_records import mcap_channel_info
+    from gyroemu.pipelines.formats.messages import IMU
+    from gyroemu.pipelines.transport.record import Recorder
+    from gyroemu.pipelines.transport.replay import announced_types
+    from gyroemu.pipelines.transport.zenoh_io import pack_attachment, topic_types, types_payload
+
+    path = tmp_path / "f.mcap"
+    with open(path, "wb") as f:
+        writer = Writer(f)
+        text = writer.register_msgdef("std_msgs/msg/String", "string data\n")
+        writer.write_message("/a/b", text, {"data": "x"}, log_time=1)
+        writer.write_message("/raw/x", text, {"data": "x"}, log_time=1)  # no raw type: announced as it is
+        writer.finish()
+    channels = mcap_channel_info(path)
+    keys = {"/a/b": "gyroemu/d/a/b", "/raw/x": "gyroemu/d/raw/x"}
+    types = announced_types(keys, {"/a/b": "d", "/raw/x": "d"}, channels)
+    assert set(types) == {"d"} and types["d"]["gyroemu/d/a/b"].name == "std_msgs/msg/String"
+    assert topic_types(types_payload(types["d"])) == types["d"]
+    imu = bytes(IMU.encode(np.array([1_000_000_000]), "d")[0])
+    asked = []
+    recorder = Recorder(tmp_path / "r.mcap", on_new_device=asked.append, config_grace_s=60.0)
+    recorder.add(Sample("gyroemu/d/a/b", imu, pack_attachment(0, 1, bytes(16))))
+    recorder.add(Sample("gyroemu/d/imu", imu, pack_attachment(0, 1, bytes(range(16)))))
+    recorder.add(Sample("gyroemu/e/c", imu, pack_attachment(0, 1, bytes(range(1, 17)))))
+    recorder.flush()
+    assert asked == ["d", "e"]
+    assert [c.topic for c in mcap_channel_info(tmp_path / "r.mcap")] == ["/imu"]  # the others wait
+    recorder.add_types("d", types["d"])
+    recorder.add(Sample("gyroemu/d/a/b", imu, pack_attachment(1, 1, bytes(16))))
+    recorder.add_types("e", {})  # e's answer is over: nothing announced
+    recorder.close()
+    recorded = {c.topic: c for c in mcap_channel_info(tmp_path / "r.mcap")}
+    assert list(recorded) == ["/imu", "/a/b", "/e/c"]
+    assert recorded["/a/b"].schema_name == "std_msgs/msg/String" and recorded["/a/b"].schema_data == b"string data\n"
+    assert recorded["/e/c"].schema_name == "" and recorded["/imu"].schema_name == IMU.name
+    assert [m[1] for m in mcap_messages(tmp_path / "r.mcap", "/a/b")] == [1_000_000_000] * 2
+    assert recorder.messages == 4
+
+
 def test_topic_keys_rule():
     """Without processes: gyroemu topics by prefix / metadata / --device-name; foreign topics under the device."""
     from gyroemu.pipelines.transport.replay import topic_keys

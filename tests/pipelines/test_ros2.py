@@ -137,14 +137,15 @@ def test_keys_and_tokens_follow_rmw_zenoh():
     (publisher) chunks rmw_zenoh's ``Entity::make`` parses, none empty; QoS chunk parts as its
     ``keyexpr_to_qos`` splits them."""
     imu = PUBLISHED["sensor_msgs/msg/Imu"]
-    assert ros_topic("imu0", "/raw/rate-gyro") == "/imu0/raw/rate_gyro"
-    assert gyroemu_topic("/imu0/raw/rate_gyro", "gyroemu_msgs/msg/RateGyroRaw") == ("imu0", "/raw/rate-gyro")
-    assert gyroemu_topic("/imu0/truth/imu", "sensor_msgs/msg/Imu") == ("imu0", "/truth/imu")
+    assert ros_topic("imu0", "/raw/rate_gyro") == "/imu0/raw/rate_gyro"
+    assert ros_topic("imu0", "/raw/rate-gyro") == "/imu0/raw/rate_gyro"  # an older log's name, replayed
+    assert gyroemu_topic("/imu0/raw/rate_gyro") == ("imu0", "/raw/rate_gyro")
+    assert gyroemu_topic("/imu0/truth/imu") == ("imu0", "/truth/imu")
     for bad in ("/raw/x.y", "/2d/imu"):
         with pytest.raises(Ros2Error):
             ros_topic("imu0", bad)
     with pytest.raises(Ros2Error):
-        gyroemu_topic("/rosout", "rcl_interfaces/msg/Log")
+        gyroemu_topic("/rosout")
     key = data_key(7, "/imu0/imu", "sensor_msgs/msg/Imu", imu)
     assert key == f"7/imu0/imu/sensor_msgs::msg::dds_::Imu_/{imu}"
     parsed = parse_data_key(key)
@@ -376,8 +377,8 @@ def test_replay_ros2_of_a_foreign_file(procs, tmp_path):
 
 
 def test_recorder_maps_ros2_keys_back_to_topics(tmp_path):
-    """Without processes: a raw topic's kind comes back from its type (``rate_gyro`` -> ``rate-gyro``),
-    the type hash goes into the channel metadata, the schema is the key's type, and a key of a
+    """Without processes: a raw topic keeps its ROS 2 name, gyroemu's own (``/raw/rate_gyro``), the
+    type hash goes into the channel metadata, the schema is the key's type, and a key of a
     one-token topic (``/rosout``) or of another form is skipped, counted."""
     import numpy as np
 
@@ -411,7 +412,7 @@ def test_recorder_maps_ros2_keys_back_to_topics(tmp_path):
     recorder.close()
     assert (recorder.messages, recorder.skipped) == (2, 2)
     channels = {c.topic: c for c in mcap_channel_info(tmp_path / "r.mcap")}
-    assert sorted(channels) == ["/imu", "/raw/rate-gyro"]
-    assert channels["/raw/rate-gyro"].schema_name == raw.name
-    assert channels["/raw/rate-gyro"].metadata["topic_type_hash"] == raw_hash
+    assert sorted(channels) == ["/imu", "/raw/rate_gyro"]
+    assert channels["/raw/rate_gyro"].schema_name == raw.name
+    assert channels["/raw/rate_gyro"].metadata["topic_type_hash"] == raw_hash
     assert channels["/imu"].metadata["topic_type_hash"] == PUBLISHED[IMU.name]

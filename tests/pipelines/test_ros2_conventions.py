@@ -31,6 +31,8 @@ Tolerances
 from __future__ import annotations
 
 import math
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -41,6 +43,8 @@ from tf_tree import interpolation_bound, tf_lookup
 from tf_tree import quat_angle as _angle
 from tf_tree import quat_mul as _mul
 
+from gyroemu.dynamics.config import config_dir
+from gyroemu.pipelines.formats.channels import raw_role
 from gyroemu.pipelines.formats.frames import (
     ESTIMATE_FRAME,
     SIMULATE_EPOCH_NS,
@@ -338,6 +342,102 @@ def test_old_style_log_without_tf_is_read_and_estimated(tmp_path):
     assert set(tree.child_frame_id.tolist()) == {ESTIMATE_FRAME}
     assert tree.stamp_ns[0] == 1_000_000 and tree.stamp_ns[-1] == 2_000_000_000  # the old stamps kept
     assert np.all(tree.translation == 0)  # no /truth/pose: at the origin
+
+
+# ---------------------------------------------------------------------------------------------------
+# Topic names.
+
+ROS_TOPIC = re.compile(r"^(/[A-Za-z_][A-Za-z0-9_]*)+$")
+"""A fully qualified ROS 2 topic name (rcl, rmw): tokens of letters, digits and ``_``, none starting with
+a digit, joined by single ``/``; no ``-``."""
+DEVICES = sorted(p.stem for p in (config_dir() / "devices").glob("*.toml"))
+
+
+def _topics(path: Path) -> list[str]:
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    return [c.topic for c in summary.channels.values()]
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_every_topic_written_is_a_ros2_name(device, tmp_path):
+    """Every topic of a shipped device's log is a valid ROS 2 name: the raw topics of the kinds
+    ``rate-gyro``, ``rate-integrating`` and ``free-gyro`` were ``/raw/rate-gyro`` ..., which ``ros2 bag
+    play`` cannot publish; they are the kind with ``-`` as ``_``."""
+    from gyroemu.pipelines.formats.messages import RAW_MESSAGE_TYPES
+    from gyroemu.sensors import load_device
+
+    path = tmp_path / f"{device}.mcap"
+    run_simulate(SimulateOptions(scenario="rate_table_steps", device=device, duration=0.3, out=path))
+    topics = _topics(path)
+    assert [t for t in topics if not ROS_TOPIC.match(t)] == [], topics
+    kind = load_device(device).kind
+    if kind in RAW_MESSAGE_TYPES:  # a kind with raw observables: its topic is there, by that rule
+        assert "/raw/" + kind.replace("-", "_") in topics, topics
+
+
+def _rename_topics(src: Path, dst: Path, renames: dict[str, str]) -> None:
+    """``src`` written again (mcap's own writer) with its channels' topics renamed: every schema, channel
+    metadata, metadata record and message (times, sequence, bytes) as they were."""
+    from mcap.reader import make_reader
+    from mcap.writer import CompressionType, Writer
+
+    with open(src, "rb") as f, open(dst, "wb") as g:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None
+        writer = Writer(g, compression=CompressionType.ZSTD)
+        writer.start(profile=reader.get_header().profile, library=reader.get_header().library)
+        schemas = {i: writer.register_schema(s.name, s.encoding, s.data) for i, s in summary.schemas.items()}
+        channels = {
+            i: writer.register_channel(
+                renames.get(c.topic, c.topic), c.message_encoding, schemas.get(c.schema_id, 0), c.metadata
+            )
+            for i, c in summary.channels.items()
+        }
+        for record in reader.iter_metadata():
+            writer.add_metadata(record.name, record.metadata)
+        for _, c, m in reader.iter_messages(log_time_order=False):
+            writer.add_message(channels[c.id], m.log_time, m.data, m.publish_time, m.sequence)
+        writer.finish()
+
+
+def test_a_log_with_the_older_hyphenated_raw_topic_still_reads(tmp_path):
+    """A log written before the raw topics became ROS 2 names (``/raw/rate-gyro``) reads as today's: its
+    raw channel by read_mcap, info and the streamed reader, estimate copies it through, and replay and
+    record put it under today's name."""
+    from gyroemu.pipelines.formats.device_stream import scan_devices
+    from gyroemu.pipelines.jobs.info import log_info
+    from gyroemu.pipelines.transport.record import gyroemu_key
+    from gyroemu.pipelines.transport.replay import topic_keys
+
+    new, old = tmp_path / "new.mcap", tmp_path / "old.mcap"
+    run_simulate(SimulateOptions(scenario="rate_table_steps", device="classic_rate_gyro", duration=0.5, out=new))
+    _rename_topics(new, old, {"/raw/rate_gyro": "/raw/rate-gyro"})
+    assert "/raw/rate-gyro" in _topics(old) and "/raw/rate_gyro" not in _topics(old)
+    role = raw_role("rate-gyro")
+    a, b = read_mcap(new), read_mcap(old)
+    assert not b.skipped and b.device.topics[role] == "/raw/rate-gyro" and a.device.topics[role] == "/raw/rate_gyro"
+    assert list(b.device.samples.raw) == ["rate-gyro"]
+    for name, value in a.device.samples.raw["rate-gyro"].items():
+        assert np.array_equal(b.device.samples.raw["rate-gyro"][name], value), name
+    assert np.array_equal(a.device.samples.gyro, b.device.samples.gyro) and len(b.device.samples.t) == 100
+    info = log_info(old)
+    assert info.devices[0].topics[role] == "/raw/rate-gyro" and not info.skipped
+    streamed, _ = scan_devices(old)
+    assert streamed["classic_rate_gyro"].topics[role] == "/raw/rate-gyro"
+    out = tmp_path / "est.mcap"
+    estimate_log(old, out, filter_name="mekf")
+    copied = read_mcap(out).device
+    assert copied.topics[role] == "/raw/rate-gyro" and copied.estimate is not None
+    angle = a.device.samples.raw["rate-gyro"]["gimbal_angle_rad"]
+    assert np.array_equal(copied.samples.raw["rate-gyro"]["gimbal_angle_rad"], angle)
+    keys, bad = topic_keys(["/raw/rate-gyro"], b.metadata, "zz")
+    assert keys == {"/raw/rate-gyro": "gyroemu/classic_rate_gyro/raw/rate_gyro"} and not bad
+    assert gyroemu_key("gyroemu/dev/raw/rate-gyro").topic == "/raw/rate_gyro"  # an older stream, recorded
 
 
 def test_start_time_and_frame_id_options(tmp_path):
