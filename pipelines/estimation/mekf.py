@@ -442,6 +442,15 @@ class Mekf:
         self._F = np.eye(kern.X_SIZE)
         self._Q = np.zeros((kern.X_SIZE, kern.X_SIZE))
 
+    @property
+    def start_s(self) -> float:
+        """Seconds its first block is read for the start (:func:`~.protocol.start_span_s`): ``init_s``
+        for the attitude, ``gyrocompass_s`` where it may find north from the Earth's rate (6D, latitude
+        known; in 9D only when the field is missing over the first ``init_s``, which this does not hold)."""
+        if self.setup.latitude_rad is not None and not self.setup.use_mag:
+            return max(self.params.init_s, self.params.gyrocompass_s)
+        return self.params.init_s
+
     def process(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None) -> Estimate:
         """Filter the next block: ``t`` (N,) s, ``gyro`` (N, 3) rad/s, ``accel`` (N, 3) m/s², ``mag``
         (N, 3) T or None. Returns the attitude, bias and attitude covariance after each sample."""

@@ -20,6 +20,11 @@ and is named on the command line as ``module:Class`` (``gyroemu bench --filter m
 An offline filter (``offline = True``) takes the whole log in one ``process`` call; one that can also
 take a log too long to hold (:class:`BlockLearner`: ``learns_in_blocks = True``) is given every block
 by ``learn`` first, then asked by ``process`` for the same blocks' estimates in the same order.
+A filter that starts from more than its first sample (the MEKF: its first ``init_s``, and the first
+``gyrocompass_s`` where it may find north from the Earth's rate) says how many seconds its first
+``process`` call reads with ``start_s`` (:func:`start_span_s`; absent: 0). A live run holds its first
+samples until they span it, so that the filter starts as it does on the recorded log, whatever the
+stream's blocks.
 Frames and units follow ``interface.md``: ``q_wb`` turns body vectors into the ENU world frame.
 """
 
@@ -40,6 +45,7 @@ __all__ = [
     "FilterSetup",
     "estimate_problem",
     "learns_in_blocks",
+    "start_span_s",
 ]
 
 
@@ -179,6 +185,13 @@ class BlockLearner(AttitudeFilter, Protocol):
     def spool_bytes(self, samples: int, duration_s: float) -> int: ...
 
     def close(self) -> None: ...
+
+
+def start_span_s(flt: object) -> float:
+    """Seconds of samples a filter's first ``process`` call reads to start (its ``start_s``; 0 for a
+    filter that starts from its first sample, or says nothing)."""
+    span = getattr(flt, "start_s", 0.0)
+    return float(span) if isinstance(span, (int, float)) and span > 0 else 0.0
 
 
 def learns_in_blocks(filter_or_class: object) -> TypeGuard[BlockLearner]:

@@ -11,6 +11,11 @@ With a ``tf_rate_hz`` it also puts ``map`` → ``body_estimate`` (the estimated 
 origin: a live filter knows no position) on the device's ``/tf`` key, thinned to that rate as the
 stream thins its own ``/tf`` (:class:`~gyroemu.pipelines.formats.frames.TfThinning`), so a tf listener
 sees the estimate beside the truth's ``map`` → ``base_link``.
+The filter's first block is held until it spans what the filter reads to start
+(:func:`~gyroemu.pipelines.estimation.protocol.start_span_s`: the MEKF's 0.5 s, or 10 s where it may
+find north from the Earth's rate), so that it starts as it does on the recorded log: the same seed
+gives the same estimates, those ``gyroemu estimate`` writes (a first block of whatever one poll held
+started it elsewhere: 1.8° and 5.3° apart on two runs of one stream).
 The estimate is the body's (``base_link``): with the device's mounting given (``q_bs``), the filter's
 sensor-frame attitude and rate are turned into the body's as ``gyroemu estimate`` turns them
 (:mod:`gyroemu.pipelines.estimation.mounting`). Topics and the encoding of the estimate are the channel
@@ -28,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gyroemu.pipelines.estimation.mounting import mounting_turn
+from gyroemu.pipelines.estimation.protocol import start_span_s
 from gyroemu.pipelines.estimation.series import estimate_series
 from gyroemu.pipelines.formats.channels import (
     ESTIMATE_FRAME,
@@ -98,6 +104,7 @@ class LiveEstimator:
         self._pending: list[tuple[int, NDArray[np.float64], NDArray[np.float64]]] = []  # (stamp ns, gyro, accel)
         self._fields: dict[int, NDArray[np.float64]] = {}
         self._t0_ns: int | None = None
+        self._start_ns = round(start_span_s(flt) * 1e9)  # the span its first block must hold, ns
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="gyroemu-live-estimate", daemon=True)
 
@@ -113,7 +120,7 @@ class LiveEstimator:
     def close(self, drain_s: float = 1.0) -> None:
         """Process what is still queued (for up to ``drain_s``), then stop."""
         end = time.monotonic() + drain_s
-        while time.monotonic() < end and self._step(final=True):
+        while time.monotonic() < end and self.poll(final=True):
             pass
         if self._thinning is not None and self._thinning.last() and self._last_tf is not None:
             self._out.put(str(self.tf_key), self._last_tf.tobytes())  # the run's last sample, as /tf ends
@@ -131,11 +138,13 @@ class LiveEstimator:
 
     def _loop(self) -> None:
         while not self._stop.is_set():
-            if not self._step():
+            if not self.poll():
                 time.sleep(0.001)
 
-    def _step(self, final: bool = False) -> bool:
-        """Take in what has arrived and filter the samples that are complete; False when idle."""
+    def poll(self, final: bool = False) -> bool:
+        """Take in what has arrived and filter the samples that are complete (``final``: every sample
+        held, the end of the stream); False when idle. The worker thread polls every millisecond; a
+        caller that runs no thread (a test) may poll itself."""
         imu = drain(self._imu)
         mag = drain(self._mag) if self._mag is not None else []
         if mag:
@@ -156,6 +165,8 @@ class LiveEstimator:
                 ready += 1
         if ready == 0:
             return bool(imu or mag)
+        if self._t0_ns is None and not final and self._pending[ready - 1][0] - self._pending[0][0] < self._start_ns:
+            return bool(imu or mag)  # the first block: held until it spans the filter's start
         block, self._pending = self._pending[:ready], self._pending[ready:]
         stamp_ns = np.array([s for s, _, _ in block], dtype=np.int64)
         gyro = np.array([g for _, g, _ in block])
