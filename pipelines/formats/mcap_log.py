@@ -689,7 +689,7 @@ class McapLogWriter:
         self, recording: Recording, t: ArrayLike, what: str, stamp_ns: NDArray[np.int64]
     ) -> NDArray[np.int64]:
         """A truth, estimate or pose series' stamps, ns: the samples' exact stamps where they are the same."""
-        series_ns = _log_stamps(t, what) + self._start_ns
+        series_ns = _log_stamps(t, what, self._start_ns)
         if (
             recording.stamp_ns is not None
             and len(series_ns) == len(stamp_ns)
@@ -701,7 +701,7 @@ class McapLogWriter:
     def _encode(self, device: _DeviceChannels, recording: Recording) -> EncodedBlock:
         """``(channel_id, stamp_ns, payloads)`` of every channel of a recording."""
         samples = recording.samples
-        stamp_ns = _log_stamps(samples.t, "samples.t") + self._start_ns
+        stamp_ns = _log_stamps(samples.t, "samples.t", self._start_ns)
         if recording.stamp_ns is not None:
             exact = np.asarray(recording.stamp_ns, dtype=np.int64)
             if exact.shape != stamp_ns.shape or np.abs(exact - stamp_ns).max(initial=0) > 1000:
@@ -783,10 +783,14 @@ class McapLogWriter:
             self._tmp.unlink(missing_ok=True)
 
 
-def _log_stamps(t: ArrayLike, what: str) -> NDArray[np.int64]:
-    stamp_ns = stamps_to_ns(t)
+def _log_stamps(t: ArrayLike, what: str, start_ns: int) -> NDArray[np.int64]:
+    """The log times of stamps ``t`` (s from ``start_ns``): unsigned, so none before the Unix epoch (a
+    stamp before ``start_ns``, a clock that runs behind, is a valid time)."""
+    stamp_ns = stamps_to_ns(t) + start_ns
     if len(stamp_ns) and stamp_ns.min() < 0:
-        raise ValueError(f"{what} has stamps before 0 s ({stamp_ns.min() * 1e-9:g} s): MCAP log times are unsigned")
+        raise ValueError(
+            f"{what} has stamps before 1970 ({stamp_ns.min() * 1e-9:g} s from the epoch): MCAP log times are unsigned"
+        )
     return stamp_ns
 
 

@@ -264,10 +264,20 @@ _LAST_STAMP_S = 2.0**31  # builtin_interfaces/Time's int32 seconds: a stamp must
 
 def _check_last_stamp(options: SimulateOptions, span_s: float | None, device: Device | None) -> None:
     """Refuse an .mcap run whose last stamp (``--start-time`` plus the span, the device clock's offset and
-    two samples of jitter) lies beyond ROS time's int32 seconds, which the writer would find only there."""
+    two samples of jitter) lies beyond ROS time's int32 seconds, or whose first (a clock that runs behind
+    a start near 1970) before the Unix epoch, which the writer would find only there."""
     if options.out.suffix != ".mcap" or span_s is None:
         return
     start_s = start_ns(options) / 1e9
+    if device is not None:
+        early = min(float(device.spec.clock.offset_s), 0.0) - 2.0 / float(device.spec.rate_hz)
+        if start_s + early < 0:
+            raise ConfigError(
+                f"an offset of {device.spec.clock.offset_s:g} s puts the run's first stamps before 1970 (the "
+                "Unix epoch; log times are unsigned): start later (--start-time) or take the offset in",
+                file=device.path or device.name,
+                key="clock.offset_s",
+            )
     late = 0.0 if device is None else max(float(device.spec.clock.offset_s), 0.0) + 2.0 / float(device.spec.rate_hz)
     if not start_s + float(span_s) + late < _LAST_STAMP_S:
         from gyroemu.pipelines.formats.frames import SIMULATE_EPOCH_NS, format_stamp

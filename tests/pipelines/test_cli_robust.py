@@ -21,6 +21,7 @@ from cli_runs import run_cli
 from live_processes import free_port
 from zenoh_samples import Sample
 
+from gyroemu.pipelines.formats.frames import SIMULATE_EPOCH_NS
 from gyroemu.pipelines.jobs.simulate import SimulateError, SimulateOptions, check_options
 
 
@@ -174,6 +175,25 @@ def test_simulate_refuses_a_run_ending_beyond_ros_time_before_work(tmp_path, opt
         [*argv[:3], "--device", str(device), "--duration", "5", "--out", str(tmp_path / "c.mcap")]
     )
     assert code == 2 and f"{device}: key 'clock.offset_s'" in stderr, stderr
+
+
+def test_a_clock_that_runs_behind_writes_its_stamps_before_the_start(tmp_path):
+    """A device clock 0.5 s behind stamps its samples before ``--start-time``: valid ROS times, written
+    (the writer refused stamps before the run's start, a traceback after the work); only stamps before
+    1970 cannot be log times, refused before any work naming ``clock.offset_s``."""
+    from mcap.reader import make_reader
+
+    device = tmp_path / "behind.toml"
+    device.write_text('description = "x"\nrate_hz = 100\n\n[clock]\noffset_s = -0.5\n')
+    argv = ["simulate", "--scenario", "bench_static", "--device", str(device), "--duration", "2"]
+    code, _, stderr = run_cli([*argv, "--start-time", "2025-01-01T00:00:00Z", "--out", str(tmp_path / "b.mcap")])
+    assert code == 0, stderr
+    with open(tmp_path / "b.mcap", "rb") as f:
+        first = min(m.log_time for _, c, m in make_reader(f).iter_messages(topics=["/imu"]))
+    assert first == SIMULATE_EPOCH_NS - 500_000_000 + 10_000_000  # the first sample, 10 ms in, 0.5 s early
+    code, _, stderr = run_cli([*argv, "--start-time", "0", "--out", str(tmp_path / "c.mcap")])
+    assert code == 2 and f"{device}: key 'clock.offset_s'" in stderr and "1970" in stderr, stderr
+    assert not (tmp_path / "c.mcap").exists()
 
 
 def test_simulate_names_the_argument_or_key_at_fault(tmp_path):
