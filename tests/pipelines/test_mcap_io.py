@@ -225,7 +225,7 @@ def test_several_devices_prefixed_and_interleaved(tmp_path, runs, scenario):
 def test_bad_inputs_to_the_writer(tmp_path, runs):
     _, samples, _ = runs["ideal"]
     early = ImuSamples(t=samples.t - 0.1, gyro=samples.gyro, accel=samples.accel, mag=samples.mag)
-    with pytest.raises(ValueError, match="before 0 s"):
+    with pytest.raises(ValueError, match="before 1970"):
         write_mcap(tmp_path / "n.mcap", early)
     renamed = ImuSamples(t=samples.t, gyro=samples.gyro, accel=samples.accel, mag=samples.mag, device="raw")
     with pytest.raises(ValueError, match="cannot prefix"):
