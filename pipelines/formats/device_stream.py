@@ -53,6 +53,7 @@ from gyroemu.pipelines.formats.mcap_records import McapRecordWalk, McapScan, Raw
 from gyroemu.pipelines.formats.messages import DecodedBatch, MessageType, ns_to_stamps, stamps_to_ns
 
 __all__ = [
+    "FIRST_BLOCK_S",
     "MAX_PENDING",
     "POSE_MATCH_NS",
     "TRUTH_FIELDS",
@@ -72,6 +73,12 @@ __all__ = [
     "not_increasing_since",
     "warn_drops",
 ]
+
+FIRST_BLOCK_S = 60.0
+"""Seconds of a device's first samples :func:`count_samples` keeps for the commands that read a log a
+block at a time (``gyroemu estimate``, ``bench --log``): a filter starts from its first block (the MEKF
+reads at most its first 10 s, to find north from the Earth's rate: its ``start_s``), so every filter is
+given its first minute at once, read in the counting pass, and the copy need not hold it back."""
 
 MAX_PENDING = 1 << 20
 """Samples a stream may hold while a paired topic catches up, before it gives up (:class:`NotStreamable`)."""

@@ -45,6 +45,7 @@ from gyroemu.pipelines.estimation.registry import make_filter
 from gyroemu.pipelines.estimation.series import check_counts, not_increasing_error
 from gyroemu.pipelines.formats.channels import MOVEMENT_ROLE
 from gyroemu.pipelines.formats.device_stream import (
+    FIRST_BLOCK_S,
     DeviceBlock,
     DeviceStream,
     NotStreamable,
@@ -75,9 +76,6 @@ __all__ = [
 
 TRUTH_MATCH = 0.25
 """How far, in sample intervals, a truth message may lie from a sample's stamp to be its reference."""
-
-FIRST_BLOCK_S = 60.0
-"""Seconds of a device's first samples kept from the census: the filters' first block and warm-up."""
 
 
 class _Named(Protocol):

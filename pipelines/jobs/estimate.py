@@ -72,6 +72,7 @@ from gyroemu.pipelines.formats.channels import (
     split_topic,
 )
 from gyroemu.pipelines.formats.device_stream import (
+    FIRST_BLOCK_S,
     Counted,
     DeviceBlock,
     DeviceCensus,
@@ -88,7 +89,6 @@ from gyroemu.pipelines.formats.messages import IMU, seconds_since
 from gyroemu.pipelines.jobs.disk_space import MCAP_RECORD_OVERHEAD, free_bytes, human_size
 from gyroemu.pipelines.jobs.estimate_copy import (
     ESTIMATE_CHANNEL,
-    FIRST_BLOCK_S,
     BlockRun,
     EstimateTarget,
     StreamFeed,

@@ -43,7 +43,6 @@ from gyroemu.pipelines.formats.messages import IMU, ns_to_stamps, seconds_since
 
 __all__ = [
     "ESTIMATE_CHANNEL",
-    "FIRST_BLOCK_S",
     "BlockRun",
     "EstimateTarget",
     "StreamFeed",
@@ -72,13 +71,6 @@ class EstimateTarget:
     tf_pos: np.ndarray | None = None  # (N, 3): the true position there (zeros without /truth/pose)
     tf_channel_out: int = 0
     tf_sequence: int = 0
-
-
-FIRST_BLOCK_S = 60.0
-"""A filter initialises from its first block (the MEKF reads at most its first 10 s, to find north from
-Earth's rate): a log read a block at a time gives the filter its first minute at once, read in the pass
-that counts the samples (:func:`~gyroemu.pipelines.formats.device_stream.count_samples`), so that the
-copy need not hold a minute of the log back."""
 
 
 @dataclass

@@ -15,6 +15,7 @@ from memory_growth import assert_flat_when_streamed
 from gyroemu.pipelines.estimation.series import check_samples, rate_of
 from gyroemu.pipelines.formats.channels import role_message_type
 from gyroemu.pipelines.formats.device_stream import (
+    FIRST_BLOCK_S,
     DeviceCensus,
     DeviceStream,
     NotStreamable,
@@ -34,7 +35,6 @@ from gyroemu.pipelines.formats.mcap_log import (
 from gyroemu.pipelines.formats.mcap_records import McapFileWriter, McapRecordWalk, RawMessages
 from gyroemu.pipelines.formats.messages import FLAG, IMU, MAGNETIC_FIELD, POSE_STAMPED
 from gyroemu.pipelines.jobs.estimate import estimate_log
-from gyroemu.pipelines.jobs.estimate_copy import FIRST_BLOCK_S
 
 from ..foreign_bags import write_foreign_bag
 
