@@ -358,6 +358,11 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
             if e.file is not None:
                 raise  # a bad scenario or device file: names the file and key
             key = str(getattr(e, "key", "") or "")
+            if key == "seed_range":  # the range as a whole: its last seed past what a seed can be
+                raise UsageError(
+                    f"argument --seed: --seed {args.seed} + --runs {args.runs} must be at most 2**63 (the last "
+                    "seed below 2**63: seeds are stored as int64)"
+                ) from None
             flag = "--runs" if key == "seed_range.count" else flags.get(key.split("[")[0].split(".")[0], "--scheduler")
             raise UsageError(f"argument {flag}: {e.reason}") from None
     out = Path(args.out)
@@ -377,6 +382,8 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         f"{len(summary.failures)} failed; {summary.rows} rows -> {summary.store}"
     )
     print(f"report -> {summary.paths['markdown']}, {summary.paths['json']}")
+    if summary.superseded is not None:
+        print(f"note: what {out} held that is not this campaign's (parts, a report) was moved to {summary.superseded}")
     for failure in summary.failures:
         print(f"gyroemu bench: error: {failure.task.cell.label}: {failure.error}", file=sys.stderr)
     return 1 if summary.failures else 0

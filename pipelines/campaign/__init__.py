@@ -14,7 +14,7 @@ a campaign runs.
 from .engine import SchedulerLostError, TaskFailure, default_workers, run_tasks, scheduler_problem
 from .progress import RunsProgress
 from .spec import Campaign, CampaignSpec, Cell, CellTask, SeedRange, campaign_from_spec, config_hash, load_campaign
-from .store import PartStore, readable
+from .store import PartStore, StoreWarning, readable
 from .tasks import ROW_COLUMNS, LogTask, consecutive, make_log, row_schema, run_cell
 
 __all__ = [
@@ -28,6 +28,7 @@ __all__ = [
     "RunsProgress",
     "SchedulerLostError",
     "SeedRange",
+    "StoreWarning",
     "TaskFailure",
     "campaign_from_spec",
     "config_hash",

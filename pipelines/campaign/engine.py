@@ -175,6 +175,9 @@ def run_tasks(
     ------
     SchedulerLostError
         ``scheduler`` unreachable, or the scheduler lost while tasks were running.
+    Exception
+        What ``on_result`` raises (an ``OSError`` of a full disk), as it is: the tasks not handed over
+        yet are dropped with the cluster.
     """
     if not tasks:
         return []
@@ -189,30 +192,35 @@ def run_tasks(
             key = f"gyroemu-{_safe(label(task))}-{run}-{i}"
             futures[client.submit(fn, task, key=key, pure=False)] = task
         done = 0
-        try:
-            for future in as_completed(list(futures)):
+        finished = as_completed(list(futures))
+        while True:
+            # Only the scheduler's calls are read as a lost connection: an error of ``on_result`` (the
+            # store's full disk, its folder a file) is the caller's own and goes through as it is.
+            try:
+                future = next(finished, None)
+                if future is None:
+                    break
                 task = futures.pop(future)
                 status = future.status
                 if status == "finished":
                     result = future.result()
                     future.release()
-                    on_result(task, result)
-                    done += 1
                 elif status == "error":
                     exc = future.exception()
                     failures.append(TaskFailure(task, f"{type(exc).__name__}: {exc}"))
                     future.release()
+                    continue
                 else:  # cancelled: not by us, so by the client on losing the scheduler
                     raise SchedulerLostError(
                         f"lost the Dask scheduler ({where}) with {done} of {len(tasks)} tasks finished"
                     )
-        except SchedulerLostError:
-            raise
-        except (OSError, TimeoutError) as exc:  # the connection itself failed mid-run
-            raise SchedulerLostError(
-                f"lost the Dask scheduler ({where}) with {done} of {len(tasks)} tasks finished "
-                f"({type(exc).__name__}: {exc})"
-            ) from None
+            except (OSError, TimeoutError) as exc:  # the connection itself failed mid-run
+                raise SchedulerLostError(
+                    f"lost the Dask scheduler ({where}) with {done} of {len(tasks)} tasks finished "
+                    f"({type(exc).__name__}: {exc})"
+                ) from None
+            on_result(task, result)
+            done += 1
     return failures
 
 

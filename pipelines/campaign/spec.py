@@ -15,8 +15,10 @@ on each. The file holds these top-level keys (every other key is refused, naming
     batched = true                        # the mekf over a task's seeds at once (mekf_batch)
     seeds_per_task = 25                   # seeds per task (one task: one cell × a slice of seeds)
 
-:func:`load_campaign` reads and checks everything before any work: a bad key or value, an unknown
-scenario, device or filter raise :class:`~gyroemu.errors.ConfigError` naming the file and key. The
+:func:`load_campaign` reads and checks everything before any work: a bad key or value (a ``seed_range``
+whose last seed passes 2**63 − 1), an unknown scenario, device or filter, one config under two names (a
+built-in's name and its file's path: two cells of one task key) raise
+:class:`~gyroemu.errors.ConfigError` naming the file and key. The
 tasks (:class:`CellTask`) carry hashes of the resolved scenario and device configs, and their key
 (:attr:`CellTask.key`) is a hash of everything that decides their rows, so a resumed campaign skips
 exactly the tasks whose results are already stored.
@@ -54,10 +56,19 @@ Duration = Annotated[PositiveReal, at_most(MAX_DURATION_S, "the longest run 'gyr
 
 
 class SeedRange(Section):
-    """Seeds ``start … start + count − 1``."""
+    """Seeds ``start … start + count − 1``, every one of them below :data:`SEED_LIMIT`."""
 
     start: Seed = 0
     count: Annotated[int, Field(ge=1, le=10_000_000, strict=True)]
+
+    @model_validator(mode="after")
+    def _last_seed_fits(self) -> SeedRange:
+        if self.start + self.count > SEED_LIMIT:
+            raise ValueError(
+                f"start + count must be at most 2**63 = {SEED_LIMIT} (seeds are stored as int64): the last seed "
+                f"would be {self.start + self.count - 1}"
+            )
+        return self
 
 
 class CampaignSpec(Section):
@@ -165,7 +176,8 @@ class Campaign:
 
 def load_campaign(path: str | Path) -> Campaign:
     """Read and check a campaign file; :class:`ConfigError` naming the file and key for anything wrong
-    (a bad key or value, an unknown scenario, device or filter), before any work."""
+    (a bad key or value, an unknown scenario, device or filter, one config under two names), before any
+    work."""
     path = Path(path)
     spec = validate(CampaignSpec, read_toml(path), file=path)
     return campaign_from_spec(spec, path=path)
@@ -180,6 +192,27 @@ def _entry(text: str, base: Path | None) -> str:
             p = base / p
         return str(p.resolve())
     return text
+
+
+class _SameConfig:
+    """The scenario or device entries seen so far by their configs' hashes: :meth:`check` refuses a second
+    entry that is the same config under another name (the same name again is one entry, taken once)."""
+
+    def __init__(self, path: Path | None) -> None:
+        self.path = path
+        self.seen: dict[tuple[str, str], tuple[int, str]] = {}  # (key, hash) -> (index, entry)
+
+    def check(self, key: str, i: int, entry: str, digest: str) -> None:
+        """:class:`ConfigError` naming ``key[i]`` and the earlier entry when ``entry`` (``key[i]``) has the
+        config ``digest`` of another entry of ``key``."""
+        first = self.seen.setdefault((key, digest), (i, entry))
+        if first[1] != entry:
+            raise ConfigError(
+                f"{entry!r} is the same config as {key}[{first[0]}] ({first[1]!r}): their runs would be one task; "
+                "give each config once",
+                file=self.path,
+                key=f"{key}[{i}]",
+            )
 
 
 def campaign_from_spec(spec: CampaignSpec, *, path: Path | None = None) -> Campaign:
@@ -203,6 +236,9 @@ def campaign_from_spec(spec: CampaignSpec, *, path: Path | None = None) -> Campa
         reason = exc.reason if isinstance(exc, ConfigError) else str(exc)
         return ConfigError(reason, file=path, key=f"{key}[{i}]")
 
+    # A config given twice under two names (a built-in's name and its file's path, two copies of one
+    # file) would make two cells of one task key, one of which is never stored: refused, naming both.
+    same = _SameConfig(path)
     scenarios: dict[str, str] = {}
     truth_rates: dict[str, tuple[str, float]] = {}  # entry -> the scenario's name and truth rate
     for i, text in enumerate(spec.scenarios):
@@ -211,7 +247,9 @@ def campaign_from_spec(spec: CampaignSpec, *, path: Path | None = None) -> Campa
             scenario = load_scenario(entry)
         except ConfigError as exc:
             raise named("scenarios", i, exc) from None
-        scenarios.setdefault(entry, config_hash(scenario.to_toml()))
+        digest = config_hash(scenario.to_toml())
+        same.check("scenarios", i, entry, digest)
+        scenarios.setdefault(entry, digest)
         truth_rates.setdefault(entry, (scenario.name, scenario.rate_hz))
     devices: dict[str, tuple[str, bool]] = {}
     device_rates: dict[str, tuple[str, float]] = {}
@@ -221,7 +259,9 @@ def campaign_from_spec(spec: CampaignSpec, *, path: Path | None = None) -> Campa
             device = load_device(entry, seed=0)
         except ConfigError as exc:
             raise named("devices", i, exc) from None
-        devices.setdefault(entry, (config_hash(device.to_toml()), device.spec.magnetometer is not None))
+        digest = config_hash(device.to_toml())
+        same.check("devices", i, entry, digest)
+        devices.setdefault(entry, (digest, device.spec.magnetometer is not None))
         device_rates.setdefault(entry, (device.name, device.spec.rate_hz))
     for i, duration in enumerate(spec.durations_s):  # two truth samples and two of every device's
         for scenario_name, truth_rate in truth_rates.values():

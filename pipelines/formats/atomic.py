@@ -1,8 +1,12 @@
 """Files written whole or not at all: a temporary file in the target's folder, renamed over the target.
 
 A reader (or a crash) never sees a half-written file at ``path``: the data go to
-``.<name>.<random>.tmp`` beside it, which :func:`os.replace` moves to ``path`` once it is complete; on any
-error the temporary file is removed and ``path`` is untouched. The file gets the mode a plain ``open``
+``.<name>.<random>.tmp`` beside it, which is flushed to the disk (``fsync``) and then moved to ``path`` by
+:func:`os.replace` once it is complete, and the folder is synced after the rename; on any error the
+temporary file is removed and ``path`` is untouched. Without the first sync a power loss can keep the
+rename and lose the data (an empty file at ``path``); without the second, lose the rename. A process
+killed mid-write leaves its temporary file: :func:`temporaries` finds those of given names, for a job
+that writes them again to remove. The file gets the mode a plain ``open``
 would leave it with: an existing file's own, a new one ``0o666`` less the process's umask (the temporary
 file's is ``0o600``); where the file system keeps no modes (FAT, some network mounts) it gets what it gets.
 
@@ -21,7 +25,9 @@ every temporary file is removed and the folder is left as it was, an earlier rep
 
 from __future__ import annotations
 
+import errno
 import os
+import re
 import stat
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
@@ -41,6 +47,7 @@ __all__ = [
     "output_folder_problem",
     "StagedFiles",
     "staged_files",
+    "temporaries",
     "write_atomic",
     "write_text_atomic",
     "write_figure_atomic",
@@ -83,8 +90,15 @@ class StagedFiles:
         path = Path(path)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
         try:
+            synced = False
             with os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8") as f:
                 write(f)
+                if not f.closed:  # the data on the disk before the rename can be
+                    f.flush()
+                    os.fsync(f.fileno())
+                    synced = True
+            if not synced:  # ``write`` closed the file itself
+                _sync_file(tmp)
             _give_mode(tmp, path)  # mkstemp's 0o600 is for the temporary file, not the output
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
@@ -110,12 +124,16 @@ class StagedFiles:
         self._removals.append(Path(path))
 
     def _commit(self) -> None:
+        folders = dict.fromkeys(path.parent for path in self._removals)
         for path in self._removals:
             path.unlink(missing_ok=True)
         while self._staged:
             tmp, path = self._staged[0]
             os.replace(tmp, path)
+            folders[path.parent] = None
             del self._staged[0]
+        for folder in folders:
+            _sync_folder(folder)
 
     def _discard(self) -> None:
         for tmp, _ in self._staged:
@@ -156,12 +174,57 @@ def staged_files(folder: str | os.PathLike[str] | None = None) -> Iterator[Stage
         raise
 
 
+_TEMPORARY = re.compile(r"^\.(?P<name>.+)\.[a-z0-9_]{8}\.tmp$")
+"""A temporary file's name: ``.<name>.<8 characters>.tmp``, as :class:`StagedFiles` (``tempfile.mkstemp``'s
+letters, digits and ``_``) and the MCAP log writer (8 hex digits) make them."""
+
+
+def temporaries(folder: str | os.PathLike[str], names: Iterable[str]) -> list[Path]:
+    """The temporary files in ``folder`` of writes to files named ``names`` (``.<name>.<8 characters>.tmp``,
+    plain files only), sorted: what a process killed while writing those files left. A job about to write
+    them again may remove them; no other file matches. Empty when ``folder`` is missing."""
+    wanted = set(names)
+    found = []
+    try:
+        entries = list(os.scandir(folder))
+    except (FileNotFoundError, NotADirectoryError):
+        return []
+    for entry in entries:
+        m = _TEMPORARY.match(entry.name)
+        if m is not None and m.group("name") in wanted and entry.is_file(follow_symlinks=False):
+            found.append(Path(entry.path))
+    return sorted(found)
+
+
+def _sync_file(path: str) -> None:
+    """Flush the file ``path``'s data to the disk (``fsync``)."""
+    fd = os.open(path, os.O_RDWR)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _sync_folder(folder: Path) -> None:
+    """Flush ``folder``'s entries (a rename into it) to the disk: ``fsync`` of the folder, where the system
+    and file system can (not on Windows, nor on file systems that refuse it: the rename stands)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    except OSError:  # a folder cannot be opened here (Windows)
+        return
+    try:
+        os.fsync(fd)
+    except OSError as exc:
+        if exc.errno not in (errno.EINVAL, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EBADF, errno.EACCES):
+            raise
+    finally:
+        os.close(fd)
+
+
 def folder_problem(folder: str | os.PathLike[str]) -> str | None:
     """Why ``folder`` cannot take a new file (``"no such folder"``, ``"not a folder"``, ``"read-only file
     system"``, ``"not writable"``), or None when it can: checked with :func:`os.access`, which also
     refuses a read-only mount to root."""
-    import errno
-
     folder = Path(folder) if str(folder) else Path(".")
     if not folder.exists():
         return "no such folder"

@@ -21,8 +21,19 @@ others complete; a lost scheduler raises :class:`~gyroemu.pipelines.campaign.Sch
 after the finished tasks are stored.
 
 Before any work (:func:`check_options`): the scheduler's address, and ``out``: a folder that can take
-files (made if missing), whose report files (``bench.md``, ``bench.json``, ``.png``) are a campaign's
-own (beside its ``runs/`` store, rewritten on each run) or may be overwritten (``force``).
+files (made if missing), whose ``runs`` is a folder if there, and whose report files (``bench.md``,
+``bench.json``, ``.png``) are this campaign's own (beside its ``runs/`` store, rewritten on each run) or
+may be overwritten (``force``).
+
+Which campaign ``out`` holds is its ``bench.json``'s ``settings.campaign`` ``name`` and ``file`` (the
+campaign file as given, None for ``gyroemu bench --scheduler``'s flags), or, before a first report, the
+``campaign`` column of a part in ``runs/``: the name labels every row, and the file tells two campaigns of
+one name apart; an edited file is the same campaign (it resumes: more seeds add tasks). Another
+campaign's ``out`` is refused without ``force``; with it, that campaign's report and every part of
+``runs/`` are moved to ``out/superseded/<UTC time>/`` (as ``bench.json``, ``bench.md``, its plots and
+``runs/``), not deleted and not counted. Of this campaign's own ``runs/``, the parts of tasks it no
+longer has (an edit changed its seeds, configs or ``seeds_per_task``) are moved there too, so that
+``runs/`` always reads as this campaign's rows, each run once.
 """
 
 from __future__ import annotations
@@ -38,16 +49,19 @@ from typing import TYPE_CHECKING, Any
 from gyroemu.errors import ConfigError
 
 if TYPE_CHECKING:
-    from gyroemu.pipelines.campaign import Campaign, CampaignSpec, CellTask, TaskFailure
+    from gyroemu.pipelines.campaign import Campaign, CampaignSpec, CellTask, PartStore, TaskFailure
     from gyroemu.pipelines.formats.atomic import StagedFiles
     from gyroemu.pipelines.jobs.bench import BenchReport
 
 __all__ = [
+    "BATCHED_THROUGHPUT",
+    "SUPERSEDED",
     "CampaignError",
     "CampaignOptions",
     "CampaignSummary",
     "campaign_report",
     "check_options",
+    "other_campaign",
     "run_campaign",
     "save_campaign_report",
     "spec_from_bench_flags",
@@ -79,7 +93,8 @@ class CampaignOptions:
     plots : bool
         Write the per-cell plots.
     force : bool
-        Overwrite report files in ``out`` that are not a campaign's (no ``runs/`` store beside them).
+        Overwrite report files in ``out`` that are not a campaign's (no ``runs/`` store beside them); move
+        another campaign's report and parts there to ``out/superseded/<UTC time>/`` (see the module's notes).
     """
 
     spec: Path | CampaignSpec
@@ -112,6 +127,8 @@ class CampaignSummary:
     report: BenchReport
     runs_made: int = 0
     paths: dict[str, Any] = field(default_factory=dict)
+    superseded: Path | None = None
+    """Where the parts (and report) not of this campaign were moved before the work, or None: none were."""
 
     @property
     def runs_per_s(self) -> float:
@@ -119,13 +136,19 @@ class CampaignSummary:
         return self.runs_made / self.elapsed_s if self.elapsed_s > 0 else float("nan")
 
 
+SUPERSEDED = "superseded"
+"""The folder in ``out`` that parts and a report not of the campaign are moved to (see the module's notes)."""
+
+
 def check_options(options: CampaignOptions, campaign: Campaign | None = None) -> None:
     """:class:`CampaignError` naming the argument, before any work: a scheduler address that is none
     (:func:`~gyroemu.pipelines.campaign.scheduler_problem`); an ``out`` that is not a folder or cannot
-    take files (read-only, not writable; where it would be made when missing); report files in ``out``
-    (``bench.md``, ``bench.json``, ``.png``) without a campaign's ``runs/`` store beside them, unless
-    ``force``; a report file that is an input, even with ``force``: the campaign file, and the scenario
-    and device files ``campaign`` (loaded from it) names."""
+    take files (read-only, not writable; where it would be made when missing), or whose ``runs`` is not
+    a folder (even with ``force``: it is not a report file); report files in ``out`` (``bench.md``,
+    ``bench.json``, ``.png``) without a campaign's ``runs/`` store beside them, unless ``force``; the
+    results of another campaign than ``campaign`` (:func:`other_campaign`), unless ``force``; a report
+    file that is an input, even with ``force``: the campaign file, and the scenario and device files
+    ``campaign`` (loaded from it) names."""
     from gyroemu.pipelines.campaign import scheduler_problem
     from gyroemu.pipelines.formats.atomic import output_folder_problem
     from gyroemu.pipelines.jobs.bench import report_files_in, report_input_problem
@@ -138,22 +161,132 @@ def check_options(options: CampaignOptions, campaign: Campaign | None = None) ->
     problem = output_folder_problem(out)
     if problem is not None:
         raise CampaignError(f"argument --out: {problem}")
+    runs = out / "runs"
+    if (runs.exists() or runs.is_symlink()) and not runs.is_dir():
+        raise CampaignError(
+            f"argument --out: {runs} is not a folder: a campaign stores its rows there (move it, or use another folder)"
+        )
     there = report_files_in(out)
-    if there and not (out / "runs").is_dir() and not options.force:
+    if there and not runs.is_dir() and not options.force:
         raise CampaignError(
             f"argument --out: {out} holds {', '.join(there)} but no campaign's runs/: the report would overwrite "
             "them (use --force to overwrite them, or another folder)"
         )
+    if campaign is not None and not options.force:
+        other = other_campaign(out, campaign)
+        if other is not None:
+            raise CampaignError(
+                f"argument --out: {out} holds the results of another campaign ({other}): use another folder, or "
+                f"--force to run this one there (the other's report and parts are moved to {out / SUPERSEDED}/)"
+            )
     inputs = [options.spec] if isinstance(options.spec, Path) else []
     if campaign is not None:
         inputs += [
             Path(entry) for cell in campaign.cells for entry in (cell.scenario, cell.device) if Path(entry).is_file()
         ]
-    # bench.md, bench.json, and an earlier report's plots that --force removes; the new plots' names come
-    # from the runs' rows, known only after the work (not checked: a .png named as a cell is no input)
-    problem = report_input_problem(out, inputs, replace_earlier=options.force)
+    # bench.md, bench.json, and the earlier report's plots, removed whatever the campaign (its own, or
+    # another's with --force); the new plots' names come from the runs' rows, known only after the work
+    # (not checked: a .png named as a cell is no input)
+    problem = report_input_problem(out, inputs, replace_earlier=True)
     if problem is not None:
         raise CampaignError(problem)
+
+
+def other_campaign(out: Path, campaign: Campaign) -> str | None:
+    """How the campaign whose results ``out`` holds differs from ``campaign`` (``"campaign 'a', not 'b'"``,
+    ``"from a.toml, not b.toml"``), or None when it is ``campaign`` or ``out`` holds no campaign's
+    ``runs/`` store. Which campaign that is: its ``bench.json``'s ``settings.campaign`` ``name`` and
+    ``file`` (a report that is no campaign's differs), or, before its first report (a first run stopped),
+    the ``campaign`` column of a part in ``runs/`` (the name only). Files compare by the path as given or
+    the file it names (:func:`~gyroemu.pipelines.formats.file_names.same_file`)."""
+    from gyroemu.pipelines.campaign import PartStore
+
+    if not (out / "runs").is_dir():
+        return None
+    here_file = None if campaign.path is None else str(campaign.path)
+    report = out / "bench.json"
+    if report.exists() or report.is_symlink():
+        try:
+            earlier = json.loads(report.read_text(encoding="utf-8"))["settings"]["campaign"]
+            name, file, store = earlier["name"], earlier["file"], earlier.get("store")
+        except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, AttributeError):
+            return f"{report} is no campaign's report"
+        if not isinstance(name, str) or not all(v is None or isinstance(v, str) for v in (file, store)):
+            return f"{report} is no campaign's report"
+        differs = []
+        if name != campaign.name:
+            differs.append(f"campaign {name!r}, not {campaign.name!r}")
+        if not _same_campaign_file(file, store, out, campaign.path):
+            differs.append(f"from {file or 'bench flags'}, not {here_file or 'bench flags'}")
+        return "; ".join(differs) or None
+    name = _a_part_campaign(PartStore(out / "runs"))
+    if name is not None and name != campaign.name:
+        return f"rows of campaign {name!r} in {out / 'runs'}, not {campaign.name!r}"
+    return None
+
+
+def _same_campaign_file(earlier: str | None, store: str | None, out: Path, here: Path | None) -> bool:
+    """Whether the campaign file ``earlier`` (as the report in ``out`` names it, beside its ``store``) is
+    ``here``: both none (bench flags), the same path as given, or the same file
+    (:func:`~gyroemu.pipelines.formats.file_names.same_file`), a relative ``earlier`` taken from this
+    folder or from the one the earlier run was started in (where its relative ``store``, ``out/runs`` as
+    given then, names ``out``'s ``runs``: the campaign run again from another folder is the same one)."""
+    import os
+
+    from gyroemu.pipelines.formats.file_names import same_file
+
+    if earlier is None or here is None:
+        return earlier is None and here is None
+    if earlier == str(here) or same_file(earlier, here):
+        return True
+    given = Path(os.path.normpath(store)) if store is not None else None
+    if Path(earlier).is_absolute() or given is None or given.is_absolute() or ".." in given.parts:
+        return False
+    runs = Path(os.path.abspath(out / "runs"))
+    if runs.parts[-len(given.parts) :] != given.parts:
+        return False
+    started_in = Path(*runs.parts[: -len(given.parts)])
+    return same_file(started_in / earlier, here)
+
+
+def _a_part_campaign(store: PartStore) -> str | None:
+    """The ``campaign`` of the first row of one part of ``store``, or None: no part, or none readable."""
+    import pyarrow.parquet as pq
+
+    for key in sorted(store.keys())[:1]:
+        try:
+            values = pq.read_table(store.path(key), columns=["campaign"]).column("campaign").to_pylist()
+        except Exception:  # any reader's complaint: a part that tells nothing
+            return None
+        return str(values[0]) if values and values[0] is not None else None
+    return None
+
+
+def _supersede(out: Path, keep: list[str], whole: bool) -> Path | None:
+    """Move what in ``out`` is not this campaign's to ``out/superseded/<UTC time>/`` before the work: with
+    ``whole`` (another campaign's results, ``--force``) its report (``bench.json``, ``bench.md``, the plots
+    its ``bench.json`` names) and every part of ``runs/``; else the parts whose keys are not ``keep``.
+    Returns that folder, or None when nothing was moved."""
+    import os
+
+    from gyroemu.pipelines.campaign import PartStore
+    from gyroemu.pipelines.jobs.bench import REPORT_FILES, earlier_plots
+
+    store = PartStore(out / "runs")
+    report = ([out / name for name in REPORT_FILES if (out / name).is_file()] + earlier_plots(out)) if whole else []
+    if not report and not (store.keys() - set(() if whole else keep)):
+        return None
+    stamp = datetime.datetime.now(datetime.UTC).strftime("%Y%m%dT%H%M%SZ")
+    where = out / SUPERSEDED / stamp
+    n = 1
+    while where.exists():
+        n += 1
+        where = out / SUPERSEDED / f"{stamp}-{n}"
+    where.mkdir(parents=True)
+    store.set_aside(() if whole else keep, where / "runs")
+    for path in report:
+        os.replace(path, where / path.name)
+    return where
 
 
 def run_campaign(options: CampaignOptions) -> CampaignSummary:
@@ -183,8 +316,13 @@ def run_campaign(options: CampaignOptions) -> CampaignSummary:
         campaign = campaign_from_spec(options.spec)
     check_options(options, campaign)
     out = options.out
+    keys = [t.key for t in campaign.tasks]
+    superseded = _supersede(out, keys, whole=other_campaign(out, campaign) is not None)
     store = PartStore(out / "runs", row_schema())
-    todo = [t for t in campaign.tasks if not store.has(t.key)]
+    for tmp in store.temporaries(keys):  # a part's write a killed run left: never to be completed
+        tmp.unlink(missing_ok=True)
+    missing = store.missing(keys)
+    todo = [t for t in campaign.tasks if t.key in missing]
     resumed = len(campaign.tasks) - len(todo)
     ran: list[CellTask] = []
     started = time.perf_counter()
@@ -219,6 +357,7 @@ def run_campaign(options: CampaignOptions) -> CampaignSummary:
         elapsed_s=elapsed,
         report=report,
         runs_made=sum(t.runs for t in ran),
+        superseded=superseded,
     )
     summary.paths = save_campaign_report(report, table, out, plots=options.plots)
     return summary
@@ -268,6 +407,7 @@ def campaign_report(
     """The campaign's stored rows (a ``pyarrow.Table`` of :data:`ROW_COLUMNS`) as a
     :class:`~gyroemu.pipelines.jobs.bench.BenchReport`: a case per cell, runs in seed order; the
     campaign's own facts (store, tasks, failures) in ``settings["campaign"]`` and the notes."""
+    from gyroemu.pipelines.campaign import consecutive
     from gyroemu.pipelines.jobs.bench import BenchReport, CaseResult, FilterResult, RunResult
 
     failures = list(failures or [])
@@ -307,6 +447,17 @@ def campaign_report(
             )
         seeds = sorted({r["seed"] for r in rows})
         first = rows[0]
+        source: dict[str, Any] = {
+            "scenario": cell.scenario,
+            "device": cell.device,
+            "duration_s": cell.duration_s,
+            "scenario_hash": cell.scenario_hash,
+            "device_hash": cell.device_hash,
+            "seeds": seeds,
+        }
+        if any(fr.batched for fr in filters.values()):  # mekf_batch ran each task's consecutive seeds at once
+            stored = {by_task[r["task"]] for r in rows}
+            source["runs_at_once"] = sorted({n for t in stored for _, n in consecutive(t.seeds)})
         cases.append(
             CaseResult(
                 name=f"{first['case']}, {cell.duration_s:g} s",
@@ -316,14 +467,7 @@ def campaign_report(
                 samples=first["samples"],
                 duration_s=cell.duration_s,
                 runs=len(seeds),
-                source={
-                    "scenario": cell.scenario,
-                    "device": cell.device,
-                    "duration_s": cell.duration_s,
-                    "scenario_hash": cell.scenario_hash,
-                    "device_hash": cell.device_hash,
-                    "seeds": seeds,
-                },
+                source=source,
                 filters=[filters[f] for f in campaign.filters if f in filters],
             )
         )
@@ -367,6 +511,24 @@ def campaign_report(
     return BenchReport(cases=cases, settings=settings, notes=notes, unavailable=dict(campaign.unavailable))
 
 
+_BATCHED_THROUGHPUT = "[batched] rows: filter updates per second across all runs at once."
+"""bench's words for a batched row's throughput, which a campaign's report says of a task's runs."""
+
+BATCHED_THROUGHPUT = (
+    "batched: filter updates/s across the runs one task ran at once (its consecutive seeds, at most "
+    "seeds_per_task; the case's source.runs_at_once), not across all the runs of the case"
+)
+"""A campaign report's definition of a batched row's throughput (``bench.json``'s ``definitions``)."""
+
+
+def _runs_at_once(sizes: list[int]) -> str:
+    """``sizes`` (ascending) of a case's batches as the throughput cell says them: ``(25 runs at once)``,
+    ``(5–25 runs at once)``, ``(1 run at once)``."""
+    if sizes[0] == sizes[-1]:
+        return f"({sizes[0]} run{'s' if sizes[0] != 1 else ''} at once)"
+    return f"({sizes[0]}–{sizes[-1]} runs at once)"
+
+
 def _markdown(report: BenchReport) -> str:
     c = report.settings["campaign"]
     head = [
@@ -380,18 +542,46 @@ def _markdown(report: BenchReport) -> str:
         head += ["", "Failed cells (run the campaign again to retry them):"]
         head += [f"- {f['cell']}, seeds {f['seeds'][0]}…{f['seeds'][-1]}: {f['error']}" for f in c["failures"]]
     body = report.to_markdown().split("\n", 1)[1]  # bench's own text, without its title
+    # bench says a batched row's updates/s are across all the case's runs at once; a campaign batches
+    # only each task's seeds: the table's cell and the note say so
+    lines = body.split("\n")
+    batched = False
+    for case in report.cases:
+        sizes: list[int] = case.source.get("runs_at_once") or []
+        for fr in case.filters if sizes else []:
+            if not fr.batched:
+                continue
+            batched = True
+            row = f"| {case.name} | {fr.label} |"
+            said = f"({len(fr.runs)} runs at once)"
+            lines = [line.replace(said, _runs_at_once(sizes)) if line.startswith(row) else line for line in lines]
+    body = "\n".join(lines)
+    if batched:
+        body = body.replace(
+            _BATCHED_THROUGHPUT,
+            "[batched] rows: filter updates per second across the runs one task ran at once (its consecutive "
+            "seeds, at most seeds_per_task).",
+        )
     return "\n".join(head) + "\n" + body
 
 
 def save_campaign_report(report: BenchReport, table: Any, out: Path, *, plots: bool = True) -> dict[str, Any]:
-    """``bench.md``, ``bench.json`` and (``plots``) one box plot per cell in ``out``; their paths. All or
-    nothing: each file is written to a temporary file, and they are renamed into place only once all are
-    complete; on an error (a full disk) ``out`` is left as it was, its run store untouched."""
+    """``bench.md``, ``bench.json`` and (``plots``) one box plot per cell in ``out``; their paths. The
+    earlier report's plots there (those its ``bench.json`` names, :func:`~gyroemu.pipelines.jobs.bench.earlier_plots`)
+    are removed. All or nothing: each file is written to a temporary file, and they are renamed into place
+    (and the earlier plots removed) only once all are complete; on an error (a full disk) ``out`` is left
+    as it was, its run store untouched. A report with a batched row defines its throughput as a campaign
+    runs it (:data:`BATCHED_THROUGHPUT`)."""
     from gyroemu.pipelines.formats.atomic import staged_files
+    from gyroemu.pipelines.jobs.bench import earlier_plots
 
     paths: dict[str, Any] = {"markdown": out / "bench.md", "json": out / "bench.json", "plots": []}
     data = report.to_dict() | ({} if plots else {"plots": []})  # the names of the plots written beside it
+    if any(fr.batched for case in report.cases for fr in case.filters):
+        data["definitions"]["throughput"] = f"samples/s of process() wall time; {BATCHED_THROUGHPUT}"
     with staged_files(out) as stage:
+        for plot in earlier_plots(out):  # the earlier report's (this campaign's, or the one --force replaces)
+            stage.remove(plot)
         stage.write_text(paths["json"], json.dumps(data, indent=1, ensure_ascii=False, allow_nan=False))
         stage.write_text(paths["markdown"], _markdown(report))
         if plots:

@@ -3,7 +3,8 @@
 The campaign file is the bench's (:mod:`gyroemu.pipelines.campaign.spec`); ``generate`` uses its
 ``scenarios``, ``devices``, ``durations_s`` and seeds (``filters``, ``modes``, ``threshold_deg``,
 ``batched`` are the bench's and ignored here). Each (scenario, device, duration, seed) is one task and
-one log, ``<scenario>__<device>__<duration>s__seed<seed>.mcap``, written by
+one log, ``<scenario>__<device>__<duration>s__seed<seed>.mcap`` (the duration as :func:`duration_name`
+writes it: distinct durations, distinct names), written by
 :func:`gyroemu.pipelines.jobs.simulate.run_simulate`: the log carries its scenario and device configs
 and its seed in its ``gyroemu`` metadata, and ``gyroemu simulate`` with the arguments of its index row
 (``simulate_command``) writes the same bytes.
@@ -18,7 +19,10 @@ Other people's files are never replaced (:func:`check_options`, before any work)
 path is kept when it is that log (its ``gyroemu`` metadata: the task's scenario and device configs, by
 their hashes, and its seed), and otherwise refused; so is an ``index.parquet`` or ``index.csv`` that is
 not an index ``generate`` wrote (its columns, :data:`INDEX_COLUMNS`). A log of the task without its
-index part (a run stopped between the two) is made again: the same bytes.
+index part (a run stopped between the two) is made again: the same bytes. Before the work, the temporary
+files a killed run left of this campaign's logs and index (``.<name>.<8 characters>.tmp``,
+:func:`gyroemu.pipelines.formats.atomic.temporaries`) are removed; no other file. Two ``generate`` runs
+into one folder at once are not supported.
 """
 
 from __future__ import annotations
@@ -39,6 +43,7 @@ __all__ = [
     "GenerateSummary",
     "INDEX_COLUMNS",
     "check_options",
+    "duration_name",
     "index_schema",
     "log_tasks",
     "run_generate",
@@ -116,9 +121,19 @@ def _stem(entry: str) -> str:
     return "".join(c if c.isalnum() or c in "-_" else "_" for c in Path(entry).stem)
 
 
+def duration_name(duration: float) -> str:
+    """``duration`` (seconds) as a log's name writes it: as ``:g`` does (``3``, ``0.5``, ``1e+06``, the
+    names of every dataset made so far) where that reads back as ``duration`` exactly, else the shortest
+    text that does (``repr``: ``3.000001``, where ``:g`` says ``3``). The name reads back as the duration,
+    so two durations never share one."""
+    short = f"{duration:g}"
+    return short if float(short) == duration else repr(float(duration))
+
+
 def log_tasks(campaign: Campaign, out_dir: Path) -> list[LogTask]:
     """One :class:`~gyroemu.pipelines.campaign.LogTask` per (scenario, device, duration, seed), in the
-    grid's order; :class:`~gyroemu.errors.ConfigError` when two entries would share a file name."""
+    grid's order; :class:`~gyroemu.errors.ConfigError` naming the key (``scenarios``, ``devices``, or
+    ``durations_s``) whose two entries would share a file name."""
     from gyroemu.errors import ConfigError
     from gyroemu.pipelines.campaign import LogTask
 
@@ -127,12 +142,16 @@ def log_tasks(campaign: Campaign, out_dir: Path) -> list[LogTask]:
     seen = dict.fromkeys((c.scenario, c.device, c.duration_s, c.scenario_hash, c.device_hash) for c in campaign.cells)
     for scenario, device, duration, sc_hash, dev_hash in seen:
         for seed in campaign.seeds:
-            name = f"{_stem(scenario)}__{_stem(device)}__{duration:g}s__seed{seed}.mcap"
+            name = f"{_stem(scenario)}__{_stem(device)}__{duration_name(duration)}s__seed{seed}.mcap"
             if name in tasks:
-                raise ConfigError(
-                    f"two entries make the same log name {name}: give scenario and device files distinct names",
-                    file=campaign.path,
+                other = tasks[name]
+                pairs = (
+                    ("scenarios", other.scenario, scenario, "give scenario files distinct names"),
+                    ("devices", other.device, device, "give device files distinct names"),
+                    ("durations_s", other.duration_s, duration, "give durations that differ in their names"),
                 )
+                key, a, b, fix = next((p for p in pairs if p[1] != p[2]), pairs[0])
+                raise ConfigError(f"{a!r} and {b!r} make the same log name {name}: {fix}", file=campaign.path, key=key)
             tasks[name] = LogTask(
                 campaign.name, scenario, device, duration, seed, sc_hash, dev_hash, str(out_dir / name)
             )
@@ -244,7 +263,7 @@ def run_generate(options: GenerateOptions) -> GenerateSummary:
 
     from gyroemu.pipelines.campaign import PartStore, load_campaign, make_log, readable, run_tasks
     from gyroemu.pipelines.campaign.progress import RunsProgress
-    from gyroemu.pipelines.formats.atomic import write_atomic
+    from gyroemu.pipelines.formats.atomic import temporaries, write_atomic
 
     campaign = load_campaign(options.spec)
     out = options.out_dir
@@ -254,7 +273,13 @@ def run_generate(options: GenerateOptions) -> GenerateSummary:
     check_options(options, tasks)
     out.mkdir(parents=True, exist_ok=True)
     store = PartStore(out / ".index", index_schema())
-    todo = [t for t in tasks if not (store.has(t.key) and Path(t.out).is_file())]
+    keys = [t.key for t in tasks]
+    # what a killed run was writing (a worker's log, an index part, the index): never to be completed
+    stale = temporaries(out, [Path(t.out).name for t in tasks] + ["index.parquet", "index.csv"])
+    for tmp in stale + store.temporaries(keys):
+        tmp.unlink(missing_ok=True)
+    missing = store.missing(keys)
+    todo = [t for t in tasks if t.key in missing or not Path(t.out).is_file()]
     resumed = len(tasks) - len(todo)
     made = 0
     started = time.perf_counter()

@@ -484,3 +484,316 @@ def test_a_full_disk_leaves_the_earlier_campaign_report_as_it_was(tmp_path, monk
         save_campaign_report(report, None, out)
     assert caught.value.errno == errno.ENOSPC and len(asked) == n
     assert contents(out) == before
+
+
+# --- faults: the store's own errors, bad grids, another campaign's folder, damaged parts ----------------
+
+ONE = """
+name = "one"
+scenarios = ["smooth_manoeuvre"]
+devices = ["consumer_mems"]
+durations_s = [0.5]
+seed_range = { start = 0, count = 2 }
+filters = ["madgwick"]
+seeds_per_task = 1
+"""
+
+
+def _in_process(spec: Path, out: Path, **kwargs):
+    from gyroemu.pipelines.jobs.campaign import CampaignOptions
+
+    return CampaignOptions(spec=spec, out=out, workers=1, processes=False, plots=False, **kwargs)
+
+
+def _stored(out: Path) -> list[tuple]:
+    """(campaign, seed, filter) of every row ``out/runs`` reads as (pyarrow.dataset, as README reads it)."""
+    import pyarrow.dataset as ds
+
+    rows = ds.dataset(out / "runs").to_table().to_pylist()
+    return sorted((r["campaign"], r["seed"], r["filter"]) for r in rows)
+
+
+@pytest.fixture
+def no_work(monkeypatch):
+    """Any task submitted fails the test: what is refused must be refused before the work."""
+    import gyroemu.pipelines.campaign as campaign
+
+    def run_tasks(*args, **kwargs):
+        raise AssertionError("the work ran")
+
+    monkeypatch.setattr(campaign, "run_tasks", run_tasks)
+
+
+def test_an_error_storing_a_result_is_no_lost_scheduler(tmp_path):
+    """An error of the callback that stores a task's result (a full disk) goes through as it is: it was
+    reported as 'lost the Dask scheduler (OSError: No space left on device)'."""
+    import errno
+
+    from gyroemu.pipelines.campaign import SchedulerLostError
+
+    def full(task, rows):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    with pytest.raises(OSError) as info:
+        run_tasks(list(range(3)), _square_or_fail, full, workers=1, processes=False)
+    assert info.value.errno == errno.ENOSPC and not isinstance(info.value, SchedulerLostError)
+
+
+def test_a_full_disk_storing_a_part_stops_the_campaign_with_the_disk_error(tmp_path, monkeypatch):
+    import errno
+
+    from full_disk import disk_full_at
+
+    from gyroemu.pipelines.jobs.campaign import run_campaign
+
+    spec = _write(tmp_path / "c.toml", ONE)
+    disk_full_at(monkeypatch, 1)  # the first part
+    with pytest.raises(OSError) as info:
+        run_campaign(_in_process(spec, tmp_path / "out"))
+    assert info.value.errno == errno.ENOSPC
+    assert not list((tmp_path / "out" / "runs").iterdir())  # no part, no temporary file
+
+
+def test_a_file_named_runs_in_out_is_refused_before_any_work(tmp_path, capsys, no_work):
+    from gyroemu.pipelines.jobs.campaign import CampaignError, check_options
+
+    spec = _write(tmp_path / "c.toml", ONE)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "runs").write_text("my notes")
+    assert cli.main(["bench", "--campaign", str(spec), "--out", str(out)]) == 2
+    assert f"argument --out: {out / 'runs'} is not a folder" in capsys.readouterr().err
+    assert (out / "runs").read_text() == "my notes" and [p.name for p in out.iterdir()] == ["runs"]
+    with pytest.raises(CampaignError, match="argument --out"):  # --force overwrites reports, not this
+        check_options(_in_process(spec, out, force=True))
+
+
+def test_a_seed_range_past_int64_is_refused_before_any_work(tmp_path, capsys, no_work):
+    spec = _write(tmp_path / "c.toml", ONE.replace("start = 0, count = 2", f"start = {2**63 - 2}, count = 4"))
+    with pytest.raises(ConfigError) as info:
+        load_campaign(spec)
+    assert (info.value.file, info.value.key) == (str(spec), "seed_range") and str(2**63 + 1) in str(info.value)
+    # its last seed 2**63 - 1: taken
+    load_campaign(_write(tmp_path / "d.toml", ONE.replace("start = 0, count = 2", f"start = {2**63 - 4}, count = 4")))
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as exit_info:  # bench's flags as a campaign: the argument named
+        cli.main(
+            ["bench", "--scheduler", "tcp://127.0.0.1:1", "--seed", str(2**63 - 2), "--runs", "4", "--out", str(out)]
+        )
+    assert exit_info.value.code == 2
+    assert "argument --seed: --seed 9223372036854775806 + --runs 4" in capsys.readouterr().err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("key", ["devices", "scenarios"])
+def test_one_config_under_two_names_is_refused_naming_both_entries(tmp_path, key):
+    """A built-in by name and by its file's path are one config: two cells of one task key (one of them
+    never stored, the campaign never complete). Refused, naming both entries; the same name twice is
+    one entry, as before."""
+    from gyroemu.dynamics.config import config_dir
+
+    kind, name = {"devices": ("devices", "consumer_mems"), "scenarios": ("scenarios", "smooth_manoeuvre")}[key]
+    path = config_dir() / kind / f"{name}.toml"
+    spec = _write(tmp_path / "c.toml", ONE.replace(f'["{name}"]', f'["{name}", "{path}"]'))
+    with pytest.raises(ConfigError) as info:
+        load_campaign(spec)
+    assert (info.value.file, info.value.key) == (str(spec), f"{key}[1]")
+    assert f"{key}[0] ('{name}')" in str(info.value) and "same config" in str(info.value)
+    twice = load_campaign(_write(tmp_path / "d.toml", ONE.replace(f'["{name}"]', f'["{name}", "{name}"]')))
+    assert len(twice.cells) == 1
+
+
+def test_another_campaign_in_out_is_refused_and_force_moves_its_results_aside(tmp_path, capsys):
+    """Another campaign (name or file) in --out: refused before any work naming what differs (it replaced
+    the report and piled its rows into runs/); with --force its report and parts go to
+    out/superseded/<time>/, and runs/ reads as this campaign's rows alone."""
+    import json
+
+    from gyroemu.pipelines.jobs.campaign import SUPERSEDED, CampaignError, check_options, run_campaign
+
+    out = tmp_path / "out"
+    first = _write(tmp_path / "one.toml", ONE)
+    run_campaign(_in_process(first, out))
+    before = {p.name: p.read_bytes() for p in (out / "runs").iterdir()}
+    other = _write(tmp_path / "two.toml", ONE.replace('"one"', '"two"').replace("count = 2", "count = 1"))
+    assert cli.main(["bench", "--campaign", str(other), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"argument --out: {out} holds the results of another campaign" in err
+    assert "campaign 'one', not 'two'" in err and f"from {first}, not {other}" in err
+    assert {p.name: p.read_bytes() for p in (out / "runs").iterdir()} == before
+    # the same name in another file is another campaign too
+    same_name = _write(tmp_path / "elsewhere.toml", ONE)
+    with pytest.raises(CampaignError, match=f"from {first}, not {same_name}"):
+        check_options(_in_process(same_name, out), load_campaign(same_name))
+
+    summary = run_campaign(_in_process(other, out, force=True))
+    assert summary.superseded is not None and summary.superseded.parent == out / SUPERSEDED
+    assert _stored(out) == [("two", 0, "madgwick")]
+    assert {p.name: p.read_bytes() for p in (summary.superseded / "runs").iterdir()} == before
+    assert json.loads((summary.superseded / "bench.json").read_text())["settings"]["campaign"]["name"] == "one"
+    report = json.loads((out / "bench.json").read_text())["settings"]["campaign"]
+    assert (report["name"], report["rows_stored"]) == ("two", 1)
+    again = run_campaign(_in_process(other, out))  # now its own: resumed, nothing moved
+    assert (again.ran, again.resumed, again.superseded) == (0, 1, None)
+
+
+def test_an_edited_campaign_resumes_and_its_old_parts_leave_runs(tmp_path):
+    """The same campaign file edited (seeds_per_task) is the same campaign: resumed without --force, and
+    the parts of tasks it no longer has are moved aside, so runs/ reads each run once (twice before)."""
+    from gyroemu.pipelines.jobs.campaign import run_campaign
+
+    out = tmp_path / "out"
+    spec = _write(tmp_path / "c.toml", ONE)
+    run_campaign(_in_process(spec, out))
+    spec.write_text(ONE.replace("seeds_per_task = 1", "seeds_per_task = 2"))
+    summary = run_campaign(_in_process(spec, out))
+    assert (summary.ran, summary.resumed, summary.rows) == (1, 0, 2)
+    assert _stored(out) == [("one", 0, "madgwick"), ("one", 1, "madgwick")]
+    assert len(list((summary.superseded / "runs").iterdir())) == 2 and not (summary.superseded / "bench.json").exists()
+
+
+def test_the_same_campaign_run_from_another_folder_is_its_own(tmp_path, monkeypatch):
+    """The report names the campaign file as given (relative): from another folder it is still the same
+    campaign (its relative store tells the folder the earlier run started in)."""
+    import json
+
+    from gyroemu.pipelines.jobs.campaign import other_campaign
+
+    out = tmp_path / "work" / "out"
+    (out / "runs").mkdir(parents=True)
+    spec = _write(tmp_path / "work" / "c.toml", ONE)
+    report = {"gyroemu_bench": 1, "settings": {"campaign": {"name": "one", "file": "c.toml", "store": "out/runs"}}}
+    (out / "bench.json").write_text(json.dumps(report))
+    monkeypatch.chdir(tmp_path)
+    assert other_campaign(out, load_campaign(spec)) is None
+    assert other_campaign(Path("work/out"), load_campaign(Path("work/c.toml"))) is None
+    (tmp_path / "work" / "d.toml").write_text(ONE)
+    assert "from c.toml, not" in other_campaign(out, load_campaign(tmp_path / "work" / "d.toml"))
+
+
+def test_a_batched_campaign_says_how_many_runs_a_task_ran_at_once(tmp_path):
+    """The batched mekf runs each task's seeds at once (here 1), not all the case's (3): bench's '(3 runs
+    at once)' and its JSON definition were wrong for a campaign. (The report of hand-made rows: the
+    words are the report's, whatever the numbers.)"""
+    import json
+
+    from gyroemu.pipelines.jobs.campaign import BATCHED_THROUGHPUT, campaign_report, save_campaign_report
+
+    def hand_made(campaign):
+        rows = [
+            {"task": t.key, "seed": seed, "filter": f, "filter_name": f, "batched": f == "mekf", "case": "c"}
+            | {"mode": "9D", "rate_hz": 100.0, "samples": 50, "total_deg": 1.0, "throughput": 1e5, "wall_s": 0.1}
+            | {"diverged": False}
+            for t in campaign.tasks
+            for seed in t.seeds
+            for f in campaign.filters
+        ]
+        return pa.Table.from_pylist(rows, schema=row_schema())
+
+    text = ONE.replace('["madgwick"]', '["mekf", "madgwick"]').replace("count = 2", "count = 3")
+    campaign = load_campaign(_write(tmp_path / "c.toml", text + "batched = true\n"))
+    table = hand_made(campaign)
+    save_campaign_report(campaign_report(campaign, table), table, tmp_path, plots=False)
+    md = (tmp_path / "bench.md").read_text()
+    row = next(line for line in md.splitlines() if "mekf [batched]" in line)
+    assert "(1 run at once)" in row and "(3 runs at once)" not in md
+    assert "across the runs one task ran at once" in md and "across all runs at once" not in md
+    data = json.loads((tmp_path / "bench.json").read_text())
+    assert BATCHED_THROUGHPUT in data["definitions"]["throughput"]
+    assert data["cases"][0]["source"]["runs_at_once"] == [1]
+    # without a batched row: bench's words, as before
+    campaign = load_campaign(_write(tmp_path / "d.toml", text.replace('"mekf", ', "")))
+    table = hand_made(campaign)
+    out = tmp_path / "plain"
+    save_campaign_report(campaign_report(campaign, table), table, out, plots=False)
+    assert "across all runs at once" in (out / "bench.md").read_text()
+    assert "runs_at_once" not in json.loads((out / "bench.json").read_text())["cases"][0]["source"]
+
+
+def test_generate_removes_its_own_stale_temporary_logs_and_no_other_file(tmp_path):
+    """A generate killed mid-log leaves ``.<log>.<8 characters>.tmp``: the next run removes those of its
+    logs (and index), never another file."""
+    from gyroemu.pipelines.jobs.generate import GenerateOptions, run_generate
+
+    spec = _write(tmp_path / "c.toml", ONE.replace("count = 2", "count = 1"))
+    out = tmp_path / "data"
+    out.mkdir()
+    stale = [out / f".{LOG}.0a1b2c3d.tmp", out / ".index.parquet.x_9y8z7w.tmp"]
+    kept = [out / ".other.mcap.0a1b2c3d.tmp", out / f".{LOG}.notes.tmp", out / f"{LOG}.0a1b2c3d.tmp"]
+    for path in stale + kept:
+        path.write_bytes(b"partial")
+    summary = run_generate(GenerateOptions(spec=spec, out_dir=out, workers=1, processes=False))
+    assert summary.made == 1 and (out / LOG).is_file()
+    assert not any(p.exists() for p in stale) and all(p.read_bytes() == b"partial" for p in kept)
+
+
+def test_parts_are_synced_before_and_after_their_rename(tmp_path, monkeypatch):
+    """Without fsync a power loss can keep the rename and lose the data: an empty part."""
+    import os
+
+    from gyroemu.pipelines.formats import atomic
+
+    synced: list[str] = []
+    real = os.fsync
+
+    def fsync(fd):
+        synced.append(os.readlink(f"/proc/self/fd/{fd}") if os.path.exists("/proc/self/fd") else str(fd))
+        real(fd)
+
+    monkeypatch.setattr(atomic.os, "fsync", fsync)
+    store = PartStore(tmp_path / "runs", pa.schema([("x", pa.float64())]))
+    path = store.write("a", [{"x": 1.0}])
+    assert len(synced) == 2
+    if os.path.exists("/proc/self/fd"):
+        assert synced[0].startswith(str(tmp_path / "runs" / ".part-a.parquet.")) and synced[1] == str(path.parent)
+
+
+def test_an_empty_part_is_run_again_not_a_crash(tmp_path):
+    """A part left empty (its rename on the disk before its data) made every resume crash (ArrowInvalid:
+    Parquet file size is 0 bytes): it counts as missing, with a warning, and its task runs again."""
+    from gyroemu.pipelines.campaign import StoreWarning
+    from gyroemu.pipelines.jobs.campaign import run_campaign
+
+    spec = _write(tmp_path / "c.toml", ONE)
+    out = tmp_path / "out"
+    run_campaign(_in_process(spec, out))
+    victim = sorted((out / "runs").iterdir())[0]
+    victim.write_bytes(b"")
+    with pytest.warns(StoreWarning, match=f"{victim.name}: empty: its task runs again"):
+        summary = run_campaign(_in_process(spec, out))
+    assert (summary.ran, summary.resumed, summary.rows) == (1, 1, 2) and victim.stat().st_size > 0
+    store = PartStore(out / "runs", row_schema())
+    (out / "runs" / victim.name).write_bytes(b"PAR1" + b"\0" * 8 + b"PAR1")  # looks whole, reads not
+    with pytest.warns(StoreWarning, match="cannot be read"):
+        assert store.read().num_rows == 1
+
+
+def test_log_names_keep_their_durations_and_tell_close_ones_apart(tmp_path):
+    """A log's name says its duration as ':g' does where that is exact (every dataset so far keeps its
+    names), else exactly: 3.000001 and 3.000002 made one name (and an error blaming the files' names)."""
+    from gyroemu.pipelines.jobs.generate import duration_name, log_tasks
+
+    for d in (0.5, 1.0, 3.0, 2.25, 0.1, 60.0, 1e6, 1e-3, 1234.5):
+        assert duration_name(d) == f"{d:g}"
+    assert (duration_name(3.000001), duration_name(3.000002)) == ("3.000001", "3.000002")
+    assert duration_name(1234567.5) == "1234567.5"  # ':g' says 1.23457e+06
+    spec = _write(tmp_path / "c.toml", ONE.replace("[0.5]", "[3.000001, 3.000002, 3.0]"))
+    names = [Path(t.out).name for t in log_tasks(load_campaign(spec), tmp_path)]
+    assert len(set(names)) == len(names) == 6
+    assert "smooth_manoeuvre__consumer_mems__3.000001s__seed0.mcap" in names
+    assert "smooth_manoeuvre__consumer_mems__3s__seed0.mcap" in names
+
+
+def test_two_device_files_of_one_stem_are_named_with_their_key(tmp_path):
+    from gyroemu.dynamics.config import config_dir
+    from gyroemu.pipelines.jobs.generate import log_tasks
+
+    text = (config_dir() / "devices" / "consumer_mems.toml").read_text()
+    assert "\nrate_hz = 1000\n" in text
+    for folder, rate in (("a", "1000"), ("b", "500")):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / "imu.toml").write_text(text.replace("\nrate_hz = 1000\n", f"\nrate_hz = {rate}\n", 1))
+    spec = _write(tmp_path / "c.toml", ONE.replace('["consumer_mems"]', '["a/imu.toml", "b/imu.toml"]'))
+    with pytest.raises(ConfigError) as info:
+        log_tasks(load_campaign(spec), tmp_path)
+    assert info.value.key == "devices" and "give device files distinct names" in str(info.value)
