@@ -6,8 +6,9 @@ here (:func:`kalman_predict`, :func:`kalman_update`: the same equations, Joseph 
 run stays in compiled code. ``tests/pipelines/test_mekf.py`` checks that both give the same attitude.
 
 numba's on-disk cache is keyed on this file's content only: a change to :mod:`.mekf_kernels` reaches
-the cached ``_run`` only when this file changes too (kernel layout as of ``P_SIZE = 36``, ``X_SIZE = 17``,
-``S_SIZE = 111``, ``P_BIAS_RW_VERTICAL`` the last; the gravity update ``mekf_kernels.gravity_update``;
+the cached ``_run`` only when this file changes too (kernel layout as of ``P_SIZE = 35``, ``X_SIZE = 17``,
+``S_SIZE = 110``, ``P_BIAS_RW_VERTICAL`` the last; the gravity update ``mekf_kernels.gravity_update`` after
+``mekf_kernels.gravity_adapt``, no gate;
 ``mekf_kernels.body_vertical`` shared by the transition and the heading gain; ``P_ACC_GM_PROCESS``).
 """
 
@@ -69,7 +70,8 @@ def _window(
     kern.transition(win, phi, q, earth, params, F, Q)
     kalman_predict(P, F, Q)
     z, H, R = np.empty(2), np.empty((2, kern.X_SIZE)), np.empty((2, 2))
-    if kern.gravity_measurement(win, slow, params, z, H, R) and kern.gravity_gate(P, z, H, R, slow, params):
+    if kern.gravity_measurement(win, slow, params, z, H, R):
+        kern.gravity_adapt(P, z, H, R, slow, params)
         kern.gravity_update(x, P, z, H, R)
     if kern.rest_due(win, slow, params):
         z3, H3, R3 = np.empty(3), np.empty((3, kern.X_SIZE)), np.empty((3, 3))

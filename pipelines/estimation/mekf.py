@@ -12,8 +12,8 @@ update the error state, and the error is folded back into the nominal state (Mar
 * **gravity direction** from the specific force in the world frame through two low-passes of
   ``accel_tau_s``: it corrects inclination only (its ``H`` has no heading column). Non-gravitational
   acceleration (translation, tapping, vibration) is what the low-passes leave of it, noise of density
-  ``motion_accel_density`` plus how far ``|ā|`` strays from gravity, and a χ² gate rejects what is still
-  implausible, for at most ``accel_timeout_s``;
+  ``motion_accel_density`` plus how far ``|ā|`` strays from gravity, plus what the innovations show
+  beyond the model (``accel_adapt``); every measurement is taken (no gate);
 * **heading** from the magnetic field averaged in the world frame, a scalar measurement whose gain is
   constrained to never touch inclination; fields whose norm or dip differ from the reference
   (learned at the start) are a disturbance and skipped, and a χ² gate catches the rest;
@@ -95,9 +95,11 @@ class MekfParams:
         Window over which the field is averaged in the world frame, s.
     motion_accel_density : float
         Non-gravitational acceleration always allowed for, as a white-noise density, m/s²/√Hz (its
-        correlation over the window is what makes this a density and not a level). 0.4 (was 0.3, BROAD's
-        low-passed residual): the simulated smooth manoeuvre's translation needs it for a covariance that
-        tells the truth; BROAD's online figures move by 0.02° (README).
+        correlation over the window is what makes this a density and not a level). 0.4/√2 ≈ 0.283: the 0.4
+        chosen before 2026-11-27 (was 0.3, BROAD's low-passed residual; the simulated smooth manoeuvre's
+        translation needs 0.4 for a covariance that tells the truth; BROAD's online figures moved by 0.02°,
+        README), restated in the density convention of the accelerometer's own noise (the variance through
+        the low-passes was then taken as N²/(8τ), half of :func:`mekf_kernels.double_lowpass_variance`).
     motion_gain : float
         Weight of the window's squared deviation of ``|a|`` from gravity in the gravity noise.
     accel_gm_sigma, accel_gm_process_sigma, accel_gm_tau_s : float
@@ -107,22 +109,27 @@ class MekfParams:
         stationary level, m/s² (motion slower than the low-passes, which they keep: a sway, a walk). It is
         a *consider* state (:func:`mekf_kernels.gravity_update`): never estimated, but its correlation over
         ``accel_gm_tau_s`` is in the covariance. The prior, 0.15 m/s² decaying over 10 s, with the white
-        0.4 m/s²/√Hz puts the attitude NEES of the simulated runs in their χ² band
+        ``motion_accel_density`` puts the attitude NEES of the simulated runs in their χ² band
         (``tests/benchmarks/nees_check.py``); the stationary level is a floor, 2·10⁻⁴ m/s², that keeps P
         regular for the smoother: measured, 0.02–0.1 m/s² there leaves the consumer car or the tactical
         manoeuvre outside their bands on some seed sets (README, "Covariance"). Until 2026-11-26 a loop in
         the transition overwrote this process noise with the scale states' (10⁻¹⁰ T, about this floor).
     accel_adapt : float
         Weight of the gravity innovations' mean square beyond what the filter expects, added to the gravity
-        noise (innovation-based adaptive estimation; :func:`mekf_kernels.gravity_gate`); 0: off.
+        noise (innovation-based adaptive estimation; :func:`mekf_kernels.gravity_adapt`); 0: off.
     accel_adapt_rise_s : float
         Time constant of that mean square as it rises, s (it falls over ``4 accel_tau_s``, as an ended
         acceleration leaves the low-passes): 0.5 s catches a car speeding up before the tilt has taken in
         much of it (with ``accel_tau_s``, 1 s, the car's tilt error doubled with the acceleration state).
-    accel_gate, mag_gate : float
-        χ² gates of the gravity (2 dof) and heading (1 dof) innovations.
-    accel_timeout_s, mag_timeout_s : float
-        How long rejections may last before a measurement is taken again, inflated onto the gate, s.
+    accel_gate : float
+        Threshold of the adaptive gravity noise (``accel_adapt``), a χ²(2) quantile: the innovations' mean
+        square counts once twice it exceeds this times its expected spread. There is no gate on the gravity
+        measurement (the one of this name, with ``accel_timeout_s``, never fired and is gone since
+        2026-11-27: docs/offline-attitude.md).
+    mag_gate : float
+        χ² gate of the heading (1 dof) innovation.
+    mag_timeout_s : float
+        How long heading rejections may last before a measurement is taken again, inflated onto the gate, s.
     heading_sigma, heading_correlation_s : float
         Heading error of the field's direction (residual soft iron, local anomalies, a moving
         sensor's changing surroundings), rad, and the time over which it is correlated, s.
@@ -173,7 +180,10 @@ class MekfParams:
     window_s: float = 0.02
     accel_tau_s: float = 1.0
     mag_window_s: float = 1.0
-    motion_accel_density: float = 0.4
+    # 0.4 was chosen (on the NEES check) when the gravity noise took N²/(8τ) for the variance of white noise
+    # through the double low-pass, half of what the density convention gives (N²/(4τ)); the same noise in
+    # the documented convention is 0.4/√2, so the motion's share of R is as it was
+    motion_accel_density: float = 0.4 / math.sqrt(2.0)
     motion_gain: float = 1.0
     accel_adapt: float = 1.0
     accel_adapt_rise_s: float = 0.5
@@ -181,7 +191,6 @@ class MekfParams:
     accel_gm_process_sigma: float = 2e-4
     accel_gm_tau_s: float = 10.0
     accel_gate: float = 13.8
-    accel_timeout_s: float = 2.0
     mag_gate: float = 10.8
     mag_timeout_s: float = 60.0
     heading_sigma: float = 5 * _DEG
@@ -268,7 +277,6 @@ class MekfParams:
         p[kern.P_ACC_GM_PROCESS] = max(self.accel_gm_process_sigma / 9.80665, 1e-9)
         p[kern.P_ACC_GM_TAU] = self.accel_gm_tau_s
         p[kern.P_ACC_GATE] = self.accel_gate
-        p[kern.P_ACC_TIMEOUT] = self.accel_timeout_s
         p[kern.P_HEADING_SIGMA] = self.heading_sigma
         p[kern.P_HEADING_CORR] = self.heading_correlation_s
         p[kern.P_HEADING_MOTION] = self.heading_motion_factor
@@ -534,7 +542,8 @@ class Mekf:
         kern.transition(win, self._phi, self.q, self._earth, p, self._F, self._Q)
         kf.predict(F=self._F, Q=self._Q)
         z, H, R = np.empty(2), np.empty((2, kern.X_SIZE)), np.empty((2, 2))
-        if kern.gravity_measurement(win, slow, p, z, H, R) and kern.gravity_gate(kf.P, z, H, R, slow, p):
+        if kern.gravity_measurement(win, slow, p, z, H, R):
+            kern.gravity_adapt(kf.P, z, H, R, slow, p)
             kern.gravity_update(kf.x.reshape(kern.X_SIZE), kf.P, z, H, R)
         if kern.rest_due(win, slow, p):
             z3, H3, R3 = np.empty(3), np.empty((3, kern.X_SIZE)), np.empty((3, 3))

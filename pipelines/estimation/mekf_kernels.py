@@ -31,7 +31,7 @@ Measurements, made at the end of each window
   carries it as ``δa`` (world x, y; a first-order Gauss–Markov process, a consider state:
   :func:`gravity_update`), and whatever
   acceleration the innovations show beyond the model goes into the measurement's noise
-  (:func:`gravity_gate`, innovation-based adaptive estimation).
+  (:func:`gravity_adapt`, innovation-based adaptive estimation).
 * Heading: the magnetic field turned into the world frame and averaged, ``m̄_w``; its azimuth from
   north is ``ψ = atan2(m_x, m_y) = D + δθ_z + tan(dip) (n · δθ)`` (``D`` the declination, ``n`` the
   field's horizontal direction).
@@ -69,22 +69,21 @@ S_OMEGA = 1  # 1:4 last valid gyro sample, rad/s
 S_LP_G = 4  # 4:7 low-passed gyro, rad/s
 S_LP_A = 7  # 7:10 low-passed specific force, m/s²
 S_REST_T = 10  # time at rest so far, s
-S_ACC_REJ_T = 11  # time since the last accepted gravity update, s
-S_MAG_NORM = 12  # reference field: norm, T
-S_MAG_DIP = 13  # and dip (angle below the horizontal), rad
-S_MAG_REJ_T = 14  # time since the last accepted heading update, s
-S_GRAVITY = 15  # gravity magnitude seen at initialisation, m/s²
-S_GRAV_LP = 16  # 16:19 specific force in the world frame, low-passed once, m/s²
-S_GRAV_LP2 = 19  # 19:22 and twice: the gravity measurement, m/s²
-S_LAG1 = 22  # 22:58 D₁ (3×12, row-major): the first low-pass's sensitivity to δb and δM
-S_LAG2 = 58  # 58:94 D₂: the second's (the measurement's); see strapdown and gravity_measurement
-S_SCALE = 94  # 94:103 M̂ (3×3, row-major): the gyro's scale-factor and misalignment errors
-S_ACC_MS = 103  # mean square of the gravity innovation per horizontal axis, low-passed over accel_tau_s, rad²
-S_ACC_CORR = 104  # the current gravity measurement's correlation factor 4τ/T (gravity_measurement)
-S_ACC_EST = 105  # 105:107 â: the low-passed horizontal non-gravitational acceleration over g, world x and y, rad
-S_REST_N = 107  # gyro samples in the accepted rest windows of the current stretch at rest
-S_REST_SUM = 108  # 108:111 their sum of ω_m, rad/s
-S_SIZE = 111
+S_MAG_NORM = 11  # reference field: norm, T
+S_MAG_DIP = 12  # and dip (angle below the horizontal), rad
+S_MAG_REJ_T = 13  # time since the last accepted heading update, s
+S_GRAVITY = 14  # gravity magnitude seen at initialisation, m/s²
+S_GRAV_LP = 15  # 15:18 specific force in the world frame, low-passed once, m/s²
+S_GRAV_LP2 = 18  # 18:21 and twice: the gravity measurement, m/s²
+S_LAG1 = 21  # 21:57 D₁ (3×12, row-major): the first low-pass's sensitivity to δb and δM
+S_LAG2 = 57  # 57:93 D₂: the second's (the measurement's); see strapdown and gravity_measurement
+S_SCALE = 93  # 93:102 M̂ (3×3, row-major): the gyro's scale-factor and misalignment errors
+S_ACC_MS = 102  # mean square of the gravity innovation per horizontal axis, low-passed over accel_tau_s, rad²
+S_ACC_CORR = 103  # the current gravity measurement's correlation factor 4τ/T (gravity_measurement)
+S_ACC_EST = 104  # 104:106 â: the low-passed horizontal non-gravitational acceleration over g, world x and y, rad
+S_REST_N = 106  # gyro samples in the accepted rest windows of the current stretch at rest
+S_REST_SUM = 107  # 107:110 their sum of ω_m, rad/s
+S_SIZE = 110
 
 # Error state layout.
 X_THETA = 0  # 0:3 δθ, rad, world axes
@@ -154,7 +153,6 @@ def strapdown(
         if not dt > 0.0:
             raise ValueError("sample stamps must increase")
         slow[S_T] = t[k]
-        slow[S_ACC_REJ_T] += dt
         # The rate over [t_{k-1}, t_k], bias, scale and misalignment and Earth rate removed:
         # ω_bw = (I − M̂)(ω_m − b̂) − Rᵀ Ω_ie.
         if use_delta:
@@ -280,34 +278,33 @@ P_HOLD_RATE = 5
 P_ACC_NOISE = 6
 P_MOTION = 7
 P_MOTION_GAIN = 8
-P_ACC_GATE = 9
-P_ACC_TIMEOUT = 10
-P_HEADING_SIGMA = 11
-P_MAG_NOISE = 12
-P_MAG_NORM_TOL = 13
-P_MAG_DIP_TOL = 14
-P_MAG_GATE = 15
-P_MAG_TIMEOUT = 16
-P_REST_TAU = 17
-P_REST_GYRO = 18
-P_REST_ACCEL = 19
-P_REST_TIME = 20
-P_REST_SIGMA = 21
-P_USE_MAG = 22
-P_DECLINATION = 23
-P_ACC_TAU = 24
-P_MAG_WINDOW = 25
-P_HEADING_CORR = 26
-P_TURN_NOISE = 27
-P_HEADING_MOTION = 28
-P_ACC_ADAPT = 29
-P_ACC_GM_PROCESS = 30
-P_ACC_GM_TAU = 31
-P_REST_RATE = 32
-P_REST_GATE = 33
-P_ACC_RISE = 34
-P_BIAS_RW_VERTICAL = 35
-P_SIZE = 36
+P_ACC_GATE = 9  # accel_gate: gravity_adapt's threshold, a χ²(2) quantile
+P_HEADING_SIGMA = 10
+P_MAG_NOISE = 11
+P_MAG_NORM_TOL = 12
+P_MAG_DIP_TOL = 13
+P_MAG_GATE = 14
+P_MAG_TIMEOUT = 15
+P_REST_TAU = 16
+P_REST_GYRO = 17
+P_REST_ACCEL = 18
+P_REST_TIME = 19
+P_REST_SIGMA = 20
+P_USE_MAG = 21
+P_DECLINATION = 22
+P_ACC_TAU = 23
+P_MAG_WINDOW = 24
+P_HEADING_CORR = 25
+P_TURN_NOISE = 26
+P_HEADING_MOTION = 27
+P_ACC_ADAPT = 28
+P_ACC_GM_PROCESS = 29
+P_ACC_GM_TAU = 30
+P_REST_RATE = 31
+P_REST_GATE = 32
+P_ACC_RISE = 33
+P_BIAS_RW_VERTICAL = 34
+P_SIZE = 35
 
 
 @njit
@@ -362,6 +359,20 @@ def transition(
 
 
 @njit
+def double_lowpass_variance(density: float, tau: float) -> float:
+    """Variance of white noise of density ``density`` (N) through two first-order low-passes of ``tau``
+    in cascade, ``1/(1 + τs)²``, as the gravity measurement's force goes through them (:func:`strapdown`):
+
+        σ² = N² ∫₀^∞ h(t)² dt = N² / (4τ),    h(t) = t e^(−t/τ) / τ²
+
+    N is the project's density (:mod:`gyroemu.sensors.noise`, the Allan convention: a per-sample σ of
+    N/√Δt, a two-sided PSD of N²), so the output's variance is N² times the integral of the squared
+    impulse response: ∫ t² e^(−2t/τ) dt = τ³/4, over τ⁴. (N²/(8τ), which stood here until 2026-11-27,
+    takes N² for the one-sided PSD: half the variance.)"""
+    return density * density / (4.0 * tau)
+
+
+@njit
 def gravity_measurement(
     win: NDArray[np.float64],
     slow: NDArray[np.float64],
@@ -375,13 +386,14 @@ def gravity_measurement(
     ``z`` is the horizontal part of the direction of the low-passed world-frame specific force
     ``ā_w`` (:func:`strapdown`). Returns False when the window had no valid accelerometer sample.
 
-    Noise. White noise of density N through ``1/(1 + τs)²`` has the variance ``N² / (8τ)``
-    (its noise bandwidth is 1/(8τ) Hz); that of the sensor and the non-gravitational acceleration
+    Noise. White noise of density N through ``1/(1 + τs)²`` has the variance ``N² / (4τ)``
+    (:func:`double_lowpass_variance`); that of the sensor and the non-gravitational acceleration
     always allowed for (both densities) is the base. What the low-pass left of the motion shows in
     ``|ā_w| − g`` (the vertical share of the residual, as large as each horizontal one for motion
-    in every direction), weighted by ``motion_gain``. All over g², in rad². The output is
-    correlated over about ``4τ`` (``1 / (2 · bandwidth)``), so a measurement every window of T
-    carries the information of ``T / 4τ`` independent ones: ``R`` is scaled by ``4τ / T``."""
+    in every direction), weighted by ``motion_gain``. All over g², in rad². The output's
+    autocorrelation integrates to N² (the cascade's DC gain is 1), ``4τ`` times its variance, so a
+    measurement every window of T carries the information of ``T / 4τ`` independent ones: ``R`` is
+    scaled by ``4τ / T`` (the white part then N²/T, the variance of the noise's mean over T)."""
     decay = math.exp(-win[W_T] / params[P_ACC_GM_TAU])  # â's expected value decays as the process does
     slow[S_ACC_EST] *= decay
     slow[S_ACC_EST + 1] *= decay
@@ -407,9 +419,8 @@ def gravity_measurement(
         H[0, X_BIAS + j] = -slow[S_LAG2 + N_DRIFT + j]
         H[1, X_BIAS + j] = slow[S_LAG2 + j]
     tau = params[P_ACC_TAU]
-    var = (
-        (params[P_ACC_NOISE] ** 2 + params[P_MOTION] ** 2) / (8.0 * tau) + params[P_MOTION_GAIN] * (norm - g) ** 2
-    ) / (g * g)
+    white = double_lowpass_variance(params[P_ACC_NOISE], tau) + double_lowpass_variance(params[P_MOTION], tau)
+    var = (white + params[P_MOTION_GAIN] * (norm - g) ** 2) / (g * g)
     corr = 4.0 * tau / max(win[W_T], 1e-9)
     slow[S_ACC_CORR] = corr
     var *= corr
@@ -536,75 +547,61 @@ def rest_measurement(
 
 
 @njit
-def gravity_gate(
+def gravity_adapt(
     P: NDArray[np.float64],
     z: NDArray[np.float64],
     H: NDArray[np.float64],
     R: NDArray[np.float64],
     slow: NDArray[np.float64],
     params: NDArray[np.float64],
-) -> bool:
-    """Decide on the gravity measurement (``x = 0``, as it is the first after the prediction).
+) -> None:
+    """Match the gravity measurement's ``R`` to what the innovations show (``x = 0``, as it is the first
+    after the prediction; ``R`` is modified in place).
 
-    First ``R`` is matched to what the innovations show (``R`` is modified in place). The low-passed
-    force keeps whatever non-gravitational acceleration lasts longer than the low-pass (a car speeding
-    up for seconds, a slow sway): an error the filter does not estimate, coloured, and far larger than
-    the white density allows for while it lasts. Innovation-based adaptive estimation (Mehra 1970;
-    Mohamed & Schwarz 1999, J. Geodesy 73: ``R̂ = Ĉ − H P Hᵀ``, ``Ĉ`` the innovations' sample
-    covariance; Suh 2010, IEEE TIM 59(12), for an orientation filter under external acceleration):
-    ``Ĉ`` per horizontal axis is the mean of ``|z|²/2`` low-passed over ``accel_tau_s`` (``x = 0``, so
-    ``z`` is the innovation), and what it holds beyond the single measurement's expected variance
-    ``tr(H P Hᵀ)/2 + R T/(4τ)`` is the unmodelled acceleration's variance (over g²), added to ``R`` with the
-    same correlation factor ``4τ/T``, once it is significant: ``2 Ĉ`` beyond the gravity gate (a χ²(2)
-    quantile) times the expected variance without the slow acceleration ``δa`` (Suh's threshold; a lower
-    one, the 95 % quantile, took the smooth manoeuvre's sway for acceleration and doubled its 6D
+    The low-passed force keeps whatever non-gravitational acceleration lasts longer than the low-pass (a
+    car speeding up for seconds, a slow sway, a tap's swing): an error the filter does not estimate,
+    coloured, and far larger than the white density allows for while it lasts. Innovation-based adaptive
+    estimation (Mehra 1970; Mohamed & Schwarz 1999, J. Geodesy 73: ``R̂ = Ĉ − H P Hᵀ``, ``Ĉ`` the
+    innovations' sample covariance; Suh 2010, IEEE TIM 59(12), for an orientation filter under external
+    acceleration): ``Ĉ`` per horizontal axis is the mean of ``|z|²/2`` low-passed over ``accel_tau_s``
+    (``x = 0``, so ``z`` is the innovation), and what it holds beyond the single measurement's expected
+    variance ``tr(H P Hᵀ)/2 + R T/(4τ)`` is the unmodelled acceleration's variance (over g²), added to
+    ``R`` with the same correlation factor ``4τ/T``, once it is significant: ``2 Ĉ`` beyond ``accel_gate``
+    (a χ²(2) quantile) times the expected variance without the slow acceleration ``δa`` (Suh's threshold;
+    a lower one, the 95 % quantile, took the smooth manoeuvre's sway for acceleration and doubled its 6D
     inclination error). ``Ĉ`` rises over ``accel_adapt_rise_s`` and falls over ``4τ``. Weight
     ``accel_adapt`` (0: off).
 
-    Accepted when its Mahalanobis distance ``zᵀ S⁻¹ z`` is within the gate (a χ² quantile). A
-    rejected measurement is a disturbance (a tap, a push); after ``accel_timeout_s`` of rejections the
-    filter must be wrong rather than the world: its tilt variance is widened by ``|z|²/gate`` (which
-    puts the measurement inside the gate) and the measurement is accepted, so that the tilt, not the
-    bias, takes the correction. Modifies ``P`` in place in that case."""
-    HPH = H @ P @ H.T
+    Every measurement is then taken: a χ² gate on ``zᵀ (H P Hᵀ + R)⁻¹ z`` stood here until 2026-11-27,
+    but with ``R`` scaled by ``4τ/T`` (about 200) it never fired (docs/offline-attitude.md)."""
     adapt = params[P_ACC_ADAPT]
-    if adapt > 0.0:
-        corr = slow[S_ACC_CORR]  # 4τ/T
-        window = params[P_ACC_TAU] * 4.0 / corr  # T, s
-        # The mean square follows a rise over accel_adapt_rise_s (faster than the filter's tilt takes an
-        # acceleration in) and a fall over 4τ: an acceleration that ends leaves the cascade's output as
-        # t e^(−t/τ), which takes about 4τ to vanish.
-        square = 0.5 * (z[0] * z[0] + z[1] * z[1])
-        rise = square > slow[S_ACC_MS]
-        beta = 1.0 - math.exp(-window / (params[P_ACC_RISE] if rise else 4.0 * params[P_ACC_TAU]))
-        slow[S_ACC_MS] += beta * (square - slow[S_ACC_MS])
-        expected = 0.5 * (HPH[0, 0] + HPH[1, 1]) + 0.5 * (R[0, 0] + R[1, 1]) / corr
-        # Suh's threshold: only a significant excess counts (the mean square holds about one independent
-        # innovation, so below the χ² gate it is noise and max(·, 0) would bias R upwards). The threshold
-        # scales with the spread of that estimate, the innovation's fast part: without the slow acceleration
-        # δa, whose variance stays the same over the mean square's time (notes of issue #17: with δa in it,
-        # the attitude NEES of the car × tactical MEMS left its band on other seeds).
-        Hw = H.copy()
-        Hw[:, X_ACC:] = 0.0
-        HPHw = Hw @ P @ Hw.T
-        fast = 0.5 * (HPHw[0, 0] + HPHw[1, 1]) + 0.5 * (R[0, 0] + R[1, 1]) / corr
-        excess = 0.0
-        if 2.0 * slow[S_ACC_MS] > params[P_ACC_GATE] * fast:
-            excess = adapt * max(slow[S_ACC_MS] - expected, 0.0) * corr
-        R[0, 0] += excess
-        R[1, 1] += excess
-    S = HPH + R
-    d2 = z @ np.linalg.solve(S, z)
-    if d2 <= params[P_ACC_GATE]:
-        slow[S_ACC_REJ_T] = 0.0
-        return True
-    if slow[S_ACC_REJ_T] > params[P_ACC_TIMEOUT]:
-        extra = (z[0] * z[0] + z[1] * z[1]) / params[P_ACC_GATE]
-        P[0, 0] += extra
-        P[1, 1] += extra
-        slow[S_ACC_REJ_T] = 0.0
-        return True
-    return False
+    if not adapt > 0.0:
+        return
+    HPH = H @ P @ H.T
+    corr = slow[S_ACC_CORR]  # 4τ/T
+    window = params[P_ACC_TAU] * 4.0 / corr  # T, s
+    # The mean square follows a rise over accel_adapt_rise_s (faster than the filter's tilt takes an
+    # acceleration in) and a fall over 4τ: an acceleration that ends leaves the cascade's output as
+    # t e^(−t/τ), which takes about 4τ to vanish.
+    square = 0.5 * (z[0] * z[0] + z[1] * z[1])
+    rise = square > slow[S_ACC_MS]
+    beta = 1.0 - math.exp(-window / (params[P_ACC_RISE] if rise else 4.0 * params[P_ACC_TAU]))
+    slow[S_ACC_MS] += beta * (square - slow[S_ACC_MS])
+    expected = 0.5 * (HPH[0, 0] + HPH[1, 1]) + 0.5 * (R[0, 0] + R[1, 1]) / corr
+    # Suh's threshold: only a significant excess counts (the mean square holds about one independent
+    # innovation, so below a χ² quantile it is noise and max(·, 0) would bias R upwards). The threshold
+    # scales with the spread of that estimate, the innovation's fast part: without the slow acceleration
+    # δa, whose variance stays the same over the mean square's time (notes of issue #17: with δa in it,
+    # the attitude NEES of the car × tactical MEMS left its band on other seeds).
+    Hw = H.copy()
+    Hw[:, X_ACC:] = 0.0
+    HPHw = Hw @ P @ Hw.T
+    fast = 0.5 * (HPHw[0, 0] + HPHw[1, 1]) + 0.5 * (R[0, 0] + R[1, 1]) / corr
+    excess = 0.0
+    if 2.0 * slow[S_ACC_MS] > params[P_ACC_GATE] * fast:
+        excess = adapt * max(slow[S_ACC_MS] - expected, 0.0) * corr
+    R[0, 0] += excess
+    R[1, 1] += excess
 
 
 @njit

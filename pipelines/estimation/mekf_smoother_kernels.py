@@ -8,15 +8,14 @@ stores
 * ``F_top[j]`` (5, X_SIZE): the rows of the window's error-state transition that are not the identity's:
   the attitude's three and the acceleration's two (``δb``, ``δM`` are random walks, ``δa`` Gauss–Markov,
   :func:`.mekf_kernels.transition`);
-* ``P_prior[j]``: the error covariance before the window's updates (after the gravity gate, whose
-  widening of the tilt variance after a long rejection acts as process noise);
+* ``P_prior[j]``: the error covariance before the window's updates (the prediction's);
 * ``P_post[j]``: after the updates; and ``x_upd[j]``, the update itself (what was injected into the
   nominal state: the error of the prior nominal state as the filter saw it).
 
 (numba caches this file's functions by its content alone: a change to :mod:`.mekf_kernels` needs
-a change here, such as the layout noted here: ``P_SIZE = 36``, ``P_BIAS_RW_VERTICAL`` the last; ``X_SIZE = 17``,
-``S_SIZE = 111``; ``body_vertical`` in the transition and the heading gain; ``P_ACC_GM_PROCESS``, δa's
-own process noise.)
+a change here, such as the layout noted here: ``P_SIZE = 35``, ``P_BIAS_RW_VERTICAL`` the last; ``X_SIZE = 17``,
+``S_SIZE = 110``; ``gravity_adapt`` with no gate; ``body_vertical`` in the transition and the heading gain;
+``P_ACC_GM_PROCESS``, δa's own process noise.)
 
 Index 0 is the initial state (``P_post[0] = P₀``, no update). Float64: 5,520 bytes a window, 166 MB for a
 10-minute log at 1 kHz with 20 ms windows (30 000 windows; per-sample storage would be 50× that).
@@ -103,12 +102,11 @@ def _store_window(
     kern.transition(win, phi, q, earth, params, F, Q)
     kalman_predict(P, F, Q)
     z, H, R = np.empty(2), np.empty((2, X)), np.empty((2, 2))
-    gravity = kern.gravity_measurement(win, slow, params, z, H, R)
-    accept = gravity and kern.gravity_gate(P, z, H, R, slow, params)  # may widen P: part of the prior
     F_top[j, 0:3] = F[0:3, :]
     F_top[j, 3:] = F[kern.X_ACC :, :]
     P_prior[j] = P
-    if accept:
+    if kern.gravity_measurement(win, slow, params, z, H, R):
+        kern.gravity_adapt(P, z, H, R, slow, params)
         kern.gravity_update(x, P, z, H, R)
     if kern.rest_due(win, slow, params):
         z3, H3, R3 = np.empty(3), np.empty((3, X)), np.empty((3, 3))

@@ -350,13 +350,81 @@ def test_simulated_field_heading_error_is_the_sensors_iron():
     assert FilterSetup(rate_hz=100.0).field_heading_sigma is None
 
 
+def test_gravity_noise_is_white_noise_through_the_double_low_pass():
+    """White noise of density N, in the project's convention (a per-sample σ of N/√Δt,
+    ``sensors.noise.white_noise``: a two-sided PSD N²), through the strapdown's two low-passes of τ has
+    the variance N² ∫₀^∞ h² dt, h(t) = t e^(−t/τ)/τ²: N²/(4τ) (``double_lowpass_variance``; ∫h² checked
+    by quadrature), and the gravity measurement's R at rest is the sensor's and the motion's
+    densities so, times its correlation factor 4τ/T, over g²: (N_a² + N_m²)/(T g²). Until 2026-11-27
+    it took N²/(8τ) (the one-sided PSD's figure), which fails here by a factor 2.
+
+    Monte Carlo, the kernel's own low-passes (``strapdown``, level and still, noise on the force): the
+    world-frame force after them, read every D = 20τ (correlation (1 + D/τ) e^(−D/τ) < 10⁻⁷ between
+    reads, and the start forgotten), on both horizontal axes, gives m independent draws y_i ~ N(0, v).
+    Their mean square s has E s = v and Var s = 2v²/m (χ²_m/m), so s lies within 5 v √(2/m) of v
+    (5σ: false alarm below 10⁻⁶); v is the closed form up to the exact discretisation's own variance,
+    (N²/Δt) α⁴ (1 + a²)/(1 − a²)³ (impulse response α² (k+1) aᵏ, a = e^(−Δt/τ), α = 1 − a), within
+    10⁻⁴ of it at Δt/τ = 0.02: added to the bound."""
+    from scipy.integrate import quad
+
+    from gyroemu.sensors.noise import white_noise
+
+    rate, tau, density = 1000.0, 0.05, 0.3
+    dt = 1.0 / rate
+    closed = density**2 / (4.0 * tau)
+    assert np.isclose(kern.double_lowpass_variance(density, tau), closed, rtol=4 * EPS, atol=0)
+    integral, _ = quad(lambda t: (t * np.exp(-t / tau) / tau**2) ** 2, 0.0, np.inf)
+    assert np.isclose(integral, 1.0 / (4.0 * tau), rtol=1e-8, atol=0)
+    # the default motion density is the 0.4 chosen under N²/(8τ), restated: the motion's share as it was
+    motion = kern.double_lowpass_variance(MekfParams().motion_accel_density, tau)
+    assert np.isclose(motion, 0.4**2 / (8.0 * tau), rtol=4 * EPS, atol=0)
+
+    # the measurement at rest (|ā| = g: no motion term), the window of the defaults
+    params = MekfParams(accel_noise_density=0.05, accel_tau_s=tau)
+    p = params.vector(FilterSetup(rate_hz=rate, use_mag=False))
+    g, T = 9.81, params.window_s
+    win, slow = np.zeros(kern.W_SIZE), np.zeros(kern.S_SIZE)
+    win[kern.W_ACC_N], win[kern.W_T] = 20.0, T
+    slow[kern.S_GRAVITY] = g
+    slow[kern.S_GRAV_LP2 : kern.S_GRAV_LP2 + 3] = [0.0, 0.0, g]
+    z, H, R = np.empty(2), np.empty((2, kern.X_SIZE)), np.empty((2, 2))
+    assert kern.gravity_measurement(win, slow, p, z, H, R)
+    want = (params.accel_noise_density**2 + params.motion_accel_density**2) / (T * g * g)
+    assert np.allclose(np.diag(R), want, rtol=16 * EPS, atol=0) and R[0, 1] == R[1, 0] == 0.0
+
+    draws, span = 2000, int(round(20 * tau * rate))  # reads, samples between reads
+    p = MekfParams(accel_tau_s=tau).vector(FilterSetup(rate_hz=rate, use_mag=False))
+    p[kern.P_WINDOW], p[kern.P_WINDOW_N] = span * dt * (1 - 1e-9), span + 0.5  # a window per read
+    q, b, slow = np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3), np.zeros(kern.S_SIZE)
+    slow[kern.S_GRAV_LP : kern.S_GRAV_LP2 + 3] = np.tile([0.0, 0.0, g], 2)
+    slow[kern.S_T] = -dt
+    gyro, mag, no_delta = np.zeros((span, 3)), np.full((span, 3), np.nan), np.empty((0, 3))
+    phi, q_out = np.zeros((3, kern.N_DRIFT)), np.empty((span, 4))
+    rng = np.random.default_rng(5)
+    y = np.empty((draws, 2))
+    for i in range(draws):
+        t = (i * span + np.arange(span)) * dt
+        accel = white_noise(rng, (span, 3), dt, density) + [0.0, 0.0, g]
+        win = np.zeros(kern.W_SIZE)
+        assert kern.strapdown(q, b, slow, win, phi, t, gyro, no_delta, accel, mag, np.zeros(3), p, 0, q_out) == span
+        y[i] = slow[kern.S_GRAV_LP2 : kern.S_GRAV_LP2 + 2]
+    assert np.array_equal(q, [1.0, 0.0, 0.0, 0.0])  # still: the world frame is the body's
+    m = y.size
+    s = np.mean(y**2)
+    a = np.exp(-dt / tau)
+    discrete = density**2 / dt * (1 - a) ** 4 * (1 + a * a) / (1 - a * a) ** 3
+    v = kern.double_lowpass_variance(density, tau)
+    assert abs(discrete - closed) < 1e-4 * closed
+    assert abs(s - v) <= 5 * v * np.sqrt(2.0 / m) + abs(discrete - closed)
+
+
 def test_gravity_noise_takes_what_a_sustained_acceleration_shows():
-    """Innovation-based adaptive estimation (``gravity_gate``): a gravity innovation held at 14° (a car
+    """Innovation-based adaptive estimation (``gravity_adapt``): a gravity innovation held at 14° (a car
     speeding up at 2.5 m/s²) drives the mean square of the innovation per axis to |z|²/2 (a low-pass
     rising over τ_r = ``accel_adapt_rise_s``: after n windows of T it is within e^(−nT/τ_r) of it, to
     round-off), and R then carries what exceeds the
     expected variance tr(H P Hᵀ)/2 + R₀ T/(4τ), with the correlation factor 4τ/T: closed form. An
-    innovation within the expected spread adds nothing (below the χ² gate)."""
+    innovation within the expected spread adds nothing (below Suh's threshold, ``accel_gate``)."""
     setup = FilterSetup(rate_hz=100.0, use_mag=False)
     params = MekfParams()
     p = params.vector(setup)
@@ -374,7 +442,7 @@ def test_gravity_noise_takes_what_a_sustained_acceleration_shows():
         for _ in range(n):
             slow[kern.S_ACC_CORR] = corr
             R = np.eye(2) * r0
-            kern.gravity_gate(P, z, H, R, slow, p)
+            kern.gravity_adapt(P, z, H, R, slow, p)
         ms = 0.5 * tilt**2
         # round-off: ε·ms per step, summed by the low-pass with gain 1/β (β = 1 − e^(−T/τ_r)), twice over
         tau_r = params.accel_adapt_rise_s
