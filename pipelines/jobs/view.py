@@ -1,9 +1,13 @@
 """``gyroemu view LOG``: serve a gyroemu log to the Foxglove app, with play, pause, seek and speed.
 
 The log's ``cdr`` channels go out as recorded (their ``ros2msg`` schemas, the recorded bytes, each
-message's log time), with the live view's ``/tf`` and ``/scene`` drawn at a display rate from the
-log's ``/truth/imu`` and ``/estimate/imu`` (:mod:`gyroemu.pipelines.transport.foxglove_view`; a log's
-own ``/tf`` and ``/tf_static`` are not forwarded: the view's ``/tf`` takes their place).
+message's header stamp as its log time, or the record's log time for a type without a header), with
+the live view's ``/tf`` and ``/scene`` drawn at a display rate from the log's ``/truth/imu`` and
+``/estimate/imu`` (:mod:`gyroemu.pipelines.transport.foxglove_view`; a log's own ``/tf`` and
+``/tf_static`` are not forwarded then: the view's take their place). A log with neither (someone
+else's bag) keeps its own ``/tf`` and ``/tf_static``, forwarded as recorded
+(:func:`~gyroemu.pipelines.transport.foxglove_view.replaced_topics`). A ``cdr`` channel without a
+schema (``gyroemu record`` stores a topic it could not type so) is skipped with a warning naming it.
 
 Playback control is foxglove-sdk's (0.30): the server advertises the capabilities ``PlaybackControl``
 and ``Time`` and the log's time range (first and last log time), so the app shows its own play/pause
@@ -15,8 +19,9 @@ seek and change of speed) and broadcasts the current log time with each frame. A
 again from its start, skipping what comes before the time sought (one pass of decompression up to it:
 a fraction of a second for an hour's log); the end of the log is ``Ended`` until the next seek.
 
-The job runs until SIGINT or SIGTERM (exit status 130 or 143 from the command line); the file is only
-ever read.
+The job runs until SIGINT or SIGTERM (exit status 130 or 143 from the command line), then stops the
+server waiting for its clients :data:`~gyroemu.pipelines.transport.foxglove_view.STOP_TIMEOUT_S` at
+most (a client that stopped reading held it forever); the file is only ever read.
 
 From Python: ``run_view(ViewLogOptions(path=Path("run.mcap")))``.
 """
@@ -36,13 +41,15 @@ from gyroemu.pipelines.formats.mcap_log import check_mcap_noting
 from gyroemu.pipelines.formats.mcap_records import McapMessage, iter_mcap_batches
 from gyroemu.pipelines.formats.messages import starts_with_header
 from gyroemu.pipelines.transport.foxglove_view import (
-    VIEW_TOPICS,
     ViewOptions,
     ViewPublisher,
     check_view_options,
     log_channel_specs,
     log_mounting,
+    replaced_topics,
     start_view_server,
+    stop_view_server,
+    unservable,
 )
 
 __all__ = ["ViewLogOptions", "LogPlayer", "run_view"]
@@ -206,7 +213,7 @@ class LogPlayer:
             if wait_ns > 0:
                 time.sleep(min(wait_ns * 1e-9, 0.05))
                 continue
-            self.publisher.message(pending.topic, pending.data)
+            self.publisher.message(pending.topic, pending.data, pending.log_time)
             with self._lock:
                 if not self._changed:
                     self.position = pending.log_time
@@ -253,7 +260,17 @@ def run_view(
     check_view_options(options.view, "--port", "--rate")
     # validation: LogError naming the file
     log = check_mcap_noting(path, lambda message: print(f"view: warning: {message}", file=out))
-    channels = [c for c in log.channels if c.message_encoding == "cdr" and c.topic not in VIEW_TOPICS]
+    channels = []
+    for c in log.channels:
+        if c.message_encoding != "cdr":
+            continue
+        why = unservable(c.schema_name, c.message_encoding)
+        if why:
+            print(f"view: warning: {path}: skipping topic {c.topic}: {why} (the app cannot decode it)", file=out)
+        else:
+            channels.append(c)
+    replaced = replaced_topics(c.topic for c in channels)
+    channels = [c for c in channels if c.topic not in replaced]
     topics = [c.topic for c in channels]
     stamped = [
         c.topic
@@ -296,5 +313,5 @@ def run_view(
             on_ready(server.port)
         player.run(stop)
     finally:
-        server.stop()
+        stop_view_server(server)  # bounded: a client that stopped reading no longer holds the exit
     return 0

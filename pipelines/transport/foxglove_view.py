@@ -7,10 +7,14 @@ What goes out (open ``ws://localhost:8765`` in the Foxglove app, layout ``config
   into MCAP logs, with the ``ros2msg`` schema a log holds (encoding ``cdr``). The app decodes ROS 2
   messages natively, so nothing is re-encoded: forwarding a message costs one call into the SDK
   (~0.3 us without a client), and a plot in Foxglove and a field of a recorded log are the same bytes.
-  Each message's ``log_time`` is its header stamp.
+  Each message's ``log_time`` is its header stamp; a type without a header goes out at its log
+  record's time (``gyroemu view``) or its schedule's (a live stream: the wall clock of its deadline).
+  A channel without a schema (:func:`unservable`) is skipped with a warning naming it: the app could
+  not decode it, and the SDK refuses it.
 - ``/tf`` (``foxglove.FrameTransforms``): ``map`` -> ``base_link`` (the true attitude ``q_wb`` of
   ``/truth/imu``) and ``map`` -> ``body_estimate`` (the estimate's), each stamped with its message's
-  header stamp; attitude only, no translation.
+  header stamp; attitude only, no translation. A log with neither a truth nor an estimate (someone
+  else's bag) has its own ``/tf`` and ``/tf_static`` forwarded instead (:func:`replaced_topics`).
 - ``/tf_static`` (``foxglove.FrameTransforms``): ``base_link`` -> the IMU's frame, the device's mounting
   (:class:`Mounting`: a stream's device, a log's own ``/tf_static``), so the IMU frame shows in the 3D
   panel; with the first frame and every :data:`STATIC_EVERY` frames (the server keeps no latched
@@ -20,14 +24,20 @@ What goes out (open ``ws://localhost:8765`` in the Foxglove app, layout ``config
   ``g_w = (0, 0, -1)`` (ENU, unit length) and magnetic field ``m_w`` as arrows fixed in ``map`` (from
   the body's centre); the estimate's, ``R̂_bw g_w`` and ``R̂_bw m_w`` (where the estimate puts them in
   body axes), as translucent arrows on the true body, so that they depart from the truth's by the
-  estimate's tilt and heading error. ``m_w`` is the direction of the mean of ``R_wb m_b`` over the
-  measured field (``/mag``, read but not served by a live stream's view; no field arrows without a
-  magnetometer). The boxes and the truth's arrows are sent when first drawable and every 2 s; the
-  estimate's arrows every frame.
+  estimate's tilt and heading error. ``m_w`` is the direction of the mean of ``R_wb R_bs m_s`` over the
+  measured field (``/mag``, in the IMU's axes, turned into the body's by the mounting ``q_bs``; read
+  but not served by a live stream's view; no field arrows without a magnetometer). The boxes and the
+  truth's arrows are sent when first drawable and every 2 s; the estimate's arrows every frame.
 - ``/view/errors`` (JSON, :data:`ERRORS_SCHEMA`), every :data:`ERRORS_EVERY` frames: the attitude error
   (angle and rotation vector of ``q_truth^-1 (x) q_estimate``), the filter's bias estimate (measured less
   bias-corrected rate) and the device's error against the truth (its true bias plus the mean noise),
-  means over the samples since the last one: what the layout plots.
+  means over the samples since the last one: what the layout plots. All in body axes: the measured
+  ``/imu`` rate ``ω_s`` is turned by the mounting, ``R_bs ω_s``, as
+  :mod:`gyroemu.pipelines.estimation.mounting` turns it (``/truth/imu`` and ``/estimate/imu`` are the
+  body's); an identity mounting turns nothing.
+
+Closing the view stops its server waiting :data:`STOP_TIMEOUT_S` at most (:func:`stop_view_server`): the
+SDK's ``stop()`` waits for every client, and one that stopped reading held the command forever.
 
 ``/tf`` and ``/scene`` (built with ``foxglove.messages``, encoded by the SDK) go out at a display rate
 (``--foxglove-rate``, default 30 Hz), not at the IMU's. The default is the benchmark's
@@ -59,6 +69,7 @@ From Python::
 from __future__ import annotations
 
 import errno
+import logging
 import math
 import os
 import queue
@@ -67,7 +78,7 @@ import struct
 import threading
 import time
 from collections import deque
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -114,9 +125,13 @@ __all__ = [
     "live_view_topics",
     "imu_fields",
     "log_channel_specs",
+    "replaced_topics",
+    "unservable",
     "check_view_options",
     "ViewOptionError",
     "start_view_server",
+    "stop_view_server",
+    "STOP_TIMEOUT_S",
     "ViewPublisher",
     "FoxgloveView",
 ]
@@ -131,7 +146,14 @@ TF_STATIC_TOPIC = "/tf_static"
 SCENE_TOPIC = "/scene"
 ERRORS_TOPIC = "/view/errors"
 VIEW_TOPICS = (TF_TOPIC, TF_STATIC_TOPIC, SCENE_TOPIC, ERRORS_TOPIC)
-"""The view's own topics (and ``/tf_static``): a log's channels of these names are not forwarded."""
+"""The view's own topics (and ``/tf_static``): a log's channels of these names are not forwarded (but a
+log's ``/tf`` and ``/tf_static`` where the view draws no tree of its own: :func:`replaced_topics`)."""
+STOP_TIMEOUT_S = 2.0
+"""Seconds closing the view waits for the SDK's ``WebSocketServer.stop()``, which waits for every
+client's connection to close, with no limit, in native code (where the main thread sees no Ctrl-C): a
+client that stopped reading (a frozen app, a laptop's lid shut) held ``stream``, ``replay`` and ``view``
+forever. A client that reads closes within milliseconds; after this the command exits without waiting
+(:func:`stop_view_server`)."""
 QUEUE_DEPTH = 64
 """Batches waiting for the view's worker, at most (then batches are dropped, never waited for)."""
 FIELD_EVERY = 8
@@ -173,6 +195,7 @@ ERRORS_SCHEMA = {
 }
 """JSON schema of :data:`ERRORS_TOPIC` (JSON messages; absent fields: not available at that frame)."""
 
+_log = logging.getLogger(__name__)
 _GRAVITY_W = np.array([0.0, 0.0, -1.0])  # ENU: gravity points to -z (interface.md), unit length
 _BOX = (0.6, 0.4, 0.15)  # m, the body's box (x, y, z)
 _GRAVITY_RGBA = (0.2, 0.4, 1.0, 1.0)
@@ -284,14 +307,31 @@ def live_view_topics(topics: Iterable[str]) -> tuple[list[str], list[str]]:
     return [t for t in topics if split_topic(t)[1] in roles], [t for t in topics if split_topic(t)[1] == MAG_ROLE]
 
 
+def replaced_topics(topics: Iterable[str]) -> frozenset[str]:
+    """The topics of a log (``topics``) whose channels the view's own take the place of: ``/scene`` and
+    ``/view/errors`` always; ``/tf`` and ``/tf_static`` when the log has a truth or an estimate
+    (``/truth/imu``, ``/estimate/imu``) for the view to draw them from. A log without either (someone
+    else's bag) keeps its own tree: the view would put nothing on ``/tf``."""
+    draws = any(split_topic(t)[1] in (TRUTH_ROLE, ESTIMATE_ROLE) for t in topics)
+    return frozenset(VIEW_TOPICS if draws else (SCENE_TOPIC, ERRORS_TOPIC))
+
+
+def unservable(schema_name: str, message_encoding: str) -> str:
+    """Why the view cannot serve a channel (``''``: it can): a channel without a schema, unless it is
+    JSON (``gyroemu record`` stores a topic it could not type without one; the Foxglove app decodes a
+    ``cdr`` message only by its schema, and the SDK refuses such a channel)."""
+    return "" if schema_name or message_encoding == "json" else "no schema"
+
+
 def log_channel_specs(
     channels: Iterable[ChannelInfo], topics: Iterable[str], stamped: Iterable[str]
 ) -> list[ChannelSpec]:
     """:class:`ChannelSpec` of an MCAP file's channels (:class:`gyroemu.pipelines.formats.mcap_records.ChannelInfo`)
     of ``topics``, their schemas as recorded; ``stamped``: the topics whose type starts with a header.
-    A log's own ``/tf`` and ``/tf_static`` (and any ``/scene``, ``/view/errors``) are left out: the
-    view's channels of those names take their place."""
-    wanted, stamped = set(topics) - set(VIEW_TOPICS), set(stamped)
+    The channels the view's own take the place of (:func:`replaced_topics`: a log's ``/tf`` and
+    ``/tf_static`` where it has a truth or an estimate, any ``/scene``, ``/view/errors``) are left out."""
+    topics = list(topics)
+    wanted, stamped = set(topics) - replaced_topics(topics), set(stamped)
     return [
         ChannelSpec(c.topic, c.schema_name, c.schema_encoding, c.schema_data, c.message_encoding, c.topic in stamped)
         for c in channels
@@ -321,6 +361,12 @@ def check_view_options(
         raise ViewOptionError(f"argument {port_arg}: must be a TCP port, 0 to 65535, got {port}")
     host = options.host
     with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM) as s:
+        if os.name != "nt":
+            # as the SDK's listener (tokio) binds: a port whose last connection lingers in TIME_WAIT (a
+            # client closed cleanly, for up to 60 s) is free to listen on; one a socket listens on (on
+            # this address, 0.0.0.0 or ::) is still refused. (Not on Windows, where the option lets a
+            # socket take a port another one listens on.)
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             s.bind((host, port))  # port 0: any free one, so only the host is checked
         except OSError as e:
@@ -363,6 +409,23 @@ def start_view_server(
     except RuntimeError as e:
         raise ValueError(f"argument {port_arg}: {options.host}:{options.port}: {e}") from None
     return context, server
+
+
+def stop_view_server(server: WebSocketServer, timeout_s: float = STOP_TIMEOUT_S) -> bool:
+    """Stop a server (``server.stop()``) waiting at most ``timeout_s`` (:data:`STOP_TIMEOUT_S`); True
+    when it stopped. The SDK's stop waits for every client without a limit: it runs on a daemon
+    thread, which a client that never reads leaves behind (the process exits without it). The wait
+    is in Python, so a SIGINT or SIGTERM during it still raises in the main thread."""
+    stopper = threading.Thread(target=server.stop, name="gyroemu-foxglove-stop", daemon=True)
+    stopper.start()
+    stopper.join(timeout_s)
+    if stopper.is_alive():
+        _log.warning(
+            "the Foxglove server did not stop within %g s (a client that stopped reading): exiting without it",
+            timeout_s,
+        )
+        return False
+    return True
 
 
 def _matrix(q: Sequence[float]) -> NDArray[np.float64]:
@@ -473,13 +536,21 @@ class ViewPublisher:
     channels : iterable of ChannelSpec
         The forwarded channels. The first ``truth/imu`` topic's device is drawn: its ``/truth/imu``
         drives ``base_link``, its ``/estimate/imu`` ``body_estimate``, its ``/mag`` the field arrows.
+        A channel the SDK cannot serve (:func:`unservable`: ``cdr`` without a schema) is skipped with a
+        warning naming it. A forwarded ``/tf`` or ``/tf_static`` (a log the view draws nothing of:
+        :func:`replaced_topics`) takes the place of the view's own.
     mounting : Mounting or None
-        The IMU's frame on the body, published on ``/tf_static``; None: no ``/tf_static``.
+        The IMU's frame on the body, published on ``/tf_static``; None: no ``/tf_static``. Its turn
+        ``q_bs`` also takes the IMU's sensor-axes ``/imu`` rate and ``/mag`` field into body axes, where
+        ``/truth/imu`` and ``/estimate/imu`` are (``gyroemu estimate`` writes a mounted device's
+        estimate as the body's), for ``/view/errors`` and the field's arrow.
 
     Attributes
     ----------
     messages, frames : int
         Messages forwarded and frames drawn so far.
+    skipped : dict
+        ``{topic: why}`` of the channels not served.
     """
 
     def __init__(
@@ -488,8 +559,27 @@ class ViewPublisher:
         import foxglove
         from foxglove.channels import FrameTransformsChannel, SceneUpdateChannel
 
+        # sensor axes -> body axes (None: an identity mounting, nothing turned, the bytes as they were);
+        # first, so that the slow part (an import, a compiled loop) does not split the channels' advertising
+        self._q_bs: NDArray[np.float64] | None = None
+        self._turn: Callable[[Any, NDArray[np.float64]], NDArray[np.float64]] | None = None
+        if mounting is not None and np.any(np.asarray(mounting.q_bs, dtype=float)[1:] != 0.0):
+            # imported only for a turned mounting: the estimation package takes ~0.6-0.9 s to import
+            from gyroemu.pipelines.estimation.mounting import body_vectors, mounting_turn
+
+            self._q_bs, self._turn = mounting_turn(mounting.q_bs), body_vectors
+            if self._q_bs is not None:  # its compiled loops loaded now, not in the first frames (~0.3 s):
+                for rows in (1, 2):  # one row (a field) and several (rates; q_bs broadcast, not contiguous)
+                    body_vectors(np.zeros((rows, 3)), self._q_bs)
+
         self._channels: dict[str, tuple[foxglove.Channel | None, bool]] = {}
+        self.skipped: dict[str, str] = {}
         for spec in channels:
+            why = unservable(spec.schema_name, spec.message_encoding) if spec.forward else ""
+            if why:
+                self.skipped[spec.topic] = why
+                _log.warning("Foxglove view: skipping topic %s: %s (the app cannot decode it)", spec.topic, why)
+                continue
             schema = (
                 foxglove.Schema(name=spec.schema_name, encoding=spec.schema_encoding, data=spec.schema_data)
                 if spec.schema_name
@@ -517,9 +607,15 @@ class ViewPublisher:
             t: (None if c is None else c.base.log, stamped, self._followed.get(t))
             for t, (c, stamped) in self._channels.items()
         }
-        self._tf = FrameTransformsChannel(TF_TOPIC, context=context)
+        forwarded = set(self.topics)
+        # a log's own tree, forwarded (replaced_topics), or the view's drawn one
+        self._tf = None if TF_TOPIC in forwarded else FrameTransformsChannel(TF_TOPIC, context=context)
         self.mounting = mounting
-        self._tf_static = None if mounting is None else FrameTransformsChannel(TF_STATIC_TOPIC, context=context)
+        self._tf_static = (
+            None
+            if mounting is None or TF_STATIC_TOPIC in forwarded
+            else FrameTransformsChannel(TF_STATIC_TOPIC, context=context)
+        )
         self._scene = SceneUpdateChannel(SCENE_TOPIC, context=context)
         self._errors = foxglove.Channel(ERRORS_TOPIC, schema=ERRORS_SCHEMA, context=context)
         self._field_sum = [0.0, 0.0, 0.0]
@@ -534,15 +630,16 @@ class ViewPublisher:
         """The served topics."""
         return [t for t, (c, _) in self._channels.items() if c is not None]
 
-    def message(self, topic: str, payload: bytes) -> None:
-        """Forward one message (its header stamp as log time); unknown topics are ignored."""
+    def message(self, topic: str, payload: bytes, log_time: int | None = None) -> None:
+        """Forward one message: its header stamp as log time, or, for a type without a header,
+        ``log_time`` (a log's record's; None: the SDK's, now). Unknown topics are ignored."""
         route = self._route.get(topic)
         if route is None:
             return
         log, stamped, track = route
         if not stamped:
             if log is not None:
-                log(payload, None, None)
+                log(payload, log_time, None)
                 self.messages += 1
             return
         sec, nanosec = _STAMP.unpack_from(payload, 4)  # header.stamp after the encapsulation header
@@ -602,7 +699,8 @@ class ViewPublisher:
                 )
             )
         stamp_ns = max(att[0] for att in (truth, estimate) if att is not None)
-        self._tf.log(FrameTransforms(transforms=transforms), log_time=stamp_ns)
+        if self._tf is not None:
+            self._tf.log(FrameTransforms(transforms=transforms), log_time=stamp_ns)
         if self._tf_static is not None and self.frames % STATIC_EVERY == 1:
             self._tf_static.log(self._mounting_transforms(stamp_ns), log_time=stamp_ns)
         if self.frames % FIELD_EVERY == 1:
@@ -639,12 +737,19 @@ class ViewPublisher:
         errors: dict[str, Any] = {}
         if wanted:
             _, _, _, rate, has_rate = imu_fields(wanted)  # one read of every message needed
+            q_bs, turn = self._q_bs, self._turn
+
+            def measured(rows: slice) -> NDArray[np.float64]:
+                """``/imu``'s rates in body axes, ``R(q_bs) ω_s``, as the truth's and the estimate's are."""
+                # (contiguous rows: the layout the compiled loop was loaded for in __init__)
+                return rate[rows] if q_bs is None or turn is None else turn(np.ascontiguousarray(rate[rows]), q_bs)
+
             if truth_rows.stop > truth_rows.start and np.all(has_rate[truth_rows]):
                 # the device's error against the truth: its true bias plus the window's mean noise
-                errors["gyro_error_rad_s"] = np.mean(rate[truth_gyro] - rate[truth_rows], axis=0).tolist()
+                errors["gyro_error_rad_s"] = np.mean(measured(truth_gyro) - rate[truth_rows], axis=0).tolist()
             if estimate_rows.stop > estimate_rows.start and np.all(has_rate[estimate_rows]):
                 # the filter's bias: measured rate less its bias-corrected rate
-                errors["bias_estimate_rad_s"] = np.mean(rate[estimate_gyro] - rate[estimate_rows], axis=0).tolist()
+                errors["bias_estimate_rad_s"] = np.mean(measured(estimate_gyro) - rate[estimate_rows], axis=0).tolist()
         if truth_then is not None and estimate is not None:
             # body-frame error dq = q_truth^* (x) q_estimate (Hamilton product), so q_estimate = q_truth (x) dq
             a0, a1, a2, a3 = truth_then[1]
@@ -665,15 +770,18 @@ class ViewPublisher:
         return {k: v for k, v in errors.items() if all(map(math.isfinite, np.ravel(v)))}
 
     def _update_field(self, truth: tuple[int, list[float]] | None) -> None:
-        """Add ``R_wb m_b`` of the latest measured field to the running sum whose direction is ``m_w``."""
+        """Add ``R_wb R_bs m_s`` of the latest measured field (``m_s``: the IMU's axes) to the running sum
+        whose direction is ``m_w``."""
         payload = self.mag.payload
         if truth is None or payload is None or payload is self._field_seen:
             return
         self._field_seen = payload
         # sensor_msgs/msg/MagneticField: the header, then (8-aligned) magnetic_field x, y, z, tesla
-        m_b = _STRUCT_3D.unpack_from(payload, _body_offset(payload))
+        m_b: tuple[float, ...] = _STRUCT_3D.unpack_from(payload, _body_offset(payload))
         if not all(map(math.isfinite, m_b)):
             return
+        if self._q_bs is not None and self._turn is not None:
+            m_b = tuple(self._turn(np.array([m_b]), self._q_bs)[0].tolist())  # m_b = R_bs m_s
         m_w = _rotate(truth[1], m_b)
         total = self._field_sum = [a + b for a, b in zip(self._field_sum, m_w)]
         norm = math.sqrt(sum(c * c for c in total))
@@ -842,6 +950,7 @@ class FoxgloveView:
         self._pending: deque[Batch] = deque()  # taken from the queue, not yet all due
         self._cursor = 0  # the first message of pending[0] not yet forwarded
         self._anchor_ns: int | None = None
+        self._anchor_epoch_ns = 0  # the wall clock (ns since the epoch) at the anchor
         self._followed: list[tuple[zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]], str]] = []
         self._follow_lock = threading.Lock()
         self._stop = threading.Event()
@@ -859,7 +968,7 @@ class FoxgloveView:
         """Queue a batch for the view without waiting: False (dropped) when the view is behind. The first
         call starts the view's clock (the publisher's ``t_start``)."""
         if self._anchor_ns is None:
-            self._anchor_ns = time.monotonic_ns()
+            self._anchor_ns, self._anchor_epoch_ns = time.monotonic_ns(), time.time_ns()
         try:
             self._queue.put_nowait(batch)
             return True
@@ -882,7 +991,8 @@ class FoxgloveView:
 
     def close(self, timeout_s: float = 2.0) -> None:
         """Stop the worker (what is queued and due within ``timeout_s`` is still shown), the
-        subscribers and the server."""
+        subscribers and the server (waiting for it :data:`STOP_TIMEOUT_S` at most:
+        :func:`stop_view_server`)."""
         end = time.monotonic() + timeout_s
         while (not self._queue.empty() or self._pending) and time.monotonic() < end and self._thread.is_alive():
             time.sleep(0.01)
@@ -895,7 +1005,7 @@ class FoxgloveView:
                 except Exception:  # zenoh.ZError: its session has closed already
                     pass
             self._followed.clear()
-        self._server.stop()
+        stop_view_server(self._server)
 
     def _drain_followed(self) -> None:
         with self._follow_lock:
@@ -911,7 +1021,8 @@ class FoxgloveView:
     def _run(self) -> None:
         """Tick at the display rate: forward what is due (paced: offset <= now - t_start; else all that
         is queued), then draw a frame if a truth or an estimate came in. One wake-up a frame, the
-        messages forwarded a frame's worth at a time."""
+        messages forwarded a frame's worth at a time. A message of a type without a header goes out at
+        its schedule's time (paced: the wall clock of its deadline; else the SDK's, now)."""
         step_ns = round(1e9 / self.options.rate_hz)
         publisher, key_topics, pending = self.publisher, self._key_topics, self._pending
         next_tick = time.monotonic_ns()
@@ -927,6 +1038,7 @@ class FoxgloveView:
                 except queue.Empty:
                     break
             due = (now - self._anchor_ns) if self._paced and self._anchor_ns is not None else None
+            epoch = self._anchor_epoch_ns  # + offset: a message's deadline on the wall clock
             before = publisher.truth.stamp, publisher.estimate.stamp
             while pending:
                 batch = pending[0]
@@ -937,7 +1049,7 @@ class FoxgloveView:
                         break
                     topic = key_topics.get(key)
                     if topic is not None:
-                        publisher.message(topic, payload)
+                        publisher.message(topic, payload, None if due is None else epoch + offset)
                     i += 1
                 if i < n:
                     self._cursor = i

@@ -43,6 +43,10 @@ publishers. ``/tf`` and ``/tf_static`` are the ROS 2 graph's own topics, not a d
 (:data:`~gyroemu.pipelines.formats.ros2_keys.GLOBAL_TOPICS`): they go to ``/tf`` and ``/tf_static``,
 their publishers advertising tf2's QoS (``/tf_static`` transient local;
 :func:`~gyroemu.pipelines.formats.ros2_keys.topic_qos`), so tf2 listeners on rmw_zenoh get the tree.
+zenoh keeps no history for a listener that joins later, so, as ``gyroemu stream`` does, the replay
+sends the file's ``/tf_static`` messages again, the same bytes, every
+:data:`~gyroemu.pipelines.formats.frames.TF_STATIC_REPEAT_S` of log time after the first (the distinct
+ones seen so far, :data:`TF_STATIC_KEEP` at most, with the deadline of the message they precede).
 The type is the channel's schema name; the hash is the channel's ``topic_type_hash``
 metadata (rosbag2 records it since Iron) or else computed by REP-2011 from the channel's ``ros2msg``
 schema. A channel with neither (no schema, an IDL schema and no recorded hash) is skipped with a
@@ -108,7 +112,7 @@ from gyroemu.pipelines.formats.channels import (
     role_topic,
     split_topic,
 )
-from gyroemu.pipelines.formats.frames import TF_STATIC_TOPIC, TF_TOPIC
+from gyroemu.pipelines.formats.frames import TF_STATIC_REPEAT_S, TF_STATIC_TOPIC, TF_TOPIC
 from gyroemu.pipelines.formats.mcap_log import check_mcap_noting
 from gyroemu.pipelines.formats.mcap_records import iter_mcap_batches
 from gyroemu.pipelines.formats.messages import CLOCK_TYPE, encode_clock, shift_header_stamp, starts_with_header
@@ -141,12 +145,19 @@ __all__ = [
     "READ_AHEAD",
     "BATCH",
     "CLOCK_HZ",
+    "TF_STATIC_KEEP",
     "MIN_RATE",
     "MAX_RATE",
 ]
 
 CLOCK_HZ = 40.0
 """``--clock``: /clock messages a second of wall time, at most (``ros2 bag play --clock``'s default)."""
+
+TF_STATIC_KEEP = 64
+"""ROS 2 mode: distinct ``/tf_static`` messages a replay re-sends every
+:data:`~gyroemu.pipelines.formats.frames.TF_STATIC_REPEAT_S` of log time, at most (the latest): a tree
+has a few (one per static broadcaster of a bag; gyroemu's logs one per device), so this only bounds the
+memory of a file that writes a new one at every message."""
 
 # The speed factors the pacing can do. A deadline is round(log time since the start / rate) ns: at 1e6
 # a 1 kHz log's 1 ms becomes the deadline's 1 ns, so a faster factor changes nothing (the publisher
@@ -296,7 +307,10 @@ class ReadAhead(ReadAheadThread):
     With ``loop``, the messages of the topics in ``stamped`` (types that start with a header) get their
     header stamps moved by each pass's shift (none in pass 0). ``clock_key``: a ``rosgraph_msgs/msg/Clock``
     of the (shifted) log time goes there with the first message of every log-time step of at least
-    ``rate / CLOCK_HZ`` s.
+    ``rate / CLOCK_HZ`` s. ``repeat_static`` (ROS 2 mode: ``/tf_static``): that topic's distinct
+    messages seen so far go out again, as last sent, every
+    :data:`~gyroemu.pipelines.formats.frames.TF_STATIC_REPEAT_S` of log time after the first, each
+    time just before the message then due (:data:`TF_STATIC_KEEP` at most).
     """
 
     def __init__(
@@ -308,17 +322,24 @@ class ReadAhead(ReadAheadThread):
         depth: int = READ_AHEAD,
         stamped: Iterable[str] = (),
         clock_key: str | None = None,
+        repeat_static: str | None = None,
     ) -> None:
         super().__init__(depth, name="replay-read-ahead")
         self.path, self.keys, self.rate, self.loop = path, keys, float(rate), loop
         self.stamped = frozenset(stamped)
         self.clock_key = clock_key
+        self.repeat_static = repeat_static if repeat_static in keys else None
         self.passes = 0
 
     def produce(self) -> Generator[Batch, None, None]:
         keys, rate, stamped, clock_key = self.keys, self.rate, self.stamped, self.clock_key
         clock_step = round(rate * 1e9 / CLOCK_HZ)  # ns of log time between /clock messages, at least
         clock_next = None
+        static_topic = self.repeat_static
+        static_key = "" if static_topic is None else keys[static_topic]  # (unused without one)
+        static_step = round(TF_STATIC_REPEAT_S * 1e9)  # ns of log time between repeats
+        statics: dict[bytes, bytes] = {}  # /tf_static as recorded -> as last sent (stamps shifted by --loop)
+        static_next: int | None = None  # the (shifted) log time of the next repeat
         offset = 0  # ns of log time added to this pass
         first = None
         while not self.stopping.is_set():
@@ -343,7 +364,17 @@ class ReadAhead(ReadAheadThread):
                     if clock_key is not None and (clock_next is None or m.log_time + offset >= clock_next):
                         items.append((deadline, clock_key, encode_clock(m.log_time + offset)))
                         clock_next = m.log_time + offset + clock_step
+                    if static_next is not None and m.log_time + offset >= static_next:
+                        items.extend((deadline, static_key, payload) for payload in statics.values())
+                        static_next = m.log_time + offset + static_step
                     items.append((deadline, keys[m.topic], data))
+                    if m.topic == static_topic:
+                        statics.pop(m.data, None)  # the latest last
+                        statics[m.data] = data
+                        if len(statics) > TF_STATIC_KEEP:
+                            del statics[next(iter(statics))]
+                        if static_next is None:
+                            static_next = m.log_time + offset + static_step
                 last = batch[-1].log_time
                 while batch:  # free the McapMessage tuples a slice at a time: a deallocation holds
                     del batch[-BATCH:]  # the GIL throughout, and 4000 at once take ~0.5 ms
@@ -479,7 +510,11 @@ def run_replay(options: ReplayOptions, *, out: TextIO = sys.stdout) -> int:
             publisher = live.publish(sorted(set(keys.values()) | ({clock_key} if clock_key else set())), pacing.timing)
             if ros is not None:
                 ros.declare(session, out)
-            reader = ReadAhead(path, keys, rate, loop, stamped=stamped, clock_key=clock_key)
+            # ROS 2 mode: /tf_static advertised transient local, but zenoh keeps no history: repeated
+            repeat_static = TF_STATIC_TOPIC if ros is not None else None
+            reader = ReadAhead(
+                path, keys, rate, loop, stamped=stamped, clock_key=clock_key, repeat_static=repeat_static
+            )
             reader.start()  # fills its queue while we wait for subscribers
             stop = live.stopped
             wait_s = pacing.wait_s

@@ -416,3 +416,105 @@ def test_recorder_maps_ros2_keys_back_to_topics(tmp_path):
     assert channels["/raw/rate_gyro"].schema_name == raw.name
     assert channels["/raw/rate_gyro"].metadata["topic_type_hash"] == raw_hash
     assert channels["/imu"].metadata["topic_type_hash"] == PUBLISHED[IMU.name]
+
+
+# -- /tf_static of a ROS 2 replay: advertised transient local, so sent again for late listeners ------------
+
+
+def _bag_with_tf_static(folder: Path, seconds: float) -> Path:
+    """A bag written by rosbags (MCAP storage): ``/imu`` at 100 Hz for ``seconds`` from 2024-06-01 and
+    ``/tf_static`` (``base_link`` -> ``imu_link``) once, with the first sample. Returns the MCAP file."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    t = ts.types
+    Header, Time = t["std_msgs/msg/Header"], t["builtin_interfaces/msg/Time"]
+    Q, V, Imu = t["geometry_msgs/msg/Quaternion"], t["geometry_msgs/msg/Vector3"], t["sensor_msgs/msg/Imu"]
+    TS, Tr, TF = t["geometry_msgs/msg/TransformStamped"], t["geometry_msgs/msg/Transform"], t["tf2_msgs/msg/TFMessage"]
+    t0, cov = 1_717_200_000 * 10**9, np.zeros(9)
+
+    def header(ns: int, frame: str):
+        return Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id=frame)
+
+    with Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        ci = w.add_connection("/imu", Imu.__msgtype__, typestore=ts)
+        cs = w.add_connection("/tf_static", TF.__msgtype__, typestore=ts)
+        for k in range(round(seconds * 100)):
+            lt = t0 + k * 10_000_000
+            if k == 0:
+                mount = Tr(translation=V(x=0.1, y=0.0, z=0.0), rotation=Q(x=0.0, y=0.0, z=0.0, w=1.0))
+                static = TF(transforms=[TS(header=header(lt, "base_link"), child_frame_id="imu_link", transform=mount)])
+                w.write(cs, lt, ts.serialize_cdr(static, TF.__msgtype__))
+            imu = Imu(
+                header=header(lt, "imu_link"),
+                orientation=Q(x=0.0, y=0.0, z=0.0, w=1.0),
+                orientation_covariance=cov,
+                angular_velocity=V(x=0.0, y=0.0, z=0.1 * k),
+                angular_velocity_covariance=cov,
+                linear_acceleration=V(x=0.0, y=0.0, z=9.81),
+                linear_acceleration_covariance=cov,
+            )
+            w.write(ci, lt, ts.serialize_cdr(imu, Imu.__msgtype__))
+    (path,) = folder.glob("*.mcap")
+    return path
+
+
+def _produced(path: Path, keys: dict[str, str], loop: bool = False, until_ns: int | None = None, **kw) -> list:
+    """Every ``(deadline ns, key, payload)`` a replay's reader makes of ``path`` at rate 1 (its generator,
+    no thread), up to deadline ``until_ns`` when looping."""
+    from gyroemu.pipelines.transport.replay import ReadAhead
+
+    out = []
+    for batch in ReadAhead(path, keys, 1.0, loop, **kw).produce():
+        out.extend(batch)
+        if until_ns is not None and batch[-1][0] > until_ns:
+            break
+    return out
+
+
+def test_replay_sends_tf_static_again_every_second_of_log_time(tmp_path):
+    """ROS 2 mode: the reader sends the file's ``/tf_static`` again, the same bytes, every
+    TF_STATIC_REPEAT_S of log time (as ``gyroemu stream`` does); every other message is as it was, in
+    the same order. With ``--loop`` the repeats are the pass's message (stamps shifted)."""
+    from gyroemu.pipelines.formats.frames import TF_STATIC_REPEAT_S
+
+    path = _bag_with_tf_static(tmp_path / "bag", 3.5)
+    keys = {"/imu": "d/imu", "/tf_static": "d/tf_static"}
+    recorded = [d for _, _, d in mcap_messages(path, "/tf_static")]
+    plain = _produced(path, keys)
+    repeated = _produced(path, keys, repeat_static="/tf_static")
+    assert [x for x in repeated if x[1] != "d/tf_static"] == [x for x in plain if x[1] != "d/tf_static"]
+    statics = [(t, d) for t, k, d in repeated if k == "d/tf_static"]
+    step = round(TF_STATIC_REPEAT_S * 1e9)
+    assert [t for t, _ in statics] == [0, step, 2 * step, 3 * step]
+    assert all(d == recorded[0] for _, d in statics)
+    assert [d for t, k, d in plain if k == "d/tf_static"] == recorded  # without: once
+    # looping: pass 1's message (stamps moved by the pass's shift) and its repeats
+    looped = _produced(path, keys, True, 6 * step, repeat_static="/tf_static")
+    second = [(t, d) for t, k, d in looped if k == "d/tf_static" and t >= 3.5 * step]
+    assert second and second[0][1] != recorded[0] and all(d == second[0][1] for _, d in second)
+
+
+@pytest.mark.slow
+def test_a_tf2_listener_joining_a_ros2_replay_late_gets_the_mounting(procs, tmp_path):
+    """``replay --ros2`` advertises ``/tf_static`` transient local (tf2's StaticBroadcasterQoS) but zenoh
+    keeps no history: a listener that joins 1.5 s in gets the file's ``/tf_static`` (the same bytes) from
+    the repeats; it got none."""
+    from gyroemu.pipelines.transport.zenoh_io import drain, open_session, session_config, subscribe
+
+    path = _bag_with_tf_static(tmp_path / "bag", 3.5)
+    recorded = [d for _, _, d in mcap_messages(path, "/tf_static")]
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    session = open_session(session_config(listen=[endpoint], mode="peer"))
+    try:
+        procs.start("replay", "replay", str(path), "--ros2", "--domain", "57", "--wait", "0", "--connect", endpoint)
+        procs.wait_for("replay", "replay: publishing")
+        time.sleep(1.5)
+        late = subscribe(session, "57/tf_static/**")
+        assert procs.wait("replay", 30) == 0, procs.log("replay")
+        time.sleep(0.3)
+        got = [bytes(s.payload.to_bytes()) for s in drain(late)]
+    finally:
+        session.close()
+    assert got and all(d == recorded[0] for d in got), (len(got), procs.log("replay"))
