@@ -303,9 +303,15 @@ class BenchReport:
             "gyro minus the true rate averaged over 1 s (— : the filter estimates no bias, or the "
             "truth has no rate)."
         )
+        per_task = any(case.source.get("runs_at_once") for case in self.cases for fr in case.filters if fr.batched)
         lines.append(
-            "Throughput: samples per second of process() wall time; [batched] rows: filter updates "
-            "per second across all runs at once."
+            "Throughput: samples per second of process() wall time; "
+            + (
+                "[batched] rows: filter updates per second across the runs one task ran at once (its "
+                "consecutive seeds, at most seeds_per_task)."
+                if per_task  # a campaign's: each task batches its own seeds
+                else "[batched] rows: filter updates per second across all runs at once."
+            )
         )
         lines.append(
             f"Diverged: non-finite output, or inclination error RMS above "
@@ -346,11 +352,12 @@ class BenchReport:
             else:
                 cells.append(_cell(fr.summary(metric), digits, metric))
         tp = fr.summary("throughput")
-        cells.append(
-            "—"
-            if tp["mean"] is None
-            else (f"{_si(tp['mean'])} updates/s ({n_runs} runs at once)" if fr.batched else _si(tp["mean"]))
-        )
+        batches = case.source.get("runs_at_once")  # a campaign's: each task's batch; bench: all the runs
+        together = _runs_at_once(batches) if batches else f"({n_runs} runs at once)"
+        if tp["mean"] is None:
+            cells.append("—")
+        else:
+            cells.append(f"{_si(tp['mean'])} updates/s {together}" if fr.batched else _si(tp["mean"]))
         if fr.diverged_runs:
             cells.append(f"diverged ({fr.diverged_runs} of {n_runs} runs)" if n_runs > 1 else "diverged")
         else:
@@ -627,6 +634,14 @@ def report_figures(data: dict[str, Any]) -> dict[str, Any]:
                 run.pop("wall_s", None)
                 run.pop("throughput", None)
     return data
+
+
+def _runs_at_once(sizes: list[int]) -> str:
+    """``sizes`` (ascending) of a batched row's batches as its throughput cell says them: ``(25 runs at
+    once)``, ``(5–25 runs at once)`` (a campaign's tasks, ``source.runs_at_once``), ``(1 run at once)``."""
+    if sizes[0] == sizes[-1]:
+        return f"({sizes[0]} run{'s' if sizes[0] != 1 else ''} at once)"
+    return f"({sizes[0]}–{sizes[-1]} runs at once)"
 
 
 def _si(x: float) -> str:

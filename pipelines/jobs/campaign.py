@@ -511,22 +511,11 @@ def campaign_report(
     return BenchReport(cases=cases, settings=settings, notes=notes, unavailable=dict(campaign.unavailable))
 
 
-_BATCHED_THROUGHPUT = "[batched] rows: filter updates per second across all runs at once."
-"""bench's words for a batched row's throughput, which a campaign's report says of a task's runs."""
-
 BATCHED_THROUGHPUT = (
     "batched: filter updates/s across the runs one task ran at once (its consecutive seeds, at most "
     "seeds_per_task; the case's source.runs_at_once), not across all the runs of the case"
 )
 """A campaign report's definition of a batched row's throughput (``bench.json``'s ``definitions``)."""
-
-
-def _runs_at_once(sizes: list[int]) -> str:
-    """``sizes`` (ascending) of a case's batches as the throughput cell says them: ``(25 runs at once)``,
-    ``(5–25 runs at once)``, ``(1 run at once)``."""
-    if sizes[0] == sizes[-1]:
-        return f"({sizes[0]} run{'s' if sizes[0] != 1 else ''} at once)"
-    return f"({sizes[0]}–{sizes[-1]} runs at once)"
 
 
 def _markdown(report: BenchReport) -> str:
@@ -542,26 +531,6 @@ def _markdown(report: BenchReport) -> str:
         head += ["", "Failed cells (run the campaign again to retry them):"]
         head += [f"- {f['cell']}, seeds {f['seeds'][0]}…{f['seeds'][-1]}: {f['error']}" for f in c["failures"]]
     body = report.to_markdown().split("\n", 1)[1]  # bench's own text, without its title
-    # bench says a batched row's updates/s are across all the case's runs at once; a campaign batches
-    # only each task's seeds: the table's cell and the note say so
-    lines = body.split("\n")
-    batched = False
-    for case in report.cases:
-        sizes: list[int] = case.source.get("runs_at_once") or []
-        for fr in case.filters if sizes else []:
-            if not fr.batched:
-                continue
-            batched = True
-            row = f"| {case.name} | {fr.label} |"
-            said = f"({len(fr.runs)} runs at once)"
-            lines = [line.replace(said, _runs_at_once(sizes)) if line.startswith(row) else line for line in lines]
-    body = "\n".join(lines)
-    if batched:
-        body = body.replace(
-            _BATCHED_THROUGHPUT,
-            "[batched] rows: filter updates per second across the runs one task ran at once (its consecutive "
-            "seeds, at most seeds_per_task).",
-        )
     return "\n".join(head) + "\n" + body
 
 
