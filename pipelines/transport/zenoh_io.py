@@ -104,6 +104,7 @@ __all__ = [
     "connect_warning",
     "config_key",
     "ConfigAnnouncer",
+    "StandingAnswer",
     "CONFIG_TOPIC",
     "config_fields",
     "TYPES_CHUNK",
@@ -559,7 +560,35 @@ def config_fields(payload: bytes, attachment: bytes | None = None) -> dict[str, 
     return fields
 
 
-class ConfigAnnouncer:
+class StandingAnswer:
+    """A queryable on ``key`` that answers every ``get`` with the same ``payload`` (and ``attachment``)
+    for as long as the session lives: what a late joiner asks for (:class:`ConfigAnnouncer`,
+    :class:`TypesAnnouncer`). ``queries`` counts the answers given; :meth:`close` undeclares it."""
+
+    def __init__(self, session: zenoh.Session, key: str, payload: bytes, attachment: bytes | None = None) -> None:
+        self.key = key
+        self.payload = payload
+        self.attachment = attachment
+        self.queries = 0
+        self._queryable = session.declare_queryable(key, self._reply)
+
+    def _reply(self, query: zenoh.Query) -> None:
+        try:
+            if self.attachment is None:
+                query.reply(self.key, self.payload)
+            else:
+                query.reply(self.key, self.payload, attachment=self.attachment)
+            self.queries += 1
+        except Exception:  # a query gone (timed out) by now: nothing to answer
+            pass
+
+    def close(self) -> None:
+        """Undeclare the queryable."""
+        with contextlib.suppress(Exception):
+            self._queryable.undeclare()
+
+
+class ConfigAnnouncer(StandingAnswer):
     """Announces a device's resolved config on ``gyroemu/<device>/config`` (:func:`config_key`).
 
     A queryable on the key answers every ``get`` for as long as the session lives, so a recorder that
@@ -584,29 +613,13 @@ class ConfigAnnouncer:
     def __init__(
         self, session: zenoh.Session, device_name: str, device_toml: str, seed: int | None, scenario_toml: str = ""
     ) -> None:
-        self.key = config_key(device_name)
-        self.payload = device_toml.encode("utf-8")
         extra = {"seed": "" if seed is None else str(int(seed)), "scenario": scenario_toml}
-        self.attachment = json.dumps(extra).encode()
-        self.queries = 0
+        super().__init__(session, config_key(device_name), device_toml.encode("utf-8"), json.dumps(extra).encode())
         self._session = session
-        self._queryable = session.declare_queryable(self.key, self._reply)
-
-    def _reply(self, query: zenoh.Query) -> None:
-        try:
-            query.reply(self.key, self.payload, attachment=self.attachment)
-            self.queries += 1
-        except Exception:  # a query gone (timed out) by now: nothing to answer
-            pass
 
     def announce(self) -> None:
         """Put the config once on the key (for subscribers; recorders ask the queryable)."""
         self._session.put(self.key, self.payload, attachment=self.attachment)
-
-    def close(self) -> None:
-        """Undeclare the queryable."""
-        with contextlib.suppress(Exception):
-            self._queryable.undeclare()
 
 
 TYPES_CHUNK = "@types"
@@ -658,7 +671,7 @@ def topic_types(payload: bytes) -> dict[str, TopicType]:
     return out
 
 
-class TypesAnnouncer:
+class TypesAnnouncer(StandingAnswer):
     """Answers ``get`` on ``gyroemu/<device>/@types`` (:func:`types_key`) with the message types of the
     device's keys (:func:`types_payload`), for as long as the session lives.
 
@@ -680,22 +693,7 @@ class TypesAnnouncer:
     """
 
     def __init__(self, session: zenoh.Session, device_name: str, types: Mapping[str, TopicType]) -> None:
-        self.key = types_key(device_name)
-        self.payload = types_payload(types)
-        self.queries = 0
-        self._queryable = session.declare_queryable(self.key, self._reply)
-
-    def _reply(self, query: zenoh.Query) -> None:
-        try:
-            query.reply(self.key, self.payload)
-            self.queries += 1
-        except Exception:  # a query gone (timed out) by now: nothing to answer
-            pass
-
-    def close(self) -> None:
-        """Undeclare the queryable."""
-        with contextlib.suppress(Exception):
-            self._queryable.undeclare()
+        super().__init__(session, types_key(device_name), types_payload(types))
 
 
 def pack_attachment(sequence: int, source_timestamp_ns: int, publisher_id: bytes) -> bytes:
