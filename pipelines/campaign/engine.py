@@ -210,6 +210,12 @@ def run_tasks(
                     failures.append(TaskFailure(task, f"{type(exc).__name__}: {exc}"))
                     future.release()
                     continue
+                elif status in ("lost", "pending"):
+                    # Its worker died holding the result after ``as_completed`` had handed it over: the
+                    # scheduler computes it again on a living worker, so wait for it once more.
+                    futures[future] = task
+                    finished.add(future)
+                    continue
                 else:  # cancelled: not by us, so by the client on losing the scheduler
                     raise SchedulerLostError(
                         f"lost the Dask scheduler ({where}) with {done} of {len(tasks)} tasks finished"

@@ -15,6 +15,7 @@ What is held, and why it could be false
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 
 import pytest
@@ -797,3 +798,44 @@ def test_two_device_files_of_one_stem_are_named_with_their_key(tmp_path):
     with pytest.raises(ConfigError) as info:
         log_tasks(load_campaign(spec), tmp_path)
     assert info.value.key == "devices" and "give device files distinct names" in str(info.value)
+
+
+def _slow_first(task: int) -> list[dict]:
+    if task == 0:
+        time.sleep(0.5)
+    return [{"task": task, "value": float(task)}]
+
+
+def test_a_result_lost_with_its_worker_is_awaited_again(monkeypatch):
+    """A future ``as_completed`` hands over whose worker then dies reads "lost" (or "pending", being
+    computed again), not "finished": it was reported as 'lost the Dask scheduler' with the scheduler
+    alive (CI: a worker killed mid-campaign). Here ``as_completed`` hands over the first, slow task
+    before it finishes, as it stands after its worker's death."""
+    import distributed
+
+    real = distributed.as_completed
+
+    class EarlyFirst:
+        def __init__(self, futures):
+            self.first, self.rest = futures[0], real(futures[1:])
+
+        def __iter__(self):
+            return self
+
+        def __next__(self):
+            if self.first is not None:
+                first, self.first = self.first, None
+                assert first.status == "pending"
+                return first
+            return next(self.rest)
+
+        def add(self, future):
+            self.rest.add(future)
+
+    monkeypatch.setattr(distributed, "as_completed", EarlyFirst)
+    seen = {}
+    failures = run_tasks(
+        list(range(3)), _slow_first, lambda task, rows: seen.update({task: rows}), workers=1, processes=False
+    )
+    assert failures == []
+    assert seen == {t: [{"task": t, "value": float(t)}] for t in range(3)}
