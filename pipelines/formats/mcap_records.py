@@ -291,7 +291,7 @@ more bytes (ratio 4.90 against 4.98)."""
 def _rows(buffer: NDArray[np.uint8], size: int) -> NDArray[np.uint8]:
     """Every run of ``size`` bytes of ``buffer`` (n,) as a row of a (n − size + 1, size) view: indexed by
     start offsets, it reads or writes whole payloads without an index per byte."""
-    return np.lib.stride_tricks.sliding_window_view(buffer, size, writeable=buffer.flags.writeable)
+    return _windows(buffer, size, writeable=bool(buffer.flags.writeable))
 
 
 class McapFileWriter:
@@ -1148,7 +1148,16 @@ def _gather(buffer: NDArray[np.uint8], starts: NDArray[np.int64], width: int) ->
     a sliding-window view copies each row whole (25 times faster than a gather of M × width bytes)."""
     if len(starts) == 0:
         return np.empty((0, width), np.uint8)
-    return np.lib.stride_tricks.sliding_window_view(buffer, width)[starts]
+    return _windows(buffer, width, writeable=False)[starts]
+
+
+def _windows(buffer: NDArray[np.uint8], width: int, *, writeable: bool) -> NDArray[np.uint8]:
+    """The (n − width + 1, width) view of every run of ``width`` bytes of the 1-D ``buffer``: numpy's
+    ``sliding_window_view`` without its checks, which cost 40 µs a call (a third of reading a small
+    chunk; 170,000 calls for a log of 20,000 chunks)."""
+    (step,) = buffer.strides
+    rows = max(len(buffer) - width + 1, 0)
+    return np.lib.stride_tricks.as_strided(buffer, (rows, width), (step, step), writeable=writeable)
 
 
 def folder_not_mcap(folder: Path) -> str:
