@@ -34,6 +34,7 @@ asks, where it would otherwise fail later, deep in the job, with a traceback.
 from __future__ import annotations
 
 import importlib
+import importlib.machinery
 import importlib.util
 import sys
 from dataclasses import dataclass
@@ -207,6 +208,15 @@ def available_filters(*, offline: bool = False) -> list[str]:
     return [name for name in FILTERS if name not in missing and (offline or not FILTERS[name].offline)]
 
 
+class _ReadOnlySourceLoader(importlib.machinery.SourceFileLoader):
+    """Python's loader of a source file, but one that writes nothing: a user's filter named by its path
+    is read where it is, without a ``__pycache__`` left in their folder (``set_data`` is the one method
+    by which a source loader writes its bytecode; ``importlib.abc.SourceLoader`` documents it optional)."""
+
+    def set_data(self, path: str, data: object, *, _mode: int = 0o666) -> None:
+        """Write nothing."""
+
+
 def _user_class(spec: str) -> type:
     module_name, sep, attr = spec.rpartition(":")
     if not sep or not module_name or not attr:
@@ -217,7 +227,9 @@ def _user_class(spec: str) -> type:
         if not path.is_file():
             raise FilterError(f"filter '{spec}': no such file {path}")
         mod_id = f"gyroemu_user_filter_{abs(hash(str(path.resolve())))}"
-        loader_spec = importlib.util.spec_from_file_location(mod_id, path)
+        loader_spec = importlib.util.spec_from_file_location(
+            mod_id, path, loader=_ReadOnlySourceLoader(mod_id, str(path))
+        )
         if loader_spec is None or loader_spec.loader is None:
             raise FilterError(f"filter '{spec}': {path} is not a Python file")
         module = importlib.util.module_from_spec(loader_spec)

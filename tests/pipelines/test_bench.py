@@ -383,6 +383,17 @@ def test_estimate_refuses_a_filter_that_breaks_the_protocol(tmp_path, monkeypatc
     assert sorted(p.name for p in tmp_path.iterdir()) == ["badf.py", "in.mcap"]
 
 
+def test_a_users_filter_file_is_read_without_writing_beside_it(tmp_path, monkeypatch):
+    """A filter named by its file is imported where it is and nothing is written there: Python's own
+    loader left a ``__pycache__`` in the user's folder wherever bytecode is written (CI found it once
+    PYTHONDONTWRITEBYTECODE was unset, in the listing of the test above)."""
+    monkeypatch.setattr(sys, "dont_write_bytecode", False)
+    module = tmp_path / "badf.py"
+    module.write_text(BREAKS_PROTOCOL)
+    assert registry.filter_class(f"{module}:Duck").__name__ == "Duck"
+    assert [p.name for p in tmp_path.iterdir()] == ["badf.py"]
+
+
 def test_protocol_checks_wrap_only_a_users_filter_and_only_when_asked(tmp_path):
     """Without ``argument`` (bench, which checks the results itself) make_filter gives the user's object
     as it is; the built-ins are never wrapped; an object with a q_wb passes as an Estimate."""
