@@ -23,6 +23,7 @@ import os
 import re
 import uuid
 from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import CancelledError
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
@@ -192,6 +193,12 @@ def run_tasks(
             key = f"gyroemu-{_safe(label(task))}-{run}-{i}"
             futures[client.submit(fn, task, key=key, pure=False)] = task
         done = 0
+
+        def lost(cause: str = "") -> SchedulerLostError:
+            return SchedulerLostError(
+                f"lost the Dask scheduler ({where}) with {done} of {len(tasks)} tasks finished{cause}"
+            )
+
         finished = as_completed(list(futures))
         while True:
             # Only the scheduler's calls are read as a lost connection: an error of ``on_result`` (the
@@ -217,14 +224,11 @@ def run_tasks(
                     finished.add(future)
                     continue
                 else:  # cancelled: not by us, so by the client on losing the scheduler
-                    raise SchedulerLostError(
-                        f"lost the Dask scheduler ({where}) with {done} of {len(tasks)} tasks finished"
-                    )
+                    raise lost()
+            except CancelledError:  # the same, seen as the result is fetched (distributed's FutureCancelledError)
+                raise lost() from None
             except (OSError, TimeoutError) as exc:  # the connection itself failed mid-run
-                raise SchedulerLostError(
-                    f"lost the Dask scheduler ({where}) with {done} of {len(tasks)} tasks finished "
-                    f"({type(exc).__name__}: {exc})"
-                ) from None
+                raise lost(f" ({type(exc).__name__}: {exc})") from None
             on_result(task, result)
             done += 1
     return failures

@@ -839,3 +839,33 @@ def test_a_result_lost_with_its_worker_is_awaited_again(monkeypatch):
     )
     assert failures == []
     assert seen == {t: [{"task": t, "value": float(t)}] for t in range(3)}
+
+
+def test_a_result_cancelled_as_it_is_fetched_is_a_lost_scheduler(monkeypatch):
+    """The client cancels every future when it loses the scheduler; one that had finished when
+    ``as_completed`` handed it over raises ``FutureCancelledError`` (a ``concurrent.futures.CancelledError``) as its
+    result is fetched: that is the lost scheduler, said as such (it went out as a traceback, exit 1)."""
+    import distributed
+    from distributed.client import FutureCancelledError
+
+    from gyroemu.pipelines.campaign import SchedulerLostError
+
+    real = distributed.as_completed
+
+    def cancelled_on_fetch(futures):
+        for future in real(futures):
+            key = future.key
+
+            def result(timeout=None):
+                raise FutureCancelledError(key, "scheduler-connection-lost", "Client lost the connection")
+
+            future.result = result
+            yield future
+
+    monkeypatch.setattr(distributed, "as_completed", cancelled_on_fetch)
+    seen = []
+    with pytest.raises(
+        SchedulerLostError, match=r"^lost the Dask scheduler \(the local cluster\) with 0 of 2 tasks finished$"
+    ):
+        run_tasks([1, 2], _slow_first, lambda task, rows: seen.append(task), workers=1, processes=False)
+    assert seen == []
