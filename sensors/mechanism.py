@@ -159,6 +159,12 @@ class GyroMechanism(Section):
         """White rate noise the physics itself makes, rad/s/√Hz (Allan deviation at 1 s); 0 if none."""
         return 0.0
 
+    def output_angle_quantum(self) -> float | None:
+        """Angle of one count of the mechanism's own output counter, rad (one pulse of a counting
+        kind); None when its output is not counted. Each sample's rate is then a difference of two
+        counts over the interval, which the ``/imu`` covariance charges ``2 (q/T)²/12``."""
+        return None
+
     def rest_bias(self) -> float:
         """Size of the rate the mechanism indicates at rest on the ground (its offsets at the reference
         temperature and its g-sensitivity under 1 g), rad/s; 0 if none. Not part of the device's error

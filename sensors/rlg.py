@@ -295,6 +295,10 @@ class RingLaserGyro(GyroMechanism):
     def intrinsic_noise_density(self) -> float:
         return self.dither_random_walk()
 
+    def output_angle_quantum(self) -> float:
+        """q, rad: the output counts whole fringes (module notes, "Dither removal")."""
+        return self.fringe_angle_rad
+
     def respond(self, truth: GyroTruth, rng: np.random.Generator, state: dict[str, Any] | None = None) -> GyroResponse:
         """Fringe-counted angle (dither removed) on the inner grid, with the beat's raw observables.
 
