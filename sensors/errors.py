@@ -61,7 +61,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import BeforeValidator, Field, ValidationInfo, field_validator
 
-from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Real, Section, at_most
+from gyroemu.dynamics.config import NonNegativeReal, PositiveReal, Real, Section, at_least, at_most
 from gyroemu.dynamics.jit import njit
 from gyroemu.errors import ConfigError
 
@@ -78,6 +78,7 @@ __all__ = [
     "MAX_ACCEL_LSB_M_PER_S2",
     "MAX_ANGLE_LSB_RAD",
     "MAX_VELOCITY_LSB_M_PER_S",
+    "MIN_LSB",
     "MIN_BANDWIDTH_FRACTION",
     "bandwidth_problem",
 ]
@@ -121,6 +122,15 @@ times the coarsest counts of real delta-velocity outputs (a 16-bit word over ±2
 pulse-rebalanced accelerometers count 10⁻⁴ m/s). A count of 10³⁰⁰ m/s was taken and every output
 sample read 0."""
 
+MIN_LSB = 1e-12
+"""The finest quantisation of every kind (``quantisation_rad``, ``quantisation_rad_per_s``,
+``quantisation_m_per_s``, ``quantisation_m_per_s2``), in the key's SI unit: over a thousand times finer
+than the finest words of real outputs (32 bits over ±720° per sample is 5.9·10⁻⁹ rad, over ±450 °/s
+3.7·10⁻⁹ rad/s, over ±200 m/s 9.3·10⁻⁸ m/s, over ±40 g 1.8·10⁻⁷ m/s²), and about float64's step of a
+counted angle or velocity within an hour (ulp(6283 rad, a thousand turns) = 9.1·10⁻¹³ rad; ulp(9807 m/s,
+1 g for 1000 s) = 1.8·10⁻¹² m/s), so a finer count would not be resolved. A count of 10⁻³²⁰ (subnormal)
+was taken and every output sample read NaN."""
+
 MIN_BANDWIDTH_FRACTION = 1e-4
 """The narrowest output low-pass (``bandwidth_hz``), as a fraction of the sample rate: a hundred times
 narrower than the output filters of real IMUs (which sit within about a hundredth of the output rate);
@@ -144,17 +154,25 @@ def bandwidth_problem(bandwidth_hz: float, rate_hz: float, rate: str = "") -> st
     return None
 
 
+_FINEST = at_least(MIN_LSB, "over a thousand times finer than the finest words of real outputs")
 _RateLsb = Annotated[
-    PositiveReal, at_most(MAX_RATE_LSB_RAD_PER_S, "one count would be more than the widest gyro's whole range")
+    PositiveReal,
+    _FINEST,
+    at_most(MAX_RATE_LSB_RAD_PER_S, "one count would be more than the widest gyro's whole range"),
 ]
 _AccelLsb = Annotated[
-    PositiveReal, at_most(MAX_ACCEL_LSB_M_PER_S2, "one count would be more than the widest accelerometer's range")
+    PositiveReal,
+    _FINEST,
+    at_most(MAX_ACCEL_LSB_M_PER_S2, "one count would be more than the widest accelerometer's range"),
 ]
 _AngleLsb = Annotated[
-    PositiveReal, at_most(MAX_ANGLE_LSB_RAD, "over 250 times the coarsest angle count of real integrating outputs")
+    PositiveReal,
+    _FINEST,
+    at_most(MAX_ANGLE_LSB_RAD, "over 250 times the coarsest angle count of real integrating outputs"),
 ]
 _VelocityLsb = Annotated[
     PositiveReal,
+    _FINEST,
     at_most(MAX_VELOCITY_LSB_M_PER_S, "over 150 times the coarsest velocity count of real integrating outputs"),
 ]
 

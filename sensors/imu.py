@@ -371,6 +371,8 @@ class Device:
                 key="gyro.errors.range_deg_per_s",
             )
         accel_errors = spec.accelerometer.errors.to_si()
+        # the error layers' sample interval: the true one, T (1 + ε) (DeviceRun)
+        true_period = (1.0 / spec.rate_hz) * (1.0 + spec.clock.rate_error_ppm * 1e-6)
         # The output low-passes before the noise budget, which takes their noise gain.
         for model, prefix in ((self._gyro_errors, "gyro.errors"), (accel_errors, "accelerometer.errors")):
             problem = (
@@ -380,6 +382,15 @@ class Device:
             )
             if problem is not None:
                 raise ConfigError(problem, file=where, key=f"{prefix}.bandwidth_hz")
+            tau_max = model.bias_instability_tau_range[1]
+            if np.any(model.bias_instability) and not tau_max > true_period:
+                # the flicker bank is fitted on [max(τ_min, T), τ_max] (noise.flicker_bank): empty here
+                raise ConfigError(
+                    f"the bias instability's range ends at {tau_max:g} s, not above the sample interval "
+                    f"{true_period:g} s: a floor flat only at shorter averaging times never shows in the samples",
+                    file=where,
+                    key=f"{prefix}.bias_instability_tau_range_s",
+                )
         self.intrinsic_noise_density = float(self.mechanism.intrinsic_noise_density())
         if not self.intrinsic_noise_density < MAX_INTRINSIC_NOISE_DENSITY:
             # a backstop: each mechanism's keys are bounded so that their noise stays far below this

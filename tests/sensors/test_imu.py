@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicHermiteSpline
 
-from gyroemu.dynamics import ConfigError, Environment, trajectory_from_world_motion
+from gyroemu.dynamics import ConfigError, Environment, load_scenario, trajectory_from_world_motion
 from gyroemu.dynamics.rotation import quat_from_rotvec, quat_rotate
 from gyroemu.sensors import device_from_dict
+from gyroemu.sensors.errors import MIN_LSB
 from gyroemu.sensors.mechanism import GYRO_KINDS, GyroMechanism, GyroResponse, GyroTruth, mechanism_class
 
 EPS = np.finfo(float).eps
@@ -257,6 +258,28 @@ def test_an_output_lsb_beyond_any_sensors_range_is_refused_naming_the_key(sensor
         device_from_dict({"description": "x", "rate_hz": 1000, sensor: {"errors": {key: 1e300}}}, name="dev.toml")
     assert info.value.key == f"{sensor}.errors.{key}" and info.value.file == "dev.toml"
     device_from_dict({"description": "x", "rate_hz": 1000, sensor: {"errors": {key: limit}}}, name="dev.toml")
+
+
+@pytest.mark.parametrize(
+    "sensor, key",
+    [
+        ("gyro", "quantisation_rad_per_s"),
+        ("accelerometer", "quantisation_m_per_s2"),
+        ("gyro", "quantisation_rad"),
+        ("accelerometer", "quantisation_m_per_s"),
+    ],
+)
+def test_an_lsb_finer_than_any_real_output_is_refused_naming_the_key(sensor, key):
+    """A subnormal LSB (1e-320) made the quantiser's count overflow and every output sample NaN, silently;
+    an LSB finer than :data:`MIN_LSB` is refused, the limit itself taken and its output finite."""
+    with pytest.raises(ConfigError, match=re.escape(f"less than the limit of {MIN_LSB:g}: ")) as info:
+        device_from_dict({"description": "x", "rate_hz": 1000, sensor: {"errors": {key: 1e-320}}}, name="dev.toml")
+    assert info.value.key == f"{sensor}.errors.{key}" and info.value.file == "dev.toml"
+    noise = {"gyro": "noise_density_deg_per_s_per_sqrt_hz", "accelerometer": "noise_density_ug_per_sqrt_hz"}[sensor]
+    errors = {key: MIN_LSB, noise: 1.0}
+    device = device_from_dict({"description": "x", "rate_hz": 100, sensor: {"errors": errors}}, name="dev.toml")
+    out = device.measure(load_scenario("bench_static").simulate(duration=1.0, rate_hz=100))
+    assert np.all(np.isfinite(out.gyro)) and np.all(np.isfinite(out.accel))
 
 
 @pytest.mark.parametrize("rate_hz, words", [(1e-300, "less than the limit of 0.1: "), (0.09, "less than the limit")])

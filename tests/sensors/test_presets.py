@@ -184,3 +184,25 @@ def test_allan_command_fits_a_log_and_draws_the_plot(tmp_path):
     assert (tmp_path / "allan.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     bad = gyroemu("allan", str(device))
     assert bad.returncode == 2 and str(device) in bad.stderr
+
+
+@pytest.mark.parametrize(
+    "sensor, key", [("gyro", "bias_instability_deg_per_h"), ("accelerometer", "bias_instability_ug")]
+)
+def test_bias_instability_range_below_the_sample_interval_is_refused(tmp_path, sensor, key):
+    """A flicker floor flat only at averaging times shorter than the 1 s sample interval cannot be
+    made (the bank is fitted on [max(τ_min, T), τ_max]): refused when the device is built, naming the key,
+    and the CLI exits 2 (it used to stop on a ValueError from the noise design, exit 1)."""
+    device = tmp_path / "dev.toml"
+    device.write_text(
+        f'description = "test"\nrate_hz = 1.0\n[{sensor}.errors]\n{key} = 1.0\n'
+        "bias_instability_tau_range_s = [0.01, 0.5]\n"
+    )
+    with pytest.raises(ConfigError) as error:
+        load_device(device)
+    assert error.value.key == f"{sensor}.errors.bias_instability_tau_range_s"
+    if sensor == "gyro":
+        log = tmp_path / "out.npz"
+        args = ("--scenario", "bench_static", "--duration", "20", "--device", str(device), "--out", str(log))
+        result = gyroemu("simulate", *args)
+        assert result.returncode == 2 and "gyro.errors.bias_instability_tau_range_s" in result.stderr, result.stderr
