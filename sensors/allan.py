@@ -113,12 +113,18 @@ times the relative standard deviation √(2/ν) of the Allan variance estimate t
 chi-squared degrees of freedom ν·share² of its interval exceed 2·RESOLVE_SIGMAS² = 8 (a two-sigma
 detection; ν is the conservative cluster count, so more cautious still). Equivalently its value exceeds
 its detection limit (:attr:`Coefficient.limit`): the smallest value that would make that share at the
-τ where the term shows most. A term below it is reported as not resolved, with the limit as its upper
-bound: a larger term would have stood out of the curve's scatter. Why two sigma: the fit puts a spare
-term wherever the scatter leaves room, and the octaves are many. Of 100 simulated 10-min runs of white
-noise and bias instability at 100 Hz, none had its random walk resolved by this test, while a
-one-sigma test (ν·share² > 2) resolved it in 4 of 40; a random walk that dominates the last octaves
-is resolved in every run. The τ⁻² term fitted with either sign (``band_limit=True``) trades with N over
+τ where the term shows most. A term below it is reported as not resolved. The limit is no upper bound:
+a term just above it is often missed, and then lies above the limit. So the bound reported
+(:attr:`Coefficient.upper_limit`) is the larger of the limit and the curve's own bound: every term adds
+a non-negative c_j A_j(τ) to the Allan variance, so c_j ≤ σ²(τ)/A_j(τ) at every τ fitted, and with σ_hi
+the one-sided 95 % chi-squared upper limit of each point (:data:`BOUND_CONFIDENCE`),
+√c_j ≤ min_τ σ_hi(τ)/√A_j(τ) (:attr:`Coefficient.bound`). On simulated runs with a rate random walk or
+a bias instability near its limit, the limit was below the truth on 28 of the 84 axes where the term
+was not resolved, the bound on 1 (``tests/sensors/test_allan_upper_bound.py``). Why two sigma: the
+fit puts a spare term wherever the scatter leaves room, and the octaves are many. Of 100 simulated
+10-min runs of white noise and bias instability at 100 Hz, none had its random walk resolved by this
+test, while a one-sigma test (ν·share² > 2) resolved it in 4 of 40; a random walk that dominates the
+last octaves is resolved in every run. The τ⁻² term fitted with either sign (``band_limit=True``) trades with N over
 the short octaves, which one point does not see: its limit is also at least √(2 sd), sd the standard
 deviation of its coefficient from the fit's covariance, so it is resolved (as quantisation, or by its
 magnitude as a band limit) only beyond two of those. Simulated at rest for 150 s (50 runs of
@@ -160,6 +166,7 @@ __all__ = [
     "white_edf",
     "TERMS",
     "RESOLVE_SIGMAS",
+    "BOUND_CONFIDENCE",
 ]
 
 #: The IEEE 952 terms in the order of the fit's coefficients.
@@ -168,6 +175,10 @@ TERMS = ("quantisation", "arw", "bias_instability", "rrw", "rate_ramp")
 #: A term is resolved when its share of σ² at some τ exceeds this many relative standard deviations of
 #: the Allan variance estimate there (module notes).
 RESOLVE_SIGMAS = 2.0
+
+#: The one-sided confidence of the upper bound reported for a term not resolved (module notes): each
+#: Allan point's chi-squared upper limit at this level.
+BOUND_CONFIDENCE = 0.95
 
 _ONE_SIGMA = 0.682689492137086  # probability within ±1σ of a normal distribution
 _TAU_KEYWORDS = ("octave", "all", "decade", "log10")
@@ -348,13 +359,16 @@ class Coefficient:
     ``limit`` is the detection limit :func:`fit_allan` sets (NaN for a coefficient built elsewhere):
     the smallest value the data would resolve (module notes; for the τ⁻² term of either sign, at least
     √(2 sd) of its coefficient from the fit's covariance). A term is :attr:`resolved` when its value
-    exceeds it; one that is not is bounded by it.
+    exceeds it. ``bound``: the curve's own one-sided upper bound on the coefficient,
+    min_τ σ_hi(τ)/√A_j(τ) (module notes; NaN when not computed); a term not resolved is bounded by
+    the larger of the two (:attr:`upper_limit`).
     """
 
     value: float
     low: float
     high: float
     limit: float = math.nan
+    bound: float = math.nan
 
     @property
     def resolved(self) -> bool:
@@ -366,8 +380,14 @@ class Coefficient:
 
     @property
     def upper_limit(self) -> float:
-        """The bound to report for a term not resolved: the detection limit (or ``high`` without one)."""
-        return self.high if math.isnan(self.limit) else max(self.limit, self.value)
+        """The bound to report for a term not resolved: the larger of the detection limit and the curve's
+        :attr:`bound` (``high`` without a limit; the value itself for a term resolved), in the
+        coefficient's unit."""
+        if math.isnan(self.limit):
+            return self.high
+        if self.resolved:
+            return self.value
+        return self.limit if math.isnan(self.bound) else max(self.limit, self.bound)
 
 
 @dataclass(frozen=True)
@@ -619,7 +639,7 @@ def fit_allan(
     if free[0]:  # the τ⁻² term of either sign: resolved only beyond two standard deviations of the fit's too
         q = fitted["quantisation"]
         floor = float(np.sqrt(RESOLVE_SIGMAS * np.sqrt(covariance[0, 0])))
-        fitted["quantisation"] = Coefficient(q.value, q.low, q.high, max(q.limit, floor))
+        fitted["quantisation"] = replace(q, limit=max(q.limit, floor))
     return AllanFit(allan=whole, band_limit=float(max(0.0, -3.0 * coefficients[0])), skipped=skip, **fitted)
 
 
@@ -679,16 +699,27 @@ def read_coefficient(
     :func:`fit_covariance`) with its confidence (:func:`coefficient_dof`: the wider of the one-point and the
     whole fit's interval). A term not found (c_j ≤ 0) gets the upper limit at which it would have made
     one standard deviation where it shows most; a term found but pinned by less than one degree of
-    freedom is undetermined, with the interval (0, ∞).
+    freedom is undetermined, with the interval (0, ∞). Every term gets its detection limit and the
+    curve's upper bound (:class:`Coefficient`).
     """
     relative_sd = np.sqrt(2 / allan.edf)
     detectable = np.min(model * relative_sd / basis[:, j])  # c_j making one sd where it shows most
     limit = float(np.sqrt(RESOLVE_SIGMAS * detectable))  # ... RESOLVE_SIGMAS sd: the detection limit
+    bound = _curve_bound(allan, basis[:, j])
     if c[j] <= 0:
-        return Coefficient(0.0, 0.0, float(np.sqrt(detectable)), limit)
+        return Coefficient(0.0, 0.0, float(np.sqrt(detectable)), limit, bound)
     value = np.sqrt(c[j])
     dof = coefficient_dof(j, c, basis, model, allan, covariance)
     if dof < 1.0:  # the term is not pinned by one degree of freedom: undetermined
-        return Coefficient(float(value), 0.0, float("inf"), limit)
+        return Coefficient(float(value), 0.0, float("inf"), limit, bound)
     low, high = chi2_interval(value, dof)
-    return Coefficient(float(value), float(low), float(high), limit)
+    return Coefficient(float(value), float(low), float(high), limit, bound)
+
+
+def _curve_bound(allan: AllanDeviation, basis: NDArray[np.float64]) -> float:
+    """min_τ σ_hi(τ)/√A(τ): a one-sided upper bound, at :data:`BOUND_CONFIDENCE` per point, on the
+    coefficient of a term of basis ``A`` (M,) (unit²/coefficient²) under ``allan``'s points, from the
+    curve alone: the term's c·A(τ) is one non-negative part of σ²(τ) (module notes)."""
+    _, high = chi2_interval(allan.adev, allan.edf, ci=2 * BOUND_CONFIDENCE - 1)  # two-sided 2p − 1: one-sided p
+    shows = basis > 0
+    return float(np.sqrt(np.min(high[shows] ** 2 / basis[shows]))) if shows.any() else math.inf

@@ -36,9 +36,12 @@ the sample rate read N 26 % low over every octave) the shortest τ, within the f
 out, and the row ``fitted from τ`` (``--json``: ``fitted_from``, s) gives where each axis's fit starts;
 the plot draws the model from there.
 
-Each term is printed with its 68 % interval, or as ``not resolved (< limit)`` when the data do not
+Each term is printed with its 68 % interval, or as ``not resolved (< bound)`` when the data do not
 resolve it (:attr:`gyroemu.sensors.allan.Coefficient.resolved`: its share of the Allan variance never
-exceeds two standard deviations of the estimate).
+exceeds two standard deviations of the estimate). The bound (:attr:`~gyroemu.sensors.allan.Coefficient.upper_limit`,
+also what ``--kalibr`` writes) is the larger of the detection limit and min_τ σ_hi(τ)/√A(τ), σ_hi each
+point's one-sided 95 % chi-squared upper limit and A the term's Allan variance per unit coefficient²:
+the limit alone is no bound, a term just above it being often missed.
 
 Before fitting, :func:`allan_of_log` checks that the log is static (:class:`StaticCheck`, figures
 accumulated batch by batch as the log streams): the accelerometer's specific force must keep its
