@@ -51,6 +51,8 @@ from gyroemu.pipelines.twin import (
 )
 
 if TYPE_CHECKING:
+    from gyroemu.dynamics.scenarios import Scenario
+    from gyroemu.pipelines.estimation.protocol import FilterSetup
     from gyroemu.sensors import Device
 
 __all__ = [
@@ -127,7 +129,8 @@ def check_options(options: TwinOptions) -> tuple[list[str], dict[str, str], dict
     site's handling offset (None without a ``[handling]`` table) and the device (seed 0). A file of the
     report (:func:`report_files`) that is an input (a recording, the device or site file, by any path
     to it) is refused, even with ``force``."""
-    from gyroemu.pipelines.estimation.registry import FilterError, available_filters, filter_class, unavailable_filters
+    from gyroemu.pipelines.estimation.protocol import FilterSetup
+    from gyroemu.pipelines.estimation.registry import FilterError, available_filters, make_filter, unavailable_filters
     from gyroemu.sensors import load_device
 
     if not options.trials:
@@ -146,6 +149,10 @@ def check_options(options: TwinOptions) -> tuple[list[str], dict[str, str], dict
         raise TwinError(f"argument --seeds: must be a whole number of at least 1, got {options.seeds!r}")
     if isinstance(options.workers, bool) or not isinstance(options.workers, int) or options.workers < 1:
         raise TwinError(f"argument --workers: must be a whole number of at least 1, got {options.workers!r}")
+    try:
+        device = load_device(options.device, seed=0)
+    except ConfigError as e:
+        raise TwinError(f"argument --device: {e}") from None
     unavailable: dict[str, str] = {}
     if options.filters is None:
         filters = available_filters()
@@ -154,15 +161,15 @@ def check_options(options: TwinOptions) -> tuple[list[str], dict[str, str], dict
         filters = list(options.filters)
         if not filters:
             raise TwinError("argument --filter: give at least one filter")
+        # each made once, as every run makes it (the filters' defaults at the twins' rate): a class that
+        # does not import, whose constructor fails, or without a 'name' or 'process' is named here, not
+        # in a note after every run failed
+        probe = FilterSetup(rate_hz=float(device.spec.rate_hz))
         for spec in filters:
             try:
-                filter_class(spec)
+                make_filter(spec, probe)
             except FilterError as e:
                 raise TwinError(f"argument --filter: {e}") from None
-    try:
-        device = load_device(options.device, seed=0)
-    except ConfigError as e:
-        raise TwinError(f"argument --device: {e}") from None
     try:
         site, handling = read_site(options.site)
     except SiteFileError as e:
@@ -193,9 +200,11 @@ def report_files(trials: Sequence[Path]) -> list[str]:
 def _check_smoothing(smoothing: dict[str, Any] | None, real: Recording) -> None:
     """:class:`TwinError` naming ``--smoothing`` for a key the recorded scenario's ``[smoothing]`` does not
     take, a bad value, or a cut-off at or above the Nyquist frequency of the truth's stamps (the motion
-    is fitted there; found otherwise only when the first twin fits its motion, after the real run)."""
+    is fitted there), and naming ``TRIAL`` for a gap in its reference longer than ``max_gap_s`` (found
+    otherwise only when the first twin fits its motion, after the real run)."""
     from pydantic import ValidationError
 
+    from gyroemu.dynamics.smoothing_spline import contiguous_runs
     from gyroemu.pipelines.recorded_scenario import SmoothingSpec
 
     try:
@@ -208,6 +217,15 @@ def _check_smoothing(smoothing: dict[str, Any] | None, real: Recording) -> None:
     # the recorded motion is fitted at the truth's stamps, which may be sparser than the samples': the
     # cut-off is checked as the fit will check it, against their median step
     truth_t = real.t[np.isfinite(real.q_true).all(axis=1)]
+    # a gap as the fit finds it: a step between the truth's stamps that splits their runs
+    for run in contiguous_runs(truth_t)[1:]:
+        before, gap = float(truth_t[run.start - 1]), float(truth_t[run.start] - truth_t[run.start - 1])
+        if gap > spec.max_gap_s:
+            raise TwinError(
+                f"argument TRIAL: {real.path}: a gap of {gap:.4g} s without a reference after t = {before:.6g} s "
+                f"is longer than smoothing.max_gap_s = {spec.max_gap_s:g} s (--smoothing max_gap_s=SECONDS "
+                "bridges it)"
+            )
     step = float(np.median(np.diff(truth_t))) if len(truth_t) > 1 else 1.0 / real.rate_hz
     for key in ("position_cutoff_hz", "orientation_cutoff_hz"):
         value = getattr(spec, key)
@@ -243,16 +261,18 @@ def run_twin(options: TwinOptions) -> TwinReport:
     started = time.perf_counter()
     filters, unavailable, site, handling, device = check_options(options)
     reals: list[Recording] = []
+    scenarios: list[Scenario] = []  # twin 0's, whose site (--site) every twin's filters are set up in
     for path in options.trials:
         try:
             real = load_recording(path)
             _check_smoothing(options.smoothing, real)
-            twin_scenario(real, site, 0, options.smoothing)  # the recorded motion reads and checks
+            scenarios.append(twin_scenario(real, site, 0, options.smoothing))  # the recorded motion reads and checks
         except TwinError:
             raise
         except Exception as e:  # noqa: BLE001 - LogError, ConfigError and friends: the file at fault
             raise _trial_error(path, e) from None
-        reals.append(real)
+        same_name = sum(earlier.name == real.name for earlier in reals)  # their twins draw apart
+        reals.append(replace(real, same_name_index=same_name))
     timings: dict[str, float] = {"load and check": time.perf_counter() - started}
     has_dev_mag = device.spec.magnetometer is not None
     plans = []
@@ -269,9 +289,7 @@ def run_twin(options: TwinOptions) -> TwinReport:
                 setup9, setup6 = FilterSetup(rate_hz=real.rate_hz, use_mag=True), FilterSetup(rate_hz=real.rate_hz)
         if mode == "6D":
             setup9 = None
-        # the twins are sampled at the device's rate: their filters are told it (the same setup otherwise)
-        twin9 = None if setup9 is None else replace(setup9, rate_hz=float(device.spec.rate_hz))
-        twin6 = replace(setup6, rate_hz=float(device.spec.rate_hz))
+        twin9, twin6 = _twin_setups(real, setup9, setup6, scenarios[i], device)
         rests, rest_info = rest_phases(real)
         plans.append((mode, rest_info))
         tasks.append(((i, None), run_real, (real, filters, setup9, setup6, rests)))
@@ -340,10 +358,17 @@ def run_twin(options: TwinOptions) -> TwinReport:
         "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
     }
     notes = [f"{name} left out: {why}" for name, why in unavailable.items()]
-    notes.append(
-        "filter setup: the same for the real log and its twins (the log's gyroemu metadata, else the "
-        "filters' defaults at the recording's rate, as gyroemu bench does)"
-    )
+    if any(_knows_its_setup(real) for real in reals):
+        notes.append(
+            "filter setup: each side's own (a gyroemu log's from its metadata, its device in its site; its "
+            "twins' from --device in --site; a recording without metadata: the filters' defaults at each "
+            "side's rate, as gyroemu bench does)"
+        )
+    else:
+        notes.append(
+            "filter setup: the same for the real log and its twins (the log's gyroemu metadata, else the "
+            "filters' defaults at the recording's rate, as gyroemu bench does)"
+        )
     if handling is not None:
         notes.append(
             "handling: over each recording's movement mask every twin's accelerometer reads an offset drawn "
@@ -356,6 +381,29 @@ def run_twin(options: TwinOptions) -> TwinReport:
         [[results[(i, seed)] for i in range(len(reals))] for seed in range(options.seeds)],
     )
     return TwinReport(trials=trials, settings=settings, timings=timings, notes=notes, pooled_residuals=pooled)
+
+
+def _knows_its_setup(real: Recording) -> bool:
+    """Whether ``real`` says what sensed it: a gyroemu log's metadata holds its device (and scenario)."""
+    return bool(real.metadata and real.metadata.get("device"))
+
+
+def _twin_setups(
+    real: Recording, setup9: FilterSetup | None, setup6: FilterSetup, scenario: Scenario, device: Device
+) -> tuple[FilterSetup | None, FilterSetup]:
+    """The twins' 9D (None when ``setup9`` is: the run is 6D) and 6D filter setups. The twins are
+    sampled at ``device``'s rate, and their filters are told it. A log that says what sensed it
+    (:func:`_knows_its_setup`) gives its own filters its device's latencies and its site's declination and
+    latitude; the twins' are ``device``'s in the twins' ``scenario`` (its ``[site]``, from ``--site``), as
+    :func:`~gyroemu.pipelines.estimation.setup.setup_for` gives a simulated run. Otherwise (a BROAD
+    trial) both sides take the filters' defaults, ``setup9`` and ``setup6`` at the twins' rate."""
+    from gyroemu.pipelines.estimation.setup import setup_for
+
+    if _knows_its_setup(real):
+        twin9 = None if setup9 is None else setup_for(device, scenario, use_mag=True)
+        return twin9, setup_for(device, scenario, use_mag=False)
+    rate_hz = float(device.spec.rate_hz)
+    return None if setup9 is None else replace(setup9, rate_hz=rate_hz), replace(setup6, rate_hz=rate_hz)
 
 
 def _task(

@@ -8,7 +8,9 @@ above :data:`TWIN_GYRO_CROSSOVER_HZ` and held still in the rest phases (:func:`t
 ``i`` of a recording draws its device, its magnetic environment and its handling offset from
 :func:`twin_seed` of ``i`` and the recording's file name, so that the twins of different recordings
 draw independently (with seed ``i`` alone, twin ``i`` of every recording had the same noise at the
-same time from power-up, and pooling their rests pooled one draw).
+same time from power-up, and pooling their rests pooled one draw). Recordings of one run that share a
+file name (``a/log.mcap``, ``b/log.mcap``) are told apart by their position among them: the first
+draws as its name alone says, the next ones from seeds of their own.
 
 Times. The recorded scenario's time 0 is the recording's first valid truth sample, at stamp ``t0``
 (``scenario.spec.motion().t0``) in the recording's clock. A twin sample taken at true instant ``t``
@@ -47,11 +49,17 @@ TWIN_GYRO_CROSSOVER_HZ = 1.0
 0.5 to 2 Hz (README, "The twin")."""
 
 
-def twin_seed(seed: int, recording: str) -> int:
+def twin_seed(seed: int, recording: str, same_name_index: int = 0) -> int:
     """The seed of twin ``seed`` of the recording whose file is named ``recording``: the first word of
     ``SeedSequence([seed, crc32(recording)])``, the device's, the magnetic environment's and the handling
-    offset's seed (each draws from its own streams of it)."""
-    return int(np.random.SeedSequence([seed, zlib.crc32(recording.encode())]).generate_state(1, np.uint64)[0])
+    offset's seed (each draws from its own streams of it). ``same_name_index``: how many recordings of
+    the run with the same file name come before it; from 1 it joins the sequence's entropy
+    (``[seed, crc32(recording), same_name_index]``), so that same-named recordings draw apart while a
+    recording whose name is its own keeps its seeds."""
+    entropy = [seed, zlib.crc32(recording.encode())]
+    if same_name_index:
+        entropy.append(same_name_index)
+    return int(np.random.SeedSequence(entropy).generate_state(1, np.uint64)[0])
 
 
 def twin_attitude(

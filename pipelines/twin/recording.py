@@ -15,7 +15,15 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["RECORDING_FORMATS", "Recording", "RecordingError", "load_recording", "rest_phases", "longest_run"]
+__all__ = [
+    "RECORDING_FORMATS",
+    "Recording",
+    "RecordingError",
+    "load_recording",
+    "longest_run",
+    "measured_field",
+    "rest_phases",
+]
 
 RECORDING_FORMATS = {".hdf5": "broad", ".h5": "broad", ".mcap": "mcap"}
 """File suffix → the ``recorded`` scenario's ``format``."""
@@ -43,6 +51,13 @@ class Recording:
     counted: str
     omega_true: np.ndarray | None = None  # (N, 3) rad/s, a log's /truth/imu rate
     force_true: np.ndarray | None = None  # (N, 3) m/s², a log's /truth/imu specific force
+    same_name_index: int = 0  # recordings of the same file name before it in the run (its twins' seeds)
+
+
+def measured_field(mag_t: np.ndarray) -> np.ndarray | None:
+    """The magnetometer ``mag_t`` (N, 3) T, or None when no row of it is finite (a recording without a
+    magnetometer: its filters run 6D only)."""
+    return mag_t if np.isfinite(mag_t).all(axis=1).any() else None
 
 
 def load_recording(path: Path) -> Recording:
@@ -61,7 +76,7 @@ def load_recording(path: Path) -> Recording:
             t=t,
             gyro=np.asarray(trial.gyro, float),
             accel=np.asarray(trial.accel, float),
-            mag=np.asarray(trial.mag_ut, float) * 1e-6,
+            mag=measured_field(np.asarray(trial.mag_ut, float) * 1e-6),
             q_true=np.asarray(trial.opt_quat, float),
             mask=mask if mask.any() else np.ones(len(t), bool),
             rate_hz=float(trial.rate_hz),
@@ -97,15 +112,15 @@ def load_recording(path: Path) -> Recording:
     hit = np.abs(tt[j] - t) <= 0.25 * dt
     q_true = np.full((len(t), 4), np.nan)
     q_true[hit] = dev.truth.q_wb[j[hit]]
-    extra = {}
+    extra: dict[str, np.ndarray | None] = {}
     for key, attr in (("omega_true", "omega_b"), ("force_true", "specific_force_b")):
         v = getattr(dev.truth, attr, None)
         if v is not None and np.isfinite(v).any():
-            extra[key] = np.full((len(t), 3), np.nan)
-            extra[key][hit] = np.asarray(v, float)[j[hit]]
+            column = np.full((len(t), 3), np.nan)
+            column[hit] = np.asarray(v, float)[j[hit]]
+            extra[key] = column
     movement = getattr(dev, "movement", None)
     has_mask = movement is not None and np.asarray(movement, bool).any()
-    mag = np.asarray(s.mag, float)
     return Recording(
         name=path.name,
         path=path,
@@ -113,13 +128,14 @@ def load_recording(path: Path) -> Recording:
         t=clock,
         gyro=np.asarray(s.gyro, float),
         accel=np.asarray(s.accel, float),
-        mag=mag if np.isfinite(mag).all(axis=1).any() else None,
+        mag=measured_field(np.asarray(s.mag, float)),
         q_true=q_true,
         mask=np.asarray(movement, bool) if has_mask else np.ones(len(t), bool),
         rate_hz=1.0 / dt,
         metadata=dev.metadata,
         counted="movement mask" if has_mask else "every sample",
-        **extra,
+        omega_true=extra.get("omega_true"),
+        force_true=extra.get("force_true"),
     )
 
 

@@ -427,8 +427,9 @@ def trial_result(
     rest = dict(rest)
     rest["real_samples"] = int(rr["samples"])
     rest["twin_samples"] = [int(t["residuals"]["samples"]) for t in twins]
+    counted = real.mask & np.isfinite(real.q_true).all(axis=1)  # as the filters are scored
     notes = [
-        f"real: {int(real.mask.sum())} samples counted ({real.counted}); twins: "
+        f"real: {int(counted.sum())} samples counted ({real.counted}); twins: "
         + ", ".join(str(t["counted"]) for t in twins)
     ]
     drawn = [t.get("handling_offset") for t in twins]
@@ -446,7 +447,7 @@ def trial_result(
             "path": str(real.path),
             "format": real.format,
             "seeds": list(range(seeds)),
-            "twin_seeds": [twin_seed(i, real.name) for i in range(seeds)],
+            "twin_seeds": [twin_seed(i, real.name, real.same_name_index) for i in range(seeds)],
         },
         mode=mode,
         rate_hz=real.rate_hz,

@@ -2,13 +2,15 @@
 residuals at rest.
 
 Filters. Each filter runs 9D (with the magnetometer, when both the recording and the device have one)
-and 6D, with the same :class:`FilterSetup` on the real log and on its twins but for the rate (each side
-is told its own: the twins are sampled at the device's): what ``gyroemu bench`` uses for the real log
-(``setup_from_metadata`` of an MCAP log; the defaults at the file's rate for a BROAD trial, as
-``tests/benchmarks/broad_filters.py``). Magnetometers go to the filters in tesla (BROAD's µT × 1e-6).
-Errors are BROAD's (:mod:`gyroemu.pipelines.estimation.metrics`): RMSE, degrees, over the movement
-samples with a finite reference; a twin is scored against the recording's reference at the nearest real
-sample (real time = twin time + t0), and over the recording's movement mask carried over the same way.
+and 6D, each side with the :class:`FilterSetup` of what sensed it (the job builds them): the real log
+with what ``gyroemu bench`` uses (``setup_from_metadata`` of an MCAP log, its own device and site; the
+defaults at the file's rate for a BROAD trial, as ``tests/benchmarks/broad_filters.py``), its twins
+with their device in their site when the log's is known, else the same defaults at the device's rate.
+Magnetometers go to the filters in tesla (BROAD's µT × 1e-6). Errors are BROAD's
+(:mod:`gyroemu.pipelines.estimation.metrics`): RMSE, degrees, over the movement samples with a finite
+reference; a twin is scored against the recording's reference at the nearest real sample (real time =
+twin time + t0), and over the recording's movement mask carried over the same way. A filter whose
+attitude is not finite at a counted sample has diverged: its run fails, as one that raises does.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 
 from .motion import twin_scenario, twin_seed
-from .recording import Recording
+from .recording import Recording, measured_field
 from .residuals import rest_residuals
 from .site import Handling
 
@@ -49,7 +51,11 @@ def filter_errors(
 ) -> dict[str, dict[str, Any]]:
     """{filter: {metric: RMSE deg or None, "error": what failed or None}} of each filter run over ``t``
     (N,) s, ``gyro`` rad/s, ``accel`` m/s², ``mag`` T (9D with ``setup9``, 6D with ``setup6``; None: not
-    run), scored against ``q_true`` (N, 4) over ``mask`` (N,); wall times added to ``timings``."""
+    run), scored against ``q_true`` (N, 4) over ``mask`` (N,); wall times added to ``timings``.
+
+    A run fails, its metrics None and "error" saying why (each failed mode's, "9d: …; 6d: …"), when the
+    filter raises, returns no (N, 4) attitude, or returns a non-finite one at a counted sample (a
+    filter diverged partway would otherwise be scored over the samples before, and look better)."""
     from gyroemu.pipelines.estimation.metrics import attitude_errors, rmse_deg
     from gyroemu.pipelines.estimation.registry import make_filter
 
@@ -57,7 +63,7 @@ def filter_errors(
     out: dict[str, dict[str, Any]] = {}
     for spec in filters:
         row: dict[str, Any] = dict.fromkeys(METRICS)
-        row["error"] = None
+        failures = []
         for mode, setup in (("9d", setup9), ("6d", setup6)):
             if setup is None:
                 continue
@@ -68,12 +74,20 @@ def filter_errors(
                 if q.shape != (len(t), 4):
                     raise ValueError(f"returned q_wb of shape {q.shape}")
             except Exception as exc:  # noqa: BLE001 - a failing filter is reported, not fatal
-                row["error"] = f"{mode}: {type(exc).__name__}: {exc}"
+                failures.append(f"{mode}: {type(exc).__name__}: {exc}")
                 continue
             finally:
                 timings[f"filter {spec} {mode}"] = timings.get(f"filter {spec} {mode}", 0.0) + (
                     time.perf_counter() - started
                 )
+            lost = counted & ~np.isfinite(q).all(axis=1)
+            if lost.any():
+                first = int(np.flatnonzero(lost)[0])
+                failures.append(
+                    f"{mode}: diverged: a non-finite attitude at {int(lost.sum())} of {int(counted.sum())} counted "
+                    f"samples, the first at t = {float(t[first]):.6g} s"
+                )
+                continue
             with np.errstate(invalid="ignore", divide="ignore"):
                 err = attitude_errors(q, q_true)
             if mode == "9d":
@@ -82,6 +96,7 @@ def filter_errors(
                 row["inclination_9d"] = rmse_deg(err.inclination, counted)
             else:
                 row["inclination_6d"] = rmse_deg(err.inclination, counted)
+        row["error"] = "; ".join(failures) or None
         out[spec] = row
     return out
 
@@ -141,7 +156,7 @@ def run_one_twin(
 
     timings: dict[str, float] = {}
     started = time.perf_counter()
-    seed = twin_seed(seed, real.name)
+    seed = twin_seed(seed, real.name, real.same_name_index)
     scenario = twin_scenario(real, site, seed, smoothing)
     device = load_device(device_name, seed=seed)
     spec = cast("RecordedSpec", scenario.spec)  # twin_scenario's kind is "recorded"
@@ -174,9 +189,7 @@ def run_one_twin(
     if handling is not None and real.counted == "movement mask":
         offset = handling.draw(seed)
         accel = accel + np.where(mask[:, None], offset, 0.0)
-    mag: np.ndarray | None = np.asarray(samples.mag, float) if samples.mag is not None else None
-    if mag is not None and not np.isfinite(mag).all(axis=1).any():
-        mag = None
+    mag = None if samples.mag is None else measured_field(np.asarray(samples.mag, float))
     # Scored as the real log is, against the recording's reference (the nearest sample): its noise is in
     # the real errors, so it is in the twins' (their motion is the reference refined by the gyro).
     reference = np.where(inside[:, None], real.q_true[k], np.nan)
@@ -212,6 +225,6 @@ def run_one_twin(
         "timings": timings,
         "t0": t0,
         "samples": len(t),
-        "counted": int(mask.sum()),
+        "counted": int((mask & np.isfinite(reference).all(axis=1)).sum()),  # as filter_errors counts
         "handling_offset": None if offset is None else [float(x) for x in offset],
     }

@@ -444,3 +444,160 @@ def test_twin_attitude_is_the_reference_refined_by_the_gyro_and_still_at_rest():
     inside = (t >= 2.0) & (t <= 3.0)
     assert np.ptp(held[inside], axis=0).max() == 0.0 and np.allclose(np.linalg.norm(held[inside], axis=1), 1.0)
     assert np.array_equal(held[~inside], same[~inside])
+
+
+def test_the_twins_filters_are_set_up_in_the_twins_site_the_logs_in_its_own(tmp_path, monkeypatch):
+    """A gyroemu log sensed at 33.9° S in a field 45° east of north (declination atan2(20, 20)): its own
+    filters are told that site, from its metadata; its twins, sensed in --site (the BROAD lab: field
+    (0.0132, 14.25, -39.72) µT, so declination atan2(0.0132, 14.25) = 0.053°; latitude 52.5°, the site's
+    default) by --device, are told theirs (they were given the log's, 45° off their field). Both
+    declinations are one arctan2 of the site's numbers: equal to a few ulps of π/4."""
+    from gyroemu.pipelines.jobs import twin
+    from gyroemu.sensors import load_device
+
+    scenario = tmp_path / "sydney.toml"
+    scenario.write_text(
+        'kind = "random-manoeuvre"\nduration_s = 10.0\nrate_hz = 200.0\nseed = 0\n\n'
+        "[site]\nlatitude_deg = -33.9\nmagnetic_field_enu_uT = [20.0, 20.0, -40.0]\n"
+    )
+    log = tmp_path / "sydney.mcap"
+    assert cli.main(["simulate", "--scenario", str(scenario), "--device", "aktos_t_broad", "--out", str(log)]) in (
+        0,
+        None,
+    )
+    given = {}
+    real_run, twin_run = twin.run_real, twin.run_one_twin
+
+    def spy_real(real, filters, setup9, setup6, rests):
+        given["real"] = (setup9, setup6)
+        return real_run(real, filters, setup9, setup6, rests)
+
+    def spy_twin(real, site, smoothing, device_name, seed, filters, setup9, setup6, *rest):
+        given["twin"] = (setup9, setup6)
+        return twin_run(real, site, smoothing, device_name, seed, filters, setup9, setup6, *rest)
+
+    monkeypatch.setattr(twin, "run_real", spy_real)
+    monkeypatch.setattr(twin, "run_one_twin", spy_twin)
+    run_twin(TwinOptions(trials=[log], seeds=1, filters=["vqf"], workers=1, out=tmp_path / "o"))
+    ulps = 4 * np.finfo(float).eps
+    device = load_device("aktos_t_broad", seed=0)
+    for side, declination, latitude_deg in (
+        ("real", math.atan2(20.0, 20.0), -33.9),
+        ("twin", math.atan2(0.0132, 14.25), 52.5),
+    ):
+        assert all(setup is not None for setup in given[side]), side  # 9D and 6D
+        for setup in given[side]:
+            assert setup.declination_rad == pytest.approx(declination, rel=ulps, abs=0), (side, setup)
+            assert setup.latitude_rad == pytest.approx(math.radians(latitude_deg), rel=ulps, abs=0), (side, setup)
+            assert (setup.gyro_latency_s, setup.mag_latency_s) == (device.latencies[0], device.latencies[2])
+    assert given["twin"][1].rate_hz == float(device.spec.rate_hz)
+
+
+def test_recordings_of_the_same_name_draw_different_twins(synthetic, tmp_path):
+    """Two recordings named alike (a/syn.mcap, b/syn.mcap; here the same log twice, so that only the
+    seeds can tell their twins apart): the first keeps the seeds its name gives, the second draws its
+    own, and its twin senses other noise (they had the same device draw, and pooling their rests
+    pooled one draw twice)."""
+    import shutil
+
+    copies = []
+    for folder in ("a", "b"):
+        (tmp_path / folder).mkdir()
+        copies.append(Path(shutil.copy(synthetic, tmp_path / folder / "syn.mcap")))
+    report = run_twin(
+        TwinOptions(trials=copies, device="tactical_mems", seeds=2, filters=["vqf"], workers=1, out=tmp_path / "o")
+    )
+    first, second = (trial.source["twin_seeds"] for trial in report.trials)
+    assert first == [twin_seed(i, "syn.mcap") for i in range(2)]
+    assert not set(first) & set(second) and len(set(second)) == 2
+    stds = [trial.residuals["gyro"]["twin_std"] for trial in report.trials]
+    assert stds[0] != stds[1]  # other noise: a continuous draw, equal only by accident
+
+
+def test_the_seeds_of_recordings_with_their_own_names_are_kept():
+    """The BROAD trials' twin seeds as they were before same-named recordings were told apart (the
+    README's figures were drawn from them): bit for bit."""
+    kept = {
+        "02_undisturbed_slow_rotation_B.hdf5": [159308892824065316, 10163323929485804529, 9181270909691770912],
+        "07_undisturbed_fast_rotation_B.hdf5": [14139165140070430742, 5005298541530700313, 10022520127175153366],
+    }
+    for name, seeds in kept.items():
+        assert [twin_seed(i, name) for i in range(3)] == seeds
+        assert [twin_seed(i, name, 0) for i in range(3)] == seeds
+
+
+def _hand_made_broad(path: Path, *, gap: slice | None = None, mag_nan: bool = False, fs: float = 100.0, n: int = 2000):
+    """A BROAD-like trial: 20 s at 100 Hz of a slow yaw, still for the first 5 s then moving (the
+    movement mask), its reference lost over ``gap``, its magnetometer NaN throughout with ``mag_nan``."""
+    import h5py
+
+    t = np.arange(n) / fs
+    yaw = np.where(t < 5.0, 0.0, 0.2 * (t - 5.0))
+    q = np.stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)], axis=1)
+    if gap is not None:
+        q[gap] = np.nan
+    rng = np.random.default_rng(3)
+    gyro = np.zeros((n, 3)) + 1e-3 * rng.standard_normal((n, 3))
+    gyro[t >= 5.0, 2] += 0.2
+    accel = np.tile([0.0, 0.0, 9.81], (n, 1)) + 1e-2 * rng.standard_normal((n, 3))
+    mag = np.full((n, 3), np.nan) if mag_nan else np.tile([0.0, 20.0, -40.0], (n, 1))
+    with h5py.File(path, "w") as f:
+        f["imu_gyr"], f["imu_acc"], f["imu_mag"], f["opt_quat"] = gyro, accel, mag, q
+        f["movement"] = t >= 5.0
+        f.attrs["sampling_rate"] = fs
+
+
+def test_a_reference_gap_longer_than_max_gap_is_named_before_any_work(tmp_path, capsys, monkeypatch):
+    """A reference lost for 0.5 s (50 samples at 100 Hz: the step across is 0.51 s) against max_gap_s =
+    0.25 s: exit 2 naming the trial argument, the file once and the key, before the real run (it was
+    found by the first twin, after it, naming the file twice); --smoothing max_gap_s=1 bridges it."""
+    from gyroemu.pipelines.jobs import twin
+
+    class NoWork(Exception):
+        pass
+
+    def no_work(*args, **kwargs):
+        raise NoWork
+
+    monkeypatch.setattr(twin, "run_real", no_work)
+    trial = tmp_path / "gap.hdf5"
+    _hand_made_broad(trial, gap=slice(1000, 1050))
+    out = tmp_path / "o"
+    with pytest.raises(SystemExit) as e:
+        cli.main(["twin", str(trial), "--filter", "vqf", "--workers", "1", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and f"argument TRIAL: {trial}: a gap of 0.51 s" in err and "smoothing.max_gap_s" in err, (
+        err
+    )
+    assert err.count(trial.name) == 1 and not out.exists()
+    with pytest.raises(NoWork):  # checked, and on to the runs
+        run_twin(
+            TwinOptions(
+                trials=[trial], filters=["vqf"], workers=1, out=out, smoothing={**twin.TWIN_SMOOTHING, "max_gap_s": 1.0}
+            )
+        )
+
+
+def test_a_user_filter_without_a_name_is_refused_naming_filter(synthetic, tmp_path, capsys, monkeypatch):
+    """A class with ``process`` but no ``name``: exit 2 naming --filter and what is missing, before any run
+    (it passed the check, then every run failed and the report said so in a note, exit 0)."""
+    from gyroemu.pipelines.jobs import twin
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("the real log's filters ran before the arguments were checked")
+
+    monkeypatch.setattr(twin, "run_real", no_work)
+    module = tmp_path / "nameless.py"
+    module.write_text(
+        "class Nameless:\n"
+        "    def __init__(self, setup):\n"
+        "        self.setup = setup\n\n"
+        "    def process(self, t, gyro, accel, mag=None):\n"
+        "        raise RuntimeError('never run')\n"
+    )
+    out = tmp_path / "o"
+    with pytest.raises(SystemExit) as e:
+        cli.main(["twin", str(synthetic), "--filter", f"{module}:Nameless", "--workers", "1", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and "argument --filter" in err and "has no 'name'" in err, err
+    assert not out.exists()

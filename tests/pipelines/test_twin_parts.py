@@ -399,7 +399,8 @@ def twin_runs(tmp_path_factory):
     """3 s of ``smooth_manoeuvre`` logged by the ideal device at 1 kHz, cut to its first 2.5 s, with a
     movement mask from 1 s and a reference whose rows are distinct; twin 0 of it sensed by an ideal
     device at 300 Hz (its instants k/300 s fall 0, 1/3 or 2/3 of a real sample past one), without and
-    with a handling offset; what each run gave the filters."""
+    with a handling offset, and without with the reference lost over 1.5–1.6 s; what each run gave the
+    filters."""
     from gyroemu.pipelines.twin import runs as twin_runs_module
 
     folder = tmp_path_factory.mktemp("twin_parts")
@@ -440,6 +441,9 @@ def twin_runs(tmp_path_factory):
     mp.setattr(twin_runs_module, "filter_errors", capture)
     try:
         runs = [run_one_twin(real, {}, None, str(device), 0, [], None, None, [], handling=h) for h in (None, handling)]
+        lost = real.q_true.copy()
+        lost[1500:1600] = np.nan  # a reference lost inside the movement mask
+        runs.append(run_one_twin(dataclasses.replace(real, q_true=lost), {}, None, str(device), 0, [], None, None, []))
     finally:
         mp.undo()
     return real, handling, runs, seen
@@ -492,8 +496,9 @@ def _errors(values: dict) -> dict:
     }
 
 
-def _trial(name="syn.mcap", real=None, seeds=None, mode="9D", offsets=None):
-    """trial_result of a hand-made real run and twins: ``real`` and ``seeds`` the 9D totals per filter."""
+def _trial(name="syn.mcap", real=None, seeds=None, mode="9D", offsets=None, q_true=None):
+    """trial_result of a hand-made real run and twins: ``real`` and ``seeds`` the 9D totals per filter,
+    ``q_true`` the reference (default zeros: finite throughout)."""
     real = {"mekf": 1.0, "vqf": 2.0} if real is None else real
     seeds = {"mekf": [1.1, 1.2], "vqf": [2.1, 2.3]} if seeds is None else seeds
     count = len(next(iter(seeds.values())))
@@ -508,7 +513,7 @@ def _trial(name="syn.mcap", real=None, seeds=None, mode="9D", offsets=None):
         np.zeros((n, 3)),
         np.zeros((n, 3)),
         None,
-        np.zeros((n, 4)),
+        np.zeros((n, 4)) if q_true is None else q_true,
         np.arange(n) >= 100,
         100.0,
         None,
@@ -639,3 +644,85 @@ def test_a_full_disk_leaves_the_earlier_twin_report_as_it_was(tmp_path, monkeypa
     with pytest.raises(OSError):
         report.save(tmp_path / "new" / "out")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def _filter_module(folder: Path) -> Path:
+    """A file of user filters: ``Diverging`` (identity, then NaN from sample ``len(t) // 2``: a filter
+    that diverged halfway), ``LateNaN`` (NaN on the last sample only) and ``Failing`` (raises)."""
+    module = folder / "user_filters.py"
+    module.write_text(
+        "import numpy as np\n"
+        "from gyroemu.pipelines.estimation.protocol import Estimate\n\n\n"
+        "class Diverging:\n"
+        "    name = 'diverging'\n\n"
+        "    def __init__(self, setup):\n"
+        "        self.setup = setup\n\n"
+        "    def process(self, t, gyro, accel, mag=None):\n"
+        "        q = np.tile([1.0, 0.0, 0.0, 0.0], (len(t), 1))\n"
+        "        q[len(t) // 2 :] = np.nan\n"
+        "        return Estimate(q_wb=q)\n\n\n"
+        "class LateNaN(Diverging):\n"
+        "    name = 'late_nan'\n\n"
+        "    def process(self, t, gyro, accel, mag=None):\n"
+        "        q = np.tile([1.0, 0.0, 0.0, 0.0], (len(t), 1))\n"
+        "        q[-1] = np.nan\n"
+        "        return Estimate(q_wb=q)\n\n\n"
+        "class Failing(Diverging):\n"
+        "    name = 'failing'\n\n"
+        "    def process(self, t, gyro, accel, mag=None):\n"
+        "        raise RuntimeError('mag' if mag is not None else 'no mag')\n"
+    )
+    return module
+
+
+def test_a_filter_whose_attitude_turns_nan_at_a_counted_sample_has_failed(tmp_path):
+    """An attitude that is NaN from halfway through the counted samples: no RMSE of the half before (it
+    scored better than the filters that kept going), but an error saying where, in each mode run; NaN
+    only at a sample not counted (the last, outside the mask): scored as before, exactly 0 against an
+    identity reference. A filter failing in both modes: both errors kept."""
+    from gyroemu.pipelines.estimation.protocol import FilterSetup
+
+    module = _filter_module(tmp_path)
+    n = 100
+    t = np.arange(n) / 100.0
+    gyro, accel, mag = np.zeros((n, 3)), np.tile([0.0, 0.0, 9.81], (n, 1)), np.tile([0.0, 2e-5, -4e-5], (n, 1))
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    mask = np.arange(n) < n - 1  # all but the last sample
+    specs = [f"{module}:{name}" for name in ("Diverging", "LateNaN", "Failing")]
+    setup9, setup6 = FilterSetup(rate_hz=100.0, use_mag=True), FilterSetup(rate_hz=100.0, use_mag=False)
+    out = filter_errors(specs, setup9, setup6, t, gyro, accel, mag, q, mask, {})
+    diverged, late, failing = (out[s] for s in specs)
+    assert all(diverged[m] is None for m in ("total_9d", "heading_9d", "inclination_9d", "inclination_6d"))
+    lost = "diverged: a non-finite attitude at 49 of 99 counted samples, the first at t = 0.5 s"
+    assert diverged["error"] == f"9d: {lost}; 6d: {lost}"
+    assert late["error"] is None and all(late[m] == 0.0 for m in ("total_9d", "inclination_6d"))
+    assert failing["error"] == "9d: RuntimeError: mag; 6d: RuntimeError: no mag"
+    assert failing["total_9d"] is None and failing["inclination_6d"] is None
+
+
+def test_a_broad_trial_whose_magnetometer_never_reads_has_none(tmp_path):
+    """imu_mag NaN in every row: no magnetometer (the run is 6D, not a 9D run on NaN), as for a log."""
+    import h5py
+
+    n = 200
+    path = tmp_path / "blind.hdf5"
+    with h5py.File(path, "w") as f:
+        f["imu_gyr"], f["imu_acc"] = np.zeros((n, 3)), np.tile([0.0, 0.0, 9.81], (n, 1))
+        f["imu_mag"] = np.full((n, 3), np.nan)
+        f["opt_quat"] = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+        f["movement"] = np.arange(n) >= 100
+        f.attrs["sampling_rate"] = 100.0
+    assert load_recording(path).mag is None
+
+
+def test_the_samples_counted_are_those_with_a_reference_on_both_sides(twin_runs):
+    """A reference lost inside the movement mask: neither side scores those samples, and the note counts
+    what is scored (mask and a finite reference), not the mask alone."""
+    real, _, runs, seen = twin_runs
+    given = seen[2]
+    scored = given["mask"] & np.isfinite(given["q_true"]).all(axis=1)
+    assert runs[2]["counted"] == int(scored.sum()) < runs[0]["counted"]
+    q = np.zeros((400, 4))
+    q[150:170] = np.nan  # 20 of the 300 masked samples (100…399) without a reference
+    trial, _, _ = _trial(q_true=q)
+    assert trial.notes[0].startswith("real: 280 samples counted (movement mask); twins: 300, 300")
