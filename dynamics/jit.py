@@ -57,7 +57,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import IO, Any, overload
 
-__all__ = ["Deferred", "cache_path", "callee_files", "compile_lock", "lock_path", "njit"]
+__all__ = ["Deferred", "cache_path", "callee_files", "compile_lock", "lock_path", "njit", "options_stamp"]
 
 _thread_lock = threading.RLock()
 _depth = 0
@@ -88,7 +88,7 @@ def _user_cache(py_func: Callable[..., Any], options: dict[str, Any]) -> Any:
     :func:`cache_path` (mirroring the source tree below it, as numba's user-wide cache does), or None
     where numba lacks the public classes this needs (then numba's own cache, beside the sources, is
     used)."""
-    flags = repr(sorted(options.items()))
+    flags = options_stamp(options)
     try:
         from numba.core.caching import CompileResultCacheImpl, FunctionCache, UserWideCacheLocator
     except ImportError:
@@ -116,6 +116,15 @@ def _user_cache(py_func: Callable[..., Any], options: dict[str, Any]) -> Any:
         return Cache(py_func)
     except RuntimeError:  # no locator: a function without a source file
         return None
+
+
+def options_stamp(options: dict[str, Any]) -> str:
+    """numba's compile ``options`` as text that is the same in every process: sorted, and a set option
+    (``fastmath={"nsz", "arcp"}``) sorted too, since a set's order follows the strings' hashes, which
+    differ from process to process (the ring laser's kernels missed the cache in five runs of six)."""
+    return repr(
+        sorted((key, sorted(value) if isinstance(value, (set, frozenset)) else value) for key, value in options.items())
+    )
 
 
 def callee_files(py_func: Callable[..., Any]) -> set[str]:

@@ -226,6 +226,28 @@ def test_a_changed_compiled_callee_in_another_file_is_compiled_again(tmp_path):
     assert run() == "10.0"
 
 
+def test_a_set_option_is_loaded_from_the_cache_in_every_process(tmp_path):
+    """A set option (``fastmath``, as the ring laser's kernels take it) was part of the cache entry in its
+    set's order, which follows the strings' hashes and so differs from process to process: the entry
+    was compiled again and rewritten in most processes. Each hash seed below is another process order."""
+    (tmp_path / "kernels.py").write_text(
+        'from gyroemu.dynamics.jit import njit\n\n\n@njit(fastmath={"arcp", "nsz", "contract", "reassoc"})\n'
+        "def f(x):\n    return x * 2.0\n"
+    )
+    code = "from kernels import f; f(1.0); print(sum(f.stats.cache_hits.values()), sum(f.stats.cache_misses.values()))"
+
+    def run(hash_seed: int) -> str:
+        env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache"), "PYTHONPATH": str(tmp_path)}
+        env["PYTHONHASHSEED"] = str(hash_seed)
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env)
+        assert done.returncode == 0, done.stderr
+        return done.stdout.strip()
+
+    assert run(0) == "0 1"  # compiled and cached
+    # 24 orders of four strings: with the order in the entry, 4 other seeds all hit by chance 1 in 24⁴
+    assert [run(seed) for seed in range(1, 5)] == ["1 0"] * 4
+
+
 def test_compiled_options_are_part_of_the_cache_entry(tmp_path):
     """numba's cache index leaves out flags such as ``nogil``; gyroemu's entries carry the options, so a
     function whose options changed (its file unchanged) is compiled again instead of loaded with the old
