@@ -226,6 +226,16 @@ def test_a_changed_compiled_callee_in_another_file_is_compiled_again(tmp_path):
     assert run() == "10.0"
 
 
+def _hits_and_misses(folder: Path, **env: str) -> str:
+    """Call ``f`` of ``folder``/kernels.py once in a new process with the user cache in ``folder``/cache
+    and ``env`` added: "hits misses" of numba's cache."""
+    code = "from kernels import f; f(1.0); print(sum(f.stats.cache_hits.values()), sum(f.stats.cache_misses.values()))"
+    environment = {**os.environ, "XDG_CACHE_HOME": str(folder / "cache"), "PYTHONPATH": str(folder), **env}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=folder, env=environment)
+    assert done.returncode == 0, done.stderr
+    return done.stdout.strip()
+
+
 def test_a_set_option_is_loaded_from_the_cache_in_every_process(tmp_path):
     """A set option (``fastmath``, as the ring laser's kernels take it) was part of the cache entry in its
     set's order, which follows the strings' hashes and so differs from process to process: the entry
@@ -234,18 +244,9 @@ def test_a_set_option_is_loaded_from_the_cache_in_every_process(tmp_path):
         'from gyroemu.dynamics.jit import njit\n\n\n@njit(fastmath={"arcp", "nsz", "contract", "reassoc"})\n'
         "def f(x):\n    return x * 2.0\n"
     )
-    code = "from kernels import f; f(1.0); print(sum(f.stats.cache_hits.values()), sum(f.stats.cache_misses.values()))"
-
-    def run(hash_seed: int) -> str:
-        env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache"), "PYTHONPATH": str(tmp_path)}
-        env["PYTHONHASHSEED"] = str(hash_seed)
-        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env)
-        assert done.returncode == 0, done.stderr
-        return done.stdout.strip()
-
-    assert run(0) == "0 1"  # compiled and cached
+    assert _hits_and_misses(tmp_path, PYTHONHASHSEED="0") == "0 1"  # compiled and cached
     # 24 orders of four strings: with the order in the entry, 4 other seeds all hit by chance 1 in 24⁴
-    assert [run(seed) for seed in range(1, 5)] == ["1 0"] * 4
+    assert [_hits_and_misses(tmp_path, PYTHONHASHSEED=str(seed)) for seed in range(1, 5)] == ["1 0"] * 4
 
 
 def test_compiled_options_are_part_of_the_cache_entry(tmp_path):
@@ -256,16 +257,7 @@ def test_compiled_options_are_part_of_the_cache_entry(tmp_path):
         "import os\n\nfrom gyroemu.dynamics.jit import njit\n\n\n"
         '@njit(nogil=os.environ["KERNEL_NOGIL"] == "1")\ndef f(x):\n    return x * 2.0\n'
     )
-    code = "from kernels import f; f(1.0); print(sum(f.stats.cache_hits.values()), sum(f.stats.cache_misses.values()))"
-
-    def run(nogil: str) -> str:
-        env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache"), "PYTHONPATH": str(tmp_path)}
-        env["KERNEL_NOGIL"] = nogil
-        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env)
-        assert done.returncode == 0, done.stderr
-        return done.stdout.strip()
-
-    assert run("1") == "0 1"  # compiled and cached
-    assert run("1") == "1 0"  # loaded
-    assert run("0") == "0 1"  # the same file, other options: compiled again
-    assert run("0") == "1 0"
+    assert _hits_and_misses(tmp_path, KERNEL_NOGIL="1") == "0 1"  # compiled and cached
+    assert _hits_and_misses(tmp_path, KERNEL_NOGIL="1") == "1 0"  # loaded
+    assert _hits_and_misses(tmp_path, KERNEL_NOGIL="0") == "0 1"  # the same file, other options: compiled again
+    assert _hits_and_misses(tmp_path, KERNEL_NOGIL="0") == "1 0"
