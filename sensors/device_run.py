@@ -125,7 +125,7 @@ class DeviceRun:
         self.device = device
         self.source = source
         self.period = 1.0 / spec.rate_hz  # what the device believes
-        self.true_period = self.period * (1.0 + spec.clock.rate_error_ppm * 1e-6)
+        self.true_period = spec.clock.true_period(spec.rate_hz)
         self.t0 = float(source.t_start)
         latencies = device.latencies
         self._lag = max(0.0, *latencies)

@@ -110,6 +110,10 @@ class ClockSpec(Section):
     offset_s: Real = 0.0
     jitter_s: NonNegativeReal = 0.0
 
+    def true_period(self, rate_hz: float) -> float:
+        """The true sample interval, s, of a clock that believes it samples at ``rate_hz``: T (1 + ε)."""
+        return (1.0 / rate_hz) * (1.0 + self.rate_error_ppm * 1e-6)
+
 
 MAX_SENSOR_TEMPERATURE_DEGC = 1000.0
 """The hottest ``[temperature]`` ``initial_degC`` and ``final_degC``, °C: five times the hottest rating of
@@ -371,8 +375,7 @@ class Device:
                 key="gyro.errors.range_deg_per_s",
             )
         accel_errors = spec.accelerometer.errors.to_si()
-        # the error layers' sample interval: the true one, T (1 + ε) (DeviceRun)
-        true_period = (1.0 / spec.rate_hz) * (1.0 + spec.clock.rate_error_ppm * 1e-6)
+        true_period = spec.clock.true_period(spec.rate_hz)  # the error layers' sample interval (DeviceRun)
         # The output low-passes before the noise budget, which takes their noise gain.
         for model, prefix in ((self._gyro_errors, "gyro.errors"), (accel_errors, "accelerometer.errors")):
             problem = (

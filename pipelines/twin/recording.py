@@ -112,13 +112,16 @@ def load_recording(path: Path) -> Recording:
     hit = np.abs(tt[j] - t) <= 0.25 * dt
     q_true = np.full((len(t), 4), np.nan)
     q_true[hit] = dev.truth.q_wb[j[hit]]
-    extra: dict[str, np.ndarray | None] = {}
-    for key, attr in (("omega_true", "omega_b"), ("force_true", "specific_force_b")):
-        v = getattr(dev.truth, attr, None)
-        if v is not None and np.isfinite(v).any():
-            column = np.full((len(t), 3), np.nan)
-            column[hit] = np.asarray(v, float)[j[hit]]
-            extra[key] = column
+
+    def at_samples(attribute: str) -> np.ndarray | None:
+        """The truth's (N, 3) ``attribute`` at the samples it meets (NaN elsewhere); None if it has none."""
+        v = getattr(dev.truth, attribute, None)
+        if v is None or not np.isfinite(v).any():
+            return None
+        column = np.full((len(t), 3), np.nan)
+        column[hit] = np.asarray(v, float)[j[hit]]
+        return column
+
     movement = getattr(dev, "movement", None)
     has_mask = movement is not None and np.asarray(movement, bool).any()
     return Recording(
@@ -134,8 +137,8 @@ def load_recording(path: Path) -> Recording:
         rate_hz=1.0 / dt,
         metadata=dev.metadata,
         counted="movement mask" if has_mask else "every sample",
-        omega_true=extra.get("omega_true"),
-        force_true=extra.get("force_true"),
+        omega_true=at_samples("omega_b"),
+        force_true=at_samples("specific_force_b"),
     )
 
 

@@ -21,7 +21,7 @@ import numpy as np
 from .motion import twin_seed
 from .recording import Recording
 from .residuals import TAUS_S, rms_over_seeds
-from .runs import METRICS
+from .runs import METRICS, counted_samples
 
 if TYPE_CHECKING:
     from gyroemu.pipelines.formats.atomic import StagedFiles
@@ -427,7 +427,7 @@ def trial_result(
     rest = dict(rest)
     rest["real_samples"] = int(rr["samples"])
     rest["twin_samples"] = [int(t["residuals"]["samples"]) for t in twins]
-    counted = real.mask & np.isfinite(real.q_true).all(axis=1)  # as the filters are scored
+    counted = counted_samples(real.mask, real.q_true)
     notes = [
         f"real: {int(counted.sum())} samples counted ({real.counted}); twins: "
         + ", ".join(str(t["counted"]) for t in twins)

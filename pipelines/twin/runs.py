@@ -29,12 +29,17 @@ if TYPE_CHECKING:
     from gyroemu.pipelines.estimation.protocol import FilterSetup
     from gyroemu.pipelines.recorded_scenario import RecordedSpec
 
-__all__ = ["METRICS", "GRAVITY_M_S2", "filter_errors", "run_real", "run_one_twin"]
+__all__ = ["METRICS", "GRAVITY_M_S2", "counted_samples", "filter_errors", "run_real", "run_one_twin"]
 
 METRICS = ("total_9d", "heading_9d", "inclination_9d", "inclination_6d")
 """The errors each filter is scored by (BROAD's), degrees."""
 GRAVITY_M_S2 = 9.81
 """The still body's specific force at a BROAD trial's rest, m/s² (its log has no truth force)."""
+
+
+def counted_samples(mask: np.ndarray, q_true: np.ndarray) -> np.ndarray:
+    """The samples a filter is scored on (N,) bool: in ``mask`` (N,) with a finite reference ``q_true`` (N, 4)."""
+    return np.asarray(mask & np.isfinite(q_true).all(axis=1), dtype=bool)
 
 
 def filter_errors(
@@ -59,7 +64,7 @@ def filter_errors(
     from gyroemu.pipelines.estimation.metrics import attitude_errors, rmse_deg
     from gyroemu.pipelines.estimation.registry import make_filter
 
-    counted = mask & np.isfinite(q_true).all(axis=1)
+    counted = counted_samples(mask, q_true)
     out: dict[str, dict[str, Any]] = {}
     for spec in filters:
         row: dict[str, Any] = dict.fromkeys(METRICS)
@@ -225,6 +230,6 @@ def run_one_twin(
         "timings": timings,
         "t0": t0,
         "samples": len(t),
-        "counted": int((mask & np.isfinite(reference).all(axis=1)).sum()),  # as filter_errors counts
+        "counted": int(counted_samples(mask, reference).sum()),
         "handling_offset": None if offset is None else [float(x) for x in offset],
     }
